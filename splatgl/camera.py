@@ -1,0 +1,199 @@
+"""Cameras: a frozen pinhole or orthographic camera in OpenCV axes (+x right, +y down, +z forward).
+
+Pixel (i, j) (row i from the top, column j) has its centre at image coordinates (j + 0.5, i + 0.5).
+Perspective: ``u = fx x / z + cx``, ``v = fy y / z + cy`` with (x, y, z) in camera space.
+Orthographic: ``u = fx x + cx``, ``v = fy y + cy`` (fx, fy in pixels per world unit).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import CameraError
+
+
+class Projection(enum.Enum):
+    PERSPECTIVE = "perspective"
+    ORTHOGRAPHIC = "orthographic"
+
+
+def _frozen_matrix(m: object) -> np.ndarray:
+    arr = np.array(m, dtype=np.float64, copy=True)
+    if arr.shape != (4, 4) or not np.isfinite(arr).all():
+        raise CameraError(f"world_to_camera must be a finite 4x4 matrix, got shape {arr.shape}")
+    if not np.allclose(arr[3], [0.0, 0.0, 0.0, 1.0]):
+        raise CameraError(f"world_to_camera's last row must be (0, 0, 0, 1), got {arr[3].tolist()}")
+    arr.flags.writeable = False
+    return arr
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A camera; all lengths in pixels except ``world_to_camera``'s translation (world units).
+
+    Attributes:
+        width, height: image size in pixels.
+        fx, fy: focal lengths in pixels (orthographic: pixels per world unit).
+        cx, cy: principal point in image coordinates (pixels; (0, 0) is the top-left corner).
+        world_to_camera: (4, 4) float64 rigid transform, OpenCV axes.
+        projection: perspective or orthographic.
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    world_to_camera: np.ndarray = field(default_factory=lambda: np.eye(4))
+    projection: Projection = Projection.PERSPECTIVE
+
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if int(value) != value or int(value) < 1:
+                raise CameraError(f"camera {name} must be a positive integer, got {value!r}")
+            object.__setattr__(self, name, int(value))
+        for name in ("fx", "fy", "cx", "cy"):
+            value = float(getattr(self, name))
+            if not math.isfinite(value):
+                raise CameraError(f"camera {name} must be finite, got {value!r}")
+            object.__setattr__(self, name, value)
+        if self.fx <= 0 or self.fy <= 0:
+            raise CameraError(f"camera focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
+        object.__setattr__(self, "world_to_camera", _frozen_matrix(self.world_to_camera))
+        object.__setattr__(self, "projection", Projection(self.projection))
+
+    # ----------------------------------------------------------------------------- factories
+    @classmethod
+    def from_fov(cls, width: int, height: int, fov_y_degrees: float,
+                 world_to_camera: np.ndarray | None = None) -> "Camera":
+        """Perspective camera with vertical field of view ``fov_y_degrees``, square pixels."""
+        if not 0.0 < fov_y_degrees < 180.0:
+            raise CameraError(f"field of view must be in (0, 180) degrees, got {fov_y_degrees}")
+        f = 0.5 * height / math.tan(math.radians(fov_y_degrees) / 2.0)
+        return cls(width, height, f, f, width / 2.0, height / 2.0,
+                   np.eye(4) if world_to_camera is None else world_to_camera)
+
+    @classmethod
+    def from_frustum(cls, width: int, height: int, left: float, right: float, top: float,
+                     bottom: float, near: float, far: float | None = None,
+                     world_to_camera: np.ndarray | None = None) -> "Camera":
+        """Perspective camera from OpenGL-style frustum bounds at the near plane.
+
+        ``left < right`` and ``bottom < top`` are camera-space coordinates on the plane at
+        distance ``near`` with GL's y axis pointing up; ``far`` does not change pixels.  The
+        image x range [0, W] covers [left, right] and row 0 is at ``top``:
+        ``fx = W near / (right - left)``, ``cx = -left W / (right - left)``,
+        ``fy = H near / (top - bottom)``, ``cy = top H / (top - bottom)``.
+        """
+        if not (right > left and top > bottom and near > 0.0):
+            raise CameraError("frustum needs left < right, bottom < top and near > 0, got "
+                              f"l={left} r={right} b={bottom} t={top} n={near}")
+        if far is not None and not far > near:
+            raise CameraError(f"frustum far ({far}) must exceed near ({near})")
+        fx = width * near / (right - left)
+        fy = height * near / (top - bottom)
+        cx = -left * width / (right - left)
+        cy = top * height / (top - bottom)
+        return cls(width, height, fx, fy, cx, cy,
+                   np.eye(4) if world_to_camera is None else world_to_camera)
+
+    @classmethod
+    def orthographic(cls, width: int, height: int, pixels_per_unit: float,
+                     world_to_camera: np.ndarray | None = None) -> "Camera":
+        """Orthographic camera, ``pixels_per_unit`` pixels per world unit, centred."""
+        return cls(width, height, pixels_per_unit, pixels_per_unit, width / 2.0, height / 2.0,
+                   np.eye(4) if world_to_camera is None else world_to_camera,
+                   Projection.ORTHOGRAPHIC)
+
+    def with_pose(self, world_to_camera: np.ndarray) -> "Camera":
+        return Camera(self.width, self.height, self.fx, self.fy, self.cx, self.cy,
+                      world_to_camera, self.projection)
+
+    def resized(self, width: int, height: int) -> "Camera":
+        """The same view at another resolution (intrinsics scaled per axis)."""
+        sx, sy = width / self.width, height / self.height
+        return Camera(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy,
+                      self.world_to_camera, self.projection)
+
+    # ----------------------------------------------------------------------------- geometry
+    @property
+    def rotation(self) -> np.ndarray:
+        """(3, 3) float64 world-to-camera rotation."""
+        return self.world_to_camera[:3, :3]
+
+    @property
+    def translation(self) -> np.ndarray:
+        """(3,) float64 world-to-camera translation."""
+        return self.world_to_camera[:3, 3]
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) float64 camera centre in world space (``-R^T t``)."""
+        return -self.rotation.T @ self.translation
+
+    @property
+    def is_orthographic(self) -> bool:
+        return self.projection is Projection.ORTHOGRAPHIC
+
+    @property
+    def tan_half_fov(self) -> tuple[float, float]:
+        """(tan(fov_x / 2), tan(fov_y / 2)) as the reference computes them: W / (2 fx), H / (2 fy)."""
+        return self.width / (2.0 * self.fx), self.height / (2.0 * self.fy)
+
+    def to_json(self) -> dict:
+        """The single-camera JSON form (see :func:`splatgl.camera_io.load_camera`)."""
+        return {
+            "width": self.width, "height": self.height,
+            "fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy,
+            "world_to_camera": self.world_to_camera.tolist(),
+            "projection": self.projection.value,
+        }
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, -1.0, 0.0)) -> np.ndarray:
+    """(4, 4) world-to-camera matrix (OpenCV axes) for a camera at ``eye`` looking at ``target``.
+
+    ``up`` is the world direction that should appear up in the image; the default (0, -1, 0)
+    suits scenes trained from COLMAP, whose world y axis usually points down.
+    """
+    eye = np.asarray(eye, np.float64)
+    forward = np.asarray(target, np.float64) - eye
+    norm = np.linalg.norm(forward)
+    if not norm > 0.0:
+        raise CameraError("look_at: eye and target coincide")
+    z = forward / norm
+    up = np.asarray(up, np.float64)
+    x = np.cross(z, up)  # camera y is image-down, about -up; x = y cross z = z cross up
+    if np.linalg.norm(x) < 1e-9:
+        x = np.cross(z, [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    m = np.eye(4)
+    m[:3, :3] = np.stack([x, y, z])
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m
+
+
+def orbit(target: np.ndarray, distance: float, azimuth_degrees: float, elevation_degrees: float,
+          up: np.ndarray = (0.0, -1.0, 0.0)) -> np.ndarray:
+    """World-to-camera matrix of a camera orbiting ``target`` at ``distance``.
+
+    Azimuth turns about ``up``; elevation lifts the camera towards ``up`` (degrees).
+    """
+    up = np.asarray(up, np.float64)
+    up = up / np.linalg.norm(up)
+    # Any unit vector orthogonal to up serves as azimuth 0.
+    ref = np.array([0.0, 0.0, 1.0]) if abs(up[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    a = ref - up * (ref @ up)
+    a /= np.linalg.norm(a)
+    b = np.cross(up, a)
+    az, el = math.radians(azimuth_degrees), math.radians(elevation_degrees)
+    direction = math.cos(el) * (math.cos(az) * a + math.sin(az) * b) + math.sin(el) * up
+    eye = np.asarray(target, np.float64) + distance * direction
+    return look_at(eye, target, up)

@@ -1,0 +1,96 @@
+"""Reference constants of the per-tile 3DGS rasterizer (DESIGN.md section 2), in one place.
+
+Python code imports these names; GLSL receives them as generated ``#define`` lines from
+:func:`glsl_defines`, so no constant is ever typed twice.
+"""
+
+from __future__ import annotations
+
+import math
+
+#: Tile edge in pixels (the reference bins splats into 16 x 16 tiles).
+TILE_SIZE = 16
+#: Default near-plane distance of the reference (view-space z <= this is culled).  splatgl's own
+#: default is scene-relative (see :func:`splatgl.settings.resolve_near`), never larger than this.
+REFERENCE_NEAR = 0.2
+#: ``x/z`` and ``y/z`` are clamped to +-JACOBIAN_CLAMP * tan(half fov) inside the Jacobian only.
+JACOBIAN_CLAMP = 1.3
+#: Low-pass dilation added to both diagonal entries of the 2D covariance, in pixels^2.
+LOW_PASS = 0.3
+#: Floor of the antialiasing opacity compensation factor sqrt(det / det_dilated).
+AA_MIN_FACTOR = 2.5e-5
+#: Floor of the eigenvalue discriminant when computing the extent (``max(0.1, mid^2 - det)``).
+EXTENT_DISCRIMINANT_FLOOR = 0.1
+#: Extent of the reference in standard deviations (radius ``ceil(3 sqrt(lambda_max))``).
+EXTENT_SIGMAS = 3.0
+#: Upper clamp of a splat's alpha.
+ALPHA_MAX = 0.99
+#: Smallest alpha that contributes; smaller ones are skipped (and discarded on the GPU).
+ALPHA_MIN = 1.0 / 255.0
+#: Front-to-back blending stops when the transmittance would fall below this.
+T_MIN = 1e-4
+#: Constant added to the SH colour before the clamp at 0.
+SH_OFFSET = 0.5
+
+# Real spherical-harmonics basis constants (trig-free polynomial form), degrees 0..3.
+SH_C0 = 0.28209479177387814
+SH_C1 = 0.4886025119029199
+SH_C2 = (
+    1.0925484305920792,
+    -1.0925484305920792,
+    0.31539156525252005,
+    -1.0925484305920792,
+    0.5462742152960396,
+)
+SH_C3 = (
+    -0.5900435899266435,
+    2.890611442640554,
+    -0.4570457994644658,
+    0.3731763325901154,
+    -0.4570457994644658,
+    1.445305721320277,
+    -0.5900435899266435,
+)
+MAX_SH_DEGREE = 3
+
+
+def sh_coeff_count(degree: int) -> int:
+    """Number of SH coefficients per colour channel for ``degree`` (1, 4, 9 or 16)."""
+    return (degree + 1) ** 2
+
+
+def opacity_extent_sigmas(opacity: float) -> float:
+    """Distance, in standard deviations, at which ``opacity * exp(-r^2 / 2)`` reaches ALPHA_MIN.
+
+    Zero when the splat can never reach ALPHA_MIN.
+    """
+    ratio = opacity / ALPHA_MIN
+    return math.sqrt(2.0 * math.log(ratio)) if ratio > 1.0 else 0.0
+
+
+def _glsl_float(value: float) -> str:
+    text = repr(float(value))
+    return text if ("e" in text or "." in text) else text + ".0"
+
+
+def glsl_defines() -> dict[str, str]:
+    """The constants above as GLSL ``#define`` values (name -> literal)."""
+    out = {
+        "TILE_SIZE": str(TILE_SIZE),
+        "JACOBIAN_CLAMP": _glsl_float(JACOBIAN_CLAMP),
+        "LOW_PASS": _glsl_float(LOW_PASS),
+        "AA_MIN_FACTOR": _glsl_float(AA_MIN_FACTOR),
+        "EXTENT_DISCRIMINANT_FLOOR": _glsl_float(EXTENT_DISCRIMINANT_FLOOR),
+        "EXTENT_SIGMAS": _glsl_float(EXTENT_SIGMAS),
+        "ALPHA_MAX": _glsl_float(ALPHA_MAX),
+        "ALPHA_MIN": _glsl_float(ALPHA_MIN),
+        "T_MIN": _glsl_float(T_MIN),
+        "SH_OFFSET": _glsl_float(SH_OFFSET),
+        "SH_C0": _glsl_float(SH_C0),
+        "SH_C1": _glsl_float(SH_C1),
+    }
+    for i, c in enumerate(SH_C2):
+        out[f"SH_C2_{i}"] = _glsl_float(c)
+    for i, c in enumerate(SH_C3):
+        out[f"SH_C3_{i}"] = _glsl_float(c)
+    return out

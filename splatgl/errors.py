@@ -1,0 +1,34 @@
+"""Exceptions splatgl raises for bad input.  The CLI turns them into one line and exit code 2."""
+
+from __future__ import annotations
+
+
+class SplatglError(Exception):
+    """Base class of every user-facing error (bad files, bad arguments, no OpenGL)."""
+
+
+class SceneFormatError(SplatglError, ValueError):
+    """A scene file is malformed or holds invalid values.
+
+    The message always names the file and, where one is at fault, the field; for bad values it
+    says how many rows are affected and the first index.
+    """
+
+    def __init__(self, path: object, message: str, field: str | None = None):
+        self.path = str(path)
+        self.field = field
+        where = f"{self.path}: " if path is not None else ""
+        what = f"field '{field}': " if field else ""
+        super().__init__(f"{where}{what}{message}")
+
+
+class CameraError(SplatglError, ValueError):
+    """A camera file or camera parameters are invalid."""
+
+
+class ContextError(SplatglError, RuntimeError):
+    """No OpenGL context could be created; the message lists every backend tried."""
+
+
+class ShaderError(SplatglError, RuntimeError):
+    """A shader failed to preprocess or compile; the message names file and line."""

@@ -1,0 +1,88 @@
+"""Scene file formats: detection from content, and one ``load_scene`` for all of them.
+
+Each format module provides ``NAME`` (str), ``EXTENSIONS`` (tuple of lower-case suffixes),
+``sniff(head: bytes) -> bool`` (does the file start like this format?) and
+``read(path: Path, drop_invalid: bool) -> Scene``.  Writers provide ``write(path, scene)``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from types import ModuleType
+
+from ..errors import SceneFormatError
+from ..scene import Scene
+
+#: Format modules in detection order (most specific signature first).
+_FORMAT_MODULES = ("compressed_ply", "ply", "spz", "ksplat", "splat")
+
+#: How many leading bytes ``sniff`` sees.
+SNIFF_BYTES = 4096
+
+
+def _modules() -> list[ModuleType]:
+    mods = []
+    for name in _FORMAT_MODULES:
+        try:
+            mods.append(importlib.import_module(f"{__name__}.{name}"))
+        except ModuleNotFoundError as exc:  # a format not written yet
+            if exc.name != f"{__name__}.{name}":
+                raise
+    return mods
+
+
+def detect_format(path: Path) -> ModuleType:
+    """The format module for ``path``: by content first, then by extension."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(SNIFF_BYTES)
+    except FileNotFoundError:
+        raise SceneFormatError(path, "no such file") from None
+    except IsADirectoryError:
+        raise SceneFormatError(path, "is a directory, not a scene file") from None
+    except OSError as exc:
+        raise SceneFormatError(path, f"cannot read: {exc.strerror}") from None
+    mods = _modules()
+    for mod in mods:
+        if mod.sniff(head):
+            return mod
+    suffix = path.name.lower()
+    for mod in mods:
+        if any(suffix.endswith(ext) for ext in mod.EXTENSIONS) and not getattr(mod, "NEEDS_MAGIC", False):
+            return mod
+    names = ", ".join(m.NAME for m in mods)
+    raise SceneFormatError(path, f"unknown scene format (supported: {names})")
+
+
+def load_scene(path: str | Path, drop_invalid: bool = False) -> Scene:
+    """Load a scene file of any supported format.
+
+    Raises :class:`SceneFormatError` (naming file, field and values) for anything malformed.
+    With ``drop_invalid``, rows holding NaN/Inf or degenerate quaternions are dropped with a
+    warning instead of rejected.
+    """
+    path = Path(path)
+    return detect_format(path).read(path, drop_invalid=drop_invalid)
+
+
+def writer_for(path: str | Path) -> ModuleType:
+    """The format module that writes files named like ``path`` (by extension)."""
+    name = Path(path).name.lower()
+    for mod in _modules():
+        if hasattr(mod, "write") and any(name.endswith(ext) for ext in mod.EXTENSIONS):
+            return mod
+    raise SceneFormatError(path, "cannot write this format (writable: .ply, .splat)")
+
+
+def save_scene(path: str | Path, scene: Scene) -> None:
+    """Write ``scene`` in the format the extension names, atomically (temp file, then rename)."""
+    path = Path(path)
+    mod = writer_for(path)
+    tmp = path.with_name(path.name + ".partial")
+    try:
+        mod.write(tmp, scene)
+        tmp.replace(path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()

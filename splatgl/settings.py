@@ -1,0 +1,85 @@
+"""Render settings shared by every path (quad, tile, reference): frozen, with enums for modes."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+from .constants import MAX_SH_DEGREE, REFERENCE_NEAR
+from .errors import SplatglError
+
+
+class Precision(enum.Enum):
+    """Colour target of the quad path's blending."""
+
+    RGBA32F = "rgba32f"
+    RGBA16F = "rgba16f"
+    RGBA8 = "rgba8"
+
+
+class QuadExtent(enum.Enum):
+    """How the quad path sizes each splat's quad.
+
+    ELLIPSE: along the ellipse axes, out to where ``o exp(-r^2/2)`` reaches 1/255 (default).
+    SQUARE: the reference's axis-aligned square of radius ``ceil(3 sqrt(lambda_max))``.
+    """
+
+    ELLIPSE = "ellipse"
+    SQUARE = "square"
+
+
+class RendererKind(enum.Enum):
+    QUAD = "quad"
+    TILE = "tile"
+    REFERENCE = "reference"
+
+
+#: Auto near plane: this fraction of the scene's robust radius, never more than the reference's.
+AUTO_NEAR_FRACTION = 0.01
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """What to render and how; the same object drives every renderer.
+
+    Attributes:
+        background: RGB composited behind the splats as ``C + (1 - A) bg``.
+        precision: blend target of the quad path.
+        extent: quad sizing of the quad path.
+        near: near-plane distance (view z at or below it is culled); ``None`` picks
+            :func:`resolve_near`'s scene-relative default.
+        antialias: multiply opacity by the reference's antialiasing compensation factor.
+        sh_degree: cap on the SH bands evaluated (``None``: all the scene has).
+    """
+
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    precision: Precision = Precision.RGBA32F
+    extent: QuadExtent = QuadExtent.ELLIPSE
+    near: float | None = None
+    antialias: bool = False
+    sh_degree: int | None = None
+
+    def __post_init__(self) -> None:
+        bg = tuple(float(v) for v in self.background)
+        if len(bg) != 3:
+            raise SplatglError(f"background must have 3 components, got {len(bg)}")
+        object.__setattr__(self, "background", bg)
+        object.__setattr__(self, "precision", Precision(self.precision))
+        object.__setattr__(self, "extent", QuadExtent(self.extent))
+        if self.near is not None and not self.near > 0.0:
+            raise SplatglError(f"near plane must be positive, got {self.near}")
+        if self.sh_degree is not None and not 0 <= self.sh_degree <= MAX_SH_DEGREE:
+            raise SplatglError(f"SH degree cap must be 0..{MAX_SH_DEGREE}, got {self.sh_degree}")
+
+
+def resolve_near(settings: RenderSettings, scene_radius: float) -> float:
+    """The near plane to use: the explicit setting, or ``min(0.2, 0.01 * scene_radius)``.
+
+    A fixed 0.2 (the reference's) culls small objects entirely from a camera that frames them
+    (the 0.2-unit donut scene); scaling with the scene keeps them while staying the reference's
+    value for room-sized scenes.
+    """
+    if settings.near is not None:
+        return float(settings.near)
+    radius = scene_radius if scene_radius > 0.0 else 1.0
+    return float(min(REFERENCE_NEAR, AUTO_NEAR_FRACTION * radius))
