@@ -1,0 +1,1 @@
+"""Sub-commands of the ``splatgl`` CLI, one module each (discovered by :mod:`splatgl.cli`)."""
