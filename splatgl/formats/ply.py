@@ -1,0 +1,355 @@
+"""INRIA-style 3DGS / 2DGS PLY files (binary little/big endian and ASCII): reader and writer.
+
+The vertex element holds one splat per row with (at least) the properties
+
+    x y z  f_dc_0..2  opacity  scale_0..2 (scale_0..1 for 2DGS surfels)  rot_0..3 (w, x, y, z)
+
+plus optional ``nx ny nz`` (ignored), ``f_rest_*`` (0, 9, 24 or 45 of them, channel-major) and
+anything else (ignored).  Values are the raw training values (log-scales, opacity logits,
+unnormalised quaternions); :func:`splatgl.scene.activate` validates them.
+
+Other elements may precede or follow the vertex element.  In binary files they are skipped by
+size, so they must hold fixed-size scalar properties only; an element with a list property
+before the vertex element is an error, one after it is ignored.  The PlayCanvas compressed PLY
+(``element chunk`` with packed properties) belongs to :mod:`splatgl.formats.compressed_ply`.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneFormatError
+from ..scene import Scene, SplatKind, activate, rest_to_sh, sh_degree_from_rest_count, sh_to_rest
+
+NAME = "ply"
+EXTENSIONS = (".ply",)
+
+#: PLY scalar type names (both spellings) -> NumPy type codes without byte order.
+SCALAR_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+#: ``format`` keyword -> NumPy byte order (None for ASCII).
+FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None}
+#: A header longer than this is not a PLY header (guards against reading a huge text file).
+MAX_HEADER_BYTES = 1 << 20
+
+_REST_RE = re.compile(r"^f_rest_(\d+)$")
+
+
+@dataclass
+class Element:
+    """One ``element`` of the header: its name, row count and properties.
+
+    ``properties`` is a list of ``(name, numpy_code)``; ``has_list`` is set when any property is a
+    ``property list`` (variable size per row).
+    """
+
+    name: str
+    count: int
+    properties: list[tuple[str, str]] = field(default_factory=list)
+    has_list: bool = False
+
+    def dtype(self, order: str) -> np.dtype:
+        """Structured dtype of one row in byte ``order`` ('<' or '>'); fixed-size rows only."""
+        return np.dtype([(name, order + code) for name, code in self.properties])
+
+
+@dataclass
+class Header:
+    """A parsed PLY header: byte order (None for ASCII), elements, and where the body starts."""
+
+    order: str | None
+    elements: list[Element]
+    body_offset: int
+    lines: int  # number of header lines, so ASCII errors can give file line numbers
+
+
+def _error(path, message: str, field_name: str | None = None) -> SceneFormatError:
+    return SceneFormatError(path, message, field_name)
+
+
+def parse_header(path, fh) -> Header:
+    """Parse the header from the binary file object ``fh`` (positioned at 0).
+
+    Raises :class:`SceneFormatError` for a missing ``ply`` magic, missing ``end_header``,
+    unsupported format, unknown property types and malformed lines.
+    """
+    first = fh.readline(16)
+    if first.rstrip(b"\r\n") != b"ply":
+        raise _error(path, "not a PLY file (it does not start with a 'ply' line)")
+    order: str | None = None
+    have_format = False
+    elements: list[Element] = []
+    lineno = 1
+    while True:
+        raw = fh.readline(MAX_HEADER_BYTES)
+        lineno += 1
+        if not raw:
+            raise _error(path, "the header has no 'end_header' line (file ends inside the header)")
+        if fh.tell() > MAX_HEADER_BYTES:
+            raise _error(path, f"no 'end_header' within the first {MAX_HEADER_BYTES} bytes")
+        try:
+            line = raw.decode("ascii").strip()
+        except UnicodeDecodeError:
+            raise _error(path, f"header line {lineno} is not ASCII text (missing 'end_header'?)")
+        words = line.split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        key = words[0]
+        if key == "end_header":
+            break
+        if key == "format":
+            if len(words) != 3 or words[1] not in FORMATS or words[2] != "1.0":
+                raise _error(path, f"unsupported format line '{line}' (expected "
+                                   "'format binary_little_endian|binary_big_endian|ascii 1.0')",
+                             "format")
+            order, have_format = FORMATS[words[1]], True
+        elif key == "element":
+            if len(words) != 3 or not words[2].isdigit():
+                raise _error(path, f"header line {lineno}: malformed element line '{line}'")
+            elements.append(Element(words[1], int(words[2])))
+        elif key == "property":
+            if not elements:
+                raise _error(path, f"header line {lineno}: property before any element")
+            elem = elements[-1]
+            if len(words) == 5 and words[1] == "list":
+                for t in words[2:4]:
+                    if t not in SCALAR_TYPES:
+                        raise _error(path, f"unknown property type '{t}' in list property",
+                                     words[4])
+                elem.has_list = True
+                elem.properties.append((words[4], "list"))
+            elif len(words) == 3:
+                if words[1] not in SCALAR_TYPES:
+                    raise _error(path, f"unknown property type '{words[1]}' (expected one of "
+                                       f"{', '.join(sorted(set(SCALAR_TYPES)))})", words[2])
+                if any(words[2] == name for name, _ in elem.properties):
+                    raise _error(path, f"property declared twice in element '{elem.name}'",
+                                 words[2])
+                elem.properties.append((words[2], SCALAR_TYPES[words[1]]))
+            else:
+                raise _error(path, f"header line {lineno}: malformed property line '{line}'")
+        else:
+            raise _error(path, f"header line {lineno}: unexpected header line '{line}'")
+    if not have_format:
+        raise _error(path, "the header has no 'format' line", "format")
+    return Header(order, elements, fh.tell(), lineno)
+
+
+def sniff(head: bytes) -> bool:
+    """True for a ``ply`` header with an ``element vertex`` holding a float ``x`` and no
+    ``element chunk`` (the compressed PLY is another format)."""
+    if not (head.startswith(b"ply\n") or head.startswith(b"ply\r\n")):
+        return False
+    text = head.split(b"end_header", 1)[0].decode("ascii", errors="replace")
+    current, has_x = None, False
+    for line in text.splitlines():
+        words = line.split()
+        if len(words) >= 2 and words[0] == "element":
+            current = words[1]
+            if current == "chunk":
+                return False
+        elif len(words) == 3 and words[0] == "property" and current == "vertex":
+            if words[2] == "x" and SCALAR_TYPES.get(words[1], "").startswith("f"):
+                has_x = True
+    return has_x
+
+
+def _read_vertex_binary(path, fh, header: Header, file_size: int) -> np.ndarray:
+    """The vertex rows as a structured array, skipping other fixed-size elements by size."""
+    offset = header.body_offset
+    vertex = None
+    for elem in header.elements:
+        if elem.has_list:
+            if vertex is not None:
+                return vertex  # after the vertex rows: ignored (size unknown without parsing)
+            raise _error(path, f"element '{elem.name}' before the vertex element has list "
+                               "properties; only fixed-size scalar properties are supported "
+                               "in binary PLY", elem.name)
+        dtype = elem.dtype(header.order)
+        need = elem.count * dtype.itemsize
+        if offset + need > file_size:
+            raise _error(path, f"file is truncated: element '{elem.name}' needs {need} bytes "
+                               f"({elem.count} rows x {dtype.itemsize} bytes) from byte {offset}"
+                               f", found {max(0, file_size - offset)}", elem.name)
+        if elem.name == "vertex":
+            fh.seek(offset)
+            vertex = np.fromfile(fh, dtype=dtype, count=elem.count)
+        offset += need
+    if offset < file_size:
+        raise _error(path, f"{file_size - offset} bytes after the last element "
+                           f"(header declares {offset} bytes in all); header/count mismatch")
+    return vertex
+
+
+def _read_vertex_ascii(path, fh, header: Header) -> np.ndarray:
+    """The vertex rows of an ASCII PLY as a structured array (native byte order)."""
+    lines = fh.read().decode("ascii", errors="replace").splitlines()
+    pos, vertex = 0, None
+    for elem in header.elements:
+        rows = lines[pos:pos + elem.count]
+        if len(rows) < elem.count:
+            raise _error(path, f"file is truncated: element '{elem.name}' declares {elem.count} "
+                               f"rows, found {len(rows)} (file ends at line "
+                               f"{header.lines + len(lines)})", elem.name)
+        if elem.name == "vertex":
+            vertex = _parse_ascii_rows(path, elem, rows, header.lines + pos + 1)
+        pos += elem.count
+    extra = sum(1 for line in lines[pos:] if line.strip())
+    if extra:
+        raise _error(path, f"{extra} non-empty line(s) after the last element "
+                           f"(from line {header.lines + pos + 1}); header/count mismatch")
+    return vertex
+
+
+def _parse_ascii_rows(path, elem: Element, rows: list[str], first_line: int) -> np.ndarray:
+    nprop = len(elem.properties)
+    tokens = " ".join(rows).split()
+    if len(tokens) != nprop * elem.count:
+        for i, row in enumerate(rows):
+            if len(row.split()) != nprop:
+                raise _error(path, f"line {first_line + i}: {len(row.split())} values, expected "
+                                   f"{nprop} (one per vertex property)", elem.name)
+    try:
+        values = np.array(tokens, dtype=np.float64).reshape(elem.count, nprop)
+    except ValueError:
+        for i, row in enumerate(rows):
+            for tok, (name, _) in zip(row.split(), elem.properties):
+                try:
+                    float(tok)
+                except ValueError:
+                    raise _error(path, f"line {first_line + i}: '{tok}' is not a number",
+                                 name) from None
+        raise
+    out = np.empty(elem.count, elem.dtype("="))
+    for j, (name, _) in enumerate(elem.properties):
+        out[name] = values[:, j]
+    return out
+
+
+def _column(path, vertex: np.ndarray, names: list[str]) -> np.ndarray:
+    missing = [n for n in names if n not in vertex.dtype.names]
+    if missing:
+        raise _error(path, "required vertex property missing (has: "
+                           f"{' '.join(vertex.dtype.names)})", missing[0])
+    return np.stack([vertex[n].astype(np.float32) for n in names], axis=1)
+
+
+def read(path: Path, drop_invalid: bool = False) -> Scene:
+    """Load an INRIA-style PLY into a :class:`Scene` (raw values kept, rows validated).
+
+    Raises :class:`SceneFormatError` naming the file and, where one is at fault, the property.
+    """
+    try:
+        with open(path, "rb") as fh:
+            header = parse_header(path, fh)
+            names = {e.name for e in header.elements}
+            if "vertex" not in names:
+                raise _error(path, "the header has no 'element vertex'")
+            vertex_elem = next(e for e in header.elements if e.name == "vertex")
+            if "chunk" in names or any(n.startswith("packed_") for n, _ in
+                                       vertex_elem.properties):
+                raise _error(path, "this is a PlayCanvas compressed PLY (element chunk / packed "
+                                   "properties), not an INRIA-style PLY")
+            if vertex_elem.has_list:
+                raise _error(path, "the vertex element has a list property", "vertex")
+            if header.order is None:
+                vertex = _read_vertex_ascii(path, fh, header)
+            else:
+                vertex = _read_vertex_binary(path, fh, header, os.fstat(fh.fileno()).st_size)
+    except OSError as exc:
+        raise _error(path, f"cannot read: {exc.strerror or exc}") from None
+    if vertex_elem.count == 0:
+        raise _error(path, "the scene has no splats (element vertex 0)", "vertex")
+    props = set(vertex.dtype.names)
+    surfel = "scale_1" in props and "scale_2" not in props
+    nscale = 2 if surfel else 3
+    means = _column(path, vertex, ["x", "y", "z"])
+    dc = _column(path, vertex, [f"f_dc_{i}" for i in range(3)])
+    opacity = _column(path, vertex, ["opacity"])[:, 0]
+    log_scales = _column(path, vertex, [f"scale_{i}" for i in range(nscale)])
+    quats = _column(path, vertex, [f"rot_{i}" for i in range(4)])
+    rest_idx = sorted(int(m.group(1)) for n in props if (m := _REST_RE.match(n)))
+    if rest_idx != list(range(len(rest_idx))):
+        gap = next(i for i in range(len(rest_idx) + 1) if i not in rest_idx)
+        raise _error(path, f"f_rest properties are not numbered 0..{len(rest_idx) - 1}",
+                     f"f_rest_{gap}")
+    sh_degree_from_rest_count(path, len(rest_idx))
+    if rest_idx:
+        rest = _column(path, vertex, [f"f_rest_{i}" for i in rest_idx])
+    else:
+        rest = np.zeros((vertex.shape[0], 0), np.float32)
+    sh = rest_to_sh(dc, rest)
+    kind = SplatKind.SURFEL_2D if surfel else SplatKind.GAUSSIAN_3D
+    return activate(path, means, quats, log_scales, opacity, sh, kind, drop_invalid)
+
+
+def write_elements(path, elements: list[tuple[str, np.ndarray]], byte_order: str = "little",
+                   ascii: bool = False, comments: tuple[str, ...] = ()) -> None:
+    """Write any PLY: ``elements`` is a list of ``(name, structured array)`` with scalar fields.
+
+    ``byte_order`` is 'little' or 'big' (binary); ``ascii=True`` writes text with 9 significant
+    digits for floats, enough for float32 to read back bit-exact.
+    """
+    if byte_order not in ("little", "big"):
+        raise ValueError(f"byte_order must be 'little' or 'big', not {byte_order!r}")
+    fmt = "ascii" if ascii else f"binary_{byte_order}_endian"
+    codes = {v: k for k, v in SCALAR_TYPES.items() if k.isalpha() and not k[-1].isdigit()}
+    head = ["ply", f"format {fmt} 1.0", *(f"comment {c}" for c in comments)]
+    for name, arr in elements:
+        head.append(f"element {name} {len(arr)}")
+        for fname in arr.dtype.names:
+            head.append(f"property {codes[arr.dtype[fname].str[1:]]} {fname}")
+    head.append("end_header")
+    order = "<" if byte_order == "little" else ">"
+    with open(path, "wb") as fh:
+        fh.write(("\n".join(head) + "\n").encode("ascii"))
+        for _, arr in elements:
+            if ascii:
+                fmts = ["%.9g" if arr.dtype[n].kind == "f" else "%d" for n in arr.dtype.names]
+                cols = [arr[n] for n in arr.dtype.names]
+                for row in zip(*cols):
+                    fh.write((" ".join(f % v for f, v in zip(fmts, row)) + "\n").encode("ascii"))
+            else:
+                dt = np.dtype([(n, order + arr.dtype[n].str[1:]) for n in arr.dtype.names])
+                arr.astype(dt).tofile(fh)
+
+
+def scene_to_vertices(scene: Scene, normals: bool = True) -> np.ndarray:
+    """The INRIA vertex layout of ``scene``: a structured float32 array, one row per splat.
+
+    Fields: x y z [nx ny nz] f_dc_0..2 f_rest_* (channel-major) opacity scale_* rot_0..3.
+    """
+    dc, rest = sh_to_rest(scene.sh)
+    cols: list[tuple[str, np.ndarray]] = [(n, scene.means[:, i]) for i, n in enumerate("xyz")]
+    if normals:
+        zero = np.zeros(scene.count, np.float32)
+        cols += [("nx", zero), ("ny", zero), ("nz", zero)]
+    cols += [(f"f_dc_{i}", dc[:, i]) for i in range(3)]
+    cols += [(f"f_rest_{i}", rest[:, i]) for i in range(rest.shape[1])]
+    cols.append(("opacity", scene.opacity_logits))
+    cols += [(f"scale_{i}", scene.log_scales[:, i]) for i in range(scene.log_scales.shape[1])]
+    cols += [(f"rot_{i}", scene.quats[:, i]) for i in range(4)]
+    out = np.empty(scene.count, np.dtype([(n, "<f4") for n, _ in cols]))
+    for n, c in cols:
+        out[n] = c
+    return out
+
+
+def write(path, scene: Scene, *, byte_order: str = "little", ascii: bool = False,
+          normals: bool = True) -> None:
+    """Write ``scene`` as an INRIA-layout PLY (float32; binary little endian by default).
+
+    Reading the file back gives bit-identical arrays.  ``byte_order='big'`` and ``ascii=True``
+    exist mainly to exercise the reader; ``normals=False`` leaves out ``nx ny nz``.
+    """
+    write_elements(path, [("vertex", scene_to_vertices(scene, normals))], byte_order, ascii,
+                   comments=("written by splatgl",))
