@@ -1,0 +1,8 @@
+// Camera uniforms shared by every stage (splatgl/gl/uniforms.py sets them from a Camera).
+uniform mat3 u_view_rot;      // world-to-camera rotation R_cw (OpenCV axes)
+uniform vec3 u_view_trans;    // world-to-camera translation t_cw
+uniform vec3 u_cam_center;    // camera centre in the scene's own frame (for SH directions)
+uniform vec4 u_intrinsics;    // (fx, fy, cx, cy) in pixels (orthographic: pixels per unit)
+uniform vec2 u_viewport;      // (width, height) in pixels
+uniform vec2 u_tan_fov;       // (tan(fov_x / 2), tan(fov_y / 2)) = (W / 2fx, H / 2fy)
+uniform float u_near;         // view z at or below this is culled

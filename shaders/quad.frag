@@ -1,0 +1,18 @@
+// Quad path, fragment stage: conic opacity with the reference clamp and cut, DESIGN.md 1-2:
+//   alpha = min(0.99, o exp(power)), power = -0.5 (a dx^2 + c dy^2) - b dx dy,
+//   skipped when power > 0 or alpha < 1/255.  Output premultiplied (c alpha, alpha) for
+//   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).  Twin: splatgl/reference rasterize.
+flat in vec2 v_mean2d;
+flat in vec3 v_conic;
+flat in vec4 v_color;
+
+layout(location = 0) out vec4 out_color;
+
+void main() {
+    vec2 d = gl_FragCoord.xy - v_mean2d;
+    float power = -0.5 * (v_conic.x * d.x * d.x + v_conic.z * d.y * d.y) - v_conic.y * d.x * d.y;
+    if (power > 0.0) discard;
+    float alpha = min(ALPHA_MAX, v_color.a * exp(power));
+    if (alpha < ALPHA_MIN) discard;
+    out_color = vec4(v_color.rgb * alpha, alpha);
+}

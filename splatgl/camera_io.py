@@ -1,0 +1,114 @@
+"""Camera files: splatgl's single-camera JSON and the cameras.json of 3DGS training output.
+
+(a) Single camera: ``{"width", "height", "fx", "fy", "cx", "cy", "world_to_camera": 4x4
+    row-major, optional "projection": "perspective" | "orthographic"}`` (orthographic fx, fy in
+    pixels per world unit).
+(b) 3DGS ``cameras.json``: a list of ``{"width", "height", "position", "rotation", "fx", "fy",
+    ...}`` where ``rotation`` is camera-to-world (3x3, rows as stored) and ``position`` the camera
+    centre; the principal point is the image centre.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera, Projection
+from .errors import CameraError
+
+
+def _number(path: Path, where: str, obj: dict, key: str) -> float:
+    if key not in obj:
+        raise CameraError(f"{path}: {where}missing field '{key}'")
+    value = obj[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise CameraError(f"{path}: {where}field '{key}' must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, int]) -> np.ndarray:
+    if key not in obj:
+        raise CameraError(f"{path}: {where}missing field '{key}'")
+    try:
+        arr = np.array(obj[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CameraError(f"{path}: {where}field '{key}' must be a {shape[0]}x{shape[1]} array of numbers") from None
+    if arr.shape != shape or not np.isfinite(arr).all():
+        raise CameraError(f"{path}: {where}field '{key}' must be a finite {shape[0]}x{shape[1]} array, got shape {arr.shape}")
+    return arr
+
+
+def camera_from_json(obj: dict, path: Path = Path("<camera>")) -> Camera:
+    """A camera from the single-camera JSON object (form (a))."""
+    if not isinstance(obj, dict):
+        raise CameraError(f"{path}: expected a JSON object with width, height, fx, fy, cx, cy, world_to_camera")
+    vals = {k: _number(path, "", obj, k) for k in ("width", "height", "fx", "fy", "cx", "cy")}
+    w2c = _matrix(path, "", obj, "world_to_camera", (4, 4))
+    proj = obj.get("projection", "perspective")
+    try:
+        projection = Projection(proj)
+    except ValueError:
+        raise CameraError(f"{path}: field 'projection' must be 'perspective' or 'orthographic', got {proj!r}") from None
+    try:
+        return Camera(int(vals["width"]) if vals["width"].is_integer() else vals["width"],
+                      int(vals["height"]) if vals["height"].is_integer() else vals["height"],
+                      vals["fx"], vals["fy"], vals["cx"], vals["cy"], w2c, projection)
+    except CameraError as exc:
+        raise CameraError(f"{path}: {exc}") from None
+
+
+def camera_from_3dgs(entry: dict, path: Path, index: int) -> Camera:
+    """A camera from one entry of a 3DGS cameras.json (form (b))."""
+    where = f"camera {index}: "
+    if not isinstance(entry, dict):
+        raise CameraError(f"{path}: {where}expected a JSON object")
+    w, h = _number(path, where, entry, "width"), _number(path, where, entry, "height")
+    fx, fy = _number(path, where, entry, "fx"), _number(path, where, entry, "fy")
+    c2w_rot = _matrix(path, where, entry, "rotation", (3, 3))
+    centre = np.array(_matrix(path, where, {"p": [entry.get("position")]}, "p", (1, 3))[0]) \
+        if "position" in entry else None
+    if centre is None:
+        raise CameraError(f"{path}: {where}missing field 'position'")
+    if not np.allclose(c2w_rot @ c2w_rot.T, np.eye(3), atol=1e-4):
+        raise CameraError(f"{path}: {where}field 'rotation' is not a rotation matrix")
+    w2c = np.eye(4)
+    w2c[:3, :3] = c2w_rot.T
+    w2c[:3, 3] = -c2w_rot.T @ centre
+    try:
+        return Camera(int(w), int(h), fx, fy, w / 2.0, h / 2.0, w2c)
+    except CameraError as exc:
+        raise CameraError(f"{path}: {where}{exc}") from None
+
+
+def load_cameras(path: str | Path) -> list[Camera]:
+    """Every camera in a file of either form (a list of one for form (a))."""
+    path = Path(path)
+    try:
+        obj = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise CameraError(f"{path}: no such camera file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CameraError(f"{path}: cannot read camera file ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise CameraError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    if isinstance(obj, list):
+        if not obj:
+            raise CameraError(f"{path}: the camera list is empty")
+        return [camera_from_3dgs(entry, path, i) for i, entry in enumerate(obj)]
+    return [camera_from_json(obj, path)]
+
+
+def load_camera(path: str | Path, index: int = 0) -> Camera:
+    """Camera ``index`` of a camera file (index 0 for a single-camera JSON)."""
+    cams = load_cameras(path)
+    if not -len(cams) <= index < len(cams):
+        raise CameraError(f"{path}: camera index {index} out of range (the file has {len(cams)} camera(s))")
+    return cams[index]
+
+
+def save_camera(path: str | Path, camera: Camera) -> None:
+    """Write the single-camera JSON form (a) of ``camera``."""
+    Path(path).write_text(json.dumps(camera.to_json(), indent=2) + "\n")

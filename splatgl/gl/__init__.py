@@ -1,0 +1,1 @@
+"""OpenGL plumbing: the one context factory, shader loading, and GPU buffers."""

@@ -1,0 +1,130 @@
+"""The one place that creates OpenGL contexts.
+
+Headless: EGL through moderngl (``backend='egl'``, works with or without DISPLAY), falling back to
+OSMesa through ctypes (``libOSMesa``, Debian ``libosmesa6``) where EGL is missing.  The
+environment variable ``SPLATGL_GL_BACKEND`` (``egl`` or ``osmesa``) forces one.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import enum
+import os
+
+import moderngl
+
+from ..errors import ContextError
+
+#: Compute shaders (the tile renderer) and storage buffers need OpenGL 4.3.
+REQUIRED_VERSION = 430
+
+
+class Backend(enum.Enum):
+    EGL = "egl"
+    OSMESA = "osmesa"
+
+
+# OSMesa constants (GL/osmesa.h).
+_OSMESA_FORMAT = 0x22
+_OSMESA_RGBA = 0x1908
+_OSMESA_DEPTH_BITS = 0x30
+_OSMESA_PROFILE = 0x33
+_OSMESA_CORE_PROFILE = 0x34
+_OSMESA_CONTEXT_MAJOR_VERSION = 0x36
+_OSMESA_CONTEXT_MINOR_VERSION = 0x37
+_GL_UNSIGNED_BYTE = 0x1401
+
+
+class _OSMesaLoader:
+    """moderngl loader over ``OSMesaGetProcAddress``; owns the OSMesa context and its buffer."""
+
+    def __init__(self) -> None:
+        name = ctypes.util.find_library("OSMesa") or "libOSMesa.so.8"
+        try:
+            lib = ctypes.CDLL(name)
+        except OSError as exc:
+            raise ContextError(f"OSMesa library not found ({exc})") from None
+        lib.OSMesaCreateContextAttribs.restype = ctypes.c_void_p
+        lib.OSMesaCreateContextAttribs.argtypes = [ctypes.POINTER(ctypes.c_int), ctypes.c_void_p]
+        lib.OSMesaMakeCurrent.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int,
+                                          ctypes.c_int, ctypes.c_int]
+        lib.OSMesaGetProcAddress.restype = ctypes.c_void_p
+        lib.OSMesaGetProcAddress.argtypes = [ctypes.c_char_p]
+        lib.OSMesaDestroyContext.argtypes = [ctypes.c_void_p]
+        attribs = (ctypes.c_int * 11)(
+            _OSMESA_FORMAT, _OSMESA_RGBA, _OSMESA_DEPTH_BITS, 0,
+            _OSMESA_PROFILE, _OSMESA_CORE_PROFILE,
+            _OSMESA_CONTEXT_MAJOR_VERSION, 4, _OSMESA_CONTEXT_MINOR_VERSION, 5, 0,
+        )
+        ctx = lib.OSMesaCreateContextAttribs(attribs, None)
+        if not ctx:
+            raise ContextError("OSMesaCreateContextAttribs failed for a 4.5 core context")
+        # A 1x1 default framebuffer: splatgl always renders into its own framebuffers.
+        self._buffer = (ctypes.c_ubyte * 4)()
+        if not lib.OSMesaMakeCurrent(ctx, self._buffer, _GL_UNSIGNED_BYTE, 1, 1):
+            lib.OSMesaDestroyContext(ctx)
+            raise ContextError("OSMesaMakeCurrent failed")
+        self._lib, self._ctx = lib, ctx
+
+    def load_opengl_function(self, name: str) -> int:
+        return self._lib.OSMesaGetProcAddress(name.encode()) or 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *args):
+        return None
+
+    def release(self) -> None:
+        if self._ctx:
+            self._lib.OSMesaDestroyContext(self._ctx)
+            self._ctx = None
+
+
+def _create_egl() -> moderngl.Context:
+    return moderngl.create_context(standalone=True, backend="egl", require=REQUIRED_VERSION)
+
+
+def _create_osmesa() -> moderngl.Context:
+    loader = _OSMesaLoader()
+    moderngl.init_context(loader=loader)  # stores the context instead of returning it
+    ctx = moderngl.get_context()
+    ctx.extra = {"osmesa_loader": loader}  # keeps the OSMesa context alive with moderngl's
+    if ctx.version_code < REQUIRED_VERSION:
+        raise ContextError(f"OSMesa gave OpenGL {ctx.version_code}, need {REQUIRED_VERSION}")
+    return ctx
+
+
+_FACTORIES = {Backend.EGL: _create_egl, Backend.OSMESA: _create_osmesa}
+
+
+def create_headless_context(backend: Backend | str | None = None) -> moderngl.Context:
+    """A headless OpenGL 4.3+ core context; release it with ``ctx.release()``.
+
+    Tries ``backend`` alone when given (or ``$SPLATGL_GL_BACKEND``), else EGL then OSMesa.
+    Raises :class:`ContextError` listing every backend tried and why it failed.
+    """
+    chosen = backend or os.environ.get("SPLATGL_GL_BACKEND") or None
+    if chosen is not None:
+        try:
+            order = [Backend(chosen)]
+        except ValueError:
+            raise ContextError(f"unknown OpenGL backend {chosen!r} (choose egl or osmesa)") from None
+    else:
+        order = [Backend.EGL, Backend.OSMESA]
+    failures = []
+    for b in order:
+        try:
+            return _FACTORIES[b]()
+        except Exception as exc:  # each backend fails in its own way; all are reported below
+            failures.append(f"{b.value}: {str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__}")
+    raise ContextError("could not create an OpenGL 4.3 context; tried " + "; ".join(failures))
+
+
+def create_window_context() -> moderngl.Context:
+    """Wrap the OpenGL context current on this thread (a glfw window's) in moderngl."""
+    try:
+        return moderngl.create_context(require=330)
+    except Exception as exc:
+        raise ContextError(f"could not use the window's OpenGL context: {exc}") from None

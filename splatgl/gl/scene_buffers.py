@@ -1,0 +1,55 @@
+"""The static scene on the GPU: storage buffers uploaded once (layouts in shaders/lib/scene.glsl)."""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from ..scene import Scene
+
+BINDING_A, BINDING_Q, BINDING_S, BINDING_DC, BINDING_SH = 0, 1, 2, 3, 4
+
+
+def _vec4(columns: list[np.ndarray], n: int) -> np.ndarray:
+    out = np.zeros((n, 4), np.float32)
+    col = 0
+    for arr in columns:
+        arr = arr.reshape(n, -1)
+        out[:, col:col + arr.shape[1]] = arr
+        col += arr.shape[1]
+    return out
+
+
+class SceneBuffers:
+    """Activated splat attributes in std430 storage buffers; release with :meth:`release`.
+
+    ``a`` = (mean.xyz, opacity), ``q`` = unit quaternion, ``s`` = (scale.xyz, 0) for 3DGS or
+    (scale.xy, 0, 0) for surfels, ``dc`` = (SH DC RGB, 0), ``sh`` = coefficients 1..K-1
+    (float32, K-1 x 3 per splat; absent at degree 0).
+    """
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene):
+        n = scene.count
+        self.scene = scene
+        self.count = n
+        self.sh_rest_coeffs = scene.sh.shape[1] - 1
+        self.a = ctx.buffer(_vec4([scene.means, scene.opacities], n).tobytes())
+        self.q = ctx.buffer(np.ascontiguousarray(scene.rotations, np.float32).tobytes())
+        self.s = ctx.buffer(_vec4([scene.scales], n).tobytes())
+        self.dc = ctx.buffer(_vec4([scene.sh[:, 0]], n).tobytes())
+        self.sh = (ctx.buffer(np.ascontiguousarray(scene.sh[:, 1:]).tobytes())
+                   if self.sh_rest_coeffs > 0 else None)
+
+    def bind(self) -> None:
+        self.a.bind_to_storage_buffer(BINDING_A)
+        self.q.bind_to_storage_buffer(BINDING_Q)
+        self.s.bind_to_storage_buffer(BINDING_S)
+        self.dc.bind_to_storage_buffer(BINDING_DC)
+        if self.sh is not None:
+            self.sh.bind_to_storage_buffer(BINDING_SH)
+
+    def release(self) -> None:
+        for buf in (self.a, self.q, self.s, self.dc, self.sh):
+            if buf is not None:
+                buf.release()
+        self.sh = None

@@ -1,0 +1,141 @@
+"""Shader files: locating them, an ``#include`` preprocessor, and a program cache.
+
+Shaders live in the top-level ``shaders/`` folder (shipped in the wheel as ``splatgl/shaders``).
+A stage file may ``#include "lib/name.glsl"``; each file is included once per stage.  The
+preprocessor emits ``#line`` directives with a per-file number, so compiler messages are mapped
+back to ``file:line``.  Programs are specialised by generated ``#define`` lines (the reference
+constants of :mod:`splatgl.constants` plus per-variant switches) and cached by (names, defines).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import moderngl
+
+from ..constants import glsl_defines
+from ..errors import ShaderError
+
+GLSL_VERSION = "#version 430 core"
+_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
+_MESA_MSG = re.compile(r"(\d+):(\d+)\((\d+)\)")
+_NVIDIA_MSG = re.compile(r"(\d+)\((\d+)\)")
+
+
+def shader_dir() -> Path:
+    """The shader folder: inside the installed package, or the repository's ``shaders/``."""
+    here = Path(__file__).resolve().parent.parent
+    for candidate in (here / "shaders", here.parent / "shaders"):
+        if (candidate / "lib").is_dir():
+            return candidate
+    raise ShaderError(f"shader folder not found next to {here} (broken installation?)")
+
+
+@dataclass(frozen=True)
+class Source:
+    """Preprocessed GLSL and the file each ``#line`` source number stands for."""
+
+    text: str
+    files: tuple[str, ...]
+
+    def describe(self, log: str) -> str:
+        """Rewrite ``N:line(col)`` references in a compiler log as ``file:line``."""
+
+        def mesa(m: re.Match) -> str:
+            idx = int(m.group(1))
+            name = self.files[idx] if idx < len(self.files) else f"<{idx}>"
+            return f"{name}:{m.group(2)}({m.group(3)})"
+
+        out = _MESA_MSG.sub(mesa, log)
+        if out == log:  # other drivers write "N(line)"
+            out = _NVIDIA_MSG.sub(
+                lambda m: f"{self.files[int(m.group(1))] if int(m.group(1)) < len(self.files) else m.group(1)}:{m.group(2)}",
+                log,
+            )
+        return out
+
+
+def preprocess(name: str, defines: dict[str, str] | None = None, root: Path | None = None) -> Source:
+    """Expand ``name`` (relative to the shader folder) into one GLSL string.
+
+    Adds the version line, the reference constants and ``defines`` as ``#define`` lines.
+    Raises :class:`ShaderError` naming ``file:line`` for a missing include or an include cycle.
+    """
+    root = root or shader_dir()
+    files: list[str] = []
+    included: set[str] = set()
+    out: list[str] = [GLSL_VERSION]
+    all_defines = {**glsl_defines(), **(defines or {})}
+    out += [f"#define {k} {v}".rstrip() for k, v in sorted(all_defines.items())]
+
+    def expand(rel: str, stack: tuple[str, ...], where: str) -> None:
+        if rel in stack:
+            raise ShaderError(f"{where}: include cycle {' -> '.join(stack + (rel,))}")
+        if rel in included:
+            return
+        path = root / rel
+        if not path.is_file():
+            raise ShaderError(f"{where}: shader file '{rel}' not found in {root}")
+        included.add(rel)
+        number = len(files)
+        files.append(rel)
+        out.append(f"#line 1 {number}")
+        for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+            m = _INCLUDE.match(line)
+            if m:
+                expand(m.group(1), stack + (rel,), f"{rel}:{lineno}")
+                out.append(f"#line {lineno + 1} {number}")
+            elif line.lstrip().startswith("#version"):
+                out.append("")  # the version line is emitted once, above
+            else:
+                out.append(line)
+
+    expand(name, (), "(top)")
+    return Source("\n".join(out) + "\n", tuple(files))
+
+
+def _define_key(defines: dict[str, object] | None) -> tuple[tuple[str, str], ...]:
+    return tuple(sorted((k, str(v)) for k, v in (defines or {}).items()))
+
+
+class ProgramCache:
+    """Compiles programs on first use and keeps them, keyed by (stage files, defines)."""
+
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self._programs: dict[tuple, moderngl.Program | moderngl.ComputeShader] = {}
+
+    def _compile(self, kind: str, sources: dict[str, Source]):
+        try:
+            if kind == "compute":
+                return self.ctx.compute_shader(sources["compute"].text)
+            return self.ctx.program(
+                vertex_shader=sources["vertex"].text, fragment_shader=sources["fragment"].text
+            )
+        except moderngl.Error as exc:
+            log = str(exc)
+            for src in sources.values():
+                log = src.describe(log)
+            raise ShaderError(f"shader compile failed ({', '.join(s.files[0] for s in sources.values())}):\n{log}") from None
+
+    def program(self, vertex: str, fragment: str, defines: dict[str, object] | None = None) -> moderngl.Program:
+        key = ("render", vertex, fragment, _define_key(defines))
+        if key not in self._programs:
+            d = dict(_define_key(defines))
+            self._programs[key] = self._compile(
+                "render", {"vertex": preprocess(vertex, d), "fragment": preprocess(fragment, d)}
+            )
+        return self._programs[key]
+
+    def compute(self, name: str, defines: dict[str, object] | None = None) -> moderngl.ComputeShader:
+        key = ("compute", name, _define_key(defines))
+        if key not in self._programs:
+            self._programs[key] = self._compile("compute", {"compute": preprocess(name, dict(_define_key(defines)))})
+        return self._programs[key]
+
+    def release(self) -> None:
+        for prog in self._programs.values():
+            prog.release()
+        self._programs.clear()

@@ -1,0 +1,186 @@
+"""The graphics-API quad path (DESIGN.md section 3): cull -> sort -> instanced quads -> blend.
+
+Per view, only the sorted index buffer is uploaded; the scene's storage buffers are uploaded
+once.  The vertex stage (shaders/quad.vert) evaluates SH colour and the 2D covariance and sizes
+the quad; the fragment stage (shaders/quad.frag) evaluates the conic opacity.  Blending is
+front to back, (ONE_MINUS_DST_ALPHA, ONE), into a cleared (0, 0, 0, 0) target.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from .camera import Camera
+from .cull import cull
+from .gl.scene_buffers import SceneBuffers
+from .gl.shaders import ProgramCache
+from .gl.targets import ColorTarget
+from .scene import Scene, SplatKind
+from .settings import QuadExtent, RenderSettings, resolve_near
+from .sort import depth_sort
+
+
+@dataclass(frozen=True)
+class QuadTimes:
+    """Wall-clock seconds of each stage of one quad-path frame."""
+
+    cull: float
+    sort: float
+    upload: float
+    draw: float
+    readback: float
+
+    @property
+    def total(self) -> float:
+        return self.cull + self.sort + self.upload + self.draw + self.readback
+
+
+def composite(rgba: np.ndarray, background: tuple[float, float, float]) -> np.ndarray:
+    """``C + (1 - A) bg`` on an (H, W, 4) premultiplied image; alpha is kept as A."""
+    out = rgba.copy()
+    out[..., :3] += (1.0 - rgba[..., 3:4]) * np.asarray(background, np.float32)
+    return out
+
+
+def set_camera_uniforms(prog: moderngl.Program, camera: Camera, near: float) -> None:
+    """Write the uniforms of shaders/lib/camera.glsl that ``prog`` uses."""
+    tx, ty = camera.tan_half_fov
+    values = {
+        "u_view_rot": tuple(camera.rotation.astype(np.float32).T.ravel()),  # column-major
+        "u_view_trans": tuple(camera.translation.astype(np.float32)),
+        "u_cam_center": tuple(camera.center.astype(np.float32)),
+        "u_intrinsics": (camera.fx, camera.fy, camera.cx, camera.cy),
+        "u_viewport": (float(camera.width), float(camera.height)),
+        "u_tan_fov": (tx, ty),
+        "u_near": near,
+    }
+    for name, value in values.items():
+        if name in prog:
+            prog[name].value = value
+
+
+class QuadRenderer:
+    """Renders one scene through the quad path; reuse it across views, then :meth:`release`."""
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
+                 programs: ProgramCache | None = None):
+        if scene.kind is not SplatKind.GAUSSIAN_3D:
+            raise NotImplementedError("the quad path renders 3DGS scenes; 2DGS surfels are not supported yet")
+        self.ctx = ctx
+        self.scene = scene
+        self.settings = settings
+        self.programs = programs or ProgramCache(ctx)
+        self.near = resolve_near(settings, scene.robust_radius)
+        self.buffers = SceneBuffers(ctx, scene)
+        self._max_scale = scene.scales.max(axis=1)
+        self._index_buffer: moderngl.Buffer | None = None
+        self._vao: moderngl.VertexArray | None = None
+        self._target: ColorTarget | None = None
+        self._order_key: tuple | None = None
+        self._order = np.zeros(0, np.uint32)
+        self.last_times: QuadTimes | None = None
+
+    # --------------------------------------------------------------------------- stages
+    def program(self) -> moderngl.Program:
+        degree = self.scene.sh_degree if self.settings.sh_degree is None else min(
+            self.settings.sh_degree, self.scene.sh_degree)
+        defines: dict[str, object] = {
+            "SH_DEGREE": degree,
+            "SH_REST_COEFFS": self.buffers.sh_rest_coeffs,
+        }
+        if self.settings.extent is QuadExtent.SQUARE:
+            defines["EXTENT_SQUARE"] = 1
+        if self.settings.antialias:
+            defines["ANTIALIAS"] = 1
+        return self.programs.program("quad.vert", "quad.frag", defines)
+
+    def visible_order(self, camera: Camera) -> np.ndarray:
+        """Cull and sort for ``camera``: (M,) uint32 splat indices, front to back.
+
+        Re-sorted whenever the pose or intrinsics change; the same camera reuses the order.
+        """
+        key = (camera.world_to_camera.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy,
+               camera.width, camera.height, camera.projection)
+        if key == self._order_key:
+            self._times_cull = self._times_sort = 0.0
+            return self._order
+        t0 = time.perf_counter()
+        rot = camera.rotation.astype(np.float32)
+        p_cam = self.scene.means @ rot.T + camera.translation.astype(np.float32)
+        keep = np.flatnonzero(cull(p_cam, self._max_scale, self.scene.opacities, camera, self.near))
+        t1 = time.perf_counter()
+        order = depth_sort(p_cam[keep, 2], keep.astype(np.uint32))
+        t2 = time.perf_counter()
+        self._times_cull, self._times_sort = t1 - t0, t2 - t1
+        self._order_key, self._order = key, order
+        return order
+
+    def _upload(self, order: np.ndarray, prog: moderngl.Program) -> None:
+        data = order.tobytes()
+        if self._index_buffer is None or self._index_buffer.size < max(len(data), 4):
+            if self._vao is not None:
+                self._vao.release()
+            if self._index_buffer is not None:
+                self._index_buffer.release()
+            self._index_buffer = self.ctx.buffer(reserve=max(len(data), 4))
+            self._vao = None
+        if data:
+            self._index_buffer.write(data)
+        if self._vao is None or self._vao.program is not prog:
+            if self._vao is not None:
+                self._vao.release()
+            self._vao = self.ctx.vertex_array(prog, [(self._index_buffer, "u4/i", "splat_index")])
+
+    def target(self, camera: Camera) -> ColorTarget:
+        size = (camera.width, camera.height)
+        if self._target is None or self._target.size != size or self._target.precision is not self.settings.precision:
+            if self._target is not None:
+                self._target.release()
+            self._target = ColorTarget(self.ctx, camera.width, camera.height, self.settings.precision)
+        return self._target
+
+    def draw(self, camera: Camera, fbo: moderngl.Framebuffer) -> int:
+        """Cull, sort, upload and draw into ``fbo`` (cleared to 0); returns splats drawn."""
+        order = self.visible_order(camera)
+        prog = self.program()
+        t0 = time.perf_counter()
+        self._upload(order, prog)
+        t1 = time.perf_counter()
+        set_camera_uniforms(prog, camera, self.near)
+        self.buffers.bind()
+        fbo.use()
+        self.ctx.viewport = (0, 0, camera.width, camera.height)
+        self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.blend_func = moderngl.ONE_MINUS_DST_ALPHA, moderngl.ONE
+        self.ctx.blend_equation = moderngl.FUNC_ADD
+        if len(order):
+            self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(order))
+        self.ctx.disable(moderngl.BLEND)
+        self.ctx.finish()
+        t2 = time.perf_counter()
+        self._times_upload, self._times_draw = t1 - t0, t2 - t1
+        return len(order)
+
+    def render(self, camera: Camera) -> np.ndarray:
+        """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top."""
+        target = self.target(camera)
+        self.draw(camera, target.fbo)
+        t0 = time.perf_counter()
+        rgba = target.read()
+        t1 = time.perf_counter()
+        self.last_times = QuadTimes(self._times_cull, self._times_sort, self._times_upload,
+                                    self._times_draw, t1 - t0)
+        return composite(rgba, self.settings.background)
+
+    def release(self) -> None:
+        for obj in (self._vao, self._index_buffer, self._target):
+            if obj is not None:
+                obj.release()
+        self._vao = self._index_buffer = self._target = None
+        self.buffers.release()

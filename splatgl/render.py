@@ -1,0 +1,117 @@
+"""The Python API the CLI is built on: a default camera, and renderers behind one call.
+
+>>> import splatgl
+>>> scene = splatgl.load_scene("scene.ply")
+>>> camera = splatgl.default_camera(scene, 640, 480)
+>>> rgba = splatgl.render(scene, camera)          # (480, 640, 4) float32, row 0 at the top
+"""
+
+from __future__ import annotations
+
+import math
+
+import moderngl
+import numpy as np
+
+from .camera import Camera, orbit
+from .gl.context import create_headless_context
+from .gl.shaders import ProgramCache
+from .scene import Scene
+from .settings import RenderSettings, RendererKind
+
+#: Default vertical field of view of :func:`default_camera`, degrees.
+DEFAULT_FOV_Y = 50.0
+#: Elevation of the default view above the scene's "horizon", degrees.
+DEFAULT_ELEVATION = 20.0
+
+
+def default_camera(scene: Scene, width: int = 1280, height: int = 720,
+                   fov_y_degrees: float = DEFAULT_FOV_Y) -> Camera:
+    """A perspective camera that frames ``scene``.
+
+    Frames the 1st-99th percentile box of the means (so a few stray splats far away do not
+    shrink the scene to a dot), looking along world +z from slightly above (world -y is up, the
+    COLMAP convention), far enough that the box's bounding sphere fits the narrower fov.
+    """
+    lo, hi = scene.robust_bounds
+    centre = 0.5 * (lo + hi)
+    radius = max(scene.robust_radius, 1e-6)
+    fov_y = math.radians(fov_y_degrees)
+    fov_x = 2.0 * math.atan(math.tan(fov_y / 2.0) * width / height)
+    half = min(fov_x, fov_y) / 2.0
+    distance = 1.05 * radius / math.sin(half)
+    pose = orbit(centre, distance, 180.0, DEFAULT_ELEVATION)
+    return Camera.from_fov(width, height, fov_y_degrees, pose)
+
+
+class Renderer:
+    """Owns one headless OpenGL context and renders scenes with any renderer kind.
+
+    Per (scene, settings) the GPU state (uploaded scene, programs, targets) is kept, so
+    rendering many views of one scene uploads it once.  Use as a context manager or call
+    :meth:`close`.
+    """
+
+    def __init__(self, ctx: moderngl.Context | None = None):
+        self._owns_ctx = ctx is None
+        self.ctx = ctx if ctx is not None else create_headless_context()
+        self.programs = ProgramCache(self.ctx)
+        self._paths: dict[tuple, object] = {}
+
+    def _path(self, scene: Scene, settings: RenderSettings, kind: RendererKind):
+        key = (id(scene), settings, kind)
+        path = self._paths.get(key)
+        if path is None or path.scene is not scene:
+            if kind is RendererKind.QUAD:
+                from .quad import QuadRenderer
+                path = QuadRenderer(self.ctx, scene, settings, self.programs)
+            elif kind is RendererKind.TILE:
+                from .tile import TileRenderer
+                path = TileRenderer(self.ctx, scene, settings, self.programs)
+            else:
+                raise ValueError(f"{kind} has no GPU path")
+            self._paths[key] = path
+        return path
+
+    def renderer_for(self, scene: Scene, settings: RenderSettings, kind: RendererKind = RendererKind.QUAD):
+        """The (cached) GPU renderer object, e.g. to read its ``last_times``."""
+        return self._path(scene, settings, kind)
+
+    def render(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
+               kind: RendererKind = RendererKind.QUAD) -> np.ndarray:
+        """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top."""
+        kind = RendererKind(kind)
+        if kind is RendererKind.REFERENCE:
+            return render_reference_rgba(scene, camera, settings)
+        return self._path(scene, settings, kind).render(camera)
+
+    def close(self) -> None:
+        for path in self._paths.values():
+            path.release()
+        self._paths.clear()
+        self.programs.release()
+        if self._owns_ctx:
+            self.ctx.release()
+
+    def __enter__(self) -> "Renderer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings) -> np.ndarray:
+    """The NumPy per-tile reference as an (H, W, 4) float32 image (no OpenGL)."""
+    from .reference import render_reference
+
+    ref = render_reference(scene, camera, settings)
+    return np.concatenate([ref.color, ref.alpha[..., None]], axis=-1).astype(np.float32)
+
+
+def render(scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
+           kind: RendererKind = RendererKind.QUAD) -> np.ndarray:
+    """Render one view with a fresh context (use :class:`Renderer` for many views)."""
+    if RendererKind(kind) is RendererKind.REFERENCE:
+        return render_reference_rgba(scene, camera, settings)
+    with Renderer() as r:
+        return r.render(scene, camera, settings, kind)
