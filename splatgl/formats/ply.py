@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.lib.recfunctions import structured_to_unstructured
 
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate, rest_to_sh, sh_degree_from_rest_count, sh_to_rest
@@ -240,7 +241,7 @@ def _column(path, vertex: np.ndarray, names: list[str]) -> np.ndarray:
     if missing:
         raise _error(path, "required vertex property missing (has: "
                            f"{' '.join(vertex.dtype.names)})", missing[0])
-    return np.stack([vertex[n].astype(np.float32) for n in names], axis=1)
+    return structured_to_unstructured(vertex[names], dtype=np.float32)
 
 
 def read(path: Path, drop_invalid: bool = False) -> Scene:
