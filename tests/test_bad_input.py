@@ -286,3 +286,8 @@ def test_cli_info_on_real_scene(shared_scenes, capsys):
     rc, out, err = run_cli(capsys, "info", str(shared_scenes / "ply" / "donut_sh0.ply"))
     assert rc == 0 and err == ""
     assert "45624" in out and "SH degree 0" in out
+
+
+def test_element_declared_twice(tmp_path):
+    path = header_variant(tmp_path, b"end_header", b"element vertex 0\nend_header")
+    expect_error(path, "element name twice")

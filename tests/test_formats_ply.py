@@ -146,7 +146,8 @@ def test_list_element_after_vertices_is_ignored(tmp_path):
     ply.write(path, scene)
     head, body = path.read_bytes().split(b"end_header\n")
     head += b"element face 1\nproperty list uchar int vertex_indices\n"
-    path.write_bytes(head + b"end_header\n" + body + bytes([3]) + np.arange(3, dtype="<i4").tobytes())
+    face = bytes([3]) + np.arange(3, dtype="<i4").tobytes()
+    path.write_bytes(head + b"end_header\n" + body + face)
     assert_same_bits(load_scene(path), scene)
 
 
@@ -158,8 +159,8 @@ def test_detection_is_by_content(tmp_path):
     assert_same_bits(load_scene(path), scene)
     assert ply.sniff(path.read_bytes()[:4096])
     assert not ply.sniff(b"ply\nformat binary_little_endian 1.0\nelement chunk 1\n"
-                         b"property float min_x\nelement vertex 256\nproperty uint packed_position\n"
-                         b"end_header\n")
+                         b"property float min_x\nelement vertex 256\n"
+                         b"property uint packed_position\nend_header\n")
     assert not ply.sniff(b"\x00" * 64)
     assert not splat.sniff((tmp_path / "scene.bin").read_bytes())
 
@@ -230,7 +231,8 @@ def test_splat_writer_drops_sh_with_warning_and_refuses_surfels(tmp_path):
         splat.write(tmp_path / "b.splat", random_scene(15, kind=SplatKind.SURFEL_2D))
 
 
-@settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(values=hnp.arrays(np.float32, (6, 14),
                          elements=st.floats(width=32, allow_nan=False, allow_infinity=False)))
 def test_any_finite_float32_round_trips_in_every_encoding(tmp_path, values):

@@ -253,6 +253,8 @@ def read(path: Path, drop_invalid: bool = False) -> Scene:
         with open(path, "rb") as fh:
             header = parse_header(path, fh)
             names = {e.name for e in header.elements}
+            if len(names) != len(header.elements):
+                raise _error(path, "the header declares an element name twice")
             if "vertex" not in names:
                 raise _error(path, "the header has no 'element vertex'")
             vertex_elem = next(e for e in header.elements if e.name == "vertex")
