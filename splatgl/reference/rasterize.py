@@ -1,0 +1,250 @@
+"""Reference stage 5: ``rasterize``, per-tile front-to-back blending (3DGS's ``renderCUDA``).
+
+For every pixel of a tile, the tile's depth-sorted splats are blended in order with
+
+    power = -0.5 (a dx^2 + c dy^2) - b dx dy,   d = pixel centre - mean2d   (pixels)
+    alpha = min(alpha_max, o exp(power)), skipped when power > 0 or alpha < 1/255
+    stop (without adding the splat) once T (1 - alpha) < 1e-4   (GSPLAT: <= 1e-4)
+    C = sum c alpha T,  D = sum z alpha T,  A = 1 - T_final,  out = C + T_final background
+
+Vectorisation: tiles are processed in batches; for a batch, the next ``chunk`` splats of every
+tile are evaluated on all 256 pixels at once as (tiles, chunk, 256) arrays.  The transmittance
+is a cumulative product seeded with the running T (the same sequence of float multiplications
+as the serial loop), and since T never increases, the splats a pixel still blends form a prefix
+of the chunk: those whose running product stays at or above 1e-4.  A tile leaves the batch when
+its list is exhausted or all its pixels have stopped.  Batches run on a thread pool (NumPy
+releases the GIL); each tile's arithmetic does not depend on the batching.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import ALPHA_MIN, T_MIN, TILE_SIZE
+from .options import ReferenceOptions
+from .stages import ProjectedSplats
+
+#: Pixels per tile.
+TILE_PIXELS = TILE_SIZE * TILE_SIZE
+#: Splats of every tile evaluated per step (tuned on a 2-core machine).
+DEFAULT_CHUNK = 32
+#: Tiles per batch (one thread-pool task).
+DEFAULT_TILES_PER_BATCH = 64
+
+
+@dataclass(frozen=True)
+class Raster:
+    """Per-pixel output of :func:`rasterize` (H rows from the top, W columns).
+
+    color: (H, W, 3) float ``C + T_final background``.  alpha: (H, W) float ``1 - T_final``.
+    depth: (H, W) float ``D = sum z alpha T`` (world units, not normalised).
+    transmittance: (H, W) float ``T_final``.  n_contrib: (H, W) int32, 1-based position in the
+    tile's list of the last splat blended (0: none), as 3DGS's ``n_contrib``.
+    """
+
+    color: np.ndarray
+    alpha: np.ndarray
+    depth: np.ndarray
+    transmittance: np.ndarray
+    n_contrib: np.ndarray
+
+
+def gaussian_power(conic: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """``-0.5 (a dx^2 + c dy^2) - b dx dy`` with ``conic[..., 0:3] = (a, b, c)`` (broadcast)."""
+    a, b, c = conic[..., 0], conic[..., 1], conic[..., 2]
+    half = np.asarray(-0.5, dtype=np.result_type(conic, dx))
+    return half * (a * dx * dx + c * dy * dy) - b * dx * dy
+
+
+def gaussian_alpha(power: np.ndarray, opacity: np.ndarray, alpha_max: float) -> np.ndarray:
+    """``min(alpha_max, o exp(power))``, 0 where ``power > 0`` or the result is below 1/255."""
+    dt = np.result_type(power, opacity).type
+    with np.errstate(over="ignore"):
+        alpha = np.minimum(dt(alpha_max), opacity * np.exp(power))
+    return np.where((power <= 0) & (alpha >= dt(ALPHA_MIN)), alpha, dt(0.0))
+
+
+class _Tiles:
+    """Per-tile splat data gathered for one chunk: everything :func:`_blend_chunk` reads."""
+
+    def __init__(self, proj: ProjectedSplats, values: np.ndarray, pos: np.ndarray,
+                 valid: np.ndarray):
+        sidx = values[np.minimum(pos, values.shape[0] - 1)]
+        self.mean2d = proj.mean2d[sidx]      # (n, K, 2)
+        self.conic = proj.conic[sidx]        # (n, K, 3)
+        self.opacity = proj.opacity[sidx]    # (n, K)
+        self.color = proj.color[sidx]        # (n, K, 3)
+        self.depth = proj.depth[sidx]        # (n, K)
+        self.valid = valid                   # (n, K)
+
+
+def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) -> np.ndarray:
+    """(n, K, 256) alpha of K splats on the 256 pixels of n tiles (0 where skipped).
+
+    ``px``, ``py``: (n, 16) pixel-centre coordinates of each tile's columns and rows.  The
+    quadratic form is separable per axis, so the x and y terms are built on 16 lanes and
+    combined with the same operation order as the serial formula.
+    """
+    dt = px.dtype.type
+    dx = px[:, None, :] - g.mean2d[:, :, 0, None]          # (n, K, 16) by column
+    dy = py[:, None, :] - g.mean2d[:, :, 1, None]          # (n, K, 16) by row
+    axx = g.conic[:, :, 0, None] * dx * dx
+    cyy = g.conic[:, :, 2, None] * dy * dy
+    bx = g.conic[:, :, 1, None] * dx
+    power = dt(-0.5) * (axx[:, :, None, :] + cyy[:, :, :, None]) - bx[:, :, None, :] * dy[:, :, :, None]
+    n, k = dx.shape[:2]
+    alpha = gaussian_alpha(power.reshape(n, k, TILE_PIXELS), g.opacity[:, :, None], alpha_max)
+    return np.where(g.valid[:, :, None], alpha, dt(0.0))
+
+
+def _blend_chunk(t_prev: np.ndarray, alpha: np.ndarray, inclusive_stop: bool
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Blend one chunk: (n, 256) running T, (n, K, 256) alphas (0 for skipped or stopped).
+
+    Returns ``(weights (n, K, 256) = alpha T for blended splats, 0 otherwise,
+    n_blended (n, 256) prefix length kept, t_seq (n, K + 1, 256))`` where ``t_seq[:, 0]`` is
+    ``t_prev`` and ``t_seq[:, k + 1]`` the running product after splat k (before the stop test).
+    """
+    n, k, p = alpha.shape
+    t_seq = np.empty((n, k + 1, p), alpha.dtype)
+    t_seq[:, 0] = t_prev
+    np.subtract(alpha.dtype.type(1.0), alpha, out=t_seq[:, 1:])
+    np.cumprod(t_seq, axis=1, out=t_seq)
+    t_min = alpha.dtype.type(T_MIN)
+    kept = t_seq[:, 1:] > t_min if inclusive_stop else t_seq[:, 1:] >= t_min
+    weights = np.where(kept, alpha, alpha.dtype.type(0.0)) * t_seq[:, :-1]
+    return weights, kept.sum(axis=1), t_seq
+
+
+def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
+                  tiles: np.ndarray, options: ReferenceOptions, chunk: int):
+    """Blend the tiles ``tiles`` (b,) completely; returns (T, C, D, n_contrib) per tile pixel."""
+    dt = proj.dtype.type
+    b = tiles.shape[0]
+    out_t = np.ones((b, TILE_PIXELS), proj.dtype)
+    out_c = np.zeros((b, TILE_PIXELS, 3), proj.dtype)
+    out_d = np.zeros((b, TILE_PIXELS), proj.dtype)
+    out_n = np.zeros((b, TILE_PIXELS), np.int32)
+    start, end = ranges[tiles, 0], ranges[tiles, 1]
+    rows = np.flatnonzero(end > start)
+    lanes = np.arange(TILE_SIZE, dtype=np.float64) + 0.5
+    gw = proj.grid[0]
+    px = ((tiles % gw)[:, None] * TILE_SIZE + lanes).astype(proj.dtype)
+    py = ((tiles // gw)[:, None] * TILE_SIZE + lanes).astype(proj.dtype)
+    t, c, d, nc = out_t[rows], out_c[rows], out_d[rows], out_n[rows]
+    done = np.zeros((rows.size, TILE_PIXELS), bool)
+    amax, inclusive = options.resolved_alpha_max, options.stop_inclusive
+    ks = np.arange(chunk)
+    offset = 0
+    while rows.size:
+        pos = start[rows, None] + offset + ks
+        g = _Tiles(proj, values, pos, pos < end[rows, None])
+        alpha = _chunk_alpha(g, px[rows], py[rows], amax)
+        alpha = np.where(done[:, None, :], dt(0.0), alpha)
+        w, kept, t_seq = _blend_chunk(t, alpha, inclusive)
+        wt = w.transpose(0, 2, 1)                           # (n, 256, K)
+        c += np.matmul(wt, g.color)
+        d += np.matmul(wt, g.depth[:, :, None])[:, :, 0]
+        t = np.take_along_axis(t_seq, kept[:, None, :], axis=1)[:, 0]
+        done |= kept < chunk
+        blended = w > 0
+        last = chunk - np.argmax(blended[:, ::-1, :], axis=1)   # 1-based within the chunk
+        nc = np.where(blended.any(axis=1), offset + last, nc).astype(np.int32)
+        offset += chunk
+        go = ~done.all(axis=1) & (start[rows] + offset < end[rows])
+        if not go.all():
+            stop = ~go
+            out_t[rows[stop]], out_c[rows[stop]] = t[stop], c[stop]
+            out_d[rows[stop]], out_n[rows[stop]] = d[stop], nc[stop]
+            rows, t, c, d, nc, done = rows[go], t[go], c[go], d[go], nc[go], done[go]
+    return out_t, out_c, out_d, out_n
+
+
+def _untile(per_tile: np.ndarray, grid: tuple[int, int], height: int, width: int) -> np.ndarray:
+    """(tiles, 256, ...) -> (H, W, ...) image, cropping the partial tiles at the edges."""
+    gw, gh = grid
+    rest = per_tile.shape[2:]
+    img = per_tile.reshape((gh, gw, TILE_SIZE, TILE_SIZE) + rest).swapaxes(1, 2)
+    return np.ascontiguousarray(img.reshape((gh * TILE_SIZE, gw * TILE_SIZE) + rest)[:height, :width])
+
+
+def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarray,
+              background=(0.0, 0.0, 0.0), options: ReferenceOptions | None = None,
+              chunk: int = DEFAULT_CHUNK, tiles_per_batch: int = DEFAULT_TILES_PER_BATCH,
+              workers: int | None = None) -> Raster:
+    """Blend every tile's sorted splat list into the image (the reference's last stage).
+
+    Args:
+        proj: output of :func:`~splatgl.reference.stages.project` (its dtype is used throughout).
+        sorted_values: (M,) int64 splat indices in sorted key order (:func:`sort`).
+        ranges: (tiles, 2) int64 ``[start, end)`` per tile (:func:`tile_ranges`).
+        background: RGB composited as ``C + T_final background``.
+        options: alpha clamp and stop rule (default INRIA).
+        chunk, tiles_per_batch, workers: vectorisation knobs; the result does not depend on
+            them beyond float summation order of C and D (T and n_contrib are exact).
+    """
+    options = ReferenceOptions() if options is None else options
+    if chunk < 1 or tiles_per_batch < 1:
+        raise ValueError("chunk and tiles_per_batch must be positive")
+    n_tiles = proj.n_tiles
+    busy = np.flatnonzero(ranges[:, 1] > ranges[:, 0])
+    # Interleave busy tiles across batches so that dense regions spread over all workers.
+    n_batches = max(1, -(-busy.size // tiles_per_batch))
+    batches = [busy[i::n_batches] for i in range(n_batches)] if busy.size else []
+    workers = workers or min(os.cpu_count() or 1, 8)
+    t = np.ones((n_tiles, TILE_PIXELS), proj.dtype)
+    c = np.zeros((n_tiles, TILE_PIXELS, 3), proj.dtype)
+    d = np.zeros((n_tiles, TILE_PIXELS), proj.dtype)
+    nc = np.zeros((n_tiles, TILE_PIXELS), np.int32)
+    values = np.asarray(sorted_values, np.int64)
+
+    def run(tiles: np.ndarray):
+        return tiles, _raster_batch(proj, values, ranges, tiles, options, chunk)
+
+    with np.errstate(under="ignore"):
+        if workers > 1 and len(batches) > 1:
+            with ThreadPoolExecutor(workers) as pool:
+                results = list(pool.map(run, batches))
+        else:
+            results = [run(b) for b in batches]
+    for tiles, (bt, bc, bd, bn) in results:
+        t[tiles], c[tiles], d[tiles], nc[tiles] = bt, bc, bd, bn
+    bg = np.asarray(background, proj.dtype)
+    h, w = proj.height, proj.width
+    t_img = _untile(t, proj.grid, h, w)
+    color = _untile(c, proj.grid, h, w) + t_img[..., None] * bg
+    return Raster(color=color, alpha=proj.dtype.type(1.0) - t_img,
+                  depth=_untile(d, proj.grid, h, w), transmittance=t_img,
+                  n_contrib=_untile(nc, proj.grid, h, w))
+
+
+def transmittance_trace(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarray,
+                        tile: int, options: ReferenceOptions | None = None) -> np.ndarray:
+    """T of each of a tile's 256 pixels after each splat of its list, for inspection and tests.
+
+    Returns (L + 1, 256) in the projection dtype: row 0 is 1, row k + 1 the transmittance after
+    the tile's k-th splat (frozen once the pixel has stopped).  Uses the same per-chunk code as
+    :func:`rasterize` with the whole list as one chunk.
+    """
+    options = ReferenceOptions() if options is None else options
+    start, end = (int(v) for v in ranges[tile])
+    length = end - start
+    t = np.ones((1, TILE_PIXELS), proj.dtype)
+    if length == 0:
+        return t
+    lanes = np.arange(TILE_SIZE, dtype=np.float64) + 0.5
+    gw = proj.grid[0]
+    px = ((tile % gw) * TILE_SIZE + lanes).astype(proj.dtype)[None]
+    py = ((tile // gw) * TILE_SIZE + lanes).astype(proj.dtype)[None]
+    pos = start + np.arange(length)[None]
+    g = _Tiles(proj, np.asarray(sorted_values, np.int64), pos, pos < end)
+    with np.errstate(under="ignore"):
+        alpha = _chunk_alpha(g, px, py, options.resolved_alpha_max)
+        _, kept, t_seq = _blend_chunk(t, alpha, options.stop_inclusive)
+    final = np.take_along_axis(t_seq, kept[:, None, :], axis=1)
+    ks = np.arange(length + 1)[None, :, None]
+    return np.where(ks <= kept[:, None, :], t_seq, final)[0]

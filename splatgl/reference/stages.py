@@ -1,0 +1,201 @@
+"""Stage ``project`` of the reference: per-splat screen quantities, culling and tile rectangles.
+
+The twin of 3DGS's ``preprocessCUDA`` (and gsplat's projection + tile bounds under
+:attr:`Compat.GSPLAT`).  The math itself lives in :mod:`splatgl.project`; this module adds the
+reference's culling rules and its tile rectangles.
+
+Coordinates: ``mean2d`` is in splatgl's image coordinates (pixel (i, j) has its centre at
+``(j + 0.5, i + 0.5)``).  3DGS works in pixel-index coordinates instead (centre of pixel j at
+``j``), so its ``getRect`` sees ``p = mean2d - 0.5``; the INRIA rectangle below uses exactly
+that ``p``, which makes the set of tiles identical to what 3DGS bins for the same camera.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import project as pm
+from ..camera import Camera
+from ..constants import ALPHA_MIN, TILE_SIZE
+from ..scene import Scene, SplatKind
+from ..settings import RenderSettings, resolve_near
+from .options import GSPLAT_EXTENT_SIGMAS, Compat, ReferenceOptions
+
+
+@dataclass(frozen=True)
+class ProjectedSplats:
+    """Output of :func:`project`: one row per input splat (culled rows included, flagged).
+
+    Attributes (N rows; ``float`` means the render dtype, float32 or float64):
+        visible: (N,) bool; False for splats culled (near plane, ``det <= 0``, empty rect, ...).
+        depth: (N,) float view-space z (world units).
+        mean2d: (N, 2) float image coordinates (u, v) in pixels, centre convention ``j + 0.5``.
+        conic: (N, 3) float inverse 2D covariance (a, b, c), ``Q = [[a, b], [b, c]]``, 1/px^2.
+        opacity: (N,) float opacity in [0, 1] (times the AA factor when antialiasing).
+        color: (N, 3) float SH colour (>= 0, unbounded above).
+        radius: (N, 2) int64 extent (x, y) in pixels; 0 for culled rows.  INRIA: both equal
+            ``ceil(3 sqrt(lambda_max))``.
+        rect_min, rect_max: (N, 2) int64 tile rectangle, ``[min, max)`` in tile units (x, y),
+            clamped to the grid; empty (min == max) for culled rows.
+        width, height: image size in pixels.  grid: (tiles_x, tiles_y).
+    """
+
+    visible: np.ndarray
+    depth: np.ndarray
+    mean2d: np.ndarray
+    conic: np.ndarray
+    opacity: np.ndarray
+    color: np.ndarray
+    radius: np.ndarray
+    rect_min: np.ndarray
+    rect_max: np.ndarray
+    width: int
+    height: int
+    grid: tuple[int, int]
+
+    @property
+    def count(self) -> int:
+        return int(self.visible.shape[0])
+
+    @property
+    def dtype(self) -> np.dtype:
+        return self.mean2d.dtype
+
+    @property
+    def n_tiles(self) -> int:
+        return self.grid[0] * self.grid[1]
+
+    @property
+    def tiles_touched(self) -> np.ndarray:
+        """(N,) int64 number of tiles in each splat's rectangle (0 for culled rows)."""
+        size = np.maximum(self.rect_max - self.rect_min, 0)
+        return np.where(self.visible, size[:, 0] * size[:, 1], 0)
+
+
+def tile_grid(width: int, height: int) -> tuple[int, int]:
+    """(tiles_x, tiles_y) covering a ``width`` x ``height`` image with 16 x 16 tiles."""
+    return (width + TILE_SIZE - 1) // TILE_SIZE, (height + TILE_SIZE - 1) // TILE_SIZE
+
+
+def inria_rect(mean2d: np.ndarray, radius: np.ndarray, grid: tuple[int, int]
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """3DGS ``getRect``: tile rectangles of squares of ``radius`` pixels around ``mean2d``.
+
+    ``rect_min = clamp((int)((p - r) / 16), 0, grid)``, ``rect_max = clamp((int)((p + r + 15) /
+    16), 0, grid)`` with ``p = mean2d - 0.5`` (3DGS pixel-index coordinates), C truncation, the
+    arithmetic in ``mean2d``'s dtype.  (N, 2) float, (N,) int -> two (N, 2) int64 arrays.
+    """
+    dt = mean2d.dtype.type
+    p = mean2d - dt(0.5)
+    r = radius.astype(mean2d.dtype)[:, None]
+    hi = np.array(grid, np.int64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        lo_f = np.trunc((p - r) / dt(TILE_SIZE))
+        hi_f = np.trunc((p + r + dt(TILE_SIZE - 1)) / dt(TILE_SIZE))
+    return _clamp_int(lo_f, hi), _clamp_int(hi_f, hi)
+
+
+def gsplat_rect(mean2d: np.ndarray, radius_xy: np.ndarray, grid: tuple[int, int]
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """gsplat tile bounds: ``[floor(u/16 - r_x/16), ceil(u/16 + r_x/16))`` per axis, clamped.
+
+    (N, 2) float means (centre convention ``j + 0.5``), (N, 2) int radii -> (N, 2) int64 each.
+    """
+    dt = mean2d.dtype.type
+    t = mean2d / dt(TILE_SIZE)
+    tr = radius_xy.astype(mean2d.dtype) / dt(TILE_SIZE)
+    hi = np.array(grid, np.int64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        return _clamp_int(np.floor(t - tr), hi), _clamp_int(np.ceil(t + tr), hi)
+
+
+def _clamp_int(values: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Float tile coordinates -> int64 clamped to [0, hi] (NaN -> 0)."""
+    v = np.nan_to_num(values, nan=0.0, posinf=1e18, neginf=-1e18)
+    return np.clip(v, 0, hi).astype(np.int64)
+
+
+def gsplat_radius(cov2d: np.ndarray, opacity: np.ndarray) -> np.ndarray:
+    """gsplat's per-axis extent ``ceil(min(3.33, sqrt(2 ln(o / (1/255)))) sqrt(cov_ii))``.
+
+    (N, 2, 2) dilated covariances (px^2), (N,) opacities -> (N, 2) int64 radii (x, y) in
+    pixels; 0 where ``o < 1/255``.
+    """
+    dt = cov2d.dtype.type
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = np.sqrt(np.maximum(dt(2.0) * np.log(opacity / dt(ALPHA_MIN)), dt(0.0)))
+    k = np.minimum(dt(GSPLAT_EXTENT_SIGMAS), k)
+    k = np.where(opacity >= dt(ALPHA_MIN), k, dt(0.0))
+    diag = np.stack([cov2d[:, 0, 0], cov2d[:, 1, 1]], -1)
+    with np.errstate(invalid="ignore"):
+        r = np.ceil(k[:, None] * np.sqrt(np.maximum(diag, dt(0.0))))
+    return np.nan_to_num(r, nan=0.0, posinf=0.0).astype(np.int64)
+
+
+def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None,
+            dtype: np.dtype | type = np.float32,
+            options: ReferenceOptions | None = None) -> ProjectedSplats:
+    """Reference stage 1: project every splat and decide which tiles it touches.
+
+    Culling (a culled row gets ``visible = False``, radius 0 and an empty rectangle): view z at
+    or below the near plane (``settings.near`` or :func:`resolve_near`), non-finite values,
+    ``det(cov2d) <= 0``, an empty tile rectangle; under GSPLAT also ``o < 1/255``, zero radii
+    and an extent entirely off screen.
+
+    Args:
+        scene: a 3DGS scene (2DGS surfels raise NotImplementedError).
+        camera: perspective or orthographic camera.
+        settings: near plane, antialiasing, SH degree cap (default RenderSettings()).
+        dtype: float32 (mimics the GPU) or float64 (checks).
+        options: convention (default INRIA).
+    """
+    settings = RenderSettings() if settings is None else settings
+    options = ReferenceOptions() if options is None else options
+    if scene.kind is SplatKind.SURFEL_2D:
+        raise NotImplementedError(
+            "the NumPy reference rasterizer handles 3DGS Gaussians only; 2DGS surfels "
+            "(ray-splat intersection) are not implemented yet")
+    dt = np.dtype(dtype)
+    if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
+        raise ValueError(f"reference dtype must be float32 or float64, got {dt}")
+    near = dt.type(resolve_near(settings, scene.robust_radius))
+    grid = tile_grid(camera.width, camera.height)
+    with np.errstate(all="ignore"):
+        pr = pm.project(scene.means.astype(dt), scene.rotations.astype(dt),
+                        scene.scales.astype(dt), scene.opacities.astype(dt), scene.sh.astype(dt),
+                        camera, settings.antialias, settings.sh_degree)
+    finite = (np.isfinite(pr.mean2d).all(1) & np.isfinite(pr.conic).all(1)
+              & np.isfinite(pr.cov2d).all((1, 2)) & np.isfinite(pr.color).all(1)
+              & np.isfinite(pr.opacity))
+    ok = (pr.depth > near) & finite & (pr.det > 0)
+    mean2d = np.where(ok[:, None], pr.mean2d, dt.type(0.0)).astype(dt)
+    cov2d = np.where(ok[:, None, None], pr.cov2d, dt.type(1.0)).astype(dt)
+
+    if options.compat is Compat.INRIA:
+        r = np.where(ok, pm.reference_radius(cov2d), 0)
+        radius = np.stack([r, r], -1)
+        rect_min, rect_max = inria_rect(mean2d, r, grid)
+    else:
+        radius = np.where(ok[:, None], gsplat_radius(cov2d, pr.opacity.astype(dt)), 0)
+        ok &= (radius > 0).any(1)
+        u, v = mean2d[:, 0], mean2d[:, 1]
+        rx, ry = radius[:, 0].astype(dt), radius[:, 1].astype(dt)
+        ok &= ~((u + rx <= 0) | (u - rx >= camera.width) | (v + ry <= 0)
+                | (v - ry >= camera.height))
+        rect_min, rect_max = gsplat_rect(mean2d, radius, grid)
+    ok &= ((rect_max - rect_min) > 0).all(1)
+    rect_min = np.where(ok[:, None], rect_min, 0)
+    rect_max = np.where(ok[:, None], rect_max, 0)
+    radius = np.where(ok[:, None], radius, 0)
+
+    def clean(a: np.ndarray) -> np.ndarray:
+        mask = ok.reshape((-1,) + (1,) * (a.ndim - 1))
+        return np.ascontiguousarray(np.where(mask, a, 0).astype(dt))
+
+    return ProjectedSplats(
+        visible=ok, depth=clean(pr.depth), mean2d=clean(mean2d), conic=clean(pr.conic),
+        opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
+        rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
+        grid=grid)
