@@ -188,7 +188,7 @@ def rest_to_sh(dc: np.ndarray, rest: np.ndarray) -> np.ndarray:
 def sh_to_rest(sh: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of :func:`rest_to_sh`: ``(f_dc (N, 3), f_rest (N, 3 * (K - 1)))``."""
     n = sh.shape[0]
-    return sh[:, 0].copy(), sh[:, 1:].transpose(0, 2, 1).reshape(n, -1).copy()
+    return sh[:, 0].copy(), sh[:, 1:].transpose(0, 2, 1).reshape(n, 3 * (sh.shape[1] - 1)).copy()
 
 
 def _report_bad(path, field, bad: np.ndarray, what: str, drop: bool, dropped: np.ndarray) -> None:
