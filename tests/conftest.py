@@ -31,3 +31,43 @@ def artifacts_dir() -> Path:
     path = REPO / "test-artifacts"
     path.mkdir(exist_ok=True)
     return path
+
+
+@pytest.fixture(scope="module")
+def gl_renderer():
+    """A :class:`splatgl.render.Renderer` on a headless context, shared by a test module.
+
+    Skips the module where no OpenGL context can be made.  After the module, checks that no GL
+    error was left pending.
+    """
+    from splatgl.errors import ContextError
+    from splatgl.render import Renderer
+
+    try:
+        renderer = Renderer()
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL context: {exc}")
+    yield renderer
+    error = renderer.ctx.error
+    renderer.close()
+    assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
+
+
+def save_failure_images(directory: Path, name: str, got, expected) -> str:
+    """Dump got / expected / |difference| (x10) images; returns a note for assertion messages."""
+    import numpy as np
+
+    from splatgl.image_io import write_image
+
+    diff = np.abs(np.asarray(got, np.float32) - np.asarray(expected, np.float32))
+    paths = []
+    for tag, img in (("got", got), ("expected", expected), ("diff_x10", diff * 10)):
+        img = np.asarray(img, np.float32)
+        if img.ndim == 2:
+            img = np.repeat(img[..., None], 3, axis=-1)
+        if img.shape[-1] == 3:
+            img = np.concatenate([img, np.ones(img.shape[:2] + (1,), np.float32)], -1)
+        path = directory / f"{name}_{tag}.exr"
+        write_image(path, img)
+        paths.append(str(path))
+    return "images: " + ", ".join(paths)
