@@ -1,0 +1,54 @@
+// Per-view buffers of the tile renderer (splatgl/tile.py allocates and binds them; the binding
+// numbers come from generated #defines TILE_BINDING_*, so they are written in one place).
+// Twin arrays: splatgl/reference/stages.py ProjectedSplats and reference/binning.py.
+//
+// proj_mean_depth[i] = (u, v, view z, 0): image position in pixels (centre of pixel (i, j) at
+//                      (j + 0.5, i + 0.5)) and camera-space depth in world units.
+// proj_conic_o[i]    = (a, b, c, opacity): Q = Sigma'^-1 = [[a, b], [b, c]] in 1/px^2.
+// proj_color[i]      = (r, g, b, 0): SH colour, clamped below at 0.
+// proj_rect[i]       = (min x, min y, max x, max y): tile rectangle [min, max), tile units.
+// tiles_touched[i]   = (max x - min x) (max y - min y), 0 for a culled splat.
+// tile_offsets[i]    = exclusive prefix sum of tiles_touched: where splat i's keys start.
+// sort_keys[k]       = 64-bit key as (low word, high word); see tile_key() below.
+// sort_values[k]     = splat index of key k (only when the index is not packed in the key).
+// tile_ranges[t]     = [start, end) of tile t's run in the sorted keys.
+layout(std430, binding = TILE_BINDING_MEAN_DEPTH) buffer ProjMeanDepth { vec4 proj_mean_depth[]; };
+layout(std430, binding = TILE_BINDING_CONIC_O) buffer ProjConicO { vec4 proj_conic_o[]; };
+layout(std430, binding = TILE_BINDING_COLOR) buffer ProjColor { vec4 proj_color[]; };
+layout(std430, binding = TILE_BINDING_RECT) buffer ProjRect { uvec4 proj_rect[]; };
+layout(std430, binding = TILE_BINDING_TOUCHED) buffer TilesTouched { uint tiles_touched[]; };
+layout(std430, binding = TILE_BINDING_OFFSETS) buffer TileOffsets { uint tile_offsets[]; };
+layout(std430, binding = TILE_BINDING_KEYS) buffer SortKeys { uvec2 sort_keys[]; };
+layout(std430, binding = TILE_BINDING_VALUES) buffer SortValues { uint sort_values[]; };
+layout(std430, binding = TILE_BINDING_RANGES) buffer TileRanges { uvec2 tile_ranges[]; };
+
+// Key layout (DESIGN.md section 2: tile id major, float bits of view z minor, compared as one
+// unsigned 64-bit integer).  splatgl packs it as
+//   key = (tile << u_tile_shift) | (depth_bits << u_depth_shift) | (KEY_PACKED ? index : 0)
+// The reference's own layout is tile_shift = 32, depth_shift = 0.  With KEY_PACKED the splat
+// index fills the low u_depth_shift bits (depth bits are 31 wide: view z > 0 has sign bit 0),
+// so sorting the keys alone equals the reference's stable sort (ties keep index order).
+uniform uint u_tile_shift;
+uniform uint u_depth_shift;
+
+// uint64(v) << s as (low word, high word), 0 <= s <= 63 (GLSL 4.3 has no 64-bit integers and
+// shifts by 32 or more are undefined, hence the cases).
+uvec2 shift_left64(uint v, uint s) {
+    if (s == 0u) return uvec2(v, 0u);
+    if (s < 32u) return uvec2(v << s, v >> (32u - s));
+    return uvec2(0u, v << (s - 32u));
+}
+
+uvec2 tile_key(uint tile, uint depth_bits, uint index) {
+    uvec2 key = shift_left64(tile, u_tile_shift) | shift_left64(depth_bits, u_depth_shift);
+#ifdef KEY_PACKED
+    key.x |= index;
+#endif
+    return key;
+}
+
+// Splat index of this invocation in a per-splat dispatch of (groups_x, groups_y) work groups of
+// SPLAT_GROUP invocations (2D so that more than 65535 groups' worth of splats fit).
+uint splat_invocation() {
+    return gl_GlobalInvocationID.y * (gl_NumWorkGroups.x * uint(SPLAT_GROUP)) + gl_GlobalInvocationID.x;
+}
