@@ -40,10 +40,24 @@ def covariance_3d(rot: np.ndarray, scales: np.ndarray) -> np.ndarray:
     return m @ np.swapaxes(m, -1, -2)
 
 
+def transform_points(points: np.ndarray, rot: np.ndarray, trans: np.ndarray) -> np.ndarray:
+    """``R p + t`` for (N, 3) points, in the points' dtype.
+
+    Written out per output column: NumPy's matmul with a 3-wide inner dimension measured ~10x
+    slower here (28 ms against 3 ms for 150k float32 points).
+    """
+    rot = np.asarray(rot, points.dtype)
+    trans = np.asarray(trans, points.dtype)
+    out = np.empty(points.shape, points.dtype)
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    for i in range(3):
+        out[:, i] = x * rot[i, 0] + y * rot[i, 1] + z * rot[i, 2] + trans[i]
+    return out
+
+
 def to_camera(means: np.ndarray, camera: Camera) -> np.ndarray:
     """(N, 3) world points -> (N, 3) camera-space points ``R_cw p + t_cw`` (OpenCV axes)."""
-    rot = camera.rotation.astype(means.dtype)
-    return means @ rot.T + camera.translation.astype(means.dtype)
+    return transform_points(means, camera.rotation, camera.translation)
 
 
 def project_means(p_cam: np.ndarray, camera: Camera) -> np.ndarray:

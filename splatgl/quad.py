@@ -19,6 +19,7 @@ from .cull import cull
 from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
+from .project import to_camera
 from .scene import Scene, SplatKind
 from .settings import QuadExtent, RenderSettings, resolve_near
 from .sort import depth_sort
@@ -109,8 +110,7 @@ class QuadRenderer:
             self._times_cull = self._times_sort = 0.0
             return self._order
         t0 = time.perf_counter()
-        rot = camera.rotation.astype(np.float32)
-        p_cam = self.scene.means @ rot.T + camera.translation.astype(np.float32)
+        p_cam = to_camera(self.scene.means, camera)
         keep = np.flatnonzero(cull(p_cam, self._max_scale, self.scene.opacities, camera, self.near))
         t1 = time.perf_counter()
         order = depth_sort(p_cam[keep, 2], keep.astype(np.uint32))
