@@ -29,6 +29,10 @@ ALPHA_MAX = 0.99
 ALPHA_MIN = 1.0 / 255.0
 #: Front-to-back blending stops when the transmittance would fall below this.
 T_MIN = 1e-4
+#: The other published convention (gsplat), for ``Compat.GSPLAT``: per-axis opacity-aware extent
+#: of at most this many standard deviations, and its alpha clamp.
+GSPLAT_EXTENT_SIGMAS = 3.33
+GSPLAT_ALPHA_MAX = 0.999
 #: Constant added to the SH colour before the clamp at 0.
 SH_OFFSET = 0.5
 

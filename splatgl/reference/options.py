@@ -18,12 +18,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from ..constants import ALPHA_MAX
-
-#: gsplat's largest extent, in standard deviations along each screen axis.
-GSPLAT_EXTENT_SIGMAS = 3.33
-#: gsplat's alpha clamp.
-GSPLAT_ALPHA_MAX = 0.999
+from ..constants import ALPHA_MAX, GSPLAT_ALPHA_MAX, GSPLAT_EXTENT_SIGMAS
 
 
 class Compat(enum.Enum):
