@@ -6,11 +6,19 @@
 //   alpha = min(0.99, o exp(power)), skipped when power > 0 or alpha < 1/255
 //   stop, without adding the splat, once T (1 - alpha) < 1e-4
 //   C = sum c alpha T,  D = sum z alpha T,  A = 1 - T;  output (C + T bg, A) and D.
+// Speed-up that cannot change the result: a splat with alpha < 1/255 at every pixel centre of
+// the tile (o exp(-q_min / 2) < 1/255, q_min from conic_min_over_box, with a safety margin) is
+// dropped from the batch before blending, keeping the order of the others; and a pixel skips
+// exp() where power is below that splat's cut-off by the same margin.
 #include "lib/tile_common.glsl"
 
 layout(local_size_x = TILE_SIZE, local_size_y = TILE_SIZE) in;
 
 const uint TILE_PIXELS = uint(TILE_SIZE * TILE_SIZE);
+// Safety margin on q = -2 power for the two skips above: relative and absolute (q is ~1..100;
+// float rounding of q and exp is ~1e-6 relative, so these margins are never reached by it).
+const float Q_MARGIN_REL = 1.0e-3;
+const float Q_MARGIN_ABS = 1.0e-2;
 
 layout(std430, binding = TILE_BINDING_OUT_RGBA) writeonly buffer OutRGBA { vec4 out_rgba[]; };
 layout(std430, binding = TILE_BINDING_OUT_DEPTH) writeonly buffer OutDepth { float out_depth[]; };
@@ -20,10 +28,13 @@ uniform uvec2 u_size;        // (width, height) in pixels
 uniform vec3 u_background;   // composited as C + T_final bg
 uniform uint u_index_mask;   // low bits of a packed key holding the splat index
 
-shared vec4 s_mean_depth[TILE_PIXELS];
-shared vec4 s_conic_o[TILE_PIXELS];
-shared vec4 s_color[TILE_PIXELS];
-shared uint s_done[2];       // invocations finished, per batch parity
+shared vec4 s_mean_cut[TILE_PIXELS];   // (u, v, power cut-off, view z) of the kept splats
+shared vec4 s_conic_o[TILE_PIXELS];    // (a, b, c, opacity)
+shared vec4 s_color[TILE_PIXELS];      // (r, g, b, 0)
+shared uint s_slot[TILE_PIXELS];       // keep flag, then (after the scan) the kept slot
+shared uint s_alive[TILE_PIXELS];      // 1 while the invocation's pixel still blends
+shared uint s_kept;                    // splats kept in this batch
+shared uint s_alive_count;             // invocations still blending
 
 void main() {
     uint tile = gl_WorkGroupID.y * u_grid.x + gl_WorkGroupID.x;
@@ -31,50 +42,80 @@ void main() {
     uint rank = gl_LocalInvocationIndex;
     bool inside = pix.x < u_size.x && pix.y < u_size.y;
     vec2 centre = vec2(pix) + 0.5;               // pixel centre (j + 0.5, i + 0.5)
+    // Box of this tile's pixel centres inside the image.
+    vec2 box_lo = vec2(gl_WorkGroupID.xy * uint(TILE_SIZE)) + 0.5;
+    vec2 box_hi = min(box_lo + float(TILE_SIZE - 1), vec2(u_size) - 0.5);
     uvec2 range = tile_ranges[tile];
 
     bool done = !inside;
     float T = 1.0;
     vec3 C = vec3(0.0);
     float D = 0.0;
-    if (rank == 0u) s_done[0] = 0u;
-    uint parity = 0u;
     for (uint base = range.x; base < range.y; base += TILE_PIXELS) {
-        // Everyone has finished with the previous batch (and read its done count).
         memoryBarrierShared();
-        barrier();
-        if (done) atomicAdd(s_done[parity], 1u);
-        if (rank == 0u) s_done[parity ^ 1u] = 0u;
+        barrier();                                // the previous batch is consumed
+        // Fetch one splat per invocation and decide whether it can reach the tile:
+        // alpha >= 1/255 needs q <= 2 ln(255 o).
         uint k = base + rank;
+        bool keep = false;
+        vec4 mc = vec4(0.0), qo = vec4(0.0);
         if (k < range.y) {
 #ifdef KEY_PACKED
             uint idx = sort_keys[k].x & u_index_mask;
 #else
             uint idx = sort_values[k];
 #endif
-            s_mean_depth[rank] = proj_mean_depth[idx];
-            s_conic_o[rank] = proj_conic_o[idx];
-            s_color[rank] = proj_color[idx];
+            vec4 md = proj_mean_depth[idx];
+            qo = proj_conic_o[idx];
+            float q_cut = 2.0 * log(qo.w / ALPHA_MIN) * (1.0 + Q_MARGIN_REL) + Q_MARGIN_ABS;
+            keep = conic_min_over_box(qo.xyz, md.xy, box_lo, box_hi) <= q_cut;
+            mc = vec4(md.xy, -0.5 * q_cut, md.z);
+            if (keep) s_color[rank] = proj_color[idx];
+        }
+        s_slot[rank] = keep ? 1u : 0u;
+        s_alive[rank] = done ? 0u : 1u;
+        memoryBarrierShared();
+        barrier();
+        if (rank == 0u) {                         // order-preserving compaction (serial scan)
+            uint kept = 0u, alive = 0u;
+            for (uint j = 0u; j < TILE_PIXELS; ++j) {
+                uint flag = s_slot[j];
+                s_slot[j] = kept;
+                kept += flag;
+                alive += s_alive[j];
+            }
+            s_kept = kept;
+            s_alive_count = alive;
         }
         memoryBarrierShared();
         barrier();
-        if (s_done[parity] == TILE_PIXELS) break;   // the same value in every invocation
-        parity ^= 1u;
-        uint count = min(TILE_PIXELS, range.y - base);
+        if (s_alive_count == 0u) break;           // the same value in every invocation
+        vec3 color = s_color[rank].rgb;
+        memoryBarrierShared();
+        barrier();                                // colours read before slots are overwritten
+        if (keep) {
+            uint slot = s_slot[rank];
+            s_mean_cut[slot] = mc;
+            s_conic_o[slot] = qo;
+            s_color[slot] = vec4(color, 0.0);
+        }
+        memoryBarrierShared();
+        barrier();
+        uint count = s_kept;
         for (uint j = 0u; !done && j < count; ++j) {
             vec4 q = s_conic_o[j];
-            vec4 md = s_mean_depth[j];
-            vec2 d = centre - md.xy;
+            vec4 m = s_mean_cut[j];
+            vec2 d = centre - m.xy;
             // power = -0.5 (a dx^2 + c dy^2) - b dx dy, grouped as the NumPy twin groups it.
             float power = -0.5 * (q.x * d.x * d.x + q.z * d.y * d.y) - q.y * d.x * d.y;
-            if (power > 0.0) continue;
+            if (power > 0.0 || power < m.z) continue;
             float alpha = min(ALPHA_MAX, q.w * exp(power));
             if (alpha < ALPHA_MIN) continue;
             float test_t = T * (1.0 - alpha);
             if (test_t < T_MIN) { done = true; break; }
             float w = alpha * T;                  // alpha_k T_k
             C += s_color[j].rgb * w;
-            D += md.z * w;
+            D += m.w * w;
             T = test_t;
         }
     }

@@ -52,3 +52,22 @@ uvec2 tile_key(uint tile, uint depth_bits, uint index) {
 uint splat_invocation() {
     return gl_GlobalInvocationID.y * (gl_NumWorkGroups.x * uint(SPLAT_GROUP)) + gl_GlobalInvocationID.x;
 }
+
+// Smallest q(d) = d^T Q d = a dx^2 + 2 b dx dy + c dy^2 (so power = -q / 2) over the points of
+// the box [lo, hi] (pixels; d = point - mean), Q = [[a, b], [b, c]] positive definite.  Zero
+// when the mean lies in the box; otherwise the minimum of this convex function lies on an
+// edge, where it is the 1D minimum dy = -b dx / c (or dx = -b dy / a) clamped to the edge.
+float conic_min_over_box(vec3 Q, vec2 mean, vec2 lo, vec2 hi) {
+    vec2 d0 = lo - mean, d1 = hi - mean;
+    if (d0.x <= 0.0 && d1.x >= 0.0 && d0.y <= 0.0 && d1.y >= 0.0) return 0.0;
+    float best = 3.0e38;
+    for (int e = 0; e < 2; ++e) {
+        float dx = e == 0 ? d0.x : d1.x;          // vertical edges, dy free
+        float dy = clamp(-Q.y * dx / Q.z, d0.y, d1.y);
+        best = min(best, Q.x * dx * dx + 2.0 * Q.y * dx * dy + Q.z * dy * dy);
+        float ey = e == 0 ? d0.y : d1.y;          // horizontal edges, dx free
+        float ex = clamp(-Q.y * ey / Q.x, d0.x, d1.x);
+        best = min(best, Q.x * ex * ex + 2.0 * Q.y * ex * ey + Q.z * ey * ey);
+    }
+    return best;
+}
