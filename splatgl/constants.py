@@ -33,6 +33,11 @@ T_MIN = 1e-4
 #: of at most this many standard deviations, and its alpha clamp.
 GSPLAT_EXTENT_SIGMAS = 3.33
 GSPLAT_ALPHA_MAX = 0.999
+#: |logit| bound for opacities of exactly 0 or 1 (8-bit alphas 0/255, ``from_activated``), so
+#: every stored logit stays finite; sigmoid(40) rounds to 1.0 in float32.
+MAX_LOGIT = 40.0
+#: Linear scale used in place of an exact 0 before taking the log, so stored log-scales stay finite.
+MIN_SCALE = 1e-38
 #: Constant added to the SH colour before the clamp at 0.
 SH_OFFSET = 0.5
 

@@ -26,12 +26,13 @@ DEFAULT_ELEVATION = 20.0
 
 
 def default_camera(scene: Scene, width: int = 1280, height: int = 720,
-                   fov_y_degrees: float = DEFAULT_FOV_Y) -> Camera:
+                   fov_y_degrees: float = DEFAULT_FOV_Y, distance_scale: float = 1.0) -> Camera:
     """A perspective camera that frames ``scene``.
 
     Frames the 1st-99th percentile box of the means (so a few stray splats far away do not
     shrink the scene to a dot), looking along world +z from slightly above (world -y is up, the
-    COLMAP convention), far enough that the box's bounding sphere fits the narrower fov.
+    COLMAP convention), far enough that the box's bounding sphere fits the narrower fov, times
+    ``distance_scale`` (below 1 moves closer).
     """
     lo, hi = scene.robust_bounds
     centre = 0.5 * (lo + hi)
@@ -39,7 +40,7 @@ def default_camera(scene: Scene, width: int = 1280, height: int = 720,
     fov_y = math.radians(fov_y_degrees)
     fov_x = 2.0 * math.atan(math.tan(fov_y / 2.0) * width / height)
     half = min(fov_x, fov_y) / 2.0
-    distance = 1.05 * radius / math.sin(half)
+    distance = 1.05 * radius / math.sin(half) * distance_scale
     pose = orbit(centre, distance, 180.0, DEFAULT_ELEVATION)
     return Camera.from_fov(width, height, fov_y_degrees, pose)
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .constants import MAX_SH_DEGREE, sh_coeff_count
+from .constants import MAX_LOGIT, MAX_SH_DEGREE, MIN_SCALE, sh_coeff_count
 from .errors import SceneFormatError
 
 #: A quaternion whose norm is below this is treated as degenerate (no rotation can be derived).
@@ -95,8 +95,8 @@ class Scene:
         """
         o = np.clip(np.asarray(opacities, np.float64), 0.0, 1.0)
         with np.errstate(divide="ignore"):
-            logits = np.clip(np.log(o) - np.log1p(-o), -40.0, 40.0)
-        scales64 = np.maximum(np.asarray(scales, np.float64), 1e-38)
+            logits = np.clip(np.log(o) - np.log1p(-o), -MAX_LOGIT, MAX_LOGIT)
+        scales64 = np.maximum(np.asarray(scales, np.float64), MIN_SCALE)
         return cls(means, rotations, np.log(scales64), logits, sh, kind)
 
     @property

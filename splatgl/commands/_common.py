@@ -54,6 +54,9 @@ def add_camera_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--height", type=int, default=None, help="image height in pixels (default 720)")
     g.add_argument("--fov", type=float, default=None,
                    help="vertical field of view of the default camera, degrees (default 50)")
+    g.add_argument("--distance", type=float, default=1.0, metavar="SCALE",
+                   help="default camera distance as a multiple of the framing distance "
+                        "(default 1; 0.5 is twice as close)")
 
 
 def add_settings_arguments(p: argparse.ArgumentParser) -> None:
@@ -98,5 +101,7 @@ def camera_from_args(args: argparse.Namespace, scene: Scene) -> Camera:
         return cam
     if args.fov is not None and not 0.0 < args.fov < 180.0:
         raise SplatglError(f"--fov must be in (0, 180) degrees, got {args.fov}")
+    if not args.distance > 0.0:
+        raise SplatglError(f"--distance must be positive, got {args.distance}")
     return default_camera(scene, args.width or 1280, args.height or 720,
-                          args.fov if args.fov is not None else 50.0)
+                          args.fov if args.fov is not None else 50.0, args.distance)

@@ -12,14 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..constants import MAX_LOGIT, MIN_SCALE  # noqa: F401 (re-exported to the loaders)
 from ..errors import SceneFormatError
 
-#: |logit| bound for 8-bit (or unorm) alphas of exactly 0 or 1, so every stored logit stays
-#: finite.  Same value as the clamp in :meth:`splatgl.scene.Scene.from_activated`.
-MAX_LOGIT = 40.0
-#: Linear scale used in place of an exact 0 before taking the log (same floor as
-#: :meth:`~splatgl.scene.Scene.from_activated`), so an underflowed float16 scale stays finite.
-MIN_SCALE = 1e-38
 
 
 def read_bytes(path: Path) -> bytes:

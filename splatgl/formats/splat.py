@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import SH_C0
+from ..constants import MAX_LOGIT, SH_C0
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate
 
@@ -29,8 +29,6 @@ EXTENSIONS = (".splat",)
 NEEDS_MAGIC = False
 #: Bytes per splat.
 ROW_BYTES = 32
-#: |logit| bound for alpha bytes 0 and 255.
-MAX_LOGIT = 40.0
 
 ROW_DTYPE = np.dtype([("position", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4),
                       ("rotation", "u1", 4)])

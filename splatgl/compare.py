@@ -1,0 +1,57 @@
+"""Comparing two renderers' images: metrics, side-by-side picture, error heat map."""
+
+from __future__ import annotations
+
+import numpy as np
+import OpenImageIO as oiio
+
+#: Colour map of the heat map: black -> purple -> orange -> yellow -> white (perceptually ordered).
+_STOPS = np.array([
+    [0.0, 0.0, 0.0], [0.33, 0.06, 0.45], [0.85, 0.25, 0.25], [0.99, 0.65, 0.05], [1.0, 1.0, 0.9],
+])
+
+
+def colormap(t: np.ndarray) -> np.ndarray:
+    """Map values in [0, 1] (any shape) to RGB (shape + (3,)), clipping outside."""
+    t = np.clip(np.asarray(t, np.float64), 0.0, 1.0) * (len(_STOPS) - 1)
+    i = np.minimum(t.astype(int), len(_STOPS) - 2)
+    f = (t - i)[..., None]
+    return (_STOPS[i] * (1 - f) + _STOPS[i + 1] * f).astype(np.float32)
+
+
+def _label(img: np.ndarray, x: int, y: int, text: str, size: int = 14) -> np.ndarray:
+    """Draw ``text`` into an (H, W, 3) float image with OpenImageIO's built-in font."""
+    h, w = img.shape[:2]
+    buf = oiio.ImageBuf(oiio.ImageSpec(w, h, 3, oiio.FLOAT))
+    buf.set_pixels(oiio.ROI(0, w, 0, h, 0, 1, 0, 3), np.ascontiguousarray(img, np.float32))
+    oiio.ImageBufAlgo.render_text(buf, x, y, text, size, "", (1.0, 1.0, 1.0))
+    return np.asarray(buf.get_pixels(oiio.FLOAT), np.float32).reshape(h, w, 3)
+
+
+def heatmap(got: np.ndarray, expected: np.ndarray, scale: float) -> np.ndarray:
+    """(H + bar, W, 4) image: per-pixel max channel |error| / scale through :func:`colormap`,
+    with a labelled colour scale bar (0 .. scale) underneath."""
+    err = np.abs(got[..., :3].astype(np.float64) - expected[..., :3]).max(axis=-1)
+    h, w = err.shape
+    img = colormap(err / scale)
+    bar_h = 34
+    bar = np.zeros((bar_h, w, 3), np.float32)
+    ramp = colormap(np.linspace(0.0, 1.0, w))
+    bar[2:14] = ramp[None]
+    if w >= 120:
+        bar = _label(bar, 2, 30, "0")
+        text = f"{scale:.3g} ({scale * 255:.3g}/255) and above"
+        bar = _label(bar, max(2, w - 7 * len(text) - 2), 30, text)
+    out = np.concatenate([img, bar], axis=0)
+    return np.concatenate([out, np.ones(out.shape[:2] + (1,), np.float32)], -1)
+
+
+def side_by_side(left: np.ndarray, right: np.ndarray, names: tuple[str, str]) -> np.ndarray:
+    """(H, 2W + 4, 4) image of two renders with their names written on them."""
+    h = left.shape[0]
+    gap = np.full((h, 4, 3), 0.5, np.float32)
+    row = np.concatenate([np.clip(left[..., :3], 0, 1), gap, np.clip(right[..., :3], 0, 1)], axis=1)
+    if h >= 24:
+        row = _label(row, 4, 16, names[0])
+        row = _label(row, left.shape[1] + 8, 16, names[1])
+    return np.concatenate([row, np.ones((h, row.shape[1], 1), np.float32)], -1)

@@ -1,0 +1,75 @@
+"""Image error metrics for comparing renderers: PSNR, SSIM, absolute errors, shares off."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+#: Thresholds reported as "share of pixels off by more than": one and four 8-bit steps.
+OFF_THRESHOLDS = (1.0 / 255.0, 4.0 / 255.0)
+
+
+@dataclass(frozen=True)
+class ImageErrors:
+    """Errors of an RGB image against a reference, both (H, W, 3) in [0, 1]-ish units.
+
+    ``psnr`` uses a peak of 1.0 (infinite for identical images); ``ssim`` is the mean SSIM
+    over channels (Gaussian window, sigma 1.5, Wang et al. 2004 constants); ``off_1`` and
+    ``off_4`` are the shares of pixels whose largest channel error exceeds 1/255 and 4/255.
+    """
+
+    psnr: float
+    ssim: float
+    mean_abs: float
+    max_abs: float
+    off_1: float
+    off_4: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: (None if isinstance(v, float) and math.isinf(v) else v) for k, v in asdict(self).items()}
+
+
+def psnr(a: np.ndarray, b: np.ndarray, peak: float = 1.0) -> float:
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
+    return math.inf if mse == 0.0 else 10.0 * math.log10(peak * peak / mse)
+
+
+def _gaussian_blur(img: np.ndarray, sigma: float = 1.5, radius: int = 5) -> np.ndarray:
+    """Separable Gaussian blur of (H, W) with an 11-tap window, 'valid' region only."""
+    x = np.arange(-radius, radius + 1, dtype=np.float64)
+    w = np.exp(-0.5 * (x / sigma) ** 2)
+    w /= w.sum()
+    h, wd = img.shape
+    if h <= 2 * radius or wd <= 2 * radius:
+        return np.full((1, 1), img.mean())
+    rows = sum(w[k] * img[:, k:wd - 2 * radius + k] for k in range(2 * radius + 1))
+    return sum(w[k] * rows[k:h - 2 * radius + k, :] for k in range(2 * radius + 1))
+
+
+def ssim(a: np.ndarray, b: np.ndarray, peak: float = 1.0) -> float:
+    """Mean SSIM of two (H, W, C) images (per channel, averaged)."""
+    c1, c2 = (0.01 * peak) ** 2, (0.03 * peak) ** 2
+    values = []
+    for ch in range(a.shape[-1]):
+        x, y = a[..., ch].astype(np.float64), b[..., ch].astype(np.float64)
+        mx, my = _gaussian_blur(x), _gaussian_blur(y)
+        sxx = _gaussian_blur(x * x) - mx * mx
+        syy = _gaussian_blur(y * y) - my * my
+        sxy = _gaussian_blur(x * y) - mx * my
+        s = ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx * mx + my * my + c1) * (sxx + syy + c2))
+        values.append(float(s.mean()))
+    return float(np.mean(values))
+
+
+def image_errors(got: np.ndarray, expected: np.ndarray) -> ImageErrors:
+    """All metrics of ``got`` against ``expected``, (H, W, >=3) arrays (RGB used)."""
+    g, e = got[..., :3], expected[..., :3]
+    diff = np.abs(g.astype(np.float64) - e.astype(np.float64))
+    per_pixel = diff.max(axis=-1)
+    return ImageErrors(
+        psnr=psnr(g, e), ssim=ssim(g, e), mean_abs=float(diff.mean()), max_abs=float(diff.max()),
+        off_1=float((per_pixel > OFF_THRESHOLDS[0]).mean()),
+        off_4=float((per_pixel > OFF_THRESHOLDS[1]).mean()),
+    )
