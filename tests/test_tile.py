@@ -1,0 +1,204 @@
+"""The per-tile compute renderer (splatgl.tile) against the NumPy per-tile reference.
+
+Integer stages (tiles touched, tile rectangles, emitted and sorted keys, splat order, tile
+ranges) must be identical.  Images: float32 GPU against the float32 reference, 1e-5 absolute.
+Both evaluate the same formulas in float32; what differs is operation order (matrix products,
+the reference's per-chunk matmul accumulation of C and D) and llvmpipe's exp(), each ~1e-7
+relative, so a pixel accumulates a few ulps (measured worst case 1.0e-6).  A pixel whose splat
+sits exactly on the 1/255 or 1e-4 thresholds could differ by up to ~0.01; with the seeded scenes
+below none does.  Depth (world units, up to ~8) is compared with 1e-5 relative to its maximum.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import save_failure_images
+from splatgl.camera import Camera, orbit
+from splatgl.errors import ContextError
+from splatgl.reference import emit_keys, project, render_reference, sort, tile_ranges
+from splatgl.render import Renderer, default_camera
+from splatgl.scene import Scene
+from splatgl.settings import RendererKind, RenderSettings
+from splatgl import tile as tile_mod
+from splatgl.tile import KeyLayout, TileRenderer
+
+TOL = 1e-5
+DEPTH_TOL_REL = 1e-5
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    """One headless context per module; checks that no GL error is left pending."""
+    from splatgl.gl.context import create_headless_context
+
+    try:
+        context = create_headless_context()
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL context: {exc}")
+    yield context
+    error = context.error
+    context.release()
+    assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
+
+
+def random_scene(n: int, seed: int, sh_degree: int = 1) -> Scene:
+    """n splats in front of an identity camera (z 2..8), anisotropic, scales 0.01..0.3."""
+    rng = np.random.default_rng(seed)
+    means = rng.uniform([-2.0, -1.5, 2.0], [2.0, 1.5, 8.0], (n, 3))
+    k = (sh_degree + 1) ** 2
+    return Scene.from_activated(means, rng.normal(size=(n, 4)),
+                                np.exp(rng.uniform(np.log(0.01), np.log(0.3), (n, 3))),
+                                rng.uniform(0.02, 1.0, n), rng.normal(0.0, 0.5, (n, k, 3)))
+
+
+CAM = Camera.from_fov(128, 96, 60.0)
+
+
+def render_pair(ctx, scene, camera, settings):
+    renderer = TileRenderer(ctx, scene, settings)
+    try:
+        got = renderer.render_layers(camera)
+    finally:
+        renderer.release()
+    return got, render_reference(scene, camera, settings, np.float32)
+
+
+def assert_close(got, expected, tol, name, artifacts_dir):
+    err = float(np.abs(got - expected).max()) if got.size else 0.0
+    if not err <= tol:
+        note = save_failure_images(artifacts_dir, name, got, expected)
+        pytest.fail(f"{name}: max abs error {err:.3g} > {tol:.3g}; {note}")
+
+
+# ------------------------------------------------------------------------------ CPU-only
+def test_key_layout_round_trip():
+    rng = np.random.default_rng(1)
+    n, tiles = 3000, 48
+    layout = KeyLayout.choose(n, tiles)
+    assert layout.packed and layout.depth_shift == 12 and layout.tile_shift == 43
+    tile = rng.integers(0, tiles, 500).astype(np.uint64)
+    depth = rng.uniform(0.01, 100.0, 500).astype(np.float32).view(np.uint32).astype(np.uint64)
+    index = rng.integers(0, n, 500).astype(np.uint64)
+    packed = (tile << np.uint64(43)) | (depth << np.uint64(12)) | index
+    ref_keys, values = layout.to_reference(packed)
+    np.testing.assert_array_equal(ref_keys, (tile << np.uint64(32)) | depth)
+    np.testing.assert_array_equal(values, index.astype(np.int64))
+    # Sorting packed keys == stable sort of reference keys.
+    order = np.argsort((tile << np.uint64(32)) | depth, kind="stable")
+    np.testing.assert_array_equal(layout.to_reference(np.sort(packed))[0], ref_keys[order])
+    assert not KeyLayout.choose(3_000_000, 1 << 16).packed  # 22 + 31 + 16 bits > 64
+
+
+# ------------------------------------------------------------------------------ GPU
+def test_integer_stages_match_reference(ctx):
+    scene, settings = random_scene(3000, seed=7), RenderSettings()
+    renderer = TileRenderer(ctx, scene, settings)
+    try:
+        got = renderer.debug_stages(CAM)
+    finally:
+        renderer.release()
+    proj = project(scene, CAM, settings, np.float32)
+    np.testing.assert_array_equal(got.tiles_touched, proj.tiles_touched)
+    np.testing.assert_array_equal(got.rect_min, proj.rect_min)
+    np.testing.assert_array_equal(got.rect_max, proj.rect_max)
+    keys, values = emit_keys(proj)
+    assert len(keys) > 5000  # the scene really spans many tiles
+    np.testing.assert_array_equal(got.emitted_keys, keys)
+    np.testing.assert_array_equal(got.emitted_values, values)
+    keys, values = sort(keys, values)
+    np.testing.assert_array_equal(got.keys, keys)
+    np.testing.assert_array_equal(got.values, values)
+    np.testing.assert_array_equal(got.ranges, tile_ranges(keys, proj.n_tiles))
+
+
+def test_unpacked_key_layout_matches_reference(ctx, monkeypatch, artifacts_dir):
+    """The fallback for huge scenes (reference key layout, stable argsort with values)."""
+    monkeypatch.setattr(tile_mod.KeyLayout, "choose", classmethod(lambda cls, n, t: cls(32, 0, False)))
+    scene, settings = random_scene(2000, seed=3), RenderSettings()
+    renderer = TileRenderer(ctx, scene, settings)
+    try:
+        got = renderer.debug_stages(CAM)
+        image = renderer.render(CAM)
+    finally:
+        renderer.release()
+    proj = project(scene, CAM, settings, np.float32)
+    keys, values = sort(*emit_keys(proj))
+    np.testing.assert_array_equal(got.keys, keys)
+    np.testing.assert_array_equal(got.values, values)
+    assert_close(image, render_reference(scene, CAM, settings).rgba, TOL, "tile_unpacked", artifacts_dir)
+
+
+@pytest.mark.parametrize("name, settings, camera, sh_degree", [
+    ("default", RenderSettings(), CAM, 1),
+    ("aa_bg_sh3", RenderSettings(antialias=True, background=(0.2, 0.4, 0.9)), CAM, 3),
+    ("sh_cap", RenderSettings(sh_degree=1, background=(1.0, 1.0, 1.0)), CAM, 3),
+    ("partial_tiles", RenderSettings(), Camera.from_fov(101, 77, 60.0), 1),
+    ("orthographic", RenderSettings(near=0.5), Camera.orthographic(128, 96, 24.0), 0),
+])
+def test_image_matches_reference(ctx, artifacts_dir, name, settings, camera, sh_degree):
+    scene = random_scene(3000, seed=11, sh_degree=sh_degree)
+    got, ref = render_pair(ctx, scene, camera, settings)
+    assert got.rgba.shape == (camera.height, camera.width, 4) and got.rgba.dtype == np.float32
+    assert ref.alpha.max() > 0.9  # the image is not empty
+    assert_close(got.rgba, ref.rgba, TOL, f"tile_{name}", artifacts_dir)
+    assert_close(got.depth, ref.depth, DEPTH_TOL_REL * float(ref.depth.max()),
+                 f"tile_{name}_depth", artifacts_dir)
+
+
+def test_empty_and_all_culled_scenes_give_background(ctx):
+    bg = (0.25, 0.5, 0.75)
+    expected = np.broadcast_to(np.array([*bg, 0.0], np.float32), (96, 128, 4))
+    behind = random_scene(500, seed=5)
+    behind = Scene(behind.means * np.float32([1, 1, -1]), behind.quats, behind.log_scales,
+                   behind.opacity_logits, behind.sh)  # every splat behind the camera
+    empty = random_scene(1, seed=5).subset(np.zeros(1, bool))
+    for scene in (behind, empty):
+        renderer = TileRenderer(ctx, scene, RenderSettings(background=bg))
+        try:
+            got = renderer.render(CAM)
+            assert renderer.last_times.n_keys == 0
+        finally:
+            renderer.release()
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_renderer_dispatches_tile_kind(ctx):
+    scene = random_scene(300, seed=2)
+    with Renderer(ctx) as r:
+        got = r.render(scene, CAM, RenderSettings(), RendererKind.TILE)
+        times = r.renderer_for(scene, RenderSettings(), RendererKind.TILE).last_times
+    assert got.shape == (96, 128, 4) and got[..., 3].max() > 0.5
+    assert times.total >= times.rasterize > 0.0
+
+
+def test_moving_camera_re_sorts(ctx, artifacts_dir):
+    """The same renderer must follow a new pose (no stale keys or order)."""
+    scene = random_scene(1500, seed=9)
+    renderer = TileRenderer(ctx, scene, RenderSettings())
+    try:
+        for azimuth in (170.0, 200.0):
+            cam = Camera.from_fov(96, 80, 60.0, orbit(np.array([0.0, 0.0, 5.0]), 6.0, azimuth, 10.0))
+            got = renderer.render(cam)
+            assert got[..., 3].max() > 0.5
+            assert_close(got, render_reference(scene, cam).rgba, TOL, f"tile_orbit_{azimuth:g}",
+                         artifacts_dir)
+    finally:
+        renderer.release()
+
+
+def test_donut_matches_reference(ctx, shared_scenes, artifacts_dir):
+    """The real donut (45k splats, SH degree 0), default camera, 256 x 192."""
+    try:
+        from splatgl.formats import load_scene
+    except ImportError:
+        pytest.skip("no scene reader")
+    path = shared_scenes / "ply" / "donut_sh0.ply"
+    if not path.is_file():
+        pytest.skip(f"{path} not found")
+    scene = load_scene(path)
+    camera = default_camera(scene, 256, 192)
+    got, ref = render_pair(ctx, scene, camera, RenderSettings())
+    assert ref.alpha.max() > 0.9
+    assert_close(got.rgba, ref.rgba, TOL, "tile_donut", artifacts_dir)
