@@ -86,7 +86,7 @@ class QuadRenderer:
         self.last_times: QuadTimes | None = None
 
     # --------------------------------------------------------------------------- stages
-    def program(self) -> moderngl.Program:
+    def program(self, camera: Camera) -> moderngl.Program:
         degree = self.scene.sh_degree if self.settings.sh_degree is None else min(
             self.settings.sh_degree, self.scene.sh_degree)
         defines: dict[str, object] = {
@@ -97,6 +97,8 @@ class QuadRenderer:
             defines["EXTENT_SQUARE"] = 1
         if self.settings.antialias:
             defines["ANTIALIAS"] = 1
+        if camera.is_orthographic:
+            defines["ORTHOGRAPHIC"] = 1
         return self.programs.program("quad.vert", "quad.frag", defines)
 
     def visible_order(self, camera: Camera) -> np.ndarray:
@@ -146,7 +148,7 @@ class QuadRenderer:
     def draw(self, camera: Camera, fbo: moderngl.Framebuffer) -> int:
         """Cull, sort, upload and draw into ``fbo`` (cleared to 0); returns splats drawn."""
         order = self.visible_order(camera)
-        prog = self.program()
+        prog = self.program(camera)
         t0 = time.perf_counter()
         self._upload(order, prog)
         t1 = time.perf_counter()
