@@ -2,8 +2,8 @@
 
 Shaders live in the top-level ``shaders/`` folder (shipped in the wheel as ``splatgl/shaders``).
 A stage file may ``#include "lib/name.glsl"``; each file is included once per stage.  The
-preprocessor emits ``#line`` directives with a per-file number, so compiler messages are mapped
-back to ``file:line``.  Programs are specialised by generated ``#define`` lines (the reference
+preprocessor emits ``#line`` directives that encode the file in the line number, so compiler messages are
+mapped back to ``file:line``.  Programs are specialised by generated ``#define`` lines (the reference
 constants of :mod:`splatgl.constants` plus per-variant switches) and cached by (names, defines).
 """
 
@@ -22,6 +22,8 @@ GLSL_VERSION = "#version 430 core"
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
 _MESA_MSG = re.compile(r"(\d+):(\d+)\((\d+)\)")
 _NVIDIA_MSG = re.compile(r"(\d+)\((\d+)\)")
+#: ``#line`` numbers are ``file_index * LINE_STRIDE + line`` (see :meth:`Source.describe`).
+LINE_STRIDE = 100000
 
 
 def shader_dir() -> Path:
@@ -41,19 +43,19 @@ class Source:
     files: tuple[str, ...]
 
     def describe(self, log: str) -> str:
-        """Rewrite ``N:line(col)`` references in a compiler log as ``file:line``."""
+        """Rewrite ``S:line(col)`` (Mesa) or ``S(line)`` (NVIDIA) references as ``file:line``.
 
-        def mesa(m: re.Match) -> str:
-            idx = int(m.group(1))
-            name = self.files[idx] if idx < len(self.files) else f"<{idx}>"
-            return f"{name}:{m.group(2)}({m.group(3)})"
+        Line numbers carry the file: ``#line`` sets them to ``file_index * LINE_STRIDE + line``
+        (Mesa attributes some errors to the wrong source-string number, never to a wrong line).
+        """
 
-        out = _MESA_MSG.sub(mesa, log)
-        if out == log:  # other drivers write "N(line)"
-            out = _NVIDIA_MSG.sub(
-                lambda m: f"{self.files[int(m.group(1))] if int(m.group(1)) < len(self.files) else m.group(1)}:{m.group(2)}",
-                log,
-            )
+        def name(encoded: int) -> str:
+            idx, line = divmod(encoded, LINE_STRIDE)
+            return f"{self.files[idx] if idx < len(self.files) else f'<{idx}>'}:{line}"
+
+        out = _MESA_MSG.sub(lambda m: f"{name(int(m.group(2)))}({m.group(3)})", log)
+        if out == log:
+            out = _NVIDIA_MSG.sub(lambda m: name(int(m.group(2))), log)
         return out
 
 
@@ -81,12 +83,12 @@ def preprocess(name: str, defines: dict[str, str] | None = None, root: Path | No
         included.add(rel)
         number = len(files)
         files.append(rel)
-        out.append(f"#line 1 {number}")
+        out.append(f"#line {number * LINE_STRIDE + 1}")
         for lineno, line in enumerate(path.read_text().splitlines(), start=1):
             m = _INCLUDE.match(line)
             if m:
                 expand(m.group(1), stack + (rel,), f"{rel}:{lineno}")
-                out.append(f"#line {lineno + 1} {number}")
+                out.append(f"#line {number * LINE_STRIDE + lineno + 1}")
             elif line.lstrip().startswith("#version"):
                 out.append("")  # the version line is emitted once, above
             else:

@@ -1,0 +1,72 @@
+"""The shader include preprocessor: expansion, include-once, errors by file and line, cache."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from splatgl.errors import ShaderError
+from splatgl.gl.shaders import ProgramCache, preprocess, shader_dir
+
+
+def _write(root: Path, files: dict[str, str]) -> Path:
+    for name, text in files.items():
+        path = root / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    return root
+
+
+def test_includes_expand_once_with_constants_and_defines(tmp_path):
+    root = _write(tmp_path, {
+        "lib/a.glsl": "float a() { return ALPHA_MAX; }\n",
+        "lib/b.glsl": '#include "lib/a.glsl"\nfloat b() { return a(); }\n',
+        "main.comp": '#version 430\n#include "lib/a.glsl"\n#include "lib/b.glsl"\nvoid main() {}\n',
+    })
+    src = preprocess("main.comp", {"SH_DEGREE": "2"}, root=root)
+    assert src.files == ("main.comp", "lib/a.glsl", "lib/b.glsl")
+    assert src.text.count("float a()") == 1
+    assert src.text.startswith("#version 430 core\n")
+    assert "#define ALPHA_MAX 0.99" in src.text and "#define SH_DEGREE 2" in src.text
+
+
+def test_missing_include_and_cycle_name_file_and_line(tmp_path):
+    root = _write(tmp_path, {
+        "x.comp": 'void f();\n#include "lib/none.glsl"\n',
+        "lib/p.glsl": '#include "lib/q.glsl"\n', "lib/q.glsl": '\n#include "lib/p.glsl"\n',
+        "y.comp": '#include "lib/p.glsl"\n',
+    })
+    with pytest.raises(ShaderError, match=r"x\.comp:2: shader file 'lib/none.glsl' not found"):
+        preprocess("x.comp", root=root)
+    with pytest.raises(ShaderError, match=r"lib/q\.glsl:2: include cycle"):
+        preprocess("y.comp", root=root)
+
+
+def test_compile_error_reports_the_included_file_and_line(tmp_path, gl_renderer):
+    root = _write(tmp_path, {
+        "lib/bad.glsl": "float ok() { return 1.0; }\nfloat bad() { return undefined_thing; }\n",
+        "c.comp": '#version 430\n#include "lib/bad.glsl"\nlayout(local_size_x = 1) in;\n'
+                  "void main() { float x = bad(); }\n",
+    })
+    src = preprocess("c.comp", root=root)
+    try:
+        gl_renderer.ctx.compute_shader(src.text)
+    except Exception as exc:  # moderngl.Error
+        text = src.describe(str(exc))
+    else:
+        pytest.fail("the broken shader compiled")
+    assert "lib/bad.glsl:2(" in text and "undefined_thing" in text
+
+
+def test_every_quad_variant_compiles_and_is_cached(gl_renderer):
+    """All specialisations of the quad program (the tile shaders compile in test_tile.py)."""
+    assert (shader_dir() / "quad.vert").is_file()
+    cache = ProgramCache(gl_renderer.ctx)
+    for degree in range(4):
+        for extra in ({}, {"EXTENT_SQUARE": 1}, {"ANTIALIAS": 1}, {"ORTHOGRAPHIC": 1}):
+            defines = {"SH_DEGREE": degree, "SH_REST_COEFFS": 15, **extra}
+            prog = cache.program("quad.vert", "quad.frag", defines)
+            assert cache.program("quad.vert", "quad.frag", dict(defines)) is prog
+    assert len(cache._programs) == 16
+    cache.release()
