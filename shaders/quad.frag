@@ -1,12 +1,18 @@
 // Quad path, fragment stage: conic opacity with the reference clamp and cut, DESIGN.md 1-2:
 //   alpha = min(0.99, o exp(power)), power = -0.5 (a dx^2 + c dy^2) - b dx dy,
 //   skipped when power > 0 or alpha < 1/255.  Output premultiplied (c alpha, alpha) for
-//   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).  Twin: splatgl/reference rasterize.
+//   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).  Twin: splatgl/blend.py.
+// With DEPTH_OUTPUT, a second target gets (z alpha, 0, 0, alpha) under the same blend, so its
+// own alpha channel tracks the same transmittance and red accumulates D = sum z alpha T.
 flat in vec2 v_mean2d;
 flat in vec3 v_conic;
 flat in vec4 v_color;
+flat in float v_depth;
 
 layout(location = 0) out vec4 out_color;
+#ifdef DEPTH_OUTPUT
+layout(location = 1) out vec4 out_depth;
+#endif
 
 void main() {
     vec2 d = gl_FragCoord.xy - v_mean2d;
@@ -15,4 +21,7 @@ void main() {
     float alpha = min(ALPHA_MAX, v_color.a * exp(power));
     if (alpha < ALPHA_MIN) discard;
     out_color = vec4(v_color.rgb * alpha, alpha);
+#ifdef DEPTH_OUTPUT
+    out_depth = vec4(v_depth * alpha, 0.0, 0.0, alpha);
+#endif
 }

@@ -11,6 +11,7 @@ in uint splat_index;          // from the per-view sorted index buffer (divisor 
 flat out vec2 v_mean2d;       // pixel centre of the splat
 flat out vec3 v_conic;        // (a, b, c) of Sigma'^-1
 flat out vec4 v_color;        // (SH colour, opacity)
+flat out float v_depth;       // camera-space z of the centre, for the depth layer
 
 const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothing rasterised
 
@@ -39,6 +40,7 @@ void main() {
     gl_Position = vec4(pixel / u_viewport * 2.0 - 1.0, 0.0, 1.0);
     v_mean2d = mean2d;
     v_conic = con;
+    v_depth = p.z;
     vec3 dir = normalize(a.xyz - u_cam_center);
     v_color = vec4(sh_color(i, splat_dc[i].rgb, dir), opacity);
 }

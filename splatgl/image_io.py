@@ -14,11 +14,13 @@ _INTEGER_FORMATS = {".png", ".tif", ".tiff"}
 _FLOAT_FORMATS = {".exr"}
 
 
-def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8) -> None:
+def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
+                depth: np.ndarray | None = None) -> None:
     """Write an (H, W, 4) float32 image (row 0 at the top), atomically.
 
     PNG/TIFF get RGB (the background already composited), clipped to [0, 1] and quantised once
-    to ``bit_depth`` (8 or 16).  EXR gets float32 R, G, B, A (A = accumulated alpha).
+    to ``bit_depth`` (8 or 16).  EXR gets float32 R, G, B, A (A = accumulated alpha) and, when
+    ``depth`` (H, W) is given, a Z channel (the expected depth, 0 where nothing was drawn).
     """
     path = Path(path)
     ext = path.suffix.lower()
@@ -29,6 +31,9 @@ def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8) -> None:
     if ext in _FLOAT_FORMATS:
         pixels, fmt = np.ascontiguousarray(rgba, np.float32), oiio.FLOAT
         channels = ("R", "G", "B", "A")
+        if depth is not None:
+            pixels = np.ascontiguousarray(np.concatenate([pixels, depth[..., None]], -1), np.float32)
+            channels += ("Z",)
     else:
         scale = 255.0 if bit_depth == 8 else 65535.0
         dtype = np.uint8 if bit_depth == 8 else np.uint16

@@ -19,6 +19,7 @@ from .cull import cull
 from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
+from .output import RenderOutput
 from .project import to_camera
 from .scene import Scene, SplatKind
 from .settings import QuadExtent, RenderSettings, resolve_near
@@ -86,7 +87,7 @@ class QuadRenderer:
         self.last_times: QuadTimes | None = None
 
     # --------------------------------------------------------------------------- stages
-    def program(self, camera: Camera) -> moderngl.Program:
+    def program(self, camera: Camera, depth: bool = False) -> moderngl.Program:
         degree = self.scene.sh_degree if self.settings.sh_degree is None else min(
             self.settings.sh_degree, self.scene.sh_degree)
         defines: dict[str, object] = {
@@ -99,6 +100,8 @@ class QuadRenderer:
             defines["ANTIALIAS"] = 1
         if camera.is_orthographic:
             defines["ORTHOGRAPHIC"] = 1
+        if depth:
+            defines["DEPTH_OUTPUT"] = 1
         return self.programs.program("quad.vert", "quad.frag", defines)
 
     def visible_order(self, camera: Camera) -> np.ndarray:
@@ -137,18 +140,22 @@ class QuadRenderer:
                 self._vao.release()
             self._vao = self.ctx.vertex_array(prog, [(self._index_buffer, "u4/i", "splat_index")])
 
-    def target(self, camera: Camera) -> ColorTarget:
+    def target(self, camera: Camera, depth: bool = False) -> ColorTarget:
         size = (camera.width, camera.height)
-        if self._target is None or self._target.size != size or self._target.precision is not self.settings.precision:
-            if self._target is not None:
-                self._target.release()
-            self._target = ColorTarget(self.ctx, camera.width, camera.height, self.settings.precision)
+        t = self._target
+        if t is None or t.size != size or t.precision is not self.settings.precision or t.has_depth != depth:
+            if t is not None:
+                t.release()
+            self._target = ColorTarget(self.ctx, camera.width, camera.height, self.settings.precision, depth)
         return self._target
 
-    def draw(self, camera: Camera, fbo: moderngl.Framebuffer) -> int:
-        """Cull, sort, upload and draw into ``fbo`` (cleared to 0); returns splats drawn."""
+    def draw(self, camera: Camera, fbo: moderngl.Framebuffer, depth: bool = False) -> int:
+        """Cull, sort, upload and draw into ``fbo`` (cleared to 0); returns splats drawn.
+
+        With ``depth`` the program also writes the depth layer to ``fbo``'s attachment 1.
+        """
         order = self.visible_order(camera)
-        prog = self.program(camera)
+        prog = self.program(camera, depth)
         t0 = time.perf_counter()
         self._upload(order, prog)
         t1 = time.perf_counter()
@@ -171,14 +178,19 @@ class QuadRenderer:
 
     def render(self, camera: Camera) -> np.ndarray:
         """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top."""
-        target = self.target(camera)
-        self.draw(camera, target.fbo)
+        return self.render_layers(camera, depth=False).rgba
+
+    def render_layers(self, camera: Camera, depth: bool = True) -> RenderOutput:
+        """Colour and (with ``depth``) the accumulated depth layer, from the same pass."""
+        target = self.target(camera, depth)
+        self.draw(camera, target.fbo, depth)
         t0 = time.perf_counter()
         rgba = target.read()
+        d = target.read_depth() if depth else np.zeros(rgba.shape[:2], np.float32)
         t1 = time.perf_counter()
         self.last_times = QuadTimes(self._times_cull, self._times_sort, self._times_upload,
                                     self._times_draw, t1 - t0)
-        return composite(rgba, self.settings.background)
+        return RenderOutput(composite(rgba, self.settings.background), d)
 
     def release(self) -> None:
         for obj in (self._vao, self._index_buffer, self._target):

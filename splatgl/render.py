@@ -16,6 +16,7 @@ import numpy as np
 from .camera import Camera, orbit
 from .gl.context import create_headless_context
 from .gl.shaders import ProgramCache
+from .output import RenderOutput
 from .scene import Scene
 from .settings import RenderSettings, RendererKind
 
@@ -86,6 +87,14 @@ class Renderer:
             return render_reference_rgba(scene, camera, settings)
         return self._path(scene, settings, kind).render(camera)
 
+    def render_layers(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
+                      kind: RendererKind = RendererKind.QUAD) -> RenderOutput:
+        """Colour, alpha and accumulated depth of one view (same pass, same weights)."""
+        kind = RendererKind(kind)
+        if kind is RendererKind.REFERENCE:
+            return render_reference_layers(scene, camera, settings)
+        return self._path(scene, settings, kind).render_layers(camera, depth=True)
+
     def close(self) -> None:
         for path in self._paths.values():
             path.release()
@@ -103,10 +112,16 @@ class Renderer:
 
 def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings) -> np.ndarray:
     """The NumPy per-tile reference as an (H, W, 4) float32 image (no OpenGL)."""
+    return render_reference_layers(scene, camera, settings).rgba
+
+
+def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettings) -> RenderOutput:
+    """The NumPy per-tile reference's colour, alpha and depth (float32 math, no OpenGL)."""
     from .reference import render_reference
 
     ref = render_reference(scene, camera, settings)
-    return np.concatenate([ref.color, ref.alpha[..., None]], axis=-1).astype(np.float32)
+    rgba = np.concatenate([ref.color, ref.alpha[..., None]], axis=-1).astype(np.float32)
+    return RenderOutput(rgba, np.asarray(ref.depth, np.float32))
 
 
 def render(scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),

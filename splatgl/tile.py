@@ -35,6 +35,7 @@ from .errors import SplatglError
 from .gl.scene_buffers import BINDING_SH, SceneBuffers
 from .gl.shaders import ProgramCache
 from .quad import set_camera_uniforms
+from .output import RenderOutput
 from .scene import Scene, SplatKind
 from .settings import RenderSettings, resolve_near
 
@@ -132,12 +133,8 @@ class TileStages:
     ranges: np.ndarray
 
 
-@dataclass(frozen=True)
-class TileImage:
-    """rgba: (H, W, 4) float32 (``C + T bg``, ``1 - T``); depth: (H, W) float32 ``sum z alpha T``."""
-
-    rgba: np.ndarray
-    depth: np.ndarray
+#: The tile renderer returns the shared layer type.
+TileImage = RenderOutput
 
 
 class _Buffer:

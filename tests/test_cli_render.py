@@ -36,10 +36,10 @@ def test_exr_has_float_rgba_and_tiff_16_bit(tmp_path):
     assert main(["render", "-o", str(exr), *common]) == 0
     assert main(["render", "-o", str(tif), "--bit-depth", "16", *common]) == 0
     e, t = read_image(exr), read_image(tif)
-    assert e.shape == (48, 64, 4) and t.shape == (48, 64, 3)
+    assert e.shape == (48, 64, 5) and t.shape == (48, 64, 3)  # R, G, B, A, Z
     np.testing.assert_allclose(t, np.clip(e[..., :3], 0, 1), atol=0.5 / 65535 + 1e-6)
     corner = e[0, 0]
-    np.testing.assert_allclose(corner, [0.2, 0.3, 0.4, 0.0], atol=1e-6)  # background, A = 0
+    np.testing.assert_allclose(corner, [0.2, 0.3, 0.4, 0.0, 0.0], atol=1e-6)  # background, A = Z = 0
 
 
 def test_single_camera_json_round_trip(tmp_path):

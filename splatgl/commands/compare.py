@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from ..compare import heatmap, side_by_side
+from ..pictures import heatmap, side_by_side
 from ..image_io import write_image
 from ..metrics import image_errors
 from ..render import Renderer

@@ -6,8 +6,13 @@ import argparse
 import sys
 from pathlib import Path
 
+from contextlib import nullcontext
+
+from ..errors import SplatglError
 from ..image_io import write_image
-from ..render import Renderer, render_reference_rgba
+from ..output import RenderOutput
+from ..pictures import depth_preview
+from ..render import Renderer, render_reference_layers
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       camera_from_args, load_scene_arg, settings_from_args)
@@ -18,12 +23,15 @@ HELP = "render a scene (default: the bundled demo) to PNG, TIFF or EXR"
 DESCRIPTION = """Render one view of a Gaussian-splat scene headlessly (EGL, or OSMesa).
 
 The output format follows the extension: .png and .tif/.tiff get RGB with the background
-composited (8-bit, or 16-bit with --bit-depth 16); .exr gets float R, G, B and A.
+composited (8-bit, or 16-bit with --bit-depth 16); .exr gets float R, G, B, A and Z, where Z
+is the expected depth D / A (camera-space z, world units; 0 where nothing was drawn) and
+D = sum z alpha T is accumulated with the colour's weights in the same pass.
 
 examples:
   splatgl render -o demo.png
   splatgl render scene.ply --camera cameras.json --camera-index 3 -o view.exr
-  splatgl render scene.ply --width 1920 --height 1080 --background 1,1,1 -o white.png"""
+  splatgl render scene.ply --width 1920 --height 1080 --background 1,1,1 -o white.png
+  splatgl render scene.ply -o view.png --depth-png depth.png"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -34,6 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--renderer", choices=[k.value for k in RendererKind], default="quad",
                    help="quad = the OpenGL quad path (default); tile = the per-tile compute-shader "
                         "renderer; reference = the NumPy per-tile reference (slow)")
+    p.add_argument("--depth-png", type=Path, default=None, metavar="FILE",
+                   help="also write a colourised preview of the expected depth with a scale bar")
     p.add_argument("--timings", action="store_true", help="print the frame's stage times")
     add_camera_arguments(p)
     add_settings_arguments(p)
@@ -44,14 +54,24 @@ def run(args: argparse.Namespace) -> int:
     camera = camera_from_args(args, scene)
     settings = settings_from_args(args)
     kind = RendererKind(args.renderer)
-    if kind is RendererKind.REFERENCE:
-        rgba = render_reference_rgba(scene, camera, settings)
-        times = None
-    else:
-        with Renderer() as renderer:
-            rgba = renderer.render(scene, camera, settings, kind)
+    want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
+    if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
+        raise SplatglError(f"{args.depth_png}: --depth-png needs a .png or .tif file name")
+    times = None
+    with Renderer() if kind is not RendererKind.REFERENCE else nullcontext() as renderer:
+        if renderer is None:
+            out = render_reference_layers(scene, camera, settings)
+        elif want_depth:
+            out = renderer.render_layers(scene, camera, settings, kind)
+        else:
+            out = RenderOutput(renderer.render(scene, camera, settings, kind), None)
+        if renderer is not None:
             times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
-    write_image(args.output, rgba, args.bit_depth)
+    depth = out.expected_depth() if want_depth else None
+    write_image(args.output, out.rgba, args.bit_depth, depth=depth)
+    if args.depth_png is not None:
+        write_image(args.depth_png, depth_preview(depth, out.alpha))
+        print(f"wrote {args.depth_png} (expected depth)")
     print(f"wrote {args.output} ({camera.width}x{camera.height}, {scene.count} splats, {kind.value})")
     if args.timings and times is not None:
         parts = ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in vars(times).items())

@@ -2,16 +2,19 @@
 
 Each format module provides ``NAME`` (str), ``EXTENSIONS`` (tuple of lower-case suffixes),
 ``sniff(head: bytes) -> bool`` (does the file start like this format?) and
-``read(path: Path, drop_invalid: bool) -> Scene``.  Writers provide ``write(path, scene)``.
+``read(path: Path, drop_invalid: bool) -> Scene`` (optionally also ``progress=None``,
+see :mod:`splatgl.progress`).  Writers provide ``write(path, scene)``.
 """
 
 from __future__ import annotations
 
 import importlib
+import inspect
 from pathlib import Path
 from types import ModuleType
 
 from ..errors import SceneFormatError
+from ..progress import default_progress
 from ..scene import Scene
 
 #: Format modules in detection order (most specific signature first).
@@ -55,15 +58,22 @@ def detect_format(path: Path) -> ModuleType:
     raise SceneFormatError(path, f"unknown scene format (supported: {names})")
 
 
-def load_scene(path: str | Path, drop_invalid: bool = False) -> Scene:
+def load_scene(path: str | Path, drop_invalid: bool = False, progress=None) -> Scene:
     """Load a scene file of any supported format.
 
     Raises :class:`SceneFormatError` (naming file, field and values) for anything malformed.
     With ``drop_invalid``, rows holding NaN/Inf or degenerate quaternions are dropped with a
-    warning instead of rejected.
+    warning instead of rejected.  ``progress(done, total, what)`` (see :mod:`splatgl.progress`)
+    is handed to readers that read in chunks (those whose ``read`` takes ``progress``); when it
+    is None, a stderr meter is used if stderr is a terminal or ``SPLATGL_PROGRESS=1``.
     """
     path = Path(path)
-    return detect_format(path).read(path, drop_invalid=drop_invalid)
+    mod = detect_format(path)
+    if "progress" not in inspect.signature(mod.read).parameters:
+        return mod.read(path, drop_invalid=drop_invalid)
+    if progress is None:
+        progress = default_progress()
+    return mod.read(path, drop_invalid=drop_invalid, progress=progress)
 
 
 def writer_for(path: str | Path) -> ModuleType:

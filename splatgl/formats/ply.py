@@ -22,10 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from numpy.lib.recfunctions import structured_to_unstructured
 
 from ..errors import SceneFormatError
-from ..scene import Scene, SplatKind, activate, rest_to_sh, sh_degree_from_rest_count, sh_to_rest
+from ..scene import Scene, SplatKind, activate, sh_degree_from_rest_count, sh_to_rest
 
 NAME = "ply"
 EXTENSIONS = (".ply",)
@@ -43,6 +42,8 @@ FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None}
 MAX_HEADER_BYTES = 1 << 20
 
 _REST_RE = re.compile(r"^f_rest_(\d+)$")
+#: Rows per read of a binary PLY (64 Ki rows: 16 MiB for 62 float properties).
+CHUNK_ROWS = 1 << 16
 
 
 @dataclass
@@ -164,14 +165,18 @@ def sniff(head: bytes) -> bool:
     return has_x
 
 
-def _read_vertex_binary(path, fh, header: Header, file_size: int) -> np.ndarray:
-    """The vertex rows as a structured array, skipping other fixed-size elements by size."""
+def _vertex_layout(path, header: Header, file_size: int) -> tuple[int, np.dtype]:
+    """(byte offset, row dtype) of the binary vertex rows, all element sizes checked first.
+
+    Other fixed-size elements are skipped by size; one with list properties may only follow the
+    vertex element (it is then ignored, its size being unknown without parsing).
+    """
     offset = header.body_offset
-    vertex = None
+    found = None
     for elem in header.elements:
         if elem.has_list:
-            if vertex is not None:
-                return vertex  # after the vertex rows: ignored (size unknown without parsing)
+            if found is not None:
+                return found  # after the vertex rows: ignored
             raise _error(path, f"element '{elem.name}' before the vertex element has list "
                                "properties; only fixed-size scalar properties are supported "
                                "in binary PLY", elem.name)
@@ -182,13 +187,40 @@ def _read_vertex_binary(path, fh, header: Header, file_size: int) -> np.ndarray:
                                f"({elem.count} rows x {dtype.itemsize} bytes) from byte {offset}"
                                f", found {max(0, file_size - offset)}", elem.name)
         if elem.name == "vertex":
-            fh.seek(offset)
-            vertex = np.fromfile(fh, dtype=dtype, count=elem.count)
+            found = (offset, dtype)
         offset += need
     if offset < file_size:
         raise _error(path, f"{file_size - offset} bytes after the last element "
                            f"(header declares {offset} bytes in all); header/count mismatch")
-    return vertex
+    return found
+
+
+def _read_rows_chunked(path, fh, offset: int, dtype: np.dtype, count: int, plan: "_Columns",
+                       progress, what: str) -> None:
+    """Read ``count`` binary rows from ``offset`` into ``plan``'s arrays, CHUNK_ROWS at a time.
+
+    One (CHUNK_ROWS,) structured buffer is reused (``readinto``), so the reader's memory is the
+    decoded arrays plus one chunk; ``progress(done_rows, count, what)`` follows every chunk.
+    """
+    fh.seek(offset)
+    buf = np.empty(min(count, CHUNK_ROWS), dtype)
+    done = 0
+    if progress is not None:
+        progress(0, count, what)
+    while done < count:
+        rows = buf[:min(CHUNK_ROWS, count - done)]
+        view = memoryview(rows.view(np.uint8))
+        got = 0
+        while got < view.nbytes:
+            n = fh.readinto(view[got:])
+            if not n:
+                raise _error(path, f"file is truncated: vertex row {done + got // dtype.itemsize}"
+                                   " could not be read", "vertex")
+            got += n
+        plan.fill(rows, done)
+        done += rows.shape[0]
+        if progress is not None:
+            progress(done, count, what)
 
 
 def _read_vertex_ascii(path, fh, header: Header) -> np.ndarray:
@@ -236,19 +268,70 @@ def _parse_ascii_rows(path, elem: Element, rows: list[str], first_line: int) -> 
     return out
 
 
-def _column(path, vertex: np.ndarray, names: list[str]) -> np.ndarray:
-    missing = [n for n in names if n not in vertex.dtype.names]
-    if missing:
-        raise _error(path, "required vertex property missing (has: "
-                           f"{' '.join(vertex.dtype.names)})", missing[0])
-    return structured_to_unstructured(vertex[names], dtype=np.float32)
+class _Columns:
+    """Where each vertex property goes in the decoded float32 arrays (the :func:`activate` inputs).
+
+    ``means`` (N, 3) x y z; ``dc`` into ``sh[:, 0]``; ``opacity`` (N,); ``log_scales`` (N, 3) or
+    (N, 2) for surfels; ``quats`` (N, 4) rot_0..3 (w, x, y, z); ``f_rest_*`` (channel-major in
+    the file) into ``sh[:, 1:]`` (N, K - 1, 3).  Checks the required properties on creation.
+    """
+
+    def __init__(self, path, names: list[str], count: int):
+        have = set(names)
+        surfel = "scale_1" in have and "scale_2" not in have
+        self.surfel = surfel
+        nscale = 2 if surfel else 3
+        groups = [("means", ["x", "y", "z"]), ("dc", [f"f_dc_{i}" for i in range(3)]),
+                  ("opacity", ["opacity"]), ("log_scales", [f"scale_{i}" for i in range(nscale)]),
+                  ("quats", [f"rot_{i}" for i in range(4)])]
+        for _, group in groups:
+            missing = [n for n in group if n not in have]
+            if missing:
+                raise _error(path, "required vertex property missing (has: "
+                                   f"{' '.join(names)})", missing[0])
+        rest_idx = sorted(int(m.group(1)) for n in names if (m := _REST_RE.match(n)))
+        if rest_idx != list(range(len(rest_idx))):
+            gap = next(i for i in range(len(rest_idx) + 1) if i not in rest_idx)
+            raise _error(path, f"f_rest properties are not numbered 0..{len(rest_idx) - 1}",
+                         f"f_rest_{gap}")
+        degree = sh_degree_from_rest_count(path, len(rest_idx))
+        k = (degree + 1) ** 2
+        self.means = np.empty((count, 3), np.float32)
+        self.quats = np.empty((count, 4), np.float32)
+        self.log_scales = np.empty((count, nscale), np.float32)
+        self.opacity = np.empty(count, np.float32)
+        self.sh = np.empty((count, k, 3), np.float32)
+        #: (property name, target array, index within a row of the target)
+        self.targets: list[tuple[str, np.ndarray, tuple]] = []
+        for (key, group) in groups:
+            for i, name in enumerate(group):
+                if key == "dc":
+                    self.targets.append((name, self.sh, (0, i)))
+                elif key == "opacity":
+                    self.targets.append((name, self.opacity, ()))
+                else:
+                    self.targets.append((name, getattr(self, key), (i,)))
+        for j in rest_idx:  # channel-major: f_rest_{c (K-1) + m} is coefficient m + 1 of c
+            c, m = divmod(j, k - 1)
+            self.targets.append((f"f_rest_{j}", self.sh, (m + 1, c)))
+
+    def fill(self, rows: np.ndarray, start: int) -> None:
+        """Copy the structured ``rows`` (any scalar types, either byte order) to ``start:``."""
+        stop = start + rows.shape[0]
+        for name, target, index in self.targets:
+            target[(slice(start, stop),) + index] = rows[name]
 
 
-def read(path: Path, drop_invalid: bool = False) -> Scene:
+def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
     """Load an INRIA-style PLY into a :class:`Scene` (raw values kept, rows validated).
+
+    Binary files are read :data:`CHUNK_ROWS` rows at a time straight into the float32 arrays the
+    scene is built from, so memory beyond them is one chunk; ``progress(done_rows, total_rows,
+    what)`` (see :mod:`splatgl.progress`) is called after every chunk when given.
 
     Raises :class:`SceneFormatError` naming the file and, where one is at fault, the property.
     """
+    what = f"reading {Path(path).name}"
     try:
         with open(path, "rb") as fh:
             header = parse_header(path, fh)
@@ -264,35 +347,33 @@ def read(path: Path, drop_invalid: bool = False) -> Scene:
                                    "properties), not an INRIA-style PLY")
             if vertex_elem.has_list:
                 raise _error(path, "the vertex element has a list property", "vertex")
+            count = vertex_elem.count
+            prop_names = [n for n, _ in vertex_elem.properties]
             if header.order is None:
                 vertex = _read_vertex_ascii(path, fh, header)
+                _check_not_empty(path, count)
+                plan = _Columns(path, prop_names, count)
+                if progress is not None:
+                    progress(0, count, what)
+                plan.fill(vertex, 0)
+                del vertex
+                if progress is not None:
+                    progress(count, count, what)
             else:
-                vertex = _read_vertex_binary(path, fh, header, os.fstat(fh.fileno()).st_size)
+                offset, dtype = _vertex_layout(path, header, os.fstat(fh.fileno()).st_size)
+                _check_not_empty(path, count)
+                plan = _Columns(path, prop_names, count)
+                _read_rows_chunked(path, fh, offset, dtype, count, plan, progress, what)
     except OSError as exc:
         raise _error(path, f"cannot read: {exc.strerror or exc}") from None
-    if vertex_elem.count == 0:
+    kind = SplatKind.SURFEL_2D if plan.surfel else SplatKind.GAUSSIAN_3D
+    return activate(path, plan.means, plan.quats, plan.log_scales, plan.opacity, plan.sh, kind,
+                    drop_invalid)
+
+
+def _check_not_empty(path, count: int) -> None:
+    if count == 0:
         raise _error(path, "the scene has no splats (element vertex 0)", "vertex")
-    props = set(vertex.dtype.names)
-    surfel = "scale_1" in props and "scale_2" not in props
-    nscale = 2 if surfel else 3
-    means = _column(path, vertex, ["x", "y", "z"])
-    dc = _column(path, vertex, [f"f_dc_{i}" for i in range(3)])
-    opacity = _column(path, vertex, ["opacity"])[:, 0]
-    log_scales = _column(path, vertex, [f"scale_{i}" for i in range(nscale)])
-    quats = _column(path, vertex, [f"rot_{i}" for i in range(4)])
-    rest_idx = sorted(int(m.group(1)) for n in props if (m := _REST_RE.match(n)))
-    if rest_idx != list(range(len(rest_idx))):
-        gap = next(i for i in range(len(rest_idx) + 1) if i not in rest_idx)
-        raise _error(path, f"f_rest properties are not numbered 0..{len(rest_idx) - 1}",
-                     f"f_rest_{gap}")
-    sh_degree_from_rest_count(path, len(rest_idx))
-    if rest_idx:
-        rest = _column(path, vertex, [f"f_rest_{i}" for i in rest_idx])
-    else:
-        rest = np.zeros((vertex.shape[0], 0), np.float32)
-    sh = rest_to_sh(dc, rest)
-    kind = SplatKind.SURFEL_2D if surfel else SplatKind.GAUSSIAN_3D
-    return activate(path, means, quats, log_scales, opacity, sh, kind, drop_invalid)
 
 
 def write_elements(path, elements: list[tuple[str, np.ndarray]], byte_order: str = "little",

@@ -11,13 +11,27 @@ _DTYPES = {Precision.RGBA32F: "f4", Precision.RGBA16F: "f2", Precision.RGBA8: "f
 
 
 class ColorTarget:
-    """An RGBA framebuffer of the given precision; row 0 of the readback is framebuffer row 0."""
+    """An RGBA framebuffer of the given precision; row 0 of the readback is framebuffer row 0.
 
-    def __init__(self, ctx: moderngl.Context, width: int, height: int, precision: Precision):
+    With ``depth``, a second RGBA32F attachment receives the depth layer (always float32:
+    depth values are not in [0, 1] and need the range).
+    """
+
+    def __init__(self, ctx: moderngl.Context, width: int, height: int, precision: Precision,
+                 depth: bool = False):
         self.size = (width, height)
         self.precision = precision
         self.texture = ctx.texture((width, height), 4, dtype=_DTYPES[precision])
-        self.fbo = ctx.framebuffer(color_attachments=[self.texture])
+        self.depth_texture = ctx.texture((width, height), 4, dtype="f4") if depth else None
+        attachments = [self.texture] + ([self.depth_texture] if depth else [])
+        self.fbo = ctx.framebuffer(color_attachments=attachments)
+        self.has_depth = depth
+
+    def read_depth(self) -> np.ndarray:
+        """(H, W) float32 accumulated depth (red channel of the depth attachment)."""
+        w, h = self.size
+        raw = self.fbo.read(components=4, dtype="f4", attachment=1)
+        return np.frombuffer(raw, np.float32).reshape(h, w, 4)[..., 0].copy()
 
     def read(self) -> np.ndarray:
         """(H, W, 4) float32 contents."""
@@ -31,3 +45,5 @@ class ColorTarget:
     def release(self) -> None:
         self.fbo.release()
         self.texture.release()
+        if self.depth_texture is not None:
+            self.depth_texture.release()

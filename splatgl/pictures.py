@@ -1,4 +1,4 @@
-"""Comparing two renderers' images: metrics, side-by-side picture, error heat map."""
+"""Pictures for people: error heat maps, side-by-side renders, colourised depth, with scale bars."""
 
 from __future__ import annotations
 
@@ -28,22 +28,36 @@ def _label(img: np.ndarray, x: int, y: int, text: str, size: int = 14) -> np.nda
     return np.asarray(buf.get_pixels(oiio.FLOAT), np.float32).reshape(h, w, 3)
 
 
+def _with_scale_bar(img: np.ndarray, low: str, high: str) -> np.ndarray:
+    """Append a colour ramp with ``low`` / ``high`` labels under an (H, W, 3) image -> RGBA."""
+    w = img.shape[1]
+    bar = np.zeros((34, w, 3), np.float32)
+    bar[2:14] = colormap(np.linspace(0.0, 1.0, w))[None]
+    if w >= 120:
+        bar = _label(bar, 2, 30, low)
+        bar = _label(bar, max(2, w - 7 * len(high) - 2), 30, high)
+    out = np.concatenate([img, bar], axis=0)
+    return np.concatenate([out, np.ones(out.shape[:2] + (1,), np.float32)], -1)
+
+
 def heatmap(got: np.ndarray, expected: np.ndarray, scale: float) -> np.ndarray:
     """(H + bar, W, 4) image: per-pixel max channel |error| / scale through :func:`colormap`,
     with a labelled colour scale bar (0 .. scale) underneath."""
     err = np.abs(got[..., :3].astype(np.float64) - expected[..., :3]).max(axis=-1)
-    h, w = err.shape
-    img = colormap(err / scale)
-    bar_h = 34
-    bar = np.zeros((bar_h, w, 3), np.float32)
-    ramp = colormap(np.linspace(0.0, 1.0, w))
-    bar[2:14] = ramp[None]
-    if w >= 120:
-        bar = _label(bar, 2, 30, "0")
-        text = f"{scale:.3g} ({scale * 255:.3g}/255) and above"
-        bar = _label(bar, max(2, w - 7 * len(text) - 2), 30, text)
-    out = np.concatenate([img, bar], axis=0)
-    return np.concatenate([out, np.ones(out.shape[:2] + (1,), np.float32)], -1)
+    return _with_scale_bar(colormap(err / scale), "0", f"{scale:.3g} ({scale * 255:.3g}/255) and above")
+
+
+def depth_preview(expected_depth: np.ndarray, alpha: np.ndarray, min_alpha: float = 1e-3) -> np.ndarray:
+    """(H + bar, W, 4) colourised expected depth (near = dark, far = bright), black where
+    ``alpha < min_alpha``, with the depth range (world units) on a scale bar."""
+    ok = alpha >= min_alpha
+    if ok.any():
+        lo, hi = np.percentile(expected_depth[ok], [1.0, 99.0])
+    else:
+        lo, hi = 0.0, 1.0
+    hi = hi if hi > lo else lo + 1.0
+    img = colormap((expected_depth - lo) / (hi - lo)) * ok[..., None]
+    return _with_scale_bar(img.astype(np.float32), f"z {lo:.4g}", f"z {hi:.4g}")
 
 
 def side_by_side(left: np.ndarray, right: np.ndarray, names: tuple[str, str]) -> np.ndarray:
