@@ -315,6 +315,11 @@ class _Columns:
             c, m = divmod(j, k - 1)
             self.targets.append((f"f_rest_{j}", self.sh, (m + 1, c)))
 
+    def freeze(self) -> None:
+        """Mark the arrays read-only: nothing else holds them, so a scene may adopt them."""
+        for arr in (self.means, self.quats, self.log_scales, self.opacity, self.sh):
+            arr.flags.writeable = False
+
     def fill(self, rows: np.ndarray, start: int) -> None:
         """Copy the structured ``rows`` (any scalar types, either byte order) to ``start:``."""
         stop = start + rows.shape[0]
@@ -367,6 +372,7 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
     except OSError as exc:
         raise _error(path, f"cannot read: {exc.strerror or exc}") from None
     kind = SplatKind.SURFEL_2D if plan.surfel else SplatKind.GAUSSIAN_3D
+    plan.freeze()
     return activate(path, plan.means, plan.quats, plan.log_scales, plan.opacity, plan.sh, kind,
                     drop_invalid)
 
