@@ -39,7 +39,8 @@ class Camera:
         width, height: image size in pixels.
         fx, fy: focal lengths in pixels (orthographic: pixels per world unit).
         cx, cy: principal point in image coordinates (pixels; (0, 0) is the top-left corner).
-        world_to_camera: (4, 4) float64 rigid transform, OpenCV axes.
+        world_to_camera: (4, 4) float64 transform, OpenCV axes: rigid, or rigid times a uniform
+            scale when a model transform is folded in (:func:`splatgl.transform.apply_model`).
         projection: perspective or orthographic.
     """
 
@@ -134,8 +135,17 @@ class Camera:
 
     @property
     def center(self) -> np.ndarray:
-        """(3,) float64 camera centre in world space (``-R^T t``)."""
-        return -self.rotation.T @ self.translation
+        """(3,) float64 camera centre in world space (``-R^-1 t``).
+
+        When a model transform is folded in (:func:`splatgl.transform.apply_model`), the matrix
+        is scene-to-camera and this is the centre in the scene's own frame.
+        """
+        return -np.linalg.solve(self.rotation, self.translation)
+
+    @property
+    def scale(self) -> float:
+        """Uniform scale of the 3x3 block (1 for a rigid pose; the model scale when folded in)."""
+        return float(np.cbrt(np.linalg.det(self.rotation)))
 
     @property
     def is_orthographic(self) -> bool:

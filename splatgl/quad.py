@@ -116,7 +116,8 @@ class QuadRenderer:
             return self._order
         t0 = time.perf_counter()
         p_cam = to_camera(self.scene.means, camera)
-        keep = np.flatnonzero(cull(p_cam, self._max_scale, self.scene.opacities, camera, self.near))
+        keep = np.flatnonzero(cull(p_cam, self._max_scale * camera.scale, self.scene.opacities,
+                                   camera, self.near))
         t1 = time.perf_counter()
         order = depth_sort(p_cam[keep, 2], keep.astype(np.uint32))
         t2 = time.perf_counter()

@@ -19,6 +19,7 @@ from .gl.shaders import ProgramCache
 from .output import RenderOutput
 from .scene import Scene
 from .settings import RenderSettings, RendererKind
+from .transform import ModelTransform, apply_model
 
 #: Default vertical field of view of :func:`default_camera`, degrees.
 DEFAULT_FOV_Y = 50.0
@@ -27,17 +28,22 @@ DEFAULT_ELEVATION = 20.0
 
 
 def default_camera(scene: Scene, width: int = 1280, height: int = 720,
-                   fov_y_degrees: float = DEFAULT_FOV_Y, distance_scale: float = 1.0) -> Camera:
+                   fov_y_degrees: float = DEFAULT_FOV_Y, distance_scale: float = 1.0,
+                   model: ModelTransform | None = None) -> Camera:
     """A perspective camera that frames ``scene``.
 
     Frames the 1st-99th percentile box of the means (so a few stray splats far away do not
     shrink the scene to a dot), looking along world +z from slightly above (world -y is up, the
     COLMAP convention), far enough that the box's bounding sphere fits the narrower fov, times
-    ``distance_scale`` (below 1 moves closer).
+    ``distance_scale`` (below 1 moves closer).  With a ``model`` transform the scene is framed
+    where the transform places it.
     """
     lo, hi = scene.robust_bounds
     centre = 0.5 * (lo + hi)
     radius = max(scene.robust_radius, 1e-6)
+    if model is not None:
+        centre = model.apply_points(centre[None])[0]
+        radius *= model.scale
     fov_y = math.radians(fov_y_degrees)
     fov_x = 2.0 * math.atan(math.tan(fov_y / 2.0) * width / height)
     half = min(fov_x, fov_y) / 2.0
@@ -85,7 +91,7 @@ class Renderer:
         kind = RendererKind(kind)
         if kind is RendererKind.REFERENCE:
             return render_reference_rgba(scene, camera, settings)
-        return self._path(scene, settings, kind).render(camera)
+        return self._path(scene, settings, kind).render(apply_model(camera, settings.model))
 
     def render_layers(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
                       kind: RendererKind = RendererKind.QUAD) -> RenderOutput:
@@ -93,7 +99,7 @@ class Renderer:
         kind = RendererKind(kind)
         if kind is RendererKind.REFERENCE:
             return render_reference_layers(scene, camera, settings)
-        return self._path(scene, settings, kind).render_layers(camera, depth=True)
+        return self._path(scene, settings, kind).render_layers(apply_model(camera, settings.model), depth=True)
 
     def close(self) -> None:
         for path in self._paths.values():
@@ -119,7 +125,7 @@ def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettin
     """The NumPy per-tile reference's colour, alpha and depth (float32 math, no OpenGL)."""
     from .reference import render_reference
 
-    ref = render_reference(scene, camera, settings)
+    ref = render_reference(scene, apply_model(camera, settings.model), settings)
     rgba = np.concatenate([ref.color, ref.alpha[..., None]], axis=-1).astype(np.float32)
     return RenderOutput(rgba, np.asarray(ref.depth, np.float32))
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from .constants import MAX_SH_DEGREE, REFERENCE_NEAR
 from .errors import SplatglError
+from .transform import ModelTransform  # noqa: F401 (annotation)
 
 
 class Precision(enum.Enum):
@@ -50,6 +51,8 @@ class RenderSettings:
             :func:`resolve_near`'s scene-relative default.
         antialias: multiply opacity by the reference's antialiasing compensation factor.
         sh_degree: cap on the SH bands evaluated (``None``: all the scene has).
+        model: where the scene sits in the world (rotation, translation, uniform scale);
+            renderers fold it into the camera (:func:`splatgl.transform.apply_model`).
     """
 
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -58,6 +61,7 @@ class RenderSettings:
     near: float | None = None
     antialias: bool = False
     sh_degree: int | None = None
+    model: "ModelTransform | None" = None
 
     def __post_init__(self) -> None:
         bg = tuple(float(v) for v in self.background)

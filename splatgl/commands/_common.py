@@ -12,6 +12,7 @@ from ..formats import load_scene
 from ..render import default_camera
 from ..scene import Scene
 from ..settings import Precision, QuadExtent, RenderSettings
+from ..transform import parse_transform
 
 
 def demo_scene_path() -> Path:
@@ -75,6 +76,11 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                    help="apply the reference's antialiasing opacity compensation")
     g.add_argument("--sh-degree", type=int, default=None, choices=range(4),
                    help="cap the SH degree evaluated (default: the scene's)")
+    g.add_argument("--transform", type=str, default=None, metavar="JSON",
+                   help='place the scene in the world: inline JSON or a JSON file, e.g. '
+                        '\'{"rotate_deg": [0, 90, 0], "translate": [0, 0, 1], "scale": 2}\' '
+                        "(rotations about x, then y, then z; or \"rotation\": 3x3). SH is "
+                        "evaluated in the scene's own frame")
 
 
 def load_scene_arg(args: argparse.Namespace) -> Scene:
@@ -83,11 +89,13 @@ def load_scene_arg(args: argparse.Namespace) -> Scene:
 
 
 def settings_from_args(args: argparse.Namespace) -> RenderSettings:
+    model = parse_transform(args.transform) if args.transform else None
     return RenderSettings(background=args.background, precision=args.precision, extent=args.extent,
-                          near=args.near, antialias=args.antialias, sh_degree=args.sh_degree)
+                          near=args.near, antialias=args.antialias, sh_degree=args.sh_degree,
+                          model=model)
 
 
-def camera_from_args(args: argparse.Namespace, scene: Scene) -> Camera:
+def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSettings | None = None) -> Camera:
     for name in ("width", "height"):
         value = getattr(args, name)
         if value is not None and not 1 <= value <= 16384:
@@ -104,4 +112,5 @@ def camera_from_args(args: argparse.Namespace, scene: Scene) -> Camera:
     if not args.distance > 0.0:
         raise SplatglError(f"--distance must be positive, got {args.distance}")
     return default_camera(scene, args.width or 1280, args.height or 720,
-                          args.fov if args.fov is not None else 50.0, args.distance)
+                          args.fov if args.fov is not None else 50.0, args.distance,
+                          settings.model if settings is not None else None)

@@ -50,8 +50,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     scene = load_scene_arg(args)
-    camera = camera_from_args(args, scene)
     settings = settings_from_args(args)
+    camera = camera_from_args(args, scene, settings)
     kinds = (RendererKind(args.renderer), RendererKind(args.against))
     images, seconds = [], []
     with Renderer() as renderer:

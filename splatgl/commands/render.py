@@ -51,8 +51,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     scene = load_scene_arg(args)
-    camera = camera_from_args(args, scene)
     settings = settings_from_args(args)
+    camera = camera_from_args(args, scene, settings)
     kind = RendererKind(args.renderer)
     want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
     if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
