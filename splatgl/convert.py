@@ -34,15 +34,17 @@ def rotation_angle_deg(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
     """(N,) float64 angle in degrees of the rotation taking ``qa`` to ``qb`` ((N, 4) w-first).
 
     Quaternions are normalised first; ``q`` and ``-q`` are the same rotation (angle 0).  Uses
-    ``2 atan2(|a - s b|, |a + s b|)`` with ``s = sign(a . b)``, accurate near 0 (unlike acos).
+    ``4 atan2(|a - s b|, |a + s b|)`` with ``s = sign(a . b)``: for unit vectors that atan2 is
+    half the 4D angle between them, and a rotation turns by twice that angle.  Accurate near 0
+    (unlike ``2 acos(|a . b|)``).
     """
     a = np.asarray(qa, np.float64)
     b = np.asarray(qb, np.float64)
     a = a / np.linalg.norm(a, axis=1, keepdims=True)
     b = b / np.linalg.norm(b, axis=1, keepdims=True)
     s = np.where((a * b).sum(axis=1) < 0.0, -1.0, 1.0)[:, None]
-    half = np.arctan2(np.linalg.norm(a - s * b, axis=1), np.linalg.norm(a + s * b, axis=1))
-    return np.degrees(2.0 * half)
+    quarter = np.arctan2(np.linalg.norm(a - s * b, axis=1), np.linalg.norm(a + s * b, axis=1))
+    return np.degrees(4.0 * quarter)
 
 
 def conversion_error(a: Scene, b: Scene) -> dict:
