@@ -74,6 +74,8 @@ class Scene:
         if sh_shape[1] not in [sh_coeff_count(d) for d in range(MAX_SH_DEGREE + 1)]:
             raise ValueError(f"Scene.sh has {sh_shape[1]} coefficients per channel")
         for name in ("means", "quats", "log_scales", "opacity_logits", "sh"):
+            if _adoptable(getattr(self, name)):
+                continue  # a loader's read-only float32 array: nothing can change it, no copy
             arr = np.array(getattr(self, name), dtype=np.float32, order="C", copy=True)
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
@@ -154,6 +156,12 @@ class Scene:
         if sh.shape[1] < k:
             sh = np.concatenate([sh, np.zeros((self.count, k - sh.shape[1], 3), np.float32)], 1)
         return Scene(self.means, self.quats, self.log_scales, self.opacity_logits, sh, self.kind)
+
+
+def _adoptable(arr) -> bool:
+    """A float32 C-contiguous array that owns its data and is read-only (safe to share)."""
+    return (isinstance(arr, np.ndarray) and arr.dtype == np.float32 and arr.flags.c_contiguous
+            and arr.flags.owndata and not arr.flags.writeable)
 
 
 def _frozen(arr: np.ndarray) -> np.ndarray:
