@@ -53,7 +53,7 @@ def measure(name: str, scene: Scene, width: int, height: int, frames: int) -> di
             wall = time.perf_counter() - t0
             if i > 0:
                 t = quad.last_times
-                rows.append({"cull": t.cull, "sort": t.sort, "upload": t.upload, "draw": t.draw,
+                rows.append({"cull": t.cull, "sort": t.sort, "upload": t.upload, "prepass": t.prepass, "draw": t.draw,
                              "readback": t.readback, "total": wall})
     med = {k: statistics.median(r[k] for r in rows) * 1e3 for k in rows[0]}
     parts = "  ".join(f"{k} {v:7.1f}" for k, v in med.items())

@@ -8,6 +8,9 @@ flat in vec2 v_mean2d;
 flat in vec3 v_conic;
 flat in vec4 v_color;
 flat in float v_depth;
+#ifdef EXTENT_FAST
+in vec2 v_unit;                // corner coordinate in sigmas
+#endif
 
 layout(location = 0) out vec4 out_color;
 #ifdef DEPTH_OUTPUT
@@ -15,8 +18,14 @@ layout(location = 1) out vec4 out_depth;
 #endif
 
 void main() {
+#ifdef EXTENT_FAST
+    // The fast approximation: the quad spans a fixed FAST_CORNER_SIGMAS along the ellipse axes
+    // and the conic in those coordinates is the identity.
+    float power = -0.5 * dot(v_unit, v_unit);
+#else
     vec2 d = gl_FragCoord.xy - v_mean2d;
     float power = -0.5 * (v_conic.x * d.x * d.x + v_conic.z * d.y * d.y) - v_conic.y * d.x * d.y;
+#endif
     if (power > 0.0) discard;
     float alpha = min(ALPHA_MAX, v_color.a * exp(power));
     if (alpha < ALPHA_MIN) discard;

@@ -29,6 +29,9 @@ ALPHA_MAX = 0.99
 ALPHA_MIN = 1.0 / 255.0
 #: Front-to-back blending stops when the transmittance would fall below this.
 T_MIN = 1e-4
+#: Fixed quad half-size, in standard deviations, of the fast approximation (``--extent fast``):
+#: 2 sqrt(2), the corner distance web viewers use (their corner coordinate 2 times sqrt(2) sigma).
+FAST_CORNER_SIGMAS = 2.0 * math.sqrt(2.0)
 #: The other published convention (gsplat), for ``Compat.GSPLAT``: per-axis opacity-aware extent
 #: of at most this many standard deviations, and its alpha clamp.
 GSPLAT_EXTENT_SIGMAS = 3.33
@@ -40,6 +43,10 @@ MAX_LOGIT = 40.0
 MIN_SCALE = 1e-38
 #: Constant added to the SH colour before the clamp at 0.
 SH_OFFSET = 0.5
+#: 2DGS screen-space low-pass (the official rasterizer's ``FilterInvSquare``): a surfel's
+#: Gaussian value at pixel x is ``max(G(u(x)), exp(-0.5 F |x - c|^2))`` with F this value, i.e.
+#: a screen disc of sigma 1/sqrt(F) = sqrt(2)/2 px around the projected centre c.
+SURFEL_FILTER_INV_SQUARE = 2.0
 
 # Real spherical-harmonics basis constants (trig-free polynomial form), degrees 0..3.
 SH_C0 = 0.28209479177387814
@@ -95,6 +102,8 @@ def glsl_defines() -> dict[str, str]:
         "ALPHA_MIN": _glsl_float(ALPHA_MIN),
         "T_MIN": _glsl_float(T_MIN),
         "SH_OFFSET": _glsl_float(SH_OFFSET),
+        "SURFEL_FILTER_INV_SQUARE": _glsl_float(SURFEL_FILTER_INV_SQUARE),
+        "FAST_CORNER_SIGMAS": _glsl_float(FAST_CORNER_SIGMAS),
         "SH_C0": _glsl_float(SH_C0),
         "SH_C1": _glsl_float(SH_C1),
     }

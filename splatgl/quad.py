@@ -22,23 +22,33 @@ from .gl.targets import ColorTarget
 from .output import RenderOutput
 from .project import to_camera
 from .scene import Scene, SplatKind
-from .settings import QuadExtent, RenderSettings, resolve_near
-from .sort import depth_sort
+from .settings import Preprocess, QuadExtent, RenderSettings, SortKey, resolve_near
+from .sort import bucket_sort, depth_sort
+
+#: Storage bindings of the compute pre-pass (after the scene's 0..4).
+BINDING_ORDER, BINDING_PREPARED = 5, 6
+#: Bytes per splat of the pre-pass output (4 vec4, see shaders/quad_prepass.comp).
+PREPARED_BYTES = 64
+#: Work-group size of shaders/quad_prepass.comp.
+PREPASS_GROUP = 128
 
 
 @dataclass(frozen=True)
 class QuadTimes:
-    """Wall-clock seconds of each stage of one quad-path frame."""
+    """Wall-clock seconds of each stage of one quad-path frame (``prepass`` is 0 unless the
+    per-splat math runs in the compute pre-pass); ``drawn`` counts the instances drawn."""
 
     cull: float
     sort: float
     upload: float
+    prepass: float
     draw: float
     readback: float
+    drawn: int = 0
 
     @property
     def total(self) -> float:
-        return self.cull + self.sort + self.upload + self.draw + self.readback
+        return self.cull + self.sort + self.upload + self.prepass + self.draw + self.readback
 
 
 def composite(rgba: np.ndarray, background: tuple[float, float, float]) -> np.ndarray:
@@ -80,14 +90,19 @@ class QuadRenderer:
         self.buffers = SceneBuffers(ctx, scene)
         self._max_scale = scene.scales.max(axis=1)
         self._index_buffer: moderngl.Buffer | None = None
+        self._prepared: moderngl.Buffer | None = None
         self._vao: moderngl.VertexArray | None = None
         self._target: ColorTarget | None = None
         self._order_key: tuple | None = None
         self._order = np.zeros(0, np.uint32)
+        self._stale_frames = 0
+        self._times_cull = self._times_sort = self._times_upload = 0.0
+        self._times_prepass = self._times_draw = 0.0
         self.last_times: QuadTimes | None = None
 
     # --------------------------------------------------------------------------- stages
-    def program(self, camera: Camera, depth: bool = False) -> moderngl.Program:
+    def defines(self, camera: Camera, depth: bool = False) -> dict[str, object]:
+        """The specialisation of the quad programs for this scene, settings and camera."""
         degree = self.scene.sh_degree if self.settings.sh_degree is None else min(
             self.settings.sh_degree, self.scene.sh_degree)
         defines: dict[str, object] = {
@@ -96,36 +111,54 @@ class QuadRenderer:
         }
         if self.settings.extent is QuadExtent.SQUARE:
             defines["EXTENT_SQUARE"] = 1
+        elif self.settings.extent is QuadExtent.FAST:
+            defines["EXTENT_FAST"] = 1
         if self.settings.antialias:
             defines["ANTIALIAS"] = 1
         if camera.is_orthographic:
             defines["ORTHOGRAPHIC"] = 1
         if depth:
             defines["DEPTH_OUTPUT"] = 1
-        return self.programs.program("quad.vert", "quad.frag", defines)
+        return defines
+
+    def program(self, camera: Camera, depth: bool = False) -> moderngl.Program:
+        """The draw program: full per-corner math, or the light one after the pre-pass."""
+        vertex = "quad_light.vert" if self.settings.preprocess is Preprocess.COMPUTE else "quad.vert"
+        return self.programs.program(vertex, "quad.frag", self.defines(camera, depth))
 
     def visible_order(self, camera: Camera) -> np.ndarray:
         """Cull and sort for ``camera``: (M,) uint32 splat indices, front to back.
 
-        Re-sorted whenever the pose or intrinsics change; the same camera reuses the order.
+        Re-sorted whenever the pose or intrinsics change (the same camera reuses the order);
+        with ``resort_interval`` N > 1, only every N-th change re-sorts (sort lag).
         """
         key = (camera.world_to_camera.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy,
                camera.width, camera.height, camera.projection)
+        self._times_cull = self._times_sort = 0.0
         if key == self._order_key:
-            self._times_cull = self._times_sort = 0.0
             return self._order
+        if self._order_key is not None and self._stale_frames + 1 < self.settings.resort_interval:
+            self._stale_frames += 1
+            self._order_key = key
+            return self._order
+        self._stale_frames = 0
         t0 = time.perf_counter()
         p_cam = to_camera(self.scene.means, camera)
-        keep = np.flatnonzero(cull(p_cam, self._max_scale * camera.scale, self.scene.opacities,
-                                   camera, self.near))
+        if self.settings.cull:
+            mask = cull(p_cam, self._max_scale * camera.scale, self.scene.opacities, camera, self.near)
+        else:
+            mask = p_cam[:, 2] > self.near  # sort keys need positive depths
+        keep = np.flatnonzero(mask)
         t1 = time.perf_counter()
-        order = depth_sort(p_cam[keep, 2], keep.astype(np.uint32))
+        sort = bucket_sort if self.settings.sort_key is SortKey.BUCKET16 else depth_sort
+        order = sort(p_cam[keep, 2], keep.astype(np.uint32))
         t2 = time.perf_counter()
         self._times_cull, self._times_sort = t1 - t0, t2 - t1
         self._order_key, self._order = key, order
         return order
 
     def _upload(self, order: np.ndarray, prog: moderngl.Program) -> None:
+        """Write the sorted indices (the only per-view upload) and bind them for the draw."""
         data = order.tobytes()
         if self._index_buffer is None or self._index_buffer.size < max(len(data), 4):
             if self._vao is not None:
@@ -139,7 +172,27 @@ class QuadRenderer:
         if self._vao is None or self._vao.program is not prog:
             if self._vao is not None:
                 self._vao.release()
-            self._vao = self.ctx.vertex_array(prog, [(self._index_buffer, "u4/i", "splat_index")])
+            if self.settings.preprocess is Preprocess.COMPUTE:
+                self._vao = self.ctx.vertex_array(prog, [])  # instance k reads prepared[k]
+            else:
+                self._vao = self.ctx.vertex_array(prog, [(self._index_buffer, "u4/i", "splat_index")])
+
+    def _prepass(self, camera: Camera, count: int, depth: bool) -> None:
+        """Run quad_prepass.comp over the ``count`` sorted splats into the prepared buffer."""
+        need = max(count * PREPARED_BYTES, 16)
+        if self._prepared is None or self._prepared.size < need:
+            if self._prepared is not None:
+                self._prepared.release()
+            self._prepared = self.ctx.buffer(reserve=need)
+        self._prepared.bind_to_storage_buffer(BINDING_PREPARED)
+        if count == 0:
+            return
+        comp = self.programs.compute("quad_prepass.comp", self.defines(camera, depth))
+        set_camera_uniforms(comp, camera, self.near)
+        comp["u_count"].value = count
+        self._index_buffer.bind_to_storage_buffer(BINDING_ORDER)
+        comp.run(group_x=(count + PREPASS_GROUP - 1) // PREPASS_GROUP)
+        self.ctx.memory_barrier()
 
     def target(self, camera: Camera, depth: bool = False) -> ColorTarget:
         size = (camera.width, camera.height)
@@ -160,8 +213,12 @@ class QuadRenderer:
         t0 = time.perf_counter()
         self._upload(order, prog)
         t1 = time.perf_counter()
-        set_camera_uniforms(prog, camera, self.near)
         self.buffers.bind()
+        if self.settings.preprocess is Preprocess.COMPUTE:
+            self._prepass(camera, len(order), depth)
+            self.ctx.finish()
+        tp = time.perf_counter()
+        set_camera_uniforms(prog, camera, self.near)
         fbo.use()
         self.ctx.viewport = (0, 0, camera.width, camera.height)
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
@@ -174,7 +231,8 @@ class QuadRenderer:
         self.ctx.disable(moderngl.BLEND)
         self.ctx.finish()
         t2 = time.perf_counter()
-        self._times_upload, self._times_draw = t1 - t0, t2 - t1
+        self._times_upload, self._times_prepass, self._times_draw = t1 - t0, tp - t1, t2 - tp
+        self._drawn = len(order)
         return len(order)
 
     def render(self, camera: Camera) -> np.ndarray:
@@ -190,12 +248,12 @@ class QuadRenderer:
         d = target.read_depth() if depth else np.zeros(rgba.shape[:2], np.float32)
         t1 = time.perf_counter()
         self.last_times = QuadTimes(self._times_cull, self._times_sort, self._times_upload,
-                                    self._times_draw, t1 - t0)
+                                    self._times_prepass, self._times_draw, t1 - t0, self._drawn)
         return RenderOutput(composite(rgba, self.settings.background), d)
 
     def release(self) -> None:
-        for obj in (self._vao, self._index_buffer, self._target):
+        for obj in (self._vao, self._index_buffer, self._prepared, self._target):
             if obj is not None:
                 obj.release()
-        self._vao = self._index_buffer = self._target = None
+        self._vao = self._index_buffer = self._prepared = self._target = None
         self.buffers.release()

@@ -23,10 +23,36 @@ class QuadExtent(enum.Enum):
 
     ELLIPSE: along the ellipse axes, out to where ``o exp(-r^2/2)`` reaches 1/255 (default).
     SQUARE: the reference's axis-aligned square of radius ``ceil(3 sqrt(lambda_max))``.
+    FAST: the fast approximation of web viewers: a fixed 2 sqrt(2) sigmas along the ellipse
+        axes, the fragment evaluating an identity conic on the interpolated corner coordinate.
     """
 
     ELLIPSE = "ellipse"
     SQUARE = "square"
+    FAST = "fast"
+
+
+class SortKey(enum.Enum):
+    """Depth keys of the quad path's sort.
+
+    EXACT: the float32 bits of view z (exact order; ties by index).
+    BUCKET16: z quantised into 65536 buckets between the nearest and farthest splat (the
+        counting-sort keys some web viewers use; breaks scenes with distant splats).
+    """
+
+    EXACT = "exact"
+    BUCKET16 = "bucket16"
+
+
+class Preprocess(enum.Enum):
+    """Where the quad path's per-splat math runs.
+
+    VERTEX: in the vertex shader, once per quad corner (the design card's shape).
+    COMPUTE: once per splat in a compute pre-pass; a light vertex shader only places corners.
+    """
+
+    VERTEX = "vertex"
+    COMPUTE = "compute"
 
 
 class RendererKind(enum.Enum):
@@ -53,6 +79,10 @@ class RenderSettings:
         sh_degree: cap on the SH bands evaluated (``None``: all the scene has).
         model: where the scene sits in the world (rotation, translation, uniform scale);
             renderers fold it into the camera (:func:`splatgl.transform.apply_model`).
+        sort_key: quad path depth keys.  resort_interval: re-sort every N camera changes
+            (1 = always; larger values show sort lag, for the benchmark).
+        preprocess: where the quad path's per-splat math runs.
+        cull: the quad path's CPU frustum/opacity cull (the near plane is always applied).
     """
 
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -62,6 +92,10 @@ class RenderSettings:
     antialias: bool = False
     sh_degree: int | None = None
     model: "ModelTransform | None" = None
+    sort_key: SortKey = SortKey.EXACT
+    resort_interval: int = 1
+    preprocess: Preprocess = Preprocess.VERTEX
+    cull: bool = True
 
     def __post_init__(self) -> None:
         bg = tuple(float(v) for v in self.background)
@@ -70,6 +104,10 @@ class RenderSettings:
         object.__setattr__(self, "background", bg)
         object.__setattr__(self, "precision", Precision(self.precision))
         object.__setattr__(self, "extent", QuadExtent(self.extent))
+        object.__setattr__(self, "sort_key", SortKey(self.sort_key))
+        object.__setattr__(self, "preprocess", Preprocess(self.preprocess))
+        if int(self.resort_interval) != self.resort_interval or self.resort_interval < 1:
+            raise SplatglError(f"resort interval must be a positive integer, got {self.resort_interval}")
         if self.near is not None and not self.near > 0.0:
             raise SplatglError(f"near plane must be positive, got {self.near}")
         if self.sh_degree is not None and not 0 <= self.sh_degree <= MAX_SH_DEGREE:

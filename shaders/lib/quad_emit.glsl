@@ -1,0 +1,29 @@
+// Emits one corner of a splat's quad (triangle strip, gl_VertexID 0..3) and the fragment
+// inputs of quad.frag.  Shared by quad.vert (math per vertex) and quad_light.vert (math from
+// the compute pre-pass).
+
+flat out vec2 v_mean2d;       // pixel centre of the splat
+flat out vec3 v_conic;        // (a, b, c) of Sigma'^-1
+flat out vec4 v_color;        // (SH colour, opacity)
+flat out float v_depth;       // camera-space z of the centre, for the depth layer
+#ifdef EXTENT_FAST
+out vec2 v_unit;              // corner coordinate in sigmas (identity conic)
+#endif
+
+const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothing rasterised
+
+void emit_corner(vec2 mean2d, vec2 axis1, vec2 axis2, vec3 con, vec3 color, float opacity,
+                 float depth) {
+    vec2 corner = vec2((gl_VertexID & 1) != 0 ? 1.0 : -1.0, (gl_VertexID & 2) != 0 ? 1.0 : -1.0);
+    vec2 pixel = mean2d + corner.x * axis1 + corner.y * axis2;
+    // Image coordinates map to NDC without a y flip: framebuffer row 0 holds image row 0 (the
+    // top), so a plain readback is already top-down and gl_FragCoord.xy = (j + 0.5, i + 0.5).
+    gl_Position = vec4(pixel / u_viewport * 2.0 - 1.0, 0.0, 1.0);
+    v_mean2d = mean2d;
+    v_conic = con;
+    v_color = vec4(color, opacity);
+    v_depth = depth;
+#ifdef EXTENT_FAST
+    v_unit = corner * FAST_CORNER_SIGMAS;
+#endif
+}

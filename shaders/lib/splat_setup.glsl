@@ -1,0 +1,55 @@
+// Per-splat screen setup shared by the quad path's vertex shader and its compute pre-pass.
+// Twin: splatgl/project.py project() + ellipse_axes / reference_radius.
+// Needs lib/camera.glsl, lib/scene.glsl, lib/project.glsl, lib/sh.glsl included before it.
+
+struct ScreenSplat {
+    vec2 mean2d;    // pixel position of the centre
+    vec2 axis1;     // quad half-axes in pixels (columns of the corner transform)
+    vec2 axis2;
+    vec3 conic;     // (a, b, c) of Sigma'^-1
+    vec3 color;     // SH colour
+    float opacity;  // opacity (times the AA factor with ANTIALIAS)
+    float depth;    // camera-space z of the centre
+};
+
+// Quad half-axes by extent mode (DESIGN.md 2, splatgl.settings.QuadExtent):
+//   default        opacity-aware ellipse axes, out to o exp(-r^2/2) = 1/255;
+//   EXTENT_SQUARE  the reference's square of radius ceil(3 sqrt(lambda_max));
+//   EXTENT_FAST    ellipse axes at a fixed FAST_CORNER_SIGMAS (the fragment then evaluates an
+//                  identity conic on the interpolated corner coordinate).
+void quad_axes(vec3 cov, float opacity, out vec2 axis1, out vec2 axis2) {
+#if defined(EXTENT_SQUARE)
+    float r = reference_radius(cov);
+    axis1 = vec2(r, 0.0);
+    axis2 = vec2(0.0, r);
+#elif defined(EXTENT_FAST)
+    mat2 unit = ellipse_axes(cov, ALPHA_MIN * exp(0.5));  // k = 1: one sigma along each axis
+    axis1 = unit[0] * FAST_CORNER_SIGMAS;
+    axis2 = unit[1] * FAST_CORNER_SIGMAS;
+#else
+    mat2 axes = ellipse_axes(cov, opacity);
+    axis1 = axes[0];
+    axis2 = axes[1];
+#endif
+}
+
+// Fills s for splat i; false when the splat is culled (behind the near plane, or a
+// non-positive-definite 2D covariance).
+bool setup_splat(uint i, out ScreenSplat s) {
+    vec4 a = splat_a[i];
+    vec3 p = u_view_rot * a.xyz + u_view_trans;
+    if (!(p.z > u_near)) return false;  // view z, before any divide
+    vec3 cov = covariance_2d(covariance_3d(quat_to_rotmat(splat_q[i]), splat_s[i].xyz), p);
+    float det;
+    s.conic = conic(cov, det);
+    if (!(det > 0.0)) return false;
+    s.opacity = a.w;
+#ifdef ANTIALIAS
+    s.opacity *= antialias_factor(cov);
+#endif
+    s.mean2d = project_mean(p);
+    quad_axes(cov, s.opacity, s.axis1, s.axis2);
+    s.depth = p.z;
+    s.color = sh_color(i, splat_dc[i].rgb, normalize(a.xyz - u_cam_center));
+    return true;
+}

@@ -1,0 +1,26 @@
+// Quad path, compute pre-pass: the per-splat math of quad.vert done once per splat (not once
+// per corner), for the sorted visible splats, into `prepared` for quad_light.vert.
+// Layout per sorted slot k (4 vec4): (mean2d, axis1), (axis2, conic.ab), (conic.c, color),
+// (opacity, depth, visible, 0).  Twin: splatgl/project.py, as for quad.vert.
+#include "lib/camera.glsl"
+#include "lib/scene.glsl"
+#include "lib/project.glsl"
+#include "lib/sh.glsl"
+#include "lib/splat_setup.glsl"
+
+layout(local_size_x = 128) in;
+layout(std430, binding = 5) readonly buffer Order { uint order[]; };
+layout(std430, binding = 6) writeonly buffer Prepared { vec4 prepared[]; };
+uniform uint u_count;
+
+void main() {
+    uint k = gl_GlobalInvocationID.x;
+    if (k >= u_count) return;
+    ScreenSplat s;
+    bool ok = setup_splat(order[k], s);
+    prepared[4u * k + 3u] = vec4(s.opacity, s.depth, ok ? 1.0 : 0.0, 0.0);
+    if (!ok) return;
+    prepared[4u * k] = vec4(s.mean2d, s.axis1);
+    prepared[4u * k + 1u] = vec4(s.axis2, s.conic.xy);
+    prepared[4u * k + 2u] = vec4(s.conic.z, s.color);
+}
