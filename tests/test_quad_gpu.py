@@ -15,8 +15,8 @@ import pytest
 from conftest import save_failure_images
 from splatgl.blend import blend_front_to_back, splat_alpha
 from splatgl.camera import Camera, orbit
-from splatgl.constants import SH_C0
-from splatgl.project import project, quat_to_rotmat
+from splatgl.constants import ALPHA_MIN, FAST_CORNER_SIGMAS, SH_C0
+from splatgl.project import ellipse_axes, project, quat_to_rotmat
 from splatgl.quad import composite
 from splatgl.render import default_camera
 from splatgl.scene import Scene
@@ -95,9 +95,38 @@ def test_random_scene_matches_twin_in_both_extents(gl_renderer, artifacts_dir):
                        rng.uniform(0.05, 0.35, n), rng.uniform(0, 1, (n, 3)))
     cam = Camera(80, 60, 70.0, 70.0, 40.0, 30.0)
     expected = twin_image(scene, cam)
-    for extent in QuadExtent:
+    for extent in (QuadExtent.ELLIPSE, QuadExtent.SQUARE):
         got = gl_renderer.render(scene, cam, RenderSettings(extent=extent))
         assert_images_close(got, expected, TOL32, f"random_{extent.value}", artifacts_dir)
+
+
+def test_fast_extent_is_the_gaussian_cut_at_a_fixed_rectangle(gl_renderer, artifacts_dir):
+    """The fast mode's identity conic on whitened corner coordinates is the exact Gaussian,
+    truncated to |w1|, |w2| <= 2 sqrt(2) along the ellipse axes."""
+    rng = np.random.default_rng(13)
+    n = 30
+    scene = make_scene(rng.normal(size=(n, 3)) * [0.6, 0.5, 0.4] + [0, 0, 4], rng.normal(size=(n, 4)),
+                       rng.uniform(0.03, 0.25, (n, 3)), rng.uniform(0.3, 0.95, n), rng.uniform(0, 1, (n, 3)))
+    cam = Camera(80, 60, 70.0, 70.0, 40.0, 30.0)
+    pr = project(scene.means.astype(np.float64), scene.rotations.astype(np.float64),
+                 scene.scales.astype(np.float64), scene.opacities.astype(np.float64),
+                 scene.sh.astype(np.float64), cam)
+    order = depth_sort(pr.depth.astype(np.float32), np.arange(n, dtype=np.uint32))
+    unit = ellipse_axes(pr.cov2d, np.full(n, ALPHA_MIN * math.exp(0.5)))[order]  # one sigma
+    u, v = np.meshgrid(np.arange(80) + 0.5, np.arange(60) + 0.5)
+    d = np.stack([u[None] - pr.mean2d[order, 0, None, None], v[None] - pr.mean2d[order, 1, None, None]], -1)
+    # whitened coordinates: w_i = (d . axis_i) / |axis_i|^2
+    w1 = (d @ unit[:, 0][:, None, :, None])[..., 0] / (unit[:, 0] ** 2).sum(-1)[:, None, None]
+    w2 = (d @ unit[:, 1][:, None, :, None])[..., 0] / (unit[:, 1] ** 2).sum(-1)[:, None, None]
+    inside = (np.abs(w1) <= FAST_CORNER_SIGMAS) & (np.abs(w2) <= FAST_CORNER_SIGMAS)
+    alpha = splat_alpha(pr.mean2d[order], pr.conic[order], pr.opacity[order], 80, 60, inside)
+    expected = blend_front_to_back(alpha, pr.color[order])
+    got = gl_renderer.render(scene, cam, RenderSettings(extent=QuadExtent.FAST))
+    # Pixels on the rectangle's edge may fall either side in float32: compare with a mask
+    # that drops pixels within 1e-3 sigma of the edge.
+    edge = np.any(np.abs(np.maximum(np.abs(w1), np.abs(w2)) - FAST_CORNER_SIGMAS) < 1e-3, axis=0)
+    assert_images_close(np.where(edge[..., None], 0, got), np.where(edge[..., None], 0, expected),
+                        TOL32, "fast_extent", artifacts_dir)
 
 
 def test_depth_order_front_to_back(gl_renderer):

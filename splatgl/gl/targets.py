@@ -43,6 +43,9 @@ class ColorTarget:
         return np.frombuffer(raw, np.float16 if dtype == "f2" else np.float32).reshape(h, w, 4).astype(np.float32)
 
     def release(self) -> None:
+        # Bind the default framebuffer first: moderngl re-binds the last used framebuffer after
+        # creating the next one, and binding a deleted name is GL_INVALID_OPERATION.
+        self.fbo.ctx.detect_framebuffer(0).use()
         self.fbo.release()
         self.texture.release()
         if self.depth_texture is not None:
