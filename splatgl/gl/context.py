@@ -128,3 +128,37 @@ def create_window_context() -> moderngl.Context:
         return moderngl.create_context(require=330)
     except Exception as exc:
         raise ContextError(f"could not use the window's OpenGL context: {exc}") from None
+
+
+#: Window context versions tried in order (DESIGN.md section 6: 4.5 works under Xvfb, 4.6 fails;
+#: 4.3 is the least the renderers need; 3.3 only so the caller can say what is missing).
+WINDOW_VERSIONS = ((4, 5), (4, 3), (3, 3))
+
+
+def create_glfw_window(width: int, height: int, title: str, visible: bool = True):
+    """Open a glfw window with a core-profile context, make it current; ``(window, (major, minor))``.
+
+    Tries each of :data:`WINDOW_VERSIONS` in turn; the caller decides what a version below
+    :data:`REQUIRED_VERSION` can still do.  ``glfw.init()`` must have succeeded.  Raises
+    :class:`ContextError` when no version gives a window.
+    """
+    import glfw
+
+    failures = []
+    for major, minor in WINDOW_VERSIONS:
+        glfw.default_window_hints()
+        glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, major)
+        glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, minor)
+        glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+        glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+        glfw.window_hint(glfw.VISIBLE, bool(visible))
+        try:
+            window = glfw.create_window(width, height, title, None, None)
+        except glfw.GLFWError:  # raised instead of returned when glfw.ERROR_REPORTING = 'raise'
+            window = None
+        if window:
+            glfw.make_context_current(window)
+            return window, (major, minor)
+        failures.append(f"{major}.{minor}")
+    raise ContextError("could not open a window with an OpenGL core context (tried "
+                       + ", ".join(failures) + ")")
