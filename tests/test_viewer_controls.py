@@ -1,0 +1,127 @@
+"""The viewer's pure input -> camera functions (no window, no OpenGL)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from splatgl.camera import Camera, look_at
+from splatgl.viewer import controls
+from splatgl.viewer.controls import ViewState
+
+W, H = 320, 240
+
+
+@pytest.fixture
+def state() -> ViewState:
+    return ViewState(target=(0.5, -0.2, 1.0), distance=3.0, yaw=150.0, pitch=25.0, roll=10.0, fov_y=50.0)
+
+
+def _dist(s: ViewState) -> float:
+    return float(np.linalg.norm(controls.eye(s) - np.array(s.target)))
+
+
+def test_camera_looks_at_target_from_distance(state):
+    cam = controls.to_camera(state, W, H)
+    assert np.allclose(cam.center, controls.eye(state))
+    p = cam.world_to_camera @ np.append(state.target, 1.0)
+    assert np.allclose(p[:2], 0.0, atol=1e-9) and p[2] == pytest.approx(state.distance)
+    assert cam.height / (2 * cam.fy) == pytest.approx(math.tan(math.radians(25.0)))
+
+
+@pytest.mark.parametrize("dx,dy", [(40, 0), (0, -30), (-200, 500), (1000, 1000)])
+def test_orbit_keeps_distance_to_target(state, dx, dy):
+    moved = controls.orbit_drag(state, dx, dy)
+    assert moved.target == state.target
+    assert _dist(moved) == pytest.approx(state.distance)
+    assert not np.allclose(controls.eye(moved), controls.eye(state))
+    assert -controls.PITCH_LIMIT <= moved.pitch <= controls.PITCH_LIMIT
+
+
+def test_pan_moves_target_in_the_camera_plane(state):
+    right, down, forward = controls.axes(state)
+    moved = controls.pan(state, 30.0, -12.0, H)
+    delta = np.array(moved.target) - np.array(state.target)
+    assert abs(delta @ forward) < 1e-9
+    assert np.linalg.norm(delta) > 0
+    # The eye moves with the target: same orientation, same distance.
+    assert np.allclose(controls.eye(moved) - controls.eye(state), delta)
+    # The world point that was under the dragged pixel stays under the cursor.
+    cam0, cam1 = controls.to_camera(state, W, H), controls.to_camera(moved, W, H)
+    p = np.append(state.target, 1.0)
+    u0 = (cam0.world_to_camera @ p)[:3]
+    u1 = (cam1.world_to_camera @ p)[:3]
+    px0 = np.array([cam0.fx * u0[0] / u0[2], cam0.fy * u0[1] / u0[2]])
+    px1 = np.array([cam1.fx * u1[0] / u1[2], cam1.fy * u1[1] / u1[2]])
+    assert np.allclose(px1 - px0, [30.0, -12.0])
+
+
+def test_zoom_is_multiplicative(state):
+    once = controls.zoom(state, 1.0)
+    assert once.distance == pytest.approx(state.distance / controls.ZOOM_FACTOR)
+    twice = controls.zoom(once, 1.0)
+    assert twice.distance / once.distance == pytest.approx(once.distance / state.distance)
+    assert controls.zoom(controls.zoom(state, 3.0), -3.0).distance == pytest.approx(state.distance)
+    assert once.target == state.target
+
+
+def test_fly_moves_along_view_axes(state):
+    right, down, forward = controls.axes(state)
+    e0 = controls.eye(state)
+    assert np.allclose(controls.eye(controls.fly(state, forward=2.0)) - e0, 2.0 * forward)
+    assert np.allclose(controls.eye(controls.fly(state, right=-0.5)) - e0, -0.5 * right)
+    assert np.allclose(controls.eye(controls.fly(state, up=1.0)) - e0, -down)
+    moved = controls.fly(state, 1.0, 1.0, 1.0)
+    assert np.allclose(controls.axes(moved), controls.axes(state))  # orientation unchanged
+
+
+def test_roll_turns_about_the_view_axis(state):
+    rolled = controls.roll_by(state, 30.0)
+    assert np.allclose(controls.eye(rolled), controls.eye(state))
+    assert np.allclose(controls.axes(rolled)[2], controls.axes(state)[2])
+    cos = controls.axes(rolled)[0] @ controls.axes(state)[0]
+    assert cos == pytest.approx(math.cos(math.radians(30.0)))
+
+
+def test_fov_changes_and_clamps(state):
+    assert controls.change_fov(state, 4.0).fov_y == pytest.approx(54.0)
+    assert controls.change_fov(state, -1000.0).fov_y == controls.FOV_RANGE[0]
+    assert controls.change_fov(state, 1000.0).fov_y == controls.FOV_RANGE[1]
+
+
+def test_reset_restores_home(state):
+    s = controls.zoom(controls.pan(controls.orbit_drag(state, 50, 20), 5, 5, H), 2)
+    s = controls.roll_by(controls.fly(s, 1, 2, 3), 40)
+    assert s != state
+    assert controls.reset(s, state) == state
+
+
+def test_camera_stepping_cycles():
+    seen = [0]
+    for _ in range(7):
+        seen.append(controls.step_index(seen[-1], 3, 1))
+    assert seen == [0, 1, 2, 0, 1, 2, 0, 1]
+    assert controls.step_index(0, 3, -1) == 2
+    with pytest.raises(ValueError):
+        controls.step_index(0, 0, 1)
+
+
+@pytest.mark.parametrize("roll", [0.0, 33.0, -120.0])
+def test_state_round_trips_through_a_camera(state, roll):
+    s = ViewState(state.target, state.distance, state.yaw, state.pitch, roll, 40.0)
+    cam = controls.to_camera(s, W, H)
+    back = controls.from_camera(cam, s.distance)
+    assert np.allclose(controls.world_to_camera(back), cam.world_to_camera, atol=1e-9)
+    assert back.fov_y == pytest.approx(40.0)
+    assert np.allclose(back.target, s.target)
+
+
+def test_from_camera_reproduces_a_training_pose():
+    pose = look_at([1.0, -2.0, -4.0], [0.2, 0.1, 0.3], up=(0.1, -1.0, 0.2))
+    cam = Camera(640, 480, 500.0, 500.0, 320.0, 240.0, pose)
+    s = controls.from_camera(cam, 2.5)
+    got = controls.to_camera(s, 640, 480)
+    assert np.allclose(got.world_to_camera, pose, atol=1e-9)
+    assert got.fy == pytest.approx(500.0)
