@@ -1,0 +1,98 @@
+"""``splatgl view``: an interactive window (glfw, OpenGL 4.5 core) over the renderers."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from ..camera_io import load_cameras
+from ..errors import SplatglError
+from ..settings import RendererKind
+from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
+                      camera_from_args, demo_scene_path, load_scene_arg, settings_from_args)
+
+NAME = "view"
+ORDER = 15
+HELP = "open an interactive window on a scene (default: the bundled demo)"
+DESCRIPTION = """Look at a Gaussian-splat scene in a window (glfw; OpenGL 4.3+ needed, 4.5 asked for).
+
+The splats are drawn by the same renderers as `splatgl render` into an offscreen float target
+that is shown in the window; F12 writes the PNG `splatgl render` would write for the current
+view, and the camera JSON (and the command line) that reproduces it.  Every rendering option of
+`splatgl render` applies; the window starts at --width x --height (default 1280x720, or the
+camera file's size scaled to fit 1600x1000).  Keys are printed at start (and with H).
+
+examples:
+  splatgl view
+  splatgl view scene.ply --camera cameras.json --camera-index 5
+  splatgl view scene.ply --precision rgba16f --background 1,1,1
+  splatgl view scene.ply --benchmark 120      # scripted orbit, prints the frame rate"""
+
+#: A camera file's image is shown in a window of at most this size (unless --width/--height).
+MAX_WINDOW = (1600, 1000)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_scene_arguments(p)
+    p.add_argument("--renderer", choices=[RendererKind.QUAD.value, RendererKind.TILE.value],
+                   default="quad", help="start with the quad path (default) or the tile renderer")
+    p.add_argument("--screenshot-dir", type=Path, default=Path("."), metavar="DIR",
+                   help="where F12 writes splatgl-view-NNNN.png/.json (default: here)")
+    p.add_argument("--benchmark", type=int, default=None, metavar="FRAMES",
+                   help="render FRAMES frames of a scripted orbit, print the frame rate and exit")
+    p.add_argument("--no-vsync", action="store_true", help="do not wait for the display refresh")
+    add_camera_arguments(p)
+    add_settings_arguments(p)
+
+
+def _fit(camera, max_size=MAX_WINDOW):
+    """The camera scaled down (aspect kept) to fit a window of ``max_size``."""
+    s = min(1.0, max_size[0] / camera.width, max_size[1] / camera.height)
+    return camera if s >= 1.0 else camera.resized(max(1, round(camera.width * s)),
+                                                  max(1, round(camera.height * s)))
+
+
+def _render_args(args: argparse.Namespace) -> tuple[str, ...]:
+    """``splatgl render`` arguments for what RenderSettings does not hold."""
+    out = [str(args.scene if args.scene is not None else demo_scene_path())]
+    if args.drop_invalid:
+        out.append("--drop-invalid")
+    if args.transform:
+        out += ["--transform", args.transform]
+    return tuple(out)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.benchmark is not None and args.benchmark < 1:
+        raise SplatglError(f"--benchmark needs at least 1 frame, got {args.benchmark}")
+    path = args.scene if args.scene is not None else demo_scene_path()
+    print(f"loading {path} ...", flush=True)
+    t0 = time.perf_counter()
+    scene = load_scene_arg(args)
+    print(f"loaded {scene.count:,} splats (SH degree {scene.sh_degree}) in "
+          f"{time.perf_counter() - t0:.2f} s", flush=True)
+    settings = settings_from_args(args)
+    camera = camera_from_args(args, scene, settings)
+    cameras = load_cameras(args.camera) if args.camera is not None else []
+    if args.camera is not None and not (args.width or args.height):
+        camera = _fit(camera)
+
+    from ..viewer.app import Viewer, ViewerOptions  # glfw only when a window is wanted
+
+    options = ViewerOptions(title=f"splatgl view - {Path(path).name}",
+                            screenshot_dir=args.screenshot_dir, render_args=_render_args(args),
+                            vsync=not args.no_vsync and args.benchmark is None)
+    with Viewer(scene, settings, camera, cameras, args.camera_index % max(len(cameras), 1),
+                RendererKind(args.renderer), options) as viewer:
+        print(f"OpenGL {viewer.ctx.info['GL_VERSION']} on {viewer.ctx.info['GL_RENDERER']}", flush=True)
+        if args.benchmark is not None:
+            viewer.step()  # first frame: uploads and compiles
+            r = viewer.benchmark(args.benchmark)
+            print(f"benchmark: {args.benchmark} frames at {viewer.size[0]}x{viewer.size[1]}, "
+                  f"{viewer.kind.value}: {r['fps']:.2f} fps, frame {r['frame'] * 1e3:.1f} ms "
+                  f"(sort {r['sort'] * 1e3:.1f} ms, draw {r['draw'] * 1e3:.1f} ms)", flush=True)
+            return 0
+        viewer.run()
+    return 0
+

@@ -1,0 +1,93 @@
+"""One frame of the viewer: which renderer call makes it, for each view mode.
+
+Colour through the quad path draws straight into the quad renderer's own float target (no
+readback: the window samples that texture).  Everything else comes back as a NumPy image from
+the same :class:`~splatgl.render.Renderer` calls ``splatgl render`` makes: the tile path's
+colour, the colourised expected depth (what ``--depth-png`` writes) and the |quad - tile| heat
+map (what ``splatgl compare`` draws).
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from ..camera import Camera
+from ..pictures import depth_preview, heatmap
+from ..render import Renderer
+from ..scene import Scene
+from ..settings import RendererKind, RenderSettings
+from ..transform import apply_model
+
+#: Error that saturates the difference view's colour scale (8/255).
+DIFFERENCE_SCALE = 8.0 / 255.0
+
+
+class ViewMode(enum.Enum):
+    COLOR = "colour"
+    DEPTH = "depth"
+    DIFFERENCE = "difference"
+
+
+@dataclass
+class FrameResult:
+    """A rendered frame, ready to present.
+
+    Exactly one of ``texture`` (the quad target: premultiplied ``(C, A)``, row 0 = top, owned
+    by the renderer) and ``image`` ((H, W, 4) float32, background already composited) is set.
+    ``sort`` and ``draw`` are seconds (see :class:`splatgl.viewer.overlay.Status`); ``splats``
+    describes how many splats took part; ``note`` is extra status (the difference's maximum).
+    """
+
+    texture: moderngl.Texture | None
+    image: np.ndarray | None
+    premultiplied: bool
+    sort: float
+    draw: float
+    splats: str
+    note: str = ""
+
+
+def _times(renderer: Renderer, scene: Scene, settings: RenderSettings,
+           kind: RendererKind) -> tuple[float, float, str]:
+    """(sort, draw, splats text) of the last frame of ``kind`` from its ``last_times``."""
+    t = renderer.renderer_for(scene, settings, kind).last_times
+    if t is None:
+        return 0.0, 0.0, ""
+    if kind is RendererKind.TILE:
+        return t.sort, t.rasterize, f"{t.n_keys:,} tile keys, {scene.count:,} splats"
+    return t.cull + t.sort, t.upload + t.draw, f"{scene.count:,} splats"
+
+
+def render_frame(renderer: Renderer, scene: Scene, camera: Camera, settings: RenderSettings,
+                 kind: RendererKind, view: ViewMode) -> FrameResult:
+    """Render ``camera``'s view (world frame; the model transform is applied here)."""
+    if view is ViewMode.COLOR and kind is RendererKind.QUAD:
+        quad = renderer.renderer_for(scene, settings, kind)
+        cam = apply_model(camera, settings.model)
+        t0 = time.perf_counter()
+        order = quad.visible_order(cam)  # cull + sort (draw() reuses it for this camera)
+        t1 = time.perf_counter()
+        target = quad.target(cam)
+        quad.draw(cam, target.fbo)  # upload + draw, ends with a finish
+        t2 = time.perf_counter()
+        return FrameResult(target.texture, None, True, t1 - t0, t2 - t1,
+                           f"{len(order):,} visible / {scene.count:,}")
+    if view is ViewMode.COLOR:
+        rgba = renderer.render(scene, camera, settings, kind)
+        return FrameResult(None, rgba, False, *_times(renderer, scene, settings, kind))
+    if view is ViewMode.DEPTH:
+        out = renderer.render_layers(scene, camera, settings, kind)
+        img = depth_preview(out.expected_depth(), out.alpha)
+        return FrameResult(None, img, False, *_times(renderer, scene, settings, kind))
+    quad = renderer.render(scene, camera, settings, RendererKind.QUAD)
+    tile = renderer.render(scene, camera, settings, RendererKind.TILE)
+    worst = float(np.abs(quad[..., :3] - tile[..., :3]).max()) if quad.size else 0.0
+    img = heatmap(quad, tile, DIFFERENCE_SCALE)
+    sort, draw, splats = _times(renderer, scene, settings, RendererKind.QUAD)
+    return FrameResult(None, img, False, sort, draw, splats,
+                       f"max |quad - tile| {worst * 255:.1f}/255")

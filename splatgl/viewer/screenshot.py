@@ -1,0 +1,51 @@
+"""F12: the current view as ``splatgl render`` writes it, plus the camera that reproduces it."""
+
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+
+from ..camera import Camera
+from ..camera_io import save_camera
+from ..image_io import write_image
+from ..render import Renderer
+from ..scene import Scene
+from ..settings import RendererKind, RenderSettings
+
+PREFIX = "splatgl-view-"
+
+
+def next_paths(directory: Path) -> tuple[Path, Path]:
+    """The first unused ``splatgl-view-NNNN.png`` / ``.json`` pair in ``directory``."""
+    directory.mkdir(parents=True, exist_ok=True)
+    n = 1
+    while (directory / f"{PREFIX}{n:04d}.png").exists() or (directory / f"{PREFIX}{n:04d}.json").exists():
+        n += 1
+    return directory / f"{PREFIX}{n:04d}.png", directory / f"{PREFIX}{n:04d}.json"
+
+
+def settings_arguments(settings: RenderSettings, kind: RendererKind) -> list[str]:
+    """``splatgl render`` options giving ``settings`` and ``kind`` (model transform excluded)."""
+    args = ["--renderer", kind.value, "--precision", settings.precision.value,
+            "--extent", settings.extent.value,
+            "--background", ",".join(repr(float(v)) for v in settings.background)]
+    if settings.near is not None:
+        args += ["--near", repr(settings.near)]
+    if settings.antialias:
+        args.append("--antialias")
+    if settings.sh_degree is not None:
+        args += ["--sh-degree", str(settings.sh_degree)]
+    return args
+
+
+def save_screenshot(renderer: Renderer, scene: Scene, camera: Camera, settings: RenderSettings,
+                    kind: RendererKind, directory: Path, render_args=()) -> tuple[Path, Path, str]:
+    """Write the 8-bit PNG of ``camera``'s view (the renderer call and :func:`write_image` of
+    ``splatgl render``) and the camera JSON; returns (png, json, reproducing command line)."""
+    png, js = next_paths(Path(directory))
+    rgba = renderer.render(scene, camera, settings, kind)
+    save_camera(js, camera)
+    write_image(png, rgba)
+    argv = ["splatgl", "render", *render_args, "--camera", str(js), *settings_arguments(settings, kind),
+            "-o", str(png)]
+    return png, js, shlex.join(argv)

@@ -1,0 +1,242 @@
+"""The viewer in a real glfw window under Xvfb, driven from Python.
+
+Input is injected through the same ``Viewer.on_*`` handlers the glfw callbacks call, and
+``Viewer.step()`` runs one loop iteration.  Skips where Xvfb is missing or glfw cannot open a
+window on it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+W, H = 320, 240
+XVFB = "/usr/bin/Xvfb" if Path("/usr/bin/Xvfb").exists() else shutil.which("Xvfb")
+
+
+def _free_display() -> int:
+    for n in range(91, 300):
+        if not Path(f"/tmp/.X{n}-lock").exists() and not Path(f"/tmp/.X11-unix/X{n}").exists():
+            return n
+    raise RuntimeError("no free X display number")
+
+
+@pytest.fixture(scope="session")
+def xvfb_display():
+    """A private Xvfb server; DISPLAY points at it for the session, and it is killed after."""
+    if XVFB is None:
+        pytest.skip("Xvfb not installed (Debian package xvfb): cannot open windows headlessly")
+    n = _free_display()
+    proc = subprocess.Popen([XVFB, f":{n}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 10.0
+    while not Path(f"/tmp/.X11-unix/X{n}").exists():
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            pytest.skip(f"Xvfb :{n} did not start")
+        time.sleep(0.05)
+    old = os.environ.get("DISPLAY")
+    os.environ["DISPLAY"] = f":{n}"
+    import glfw
+
+    if not glfw.init():
+        proc.kill()
+        pytest.skip(f"glfw cannot initialise on Xvfb :{n}")
+    glfw.terminate()
+    yield f":{n}"
+    if old is None:
+        os.environ.pop("DISPLAY", None)
+    else:
+        os.environ["DISPLAY"] = old
+    proc.terminate()
+    proc.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def demo():
+    from splatgl.commands._common import demo_scene_path
+    from splatgl.formats import load_scene
+
+    path = demo_scene_path()
+    return path, load_scene(path)
+
+
+@pytest.fixture
+def viewer(xvfb_display, demo, tmp_path):
+    from splatgl.errors import ContextError
+    from splatgl.render import default_camera
+    from splatgl.settings import RenderSettings
+    from splatgl.viewer.app import Viewer, ViewerOptions
+
+    path, scene = demo
+    options = ViewerOptions(visible=True, screenshot_dir=tmp_path, render_args=(str(path),), vsync=False)
+    try:
+        v = Viewer(scene, RenderSettings(background=(0.1, 0.2, 0.3)), default_camera(scene, W, H),
+                   options=options)
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
+    yield v
+    v.close()
+
+
+def _window_pixels(v) -> np.ndarray:
+    """(H, W, 3) uint8 of the window's front buffer contents, row 0 at the top."""
+    w, h = v.size
+    v.ctx.screen.use()
+    raw = v.ctx.screen.read(components=3)  # after swap: the back buffer holds the same frame
+    return np.frombuffer(raw, np.uint8).reshape(h, w, 3)[::-1]
+
+
+def test_drag_key_screenshot_matches_headless_render(viewer, demo, tmp_path):
+    import glfw
+
+    from splatgl.image_io import read_image
+
+    v = viewer
+    assert v.step() and v.frames_rendered == 1
+    v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+    for x in range(100, 160, 10):
+        v.on_cursor(x, 120 + (x - 100) // 4)
+    v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+    v.on_key(glfw.KEY_RIGHT_BRACKET, glfw.PRESS, 0)   # wider field of view
+    v.on_key(glfw.KEY_W, glfw.PRESS, 0)               # hold W: fly forward
+    assert v.step(dt=0.05)
+    v.on_key(glfw.KEY_W, glfw.RELEASE, 0)
+    v.on_key(glfw.KEY_I, glfw.PRESS, 0)               # hide the status panel
+    v.step()
+    assert v.frames_rendered == 2
+    assert v.state != v.home
+
+    png, js = v.screenshot()
+    assert json.loads(js.read_text())["width"] == W
+    ref = tmp_path / "headless.png"
+    r = subprocess.run([sys.executable, "-m", "splatgl", "render", str(demo[0]), "--camera", str(js),
+                        "--background", "0.1,0.2,0.3", "-o", str(ref)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    got, want = read_image(png), read_image(ref)
+    assert got.shape == want.shape == (H, W, 3)
+    assert np.abs(got - want).max() <= 1.0 / 255.0 + 1e-6
+    assert want.std() > 0.01  # the scene is in view, not just background
+
+    # What the window shows is that image: same rows (no y flip), within one 8-bit step.
+    shown = _window_pixels(v).astype(np.int32)
+    assert np.abs(shown - np.round(got * 255).astype(np.int32)).max() <= 1
+
+
+def test_unchanged_camera_renders_no_new_frame(viewer):
+    v = viewer
+    v.step()
+    frames, presents = v.frames_rendered, v.presents
+    for _ in range(5):
+        assert not v.step()
+    assert v.frames_rendered == frames
+    assert v.presents <= presents + 1  # at most one overlay refresh, never a render
+    v.on_scroll(0.0, 1.0)
+    assert v.step() and v.frames_rendered == frames + 1
+
+
+def test_resize_to_zero_and_back(viewer):
+    import glfw
+
+    v = viewer
+    v.step()
+    frames = v.frames_rendered
+    v.on_resize(0, 0)                 # what a minimised window reports on some platforms
+    v.on_mouse_button(glfw.MOUSE_BUTTON_RIGHT, glfw.PRESS, 0)
+    v.on_cursor(10, 10)
+    v.on_cursor(30, 25)               # pan while minimised: state changes, nothing is drawn
+    v.on_mouse_button(glfw.MOUSE_BUTTON_RIGHT, glfw.RELEASE, 0)
+    assert not v.step() and not v.step()
+    assert v.frames_rendered == frames
+    glfw.iconify_window(v.window)
+    glfw.poll_events()
+    v.step()
+    glfw.restore_window(v.window)
+    glfw.set_window_size(v.window, 200, 150)
+    deadline = time.monotonic() + 5.0
+    while v.size != (200, 150) and time.monotonic() < deadline:
+        glfw.wait_events_timeout(0.05)
+    assert v.size == (200, 150)
+    assert v.step()
+    assert v.last.texture.size == (200, 150)
+
+
+def test_views_keys_and_closing(viewer):
+    import glfw
+
+    from splatgl.settings import Precision, RendererKind
+    from splatgl.viewer.frames import ViewMode
+
+    v = viewer
+    v.step()
+    v.on_key(glfw.KEY_D, glfw.PRESS, glfw.MOD_CONTROL)
+    assert v.view is ViewMode.DEPTH and v.step() and v.last.image is not None
+    v.on_key(glfw.KEY_C, glfw.PRESS, 0)
+    assert v.view is ViewMode.DIFFERENCE and v.step()
+    assert "max |quad - tile|" in v.last.note
+    v.on_key(glfw.KEY_C, glfw.PRESS, 0)
+    v.on_key(glfw.KEY_T, glfw.PRESS, 0)
+    assert v.kind is RendererKind.TILE and v.step() and "tile keys" in v.last.splats
+    v.on_key(glfw.KEY_T, glfw.PRESS, 0)
+    v.on_key(glfw.KEY_P, glfw.PRESS, 0)
+    assert v.settings.precision is Precision.RGBA16F and v.step()
+    v.on_key(glfw.KEY_1, glfw.PRESS, 0)
+    assert v.settings.sh_degree == 1 and v.step()
+    v.on_key(glfw.KEY_H, glfw.PRESS, 0)
+    v.step()
+    assert v.overlay.show_keys and v.overlay.image.shape[0] > 200
+    v.on_key(glfw.KEY_ESCAPE, glfw.PRESS, 0)
+    assert v.should_close()
+    assert v.ctx.error == "GL_NO_ERROR"
+
+
+def test_training_cameras_step(xvfb_display, demo, tmp_path):
+    import glfw
+
+    from splatgl.camera import orbit
+    from splatgl.camera_io import load_cameras
+    from splatgl.settings import RenderSettings
+    from splatgl.viewer.app import Viewer, ViewerOptions
+
+    path, scene = demo
+    centre = 0.5 * np.add(*scene.robust_bounds)
+    entries = []
+    for az in (0.0, 120.0, 240.0):
+        w2c = orbit(centre, 3 * scene.robust_radius, az, 10.0)
+        c2w = np.linalg.inv(w2c)
+        entries.append({"id": len(entries), "img_name": f"{az}", "width": W, "height": H,
+                        "position": c2w[:3, 3].tolist(), "rotation": c2w[:3, :3].tolist(),
+                        "fx": 300.0, "fy": 300.0})
+    cams_path = tmp_path / "cameras.json"
+    cams_path.write_text(json.dumps(entries))
+    cams = load_cameras(cams_path)
+    with Viewer(scene, RenderSettings(), cams[0], cams, 0,
+                options=ViewerOptions(screenshot_dir=tmp_path, vsync=False)) as v:
+        v.on_key(glfw.KEY_N, glfw.PRESS, 0)
+        assert v.camera_index == 1
+        assert np.allclose(v.camera().world_to_camera, cams[1].world_to_camera, atol=1e-9)
+        assert v.camera().fy == pytest.approx(300.0)
+        v.on_key(glfw.KEY_PAGE_UP, glfw.PRESS, 0)
+        v.on_key(glfw.KEY_N, glfw.PRESS, glfw.MOD_SHIFT)
+        assert v.camera_index == 2  # 1 -> 0 -> 2 (wraps)
+        assert v.step()
+        v.on_key(glfw.KEY_R, glfw.PRESS, 0)
+        assert np.allclose(v.camera().world_to_camera, cams[0].world_to_camera, atol=1e-9)
+
+
+def test_bad_scene_exits_2_without_traceback(tmp_path):
+    bad = tmp_path / "broken.ply"
+    bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nend_header\n\x00")
+    r = subprocess.run([sys.executable, "-m", "splatgl", "view", str(bad)], capture_output=True,
+                       text=True, timeout=60, env={**os.environ, "DISPLAY": ""})
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr and "error" in r.stderr
