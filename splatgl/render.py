@@ -14,7 +14,7 @@ import moderngl
 import numpy as np
 
 from .camera import Camera, orbit
-from .gl.context import create_headless_context
+from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
 from .output import RenderOutput
 from .scene import Scene
@@ -82,7 +82,12 @@ class Renderer:
         return path
 
     def renderer_for(self, scene: Scene, settings: RenderSettings, kind: RendererKind = RendererKind.QUAD):
-        """The (cached) GPU renderer object, e.g. to read its ``last_times``."""
+        """The (cached) GPU renderer object, e.g. to read its ``last_times``.
+
+        It makes ``self.ctx`` current; when other OpenGL contexts are created later, call
+        :func:`splatgl.gl.context.make_current` before using the object directly.
+        """
+        make_current(self.ctx)
         return self._path(scene, settings, kind)
 
     def render(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
@@ -91,6 +96,7 @@ class Renderer:
         kind = RendererKind(kind)
         if kind is RendererKind.REFERENCE:
             return render_reference_rgba(scene, camera, settings)
+        make_current(self.ctx)  # another context may have been made current since
         return self._path(scene, settings, kind).render(apply_model(camera, settings.model))
 
     def render_layers(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
@@ -99,9 +105,11 @@ class Renderer:
         kind = RendererKind(kind)
         if kind is RendererKind.REFERENCE:
             return render_reference_layers(scene, camera, settings)
+        make_current(self.ctx)
         return self._path(scene, settings, kind).render_layers(apply_model(camera, settings.model), depth=True)
 
     def close(self) -> None:
+        make_current(self.ctx)
         for path in self._paths.values():
             path.release()
         self._paths.clear()

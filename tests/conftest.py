@@ -41,6 +41,7 @@ def gl_renderer():
     error was left pending.
     """
     from splatgl.errors import ContextError
+    from splatgl.gl.context import make_current
     from splatgl.render import Renderer
 
     try:
@@ -48,6 +49,7 @@ def gl_renderer():
     except ContextError as exc:
         pytest.skip(f"no OpenGL context: {exc}")
     yield renderer
+    make_current(renderer.ctx)  # other tests may have made their own contexts current
     error = renderer.ctx.error
     renderer.close()
     assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"

@@ -33,9 +33,10 @@ def test_osmesa_fallback_renders_the_same(monkeypatch):
     cam = Camera(32, 32, 30.0, 30.0, 16.0, 16.0)
     images = []
     for backend in ("egl", "osmesa"):
-        with Renderer(context.create_headless_context(backend)) as r:
+        ctx = context.create_headless_context(backend)
+        with Renderer(ctx) as r:
             images.append(r.render(scene, cam))
-            r.ctx.release()
+        ctx.release()
     np.testing.assert_array_equal(images[0], images[1])
 
     # With EGL failing, the default order falls back to OSMesa.

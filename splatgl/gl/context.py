@@ -71,6 +71,9 @@ class _OSMesaLoader:
         return self._lib.OSMesaGetProcAddress(name.encode()) or 0
 
     def __enter__(self):
+        # moderngl calls this when the context is entered: make the OSMesa context current.
+        if self._ctx:
+            self._lib.OSMesaMakeCurrent(self._ctx, self._buffer, _GL_UNSIGNED_BYTE, 1, 1)
         return self
 
     def __exit__(self, *args):
@@ -162,3 +165,14 @@ def create_glfw_window(width: int, height: int, title: str, visible: bool = True
         failures.append(f"{major}.{minor}")
     raise ContextError("could not open a window with an OpenGL core context (tried "
                        + ", ".join(failures) + ")")
+
+
+def make_current(ctx: moderngl.Context) -> None:
+    """Make ``ctx`` the current context of this thread, and leave it current.
+
+    Creating a second context (a window, another renderer) makes that one current, and
+    moderngl does not switch back by itself; every public entry point that issues GL calls on
+    a context it holds calls this first.  (Unlike ``with ctx:``, nothing is restored later, so
+    a released context is never made current again.)
+    """
+    ctx.__enter__()
