@@ -13,11 +13,18 @@ in vec2 v_unit;                // corner coordinate in sigmas
 #endif
 
 layout(location = 0) out vec4 out_color;
+#ifdef COUNT_FRAGMENTS
+// Benchmark variant: counts fragments shaded and fragments kept (alpha >= 1/255).
+layout(std430, binding = 7) buffer FragmentCounts { uint fragments_shaded; uint fragments_kept; };
+#endif
 #ifdef DEPTH_OUTPUT
 layout(location = 1) out vec4 out_depth;
 #endif
 
 void main() {
+#ifdef COUNT_FRAGMENTS
+    atomicAdd(fragments_shaded, 1u);
+#endif
 #ifdef EXTENT_FAST
     // The fast approximation: the quad spans a fixed FAST_CORNER_SIGMAS along the ellipse axes
     // and the conic in those coordinates is the identity.
@@ -29,6 +36,9 @@ void main() {
     if (power > 0.0) discard;
     float alpha = min(ALPHA_MAX, v_color.a * exp(power));
     if (alpha < ALPHA_MIN) discard;
+#ifdef COUNT_FRAGMENTS
+    atomicAdd(fragments_kept, 1u);
+#endif
     out_color = vec4(v_color.rgb * alpha, alpha);
 #ifdef DEPTH_OUTPUT
     out_depth = vec4(v_depth * alpha, 0.0, 0.0, alpha);

@@ -27,6 +27,8 @@ from .sort import bucket_sort, depth_sort
 
 #: Storage bindings of the compute pre-pass (after the scene's 0..4).
 BINDING_ORDER, BINDING_PREPARED = 5, 6
+#: Storage binding of the benchmark's fragment counters (shaders/quad.frag, COUNT_FRAGMENTS).
+BINDING_FRAGMENT_COUNTS = 7
 #: Bytes per splat of the pre-pass output (4 vec4, see shaders/quad_prepass.comp).
 PREPARED_BYTES = 64
 #: Work-group size of shaders/quad_prepass.comp.
@@ -75,6 +77,12 @@ def set_camera_uniforms(prog: moderngl.Program, camera: Camera, near: float) -> 
             prog[name].value = value
 
 
+def _valid_elapsed(ns: int) -> int | None:
+    """A timer query's nanoseconds, or None where the driver returns no real value (llvmpipe
+    answers 2^32 - 1)."""
+    return int(ns) if 0 < ns < 0xFFFFFFFF else None
+
+
 class QuadRenderer:
     """Renders one scene through the quad path; reuse it across views, then :meth:`release`."""
 
@@ -96,6 +104,11 @@ class QuadRenderer:
         self._order_key: tuple | None = None
         self._order = np.zeros(0, np.uint32)
         self._stale_frames = 0
+        self._count_fragments = False
+        #: Time the draw with a GL timer query too (the benchmark); result in last_gpu_draw_ns.
+        self.gpu_timer = False
+        self.last_gpu_draw_ns: int | None = None
+        self._query: moderngl.Query | None = None
         self._times_cull = self._times_sort = self._times_upload = 0.0
         self._times_prepass = self._times_draw = 0.0
         self.last_times: QuadTimes | None = None
@@ -119,6 +132,8 @@ class QuadRenderer:
             defines["ORTHOGRAPHIC"] = 1
         if depth:
             defines["DEPTH_OUTPUT"] = 1
+        if self._count_fragments:
+            defines["COUNT_FRAGMENTS"] = 1
         return defines
 
     def program(self, camera: Camera, depth: bool = False) -> moderngl.Program:
@@ -227,7 +242,15 @@ class QuadRenderer:
         self.ctx.blend_func = moderngl.ONE_MINUS_DST_ALPHA, moderngl.ONE
         self.ctx.blend_equation = moderngl.FUNC_ADD
         if len(order):
-            self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(order))
+            if self.gpu_timer:
+                if self._query is None:
+                    self._query = self.ctx.query(time=True)
+                with self._query:
+                    self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(order))
+                self.ctx.finish()
+                self.last_gpu_draw_ns = _valid_elapsed(self._query.elapsed)
+            else:
+                self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(order))
         self.ctx.disable(moderngl.BLEND)
         self.ctx.finish()
         t2 = time.perf_counter()
@@ -250,6 +273,40 @@ class QuadRenderer:
         self.last_times = QuadTimes(self._times_cull, self._times_sort, self._times_upload,
                                     self._times_prepass, self._times_draw, t1 - t0, self._drawn)
         return RenderOutput(composite(rgba, self.settings.background), d)
+
+    def prepare_geometry(self, camera: Camera) -> int:
+        """Cull, sort, upload and run the compute pre-pass for ``camera`` (no draw); returns
+        the number of sorted splats whose quads now sit in the prepared buffer (binding 6).
+
+        Needs ``preprocess=COMPUTE``; the benchmark's limit row draws this geometry.
+        """
+        order = self.visible_order(camera)
+        self._upload(order, self.program(camera))
+        self.buffers.bind()
+        self._prepass(camera, len(order), False)
+        self.ctx.finish()
+        return len(order)
+
+    def count_fragments(self, camera: Camera) -> tuple[int, int]:
+        """Draw once with counting shaders: (fragments shaded, fragments with alpha >= 1/255).
+
+        Their ratio is the quad extent's fragment efficiency (the benchmark reports it).
+        Atomic counters slow the draw, so this is a separate, untimed pass.
+        """
+        counts = self.ctx.buffer(np.zeros(2, np.uint32).tobytes())
+        counts.bind_to_storage_buffer(BINDING_FRAGMENT_COUNTS)
+        self._count_fragments = True
+        try:
+            self.draw(camera, self.target(camera).fbo)
+        finally:
+            self._count_fragments = False
+        #: Time the draw with a GL timer query too (the benchmark); result in last_gpu_draw_ns.
+        self.gpu_timer = False
+        self.last_gpu_draw_ns: int | None = None
+        self._query: moderngl.Query | None = None
+        shaded, kept = np.frombuffer(counts.read(), np.uint32)
+        counts.release()
+        return int(shaded), int(kept)
 
     def release(self) -> None:
         for obj in (self._vao, self._index_buffer, self._prepared, self._target):

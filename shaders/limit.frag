@@ -1,0 +1,7 @@
+// Benchmark limit row, fragment stage: a constant premultiplied colour under the quad path's
+// blending, so the draw costs fill and blending only.
+layout(location = 0) out vec4 out_color;
+
+void main() {
+    out_color = vec4(0.02, 0.02, 0.02, 0.02);
+}

@@ -1,0 +1,1 @@
+"""``splatgl bench``: frame time against error for renderer configurations, in one run."""

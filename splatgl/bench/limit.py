@@ -1,0 +1,67 @@
+"""The limit row: the quad path's geometry drawn with trivial shaders (fill + per-primitive cost).
+
+Each configuration's frame time reads as a ratio to this: what this machine's OpenGL can do at
+best with the same quads, blending and target.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import moderngl
+import numpy as np
+
+from ..camera import Camera
+from ..gl.shaders import ProgramCache
+from ..output import RenderOutput
+from ..quad import QuadRenderer, QuadTimes, composite
+from ..scene import Scene
+from ..settings import Preprocess, RenderSettings
+
+
+class LimitRenderer:
+    """Draws the quads of ``settings``' extent with shaders/limit.vert + limit.frag.
+
+    Per frame the geometry is prepared by the quad path's cull, sort and compute pre-pass,
+    untimed; ``last_times`` holds only the trivial draw and the readback.
+    """
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
+                 programs: ProgramCache | None = None):
+        self.ctx = ctx
+        self.scene = scene
+        self.settings = settings
+        self.quad = QuadRenderer(ctx, scene, dataclasses.replace(settings, preprocess=Preprocess.COMPUTE),
+                                 programs)
+        self.program = self.quad.programs.program("limit.vert", "limit.frag")
+        self.vao = ctx.vertex_array(self.program, [])
+        self.last_times: QuadTimes | None = None
+
+    def render(self, camera: Camera) -> np.ndarray:
+        count = self.quad.prepare_geometry(camera)
+        target = self.quad.target(camera)
+        self.program["u_viewport"].value = (float(camera.width), float(camera.height))
+        t0 = time.perf_counter()
+        target.fbo.use()
+        self.ctx.viewport = (0, 0, camera.width, camera.height)
+        target.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.blend_func = moderngl.ONE_MINUS_DST_ALPHA, moderngl.ONE
+        if count:
+            self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=count)
+        self.ctx.disable(moderngl.BLEND)
+        self.ctx.finish()
+        t1 = time.perf_counter()
+        rgba = target.read()
+        t2 = time.perf_counter()
+        self.last_times = QuadTimes(0.0, 0.0, 0.0, 0.0, t1 - t0, t2 - t1, count)
+        return composite(rgba, self.settings.background)
+
+    def render_layers(self, camera: Camera, depth: bool = True) -> RenderOutput:
+        rgba = self.render(camera)
+        return RenderOutput(rgba, np.zeros(rgba.shape[:2], np.float32))
+
+    def release(self) -> None:
+        self.vao.release()
+        self.quad.release()

@@ -1,0 +1,102 @@
+"""Benchmark output: a terminal table, CSV, JSON, and frame time against error as a plot."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+from .runner import BenchRow
+
+
+def _fmt(value, spec: str, missing: str = "-") -> str:
+    if value is None:
+        return missing
+    if isinstance(value, float) and math.isinf(value):
+        return "inf"
+    return format(value, spec)
+
+
+def table(rows: list[BenchRow]) -> str:
+    """A fixed-width table, one block per scene."""
+    head = (f"{'config':<22} {'ms':>8} {'p10-p90':>15} {'xlimit':>7} {'drawn':>8} {'frag eff':>8} "
+            f"{'PSNR':>7} {'max err':>8} {'>1/255':>8}")
+    out = []
+    for scene in dict.fromkeys(r.scene for r in rows):
+        sub = [r for r in rows if r.scene == scene]
+        out.append(f"\n{scene} ({sub[0].splats} splats)")
+        out.append(head)
+        for r in sub:
+            spread = f"{r.frame_ms_p10:.1f}-{r.frame_ms_p90:.1f}"
+            out.append(
+                f"{r.config:<22} {r.frame_ms:>8.1f} {spread:>15} {_fmt(r.limit_ratio, '.2f'):>7} "
+                f"{_fmt(r.drawn, 'd'):>8} {_fmt(r.fragment_efficiency, '.3f'):>8} "
+                f"{_fmt(r.psnr, '.1f'):>7} {_fmt(r.max_abs, '.4f'):>8} "
+                f"{_fmt(None if r.off_1 is None else r.off_1 * 100, '.3f'):>7}%")
+    return "\n".join(out)
+
+
+def write_csv(path: Path, rows: list[BenchRow]) -> None:
+    stage_names = sorted({k for r in rows for k in r.stages_ms})
+    fields = [k for k in rows[0].as_dict() if k != "stages_ms"] + [f"{s}_ms" for s in stage_names]
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=fields)
+        w.writeheader()
+        for r in rows:
+            d = r.as_dict()
+            stages = d.pop("stages_ms")
+            d.update({f"{s}_ms": stages.get(s) for s in stage_names})
+            w.writerow(d)
+
+
+def write_json(path: Path, rows: list[BenchRow], extra: dict) -> None:
+    path.write_text(json.dumps({**extra, "rows": [r.as_dict() for r in rows]}, indent=1) + "\n")
+
+
+def pareto_front(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of points (time, error) that no other point beats in both (lower is better)."""
+    front = []
+    for i, (t, e) in enumerate(points):
+        if not any((t2 <= t and e2 <= e) and (t2 < t or e2 < e) for j, (t2, e2) in enumerate(points) if j != i):
+            front.append(i)
+    return sorted(front, key=lambda i: points[i][0])
+
+
+def plot(path: Path, rows: list[BenchRow]) -> None:
+    """Frame time against RMS error (from PSNR), one panel per scene, Pareto front marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+
+    scenes = list(dict.fromkeys(r.scene for r in rows))
+    fig, axes = plt.subplots(1, len(scenes), figsize=(6.5 * len(scenes), 5.2), squeeze=False)
+    for ax, scene in zip(axes[0], scenes):
+        sub = [r for r in rows if r.scene == scene and r.psnr is not None]
+        floor = 1e-7  # identical images (the reference itself) sit on the floor
+        pts = [(r.frame_ms, max(floor, 10 ** (-r.psnr / 20) if not math.isinf(r.psnr) else floor)) for r in sub]
+        front = pareto_front(pts)
+        ax.scatter([p[0] for p in pts], [p[1] for p in pts], c="tab:blue", s=22, zorder=3)
+        ax.plot([pts[i][0] for i in front], [pts[i][1] for i in front], "-o", c="tab:red", ms=7,
+                mfc="none", zorder=2, label="Pareto front")
+        for r, (x, y) in zip(sub, pts):
+            ax.annotate(r.config, (x, y), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        limit = next((r.frame_ms for r in rows if r.scene == scene and r.group == "limit"), None)
+        if limit:
+            ax.axvline(limit, ls="--", c="gray", lw=1, label=f"limit row {limit:.0f} ms")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_xlabel("median frame time (ms)")
+        ax.set_ylabel("RMS error against the reference")
+        ax.set_title(f"{scene} ({sub[0].splats if sub else 0} splats)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    tmp = path.with_name(path.stem + ".partial" + path.suffix)
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(path)

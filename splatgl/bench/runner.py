@@ -1,0 +1,203 @@
+"""Running the benchmark: camera paths, timed frames, errors against the reference."""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..camera import Camera, orbit
+from ..metrics import image_errors
+from ..render import Renderer, default_camera, render_reference_rgba
+from ..scene import Scene
+from ..settings import RendererKind, RenderSettings
+from ..sort import depth_sort
+from .configs import BenchConfig, RowKind, configurations
+from .limit import LimitRenderer
+
+Progress = Callable[[int, int, str], None]
+
+
+@dataclass(frozen=True)
+class BenchOptions:
+    """How the benchmark runs.
+
+    Attributes:
+        width, height: image size in pixels.
+        frames: timed frames per configuration, along an orbit (the camera moves every frame,
+            so cull and sort run every frame, and a lazy re-sort shows its lag).
+        orbit_step: degrees of azimuth per frame.
+        error_frames: which frames are compared with the reference (indices into the path).
+        quick: fewer rows (one per question), for CI.
+        groups: only these groups of rows (plus default and limit); None = all.
+    """
+
+    width: int = 1280
+    height: int = 720
+    frames: int = 12
+    orbit_step: float = 2.0
+    error_frames: tuple[int, ...] = (3, 7, 11)
+    quick: bool = False
+    groups: frozenset[str] | None = None
+
+
+@dataclass(frozen=True)
+class BenchRow:
+    """One configuration on one scene; times in milliseconds."""
+
+    scene: str
+    splats: int
+    config: str
+    group: str
+    renderer: str
+    frame_ms: float
+    frame_ms_p10: float
+    frame_ms_p90: float
+    stages_ms: dict = field(default_factory=dict)
+    gpu_draw_ms: float | None = None
+    drawn: int | None = None
+    fragments_shaded: int | None = None
+    fragments_kept: int | None = None
+    fragment_efficiency: float | None = None
+    psnr: float | None = None
+    max_abs: float | None = None
+    off_1: float | None = None
+    limit_ratio: float | None = None
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        if d["psnr"] is not None and math.isinf(d["psnr"]):
+            d["psnr"] = None  # JSON has no infinity; None reads as "identical"
+        return d
+
+
+def orbit_path(scene: Scene, options: BenchOptions, start: int = 0) -> list[Camera]:
+    """Cameras orbiting the scene's centre at the default framing distance and elevation."""
+    base = default_camera(scene, options.width, options.height)
+    lo, hi = scene.robust_bounds
+    centre = 0.5 * (lo + hi)
+    distance = float(np.linalg.norm(base.center - centre))
+    return [base.with_pose(orbit(centre, distance, 180.0 + options.orbit_step * (start + i), 20.0))
+            for i in range(options.frames)]
+
+
+def sort_benchmark(n: int = 1_000_000, repeats: int = 7, seed: int = 0) -> float:
+    """Median milliseconds of the exact 32-bit depth sort of ``n`` keys."""
+    rng = np.random.default_rng(seed)
+    depth = rng.uniform(0.1, 100.0, n).astype(np.float32)
+    idx = np.arange(n, dtype=np.uint32)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        depth_sort(depth, idx)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times) * 1e3
+
+
+def _stage_ms(times) -> dict[str, float]:
+    if times is None:
+        return {}
+    out = {}
+    for name, value in vars(times).items():
+        if isinstance(value, float):
+            out[name] = value * 1e3
+    return out
+
+
+class _Runner:
+    def __init__(self, renderer: Renderer, scene: Scene, config: BenchConfig):
+        self.kind = config.kind
+        self.settings = config.settings
+        if config.kind is RowKind.LIMIT:
+            self.impl = LimitRenderer(renderer.ctx, scene, config.settings, renderer.programs)
+        elif config.kind in (RowKind.QUAD, RowKind.TILE):
+            self.impl = renderer.renderer_for(scene, config.settings, RendererKind(config.kind.value))
+        else:
+            self.impl = None
+        self.scene = scene
+
+    def render(self, camera: Camera) -> np.ndarray:
+        if self.impl is None:
+            return render_reference_rgba(self.scene, camera, self.settings)
+        return self.impl.render(camera)
+
+    def release(self) -> None:
+        if self.kind is RowKind.LIMIT:
+            self.impl.release()
+
+
+def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptions,
+                base: RenderSettings = RenderSettings(), progress: Progress | None = None) -> list[BenchRow]:
+    """All rows for one scene.  The reference images of the error frames are computed once."""
+    cameras = orbit_path(scene, options)
+    warm = orbit_path(scene, BenchOptions(options.width, options.height, 1, options.orbit_step), start=-3)[0]
+    err_frames = [i for i in options.error_frames if i < len(cameras)] or [len(cameras) - 1]
+    configs = configurations(base, scene.sh_degree, options.quick, options.groups)
+    total = len(err_frames) + len(configs)
+    step = 0
+
+    def tick(what: str) -> None:
+        nonlocal step
+        step += 1
+        if progress is not None:
+            progress(step, total, f"{name}: {what}")
+
+    refs, ref_ms = {}, []
+    for i in err_frames:
+        t0 = time.perf_counter()
+        refs[i] = render_reference_rgba(scene, cameras[i], base)
+        ref_ms.append((time.perf_counter() - t0) * 1e3)
+        tick(f"reference frame {i}")
+
+    rows: list[BenchRow] = []
+    for config in configs:
+        if config.kind is RowKind.REFERENCE:
+            rows.append(BenchRow(name, scene.count, config.name, config.group, "reference",
+                                 statistics.median(ref_ms), min(ref_ms), max(ref_ms), psnr=math.inf,
+                                 max_abs=0.0, off_1=0.0))
+            tick(config.name)
+            continue
+        runner = _Runner(renderer, scene, config)
+        if config.kind is RowKind.QUAD:
+            runner.impl.gpu_timer = True
+        runner.render(warm)  # compile, upload, allocate
+        runner.render(cameras[-1])
+        times, stages, gpu, drawn, errs = [], [], [], [], []
+        for i, cam in enumerate(cameras):
+            t0 = time.perf_counter()
+            img = runner.render(cam)
+            times.append((time.perf_counter() - t0) * 1e3)
+            last = getattr(runner.impl, "last_times", None)
+            stages.append(_stage_ms(last))
+            drawn.append(getattr(last, "drawn", None))
+            if config.kind is RowKind.QUAD and runner.impl.last_gpu_draw_ns is not None:
+                gpu.append(runner.impl.last_gpu_draw_ns / 1e6)
+            if i in refs and config.kind is not RowKind.LIMIT:
+                errs.append(image_errors(img, refs[i]))
+        shaded = kept = eff = None
+        if config.kind is RowKind.QUAD:
+            runner.impl.gpu_timer = False
+            shaded, kept = runner.impl.count_fragments(cameras[0])
+            eff = kept / shaded if shaded else None
+        runner.release()
+        keys = stages[0].keys() if stages else []
+        rows.append(BenchRow(
+            name, scene.count, config.name, config.group, config.kind.value,
+            statistics.median(times), float(np.percentile(times, 10)), float(np.percentile(times, 90)),
+            {k: statistics.median(s[k] for s in stages) for k in keys},
+            statistics.median(gpu) if gpu else None,
+            int(statistics.median(d for d in drawn if d is not None)) if any(d is not None for d in drawn) else None,
+            shaded, kept, eff,
+            min(e.psnr for e in errs) if errs else None,
+            max(e.max_abs for e in errs) if errs else None,
+            max(e.off_1 for e in errs) if errs else None,
+        ))
+        tick(config.name)
+    limit = next((r.frame_ms for r in rows if r.group == "limit"), None)
+    if limit:
+        rows = [BenchRow(**{**asdict(r), "limit_ratio": r.frame_ms / limit}) for r in rows]
+    return rows

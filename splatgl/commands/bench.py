@@ -1,0 +1,116 @@
+"""``splatgl bench``: frame time against error for every configuration, in one run."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..bench.report import plot, table, write_csv, write_json
+from ..bench.runner import BenchOptions, bench_scene, sort_benchmark
+from ..errors import SplatglError
+from ..formats import load_scene
+from ..progress import StderrProgress, enabled
+from ..render import Renderer
+from ..scene import Scene
+from ._common import demo_scene_path
+
+NAME = "bench"
+ORDER = 40
+HELP = "benchmark run time against error for renderer configurations"
+DESCRIPTION = """Measure, on the same scenes and camera paths in one run, each configuration's
+frame time and its error against the per-tile reference.
+
+Rows: the default quad configuration; each knob changed alone (blend precision, quad extent,
+sort keys, SH degree cap, re-sorting every N frames, per-splat math in a compute pre-pass or
+the vertex shader, culling); the tile renderer and the NumPy reference; and the limit row (the
+default's quads drawn with trivial shaders), so every time reads as a ratio to the best this
+machine's OpenGL can do.  Each row: median frame time with its 10-90% spread over an orbit
+(the camera moves every frame), per-stage times, GL timer-query draw time where the driver has
+real timer queries, splats drawn, fragments shaded against fragments with alpha >= 1/255,
+and PSNR / max error / share of pixels off by more than 1/255 against the reference.
+
+Without scenes: the real scenes in ../shared/scenes (if present) and a synthetic 150k SH3
+scene; with --quick: the bundled demo at 160x120, a few frames, one row per question (CI).
+
+examples:
+  splatgl bench --quick
+  splatgl bench scene.ply --width 1280 --height 720 --out bench-results
+  splatgl bench --groups extent,preprocess"""
+
+SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"
+REAL = ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply", "compressed_ply/guitar.compressed.ply"]
+
+
+def synthetic_scene(n: int = 150_000, degree: int = 3, seed: int = 0) -> Scene:
+    """``n`` random splats in a 4-unit box, log-normal scales, SH of ``degree``."""
+    rng = np.random.default_rng(seed)
+    return Scene(rng.uniform(-2, 2, (n, 3)), rng.normal(size=(n, 4)), rng.normal(-4.0, 0.6, (n, 3)),
+                 rng.normal(0.0, 2.0, n), rng.normal(0, 0.3, (n, (degree + 1) ** 2, 3)))
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scenes", nargs="*", type=Path, help="scene files (default: see above)")
+    p.add_argument("--quick", action="store_true", help="small and fast: the demo scene, few rows (CI)")
+    p.add_argument("--width", type=int, default=None, help="image width (default 1280; quick 160)")
+    p.add_argument("--height", type=int, default=None, help="image height (default 720; quick 120)")
+    p.add_argument("--frames", type=int, default=None, help="timed frames per row (default 12; quick 4)")
+    p.add_argument("--groups", default=None,
+                   help="only these comma-separated groups of rows: precision, extent, sort, sh, "
+                        "resort, preprocess, cull, renderer (default and limit always run)")
+    p.add_argument("--synthetic", type=int, default=None, metavar="N",
+                   help="add a synthetic SH3 scene of N splats (default 150000 without scenes)")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+                   help="write bench.csv, bench.json and bench.png there")
+    p.add_argument("--json", action="store_true", help="print the JSON instead of the table")
+
+
+def run(args: argparse.Namespace) -> int:
+    quick = args.quick
+    width = args.width or (160 if quick else 1280)
+    height = args.height or (120 if quick else 720)
+    frames = args.frames or (4 if quick else 12)
+    if frames < 1 or width < 1 or height < 1:
+        raise SplatglError("--frames, --width and --height must be positive")
+    groups = frozenset(g.strip() for g in args.groups.split(",")) if args.groups else None
+    options = BenchOptions(width, height, frames, error_frames=tuple(sorted({frames // 3, 2 * frames // 3, frames - 1}))
+                           if not quick else (frames - 1,), quick=quick, groups=groups)
+    jobs = [(p.name, load_scene(p)) for p in args.scenes]
+    if not jobs:
+        if quick:
+            jobs.append(("demo", load_scene(demo_scene_path())))
+        else:
+            jobs += [(Path(r).name, load_scene(SHARED / r)) for r in REAL if (SHARED / r).is_file()]
+    n_syn = args.synthetic if args.synthetic is not None else (150_000 if not args.scenes and not quick else 0)
+    if n_syn:
+        jobs.append((f"synthetic-{n_syn // 1000}k-sh3", synthetic_scene(n_syn)))
+    progress = StderrProgress() if enabled() else None
+    rows = []
+    with Renderer() as renderer:
+        for name, scene in jobs:
+            rows += bench_scene(renderer, name, scene, options, progress=progress)
+    sort_ms = sort_benchmark(100_000 if quick else 1_000_000)
+    extra = {"width": width, "height": height, "frames": frames,
+             "sort_exact_ms": sort_ms, "sort_keys": 100_000 if quick else 1_000_000,
+             "renderer": renderer.ctx.info.get("GL_RENDERER", "?")}
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        write_csv(args.out / "bench.csv", rows)
+        write_json(args.out / "bench.json", rows, extra)
+        plot(args.out / "bench.png", rows)
+    if args.json:
+        print(json.dumps({**extra, "rows": [r.as_dict() for r in rows]}))
+        return 0
+    print(f"{width}x{height}, {frames} frames per row along an orbit, GL renderer {extra['renderer']}")
+    print(table(rows))
+    print(f"\nexact sort of {extra['sort_keys']} depth keys: {sort_ms:.1f} ms (median)")
+    defaults = [r for r in rows if r.config == "default"]
+    for r in defaults:
+        print(f"target check {r.scene}: default at {r.limit_ratio:.2f}x the limit row "
+              f"(target <= 1.5), fragment efficiency {r.fragment_efficiency:.3f} (target >= 0.5)")
+    if args.out is not None:
+        print(f"wrote {args.out / 'bench.csv'}, bench.json, bench.png")
+    return 0

@@ -1,0 +1,78 @@
+"""`splatgl bench`: rows, outputs, the limit row, fragment counts and the Pareto front."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from splatgl.bench.configs import RowKind, configurations
+from splatgl.bench.report import pareto_front
+from splatgl.bench.runner import BenchOptions, bench_scene
+from splatgl.cli import main
+from splatgl.image_io import read_image
+from splatgl.render import default_camera
+from splatgl.scene import Scene
+from splatgl.settings import QuadExtent, RenderSettings
+
+
+def test_pareto_front():
+    pts = [(1.0, 5.0), (2.0, 1.0), (3.0, 3.0), (0.5, 9.0), (2.0, 2.0)]
+    assert pareto_front(pts) == [3, 0, 1]
+
+
+def test_configurations_cover_every_question():
+    rows = configurations(RenderSettings(), scene_sh_degree=3)
+    groups = {r.group for r in rows}
+    assert groups == {"default", "precision", "extent", "sort", "sh", "resort", "preprocess", "cull",
+                      "renderer", "limit"}
+    assert {r.name for r in rows if r.group == "sh"} == {"sh<=0", "sh<=1", "sh<=2"}
+    assert [r.kind for r in rows if r.group == "renderer"] == [RowKind.TILE, RowKind.REFERENCE]
+    quick = configurations(RenderSettings(), 0, quick=True)
+    assert len(quick) < len(rows) and {r.group for r in quick} >= {"default", "limit", "extent"}
+
+
+def test_ellipse_fragment_efficiency_is_pi_over_4(gl_renderer):
+    """Inside an axis-aligned rectangle, the inscribed ellipse covers pi/4 of the pixels."""
+    rng = np.random.default_rng(6)
+    n = 400
+    scene = Scene(rng.normal(size=(n, 3)), rng.normal(size=(n, 4)), rng.normal(-2.0, 0.3, (n, 3)),
+                  rng.normal(2.0, 0.5, n), rng.normal(0, 0.2, (n, 1, 3)))
+    cam = default_camera(scene, 320, 240)
+    quad = gl_renderer.renderer_for(scene, RenderSettings())
+    shaded, kept = quad.count_fragments(cam)
+    assert shaded > 100_000
+    assert kept / shaded == pytest.approx(math.pi / 4, abs=0.01)
+    square = gl_renderer.renderer_for(scene, RenderSettings(extent=QuadExtent.SQUARE))
+    s2, k2 = square.count_fragments(cam)
+    assert k2 / s2 < kept / shaded and abs(k2 - kept) / kept < 0.02  # same kept, more shaded
+
+
+def test_bench_scene_rows_and_limit(gl_renderer):
+    rng = np.random.default_rng(1)
+    n = 300
+    scene = Scene(rng.normal(size=(n, 3)), rng.normal(size=(n, 4)), rng.normal(-2.5, 0.3, (n, 3)),
+                  rng.normal(1.0, 1.0, n), rng.normal(0, 0.2, (n, 4, 3)))
+    rows = bench_scene(gl_renderer, "syn", scene, BenchOptions(64, 48, 3, error_frames=(2,), quick=True))
+    by = {r.config: r for r in rows}
+    assert by["limit"].limit_ratio == pytest.approx(1.0)
+    assert by["default"].psnr > 60 and by["reference"].psnr == math.inf
+    assert by["tile"].psnr > 100
+    assert by["default"].drawn <= n and by["default"].fragment_efficiency > 0.5
+    assert all(r.frame_ms > 0 and r.frame_ms_p10 <= r.frame_ms <= r.frame_ms_p90 for r in rows)
+    assert by["sh<=0"].psnr < by["default"].psnr  # dropping SH bands costs accuracy
+
+
+def test_bench_quick_cli_writes_table_csv_json_plot(tmp_path, capsys):
+    assert main(["bench", "--quick", "--frames", "2", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "limit" in out and "target check demo" in out and "exact sort" in out
+    data = json.loads((tmp_path / "bench.json").read_text())
+    assert {r["config"] for r in data["rows"]} >= {"default", "tile", "reference", "limit"}
+    with open(tmp_path / "bench.csv") as fh:
+        assert len(list(csv.DictReader(fh))) == len(data["rows"])
+    png = read_image(tmp_path / "bench.png")
+    assert png.shape[0] > 200 and png.std() > 0.01
