@@ -88,8 +88,9 @@ class QuadRenderer:
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
                  programs: ProgramCache | None = None):
-        if scene.kind is not SplatKind.GAUSSIAN_3D:
-            raise NotImplementedError("the quad path renders 3DGS scenes; 2DGS surfels are not supported yet")
+        if scene.kind is SplatKind.SURFEL_2D and settings.preprocess is Preprocess.COMPUTE:
+            raise NotImplementedError("the compute pre-pass renders 3DGS scenes; draw 2DGS surfels "
+                                      "with the vertex-stage quad path (shaders/surfel.vert)")
         self.ctx = ctx
         self.scene = scene
         self.settings = settings
@@ -137,7 +138,13 @@ class QuadRenderer:
         return defines
 
     def program(self, camera: Camera, depth: bool = False) -> moderngl.Program:
-        """The draw program: full per-corner math, or the light one after the pre-pass."""
+        """The draw program: full per-corner math, or the light one after the pre-pass.
+
+        2DGS surfels use shaders/surfel.vert + surfel.frag (ray-splat intersection); the
+        extent and antialiasing settings are 3DGS-only and do not change them.
+        """
+        if self.scene.kind is SplatKind.SURFEL_2D:
+            return self.programs.program("surfel.vert", "surfel.frag", self.defines(camera, depth))
         vertex = "quad_light.vert" if self.settings.preprocess is Preprocess.COMPUTE else "quad.vert"
         return self.programs.program(vertex, "quad.frag", self.defines(camera, depth))
 
