@@ -133,11 +133,13 @@ def test_project_orthographic_footprint_is_depth_independent():
     np.testing.assert_allclose(proj.conic, [[1 / v, 0, 1 / v]] * 2, rtol=1e-6, atol=1e-12)
 
 
-def test_surfels_are_not_supported():
+def test_surfels_are_projected_and_near_culled():
+    """2DGS surfels take the surfel branch (tests/test_surfels.py); one at z = 0 is near-culled."""
     scene = Scene(np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]]), np.zeros((1, 2)), np.zeros(1),
                   np.zeros((1, 1, 3)), SplatKind.SURFEL_2D)
-    with pytest.raises(NotImplementedError, match="2DGS"):
-        render_reference(scene, Camera(16, 16, 10.0, 10.0, 8.0, 8.0), NEAR)
+    ref = render_reference(scene, Camera(16, 16, 10.0, 10.0, 8.0, 8.0), NEAR)
+    assert ref.projected.is_surfel and not ref.projected.visible[0]
+    assert np.all(ref.alpha == 0.0)
 
 
 def test_project_rejects_other_dtypes():

@@ -4,6 +4,8 @@ For every pixel of a tile, the tile's depth-sorted splats are blended in order w
 
     power = -0.5 (a dx^2 + c dy^2) - b dx dy,   d = pixel centre - mean2d   (pixels)
     alpha = min(alpha_max, o exp(power)), skipped when power > 0 or alpha < 1/255
+    (2DGS surfels: power = -0.5 min(u^2 + v^2, F |d|^2) from the ray-splat intersection,
+    :func:`splatgl.surfel.surfel_alpha`, and z is the view z of the hit, per pixel)
     stop (without adding the splat) once T (1 - alpha) < 1e-4   (GSPLAT: <= 1e-4)
     C = sum c alpha T,  D = sum z alpha T,  A = 1 - T_final,  out = C + T_final background
 
@@ -24,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import surfel as sf
 from ..constants import ALPHA_MIN, T_MIN, TILE_SIZE
 from .options import ReferenceOptions
 from .stages import ProjectedSplats
@@ -80,6 +83,9 @@ class _Tiles:
         self.color = proj.color[sidx]        # (n, K, 3)
         self.depth = proj.depth[sidx]        # (n, K)
         self.valid = valid                   # (n, K)
+        if proj.is_surfel:
+            self.rows = proj.surfel_rows[sidx]       # (n, K, 3, 3)
+            self.depth_rows = proj.depth_rows[sidx]  # (n, K, 3)
 
 
 def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) -> np.ndarray:
@@ -99,6 +105,24 @@ def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) ->
     n, k = dx.shape[:2]
     alpha = gaussian_alpha(power.reshape(n, k, TILE_PIXELS), g.opacity[:, :, None], alpha_max)
     return np.where(g.valid[:, :, None], alpha, dt(0.0))
+
+
+def _surfel_chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """2DGS: (n, K, 256) alpha (0 where skipped) and (n, K, 256) view z of the hit.
+
+    :func:`splatgl.surfel.surfel_alpha` on the tile's pixel centres, as (n, K, 16 rows,
+    16 columns) broadcasts: ``h_u`` varies along columns only, ``h_v`` along rows only.
+    """
+    dt = px.dtype.type
+    dx = (px[:, None, :] - g.mean2d[:, :, 0, None])[:, :, None, :]   # (n, K, 1, 16) by column
+    dy = (py[:, None, :] - g.mean2d[:, :, 1, None])[:, :, :, None]   # (n, K, 16, 1) by row
+    alpha, z = sf.surfel_alpha(g.rows[:, :, None, None], g.depth_rows[:, :, None, None],
+                               g.opacity[:, :, None, None], dx, dy, alpha_max)
+    n, k = g.opacity.shape
+    alpha = np.broadcast_to(alpha, (n, k, TILE_SIZE, TILE_SIZE)).reshape(n, k, TILE_PIXELS)
+    z = np.broadcast_to(z, (n, k, TILE_SIZE, TILE_SIZE)).reshape(n, k, TILE_PIXELS)
+    return np.where(g.valid[:, :, None], alpha, dt(0.0)), z
 
 
 def _blend_chunk(t_prev: np.ndarray, alpha: np.ndarray, inclusive_stop: bool
@@ -143,12 +167,18 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
     while rows.size:
         pos = start[rows, None] + offset + ks
         g = _Tiles(proj, values, pos, pos < end[rows, None])
-        alpha = _chunk_alpha(g, px[rows], py[rows], amax)
+        if proj.is_surfel:
+            alpha, z_pix = _surfel_chunk_alpha(g, px[rows], py[rows], amax)
+        else:
+            alpha = _chunk_alpha(g, px[rows], py[rows], amax)
         alpha = np.where(done[:, None, :], dt(0.0), alpha)
         w, kept, t_seq = _blend_chunk(t, alpha, inclusive)
         wt = w.transpose(0, 2, 1)                           # (n, 256, K)
         c += np.matmul(wt, g.color)
-        d += np.matmul(wt, g.depth[:, :, None])[:, :, 0]
+        if proj.is_surfel:                                  # depth of the hit, per pixel
+            d += (w * np.where(w > 0, z_pix, dt(0.0))).sum(axis=1)
+        else:
+            d += np.matmul(wt, g.depth[:, :, None])[:, :, 0]
         t = np.take_along_axis(t_seq, kept[:, None, :], axis=1)[:, 0]
         done |= kept < chunk
         blended = w > 0
@@ -243,7 +273,10 @@ def transmittance_trace(proj: ProjectedSplats, sorted_values: np.ndarray, ranges
     pos = start + np.arange(length)[None]
     g = _Tiles(proj, np.asarray(sorted_values, np.int64), pos, pos < end)
     with np.errstate(under="ignore"):
-        alpha = _chunk_alpha(g, px, py, options.resolved_alpha_max)
+        if proj.is_surfel:
+            alpha, _ = _surfel_chunk_alpha(g, px, py, options.resolved_alpha_max)
+        else:
+            alpha = _chunk_alpha(g, px, py, options.resolved_alpha_max)
         _, kept, t_seq = _blend_chunk(t, alpha, options.stop_inclusive)
     final = np.take_along_axis(t_seq, kept[:, None, :], axis=1)
     ks = np.arange(length + 1)[None, :, None]

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import project as pm
+from .. import surfel as sf
 from ..camera import Camera
 from ..constants import ALPHA_MIN, TILE_SIZE
 from ..scene import Scene, SplatKind
@@ -40,6 +41,10 @@ class ProjectedSplats:
         rect_min, rect_max: (N, 2) int64 tile rectangle, ``[min, max)`` in tile units (x, y),
             clamped to the grid; empty (min == max) for culled rows.
         width, height: image size in pixels.  grid: (tiles_x, tiles_y).
+        surfel_rows, depth_rows: 2DGS surfels only (None for 3DGS): (N, 3, 3) centred
+            ``T' = A P H`` and (N, 3) view-z rows (:class:`splatgl.surfel.SurfelScreen`); then
+            ``mean2d`` is the projected centre (the low-pass centre), ``conic`` is zero and
+            ``radius`` holds the per-axis ``ceil`` of the box half extents.
     """
 
     visible: np.ndarray
@@ -54,6 +59,12 @@ class ProjectedSplats:
     width: int
     height: int
     grid: tuple[int, int]
+    surfel_rows: np.ndarray | None = None
+    depth_rows: np.ndarray | None = None
+
+    @property
+    def is_surfel(self) -> bool:
+        return self.surfel_rows is not None
 
     @property
     def count(self) -> int:
@@ -111,6 +122,30 @@ def gsplat_rect(mean2d: np.ndarray, radius_xy: np.ndarray, grid: tuple[int, int]
         return _clamp_int(np.floor(t - tr), hi), _clamp_int(np.ceil(t + tr), hi)
 
 
+def box_rect(center: np.ndarray, half: np.ndarray, grid: tuple[int, int]
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Tile rectangles of pixel boxes ``center +- half`` (2DGS surfels), conservative.
+
+    The 3DGS ``getRect`` form in pixel-index coordinates (``p = center - 0.5``), but exact about
+    which pixels the box holds: indices ``ceil(p - half)`` .. ``floor(p + half)``, tiles
+    ``[floor(first / 16), floor(last / 16) + 1)`` clamped to the grid.  (getRect's
+    ``(int)((p + r + 15) / 16)`` drops the tile of pixel ``floor(p + r)`` when that pixel starts
+    a tile and ``p + r`` is not an integer; harmless at 3 sigma, visible with a tight box.)
+    (N, 2) float centres and half extents (pixels) -> two (N, 2) int64 arrays; a box holding no
+    pixel centre gets an empty rectangle.
+    """
+    dt = center.dtype.type
+    p = center - dt(0.5)
+    hi = np.array(grid, np.int64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        first = np.ceil(p - half)
+        last = np.floor(p + half)
+        lo_t = _clamp_int(np.floor(first / dt(TILE_SIZE)), hi)
+        hi_t = _clamp_int(np.floor(last / dt(TILE_SIZE)) + dt(1.0), hi)
+        hi_t = np.where(last >= first, hi_t, lo_t)
+    return lo_t, hi_t
+
+
 def _clamp_int(values: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Float tile coordinates -> int64 clamped to [0, hi] (NaN -> 0)."""
     v = np.nan_to_num(values, nan=0.0, posinf=1e18, neginf=-1e18)
@@ -144,8 +179,10 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     ``det(cov2d) <= 0``, an empty tile rectangle; under GSPLAT also ``o < 1/255``, zero radii
     and an extent entirely off screen.
 
+    2DGS surfels go to :func:`project_surfels` (same culling idea, the surfel's own box).
+
     Args:
-        scene: a 3DGS scene (2DGS surfels raise NotImplementedError).
+        scene: a 3DGS or 2DGS scene.
         camera: perspective or orthographic camera.
         settings: near plane, antialiasing, SH degree cap (default RenderSettings()).
         dtype: float32 (mimics the GPU) or float64 (checks).
@@ -153,13 +190,11 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     """
     settings = RenderSettings() if settings is None else settings
     options = ReferenceOptions() if options is None else options
-    if scene.kind is SplatKind.SURFEL_2D:
-        raise NotImplementedError(
-            "the NumPy reference rasterizer handles 3DGS Gaussians only; 2DGS surfels "
-            "(ray-splat intersection) are not implemented yet")
     dt = np.dtype(dtype)
     if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise ValueError(f"reference dtype must be float32 or float64, got {dt}")
+    if scene.kind is SplatKind.SURFEL_2D:
+        return project_surfels(scene, camera, settings, dt)
     near = dt.type(resolve_near(settings, scene.robust_radius))
     grid = tile_grid(camera.width, camera.height)
     with np.errstate(all="ignore"):
@@ -199,3 +234,42 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
         opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
         rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
         grid=grid)
+
+
+def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
+                    dtype: np.dtype) -> ProjectedSplats:
+    """Stage 1 for 2DGS surfels: centred ``T``, projected centre, SH colour and tile rects.
+
+    The rectangle is :func:`box_rect` of the box of :func:`splatgl.surfel.surfel_bounds` (the
+    quad path draws that same box); ``radius`` is the per-axis ``ceil`` of its half extents.  Culled: centre view z at or below the near plane,
+    ``o <= 1/255``, non-finite values, an empty box or rectangle.  Compat and antialiasing do
+    not apply to surfels.
+    """
+    dt = np.dtype(dtype)
+    near = resolve_near(settings, scene.robust_radius)
+    grid = tile_grid(camera.width, camera.height)
+    means = scene.means.astype(dt)
+    opac = scene.opacities.astype(dt)
+    with np.errstate(all="ignore"):
+        scr = sf.surfel_screen(means, scene.rotations.astype(dt), scene.scales.astype(dt), camera)
+        box = sf.surfel_bounds(scr, opac, camera, near)
+        color = pm.sh_color(scene.sh.astype(dt), pm.view_dirs(means, camera), settings.sh_degree)
+    ok = ((scr.view_z > dt.type(near)) & box.visible & np.isfinite(color).all(1)
+          & np.isfinite(scr.depth_row).all(1))
+    radius = np.where(ok[:, None], np.ceil(box.half), 0).astype(np.int64)
+    rect_min, rect_max = box_rect(box.center, box.half, grid)
+    ok &= ((rect_max - rect_min) > 0).all(1)
+    rect_min = np.where(ok[:, None], rect_min, 0)
+    rect_max = np.where(ok[:, None], rect_max, 0)
+    radius = np.where(ok[:, None], radius, 0)
+
+    def clean(a: np.ndarray) -> np.ndarray:
+        mask = ok.reshape((-1,) + (1,) * (a.ndim - 1))
+        return np.ascontiguousarray(np.where(mask, a, 0).astype(dt))
+
+    return ProjectedSplats(
+        visible=ok, depth=clean(scr.view_z), mean2d=clean(scr.center),
+        conic=np.zeros((scene.count, 3), dt), opacity=clean(opac), color=clean(color),
+        radius=radius, rect_min=rect_min, rect_max=rect_max, width=camera.width,
+        height=camera.height, grid=grid, surfel_rows=clean(scr.rows),
+        depth_rows=clean(scr.depth_row))
