@@ -88,12 +88,12 @@ class QuadRenderer:
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
                  programs: ProgramCache | None = None):
-        if scene.kind is SplatKind.SURFEL_2D and settings.preprocess is Preprocess.COMPUTE:
-            raise NotImplementedError("the compute pre-pass renders 3DGS scenes; draw 2DGS surfels "
-                                      "with the vertex-stage quad path (shaders/surfel.vert)")
         self.ctx = ctx
         self.scene = scene
         self.settings = settings
+        # The compute pre-pass covers 3DGS; surfels always take their vertex stage.
+        self.uses_prepass = (settings.preprocess is Preprocess.COMPUTE
+                             and scene.kind is SplatKind.GAUSSIAN_3D)
         self.programs = programs or ProgramCache(ctx)
         self.near = resolve_near(settings, scene.robust_radius)
         self.buffers = SceneBuffers(ctx, scene)
@@ -145,7 +145,7 @@ class QuadRenderer:
         """
         if self.scene.kind is SplatKind.SURFEL_2D:
             return self.programs.program("surfel.vert", "surfel.frag", self.defines(camera, depth))
-        vertex = "quad_light.vert" if self.settings.preprocess is Preprocess.COMPUTE else "quad.vert"
+        vertex = "quad_light.vert" if self.uses_prepass else "quad.vert"
         return self.programs.program(vertex, "quad.frag", self.defines(camera, depth))
 
     def visible_order(self, camera: Camera) -> np.ndarray:
@@ -167,7 +167,8 @@ class QuadRenderer:
         t0 = time.perf_counter()
         p_cam = to_camera(self.scene.means, camera)
         if self.settings.cull:
-            mask = cull(p_cam, self._max_scale * camera.scale, self.scene.opacities, camera, self.near)
+            mask = cull(p_cam, self._max_scale * camera.scale, self.scene.opacities, camera, self.near,
+                        self.settings.antialias)
         else:
             mask = p_cam[:, 2] > self.near  # sort keys need positive depths
         keep = np.flatnonzero(mask)
@@ -194,7 +195,7 @@ class QuadRenderer:
         if self._vao is None or self._vao.program is not prog:
             if self._vao is not None:
                 self._vao.release()
-            if self.settings.preprocess is Preprocess.COMPUTE:
+            if self.uses_prepass:
                 self._vao = self.ctx.vertex_array(prog, [])  # instance k reads prepared[k]
             else:
                 self._vao = self.ctx.vertex_array(prog, [(self._index_buffer, "u4/i", "splat_index")])
@@ -236,7 +237,7 @@ class QuadRenderer:
         self._upload(order, prog)
         t1 = time.perf_counter()
         self.buffers.bind()
-        if self.settings.preprocess is Preprocess.COMPUTE:
+        if self.uses_prepass:
             self._prepass(camera, len(order), depth)
             self.ctx.finish()
         tp = time.perf_counter()

@@ -321,3 +321,19 @@ def test_quad_culls_behind_and_offscreen(gl_renderer):
     got = gl_renderer.render(scene, cam)
     assert got[..., 0].max() == 0.0 and got[..., 1].max() == 0.0 and got[..., 2].max() > 0.8
     assert resolve_near(RenderSettings(), scene.robust_radius) > 0
+
+
+def test_surfels_take_their_vertex_stage_whatever_the_preprocess_setting(gl_renderer):
+    from splatgl.settings import Preprocess, RenderSettings as RS
+
+    rng = np.random.default_rng(31)
+    n = 200
+    scene = Scene(rng.normal(size=(n, 3)), rng.normal(size=(n, 4)), rng.normal(-2.5, 0.3, (n, 2)),
+                  rng.normal(1.0, 1.0, n), rng.normal(0, 0.3, (n, 1, 3)), SplatKind.SURFEL_2D)
+    from splatgl.render import default_camera as dc
+
+    cam = dc(scene, 64, 48)
+    a = gl_renderer.render(scene, cam, RS())
+    b = gl_renderer.render(scene, cam, RS(preprocess=Preprocess.COMPUTE))
+    np.testing.assert_array_equal(a, b)
+    assert a[..., 3].max() > 0.3
