@@ -35,7 +35,9 @@ def xvfb_display():
     if XVFB is None:
         pytest.skip("Xvfb not installed (Debian package xvfb): cannot open windows headlessly")
     n = _free_display()
-    proc = subprocess.Popen([XVFB, f":{n}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
+    # -noreset: without it the server resets when its last client leaves, and a viewer opened
+    # right after another one closed can fail to connect during the reset.
+    proc = subprocess.Popen([XVFB, f":{n}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp", "-noreset"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 10.0
     while not Path(f"/tmp/.X11-unix/X{n}").exists():

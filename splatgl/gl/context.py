@@ -139,32 +139,77 @@ WINDOW_VERSIONS = ((4, 5), (4, 3), (3, 3))
 
 
 def create_glfw_window(width: int, height: int, title: str, visible: bool = True):
-    """Open a glfw window with a core-profile context, make it current; ``(window, (major, minor))``.
+    """Open a glfw window with a core-profile context, make it current.
 
-    Tries each of :data:`WINDOW_VERSIONS` in turn; the caller decides what a version below
-    :data:`REQUIRED_VERSION` can still do.  ``glfw.init()`` must have succeeded.  Raises
-    :class:`ContextError` when no version gives a window.
+    Returns ``(window, (major, minor), api)`` with ``api`` ``"egl"`` or ``"native"`` (GLX on
+    X11).  Per version of :data:`WINDOW_VERSIONS`, EGL is tried first: a process that already
+    made a headless EGL context (:func:`create_headless_context`) cannot make a GLX context
+    current on the same display under Mesa (X error BadAccess, which ends the process), and
+    EGL and EGL mix.  The caller decides what a version below :data:`REQUIRED_VERSION` can
+    still do.  ``glfw.init()`` must have succeeded.  Raises :class:`ContextError` when no
+    version gives a window.
     """
     import glfw
 
     failures = []
     for major, minor in WINDOW_VERSIONS:
-        glfw.default_window_hints()
-        glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, major)
-        glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, minor)
-        glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
-        glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
-        glfw.window_hint(glfw.VISIBLE, bool(visible))
-        try:
-            window = glfw.create_window(width, height, title, None, None)
-        except glfw.GLFWError:  # raised instead of returned when glfw.ERROR_REPORTING = 'raise'
-            window = None
-        if window:
-            glfw.make_context_current(window)
-            return window, (major, minor)
-        failures.append(f"{major}.{minor}")
+        for api, hint in (("egl", glfw.EGL_CONTEXT_API), ("native", glfw.NATIVE_CONTEXT_API)):
+            glfw.default_window_hints()
+            glfw.window_hint(glfw.CONTEXT_CREATION_API, hint)
+            glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, major)
+            glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, minor)
+            glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+            glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+            glfw.window_hint(glfw.VISIBLE, bool(visible))
+            try:
+                window = glfw.create_window(width, height, title, None, None)
+            except glfw.GLFWError:  # raised instead of returned when ERROR_REPORTING = 'raise'
+                window = None
+            if window:
+                glfw.make_context_current(window)
+                return window, (major, minor), api
+            failures.append(f"{major}.{minor} ({api})")
     raise ContextError("could not open a window with an OpenGL core context (tried "
                        + ", ".join(failures) + ")")
+
+
+class _GlfwLoader:
+    """moderngl loader over ``glfw.get_proc_address`` (EGL and GLX window contexts alike);
+    entering it (what :func:`make_current` does) makes the window's context current."""
+
+    def __init__(self, window) -> None:
+        self.window = window
+
+    def load_opengl_function(self, name: str) -> int:
+        import glfw
+
+        return glfw.get_proc_address(name) or 0
+
+    def __enter__(self):
+        import glfw
+
+        glfw.make_context_current(self.window)
+        return self
+
+    def __exit__(self, *args):
+        return None
+
+    def release(self) -> None:
+        return None
+
+
+def create_glfw_context() -> moderngl.Context:
+    """Wrap the current glfw window's context (EGL or GLX) in moderngl; the window owns it."""
+    import glfw
+
+    window = glfw.get_current_context()
+    if not window:
+        raise ContextError("no glfw window context is current")
+    try:
+        moderngl.init_context(loader=_GlfwLoader(window))
+        return moderngl.get_context()
+    except Exception as exc:
+        raise ContextError(f"could not use the window's OpenGL context: {exc}") from None
 
 
 def make_current(ctx: moderngl.Context) -> None:

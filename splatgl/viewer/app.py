@@ -18,7 +18,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import SplatglError
-from ..gl.context import REQUIRED_VERSION, create_glfw_window, create_window_context
+from ..gl.context import REQUIRED_VERSION, create_glfw_context, create_glfw_window
 from ..render import Renderer
 from ..scene import Scene
 from ..settings import Precision, RendererKind, RenderSettings
@@ -110,14 +110,14 @@ class Viewer:
             raise SplatglError("cannot open a window: glfw failed to initialise "
                                "(no display? set DISPLAY, e.g. run under Xvfb)")
         try:
-            self.window, version = create_glfw_window(width, height, self.options.title,
+            self.window, version, self.context_api = create_glfw_window(width, height, self.options.title,
                                                       self.options.visible)
             if version[0] * 100 + version[1] * 10 < REQUIRED_VERSION:
                 raise SplatglError(
                     f"only an OpenGL {version[0]}.{version[1]} window context is available; the "
                     "viewer needs 4.3 (storage buffers for the quad path, compute shaders for "
                     "the tile path). Use `splatgl render` (headless EGL) instead")
-            self.ctx = create_window_context()
+            self.ctx = create_glfw_context()
         except Exception:
             self._terminate()
             raise
@@ -371,15 +371,17 @@ class Viewer:
             self.step()
 
     def benchmark(self, frames: int) -> dict[str, float]:
-        """Render ``frames`` frames of a full orbit (yaw steps of 360 / frames degrees), each
-        presented and swapped; returns mean seconds per frame and per stage, and fps."""
+        """Render ``frames`` frames of a scripted orbit (yaw steps of 360 / (frames + 1) degrees,
+        so every frame is a new view), each presented and swapped; returns mean seconds per
+        frame and per stage, and fps."""
         totals = {"frame": 0.0, "sort": 0.0, "draw": 0.0}
         start = self.state
-        for i in range(frames):
+        for i in range(1, frames + 1):
             glfw.poll_events()
-            self.state = replace(start, yaw=start.yaw + 360.0 * i / frames)
+            self.state = replace(start, yaw=start.yaw + 360.0 * i / (frames + 1))
             t0 = time.perf_counter()
-            self.step(dt=0.0)
+            if not self.step(dt=0.0):
+                raise SplatglError("benchmark: the window cannot be drawn into (minimised?)")
             self.ctx.finish()
             totals["frame"] += time.perf_counter() - t0
             totals["sort"] += self.last.sort
