@@ -22,6 +22,18 @@ W, H = 320, 240
 XVFB = "/usr/bin/Xvfb" if Path("/usr/bin/Xvfb").exists() else shutil.which("Xvfb")
 
 
+def _die_with_parent() -> None:
+    """In the Xvfb child: get SIGTERM when the test process dies (even by a crash), so a
+    failed run leaves no server behind (Linux prctl PR_SET_PDEATHSIG)."""
+    try:
+        import ctypes
+        import signal
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)
+    except Exception:
+        pass
+
+
 def _free_display() -> int:
     for n in range(91, 300):
         if not Path(f"/tmp/.X{n}-lock").exists() and not Path(f"/tmp/.X11-unix/X{n}").exists():
@@ -38,7 +50,8 @@ def xvfb_display():
     # -noreset: without it the server resets when its last client leaves, and a viewer opened
     # right after another one closed can fail to connect during the reset.
     proc = subprocess.Popen([XVFB, f":{n}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp", "-noreset"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            preexec_fn=_die_with_parent)
     deadline = time.monotonic() + 10.0
     while not Path(f"/tmp/.X11-unix/X{n}").exists():
         if proc.poll() is not None or time.monotonic() > deadline:
