@@ -96,7 +96,7 @@ class QuadRenderer:
                              and scene.kind is SplatKind.GAUSSIAN_3D)
         self.programs = programs or ProgramCache(ctx)
         self.near = resolve_near(settings, scene.robust_radius)
-        self.buffers = SceneBuffers(ctx, scene)
+        self.buffers = SceneBuffers(ctx, scene, settings.half_sh)
         self._max_scale = scene.scales.max(axis=1)
         self._index_buffer: moderngl.Buffer | None = None
         self._prepared: moderngl.Buffer | None = None
@@ -135,6 +135,8 @@ class QuadRenderer:
             defines["DEPTH_OUTPUT"] = 1
         if self._count_fragments:
             defines["COUNT_FRAGMENTS"] = 1
+        if self.buffers.half_sh:
+            defines["SH_HALF"] = 1
         return defines
 
     def program(self, camera: Camera, depth: bool = False) -> moderngl.Program:

@@ -83,6 +83,8 @@ class RenderSettings:
             (1 = always; larger values show sort lag, for the benchmark).
         preprocess: where the quad path's per-splat math runs.
         cull: the quad path's CPU frustum/opacity cull (the near plane is always applied).
+        half_sh: store SH coefficients 1.. as float16 in the quad path (half the memory and
+            bandwidth; the benchmark reports the error against float32).
     """
 
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -96,6 +98,7 @@ class RenderSettings:
     resort_interval: int = 1
     preprocess: Preprocess = Preprocess.VERTEX
     cull: bool = True
+    half_sh: bool = False
 
     def __post_init__(self) -> None:
         bg = tuple(float(v) for v in self.background)

@@ -91,3 +91,17 @@ def test_prepass_with_depth_and_every_precision(gl_renderer, precision):
     b = gl_renderer.render_layers(scene, cam, RenderSettings(precision=precision, preprocess="compute"))
     np.testing.assert_allclose(a.rgba, b.rgba, atol=2e-6 if precision is Precision.RGBA32F else 2e-3)
     np.testing.assert_allclose(a.depth, b.depth, rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("degree", [1, 3])
+def test_half_float_sh_storage_error_is_bounded(gl_renderer, degree):
+    """float16 keeps 11 significant bits: each coefficient errs by <= |h| 2^-11.  With |h| < 1.2
+    here (0.3-sigma normals, 4 sigma) and |Y_lm| < 1.1 over <= 15 bands, a colour errs by at most
+    15 * 1.2 * 1.1 * 2^-11 ~ 0.01 (measured about 2e-4)."""
+    scene = _scene(degree=degree)
+    assert np.abs(scene.sh).max() < 1.2 * 1.0 + 1.0  # the bound's premise, loosely
+    cam = default_camera(scene, 96, 72)
+    full = gl_renderer.render(scene, cam)
+    half = gl_renderer.render(scene, cam, RenderSettings(half_sh=True))
+    diff = np.abs(full - half).max()
+    assert 0 < diff < 0.01  # not identical (the storage really changed), and bounded

@@ -7,6 +7,9 @@ layout(std430, binding = 0) readonly buffer SplatA { vec4 splat_a[]; };
 layout(std430, binding = 1) readonly buffer SplatQ { vec4 splat_q[]; };
 layout(std430, binding = 2) readonly buffer SplatS { vec4 splat_s[]; };
 layout(std430, binding = 3) readonly buffer SplatDC { vec4 splat_dc[]; };
-#if SH_DEGREE > 0
+#if SH_DEGREE > 0 && defined(SH_HALF)
+// Half-float storage: two coefficients per uint (unpackHalf2x16: low half first).
+layout(std430, binding = 4) readonly buffer SplatSH { uint sh_rest_h[]; };
+#elif SH_DEGREE > 0
 layout(std430, binding = 4) readonly buffer SplatSH { float sh_rest[]; };
 #endif

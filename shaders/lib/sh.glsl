@@ -4,10 +4,18 @@
 // degree > 0, the sh_rest buffer (lib/scene.glsl).  dc is the degree-0 coefficient.
 
 #if SH_DEGREE > 0
+#ifdef SH_HALF
+float sh_rest_value(uint h) {
+    vec2 pair = unpackHalf2x16(sh_rest_h[h >> 1u]);
+    return (h & 1u) == 0u ? pair.x : pair.y;
+}
+#else
+float sh_rest_value(uint h) { return sh_rest[h]; }
+#endif
 // Coefficient k >= 1 of a splat (RGB), from the buffer holding coefficients 1..K-1.
 vec3 sh_coeff(uint splat, int k) {
     uint base = (splat * uint(SH_REST_COEFFS) + uint(k - 1)) * 3u;
-    return vec3(sh_rest[base], sh_rest[base + 1u], sh_rest[base + 2u]);
+    return vec3(sh_rest_value(base), sh_rest_value(base + 1u), sh_rest_value(base + 2u));
 }
 #endif
 

@@ -48,6 +48,8 @@ def configurations(base: RenderSettings, scene_sh_degree: int, quick: bool = Fal
     rows += [q(f"extent={e.value}", "extent", extent=e) for e in QuadExtent if e is not base.extent]
     rows += [q(f"sort={k.value}", "sort", sort_key=k) for k in SortKey if k is not base.sort_key]
     rows += [q(f"sh<={d}", "sh", sh_degree=d) for d in range(scene_sh_degree)]
+    if scene_sh_degree > 0:
+        rows.append(q("sh=half", "sh", half_sh=not base.half_sh))
     rows += [q(f"resort/{n}", "resort", resort_interval=n) for n in (4, 16)]
     rows += [q(f"preprocess={p.value}", "preprocess", preprocess=p)
              for p in Preprocess if p is not base.preprocess]

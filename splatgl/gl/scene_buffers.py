@@ -25,10 +25,11 @@ class SceneBuffers:
 
     ``a`` = (mean.xyz, opacity), ``q`` = unit quaternion, ``s`` = (scale.xyz, 0) for 3DGS or
     (scale.xy, 0, 0) for surfels, ``dc`` = (SH DC RGB, 0), ``sh`` = coefficients 1..K-1
-    (float32, K-1 x 3 per splat; absent at degree 0).
+    (K-1 x 3 per splat, float32 or with ``half_sh`` float16 packed two per uint; absent at
+    degree 0).  Stored at the scene's own degree: nothing is padded to degree 3.
     """
 
-    def __init__(self, ctx: moderngl.Context, scene: Scene):
+    def __init__(self, ctx: moderngl.Context, scene: Scene, half_sh: bool = False):
         n = scene.count
         self.scene = scene
         self.count = n
@@ -37,8 +38,11 @@ class SceneBuffers:
         self.q = ctx.buffer(np.ascontiguousarray(scene.rotations, np.float32).tobytes())
         self.s = ctx.buffer(_vec4([scene.scales], n).tobytes())
         self.dc = ctx.buffer(_vec4([scene.sh[:, 0]], n).tobytes())
-        self.sh = (ctx.buffer(np.ascontiguousarray(scene.sh[:, 1:]).tobytes())
-                   if self.sh_rest_coeffs > 0 else None)
+        self.half_sh = half_sh
+        rest = np.ascontiguousarray(scene.sh[:, 1:], np.float16 if half_sh else np.float32).ravel()
+        if half_sh and rest.size % 2:
+            rest = np.concatenate([rest, np.zeros(1, np.float16)])  # whole uints
+        self.sh = ctx.buffer(rest.tobytes()) if self.sh_rest_coeffs > 0 else None
 
     def bind(self) -> None:
         self.a.bind_to_storage_buffer(BINDING_A)
