@@ -76,3 +76,19 @@ def test_bench_quick_cli_writes_table_csv_json_plot(tmp_path, capsys):
         assert len(list(csv.DictReader(fh))) == len(data["rows"])
     png = read_image(tmp_path / "bench.png")
     assert png.shape[0] > 200 and png.std() > 0.01
+
+
+def test_savings_rows_show_each_saving(gl_renderer):
+    from splatgl.bench.savings import savings_rows, visible_fraction
+
+    rng = np.random.default_rng(3)
+    n = 3000
+    scene = Scene(rng.normal(size=(n, 3)), rng.normal(size=(n, 4)), rng.normal(-3.0, 0.3, (n, 3)),
+                  rng.normal(1.0, 1.0, n), rng.normal(0, 0.2, (n, 1, 3)))
+    rows = savings_rows(gl_renderer, "syn", scene, BenchOptions(64, 48, 3))
+    by = {r.config: r for r in rows}
+    assert "same scene padded to sh3" in by and "sh0 stored as is" in by
+    off = [r for r in rows if r.config.endswith("off-screen, culled")][0]
+    not_culled = [r for r in rows if r.config.endswith("off-screen, not culled")][0]
+    assert off.drawn < 0.3 * not_culled.drawn  # culling removed most of the off-screen splats
+    assert by["still camera"].frame_ms > 0 and by["moving camera (orbit)"].frame_ms > 0

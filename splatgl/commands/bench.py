@@ -11,6 +11,7 @@ import numpy as np
 
 from ..bench.report import plot, table, write_csv, write_json
 from ..bench.runner import BenchOptions, bench_scene, sort_benchmark
+from ..bench.savings import savings_rows
 from ..errors import SplatglError
 from ..formats import load_scene
 from ..progress import StderrProgress, enabled
@@ -66,6 +67,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="write bench.csv, bench.json and bench.png there")
     p.add_argument("--json", action="store_true", help="print the JSON instead of the table")
+    p.add_argument("--savings", action="store_true",
+                   help="also run the paired rows that prove each skipped cost: SH0 against the "
+                        "same scene padded to SH3, 90%% off-screen culled and not, still against "
+                        "moving camera (on by default without --quick)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -92,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
     with Renderer() as renderer:
         for name, scene in jobs:
             rows += bench_scene(renderer, name, scene, options, progress=progress)
+            if args.savings or not quick:
+                rows += savings_rows(renderer, name, scene, options)
     sort_ms = sort_benchmark(100_000 if quick else 1_000_000)
     extra = {"width": width, "height": height, "frames": frames,
              "sort_exact_ms": sort_ms, "sort_keys": 100_000 if quick else 1_000_000,
