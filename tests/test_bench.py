@@ -29,7 +29,7 @@ def test_configurations_cover_every_question():
     groups = {r.group for r in rows}
     assert groups == {"default", "precision", "extent", "sort", "sh", "resort", "preprocess", "cull",
                       "renderer", "limit"}
-    assert {r.name for r in rows if r.group == "sh"} == {"sh<=0", "sh<=1", "sh<=2"}
+    assert {r.name for r in rows if r.group == "sh"} == {"sh<=0", "sh<=1", "sh<=2", "sh=half"}
     assert [r.kind for r in rows if r.group == "renderer"] == [RowKind.TILE, RowKind.REFERENCE]
     quick = configurations(RenderSettings(), 0, quick=True)
     assert len(quick) < len(rows) and {r.group for r in quick} >= {"default", "limit", "extent"}
@@ -90,5 +90,5 @@ def test_savings_rows_show_each_saving(gl_renderer):
     assert "same scene padded to sh3" in by and "sh0 stored as is" in by
     off = [r for r in rows if r.config.endswith("off-screen, culled")][0]
     not_culled = [r for r in rows if r.config.endswith("off-screen, not culled")][0]
-    assert off.drawn < 0.3 * not_culled.drawn  # culling removed most of the off-screen splats
+    assert off.drawn < 0.25 * n and off.drawn < 0.5 * not_culled.drawn  # culling removed most
     assert by["still camera"].frame_ms > 0 and by["moving camera (orbit)"].frame_ms > 0
