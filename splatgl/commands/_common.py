@@ -11,7 +11,7 @@ from ..errors import SplatglError
 from ..formats import load_scene
 from ..render import default_camera
 from ..scene import Scene
-from ..settings import Precision, QuadExtent, RenderSettings
+from ..settings import Precision, Preprocess, QuadExtent, RenderSettings, SortKey
 from ..transform import parse_transform
 
 
@@ -76,6 +76,13 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                    help="apply the reference's antialiasing opacity compensation")
     g.add_argument("--sh-degree", type=int, default=None, choices=range(4),
                    help="cap the SH degree evaluated (default: the scene's)")
+    g.add_argument("--preprocess", choices=[m.value for m in Preprocess], default=None,
+                   help="where the quad path's per-splat math runs: 'vertex' shader (per corner) "
+                        "or a 'compute' pre-pass (per splat); default: what the benchmark chose")
+    g.add_argument("--sort", choices=[m.value for m in SortKey], default="exact",
+                   help="quad path depth keys: exact 32-bit (default) or 16-bit buckets")
+    g.add_argument("--half-sh", action="store_true",
+                   help="store SH coefficients as float16 in the quad path (half the memory)")
     g.add_argument("--transform", type=str, default=None, metavar="JSON",
                    help='place the scene in the world: inline JSON or a JSON file, e.g. '
                         '\'{"rotate_deg": [0, 90, 0], "translate": [0, 0, 1], "scale": 2}\' '
@@ -90,9 +97,10 @@ def load_scene_arg(args: argparse.Namespace) -> Scene:
 
 def settings_from_args(args: argparse.Namespace) -> RenderSettings:
     model = parse_transform(args.transform) if args.transform else None
+    optional = {"preprocess": args.preprocess} if args.preprocess else {}
     return RenderSettings(background=args.background, precision=args.precision, extent=args.extent,
                           near=args.near, antialias=args.antialias, sh_degree=args.sh_degree,
-                          model=model)
+                          model=model, sort_key=args.sort, half_sh=args.half_sh, **optional)
 
 
 def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSettings | None = None) -> Camera:
