@@ -122,3 +122,10 @@ def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSet
     return default_camera(scene, args.width or 1280, args.height or 720,
                           args.fov if args.fov is not None else 50.0, args.distance,
                           settings.model if settings is not None else None)
+
+
+def inputs_from_args(args: argparse.Namespace) -> tuple[Scene, RenderSettings, Camera]:
+    """The scene, settings and camera every rendering command starts from."""
+    scene = load_scene_arg(args)
+    settings = settings_from_args(args)
+    return scene, settings, camera_from_args(args, scene, settings)

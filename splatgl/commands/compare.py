@@ -13,7 +13,7 @@ from ..metrics import image_errors
 from ..render import Renderer
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      camera_from_args, load_scene_arg, settings_from_args)
+                      inputs_from_args)
 
 NAME = "compare"
 ORDER = 30
@@ -49,9 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    scene = load_scene_arg(args)
-    settings = settings_from_args(args)
-    camera = camera_from_args(args, scene, settings)
+    scene, settings, camera = inputs_from_args(args)
     kinds = (RendererKind(args.renderer), RendererKind(args.against))
     images, seconds = [], []
     with Renderer() as renderer:

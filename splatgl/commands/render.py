@@ -15,7 +15,7 @@ from ..pictures import depth_preview
 from ..render import Renderer, render_reference_layers
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      camera_from_args, load_scene_arg, settings_from_args)
+                      inputs_from_args)
 
 NAME = "render"
 ORDER = 10
@@ -50,9 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    scene = load_scene_arg(args)
-    settings = settings_from_args(args)
-    camera = camera_from_args(args, scene, settings)
+    scene, settings, camera = inputs_from_args(args)
     kind = RendererKind(args.renderer)
     want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
     if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
