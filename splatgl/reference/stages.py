@@ -220,7 +220,19 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
         ok &= ~((u + rx <= 0) | (u - rx >= camera.width) | (v + ry <= 0)
                 | (v - ry >= camera.height))
         rect_min, rect_max = gsplat_rect(mean2d, radius, grid)
-    ok &= ((rect_max - rect_min) > 0).all(1)
+    ok, rect_min, rect_max, radius, clean = _mask_culled(ok, rect_min, rect_max, radius, dt)
+
+    return ProjectedSplats(
+        visible=ok, depth=clean(pr.depth), mean2d=clean(mean2d), conic=clean(pr.conic),
+        opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
+        rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
+        grid=grid)
+
+
+def _mask_culled(ok, rect_min, rect_max, radius, dt):
+    """Cull empty rectangles too, zero every culled row; returns the arrays and ``clean(a)``,
+    which zeroes culled rows of any per-splat array and casts it to ``dt``."""
+    ok = ok & ((rect_max - rect_min) > 0).all(1)
     rect_min = np.where(ok[:, None], rect_min, 0)
     rect_max = np.where(ok[:, None], rect_max, 0)
     radius = np.where(ok[:, None], radius, 0)
@@ -229,11 +241,7 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
         mask = ok.reshape((-1,) + (1,) * (a.ndim - 1))
         return np.ascontiguousarray(np.where(mask, a, 0).astype(dt))
 
-    return ProjectedSplats(
-        visible=ok, depth=clean(pr.depth), mean2d=clean(mean2d), conic=clean(pr.conic),
-        opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
-        rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
-        grid=grid)
+    return ok, rect_min, rect_max, radius, clean
 
 
 def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
@@ -258,14 +266,7 @@ def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
           & np.isfinite(scr.depth_row).all(1))
     radius = np.where(ok[:, None], np.ceil(box.half), 0).astype(np.int64)
     rect_min, rect_max = box_rect(box.center, box.half, grid)
-    ok &= ((rect_max - rect_min) > 0).all(1)
-    rect_min = np.where(ok[:, None], rect_min, 0)
-    rect_max = np.where(ok[:, None], rect_max, 0)
-    radius = np.where(ok[:, None], radius, 0)
-
-    def clean(a: np.ndarray) -> np.ndarray:
-        mask = ok.reshape((-1,) + (1,) * (a.ndim - 1))
-        return np.ascontiguousarray(np.where(mask, a, 0).astype(dt))
+    ok, rect_min, rect_max, radius, clean = _mask_culled(ok, rect_min, rect_max, radius, dt)
 
     return ProjectedSplats(
         visible=ok, depth=clean(scr.view_z), mean2d=clean(scr.center),
