@@ -52,6 +52,11 @@ def default_camera(scene: Scene, width: int = 1280, height: int = 720,
     return Camera.from_fov(width, height, fov_y_degrees, pose)
 
 
+#: GPU renderers (each holding an uploaded copy of its scene) kept per :class:`Renderer`; the
+#: least recently used is released beyond this.
+MAX_CACHED_PATHS = 6
+
+
 class Renderer:
     """Owns one headless OpenGL context and renders scenes with any renderer kind.
 
@@ -68,8 +73,11 @@ class Renderer:
 
     def _path(self, scene: Scene, settings: RenderSettings, kind: RendererKind):
         key = (id(scene), settings, kind)
-        path = self._paths.get(key)
-        if path is None or path.scene is not scene:
+        path = self._paths.pop(key, None)
+        if path is not None and path.scene is not scene:  # the id of a scene since collected
+            path.release()
+            path = None
+        if path is None:
             if kind is RendererKind.QUAD:
                 from .quad import QuadRenderer
                 path = QuadRenderer(self.ctx, scene, settings, self.programs)
@@ -78,7 +86,10 @@ class Renderer:
                 path = TileRenderer(self.ctx, scene, settings, self.programs)
             else:
                 raise ValueError(f"{kind} has no GPU path")
-            self._paths[key] = path
+        self._paths[key] = path  # most recently used last
+        while len(self._paths) > MAX_CACHED_PATHS:
+            oldest = next(iter(self._paths))
+            self._paths.pop(oldest).release()
         return path
 
     def renderer_for(self, scene: Scene, settings: RenderSettings, kind: RendererKind = RendererKind.QUAD):
