@@ -70,3 +70,22 @@ def test_every_quad_variant_compiles_and_is_cached(gl_renderer):
             assert cache.program("quad.vert", "quad.frag", dict(defines)) is prog
     assert len(cache._programs) == 16
     cache.release()
+
+
+def test_errors_in_both_stages_map_to_their_own_files(tmp_path, gl_renderer):
+    root = _write(tmp_path, {
+        "v.vert": "#version 430\nvoid main() { gl_Position = vec4(undefined_v); }\n",
+        "f.frag": "#version 430\nout vec4 c;\n\nvoid main() { c = vec4(undefined_f); }\n",
+    })
+    from splatgl.gl.shaders import _describe_log
+
+    sources = {"vertex": preprocess("v.vert", root=root), "fragment": preprocess("f.frag", root=root)}
+    try:
+        gl_renderer.ctx.program(vertex_shader=sources["vertex"].text, fragment_shader=sources["fragment"].text)
+    except Exception as exc:
+        text = _describe_log(str(exc), sources)
+    else:
+        pytest.fail("the broken program compiled")
+    assert "v.vert:2(" in text and "undefined_v" in text
+    if "undefined_f" in text:  # Mesa stops after the first failing stage
+        assert "f.frag:4(" in text

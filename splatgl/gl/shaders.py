@@ -98,6 +98,20 @@ def preprocess(name: str, defines: dict[str, str] | None = None, root: Path | No
     return Source("\n".join(out) + "\n", tuple(files))
 
 
+def _describe_log(log: str, sources: dict[str, Source]) -> str:
+    """Map each stage's section of a moderngl compile log (headed ``vertex_shader``,
+    ``fragment_shader``, ``compute_shader``) through that stage's :meth:`Source.describe`."""
+    headers = [(log.find(f"{stage}_shader\n"), stage) for stage in sources]
+    headers = sorted((pos, stage) for pos, stage in headers if pos >= 0)
+    if not headers:
+        return next(iter(sources.values())).describe(log) if len(sources) == 1 else log
+    out = [log[:headers[0][0]]]
+    for i, (pos, stage) in enumerate(headers):
+        end = headers[i + 1][0] if i + 1 < len(headers) else len(log)
+        out.append(sources[stage].describe(log[pos:end]))
+    return "".join(out)
+
+
 def _define_key(defines: dict[str, object] | None) -> tuple[tuple[str, str], ...]:
     return tuple(sorted((k, str(v)) for k, v in (defines or {}).items()))
 
@@ -117,9 +131,7 @@ class ProgramCache:
                 vertex_shader=sources["vertex"].text, fragment_shader=sources["fragment"].text
             )
         except moderngl.Error as exc:
-            log = str(exc)
-            for src in sources.values():
-                log = src.describe(log)
+            log = _describe_log(str(exc), sources)
             raise ShaderError(f"shader compile failed ({', '.join(s.files[0] for s in sources.values())}):\n{log}") from None
 
     def program(self, vertex: str, fragment: str, defines: dict[str, object] | None = None) -> moderngl.Program:
