@@ -7,6 +7,9 @@
 #include "lib/project.glsl"
 #include "lib/sh.glsl"
 #include "lib/tile_common.glsl"
+#ifdef SURFEL
+#include "lib/surfel.glsl"
+#endif
 
 layout(local_size_x = SPLAT_GROUP) in;
 
@@ -16,6 +19,53 @@ uniform uvec2 u_grid;   // (tiles_x, tiles_y)
 bool finite2(vec2 v) { return !any(isnan(v)) && !any(isinf(v)); }
 bool finite3(vec3 v) { return !any(isnan(v)) && !any(isinf(v)); }
 
+#ifdef SURFEL
+// 2DGS surfels (twin: reference/stages.py project_surfels with splatgl/surfel.py).  Culls the
+// centre's view z <= near, o <= 1/255, an empty or non-finite box, non-finite colour or depth
+// row and an empty tile rectangle; writes the centred rows (lib/tile_common.glsl, SURFEL).
+void main() {
+    uint i = splat_invocation();
+    if (i >= u_count) return;
+    tiles_touched[i] = 0u;
+    proj_rect[i] = uvec4(0u);
+    vec4 a = splat_a[i];
+    // p_c = R_cw p_w + t_cw (DESIGN.md 1); near cull on the centre's view z.
+    vec3 p = u_view_rot * a.xyz + u_view_trans;
+    if (!(p.z > u_near)) return;
+    mat3 rot = quat_to_rotmat(splat_q[i]);
+    vec2 s = splat_s[i].xy;
+    vec3 a_u = u_view_rot * (rot[0] * s.x);   // camera-space s_u t_u (columns of W H, eq. 5)
+    vec3 a_v = u_view_rot * (rot[1] * s.y);   // camera-space s_v t_v
+    vec2 center;
+    vec3 t0, t1, t2;
+    surfel_screen(p, a_u, a_v, center, t0, t1, t2);   // centred T' = A P H
+    vec2 lo, hi;
+    // Box of the k-sigma ellipse (dual conic) united with the low-pass disc, clamped.
+    if (!surfel_bounds(center, t0, t1, t2, a.w, lo, hi)) return;
+    vec3 color = sh_color(i, splat_dc[i].rgb, normalize(a.xyz - u_cam_center));
+    vec3 depth_row = vec3(a_u.z, a_v.z, p.z);
+    if (!finite3(color) || !finite3(depth_row)) return;
+    // box_rect (reference/stages.py): box c +- h with c = (lo + hi) / 2, h = (hi - lo) / 2; in
+    // pixel-index coordinates q = c - 0.5 it holds pixels ceil(q - h) .. floor(q + h), which
+    // lie in tiles [floor(first / 16), floor(last / 16) + 1), clamped to the grid.
+    vec2 box_c = 0.5 * (lo + hi);
+    vec2 box_h = 0.5 * (hi - lo);
+    vec2 q = box_c - 0.5;
+    vec2 first = ceil(q - box_h);
+    vec2 last = floor(q + box_h);
+    if (any(lessThan(last, first))) return;   // no pixel centre in the box
+    vec2 grid = vec2(u_grid);
+    uvec2 rmin = uvec2(clamp(floor(first / float(TILE_SIZE)), vec2(0.0), grid));
+    uvec2 rmax = uvec2(clamp(floor(last / float(TILE_SIZE)) + 1.0, vec2(0.0), grid));
+    if (rmax.x <= rmin.x || rmax.y <= rmin.y) return;
+    proj_mean_depth[i] = vec4(center, p.z, a.w);
+    proj_conic_o[i] = vec4(t0.xy, t1.xy);
+    proj_color[i] = vec4(color, 0.0);
+    proj_surfel[i] = vec4(a_u.z, a_v.z, 0.0, 0.0);
+    proj_rect[i] = uvec4(rmin, rmax);
+    tiles_touched[i] = (rmax.x - rmin.x) * (rmax.y - rmin.y);
+}
+#else
 void main() {
     uint i = splat_invocation();
     if (i >= u_count) return;
@@ -26,8 +76,9 @@ void main() {
     vec3 p = u_view_rot * a.xyz + u_view_trans;
     if (!(p.z > u_near)) return;
     // Sigma' = J W Sigma W^T J^T + 0.3 I (EWA, low-pass dilation).
-    vec3 cov = covariance_2d(covariance_3d(quat_to_rotmat(splat_q[i]), splat_s[i].xyz), p);
-    float det;
+    mat3 rot = quat_to_rotmat(splat_q[i]);
+    vec3 cov = covariance_2d(covariance_3d(rot, splat_s[i].xyz), p);
+    float det = covariance_2d_det(cov, screen_factor(rot, splat_s[i].xyz, p));  // > 0 (see project.glsl)
     vec3 con = conic(cov, det);
     if (!(det > 0.0)) return;
     float opacity = a.w;
@@ -56,3 +107,4 @@ void main() {
     proj_rect[i] = uvec4(rmin, rmax);
     tiles_touched[i] = touched;
 }
+#endif

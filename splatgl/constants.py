@@ -21,6 +21,10 @@ LOW_PASS = 0.3
 AA_MIN_FACTOR = 2.5e-5
 #: Floor of the eigenvalue discriminant when computing the extent (``max(0.1, mid^2 - det)``).
 EXTENT_DISCRIMINANT_FLOOR = 0.1
+#: ``det = a c - b^2`` of the 2D covariance is trusted where it exceeds this fraction of ``a c``
+#: (cancellation then costs at most ~eps / ratio, ~6e-6 relative in float32); below it the
+#: renderers use the cancellation-free form (:func:`splatgl.project.covariance_2d_det`).
+DET_CANCEL_RATIO = 1e-2
 #: Extent of the reference in standard deviations (radius ``ceil(3 sqrt(lambda_max))``).
 EXTENT_SIGMAS = 3.0
 #: Upper clamp of a splat's alpha.
@@ -98,6 +102,7 @@ def glsl_defines() -> dict[str, str]:
         "AA_MIN_FACTOR": _glsl_float(AA_MIN_FACTOR),
         "EXTENT_DISCRIMINANT_FLOOR": _glsl_float(EXTENT_DISCRIMINANT_FLOOR),
         "EXTENT_SIGMAS": _glsl_float(EXTENT_SIGMAS),
+        "DET_CANCEL_RATIO": _glsl_float(DET_CANCEL_RATIO),
         "ALPHA_MAX": _glsl_float(ALPHA_MAX),
         "ALPHA_MIN": _glsl_float(ALPHA_MIN),
         "T_MIN": _glsl_float(T_MIN),

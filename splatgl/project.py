@@ -12,7 +12,8 @@ import numpy as np
 
 from .camera import Camera
 from .constants import (
-    ALPHA_MIN, EXTENT_DISCRIMINANT_FLOOR, EXTENT_SIGMAS, JACOBIAN_CLAMP, LOW_PASS, AA_MIN_FACTOR,
+    ALPHA_MIN, DET_CANCEL_RATIO, EXTENT_DISCRIMINANT_FLOOR, EXTENT_SIGMAS, JACOBIAN_CLAMP, LOW_PASS,
+    AA_MIN_FACTOR,
     SH_C0, SH_C1, SH_C2, SH_C3, SH_OFFSET, sh_coeff_count,
 )
 
@@ -53,6 +54,41 @@ def transform_points(points: np.ndarray, rot: np.ndarray, trans: np.ndarray) -> 
     for i in range(3):
         out[:, i] = x * rot[i, 0] + y * rot[i, 1] + z * rot[i, 2] + trans[i]
     return out
+
+
+def anchored_camera(camera: Camera, anchor: np.ndarray) -> Camera:
+    """``camera`` for points given relative to ``anchor`` (world, float64 (3,)).
+
+    Guard (stress cases far_1e5 .. far_1e7, ortho_huge_zoom): float32 ``R p + t`` on raw
+    coordinates 1e7 from the origin keeps about one unit of precision (the scene shredded,
+    max error 0.79).  Every renderer therefore works on ``p - anchor`` (small numbers) with the
+    anchor folded into the translation in float64: ``t' = R anchor + t``.
+    """
+    shift = np.eye(4)
+    shift[:3, 3] = np.asarray(anchor, np.float64)
+    return camera.with_pose(camera.world_to_camera @ shift)
+
+
+def anchored(means: np.ndarray, anchor: np.ndarray, camera: Camera, dtype
+             ) -> tuple[np.ndarray, Camera]:
+    """``(means - anchor`` in ``dtype`` (the subtraction in float64), the anchored camera``)``:
+    what every path projects instead of the raw world means (see :func:`anchored_camera`)."""
+    rel = (np.asarray(means, np.float64) - np.asarray(anchor, np.float64)).astype(dtype)
+    return rel, anchored_camera(camera, anchor)
+
+
+def near_threshold(near: float, dtype) -> np.floating:
+    """The near plane as a ``dtype`` number that culls exactly the z values float64 culls.
+
+    Guard (stress case near_plane): ``float32(0.1)`` rounds up to 0.10000000149, so a splat whose
+    stored z is that very value was culled in float32 (z <= near) but kept in float64 (max error
+    0.41).  Rounding the plane down instead makes ``z > near`` agree in both precisions.
+    """
+    dt = np.dtype(dtype).type
+    value = dt(near)
+    if float(value) > near:
+        value = np.nextafter(value, dt(-np.inf))
+    return value
 
 
 def to_camera(means: np.ndarray, camera: Camera) -> np.ndarray:
@@ -106,14 +142,47 @@ def covariance_2d(cov3d: np.ndarray, p_cam: np.ndarray, camera: Camera,
     return cov
 
 
-def conic(cov2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def screen_factor(rot: np.ndarray, scales: np.ndarray, p_cam: np.ndarray, camera: Camera) -> np.ndarray:
+    """``M = J W R S``, (N, 2, 3): the undilated screen covariance is ``M M^T`` (pixels^2)."""
+    w = camera.rotation.astype(p_cam.dtype)
+    return ((jacobian(p_cam, camera) @ w) @ rot) * scales[..., None, :]  # GLSL's order
+
+
+def covariance_2d_det(cov2d: np.ndarray, m: np.ndarray, low_pass: float = LOW_PASS) -> np.ndarray:
+    """``det(M M^T + low_pass I)`` of (N, 2, 2) covariances and their (N, 2, 3) factors, (N,).
+
+    Guard (stress case det_nonpositive): ``a c - b^2`` of a needle 1e3 long at 45 degrees
+    cancels in float32 (entries ~3e7, true det 2e7) to zero or below, and the splat vanished
+    (max error 0.35).  Here ``det(M M^T)`` is the sum of the squared 2x2 minors of M
+    (Cauchy-Binet), so ``det = minors + low_pass tr(M M^T) + low_pass^2 >= low_pass^2 > 0``.
+    Overflow (covariances beyond ~1e19 px^2) gives +inf, hence a zero conic: a uniform veil,
+    which is what such a splat is at pixel scale.  Where ``a c - b^2 > DET_CANCEL_RATIO a c``
+    (no harmful cancellation) the reference's own ``a c - b^2`` is returned unchanged.
+    """
+    dt = m.dtype.type
+    a, b, c = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
+    with np.errstate(over="ignore", invalid="ignore"):
+        plain = a * c - b * b
+        accurate = plain > dt(DET_CANCEL_RATIO) * (a * c)
+    r0, r1 = m[:, 0], m[:, 1]
+    x, y, z = (r0[:, 1] * r1[:, 2] - r0[:, 2] * r1[:, 1], r0[:, 2] * r1[:, 0] - r0[:, 0] * r1[:, 2],
+               r0[:, 0] * r1[:, 1] - r0[:, 1] * r1[:, 0])       # cross(r0, r1), as in GLSL
+    with np.errstate(over="ignore", invalid="ignore"):
+        minors = x * x + y * y + z * z
+        trace = (r0[:, 0] * r0[:, 0] + r0[:, 1] * r0[:, 1] + r0[:, 2] * r0[:, 2]) + (
+            r1[:, 0] * r1[:, 0] + r1[:, 1] * r1[:, 1] + r1[:, 2] * r1[:, 2])
+        return np.where(accurate, plain, minors + dt(low_pass) * trace + dt(low_pass * low_pass))
+
+
+def conic(cov2d: np.ndarray, det: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of each (N, 2, 2) covariance as (a, b, c) with ``Q = [[a, b], [b, c]]``, and det.
 
-    Returns ``(conic (N, 3), det (N,))``; rows with ``det <= 0`` get a zero conic (the
-    reference culls them).
+    ``det``: the determinant when known more accurately (:func:`covariance_2d_det`); by
+    default ``a c - b^2``.  Returns ``(conic (N, 3), det (N,))``; rows with ``det <= 0`` get a
+    zero conic (the reference culls them).
     """
     a, b, c = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
-    det = a * c - b * b
+    det = a * c - b * b if det is None else det
     ok = det > 0
     inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0).astype(cov2d.dtype)
     return np.stack([c * inv, -b * inv, a * inv], axis=-1), det
@@ -136,27 +205,56 @@ def eigenvalues_2d(cov2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Reference eigenvalues ``mid +- sqrt(max(0.1, mid^2 - det))`` of (N, 2, 2) covariances."""
     a, b, c = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
     mid = 0.5 * (a + c)
-    det = a * c - b * b
-    root = np.sqrt(np.maximum(EXTENT_DISCRIMINANT_FLOOR, mid * mid - det))
+    root = np.sqrt(np.maximum(EXTENT_DISCRIMINANT_FLOOR, discriminant(cov2d)))
     return mid + root, mid - root
 
 
+def discriminant(cov2d: np.ndarray) -> np.ndarray:
+    """``mid^2 - det`` of (N, 2, 2) covariances, the reference's form.
+
+    Guard (stress case near_tiny): beyond ~1e19 px^2 both terms overflow float32 and
+    ``inf - inf`` is NaN, which made the extent garbage and dropped the splat (max error
+    0.26); there the equal ``((a - c) / 2)^2 + b^2`` is used (it may be +inf, never NaN).
+    """
+    a, b, c = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
+    mid = 0.5 * (a + c)
+    with np.errstate(over="ignore", invalid="ignore"):
+        disc = mid * mid - (a * c - b * b)
+        half = 0.5 * (a - c)
+        return np.where(np.isfinite(disc), disc, half * half + b * b)
+
+
+#: Largest extent (pixels) :func:`reference_radius` returns, so that it fits an int64; far
+#: beyond any image (a larger radius covers the same tiles).
+MAX_RADIUS = float(2 ** 52)
+
+
 def reference_radius(cov2d: np.ndarray) -> np.ndarray:
-    """Reference extent ``ceil(3 sqrt(lambda_max))`` in pixels, (N,) int64."""
+    """Reference extent ``ceil(3 sqrt(lambda_max))`` in pixels, (N,) int64 (<= MAX_RADIUS)."""
     lam_max, _ = eigenvalues_2d(cov2d)
-    return np.ceil(EXTENT_SIGMAS * np.sqrt(np.maximum(lam_max, 0.0))).astype(np.int64)
+    r = np.ceil(EXTENT_SIGMAS * np.sqrt(np.maximum(lam_max, 0.0)))
+    return np.minimum(r, MAX_RADIUS).astype(np.int64)
 
 
-def ellipse_axes(cov2d: np.ndarray, opacities: np.ndarray) -> np.ndarray:
+def ellipse_axes(cov2d: np.ndarray, opacities: np.ndarray, det: np.ndarray | None = None) -> np.ndarray:
     """Opacity-aware quad half-axes: (N, 2, 2), rows are the two half-axis vectors in pixels.
 
     Along each eigenvector the half-length is ``sqrt(2 ln(255 o)) sqrt(lambda)``: beyond it
     ``o exp(-r^2/2) < 1/255`` and the reference skips the splat.  Zero for ``o <= 1/255``.
+    ``det``: the accurate determinant (:func:`covariance_2d_det`; default ``a c - b^2``).
+
+    Guard (stress case det_nonpositive): ``lam2 = mid - root`` cancelled to 0 for a long thin
+    splat (entries ~3e7, lam2 0.3), a quad without width (max error 0.35); ``lam2 = det / lam1``
+    does not cancel.
     """
     a, b, c = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
+    det = a * c - b * b if det is None else det
     mid = 0.5 * (a + c)
-    root = np.sqrt(np.maximum(mid * mid - (a * c - b * b), 0.0))
-    lam1, lam2 = mid + root, np.maximum(mid - root, 0.0)
+    root = np.sqrt(np.maximum(discriminant(cov2d), 0.0))
+    lam1 = mid + root
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (det overflowing to +inf gives det / lam1 = inf: lam2 <= lam1 bounds it.)
+        lam2 = np.where(lam1 > 0, np.clip(det / np.where(lam1 > 0, lam1, 1.0), 0.0, lam1), 0.0)
     # Eigenvector of lam1: (b, lam1 - a), or (lam1 - c, b); pick the better conditioned one.
     v1 = np.where((np.abs(a - lam1) < np.abs(c - lam1))[:, None],
                   np.stack([lam1 - c, b], -1), np.stack([b, lam1 - a], -1))
@@ -238,9 +336,9 @@ def project(means: np.ndarray, rotations: np.ndarray, scales: np.ndarray, opacit
     Arrays as in :class:`splatgl.scene.Scene` (activated), in the dtype wanted for the math.
     """
     p_cam = to_camera(means, camera)
-    cov3d = covariance_3d(quat_to_rotmat(rotations), scales)
-    cov2d = covariance_2d(cov3d, p_cam, camera)
-    con, det = conic(cov2d)
+    rot = quat_to_rotmat(rotations)
+    cov2d = covariance_2d(covariance_3d(rot, scales), p_cam, camera)
+    con, det = conic(cov2d, covariance_2d_det(cov2d, screen_factor(rot, scales, p_cam, camera)))
     opac = opacities * antialias_factor(cov2d) if antialias else opacities
     color = sh_color(sh, view_dirs(means, camera), sh_degree)
     return Projected(p_cam, p_cam[:, 2], project_means(p_cam, camera), cov2d, con, det, color,

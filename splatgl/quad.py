@@ -20,7 +20,7 @@ from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
 from .output import RenderOutput
-from .project import to_camera
+from .project import anchored_camera, near_threshold, to_camera
 from .scene import Scene, SplatKind
 from .settings import Preprocess, QuadExtent, RenderSettings, SortKey, resolve_near
 from .sort import bucket_sort, depth_sort
@@ -69,8 +69,15 @@ def composite(rgba: np.ndarray, background: tuple[float, float, float]) -> np.nd
     return out
 
 
-def set_camera_uniforms(prog: moderngl.Program, camera: Camera, near: float) -> None:
-    """Write the uniforms of shaders/lib/camera.glsl that ``prog`` uses."""
+def set_camera_uniforms(prog: moderngl.Program, camera: Camera, near: float,
+                        anchor: np.ndarray | None = None) -> None:
+    """Write the uniforms of shaders/lib/camera.glsl that ``prog`` uses.
+
+    ``anchor``: the scene's anchor when the storage buffers hold ``means - anchor``
+    (:class:`SceneBuffers`); it is folded into the translation in float64.
+    """
+    if anchor is not None:
+        camera = anchored_camera(camera, anchor)
     tx, ty = camera.tan_half_fov
     values = {
         "u_view_rot": tuple(camera.rotation.astype(np.float32).T.ravel()),  # column-major
@@ -79,7 +86,7 @@ def set_camera_uniforms(prog: moderngl.Program, camera: Camera, near: float) -> 
         "u_intrinsics": (camera.fx, camera.fy, camera.cx, camera.cy),
         "u_viewport": (float(camera.width), float(camera.height)),
         "u_tan_fov": (tx, ty),
-        "u_near": near,
+        "u_near": float(near_threshold(near, np.float32)),
     }
     for name, value in values.items():
         if name in prog:
@@ -176,7 +183,7 @@ class QuadRenderer:
             return self._order
         self._stale_frames = 0
         t0 = time.perf_counter()
-        p_cam = to_camera(self.scene.means, camera)
+        p_cam = to_camera(self.scene.relative_means, anchored_camera(camera, self.scene.anchor))
         if self.settings.cull:
             mask = cull(p_cam, self._max_scale * camera.scale, self.scene.opacities, camera, self.near,
                         self.settings.antialias)
@@ -222,7 +229,7 @@ class QuadRenderer:
         if count == 0:
             return
         comp = self.programs.compute("quad_prepass.comp", self.defines(camera, depth))
-        set_camera_uniforms(comp, camera, self.near)
+        set_camera_uniforms(comp, camera, self.near, self.scene.anchor)
         comp["u_count"].value = count
         self._index_buffer.bind_to_storage_buffer(BINDING_ORDER)
         comp.run(group_x=(count + PREPASS_GROUP - 1) // PREPASS_GROUP)
@@ -252,7 +259,7 @@ class QuadRenderer:
             self._prepass(camera, len(order), depth)
             self.ctx.finish()
         tp = time.perf_counter()
-        set_camera_uniforms(prog, camera, self.near)
+        set_camera_uniforms(prog, camera, self.near, self.scene.anchor)
         fbo.use()
         self.ctx.viewport = (0, 0, camera.width, camera.height)
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)

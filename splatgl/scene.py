@@ -117,15 +117,53 @@ class Scene:
 
     @functools.cached_property
     def opacities(self) -> np.ndarray:
-        """(N,) float32 activated opacities ``sigmoid(opacity_logits)`` in [0, 1]."""
+        """(N,) float32 activated opacities ``sigmoid(opacity_logits)`` in [0, 1].
+
+        0 for rows whose quaternion is degenerate (see :attr:`rotations`): renderers skip them.
+        """
         with np.errstate(over="ignore"):
-            return _frozen(1.0 / (1.0 + np.exp(-self.opacity_logits.astype(np.float64))))
+            o = 1.0 / (1.0 + np.exp(-self.opacity_logits.astype(np.float64)))
+        # Guard (stress case zero_quats): a Scene built directly (not through the loaders) can
+        # hold zero or sub-1e-12 quaternions; no rotation, hence no covariance, exists for them,
+        # and a 1e-30 quaternion rendered as the identity (max error 0.75).  Opacity 0 makes
+        # every renderer skip the row (cull, alpha < 1/255) without a special case anywhere.
+        return _frozen(np.where(self._rotation_ok, o, 0.0))
+
+    @functools.cached_property
+    def _rotation_ok(self) -> np.ndarray:
+        """(N,) bool: the quaternion's norm is finite and at least MIN_QUAT_NORM."""
+        q = self.quats.astype(np.float64)
+        with np.errstate(over="ignore", invalid="ignore"):
+            norm = np.sqrt((q * q).sum(axis=1))
+        return np.isfinite(norm) & (norm >= MIN_QUAT_NORM)
 
     @functools.cached_property
     def rotations(self) -> np.ndarray:
-        """(N, 4) float32 unit quaternions (w, x, y, z), normalised in float64."""
+        """(N, 4) float32 unit quaternions (w, x, y, z), normalised in float64.
+
+        Rows with a degenerate quaternion get the identity (never NaN; their opacity is 0).
+        """
         q = self.quats.astype(np.float64)
-        return _frozen(q / np.sqrt((q * q).sum(axis=1, keepdims=True)))
+        ok = self._rotation_ok
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            unit = q / np.sqrt((q * q).sum(axis=1, keepdims=True))
+        return _frozen(np.where(ok[:, None], unit, [1.0, 0.0, 0.0, 0.0]))
+
+    @functools.cached_property
+    def anchor(self) -> np.ndarray:
+        """(3,) float64 point amid the splats (the robust box centre, a float32 value), which
+        every renderer subtracts from the means before float32 math (see :attr:`relative_means`
+        and :func:`splatgl.project.anchored_camera`); zeros when the means are not finite."""
+        lo, hi = self.robust_bounds
+        centre = (0.5 * (lo + hi)).astype(np.float32).astype(np.float64)
+        out = centre if np.isfinite(centre).all() else np.zeros(3)
+        out.flags.writeable = False
+        return out
+
+    @functools.cached_property
+    def relative_means(self) -> np.ndarray:
+        """(N, 3) float32 ``means - anchor``, subtracted in float64 (what the GPU is given)."""
+        return _frozen(self.means.astype(np.float64) - self.anchor)
 
     @functools.cached_property
     def robust_bounds(self) -> tuple[np.ndarray, np.ndarray]:

@@ -17,6 +17,11 @@ Stages (DESIGN.md section 2; each GPU stage has one shader and a same-named NumP
    binary search per tile, microseconds), uploaded.
 6. ``rasterize`` (shaders/tile_rasterize.comp): one 16 x 16 work group per tile, front to back.
 
+2DGS surfel scenes run the same stages with the ``SURFEL`` define: ``project`` builds the centred
+``T = P H`` rows and the surfel's screen box (lib/surfel.glsl) and bins it with the reference's
+``box_rect``; ``rasterize`` intersects each pixel's ray with the surfel plane (the reference's
+surfel branch).  Keys, sort and ranges are unchanged.
+
 The output is (H, W, 4) float32, RGB = ``C + T_final bg``, alpha = ``1 - T_final``, row 0 at the
 top; :meth:`TileRenderer.render_layers` adds the accumulated depth ``D = sum z alpha T``.
 """
@@ -43,7 +48,7 @@ from .settings import RenderSettings, resolve_near
 #: scene's 0..BINDING_SH); handed to GLSL as TILE_BINDING_* defines.
 BINDINGS = {name: BINDING_SH + 1 + i for i, name in enumerate(
     ("MEAN_DEPTH", "CONIC_O", "COLOR", "RECT", "TOUCHED", "OFFSETS", "KEYS", "VALUES", "RANGES",
-     "OUT_RGBA", "OUT_DEPTH"))}
+     "OUT_RGBA", "OUT_DEPTH", "SURFEL"))}
 #: Invocations per work group of the per-splat stages (project, emit).
 SPLAT_GROUP = 256
 #: Largest number of work groups along one dispatch axis guaranteed by OpenGL.
@@ -179,13 +184,12 @@ class TileRenderer:
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
                  programs: ProgramCache | None = None):
-        if scene.kind is not SplatKind.GAUSSIAN_3D:
-            raise NotImplementedError("the tile renderer renders 3DGS scenes; 2DGS surfels are not supported yet")
         self.ctx = ctx
         self.scene = scene
         self.settings = settings
         self.programs = programs or ProgramCache(ctx)
         self.near = resolve_near(settings, scene.robust_radius)
+        self.surfel = scene.kind is SplatKind.SURFEL_2D
         self.count = scene.count
         self.scene_buffers = SceneBuffers(ctx, scene) if self.count else None
         self._max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
@@ -194,6 +198,8 @@ class TileRenderer:
         for name, stride in (("MEAN_DEPTH", 16), ("CONIC_O", 16), ("COLOR", 16), ("RECT", 16),
                              ("TOUCHED", 4), ("OFFSETS", 4)):
             self._bufs[name].ensure(n * stride)
+        if self.surfel:
+            self._bufs["SURFEL"].ensure(n * 16)
         self.last_times: TileTimes | None = None
 
     # ------------------------------------------------------------------------------ programs
@@ -202,6 +208,8 @@ class TileRenderer:
         d["SPLAT_GROUP"] = SPLAT_GROUP
         if layout is not None and layout.packed:
             d["KEY_PACKED"] = 1
+        if self.surfel:
+            d["SURFEL"] = 1
         return d
 
     def _project_program(self, camera: Camera) -> moderngl.ComputeShader:
@@ -229,7 +237,7 @@ class TileRenderer:
     # -------------------------------------------------------------------------------- stages
     def _project(self, camera: Camera, grid: tuple[int, int]) -> None:
         prog = self._project_program(camera)
-        set_camera_uniforms(prog, camera, self.near)
+        set_camera_uniforms(prog, camera, self.near, self.scene.anchor)
         self._set(prog, u_count=self.count, u_grid=grid)
         prog.run(*_splat_groups(self.count))
         self.ctx.memory_barrier()
@@ -289,7 +297,10 @@ class TileRenderer:
         self._bufs["OUT_RGBA"].ensure(pixels * 16)
         self._bufs["OUT_DEPTH"].ensure(pixels * 4)
         self._bind_all()
-        prog = self.programs.compute("tile_rasterize.comp", self._defines(layout))
+        d = self._defines(layout)
+        if self.surfel and camera.is_orthographic:
+            d["ORTHOGRAPHIC"] = 1                 # T_2 = (0, 0, 1)
+        prog = self.programs.compute("tile_rasterize.comp", d)
         self._set(prog, u_grid=grid, u_size=(camera.width, camera.height),
                   u_background=self.settings.background, u_index_mask=layout.index_mask)
         prog.run(grid[0], grid[1], 1)

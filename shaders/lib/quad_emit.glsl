@@ -15,7 +15,14 @@ const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothi
 void emit_corner(vec2 mean2d, vec2 axis1, vec2 axis2, vec3 con, vec3 color, float opacity,
                  float depth) {
     vec2 corner = vec2((gl_VertexID & 1) != 0 ? 1.0 : -1.0, (gl_VertexID & 2) != 0 ? 1.0 : -1.0);
-    vec2 pixel = mean2d + corner.x * axis1 + corner.y * axis2;
+    // Guard (stress case near_tiny): a splat just past a 1e-8 near plane had quads 6e10 px wide
+    // (NDC ~1e9), which llvmpipe's clipping lost (max error 0.30).  A half-axis longer than
+    // reach = |mean - viewport centre| + |viewport| covers no more of the viewport (the
+    // shortened quad still contains the disc of that radius), so shorten it to that.
+    float reach = length(mean2d - 0.5 * u_viewport) + length(u_viewport);
+    vec2 shrink = vec2(min(1.0, reach / max(length(axis1), 1e-30)),
+                       min(1.0, reach / max(length(axis2), 1e-30)));
+    vec2 pixel = mean2d + corner.x * shrink.x * axis1 + corner.y * shrink.y * axis2;
     // Image coordinates map to NDC without a y flip: framebuffer row 0 holds image row 0 (the
     // top), so a plain readback is already top-down and gl_FragCoord.xy = (j + 0.5, i + 0.5).
     gl_Position = vec4(pixel / u_viewport * 2.0 - 1.0, 0.0, 1.0);
@@ -24,6 +31,6 @@ void emit_corner(vec2 mean2d, vec2 axis1, vec2 axis2, vec3 con, vec3 color, floa
     v_color = vec4(color, opacity);
     v_depth = depth;
 #ifdef EXTENT_FAST
-    v_unit = corner * FAST_CORNER_SIGMAS;
+    v_unit = corner * shrink * FAST_CORNER_SIGMAS;
 #endif
 }

@@ -17,17 +17,17 @@ struct ScreenSplat {
 //   EXTENT_SQUARE  the reference's square of radius ceil(3 sqrt(lambda_max));
 //   EXTENT_FAST    ellipse axes at a fixed FAST_CORNER_SIGMAS (the fragment then evaluates an
 //                  identity conic on the interpolated corner coordinate).
-void quad_axes(vec3 cov, float opacity, out vec2 axis1, out vec2 axis2) {
+void quad_axes(vec3 cov, float det, float opacity, out vec2 axis1, out vec2 axis2) {
 #if defined(EXTENT_SQUARE)
     float r = reference_radius(cov);
     axis1 = vec2(r, 0.0);
     axis2 = vec2(0.0, r);
 #elif defined(EXTENT_FAST)
-    mat2 unit = ellipse_axes(cov, ALPHA_MIN * exp(0.5));  // k = 1: one sigma along each axis
+    mat2 unit = ellipse_axes(cov, det, ALPHA_MIN * exp(0.5));  // k = 1: one sigma along each axis
     axis1 = unit[0] * FAST_CORNER_SIGMAS;
     axis2 = unit[1] * FAST_CORNER_SIGMAS;
 #else
-    mat2 axes = ellipse_axes(cov, opacity);
+    mat2 axes = ellipse_axes(cov, det, opacity);
     axis1 = axes[0];
     axis2 = axes[1];
 #endif
@@ -39,8 +39,9 @@ bool setup_splat(uint i, out ScreenSplat s) {
     vec4 a = splat_a[i];
     vec3 p = u_view_rot * a.xyz + u_view_trans;
     if (!(p.z > u_near)) return false;  // view z, before any divide
-    vec3 cov = covariance_2d(covariance_3d(quat_to_rotmat(splat_q[i]), splat_s[i].xyz), p);
-    float det;
+    mat3 rot = quat_to_rotmat(splat_q[i]);
+    vec3 cov = covariance_2d(covariance_3d(rot, splat_s[i].xyz), p);
+    float det = covariance_2d_det(cov, screen_factor(rot, splat_s[i].xyz, p));  // > 0 (see project.glsl)
     s.conic = conic(cov, det);
     if (!(det > 0.0)) return false;
     s.opacity = a.w;
@@ -48,7 +49,7 @@ bool setup_splat(uint i, out ScreenSplat s) {
     s.opacity *= antialias_factor(cov);
 #endif
     s.mean2d = project_mean(p);
-    quad_axes(cov, s.opacity, s.axis1, s.axis2);
+    quad_axes(cov, det, s.opacity, s.axis1, s.axis2);
     s.depth = p.z;
     s.color = sh_color(i, splat_dc[i].rgb, normalize(a.xyz - u_cam_center));
     return true;

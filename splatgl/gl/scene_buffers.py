@@ -23,7 +23,7 @@ def _vec4(columns: list[np.ndarray], n: int) -> np.ndarray:
 class SceneBuffers:
     """Activated splat attributes in std430 storage buffers; release with :meth:`release`.
 
-    ``a`` = (mean.xyz, opacity), ``q`` = unit quaternion, ``s`` = (scale.xyz, 0) for 3DGS or
+    ``a`` = (mean.xyz - scene.anchor, opacity), ``q`` = unit quaternion, ``s`` = (scale.xyz, 0) for 3DGS or
     (scale.xy, 0, 0) for surfels, ``dc`` = (SH DC RGB, 0), ``sh`` = coefficients 1..K-1
     (K-1 x 3 per splat, float32 or with ``half_sh`` float16 packed two per uint; absent at
     degree 0).  Stored at the scene's own degree: nothing is padded to degree 3.
@@ -34,7 +34,9 @@ class SceneBuffers:
         self.scene = scene
         self.count = n
         self.sh_rest_coeffs = scene.sh.shape[1] - 1
-        self.a = ctx.buffer(_vec4([scene.means, scene.opacities], n).tobytes())
+        # Means relative to the scene's anchor (float32-safe far from the origin); the camera
+        # uniforms fold the anchor back in (splatgl.quad.set_camera_uniforms).
+        self.a = ctx.buffer(_vec4([scene.relative_means, scene.opacities], n).tobytes())
         self.q = ctx.buffer(np.ascontiguousarray(scene.rotations, np.float32).tobytes())
         self.s = ctx.buffer(_vec4([scene.scales], n).tobytes())
         self.dc = ctx.buffer(_vec4([scene.sh[:, 0]], n).tobytes())

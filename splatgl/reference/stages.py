@@ -195,12 +195,13 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
         raise ValueError(f"reference dtype must be float32 or float64, got {dt}")
     if scene.kind is SplatKind.SURFEL_2D:
         return project_surfels(scene, camera, settings, dt)
-    near = dt.type(resolve_near(settings, scene.robust_radius))
+    near = pm.near_threshold(resolve_near(settings, scene.robust_radius), dt)
     grid = tile_grid(camera.width, camera.height)
+    means, view = pm.anchored(scene.means, scene.anchor, camera, dt)  # relative: float32-safe
     with np.errstate(all="ignore"):
-        pr = pm.project(scene.means.astype(dt), scene.rotations.astype(dt),
+        pr = pm.project(means, scene.rotations.astype(dt),
                         scene.scales.astype(dt), scene.opacities.astype(dt), scene.sh.astype(dt),
-                        camera, settings.antialias, settings.sh_degree)
+                        view, settings.antialias, settings.sh_degree)
     finite = (np.isfinite(pr.mean2d).all(1) & np.isfinite(pr.conic).all(1)
               & np.isfinite(pr.cov2d).all((1, 2)) & np.isfinite(pr.color).all(1)
               & np.isfinite(pr.opacity))
@@ -254,14 +255,14 @@ def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
     not apply to surfels.
     """
     dt = np.dtype(dtype)
-    near = resolve_near(settings, scene.robust_radius)
+    near = pm.near_threshold(resolve_near(settings, scene.robust_radius), dt)
     grid = tile_grid(camera.width, camera.height)
-    means = scene.means.astype(dt)
+    means, view = pm.anchored(scene.means, scene.anchor, camera, dt)  # relative: float32-safe
     opac = scene.opacities.astype(dt)
     with np.errstate(all="ignore"):
-        scr = sf.surfel_screen(means, scene.rotations.astype(dt), scene.scales.astype(dt), camera)
-        box = sf.surfel_bounds(scr, opac, camera, near)
-        color = pm.sh_color(scene.sh.astype(dt), pm.view_dirs(means, camera), settings.sh_degree)
+        scr = sf.surfel_screen(means, scene.rotations.astype(dt), scene.scales.astype(dt), view)
+        box = sf.surfel_bounds(scr, opac, view, near)
+        color = pm.sh_color(scene.sh.astype(dt), pm.view_dirs(means, view), settings.sh_degree)
     ok = ((scr.view_z > dt.type(near)) & box.visible & np.isfinite(color).all(1)
           & np.isfinite(scr.depth_row).all(1))
     radius = np.where(ok[:, None], np.ceil(box.half), 0).astype(np.int64)
