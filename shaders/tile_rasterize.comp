@@ -10,7 +10,18 @@
 // the tile (o exp(-q_min / 2) < 1/255, q_min from conic_min_over_box, with a safety margin) is
 // dropped from the batch before blending, keeping the order of the others; and a pixel skips
 // exp() where power is below that splat's cut-off by the same margin.
+// SURFEL (2DGS, twin: reference/rasterize.py's surfel branch, splatgl/surfel.py surfel_alpha):
+// every splat of the tile's list is kept (its tile rectangle is already the box_rect of its
+// pixel box) and a pixel evaluates the ray-splat intersection instead of the conic:
+//   h_u = T'_0 - dx T_2, h_v = T'_1 - dy T_2, (u, v, 1) ~ h_u x h_v (2DGS eq. 9-10),
+//   rho = min(u^2 + v^2, F |d|^2) (low pass, eq. 11, F = SURFEL_FILTER_INV_SQUARE),
+//   alpha = min(0.99, o exp(-rho / 2)), skipped below 1/255; same early stop; D sums the
+//   view z of the hit (depth_row . (u, v, 1)) where rho_3d <= rho_2d, else the centre's z.
 #include "lib/tile_common.glsl"
+#ifdef SURFEL
+#include "lib/camera.glsl"
+#include "lib/surfel.glsl"
+#endif
 
 layout(local_size_x = TILE_SIZE, local_size_y = TILE_SIZE) in;
 
@@ -31,6 +42,10 @@ uniform uint u_index_mask;   // low bits of a packed key holding the splat index
 shared vec4 s_mean_cut[TILE_PIXELS];   // (u, v, power cut-off, view z) of the kept splats
 shared vec4 s_conic_o[TILE_PIXELS];    // (a, b, c, opacity)
 shared vec4 s_color[TILE_PIXELS];      // (r, g, b, 0)
+#ifdef SURFEL
+shared vec2 s_depth_uv[TILE_PIXELS];   // (a_u.z, a_v.z) of depth_row (SURFEL: mean_cut is
+                                       // (c, z, o), conic_o the centred rows T'_0.xy, T'_1.xy)
+#endif
 shared uint s_slot[TILE_PIXELS];       // keep flag, then (after the scan) the kept slot
 shared uint s_alive[TILE_PIXELS];      // 1 while the invocation's pixel still blends
 shared uint s_kept;                    // splats kept in this batch
@@ -59,18 +74,29 @@ void main() {
         uint k = base + rank;
         bool keep = false;
         vec4 mc = vec4(0.0), qo = vec4(0.0);
+#ifdef SURFEL
+        vec2 duv = vec2(0.0);
+#endif
         if (k < range.y) {
 #ifdef KEY_PACKED
             uint idx = sort_keys[k].x & u_index_mask;
 #else
             uint idx = sort_values[k];
 #endif
+#ifdef SURFEL
+            keep = true;
+            mc = proj_mean_depth[idx];
+            qo = proj_conic_o[idx];
+            duv = proj_surfel[idx].xy;
+            s_color[rank] = proj_color[idx];
+#else
             vec4 md = proj_mean_depth[idx];
             qo = proj_conic_o[idx];
             float q_cut = 2.0 * log(qo.w / ALPHA_MIN) * (1.0 + Q_MARGIN_REL) + Q_MARGIN_ABS;
             keep = conic_min_over_box(qo.xyz, md.xy, box_lo, box_hi) <= q_cut;
             mc = vec4(md.xy, -0.5 * q_cut, md.z);
             if (keep) s_color[rank] = proj_color[idx];
+#endif
         }
         s_slot[rank] = keep ? 1u : 0u;
         s_alive[rank] = done ? 0u : 1u;
@@ -98,6 +124,9 @@ void main() {
             s_mean_cut[slot] = mc;
             s_conic_o[slot] = qo;
             s_color[slot] = vec4(color, 0.0);
+#ifdef SURFEL
+            s_depth_uv[slot] = duv;
+#endif
         }
         memoryBarrierShared();
         barrier();
@@ -105,17 +134,31 @@ void main() {
         for (uint j = 0u; !done && j < count; ++j) {
             vec4 q = s_conic_o[j];
             vec4 m = s_mean_cut[j];
+#ifdef SURFEL
+            vec3 depth_row = vec3(s_depth_uv[j], m.z);   // z of (u, v, 1)
+#ifdef ORTHOGRAPHIC
+            vec3 t2 = vec3(0.0, 0.0, 1.0);
+#else
+            vec3 t2 = depth_row;                         // T_2 = (a_u.z, a_v.z, p.z)
+#endif
+            float z;
+            float alpha = surfel_alpha(vec3(q.xy, 0.0), vec3(q.zw, 0.0), t2, depth_row, m.w,
+                                       centre - m.xy, z);
+            if (alpha < ALPHA_MIN) continue;
+#else
+            float z = m.w;
             vec2 d = centre - m.xy;
             // power = -0.5 (a dx^2 + c dy^2) - b dx dy, grouped as the NumPy twin groups it.
             float power = -0.5 * (q.x * d.x * d.x + q.z * d.y * d.y) - q.y * d.x * d.y;
             if (power > 0.0 || power < m.z) continue;
             float alpha = min(ALPHA_MAX, q.w * exp(power));
             if (alpha < ALPHA_MIN) continue;
+#endif
             float test_t = T * (1.0 - alpha);
             if (test_t < T_MIN) { done = true; break; }
             float w = alpha * T;                  // alpha_k T_k
             C += s_color[j].rgb * w;
-            D += m.w * w;
+            D += z * w;
             T = test_t;
         }
     }

@@ -21,6 +21,19 @@ layout(std430, binding = TILE_BINDING_OFFSETS) buffer TileOffsets { uint tile_of
 layout(std430, binding = TILE_BINDING_KEYS) buffer SortKeys { uvec2 sort_keys[]; };
 layout(std430, binding = TILE_BINDING_VALUES) buffer SortValues { uint sort_values[]; };
 layout(std430, binding = TILE_BINDING_RANGES) buffer TileRanges { uvec2 tile_ranges[]; };
+#ifdef SURFEL
+// 2DGS surfels (SURFEL defined) reuse the buffers above with these meanings (twin:
+// reference/stages.py project_surfels, rows of splatgl/surfel.py SurfelScreen):
+//   proj_mean_depth[i] = (c_x, c_y, view z, opacity): projected centre c (the low-pass centre),
+//                        the centre's camera z (sort key; depth_row.z) and o.
+//   proj_conic_o[i]    = (T'_00, T'_01, T'_10, T'_11): centred rows T'_r = T_r - c_r T_2 of
+//                        T = P H (2DGS eq. 5); their third entries are 0 exactly.
+//   proj_color[i]      = (r, g, b, 0) as for 3DGS.
+//   proj_surfel[i]     = (a_u.z, a_v.z, 0, 0): with view z, depth_row = (a_u.z, a_v.z, z), the
+//                        camera z of tangent point (u, v, 1); perspective T_2 = depth_row,
+//                        orthographic T_2 = (0, 0, 1).
+layout(std430, binding = TILE_BINDING_SURFEL) buffer ProjSurfel { vec4 proj_surfel[]; };
+#endif
 
 // Key layout (DESIGN.md section 2: tile id major, float bits of view z minor, compared as one
 // unsigned 64-bit integer).  splatgl packs it as
