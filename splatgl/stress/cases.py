@@ -275,7 +275,6 @@ def _surfels_edge_on() -> Setup:
     return Setup(scene, cam)
 
 
-_SURFEL_TILE = "the tile renderer renders 3DGS scenes only"
 _HALF_SATURATION = (
     "in RGBA16F the accumulated alpha stalls at 1 - 2^-10 (measured on llvmpipe; half floats "
     "cannot approach 1 in steps that small), so the transmittance never reaches the 1e-4 stop: "
@@ -314,8 +313,7 @@ CASES: tuple[StressCase, ...] = (
                _coincident(Precision.RGBA16F, 0.5), known={"quad": _HALF_SATURATION}),
     StressCase("image_1x1", "a 1 x 1 image", _image(1)),
     StressCase("image_8192", "an 8192 x 8192 image, sparse scene", _image(8192), slow=True),
-    StressCase("surfels_edge_on", "2DGS surfels edge-on and nearly edge-on", _surfels_edge_on,
-               unsupported={"tile": _SURFEL_TILE}),
+    StressCase("surfels_edge_on", "2DGS surfels edge-on and nearly edge-on", _surfels_edge_on),
 )
 
 
