@@ -20,8 +20,8 @@ def _fmt(value, spec: str, missing: str = "-") -> str:
 
 def table(rows: list[BenchRow]) -> str:
     """A fixed-width table, one block per scene."""
-    head = (f"{'config':<32} {'ms':>8} {'p10-p90':>15} {'xlimit':>7} {'drawn':>8} {'frag eff':>8} "
-            f"{'PSNR':>7} {'max err':>8} {'>1/255':>8}")
+    head = (f"{'config':<32} {'ms':>8} {'p10-p90':>15} {'cull+sort':>9} {'xlimit':>7} {'drawn':>8} "
+            f"{'frag eff':>8} {'PSNR':>7} {'max err':>8} {'>1/255':>8}")
     out = []
     for scene in dict.fromkeys(r.scene for r in rows):
         sub = [r for r in rows if r.scene == scene]
@@ -29,8 +29,10 @@ def table(rows: list[BenchRow]) -> str:
         out.append(head)
         for r in sub:
             spread = f"{r.frame_ms_p10:.1f}-{r.frame_ms_p90:.1f}"
+            cs = (r.stages_ms["cull"] + r.stages_ms["sort"]) if "cull" in r.stages_ms else None
             out.append(
-                f"{r.config:<32} {r.frame_ms:>8.1f} {spread:>15} {_fmt(r.limit_ratio, '.2f'):>7} "
+                f"{r.config:<32} {r.frame_ms:>8.1f} {spread:>15} {_fmt(cs, '.1f'):>9} "
+                f"{_fmt(r.limit_ratio, '.2f'):>7} "
                 f"{_fmt(r.drawn, 'd'):>8} {_fmt(r.fragment_efficiency, '.3f'):>8} "
                 f"{_fmt(r.psnr, '.1f'):>7} {_fmt(r.max_abs, '.4f'):>8} "
                 f"{_fmt(None if r.off_1 is None else r.off_1 * 100, '.3f'):>7}%")

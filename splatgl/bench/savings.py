@@ -24,20 +24,23 @@ from ..settings import RenderSettings, resolve_near
 from .runner import BenchOptions, BenchRow, orbit_path
 
 
-def _time(render, cameras: list[Camera]) -> tuple[float, float, float]:
-    """(median, p10, p90) milliseconds of ``render`` over ``cameras``, after one warm-up."""
-    render(cameras[-1])
-    times = []
+def _time(quad, cameras: list[Camera]) -> tuple[float, float, float, dict]:
+    """(median, p10, p90) milliseconds of ``quad.render`` over ``cameras`` after one warm-up,
+    and the median of each stage."""
+    quad.render(cameras[-1])
+    times, stages = [], []
     for cam in cameras:
         t0 = time.perf_counter()
-        render(cam)
+        quad.render(cam)
         times.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(times), float(np.percentile(times, 10)), float(np.percentile(times, 90))
+        stages.append({k: v * 1e3 for k, v in vars(quad.last_times).items() if isinstance(v, float)})
+    med_stages = {k: statistics.median(s[k] for s in stages) for k in stages[0]}
+    return statistics.median(times), float(np.percentile(times, 10)), float(np.percentile(times, 90)), med_stages
 
 
 def _row(name: str, scene: Scene, config: str, stats, drawn: int | None = None) -> BenchRow:
-    med, p10, p90 = stats
-    return BenchRow(name, scene.count, config, "savings", "quad", med, p10, p90, drawn=drawn)
+    med, p10, p90, stages = stats
+    return BenchRow(name, scene.count, config, "savings", "quad", med, p10, p90, stages, drawn=drawn)
 
 
 def visible_fraction(scene: Scene, camera: Camera, settings: RenderSettings) -> float:
@@ -70,8 +73,8 @@ def savings_rows(renderer: Renderer, name: str, scene: Scene, options: BenchOpti
     # SH: own degree against zero-padded to 3 (only meaningful for scenes below degree 3).
     if scene.sh_degree < 3:
         padded = scene.with_sh_degree(3)
-        rows.append(_row(name, scene, f"sh{scene.sh_degree} stored as is", _time(quad(scene, base).render, cams)))
-        rows.append(_row(name, scene, "same scene padded to sh3", _time(quad(padded, base).render, cams)))
+        rows.append(_row(name, scene, f"sh{scene.sh_degree} stored as is", _time(quad(scene, base), cams)))
+        rows.append(_row(name, scene, "same scene padded to sh3", _time(quad(padded, base), cams)))
 
     # Culling: ~90% off-screen, culled and not; and the all-on-screen default view.
     off = mostly_offscreen_camera(scene, options)
@@ -87,15 +90,15 @@ def savings_rows(renderer: Renderer, name: str, scene: Scene, options: BenchOpti
         m[:3, 3] = -m[:3, :3] @ eye
         off_path.append(c.with_pose(m))
     culled = quad(scene, base)
-    rows.append(_row(name, scene, f"{(1 - frac) * 100:.0f}% off-screen, culled", _time(culled.render, off_path),
+    rows.append(_row(name, scene, f"{(1 - frac) * 100:.0f}% off-screen, culled", _time(culled, off_path),
                      culled.last_times.drawn if culled.last_times else None))
     unculled = quad(scene, dataclasses.replace(base, cull=False))
     rows.append(_row(name, scene, f"{(1 - frac) * 100:.0f}% off-screen, not culled",
-                     _time(unculled.render, off_path), unculled.last_times.drawn if unculled.last_times else None))
-    rows.append(_row(name, scene, "all on-screen (default view)", _time(culled.render, cams)))
+                     _time(unculled, off_path), unculled.last_times.drawn if unculled.last_times else None))
+    rows.append(_row(name, scene, "all on-screen (default view)", _time(culled, cams)))
 
     # Still camera against moving: the still one reuses the sort (and the upload of indices).
     still = quad(scene, base)
-    rows.append(_row(name, scene, "moving camera (orbit)", _time(still.render, cams)))
-    rows.append(_row(name, scene, "still camera", _time(still.render, [cams[0]] * len(cams))))
+    rows.append(_row(name, scene, "moving camera (orbit)", _time(still, cams)))
+    rows.append(_row(name, scene, "still camera", _time(still, [cams[0]] * len(cams))))
     return rows
