@@ -2,8 +2,8 @@
 
 - SH: an SH0 scene against the same scene zero-padded to SH3 (padding is what a renderer that
   always stores and evaluates 48 coefficients pays).
-- Culling: a view with about 90% of the splats off-screen, culled against not culled, and
-  against an all-on-screen view.
+- Culling: the orbit turned sideways until about 90% of the splats are off-screen, culled
+  against not culled, and against the all-on-screen orbit.
 - Still camera: the same camera every frame (the sort is reused) against an orbit.
 """
 
@@ -18,9 +18,9 @@ import numpy as np
 from ..camera import Camera
 from ..cull import cull
 from ..project import to_camera
-from ..render import Renderer, default_camera
+from ..render import Renderer
 from ..scene import Scene
-from ..settings import RenderSettings, resolve_near
+from ..settings import Preprocess, RenderSettings, resolve_near
 from .runner import BenchOptions, BenchRow, orbit_path
 
 
@@ -49,17 +49,26 @@ def visible_fraction(scene: Scene, camera: Camera, settings: RenderSettings) -> 
     return float(keep.mean())
 
 
-def mostly_offscreen_camera(scene: Scene, options: BenchOptions, target: float = 0.1) -> Camera:
-    """The default view moved towards the scene's centre until about ``target`` of the splats
-    survive culling (bisection on the distance scale)."""
+def _turned(camera: Camera, degrees: float) -> Camera:
+    """The camera turned about its own vertical axis by ``degrees`` (it looks to the side)."""
+    a = np.radians(degrees)
+    turn = np.eye(4)
+    turn[0, 0], turn[0, 2], turn[2, 0], turn[2, 2] = np.cos(a), -np.sin(a), np.sin(a), np.cos(a)
+    return camera.with_pose(turn @ camera.world_to_camera)
+
+
+def mostly_offscreen_camera(camera: Camera, scene: Scene, target: float = 0.1) -> tuple[Camera, float]:
+    """``camera`` turned sideways until about ``target`` of the splats survive culling
+    (bisection on the angle); returns the camera and the angle in degrees.  Turning, unlike
+    moving closer, keeps the visible splats' screen size, so the row isolates what culling
+    saves rather than adding fill."""
     settings = RenderSettings()
-    lo, hi = 0.01, 1.0
-    for _ in range(18):
-        mid = (lo * hi) ** 0.5
-        frac = visible_fraction(scene, default_camera(scene, options.width, options.height,
-                                                      distance_scale=mid), settings)
-        lo, hi = (mid, hi) if frac < target else (lo, mid)
-    return default_camera(scene, options.width, options.height, distance_scale=hi)
+    lo, hi = 0.0, 90.0
+    for _ in range(20):
+        mid = 0.5 * (lo + hi)
+        frac = visible_fraction(scene, _turned(camera, mid), settings)
+        lo, hi = (lo, mid) if frac < target else (mid, hi)
+    return _turned(camera, hi), hi
 
 
 def savings_rows(renderer: Renderer, name: str, scene: Scene, options: BenchOptions,
@@ -71,31 +80,27 @@ def savings_rows(renderer: Renderer, name: str, scene: Scene, options: BenchOpti
         return renderer.renderer_for(s, settings)
 
     # SH: own degree against zero-padded to 3 (only meaningful for scenes below degree 3).
+    # Both places the SH math can run: the pre-pass evaluates it once per splat, the vertex
+    # stage once per quad corner (4x), so padding costs the latter far more.
     if scene.sh_degree < 3:
         padded = scene.with_sh_degree(3)
-        rows.append(_row(name, scene, f"sh{scene.sh_degree} stored as is", _time(quad(scene, base), cams)))
-        rows.append(_row(name, scene, "same scene padded to sh3", _time(quad(padded, base), cams)))
+        for pre in (base.preprocess, *(p for p in Preprocess if p is not base.preprocess)):
+            settings = dataclasses.replace(base, preprocess=pre)
+            rows.append(_row(name, scene, f"sh{scene.sh_degree} as stored ({pre.value})",
+                             _time(quad(scene, settings), cams)))
+            rows.append(_row(name, scene, f"padded to sh3 ({pre.value})", _time(quad(padded, settings), cams)))
 
-    # Culling: ~90% off-screen, culled and not; and the all-on-screen default view.
-    off = mostly_offscreen_camera(scene, options)
-    frac = visible_fraction(scene, off, base)
-    # Orbit at the close distance: move each orbit pose's eye towards the centre.
-    lo, hi = scene.robust_bounds
-    centre = 0.5 * (lo + hi)
-    scale = float(np.linalg.norm(off.center - centre) / np.linalg.norm(cams[0].center - centre))
-    off_path = []
-    for c in cams:
-        eye = centre + (c.center - centre) * scale
-        m = c.world_to_camera.copy()
-        m[:3, 3] = -m[:3, :3] @ eye
-        off_path.append(c.with_pose(m))
+    # Culling: ~90% off-screen (the orbit turned sideways), culled and not; and all on-screen.
+    off_path = [mostly_offscreen_camera(c, scene)[0] for c in cams]
+    frac = float(np.mean([visible_fraction(scene, c, base) for c in off_path]))
     culled = quad(scene, base)
     rows.append(_row(name, scene, f"{(1 - frac) * 100:.0f}% off-screen, culled", _time(culled, off_path),
                      culled.last_times.drawn if culled.last_times else None))
     unculled = quad(scene, dataclasses.replace(base, cull=False))
     rows.append(_row(name, scene, f"{(1 - frac) * 100:.0f}% off-screen, not culled",
                      _time(unculled, off_path), unculled.last_times.drawn if unculled.last_times else None))
-    rows.append(_row(name, scene, "all on-screen (default view)", _time(culled, cams)))
+    rows.append(_row(name, scene, "all on-screen (default view)", _time(culled, cams),
+                     culled.last_times.drawn if culled.last_times else None))
 
     # Still camera against moving: the still one reuses the sort (and the upload of indices).
     still = quad(scene, base)
