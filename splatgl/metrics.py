@@ -73,3 +73,22 @@ def image_errors(got: np.ndarray, expected: np.ndarray) -> ImageErrors:
         off_1=float((per_pixel > OFF_THRESHOLDS[0]).mean()),
         off_4=float((per_pixel > OFF_THRESHOLDS[1]).mean()),
     )
+
+
+def depth_errors(got, expected) -> dict[str, float]:
+    """Alpha and accumulated-depth errors of two :class:`splatgl.output.RenderOutput`.
+
+    ``depth_max_rel`` is the largest ``|D_got - D_expected|`` over the farthest expected depth
+    ``D / A`` of the reference (where A >= 0.5), so it reads in the depth's own units.
+    """
+    a = expected.alpha
+    exp_depth = expected.expected_depth()
+    solid = a >= 0.5
+    scale = float(exp_depth[solid].max()) if solid.any() else float(max(exp_depth.max(), 1e-30))
+    d = np.abs(got.depth.astype(np.float64) - expected.depth)
+    return {
+        "alpha_max_abs": float(np.abs(got.alpha.astype(np.float64) - a).max()),
+        "depth_max_abs": float(d.max()),
+        "depth_scale": scale,
+        "depth_max_rel": float(d.max() / scale) if scale > 0 else 0.0,
+    }

@@ -102,8 +102,17 @@ def test_compare_cli_json_and_images(tmp_path, capsys):
 def test_compare_cli_text(capsys):
     assert main(["compare", "--width", "64", "--height", "48"]) == 0
     out = capsys.readouterr().out
-    for word in ("PSNR", "SSIM", "max |err|", "> 1/255", "> 4/255"):
+    for word in ("PSNR", "SSIM", "max |err|", "> 1/255", "> 4/255", "depth D"):
         assert word in out
+
+
+def test_compare_json_has_depth_errors_and_rejects_bad_scale(capsys):
+    assert main(["compare", "--width", "64", "--height", "48", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    # Depth follows colour: D differs by at most z_max times the alpha bound.
+    assert 0 <= result["depth_max_rel"] < MAX_ABS_ALPHA and result["depth_scale"] > 0
+    assert main(["compare", "--heatmap-scale", "-1"]) == 2
+    assert "heatmap-scale" in capsys.readouterr().err
 
 
 def test_reference_and_quad_alpha_order_by_depth(gl_renderer):

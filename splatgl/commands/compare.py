@@ -9,7 +9,8 @@ from pathlib import Path
 
 from ..pictures import heatmap, side_by_side
 from ..image_io import write_image
-from ..metrics import image_errors
+from ..errors import SplatglError
+from ..metrics import depth_errors, image_errors
 from ..render import Renderer
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
@@ -49,28 +50,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if not args.heatmap_scale > 0:
+        raise SplatglError(f"--heatmap-scale must be positive, got {args.heatmap_scale}")
     scene, settings, camera = inputs_from_args(args)
     kinds = (RendererKind(args.renderer), RendererKind(args.against))
-    images, seconds = [], []
+    outputs, seconds = [], []
     with Renderer() as renderer:
         for kind in kinds:
             if kind is not RendererKind.REFERENCE:
                 renderer.render(scene, camera, settings, kind)  # warm-up: compile, upload
             t0 = time.perf_counter()
-            images.append(renderer.render(scene, camera, settings, kind))
+            outputs.append(renderer.render_layers(scene, camera, settings, kind))
             seconds.append(time.perf_counter() - t0)
+    images = [o.rgba for o in outputs]
     errors = image_errors(images[0], images[1])
+    depth = depth_errors(outputs[0], outputs[1])
     names = tuple(k.value for k in kinds)
     if args.side_by_side is not None:
         write_image(args.side_by_side, side_by_side(images[0], images[1], names))
     if args.heatmap is not None:
-        if not args.heatmap_scale > 0:
-            raise ValueError("--heatmap-scale must be positive")
         write_image(args.heatmap, heatmap(images[0], images[1], args.heatmap_scale))
     result = {
         "scene": str(args.scene) if args.scene else "demo", "splats": scene.count,
         "width": camera.width, "height": camera.height, "renderer": names[0], "against": names[1],
-        **errors.as_dict(), "seconds": dict(zip(names, seconds)),
+        **errors.as_dict(), **depth, "seconds": dict(zip(names, seconds)),
     }
     if args.json:
         print(json.dumps(result))
@@ -84,5 +87,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"  max |err|  {errors.max_abs:.3e}")
     print(f"  > 1/255    {errors.off_1 * 100:.3f} % of pixels")
     print(f"  > 4/255    {errors.off_4 * 100:.3f} % of pixels")
-    print("  time       " + ", ".join(f"{n} {s * 1e3:.1f} ms" for n, s in zip(names, seconds)))
+    print(f"  alpha      max |err| {depth['alpha_max_abs']:.3e}")
+    print(f"  depth D    max |err| {depth['depth_max_abs']:.3e} = {depth['depth_max_rel'] * 100:.3f} % of "
+          f"the farthest expected depth {depth['depth_scale']:.4g}")
+    print("  time       " + ", ".join(f"{n} {s * 1e3:.1f} ms" for n, s in zip(names, seconds))
+          + " (colour and depth)")
     return 0
