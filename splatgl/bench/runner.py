@@ -153,6 +153,14 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
         ref_ms.append((time.perf_counter() - t0) * 1e3)
         tick(f"reference frame {i}")
 
+    # Warm-up pass over the whole path with the first configuration, untimed: the first
+    # frames after loading a scene ran ~20% slow (page faults, llvmpipe's shader JIT),
+    # which made the default row (always first) look worse than the same settings later.
+    first = _Runner(renderer, scene, configs[0])
+    for cam in [warm] + cameras:
+        first.render(cam)
+    first.release()
+
     rows: list[BenchRow] = []
     for config in configs:
         if config.kind is RowKind.REFERENCE:
