@@ -74,8 +74,12 @@ def plot(path: Path, rows: list[BenchRow]) -> None:
     import matplotlib.ticker
 
     scenes = list(dict.fromkeys(r.scene for r in rows))
-    fig, axes = plt.subplots(1, len(scenes), figsize=(6.5 * len(scenes), 5.2), squeeze=False)
-    for ax, scene in zip(axes[0], scenes):
+    cols = min(2, len(scenes))
+    nrows = (len(scenes) + cols - 1) // cols
+    fig, axes = plt.subplots(nrows, cols, figsize=(7.0 * cols, 5.4 * nrows), squeeze=False)
+    for ax in axes.ravel()[len(scenes):]:
+        ax.set_visible(False)
+    for ax, scene in zip(axes.ravel(), scenes):
         sub = [r for r in rows if r.scene == scene and r.psnr is not None]
         floor = 1e-7  # identical images (the reference itself) sit on the floor
         pts = [(r.frame_ms, max(floor, 10 ** (-r.psnr / 20) if not math.isinf(r.psnr) else floor)) for r in sub]
