@@ -24,7 +24,9 @@ from splatgl.render import render_reference_rgba
 REPO = Path(__file__).resolve().parent.parent
 SCENES = ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply",
           "compressed_ply/guitar.compressed.ply", "spz/biker_v4.spz", "spz/donut_sh0_v2.spz",
-          "fixtures/test64_sh3.compressed.ply"]
+          "fixtures/test64_sh3.compressed.ply", "fixtures/minimal.splat", "fixtures/minimal.ksplat",
+          "fixtures/minimal-v2.spz", "fixtures/minimal-v3.spz", "fixtures/minimal-v4.spz",
+          "fixtures/minimal-raw.spz"]
 
 
 def timed(fn, repeats: int):
@@ -48,8 +50,8 @@ def main(argv=None) -> int:
     distances = [float(d) for d in args.distances.split(",")]
     settings = RenderSettings()
     print(f"{args.width}x{args.height}, RGBA32F, ellipse extent; times are medians of {args.repeats}")
-    print("| scene | dist | renderer | PSNR dB | SSIM | max abs | >1/255 % | >4/255 % | ms | reference ms |")
-    print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|")
+    print("| scene | splats | SH | dist | renderer | PSNR dB | SSIM | max abs | >1/255 % | >4/255 % | ms | reference ms |")
+    print("|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|")
     with Renderer() as renderer:
         for path in paths:
             try:
@@ -68,7 +70,8 @@ def main(argv=None) -> int:
                         continue
                     img, t = timed(lambda: renderer.render(scene, cam, settings, kind), args.repeats)
                     e = image_errors(img, ref)
-                    print(f"| {path.name} | {dist:g} | {kind.value} | {e.psnr:.1f} | {e.ssim:.6f} | "
+                    psnr = "inf" if e.psnr == float("inf") else f"{e.psnr:.1f}"
+                    print(f"| {path.name} | {scene.count} | {scene.sh_degree} | {dist:g} | {kind.value} | {psnr} | {e.ssim:.6f} | "
                           f"{e.max_abs:.4f} | {e.off_1 * 100:.3f} | {e.off_4 * 100:.3f} | "
                           f"{t * 1e3:.0f} | {t_ref * 1e3:.0f} |", flush=True)
     return 0
