@@ -2,7 +2,8 @@
 
 (a) Single camera: ``{"width", "height", "fx", "fy", "cx", "cy", "world_to_camera": 4x4
     row-major, optional "projection": "perspective" | "orthographic"}`` (orthographic fx, fy in
-    pixels per world unit).
+    pixels per world unit), or with ``"frustum": {"left", "right", "top", "bottom", "near",
+    "far"}`` in place of the intrinsics.
 (b) 3DGS ``cameras.json``: a list of ``{"width", "height", "position", "rotation", "fx", "fy",
     ...}`` where ``rotation`` is camera-to-world (3x3, rows as stored) and ``position`` the camera
     centre; the principal point is the image centre.
@@ -41,10 +42,33 @@ def _matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, int])
     return arr
 
 
+def _camera_from_frustum(obj: dict, path: Path) -> Camera:
+    frustum = obj["frustum"]
+    if not isinstance(frustum, dict):
+        raise CameraError(f"{path}: field 'frustum' must be an object with left, right, top, bottom, near")
+    where = "frustum: "
+    b = {k: _number(path, where, frustum, k) for k in ("left", "right", "top", "bottom", "near")}
+    far = _number(path, where, frustum, "far") if "far" in frustum else None
+    w, h = _number(path, "", obj, "width"), _number(path, "", obj, "height")
+    w2c = _matrix(path, "", obj, "world_to_camera", (4, 4))
+    try:
+        return Camera.from_frustum(int(w), int(h), b["left"], b["right"], b["top"], b["bottom"],
+                                   b["near"], far, w2c)
+    except CameraError as exc:
+        raise CameraError(f"{path}: {exc}") from None
+
+
 def camera_from_json(obj: dict, path: Path = Path("<camera>")) -> Camera:
-    """A camera from the single-camera JSON object (form (a))."""
+    """A camera from the single-camera JSON object (form (a)).
+
+    Instead of ``fx, fy, cx, cy`` the object may give ``"frustum": {"left", "right", "top",
+    "bottom", "near", optional "far"}`` (OpenGL-style bounds at the near plane, y up), which
+    maps to exactly the same pixels as the equivalent intrinsics.
+    """
     if not isinstance(obj, dict):
         raise CameraError(f"{path}: expected a JSON object with width, height, fx, fy, cx, cy, world_to_camera")
+    if "frustum" in obj:
+        return _camera_from_frustum(obj, path)
     vals = {k: _number(path, "", obj, k) for k in ("width", "height", "fx", "fy", "cx", "cy")}
     w2c = _matrix(path, "", obj, "world_to_camera", (4, 4))
     proj = obj.get("projection", "perspective")

@@ -85,3 +85,25 @@ def test_orthographic_camera_file_through_the_cli(tmp_path):
     out = tmp_path / "o.png"
     assert main(["render", "--camera", str(path), "-o", str(out)]) == 0
     assert json.loads(path.read_text())["projection"] == "orthographic"
+
+
+def test_frustum_camera_file_and_orthographic_flag(tmp_path):
+    import json
+
+    from splatgl.camera_io import load_camera
+    from splatgl.image_io import read_image
+
+    w2c = orbit([0, 0, 0], 6.0, 180.0, 20.0)
+    frustum = {"width": 96, "height": 72, "world_to_camera": w2c.tolist(),
+               "frustum": {"left": -0.12, "right": 0.1, "top": 0.08, "bottom": -0.09, "near": 0.2, "far": 50}}
+    same = Camera(96, 72, 96 * 0.2 / 0.22, 72 * 0.2 / 0.17, 0.12 * 96 / 0.22, 0.08 * 72 / 0.17, w2c)
+    (tmp_path / "f.json").write_text(json.dumps(frustum))
+    (tmp_path / "i.json").write_text(json.dumps(same.to_json()))
+    cam = load_camera(tmp_path / "f.json")
+    assert (cam.fx, cam.cy) == pytest.approx((same.fx, same.cy))
+    for name in ("f", "i"):
+        assert main(["render", "--camera", str(tmp_path / f"{name}.json"), "-o", str(tmp_path / f"{name}.exr")]) == 0
+    np.testing.assert_allclose(read_image(tmp_path / "f.exr"), read_image(tmp_path / "i.exr"), atol=1e-6)
+    assert main(["render", "--orthographic", "--width", "64", "--height", "48", "-o", str(tmp_path / "o.exr")]) == 0
+    ortho = read_image(tmp_path / "o.exr")
+    assert ortho[..., 3].max() > 0.5  # the framed demo is visible

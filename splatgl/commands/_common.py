@@ -55,6 +55,8 @@ def add_camera_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--height", type=int, default=None, help="image height in pixels (default 720)")
     g.add_argument("--fov", type=float, default=None,
                    help="vertical field of view of the default camera, degrees (default 50)")
+    g.add_argument("--orthographic", action="store_true",
+                   help="make the default camera orthographic, zoomed to frame the scene")
     g.add_argument("--distance", type=float, default=1.0, metavar="SCALE",
                    help="default camera distance as a multiple of the framing distance "
                         "(default 1; 0.5 is twice as close)")
@@ -119,9 +121,15 @@ def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSet
         raise SplatglError(f"--fov must be in (0, 180) degrees, got {args.fov}")
     if not args.distance > 0.0:
         raise SplatglError(f"--distance must be positive, got {args.distance}")
-    return default_camera(scene, args.width or 1280, args.height or 720,
-                          args.fov if args.fov is not None else 50.0, args.distance,
-                          settings.model if settings is not None else None)
+    cam = default_camera(scene, args.width or 1280, args.height or 720,
+                         args.fov if args.fov is not None else 50.0, args.distance,
+                         settings.model if settings is not None else None)
+    if getattr(args, "orthographic", False):
+        scale = settings.model.scale if settings is not None and settings.model else 1.0
+        radius = max(scene.robust_radius * scale, 1e-9) * args.distance
+        cam = Camera.orthographic(cam.width, cam.height, min(cam.width, cam.height) / (2.1 * radius),
+                                  cam.world_to_camera)
+    return cam
 
 
 def inputs_from_args(args: argparse.Namespace) -> tuple[Scene, RenderSettings, Camera]:
