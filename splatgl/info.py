@@ -47,7 +47,7 @@ def scene_info(scene: Scene) -> dict:
 
 
 def _fmt_vec(v: list[float]) -> str:
-    return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
+    return "(" + ", ".join(f"{x + 0.0:.4g}" for x in v) + ")"  # + 0.0: no "-0"
 
 
 def format_info(path: str | Path, scene: Scene, info: dict) -> str:
