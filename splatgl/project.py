@@ -203,8 +203,7 @@ def antialias_factor(cov2d: np.ndarray, low_pass: float = LOW_PASS) -> np.ndarra
 
 def eigenvalues_2d(cov2d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Reference eigenvalues ``mid +- sqrt(max(0.1, mid^2 - det))`` of (N, 2, 2) covariances."""
-    a, b, c = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
-    mid = 0.5 * (a + c)
+    mid = 0.5 * (cov2d[:, 0, 0] + cov2d[:, 1, 1])
     root = np.sqrt(np.maximum(EXTENT_DISCRIMINANT_FLOOR, discriminant(cov2d)))
     return mid + root, mid - root
 

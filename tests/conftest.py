@@ -73,3 +73,37 @@ def save_failure_images(directory: Path, name: str, got, expected) -> str:
         write_image(path, img)
         paths.append(str(path))
     return "images: " + ", ".join(paths)
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    """A bare headless context per module (for renderers built directly); checks that no GL
+    error is left pending."""
+    from splatgl.errors import ContextError
+    from splatgl.gl.context import create_headless_context, make_current
+
+    try:
+        context = create_headless_context()
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL context: {exc}")
+    yield context
+    make_current(context)
+    error = context.error
+    context.release()
+    assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
+
+
+def scene_with_colors(means, quats, scales, opacities, rgb, kind=None):
+    """A scene from activated values whose SH degree-0 colour seen from anywhere is ``rgb``
+    (N, 3); ``kind`` defaults to 3DGS (pass SplatKind.SURFEL_2D with two scales)."""
+    import numpy as np
+
+    from splatgl.constants import SH_C0
+    from splatgl.scene import Scene, SplatKind
+
+    n = len(means)
+    sh = np.zeros((n, 1, 3))
+    sh[:, 0] = (np.asarray(rgb, float) - 0.5) / SH_C0
+    return Scene.from_activated(np.asarray(means, float), np.asarray(quats, float),
+                                np.asarray(scales, float), np.asarray(opacities, float), sh,
+                                kind or SplatKind.GAUSSIAN_3D)

@@ -79,7 +79,7 @@ def test_bench_quick_cli_writes_table_csv_json_plot(tmp_path, capsys):
 
 
 def test_savings_rows_show_each_saving(gl_renderer):
-    from splatgl.bench.savings import savings_rows, visible_fraction
+    from splatgl.bench.savings import savings_rows
 
     rng = np.random.default_rng(3)
     n = 3000

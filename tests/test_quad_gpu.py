@@ -13,10 +13,11 @@ import numpy as np
 import pytest
 
 from conftest import save_failure_images
+from conftest import scene_with_colors as make_scene
 from splatgl.blend import blend_front_to_back, splat_alpha
 from splatgl.camera import Camera, orbit
-from splatgl.constants import ALPHA_MIN, FAST_CORNER_SIGMAS, SH_C0
-from splatgl.project import ellipse_axes, project, quat_to_rotmat
+from splatgl.constants import ALPHA_MIN, FAST_CORNER_SIGMAS
+from splatgl.project import ellipse_axes, project
 from splatgl.quad import composite
 from splatgl.render import default_camera
 from splatgl.scene import Scene
@@ -24,14 +25,6 @@ from splatgl.settings import Precision, QuadExtent, RenderSettings, resolve_near
 from splatgl.sort import depth_sort
 
 TOL32 = 2e-5
-
-
-def make_scene(means, quats, scales, opacities, rgb) -> Scene:
-    n = len(means)
-    sh = np.zeros((n, 1, 3))
-    sh[:, 0] = (np.asarray(rgb, float) - 0.5) / SH_C0
-    return Scene.from_activated(np.asarray(means, float), np.asarray(quats, float),
-                                np.asarray(scales, float), np.asarray(opacities, float), sh)
 
 
 def twin_image(scene: Scene, camera: Camera, background=(0.0, 0.0, 0.0)) -> np.ndarray:

@@ -17,9 +17,9 @@ import math
 import numpy as np
 import pytest
 
-from conftest import save_failure_images
+from conftest import scene_with_colors, save_failure_images
 from splatgl.camera import Camera, look_at, orbit
-from splatgl.constants import ALPHA_MIN, LOW_PASS, SH_C0, SURFEL_FILTER_INV_SQUARE
+from splatgl.constants import ALPHA_MIN, LOW_PASS, SURFEL_FILTER_INV_SQUARE
 from splatgl.formats import load_scene, save_scene
 from splatgl.metrics import image_errors
 from splatgl.project import project_means, quat_to_rotmat, to_camera
@@ -34,12 +34,7 @@ TOL32 = 2e-5
 
 
 def surfels(means, quats, scales, opacities, rgb) -> Scene:
-    n = len(means)
-    sh = np.zeros((n, 1, 3))
-    sh[:, 0] = (np.asarray(rgb, float) - 0.5) / SH_C0
-    return Scene.from_activated(np.asarray(means, float), np.asarray(quats, float),
-                                np.asarray(scales, float), np.asarray(opacities, float), sh,
-                                SplatKind.SURFEL_2D)
+    return scene_with_colors(means, quats, scales, opacities, rgb, SplatKind.SURFEL_2D)
 
 
 def random_surfels(n: int, seed: int, degree: int = 1) -> Scene:

@@ -16,7 +16,6 @@ import pytest
 
 from conftest import save_failure_images
 from splatgl.camera import Camera, orbit
-from splatgl.errors import ContextError
 from splatgl.reference import emit_keys, project, render_reference, sort, tile_ranges
 from splatgl.render import Renderer, default_camera
 from splatgl.scene import Scene
@@ -26,21 +25,6 @@ from splatgl.tile import KeyLayout, TileRenderer
 
 TOL = 1e-5
 DEPTH_TOL_REL = 1e-5
-
-
-@pytest.fixture(scope="module")
-def ctx():
-    """One headless context per module; checks that no GL error is left pending."""
-    from splatgl.gl.context import create_headless_context
-
-    try:
-        context = create_headless_context()
-    except ContextError as exc:
-        pytest.skip(f"no OpenGL context: {exc}")
-    yield context
-    error = context.error
-    context.release()
-    assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
 
 
 def random_scene(n: int, seed: int, sh_degree: int = 1) -> Scene:

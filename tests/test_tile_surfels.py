@@ -29,10 +29,8 @@ import math
 import numpy as np
 import pytest
 
-from conftest import save_failure_images
+from conftest import scene_with_colors, save_failure_images
 from splatgl.camera import Camera, orbit
-from splatgl.constants import SH_C0
-from splatgl.errors import ContextError
 from splatgl.reference import emit_keys, project, render_reference, sort, tile_ranges
 from splatgl.render import Renderer
 from splatgl.scene import Scene, SplatKind
@@ -47,21 +45,6 @@ MAX_FLIPS = 4
 FLIP_TOL = 0.02
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    """One headless context per module; checks that no GL error is left pending."""
-    from splatgl.gl.context import create_headless_context
-
-    try:
-        context = create_headless_context()
-    except ContextError as exc:
-        pytest.skip(f"no OpenGL context: {exc}")
-    yield context
-    error = context.error
-    context.release()
-    assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
-
-
 def random_surfels(n: int, seed: int, degree: int = 1) -> Scene:
     """n surfels around the origin (sigma 0.6), scales ~exp(-2.6), mixed opacities (as
     tests/test_surfels.py)."""
@@ -73,12 +56,7 @@ def random_surfels(n: int, seed: int, degree: int = 1) -> Scene:
 
 
 def surfels(means, quats, scales, opacities, rgb) -> Scene:
-    n = len(means)
-    sh = np.zeros((n, 1, 3))
-    sh[:, 0] = (np.asarray(rgb, float) - 0.5) / SH_C0
-    return Scene.from_activated(np.asarray(means, float), np.asarray(quats, float),
-                                np.asarray(scales, float), np.asarray(opacities, float), sh,
-                                SplatKind.SURFEL_2D)
+    return scene_with_colors(means, quats, scales, opacities, rgb, SplatKind.SURFEL_2D)
 
 
 POSE = orbit([0.0, 0.0, 0.0], 3.0, 30.0, 20.0)

@@ -8,8 +8,8 @@ import pytest
 from splatgl.camera import Camera, orbit
 from splatgl.cli import main
 from splatgl.errors import SplatglError
-from splatgl.project import project, sh_color, view_dirs
-from splatgl.render import default_camera, render_reference_layers
+from splatgl.project import sh_color, view_dirs
+from splatgl.render import default_camera
 from splatgl.scene import Scene
 from splatgl.settings import RendererKind, RenderSettings
 from splatgl.transform import ModelTransform, apply_model, parse_transform

@@ -8,7 +8,7 @@ import pytest
 from splatgl.camera import orbit
 from splatgl.render import default_camera
 from splatgl.scene import Scene
-from splatgl.settings import Precision, Preprocess, QuadExtent, RenderSettings, SortKey
+from splatgl.settings import Precision, Preprocess, QuadExtent, RenderSettings
 from splatgl.sort import bucket_sort, depth_sort
 
 

@@ -12,7 +12,8 @@ or all at once with :func:`render_reference`.  Never imports the OpenGL paths.
 """
 
 from .binning import depth_bits, emit_keys, sort, tile_ranges
-from .options import GSPLAT_ALPHA_MAX, GSPLAT_EXTENT_SIGMAS, Compat, ReferenceOptions
+from ..constants import GSPLAT_ALPHA_MAX, GSPLAT_EXTENT_SIGMAS
+from .options import Compat, ReferenceOptions
 from .rasterize import Raster, gaussian_alpha, gaussian_power, rasterize, transmittance_trace
 from .render import ReferenceImage, render_reference, render_reference_rgba
 from .stages import ProjectedSplats, gsplat_radius, gsplat_rect, inria_rect, project, tile_grid

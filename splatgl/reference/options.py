@@ -18,7 +18,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
-from ..constants import ALPHA_MAX, GSPLAT_ALPHA_MAX, GSPLAT_EXTENT_SIGMAS
+from ..constants import ALPHA_MAX, GSPLAT_ALPHA_MAX
 
 
 class Compat(enum.Enum):

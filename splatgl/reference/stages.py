@@ -22,7 +22,8 @@ from ..camera import Camera
 from ..constants import ALPHA_MIN, TILE_SIZE
 from ..scene import Scene, SplatKind
 from ..settings import RenderSettings, resolve_near
-from .options import GSPLAT_EXTENT_SIGMAS, Compat, ReferenceOptions
+from ..constants import GSPLAT_EXTENT_SIGMAS
+from .options import Compat, ReferenceOptions
 
 
 @dataclass(frozen=True)
