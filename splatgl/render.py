@@ -144,7 +144,8 @@ def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettin
     """The NumPy per-tile reference's colour, alpha and depth (float32 math, no OpenGL)."""
     from .reference import render_reference
 
-    ref = render_reference(scene, apply_model(camera, settings.model), settings)
+    ref = render_reference(scene, apply_model(camera, settings.model), settings,
+                           compat=settings.convention)
     rgba = np.concatenate([ref.color, ref.alpha[..., None]], axis=-1).astype(np.float32)
     return RenderOutput(rgba, np.asarray(ref.depth, np.float32))
 

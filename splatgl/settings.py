@@ -55,6 +55,17 @@ class Preprocess(enum.Enum):
     COMPUTE = "compute"
 
 
+class Convention(enum.Enum):
+    """Which published rasterizer's rules the NumPy reference follows (``Compat`` there).
+
+    INRIA: the 3DGS rasterizer (Kerbl et al. 2023), the default and DESIGN.md's reference.
+    GSPLAT: gsplat's per-axis opacity-aware extent (up to 3.33 sigma), alpha clamp 0.999.
+    """
+
+    INRIA = "inria"
+    GSPLAT = "gsplat"
+
+
 class RendererKind(enum.Enum):
     QUAD = "quad"
     TILE = "tile"
@@ -88,6 +99,8 @@ class RenderSettings:
         cull: the quad path's CPU frustum/opacity cull (the near plane is always applied).
         half_sh: store SH coefficients 1.. as float16 in the quad path (half the memory and
             bandwidth; the benchmark reports the error against float32).
+        convention: the published rasterizer rules the NumPy reference follows (only the
+            reference reads it).
     """
 
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -102,6 +115,7 @@ class RenderSettings:
     preprocess: Preprocess = Preprocess.COMPUTE
     cull: bool = True
     half_sh: bool = False
+    convention: Convention = Convention.INRIA
 
     def __post_init__(self) -> None:
         bg = tuple(float(v) for v in self.background)
@@ -112,6 +126,7 @@ class RenderSettings:
         object.__setattr__(self, "extent", QuadExtent(self.extent))
         object.__setattr__(self, "sort_key", SortKey(self.sort_key))
         object.__setattr__(self, "preprocess", Preprocess(self.preprocess))
+        object.__setattr__(self, "convention", Convention(self.convention))
         if int(self.resort_interval) != self.resort_interval or self.resort_interval < 1:
             raise SplatglError(f"resort interval must be a positive integer, got {self.resort_interval}")
         if self.near is not None and not self.near > 0.0:

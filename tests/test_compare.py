@@ -121,3 +121,13 @@ def test_reference_and_quad_alpha_order_by_depth(gl_renderer):
     cam = default_camera(scene, 64, 48)
     ref = render_reference(scene, cam, RenderSettings())
     assert np.all(ref.depth >= 0) and np.all(ref.alpha <= 1.0)
+
+
+def test_gsplat_convention_is_selectable_and_closer_to_the_quad_extent(capsys):
+    """gsplat's opacity-aware extent (up to 3.33 sigma, no tile snapping) is the quad path's own,
+    so against it the quad path differs only by the early stop: a higher PSNR than against 3DGS."""
+    psnr = {}
+    for conv in ("inria", "gsplat"):
+        assert main(["compare", "--width", "128", "--height", "96", "--json", "--convention", conv]) == 0
+        psnr[conv] = json.loads(capsys.readouterr().out)["psnr"]
+    assert psnr["gsplat"] > psnr["inria"] + 3.0, psnr

@@ -11,7 +11,7 @@ from ..errors import SplatglError
 from ..formats import load_scene
 from ..render import default_camera
 from ..scene import Scene
-from ..settings import Precision, Preprocess, QuadExtent, RenderSettings, SortKey
+from ..settings import Convention, Precision, Preprocess, QuadExtent, RenderSettings, SortKey
 from ..transform import parse_transform
 
 
@@ -83,6 +83,9 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                         "or a 'compute' pre-pass (per splat); default: what the benchmark chose")
     g.add_argument("--sort", choices=[m.value for m in SortKey], default="exact",
                    help="quad path depth keys: exact 32-bit (default) or 16-bit buckets")
+    g.add_argument("--convention", choices=[m.value for m in Convention], default="inria",
+                   help="rules of the NumPy reference: 'inria' = the 3DGS rasterizer (default), "
+                        "'gsplat' = per-axis opacity-aware extent up to 3.33 sigma, alpha clamp 0.999")
     g.add_argument("--half-sh", action="store_true",
                    help="store SH coefficients as float16 in the quad path (half the memory)")
     g.add_argument("--transform", type=str, default=None, metavar="JSON",
@@ -102,7 +105,8 @@ def settings_from_args(args: argparse.Namespace) -> RenderSettings:
     optional = {"preprocess": args.preprocess} if args.preprocess else {}
     return RenderSettings(background=args.background, precision=args.precision, extent=args.extent,
                           near=args.near, antialias=args.antialias, sh_degree=args.sh_degree,
-                          model=model, sort_key=args.sort, half_sh=args.half_sh, **optional)
+                          model=model, sort_key=args.sort, half_sh=args.half_sh,
+                          convention=args.convention, **optional)
 
 
 def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSettings | None = None) -> Camera:

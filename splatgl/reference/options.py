@@ -15,17 +15,15 @@ shared.
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 
 from ..constants import ALPHA_MAX, GSPLAT_ALPHA_MAX
+from ..settings import Convention
 
 
-class Compat(enum.Enum):
-    """Which published rasterizer's conventions the reference follows."""
-
-    INRIA = "inria"    #: 3DGS (Kerbl et al. 2023), the default and DESIGN.md's reference.
-    GSPLAT = "gsplat"  #: gsplat (per-axis opacity-aware extent, alpha clamp 0.999).
+#: Which published rasterizer's conventions the reference follows: the settings' enum, so
+#: ``RenderSettings.convention`` and the reference's options are one type.
+Compat = Convention
 
 
 @dataclass(frozen=True)
