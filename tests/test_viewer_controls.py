@@ -125,3 +125,19 @@ def test_from_camera_reproduces_a_training_pose():
     got = controls.to_camera(s, 640, 480)
     assert np.allclose(got.world_to_camera, pose, atol=1e-9)
     assert got.fy == pytest.approx(500.0)
+
+
+def test_screenshot_command_line_reproduces_the_settings():
+    """The command printed with a screenshot parses back to the very same settings."""
+    from splatgl.cli import build_parser
+    from splatgl.commands._common import settings_from_args
+    from splatgl.settings import RendererKind, RenderSettings
+    from splatgl.viewer.screenshot import settings_arguments
+
+    settings = RenderSettings(background=(0.1, 0.2, 0.3), precision="rgba16f", extent="fast",
+                              near=0.05, antialias=True, sh_degree=1, preprocess="vertex",
+                              sort_key="bucket16", half_sh=True)
+    argv = ["render", "-o", "x.png", *settings_arguments(settings, RendererKind.TILE)]
+    args = build_parser().parse_args(argv)
+    assert settings_from_args(args) == settings
+    assert args.renderer == "tile"

@@ -35,6 +35,9 @@ def settings_arguments(settings: RenderSettings, kind: RendererKind) -> list[str
         args.append("--antialias")
     if settings.sh_degree is not None:
         args += ["--sh-degree", str(settings.sh_degree)]
+    args += ["--preprocess", settings.preprocess.value, "--sort", settings.sort_key.value]
+    if settings.half_sh:
+        args.append("--half-sh")
     return args
 
 
