@@ -21,6 +21,8 @@ from splatgl.stress.run import watchdog
 
 #: Per-case hang limit in the tests (every fast case takes well under a second).
 CASE_HANG_S = 120.0
+#: Ceiling for the errors of known, unfixed failures (the worst measured is 0.335).
+KNOWN_FAILURE_LIMIT = 0.4
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -32,6 +34,9 @@ def _check(result) -> None:
             continue
         assert row.finite, f"{result.case}/{row.renderer}: NaN or Inf in the output"
         if row.status == "known":
+            # A known, documented failure still may not get worse than measured (0.335 for
+            # the RGBA16F 10k-layer case): the bound below catches a regression.
+            assert row.max_error < KNOWN_FAILURE_LIMIT, f"{result.case}/{row.renderer}: {row.message}"
             known.append(f"{row.renderer}: {row.message}")
             continue
         assert row.status == "ok", f"{result.case}/{row.renderer}: {row.message}"
