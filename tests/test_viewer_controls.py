@@ -141,3 +141,18 @@ def test_screenshot_command_line_reproduces_the_settings():
     args = build_parser().parse_args(argv)
     assert settings_from_args(args) == settings
     assert args.renderer == "tile"
+
+
+def test_fit_camera_keeps_a_file_cameras_own_intrinsics():
+    import numpy as np
+
+    from splatgl.camera import Camera, orbit
+    from splatgl.viewer.controls import fit_camera
+
+    cam = Camera(200, 100, 180.0, 150.0, 93.0, 57.0, orbit([0, 0, 0], 3.0, 10.0, 5.0))
+    same = fit_camera(cam, 200, 100)
+    assert (same.fx, same.fy, same.cx, same.cy) == (cam.fx, cam.fy, cam.cx, cam.cy)
+    np.testing.assert_array_equal(same.world_to_camera, cam.world_to_camera)
+    wide = fit_camera(cam, 500, 200)  # twice as tall, wider aspect: frame centred
+    assert (wide.fx, wide.fy, wide.cy) == (360.0, 300.0, 114.0)
+    assert wide.cx == 93.0 * 2 + 0.5 * (500 - 400)

@@ -78,6 +78,9 @@ class Viewer:
         self.camera_index = camera_index
         self.home = controls.from_camera(camera, self._orbit_distance(camera))
         self.state = self.home
+        # A camera from a file (the start camera, a training camera) is shown exactly, with its
+        # own intrinsics, until the user moves: the orbit state carries only pose and fov.
+        self._exact: tuple[controls.ViewState, Camera] | None = (self.home, camera)
         self.view = ViewMode.COLOR
         self.message = ""
         self.frames_rendered = 0
@@ -232,6 +235,7 @@ class Viewer:
         self.camera_index = controls.step_index(self.camera_index, len(self.cameras), delta)
         cam = self.cameras[self.camera_index]
         self.state = controls.from_camera(cam, self._orbit_distance(cam), self.state.up)
+        self._exact = (self.state, cam)
         self.message = f"training camera {self.camera_index + 1}/{len(self.cameras)}"
 
     def toggle_renderer(self) -> None:
@@ -247,7 +251,10 @@ class Viewer:
 
     def camera(self) -> Camera:
         """The current camera at the window's framebuffer size (world frame)."""
-        return controls.to_camera(self.state, max(self.size[0], 1), max(self.size[1], 1))
+        width, height = max(self.size[0], 1), max(self.size[1], 1)
+        if self._exact is not None and self._exact[0] == self.state:
+            return controls.fit_camera(self._exact[1], width, height)
+        return controls.to_camera(self.state, width, height)
 
     def screenshot(self) -> tuple[Path, Path]:
         """Write what ``splatgl render`` writes from the current camera, and that camera."""

@@ -92,6 +92,16 @@ def to_camera(state: ViewState, width: int, height: int) -> Camera:
     return Camera.from_fov(width, height, state.fov_y, world_to_camera(state))
 
 
+def fit_camera(camera: Camera, width: int, height: int) -> Camera:
+    """``camera`` (pose and intrinsics, off-centre principal point and fx != fy included) shown
+    in a ``width`` x ``height`` window: scaled by the height ratio, its frame centred
+    horizontally.  At the camera's own size it is the camera itself."""
+    s = height / camera.height
+    return Camera(width, height, camera.fx * s, camera.fy * s,
+                  camera.cx * s + 0.5 * (width - camera.width * s), camera.cy * s,
+                  camera.world_to_camera, camera.projection)
+
+
 def from_camera(camera: Camera, distance: float, up=(0.0, -1.0, 0.0)) -> ViewState:
     """The state that reproduces ``camera``'s pose, orbiting a point ``distance`` ahead of it.
 
