@@ -107,3 +107,24 @@ def scene_with_colors(means, quats, scales, opacities, rgb, kind=None):
     return Scene.from_activated(np.asarray(means, float), np.asarray(quats, float),
                                 np.asarray(scales, float), np.asarray(opacities, float), sh,
                                 kind or SplatKind.GAUSSIAN_3D)
+
+
+def assert_stages_match_reference(got, proj, min_keys: int = 0) -> None:
+    """The tile renderer's integer stages (``TileRenderer.debug_stages``) equal the NumPy
+    reference's for the same projection: tiles touched, rectangles, emitted and sorted keys and
+    values, and tile ranges, bit for bit."""
+    import numpy as np
+
+    from splatgl.reference import emit_keys, sort, tile_ranges
+
+    np.testing.assert_array_equal(got.tiles_touched, proj.tiles_touched)
+    np.testing.assert_array_equal(got.rect_min, proj.rect_min)
+    np.testing.assert_array_equal(got.rect_max, proj.rect_max)
+    keys, values = emit_keys(proj)
+    assert len(keys) > min_keys  # the scene really spans many tiles
+    np.testing.assert_array_equal(got.emitted_keys, keys)
+    np.testing.assert_array_equal(got.emitted_values, values)
+    keys, values = sort(keys, values)
+    np.testing.assert_array_equal(got.keys, keys)
+    np.testing.assert_array_equal(got.values, values)
+    np.testing.assert_array_equal(got.ranges, tile_ranges(keys, proj.n_tiles))
