@@ -128,3 +128,27 @@ def assert_stages_match_reference(got, proj, min_keys: int = 0) -> None:
     np.testing.assert_array_equal(got.keys, keys)
     np.testing.assert_array_equal(got.values, values)
     np.testing.assert_array_equal(got.ranges, tile_ranges(keys, proj.n_tiles))
+
+
+def tile_and_reference(ctx, scene, camera, settings):
+    """(tile renderer's RenderOutput, float32 NumPy reference image) of one view; the tile
+    renderer is released afterwards."""
+    import numpy as np
+
+    from splatgl.reference import render_reference
+    from splatgl.tile import TileRenderer
+
+    renderer = TileRenderer(ctx, scene, settings)
+    try:
+        got = renderer.render_layers(camera)
+    finally:
+        renderer.release()
+    return got, render_reference(scene, camera, settings, np.float32)
+
+
+def shared_file(shared_scenes: Path, name: str) -> Path:
+    """``shared_scenes / name``, skipping the test with the reason when that file is absent."""
+    path = shared_scenes / name
+    if not path.is_file():
+        pytest.skip(f"{path} not present")
+    return path

@@ -23,6 +23,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import shared_file
 from splatgl.cli import main
 from splatgl.formats import load_scene
 from splatgl.image_io import read_image
@@ -79,10 +80,7 @@ REAL = ["ply/donut_sh0.ply", "compressed_ply/guitar.compressed.ply", "spz/biker_
 
 @pytest.mark.parametrize("name", REAL)
 def test_quad_matches_reference_on_real_scenes(shared_scenes, gl_renderer, name):
-    path = shared_scenes / name
-    if not path.is_file():
-        pytest.skip(f"{path} not present")
-    scene = load_scene(path)
+    scene = load_scene(shared_file(shared_scenes, name))
     err = _check(scene, default_camera(scene, 200, 150), gl_renderer)
     assert err.ssim > 0.999
 

@@ -27,6 +27,7 @@ import warnings
 import numpy as np
 import pytest
 
+from conftest import shared_file
 from splatgl.cli import main
 from splatgl.constants import SH_C0
 from splatgl.convert import conversion_error, convert, rotation_angle_deg
@@ -162,9 +163,7 @@ def test_sh_degree_option_caps_the_bands(tmp_path):
 
 @pytest.mark.parametrize("name", REAL_FILES)
 def test_real_file_to_ply_holds_the_decoded_values_exactly(shared_scenes, tmp_path, name):
-    src = shared_scenes / name
-    if not src.is_file():
-        pytest.skip(f"{src} not found")
+    src = shared_file(shared_scenes, name)
     original = load_scene(src)
     result = convert(src, tmp_path / "out.ply")
     assert result.error["bit_exact"] and result.count == original.count

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import assert_stages_match_reference, save_failure_images
+from conftest import tile_and_reference, assert_stages_match_reference, save_failure_images
 from splatgl.camera import Camera, orbit
 from splatgl.reference import emit_keys, project, render_reference, sort
 from splatgl.render import Renderer, default_camera
@@ -41,12 +41,7 @@ CAM = Camera.from_fov(128, 96, 60.0)
 
 
 def render_pair(ctx, scene, camera, settings):
-    renderer = TileRenderer(ctx, scene, settings)
-    try:
-        got = renderer.render_layers(camera)
-    finally:
-        renderer.release()
-    return got, render_reference(scene, camera, settings, np.float32)
+    return tile_and_reference(ctx, scene, camera, settings)
 
 
 def assert_close(got, expected, tol, name, artifacts_dir):

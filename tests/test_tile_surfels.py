@@ -29,7 +29,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import assert_stages_match_reference, scene_with_colors, save_failure_images
+from conftest import tile_and_reference, assert_stages_match_reference, scene_with_colors, save_failure_images
 from splatgl.camera import Camera, orbit
 from splatgl.reference import emit_keys, project, render_reference, sort
 from splatgl.render import Renderer
@@ -65,12 +65,7 @@ ORTHOGRAPHIC = Camera(160, 120, 40.0, 40.0, 80.0, 60.0, POSE, "orthographic")
 
 
 def render_pair(ctx, scene, camera, settings):
-    renderer = TileRenderer(ctx, scene, settings)
-    try:
-        got = renderer.render_layers(camera)
-    finally:
-        renderer.release()
-    return got, render_reference(scene, camera, settings, np.float32)
+    return tile_and_reference(ctx, scene, camera, settings)
 
 
 def assert_matches_reference(got, ref, name, artifacts_dir):
