@@ -38,6 +38,7 @@ uniform uvec2 u_grid;        // (tiles_x, tiles_y)
 uniform uvec2 u_size;        // (width, height) in pixels
 uniform vec3 u_background;   // composited as C + T_final bg
 uniform uint u_index_mask;   // low bits of a packed key holding the splat index
+uniform uint u_tile_row0;    // first tile row of this dispatch (the image is drawn in bands)
 
 shared vec4 s_mean_cut[TILE_PIXELS];   // (u, v, power cut-off, view z) of the kept splats
 shared vec4 s_conic_o[TILE_PIXELS];    // (a, b, c, opacity)
@@ -52,13 +53,14 @@ shared uint s_kept;                    // splats kept in this batch
 shared uint s_alive_count;             // invocations still blending
 
 void main() {
-    uint tile = gl_WorkGroupID.y * u_grid.x + gl_WorkGroupID.x;
-    uvec2 pix = gl_GlobalInvocationID.xy;       // (column, row), row 0 = top of the image
+    uvec2 group = gl_WorkGroupID.xy + uvec2(0u, u_tile_row0);   // this tile's (x, y) in the grid
+    uint tile = group.y * u_grid.x + group.x;
+    uvec2 pix = group * uint(TILE_SIZE) + gl_LocalInvocationID.xy;  // (column, row), row 0 = top
     uint rank = gl_LocalInvocationIndex;
     bool inside = pix.x < u_size.x && pix.y < u_size.y;
     vec2 centre = vec2(pix) + 0.5;               // pixel centre (j + 0.5, i + 0.5)
     // Box of this tile's pixel centres inside the image.
-    vec2 box_lo = vec2(gl_WorkGroupID.xy * uint(TILE_SIZE)) + 0.5;
+    vec2 box_lo = vec2(group * uint(TILE_SIZE)) + 0.5;
     vec2 box_hi = min(box_lo + float(TILE_SIZE - 1), vec2(u_size) - 0.5);
     uvec2 range = tile_ranges[tile];
 

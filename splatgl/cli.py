@@ -1,25 +1,55 @@
 """The ``splatgl`` command line: one sub-command per module in :mod:`splatgl.commands`.
 
 Every sub-command module defines ``NAME``, ``HELP``, ``add_arguments(parser)`` and
-``run(args) -> int``.  Bad input (any :class:`SplatglError`) prints one line and exits with 2,
-never a traceback.
+``run(args) -> int``.  Bad input (any :class:`SplatglError`, and any bad argument) prints one
+line and exits with 2, never a traceback.  Ctrl-C (SIGINT) and SIGTERM stop the command the
+same way, at any moment including start-up: the exception unwinds, so every temporary file is
+removed, and one line says so (exit 130 or 143).  A closed stdout (``splatgl info S | head -1``)
+ends the command quietly (exit 141, as a shell reports SIGPIPE).
+
+Only the standard library is imported at module level: the commands (NumPy, moderngl, ...)
+load inside :func:`main`, where an interrupt is already handled.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
-import pkgutil
+import os
+import signal
 import sys
 import warnings
 
-from . import commands
-from .errors import SplatglError
-
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 128 + signal.SIGINT
+EXIT_TERMINATED = 128 + signal.SIGTERM
+EXIT_BROKEN_PIPE = 128 + signal.SIGPIPE
+
+
+class Terminated(KeyboardInterrupt):
+    """Raised in the main thread by SIGTERM, so it unwinds (and cleans up) exactly like Ctrl-C."""
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated()
+
+
+class BadArguments(Exception):
+    """An argument error; :func:`main` prints it as one line and returns 2."""
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """Argument errors as one line (``splatgl render: error: ...``) with the --help hint."""
+
+    def error(self, message: str):
+        raise BadArguments(f"{self.prog}: error: {message} (see {self.prog} --help)")
 
 
 def _command_modules():
+    import importlib
+    import pkgutil
+
+    from . import commands
+
     mods = []
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda i: i.name):
         if not info.name.startswith("_"):
@@ -28,7 +58,7 @@ def _command_modules():
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="splatgl",
         description="Render trained Gaussian-splat scenes (3DGS, 2DGS) through OpenGL.",
     )
@@ -45,18 +75,52 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
     print(f"splatgl: warning: {message}", file=sys.stderr if file is None else file)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    warnings.showwarning = _one_line_warning
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush cannot raise again."""
     try:
-        return int(args._run(args) or 0)
-    except SplatglError as exc:
-        print(f"splatgl: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    previous = None
+    try:
+        # A signal handler can only be installed from the main thread (tests may call main()
+        # from others); there Ctrl-C still works, SIGTERM keeps its default.
+        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    except ValueError:
+        pass
+    try:
+        from .errors import SplatglError
+
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except BadArguments as exc:
+            print(exc, file=sys.stderr)
+            return EXIT_BAD_INPUT
+        warnings.showwarning = _one_line_warning
+        try:
+            code = int(args._run(args) or 0)
+        except SplatglError as exc:
+            print(f"splatgl: error: {exc}", file=sys.stderr)
+            code = EXIT_BAD_INPUT
+        sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
+        return code
+    except Terminated:
+        print("splatgl: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print("splatgl: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,4 +1,4 @@
-"""Progress of long operations (loading a large scene): a callback protocol and a stderr reporter.
+"""Progress of long operations (loading, rendering): a callback protocol and a stderr reporter.
 
 The protocol is one callable, ``progress(done, total, what)``:
 
@@ -6,7 +6,11 @@ The protocol is one callable, ``progress(done, total, what)``:
 - ``total`` (int): units in all; the last call has ``done == total``,
 - ``what`` (str): a short label such as ``"reading scene.ply"``.
 
-Readers take it as an optional ``progress=None`` argument and call it between chunks.
+Readers take it as an optional ``progress=None`` argument and call it between chunks; so do
+the renderers' long loops (the reference between tile batches, the tile renderer between
+bands of its last stage: a renderer object with a ``progress`` attribute calls it there).
+Calling it between bounded pieces of work is also what makes Ctrl-C prompt: Python raises
+KeyboardInterrupt only between its own statements, never inside one NumPy or OpenGL call.
 :func:`default_progress` gives the reporter :func:`splatgl.formats.load_scene` uses when the
 caller passes none: a one-line meter on stderr when stderr is a terminal, or whenever the
 environment variable ``SPLATGL_PROGRESS`` is ``1`` (``0`` turns it off everywhere).
@@ -40,7 +44,9 @@ def enabled(stream: Optional[TextIO] = None) -> bool:
 
 
 class StderrProgress:
-    """A throttled text meter: ``what: 42.0% (420,000 / 1,000,000)``.
+    """A throttled text meter: ``what: 42.0% (420,000 / 1,000,000), about 3 s left``.
+
+    The estimate extrapolates the elapsed time linearly (shown once 2 % is done).
 
     On a terminal the line is redrawn in place (``\\r``) at most every ``interval`` seconds and
     only once the operation has run for ``delay`` seconds (quick loads print nothing); elsewhere
@@ -67,6 +73,9 @@ class StderrProgress:
         fraction = done / total if total > 0 else 1.0
         final = done >= total
         text = f"{what}: {100.0 * fraction:5.1f}% ({done:,} / {total:,})"
+        elapsed = now - self._start
+        if not final and fraction >= 0.02 and elapsed > 0:
+            text += f", about {format_seconds(elapsed * (1.0 - fraction) / fraction)} left"
         if self.tty:
             if final and not self._shown:
                 return  # finished before the meter was due: print nothing
@@ -80,6 +89,16 @@ class StderrProgress:
             self.stream.write(text + "\n")
         self._shown, self._last = not final, now
         self.stream.flush()
+
+
+def format_seconds(seconds: float) -> str:
+    """``"4 s"``, ``"2 min 05 s"``, ``"1 h 02 min"``: a duration for a progress line."""
+    s = int(round(seconds))
+    if s < 60:
+        return f"{max(s, 1)} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60:02d} s"
+    return f"{s // 3600} h {s % 3600 // 60:02d} min"
 
 
 def default_progress() -> Optional[ProgressCallback]:

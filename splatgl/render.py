@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 
 import moderngl
 import numpy as np
@@ -16,7 +17,9 @@ import numpy as np
 from .camera import Camera, orbit
 from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
+from .limits import check_image_size
 from .output import RenderOutput
+from .progress import ProgressCallback
 from .scene import Scene
 from .settings import RenderSettings, RendererKind
 from .transform import ModelTransform, apply_model
@@ -29,14 +32,16 @@ DEFAULT_ELEVATION = 20.0
 
 def default_camera(scene: Scene, width: int = 1280, height: int = 720,
                    fov_y_degrees: float = DEFAULT_FOV_Y, distance_scale: float = 1.0,
-                   model: ModelTransform | None = None) -> Camera:
+                   model: ModelTransform | None = None, up=(0.0, -1.0, 0.0)) -> Camera:
     """A perspective camera that frames ``scene``.
 
     Frames the 1st-99th percentile box of the means (so a few stray splats far away do not
-    shrink the scene to a dot), looking along world +z from slightly above (world -y is up, the
-    COLMAP convention), far enough that the box's bounding sphere fits the narrower fov, times
-    ``distance_scale`` (below 1 moves closer).  With a ``model`` transform the scene is framed
-    where the transform places it.
+    shrink the scene to a dot), from slightly above, with the world direction ``up`` (3,)
+    pointing up in the image (default world -y, the COLMAP convention; for a y axis up or down
+    it looks along world +z; :func:`splatgl.camera_up.resolve_up` picks one for a scene), far
+    enough that the box's bounding sphere fits the narrower fov, times ``distance_scale``
+    (below 1 moves closer).  With a ``model`` transform the scene is framed where the transform
+    places it.
     """
     lo, hi = scene.robust_bounds
     centre = 0.5 * (lo + hi)
@@ -48,7 +53,7 @@ def default_camera(scene: Scene, width: int = 1280, height: int = 720,
     fov_x = 2.0 * math.atan(math.tan(fov_y / 2.0) * width / height)
     half = min(fov_x, fov_y) / 2.0
     distance = 1.05 * radius / math.sin(half) * distance_scale
-    pose = orbit(centre, distance, 180.0, DEFAULT_ELEVATION)
+    pose = orbit(centre, distance, 180.0, DEFAULT_ELEVATION, up)
     return Camera.from_fov(width, height, fov_y_degrees, pose)
 
 
@@ -70,6 +75,14 @@ class Renderer:
         self.ctx = ctx if ctx is not None else create_headless_context()
         self.programs = ProgramCache(self.ctx)
         self._paths: dict[tuple, object] = {}
+        self._sizes_ok: set[tuple] = set()
+
+    def _check_size(self, camera: Camera, kind: RendererKind) -> None:
+        """Refuse an image the context or the memory cannot hold, before allocating it."""
+        key = (camera.width, camera.height, kind)
+        if key not in self._sizes_ok:
+            check_image_size(camera.width, camera.height, "image", kind, self.ctx)
+            self._sizes_ok.add(key)
 
     def _path(self, scene: Scene, settings: RenderSettings, kind: RendererKind):
         key = (id(scene), settings, kind)
@@ -102,22 +115,31 @@ class Renderer:
         return self._path(scene, settings, kind)
 
     def render(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
-               kind: RendererKind = RendererKind.QUAD) -> np.ndarray:
-        """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top."""
+               kind: RendererKind = RendererKind.QUAD, progress: ProgressCallback | None = None) -> np.ndarray:
+        """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top.
+
+        ``progress`` (:mod:`splatgl.progress`) hears from the renderers that report it (the
+        reference, the tile renderer) during the frame.
+        """
         kind = RendererKind(kind)
         if kind is RendererKind.REFERENCE:
-            return render_reference_rgba(scene, camera, settings)
+            return render_reference_rgba(scene, camera, settings, progress)
         make_current(self.ctx)  # another context may have been made current since
-        return self._path(scene, settings, kind).render(apply_model(camera, settings.model))
+        self._check_size(camera, kind)
+        with _reporting(self._path(scene, settings, kind), progress) as path:
+            return path.render(apply_model(camera, settings.model))
 
     def render_layers(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
-                      kind: RendererKind = RendererKind.QUAD) -> RenderOutput:
+                      kind: RendererKind = RendererKind.QUAD,
+                      progress: ProgressCallback | None = None) -> RenderOutput:
         """Colour, alpha and accumulated depth of one view (same pass, same weights)."""
         kind = RendererKind(kind)
         if kind is RendererKind.REFERENCE:
-            return render_reference_layers(scene, camera, settings)
+            return render_reference_layers(scene, camera, settings, progress)
         make_current(self.ctx)
-        return self._path(scene, settings, kind).render_layers(apply_model(camera, settings.model), depth=True)
+        self._check_size(camera, kind)
+        with _reporting(self._path(scene, settings, kind), progress) as path:
+            return path.render_layers(apply_model(camera, settings.model), depth=True)
 
     def close(self) -> None:
         make_current(self.ctx)
@@ -135,17 +157,33 @@ class Renderer:
         self.close()
 
 
-def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings) -> np.ndarray:
+@contextmanager
+def _reporting(path, progress: ProgressCallback | None):
+    """``path`` with its ``progress`` attribute set for one frame (renderers without one, as
+    the quad path today, simply do not report)."""
+    if progress is None or not hasattr(path, "progress"):
+        yield path
+        return
+    path.progress = progress
+    try:
+        yield path
+    finally:
+        path.progress = None
+
+
+def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings,
+                          progress: ProgressCallback | None = None) -> np.ndarray:
     """The NumPy per-tile reference as an (H, W, 4) float32 image (no OpenGL)."""
-    return render_reference_layers(scene, camera, settings).rgba
+    return render_reference_layers(scene, camera, settings, progress).rgba
 
 
-def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettings) -> RenderOutput:
+def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettings,
+                            progress: ProgressCallback | None = None) -> RenderOutput:
     """The NumPy per-tile reference's colour, alpha and depth (float32 math, no OpenGL)."""
     from .reference import render_reference
 
     ref = render_reference(scene, apply_model(camera, settings.model), settings,
-                           compat=settings.convention)
+                           compat=settings.convention, progress=progress)
     rgba = np.concatenate([ref.color, ref.alpha[..., None]], axis=-1).astype(np.float32)
     return RenderOutput(rgba, np.asarray(ref.depth, np.float32))
 

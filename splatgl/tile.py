@@ -55,6 +55,9 @@ SPLAT_GROUP = 256
 MAX_GROUPS = 65535
 #: Bits of a positive float32's pattern (sign bit clear).
 DEPTH_BITS = 31
+#: Tiles per rasterize dispatch, at most: the image is drawn in bands of whole tile rows, with a
+#: finish between bands, so a long frame reports progress and Ctrl-C stops it within one band.
+RASTER_BAND_TILES = 512
 
 
 def tile_grid(width: int, height: int) -> tuple[int, int]:
@@ -178,8 +181,10 @@ def _splat_groups(n: int) -> tuple[int, int]:
 class TileRenderer:
     """Renders one scene with the per-tile compute path; reuse across views, then :meth:`release`.
 
-    Attributes: ``scene``, ``settings``, ``near`` (resolved near plane, world units) and
-    ``last_times`` (:class:`TileTimes` of the last frame, or None).
+    Attributes: ``scene``, ``settings``, ``near`` (resolved near plane, world units),
+    ``last_times`` (:class:`TileTimes` of the last frame, or None) and ``progress`` (a
+    :data:`splatgl.progress.ProgressCallback` told the tiles rasterized after each band of the
+    last stage, or None).
     """
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
@@ -201,6 +206,7 @@ class TileRenderer:
         if self.surfel:
             self._bufs["SURFEL"].ensure(n * 16)
         self.last_times: TileTimes | None = None
+        self.progress = None
 
     # ------------------------------------------------------------------------------ programs
     def _defines(self, layout: KeyLayout | None = None) -> dict[str, object]:
@@ -303,7 +309,15 @@ class TileRenderer:
         prog = self.programs.compute("tile_rasterize.comp", d)
         self._set(prog, u_grid=grid, u_size=(camera.width, camera.height),
                   u_background=self.settings.background, u_index_mask=layout.index_mask)
-        prog.run(grid[0], grid[1], 1)
+        band = max(1, RASTER_BAND_TILES // grid[0])  # tile rows per dispatch
+        for row0 in range(0, grid[1], band):
+            self._set(prog, u_tile_row0=row0)
+            prog.run(grid[0], min(band, grid[1] - row0), 1)
+            if band < grid[1]:
+                self.ctx.finish()  # Python sees Ctrl-C / SIGTERM here, between bands
+                if self.progress is not None:
+                    self.progress(min(row0 + band, grid[1]) * grid[0], grid[0] * grid[1],
+                                  "tile renderer: rasterizing tiles")
         self.ctx.memory_barrier()
 
     # ----------------------------------------------------------------------------- frames

@@ -105,6 +105,9 @@ def parse_transform(text: str) -> ModelTransform:
     unknown = set(obj) - {"rotate_deg", "rotation", "translate", "scale"}
     if unknown:
         raise SplatglError(f"--transform: unknown key(s) {sorted(unknown)} (use rotate_deg, rotation, translate, scale)")
+    if "rotation" in obj and "rotate_deg" in obj:
+        raise SplatglError("--transform: give either 'rotate_deg' or 'rotation', not both "
+                           "(one would be ignored)")
     try:
         if "rotation" in obj:
             rot = tuple(map(tuple, np.asarray(obj["rotation"], np.float64)))

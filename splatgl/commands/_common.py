@@ -3,16 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from ..camera import Camera
 from ..camera_io import load_camera
 from ..errors import SplatglError
 from ..formats import load_scene
+from ..limits import MAX_IMAGE_SIDE, check_image_size
 from ..render import default_camera
 from ..scene import Scene
-from ..settings import Convention, Precision, Preprocess, QuadExtent, RenderSettings, SortKey
+from ..settings import (Convention, Precision, Preprocess, QuadExtent, RendererKind, RenderSettings,
+                        SortKey)
 from ..transform import parse_transform
+from ..camera_up import UP_CHOICES, resolve_up
 
 
 def demo_scene_path() -> Path:
@@ -25,13 +29,49 @@ def demo_scene_path() -> Path:
 
 
 def parse_rgb(text: str) -> tuple[float, float, float]:
+    """``R,G,B``: three finite, non-negative numbers (above 1 is kept as such in EXR output)."""
     try:
         parts = [float(p) for p in text.split(",")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected R,G,B numbers, got {text!r}") from None
     if len(parts) != 3:
         raise argparse.ArgumentTypeError(f"expected 3 comma-separated values, got {text!r}")
+    if not all(math.isfinite(v) and v >= 0.0 for v in parts):
+        raise argparse.ArgumentTypeError(f"each of R,G,B must be a finite number >= 0, got {text!r}")
     return tuple(parts)
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse type: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a finite number > 0 (not nan, not inf)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
 
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
@@ -47,31 +87,41 @@ def add_camera_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--camera", type=Path, default=None,
                    help="camera file: splatgl single-camera JSON, or a 3DGS cameras.json "
                         "(default: a view that frames the scene)")
-    g.add_argument("--camera-index", type=int, default=0,
-                   help="which camera of a cameras.json list (default 0)")
-    g.add_argument("--width", type=int, default=None,
-                   help="image width in pixels (default 1280, or the camera file's; with a camera "
-                        "file the intrinsics are scaled)")
-    g.add_argument("--height", type=int, default=None, help="image height in pixels (default 720)")
-    g.add_argument("--fov", type=float, default=None,
+    g.add_argument("--camera-index", type=non_negative_int, default=None, metavar="N",
+                   help="which camera of a cameras.json list, counting from 0 (default 0)")
+    g.add_argument("--width", type=positive_int, default=None,
+                   help=f"image width in pixels, at most {MAX_IMAGE_SIDE} and what the OpenGL "
+                        "driver allows (default 1280, or the camera file's; with a camera file the "
+                        "intrinsics are scaled, and --width alone keeps the file's aspect)")
+    g.add_argument("--height", type=positive_int, default=None,
+                   help="image height in pixels (default 720; with a camera file, giving both "
+                        "--width and --height must keep its aspect)")
+    g.add_argument("--fov", type=positive_float, default=None,
                    help="vertical field of view of the default camera, degrees (default 50)")
     g.add_argument("--orthographic", action="store_true",
                    help="make the default camera orthographic, zoomed to frame the scene")
-    g.add_argument("--distance", type=float, default=1.0, metavar="SCALE",
+    g.add_argument("--distance", type=positive_float, default=1.0, metavar="SCALE",
                    help="default camera distance as a multiple of the framing distance "
                         "(default 1; 0.5 is twice as close)")
+    g.add_argument("--up", choices=UP_CHOICES, default=None,
+                   help="world axis that points up in the default camera's image. Default: the "
+                        "average up of the training cameras when the scene comes with them (the "
+                        "--camera cameras.json, or a cameras.json beside the scene or up to three "
+                        "folders above it, as 3DGS training writes it); otherwise -y, the "
+                        "COLMAP convention most trained scenes follow")
 
 
 def add_settings_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("rendering")
     g.add_argument("--background", type=parse_rgb, default=(0.0, 0.0, 0.0), metavar="R,G,B",
-                   help="background colour composited behind the splats, 0-1 (default 0,0,0)")
+                   help="background colour composited behind the splats, 0-1 (default 0,0,0; "
+                        "values above 1 are kept in EXR output and clip to white in PNG/TIFF)")
     g.add_argument("--precision", choices=[m.value for m in Precision], default="rgba32f",
                    help="blend target of the quad path (default rgba32f)")
     g.add_argument("--extent", choices=[m.value for m in QuadExtent], default="ellipse",
                    help="quad size: 'ellipse' = opacity-aware ellipse axes (default), 'square' = "
                         "the reference's 3-sigma square")
-    g.add_argument("--near", type=float, default=None,
+    g.add_argument("--near", type=positive_float, default=None,
                    help="near-plane distance in world units (default: min(0.2, 1%% of the "
                         "scene's robust radius))")
     g.add_argument("--antialias", action="store_true",
@@ -85,7 +135,9 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                    help="quad path depth keys: exact 32-bit (default) or 16-bit buckets")
     g.add_argument("--convention", choices=[m.value for m in Convention], default="inria",
                    help="rules of the NumPy reference: 'inria' = the 3DGS rasterizer (default), "
-                        "'gsplat' = per-axis opacity-aware extent up to 3.33 sigma, alpha clamp 0.999")
+                        "'gsplat' = per-axis opacity-aware extent up to 3.33 sigma, alpha clamp 0.999. "
+                        "The quad and tile renderers follow the inria rules only, so 'gsplat' "
+                        "needs --renderer reference (in compare: a reference on either side)")
     g.add_argument("--half-sh", action="store_true",
                    help="store SH coefficients as float16 in the quad path (half the memory)")
     g.add_argument("--transform", type=str, default=None, metavar="JSON",
@@ -109,25 +161,64 @@ def settings_from_args(args: argparse.Namespace) -> RenderSettings:
                           convention=args.convention, **optional)
 
 
+def check_convention(args: argparse.Namespace, *kinds: RendererKind | str) -> None:
+    """Refuse ``--convention gsplat`` unless one of ``kinds`` is the NumPy reference.
+
+    Only the reference implements the gsplat rules; the quad and tile renderers would silently
+    draw the inria ones.  In ``compare`` a reference on either side makes it meaningful (the
+    other renderer measured against the gsplat rules).
+    """
+    if Convention(args.convention) is Convention.INRIA:
+        return
+    if not any(RendererKind(k) is RendererKind.REFERENCE for k in kinds):
+        names = " and ".join(RendererKind(k).value for k in kinds)
+        raise SplatglError(f"--convention {args.convention} applies to the NumPy reference only; "
+                           f"the {names} renderer follows the inria rules (use --renderer reference)")
+
+
+def size_origin(args: argparse.Namespace) -> str:
+    """Where the image size came from, for messages: the options, or the camera file's fields."""
+    if args.width or args.height or args.camera is None:
+        return "--width/--height: image"
+    return f"{args.camera}: fields 'width', 'height': image"
+
+
+def check_size(args: argparse.Namespace, camera: Camera, kind: RendererKind | str, ctx=None) -> None:
+    """The image size against this machine's limits (:mod:`splatgl.limits`), before allocating."""
+    check_image_size(camera.width, camera.height, size_origin(args), kind, ctx)
+
+
+def _resize_keeping_aspect(args: argparse.Namespace, cam: Camera) -> Camera:
+    """The file's camera at --width and/or --height; both given must keep the file's aspect."""
+    w, h = args.width, args.height
+    if w and h:
+        # Consistent when either side follows from the other by the rounding we apply below.
+        if w != round(cam.width * h / cam.height) and h != round(cam.height * w / cam.width):
+            raise SplatglError(
+                f"--width {w} --height {h} would stretch {args.camera}'s {cam.width}x{cam.height} "
+                f"view (aspect {cam.width / cam.height:.4g}, asked {w / h:.4g}); give only one of "
+                "them to scale keeping the aspect")
+    w = w or max(1, round(cam.width * h / cam.height))
+    h = h or max(1, round(cam.height * w / cam.width))
+    return cam.resized(w, h)
+
+
 def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSettings | None = None) -> Camera:
-    for name in ("width", "height"):
-        value = getattr(args, name)
-        if value is not None and not 1 <= value <= 16384:
-            raise SplatglError(f"--{name} must be between 1 and 16384, got {value}")
+    if args.camera is None and args.camera_index is not None:
+        raise SplatglError("--camera-index needs --camera (a cameras.json to pick from)")
     if args.camera is not None:
-        cam = load_camera(args.camera, args.camera_index)
+        cam = load_camera(args.camera, args.camera_index or 0)
         if args.width or args.height:
-            w = args.width or round(cam.width * args.height / cam.height)
-            h = args.height or round(cam.height * args.width / cam.width)
-            cam = cam.resized(w, h)
+            cam = _resize_keeping_aspect(args, cam)
+        check_image_size(cam.width, cam.height, size_origin(args), RendererKind.REFERENCE)
         return cam
-    if args.fov is not None and not 0.0 < args.fov < 180.0:
+    width, height = args.width or 1280, args.height or 720
+    check_image_size(width, height, size_origin(args), RendererKind.REFERENCE)
+    if args.fov is not None and not args.fov < 180.0:
         raise SplatglError(f"--fov must be in (0, 180) degrees, got {args.fov}")
-    if not args.distance > 0.0:
-        raise SplatglError(f"--distance must be positive, got {args.distance}")
-    cam = default_camera(scene, args.width or 1280, args.height or 720,
-                         args.fov if args.fov is not None else 50.0, args.distance,
-                         settings.model if settings is not None else None)
+    up, _ = resolve_up(getattr(args, "up", None), args.scene, args.camera)
+    cam = default_camera(scene, width, height, args.fov if args.fov is not None else 50.0,
+                         args.distance, settings.model if settings is not None else None, up=up)
     if getattr(args, "orthographic", False):
         scale = settings.model.scale if settings is not None and settings.model else 1.0
         radius = max(scene.robust_radius * scale, 1e-9) * args.distance
@@ -137,7 +228,28 @@ def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSet
 
 
 def inputs_from_args(args: argparse.Namespace) -> tuple[Scene, RenderSettings, Camera]:
-    """The scene, settings and camera every rendering command starts from."""
-    scene = load_scene_arg(args)
+    """The scene, settings and camera every rendering command starts from.
+
+    Settings and camera are read before the scene (cheap checks first: a bad option fails
+    without waiting for a large scene to load).
+    """
     settings = settings_from_args(args)
+    if args.camera is not None:
+        camera_from_args(args, None, settings)  # validate the file and the size early
+    scene = load_scene_arg(args)
     return scene, settings, camera_from_args(args, scene, settings)
+
+
+def format_timings(times: object) -> str:
+    """A renderer's ``last_times`` dataclass as one line: float fields are seconds (shown in
+    ms, with their total), int fields are counts (shown as such)."""
+    parts, total = [], 0.0
+    for name, value in vars(times).items():
+        if isinstance(value, bool) or value is None:
+            continue
+        if isinstance(value, int):
+            parts.append(f"{name} {value:,}")
+        else:
+            parts.append(f"{name} {float(value) * 1e3:.1f} ms")
+            total += float(value)
+    return ", ".join(parts) + f" (stages total {total * 1e3:.1f} ms)"

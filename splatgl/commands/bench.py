@@ -4,19 +4,25 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
 
 from ..bench.report import plot, table, write_csv, write_json
+from ..bench.configs import configurations
+from ..bench.machine import describe, machine_info
 from ..bench.runner import BenchOptions, bench_scene, sort_benchmark
 from ..bench.savings import savings_rows
 from ..errors import SplatglError
+from ..limits import check_image_size
+from ..output_files import OutputFiles
 from ..formats import load_scene
 from ..progress import StderrProgress, enabled
 from ..render import Renderer
 from ..scene import Scene
-from ._common import demo_scene_path
+from ..settings import RenderSettings
+from ._common import demo_scene_path, non_negative_int, positive_int
 
 NAME = "bench"
 ORDER = 40
@@ -52,19 +58,28 @@ def synthetic_scene(n: int = 150_000, degree: int = 3, seed: int = 0) -> Scene:
                  rng.normal(0.0, 2.0, n), rng.normal(0, 0.3, (n, (degree + 1) ** 2, 3)))
 
 
+def _group_names() -> tuple[str, ...]:
+    """The groups ``--groups`` may name (every row's group but the two that always run)."""
+    rows = configurations(RenderSettings(), 3)
+    return tuple(dict.fromkeys(r.group for r in rows if r.group not in ("default", "limit")))
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenes", nargs="*", type=Path, help="scene files (default: see above)")
     p.add_argument("--quick", action="store_true", help="small and fast: the demo scene, few rows (CI)")
-    p.add_argument("--width", type=int, default=None, help="image width (default 1280; quick 160)")
-    p.add_argument("--height", type=int, default=None, help="image height (default 720; quick 120)")
-    p.add_argument("--frames", type=int, default=None, help="timed frames per row (default 12; quick 4)")
+    p.add_argument("--width", type=positive_int, default=None, help="image width (default 1280; quick 160)")
+    p.add_argument("--height", type=positive_int, default=None, help="image height (default 720; quick 120)")
+    p.add_argument("--frames", type=positive_int, default=None,
+                   help="timed frames per row (default 12; quick 4)")
     p.add_argument("--groups", default=None,
-                   help="only these comma-separated groups of rows: precision, extent, sort, sh, "
-                        "resort, preprocess, cull, renderer (default and limit always run)")
-    p.add_argument("--synthetic", type=int, default=None, metavar="N",
-                   help="add a synthetic SH3 scene of N splats (default 150000 without scenes)")
+                   help="only these comma-separated groups of rows: " + ", ".join(_group_names())
+                        + " (default and limit always run)")
+    p.add_argument("--synthetic", type=non_negative_int, default=None, metavar="N",
+                   help="add a synthetic SH3 scene of N splats (default 150000 without scenes; "
+                        "0 for none)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
-                   help="write bench.csv, bench.json and bench.png there")
+                   help="write bench.csv, bench.json and bench.png there (created if missing; "
+                        "existing files of those names are replaced)")
     p.add_argument("--json", action="store_true", help="print the JSON instead of the table")
     p.add_argument("--savings", action="store_true",
                    help="also run the paired rows that prove each skipped cost: SH0 against the "
@@ -72,14 +87,55 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "moving camera (on by default without --quick)")
 
 
+def _parse_groups(text: str | None) -> frozenset[str] | None:
+    if not text:
+        return None
+    groups = frozenset(g.strip() for g in text.split(",") if g.strip())
+    valid = _group_names()
+    unknown = sorted(groups - set(valid))
+    if unknown or not groups:
+        raise SplatglError(f"--groups: unknown group(s) {', '.join(unknown) or repr(text)}; "
+                           f"valid: {', '.join(valid)}")
+    return groups
+
+
+def _check_out(out: Path | None) -> None:
+    """``--out`` must name a folder that exists or can be made: checked before measuring."""
+    if out is None:
+        return
+    if out.exists() and not out.is_dir():
+        raise SplatglError(f"--out {out}: is a file; --out names a folder for bench.csv, "
+                           "bench.json and bench.png")
+    if not out.exists() and not out.absolute().parent.is_dir():
+        raise SplatglError(f"--out {out}: folder {out.parent} does not exist")
+    if out.is_dir():  # the files themselves: not directories, writable folder
+        OutputFiles({name: out / name for name in ("bench.csv", "bench.json", "bench.png")})
+
+
+def _write_out(out: Path, rows: list, extra: dict) -> None:
+    """bench.csv, bench.json and bench.png, all or none (a folder made here goes on failure)."""
+    made = not out.exists()
+    out.mkdir(exist_ok=True)
+    try:
+        files = OutputFiles({name: out / name for name in ("bench.csv", "bench.json", "bench.png")})
+        with files:
+            write_csv(files.temp("bench.csv"), rows)
+            write_json(files.temp("bench.json"), rows, extra)
+            plot(files.temp("bench.png"), rows)
+    except BaseException:
+        if made:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
 def run(args: argparse.Namespace) -> int:
     quick = args.quick
     width = args.width or (160 if quick else 1280)
     height = args.height or (120 if quick else 720)
     frames = args.frames or (4 if quick else 12)
-    if frames < 1 or width < 1 or height < 1:
-        raise SplatglError("--frames, --width and --height must be positive")
-    groups = frozenset(g.strip() for g in args.groups.split(",")) if args.groups else None
+    groups = _parse_groups(args.groups)
+    check_image_size(width, height, "--width/--height: image", "quad")
+    _check_out(args.out)
     options = BenchOptions(width, height, frames, error_frames=tuple(sorted({frames // 3, 2 * frames // 3, frames - 1}))
                            if not quick else (frames - 1,), quick=quick, groups=groups)
     jobs = [(p.name, load_scene(p)) for p in args.scenes]
@@ -91,9 +147,14 @@ def run(args: argparse.Namespace) -> int:
     n_syn = args.synthetic if args.synthetic is not None else (150_000 if not args.scenes and not quick else 0)
     if n_syn:
         jobs.append((f"synthetic-{n_syn // 1000}k-sh3", synthetic_scene(n_syn)))
+    if not jobs:
+        raise SplatglError("nothing to measure: no scenes given, none found in "
+                           f"{SHARED}, and --synthetic 0")
     progress = StderrProgress() if enabled() else None
     rows = []
     with Renderer() as renderer:
+        check_image_size(width, height, "--width/--height: image", "quad", renderer.ctx)
+        machine = machine_info(renderer.ctx.info.get("GL_RENDERER", "?"))  # before the context closes
         for name, scene in jobs:
             rows += bench_scene(renderer, name, scene, options, progress=progress)
             if args.savings or not quick:
@@ -101,16 +162,14 @@ def run(args: argparse.Namespace) -> int:
     sort_ms = sort_benchmark(100_000 if quick else 1_000_000)
     extra = {"width": width, "height": height, "frames": frames,
              "sort_exact_ms": sort_ms, "sort_keys": 100_000 if quick else 1_000_000,
-             "renderer": renderer.ctx.info.get("GL_RENDERER", "?")}
+             "renderer": machine["gl_renderer"], "machine": machine}
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        write_csv(args.out / "bench.csv", rows)
-        write_json(args.out / "bench.json", rows, extra)
-        plot(args.out / "bench.png", rows)
+        _write_out(args.out, rows, extra)
     if args.json:
         print(json.dumps({**extra, "rows": [r.as_dict() for r in rows]}))
         return 0
-    print(f"{width}x{height}, {frames} frames per row along an orbit, GL renderer {extra['renderer']}")
+    print(describe(machine))
+    print(f"{width}x{height}, {frames} frames per row along an orbit")
     print(table(rows))
     print(f"\nexact sort of {extra['sort_keys']} depth keys: {sort_ms:.1f} ms (median)")
     defaults = [r for r in rows if r.config == "default"]

@@ -9,12 +9,13 @@ from pathlib import Path
 
 from ..pictures import heatmap, side_by_side
 from ..image_io import write_image
-from ..errors import SplatglError
+from ..output_files import OutputFiles
+from ..progress import default_progress
 from ..metrics import depth_errors, image_errors
 from ..render import Renderer
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      inputs_from_args)
+                      check_convention, check_size, inputs_from_args, positive_float)
 
 NAME = "compare"
 ORDER = 30
@@ -43,33 +44,37 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write both renders next to each other (.png, .tif or .exr)")
     p.add_argument("--heatmap", type=Path, default=None, metavar="FILE",
                    help="write a heat map of the per-pixel error with its colour scale")
-    p.add_argument("--heatmap-scale", type=float, default=4.0 / 255.0, metavar="ERR",
+    p.add_argument("--heatmap-scale", type=positive_float, default=4.0 / 255.0, metavar="ERR",
                    help="error shown at the top of the heat map's scale (default 4/255)")
     add_camera_arguments(p)
     add_settings_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    if not args.heatmap_scale > 0:
-        raise SplatglError(f"--heatmap-scale must be positive, got {args.heatmap_scale}")
-    scene, settings, camera = inputs_from_args(args)
     kinds = (RendererKind(args.renderer), RendererKind(args.against))
+    check_convention(args, *kinds)
+    files = OutputFiles({"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
+    scene, settings, camera = inputs_from_args(args)
+    progress = default_progress()
     outputs, seconds = [], []
     with Renderer() as renderer:
         for kind in kinds:
+            check_size(args, camera, kind, renderer.ctx)
+        for kind in kinds:
             if kind is not RendererKind.REFERENCE:
-                renderer.render(scene, camera, settings, kind)  # warm-up: compile, upload
+                renderer.render(scene, camera, settings, kind, progress)  # warm-up: compile, upload
             t0 = time.perf_counter()
-            outputs.append(renderer.render_layers(scene, camera, settings, kind))
+            outputs.append(renderer.render_layers(scene, camera, settings, kind, progress))
             seconds.append(time.perf_counter() - t0)
     images = [o.rgba for o in outputs]
     errors = image_errors(images[0], images[1])
     depth = depth_errors(outputs[0], outputs[1])
     names = tuple(k.value for k in kinds)
-    if args.side_by_side is not None:
-        write_image(args.side_by_side, side_by_side(images[0], images[1], names))
-    if args.heatmap is not None:
-        write_image(args.heatmap, heatmap(images[0], images[1], args.heatmap_scale))
+    with files:
+        if args.side_by_side is not None:
+            write_image(files.temp("--side-by-side"), side_by_side(images[0], images[1], names))
+        if args.heatmap is not None:
+            write_image(files.temp("--heatmap"), heatmap(images[0], images[1], args.heatmap_scale))
     result = {
         "scene": str(args.scene) if args.scene else "demo", "splats": scene.count,
         "width": camera.width, "height": camera.height, "renderer": names[0], "against": names[1],

@@ -3,19 +3,19 @@
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
-
 from contextlib import nullcontext
+from pathlib import Path
 
 from ..errors import SplatglError
 from ..image_io import write_image
 from ..output import RenderOutput
+from ..output_files import OutputFiles
+from ..progress import default_progress
 from ..pictures import depth_preview
 from ..render import Renderer, render_reference_layers
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      inputs_from_args)
+                      check_convention, check_size, format_timings, inputs_from_args)
 
 NAME = "render"
 ORDER = 10
@@ -44,34 +44,40 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "renderer; reference = the NumPy per-tile reference (slow)")
     p.add_argument("--depth-png", type=Path, default=None, metavar="FILE",
                    help="also write a colourised preview of the expected depth with a scale bar")
-    p.add_argument("--timings", action="store_true", help="print the frame's stage times")
+    p.add_argument("--timings", action="store_true",
+                   help="print the frame's stage times (ms) and counts (splats drawn, keys sorted)")
     add_camera_arguments(p)
     add_settings_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    scene, settings, camera = inputs_from_args(args)
     kind = RendererKind(args.renderer)
-    want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
+    check_convention(args, kind)
     if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
         raise SplatglError(f"{args.depth_png}: --depth-png needs a .png or .tif file name")
+    outputs = OutputFiles({"-o": args.output, "--depth-png": args.depth_png})
+    scene, settings, camera = inputs_from_args(args)
+    want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
+    progress = default_progress()
     times = None
     with Renderer() if kind is not RendererKind.REFERENCE else nullcontext() as renderer:
+        check_size(args, camera, kind, renderer.ctx if renderer is not None else None)
         if renderer is None:
-            out = render_reference_layers(scene, camera, settings)
+            out = render_reference_layers(scene, camera, settings, progress)
         elif want_depth:
-            out = renderer.render_layers(scene, camera, settings, kind)
+            out = renderer.render_layers(scene, camera, settings, kind, progress)
         else:
-            out = RenderOutput(renderer.render(scene, camera, settings, kind), None)
+            out = RenderOutput(renderer.render(scene, camera, settings, kind, progress), None)
         if renderer is not None:
             times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
     depth = out.expected_depth() if want_depth else None
-    write_image(args.output, out.rgba, args.bit_depth, depth=depth)
+    with outputs:
+        write_image(outputs.temp("-o"), out.rgba, args.bit_depth, depth=depth)
+        if args.depth_png is not None:
+            write_image(outputs.temp("--depth-png"), depth_preview(depth, out.alpha))
     if args.depth_png is not None:
-        write_image(args.depth_png, depth_preview(depth, out.alpha))
         print(f"wrote {args.depth_png} (expected depth)")
     print(f"wrote {args.output} ({camera.width}x{camera.height}, {scene.count} splats, {kind.value})")
     if args.timings and times is not None:
-        parts = ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in vars(times).items())
-        print(f"timings: {parts}", file=sys.stdout)
+        print(f"timings: {format_timings(times)}")
     return 0

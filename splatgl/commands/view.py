@@ -7,10 +7,12 @@ import time
 from pathlib import Path
 
 from ..camera_io import load_cameras
+from ..camera_up import resolve_up
 from ..errors import SplatglError
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      camera_from_args, demo_scene_path, load_scene_arg, settings_from_args)
+                      camera_from_args, check_convention, demo_scene_path, load_scene_arg,
+                      settings_from_args)
 
 NAME = "view"
 ORDER = 15
@@ -66,6 +68,9 @@ def _render_args(args: argparse.Namespace) -> tuple[str, ...]:
 def run(args: argparse.Namespace) -> int:
     if args.benchmark is not None and args.benchmark < 1:
         raise SplatglError(f"--benchmark needs at least 1 frame, got {args.benchmark}")
+    check_convention(args, args.renderer)
+    if args.screenshot_dir.exists() and not args.screenshot_dir.is_dir():
+        raise SplatglError(f"--screenshot-dir {args.screenshot_dir}: is a file, not a folder")
     path = args.scene if args.scene is not None else demo_scene_path()
     print(f"loading {path} ...", flush=True)
     t0 = time.perf_counter()
@@ -80,10 +85,12 @@ def run(args: argparse.Namespace) -> int:
 
     from ..viewer.app import Viewer, ViewerOptions  # glfw only when a window is wanted
 
+    up, _ = resolve_up(args.up, args.scene, args.camera)
     options = ViewerOptions(title=f"splatgl view - {Path(path).name}",
                             screenshot_dir=args.screenshot_dir, render_args=_render_args(args),
-                            vsync=not args.no_vsync and args.benchmark is None)
-    with Viewer(scene, settings, camera, cameras, args.camera_index % max(len(cameras), 1),
+                            vsync=not args.no_vsync and args.benchmark is None,
+                            up=tuple(float(v) for v in up))
+    with Viewer(scene, settings, camera, cameras, args.camera_index or 0,
                 RendererKind(args.renderer), options) as viewer:
         print(f"OpenGL {viewer.ctx.info['GL_VERSION']} on {viewer.ctx.info['GL_RENDERER']}", flush=True)
         if args.benchmark is not None:

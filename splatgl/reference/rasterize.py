@@ -21,7 +21,7 @@ releases the GIL); each tile's arithmetic does not depend on the batching.
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass
 
 import numpy as np
@@ -205,7 +205,7 @@ def _untile(per_tile: np.ndarray, grid: tuple[int, int], height: int, width: int
 def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarray,
               background=(0.0, 0.0, 0.0), options: ReferenceOptions | None = None,
               chunk: int = DEFAULT_CHUNK, tiles_per_batch: int = DEFAULT_TILES_PER_BATCH,
-              workers: int | None = None) -> Raster:
+              workers: int | None = None, progress=None) -> Raster:
     """Blend every tile's sorted splat list into the image (the reference's last stage).
 
     Args:
@@ -216,6 +216,9 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
         options: alpha clamp and stop rule (default INRIA).
         chunk, tiles_per_batch, workers: vectorisation knobs; the result does not depend on
             them beyond float summation order of C and D (T and n_contrib are exact).
+        progress: optional ``progress(tiles_done, busy_tiles, what)``
+            (:mod:`splatgl.progress`), called as each batch of tiles finishes.  Ctrl-C lands
+            between batches: batches not yet started are cancelled.
     """
     options = ReferenceOptions() if options is None else options
     if chunk < 1 or tiles_per_batch < 1:
@@ -235,12 +238,26 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
     def run(tiles: np.ndarray):
         return tiles, _raster_batch(proj, values, ranges, tiles, options, chunk)
 
+    results, done = [], 0
+
+    def finished(item) -> None:
+        nonlocal done
+        results.append(item)
+        done += len(item[0])
+        if progress is not None:
+            progress(done, busy.size, "reference: rasterizing tiles")
+
     with np.errstate(under="ignore"):
         if workers > 1 and len(batches) > 1:
-            with ThreadPoolExecutor(workers) as pool:
-                results = list(pool.map(run, batches))
+            pool = ThreadPoolExecutor(workers)
+            try:
+                for future in as_completed([pool.submit(run, b) for b in batches]):
+                    finished(future.result())
+            finally:  # on Ctrl-C: drop the queued batches, do not wait for them
+                pool.shutdown(wait=False, cancel_futures=True)
         else:
-            results = [run(b) for b in batches]
+            for b in batches:
+                finished(run(b))
     for tiles, (bt, bc, bd, bn) in results:
         t[tiles], c[tiles], d[tiles], nc[tiles] = bt, bc, bd, bn
     bg = np.asarray(background, proj.dtype)

@@ -50,7 +50,8 @@ class ReferenceImage:
 
 def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | None = None,
                      dtype: np.dtype | type = np.float32,
-                     compat: Compat | ReferenceOptions | str = Compat.INRIA) -> ReferenceImage:
+                     compat: Compat | ReferenceOptions | str = Compat.INRIA,
+                     progress=None) -> ReferenceImage:
     """Render ``scene`` with the NumPy per-tile reference rasterizer.
 
     Args:
@@ -59,6 +60,7 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
         settings: background, near plane, antialiasing, SH cap (default RenderSettings()).
         dtype: float32 (GPU-like) or float64.
         compat: a :class:`Compat` (INRIA default, GSPLAT) or a full :class:`ReferenceOptions`.
+        progress: optional :data:`splatgl.progress.ProgressCallback`, told the tiles rasterized.
     """
     settings = RenderSettings() if settings is None else settings
     options = as_options(compat)
@@ -66,7 +68,7 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
     keys, values = emit_keys(proj)
     keys, values = sort(keys, values)
     ranges = tile_ranges(keys, proj.n_tiles)
-    raster = rasterize(proj, values, ranges, settings.background, options)
+    raster = rasterize(proj, values, ranges, settings.background, options, progress=progress)
     return ReferenceImage(color=raster.color, alpha=raster.alpha, depth=raster.depth,
                           transmittance=raster.transmittance, n_contrib=raster.n_contrib,
                           projected=proj, sorted_values=values, ranges=ranges, options=options)

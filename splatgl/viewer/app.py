@@ -53,6 +53,7 @@ class ViewerOptions:
             in :class:`RenderSettings` (scene path, ``--transform``, ``--drop-invalid``), for the
             command line printed with each screenshot.
         vsync: wait for the display's refresh on swap.
+        up: (3,) world direction the orbit keeps up on screen (``--up``; default world -y).
     """
 
     title: str = "splatgl view"
@@ -60,6 +61,7 @@ class ViewerOptions:
     screenshot_dir: Path = Path(".")
     render_args: tuple[str, ...] = ()
     vsync: bool = True
+    up: tuple[float, float, float] = (0.0, -1.0, 0.0)
 
 
 class Viewer:
@@ -76,7 +78,7 @@ class Viewer:
         self.options = options or ViewerOptions()
         self.cameras = list(cameras or [])
         self.camera_index = camera_index
-        self.home = controls.from_camera(camera, self._orbit_distance(camera))
+        self.home = controls.from_camera(camera, self._orbit_distance(camera), self.options.up)
         self.state = self.home
         # A camera from a file (the start camera, a training camera) is shown exactly, with its
         # own intrinsics, until the user moves: the orbit state carries only pose and fov.

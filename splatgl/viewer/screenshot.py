@@ -8,6 +8,7 @@ from pathlib import Path
 from ..camera import Camera
 from ..camera_io import save_camera
 from ..image_io import write_image
+from ..output_files import OutputFiles
 from ..render import Renderer
 from ..scene import Scene
 from ..settings import RendererKind, RenderSettings
@@ -47,8 +48,10 @@ def save_screenshot(renderer: Renderer, scene: Scene, camera: Camera, settings: 
     ``splatgl render``) and the camera JSON; returns (png, json, reproducing command line)."""
     png, js = next_paths(Path(directory))
     rgba = renderer.render(scene, camera, settings, kind)
-    save_camera(js, camera)
-    write_image(png, rgba)
+    files = OutputFiles({"image": png, "camera": js}, overwrite=False)
+    with files:  # both or neither
+        save_camera(files.temp("camera"), camera)
+        write_image(files.temp("image"), rgba)
     argv = ["splatgl", "render", *render_args, "--camera", str(js), *settings_arguments(settings, kind),
             "-o", str(png)]
     return png, js, shlex.join(argv)
