@@ -13,11 +13,22 @@ load inside :func:`main`, where an interrupt is already handled.
 
 from __future__ import annotations
 
-import argparse
-import os
-import signal
 import sys
-import warnings
+
+
+def _quiet_interrupt_hook(exc_type, exc, tb, _default=sys.excepthook):
+    """Ctrl-C before :func:`main` could handle it (while Python imports this module): one line."""
+    if issubclass(exc_type, KeyboardInterrupt):
+        print("splatgl: interrupted", file=sys.stderr)
+    else:
+        _default(exc_type, exc, tb)
+
+
+if sys.excepthook is sys.__excepthook__:  # an interactive shell keeps its own hook
+    sys.excepthook = _quiet_interrupt_hook
+
+import os  # noqa: E402  (after the hook: these imports are the start-up it covers)
+import signal  # noqa: E402
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 128 + signal.SIGINT
@@ -29,19 +40,30 @@ class Terminated(KeyboardInterrupt):
     """Raised in the main thread by SIGTERM, so it unwinds (and cleans up) exactly like Ctrl-C."""
 
 
-def _raise_terminated(signum, frame) -> None:
-    raise Terminated()
+#: Signals received during this :func:`main` call (an interrupt inside a C extension's import
+#: can surface as an ImportError: the flag tells it was the user's doing).
+_received: list[int] = []
+
+
+def _on_signal(signum, frame) -> None:
+    _received.append(signum)
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 class BadArguments(Exception):
     """An argument error; :func:`main` prints it as one line and returns 2."""
 
 
-class OneLineParser(argparse.ArgumentParser):
-    """Argument errors as one line (``splatgl render: error: ...``) with the --help hint."""
+def _parser_class():
+    import argparse
 
-    def error(self, message: str):
-        raise BadArguments(f"{self.prog}: error: {message} (see {self.prog} --help)")
+    class OneLineParser(argparse.ArgumentParser):
+        """Argument errors as one line (``splatgl render: error: ...``) with the --help hint."""
+
+        def error(self, message: str):
+            raise BadArguments(f"{self.prog}: error: {message} (see {self.prog} --help)")
+
+    return OneLineParser
 
 
 def _command_modules():
@@ -57,8 +79,11 @@ def _command_modules():
     return sorted(mods, key=lambda m: getattr(m, "ORDER", 50))
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = OneLineParser(
+def build_parser():
+    """The ``splatgl`` argument parser (an :class:`argparse.ArgumentParser`)."""
+    import argparse
+
+    parser = _parser_class()(
         prog="splatgl",
         description="Render trained Gaussian-splat scenes (3DGS, 2DGS) through OpenGL.",
     )
@@ -85,14 +110,20 @@ def _silence_stdout() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    previous = None
+    handled = (signal.SIGINT, signal.SIGTERM)
+    previous = {}
+    del _received[:]
     try:
-        # A signal handler can only be installed from the main thread (tests may call main()
-        # from others); there Ctrl-C still works, SIGTERM keeps its default.
-        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+        # Handlers can only be installed from the main thread (tests may call main() from
+        # others); there Ctrl-C still raises KeyboardInterrupt, SIGTERM keeps its default.
+        for sig in handled:
+            if signal.getsignal(sig) is not signal.SIG_IGN:  # nohup'd: stay ignored
+                previous[sig] = signal.signal(sig, _on_signal)
     except ValueError:
         pass
     try:
+        import warnings
+
         from .errors import SplatglError
 
         parser = build_parser()
@@ -109,18 +140,20 @@ def main(argv: list[str] | None = None) -> int:
             code = EXIT_BAD_INPUT
         sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
         return code
-    except Terminated:
-        print("splatgl: terminated", file=sys.stderr)
-        return EXIT_TERMINATED
-    except KeyboardInterrupt:
-        print("splatgl: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
     except BrokenPipeError:
         _silence_stdout()
         return EXIT_BROKEN_PIPE
+    except BaseException as exc:
+        if not (_received or isinstance(exc, KeyboardInterrupt)) or isinstance(exc, SystemExit):
+            raise
+        # Ctrl-C or SIGTERM, possibly surfacing as another error (an import interrupted
+        # inside a C extension); the unwinding has removed every temporary file.
+        terminated = isinstance(exc, Terminated) or signal.SIGTERM in _received
+        print("splatgl: terminated" if terminated else "splatgl: interrupted", file=sys.stderr)
+        return EXIT_TERMINATED if terminated else EXIT_INTERRUPTED
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -171,9 +171,10 @@ def check_convention(args: argparse.Namespace, *kinds: RendererKind | str) -> No
     if Convention(args.convention) is Convention.INRIA:
         return
     if not any(RendererKind(k) is RendererKind.REFERENCE for k in kinds):
-        names = " and ".join(RendererKind(k).value for k in kinds)
+        names = " and ".join(dict.fromkeys(RendererKind(k).value for k in kinds))
+        which = f"the {names} renderers follow" if " and " in names else f"the {names} renderer follows"
         raise SplatglError(f"--convention {args.convention} applies to the NumPy reference only; "
-                           f"the {names} renderer follows the inria rules (use --renderer reference)")
+                           f"{which} the inria rules (use --renderer reference)")
 
 
 def size_origin(args: argparse.Namespace) -> str:

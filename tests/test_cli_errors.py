@@ -1,0 +1,210 @@
+"""Bad arguments and bad camera files through the CLI: one exact line on stderr, exit 2, no file.
+
+Each case is a command a user typed in the trial of issue 17; the expected line is the whole
+message, so a reworded or multi-line error fails here.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from splatgl.camera import look_at
+from splatgl.cli import main
+
+
+def run_cli(capsys, *argv):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a numpy cast warning must never be the only sign
+        rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def expect_one_line(capsys, tmp_path, argv, line):
+    """``argv`` exits 2 with exactly ``line`` on stderr and leaves tmp_path as it was."""
+    before = sorted(p.name for p in tmp_path.iterdir())
+    rc, out, err = run_cli(capsys, *argv)
+    assert (rc, err) == (2, line + "\n"), err
+    assert "Traceback" not in err and out == ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written or left
+
+
+def camera_file(tmp_path, name="cam.json", width=64, height=48, w2c=None):
+    w2c = look_at([0.0, -0.5, -3.0], [0.0, 0.0, 0.0]) if w2c is None else w2c
+    path = tmp_path / name
+    path.write_text(json.dumps({"width": width, "height": height, "fx": 60.0, "fy": 60.0,
+                                "cx": width / 2, "cy": height / 2,
+                                "world_to_camera": np.asarray(w2c).tolist()}))
+    return path
+
+
+R = "splatgl render: error: argument "
+HINT = " (see splatgl render --help)"
+
+
+@pytest.mark.parametrize("extra, line", [
+    (["--background", "nan,0,0"],
+     R + "--background: each of R,G,B must be a finite number >= 0, got 'nan,0,0'" + HINT),
+    (["--background", "1e400,0,0"],
+     R + "--background: each of R,G,B must be a finite number >= 0, got '1e400,0,0'" + HINT),
+    (["--near", "inf"], R + "--near: must be a finite number > 0, got 'inf'" + HINT),
+    (["--near", "nan"], R + "--near: must be a finite number > 0, got 'nan'" + HINT),
+    (["--camera-index", "-1"], R + "--camera-index: must be 0 or more, got -1" + HINT),
+    (["--width", "0"], R + "--width: must be at least 1, got 0" + HINT),
+    (["--distance", "-2"], R + "--distance: must be a finite number > 0, got '-2'" + HINT),
+    (["--up", "x"], R + "--up: invalid choice: 'x' (choose from '+y', '-y', '+z', '-z')" + HINT),
+    (["--camera-index", "2"], "splatgl: error: --camera-index needs --camera (a cameras.json to pick from)"),
+    (["--width", "20000"], "splatgl: error: --width/--height: image 20000x720 is larger than "
+                           "splatgl renders (16384 pixels a side)"),
+    (["--convention", "gsplat"], "splatgl: error: --convention gsplat applies to the NumPy "
+                                 "reference only; the quad renderer follows the inria rules "
+                                 "(use --renderer reference)"),
+    (["--convention", "gsplat", "--renderer", "tile"],
+     "splatgl: error: --convention gsplat applies to the NumPy reference only; the tile renderer "
+     "follows the inria rules (use --renderer reference)"),
+    (["--transform", '{"rotate_deg": [0, 90, 0], "rotation": [[1,0,0],[0,1,0],[0,0,1]]}'],
+     "splatgl: error: --transform: give either 'rotate_deg' or 'rotation', not both (one would "
+     "be ignored)"),
+])
+def test_meaningless_render_options(tmp_path, capsys, extra, line):
+    expect_one_line(capsys, tmp_path, ["render", "-o", tmp_path / "x.png", *extra], line)
+
+
+def test_compare_accepts_gsplat_only_against_a_reference(tmp_path, capsys):
+    expect_one_line(capsys, tmp_path, ["compare", "--convention", "gsplat", "--against", "tile"],
+                    "splatgl: error: --convention gsplat applies to the NumPy reference only; the "
+                    "quad and tile renderers follow the inria rules (use --renderer reference)")
+    rc, out, err = run_cli(capsys, "compare", "--convention", "gsplat", "--width", "48",
+                           "--height", "32", "--json")
+    assert rc == 0 and json.loads(out)["against"] == "reference"
+
+
+@pytest.mark.parametrize("height, shown", [(20000, "64x20000"), (1e9, "64x1000000000")])
+def test_camera_file_sizes_are_checked_like_options(tmp_path, capsys, height, shown):
+    path = camera_file(tmp_path, height=height)
+    expect_one_line(capsys, tmp_path, ["render", "--camera", path, "-o", tmp_path / "x.png"],
+                    f"splatgl: error: {path}: fields 'width', 'height': image {shown} is larger "
+                    "than splatgl renders (16384 pixels a side)")
+
+
+def test_camera_file_pose_errors_reach_the_cli(tmp_path, capsys):
+    w2c = look_at([0.0, 0.0, -3.0], [0.0, 0.0, 0.0])
+    w2c[:3, :3] = 0.0  # singular: was a LinAlgError traceback
+    path = camera_file(tmp_path, w2c=w2c)
+    expect_one_line(capsys, tmp_path, ["render", "--camera", path, "-o", tmp_path / "x.png"],
+                    f"splatgl: error: {path}: field 'world_to_camera' is singular "
+                    "(determinant 0): not a rotation")
+
+
+def test_other_aspect_is_refused_and_one_side_keeps_the_aspect(tmp_path, capsys):
+    path = camera_file(tmp_path, width=64, height=48)
+    expect_one_line(capsys, tmp_path, ["render", "--camera", path, "--width", "100", "--height",
+                                       "100", "-o", tmp_path / "x.png"],
+                    f"splatgl: error: --width 100 --height 100 would stretch {path}'s 64x48 view "
+                    "(aspect 1.333, asked 1); give only one of them to scale keeping the aspect")
+    out = tmp_path / "x.png"
+    rc, stdout, _ = run_cli(capsys, "render", "--camera", path, "--width", "32", "-o", out)
+    assert rc == 0 and "32x24" in stdout
+    rc, stdout, _ = run_cli(capsys, "render", "--camera", path, "--width", "32", "--height", "24",
+                            "-o", out)
+    assert rc == 0 and "32x24" in stdout
+
+
+def test_timings_show_counts_as_counts(tmp_path, capsys):
+    rc, out, _ = run_cli(capsys, "render", "-o", tmp_path / "x.png", "--width", "48", "--height",
+                         "32", "--timings")
+    line = next(t for t in out.splitlines() if t.startswith("timings:"))
+    assert "drawn 1,604 (stages total" in line
+    assert "drawn 1604" not in line and " ms, drawn" in line
+    rc, out, _ = run_cli(capsys, "render", "-o", tmp_path / "x.png", "--width", "48", "--height",
+                         "32", "--timings", "--renderer", "tile")
+    line = next(t for t in out.splitlines() if t.startswith("timings:"))
+    n_keys = line.split("n_keys ")[1].split(" ")[0].rstrip(",")
+    assert n_keys.replace(",", "").isdigit() and "ms" not in n_keys
+
+
+# ------------------------------------------------------------------------------ outputs
+def test_same_output_twice_and_directory_outputs(tmp_path, capsys):
+    out = tmp_path / "x.png"
+    expect_one_line(capsys, tmp_path, ["render", "-o", out, "--depth-png", out],
+                    f"splatgl: error: --depth-png {out}: the same file as -o; give each output "
+                    "its own name")
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    expect_one_line(capsys, tmp_path, ["render", "-o", folder],
+                    f"splatgl: error: -o {folder}: is a directory; give a file name")
+    expect_one_line(capsys, tmp_path, ["compare", "--side-by-side", out, "--heatmap", out],
+                    f"splatgl: error: --heatmap {out}: the same file as --side-by-side; give each "
+                    "output its own name")
+    missing = tmp_path / "nope" / "x.png"
+    expect_one_line(capsys, tmp_path, ["render", "-o", missing],
+                    f"splatgl: error: -o {missing}: folder {missing.parent} does not exist")
+
+
+@pytest.mark.parametrize("command", ["render", "compare"])
+def test_a_failed_second_file_leaves_neither(tmp_path, capsys, monkeypatch, command):
+    from splatgl.commands import compare as compare_cmd
+    from splatgl.commands import render as render_cmd
+    from splatgl.errors import SplatglError
+
+    module = render_cmd if command == "render" else compare_cmd
+    real = module.write_image
+    calls = []
+
+    def failing_second(path, *a, **k):
+        calls.append(path)
+        if len(calls) == 2:
+            raise SplatglError(f"{path}: writing failed: disk full")
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(module, "write_image", failing_second)
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    argv = (["render", "-o", a, "--depth-png", b] if command == "render"
+            else ["compare", "--side-by-side", a, "--heatmap", b])
+    rc, out, err = run_cli(capsys, *argv, "--width", "40", "--height", "30")
+    assert rc == 2 and err.count("\n") == 1 and "disk full" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # neither file, no temporaries
+
+
+def test_render_writes_both_files_on_success(tmp_path, capsys):
+    a, b = tmp_path / "a.exr", tmp_path / "b.png"
+    rc, out, _ = run_cli(capsys, "render", "-o", a, "--depth-png", b, "--width", "40", "--height", "30")
+    assert rc == 0 and a.stat().st_size > 0 and b.stat().st_size > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.exr", "b.png"]
+
+
+# ------------------------------------------------------------------------------ bench
+def test_bench_arguments_fail_before_measuring(tmp_path, capsys):
+    existing = tmp_path / "results"
+    existing.write_text("keep me")
+    expect_one_line(capsys, tmp_path, ["bench", "--quick", "--out", existing],
+                    f"splatgl: error: --out {existing}: is a file; --out names a folder for "
+                    "bench.csv, bench.json and bench.png")
+    expect_one_line(capsys, tmp_path, ["bench", "--quick", "--groups", "bogus,extent"],
+                    "splatgl: error: --groups: unknown group(s) bogus; valid: precision, extent, "
+                    "sort, sh, resort, preprocess, cull, renderer")
+    expect_one_line(capsys, tmp_path, ["bench", "--synthetic", "-5"],
+                    "splatgl bench: error: argument --synthetic: must be 0 or more, got -5 "
+                    "(see splatgl bench --help)")
+    expect_one_line(capsys, tmp_path, ["bench", "--width", "0", "--frames", "0"],
+                    "splatgl bench: error: argument --width: must be at least 1, got 0 "
+                    "(see splatgl bench --help)")
+    expect_one_line(capsys, tmp_path, ["bench", "--frames", "0"],
+                    "splatgl bench: error: argument --frames: must be at least 1, got 0 "
+                    "(see splatgl bench --help)")
+    assert existing.read_text() == "keep me"
+
+
+def test_bench_group_other_than_renderer_finishes_and_writes(tmp_path, capsys):
+    out = tmp_path / "res"
+    rc, stdout, err = run_cli(capsys, "bench", "--quick", "--groups", "extent", "--width", "32",
+                              "--height", "24", "--frames", "1", "--out", out)
+    assert rc == 0, err
+    data = json.loads((out / "bench.json").read_text())
+    assert {r["config"] for r in data["rows"]} == {"default", "extent=square", "limit"}
+    assert stdout.startswith("machine: ") and data["machine"]["gl_renderer"] in stdout
+    assert sorted(p.name for p in out.iterdir()) == ["bench.csv", "bench.json", "bench.png"]
