@@ -9,6 +9,7 @@ for a world-to-camera rotation R in OpenCV axes (+y image-down) a camera's up is
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +42,7 @@ def cameras_beside(scene_path: Path | None) -> Path | None:
     """A ``cameras.json`` in the scene's folder or up to :data:`CAMERAS_SEARCH_DEPTH` above it."""
     if scene_path is None:
         return None
-    folder = Path(scene_path).resolve().parent
+    folder = Path(os.path.abspath(scene_path)).parent  # beside the name given, links not followed
     for _ in range(CAMERAS_SEARCH_DEPTH + 1):
         candidate = folder / CAMERAS_NAME
         if candidate.is_file():

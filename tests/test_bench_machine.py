@@ -1,0 +1,35 @@
+"""The machine a benchmark ran on is recorded from /proc/cpuinfo and the GL context."""
+
+from __future__ import annotations
+
+from splatgl.bench.machine import describe, machine_info, simd_level
+
+EPYC = """processor\t: 0
+vendor_id\t: AuthenticAMD
+model name\t: AMD EPYC 7B13
+flags\t\t: fpu sse4_2 avx avx2 fma bmi2
+"""
+XEON = EPYC.replace("AMD EPYC 7B13", "Intel(R) Xeon(R) Platinum 8488C").replace(
+    "avx2 fma", "avx2 avx512f avx512bw fma")
+
+
+def test_simd_level_is_the_best_flag():
+    assert simd_level({"sse4_2", "avx", "avx2"}) == "avx2"
+    assert simd_level({"avx2", "avx512f"}) == "avx512"
+    assert simd_level({"asimd"}) == "neon"
+    assert simd_level(set()) == "unknown"
+
+
+def test_machine_info_from_cpuinfo_text():
+    info = machine_info("llvmpipe (LLVM 15.0.6, 256 bits)", EPYC)
+    assert (info["cpu"], info["simd"], info["gl_renderer"]) == (
+        "AMD EPYC 7B13", "avx2", "llvmpipe (LLVM 15.0.6, 256 bits)")
+    assert info["cores"] >= 1
+    assert machine_info("x", XEON)["simd"] == "avx512"
+    assert describe(info) == (f"machine: AMD EPYC 7B13 (avx2), {info['cores']} cores, "
+                              "GL renderer llvmpipe (LLVM 15.0.6, 256 bits)")
+
+
+def test_this_machine_is_described():
+    info = machine_info()
+    assert info["cpu"] and info["simd"] in ("avx512", "avx2", "avx", "sse4.2", "neon", "unknown")
