@@ -1,0 +1,101 @@
+"""All-or-nothing output files and the image-size limits, as units (the CLI cases are in
+test_cli_errors.py)."""
+
+from __future__ import annotations
+
+import pytest
+
+from splatgl import limits
+from splatgl.errors import SplatglError
+from splatgl.limits import image_size_problem
+from splatgl.output_files import OutputFiles
+
+
+def test_commit_renames_every_temporary(tmp_path):
+    files = OutputFiles({"-o": tmp_path / "a.png", "--x": tmp_path / "b.json", "--unset": None})
+    with files:
+        files.temp("-o").write_text("A")
+        files.temp("--x").write_text("B")
+        assert files.temp("-o").suffix == ".png" and files.temp("-o").parent == tmp_path
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "b.json"]
+    assert (tmp_path / "a.png").read_text() == "A"
+
+
+@pytest.mark.parametrize("failure", [KeyboardInterrupt, OSError])
+def test_failure_or_interrupt_leaves_nothing(tmp_path, failure):
+    (tmp_path / "a.png").write_text("old")
+    files = OutputFiles({"-o": tmp_path / "a.png", "--x": tmp_path / "b.json"})
+    with pytest.raises(failure):
+        with files:
+            files.temp("-o").write_text("new")
+            raise failure()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png"]
+    assert (tmp_path / "a.png").read_text() == "old"  # the old file is untouched
+
+
+def test_a_declared_file_never_written_is_an_error(tmp_path):
+    files = OutputFiles({"-o": tmp_path / "a.png", "--x": tmp_path / "b.json"})
+    with pytest.raises(SplatglError, match=r"--x .*b.json: nothing was written"):
+        with files:
+            files.temp("-o").write_text("A")
+            files.temp("--x")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_existing_files_without_overwrite(tmp_path):
+    (tmp_path / "a.png").write_text("old")
+    with pytest.raises(SplatglError) as info:
+        OutputFiles({"image": tmp_path / "a.png"}, overwrite=False)
+    assert str(info.value) == f"image {tmp_path / 'a.png'}: exists (use --force to replace it)"
+
+
+class FakeContext:
+    def __init__(self, **info):
+        self.info = {"GL_RENDERER": "fake GL", **info}
+
+
+def test_context_limits_are_named():
+    ctx = FakeContext(GL_MAX_RENDERBUFFER_SIZE=8192, GL_MAX_TEXTURE_SIZE=16384,
+                      GL_MAX_VIEWPORT_DIMS=(16384, 16384), GL_MAX_SHADER_STORAGE_BLOCK_SIZE=2 ** 27)
+    assert image_size_problem(8192, 100, "quad", ctx) is None
+    assert image_size_problem(8193, 100, "quad", ctx) == (
+        "is larger than this OpenGL driver allows (8192 pixels a side, GL_MAX_RENDERBUFFER_SIZE "
+        "of fake GL)")
+    # 16 bytes a pixel in one storage block of 128 MiB: 8,388,608 pixels at most.
+    assert image_size_problem(4096, 2048, "tile", ctx) is None
+    assert image_size_problem(4096, 2049, "tile", ctx) == (
+        "has too many pixels for the tile renderer on this driver (8,392,704; its colour buffer "
+        "of 16 bytes a pixel may hold 8,388,608, GL_MAX_SHADER_STORAGE_BLOCK_SIZE)")
+    assert image_size_problem(16385, 1, "reference") == "is larger than splatgl renders (16384 pixels a side)"
+
+
+def test_memory_is_checked_before_allocating(monkeypatch):
+    monkeypatch.setattr(limits, "available_memory", lambda: 2 ** 30)
+    assert image_size_problem(4000, 4000, "reference") is None  # 52 B a pixel: 0.77 GiB
+    assert image_size_problem(6000, 4000, "reference") == (
+        "needs at least 1.2 GiB of memory for its image buffers, 1.0 GiB available")
+
+
+def test_screenshot_writes_png_and_json_together_or_not_at_all(tmp_path, gl_renderer, monkeypatch):
+    from splatgl import default_camera
+    from splatgl.camera_io import load_camera
+    from splatgl.commands._common import demo_scene_path
+    from splatgl.formats import load_scene
+    from splatgl.settings import RendererKind, RenderSettings
+    from splatgl.viewer import screenshot
+
+    scene = load_scene(demo_scene_path())
+    camera = default_camera(scene, 40, 30)
+    png, js, cmd = screenshot.save_screenshot(gl_renderer, scene, camera, RenderSettings(),
+                                              RendererKind.QUAD, tmp_path)
+    assert (png.name, js.name) == ("splatgl-view-0001.png", "splatgl-view-0001.json")
+    assert load_camera(js).width == 40 and png.stat().st_size > 0
+
+    def broken(path, *a, **k):
+        raise SplatglError(f"{path}: writing failed: disk full")
+
+    monkeypatch.setattr(screenshot, "write_image", broken)
+    with pytest.raises(SplatglError, match="disk full"):
+        screenshot.save_screenshot(gl_renderer, scene, camera, RenderSettings(), RendererKind.QUAD,
+                                   tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([png.name, js.name])  # no lone JSON
