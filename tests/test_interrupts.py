@@ -12,7 +12,6 @@ import textwrap
 import time
 
 import numpy as np
-import pytest
 
 from splatgl.progress import StderrProgress, format_seconds
 
