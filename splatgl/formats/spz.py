@@ -193,6 +193,9 @@ def _gunzip(path, data: bytes) -> bytes:
             raise SceneFormatError(path, f"truncated: the gzip stream ends {len(head)} bytes "
                                          f"into the {HEADER_BYTES}-byte header")
         header = parse_header(path, head)
+        if header.version == 4:
+            raise SceneFormatError(path, "version 4 inside a gzip stream (version 4 files are "
+                                         "not gzipped; versions 1-3 are)", "version")
         want = header.point_bytes() * header.count
         if want > DEFLATE_MAX_RATIO * len(data):
             raise SceneFormatError(
@@ -332,13 +335,10 @@ def _arrays(path, data: bytes) -> tuple[Header, dict[str, np.ndarray]]:
     """Header and each attribute as a uint8 (n, bytes per point) array."""
     gzipped = data.startswith(b"\x1f\x8b")
     if gzipped:
-        data = _gunzip(path, data)
+        data = _gunzip(path, data)  # versions 1-3 only
     header = parse_header(path, data)
     layout = header.attribute_bytes()
     if header.version == 4:
-        if gzipped:
-            raise SceneFormatError(path, "version 4 inside a gzip stream (version 4 files are "
-                                         "not gzipped; versions 1-3 are)", "version")
         blobs = _streams(path, data, header)
     else:
         per_point = header.point_bytes()
