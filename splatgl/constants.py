@@ -40,6 +40,9 @@ FAST_CORNER_SIGMAS = 2.0 * math.sqrt(2.0)
 #: of at most this many standard deviations, and its alpha clamp.
 GSPLAT_EXTENT_SIGMAS = 3.33
 GSPLAT_ALPHA_MAX = 0.999
+#: gsplat's floor on a 2DGS surfel's squared 1-sigma screen half extent (px^2) before the
+#: ``ceil(3.33 sqrt(.))`` of its per-axis tile radius.
+GSPLAT_SURFEL_MIN_EXTENT_SQ = 1e-4
 #: |logit| bound for opacities of exactly 0 or 1 (8-bit alphas 0/255, ``from_activated``), so
 #: every stored logit stays finite; sigmoid(40) rounds to 1.0 in float32.
 MAX_LOGIT = 40.0

@@ -16,6 +16,7 @@ from types import ModuleType
 from ..errors import SceneFormatError
 from ..progress import default_progress
 from ..scene import Scene
+from ._messages import reader_guard
 
 #: Format modules in detection order (most specific signature first).
 _FORMAT_MODULES = ("compressed_ply", "ply", "spz", "ksplat", "splat")
@@ -69,11 +70,12 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None) -> S
     """
     path = Path(path)
     mod = detect_format(path)
+    read = reader_guard(mod.read)  # every format, including any added later
     if "progress" not in inspect.signature(mod.read).parameters:
-        return mod.read(path, drop_invalid=drop_invalid)
+        return read(path, drop_invalid=drop_invalid)
     if progress is None:
         progress = default_progress()
-    return mod.read(path, drop_invalid=drop_invalid, progress=progress)
+    return read(path, drop_invalid=drop_invalid, progress=progress)
 
 
 def writer_for(path: str | Path) -> ModuleType:

@@ -7,6 +7,7 @@ message that says what was expected and what was found.
 
 from __future__ import annotations
 
+import os
 import struct
 from pathlib import Path
 
@@ -14,13 +15,17 @@ import numpy as np
 
 from ..constants import MAX_LOGIT, MIN_SCALE  # noqa: F401 (re-exported to the loaders)
 from ..errors import SceneFormatError
+from ._memory import require
 
 
 
 def read_bytes(path: Path) -> bytes:
-    """The whole file as bytes; OS errors become :class:`SceneFormatError`."""
+    """The whole file as bytes (refused when it cannot fit in memory); OS errors become
+    :class:`SceneFormatError`."""
     try:
         with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            require(path, size, f"the file ({size} bytes) is read whole and needs")
             return fh.read()
     except OSError as exc:
         raise SceneFormatError(path, f"cannot read: {exc.strerror or exc}") from None

@@ -43,6 +43,8 @@ from ..constants import SH_C0
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate
 from . import _binary
+from ._memory import check_memory
+from ._messages import reader_guard
 
 NAME = "ksplat"
 EXTENSIONS = (".ksplat",)
@@ -184,9 +186,14 @@ def decode(path, data: bytes) -> tuple[np.ndarray, ...]:
                        f"{count} section headers", "maxSectionCount")
     sh_range = (sh_min, sh_max) if sh_min != sh_max else DEFAULT_SH_RANGE
     offset = HEADER_BYTES + count * SECTION_HEADER_BYTES
+    sections = [_section(path, data, index) for index in range(count)]
+    total = sum(sec.splat_count for sec in sections)
+    degree = max((sec.sh_degree for sec in sections), default=0)
+    # temporaries per splat: float64 centres, colours and SH, float32 copies (as SPZ)
+    check_memory(path, total, (degree + 1) ** 2, 160 + 16 * 3 * ((degree + 1) ** 2 - 1),
+                 len(data), "splatCount")
     parts = []
-    for index in range(count):
-        sec = _section(path, data, index)
+    for index, sec in enumerate(sections):
         raw, offset = _read_section(path, data, offset, sec, level, index, sh_range)
         if sec.splat_count:
             parts.append(raw)
@@ -198,6 +205,7 @@ def decode(path, data: bytes) -> tuple[np.ndarray, ...]:
     return tuple(np.concatenate([p[j] for p in parts]) for j in range(5))
 
 
+@reader_guard
 def read(path: Path, drop_invalid: bool = False) -> Scene:
     """Load a ksplat file as a 3DGS :class:`Scene` (values through :func:`activate`)."""
     means, quats, log_scales, logits, sh = decode(path, _binary.read_bytes(path))

@@ -25,6 +25,8 @@ import numpy as np
 
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate, sh_degree_from_rest_count, sh_to_rest
+from ._memory import check_memory
+from ._messages import quote, reader_guard
 
 NAME = "ply"
 EXTENSIONS = (".ply",)
@@ -110,13 +112,13 @@ def parse_header(path, fh) -> Header:
             break
         if key == "format":
             if len(words) != 3 or words[1] not in FORMATS or words[2] != "1.0":
-                raise _error(path, f"unsupported format line '{line}' (expected "
+                raise _error(path, f"unsupported format line {quote(line)} (expected "
                                    "'format binary_little_endian|binary_big_endian|ascii 1.0')",
                              "format")
             order, have_format = FORMATS[words[1]], True
         elif key == "element":
             if len(words) != 3 or not words[2].isdigit():
-                raise _error(path, f"header line {lineno}: malformed element line '{line}'")
+                raise _error(path, f"header line {lineno}: malformed element line {quote(line)}")
             elements.append(Element(words[1], int(words[2])))
         elif key == "property":
             if not elements:
@@ -125,22 +127,22 @@ def parse_header(path, fh) -> Header:
             if len(words) == 5 and words[1] == "list":
                 for t in words[2:4]:
                     if t not in SCALAR_TYPES:
-                        raise _error(path, f"unknown property type '{t}' in list property",
+                        raise _error(path, f"unknown property type {quote(t)} in list property",
                                      words[4])
                 elem.has_list = True
                 elem.properties.append((words[4], "list"))
             elif len(words) == 3:
                 if words[1] not in SCALAR_TYPES:
-                    raise _error(path, f"unknown property type '{words[1]}' (expected one of "
+                    raise _error(path, f"unknown property type {quote(words[1])} (expected one of "
                                        f"{', '.join(sorted(set(SCALAR_TYPES)))})", words[2])
                 if any(words[2] == name for name, _ in elem.properties):
-                    raise _error(path, f"property declared twice in element '{elem.name}'",
+                    raise _error(path, f"property declared twice in element {quote(elem.name)}",
                                  words[2])
                 elem.properties.append((words[2], SCALAR_TYPES[words[1]]))
             else:
-                raise _error(path, f"header line {lineno}: malformed property line '{line}'")
+                raise _error(path, f"header line {lineno}: malformed property line {quote(line)}")
         else:
-            raise _error(path, f"header line {lineno}: unexpected header line '{line}'")
+            raise _error(path, f"header line {lineno}: unexpected header line {quote(line)}")
     if not have_format:
         raise _error(path, "the header has no 'format' line", "format")
     return Header(order, elements, fh.tell(), lineno)
@@ -177,13 +179,13 @@ def _vertex_layout(path, header: Header, file_size: int) -> tuple[int, np.dtype]
         if elem.has_list:
             if found is not None:
                 return found  # after the vertex rows: ignored
-            raise _error(path, f"element '{elem.name}' before the vertex element has list "
+            raise _error(path, f"element {quote(elem.name)} before the vertex element has list "
                                "properties; only fixed-size scalar properties are supported "
                                "in binary PLY", elem.name)
         dtype = elem.dtype(header.order)
         need = elem.count * dtype.itemsize
         if offset + need > file_size:
-            raise _error(path, f"file is truncated: element '{elem.name}' needs {need} bytes "
+            raise _error(path, f"file is truncated: element {quote(elem.name)} needs {need} bytes "
                                f"({elem.count} rows x {dtype.itemsize} bytes) from byte {offset}"
                                f", found {max(0, file_size - offset)}", elem.name)
         if elem.name == "vertex":
@@ -230,7 +232,7 @@ def _read_vertex_ascii(path, fh, header: Header) -> np.ndarray:
     for elem in header.elements:
         rows = lines[pos:pos + elem.count]
         if len(rows) < elem.count:
-            raise _error(path, f"file is truncated: element '{elem.name}' declares {elem.count} "
+            raise _error(path, f"file is truncated: element {quote(elem.name)} declares {elem.count} "
                                f"rows, found {len(rows)} (file ends at line "
                                f"{header.lines + len(lines)})", elem.name)
         if elem.name == "vertex":
@@ -259,7 +261,7 @@ def _parse_ascii_rows(path, elem: Element, rows: list[str], first_line: int) -> 
                 try:
                     float(tok)
                 except ValueError:
-                    raise _error(path, f"line {first_line + i}: '{tok}' is not a number",
+                    raise _error(path, f"line {first_line + i}: {quote(tok)} is not a number",
                                  name) from None
         raise
     out = np.empty(elem.count, elem.dtype("="))
@@ -288,7 +290,7 @@ class _Columns:
             missing = [n for n in group if n not in have]
             if missing:
                 raise _error(path, "required vertex property missing (has: "
-                                   f"{' '.join(names)})", missing[0])
+                                   f"{quote(' '.join(names), 200)})", missing[0])
         rest_idx = sorted(int(m.group(1)) for n in names if (m := _REST_RE.match(n)))
         if rest_idx != list(range(len(rest_idx))):
             gap = next(i for i in range(len(rest_idx) + 1) if i not in rest_idx)
@@ -327,6 +329,13 @@ class _Columns:
             target[(slice(start, stop),) + index] = rows[name]
 
 
+def _sh_coeffs(names: list[str]) -> int:
+    """SH coefficients per channel the ``f_rest_*`` properties imply (for the memory estimate;
+    :class:`_Columns` checks the count exactly)."""
+    return sum(1 for n in names if _REST_RE.match(n)) // 3 + 1
+
+
+@reader_guard
 def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
     """Load an INRIA-style PLY into a :class:`Scene` (raw values kept, rows validated).
 
@@ -354,7 +363,12 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
                 raise _error(path, "the vertex element has a list property", "vertex")
             count = vertex_elem.count
             prop_names = [n for n, _ in vertex_elem.properties]
+            file_size = os.fstat(fh.fileno()).st_size
             if header.order is None:
+                # ASCII: the text, its lines and one Python float object per token are held
+                # at once (about 80 bytes per value), then the float64 rows.
+                check_memory(path, count, _sh_coeffs(prop_names), 96 * len(prop_names),
+                             3 * file_size, "vertex")
                 vertex = _read_vertex_ascii(path, fh, header)
                 _check_not_empty(path, count)
                 plan = _Columns(path, prop_names, count)
@@ -365,8 +379,11 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
                 if progress is not None:
                     progress(count, count, what)
             else:
-                offset, dtype = _vertex_layout(path, header, os.fstat(fh.fileno()).st_size)
+                offset, dtype = _vertex_layout(path, header, file_size)
                 _check_not_empty(path, count)
+                # binary: rows go straight into the float32 arrays through one chunk buffer
+                check_memory(path, count, _sh_coeffs(prop_names), 0,
+                             min(count, CHUNK_ROWS) * dtype.itemsize, "vertex")
                 plan = _Columns(path, prop_names, count)
                 _read_rows_chunked(path, fh, offset, dtype, count, plan, progress, what)
     except OSError as exc:

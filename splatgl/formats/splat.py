@@ -22,6 +22,8 @@ import numpy as np
 from ..constants import MAX_LOGIT, SH_C0
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate
+from ._memory import check_memory
+from ._messages import reader_guard
 
 NAME = "splat"
 EXTENSIONS = (".splat",)
@@ -40,6 +42,7 @@ def sniff(head: bytes) -> bool:
     return False
 
 
+@reader_guard
 def read(path: Path, drop_invalid: bool = False) -> Scene:
     """Load a .splat file: log of the scales, logit of alpha, f_dc from RGB, rotation bytes
     decoded as ``(b - 128) / 128`` (normalised later by :attr:`Scene.rotations`)."""
@@ -50,6 +53,8 @@ def read(path: Path, drop_invalid: bool = False) -> Scene:
                 path, f"size {size} bytes is not a multiple of {ROW_BYTES} (bytes per splat): "
                 f"{size // ROW_BYTES} whole splats and {size % ROW_BYTES} bytes left over "
                 "(truncated file, or not a .splat file)")
+        # the rows, then float64 colours and scales and their float32 results (~150 B/splat)
+        check_memory(path, size // ROW_BYTES, 1, 150, size)
         rows = np.fromfile(path, dtype=ROW_DTYPE)
     except OSError as exc:
         raise SceneFormatError(path, f"cannot read: {exc.strerror or exc}") from None

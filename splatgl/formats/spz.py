@@ -1,15 +1,17 @@
 """Niantic SPZ (``*.spz``): versions 1-3 (gzip or raw body) and the version 4 container.
 
 Header, 16 bytes little endian: ``uint32 magic 0x5053474e ('NGSP')``, ``uint32 version``,
-``uint32 numPoints``, ``uint8 shDegree`` (0-3), ``uint8 fractionalBits``, ``uint8 flags``
-(bit 0: trained with antialiasing; not represented in :class:`Scene`), ``uint8 reserved``
-(version 4: number of streams).
+``uint32 numPoints``, ``uint8 shDegree`` (0-3), ``uint8 fractionalBits`` (0-23),
+``uint8 flags`` (bit 0: trained with antialiasing, not represented in :class:`Scene`; bit 1:
+extension records follow, refused), ``uint8 reserved`` (0; version 4: number of streams).
 
 Versions 1-3: the header and the attribute arrays, one after another, gzip-compressed (a raw,
-un-gzipped body is accepted too).  Version 4 (not gzip): after the header, ``uint64 tocOffset``
-(32), ``uint64`` reserved, then at ``tocOffset`` one ``(uint64 compressedSize, uint64
-uncompressedSize)`` per stream, then the streams back to back, each one zstd frame holding one
-attribute array laid out as in version 3.  Layout determined from the two version 4 files in
+un-gzipped body is accepted too); the body must hold exactly ``numPoints`` points and the gzip
+trailer (CRC-32, length) must match.  Version 4 (not gzip): a 32-byte header, ``uint32
+tocByteOffset`` (32) at byte 16 and 12 reserved bytes, then at ``tocByteOffset`` one
+``(uint64 compressedSize, uint64 uncompressedSize)`` per stream, then the streams back to back
+up to the end of the file, each one zstd frame holding one attribute array laid out as in
+version 3.  Layout determined from the two version 4 files in
 the shared scenes (sizes match ``numPoints`` times the per-point bytes below).
 
 Attributes, per point, in order (with ``n = numPoints``, ``S = (shDegree + 1)^2 - 1``):
@@ -51,6 +53,8 @@ import numpy as np
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate
 from . import _binary
+from ._memory import check_memory
+from ._messages import quote, reader_guard
 
 NAME = "spz"
 EXTENSIONS = (".spz",)
@@ -65,6 +69,24 @@ COLOR_SCALE = 0.15
 FLIP_YZ_SH_SIGNS = np.array([-1, -1, 1, -1, 1, 1, -1, 1, -1, 1, -1, -1, 1, -1, 1], np.float32)
 #: zstd frame magic (version 4 streams).
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+
+
+#: Highest fractionalBits: positions are 24-bit signed fixed point, so with more than 23
+#: fractional bits no position could reach 1 (writers use 12; the minimal fixtures 8).
+MAX_FRACTIONAL_BITS = 23
+#: Flag bits: 0x1 trained with antialiasing; 0x2 extension records follow the header
+#: (Niantic's reader); splatgl reads no extensions, and they can change how SH decode.
+FLAG_ANTIALIASED = 0x1
+FLAG_EXTENSIONS = 0x2
+#: Version 4: the header is 32 bytes; ``uint32 tocByteOffset`` at byte 16, 12 reserved bytes.
+V4_HEADER_BYTES = 32
+#: Deflate never expands more than this (a 258-byte match per ~2 bits): a gzip body claiming
+#: more bytes than this times its compressed size is truncated or has a wrong numPoints.
+DEFLATE_MAX_RATIO = 1032
+#: Decoding temporaries per splat beyond the scene arrays (float64 positions, colours, scales
+#: and quaternions; measured about 112 bytes on donut_sh0_v2.spz), and per SH value.
+WORK_BYTES_PER_SPLAT = 128
+WORK_BYTES_PER_SH_VALUE = 12
 
 
 @dataclass(frozen=True)
@@ -85,6 +107,10 @@ class Header:
         n_sh = (self.sh_degree + 1) ** 2 - 1
         return sizes + ([("sh", 3 * n_sh)] if n_sh else [])
 
+    def point_bytes(self) -> int:
+        """Bytes per point over all attribute arrays."""
+        return sum(b for _, b in self.attribute_bytes())
+
 
 def sniff(head: bytes) -> bool:
     """True for ``NGSP`` at byte 0, or a gzip stream whose first bytes inflate to ``NGSP``."""
@@ -99,10 +125,16 @@ def sniff(head: bytes) -> bool:
 
 
 def parse_header(path, data: bytes) -> Header:
-    """The header at the start of ``data`` (decompressed), with version and degree checked."""
+    """The header at the start of ``data`` (decompressed), every field bounded.
+
+    version 1-4; shDegree 0-3; fractionalBits 0-:data:`MAX_FRACTIONAL_BITS` (unused by
+    version 1's float16 positions); flags only bit 0 (bit 1, extensions, is refused: they can
+    change the decoding); the reserved byte 0 in versions 1-3 and, in version 4, the stream
+    count, exactly one stream per attribute array.
+    """
     magic, *fields = _binary.unpack(path, HEADER_FORMAT, data, 0, "SPZ header")
     if magic != MAGIC:
-        raise SceneFormatError(path, f"bad magic {magic!r}, expected {MAGIC!r}", "magic")
+        raise SceneFormatError(path, f"bad magic {quote(magic)}, expected 'NGSP'", "magic")
     header = Header(*fields)
     if header.version not in SUPPORTED_VERSIONS:
         raise SceneFormatError(path, f"SPZ version {header.version} is not supported "
@@ -110,38 +142,112 @@ def parse_header(path, data: bytes) -> Header:
                                "version")
     if header.sh_degree > 3:
         raise SceneFormatError(path, f"SH degree {header.sh_degree} (expected 0-3)", "shDegree")
+    if header.version > 1 and header.fractional_bits > MAX_FRACTIONAL_BITS:
+        raise SceneFormatError(path, f"{header.fractional_bits} is outside 0-"
+                                     f"{MAX_FRACTIONAL_BITS} (positions are 24-bit signed fixed "
+                                     "point; writers use 12)", "fractionalBits")
+    if header.flags & FLAG_EXTENSIONS:
+        raise SceneFormatError(path, f"flags 0x{header.flags:02x}: bit 1 (extension records) is "
+                                     "set; SPZ extensions are not supported", "flags")
+    if header.flags & ~FLAG_ANTIALIASED:
+        raise SceneFormatError(path, f"flags 0x{header.flags:02x}: unknown bits "
+                                     f"0x{header.flags & ~FLAG_ANTIALIASED:02x} set (only bit 0, "
+                                     "antialiased, is defined)", "flags")
+    streams = len(header.attribute_bytes())
+    if header.version == 4 and header.reserved != streams:
+        raise SceneFormatError(path, f"{header.reserved} streams, expected {streams} for SH "
+                                     f"degree {header.sh_degree} (one per attribute array)",
+                               "numStreams")
+    if header.version < 4 and header.reserved != 0:
+        raise SceneFormatError(path, f"reserved byte is {header.reserved}, must be 0 in "
+                                     f"version {header.version}", "reserved")
     return header
 
 
+def _check_memory(path, header: Header, held_bytes: int) -> None:
+    n_sh = 3 * ((header.sh_degree + 1) ** 2 - 1)
+    check_memory(path, header.count, (header.sh_degree + 1) ** 2,
+                 WORK_BYTES_PER_SPLAT + WORK_BYTES_PER_SH_VALUE * n_sh, held_bytes, "numPoints")
+
+
+def _zlib_message(exc: zlib.error) -> str:
+    text = str(exc)
+    if "incorrect data check" in text:
+        return "corrupt gzip stream: its CRC-32 does not match the data"
+    if "incorrect length check" in text:
+        return "corrupt gzip stream: the length in its trailer does not match the data"
+    return f"corrupt gzip stream: {text}"
+
+
 def _gunzip(path, data: bytes) -> bytes:
-    """Inflate a gzip SPZ, never more than the header says the body needs."""
+    """Inflate a gzip SPZ: exactly the body the header declares, then the gzip trailer.
+
+    Never inflates more than the header says plus one byte (more is an error: numPoints too
+    small), and reads to the end of the stream, so zlib checks the trailer's CRC-32 and
+    length.  Bytes after the stream are an error too.
+    """
     inflater = zlib.decompressobj(wbits=31)
     try:
         head = inflater.decompress(data, HEADER_BYTES)
+        if len(head) < HEADER_BYTES:
+            raise SceneFormatError(path, f"truncated: the gzip stream ends {len(head)} bytes "
+                                         f"into the {HEADER_BYTES}-byte header")
         header = parse_header(path, head)
-        want = sum(b for _, b in header.attribute_bytes()) * header.count
-        body = inflater.decompress(inflater.unconsumed_tail, max(1, want))
+        if header.version == 4:
+            raise SceneFormatError(path, "version 4 inside a gzip stream (version 4 files are "
+                                         "not gzipped; versions 1-3 are)", "version")
+        want = header.point_bytes() * header.count
+        if want > DEFLATE_MAX_RATIO * len(data):
+            raise SceneFormatError(
+                path, f"truncated, or numPoints too large: {header.count} points need a "
+                f"{want}-byte body, more than a {len(data)}-byte gzip stream can hold",
+                "numPoints")
+        _check_memory(path, header, len(data) + want)
+        body = inflater.decompress(inflater.unconsumed_tail, want) if want else b""
+        if len(body) < want:
+            raise SceneFormatError(
+                path, f"truncated: the gzip body ends after {len(body)} bytes; numPoints "
+                f"{header.count} x {header.point_bytes()} bytes needs {want}", "numPoints")
+        if inflater.decompress(inflater.unconsumed_tail, 1):
+            raise SceneFormatError(
+                path, f"the gzip body holds more than the {want} bytes numPoints {header.count}"
+                f" x {header.point_bytes()} bytes declares", "numPoints")
     except zlib.error as exc:
-        raise SceneFormatError(path, f"corrupt gzip stream: {exc}") from None
+        raise SceneFormatError(path, _zlib_message(exc)) from None
+    if not inflater.eof:
+        raise SceneFormatError(path, "truncated: the gzip stream has no end (its CRC-32 and "
+                                     "length trailer is cut off or missing)")
+    if inflater.unused_data:
+        raise SceneFormatError(path, f"{len(inflater.unused_data)} bytes after the end of the "
+                                     "gzip stream")
     return head + body
 
 
 def _streams(path, data: bytes, header: Header) -> list[bytes]:
-    """The decompressed attribute arrays of a version 4 container, sizes checked."""
+    """The decompressed attribute arrays of a version 4 container, sizes checked.
+
+    The table of contents must follow the 32-byte header, the streams must follow the table
+    back to back and end at the end of the file.
+    """
     expected = header.attribute_bytes()
-    if header.reserved < len(expected):
-        raise SceneFormatError(path, f"{header.reserved} streams, expected at least "
-                                     f"{len(expected)} for SH degree {header.sh_degree}", "streams")
-    (toc,) = _binary.unpack(path, "<Q", data, HEADER_BYTES, "version 4 table offset")
+    (toc,) = _binary.unpack(path, "<I", data, HEADER_BYTES, "version 4 table offset")
+    _binary.need(path, data, 0, V4_HEADER_BYTES, "version 4 header")
+    if toc != V4_HEADER_BYTES:
+        raise SceneFormatError(path, f"{toc}, expected {V4_HEADER_BYTES} (the table follows the"
+                                     " header when there are no extensions)", "tocByteOffset")
     table = _binary.array(path, data, toc, "<u8", 2 * header.reserved, "stream table")
     offset = toc + table.nbytes
+    total = sum(int(table[i]) for i in range(0, table.size, 2))
+    if offset + total != len(data):
+        raise SceneFormatError(path, f"the streams' compressed sizes add up to {total} bytes, "
+                                     f"but {len(data) - offset} follow the stream table")
+    _check_memory(path, header, len(data) + header.point_bytes() * header.count)
     out = []
     for i, (name, per_point) in enumerate(expected):
         packed, size = int(table[2 * i]), int(table[2 * i + 1])
         if size != per_point * header.count:
             raise SceneFormatError(path, f"stream {i} ({name}) holds {size} bytes, expected "
                                          f"{header.count} x {per_point}", name)
-        _binary.need(path, data, offset, packed, f"stream {i} ({name})", name)
         out.append(zstd_decompress(path, data[offset:offset + packed], size, name))
         offset += packed
     return out
@@ -227,16 +333,24 @@ def _read_upto(read, limit: int) -> bytes:
 
 def _arrays(path, data: bytes) -> tuple[Header, dict[str, np.ndarray]]:
     """Header and each attribute as a uint8 (n, bytes per point) array."""
-    if data.startswith(b"\x1f\x8b"):
-        data = _gunzip(path, data)
+    gzipped = data.startswith(b"\x1f\x8b")
+    if gzipped:
+        data = _gunzip(path, data)  # versions 1-3 only
     header = parse_header(path, data)
     layout = header.attribute_bytes()
     if header.version == 4:
         blobs = _streams(path, data, header)
     else:
-        per_point = sum(b for _, b in layout)
-        _binary.check_fits(path, header.count, per_point, len(data) - HEADER_BYTES,
-                           f"{header.count} points", "numPoints")
+        per_point = header.point_bytes()
+        body = _binary.check_fits(path, header.count, per_point, len(data) - HEADER_BYTES,
+                                  f"{header.count} points", "numPoints")
+        if body != len(data) - HEADER_BYTES:
+            raise SceneFormatError(
+                path, f"the body holds {len(data) - HEADER_BYTES} bytes, but numPoints "
+                f"{header.count} x {per_point} bytes declares {body} (a wrong numPoints or "
+                f"version, or not a version {header.version} body)", "numPoints")
+        if not gzipped:
+            _check_memory(path, header, len(data))
         blobs, offset = [], HEADER_BYTES
         for _, b in layout:
             blobs.append(data[offset:offset + b * header.count])
@@ -315,12 +429,14 @@ def decode(path, data: bytes, flip_yz: bool | None = None) -> tuple[np.ndarray, 
     return means, quats, log_scales, logits, sh
 
 
+@reader_guard
 def read_spz(path: Path, drop_invalid: bool = False, flip_yz: bool | None = None) -> Scene:
     """Load an SPZ file as a 3DGS :class:`Scene`; ``flip_yz`` as in :func:`decode`."""
     raw = decode(path, _binary.read_bytes(path), flip_yz)
     return activate(path, *raw, SplatKind.GAUSSIAN_3D, drop_invalid)
 
 
+@reader_guard
 def read(path: Path, drop_invalid: bool = False) -> Scene:
     """Load an SPZ file, converting axes by version (see the module notes)."""
     return read_spz(path, drop_invalid)

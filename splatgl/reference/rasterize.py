@@ -5,7 +5,8 @@ For every pixel of a tile, the tile's depth-sorted splats are blended in order w
     power = -0.5 (a dx^2 + c dy^2) - b dx dy,   d = pixel centre - mean2d   (pixels)
     alpha = min(alpha_max, o exp(power)), skipped when power > 0 or alpha < 1/255
     (2DGS surfels: power = -0.5 min(u^2 + v^2, F |d|^2) from the ray-splat intersection,
-    :func:`splatgl.surfel.surfel_alpha`, and z is the view z of the hit, per pixel)
+    :func:`splatgl.surfel.surfel_alpha`, d from the low-pass centre; z is the view z of the
+    hit per pixel, or under GSPLAT the centre's view z)
     stop (without adding the splat) once T (1 - alpha) < 1e-4   (GSPLAT: <= 1e-4)
     C = sum c alpha T,  D = sum z alpha T,  A = 1 - T_final,  out = C + T_final background
 
@@ -28,7 +29,7 @@ import numpy as np
 
 from .. import surfel as sf
 from ..constants import ALPHA_MIN, T_MIN, TILE_SIZE
-from .options import ReferenceOptions
+from .options import Compat, ReferenceOptions
 from .stages import ProjectedSplats
 
 #: Pixels per tile.
@@ -107,8 +108,8 @@ def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) ->
     return np.where(g.valid[:, :, None], alpha, dt(0.0))
 
 
-def _surfel_chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def _surfel_chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float,
+                        convention: Compat = Compat.INRIA) -> tuple[np.ndarray, np.ndarray]:
     """2DGS: (n, K, 256) alpha (0 where skipped) and (n, K, 256) view z of the hit.
 
     :func:`splatgl.surfel.surfel_alpha` on the tile's pixel centres, as (n, K, 16 rows,
@@ -118,7 +119,7 @@ def _surfel_chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: fl
     dx = (px[:, None, :] - g.mean2d[:, :, 0, None])[:, :, None, :]   # (n, K, 1, 16) by column
     dy = (py[:, None, :] - g.mean2d[:, :, 1, None])[:, :, :, None]   # (n, K, 16, 1) by row
     alpha, z = sf.surfel_alpha(g.rows[:, :, None, None], g.depth_rows[:, :, None, None],
-                               g.opacity[:, :, None, None], dx, dy, alpha_max)
+                               g.opacity[:, :, None, None], dx, dy, alpha_max, convention)
     n, k = g.opacity.shape
     alpha = np.broadcast_to(alpha, (n, k, TILE_SIZE, TILE_SIZE)).reshape(n, k, TILE_PIXELS)
     z = np.broadcast_to(z, (n, k, TILE_SIZE, TILE_SIZE)).reshape(n, k, TILE_PIXELS)
@@ -168,7 +169,7 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
         pos = start[rows, None] + offset + ks
         g = _Tiles(proj, values, pos, pos < end[rows, None])
         if proj.is_surfel:
-            alpha, z_pix = _surfel_chunk_alpha(g, px[rows], py[rows], amax)
+            alpha, z_pix = _surfel_chunk_alpha(g, px[rows], py[rows], amax, options.compat)
         else:
             alpha = _chunk_alpha(g, px[rows], py[rows], amax)
         alpha = np.where(done[:, None, :], dt(0.0), alpha)
@@ -291,7 +292,7 @@ def transmittance_trace(proj: ProjectedSplats, sorted_values: np.ndarray, ranges
     g = _Tiles(proj, np.asarray(sorted_values, np.int64), pos, pos < end)
     with np.errstate(under="ignore"):
         if proj.is_surfel:
-            alpha, _ = _surfel_chunk_alpha(g, px, py, options.resolved_alpha_max)
+            alpha, _ = _surfel_chunk_alpha(g, px, py, options.resolved_alpha_max, options.compat)
         else:
             alpha = _chunk_alpha(g, px, py, options.resolved_alpha_max)
         _, kept, t_seq = _blend_chunk(t, alpha, options.stop_inclusive)

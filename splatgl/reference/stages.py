@@ -195,7 +195,7 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise ValueError(f"reference dtype must be float32 or float64, got {dt}")
     if scene.kind is SplatKind.SURFEL_2D:
-        return project_surfels(scene, camera, settings, dt)
+        return project_surfels(scene, camera, settings, dt, options)
     near = pm.near_threshold(resolve_near(settings, scene.robust_radius), dt)
     grid = tile_grid(camera.width, camera.height)
     means, view = pm.anchored(scene.means, scene.anchor, camera, dt)  # relative: float32-safe
@@ -217,10 +217,7 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     else:
         radius = np.where(ok[:, None], gsplat_radius(cov2d, pr.opacity.astype(dt)), 0)
         ok &= (radius > 0).any(1)
-        u, v = mean2d[:, 0], mean2d[:, 1]
-        rx, ry = radius[:, 0].astype(dt), radius[:, 1].astype(dt)
-        ok &= ~((u + rx <= 0) | (u - rx >= camera.width) | (v + ry <= 0)
-                | (v - ry >= camera.height))
+        ok &= gsplat_on_screen(mean2d, radius, camera, dt)
         rect_min, rect_max = gsplat_rect(mean2d, radius, grid)
     ok, rect_min, rect_max, radius, clean = _mask_culled(ok, rect_min, rect_max, radius, dt)
 
@@ -229,6 +226,14 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
         opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
         rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
         grid=grid)
+
+
+def gsplat_on_screen(mean2d: np.ndarray, radius: np.ndarray, camera: Camera, dt) -> np.ndarray:
+    """(N,) gsplat's screen test: the box ``mean2d +- radius`` (per axis) overlaps the image."""
+    u, v = mean2d[:, 0], mean2d[:, 1]
+    rx, ry = radius[:, 0].astype(dt), radius[:, 1].astype(dt)
+    return ~((u + rx <= 0) | (u - rx >= camera.width) | (v + ry <= 0)
+             | (v - ry >= camera.height))
 
 
 def _mask_culled(ok, rect_min, rect_max, radius, dt):
@@ -247,14 +252,23 @@ def _mask_culled(ok, rect_min, rect_max, radius, dt):
 
 
 def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
-                    dtype: np.dtype) -> ProjectedSplats:
-    """Stage 1 for 2DGS surfels: centred ``T``, projected centre, SH colour and tile rects.
+                    dtype: np.dtype, options: ReferenceOptions | None = None) -> ProjectedSplats:
+    """Stage 1 for 2DGS surfels: centred ``T``, low-pass centre, SH colour and tile rects.
 
-    The rectangle is :func:`box_rect` of the box of :func:`splatgl.surfel.surfel_bounds` (the
-    quad path draws that same box); ``radius`` is the per-axis ``ceil`` of its half extents.  Culled: centre view z at or below the near plane,
-    ``o <= 1/255``, non-finite values, an empty box or rectangle.  Compat and antialiasing do
-    not apply to surfels.
+    INRIA (the official rasterizer's setup): the low-pass centre is the projected centre, the
+    rectangle is :func:`box_rect` of the box of :func:`splatgl.surfel.surfel_bounds` (the quad
+    path draws that same box) and ``radius`` the per-axis ``ceil`` of its half extents.
+    Culled: centre view z at or below the near plane, ``o <= 1/255``, non-finite values, an
+    empty box or rectangle.
+
+    GSPLAT (gsplat's ``fully_fused_projection_2dgs``): the low-pass centre is ``means2d``, the
+    centre of the image of the 1-sigma ellipse (:func:`splatgl.surfel.gsplat_screen`; the rows
+    are centred on it), ``radius = ceil(3.33 extent)`` per axis and the rectangle
+    :func:`gsplat_rect`.  Culled: centre view z at or below the near plane, ``C*_22 = 0``,
+    non-finite values, the box ``means2d +- radius`` off screen; no opacity cull.
+    Antialiasing does not apply to surfels.  ``depth`` is the centre's view z (the sort key).
     """
+    options = ReferenceOptions() if options is None else options
     dt = np.dtype(dtype)
     near = pm.near_threshold(resolve_near(settings, scene.robust_radius), dt)
     grid = tile_grid(camera.width, camera.height)
@@ -262,17 +276,31 @@ def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
     opac = scene.opacities.astype(dt)
     with np.errstate(all="ignore"):
         scr = sf.surfel_screen(means, scene.rotations.astype(dt), scene.scales.astype(dt), view)
-        box = sf.surfel_bounds(scr, opac, view, near)
         color = pm.sh_color(scene.sh.astype(dt), pm.view_dirs(means, view), settings.sh_degree)
-    ok = ((scr.view_z > dt.type(near)) & box.visible & np.isfinite(color).all(1)
+    ok = ((scr.view_z > dt.type(near)) & np.isfinite(color).all(1)
           & np.isfinite(scr.depth_row).all(1))
-    radius = np.where(ok[:, None], np.ceil(box.half), 0).astype(np.int64)
-    rect_min, rect_max = box_rect(box.center, box.half, grid)
+    if options.compat is Compat.GSPLAT:
+        gs = sf.gsplat_screen(scr)
+        with np.errstate(all="ignore"):
+            radius_f = np.ceil(dt.type(GSPLAT_EXTENT_SIGMAS) * gs.extent)
+        ok &= gs.ok & np.isfinite(gs.rows).all((1, 2))
+        radius = np.where(ok[:, None], radius_f, 0).astype(np.int64)
+        ok &= gsplat_on_screen(gs.means2d, radius, camera, dt)
+        center = np.where(ok[:, None], gs.means2d, dt.type(0.0))
+        rect_min, rect_max = gsplat_rect(center, radius, grid)
+        rows = gs.rows
+    else:
+        with np.errstate(all="ignore"):
+            box = sf.surfel_bounds(scr, opac, view, near)
+        ok &= box.visible
+        radius = np.where(ok[:, None], np.ceil(box.half), 0).astype(np.int64)
+        rect_min, rect_max = box_rect(box.center, box.half, grid)
+        center, rows = scr.center, scr.rows
     ok, rect_min, rect_max, radius, clean = _mask_culled(ok, rect_min, rect_max, radius, dt)
 
     return ProjectedSplats(
-        visible=ok, depth=clean(scr.view_z), mean2d=clean(scr.center),
+        visible=ok, depth=clean(scr.view_z), mean2d=clean(center),
         conic=np.zeros((scene.count, 3), dt), opacity=clean(opac), color=clean(color),
         radius=radius, rect_min=rect_min, rect_max=rect_max, width=camera.width,
-        height=camera.height, grid=grid, surfel_rows=clean(scr.rows),
+        height=camera.height, grid=grid, surfel_rows=clean(rows),
         depth_rows=clean(scr.depth_row))
