@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .constants import RIGID_POSE_TOLERANCE
 from .errors import CameraError
 
 
@@ -29,6 +30,71 @@ def _frozen_matrix(m: object) -> np.ndarray:
         raise CameraError(f"world_to_camera's last row must be (0, 0, 0, 1), got {arr[3].tolist()}")
     arr.flags.writeable = False
     return arr
+
+
+def _first_bad(arr: np.ndarray) -> str | None:
+    """'NaN at row 1, column 2' for the first non-finite entry of a 2D array, else None."""
+    bad = np.argwhere(~np.isfinite(arr))
+    if not len(bad):
+        return None
+    i, j = (int(v) for v in bad[0])
+    return f"{'NaN' if np.isnan(arr[i, j]) else 'Inf'} at row {i}, column {j}"
+
+
+def rigid_pose_problem(matrix: object, tolerance: float = RIGID_POSE_TOLERANCE) -> str | None:
+    """What keeps a camera pose from being a rigid transform, or None when it is one.
+
+    A rigid pose is a rotation (orthonormal rows, determinant +1) plus a translation: no scale,
+    shear or mirror.  Camera files must hold one; only :func:`splatgl.transform.apply_model`
+    folds a uniform scale into a camera afterwards.
+
+    Args:
+        matrix: (4, 4) world-to-camera (last row must be 0, 0, 0, 1) or (3, 3) rotation, numbers.
+        tolerance: largest accepted entry of ``|R R^T - I|`` and ``|det R - 1|``
+            (default :data:`splatgl.constants.RIGID_POSE_TOLERANCE`).
+
+    Returns:
+        None, or a phrase to follow a field name, e.g. ``"is mirrored (determinant -1)"``,
+        ``"holds NaN at row 1, column 2"``.  Every loader uses this one check, so a bad pose
+        reads the same whichever file it came from.
+    """
+    arr = np.asarray(matrix, dtype=np.float64)
+    if arr.shape not in ((4, 4), (3, 3)):
+        return f"must be a 4x4 or 3x3 matrix, got shape {arr.shape}"
+    bad = _first_bad(arr)
+    if bad:
+        return f"holds {bad}"
+    if arr.shape == (4, 4) and not np.allclose(arr[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=tolerance):
+        return f"must have (0, 0, 0, 1) as its last row, got {[float(v) for v in arr[3]]}"
+    r = arr[:3, :3]
+    det = float(np.linalg.det(r))
+    norms = np.linalg.norm(r, axis=1)
+    if abs(det) <= tolerance * float(np.prod(norms)):  # Hadamard: |det| <= product of row norms
+        return f"is singular (determinant {det:.3g}): not a rotation"
+    unit = r / norms[:, None]
+    off_diagonal = float(np.abs(unit @ unit.T - np.eye(3)).max())
+    if off_diagonal > tolerance:
+        return (f"is sheared (its rotation rows are not orthogonal: largest |cos angle| "
+                f"{off_diagonal:.3g}, tolerance {tolerance:g}): not a rigid transform")
+    if np.abs(norms - 1.0).max() > tolerance:
+        lengths = ", ".join(f"{v:.6g}" for v in norms)
+        return f"is scaled (its rotation rows have lengths {lengths}, not 1): not a rigid transform"
+    if det < 0:
+        return f"is mirrored (determinant {det:.6g}, not +1): not a rotation"
+    return None
+
+
+def check_rigid_pose(matrix: object, what: str, tolerance: float = RIGID_POSE_TOLERANCE) -> np.ndarray:
+    """``matrix`` as a float64 array if :func:`rigid_pose_problem` finds nothing wrong.
+
+    Raises:
+        CameraError: ``"{what} {problem}"``, e.g. ``"cams.json: camera 3: field 'rotation' is
+            mirrored (determinant -1, not +1): not a rotation"``.
+    """
+    problem = rigid_pose_problem(matrix, tolerance)
+    if problem:
+        raise CameraError(f"{what} {problem}")
+    return np.asarray(matrix, dtype=np.float64)
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera, Projection
+from .camera import Camera, Projection, check_rigid_pose
 from .errors import CameraError
 
 
@@ -30,16 +30,31 @@ def _number(path: Path, where: str, obj: dict, key: str) -> float:
     return float(value)
 
 
-def _matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, int]) -> np.ndarray:
+def _matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, ...]) -> np.ndarray:
+    """Field ``key`` as a float64 array of ``shape``; the error says what is wrong with it."""
     if key not in obj:
         raise CameraError(f"{path}: {where}missing field '{key}'")
+    size = f"a {shape[0]}x{shape[1]} array" if len(shape) == 2 else f"{shape[0]} numbers"
+    of_numbers = f"{size} of numbers" if len(shape) == 2 else size
     try:
         arr = np.array(obj[key], dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CameraError(f"{path}: {where}field '{key}' must be a {shape[0]}x{shape[1]} array of numbers") from None
-    if arr.shape != shape or not np.isfinite(arr).all():
-        raise CameraError(f"{path}: {where}field '{key}' must be a finite {shape[0]}x{shape[1]} array, got shape {arr.shape}")
+    except (TypeError, ValueError, OverflowError):
+        raise CameraError(f"{path}: {where}field '{key}' must be {of_numbers}") from None
+    if arr.shape != shape:
+        raise CameraError(f"{path}: {where}field '{key}' must be {size}, got shape {arr.shape}")
+    bad = np.argwhere(~np.isfinite(arr))
+    if len(bad):
+        idx = tuple(int(v) for v in bad[0])
+        value = "NaN" if np.isnan(arr[idx]) else "Inf"
+        at = f"row {idx[0]}, column {idx[1]}" if len(idx) == 2 else f"entry {idx[0]}"
+        raise CameraError(f"{path}: {where}field '{key}' holds {value} at {at}")
     return arr
+
+
+def _pose(path: Path, where: str, obj: dict) -> np.ndarray:
+    """The rigid ``world_to_camera`` of a single-camera object (4x4, checked)."""
+    w2c = _matrix(path, where, obj, "world_to_camera", (4, 4))
+    return check_rigid_pose(w2c, f"{path}: {where}field 'world_to_camera'")
 
 
 def _camera_from_frustum(obj: dict, path: Path) -> Camera:
@@ -50,7 +65,7 @@ def _camera_from_frustum(obj: dict, path: Path) -> Camera:
     b = {k: _number(path, where, frustum, k) for k in ("left", "right", "top", "bottom", "near")}
     far = _number(path, where, frustum, "far") if "far" in frustum else None
     w, h = _number(path, "", obj, "width"), _number(path, "", obj, "height")
-    w2c = _matrix(path, "", obj, "world_to_camera", (4, 4))
+    w2c = _pose(path, "", obj)
     try:
         return Camera.from_frustum(int(w), int(h), b["left"], b["right"], b["top"], b["bottom"],
                                    b["near"], far, w2c)
@@ -70,7 +85,7 @@ def camera_from_json(obj: dict, path: Path = Path("<camera>")) -> Camera:
     if "frustum" in obj:
         return _camera_from_frustum(obj, path)
     vals = {k: _number(path, "", obj, k) for k in ("width", "height", "fx", "fy", "cx", "cy")}
-    w2c = _matrix(path, "", obj, "world_to_camera", (4, 4))
+    w2c = _pose(path, "", obj)
     proj = obj.get("projection", "perspective")
     try:
         projection = Projection(proj)
@@ -92,12 +107,8 @@ def camera_from_3dgs(entry: dict, path: Path, index: int) -> Camera:
     w, h = _number(path, where, entry, "width"), _number(path, where, entry, "height")
     fx, fy = _number(path, where, entry, "fx"), _number(path, where, entry, "fy")
     c2w_rot = _matrix(path, where, entry, "rotation", (3, 3))
-    centre = np.array(_matrix(path, where, {"p": [entry.get("position")]}, "p", (1, 3))[0]) \
-        if "position" in entry else None
-    if centre is None:
-        raise CameraError(f"{path}: {where}missing field 'position'")
-    if not np.allclose(c2w_rot @ c2w_rot.T, np.eye(3), atol=1e-4):
-        raise CameraError(f"{path}: {where}field 'rotation' is not a rotation matrix")
+    centre = _matrix(path, where, entry, "position", (3,))
+    check_rigid_pose(c2w_rot, f"{path}: {where}field 'rotation'")
     w2c = np.eye(4)
     w2c[:3, :3] = c2w_rot.T
     w2c[:3, 3] = -c2w_rot.T @ centre

@@ -52,6 +52,11 @@ SH_OFFSET = 0.5
 #: a screen disc of sigma 1/sqrt(F) = sqrt(2)/2 px around the projected centre c.
 SURFEL_FILTER_INV_SQUARE = 2.0
 
+#: A camera pose read from a file must be rigid: its 3x3 rotation R may differ from an orthonormal
+#: matrix with det +1 by at most this much (largest entry of |R R^T - I|, and |det R - 1|).  Poses
+#: saved as float32 keep ~1e-7; 1e-4 also accepts JSON written with 5-6 significant digits.
+RIGID_POSE_TOLERANCE = 1e-4
+
 # Real spherical-harmonics basis constants (trig-free polynomial form), degrees 0..3.
 SH_C0 = 0.28209479177387814
 SH_C1 = 0.4886025119029199

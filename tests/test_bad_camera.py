@@ -1,0 +1,111 @@
+"""Camera files: every bad pose or value gives one line naming the file's own field (exit 2)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from splatgl.camera import check_rigid_pose, look_at, rigid_pose_problem
+from splatgl.camera_io import load_camera, load_cameras
+from splatgl.constants import RIGID_POSE_TOLERANCE
+from splatgl.errors import CameraError
+
+POSE = look_at([1.0, -2.0, 3.0], [0.0, 0.0, 0.0])
+
+
+def single(tmp_path, w2c, **extra):
+    obj = {"width": 64, "height": 48, "fx": 50.0, "fy": 50.0, "cx": 32.0, "cy": 24.0,
+           "world_to_camera": np.asarray(w2c).tolist(), **extra}
+    path = tmp_path / "cam.json"
+    path.write_text(json.dumps(obj))
+    return path
+
+
+def three_dgs(tmp_path, rotation, position=(0.0, 0.0, -3.0), n=2):
+    entry = {"id": 0, "img_name": "a", "width": 64, "height": 48, "fx": 50.0, "fy": 50.0,
+             "position": list(position), "rotation": np.asarray(rotation).tolist()}
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps([dict(entry, id=i) for i in range(n)]))
+    return path
+
+
+def pose_with_rotation(r: np.ndarray) -> np.ndarray:
+    m = POSE.copy()
+    m[:3, :3] = r @ POSE[:3, :3]
+    return m
+
+
+# (3x3 factor applied to a valid rotation, the phrase every loader must print)
+BAD_ROTATIONS = [
+    (np.diag([1.0, 1.0, -1.0]), "is mirrored (determinant -1, not +1): not a rotation"),
+    (2.0 * np.eye(3), "is scaled (its rotation rows have lengths 2, 2, 2, not 1): not a rigid transform"),
+    (np.diag([1.0, 1.5, 1.0]), "is scaled (its rotation rows have lengths 1, 1.5, 1, not 1): not a rigid transform"),
+    (np.array([[1.0, 0.0, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]]),
+     "is sheared (its rotation rows are not orthogonal: largest |cos angle| 0.6, tolerance 0.0001): "
+     "not a rigid transform"),
+    (np.zeros((3, 3)), "is singular (determinant 0): not a rotation"),
+]
+
+
+@pytest.mark.parametrize("factor, phrase", BAD_ROTATIONS)
+def test_same_message_for_single_camera_and_3dgs_list(tmp_path, factor, phrase):
+    # A factor applied on the left in camera space: for the 3DGS (camera-to-world) rotation its
+    # transpose on the right gives the same rows' lengths, angles and determinant.
+    path = single(tmp_path, pose_with_rotation(factor))
+    with pytest.raises(CameraError) as info:
+        load_camera(path)
+    assert str(info.value) == f"{path}: field 'world_to_camera' {phrase}"
+    path3 = three_dgs(tmp_path, factor)
+    with pytest.raises(CameraError) as info:
+        load_cameras(path3)
+    assert str(info.value) == f"{path3}: camera 0: field 'rotation' {phrase}"
+
+
+def test_rigid_within_tolerance_is_accepted_and_beyond_is_not():
+    # A rotation rounded to 6 decimals (as some writers store it) is within the tolerance.
+    assert rigid_pose_problem(np.round(POSE, 6)) is None
+    nudged = POSE.copy()
+    nudged[0, 0] += 3 * RIGID_POSE_TOLERANCE
+    assert rigid_pose_problem(nudged) is not None
+    assert check_rigid_pose(POSE, "x").dtype == np.float64
+
+
+@pytest.mark.parametrize("value, shown", [(math.nan, "NaN"), (math.inf, "Inf")])
+def test_non_finite_pose_names_the_entry(tmp_path, value, shown):
+    m = POSE.copy()
+    m[1, 2] = value
+    path = tmp_path / "cam.json"
+    path.write_text(json.dumps({"width": 64, "height": 48, "fx": 50, "fy": 50, "cx": 32, "cy": 24,
+                                "world_to_camera": m.tolist()}))
+    with pytest.raises(CameraError) as info:
+        load_camera(path)
+    assert str(info.value) == f"{path}: field 'world_to_camera' holds {shown} at row 1, column 2"
+
+
+def test_last_row_and_shape_are_named(tmp_path):
+    m = POSE.copy()
+    m[3, 3] = 2.0
+    path = single(tmp_path, m)
+    with pytest.raises(CameraError) as info:
+        load_camera(path)
+    assert str(info.value) == (f"{path}: field 'world_to_camera' must have (0, 0, 0, 1) as its "
+                               "last row, got [0.0, 0.0, 0.0, 2.0]")
+    path = single(tmp_path, POSE[:3])
+    with pytest.raises(CameraError) as info:
+        load_camera(path)
+    assert str(info.value) == f"{path}: field 'world_to_camera' must be a 4x4 array, got shape (3, 4)"
+
+
+@pytest.mark.parametrize("position, message", [
+    ([0.0, math.nan, 1.0], "field 'position' holds NaN at entry 1"),
+    ([0.0, 1.0], "field 'position' must be 3 numbers, got shape (2,)"),
+    (["a", 1, 2], "field 'position' must be 3 numbers"),
+])
+def test_3dgs_position_is_named_as_in_the_file(tmp_path, position, message):
+    path = three_dgs(tmp_path, np.eye(3), position=position)
+    with pytest.raises(CameraError) as info:
+        load_cameras(path)
+    assert str(info.value) == f"{path}: camera 0: {message}"
