@@ -1,0 +1,114 @@
+"""Render many views of one scene in one process: one context, the scene uploaded once, the
+shaders compiled once; frames written atomically as they come, or encoded into a video.
+
+:func:`render_frames` is what ``splatgl render --path`` runs; :meth:`Renderer.render_many` is
+the iterator underneath for Python callers.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable, Optional, Sequence
+
+from .camera import Camera
+from .frame_output import FrameTarget
+from .image_io import write_image
+from .progress import ProgressCallback
+from .render import Renderer
+from .scene import Scene
+from .settings import RenderSettings, RendererKind
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """What a batch did: frames ``written`` and ``skipped`` (already complete, ``resume``),
+    ``seconds`` of wall-clock time for the loop, ``render_seconds`` the sum of the renderer's
+    own per-frame stage times (``last_times.total``; 0 where the renderer reports none)."""
+
+    written: int
+    skipped: int
+    seconds: float
+    render_seconds: float
+
+    @property
+    def fps(self) -> float:
+        return self.written / self.seconds if self.seconds > 0 else math.inf
+
+
+def _clock(seconds: float) -> str:
+    seconds = int(round(seconds))
+    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}" if seconds >= 3600 \
+        else f"{seconds // 60}:{seconds % 60:02d}"
+
+
+class FrameMeter:
+    """Reports ``frames (F fps, ETA m:ss)`` through a :data:`ProgressCallback`."""
+
+    def __init__(self, total: int, progress: Optional[ProgressCallback],
+                 clock: Callable[[], float] = time.monotonic):
+        self.total, self.progress, self.clock = total, progress, clock
+        self.start = clock()
+
+    def __call__(self, done: int, rendered: int) -> None:
+        """``done`` frames finished of which ``rendered`` were rendered now (not skipped)."""
+        if self.progress is None:
+            return
+        elapsed = self.clock() - self.start
+        if rendered > 0 and elapsed > 0:
+            fps = rendered / elapsed
+            eta = (self.total - done) / fps
+            what = f"frames ({fps:.2f} fps, ETA {_clock(eta)})"
+        else:
+            what = "frames"
+        self.progress(done, self.total, what)
+
+
+def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
+                  settings: RenderSettings, target: FrameTarget,
+                  kind: RendererKind = RendererKind.QUAD, bit_depth: int = 8,
+                  resume: bool = False, fps: float = 30.0,
+                  progress: Optional[ProgressCallback] = None) -> BatchResult:
+    """Render ``cameras`` in order to ``target``.
+
+    Image frames are written atomically, so a frame file that exists is complete; with
+    ``resume`` those are skipped.  A video is written to a temporary file and renamed when
+    complete (removed on any error or interrupt).  Frame k is rendered exactly as
+    ``splatgl render --camera`` renders the same camera (same renderer call), so the files
+    are identical bit for bit.
+    """
+    from .video import VideoWriter
+
+    target.prepare()
+    todo = [k for k in range(len(cameras))
+            if not (resume and not target.is_video and target.frame_path(k).is_file())]
+    skipped = len(cameras) - len(todo)
+    meter = FrameMeter(len(cameras), progress)
+    render_seconds = 0.0
+    t0 = time.perf_counter()
+    video = None
+    if target.is_video:
+        c0 = cameras[0]
+        video = VideoWriter(target.video, c0.width, c0.height, fps)
+    try:
+        frames = renderer.render_many(scene, [cameras[k] for k in todo], settings, kind,
+                                      depth=target.wants_depth)
+        for n, (k, out) in enumerate(zip(todo, frames), 1):
+            times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None) \
+                if kind is not RendererKind.REFERENCE else None
+            render_seconds += times.total if times is not None else 0.0
+            if video is not None:
+                video.write(out)
+            elif target.wants_depth:
+                write_image(target.frame_path(k), out.rgba, bit_depth, depth=out.expected_depth())
+            else:
+                write_image(target.frame_path(k), out, bit_depth)
+            meter(skipped + n, n)
+    except BaseException:
+        if video is not None:
+            video.abort()
+        raise
+    if video is not None:
+        video.close()
+    return BatchResult(len(todo), skipped, time.perf_counter() - t0, render_seconds)
