@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Optional, Sequence
 
@@ -19,6 +21,11 @@ from .progress import ProgressCallback
 from .render import Renderer
 from .scene import Scene
 from .settings import RenderSettings, RendererKind
+
+#: Frames rendered but not yet written that may wait for the writer thread.
+#: 0 writes each frame before the next renders.  Measured on 2 cores (llvmpipe), biker at
+#: 1280x720: 2 pending gave 0.44-0.46 s per frame against 0.51 s writing in line.
+WRITE_QUEUE = 2
 
 
 @dataclass(frozen=True)
@@ -69,12 +76,14 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
                   settings: RenderSettings, target: FrameTarget,
                   kind: RendererKind = RendererKind.QUAD, bit_depth: int = 8,
                   resume: bool = False, fps: float = 30.0,
-                  progress: Optional[ProgressCallback] = None) -> BatchResult:
+                  progress: Optional[ProgressCallback] = None,
+                  write_queue: int = WRITE_QUEUE) -> BatchResult:
     """Render ``cameras`` in order to ``target``.
 
     Image frames are written atomically, so a frame file that exists is complete; with
     ``resume`` those are skipped.  A video is written to a temporary file and renamed when
-    complete (removed on any error or interrupt).  Frame k is rendered exactly as
+    complete (removed on any error or interrupt).  ``write_queue`` frames may wait for the
+    writer thread while the next renders (0: write in line).  Frame k is rendered exactly as
     ``splatgl render --camera`` renders the same camera (same renderer call), so the files
     are identical bit for bit.
     """
@@ -91,6 +100,19 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
     if target.is_video:
         c0 = cameras[0]
         video = VideoWriter(target.video, c0.width, c0.height, fps)
+
+    def save(k: int, out) -> None:
+        if video is not None:
+            video.write(out)
+        elif target.wants_depth:
+            write_image(target.frame_path(k), out.rgba, bit_depth, depth=out.expected_depth())
+        else:
+            write_image(target.frame_path(k), out, bit_depth)
+
+    # One writer thread encodes frame k while frame k + 1 renders (OpenImageIO and FFmpeg
+    # release the GIL); it works in order, and at most ``write_queue`` frames wait for it.
+    pending: deque[Future] = deque()
+    writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="splatgl-writer")
     try:
         frames = renderer.render_many(scene, [cameras[k] for k in todo], settings, kind,
                                       depth=target.wants_depth)
@@ -98,17 +120,22 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
             times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None) \
                 if kind is not RendererKind.REFERENCE else None
             render_seconds += times.total if times is not None else 0.0
-            if video is not None:
-                video.write(out)
-            elif target.wants_depth:
-                write_image(target.frame_path(k), out.rgba, bit_depth, depth=out.expected_depth())
-            else:
-                write_image(target.frame_path(k), out, bit_depth)
-            meter(skipped + n, n)
+            while len(pending) >= max(write_queue, 1):
+                pending.popleft().result()  # re-raises a failed write
+            pending.append(writer.submit(save, k, out))
+            if write_queue == 0:
+                pending.popleft().result()
+            meter(skipped + n - len(pending) + 1, n)
+        while pending:
+            pending.popleft().result()
     except BaseException:
+        # Frames already handed to the writer finish (each is atomic); then the video goes.
+        writer.shutdown(wait=True, cancel_futures=True)
         if video is not None:
             video.abort()
         raise
+    writer.shutdown(wait=True)
     if video is not None:
         video.close()
+    meter(len(cameras), len(todo))
     return BatchResult(len(todo), skipped, time.perf_counter() - t0, render_seconds)
