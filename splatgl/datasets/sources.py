@@ -92,18 +92,18 @@ def select_indices(spec: str, count: int, what: str = "cameras") -> list[int]:
     for item in spec.split(","):
         item = item.strip()
         try:
-            if ":" in item:
-                parts = [int(p) if p.strip() else None for p in item.split(":")]
-                if len(parts) > 3 or parts[-1] == 0 and len(parts) == 3:
-                    raise ValueError
-                out.extend(range(count)[slice(*parts)])
-            else:
-                i = int(item)
-                if not -count <= i < count:
-                    raise CameraError(f"{what}: --select index {i} out of range ({count} cameras)")
-                out.append(i % count)
+            parts = [int(p) if p.strip() else None for p in item.split(":")]
         except ValueError:
-            raise CameraError(f"{what}: --select item {item!r} is not an index or start:stop:step") from None
+            parts = []
+        if not 1 <= len(parts) <= 3 or (len(parts) == 3 and parts[2] == 0) or (len(parts) == 1 and parts[0] is None):
+            raise CameraError(f"{what}: --select item {item!r} is not an index or start:stop:step")
+        if len(parts) > 1:
+            out.extend(range(count)[slice(*parts)])
+            continue
+        i = parts[0]
+        if not -count <= i < count:
+            raise CameraError(f"{what}: --select index {i} out of range ({count} cameras)")
+        out.append(i % count)
     if not out:
         raise CameraError(f"{what}: --select {spec!r} picks no camera of {count}")
     return out
