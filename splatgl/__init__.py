@@ -1,11 +1,14 @@
 """splatgl: Gaussian-splat rendering through OpenGL's graphics pipeline.
 
 The public API: :func:`load_scene`, :class:`Scene`, :class:`Camera`, :class:`RenderSettings`,
-:func:`default_camera`, :func:`render` and :class:`Renderer`.
+:func:`default_camera`, :func:`render` and :class:`Renderer` (``render_many`` for many views);
+:func:`load_cameras` reads every camera source (COLMAP, transforms.json, cameras.json, camera
+paths); :mod:`splatgl.paths` generates paths.
 """
 
 from .camera import Camera, Projection, look_at, orbit
-from .camera_io import load_camera, load_cameras, save_camera
+from .camera_io import load_camera, save_camera
+from .datasets import load_cameras
 from .errors import CameraError, ContextError, SceneFormatError, ShaderError, SplatglError
 from .formats import load_scene, save_scene
 from .render import Renderer, default_camera, render
