@@ -33,7 +33,7 @@ def _render(*argv) -> int:
 @pytest.mark.parametrize("ext", ["png", "exr"])
 def test_frame_k_equals_single_render_bit_for_bit(tmp_path, capsys, ext):
     assert _render("--path", "orbit:3", *SIZE, "-o", tmp_path / f"f_%03d.{ext}", "--background", "0.2,0.3,0.4") == 0
-    assert f"wrote {6 - len(left)} frames" in capsys.readouterr().out
+    assert "wrote 3 frames" in capsys.readouterr().out
     cams = orbit(load_scene(demo_scene_path()), 3, 96, 64)
     for k, cam in enumerate(cams):
         save_camera(tmp_path / "cam.json", cam)
