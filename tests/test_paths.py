@@ -13,7 +13,7 @@ from conftest import shared_file
 from splatgl.camera import Camera, look_at
 from splatgl.datasets.sources import load_source
 from splatgl.errors import CameraError
-from splatgl.paths import ellipse, focus_point, interpolate, orbit, parse_path, spiral
+from splatgl.paths import ellipse, focus_point, interpolate, orbit, spiral
 from splatgl.paths.quaternion import matrix_to_quaternion, quaternion_to_matrix
 from splatgl.paths.spline import sample_poses
 from splatgl.scene import Scene

@@ -5,7 +5,6 @@ complete frames and no partial video; Renderer.render_many."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
