@@ -77,13 +77,14 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
                   kind: RendererKind = RendererKind.QUAD, bit_depth: int = 8,
                   resume: bool = False, fps: float = 30.0,
                   progress: Optional[ProgressCallback] = None,
-                  write_queue: int = WRITE_QUEUE) -> BatchResult:
+                  write_queue: int = WRITE_QUEUE, first_frame: int = 0) -> BatchResult:
     """Render ``cameras`` in order to ``target``.
 
     Image frames are written atomically, so a frame file that exists is complete; with
     ``resume`` those are skipped.  A video is written to a temporary file and renamed when
     complete (removed on any error or interrupt).  ``write_queue`` frames may wait for the
-    writer thread while the next renders (0: write in line).  Frame k is rendered exactly as
+    writer thread while the next renders (0: write in line).  Camera i is written as frame
+    ``first_frame + i`` (a worker's contiguous chunk of a longer path).  Frame k is rendered exactly as
     ``splatgl render --camera`` renders the same camera (same renderer call), so the files
     are identical bit for bit.
     """
@@ -91,7 +92,7 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
 
     target.prepare()
     todo = [k for k in range(len(cameras))
-            if not (resume and not target.is_video and target.frame_path(k).is_file())]
+            if not (resume and not target.is_video and target.frame_path(first_frame + k).is_file())]
     skipped = len(cameras) - len(todo)
     meter = FrameMeter(len(cameras), progress)
     render_seconds = 0.0
@@ -105,9 +106,9 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
         if video is not None:
             video.write(out)
         elif target.wants_depth:
-            write_image(target.frame_path(k), out.rgba, bit_depth, depth=out.expected_depth())
+            write_image(target.frame_path(first_frame + k), out.rgba, bit_depth, depth=out.expected_depth())
         else:
-            write_image(target.frame_path(k), out, bit_depth)
+            write_image(target.frame_path(first_frame + k), out, bit_depth)
 
     # One writer thread encodes frame k while frame k + 1 renders (OpenImageIO and FFmpeg
     # release the GIL); it works in order, and at most ``write_queue`` frames wait for it.

@@ -18,7 +18,7 @@ from ..progress import default_progress
 from ..render import Renderer
 from ..scene import Scene
 from ..settings import RendererKind
-from ._common import load_scene_arg, settings_from_args
+from ._common import demo_scene_path, load_scene_arg, settings_from_args
 
 DEFAULT_FPS = 30.0
 DEFAULT_ORBIT_FRAMES = 120
@@ -40,6 +40,9 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                         "so an existing file is complete)")
     g.add_argument("--format", default="png", choices=("png", "tif", "exr"),
                    help="image format when -o is a folder (default png)")
+    g.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="render in N local processes, each with its own context and copy of the "
+                        "scene, on contiguous chunks of the path (image output only; default 1)")
     g.add_argument("--fps", type=float, default=None,
                    help="video frame rate (default: the path file's, else 30)")
 
@@ -79,6 +82,10 @@ def run_path(args: argparse.Namespace) -> int:
     if args.depth_png is not None:
         raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
     target = FrameTarget.parse(args.output, args.format)
+    if args.workers < 1:
+        raise SplatglError(f"--workers must be at least 1, got {args.workers}")
+    if args.workers > 1 and target.is_video:
+        raise SplatglError(f"{args.output}: --workers renders image frames; write a video with one process")
     if args.resume and target.is_video:
         raise SplatglError(f"{args.output}: a video cannot be resumed; render frames to a folder instead")
     scene = load_scene_arg(args)
@@ -88,9 +95,16 @@ def run_path(args: argparse.Namespace) -> int:
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
     kind = RendererKind(args.renderer)
-    with Renderer() as renderer:
-        result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
-                               args.resume, fps, default_progress())
+    if args.workers != 1:
+        from ..workers import render_frames_parallel
+
+        result = render_frames_parallel(args.scene if args.scene is not None else demo_scene_path(),
+                                        cameras, settings, target, args.workers, kind, args.bit_depth,
+                                        args.resume, args.drop_invalid, default_progress())
+    else:
+        with Renderer() as renderer:
+            result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
+                                   args.resume, fps, default_progress())
     where = target.video if target.is_video else target.pattern
     skipped = f", {result.skipped} already there" if result.skipped else ""
     print(f"wrote {result.written} frames to {where}{skipped} ({cameras[0].width}x{cameras[0].height}, "
