@@ -1,7 +1,9 @@
 """splatgl: Gaussian-splat rendering through OpenGL's graphics pipeline.
 
 The public API: :func:`load_scene`, :class:`Scene`, :class:`Camera`, :class:`RenderSettings`,
-:func:`default_camera`, :func:`render` and :class:`Renderer`.
+:func:`default_camera`, :func:`render` and :class:`Renderer` (``render_many`` for many views);
+:func:`load_cameras` reads every camera source (COLMAP, transforms.json, cameras.json, camera
+paths); :mod:`splatgl.paths` generates paths.
 
 The names are imported on first use (PEP 562), so ``import splatgl.cli`` costs only the
 standard library and the command line can handle Ctrl-C during its own start-up.
@@ -20,7 +22,7 @@ __version__ = "0.1.0"
 #: Public name -> the submodule defining it.
 _EXPORTS = {
     "Camera": "camera", "Projection": "camera", "look_at": "camera", "orbit": "camera",
-    "load_camera": "camera_io", "load_cameras": "camera_io", "save_camera": "camera_io",
+    "load_camera": "camera_io", "load_cameras": "datasets", "save_camera": "camera_io",
     "CameraError": "errors", "ContextError": "errors", "SceneFormatError": "errors",
     "ShaderError": "errors", "SplatglError": "errors",
     "load_scene": "formats", "save_scene": "formats",

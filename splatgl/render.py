@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from contextlib import contextmanager
+from typing import Iterable, Iterator
 
 import moderngl
 import numpy as np
@@ -140,6 +141,19 @@ class Renderer:
         self._check_size(camera, kind)
         with _reporting(self._path(scene, settings, kind), progress) as path:
             return path.render_layers(apply_model(camera, settings.model), depth=True)
+
+    def render_many(self, scene: Scene, cameras: Iterable[Camera],
+                    settings: RenderSettings = RenderSettings(),
+                    kind: RendererKind = RendererKind.QUAD,
+                    depth: bool = False) -> Iterator[np.ndarray | RenderOutput]:
+        """Render ``cameras`` one after another, yielding each frame as it is done.
+
+        The scene is uploaded and the shaders compiled once (on the first frame); each frame is
+        exactly what :meth:`render` (or :meth:`render_layers` with ``depth``) returns for that
+        camera.  Yields (H, W, 4) float32 arrays, or :class:`RenderOutput` with ``depth``.
+        """
+        for camera in cameras:
+            yield (self.render_layers if depth else self.render)(scene, camera, settings, kind)
 
     def close(self) -> None:
         make_current(self.ctx)

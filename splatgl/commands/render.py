@@ -16,6 +16,7 @@ from ..render import Renderer, render_reference_layers
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args)
+from ._render_path import add_path_arguments, run_path
 
 NAME = "render"
 ORDER = 10
@@ -31,12 +32,16 @@ examples:
   splatgl render -o demo.png
   splatgl render scene.ply --camera cameras.json --camera-index 3 -o view.exr
   splatgl render scene.ply --width 1920 --height 1080 --background 1,1,1 -o white.png
-  splatgl render scene.ply -o view.png --depth-png depth.png"""
+  splatgl render scene.ply -o view.png --depth-png depth.png
+  splatgl render scene.ply --path orbit:120 -o orbit.mp4
+  splatgl render scene.ply --path dataset/sparse/0 --select 0:100:5 -o frames/%05d.png"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("-o", "--output", type=Path, required=True, help="output image (.png, .tif, .exr)")
+    p.add_argument("-o", "--output", type=Path, required=True,
+                   help="output image (.png, .tif, .exr); with --path a folder, a pattern such as "
+                        "frames/%%05d.png, or a video (.mp4)")
     p.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
                    help="bits per channel of PNG/TIFF output (default 8)")
     p.add_argument("--renderer", choices=[k.value for k in RendererKind], default="quad",
@@ -48,9 +53,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="print the frame's stage times (ms) and counts (splats drawn, keys sorted)")
     add_camera_arguments(p)
     add_settings_arguments(p)
+    add_path_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.path is not None:
+        return run_path(args)
     kind = RendererKind(args.renderer)
     check_convention(args, kind)
     if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):

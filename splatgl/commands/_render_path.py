@@ -1,0 +1,116 @@
+"""``splatgl render --path SOURCE``: many frames in one process (options and the run).
+
+Kept apart from :mod:`splatgl.commands.render` so the single-view command stays small; the
+work itself is :func:`splatgl.batch.render_frames`.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..batch import render_frames
+from ..camera import Camera
+from ..datasets import load_source, select_indices
+from ..errors import SplatglError
+from ..frame_output import FrameTarget
+from ..paths import orbit
+from ..progress import default_progress
+from ..render import Renderer
+from ..scene import Scene
+from ..settings import RendererKind
+from ._common import demo_scene_path, load_scene_arg, settings_from_args
+
+DEFAULT_FPS = 30.0
+DEFAULT_ORBIT_FRAMES = 120
+
+
+def add_path_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("many frames (camera paths, datasets, video)")
+    g.add_argument("--path", default=None, metavar="SOURCE",
+                   help="render every camera of SOURCE instead of one view: a COLMAP model (or "
+                        "dataset folder), transforms.json, 3DGS cameras.json, nerfstudio "
+                        "camera_path.json, a splatgl path file (splatgl path ...), or 'orbit[:N]' "
+                        "(N frames around the scene, default 120). -o is then a folder, a "
+                        "pattern such as frames/%%05d.png or .exr, or a video .mp4")
+    g.add_argument("--select", default=None, metavar="RANGES",
+                   help="only these cameras of SOURCE: start:stop:step and/or indices, "
+                        "comma-separated (e.g. 0:100:5 or 0,3,7)")
+    g.add_argument("--resume", action="store_true",
+                   help="skip frames whose files already exist (frames are written atomically, "
+                        "so an existing file is complete)")
+    g.add_argument("--format", default="png", choices=("png", "tif", "exr"),
+                   help="image format when -o is a folder (default png)")
+    g.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="render in N local processes, each with its own context and copy of the "
+                        "scene, on contiguous chunks of the path (image output only; default 1)")
+    g.add_argument("--fps", type=float, default=None,
+                   help="video frame rate (default: the path file's, else 30)")
+
+
+def _sized(cam: Camera, width: int | None, height: int | None) -> Camera:
+    if not (width or height):
+        return cam
+    w = width or round(cam.width * height / cam.height)
+    h = height or round(cam.height * width / cam.width)
+    return cam.resized(w, h)
+
+
+def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None]:
+    """The cameras ``--path`` names (with ``--select`` and ``--width/--height`` applied)."""
+    spec = args.path
+    if spec == "orbit" or spec.startswith("orbit:"):
+        try:
+            frames = int(spec.split(":", 1)[1]) if ":" in spec else DEFAULT_ORBIT_FRAMES
+        except ValueError:
+            raise SplatglError(f"--path {spec}: expected orbit or orbit:FRAMES") from None
+        if frames < 1:
+            raise SplatglError(f"--path {spec}: the number of frames must be positive")
+        w, h = args.width or 1280, args.height or 720
+        cams = orbit(scene, frames, w, h, args.fov if args.fov is not None else 50.0)
+        fps = None
+    else:
+        views, fps = load_source(spec)
+        cams = [_sized(v.camera, args.width, args.height) for v in views]
+    if args.select:
+        cams = [cams[i] for i in select_indices(args.select, len(cams), spec)]
+    return cams, fps
+
+
+def run_path(args: argparse.Namespace) -> int:
+    if args.camera is not None:
+        raise SplatglError("--camera and --path exclude each other (a path brings its cameras)")
+    if args.depth_png is not None:
+        raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
+    target = FrameTarget.parse(args.output, args.format)
+    if args.workers < 1:
+        raise SplatglError(f"--workers must be at least 1, got {args.workers}")
+    if args.workers > 1 and target.is_video:
+        raise SplatglError(f"{args.output}: --workers renders image frames; write a video with one process")
+    if args.resume and target.is_video:
+        raise SplatglError(f"{args.output}: a video cannot be resumed; render frames to a folder instead")
+    scene = load_scene_arg(args)
+    settings = settings_from_args(args)
+    cameras, source_fps = path_cameras(args, scene)
+    fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)
+    if not fps > 0:
+        raise SplatglError(f"--fps must be positive, got {fps}")
+    kind = RendererKind(args.renderer)
+    if args.workers != 1:
+        from ..workers import render_frames_parallel
+
+        result = render_frames_parallel(args.scene if args.scene is not None else demo_scene_path(),
+                                        cameras, settings, target, args.workers, kind, args.bit_depth,
+                                        args.resume, args.drop_invalid, default_progress())
+    else:
+        with Renderer() as renderer:
+            result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
+                                   args.resume, fps, default_progress())
+    where = target.video if target.is_video else target.pattern
+    skipped = f", {result.skipped} already there" if result.skipped else ""
+    print(f"wrote {result.written} frames to {where}{skipped} ({cameras[0].width}x{cameras[0].height}, "
+          f"{scene.count} splats, {kind.value}, {result.fps:.2f} frames/s)")
+    if args.timings:
+        ratio = result.seconds / result.render_seconds if result.render_seconds > 0 else float("nan")
+        print(f"timings: {result.seconds:.3f} s for {result.written} frames; renderer stages "
+              f"{result.render_seconds:.3f} s; ratio {ratio:.3f}")
+    return 0

@@ -1,0 +1,64 @@
+"""Small JSON helpers shared by the camera loaders: read a file, fetch typed fields with errors
+that name the file, the entry and the field."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CameraError
+
+
+def read_json(path: Path) -> object:
+    try:
+        return json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise CameraError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CameraError(f"{path}: cannot read ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise CameraError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+
+
+def number(path: Path, where: str, obj: dict, key: str, default: float | None = None,
+           positive: bool = False) -> float:
+    """``obj[key]`` as a finite float (``default`` when absent and given)."""
+    if key not in obj:
+        if default is not None:
+            return default
+        raise CameraError(f"{path}: {where}missing field '{key}'")
+    value = obj[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise CameraError(f"{path}: {where}field '{key}' must be a finite number, got {value!r}")
+    if positive and not value > 0:
+        raise CameraError(f"{path}: {where}field '{key}' must be positive, got {value!r}")
+    return float(value)
+
+
+def matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, ...]) -> np.ndarray:
+    """``obj[key]`` as a finite float64 array of ``shape`` (a flat list of the same size is
+    reshaped row-major, as nerfstudio's camera paths store 4x4 matrices)."""
+    if key not in obj:
+        raise CameraError(f"{path}: {where}missing field '{key}'")
+    try:
+        arr = np.array(obj[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is not None and arr.shape != shape and arr.size == int(np.prod(shape)) and arr.ndim == 1:
+        arr = arr.reshape(shape)
+    if arr is None or arr.shape != shape or not np.isfinite(arr).all():
+        got = "non-numeric values" if arr is None else f"shape {arr.shape}"
+        raise CameraError(f"{path}: {where}field '{key}' must be a finite "
+                          f"{'x'.join(map(str, shape))} array of numbers, got {got}")
+    return arr
+
+
+def entries(path: Path, obj: dict, key: str) -> list:
+    """``obj[key]`` as a non-empty list."""
+    value = obj.get(key) if isinstance(obj, dict) else None
+    if not isinstance(value, list) or not value:
+        raise CameraError(f"{path}: field '{key}' must be a non-empty list")
+    return value

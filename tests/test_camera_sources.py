@@ -1,0 +1,194 @@
+"""Camera sources: the real garden cameras converted into every format load back as the same
+cameras; per format, a file written by hand in that format's axis convention puts a known
+world point on a known pixel (rendered as one small splat); bad files fail in one line."""
+
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+
+import splatgl
+from conftest import scene_with_colors, shared_file
+from splatgl.camera import Camera
+from splatgl.datasets import colmap, load_source, load_views, nerf, select_indices
+from splatgl.datasets.gs_cameras import gs_cameras_json
+from splatgl.datasets.nerfstudio_path import camera_path_json
+from splatgl.datasets.views import View
+from splatgl.errors import CameraError
+from splatgl.paths import path_json
+
+
+@pytest.fixture(scope="module")
+def garden(shared_scenes):
+    data = np.load(shared_file(shared_scenes, "cameras/garden_cameras_points.npz"))
+    w, h = int(data["width"]), int(data["height"])
+    return [View(f"DSC{i:05d}.JPG", Camera(w, h, k[0, 0], k[1, 1], k[0, 2], k[1, 2], v.astype(np.float64)))
+            for i, (k, v) in enumerate(zip(data["Ks"], data["viewmats"]))]
+
+
+def _close(a: Camera, b: Camera, pose_tol: float, intrinsics=("fx", "fy", "cx", "cy")) -> None:
+    assert (a.width, a.height) == (b.width, b.height)
+    for name in intrinsics:
+        assert getattr(a, name) == pytest.approx(getattr(b, name), rel=1e-9), name
+    np.testing.assert_allclose(a.world_to_camera, b.world_to_camera, rtol=0, atol=pose_tol)
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_garden_as_colmap_model(garden, tmp_path, binary):
+    colmap.write_colmap(tmp_path / "sparse" / "0", garden, binary=binary)
+    views = load_views(tmp_path)  # a dataset folder: finds sparse/0
+    assert [v.name for v in views] == [v.name for v in garden]
+    for got, want in zip(views, garden):
+        # the float32 garden rotations are orthonormal to ~1e-7; a quaternion stores the nearest
+        # rotation, so the round trip moves entries by that much, no more
+        _close(got.camera, want.camera, 1e-7)
+    ext = ".bin" if binary else ".txt"
+    assert len(splatgl.load_cameras(tmp_path / "sparse" / "0" / f"images{ext}")) == 3
+
+
+def test_garden_as_transforms_json(garden, tmp_path):
+    (tmp_path / "transforms.json").write_text(json.dumps(nerf.transforms_json(garden)))
+    for got, want in zip(load_views(tmp_path), garden):
+        _close(got.camera, want.camera, 1e-12)
+
+
+def test_garden_as_3dgs_cameras_json(garden, tmp_path):
+    (tmp_path / "cameras.json").write_text(json.dumps(gs_cameras_json(garden)))
+    for got, want in zip(load_views(tmp_path / "cameras.json"), garden):
+        _close(got.camera, want.camera, 1e-6, ("fx", "fy"))  # 3DGS centres the principal point
+        assert (got.camera.cx, got.camera.cy) == (want.camera.width / 2, want.camera.height / 2)
+
+
+def test_garden_as_nerfstudio_camera_path(garden, tmp_path):
+    cams = [v.camera for v in garden]
+    (tmp_path / "camera_path.json").write_text(json.dumps(camera_path_json(cams, fps=24)))
+    views, fps = load_source(tmp_path / "camera_path.json")
+    assert fps == 24
+    for got, want in zip(views, cams):
+        _close(got.camera, want, 1e-6, ("fy",))  # a fov: square pixels, centred
+
+
+def test_garden_as_splatgl_path(garden, tmp_path):
+    cams = [v.camera for v in garden]
+    (tmp_path / "p.json").write_text(json.dumps(path_json(cams)))
+    got = splatgl.load_cameras(tmp_path / "p.json")
+    for g, w in zip(got, cams):
+        np.testing.assert_array_equal(g.world_to_camera, w.world_to_camera)  # on the keys: exact
+        assert g.fy == pytest.approx(w.fy)
+
+
+# ------------------------------------------------------------------ one test per convention
+W, H, F = 96, 64, 80.0
+
+
+def _hand_written(fmt: str, tmp_path):
+    """(source path, world point, expected pixel (u, v)) of a camera written by hand."""
+    if fmt == "colmap":  # world-to-camera, OpenCV axes: identity pose looks along +z, y down
+        d = tmp_path / "model"
+        d.mkdir()
+        (d / "cameras.txt").write_text(f"1 SIMPLE_PINHOLE {W} {H} {F} 40 30\n")
+        (d / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
+        return d, (0.1, 0.2, 1.0), (40 + F * 0.1, 30 + F * 0.2)
+    if fmt == "colmap_bin":  # the same camera, rotated 90 degrees about +z (q = cos45, 0, 0, sin45)
+        d = tmp_path / "model"
+        d.mkdir()
+        (d / "cameras.bin").write_bytes(struct.pack("<QiiQQdddd", 1, 1, 1, W, H, F, F, 48, 32))
+        s = np.sqrt(0.5)
+        (d / "images.bin").write_bytes(struct.pack("<Qidddddddi", 1, 1, s, 0, 0, s, 0, 0, 0, 1) + b"a.png\0"
+                                       + struct.pack("<Q", 0))
+        # R maps world (0.1, 0.2, 1) to camera (-0.2, 0.1, 1)
+        return d, (0.1, 0.2, 1.0), (48 - F * 0.2, 32 + F * 0.1)
+    if fmt == "transforms":  # camera-to-world, OpenGL axes: identity looks along -z, y up
+        obj = {"camera_angle_x": 2 * np.arctan(W / 2 / F), "w": W, "h": H,
+               "frames": [{"file_path": "a", "transform_matrix": np.eye(4).tolist()}]}
+        (tmp_path / "transforms.json").write_text(json.dumps(obj))
+        return tmp_path / "transforms.json", (0.1, 0.2, -1.0), (W / 2 + F * 0.1, H / 2 - F * 0.2)
+    if fmt == "3dgs":  # camera-to-world rotation, OpenCV axes, position = centre
+        obj = [{"id": 0, "img_name": "a", "width": W, "height": H, "fx": F, "fy": F,
+                "position": [0, 0, -2], "rotation": np.eye(3).tolist()}]
+        (tmp_path / "cameras.json").write_text(json.dumps(obj))
+        return tmp_path / "cameras.json", (0.1, 0.2, 0.0), (W / 2 + F * 0.05, H / 2 + F * 0.1)
+    if fmt == "nerfstudio":  # camera_to_world, OpenGL axes, vertical fov in degrees
+        fov = float(np.degrees(2 * np.arctan(H / 2 / F)))
+        c2w = np.eye(4)
+        c2w[:3, 3] = [0, 0, 1]
+        obj = {"render_width": W, "render_height": H, "fps": 30, "seconds": 1,
+               "camera_path": [{"camera_to_world": c2w.reshape(-1).tolist(), "fov": fov}]}
+        (tmp_path / "camera_path.json").write_text(json.dumps(obj))
+        return tmp_path / "camera_path.json", (0.1, 0.2, 0.0), (W / 2 + F * 0.1, H / 2 - F * 0.2)
+    if fmt == "splatgl":  # look-at with up = world -y: world +x is right, world +y is down
+        fov = float(np.degrees(2 * np.arctan(H / 2 / F)))
+        obj = {"splatgl_path": 1, "width": W, "height": H, "frames": 1,
+               "keyframes": [{"eye": [0, 0, -5], "target": [0, 0, 0], "up": [0, -1, 0], "fov": fov}]}
+        (tmp_path / "p.json").write_text(json.dumps(obj))
+        return tmp_path / "p.json", (0.1, 0.2, 0.0), (W / 2 + F * 0.02, H / 2 + F * 0.04)
+    raise AssertionError(fmt)
+
+
+@pytest.mark.parametrize("fmt", ["colmap", "colmap_bin", "transforms", "3dgs", "nerfstudio", "splatgl"])
+def test_known_point_lands_on_known_pixel(fmt, tmp_path, gl_renderer):
+    source, point, (u, v) = _hand_written(fmt, tmp_path)
+    (cam,) = splatgl.load_cameras(source)
+    depth = (cam.world_to_camera @ [*point, 1.0])[2]
+    sigma = 0.8 * depth / cam.fx  # a splat about 0.8 px across
+    scene = scene_with_colors([point], [[1, 0, 0, 0]], [[sigma] * 3], [0.9], [[1, 1, 1]])
+    alpha = gl_renderer.render(scene, cam)[..., 3].astype(np.float64)
+    assert alpha.sum() > 0.5, "the splat is not in view"
+    rows, cols = np.mgrid[0:cam.height, 0:cam.width]
+    got = ((alpha * (cols + 0.5)).sum() / alpha.sum(), (alpha * (rows + 0.5)).sum() / alpha.sum())
+    # pixel centres at (j + 0.5, i + 0.5): the alpha centroid is the projected point within a
+    # small fraction of a pixel (the splat is symmetric; only pixel sampling moves it)
+    assert got == pytest.approx((u, v), abs=0.1)
+
+
+# ------------------------------------------------------------------ bad files
+def _err(path) -> str:
+    with pytest.raises(CameraError) as info:
+        splatgl.load_cameras(path)
+    return str(info.value)
+
+
+def test_bad_sources_fail_in_one_line(tmp_path):
+    (tmp_path / "x.json").write_text('{"hello": 1}')
+    assert "x.json: not a camera source splatgl knows" in _err(tmp_path / "x.json")
+    (tmp_path / "empty").mkdir()
+    assert "folder holds no camera source" in _err(tmp_path / "empty")
+    m = tmp_path / "m"
+    m.mkdir()
+    (m / "cameras.txt").write_text("1 OPENCV 10 10 5 5 5 5 0.1 0 0 0\n")
+    (m / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
+    assert "camera 1: COLMAP model OPENCV has lens distortion" in _err(m)
+    (m / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5\n")
+    assert "line 1: model PINHOLE takes 4 parameters, got 3" in _err(m)
+    (m / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5 5\n")
+    (m / "images.txt").write_text("1 1 0 0 0 0 0 0 7 a.png\n\n")
+    assert "image 'a.png': camera id 7 is not in" in _err(m)
+    (m / "images.txt").write_text("1 0 0 0 0 0 0 0 1 a.png\n\n")
+    assert "pose must be finite with a non-zero quaternion" in _err(m)
+    t = {"w": 10, "h": 10, "fl_x": 5, "k1": 0.2, "frames": [{"transform_matrix": np.eye(4).tolist()}]}
+    (tmp_path / "t.json").write_text(json.dumps(t))
+    assert "field 'k1' = 0.2: lens distortion is not supported" in _err(tmp_path / "t.json")
+    t["k1"] = 0
+    t["frames"][0]["transform_matrix"] = np.diag([1, 1, -1, 1]).tolist()
+    (tmp_path / "t.json").write_text(json.dumps(t))
+    assert "frame 0: field 'transform_matrix' is mirrored" in _err(tmp_path / "t.json")
+    p = {"camera_type": "fisheye", "render_width": 8, "render_height": 8, "camera_path": []}
+    (tmp_path / "cp.json").write_text(json.dumps(p))
+    assert "'camera_type' is 'fisheye'; splatgl renders 'perspective' only" in _err(tmp_path / "cp.json")
+    (tmp_path / "model_b").mkdir()
+    (tmp_path / "model_b" / "cameras.bin").write_bytes(struct.pack("<Q", 1) + b"\0" * 5)
+    (tmp_path / "model_b" / "images.bin").write_bytes(struct.pack("<Q", 0))
+    assert "cameras.bin: truncated at byte 8" in _err(tmp_path / "model_b")
+
+
+def test_select_ranges():
+    assert select_indices("0:100:5", 12) == [0, 5, 10]
+    assert select_indices("1,3,-1", 12) == [1, 3, 11]
+    assert select_indices("::4,2", 10) == [0, 4, 8, 2]
+    for spec, msg in [("12", "index 12 out of range (12 cameras)"), ("a", "'a' is not an index"),
+                      ("0:5:0", "'0:5:0' is not an index"), ("5:2", "picks no camera of 12")]:
+        with pytest.raises(CameraError, match=msg.replace("(", r"\(").replace(")", r"\)")):
+            select_indices(spec, 12)

@@ -1,0 +1,178 @@
+"""`splatgl eval` on a synthetic dataset made here: the demo scene rendered through cameras
+around it, the photographs perturbed by exactly +-DELTA per channel, so the expected PSNR is
+-20 log10(DELTA) (the only other error is the 16-bit PNG quantisation of the photographs,
+below 0.5/65535, which moves the PSNR by < 0.003 dB at DELTA = 0.04).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from splatgl.camera import Camera, orbit
+from splatgl.cli import main
+from splatgl.commands._common import demo_scene_path
+from splatgl.datasets import colmap, nerf
+from splatgl.datasets.dataset import Split, load_dataset, split_views
+from splatgl.datasets.views import View
+from splatgl.formats import load_scene
+from splatgl.image_io import read_image, write_image
+from splatgl.metrics import ssim
+from splatgl.settings import RenderSettings
+
+DELTA = 0.04
+EXPECTED_PSNR = -20.0 * math.log10(DELTA)  # 27.959 dB
+BG = (0.5, 0.5, 0.5)
+W, H, N_VIEWS = 64, 48, 9
+
+
+def _perturb(render: np.ndarray) -> np.ndarray:
+    """``render`` (clamped) moved by exactly DELTA per channel, away from the nearer bound."""
+    base = np.clip(render[..., :3], 0.0, 1.0)
+    return base + np.where(base < 0.5, DELTA, -DELTA)
+
+
+def _write_rgba(path, rgba):
+    """A 16-bit RGBA PNG (splatgl's write_image writes RGB only)."""
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), oiio.ImageSpec(rgba.shape[1], rgba.shape[0], 4, oiio.UINT16))
+    assert out.write_image(np.round(np.clip(rgba, 0, 1) * 65535).astype(np.uint16))
+    out.close()
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory, gl_renderer):
+    """A COLMAP + transforms.json dataset of the demo scene: images/ at 64x48, images_2/ at
+    32x24, and rgba/ with alpha 0 (and garbage colour) wherever the render is pure background."""
+    root = tmp_path_factory.mktemp("synthetic")
+    scene = load_scene(demo_scene_path())
+    settings = RenderSettings(background=BG)
+    lo, hi = scene.robust_bounds
+    views = []
+    for i in range(N_VIEWS):
+        cam = Camera.from_fov(W, H, 45.0, orbit(0.5 * (lo + hi), 6.0, 40.0 * i, 15.0))
+        name = f"img_{i:02d}.png"
+        rgba = gl_renderer.render(scene, cam, settings)
+        for folder, c in (("images", cam), ("images_2", cam.resized(W // 2, H // 2))):
+            img = rgba if c is cam else gl_renderer.render(scene, c, settings)
+            photo = _perturb(img)
+            (root / folder).mkdir(exist_ok=True)
+            write_image(root / folder / name, np.concatenate([photo, np.ones_like(photo[..., :1])], -1), 16)
+        empty = rgba[..., 3] == 0.0
+        photo = np.where(empty[..., None], [1.0, 0.0, 0.0], _perturb(rgba))  # red where masked out
+        (root / "rgba").mkdir(exist_ok=True)
+        _write_rgba(root / "rgba" / name, np.concatenate([photo, (~empty)[..., None]], -1))
+        views.append(View(name, cam))
+    colmap.write_colmap(root / "sparse" / "0", views)
+    tj = nerf.transforms_json([View(f"images/{v.name}", v.camera) for v in views])
+    (root / "nerf").mkdir()
+    (root / "nerf" / "images").symlink_to(root / "images")
+    (root / "nerf" / "images_2").symlink_to(root / "images_2")
+    (root / "nerf" / "transforms.json").write_text(json.dumps(tj))
+    return root
+
+
+def _run(capsys, *argv):
+    code = main(["eval", str(demo_scene_path()), "--background", "0.5,0.5,0.5", *map(str, argv)])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_colmap_dataset_psnr_is_the_known_perturbation(dataset, capsys, tmp_path):
+    code, out, err = _run(capsys, "--dataset", dataset, "--csv", tmp_path / "s.csv", "--json", tmp_path / "s.json")
+    assert code == 0, err
+    rows = list(csv.reader((tmp_path / "s.csv").open()))
+    assert rows[0] == ["view", "psnr", "ssim"] and len(rows) == N_VIEWS + 2
+    psnrs = [float(r[1]) for r in rows[1:-1]]
+    assert np.allclose(psnrs, EXPECTED_PSNR, atol=0.01), psnrs
+    assert rows[-1][0] == "mean" and float(rows[-1][1]) == pytest.approx(np.mean(psnrs))
+    report = json.loads((tmp_path / "s.json").read_text())
+    assert [v["name"] for v in report["views"]] == [f"img_{i:02d}.png" for i in range(N_VIEWS)]
+    assert report["mean"]["psnr"] == pytest.approx(EXPECTED_PSNR, abs=0.01)
+    assert 0.8 < report["mean"]["ssim"] < 1.0
+    assert f"mean ({N_VIEWS} views)" in out and "27.959" in out
+
+
+def test_transforms_json_dataset_matches_colmap(dataset, capsys, tmp_path):
+    code, _, err = _run(capsys, "--dataset", dataset / "nerf", "--json", tmp_path / "n.json")
+    assert code == 0, err
+    report = json.loads((tmp_path / "n.json").read_text())
+    assert [v["psnr"] for v in report["views"]] == pytest.approx([EXPECTED_PSNR] * N_VIEWS, abs=0.01)
+
+
+def test_split_every_eighth_and_downscaled_folder(dataset, capsys, tmp_path):
+    views = load_dataset(dataset, split="test")
+    assert [v.name for v in views] == ["img_00.png", "img_08.png"]
+    assert [v.name for v in load_dataset(dataset, split="train")] == [f"img_{i:02d}.png" for i in range(1, 8)]
+    half = load_dataset(dataset, images="images_2", split=Split.TEST)
+    assert (half[0].camera.width, half[0].camera.height) == (W // 2, H // 2)
+    assert half[0].camera.fx == pytest.approx(views[0].camera.fx / 2)
+    code, out, err = _run(capsys, "--dataset", dataset / "nerf", "--images", "images_2", "--split", "test",
+                          "--json", tmp_path / "h.json")
+    assert code == 0, err
+    report = json.loads((tmp_path / "h.json").read_text())
+    assert [v["name"] for v in report["views"]] == ["images/img_00.png", "images/img_08.png"]
+    assert report["mean"]["psnr"] == pytest.approx(EXPECTED_PSNR, abs=0.01)
+
+
+def test_rgba_photographs_composite_over_the_background(dataset, capsys, tmp_path, gl_renderer):
+    code, _, err = _run(capsys, "--dataset", dataset, "--images", "rgba", "--select", "0:3",
+                        "--json", tmp_path / "a.json")
+    assert code == 0, err
+    got = [v["psnr"] for v in json.loads((tmp_path / "a.json").read_text())["views"]]
+    # Error DELTA on the drawn pixels, 0 where the photograph is masked out (composited to the
+    # background, which the render shows there exactly).
+    for i, value in enumerate(got):
+        drawn = read_image(dataset / "rgba" / f"img_{i:02d}.png")[..., 3] > 0.5
+        assert 0.1 < drawn.mean() < 0.95  # the mask really removes something
+        assert value == pytest.approx(-10 * math.log10(DELTA ** 2 * drawn.mean()), abs=0.01)
+
+
+def test_sheet_of_worst_views(dataset, capsys, tmp_path):
+    code, _, err = _run(capsys, "--dataset", dataset, "--split", "test", "--sheet", tmp_path / "w.png", "--worst", "2")
+    assert code == 0, err
+    sheet = read_image(tmp_path / "w.png")
+    # two rows of render | photograph (2W + 4) | heat map (W), each row H + 4 high
+    assert sheet.shape[:2] == (2 * (H + 4), 3 * W + 8)
+
+
+def test_ssim_equals_scikit_image(dataset):
+    metrics = pytest.importorskip("skimage.metrics")
+    a = read_image(dataset / "images" / "img_01.png")[..., :3]
+    rng = np.random.default_rng(3)
+    b = np.clip(a + rng.normal(0.0, 0.05, a.shape), 0, 1).astype(np.float32)
+    ref = metrics.structural_similarity(a, b, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
+                                        data_range=1.0, channel_axis=-1)
+    assert ssim(a, b) == pytest.approx(ref, abs=1e-6)
+    assert 0.3 < ref < 0.95
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--dataset", "nowhere"], "nowhere: no such dataset folder"),
+    (["--dataset", "{root}", "--images", "images_8"], "images_8: no such image folder beside the COLMAP model"),
+    (["--dataset", "{root}", "--select", "20"], "--select index 20 out of range (9 cameras)"),
+    (["--dataset", "{root}", "--worst", "0"], "--worst must be at least 1, got 0"),
+])
+def test_bad_eval_input_is_one_line(dataset, capsys, args, message):
+    code, _, err = _run(capsys, *[a.replace("{root}", str(dataset)) for a in args])
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_missing_photograph_named(dataset, tmp_path, capsys):
+    views = [View("a.png", Camera.from_fov(W, H, 45.0, orbit([0, 0, 0], 5.0, 0.0, 0.0)))]
+    colmap.write_colmap(tmp_path / "sparse" / "0", views, binary=False)
+    (tmp_path / "images").mkdir()
+    code, _, err = _run(capsys, "--dataset", tmp_path)
+    assert code == 2 and "a.png: photograph of COLMAP image 'a.png' not found" in err
+
+
+def test_split_views_is_every_eighth():
+    views = [View(str(i), Camera.from_fov(8, 8, 40.0)) for i in range(20)]
+    assert [v.name for v in split_views(views, Split.TEST)] == ["0", "8", "16"]
+    assert len(split_views(views, Split.TRAIN)) == 17

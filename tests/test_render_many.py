@@ -1,0 +1,194 @@
+"""Many frames in one process: `splatgl render --path` to folders, patterns and video; frame k
+equals `splatgl render --camera` of the same camera bit for bit; --resume; interrupts leave only
+complete frames and no partial video; Renderer.render_many."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import splatgl
+from splatgl import batch
+from splatgl.camera_io import save_camera
+from splatgl.cli import main
+from splatgl.commands._common import demo_scene_path
+from splatgl.formats import load_scene
+from splatgl.image_io import read_image
+from splatgl.paths import orbit
+
+SIZE = ["--width", "96", "--height", "64"]
+
+
+def _render(*argv) -> int:
+    return main(["render", str(demo_scene_path()), *map(str, argv)])
+
+
+@pytest.mark.parametrize("ext", ["png", "exr"])
+def test_frame_k_equals_single_render_bit_for_bit(tmp_path, capsys, ext):
+    assert _render("--path", "orbit:3", *SIZE, "-o", tmp_path / f"f_%03d.{ext}", "--background", "0.2,0.3,0.4") == 0
+    assert "wrote 3 frames" in capsys.readouterr().out
+    cams = orbit(load_scene(demo_scene_path()), 3, 96, 64)
+    for k, cam in enumerate(cams):
+        save_camera(tmp_path / "cam.json", cam)
+        assert _render("--camera", tmp_path / "cam.json", "-o", tmp_path / f"one.{ext}", "--background", "0.2,0.3,0.4") == 0
+        got, single = read_image(tmp_path / f"f_{k:03d}.{ext}"), read_image(tmp_path / f"one.{ext}")
+        assert got.shape == single.shape == (64, 96, 5 if ext == "exr" else 3)
+        np.testing.assert_array_equal(got, single)
+
+
+def test_dataset_source_with_select_and_resume(tmp_path, capsys):
+    from splatgl.datasets import colmap
+    from splatgl.datasets.views import View
+
+    cams = orbit(load_scene(demo_scene_path()), 10, 96, 64)
+    colmap.write_colmap(tmp_path / "data" / "sparse" / "0", [View(f"{k}.png", c) for k, c in enumerate(cams)])
+    out = tmp_path / "frames"
+    assert _render("--path", tmp_path / "data", "--select", "0:10:3", "-o", out) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["00000.png", "00001.png", "00002.png", "00003.png"]
+    first = read_image(out / "00001.png")
+    (out / "00002.png").unlink()
+    before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
+    capsys.readouterr()
+    assert _render("--path", tmp_path / "data", "--select", "0:10:3", "-o", out, "--resume") == 0
+    printed = capsys.readouterr().out
+    assert "wrote 1 frames" in printed and "3 already there" in printed
+    assert {p.name: p.stat().st_mtime_ns for p in out.iterdir() if p.name in before} == before
+    assert (out / "00002.png").is_file()
+    np.testing.assert_array_equal(read_image(out / "00001.png"), first)
+
+
+def test_video_output(tmp_path, capsys):
+    av = pytest.importorskip("av")
+    from splatgl.video import read_video_frames
+
+    assert _render("--path", "orbit:5", *SIZE, "-o", tmp_path / "o.mp4", "--fps", "12") == 0
+    assert _render("--path", "orbit:5", *SIZE, "-o", tmp_path / "png") == 0
+    frames = read_video_frames(tmp_path / "o.mp4")
+    assert len(frames) == 5 and frames[0].shape == (64, 96, 3)
+    with av.open(str(tmp_path / "o.mp4")) as c:
+        assert c.streams.video[0].codec_context.name == "h264" and float(c.streams.video[0].average_rate) == 12
+    for k, f in enumerate(frames):
+        png = read_image(tmp_path / "png" / f"{k:05d}.png")
+        # H.264 at crf 18 with 4:2:0 chroma: small mean error, measured 1.5-2.5 / 255
+        assert np.abs(f / 255.0 - png).mean() < 5 / 255
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.mp4", "png"]  # no partial file left
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--path", "orbit:2", "-o", "{t}/x.png"], "many frames need a folder or a pattern such as"),
+    (["--path", "orbit:2", "-o", "{t}/x_%d_%d.png"], "needs exactly one integer field"),
+    (["--path", "orbit:2", "-o", "{t}/x.mp4", "--resume"], "a video cannot be resumed"),
+    (["--path", "orbit:2", "-o", "{t}/x.mp4", "--width", "95", "--height", "64"], "needs an even width and height, got 95x64"),
+    (["--path", "orbit:x", "-o", "{t}/f"], "expected orbit or orbit:FRAMES"),
+    (["--path", "{t}/none.json", "-o", "{t}/f"], "none.json: no such file or folder"),
+    (["--path", "orbit:2", "--camera", "c.json", "-o", "{t}/f"], "--camera and --path exclude each other"),
+])
+def test_bad_path_arguments_one_line(tmp_path, capsys, argv, message):
+    assert _render(*[a.replace("{t}", str(tmp_path)) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_interrupt_leaves_complete_frames_only_and_resume_finishes(tmp_path, monkeypatch, capsys):
+    real = batch.FrameMeter.__call__
+    calls = []
+
+    def interrupted(self, done, rendered):  # Ctrl-C arrives in the main thread after frame 3
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        real(self, done, rendered)
+
+    monkeypatch.setattr(batch.FrameMeter, "__call__", interrupted)
+    assert _render("--path", "orbit:6", *SIZE, "-o", tmp_path / "f") == 130
+    left = sorted(p.name for p in (tmp_path / "f").iterdir())
+    # the frame being written finishes (atomically), one still queued is dropped: frames 0-1,
+    # or 0-2 if the writer had started frame 2; nothing else (no temporary files) is left
+    assert left in (["00000.png", "00001.png"], ["00000.png", "00001.png", "00002.png"])
+    monkeypatch.setattr(batch.FrameMeter, "__call__", real)
+    capsys.readouterr()
+    assert _render("--path", "orbit:6", *SIZE, "-o", tmp_path / "f", "--resume") == 0
+    assert f"wrote {6 - len(left)} frames" in capsys.readouterr().out
+    assert _render("--path", "orbit:6", *SIZE, "-o", tmp_path / "g") == 0
+    for k in range(6):
+        np.testing.assert_array_equal(read_image(tmp_path / "f" / f"{k:05d}.png"),
+                                      read_image(tmp_path / "g" / f"{k:05d}.png"))
+
+
+def test_interrupt_removes_the_video(tmp_path, monkeypatch):
+    pytest.importorskip("av")
+    from splatgl import video
+
+    real = video.VideoWriter.write
+    calls = []
+
+    def flaky(self, rgba):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        real(self, rgba)
+
+    monkeypatch.setattr(video.VideoWriter, "write", flaky)
+    assert _render("--path", "orbit:6", *SIZE, "-o", tmp_path / "v.mp4") == 130
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_on_a_real_process(tmp_path):
+    """SIGINT while frames are being written: exit 130, whole frames only, no temporary files."""
+    out = tmp_path / "f"
+    proc = subprocess.Popen([sys.executable, "-m", "splatgl", "render", str(demo_scene_path()), "--path", "orbit:400",
+                             "--width", "160", "--height", "120", "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (out.is_dir() and len(list(out.iterdir())) >= 2):
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    files = sorted(out.iterdir())
+    assert 2 <= len(files) < 400 and all(not p.name.startswith(".") for p in files)
+    for p in files:
+        assert read_image(p).shape == (120, 160, 3)  # every file left is a whole image
+
+
+def test_progress_reports_fps_and_eta(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("SPLATGL_PROGRESS", "1")
+    assert _render("--path", "orbit:4", *SIZE, "-o", tmp_path / "f", "--timings") == 0
+    out = capsys.readouterr()
+    assert "frames (" in out.err and " fps, ETA 0:0" in out.err and "100.0% (4 / 4)" in out.err
+    assert "renderer stages" in out.out
+
+
+def test_render_many_api_equals_render(gl_renderer):
+    scene = load_scene(demo_scene_path())
+    cams = orbit(scene, 3, 48, 32)
+    many = list(gl_renderer.render_many(scene, cams))
+    for cam, img in zip(cams, many):
+        np.testing.assert_array_equal(img, gl_renderer.render(scene, cam))
+    layers = next(gl_renderer.render_many(scene, cams[:1], depth=True))
+    assert layers.depth.shape == (32, 48) and np.array_equal(layers.rgba, many[0])
+
+
+def test_path_command_writes_files_render_reads(tmp_path, capsys):
+    for gen, extra in (("orbit", [str(demo_scene_path())]), ("interpolate", ["--cameras", str(tmp_path / "o.json"), "--select", "0,2"])):
+        for fmt in ("splatgl", "nerfstudio", "3dgs"):
+            name = tmp_path / ("o.json" if gen == "orbit" and fmt == "splatgl" else f"{gen}_{fmt}.json")
+            assert main(["path", gen, *extra, "--frames", "4", "--as", fmt, "-o", str(name),
+                         *(["--width", "96", "--height", "64"] if gen == "orbit" else [])]) == 0
+            cams = splatgl.load_cameras(name)
+            assert len(cams) == 4 and (cams[0].width, cams[0].height) == (96, 64)
+    orbit_cams = orbit(load_scene(demo_scene_path()), 4, 96, 64)
+    for cam, got in zip(orbit_cams, splatgl.load_cameras(tmp_path / "o.json")):
+        np.testing.assert_allclose(got.world_to_camera, cam.world_to_camera, atol=1e-12)
+    inter = json.loads((tmp_path / "interpolate_splatgl.json").read_text())
+    assert len(inter["keyframes"]) == 2 and inter["frames"] == 4  # an editable keyframe file
+    capsys.readouterr()
+    assert main(["path", "spiral", "--cameras", str(tmp_path / "o.json"), "-o", str(tmp_path / "bad.txt")]) == 2
+    assert "path files are JSON" in capsys.readouterr().err
