@@ -16,6 +16,7 @@ import numpy as np
 
 from .camera import Camera
 from .cull import CullData, cull_visible
+from .gl.radix_sort import RadixSorter, device_depth_sort
 from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
@@ -114,6 +115,7 @@ class QuadRenderer:
         self.near = resolve_near(settings, scene.robust_radius)
         self.buffers = SceneBuffers(ctx, scene, settings.half_sh)
         self._cull_data: CullData | None = None  # built on the first culled view
+        self._sorter: RadixSorter | None = None  # built on the first device sort
         self._index_buffer: moderngl.Buffer | None = None
         self._prepared: moderngl.Buffer | None = None
         self._vao: moderngl.VertexArray | None = None
@@ -194,8 +196,12 @@ class QuadRenderer:
             keep = np.flatnonzero(p_cam[:, 2] > self.near).astype(np.uint32)  # keys need z > 0
             depth = p_cam[keep, 2]
         t1 = time.perf_counter()
-        sort = bucket_sort if self.settings.sort_key is SortKey.BUCKET16 else depth_sort
-        order = sort(depth, keep)
+        if self.settings.sort_key is SortKey.GPU:
+            self._sorter = self._sorter or RadixSorter(self.ctx, self.programs)
+            order = device_depth_sort(self._sorter, depth, keep)
+        else:
+            sort = bucket_sort if self.settings.sort_key is SortKey.BUCKET16 else depth_sort
+            order = sort(depth, keep)
         t2 = time.perf_counter()
         self._times_cull, self._times_sort = t1 - t0, t2 - t1
         self._order_key, self._order = key, order
@@ -342,4 +348,7 @@ class QuadRenderer:
             if obj is not None:
                 obj.release()
         self._vao = self._index_buffer = self._prepared = self._target = None
+        if self._sorter is not None:
+            self._sorter.release()
+            self._sorter = None
         self.buffers.release()
