@@ -134,6 +134,21 @@ class CullData:
     def count(self) -> int:
         return int(self.xyz.shape[1])
 
+    @classmethod
+    def from_scene(cls, scene, block: int = 1 << 16) -> "CullData":
+        """The cull data of a :class:`splatgl.scene.Scene`, activated block by block (no
+        full-size activated copy of the scene is made or cached)."""
+        n = scene.count
+        xyz = np.empty((3, n), np.float32)
+        max_scale = np.empty(n, np.float32)
+        opac = np.empty(n, np.float32)
+        for start in range(0, n, block):
+            rows = scene.activated_rows(start, min(n, start + block))
+            xyz[:, start:start + block] = rows.relative_means.T
+            max_scale[start:start + block] = rows.scales.max(axis=1)
+            opac[start:start + block] = rows.opacities
+        return cls(xyz.T, max_scale, opac)
+
 
 def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = False,
                  scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

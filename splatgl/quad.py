@@ -187,8 +187,7 @@ class QuadRenderer:
         t0 = time.perf_counter()
         if self.settings.cull:
             if self._cull_data is None:
-                self._cull_data = CullData(self.scene.relative_means, self.scene.scales.max(axis=1),
-                                           self.scene.opacities)
+                self._cull_data = CullData.from_scene(self.scene)
             keep, depth = cull_visible(self._cull_data, anchored_camera(camera, self.scene.anchor),
                                        self.near, self.settings.antialias, camera.scale)
         else:

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneFormatError
+from ..memory import check_fits
 from ..scene import Scene, SplatKind, activate, sh_degree_from_rest_count, sh_to_rest
 
 NAME = "ply"
@@ -367,6 +368,7 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
             else:
                 offset, dtype = _vertex_layout(path, header, os.fstat(fh.fileno()).st_size)
                 _check_not_empty(path, count)
+                _check_memory(path, prop_names, count, min(count, CHUNK_ROWS) * dtype.itemsize)
                 plan = _Columns(path, prop_names, count)
                 _read_rows_chunked(path, fh, offset, dtype, count, plan, progress, what)
     except OSError as exc:
@@ -375,6 +377,14 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
     plan.freeze()
     return activate(path, plan.means, plan.quats, plan.log_scales, plan.opacity, plan.sh, kind,
                     drop_invalid)
+
+
+def _check_memory(path, names: list[str], count: int, chunk_bytes: int) -> None:
+    """The one-line 'needs X GB, Y GB available' error before any array is allocated."""
+    n_rest = sum(1 for n in names if _REST_RE.match(n))
+    degree = next((d for d in range(4) if 3 * ((d + 1) ** 2 - 1) == n_rest), 3)
+    surfel = "scale_1" in names and "scale_2" not in names
+    check_fits(path, count, degree, surfel, chunk_bytes)
 
 
 def _check_not_empty(path, count: int) -> None:
