@@ -134,6 +134,14 @@ class CullData:
     def count(self) -> int:
         return int(self.xyz.shape[1])
 
+    def subset(self, rows: np.ndarray) -> "CullData":
+        """The cull data of ``rows`` (index array) only, in that order (no recomputation)."""
+        out = object.__new__(CullData)
+        out.xyz = np.ascontiguousarray(self.xyz[:, rows])
+        for name in ("max_scale", "opacities", "radius", "alive", "faint"):
+            setattr(out, name, getattr(self, name)[rows])
+        return out
+
     @classmethod
     def from_scene(cls, scene, block: int = 1 << 16) -> "CullData":
         """The cull data of a :class:`splatgl.scene.Scene`, activated block by block (no

@@ -195,16 +195,19 @@ class QuadRenderer:
             keep = np.flatnonzero(p_cam[:, 2] > self.near).astype(np.uint32)  # keys need z > 0
             depth = p_cam[keep, 2]
         t1 = time.perf_counter()
-        if self.settings.sort_key is SortKey.GPU:
-            self._sorter = self._sorter or RadixSorter(self.ctx, self.programs)
-            order = device_depth_sort(self._sorter, depth, keep)
-        else:
-            sort = bucket_sort if self.settings.sort_key is SortKey.BUCKET16 else depth_sort
-            order = sort(depth, keep)
+        order = self.sort_visible(depth, keep)
         t2 = time.perf_counter()
         self._times_cull, self._times_sort = t1 - t0, t2 - t1
         self._order_key, self._order = key, order
         return order
+
+    def sort_visible(self, depth: np.ndarray, keep: np.ndarray) -> np.ndarray:
+        """The sort stage the settings choose: (M,) uint32 ``keep`` front to back by ``depth``."""
+        if self.settings.sort_key is SortKey.GPU:
+            self._sorter = self._sorter or RadixSorter(self.ctx, self.programs)
+            return device_depth_sort(self._sorter, depth, keep)
+        sort = bucket_sort if self.settings.sort_key is SortKey.BUCKET16 else depth_sort
+        return sort(depth, keep)
 
     def _upload(self, order: np.ndarray, prog: moderngl.Program) -> None:
         """Write the sorted indices (the only per-view upload) and bind them for the draw."""
