@@ -45,6 +45,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--depth-png", type=Path, default=None, metavar="FILE",
                    help="also write a colourised preview of the expected depth with a scale bar")
     p.add_argument("--timings", action="store_true", help="print the frame's stage times")
+    p.add_argument("--lod-threshold", type=float, default=None, metavar="PX",
+                   help="level of detail (SCENE from 'splatgl lod'): draw the coarsest nodes whose "
+                        "bounding sphere projects to at most PX pixels (e.g. 1)")
+    p.add_argument("--lod-budget", type=int, default=None, metavar="N",
+                   help="level of detail: the finest cut of at most N nodes per view")
     add_camera_arguments(p)
     add_settings_arguments(p)
 
@@ -56,6 +61,29 @@ def run(args: argparse.Namespace) -> int:
     if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
         raise SplatglError(f"{args.depth_png}: --depth-png needs a .png or .tif file name")
     times = None
+    if args.lod_threshold is not None or args.lod_budget is not None:
+        from ..lod.command import render_lod
+        out, times = render_lod(args, settings, camera, want_depth)
+        kind_text = f"{kind.value}, level of detail"
+    else:
+        out, times = _render(scene, settings, camera, kind, want_depth)
+        kind_text = kind.value
+    depth = out.expected_depth() if want_depth else None
+    write_image(args.output, out.rgba, args.bit_depth, depth=depth)
+    if args.depth_png is not None:
+        write_image(args.depth_png, depth_preview(depth, out.alpha))
+        print(f"wrote {args.depth_png} (expected depth)")
+    print(f"wrote {args.output} ({camera.width}x{camera.height}, {scene.count} splats, {kind_text})")
+    if args.timings and times is not None:
+        parts = ", ".join(f"{k} {v * 1e3:.1f} ms" if isinstance(v, float) else f"{k} {v}"
+                          for k, v in vars(times).items())
+        print(f"timings: {parts}", file=sys.stdout)
+    return 0
+
+
+def _render(scene, settings, camera, kind, want_depth):
+    """(RenderOutput, the renderer's last_times or None) of one view."""
+    times = None
     with Renderer() if kind is not RendererKind.REFERENCE else nullcontext() as renderer:
         if renderer is None:
             out = render_reference_layers(scene, camera, settings)
@@ -65,13 +93,4 @@ def run(args: argparse.Namespace) -> int:
             out = RenderOutput(renderer.render(scene, camera, settings, kind), None)
         if renderer is not None:
             times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
-    depth = out.expected_depth() if want_depth else None
-    write_image(args.output, out.rgba, args.bit_depth, depth=depth)
-    if args.depth_png is not None:
-        write_image(args.depth_png, depth_preview(depth, out.alpha))
-        print(f"wrote {args.depth_png} (expected depth)")
-    print(f"wrote {args.output} ({camera.width}x{camera.height}, {scene.count} splats, {kind.value})")
-    if args.timings and times is not None:
-        parts = ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in vars(times).items())
-        print(f"timings: {parts}", file=sys.stdout)
-    return 0
+    return out, times
