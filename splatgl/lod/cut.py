@@ -49,50 +49,100 @@ class CutData:
         return cls(centres, tree.radius, tree.offsets, tree.branching, anchor)
 
 
-def _sizes_and_inside(data: CutData, ids: np.ndarray, camera: Camera):
-    """(projected radius in px, sphere touches the frustum) for the nodes ``ids``."""
-    cam = anchored_camera(camera, data.anchor)
-    r = cam.rotation.astype(np.float32)
-    t = cam.translation.astype(np.float32)
-    c = data.centres[:, ids]
-    rad = data.radius[ids] * np.float32(camera.scale)
-    p = [c[0] * r[i, 0] + c[1] * r[i, 1] + c[2] * r[i, 2] + t[i] for i in range(3)]
-    d = np.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
-    f = np.float32(max(camera.fx, camera.fy))
-    gap = d - rad
-    with np.errstate(divide="ignore"):
-        size = np.where(gap > 0, f * rad / np.maximum(gap, 1e-30), np.inf)
-    inside = p[2] + rad > 0
-    if not camera.is_orthographic:
-        for coord, fl, cc, extent in ((p[0], camera.fx, camera.cx, camera.width),
-                                      (p[1], camera.fy, camera.cy, camera.height)):
+#: A level is evaluated whole (contiguous, blocked) rather than gathered when its candidates
+#: are at least this fraction of it: a gather costs several times a contiguous pass.
+DENSE_FRACTION = 0.25
+#: Rows per block of a dense level pass (float32 temporaries stay in cache).
+BLOCK = 1 << 15
+
+
+class _View:
+    """Per-view constants of the size and frustum tests."""
+
+    def __init__(self, data: CutData, camera: Camera):
+        cam = anchored_camera(camera, data.anchor)
+        self.r = cam.rotation.astype(np.float32)
+        self.t = cam.translation.astype(np.float32)
+        self.scale = np.float32(camera.scale)
+        self.f = np.float32(max(camera.fx, camera.fy))
+        self.ortho = camera.is_orthographic
+        self.planes = []  # (slope, sqrt(1 + slope^2)) of the four side planes, per axis
+        for fl, cc, extent in ((camera.fx, camera.cx, camera.width), (camera.fy, camera.cy, camera.height)):
             lo, hi = -cc / fl, (extent - cc) / fl
-            inside &= (coord - np.float32(hi) * p[2]) <= rad * np.float32(np.sqrt(1 + hi * hi))
-            inside &= (np.float32(lo) * p[2] - coord) <= rad * np.float32(np.sqrt(1 + lo * lo))
-    else:
-        size = rad * f  # orthographic: the sphere's radius in pixels
+            self.planes.append((np.float32(lo), np.float32(np.sqrt(1 + lo * lo)),
+                                np.float32(hi), np.float32(np.sqrt(1 + hi * hi))))
+
+    def test(self, c: np.ndarray, rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(projected radius in px, sphere touches the frustum) for centres (3, K), radii (K,)."""
+        r, t = self.r, self.t
+        rad = rad * self.scale
+        p = [c[0] * r[i, 0] + c[1] * r[i, 1] + c[2] * r[i, 2] + t[i] for i in range(3)]
+        inside = p[2] + rad > 0
+        if self.ortho:
+            return rad * self.f, inside
+        d = np.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+        gap = d - rad
+        with np.errstate(divide="ignore", invalid="ignore"):
+            size = np.where(gap > 0, self.f * rad / gap, np.inf)
+        for coord, (lo, n_lo, hi, n_hi) in zip(p[:2], self.planes):
+            inside &= coord - hi * p[2] <= rad * n_hi
+            inside &= lo * p[2] - coord <= rad * n_lo
+        return size, inside
+
+
+def _dense(data: CutData, view: _View, lo: int, hi: int):
+    """Sizes and frustum flags of the contiguous node rows lo:hi, block by block."""
+    size = np.empty(hi - lo, np.float32)
+    inside = np.empty(hi - lo, bool)
+    for s in range(lo, hi, BLOCK):
+        e = min(hi, s + BLOCK)
+        size[s - lo:e - lo], inside[s - lo:e - lo] = view.test(data.centres[:, s:e], data.radius[s:e])
     return size, inside
 
 
 def select_cut(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX) -> np.ndarray:
-    """(K,) int64 node rows of the cut at ``threshold_px``, ascending."""
+    """(K,) int64 node rows of the cut at ``threshold_px``, ascending.
+
+    Level by level from the root: ``expanded`` marks the level's nodes that are in view and
+    larger than the threshold (their children are the next level's candidates).  A level whose
+    candidates are many is evaluated whole (contiguous) and masked; otherwise only the
+    candidates are gathered.
+    """
     offsets, b = data.offsets, data.branching
+    view = _View(data, camera)
     top = len(offsets) - 2
-    cand = np.arange(offsets[top], offsets[top + 1])
+    expanded = None  # bool mask over the level above's nodes
     chosen = []
     for level in range(top, -1, -1):
-        if not cand.size:
+        lo, hi = int(offsets[level]), int(offsets[level + 1])
+        n = hi - lo
+        if expanded is None:
+            cand_mask = np.ones(n, bool)
+        else:
+            cand_mask = np.repeat(expanded, b)[:n]
+        n_cand = int(np.count_nonzero(cand_mask))
+        if n_cand == 0:
             break
-        size, inside = _sizes_and_inside(data, cand, camera)
-        cand, size = cand[inside], size[inside]
-        if level == 0:
-            chosen.append(cand)
-            break
-        fine = size <= threshold_px
-        chosen.append(cand[fine])
-        coarse = cand[~fine] - offsets[level]
-        kids = (coarse[:, None] * b + np.arange(b)).ravel()
-        cand = kids[kids < offsets[level] - offsets[level - 1]] + offsets[level - 1]
+        if n_cand >= DENSE_FRACTION * n:
+            size, inside = _dense(data, view, lo, hi)
+            keep = cand_mask & inside
+            if level == 0:
+                chosen.append(np.flatnonzero(keep) + lo)
+                break
+            fine = size <= np.float32(threshold_px)
+            chosen.append(np.flatnonzero(keep & fine) + lo)
+            expanded = keep & ~fine
+        else:
+            local = np.flatnonzero(cand_mask)
+            size, inside = view.test(data.centres[:, local + lo], data.radius[local + lo])
+            local, size = local[inside], size[inside]
+            if level == 0:
+                chosen.append(local + lo)
+                break
+            fine = size <= np.float32(threshold_px)
+            chosen.append(local[fine] + lo)
+            expanded = np.zeros(n, bool)
+            expanded[local[~fine]] = True
     return np.sort(np.concatenate(chosen)) if chosen else np.zeros(0, np.int64)
 
 
