@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .scale import ScaleRow
+from .scale import ScaleRow  # noqa: F401 (annotations)
 
 #: The figures whose growth with the splat count is fitted and plotted: (label, getter).
 SERIES = (
@@ -109,3 +109,32 @@ def plot(path: Path, rows: list[ScaleRow]) -> None:
     fig.savefig(tmp, dpi=110)
     plt.close(fig)
     tmp.replace(path)
+
+
+def main(argv=None) -> int:
+    """Merge scale.json files of separate runs (e.g. one per size) into one table and plot."""
+    import argparse
+
+    from .scale import ScaleRow
+
+    p = argparse.ArgumentParser(prog="python -m splatgl.bench.scale_report", description=main.__doc__)
+    p.add_argument("inputs", nargs="+", type=Path, help="scale.json files")
+    p.add_argument("--out", type=Path, required=True, help="folder for the merged scale.json, scale.png")
+    args = p.parse_args(argv)
+    rows, extra = [], {}
+    for path in args.inputs:
+        doc = json.loads(path.read_text())
+        rows += [ScaleRow(**r) for r in doc.pop("rows")]
+        doc.pop("slopes", None)
+        extra.update(doc)
+    rows.sort(key=lambda r: (r.splats, r.sh_degree, r.width))
+    print(table(rows))
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_json(args.out / "scale.json", rows, extra)
+    plot(args.out / "scale.png", rows)
+    print(f"wrote {args.out / 'scale.json'}, scale.png")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
