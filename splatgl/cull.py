@@ -135,9 +135,11 @@ class CullData:
         return int(self.xyz.shape[1])
 
     def subset(self, rows: np.ndarray) -> "CullData":
-        """The cull data of ``rows`` (index array) only, in that order (no recomputation)."""
+        """The cull data of ``rows`` (index array, or a slice: then views, no copy) only, in
+        that order (no recomputation)."""
         out = object.__new__(CullData)
-        out.xyz = np.ascontiguousarray(self.xyz[:, rows])
+        # each row of xyz must be contiguous (the cull streams rows); a column slice keeps that
+        out.xyz = self.xyz[:, rows] if isinstance(rows, slice) else np.ascontiguousarray(self.xyz[:, rows])
         for name in ("max_scale", "opacities", "radius", "alive", "faint"):
             setattr(out, name, getattr(self, name)[rows])
         return out

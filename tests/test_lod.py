@@ -158,3 +158,29 @@ def test_cli_builds_and_renders_a_cut(tmp_path, shared_scenes):
     assert proc.returncode == 2
     assert proc.stderr.strip() == (f"splatgl: error: {src}: not a level-of-detail file; build one "
                                    "with 'splatgl lod SCENE -o SCENE.lod.ply'")
+
+
+def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
+    """Once a view's cut is >= 90% leaves, views no farther draw the leaves directly: the same
+    image as full detail up to float32 rounding (the node scene's anchor, which every centre is
+    taken relative to, is not the leaves' own: measured 92.9 dB, max error 0.0018), no cut time."""
+    from splatgl.lod.render import LEAF_SHARE_SKIP
+
+    scene, tree = biker
+    close = default_camera(scene, 96, 64, distance_scale=0.8)
+    closer = default_camera(scene, 96, 64, distance_scale=0.6)
+    lod = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
+    full = QuadRenderer(ctx, scene, RenderSettings())
+    try:
+        lod.render(close)
+        assert lod.last_cut_s > 0 and lod.skip_within is not None  # cut was mostly leaves
+        assert LEAF_SHARE_SKIP == 0.9
+        got = lod.render(closer)
+        assert lod.last_cut_s == 0.0 and lod.last_cut_nodes == scene.count
+        assert image_errors(got, full.render(closer)).psnr >= 80.0
+        far = default_camera(scene, 96, 64, distance_scale=8.0)
+        lod.render(far)
+        assert lod.last_cut_s > 0 and lod.last_cut_nodes < scene.count  # far views still cut
+    finally:
+        lod.release()
+        full.release()
