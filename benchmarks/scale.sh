@@ -8,5 +8,6 @@ OUT=${OUT:-bench-scale}
 splatgl bench --scale --sizes 0.1M,0.3M --sh3-sizes none --out "$OUT/a"
 splatgl bench --scale --sizes 1M --sh3-sizes 1M --out "$OUT/b"
 splatgl bench --scale --sizes 3M,6M --sh3-sizes none --out "$OUT/c"
-python -m splatgl.bench.scale_report "$OUT"/a/scale.json "$OUT"/b/scale.json "$OUT"/c/scale.json --out "$OUT"
+splatgl bench --scale --sizes none --sh3-sizes 6M --width 1280 --height 720 --out "$OUT/d"
+python -m splatgl.bench.scale_report "$OUT"/{a,b,c,d}/scale.json --out "$OUT"
 python -m splatgl.bench.lod_bench --sizes 3M,6M --out "$OUT"

@@ -101,7 +101,8 @@ def plot(path: Path, rows: list[ScaleRow]) -> None:
         ax.set_xlabel("splats")
         ax.set_ylabel(label)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        if ax.get_legend_handles_labels()[0]:  # SH3-only runs plot nothing
+            ax.legend(fontsize=7)
     ax_t.set_title("time against scene size")
     ax_m.set_title("peak resident memory against scene size")
     fig.tight_layout()
