@@ -82,6 +82,14 @@ SH_C3 = (
 MAX_SH_DEGREE = 3
 
 
+#: GPU radix sort (shaders/radix_*.comp, splatgl/gl/radix_sort.py): bits per pass (16 digit
+#: values), threads per work group, keys per thread.  A group sorts one tile of
+#: RADIX_GROUP * RADIX_ITEMS = 4096 keys per pass; 8 passes cover 32-bit keys.
+RADIX_BITS = 4
+RADIX_GROUP = 256
+RADIX_ITEMS = 16
+
+
 def sh_coeff_count(degree: int) -> int:
     """Number of SH coefficients per colour channel for ``degree`` (1, 4, 9 or 16)."""
     return (degree + 1) ** 2
@@ -119,6 +127,9 @@ def glsl_defines() -> dict[str, str]:
         "FAST_CORNER_SIGMAS": _glsl_float(FAST_CORNER_SIGMAS),
         "SH_C0": _glsl_float(SH_C0),
         "SH_C1": _glsl_float(SH_C1),
+        "RADIX_BITS": str(RADIX_BITS),
+        "RADIX_GROUP": str(RADIX_GROUP),
+        "RADIX_ITEMS": str(RADIX_ITEMS),
     }
     for i, c in enumerate(SH_C2):
         out[f"SH_C2_{i}"] = _glsl_float(c)

@@ -15,7 +15,8 @@ import moderngl
 import numpy as np
 
 from .camera import Camera
-from .cull import cull
+from .cull import CullData, cull_visible
+from .gl.radix_sort import RadixSorter, device_depth_sort
 from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
@@ -113,7 +114,8 @@ class QuadRenderer:
         self.programs = programs or ProgramCache(ctx)
         self.near = resolve_near(settings, scene.robust_radius)
         self.buffers = SceneBuffers(ctx, scene, settings.half_sh)
-        self._max_scale = scene.scales.max(axis=1)
+        self._cull_data: CullData | None = None  # built on the first culled view
+        self._sorter: RadixSorter | None = None  # built on the first device sort
         self._index_buffer: moderngl.Buffer | None = None
         self._prepared: moderngl.Buffer | None = None
         self._vao: moderngl.VertexArray | None = None
@@ -183,20 +185,29 @@ class QuadRenderer:
             return self._order
         self._stale_frames = 0
         t0 = time.perf_counter()
-        p_cam = to_camera(self.scene.relative_means, anchored_camera(camera, self.scene.anchor))
         if self.settings.cull:
-            mask = cull(p_cam, self._max_scale * camera.scale, self.scene.opacities, camera, self.near,
-                        self.settings.antialias)
+            if self._cull_data is None:
+                self._cull_data = CullData.from_scene(self.scene)
+            keep, depth = cull_visible(self._cull_data, anchored_camera(camera, self.scene.anchor),
+                                       self.near, self.settings.antialias, camera.scale)
         else:
-            mask = p_cam[:, 2] > self.near  # sort keys need positive depths
-        keep = np.flatnonzero(mask)
+            p_cam = to_camera(self.scene.relative_means, anchored_camera(camera, self.scene.anchor))
+            keep = np.flatnonzero(p_cam[:, 2] > self.near).astype(np.uint32)  # keys need z > 0
+            depth = p_cam[keep, 2]
         t1 = time.perf_counter()
-        sort = bucket_sort if self.settings.sort_key is SortKey.BUCKET16 else depth_sort
-        order = sort(p_cam[keep, 2], keep.astype(np.uint32))
+        order = self.sort_visible(depth, keep)
         t2 = time.perf_counter()
         self._times_cull, self._times_sort = t1 - t0, t2 - t1
         self._order_key, self._order = key, order
         return order
+
+    def sort_visible(self, depth: np.ndarray, keep: np.ndarray) -> np.ndarray:
+        """The sort stage the settings choose: (M,) uint32 ``keep`` front to back by ``depth``."""
+        if self.settings.sort_key is SortKey.GPU:
+            self._sorter = self._sorter or RadixSorter(self.ctx, self.programs)
+            return device_depth_sort(self._sorter, depth, keep)
+        sort = bucket_sort if self.settings.sort_key is SortKey.BUCKET16 else depth_sort
+        return sort(depth, keep)
 
     def _upload(self, order: np.ndarray, prog: moderngl.Program) -> None:
         """Write the sorted indices (the only per-view upload) and bind them for the draw."""
@@ -339,4 +350,7 @@ class QuadRenderer:
             if obj is not None:
                 obj.release()
         self._vao = self._index_buffer = self._prepared = self._target = None
+        if self._sorter is not None:
+            self._sorter.release()
+            self._sorter = None
         self.buffers.release()

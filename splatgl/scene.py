@@ -112,8 +112,7 @@ class Scene:
     @functools.cached_property
     def scales(self) -> np.ndarray:
         """(N, 3) or (N, 2) float32 activated scales ``exp(log_scales)``, world units."""
-        with np.errstate(over="ignore"):
-            return _frozen(np.exp(self.log_scales.astype(np.float64)))
+        return _frozen(activate_scales(self.log_scales))
 
     @functools.cached_property
     def opacities(self) -> np.ndarray:
@@ -121,21 +120,7 @@ class Scene:
 
         0 for rows whose quaternion is degenerate (see :attr:`rotations`): renderers skip them.
         """
-        with np.errstate(over="ignore"):
-            o = 1.0 / (1.0 + np.exp(-self.opacity_logits.astype(np.float64)))
-        # Guard (stress case zero_quats): a Scene built directly (not through the loaders) can
-        # hold zero or sub-1e-12 quaternions; no rotation, hence no covariance, exists for them,
-        # and a 1e-30 quaternion rendered as the identity (max error 0.75).  Opacity 0 makes
-        # every renderer skip the row (cull, alpha < 1/255) without a special case anywhere.
-        return _frozen(np.where(self._rotation_ok, o, 0.0))
-
-    @functools.cached_property
-    def _rotation_ok(self) -> np.ndarray:
-        """(N,) bool: the quaternion's norm is finite and at least MIN_QUAT_NORM."""
-        q = self.quats.astype(np.float64)
-        with np.errstate(over="ignore", invalid="ignore"):
-            norm = np.sqrt((q * q).sum(axis=1))
-        return np.isfinite(norm) & (norm >= MIN_QUAT_NORM)
+        return _frozen(activate_opacities(self.opacity_logits, self.quats))
 
     @functools.cached_property
     def rotations(self) -> np.ndarray:
@@ -143,11 +128,19 @@ class Scene:
 
         Rows with a degenerate quaternion get the identity (never NaN; their opacity is 0).
         """
-        q = self.quats.astype(np.float64)
-        ok = self._rotation_ok
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            unit = q / np.sqrt((q * q).sum(axis=1, keepdims=True))
-        return _frozen(np.where(ok[:, None], unit, [1.0, 0.0, 0.0, 0.0]))
+        return _frozen(activate_rotations(self.quats))
+
+    def activated_rows(self, start: int, stop: int) -> "ActivatedRows":
+        """Rows ``start:stop`` activated (the same values as :attr:`relative_means`,
+        :attr:`opacities`, :attr:`rotations`, :attr:`scales`), computed now and not cached:
+        what uploads and per-scene precomputations walk in chunks, so a large scene never holds
+        a second full-size activated copy."""
+        rows = slice(start, stop)
+        return ActivatedRows(
+            (self.means[rows].astype(np.float64) - self.anchor).astype(np.float32),
+            activate_opacities(self.opacity_logits[rows], self.quats[rows]).astype(np.float32),
+            activate_rotations(self.quats[rows]).astype(np.float32),
+            activate_scales(self.log_scales[rows]).astype(np.float32))
 
     @functools.cached_property
     def anchor(self) -> np.ndarray:
@@ -208,6 +201,53 @@ def _frozen(arr: np.ndarray) -> np.ndarray:
     return out
 
 
+@dataclass(frozen=True)
+class ActivatedRows:
+    """A chunk of activated rows (float32): ``relative_means`` (M, 3) (``means - anchor``),
+    ``opacities`` (M,), ``rotations`` (M, 4) unit (w, x, y, z), ``scales`` (M, 3) or (M, 2)."""
+
+    relative_means: np.ndarray
+    opacities: np.ndarray
+    rotations: np.ndarray
+    scales: np.ndarray
+
+
+def activate_scales(log_scales: np.ndarray) -> np.ndarray:
+    """(N, S) float64 ``exp(log_scales)`` (world units)."""
+    with np.errstate(over="ignore"):
+        return np.exp(log_scales.astype(np.float64))
+
+
+def rotation_ok(quats: np.ndarray) -> np.ndarray:
+    """(N,) bool: the quaternion's norm is finite and at least MIN_QUAT_NORM."""
+    q = quats.astype(np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        norm = np.sqrt((q * q).sum(axis=1))
+    return np.isfinite(norm) & (norm >= MIN_QUAT_NORM)
+
+
+def activate_opacities(logits: np.ndarray, quats: np.ndarray) -> np.ndarray:
+    """(N,) float64 ``sigmoid(logits)``, 0 where the quaternion is degenerate.
+
+    Guard (stress case zero_quats): a Scene built directly (not through the loaders) can hold
+    zero or sub-1e-12 quaternions; no rotation, hence no covariance, exists for them, and a
+    1e-30 quaternion rendered as the identity (max error 0.75).  Opacity 0 makes every renderer
+    skip the row (cull, alpha < 1/255) without a special case anywhere.
+    """
+    with np.errstate(over="ignore"):
+        o = 1.0 / (1.0 + np.exp(-logits.astype(np.float64)))
+    return np.where(rotation_ok(quats), o, 0.0)
+
+
+def activate_rotations(quats: np.ndarray) -> np.ndarray:
+    """(N, 4) float64 unit quaternions; the identity where the quaternion is degenerate."""
+    q = quats.astype(np.float64)
+    ok = rotation_ok(quats)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        unit = q / np.sqrt((q * q).sum(axis=1, keepdims=True))
+    return np.where(ok[:, None], unit, [1.0, 0.0, 0.0, 0.0])
+
+
 def sh_degree_from_rest_count(path: object, n_rest: int) -> int:
     """SH degree from the number of ``f_rest_*`` properties (0, 9, 24 or 45)."""
     for degree in range(MAX_SH_DEGREE + 1):
@@ -250,6 +290,19 @@ def _report_bad(path, field, bad: np.ndarray, what: str, drop: bool, dropped: np
     dropped |= bad
 
 
+#: Rows per block of the validation in :func:`activate` (its temporaries, such as float64
+#: quaternions or an (N, 48) mask, exist for one block at a time, not for the whole scene).
+VALIDATE_BLOCK = 1 << 16
+
+
+def _rows_where(arr: np.ndarray, test) -> np.ndarray:
+    """(N,) bool ``test(block)`` evaluated over blocks of VALIDATE_BLOCK rows of ``arr``."""
+    out = np.empty(arr.shape[0], bool)
+    for start in range(0, arr.shape[0], VALIDATE_BLOCK):
+        out[start:start + VALIDATE_BLOCK] = test(arr[start:start + VALIDATE_BLOCK])
+    return out
+
+
 def activate(
     path: object,
     means: np.ndarray,
@@ -282,13 +335,17 @@ def activate(
         "opacity": opacity_logits.reshape(n, 1), "sh": sh.reshape(n, -1),
     }
     for name, arr in fields.items():
-        _report_bad(path, name, ~np.isfinite(arr).all(axis=1), "hold NaN or Inf", drop_invalid,
-                    dropped)
-    q64 = quats.astype(np.float64)
-    with np.errstate(invalid="ignore", over="ignore"):
-        norms = np.sqrt((q64 * q64).sum(axis=1))
-        _report_bad(path, "rotation", np.isfinite(norms) & (norms < MIN_QUAT_NORM),
-                    "have a zero or degenerate quaternion", drop_invalid, dropped)
+        _report_bad(path, name, _rows_where(arr, lambda a: ~np.isfinite(a).all(axis=1)),
+                    "hold NaN or Inf", drop_invalid, dropped)
+
+    def degenerate(q: np.ndarray) -> np.ndarray:
+        q64 = q.astype(np.float64)
+        with np.errstate(invalid="ignore", over="ignore"):
+            norms = np.sqrt((q64 * q64).sum(axis=1))
+        return np.isfinite(norms) & (norms < MIN_QUAT_NORM)
+
+    _report_bad(path, "rotation", _rows_where(quats, degenerate),
+                "have a zero or degenerate quaternion", drop_invalid, dropped)
     if dropped.any():
         keep = ~dropped
         warnings.warn(f"{path}: dropped {int(dropped.sum())} invalid row(s) of {n}", stacklevel=2)

@@ -38,10 +38,14 @@ class SortKey(enum.Enum):
     EXACT: the float32 bits of view z (exact order; ties by index).
     BUCKET16: z quantised into 65536 buckets between the nearest and farthest splat (the
         counting-sort keys some web viewers use; breaks scenes with distant splats).
+    GPU: the EXACT keys sorted on the device by a compute-shader radix sort
+        (:mod:`splatgl.gl.radix_sort`): the identical order.  On llvmpipe the CPU sort is
+        faster (``splatgl bench --scale`` measures both), so EXACT stays the default.
     """
 
     EXACT = "exact"
     BUCKET16 = "bucket16"
+    GPU = "gpu"
 
 
 class Preprocess(enum.Enum):

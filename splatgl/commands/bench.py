@@ -81,6 +81,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write bench.csv, bench.json and bench.png there (created if missing; "
                         "existing files of those names are replaced)")
     p.add_argument("--json", action="store_true", help="print the JSON instead of the table")
+    p.add_argument("--scale", action="store_true",
+                   help="the scale benchmark instead: scenes of --sizes splats built from the "
+                        "shared real files (and one SH3 size), load time, peak memory, GPU bytes "
+                        "per splat, cull/sort/pre-pass/draw and tile frame times, CPU and GPU "
+                        "sort, log-log slopes (see splatgl/bench/scale.py)")
+    p.add_argument("--sizes", default=None, metavar="LIST",
+                   help="--scale sizes, e.g. 0.1M,0.3M,1M,3M,6M (the default); 'k' and 'M' suffixes")
+    p.add_argument("--sh3-sizes", default=None, metavar="LIST",
+                   help="--scale sizes also measured at SH degree 3 (default 1M; 'none' for none)")
     p.add_argument("--savings", action="store_true",
                    help="also run the paired rows that prove each skipped cost: SH0 against the "
                         "same scene padded to SH3, 90%% off-screen culled and not, still against "
@@ -129,6 +138,9 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.scale:
+        from ..bench.scale_cli import run_scale_command
+        return run_scale_command(args)
     quick = args.quick
     width = args.width or (160 if quick else 1280)
     height = args.height or (120 if quick else 720)

@@ -17,6 +17,7 @@ from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args)
 from ._render_path import add_path_arguments, run_path
+from ..stereo import StereoLayout, combine, eye_cameras
 
 NAME = "render"
 ORDER = 10
@@ -51,6 +52,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also write a colourised preview of the expected depth with a scale bar")
     p.add_argument("--timings", action="store_true",
                    help="print the frame's stage times (ms) and counts (splats drawn, keys sorted)")
+    p.add_argument("--lod-threshold", type=float, default=None, metavar="PX",
+                   help="level of detail (SCENE from 'splatgl lod'): draw the coarsest nodes whose "
+                        "bounding sphere projects to at most PX pixels (e.g. 1)")
+    p.add_argument("--lod-budget", type=int, default=None, metavar="N",
+                   help="level of detail: the finest cut of at most N nodes per view")
     add_camera_arguments(p)
     add_settings_arguments(p)
     add_path_arguments(p)
@@ -63,21 +69,37 @@ def run(args: argparse.Namespace) -> int:
     check_convention(args, kind)
     if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
         raise SplatglError(f"{args.depth_png}: --depth-png needs a .png or .tif file name")
-    outputs = OutputFiles({"-o": args.output, "--depth-png": args.depth_png})
+    stereo = StereoLayout(args.stereo_layout) if args.stereo is not None else None
+    if stereo is StereoLayout.SEPARATE:
+        names = {f"-o ({eye} eye)": args.output.with_name(f"{args.output.stem}_{eye}{args.output.suffix}")
+                 for eye in ("left", "right")}
+    else:
+        names = {"-o": args.output}
+    outputs = OutputFiles({**names, "--depth-png": args.depth_png})
     scene, settings, camera = inputs_from_args(args)
     want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
-    progress = default_progress()
+    lod = args.lod_threshold is not None or args.lod_budget is not None
+    if lod and stereo is not None:
+        raise SplatglError("--stereo and --lod-threshold/--lod-budget cannot be combined yet")
     times = None
-    with Renderer() if kind is not RendererKind.REFERENCE else nullcontext() as renderer:
-        check_size(args, camera, kind, renderer.ctx if renderer is not None else None)
-        if renderer is None:
-            out = render_reference_layers(scene, camera, settings, progress)
-        elif want_depth:
-            out = renderer.render_layers(scene, camera, settings, kind, progress)
-        else:
-            out = RenderOutput(renderer.render(scene, camera, settings, kind, progress), None)
-        if renderer is not None:
-            times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
+    if lod:
+        from ..lod.command import render_lod
+        out, times = render_lod(args, settings, camera, want_depth)
+        eyes = [out]
+        kind_text = f"{kind.value}, level of detail"
+    else:
+        cameras = list(eye_cameras(camera, args.stereo)) if stereo is not None else [camera]
+        eyes, times = _render(args, scene, settings, cameras, kind, want_depth)
+        kind_text = kind.value
+    if stereo is StereoLayout.SEPARATE:
+        with outputs:
+            for key, eye in zip(names, eyes):
+                write_image(outputs.temp(key), eye.rgba, args.bit_depth,
+                            depth=eye.expected_depth() if want_depth else None)
+        for path in names.values():
+            print(f"wrote {path} ({camera.width}x{camera.height}, {scene.count} splats, {kind_text})")
+        return 0
+    out = combine(eyes[0], eyes[1], stereo) if stereo is not None else eyes[0]
     depth = out.expected_depth() if want_depth else None
     with outputs:
         write_image(outputs.temp("-o"), out.rgba, args.bit_depth, depth=depth)
@@ -85,7 +107,27 @@ def run(args: argparse.Namespace) -> int:
             write_image(outputs.temp("--depth-png"), depth_preview(depth, out.alpha))
     if args.depth_png is not None:
         print(f"wrote {args.depth_png} (expected depth)")
-    print(f"wrote {args.output} ({camera.width}x{camera.height}, {scene.count} splats, {kind.value})")
+    height, width = out.rgba.shape[:2]
+    print(f"wrote {args.output} ({width}x{height}, {scene.count} splats, {kind_text})")
     if args.timings and times is not None:
         print(f"timings: {format_timings(times)}")
     return 0
+
+
+def _render(args, scene, settings, cameras, kind, want_depth):
+    """(a RenderOutput per camera, the renderer's last_times or None): one context for all."""
+    progress = default_progress()
+    times = None
+    outs = []
+    with Renderer() if kind is not RendererKind.REFERENCE else nullcontext() as renderer:
+        for camera in cameras:
+            check_size(args, camera, kind, renderer.ctx if renderer is not None else None)
+            if renderer is None:
+                outs.append(render_reference_layers(scene, camera, settings, progress))
+            elif want_depth:
+                outs.append(renderer.render_layers(scene, camera, settings, kind, progress))
+            else:
+                outs.append(RenderOutput(renderer.render(scene, camera, settings, kind, progress), None))
+        if renderer is not None:
+            times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
+    return outs, times

@@ -10,6 +10,10 @@ from ..scene import Scene
 BINDING_A, BINDING_Q, BINDING_S, BINDING_DC, BINDING_SH = 0, 1, 2, 3, 4
 
 
+#: Rows per upload chunk: the only CPU-side copy of the GPU layout is one chunk's worth.
+UPLOAD_ROWS = 1 << 16
+
+
 def _vec4(columns: list[np.ndarray], n: int) -> np.ndarray:
     out = np.zeros((n, 4), np.float32)
     col = 0
@@ -27,6 +31,10 @@ class SceneBuffers:
     (scale.xy, 0, 0) for surfels, ``dc`` = (SH DC RGB, 0), ``sh`` = coefficients 1..K-1
     (K-1 x 3 per splat, float32 or with ``half_sh`` float16 packed two per uint; absent at
     degree 0).  Stored at the scene's own degree: nothing is padded to degree 3.
+
+    Uploaded :data:`UPLOAD_ROWS` rows at a time into buffers reserved at their final size,
+    activating each chunk on the way (:meth:`Scene.activated_rows`): no full-size activated or
+    packed copy of the scene exists on the CPU.
     """
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, half_sh: bool = False):
@@ -34,17 +42,34 @@ class SceneBuffers:
         self.scene = scene
         self.count = n
         self.sh_rest_coeffs = scene.sh.shape[1] - 1
+        self.half_sh = half_sh
         # Means relative to the scene's anchor (float32-safe far from the origin); the camera
         # uniforms fold the anchor back in (splatgl.quad.set_camera_uniforms).
-        self.a = ctx.buffer(_vec4([scene.relative_means, scene.opacities], n).tobytes())
-        self.q = ctx.buffer(np.ascontiguousarray(scene.rotations, np.float32).tobytes())
-        self.s = ctx.buffer(_vec4([scene.scales], n).tobytes())
-        self.dc = ctx.buffer(_vec4([scene.sh[:, 0]], n).tobytes())
-        self.half_sh = half_sh
-        rest = np.ascontiguousarray(scene.sh[:, 1:], np.float16 if half_sh else np.float32).ravel()
-        if half_sh and rest.size % 2:
-            rest = np.concatenate([rest, np.zeros(1, np.float16)])  # whole uints
-        self.sh = ctx.buffer(rest.tobytes()) if self.sh_rest_coeffs > 0 else None
+        self.a, self.q, self.s, self.dc = (ctx.buffer(reserve=16 * max(n, 1)) for _ in range(4))
+        rest_values = self.sh_rest_coeffs * 3
+        rest_bytes = rest_values * (2 if half_sh else 4)
+        if half_sh and (n * rest_values) % 2:
+            rest_bytes_total = n * rest_bytes + 2  # whole uints
+        else:
+            rest_bytes_total = n * rest_bytes
+        self.sh = ctx.buffer(reserve=max(rest_bytes_total, 4)) if self.sh_rest_coeffs > 0 else None
+        for start in range(0, n, UPLOAD_ROWS):
+            stop = min(n, start + UPLOAD_ROWS)
+            m = stop - start
+            rows = scene.activated_rows(start, stop)
+            self.a.write(_vec4([rows.relative_means, rows.opacities], m).tobytes(), offset=16 * start)
+            self.q.write(rows.rotations.tobytes(), offset=16 * start)
+            self.s.write(_vec4([rows.scales], m).tobytes(), offset=16 * start)
+            self.dc.write(_vec4([scene.sh[start:stop, 0]], m).tobytes(), offset=16 * start)
+            if self.sh is not None:
+                rest = np.ascontiguousarray(scene.sh[start:stop, 1:],
+                                            np.float16 if half_sh else np.float32)
+                self.sh.write(rest.tobytes(), offset=rest_bytes * start)
+
+    @property
+    def nbytes(self) -> int:
+        """GPU bytes of the scene's storage buffers."""
+        return sum(b.size for b in (self.a, self.q, self.s, self.dc, self.sh) if b is not None)
 
     def bind(self) -> None:
         self.a.bind_to_storage_buffer(BINDING_A)

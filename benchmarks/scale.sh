@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Scale benchmark (issue 18): 0.1M-6M splats built from the shared real files, then the LOD
+# benchmark on 3M and 6M.  One run per group of sizes keeps each timed run short; the merge
+# gives one table, scale.json and the log-log plot.  On a shared machine prefix each line with
+# /work/tools/timed.  OUT defaults to bench-scale/.
+set -euo pipefail
+OUT=${OUT:-bench-scale}
+splatgl bench --scale --sizes 0.1M,0.3M --sh3-sizes none --out "$OUT/a"
+splatgl bench --scale --sizes 1M --sh3-sizes 1M --out "$OUT/b"
+splatgl bench --scale --sizes 3M,6M --sh3-sizes none --out "$OUT/c"
+splatgl bench --scale --sizes none --sh3-sizes 6M --width 1280 --height 720 --out "$OUT/d"
+python -m splatgl.bench.scale_report "$OUT"/{a,b,c,d}/scale.json --out "$OUT"
+python -m splatgl.bench.lod_bench --sizes 3M,6M --out "$OUT"

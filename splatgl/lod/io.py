@@ -1,0 +1,90 @@
+"""The ``.lod.ply`` file: an INRIA PLY whose ``vertex`` element holds the leaves (the original
+splats in Morton order, so any PLY reader renders the full-detail scene) followed by an element
+``lod_node`` with the merged parents, level by level, in the same properties; a header comment
+``lod branching B`` gives the tree's shape (:func:`splatgl.lod.build.level_offsets`)."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneFormatError
+from ..formats import ply
+from ..scene import Scene, activate
+from .build import LodTree, bounding_radii, level_offsets
+
+ELEMENT = "lod_node"
+_COMMENT = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
+
+
+def write_lod(path: Path, tree: LodTree) -> None:
+    """Write ``tree`` (atomically: a temp file, then rename)."""
+    path = Path(path)
+    n = tree.level_size(0)
+    leaves = tree.nodes.subset(slice(0, n))
+    inner = tree.nodes.subset(slice(n, None))
+    tmp = path.with_name(path.name + ".partial")
+    try:
+        ply.write_elements(tmp, [("vertex", ply.scene_to_vertices(leaves, normals=False)),
+                                 (ELEMENT, ply.scene_to_vertices(inner, normals=False))],
+                           comments=("written by splatgl lod", f"lod branching {tree.branching}"))
+        tmp.replace(path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def is_lod_file(path: Path) -> bool:
+    """Whether ``path``'s PLY header declares the lod_node element."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+    except OSError:
+        return False
+    return head.startswith(b"ply") and f"element {ELEMENT} ".encode() in head.split(b"end_header")[0]
+
+
+def read_lod(path: Path, progress=None) -> LodTree:
+    """Read a ``.lod.ply`` back into a :class:`LodTree` (radii recomputed from the nodes)."""
+    path = Path(path)
+    leaves = ply.read(path, progress=progress)
+    with open(path, "rb") as fh:
+        header = ply.parse_header(path, fh)
+        fh.seek(0)
+        head = fh.read(header.body_offset)
+        match = _COMMENT.search(head)
+        if match is None:
+            raise SceneFormatError(path, "not a splatgl LOD file (no 'comment lod branching B' "
+                                         "line); build one with 'splatgl lod'", ELEMENT)
+        branching = int(match.group(1))
+        offset = header.body_offset
+        elem = None
+        for e in header.elements:
+            if e.name == ELEMENT:
+                elem = e
+                break
+            offset += e.count * e.dtype(header.order).itemsize
+        if elem is None or header.order is None:
+            raise SceneFormatError(path, f"no binary '{ELEMENT}' element", ELEMENT)
+        offsets = level_offsets(leaves.count, branching)
+        if elem.count != offsets[-1] - leaves.count:
+            raise SceneFormatError(path, f"{elem.count} nodes, expected "
+                                         f"{offsets[-1] - leaves.count} for {leaves.count} leaves "
+                                         f"and branching {branching}", ELEMENT)
+        dtype = elem.dtype(header.order)
+        fh.seek(offset)
+        rows = np.fromfile(fh, dtype, elem.count)
+        if rows.size != elem.count:
+            raise SceneFormatError(path, "file is truncated inside the lod_node element", ELEMENT)
+    cols = ply._Columns(path, [n for n, _ in elem.properties], elem.count)
+    cols.fill(rows, 0)
+    inner = activate(path, cols.means, cols.quats, cols.log_scales, cols.opacity, cols.sh)
+    nodes = Scene(np.concatenate([leaves.means, inner.means]),
+                  np.concatenate([leaves.quats, inner.quats]),
+                  np.concatenate([leaves.log_scales, inner.log_scales]),
+                  np.concatenate([leaves.opacity_logits, inner.opacity_logits]),
+                  np.concatenate([leaves.sh, inner.sh]), leaves.kind)
+    return LodTree(nodes, offsets, branching, np.arange(leaves.count),
+                   bounding_radii(nodes, offsets, branching))
