@@ -20,6 +20,7 @@ from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
 from .output import RenderOutput
+from . import lens
 from .project import anchored_camera, near_threshold, to_camera
 from .scene import Scene, SplatKind
 from .settings import Preprocess, QuadExtent, RenderSettings, SortKey, resolve_near
@@ -87,6 +88,7 @@ def set_camera_uniforms(prog: moderngl.Program, camera: Camera, near: float,
         "u_viewport": (float(camera.width), float(camera.height)),
         "u_tan_fov": (tx, ty),
         "u_near": float(near_threshold(near, np.float32)),
+        **lens.lens_uniforms(camera),
     }
     for name, value in values.items():
         if name in prog:
@@ -145,8 +147,7 @@ class QuadRenderer:
             defines["EXTENT_FAST"] = 1
         if self.settings.antialias:
             defines["ANTIALIAS"] = 1
-        if camera.is_orthographic:
-            defines["ORTHOGRAPHIC"] = 1
+        defines.update(lens.projection_defines(camera))
         if depth:
             defines["DEPTH_OUTPUT"] = 1
         if self._count_fragments:
@@ -161,6 +162,7 @@ class QuadRenderer:
         2DGS surfels use shaders/surfel.vert + surfel.frag (ray-splat intersection); the
         extent and antialiasing settings are 3DGS-only and do not change them.
         """
+        lens.require_support(camera, self.scene.kind is SplatKind.SURFEL_2D, "quad")
         if self.scene.kind is SplatKind.SURFEL_2D:
             return self.programs.program("surfel.vert", "surfel.frag", self.defines(camera, depth))
         vertex = "quad_light.vert" if self.uses_prepass else "quad.vert"
@@ -184,15 +186,22 @@ class QuadRenderer:
         self._stale_frames = 0
         t0 = time.perf_counter()
         p_cam = to_camera(self.scene.relative_means, anchored_camera(camera, self.scene.anchor))
-        if self.settings.cull:
+        if camera.is_lens:
+            mask = lens.lens_cull(p_cam, self.scene.opacities, camera, self.near)
+        elif self.settings.cull:
             mask = cull(p_cam, self._max_scale * camera.scale, self.scene.opacities, camera, self.near,
                         self.settings.antialias)
         else:
             mask = p_cam[:, 2] > self.near  # sort keys need positive depths
         keep = np.flatnonzero(mask)
+        if camera.is_lens:   # distance keys; equirect seam splats twice (splatgl/lens.py)
+            reach = lens.splat_reach(self._max_scale[keep] * camera.scale, self.scene.opacities[keep])
+            depths, indices = lens.lens_order(p_cam, keep, reach, camera)
+        else:
+            depths, indices = p_cam[keep, 2], keep.astype(np.uint32)
         t1 = time.perf_counter()
         sort = bucket_sort if self.settings.sort_key is SortKey.BUCKET16 else depth_sort
-        order = sort(p_cam[keep, 2], keep.astype(np.uint32))
+        order = sort(depths, indices)
         t2 = time.perf_counter()
         self._times_cull, self._times_sort = t1 - t0, t2 - t1
         self._order_key, self._order = key, order
