@@ -52,6 +52,10 @@ class Camera:
             scale when a model transform is folded in (:func:`splatgl.transform.apply_model`).
         projection: perspective, orthographic, fisheye or equirectangular.
         distortion: fisheye coefficients (k1, k2, k3, k4) of ``theta_d``; zeros otherwise.
+        ods_eye: equirectangular only: signed eye offset (world units, -IPD/2 for the left eye,
+            +IPD/2 for the right) of omni-directional stereo; 0 for a mono panorama.  Each
+            splat is seen from the point of the eye circle whose tangent ray reaches it
+            (:func:`splatgl.lens.eye_space`).
     """
 
     width: int
@@ -63,6 +67,7 @@ class Camera:
     world_to_camera: np.ndarray = field(default_factory=lambda: np.eye(4))
     projection: Projection = Projection.PERSPECTIVE
     distortion: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    ods_eye: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("width", "height"):
@@ -85,6 +90,11 @@ class Camera:
         if any(k) and self.projection is not Projection.FISHEYE:
             raise CameraError(f"distortion coefficients apply to fisheye cameras only, not {self.projection.value}")
         object.__setattr__(self, "distortion", k)
+        ods = float(self.ods_eye)
+        if not math.isfinite(ods) or (ods and self.projection is not Projection.EQUIRECTANGULAR):
+            raise CameraError(f"an omni-directional stereo eye offset needs a finite value and an "
+                              f"equirectangular camera, got {self.ods_eye!r} ({self.projection.value})")
+        object.__setattr__(self, "ods_eye", ods)
 
     # ----------------------------------------------------------------------------- factories
     @classmethod
@@ -158,13 +168,13 @@ class Camera:
 
     def with_pose(self, world_to_camera: np.ndarray) -> "Camera":
         return Camera(self.width, self.height, self.fx, self.fy, self.cx, self.cy,
-                      world_to_camera, self.projection, self.distortion)
+                      world_to_camera, self.projection, self.distortion, self.ods_eye)
 
     def resized(self, width: int, height: int) -> "Camera":
         """The same view at another resolution (intrinsics scaled per axis)."""
         sx, sy = width / self.width, height / self.height
         return Camera(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy,
-                      self.world_to_camera, self.projection, self.distortion)
+                      self.world_to_camera, self.projection, self.distortion, self.ods_eye)
 
     # ----------------------------------------------------------------------------- geometry
     @property
@@ -214,6 +224,7 @@ class Camera:
             "world_to_camera": self.world_to_camera.tolist(),
             "projection": self.projection.value,
             **({"distortion": list(self.distortion)} if any(self.distortion) else {}),
+            **({"ods_eye": self.ods_eye} if self.ods_eye else {}),
         }
 
 

@@ -86,6 +86,29 @@ def fisheye_theta_limit(camera: Camera) -> float:
     return float(min(theta + FISHEYE_THETA_MARGIN, FISHEYE_THETA_CAP))
 
 
+def eye_space(p_cam: np.ndarray, camera: Camera) -> np.ndarray:
+    """Omni-directional stereo: (N, 3) points relative to the eye that sees each of them.
+
+    The eyes sit on a circle of radius ``r = |ods_eye|`` in the camera's horizontal (x, z)
+    plane.  A point at horizontal distance ``D`` and longitude ``a`` is seen along the ray
+    tangent to that circle, of longitude ``phi = a - asin(ods_eye / D)``, from the eye
+    ``e = ods_eye (cos phi, 0, -sin phi)`` (``p - e`` then has longitude ``phi``; points inside
+    the circle, ``D <= r``, are seen from the tangent point at ``D = r``).  The offset is taken
+    at the splat's centre and held constant across the splat.  No-op for other cameras.
+    """
+    eye = camera.ods_eye
+    if not eye:
+        return p_cam
+    dt = p_cam.dtype.type
+    x, z = p_cam[:, 0], p_cam[:, 2]
+    d = np.maximum(np.sqrt(x * x + z * z), dt(abs(eye)))
+    phi = np.arctan2(x, z) - np.arcsin(dt(eye) / d)
+    out = p_cam.copy()
+    out[:, 0] -= dt(eye) * np.cos(phi)
+    out[:, 2] += dt(eye) * np.sin(phi)
+    return out
+
+
 def view_depth(p_cam: np.ndarray, camera: Camera) -> np.ndarray:
     """(N,) sort and depth-layer key: view z (pinhole, orthographic) or distance |p| (lens)."""
     if camera.is_lens:
@@ -211,6 +234,7 @@ def lens_uniforms(camera: Camera) -> dict[str, object]:
         "u_distortion": tuple(camera.distortion),
         "u_theta_limit": fisheye_theta_limit(camera) if fisheye else 0.0,
         "u_wrap_period": wrap_period(camera) or 0.0,
+        "u_ods_eye": camera.ods_eye,
     }
 
 
@@ -222,7 +246,7 @@ def lens_order(p_cam: np.ndarray, keep: np.ndarray, radius: np.ndarray, camera: 
     the distance; seam splats of an equirectangular camera appear twice, the copy with
     :data:`WRAP_FLAG` set in its index and the same depth.
     """
-    pk = p_cam[keep]
+    pk = eye_space(p_cam[keep], camera)
     depth = view_depth(pk, camera).astype(np.float32)
     idx = keep.astype(np.uint32)
     dup = wrap_copies(pk, radius, camera)
@@ -237,7 +261,7 @@ def lens_cull(p_cam: np.ndarray, opacities: np.ndarray, camera: Camera, near: fl
 
     (No screen test: a fisheye or panorama sees most of a scene; the rasterizer drops the rest.)
     """
-    return lens_visible(p_cam, camera, near) & (opacities >= ALPHA_MIN)
+    return lens_visible(eye_space(p_cam, camera), camera, near) & (opacities >= ALPHA_MIN)
 
 
 def splat_reach(max_scale: np.ndarray, opacities: np.ndarray) -> np.ndarray:
@@ -264,3 +288,24 @@ def require_support(camera: Camera, surfel: bool, renderer: str, equirect: bool 
     if not equirect and camera.projection is Projection.EQUIRECTANGULAR:
         raise CameraError(f"the {renderer} renderer cannot draw equirectangular images; use "
                           "--renderer quad or reference")
+
+
+def with_projection(camera: Camera, projection: Projection | str, fov_degrees: float | None = None
+                    ) -> Camera:
+    """``camera``'s pose and image size with another projection (the CLI's ``--projection``).
+
+    Fisheye: ``fov_degrees`` (default 180) across the image circle of diameter
+    ``min(W, H)``; equirectangular: the full panorama; perspective: ``fov_degrees`` vertical
+    (default: unchanged for a perspective camera, else 50); orthographic: unchanged scale.
+    """
+    projection = Projection(projection)
+    w, h, pose = camera.width, camera.height, camera.world_to_camera
+    if projection is camera.projection and fov_degrees is None:
+        return camera
+    if projection is Projection.FISHEYE:
+        return Camera.fisheye(w, h, 180.0 if fov_degrees is None else fov_degrees, pose)
+    if projection is Projection.EQUIRECTANGULAR:
+        return Camera.equirectangular(w, h, pose)
+    if projection is Projection.PERSPECTIVE:
+        return Camera.from_fov(w, h, 50.0 if fov_degrees is None else fov_degrees, pose)
+    return Camera(w, h, camera.fx, camera.fy, camera.cx, camera.cy, pose, projection)

@@ -340,7 +340,7 @@ def project(means: np.ndarray, rotations: np.ndarray, scales: np.ndarray, opacit
 
     Arrays as in :class:`splatgl.scene.Scene` (activated), in the dtype wanted for the math.
     """
-    p_cam = to_camera(means, camera)
+    p_cam = lens.eye_space(to_camera(means, camera), camera)  # ODS: per-splat eye
     rot = quat_to_rotmat(rotations)
     cov2d = covariance_2d(covariance_3d(rot, scales), p_cam, camera)
     con, det = conic(cov2d, covariance_2d_det(cov2d, screen_factor(rot, scales, p_cam, camera)))

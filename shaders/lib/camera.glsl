@@ -9,3 +9,4 @@ uniform float u_near;         // view z at or below this is culled
 uniform vec4 u_distortion;    // fisheye k1..k4 (FISHEYE only)
 uniform float u_theta_limit;  // fisheye: largest angle from the axis kept (radians)
 uniform float u_wrap_period;  // equirect: pixels per turn of longitude (2 pi fx)
+uniform float u_ods_eye;      // equirect ODS: signed eye offset on the eye circle (0: mono)

@@ -37,6 +37,17 @@ vec4 fisheye_terms(vec3 p) {
 }
 #endif
 
+#ifdef EQUIRECT
+// Omni-directional stereo (splatgl/lens.py eye_space): p relative to the eye on the circle of
+// radius |u_ods_eye| whose tangent ray reaches it; phi = atan2(x, z) - asin(eye / D).
+vec3 eye_space(vec3 p) {
+    if (u_ods_eye == 0.0) return p;
+    float d = max(length(p.xz), abs(u_ods_eye));
+    float phi = atan(p.x, p.z) - asin(u_ods_eye / d);
+    return p - u_ods_eye * vec3(cos(phi), 0.0, -sin(phi));
+}
+#endif
+
 vec2 project_lens(vec3 p) {
 #ifdef FISHEYE
     float s = fisheye_terms(p).x;

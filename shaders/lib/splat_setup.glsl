@@ -40,6 +40,9 @@ bool setup_splat(uint idx, out ScreenSplat s) {
     uint i = idx & 0x7fffffffu;
     vec4 a = splat_a[i];
     vec3 p = u_view_rot * a.xyz + u_view_trans;
+#ifdef EQUIRECT
+    p = eye_space(p);  // omni-directional stereo: the eye that sees this splat
+#endif
     if (!in_view(p)) return false;  // view z (lens models: distance), before any divide
     mat3 rot = quat_to_rotmat(splat_q[i]);
     vec3 cov = covariance_2d(covariance_3d(rot, splat_s[i].xyz), p);

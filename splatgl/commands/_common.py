@@ -5,13 +5,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..camera import Camera
+from ..camera import Camera, Projection
 from ..camera_io import load_camera
 from ..errors import SplatglError
 from ..formats import load_scene
+from ..lens import with_projection
 from ..render import default_camera
 from ..scene import Scene
 from ..settings import Convention, Precision, Preprocess, QuadExtent, RenderSettings, SortKey
+from ..stereo import StereoLayout
 from ..transform import parse_transform
 
 
@@ -57,6 +59,19 @@ def add_camera_arguments(p: argparse.ArgumentParser) -> None:
                    help="vertical field of view of the default camera, degrees (default 50)")
     g.add_argument("--orthographic", action="store_true",
                    help="make the default camera orthographic, zoomed to frame the scene")
+    g.add_argument("--projection", choices=[m.value for m in Projection], default=None,
+                   help="camera model: perspective (default), orthographic, fisheye "
+                        "(equidistant; --fov is the image circle's field of view, default 180, up "
+                        "to 360) or equirectangular (a full 360 x 180 degree panorama, usually "
+                        "--width 2 x --height).  With --camera, the file's pose and image size "
+                        "are kept")
+    g.add_argument("--stereo", type=float, default=None, metavar="IPD",
+                   help="render a stereo pair with this interpupillary distance (world units); "
+                        "equirectangular cameras render omni-directional stereo")
+    g.add_argument("--stereo-layout", choices=[m.value for m in StereoLayout], default="side-by-side",
+                   help="where the two eyes go: side-by-side (left | right, default), top-bottom "
+                        "(left above right, the 360-video convention), or separate files "
+                        "OUT_left.EXT and OUT_right.EXT")
     g.add_argument("--distance", type=float, default=1.0, metavar="SCALE",
                    help="default camera distance as a multiple of the framing distance "
                         "(default 1; 0.5 is twice as close)")
@@ -114,21 +129,27 @@ def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSet
         value = getattr(args, name)
         if value is not None and not 1 <= value <= 16384:
             raise SplatglError(f"--{name} must be between 1 and 16384, got {value}")
+    projection = getattr(args, "projection", None)
     if args.camera is not None:
         cam = load_camera(args.camera, args.camera_index)
         if args.width or args.height:
             w = args.width or round(cam.width * args.height / cam.height)
             h = args.height or round(cam.height * args.width / cam.width)
             cam = cam.resized(w, h)
-        return cam
-    if args.fov is not None and not 0.0 < args.fov < 180.0:
+        return with_projection(cam, projection, args.fov) if projection else cam
+    if projection == "fisheye" and args.fov is not None and not 0.0 < args.fov <= 360.0:
+        raise SplatglError(f"--fov of a fisheye must be in (0, 360] degrees, got {args.fov}")
+    if projection != "fisheye" and args.fov is not None and not 0.0 < args.fov < 180.0:
         raise SplatglError(f"--fov must be in (0, 180) degrees, got {args.fov}")
     if not args.distance > 0.0:
         raise SplatglError(f"--distance must be positive, got {args.distance}")
     cam = default_camera(scene, args.width or 1280, args.height or 720,
-                         args.fov if args.fov is not None else 50.0, args.distance,
+                         args.fov if args.fov is not None and projection != "fisheye" else 50.0,
+                         args.distance,
                          settings.model if settings is not None else None)
-    if getattr(args, "orthographic", False):
+    if projection in ("fisheye", "equirectangular"):
+        cam = with_projection(cam, projection, args.fov)
+    if getattr(args, "orthographic", False) or projection == "orthographic":
         scale = settings.model.scale if settings is not None and settings.model else 1.0
         radius = max(scene.robust_radius * scale, 1e-9) * args.distance
         cam = Camera.orthographic(cam.width, cam.height, min(cam.width, cam.height) / (2.1 * radius),

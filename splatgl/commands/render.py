@@ -14,6 +14,7 @@ from ..output import RenderOutput
 from ..pictures import depth_preview
 from ..render import Renderer, render_reference_layers
 from ..settings import RendererKind
+from ..stereo import StereoLayout, combine, eye_cameras
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       inputs_from_args)
 
@@ -31,7 +32,11 @@ examples:
   splatgl render -o demo.png
   splatgl render scene.ply --camera cameras.json --camera-index 3 -o view.exr
   splatgl render scene.ply --width 1920 --height 1080 --background 1,1,1 -o white.png
-  splatgl render scene.ply -o view.png --depth-png depth.png"""
+  splatgl render scene.ply -o view.png --depth-png depth.png
+  splatgl render scene.ply --projection fisheye --fov 200 --width 1024 --height 1024 -o fish.png
+  splatgl render scene.ply --projection equirectangular --width 2048 --height 1024 -o pano.png
+  splatgl render scene.ply --projection equirectangular --stereo 0.065 --stereo-layout top-bottom \
+      --width 2048 --height 1024 -o ods.png"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -57,14 +62,29 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(f"{args.depth_png}: --depth-png needs a .png or .tif file name")
     times = None
     with Renderer() if kind is not RendererKind.REFERENCE else nullcontext() as renderer:
-        if renderer is None:
-            out = render_reference_layers(scene, camera, settings)
-        elif want_depth:
-            out = renderer.render_layers(scene, camera, settings, kind)
+        def view(cam):
+            if renderer is None:
+                return render_reference_layers(scene, cam, settings)
+            if want_depth:
+                return renderer.render_layers(scene, cam, settings, kind)
+            return RenderOutput(renderer.render(scene, cam, settings, kind), None)
+
+        if args.stereo is not None:
+            eyes = [view(cam) for cam in eye_cameras(camera, args.stereo)]
         else:
-            out = RenderOutput(renderer.render(scene, camera, settings, kind), None)
+            out = view(camera)
         if renderer is not None:
             times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
+    if args.stereo is not None:
+        layout = StereoLayout(args.stereo_layout)
+        if layout is StereoLayout.SEPARATE:
+            for eye, name in zip(eyes, ("left", "right")):
+                path = args.output.with_name(f"{args.output.stem}_{name}{args.output.suffix}")
+                write_image(path, eye.rgba, args.bit_depth,
+                            depth=eye.expected_depth() if want_depth else None)
+                print(f"wrote {path} ({name} eye)")
+            return 0
+        out = combine(eyes[0], eyes[1], layout)
     depth = out.expected_depth() if want_depth else None
     write_image(args.output, out.rgba, args.bit_depth, depth=depth)
     if args.depth_png is not None:

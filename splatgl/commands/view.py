@@ -82,7 +82,9 @@ def run(args: argparse.Namespace) -> int:
 
     options = ViewerOptions(title=f"splatgl view - {Path(path).name}",
                             screenshot_dir=args.screenshot_dir, render_args=_render_args(args),
-                            vsync=not args.no_vsync and args.benchmark is None)
+                            vsync=not args.no_vsync and args.benchmark is None,
+                            projection=args.projection if args.projection not in (None, "perspective") else None,
+                            fisheye_fov=args.fov if args.projection == "fisheye" else None)
     with Viewer(scene, settings, camera, cameras, args.camera_index % max(len(cameras), 1),
                 RendererKind(args.renderer), options) as viewer:
         print(f"OpenGL {viewer.ctx.info['GL_VERSION']} on {viewer.ctx.info['GL_RENDERER']}", flush=True)
