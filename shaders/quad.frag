@@ -20,10 +20,18 @@ layout(std430, binding = 7) buffer FragmentCounts { uint fragments_shaded; uint 
 #ifdef DEPTH_OUTPUT
 layout(location = 1) out vec4 out_depth;
 #endif
+#ifdef EQUIRECT
+uniform float u_wrap_period;  // pixels per turn of longitude: each copy reaches half a turn
+#endif
 
 void main() {
 #ifdef COUNT_FRAGMENTS
     atomicAdd(fragments_shaded, 1u);
+#endif
+#ifdef EQUIRECT
+    // Half a turn of longitude each side of the centre (splatgl/lens.py wrap_period): a splat
+    // at a pole spans the image once, and a seam splat's two copies never meet.
+    if (abs(gl_FragCoord.x - v_mean2d.x) > 0.5 * u_wrap_period) discard;
 #endif
 #ifdef EXTENT_FAST
     // The fast approximation: the quad spans a fixed FAST_CORNER_SIGMAS along the ellipse axes

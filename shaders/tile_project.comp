@@ -72,9 +72,10 @@ void main() {
     tiles_touched[i] = 0u;
     proj_rect[i] = uvec4(0u);
     vec4 a = splat_a[i];
-    // p_c = R_cw p_w + t_cw (DESIGN.md 1); cull on view z before the perspective divide.
+    // p_c = R_cw p_w + t_cw (DESIGN.md 1); cull on view z before the perspective divide
+    // (fisheye: distance and angle from the axis, lib/project.glsl in_view).
     vec3 p = u_view_rot * a.xyz + u_view_trans;
-    if (!(p.z > u_near)) return;
+    if (!in_view(p)) return;
     // Sigma' = J W Sigma W^T J^T + 0.3 I (EWA, low-pass dilation).
     mat3 rot = quat_to_rotmat(splat_q[i]);
     vec3 cov = covariance_2d(covariance_3d(rot, splat_s[i].xyz), p);
@@ -101,7 +102,7 @@ void main() {
     uvec2 rmax = uvec2(clamp(trunc((pp + r + float(TILE_SIZE - 1)) / float(TILE_SIZE)), vec2(0.0), grid));
     uint touched = (rmax.x - rmin.x) * (rmax.y - rmin.y);
     if (touched == 0u) return;
-    proj_mean_depth[i] = vec4(mean2d, p.z, 0.0);
+    proj_mean_depth[i] = vec4(mean2d, view_depth(p), 0.0);
     proj_conic_o[i] = vec4(con, opacity);
     proj_color[i] = vec4(color, 0.0);
     proj_rect[i] = uvec4(rmin, rmax);

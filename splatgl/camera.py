@@ -1,8 +1,15 @@
-"""Cameras: a frozen pinhole or orthographic camera in OpenCV axes (+x right, +y down, +z forward).
+"""Cameras: a frozen camera in OpenCV axes (+x right, +y down, +z forward).
 
 Pixel (i, j) (row i from the top, column j) has its centre at image coordinates (j + 0.5, i + 0.5).
 Perspective: ``u = fx x / z + cx``, ``v = fy y / z + cy`` with (x, y, z) in camera space.
 Orthographic: ``u = fx x + cx``, ``v = fy y + cy`` (fx, fy in pixels per world unit).
+Fisheye (OpenCV's fisheye model; equidistant when k1..k4 are 0): ``theta = atan2(rho, z)`` with
+``rho = sqrt(x^2 + y^2)``, ``theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4
+theta^8)``, ``u = fx theta_d x / rho + cx``, ``v = fy theta_d y / rho + cy`` (fx, fy in pixels
+per radian).
+Equirectangular: ``lon = atan2(x, z)``, ``lat = atan2(y, sqrt(x^2 + z^2))`` (positive below the
+horizon), ``u = fx lon + cx``, ``v = fy lat + cy``; a full panorama has ``fx = W / 2 pi``,
+``fy = H / pi`` and the principal point at the image centre.  See :mod:`splatgl.lens`.
 """
 
 from __future__ import annotations
@@ -20,6 +27,8 @@ from .errors import CameraError
 class Projection(enum.Enum):
     PERSPECTIVE = "perspective"
     ORTHOGRAPHIC = "orthographic"
+    FISHEYE = "fisheye"
+    EQUIRECTANGULAR = "equirectangular"
 
 
 def _frozen_matrix(m: object) -> np.ndarray:
@@ -107,7 +116,12 @@ class Camera:
         cx, cy: principal point in image coordinates (pixels; (0, 0) is the top-left corner).
         world_to_camera: (4, 4) float64 transform, OpenCV axes: rigid, or rigid times a uniform
             scale when a model transform is folded in (:func:`splatgl.transform.apply_model`).
-        projection: perspective or orthographic.
+        projection: perspective, orthographic, fisheye or equirectangular.
+        distortion: fisheye coefficients (k1, k2, k3, k4) of ``theta_d``; zeros otherwise.
+        ods_eye: equirectangular only: signed eye offset (world units, -IPD/2 for the left eye,
+            +IPD/2 for the right) of omni-directional stereo; 0 for a mono panorama.  Each
+            splat is seen from the point of the eye circle whose tangent ray reaches it
+            (:func:`splatgl.lens.eye_space`).
     """
 
     width: int
@@ -118,6 +132,8 @@ class Camera:
     cy: float
     world_to_camera: np.ndarray = field(default_factory=lambda: np.eye(4))
     projection: Projection = Projection.PERSPECTIVE
+    distortion: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    ods_eye: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("width", "height"):
@@ -134,6 +150,17 @@ class Camera:
             raise CameraError(f"camera focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
         object.__setattr__(self, "world_to_camera", _frozen_matrix(self.world_to_camera))
         object.__setattr__(self, "projection", Projection(self.projection))
+        k = tuple(float(v) for v in self.distortion)
+        if len(k) != 4 or not all(math.isfinite(v) for v in k):
+            raise CameraError(f"camera distortion must be 4 finite numbers (k1..k4), got {self.distortion!r}")
+        if any(k) and self.projection is not Projection.FISHEYE:
+            raise CameraError(f"distortion coefficients apply to fisheye cameras only, not {self.projection.value}")
+        object.__setattr__(self, "distortion", k)
+        ods = float(self.ods_eye)
+        if not math.isfinite(ods) or (ods and self.projection is not Projection.EQUIRECTANGULAR):
+            raise CameraError(f"an omni-directional stereo eye offset needs a finite value and an "
+                              f"equirectangular camera, got {self.ods_eye!r} ({self.projection.value})")
+        object.__setattr__(self, "ods_eye", ods)
 
     # ----------------------------------------------------------------------------- factories
     @classmethod
@@ -178,15 +205,42 @@ class Camera:
                    np.eye(4) if world_to_camera is None else world_to_camera,
                    Projection.ORTHOGRAPHIC)
 
+    @classmethod
+    def fisheye(cls, width: int, height: int, fov_degrees: float,
+                world_to_camera: np.ndarray | None = None,
+                distortion: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> "Camera":
+        """Fisheye camera whose image circle of diameter ``min(W, H)`` spans ``fov_degrees``
+        (any angle up to 360), centred; with distortion, ``theta_d`` of the half angle is what
+        reaches the circle's edge."""
+        if not 0.0 < fov_degrees <= 360.0:
+            raise CameraError(f"fisheye field of view must be in (0, 360] degrees, got {fov_degrees}")
+        half = math.radians(fov_degrees) / 2.0
+        k1, k2, k3, k4 = (float(v) for v in distortion)
+        theta_d = half * (1 + k1 * half ** 2 + k2 * half ** 4 + k3 * half ** 6 + k4 * half ** 8)
+        if not theta_d > 0.0:
+            raise CameraError(f"fisheye distortion {tuple(distortion)} maps the half angle to {theta_d}")
+        f = 0.5 * min(width, height) / theta_d
+        return cls(width, height, f, f, width / 2.0, height / 2.0,
+                   np.eye(4) if world_to_camera is None else world_to_camera,
+                   Projection.FISHEYE, (k1, k2, k3, k4))
+
+    @classmethod
+    def equirectangular(cls, width: int, height: int,
+                        world_to_camera: np.ndarray | None = None) -> "Camera":
+        """Full 360 x 180 degree longitude/latitude panorama (usually ``width = 2 height``)."""
+        return cls(width, height, width / (2.0 * math.pi), height / math.pi, width / 2.0,
+                   height / 2.0, np.eye(4) if world_to_camera is None else world_to_camera,
+                   Projection.EQUIRECTANGULAR)
+
     def with_pose(self, world_to_camera: np.ndarray) -> "Camera":
         return Camera(self.width, self.height, self.fx, self.fy, self.cx, self.cy,
-                      world_to_camera, self.projection)
+                      world_to_camera, self.projection, self.distortion, self.ods_eye)
 
     def resized(self, width: int, height: int) -> "Camera":
         """The same view at another resolution (intrinsics scaled per axis)."""
         sx, sy = width / self.width, height / self.height
         return Camera(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy,
-                      self.world_to_camera, self.projection)
+                      self.world_to_camera, self.projection, self.distortion, self.ods_eye)
 
     # ----------------------------------------------------------------------------- geometry
     @property
@@ -218,6 +272,12 @@ class Camera:
         return self.projection is Projection.ORTHOGRAPHIC
 
     @property
+    def is_lens(self) -> bool:
+        """Fisheye or equirectangular: projections by angle (:mod:`splatgl.lens`), which see
+        behind the camera plane, so they cull and sort by distance, not view z."""
+        return self.projection in (Projection.FISHEYE, Projection.EQUIRECTANGULAR)
+
+    @property
     def tan_half_fov(self) -> tuple[float, float]:
         """(tan(fov_x / 2), tan(fov_y / 2)) as the reference computes them: W / (2 fx), H / (2 fy)."""
         return self.width / (2.0 * self.fx), self.height / (2.0 * self.fy)
@@ -229,6 +289,8 @@ class Camera:
             "fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy,
             "world_to_camera": self.world_to_camera.tolist(),
             "projection": self.projection.value,
+            **({"distortion": list(self.distortion)} if any(self.distortion) else {}),
+            **({"ods_eye": self.ods_eye} if self.ods_eye else {}),
         }
 
 

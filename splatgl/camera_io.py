@@ -1,8 +1,10 @@
 """Camera files: splatgl's single-camera JSON and the cameras.json of 3DGS training output.
 
 (a) Single camera: ``{"width", "height", "fx", "fy", "cx", "cy", "world_to_camera": 4x4
-    row-major, optional "projection": "perspective" | "orthographic"}`` (orthographic fx, fy in
-    pixels per world unit), or with ``"frustum": {"left", "right", "top", "bottom", "near",
+    row-major, optional "projection": "perspective" | "orthographic" | "fisheye" |
+    "equirectangular"}`` (orthographic fx, fy in pixels per world unit; fisheye fx, fy in pixels
+    per radian with optional "distortion": [k1, k2, k3, k4]; equirectangular may omit the
+    intrinsics for a full panorama, and may give "ods_eye" for one eye of a stereo pair), or with ``"frustum": {"left", "right", "top", "bottom", "near",
     "far"}`` in place of the intrinsics.
 (b) 3DGS ``cameras.json``: a list of ``{"width", "height", "position", "rotation", "fx", "fy",
     ...}`` where ``rotation`` is camera-to-world (3x3, rows as stored) and ``position`` the camera
@@ -84,17 +86,28 @@ def camera_from_json(obj: dict, path: Path = Path("<camera>")) -> Camera:
         raise CameraError(f"{path}: expected a JSON object with width, height, fx, fy, cx, cy, world_to_camera")
     if "frustum" in obj:
         return _camera_from_frustum(obj, path)
-    vals = {k: _number(path, "", obj, k) for k in ("width", "height", "fx", "fy", "cx", "cy")}
-    w2c = _pose(path, "", obj)
     proj = obj.get("projection", "perspective")
     try:
         projection = Projection(proj)
     except ValueError:
-        raise CameraError(f"{path}: field 'projection' must be 'perspective' or 'orthographic', got {proj!r}") from None
+        names = ", ".join(f"'{m.value}'" for m in Projection)
+        raise CameraError(f"{path}: field 'projection' must be one of {names}, got {proj!r}") from None
+    keys = ("width", "height", "fx", "fy", "cx", "cy")
+    if projection is Projection.EQUIRECTANGULAR and not any(k in obj for k in keys[2:]):
+        w, h = _number(path, "", obj, "width"), _number(path, "", obj, "height")   # full panorama
+        vals = dict(zip(keys, (w, h, w / (2 * math.pi), h / math.pi, w / 2, h / 2)))
+    else:
+        vals = {k: _number(path, "", obj, k) for k in keys}
+    w2c = _pose(path, "", obj)
+    extra = {}
+    if "distortion" in obj:   # fisheye k1..k4
+        extra["distortion"] = _matrix(path, "", {"distortion": [obj["distortion"]]}, "distortion", (1, 4))[0]
+    if "ods_eye" in obj:
+        extra["ods_eye"] = _number(path, "", obj, "ods_eye")
     try:
         return Camera(int(vals["width"]) if vals["width"].is_integer() else vals["width"],
                       int(vals["height"]) if vals["height"].is_integer() else vals["height"],
-                      vals["fx"], vals["fy"], vals["cx"], vals["cy"], w2c, projection)
+                      vals["fx"], vals["fy"], vals["cx"], vals["cy"], w2c, projection, **extra)
     except CameraError as exc:
         raise CameraError(f"{path}: {exc}") from None
 

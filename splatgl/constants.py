@@ -59,6 +59,20 @@ SURFEL_FILTER_INV_SQUARE = 2.0
 #: matrix with det +1 by at most this much (largest entry of |R R^T - I|, and |det R - 1|).  Poses
 #: saved as float32 keep ~1e-7; 1e-4 also accepts JSON written with 5-6 significant digits.
 RIGID_POSE_TOLERANCE = 1e-4
+#: Fisheye cameras (:mod:`splatgl.lens`) keep splat centres up to this angle (radians, 10
+#: degrees) beyond the largest angle from the axis that reaches the image, so splats centred
+#: just outside the view still reach in, as the pinhole's rectangle test allows ...
+FISHEYE_THETA_MARGIN = math.radians(10.0)
+#: ... but never beyond this angle from the axis: at theta = pi every direction maps onto one
+#: circle and the linearisation breaks down (the last ~0.6 degrees around the antipode of a
+#: 360-degree fisheye are not drawn).
+FISHEYE_THETA_CAP = math.pi - 1e-2
+#: Below ``rho = this * z`` the fisheye map's ``g / rho`` and its Jacobian term cancel; their
+#: series in ``(rho / z)^2`` are used there (relative error below 1e-8 in ``s``).
+FISHEYE_SERIES_RHO = 1e-2
+#: Floor of an equirectangular splat's distance from the polar axis, as a fraction of its
+#: distance: keeps the longitude row of the Jacobian finite at the poles.
+EQUIRECT_POLE_EPS = 1e-4
 
 # Real spherical-harmonics basis constants (trig-free polynomial form), degrees 0..3.
 SH_C0 = 0.28209479177387814
@@ -125,6 +139,8 @@ def glsl_defines() -> dict[str, str]:
         "SH_OFFSET": _glsl_float(SH_OFFSET),
         "SURFEL_FILTER_INV_SQUARE": _glsl_float(SURFEL_FILTER_INV_SQUARE),
         "FAST_CORNER_SIGMAS": _glsl_float(FAST_CORNER_SIGMAS),
+        "FISHEYE_SERIES_RHO": _glsl_float(FISHEYE_SERIES_RHO),
+        "EQUIRECT_POLE_EPS": _glsl_float(EQUIRECT_POLE_EPS),
         "SH_C0": _glsl_float(SH_C0),
         "SH_C1": _glsl_float(SH_C1),
         "RADIX_BITS": str(RADIX_BITS),

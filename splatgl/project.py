@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import lens
 from .camera import Camera
 from .constants import (
     ALPHA_MIN, DET_CANCEL_RATIO, EXTENT_DISCRIMINANT_FLOOR, EXTENT_SIGMAS, JACOBIAN_CLAMP, LOW_PASS,
@@ -98,6 +99,8 @@ def to_camera(means: np.ndarray, camera: Camera) -> np.ndarray:
 
 def project_means(p_cam: np.ndarray, camera: Camera) -> np.ndarray:
     """(N, 3) camera-space points -> (N, 2) image coordinates (u, v) in pixels."""
+    if camera.is_lens:
+        return lens.project_lens(p_cam, camera)
     fx, fy, cx, cy = (np.asarray(v, p_cam.dtype) for v in (camera.fx, camera.fy, camera.cx, camera.cy))
     if camera.is_orthographic:
         return np.stack([fx * p_cam[:, 0] + cx, fy * p_cam[:, 1] + cy], axis=-1)
@@ -109,8 +112,10 @@ def jacobian(p_cam: np.ndarray, camera: Camera) -> np.ndarray:
 
     Perspective: ``[[fx/z, 0, -fx x/z^2], [0, fy/z, -fy y/z^2]]`` with ``x/z`` and ``y/z``
     clamped to +-1.3 tan(half fov) (the mean itself is not moved).  Orthographic: constant
-    ``diag(fx, fy)``.
+    ``diag(fx, fy)``.  Fisheye and equirectangular: :func:`splatgl.lens.jacobian_lens`.
     """
+    if camera.is_lens:
+        return lens.jacobian_lens(p_cam, camera)
     dtype = p_cam.dtype
     n = p_cam.shape[0]
     j = np.zeros((n, 2, 3), dtype)
@@ -311,7 +316,8 @@ class Projected:
     """Per-splat screen quantities (the output of :func:`project`), N rows.
 
     Attributes:
-        p_cam: (N, 3) camera-space centres.  depth: (N,) view z.
+        p_cam: (N, 3) camera-space centres.  depth: (N,) view z (fisheye and
+            equirectangular: distance from the camera, :func:`splatgl.lens.view_depth`).
         mean2d: (N, 2) pixel coordinates.  cov2d: (N, 2, 2) dilated covariance (px^2).
         conic: (N, 3) inverse covariance (a, b, c).  det: (N,) det of cov2d.
         color: (N, 3) SH colour.  opacity: (N,) opacity (times the AA factor when enabled).
@@ -334,11 +340,11 @@ def project(means: np.ndarray, rotations: np.ndarray, scales: np.ndarray, opacit
 
     Arrays as in :class:`splatgl.scene.Scene` (activated), in the dtype wanted for the math.
     """
-    p_cam = to_camera(means, camera)
+    p_cam = lens.eye_space(to_camera(means, camera), camera)  # ODS: per-splat eye
     rot = quat_to_rotmat(rotations)
     cov2d = covariance_2d(covariance_3d(rot, scales), p_cam, camera)
     con, det = conic(cov2d, covariance_2d_det(cov2d, screen_factor(rot, scales, p_cam, camera)))
     opac = opacities * antialias_factor(cov2d) if antialias else opacities
     color = sh_color(sh, view_dirs(means, camera), sh_degree)
-    return Projected(p_cam, p_cam[:, 2], project_means(p_cam, camera), cov2d, con, det, color,
-                     opac)
+    return Projected(p_cam, lens.view_depth(p_cam, camera), project_means(p_cam, camera), cov2d,
+                     con, det, color, opac)

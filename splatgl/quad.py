@@ -21,6 +21,7 @@ from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
 from .output import RenderOutput
+from . import lens
 from .project import anchored_camera, near_threshold, to_camera
 from .scene import Scene, SplatKind
 from .settings import Preprocess, QuadExtent, RenderSettings, SortKey, resolve_near
@@ -88,6 +89,7 @@ def set_camera_uniforms(prog: moderngl.Program, camera: Camera, near: float,
         "u_viewport": (float(camera.width), float(camera.height)),
         "u_tan_fov": (tx, ty),
         "u_near": float(near_threshold(near, np.float32)),
+        **lens.lens_uniforms(camera),
     }
     for name, value in values.items():
         if name in prog:
@@ -147,8 +149,7 @@ class QuadRenderer:
             defines["EXTENT_FAST"] = 1
         if self.settings.antialias:
             defines["ANTIALIAS"] = 1
-        if camera.is_orthographic:
-            defines["ORTHOGRAPHIC"] = 1
+        defines.update(lens.projection_defines(camera))
         if depth:
             defines["DEPTH_OUTPUT"] = 1
         if self._count_fragments:
@@ -163,6 +164,7 @@ class QuadRenderer:
         2DGS surfels use shaders/surfel.vert + surfel.frag (ray-splat intersection); the
         extent and antialiasing settings are 3DGS-only and do not change them.
         """
+        lens.require_support(camera, self.scene.kind is SplatKind.SURFEL_2D, "quad")
         if self.scene.kind is SplatKind.SURFEL_2D:
             return self.programs.program("surfel.vert", "surfel.frag", self.defines(camera, depth))
         vertex = "quad_light.vert" if self.uses_prepass else "quad.vert"
@@ -175,7 +177,7 @@ class QuadRenderer:
         with ``resort_interval`` N > 1, only every N-th change re-sorts (sort lag).
         """
         key = (camera.world_to_camera.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy,
-               camera.width, camera.height, camera.projection)
+               camera.width, camera.height, camera.projection, camera.distortion, camera.ods_eye)
         self._times_cull = self._times_sort = 0.0
         if key == self._order_key:
             return self._order
@@ -185,7 +187,13 @@ class QuadRenderer:
             return self._order
         self._stale_frames = 0
         t0 = time.perf_counter()
-        if self.settings.cull:
+        if camera.is_lens:   # distance keys; equirect seam splats twice (splatgl/lens.py)
+            p_cam = to_camera(self.scene.relative_means, anchored_camera(camera, self.scene.anchor))
+            kept = np.flatnonzero(lens.lens_cull(p_cam, self.scene.opacities, camera, self.near))
+            reach = lens.splat_reach(self.scene.scales[kept].max(axis=1) * camera.scale,
+                                     self.scene.opacities[kept])
+            depth, keep = lens.lens_order(p_cam, kept, reach, camera)
+        elif self.settings.cull:
             if self._cull_data is None:
                 self._cull_data = CullData.from_scene(self.scene)
             keep, depth = cull_visible(self._cull_data, anchored_camera(camera, self.scene.anchor),

@@ -42,6 +42,7 @@ from .gl.shaders import ProgramCache
 from .quad import set_camera_uniforms
 from .output import RenderOutput
 from .scene import Scene, SplatKind
+from . import lens
 from .settings import RenderSettings, resolve_near
 
 #: Storage-buffer bindings of shaders/lib/tile_common.glsl and tile_rasterize.comp (after the
@@ -225,8 +226,8 @@ class TileRenderer:
         d["SH_REST_COEFFS"] = self.scene_buffers.sh_rest_coeffs
         if self.settings.antialias:
             d["ANTIALIAS"] = 1
-        if camera.is_orthographic:
-            d["ORTHOGRAPHIC"] = 1
+        lens.require_support(camera, self.surfel, "tile", equirect=False)
+        d.update(lens.projection_defines(camera))
         return self.programs.compute("tile_project.comp", d)
 
     def _set(self, prog: moderngl.ComputeShader, **values) -> None:

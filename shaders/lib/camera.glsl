@@ -6,3 +6,7 @@ uniform vec4 u_intrinsics;    // (fx, fy, cx, cy) in pixels (orthographic: pixel
 uniform vec2 u_viewport;      // (width, height) in pixels
 uniform vec2 u_tan_fov;       // (tan(fov_x / 2), tan(fov_y / 2)) = (W / 2fx, H / 2fy)
 uniform float u_near;         // view z at or below this is culled
+uniform vec4 u_distortion;    // fisheye k1..k4 (FISHEYE only)
+uniform float u_theta_limit;  // fisheye: largest angle from the axis kept (radians)
+uniform float u_wrap_period;  // equirect: pixels per turn of longitude (2 pi fx)
+uniform float u_ods_eye;      // equirect ODS: signed eye offset on the eye circle (0: mono)

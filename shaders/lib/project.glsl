@@ -1,5 +1,10 @@
 // Per-splat projection math, DESIGN.md section 1.  Twin: splatgl/project.py (same names).
 
+#if defined(FISHEYE) || defined(EQUIRECT)
+#define LENS 1
+#endif
+#include "lib/lens.glsl"
+
 // Unit quaternion (w, x, y, z) -> rotation matrix (column-major mat3: m[col][row]).
 mat3 quat_to_rotmat(vec4 q) {
     float w = q.x, x = q.y, y = q.z, z = q.w;
@@ -17,7 +22,9 @@ mat3 covariance_3d(mat3 rot, vec3 scale) {
 
 // Pixel position of a camera-space point: u = fx x/z + cx (orthographic: u = fx x + cx).
 vec2 project_mean(vec3 p) {
-#ifdef ORTHOGRAPHIC
+#if defined(LENS)
+    return project_lens(p);
+#elif defined(ORTHOGRAPHIC)
     return u_intrinsics.xy * p.xy + u_intrinsics.zw;
 #else
     return u_intrinsics.xy * p.xy / p.z + u_intrinsics.zw;
@@ -28,7 +35,9 @@ vec2 project_mean(vec3 p) {
 // [[fx/z, 0, -fx x/z^2], [0, fy/z, -fy y/z^2]], x/z and y/z clamped to +-1.3 tan(half fov).
 // Returned as mat3 J3 with rows (J row 0, J row 1, 0) so that J3 * v = (J v, 0).
 mat3 jacobian(vec3 p) {
-#ifdef ORTHOGRAPHIC
+#if defined(LENS)
+    return jacobian_lens(p);
+#elif defined(ORTHOGRAPHIC)
     return transpose(mat3(u_intrinsics.x, 0.0, 0.0, 0.0, u_intrinsics.y, 0.0, 0.0, 0.0, 0.0));
 #else
     vec2 lim = JACOBIAN_CLAMP * u_tan_fov;
@@ -37,6 +46,30 @@ mat3 jacobian(vec3 p) {
     return transpose(mat3(fx / p.z, 0.0, -fx * t.x / p.z,
                           0.0, fy / p.z, -fy * t.y / p.z,
                           0.0, 0.0, 0.0));
+#endif
+}
+
+// Whether a camera-space centre is drawn: view z beyond the near plane, before any divide;
+// fisheye and equirectangular (splatgl/lens.py lens_visible): distance beyond the near plane,
+// and a fisheye's angle from the axis within u_theta_limit.
+bool in_view(vec3 p) {
+#if defined(LENS)
+    if (!(length(p) > u_near)) return false;
+#ifdef FISHEYE
+    if (!(atan(length(p.xy), p.z) <= u_theta_limit)) return false;
+#endif
+    return true;
+#else
+    return p.z > u_near;
+#endif
+}
+
+// Depth of a camera-space centre for the depth layer: view z, or distance for the lens models.
+float view_depth(vec3 p) {
+#if defined(LENS)
+    return length(p);
+#else
+    return p.z;
 #endif
 }
 

@@ -33,12 +33,17 @@ void quad_axes(vec3 cov, float det, float opacity, out vec2 axis1, out vec2 axis
 #endif
 }
 
-// Fills s for splat i; false when the splat is culled (behind the near plane, or a
-// non-positive-definite 2D covariance).
-bool setup_splat(uint i, out ScreenSplat s) {
+// Fills s for the splat of sorted entry idx (its index; with EQUIRECT the top bit marks the
+// second copy of a splat on the +-180 degree seam, splatgl/lens.py wrap_copies); false when the
+// splat is culled (behind the near plane, or a non-positive-definite 2D covariance).
+bool setup_splat(uint idx, out ScreenSplat s) {
+    uint i = idx & 0x7fffffffu;
     vec4 a = splat_a[i];
     vec3 p = u_view_rot * a.xyz + u_view_trans;
-    if (!(p.z > u_near)) return false;  // view z, before any divide
+#ifdef EQUIRECT
+    p = eye_space(p);  // omni-directional stereo: the eye that sees this splat
+#endif
+    if (!in_view(p)) return false;  // view z (lens models: distance), before any divide
     mat3 rot = quat_to_rotmat(splat_q[i]);
     vec3 cov = covariance_2d(covariance_3d(rot, splat_s[i].xyz), p);
     float det = covariance_2d_det(cov, screen_factor(rot, splat_s[i].xyz, p));  // > 0 (see project.glsl)
@@ -49,8 +54,13 @@ bool setup_splat(uint i, out ScreenSplat s) {
     s.opacity *= antialias_factor(cov);
 #endif
     s.mean2d = project_mean(p);
+#ifdef EQUIRECT
+    // The seam copy sits one turn of longitude away, towards the other edge (lens.wrap_shift).
+    if ((idx & 0x80000000u) != 0u)
+        s.mean2d.x += s.mean2d.x < u_intrinsics.z ? u_wrap_period : -u_wrap_period;
+#endif
     quad_axes(cov, det, s.opacity, s.axis1, s.axis2);
-    s.depth = p.z;
+    s.depth = view_depth(p);
     s.color = sh_color(i, splat_dc[i].rgb, normalize(a.xyz - u_cam_center));
     return true;
 }

@@ -6,15 +6,17 @@ import argparse
 import math
 from pathlib import Path
 
-from ..camera import Camera
+from ..camera import Camera, Projection
 from ..camera_io import load_camera
 from ..errors import SplatglError
 from ..formats import load_scene
+from ..lens import with_projection
 from ..limits import MAX_IMAGE_SIDE, check_image_size
 from ..render import default_camera
 from ..scene import Scene
 from ..settings import (Convention, Precision, Preprocess, QuadExtent, RendererKind, RenderSettings,
                         SortKey)
+from ..stereo import StereoLayout
 from ..transform import parse_transform
 from ..camera_up import UP_CHOICES, resolve_up
 
@@ -100,6 +102,19 @@ def add_camera_arguments(p: argparse.ArgumentParser) -> None:
                    help="vertical field of view of the default camera, degrees (default 50)")
     g.add_argument("--orthographic", action="store_true",
                    help="make the default camera orthographic, zoomed to frame the scene")
+    g.add_argument("--projection", choices=[m.value for m in Projection], default=None,
+                   help="camera model: perspective (default), orthographic, fisheye "
+                        "(equidistant; --fov is the image circle's field of view, default 180, up "
+                        "to 360) or equirectangular (a full 360 x 180 degree panorama, usually "
+                        "--width 2 x --height).  With --camera, the file's pose and image size "
+                        "are kept")
+    g.add_argument("--stereo", type=positive_float, default=None, metavar="IPD",
+                   help="render a stereo pair with this interpupillary distance (world units); "
+                        "equirectangular cameras render omni-directional stereo")
+    g.add_argument("--stereo-layout", choices=[m.value for m in StereoLayout], default="side-by-side",
+                   help="where the two eyes go: side-by-side (left | right, default), top-bottom "
+                        "(left above right, the 360-video convention), or separate files "
+                        "OUT_left.EXT and OUT_right.EXT")
     g.add_argument("--distance", type=positive_float, default=1.0, metavar="SCALE",
                    help="default camera distance as a multiple of the framing distance "
                         "(default 1; 0.5 is twice as close)")
@@ -209,20 +224,26 @@ def _resize_keeping_aspect(args: argparse.Namespace, cam: Camera) -> Camera:
 def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSettings | None = None) -> Camera:
     if args.camera is None and args.camera_index is not None:
         raise SplatglError("--camera-index needs --camera (a cameras.json to pick from)")
+    projection = getattr(args, "projection", None)
     if args.camera is not None:
         cam = load_camera(args.camera, args.camera_index or 0)
         if args.width or args.height:
             cam = _resize_keeping_aspect(args, cam)
         check_image_size(cam.width, cam.height, size_origin(args), RendererKind.REFERENCE)
-        return cam
+        return with_projection(cam, projection, args.fov) if projection else cam
     width, height = args.width or 1280, args.height or 720
     check_image_size(width, height, size_origin(args), RendererKind.REFERENCE)
-    if args.fov is not None and not args.fov < 180.0:
+    if projection == "fisheye" and args.fov is not None and not args.fov <= 360.0:
+        raise SplatglError(f"--fov of a fisheye must be in (0, 360] degrees, got {args.fov}")
+    if projection != "fisheye" and args.fov is not None and not args.fov < 180.0:
         raise SplatglError(f"--fov must be in (0, 180) degrees, got {args.fov}")
     up, _ = resolve_up(getattr(args, "up", None), args.scene, args.camera)
-    cam = default_camera(scene, width, height, args.fov if args.fov is not None else 50.0,
+    cam = default_camera(scene, width, height,
+                         args.fov if args.fov is not None and projection != "fisheye" else 50.0,
                          args.distance, settings.model if settings is not None else None, up=up)
-    if getattr(args, "orthographic", False):
+    if projection in ("fisheye", "equirectangular"):
+        cam = with_projection(cam, projection, args.fov)
+    if getattr(args, "orthographic", False) or projection == "orthographic":
         scale = settings.model.scale if settings is not None and settings.model else 1.0
         radius = max(scene.robust_radius * scale, 1e-9) * args.distance
         cam = Camera.orthographic(cam.width, cam.height, min(cam.width, cam.height) / (2.1 * radius),
@@ -245,13 +266,16 @@ def inputs_from_args(args: argparse.Namespace) -> tuple[Scene, RenderSettings, C
 
 def format_timings(times: object) -> str:
     """A renderer's ``last_times`` dataclass as one line: float fields are seconds (shown in
-    ms, with their total), int fields are counts (shown as such)."""
+    ms, with their total), int fields are counts and strings are already formatted (both
+    shown as they are)."""
     parts, total = [], 0.0
     for name, value in vars(times).items():
         if isinstance(value, bool) or value is None:
             continue
         if isinstance(value, int):
             parts.append(f"{name} {value:,}")
+        elif isinstance(value, str):
+            parts.append(f"{name} {value}")
         else:
             parts.append(f"{name} {float(value) * 1e3:.1f} ms")
             total += float(value)

@@ -89,7 +89,9 @@ def run(args: argparse.Namespace) -> int:
     options = ViewerOptions(title=f"splatgl view - {Path(path).name}",
                             screenshot_dir=args.screenshot_dir, render_args=_render_args(args),
                             vsync=not args.no_vsync and args.benchmark is None,
-                            up=tuple(float(v) for v in up))
+                            up=tuple(float(v) for v in up),
+                            projection=args.projection if args.projection not in (None, "perspective") else None,
+                            fisheye_fov=args.fov if args.projection == "fisheye" else None)
     with Viewer(scene, settings, camera, cameras, args.camera_index or 0,
                 RendererKind(args.renderer), options) as viewer:
         print(f"OpenGL {viewer.ctx.info['GL_VERSION']} on {viewer.ctx.info['GL_RENDERER']}", flush=True)

@@ -84,6 +84,7 @@ class _Tiles:
         self.color = proj.color[sidx]        # (n, K, 3)
         self.depth = proj.depth[sidx]        # (n, K)
         self.valid = valid                   # (n, K)
+        self.wrap_period = proj.wrap_period  # equirect: reach half a turn each side
         if proj.is_surfel:
             self.rows = proj.surfel_rows[sidx]       # (n, K, 3, 3)
             self.depth_rows = proj.depth_rows[sidx]  # (n, K, 3)
@@ -105,6 +106,10 @@ def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) ->
     power = dt(-0.5) * (axx[:, :, None, :] + cyy[:, :, :, None]) - bx[:, :, None, :] * dy[:, :, :, None]
     n, k = dx.shape[:2]
     alpha = gaussian_alpha(power.reshape(n, k, TILE_PIXELS), g.opacity[:, :, None], alpha_max)
+    if g.wrap_period is not None:   # equirect: |dx| <= period / 2 (splatgl/lens.py)
+        reach = np.abs(dx) <= dt(0.5 * g.wrap_period)                  # (n, K, 16) by column
+        alpha = np.where(np.broadcast_to(reach[:, :, None, :], power.shape).reshape(n, k, TILE_PIXELS),
+                         alpha, dt(0.0))
     return np.where(g.valid[:, :, None], alpha, dt(0.0))
 
 

@@ -16,6 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import dataclasses
+
+from .. import lens
 from .. import project as pm
 from .. import surfel as sf
 from ..camera import Camera
@@ -46,6 +49,10 @@ class ProjectedSplats:
             ``T' = A P H`` and (N, 3) view-z rows (:class:`splatgl.surfel.SurfelScreen`); then
             ``mean2d`` is the projected centre (the low-pass centre), ``conic`` is zero and
             ``radius`` holds the per-axis ``ceil`` of the box half extents.
+        wrap_period: equirectangular cameras only: pixels per turn of longitude; every splat
+            reaches at most half of it either side of its centre, and rows past the scene's
+            count are the second copies of splats on the +-180 degree seam
+            (:func:`splatgl.lens.wrap_copies`).
     """
 
     visible: np.ndarray
@@ -62,6 +69,7 @@ class ProjectedSplats:
     grid: tuple[int, int]
     surfel_rows: np.ndarray | None = None
     depth_rows: np.ndarray | None = None
+    wrap_period: float | None = None
 
     @property
     def is_surfel(self) -> bool:
@@ -194,6 +202,7 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     dt = np.dtype(dtype)
     if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise ValueError(f"reference dtype must be float32 or float64, got {dt}")
+    lens.require_support(camera, scene.kind is SplatKind.SURFEL_2D, "reference")
     if scene.kind is SplatKind.SURFEL_2D:
         return project_surfels(scene, camera, settings, dt, options)
     near = pm.near_threshold(resolve_near(settings, scene.robust_radius), dt)
@@ -206,7 +215,9 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     finite = (np.isfinite(pr.mean2d).all(1) & np.isfinite(pr.conic).all(1)
               & np.isfinite(pr.cov2d).all((1, 2)) & np.isfinite(pr.color).all(1)
               & np.isfinite(pr.opacity))
-    ok = (pr.depth > near) & finite & (pr.det > 0)
+    visible = lens.lens_visible(pr.p_cam, view, near) if view.is_lens else pr.depth > near
+    ok = visible & finite & (pr.det > 0)
+    pr, ok = _wrap_copies(pr, ok, scene, view)
     mean2d = np.where(ok[:, None], pr.mean2d, dt.type(0.0)).astype(dt)
     cov2d = np.where(ok[:, None, None], pr.cov2d, dt.type(1.0)).astype(dt)
 
@@ -225,7 +236,24 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
         visible=ok, depth=clean(pr.depth), mean2d=clean(mean2d), conic=clean(pr.conic),
         opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
         rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
-        grid=grid)
+        grid=grid, wrap_period=lens.wrap_period(camera))
+
+
+def _wrap_copies(pr: pm.Projected, ok: np.ndarray, scene: Scene, view: Camera
+                 ) -> tuple[pm.Projected, np.ndarray]:
+    """Equirectangular cameras: append a second row, one turn of longitude away, for every
+    kept splat that may reach across the +-180 degree seam (:func:`splatgl.lens.wrap_copies`,
+    the quad path's rule); other cameras unchanged."""
+    if lens.wrap_period(view) is None:
+        return pr, ok
+    reach = lens.splat_reach(scene.scales.max(axis=1) * view.scale, scene.opacities)
+    dup = np.flatnonzero(ok & lens.wrap_copies(pr.p_cam, reach, view))
+    rows = np.concatenate([np.arange(ok.shape[0]), dup])
+    taken = {f.name: getattr(pr, f.name)[rows] for f in dataclasses.fields(pr)}
+    mean2d = taken["mean2d"].copy()
+    mean2d[ok.shape[0]:, 0] += lens.wrap_shift(mean2d[ok.shape[0]:, 0], view)
+    taken["mean2d"] = mean2d
+    return pm.Projected(**taken), ok[rows]
 
 
 def gsplat_on_screen(mean2d: np.ndarray, radius: np.ndarray, camera: Camera, dt) -> np.ndarray:

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import SplatglError
+from ..lens import with_projection
 from ..gl.context import REQUIRED_VERSION, create_glfw_context, create_glfw_window
 from ..render import Renderer
 from ..scene import Scene
@@ -54,6 +55,8 @@ class ViewerOptions:
             command line printed with each screenshot.
         vsync: wait for the display's refresh on swap.
         up: (3,) world direction the orbit keeps up on screen (``--up``; default world -y).
+        projection: show every view with this camera model instead (``--projection``; fisheye
+            or equirectangular images are shown flat), ``fisheye_fov`` degrees for a fisheye.
     """
 
     title: str = "splatgl view"
@@ -62,6 +65,8 @@ class ViewerOptions:
     render_args: tuple[str, ...] = ()
     vsync: bool = True
     up: tuple[float, float, float] = (0.0, -1.0, 0.0)
+    projection: str | None = None
+    fisheye_fov: float | None = None
 
 
 class Viewer:
@@ -255,8 +260,12 @@ class Viewer:
         """The current camera at the window's framebuffer size (world frame)."""
         width, height = max(self.size[0], 1), max(self.size[1], 1)
         if self._exact is not None and self._exact[0] == self.state:
-            return controls.fit_camera(self._exact[1], width, height)
-        return controls.to_camera(self.state, width, height)
+            cam = controls.fit_camera(self._exact[1], width, height)
+        else:
+            cam = controls.to_camera(self.state, width, height)
+        if self.options.projection is not None:   # fisheye or equirect, shown flat
+            cam = with_projection(cam, self.options.projection, self.options.fisheye_fov)
+        return cam
 
     def screenshot(self) -> tuple[Path, Path]:
         """Write what ``splatgl render`` writes from the current camera, and that camera."""

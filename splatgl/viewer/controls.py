@@ -99,7 +99,7 @@ def fit_camera(camera: Camera, width: int, height: int) -> Camera:
     s = height / camera.height
     return Camera(width, height, camera.fx * s, camera.fy * s,
                   camera.cx * s + 0.5 * (width - camera.width * s), camera.cy * s,
-                  camera.world_to_camera, camera.projection)
+                  camera.world_to_camera, camera.projection, camera.distortion, camera.ods_eye)
 
 
 def from_camera(camera: Camera, distance: float, up=(0.0, -1.0, 0.0)) -> ViewState:

@@ -1,0 +1,53 @@
+"""Stereo rigs: left and right eye cameras from one camera, and their images in one frame.
+
+A pinhole, orthographic or fisheye rig places the eyes ``ipd / 2`` either side of the camera
+centre along the camera's own x axis (parallel axes, no toe-in).  An equirectangular rig is
+omni-directional stereo (ODS): the eye offset rotates with the longitude, per splat
+(:func:`splatgl.lens.eye_space`), so every direction of the panorama has correct parallax near
+the horizon.  Left is the eye at camera -x (image left).
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+
+from .camera import Camera, Projection
+from .errors import CameraError
+from .output import RenderOutput
+
+
+class StereoLayout(enum.Enum):
+    SIDE_BY_SIDE = "side-by-side"   # left | right, twice the width
+    TOP_BOTTOM = "top-bottom"       # left above right, twice the height (the 360-video norm)
+    SEPARATE = "separate"           # two files, NAME_left.EXT and NAME_right.EXT
+
+
+def eye_cameras(camera: Camera, ipd: float) -> tuple[Camera, Camera]:
+    """(left, right) cameras of a rig with interpupillary distance ``ipd`` (world units)."""
+    if not (np.isfinite(ipd) and ipd > 0.0):
+        raise CameraError(f"--stereo needs a positive interpupillary distance, got {ipd}")
+    half = 0.5 * float(ipd)
+    if camera.projection is Projection.EQUIRECTANGULAR:
+        return (Camera(**{**_fields(camera), "ods_eye": -half}),
+                Camera(**{**_fields(camera), "ods_eye": half}))
+    eyes = []
+    for offset in (half, -half):           # left eye at camera -x sees points shifted to +x
+        shift = np.eye(4)
+        shift[0, 3] = offset
+        eyes.append(camera.with_pose(shift @ camera.world_to_camera))
+    return eyes[0], eyes[1]
+
+
+def _fields(camera: Camera) -> dict:
+    return {name: getattr(camera, name) for name in camera.__dataclass_fields__}
+
+
+def combine(left: RenderOutput, right: RenderOutput, layout: StereoLayout) -> RenderOutput:
+    """One frame holding both eyes (side by side or top-bottom); depth likewise."""
+    axis = 1 if StereoLayout(layout) is StereoLayout.SIDE_BY_SIDE else 0
+    depth = None
+    if left.depth is not None and right.depth is not None:
+        depth = np.concatenate([left.depth, right.depth], axis=axis)
+    return RenderOutput(np.concatenate([left.rgba, right.rgba], axis=axis), depth)
