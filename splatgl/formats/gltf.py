@@ -17,9 +17,11 @@ one.  Accessors may be float or (normalised) integer where the extension allows 
 
 Axes: glTF is right-handed +Y up (Niantic's spec calls it LUF: left, up, front); 3DGS PLY (and
 :class:`~splatgl.scene.Scene`) is RDF (right, down, front).  RDF -> LUF is a 180-degree turn about
-z: ``(x, y, z) -> (-x, -y, z)``, the quaternion's x and y negated, and the SH coefficients odd in
-``(x, y)`` negated (:data:`Z180_SH_SIGNS`).  splat-transform and the PlayCanvas engine use the
-same turn between PLY and glTF; it is its own inverse, so reading and writing share it.
+z: ``(x, y, z) -> (-x, -y, z)``, the rotation composed with that turn (``q -> (0, 0, 0, 1) q``:
+``(w, x, y, z) -> (-z, -y, x, w)``) and the SH coefficients odd in ``(x, y)`` negated
+(:data:`Z180_SH_SIGNS`).  splat-transform and the PlayCanvas engine use the same turn between
+PLY and glTF (their quaternions match these bit for bit).  Turning twice gives ``-q``, the same
+rotation, so reading and writing share :func:`_turn`.
 
 ``KHR_gaussian_splatting_compression_spz_2`` (reading only): the primitive's extension object
 holds ``extensions.KHR_gaussian_splatting_compression_spz_2.bufferView``, an SPZ blob whose
@@ -55,9 +57,10 @@ CHUNK_JSON = 0x4E4F534A
 CHUNK_BIN = 0x004E4942
 #: SH sign changes of the 180-degree turn about z, coefficients 1..15 (3DGS order).
 Z180_SH_SIGNS = np.array([-1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1], np.float32)
-#: The turn's effect on (x, y, z) and on the quaternion (w, x, y, z).
+#: The turn's effect on (x, y, z); on a quaternion (w, x, y, z) it is (-z, -y, x, w).
 Z180_AXES = np.array([-1.0, -1.0, 1.0])
-Z180_QUAT = np.array([1.0, -1.0, -1.0, 1.0])
+Z180_QUAT_ORDER = [3, 2, 1, 0]
+Z180_QUAT_SIGNS = np.array([-1.0, -1.0, 1.0, 1.0])
 #: What the writer states in the extension object.
 EXTENSION_OBJECT = {"kernel": "ellipse", "colorSpace": "srgb_rec709_display",
                     "projection": "perspective", "sortingMethod": "cameraDistance"}
@@ -312,7 +315,8 @@ def _turn(means, quats, log_scales, logits, sh) -> tuple[np.ndarray, ...]:
     """The 180-degree turn about z between glTF (LUF) and PLY (RDF) axes (its own inverse)."""
     out_sh = np.array(sh, np.float32, copy=True)
     out_sh[:, 1:] *= Z180_SH_SIGNS[: sh.shape[1] - 1, None]
-    return means * Z180_AXES, quats * Z180_QUAT, log_scales, logits, out_sh
+    return (means * Z180_AXES, quats[:, Z180_QUAT_ORDER] * Z180_QUAT_SIGNS, log_scales, logits,
+            out_sh)
 
 
 def _transform(path, parts, matrix: np.ndarray) -> tuple[np.ndarray, ...]:
