@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..constants import SH_C0, sh_coeff_count
+from ..constants import SH_C0
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate
 from . import _binary, spz
@@ -341,17 +341,27 @@ def _transform(path, parts, matrix: np.ndarray) -> tuple[np.ndarray, ...]:
     return means, quats, log_scales + math.log(lengths[0]), logits, sh
 
 
-def read(path: Path, drop_invalid: bool = False) -> Scene:
-    """Load the splat primitives of a glTF / GLB file (all of them, concatenated)."""
-    path = Path(path)
-    doc = _Document(path)
+def _splat_parts(doc: _Document) -> list[tuple[np.ndarray, ...]]:
     parts = []
     for mesh_index, matrix in _node_matrices(doc):
         mesh = doc.item("meshes", mesh_index)
         for p, prim in enumerate(mesh.get("primitives") or []):
             if isinstance(prim, dict) and EXT in (prim.get("extensions") or {}):
                 where = f"meshes[{mesh_index}].primitives[{p}]"
-                parts.append(_transform(path, _primitive(doc, prim, where), matrix))
+                parts.append(_transform(doc.path, _primitive(doc, prim, where), matrix))
+    return parts
+
+
+def read(path: Path, drop_invalid: bool = False) -> Scene:
+    """Load the splat primitives of a glTF / GLB file (all of them, concatenated)."""
+    path = Path(path)
+    doc = _Document(path)
+    try:
+        parts = _splat_parts(doc)
+    except (TypeError, AttributeError, KeyError, IndexError, ValueError) as exc:
+        # JSON of the wrong shape where the spec wants an object, list or number
+        raise SceneFormatError(path, f"malformed glTF structure ({type(exc).__name__}: "
+                                     f"{str(exc)[:100]})") from None
     if not parts:
         raise SceneFormatError(path, f"no mesh primitive uses {EXT}", "extensions")
     degree = min(p[4].shape[1] for p in parts)

@@ -171,7 +171,10 @@ def _quats(path, files, meta, count) -> np.ndarray:
 
 
 def _codebook(path, meta, key) -> np.ndarray:
-    book = _numbers(path, meta, key).astype(np.float32)
+    book = _numbers(path, meta, key)
+    if np.abs(book).max(initial=0.0) > np.finfo(np.float32).max:
+        raise SceneFormatError(path, "values beyond float32's range", key)
+    book = book.astype(np.float32)
     if book.ndim != 1 or not 1 <= book.size <= 256:
         raise SceneFormatError(path, f"expected 1-256 numbers, found {book.size}", key)
     return np.concatenate([book, np.full(256 - book.size, book[-1], np.float32)])
@@ -263,13 +266,20 @@ def read(path: Path, drop_invalid: bool = False) -> Scene:
     files = _Files(path)
     meta = files.meta()
     version = meta.get("version")
-    if version == 2:
-        raw = _decode_v2(path, files, meta)
-    elif version is None and isinstance(meta.get("means"), dict) and "shape" in meta["means"]:
-        raw = _decode_v1(path, files, meta)
-    else:
-        raise SceneFormatError(path, f"SOG version {version!r} is not supported (supported: 1, 2)",
-                               "version")
+    try:
+        if version == 2:
+            raw = _decode_v2(path, files, meta)
+        elif version is None and isinstance(meta.get("means"), dict) and "shape" in meta["means"]:
+            raw = _decode_v1(path, files, meta)
+        else:
+            raise SceneFormatError(path, f"SOG version {version!r} is not supported (supported: "
+                                         "1, 2)", "version")
+    except (TypeError, AttributeError, KeyError, IndexError, ValueError) as exc:
+        if isinstance(exc, SceneFormatError):
+            raise
+        # meta.json values of the wrong shape (a string where numbers belong, ...)
+        raise SceneFormatError(path, f"malformed meta.json ({type(exc).__name__}: "
+                                     f"{str(exc)[:100]})") from None
     means, quats, scales, logits, sh = raw
     return activate(path, means, quats, np.asarray(scales, np.float32),
                     np.asarray(logits, np.float32), np.asarray(sh, np.float32),
