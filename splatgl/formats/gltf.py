@@ -358,6 +358,8 @@ def read(path: Path, drop_invalid: bool = False) -> Scene:
     doc = _Document(path)
     try:
         parts = _splat_parts(doc)
+    except SceneFormatError:
+        raise
     except (TypeError, AttributeError, KeyError, IndexError, ValueError) as exc:
         # JSON of the wrong shape where the spec wants an object, list or number
         raise SceneFormatError(path, f"malformed glTF structure ({type(exc).__name__}: "
