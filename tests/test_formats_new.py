@@ -7,7 +7,6 @@ from __future__ import annotations
 import base64
 import json
 import math
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +14,7 @@ import pytest
 
 from splatgl.cli import main
 from splatgl.convert import conversion_error
-from splatgl.formats import compressed_ply_write, gltf, load_scene, save_scene, sog, spz_write
+from splatgl.formats import compressed_ply_write, load_scene, save_scene, sog, spz_write
 from splatgl.formats import quantise as qz
 from splatgl.scene import Scene
 
@@ -214,3 +213,39 @@ def test_bad_new_inputs_are_one_line_errors(tmp_path, capsys):
     glb.write_bytes(b"glTF\x02\0\0\0\xff\0\0\0")
     assert main(["info", str(glb)]) == 2
     assert "truncated" in capsys.readouterr().err
+
+
+def test_antialias_tags_turn_on_antialias(tmp_path, capsys):
+    import argparse
+    import gzip
+
+    from splatgl.commands._common import antialias_from_args
+    from splatgl.formats.metadata import antialias_tag
+
+    s = random_scene(30, degree=0)
+    tagged = tmp_path / "aa.spz"
+    tagged.write_bytes(gzip.compress(spz_write.encode(s, antialiased=True)))
+    plain = tmp_path / "plain.spz"
+    save_scene(plain, s)
+    ply = tmp_path / "mip.ply"
+    save_scene(ply, s)
+    ply.write_bytes(ply.read_bytes().replace(b"comment written by splatgl",
+                                             b"comment SplatRenderMode: mip", 1))
+    meta = tmp_path / "meta.json"
+    save_scene(meta, s)
+    doc = json.loads(meta.read_text())
+    meta.write_text(json.dumps({**doc, "model": "antialiased"}))
+    assert antialias_tag(tagged) == "SPZ header flag 'antialiased'"
+    assert antialias_tag(ply) == "PLY comment 'SplatRenderMode: mip'"
+    assert antialias_tag(meta) == "SOG meta.json model 'antialiased'"
+    assert antialias_tag(plain) is None and antialias_tag(tmp_path / "none.ply") is None
+
+    def ns(scene, flag=None):
+        return argparse.Namespace(scene=scene, antialias=flag)
+
+    assert antialias_from_args(ns(tagged)) is True
+    assert "rendering with --antialias" in capsys.readouterr().err
+    assert antialias_from_args(ns(tagged, False)) is False
+    assert antialias_from_args(ns(plain)) is False and antialias_from_args(ns(None)) is False
+    assert capsys.readouterr().err == ""
+    assert load_scene(ply).count == 30  # the comment does not disturb reading
