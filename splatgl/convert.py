@@ -191,5 +191,6 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
     error = conversion_error(scene, back)
     error["bounds"] = bounds
     error["within_bounds"] = within_bounds(error, bounds)
+    size = getattr(writer, "stored_bytes", lambda p: p.stat().st_size)(output)
     return Conversion(source, output, source_format, writer.NAME, scene.count, scene.sh_degree,
-                      back.sh_degree, output.stat().st_size, time.perf_counter() - t0, error)
+                      back.sh_degree, size, time.perf_counter() - t0, error)

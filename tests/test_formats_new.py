@@ -73,6 +73,8 @@ def test_round_trip_within_bounds(tmp_path, name, degree):
 def test_sog_folder_has_its_textures_and_no_partials(tmp_path):
     save_scene(tmp_path / "meta.json", random_scene(200, degree=1))
     names = sorted(p.name for p in tmp_path.iterdir())
+    assert sog.stored_bytes(tmp_path / "meta.json") == sum(p.stat().st_size
+                                                          for p in tmp_path.iterdir())
     assert names == sorted(["meta.json", "means_l.webp", "means_u.webp", "quats.webp",
                             "scales.webp", "sh0.webp", "shN_centroids.webp", "shN_labels.webp"])
 

@@ -286,12 +286,16 @@ def read(path: Path, drop_invalid: bool = False) -> Scene:
                     SplatKind.GAUSSIAN_3D, drop_invalid)
 
 
-def antialiased(path: Path) -> bool:
-    """Whether meta.json tags the scene as trained with antialiasing (``model``)."""
-    try:
-        return read_meta(path).get("model") == "antialiased"
-    except SceneFormatError:
-        return False
+def stored_bytes(path: Path) -> int:
+    """Bytes a SOG scene occupies: the bundle, or meta.json plus the textures it names."""
+    path = Path(path)
+    size = path.stat().st_size
+    if not path.name.lower().endswith(".json"):
+        return size
+    names = {n for v in read_meta(path).values() if isinstance(v, dict)
+             for n in (v.get("files") or []) if isinstance(n, str) and "/" not in n}
+    return size + sum((path.parent / n).stat().st_size for n in names
+                      if (path.parent / n).is_file())
 
 
 # --- writing ------------------------------------------------------------------------------------
