@@ -7,6 +7,7 @@ back and measures it against the input with :func:`conversion_error`.
 
 from __future__ import annotations
 
+import inspect
 import time
 import warnings
 from dataclasses import dataclass
@@ -21,6 +22,25 @@ from .scene import Scene
 
 #: Highest SH degree each writable format stores (formats not listed store degree 3).
 MAX_SH_DEGREE_OF_FORMAT = {"splat": 0}
+#: The attributes :func:`conversion_error` measures and writers bound.
+ATTRIBUTES = ("position", "scale", "opacity", "rotation", "color", "sh_rest")
+
+
+def error_bounds(writer, scene: Scene, **options) -> dict | None:
+    """The writer's per-attribute bounds for ``scene`` (None for lossless writers)."""
+    fn = getattr(writer, "error_bounds", None)
+    if fn is None:
+        return None
+    accepted = inspect.signature(fn).parameters
+    return fn(scene, **{k: v for k, v in options.items() if k in accepted})
+
+
+def within_bounds(error: dict, bounds: dict | None) -> dict[str, bool] | None:
+    """Per attribute: is the measured max error inside its bound (attributes with a bound)."""
+    if bounds is None:
+        return None
+    return {name: bool(error[name]["max"] <= bounds[name]) for name in ATTRIBUTES
+            if bounds.get(name) is not None and error.get(name) is not None}
 
 
 def _stats(values: np.ndarray) -> dict[str, float]:
@@ -127,13 +147,18 @@ class Conversion:
 
 
 def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = False,
-            sh_degree: int | None = None, force: bool = False, progress=None) -> Conversion:
+            sh_degree: int | None = None, force: bool = False, progress=None,
+            **writer_options) -> Conversion:
     """Convert the scene file ``source`` to ``output`` (format from its extension).
 
     ``sh_degree`` caps the SH degree written (never pads).  A format that stores fewer SH bands
     than the scene has (.splat: degree 0) drops the rest with a :class:`UserWarning`.  Refuses to
     replace an existing ``output`` unless ``force``; the file appears only when complete.
-    ``progress`` is passed to :func:`load_scene` for both reads.
+    ``progress`` is passed to :func:`load_scene` for both reads.  ``writer_options`` go to the
+    writer (``version=2`` for SPZ).  For lossy writers the error dictionary also holds
+    ``bounds`` (per attribute, what the format's quantisation allows for this scene; None where
+    no a-priori bound exists) and ``within_bounds``.  Writers that reorder the splats (SOG,
+    compressed PLY) are compared row by row in the order written.
 
     Raises :class:`SplatglError` for a missing or malformed input, an output format that cannot
     be written, an existing output without ``force`` or a write that fails.
@@ -155,11 +180,17 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
         degree = limit
     written = scene if degree == scene.sh_degree else scene.with_sh_degree(degree)
     try:
-        save_scene(output, written)
+        order = save_scene(output, written, **writer_options)
     except OSError as exc:
         raise SplatglError(f"{output}: cannot write: {exc.strerror or exc}") from None
+    bounds = error_bounds(writer, written, **writer_options)
     del written
     back = load_scene(output, progress=progress)
+    if order is not None:
+        scene = scene.subset(order)
     error = conversion_error(scene, back)
+    error["bounds"] = bounds
+    error["within_bounds"] = within_bounds(error, bounds)
+    size = getattr(writer, "stored_bytes", lambda p: p.stat().st_size)(output)
     return Conversion(source, output, source_format, writer.NAME, scene.count, scene.sh_degree,
-                      back.sh_degree, output.stat().st_size, time.perf_counter() - t0, error)
+                      back.sh_degree, size, time.perf_counter() - t0, error)

@@ -215,7 +215,7 @@ def test_cli_missing_input_exits_2_and_writes_nothing(tmp_path, capsys):
 
 def test_cli_unsupported_output_exits_2(tmp_path, capsys):
     save_scene(tmp_path / "in.ply", random_scene(10))
-    code, _, err = run_cli(capsys, tmp_path / "in.ply", tmp_path / "out.spz")
+    code, _, err = run_cli(capsys, tmp_path / "in.ply", tmp_path / "out.ksplat")
     assert code == 2 and "cannot write this format" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.ply"]
 

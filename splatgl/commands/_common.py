@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from ..camera import Camera, Projection
@@ -12,6 +13,7 @@ from ..errors import SplatglError
 from ..formats import load_scene
 from ..lens import with_projection
 from ..limits import MAX_IMAGE_SIDE, check_image_size
+from ..formats.metadata import antialias_tag
 from ..render import default_camera
 from ..scene import Scene
 from ..settings import (Convention, Precision, Preprocess, QuadExtent, RendererKind, RenderSettings,
@@ -139,8 +141,11 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--near", type=positive_float, default=None,
                    help="near-plane distance in world units (default: min(0.2, 1%% of the "
                         "scene's robust radius))")
-    g.add_argument("--antialias", action="store_true",
-                   help="apply the reference's antialiasing opacity compensation")
+    g.add_argument("--antialias", action=argparse.BooleanOptionalAction, default=None,
+                   help="apply the reference's antialiasing opacity compensation (default: on "
+                        "for scenes whose file says they were trained with antialiasing, e.g. "
+                        "SPZ's antialiased flag or a 'SplatRenderMode: mip' PLY comment, with "
+                        "a message; off otherwise)")
     g.add_argument("--sh-degree", type=int, default=None, choices=range(4),
                    help="cap the SH degree evaluated (default: the scene's)")
     g.add_argument("--preprocess", choices=[m.value for m in Preprocess], default=None,
@@ -169,11 +174,25 @@ def load_scene_arg(args: argparse.Namespace) -> Scene:
     return load_scene(path, drop_invalid=args.drop_invalid)
 
 
+def antialias_from_args(args: argparse.Namespace) -> bool:
+    """``--antialias`` / ``--no-antialias`` if given, else whether the scene file is tagged as
+    trained with antialiasing (saying so on stderr)."""
+    if args.antialias is not None:
+        return args.antialias
+    path = getattr(args, "scene", None)
+    tag = antialias_tag(path) if path is not None else None
+    if tag:
+        print(f"splatgl: {path}: {tag}: rendering with --antialias (--no-antialias turns it off)",
+              file=sys.stderr)
+    return tag is not None
+
+
 def settings_from_args(args: argparse.Namespace) -> RenderSettings:
     model = parse_transform(args.transform) if args.transform else None
     optional = {"preprocess": args.preprocess} if args.preprocess else {}
     return RenderSettings(background=args.background, precision=args.precision, extent=args.extent,
-                          near=args.near, antialias=args.antialias, sh_degree=args.sh_degree,
+                          near=args.near, antialias=antialias_from_args(args),
+                          sh_degree=args.sh_degree,
                           model=model, sort_key=args.sort, half_sh=args.half_sh,
                           convention=args.convention, **optional)
 

@@ -7,26 +7,42 @@ import json
 from pathlib import Path
 
 from ..convert import convert
+from ..errors import SplatglError
 
 NAME = "convert"
 ORDER = 25
-HELP = "convert a scene to another format (.ply, .splat) and report the round-trip error"
+HELP = ("convert a scene to another format (.ply, .compressed.ply, .spz, .sog, meta.json, .glb, "
+        ".gltf, .splat) and report the round-trip error")
 DESCRIPTION = """Read a scene in any supported format and write it in the format OUT's extension
-names (.ply: float32, exact; .splat: 8-bit colour, opacity and rotation, SH degree 0 only).
+names:
+  .ply              float32, exact
+  .compressed.ply   PlayCanvas chunks: 11-10-11-bit position and log-scale per 256 splats,
+                    10-bit smallest-three rotation, 8-bit colour and opacity, 8-bit SH
+  .spz              Niantic SPZ v3 (or --spz-version 2), gzip: 24-bit fixed-point position,
+                    8-bit colour, opacity, log-scale and SH
+  .sog / meta.json  PlayCanvas SOG v2 (zip bundle / folder of lossless WebP): 16-bit log
+                    position, 256-entry codebooks, 8-bit rotation, k-means SH palette
+  .glb / .gltf      glTF 2.0 with KHR_gaussian_splatting, float32 (glTF axes: y up)
+  .splat            8-bit colour, opacity and rotation, SH degree 0 only
 OUT is written atomically and never replaced without --force.  Afterwards OUT is read back
 and compared with the input, per attribute (max and mean absolute error): position (world
 units), scale (relative), opacity, rotation (degrees; q and -q are the same rotation), SH DC
-colour (0-1 colour units) and the higher SH bands kept.
+colour (0-1 colour units) and the higher SH bands kept.  For lossy formats each line also
+shows the bound the format's quantisation implies for this scene (values outside a format's
+fixed range are clipped, and the bound includes the distance clipped); "!" marks a bound
+exceeded, which would be a bug.  SOG's SH palette has no a-priori bound (k-means).
 
 examples:
   splatgl convert scene.compressed.ply scene.ply
+  splatgl convert scene.ply scene.sog
+  splatgl convert scene.ply scene.spz --spz-version 2
   splatgl convert scene.ply scene.splat --json
   splatgl convert scene.ply small.ply --sh-degree 1 --force"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("input", type=Path, help="scene file to read (.ply, .compressed.ply, .spz, "
-                                            ".ksplat, .splat)")
+                                            ".sog, meta.json, .glb, .gltf, .ksplat, .splat)")
     p.add_argument("output", type=Path, help="file to write; its extension picks the format")
     p.add_argument("--drop-invalid", action="store_true",
                    help="drop rows with NaN/Inf values or zero quaternions (with a warning that "
@@ -34,18 +50,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sh-degree", type=int, default=None, choices=range(4), metavar="N",
                    help="write SH bands up to degree N only (0-3; default: all the input has)")
     p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    p.add_argument("--spz-version", type=int, choices=(2, 3), default=None, metavar="V",
+                   help="SPZ version to write for .spz output: 3 (default; smallest-three "
+                        "rotations, RUB axes) or 2 (3-byte rotations)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
 
 
-def _row(label: str, stats: dict | None, unit: str, fmt: str = ".3g") -> str:
+def _row(label: str, stats: dict | None, unit: str, bound: float | None = None,
+         fmt: str = ".3g") -> str:
     if stats is None:
         return f"  {label:<12} -"
-    return f"  {label:<12} {stats['max']:{fmt}} / {stats['mean']:{fmt}} {unit}"
+    text = f"  {label:<12} {stats['max']:{fmt}} / {stats['mean']:{fmt}}"
+    if bound is not None:
+        mark = "" if stats["max"] <= bound else " !"
+        text += f" (bound {bound:{fmt}}{mark})"
+    return f"{text} {unit}"
 
 
 def run(args: argparse.Namespace) -> int:
+    options = {}
+    if args.spz_version is not None:
+        if not args.output.name.lower().endswith(".spz"):
+            raise SplatglError(f"{args.output}: --spz-version applies to .spz output only")
+        options["version"] = args.spz_version
     result = convert(args.input, args.output, drop_invalid=args.drop_invalid,
-                     sh_degree=args.sh_degree, force=args.force)
+                     sh_degree=args.sh_degree, force=args.force, **options)
     if args.json:
         print(json.dumps(result.as_dict()))
         return 0
@@ -57,17 +86,18 @@ def run(args: argparse.Namespace) -> int:
     if e["bit_exact"]:
         print("round trip: bit-exact (every stored value identical)")
         return 0
-    print("round-trip error, max / mean:")
-    print(_row("position", e["position"], "world units"))
-    print(_row("scale", e["scale"], "(relative)"))
-    print(_row("opacity", e["opacity"], ""))
-    print(_row("rotation", e["rotation"], "degrees"))
-    print(_row("colour (DC)", e["color"], "(0-1 colour units; 1/255 = 0.00392)"))
+    b = e.get("bounds") or {}
+    print("round-trip error, max / mean" + (" (bound):" if b else ":"))
+    print(_row("position", e["position"], "world units", b.get("position")))
+    print(_row("scale", e["scale"], "(relative)", b.get("scale")))
+    print(_row("opacity", e["opacity"], "", b.get("opacity")))
+    print(_row("rotation", e["rotation"], "degrees", b.get("rotation")))
+    print(_row("colour (DC)", e["color"], "(0-1 colour units; 1/255 = 0.00392)", b.get("color")))
     if e["color_outside_01"] and result.output_format == "splat":
         print(f"  ({e['color_outside_01']:,} input colour channels lie outside 0-1 and were "
               "clipped to 8 bits)")
     if result.sh_degree_in > 0:
         kept = "dropped" if result.sh_degree_out == 0 else f"degrees 1-{result.sh_degree_out}"
-        print(_row("SH rest", e["sh_rest"], f"({kept})") if e["sh_rest"] else
+        print(_row("SH rest", e["sh_rest"], f"({kept})", b.get("sh_rest")) if e["sh_rest"] else
               f"  SH rest      {kept}")
     return 0

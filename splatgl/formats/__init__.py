@@ -3,7 +3,10 @@
 Each format module provides ``NAME`` (str), ``EXTENSIONS`` (tuple of lower-case suffixes),
 ``sniff(head: bytes) -> bool`` (does the file start like this format?) and
 ``read(path: Path, drop_invalid: bool) -> Scene`` (optionally also ``progress=None``,
-see :mod:`splatgl.progress`).  Writers provide ``write(path, scene)``.
+see :mod:`splatgl.progress`).  Writers (the modules in ``_WRITER_MODULES``) provide
+``NAME``, ``EXTENSIONS`` and ``write(path, scene)``, which returns None or, for writers that
+reorder the splats, the (N,) row order written; lossy writers also provide
+``error_bounds(scene) -> dict`` (see :mod:`splatgl.formats.quantise`).
 """
 
 from __future__ import annotations
@@ -19,15 +22,17 @@ from ..scene import Scene
 from ._messages import reader_guard
 
 #: Format modules in detection order (most specific signature first).
-_FORMAT_MODULES = ("compressed_ply", "ply", "spz", "ksplat", "splat")
+_FORMAT_MODULES = ("sog", "gltf", "compressed_ply", "ply", "spz", "ksplat", "splat")
+#: Writer modules, most specific extension first (.compressed.ply before .ply).
+_WRITER_MODULES = ("compressed_ply_write", "ply", "splat", "spz_write", "sog", "gltf")
 
 #: How many leading bytes ``sniff`` sees.
 SNIFF_BYTES = 4096
 
 
-def _modules() -> list[ModuleType]:
+def _modules(names: tuple[str, ...] = _FORMAT_MODULES) -> list[ModuleType]:
     mods = []
-    for name in _FORMAT_MODULES:
+    for name in names:
         try:
             mods.append(importlib.import_module(f"{__name__}.{name}"))
         except ModuleNotFoundError as exc:  # a format not written yet
@@ -81,20 +86,27 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None) -> S
 def writer_for(path: str | Path) -> ModuleType:
     """The format module that writes files named like ``path`` (by extension)."""
     name = Path(path).name.lower()
-    for mod in _modules():
-        if hasattr(mod, "write") and any(name.endswith(ext) for ext in mod.EXTENSIONS):
+    mods = _modules(_WRITER_MODULES)
+    for mod in mods:
+        if any(name.endswith(ext) for ext in mod.EXTENSIONS):
             return mod
-    raise SceneFormatError(path, "cannot write this format (writable: .ply, .splat)")
+    exts = ", ".join(ext for mod in mods for ext in mod.EXTENSIONS)
+    raise SceneFormatError(path, f"cannot write this format (writable: {exts})")
 
 
-def save_scene(path: str | Path, scene: Scene) -> None:
-    """Write ``scene`` in the format the extension names, atomically (temp file, then rename)."""
+def save_scene(path: str | Path, scene: Scene, **options):
+    """Write ``scene`` in the format the extension names, atomically (temp file, then rename).
+
+    ``options`` go to the writer (e.g. ``version=2`` for SPZ).  Returns what the writer returns:
+    None, or the (N,) row order written when the writer reorders the splats.
+    """
     path = Path(path)
     mod = writer_for(path)
     tmp = path.with_name(path.name + ".partial")
     try:
-        mod.write(tmp, scene)
+        order = mod.write(tmp, scene, **options)
         tmp.replace(path)
+        return order
     finally:
         if tmp.exists():
             tmp.unlink()

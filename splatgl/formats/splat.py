@@ -93,3 +93,23 @@ def encode(scene: Scene, path=None) -> np.ndarray:
 def write(path, scene: Scene) -> None:
     """Write ``scene`` as .splat (lossy: 8-bit colour, alpha and rotation; SH degree 0)."""
     encode(scene, path).tofile(path)
+
+
+def error_bounds(scene: Scene) -> dict:
+    """Round-trip bounds (units as in :mod:`splatgl.formats.quantise`): float32 position and
+    linear scale (``2^-24 (1 + |log s|)`` relative, from the log of the rounded exp), 8-bit
+    opacity, 8-bit colour clipped to 0..255 (plus the distance clipped), and rotation bytes
+    ``rint(128 q + 128)``: at most 0.5/128 per component, 1/128 for one clipping at 127/128, so
+    ``|q' - q| <= sqrt(1.75)/128`` and the angle ``<= 2 asin(sqrt(1.75)/128)``."""
+    import math
+    colour = 0.5 + SH_C0 * scene.sh[:, 0].astype(np.float64)
+    clipped = float(max(0.0, -colour.min(), colour.max() - 1.0)) if scene.count else 0.0
+    max_log = float(np.abs(scene.log_scales).max()) if scene.count else 0.0
+    return {
+        "position": 0.0,
+        "scale": 2.0 ** -24 * (1.0 + max_log) * (1 + 1e-6) + 1e-9,
+        "opacity": 0.5 / 255.0 + 1e-6,
+        "rotation": math.degrees(2.0 * math.asin(math.sqrt(1.75) / 128.0)),
+        "color": 0.5 / 255.0 + clipped + 1e-6,
+        "sh_rest": None,
+    }

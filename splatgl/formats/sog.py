@@ -1,0 +1,412 @@
+"""PlayCanvas SOG (``*.sog`` zip bundle, or a folder with ``meta.json``): reader (v1, v2), writer (v2).
+
+A SOG scene is a ``meta.json`` plus lossless WebP textures (RGBA, ``W x H >= count`` texels, one
+texel per splat in row-major order); a ``.sog`` file is the same files in one zip.  Version 2:
+
+- ``means``: ``means_l.webp`` / ``means_u.webp`` hold the low / high byte of 16-bit ``u`` per axis
+  (RGB); ``v = mins + (maxs - mins) u / 65535`` is ``sign(x) log(1 + |x|)``, so
+  ``x = sign(v) (exp(|v|) - 1)``.
+- ``scales``: ``scales.webp`` RGB are indices into ``codebook`` (256 log-scales).
+- ``quats``: ``quats.webp`` RGB are the smallest three of (w, x, y, z), ``(b / 255 * 2 - 1) /
+  sqrt(2)`` each, in index order; A is ``252 +`` the index of the largest (recomputed, >= 0).
+- ``sh0``: ``sh0.webp`` RGB index ``codebook`` (256 f_dc values), A is ``255 * opacity``.
+- ``shN`` (SH degrees 1-3, optional): ``shN_labels.webp`` (R + 256 G) picks a palette entry;
+  ``shN_centroids.webp`` is ``64 * coeffs`` texels wide, entry ``l`` at row ``l // 64``, texels
+  ``(l % 64) coeffs + j`` for coefficient ``j``, RGB indexing ``codebook`` (256 values).
+
+Version 1 (no ``version`` key; ``means.shape``) stores linear min/max ranges instead of codebooks:
+``scales`` / ``sh0`` (f_dc and the opacity logit in A) / ``shN`` bytes map to ``min + (max -
+min) b / 255``.  Both versions store the PLY axes (the scene's own).
+
+The writer quantises as above (constants in :mod:`splatgl.formats.quantise`): 16-bit log means,
+1D k-means codebooks of 256 entries (extremes kept, so the error is at most half the largest
+gap), 8-bit smallest-three quaternions and opacity, and a k-means palette of SH vectors sized
+like splat-transform's (``min(64, 2^floor(log2(N / 1024))) * 1024`` entries, at most N).
+Splats are written in Morton order (smaller WebP files); :func:`write` returns that order.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ..constants import SH_C0, sh_coeff_count
+from ..errors import SceneFormatError
+from ..scene import Scene, SplatKind, activate
+from . import _binary, kmeans, webp
+from . import quantise as qz
+
+NAME = "sog"
+EXTENSIONS = (".sog", "meta.json")
+GENERATOR = "splatgl"
+#: The largest zip entry or meta.json read (a corrupted size field cannot exhaust memory).
+MAX_ENTRY_BYTES = 1 << 30
+_ZIP_MAGIC = b"PK\x03\x04"
+_FILES_V2 = {"means": ("means_l.webp", "means_u.webp"), "scales": ("scales.webp",),
+             "quats": ("quats.webp",), "sh0": ("sh0.webp",),
+             "shN": ("shN_centroids.webp", "shN_labels.webp")}
+
+
+def sniff(head: bytes) -> bool:
+    """A zip whose first entry is a WebP texture or meta.json, or JSON with a ``means`` key."""
+    if head.startswith(_ZIP_MAGIC):
+        return b".webp" in head[30:300] or b"meta.json" in head[30:300]
+    return head.lstrip().startswith(b"{") and b'"means"' in head
+
+
+# --- reading ------------------------------------------------------------------------------------
+
+class _Files:
+    """The files of a SOG scene, from a zip bundle or from meta.json's folder."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.zip = None
+        try:
+            with open(path, "rb") as fh:
+                magic = fh.read(4)
+        except OSError as exc:
+            raise SceneFormatError(path, f"cannot read: {exc.strerror or exc}") from None
+        if magic == _ZIP_MAGIC:
+            try:
+                self.zip = zipfile.ZipFile(path)
+            except (zipfile.BadZipFile, OSError, ValueError) as exc:
+                raise SceneFormatError(path, f"corrupt zip bundle: {exc}") from None
+
+    def get(self, name: str) -> bytes:
+        if not isinstance(name, str) or not name or "/" in name or "\\" in name or name in (".", ".."):
+            raise SceneFormatError(self.path, f"file name {name!r} is not a plain file name",
+                                   "files")
+        if self.zip is None:
+            return _binary.read_bytes(self.path.parent / name)
+        try:
+            info = self.zip.getinfo(name)
+        except KeyError:
+            raise SceneFormatError(self.path, f"the bundle has no '{name}'", "files") from None
+        if info.file_size > MAX_ENTRY_BYTES:
+            raise SceneFormatError(self.path, f"'{name}' claims {info.file_size} bytes", "files")
+        try:
+            return self.zip.read(info)
+        except Exception as exc:  # zlib.error, BadZipFile, EOFError, NotImplementedError ...
+            raise SceneFormatError(self.path, f"cannot unpack '{name}': {exc}", "files") from None
+
+    def meta(self) -> dict:
+        blob = self.get("meta.json") if self.zip is not None else _binary.read_bytes(self.path)
+        try:
+            meta = json.loads(blob.decode("utf-8"))
+        except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+            raise SceneFormatError(self.path, f"meta.json is not valid JSON: {exc}") from None
+        if not isinstance(meta, dict):
+            raise SceneFormatError(self.path, "meta.json is not a JSON object")
+        return meta
+
+
+def _get(path, meta: dict, key: str):
+    """``meta[a][b]...`` for ``key = 'a.b'``, or an error naming the missing field."""
+    obj = meta
+    for part in key.split("."):
+        if not isinstance(obj, dict) or part not in obj:
+            raise SceneFormatError(path, "missing in meta.json", key)
+        obj = obj[part]
+    return obj
+
+
+def _numbers(path, meta: dict, key: str, length: int | None = None) -> np.ndarray:
+    """float64 array of the JSON number list (or number) at ``key``, finite, of ``length``."""
+    value = _get(path, meta, key)
+    try:
+        arr = np.asarray(value, np.float64)
+    except (TypeError, ValueError):
+        raise SceneFormatError(path, "expected numbers", key) from None
+    if arr.dtype != np.float64 or not np.isfinite(arr).all() or (
+            length is not None and arr.shape != (length,)):
+        raise SceneFormatError(path, f"expected {length or 'a list of'} finite numbers", key)
+    return arr
+
+
+def _count(path, value, key: str) -> int:
+    if not isinstance(value, int) or isinstance(value, bool) or not 0 < value <= (1 << 28):
+        raise SceneFormatError(path, f"splat count {value!r} is not a positive integer", key)
+    return value
+
+
+def _texture(path, files: _Files, meta: dict, key: str, index: int, count: int) -> np.ndarray:
+    """(count, 4) uint8 texels of the ``index``-th file of ``meta[key]``."""
+    names = _get(path, meta, f"{key}.files")
+    if not isinstance(names, list) or len(names) <= index:
+        raise SceneFormatError(path, f"expected at least {index + 1} file names", f"{key}.files")
+    rgba = webp.decode(path, files.get(names[index]), f"{key}.files[{index}]", min_texels=count)
+    return rgba.reshape(-1, 4)[:count]
+
+
+def _means(path, files, meta, count) -> np.ndarray:
+    lo = _texture(path, files, meta, "means", 0, count)[:, :3].astype(np.float64)
+    hi = _texture(path, files, meta, "means", 1, count)[:, :3].astype(np.float64)
+    mins, maxs = _numbers(path, meta, "means.mins", 3), _numbers(path, meta, "means.maxs", 3)
+    span = np.where(maxs - mins != 0.0, maxs - mins, 1.0)
+    v = mins + span * ((lo + 256.0 * hi) / 65535.0)
+    with np.errstate(over="ignore"):
+        return np.sign(v) * np.expm1(np.abs(v))
+
+
+def _quats(path, files, meta, count) -> np.ndarray:
+    t = _texture(path, files, meta, "quats", 0, count)
+    tag = t[:, 3].astype(np.intp) - qz.SOG_QUAT_TAG
+    bad = (tag < 0) | (tag > 3)
+    if bad.any():
+        raise SceneFormatError(path, f"{int(bad.sum())} quaternion tag(s) outside 252-255 (first "
+                                     f"at splat {int(np.flatnonzero(bad)[0])})", "quats")
+    abc = (t[:, :3] / 255.0 * 2.0 - 1.0) / math.sqrt(2.0)
+    quats = np.empty((count, 4))
+    rows = np.arange(count)
+    others = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+    quats[rows[:, None], others[tag]] = abc
+    quats[rows, tag] = np.sqrt(np.maximum(0.0, 1.0 - (abc * abc).sum(axis=1)))
+    return quats
+
+
+def _codebook(path, meta, key) -> np.ndarray:
+    book = _numbers(path, meta, key)
+    if np.abs(book).max(initial=0.0) > np.finfo(np.float32).max:
+        raise SceneFormatError(path, "values beyond float32's range", key)
+    book = book.astype(np.float32)
+    if book.ndim != 1 or not 1 <= book.size <= 256:
+        raise SceneFormatError(path, f"expected 1-256 numbers, found {book.size}", key)
+    return np.concatenate([book, np.full(256 - book.size, book[-1], np.float32)])
+
+
+def _sh_rest_v2(path, files, meta, count) -> np.ndarray | None:
+    if "shN" not in meta:
+        return None
+    bands = _get(path, meta, "shN.bands")
+    if bands not in (1, 2, 3):
+        raise SceneFormatError(path, f"SH bands {bands!r}, expected 1-3", "shN.bands")
+    coeffs = sh_coeff_count(bands) - 1
+    palette = _count(path, _get(path, meta, "shN.count"), "shN.count")
+    book = _codebook(path, meta, "shN.codebook")
+    labels_t = _texture(path, files, meta, "shN", 1, count)
+    labels = labels_t[:, 0].astype(np.int64) | (labels_t[:, 1].astype(np.int64) << 8)
+    names = _get(path, meta, "shN.files")
+    cen = webp.decode(path, files.get(names[0]), "shN.files[0]")
+    if cen.shape[1] != 64 * coeffs:
+        raise SceneFormatError(path, f"centroids texture is {cen.shape[1]} texels wide, expected "
+                                     f"{64 * coeffs} for {bands} SH bands", "shN.files[0]")
+    limit = min(palette, 64 * cen.shape[0])
+    bad = labels >= limit
+    if bad.any():
+        raise SceneFormatError(path, f"{int(bad.sum())} palette label(s) >= {limit} (first at "
+                                     f"splat {int(np.flatnonzero(bad)[0])})", "shN")
+    entries = cen.reshape(-1, 64, coeffs, 4).reshape(-1, coeffs, 4)[:, :, :3]  # (64 H, coeffs, 3)
+    return book[entries[labels]]  # (count, coeffs, 3)
+
+
+def _decode_v2(path, files, meta):
+    count = _count(path, _get(path, meta, "count"), "count")
+    means = _means(path, files, meta, count)
+    quats = _quats(path, files, meta, count)
+    scales = _codebook(path, meta, "scales.codebook")[
+        _texture(path, files, meta, "scales", 0, count)[:, :3]]
+    sh0 = _texture(path, files, meta, "sh0", 0, count)
+    dc = _codebook(path, meta, "sh0.codebook")[sh0[:, :3]]
+    logits = _binary.logit(sh0[:, 3] / 255.0)
+    rest = _sh_rest_v2(path, files, meta, count)
+    sh = dc[:, None, :] if rest is None else np.concatenate([dc[:, None, :], rest], axis=1)
+    return means, quats, scales, logits, sh
+
+
+def _decode_v1(path, files, meta):
+    shape = _get(path, meta, "means.shape")
+    if not isinstance(shape, list) or not shape:
+        raise SceneFormatError(path, "expected [count, 3]", "means.shape")
+    count = _count(path, shape[0], "means.shape")
+    means = _means(path, files, meta, count)
+    quats = _quats(path, files, meta, count)
+
+    def lerp(key: str, channels: int) -> np.ndarray:
+        lo, hi = _numbers(path, meta, f"{key}.mins", channels), _numbers(path, meta, f"{key}.maxs", channels)
+        t = _texture(path, files, meta, key, 0, count)[:, :channels] / 255.0
+        return lo + (hi - lo) * t
+
+    scales = lerp("scales", 3)
+    sh0 = lerp("sh0", 4)
+    sh = sh0[:, None, :3]
+    if "shN" in meta:
+        names = _get(path, meta, "shN.files")
+        cen = webp.decode(path, files.get(names[0]), "shN.files[0]")
+        bands = {192: 1, 512: 2, 960: 3}.get(cen.shape[1])
+        if bands is None:
+            raise SceneFormatError(path, f"centroids texture is {cen.shape[1]} texels wide; "
+                                         "expected 192, 512 or 960", "shN.files[0]")
+        coeffs = sh_coeff_count(bands) - 1
+        labels_t = _texture(path, files, meta, "shN", 1, count)
+        labels = labels_t[:, 0].astype(np.int64) | (labels_t[:, 1].astype(np.int64) << 8)
+        limit = 64 * cen.shape[0]
+        if (labels >= limit).any():
+            raise SceneFormatError(path, f"palette label(s) >= {limit}", "shN")
+        lo, hi = float(_numbers(path, meta, "shN.mins")), float(_numbers(path, meta, "shN.maxs"))
+        entries = cen.reshape(-1, coeffs, 4)[:, :, :3]
+        rest = lo + (hi - lo) * (entries[labels] / 255.0)
+        sh = np.concatenate([sh, rest], axis=1)
+    return means, quats, scales, sh0[:, 3], sh
+
+
+def read_meta(path: Path) -> dict:
+    """The parsed meta.json of a SOG folder or bundle."""
+    return _Files(Path(path)).meta()
+
+
+def read(path: Path, drop_invalid: bool = False) -> Scene:
+    """Load a SOG scene (``.sog`` bundle or ``meta.json``), version 1 or 2."""
+    path = Path(path)
+    files = _Files(path)
+    meta = files.meta()
+    version = meta.get("version")
+    try:
+        if version == 2:
+            raw = _decode_v2(path, files, meta)
+        elif version is None and isinstance(meta.get("means"), dict) and "shape" in meta["means"]:
+            raw = _decode_v1(path, files, meta)
+        else:
+            raise SceneFormatError(path, f"SOG version {version!r} is not supported (supported: "
+                                         "1, 2)", "version")
+    except (TypeError, AttributeError, KeyError, IndexError, ValueError) as exc:
+        if isinstance(exc, SceneFormatError):
+            raise
+        # meta.json values of the wrong shape (a string where numbers belong, ...)
+        raise SceneFormatError(path, f"malformed meta.json ({type(exc).__name__}: "
+                                     f"{str(exc)[:100]})") from None
+    means, quats, scales, logits, sh = raw
+    return activate(path, means, quats, np.asarray(scales, np.float32),
+                    np.asarray(logits, np.float32), np.asarray(sh, np.float32),
+                    SplatKind.GAUSSIAN_3D, drop_invalid)
+
+
+def stored_bytes(path: Path) -> int:
+    """Bytes a SOG scene occupies: the bundle, or meta.json plus the textures it names."""
+    path = Path(path)
+    size = path.stat().st_size
+    if not path.name.lower().endswith(".json"):
+        return size
+    names = {n for v in read_meta(path).values() if isinstance(v, dict)
+             for n in (v.get("files") or []) if isinstance(n, str) and "/" not in n}
+    return size + sum((path.parent / n).stat().st_size for n in names
+                      if (path.parent / n).is_file())
+
+
+# --- writing ------------------------------------------------------------------------------------
+
+def palette_size(count: int) -> int:
+    """Entries of the SH palette for ``count`` splats (splat-transform's rule), at most count."""
+    size = min(64.0, 2.0 ** math.floor(math.log2(count / 1024.0))) * 1024.0
+    return max(1, min(count, int(size)))
+
+
+def _texture_size(count: int) -> tuple[int, int]:
+    width = math.ceil(math.sqrt(count) / 4) * 4
+    return width, math.ceil(count / width / 4) * 4
+
+
+def _log_means(means: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    v = np.sign(means) * np.log1p(np.abs(means))
+    return v, v.min(axis=0), v.max(axis=0)
+
+
+def encode(scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS, path=None
+           ) -> tuple[dict[str, np.ndarray], dict]:
+    """The textures (name -> (H, W, 4) uint8) and meta.json object of ``scene`` (in its order)."""
+    if scene.kind is not SplatKind.GAUSSIAN_3D:
+        raise SceneFormatError(path, "SOG stores 3D Gaussians only; cannot write a 2DGS surfel "
+                                     "scene (write .ply instead)", "scale")
+    n = scene.count
+    width, height = _texture_size(n)
+    if width > webp.MAX_EDGE or height > webp.MAX_EDGE:
+        raise SceneFormatError(path, f"{n} splats exceed WebP's {webp.MAX_EDGE}-texel edge", "count")
+
+    def texture(rgb: np.ndarray, alpha) -> np.ndarray:
+        out = np.zeros((width * height, 4), np.uint8)
+        out[:, 3] = 255
+        out[:n, : rgb.shape[1]] = rgb
+        out[:n, 3] = alpha
+        return out.reshape(height, width, 4)
+
+    v, mins, maxs = _log_means(scene.means.astype(np.float64))
+    span = np.where(maxs > mins, maxs - mins, 1.0)
+    u = np.clip(np.rint((v - mins) / span * 65535.0), 0, 65535).astype(np.uint32)
+    tex = {"means_l.webp": texture(u & 255, 255), "means_u.webp": texture(u >> 8, 255)}
+    largest, abc = qz.smallest_three(scene.rotations)
+    quat = np.clip(np.rint(255.0 * (abc * math.sqrt(2.0) * 0.5 + 0.5)), 0, 255)
+    tex["quats.webp"] = texture(quat, qz.SOG_QUAT_TAG + largest)
+    scale_book = qz.codebook_1d(scene.log_scales).astype(np.float32)
+    tex["scales.webp"] = texture(qz.codebook_labels(scene.log_scales, scale_book), 255)
+    dc_book = qz.codebook_1d(scene.sh[:, 0]).astype(np.float32)
+    alpha = np.clip(np.rint(scene.opacities.astype(np.float64) * 255.0), 0, 255)
+    tex["sh0.webp"] = texture(qz.codebook_labels(scene.sh[:, 0], dc_book), alpha)
+    meta = {"version": 2, "asset": {"generator": GENERATOR}, "count": n,
+            "means": {"mins": mins.tolist(), "maxs": maxs.tolist(),
+                      "files": list(_FILES_V2["means"])},
+            "scales": {"codebook": scale_book.tolist(), "files": list(_FILES_V2["scales"])},
+            "quats": {"files": list(_FILES_V2["quats"])},
+            "sh0": {"codebook": dc_book.tolist(), "files": list(_FILES_V2["sh0"])}}
+    if scene.sh_degree > 0:
+        coeffs = scene.sh.shape[1] - 1
+        rest = scene.sh[:, 1:].reshape(n, coeffs * 3)
+        centroids, labels = kmeans.kmeans(rest, palette_size(n), iterations)
+        k = centroids.shape[0]
+        book = qz.codebook_1d(centroids).astype(np.float32)
+        cen = np.zeros((math.ceil(k / 64) * 64, coeffs, 4), np.uint8)
+        cen[..., 3] = 255
+        cen[:k, :, :3] = qz.codebook_labels(centroids.reshape(k, coeffs, 3), book)
+        tex["shN_centroids.webp"] = cen.reshape(-1, 64 * coeffs, 4)
+        lab = np.stack([labels & 255, labels >> 8], axis=1)
+        tex["shN_labels.webp"] = texture(lab, 255)
+        meta["shN"] = {"count": k, "bands": scene.sh_degree, "codebook": book.tolist(),
+                       "files": list(_FILES_V2["shN"])}
+    return tex, meta
+
+
+def write(path, scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS) -> np.ndarray:
+    """Write ``scene`` as SOG v2: a zip bundle, or (for a name ending in ``.json``) meta.json
+    with its textures beside it.  Returns the (N,) row order written (Morton order)."""
+    path = Path(path)
+    order = qz.morton_order(scene.means)
+    textures, meta = encode(scene.subset(order), iterations, path)
+    blobs = {name: webp.encode(rgba) for name, rgba in textures.items()}
+    meta_bytes = json.dumps(meta).encode("utf-8")
+    final = path.name[: -len(".partial")] if path.name.endswith(".partial") else path.name
+    if final.lower().endswith(".json"):  # a folder: each texture atomically, then meta.json
+        for name, blob in blobs.items():
+            tmp = path.parent / (name + ".partial")
+            tmp.write_bytes(blob)
+            os.replace(tmp, path.parent / name)
+        path.write_bytes(meta_bytes)
+        return order
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as zf:  # WebP is compressed already
+        for name, blob in blobs.items():
+            zf.writestr(name, blob)
+        zf.writestr("meta.json", meta_bytes)
+    return order
+
+
+def error_bounds(scene: Scene) -> dict:
+    """Per-attribute round-trip error bounds (see :mod:`splatgl.formats.quantise`); ``sh_rest``
+    is None: the k-means palette has no a-priori bound (its error is measured and reported)."""
+    v, mins, maxs = _log_means(scene.means.astype(np.float64))
+    half = (maxs - mins) / 65535.0 / 2.0
+    vmax = np.maximum(np.abs(mins), np.abs(maxs))
+    per_axis = np.exp(vmax) * np.expm1(half * (1 + 1e-9))
+    position = float(np.linalg.norm(per_axis)) * (1 + 1e-6) + qz.position_slack(scene.means)
+    scale_book = qz.codebook_1d(scene.log_scales).astype(np.float32)
+    dc_book = qz.codebook_1d(scene.sh[:, 0]).astype(np.float32)
+    return {
+        "position": position,
+        "scale": qz.relative_scale(qz.codebook_bound(scale_book, scene.log_scales)) + 1e-6,
+        "opacity": 0.5 / 255.0 + 1e-6,
+        "rotation": qz.half_step_rotation_deg(1.0 / (255.0 * math.sqrt(2.0))),
+        "color": SH_C0 * qz.codebook_bound(dc_book, scene.sh[:, 0]) + 1e-7,
+        "sh_rest": None,
+    }
