@@ -101,6 +101,9 @@ class RenderSettings:
             bandwidth; the benchmark reports the error against float32).
         convention: the published rasterizer rules the NumPy reference follows (only the
             reference reads it).
+        early_stop: quad path early termination (splatgl/early_stop.py): batched draws that
+            stop shading pixels whose transmittance fell below the reference's 1e-4, and drop
+            splats that would land only on such pixels.
     """
 
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -116,6 +119,7 @@ class RenderSettings:
     cull: bool = True
     half_sh: bool = False
     convention: Convention = Convention.INRIA
+    early_stop: bool = True
 
     def __post_init__(self) -> None:
         bg = tuple(float(v) for v in self.background)
