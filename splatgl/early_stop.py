@@ -50,9 +50,9 @@ ACCUM_UNIT = 0
 
 #: Batch schedule (chosen by measurement, docs/early-stop.md): the first batch holds this share
 #: of the sorted splats (at least MIN_BATCH), each next one GROWTH times the previous.
-FIRST_BATCH_FRACTION = 1.0 / 32.0
-GROWTH = 2.0
-MIN_BATCH = 4096
+FIRST_BATCH_FRACTION = 1.0 / 256.0
+GROWTH = 1.35
+MIN_BATCH = 512
 #: No batch is longer than this (a long draw stays interruptible between batches; with early
 #: termination off, the draw is split into batches of this size only).
 MAX_BATCH = 1 << 20
@@ -155,6 +155,7 @@ class EarlyStopPasses:
         n_cmd = sum(-(-(e - s) // SEGMENT) for s, e in zip(bounds[:-1], bounds[1:]))
         gw, gh = -(-width // TILE_SIZE), -(-height // TILE_SIZE)
         self._grow("tiles", 4 * gw * gh).bind_to_storage_buffer(BINDING_STOP_TILES)
+        self.tiles.clear()  # all open until the first mark
         self._grow("survivors", 4 * count)
         self._grow("commands", COMMAND_BYTES * n_cmd)
         self.survivors.bind_to_storage_buffer(BINDING_SURVIVORS)

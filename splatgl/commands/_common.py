@@ -86,6 +86,10 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--convention", choices=[m.value for m in Convention], default="inria",
                    help="rules of the NumPy reference: 'inria' = the 3DGS rasterizer (default), "
                         "'gsplat' = per-axis opacity-aware extent up to 3.33 sigma, alpha clamp 0.999")
+    g.add_argument("--early-stop", choices=["on", "off"], default=None,
+                   help="quad path early termination: stop shading pixels whose transmittance "
+                        "fell below 1e-4 and drop splats that land only on such pixels "
+                        "(default off, chosen by the benchmark on llvmpipe)")
     g.add_argument("--half-sh", action="store_true",
                    help="store SH coefficients as float16 in the quad path (half the memory)")
     g.add_argument("--transform", type=str, default=None, metavar="JSON",
@@ -103,6 +107,8 @@ def load_scene_arg(args: argparse.Namespace) -> Scene:
 def settings_from_args(args: argparse.Namespace) -> RenderSettings:
     model = parse_transform(args.transform) if args.transform else None
     optional = {"preprocess": args.preprocess} if args.preprocess else {}
+    if getattr(args, "early_stop", None) is not None:
+        optional["early_stop"] = args.early_stop == "on"
     return RenderSettings(background=args.background, precision=args.precision, extent=args.extent,
                           near=args.near, antialias=args.antialias, sh_degree=args.sh_degree,
                           model=model, sort_key=args.sort, half_sh=args.half_sh,
