@@ -20,8 +20,8 @@ the splats up to the end of the batch where T fell below T_MIN.  Their total wei
 when it stopped), a prefix of what the quad path added before (no stop at all), so each pixel's
 error against the reference is at most ``0.01 max|c - bg|`` and never more weight than without
 the stop.  The occlusion cull drops only splats whose every fragment the depth test would
-reject, so it changes no pixel.  8- and 16-bit targets store ``A = 1`` (``T = 0``) before
-``T < 1e-4`` is representable, where blending adds nothing anyway: the image is unchanged.
+reject, so it changes no pixel.  On 8- and 16-bit targets ``1 - A < 1e-4`` holds only
+where ``A`` is stored as exactly 1, where blending adds nothing anyway: the image is unchanged.
 
 NumPy twins: :func:`stop_mask`, :func:`stop_tiles`, :func:`occlusion_cull`.
 """
