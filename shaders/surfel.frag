@@ -6,6 +6,11 @@
 #include "lib/camera.glsl"
 #include "lib/surfel.glsl"
 
+#ifdef EARLY_STOP
+// Early termination: depth/stencil tests before shading, so fragments on pixels the mark pass
+// stopped are never shaded (a shader with `discard` otherwise gets late tests).
+layout(early_fragment_tests) in;
+#endif
 flat in vec2 v_center;
 flat in vec3 v_t0;
 flat in vec3 v_t1;

@@ -3,7 +3,10 @@
 Per view, only the sorted index buffer is uploaded; the scene's storage buffers are uploaded
 once.  The vertex stage (shaders/quad.vert) evaluates SH colour and the 2D covariance and sizes
 the quad; the fragment stage (shaders/quad.frag) evaluates the conic opacity.  Blending is
-front to back, (ONE_MINUS_DST_ALPHA, ONE), into a cleared (0, 0, 0, 0) target.
+front to back, (ONE_MINUS_DST_ALPHA, ONE), into a cleared (0, 0, 0, 0) target.  With
+``early_stop`` (the default) the sorted splats are drawn in batches and pixels that are already
+opaque stop receiving fragments (splatgl/early_stop.py); a draw calls ``on_batch(done, total)``
+between batches, which may raise KeyboardInterrupt to abandon the frame.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import numpy as np
 from .camera import Camera
 from .cull import CullData, cull_visible
 from .gl.radix_sort import RadixSorter, device_depth_sort
+from .early_stop import (COMMAND_BYTES, BatchHook, EarlyStopPasses, batch_bounds, plain_bounds)
 from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
@@ -49,6 +53,8 @@ class QuadTimes:
     draw: float
     readback: float
     drawn: int = 0
+    #: Splats the early-termination occlusion cull dropped (0 with early_stop off).
+    occlusion_culled: int = 0
 
     @property
     def total(self) -> float:
@@ -120,7 +126,6 @@ class QuadRenderer:
         self._sorter: RadixSorter | None = None  # built on the first device sort
         self._index_buffer: moderngl.Buffer | None = None
         self._prepared: moderngl.Buffer | None = None
-        self._vao: moderngl.VertexArray | None = None
         self._target: ColorTarget | None = None
         self._order_key: tuple | None = None
         self._order = np.zeros(0, np.uint32)
@@ -130,6 +135,10 @@ class QuadRenderer:
         self.gpu_timer = False
         self.last_gpu_draw_ns: int | None = None
         self._query: moderngl.Query | None = None
+        self._stop = EarlyStopPasses(ctx, self.programs) if settings.early_stop else None
+        self._vaos: dict[tuple, moderngl.VertexArray] = {}
+        self._plain_command: moderngl.Buffer | None = None
+        self._occlusion_culled = 0
         self._times_cull = self._times_sort = self._times_upload = 0.0
         self._times_prepass = self._times_draw = 0.0
         self.last_times: QuadTimes | None = None
@@ -156,7 +165,21 @@ class QuadRenderer:
             defines["COUNT_FRAGMENTS"] = 1
         if self.buffers.half_sh:
             defines["SH_HALF"] = 1
+        if self.settings.early_stop:
+            defines["EARLY_STOP"] = 1
+            if self.uses_prepass:
+                defines["SURVIVORS"] = 1
         return defines
+
+    def _cull_program(self, camera: Camera) -> moderngl.ComputeShader:
+        """occlusion_cull.comp in the variant that reads this path's splat rectangles."""
+        defines = {k: v for k, v in self.defines(camera).items()
+                   if k not in ("EARLY_STOP", "SURVIVORS", "COUNT_FRAGMENTS")}
+        if self.uses_prepass:
+            defines["PREPARED"] = 1
+        elif self.scene.kind is SplatKind.SURFEL_2D:
+            defines["SURFEL"] = 1
+        return self.programs.compute("occlusion_cull.comp", defines)
 
     def program(self, camera: Camera, depth: bool = False) -> moderngl.Program:
         """The draw program: full per-corner math, or the light one after the pre-pass.
@@ -217,25 +240,33 @@ class QuadRenderer:
         sort = bucket_sort if self.settings.sort_key is SortKey.BUCKET16 else depth_sort
         return sort(depth, keep)
 
-    def _upload(self, order: np.ndarray, prog: moderngl.Program) -> None:
-        """Write the sorted indices (the only per-view upload) and bind them for the draw."""
+    def _upload(self, order: np.ndarray, prog: moderngl.Program | None = None) -> None:
+        """Write the sorted indices (the only per-view upload)."""
         data = order.tobytes()
         if self._index_buffer is None or self._index_buffer.size < max(len(data), 4):
-            if self._vao is not None:
-                self._vao.release()
             if self._index_buffer is not None:
+                self._release_vaos()
                 self._index_buffer.release()
             self._index_buffer = self.ctx.buffer(reserve=max(len(data), 4))
-            self._vao = None
         if data:
             self._index_buffer.write(data)
-        if self._vao is None or self._vao.program is not prog:
-            if self._vao is not None:
-                self._vao.release()
-            if self.uses_prepass:
-                self._vao = self.ctx.vertex_array(prog, [])  # instance k reads prepared[k]
-            else:
-                self._vao = self.ctx.vertex_array(prog, [(self._index_buffer, "u4/i", "splat_index")])
+
+    def _vertex_array(self, prog: moderngl.Program, source: moderngl.Buffer | None) -> moderngl.VertexArray:
+        """The VAO drawing ``prog`` with its per-instance attribute read from ``source``: the
+        sorted indices, the occlusion cull's survivors, or none (the pre-pass's instance k
+        reads prepared[u_base + k])."""
+        attribute = "splat_slot" if self.uses_prepass else "splat_index"
+        key = (prog.glo, None if source is None else source.glo)
+        vao = self._vaos.get(key)
+        if vao is None:
+            content = [] if source is None else [(source, "u4/i", attribute)]
+            vao = self._vaos[key] = self.ctx.vertex_array(prog, content)
+        return vao
+
+    def _release_vaos(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
 
     def _prepass(self, camera: Camera, count: int, depth: bool) -> None:
         """Run quad_prepass.comp over the ``count`` sorted splats into the prepared buffer."""
@@ -257,16 +288,22 @@ class QuadRenderer:
     def target(self, camera: Camera, depth: bool = False) -> ColorTarget:
         size = (camera.width, camera.height)
         t = self._target
-        if t is None or t.size != size or t.precision is not self.settings.precision or t.has_depth != depth:
+        stop = self.settings.early_stop
+        if (t is None or t.size != size or t.precision is not self.settings.precision
+                or t.has_depth != depth or t.has_stop_mask != stop):
             if t is not None:
                 t.release()
-            self._target = ColorTarget(self.ctx, camera.width, camera.height, self.settings.precision, depth)
+            self._target = ColorTarget(self.ctx, camera.width, camera.height, self.settings.precision,
+                                       depth, stop_mask=stop)
         return self._target
 
-    def draw(self, camera: Camera, fbo: moderngl.Framebuffer, depth: bool = False) -> int:
-        """Cull, sort, upload and draw into ``fbo`` (cleared to 0); returns splats drawn.
+    def draw(self, camera: Camera, target: ColorTarget, depth: bool = False,
+             on_batch: BatchHook | None = None) -> int:
+        """Cull, sort, upload and draw into ``target`` (cleared to 0); returns splats drawn.
 
-        With ``depth`` the program also writes the depth layer to ``fbo``'s attachment 1.
+        With ``depth`` the program also writes the depth layer to the target's attachment 1
+        (``target`` from :meth:`target`).  ``on_batch(done, total)`` is called after each batch
+        of sorted splats; an exception it raises abandons the frame (GL state restored).
         """
         order = self.visible_order(camera)
         prog = self.program(camera, depth)
@@ -279,44 +316,109 @@ class QuadRenderer:
             self.ctx.finish()
         tp = time.perf_counter()
         set_camera_uniforms(prog, camera, self.near, self.scene.anchor)
+        fbo = target.fbo
         fbo.use()
         self.ctx.viewport = (0, 0, camera.width, camera.height)
         self.ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-        fbo.clear(0.0, 0.0, 0.0, 0.0)
-        self.ctx.enable(moderngl.BLEND)
+        if target.has_stop_mask:
+            fbo.depth_mask = True  # a clear writes depth only through the mask
+        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         self.ctx.blend_func = moderngl.ONE_MINUS_DST_ALPHA, moderngl.ONE
         self.ctx.blend_equation = moderngl.FUNC_ADD
-        if len(order):
-            if self.gpu_timer:
-                if self._query is None:
-                    self._query = self.ctx.query(time=True)
-                with self._query:
-                    self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(order))
-                self.ctx.finish()
-                self.last_gpu_draw_ns = _valid_elapsed(self._query.elapsed)
-            else:
-                self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(order))
-        self.ctx.disable(moderngl.BLEND)
+        self._occlusion_culled = 0
+        try:
+            if len(order):
+                if self.gpu_timer:
+                    if self._query is None:
+                        self._query = self.ctx.query(time=True)
+                    with self._query:
+                        self._draw_batches(camera, target, prog, len(order), on_batch)
+                    self.ctx.finish()
+                    self.last_gpu_draw_ns = _valid_elapsed(self._query.elapsed)
+                else:
+                    self._draw_batches(camera, target, prog, len(order), on_batch)
+        finally:
+            self.ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST)
         self.ctx.finish()
         t2 = time.perf_counter()
         self._times_upload, self._times_prepass, self._times_draw = t1 - t0, tp - t1, t2 - tp
         self._drawn = len(order)
         return len(order)
 
-    def render(self, camera: Camera) -> np.ndarray:
-        """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top."""
-        return self.render_layers(camera, depth=False).rgba
+    def _draw_batches(self, camera: Camera, target: ColorTarget, prog: moderngl.Program, count: int,
+                      on_batch: BatchHook | None) -> None:
+        if self._stop is None:
+            bounds = plain_bounds(count)
+            for start, end in zip(bounds[:-1], bounds[1:]):
+                self._draw_range(prog, start, end - start)
+                if on_batch is not None:
+                    self.ctx.finish()
+                    on_batch(end, count)
+            return
+        # Early termination (splatgl/early_stop.py): mark, reduce to tiles, cull, draw survivors.
+        stop, ctx = self._stop, self.ctx
+        width, height = camera.width, camera.height
+        bounds = batch_bounds(count)
+        n_cmd = stop.prepare(count, bounds, width, height)
+        cull_prog = self._cull_program(camera)
+        set_camera_uniforms(cull_prog, camera, self.near, self.scene.anchor)
+        self._index_buffer.bind_to_storage_buffer(BINDING_ORDER)
+        vao = self._vertex_array(prog, stop.survivors)
+        ctx.depth_func = "<"
+        ctx.enable(moderngl.DEPTH_TEST)
+        first = 0
+        for b, (start, end) in enumerate(zip(bounds[:-1], bounds[1:])):
+            if b > 0:
+                ctx.disable(moderngl.BLEND)
+                stop.mark(target.texture, target.mask_fbo)
+                stop.reduce_tiles(target.texture, width, height)
+                ctx.memory_barrier()
+            groups = stop.cull(cull_prog, start, end, first, width, height, check_tiles=b > 0)
+            ctx.memory_barrier()
+            target.fbo.use()
+            target.fbo.depth_mask = False
+            ctx.enable(moderngl.BLEND)
+            vao.render_indirect(stop.commands, moderngl.TRIANGLE_STRIP, count=groups, first=first)
+            first += groups
+            if on_batch is not None:
+                ctx.finish()
+                on_batch(end, count)
+        self._occlusion_culled = count - stop.survivor_count(n_cmd)
 
-    def render_layers(self, camera: Camera, depth: bool = True) -> RenderOutput:
-        """Colour and (with ``depth``) the accumulated depth layer, from the same pass."""
+    def _draw_range(self, prog: moderngl.Program, start: int, n: int) -> None:
+        """Draw sorted slots [start, start + n) without early termination."""
+        self.ctx.enable(moderngl.BLEND)
+        if self.uses_prepass:
+            prog["u_base"].value = start
+            self._vertex_array(prog, None).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+            return
+        vao = self._vertex_array(prog, self._index_buffer)
+        if start == 0:
+            vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+            return
+        # A later range: the instanced attribute starts at baseInstance (an indirect command).
+        if self._plain_command is None:
+            self._plain_command = self.ctx.buffer(reserve=COMMAND_BYTES)
+        self._plain_command.write(np.array([4, n, 0, start, 0], np.uint32).tobytes())
+        vao.render_indirect(self._plain_command, moderngl.TRIANGLE_STRIP, count=1)
+
+    def render(self, camera: Camera, on_batch: BatchHook | None = None) -> np.ndarray:
+        """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top."""
+        return self.render_layers(camera, depth=False, on_batch=on_batch).rgba
+
+    def render_layers(self, camera: Camera, depth: bool = True,
+                      on_batch: BatchHook | None = None) -> RenderOutput:
+        """Colour and (with ``depth``) the accumulated depth layer, from the same pass;
+        ``on_batch`` as in :meth:`draw`."""
         target = self.target(camera, depth)
-        self.draw(camera, target.fbo, depth)
+        self.draw(camera, target, depth, on_batch)
         t0 = time.perf_counter()
         rgba = target.read()
         d = target.read_depth() if depth else np.zeros(rgba.shape[:2], np.float32)
         t1 = time.perf_counter()
         self.last_times = QuadTimes(self._times_cull, self._times_sort, self._times_upload,
-                                    self._times_prepass, self._times_draw, t1 - t0, self._drawn)
+                                    self._times_prepass, self._times_draw, t1 - t0, self._drawn,
+                                    self._occlusion_culled)
         return RenderOutput(composite(rgba, self.settings.background), d)
 
     def prepare_geometry(self, camera: Camera) -> int:
@@ -326,7 +428,7 @@ class QuadRenderer:
         Needs ``preprocess=COMPUTE``; the benchmark's limit row draws this geometry.
         """
         order = self.visible_order(camera)
-        self._upload(order, self.program(camera))
+        self._upload(order)
         self.buffers.bind()
         self._prepass(camera, len(order), False)
         self.ctx.finish()
@@ -342,7 +444,7 @@ class QuadRenderer:
         counts.bind_to_storage_buffer(BINDING_FRAGMENT_COUNTS)
         self._count_fragments = True
         try:
-            self.draw(camera, self.target(camera).fbo)
+            self.draw(camera, self.target(camera))
         finally:
             self._count_fragments = False
         #: Time the draw with a GL timer query too (the benchmark); result in last_gpu_draw_ns.
@@ -353,11 +455,19 @@ class QuadRenderer:
         counts.release()
         return int(shaded), int(kept)
 
+    @property
+    def last_occlusion_culled(self) -> int:
+        """Splats the occlusion cull dropped in the last draw (0 with early_stop off)."""
+        return self._occlusion_culled
+
     def release(self) -> None:
-        for obj in (self._vao, self._index_buffer, self._prepared, self._target):
+        self._release_vaos()
+        if self._stop is not None:
+            self._stop.release()
+        for obj in (self._index_buffer, self._prepared, self._target, self._plain_command):
             if obj is not None:
                 obj.release()
-        self._vao = self._index_buffer = self._prepared = self._target = None
+        self._index_buffer = self._prepared = self._target = self._plain_command = None
         if self._sorter is not None:
             self._sorter.release()
             self._sorter = None

@@ -105,6 +105,12 @@ class RenderSettings:
             bandwidth; the benchmark reports the error against float32).
         convention: the published rasterizer rules the NumPy reference follows (only the
             reference reads it).
+        early_stop: quad path early termination (splatgl/early_stop.py): batched draws that
+            stop shading pixels whose transmittance fell below the reference's 1e-4, and drop
+            splats that would land only on such pixels.  Off by default by measurement on
+            llvmpipe (``splatgl bench --groups early-stop``, 1280x720): it halves the fragments
+            shaded but llvmpipe still rasterises rejected fragments and the batches serialise
+            its pipeline, so frames were 1.2x faster on donut and 1.2-1.4x slower on guitar.
     """
 
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -120,6 +126,7 @@ class RenderSettings:
     cull: bool = True
     half_sh: bool = False
     convention: Convention = Convention.INRIA
+    early_stop: bool = False
 
     def __post_init__(self) -> None:
         bg = tuple(float(v) for v in self.background)

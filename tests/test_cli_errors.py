@@ -118,7 +118,7 @@ def test_timings_show_counts_as_counts(tmp_path, capsys):
     rc, out, _ = run_cli(capsys, "render", "-o", tmp_path / "x.png", "--width", "48", "--height",
                          "32", "--timings")
     line = next(t for t in out.splitlines() if t.startswith("timings:"))
-    assert "drawn 1,604 (stages total" in line
+    assert "drawn 1,604, occlusion_culled 0 (stages total" in line
     assert "drawn 1604" not in line and " ms, drawn" in line
     rc, out, _ = run_cli(capsys, "render", "-o", tmp_path / "x.png", "--width", "48", "--height",
                          "32", "--timings", "--renderer", "tile")
@@ -186,7 +186,7 @@ def test_bench_arguments_fail_before_measuring(tmp_path, capsys):
                     "bench.csv, bench.json and bench.png")
     expect_one_line(capsys, tmp_path, ["bench", "--quick", "--groups", "bogus,extent"],
                     "splatgl: error: --groups: unknown group(s) bogus; valid: precision, extent, "
-                    "sort, sh, resort, preprocess, cull, renderer")
+                    "sort, sh, resort, preprocess, cull, early-stop, renderer")
     expect_one_line(capsys, tmp_path, ["bench", "--synthetic", "-5"],
                     "splatgl bench: error: argument --synthetic: must be 0 or more, got -5 "
                     "(see splatgl bench --help)")

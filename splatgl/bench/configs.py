@@ -23,7 +23,7 @@ class BenchConfig:
     Attributes:
         name: short label, e.g. ``precision=rgba16f``.
         group: the question the row answers (precision, extent, sort, sh, resort, preprocess,
-            cull, renderer, limit, default).
+            cull, early-stop, renderer, limit, default).
         kind: which renderer draws it.
         settings: the full settings (the default with one thing changed).
     """
@@ -54,6 +54,8 @@ def configurations(base: RenderSettings, scene_sh_degree: int, quick: bool = Fal
     rows += [q(f"preprocess={p.value}", "preprocess", preprocess=p)
              for p in Preprocess if p is not base.preprocess]
     rows.append(q("cull=off", "cull", cull=not base.cull))
+    rows.append(q(f"early-stop={'off' if base.early_stop else 'on'}", "early-stop",
+                  early_stop=not base.early_stop))
     rows.append(BenchConfig("tile", "renderer", RowKind.TILE, base))
     rows.append(BenchConfig("reference", "renderer", RowKind.REFERENCE, base))
     rows.append(BenchConfig("limit", "limit", RowKind.LIMIT, base))

@@ -67,6 +67,10 @@ class BenchRow:
     max_abs: float | None = None
     off_1: float | None = None
     limit_ratio: float | None = None
+    #: Early termination: splats its occlusion cull dropped (median over the path), and the
+    #: NumPy reference's blended fragments (alpha >= 1/255 before the stop) on the counting view.
+    occlusion_culled: int | None = None
+    reference_fragments: int | None = None
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -137,7 +141,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
     warm = orbit_path(scene, BenchOptions(options.width, options.height, 1, options.orbit_step), start=-3)[0]
     err_frames = [i for i in options.error_frames if i < len(cameras)] or [len(cameras) - 1]
     configs = configurations(base, scene.sh_degree, options.quick, options.groups)
-    total = len(err_frames) + len(configs)
+    total = len(err_frames) + len(configs) + any(c.group == "early-stop" for c in configs)
     step = 0
 
     def tick(what: str) -> None:
@@ -146,6 +150,12 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
         if progress is not None:
             progress(step, total, f"{name}: {what}")
 
+    ref_fragments = None
+    if any(c.group == "early-stop" for c in configs):
+        # The fill floor of a renderer that stops exactly, on the view count_fragments uses.
+        from ..reference import render_reference
+        ref_fragments = int(render_reference(scene, cameras[0], base, compat=base.convention).n_blended.sum())
+        tick("reference fragments")
     refs, ref_ms = {}, []
     for i in err_frames:
         t0 = time.perf_counter()
@@ -174,7 +184,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             runner.impl.gpu_timer = True
         runner.render(warm)  # compile, upload, allocate
         runner.render(cameras[-1])
-        times, stages, gpu, drawn, errs = [], [], [], [], []
+        times, stages, gpu, drawn, errs, occluded = [], [], [], [], [], []
         for i, cam in enumerate(cameras):
             t0 = time.perf_counter()
             img = runner.render(cam)
@@ -182,6 +192,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             last = getattr(runner.impl, "last_times", None)
             stages.append(_stage_ms(last))
             drawn.append(getattr(last, "drawn", None))
+            occluded.append(getattr(last, "occlusion_culled", None))
             if config.kind is RowKind.QUAD and runner.impl.last_gpu_draw_ns is not None:
                 gpu.append(runner.impl.last_gpu_draw_ns / 1e6)
             if i in refs and config.kind is not RowKind.LIMIT:
@@ -203,6 +214,9 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             min(e.psnr for e in errs) if errs else None,
             max(e.max_abs for e in errs) if errs else None,
             max(e.off_1 for e in errs) if errs else None,
+            occlusion_culled=(int(statistics.median(occluded)) if config.kind is RowKind.QUAD
+                              and None not in occluded and occluded else None),
+            reference_fragments=ref_fragments if config.kind is RowKind.QUAD else None,
         ))
         tick(config.name)
     limit = next((r.frame_ms for r in rows if r.group == "limit"), None)

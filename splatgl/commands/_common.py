@@ -160,6 +160,10 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                         "'gsplat' = per-axis opacity-aware extent up to 3.33 sigma, alpha clamp 0.999. "
                         "The quad and tile renderers follow the inria rules only, so 'gsplat' "
                         "needs --renderer reference (in compare: a reference on either side)")
+    g.add_argument("--early-stop", choices=["on", "off"], default=None,
+                   help="quad path early termination: stop shading pixels whose transmittance "
+                        "fell below 1e-4 and drop splats that land only on such pixels "
+                        "(default off, chosen by the benchmark on llvmpipe)")
     g.add_argument("--half-sh", action="store_true",
                    help="store SH coefficients as float16 in the quad path (half the memory)")
     g.add_argument("--transform", type=str, default=None, metavar="JSON",
@@ -190,6 +194,8 @@ def antialias_from_args(args: argparse.Namespace) -> bool:
 def settings_from_args(args: argparse.Namespace) -> RenderSettings:
     model = parse_transform(args.transform) if args.transform else None
     optional = {"preprocess": args.preprocess} if args.preprocess else {}
+    if getattr(args, "early_stop", None) is not None:
+        optional["early_stop"] = args.early_stop == "on"
     return RenderSettings(background=args.background, precision=args.precision, extent=args.extent,
                           near=args.near, antialias=antialias_from_args(args),
                           sh_degree=args.sh_degree,

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..bench.early_stop_report import early_stop_table
+from ..bench.real_scenes import build_real_scene, load_real_sources
 from ..bench.report import plot, table, write_csv, write_json
 from ..bench.configs import configurations
 from ..bench.machine import describe, machine_info
@@ -45,7 +47,8 @@ scene; with --quick: the bundled demo at 160x120, a few frames, one row per ques
 examples:
   splatgl bench --quick
   splatgl bench scene.ply --width 1280 --height 720 --out bench-results
-  splatgl bench --groups extent,preprocess"""
+  splatgl bench --groups extent,preprocess
+  splatgl bench --groups early-stop          (on against off; adds a 1M-splat real-data scene)"""
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"
 REAL = ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply", "compressed_ply/guitar.compressed.ply"]
@@ -77,6 +80,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--synthetic", type=non_negative_int, default=None, metavar="N",
                    help="add a synthetic SH3 scene of N splats (default 150000 without scenes; "
                         "0 for none)")
+    p.add_argument("--real-splats", type=non_negative_int, default=None, metavar="N",
+                   help="add a scene of N splats built from jittered, rotated copies of the shared "
+                        "real files (deterministic; default 1000000 with --groups early-stop and "
+                        "no scene files, else none)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="write bench.csv, bench.json and bench.png there (created if missing; "
                         "existing files of those names are replaced)")
@@ -159,6 +166,11 @@ def run(args: argparse.Namespace) -> int:
     n_syn = args.synthetic if args.synthetic is not None else (150_000 if not args.scenes and not quick else 0)
     if n_syn:
         jobs.append((f"synthetic-{n_syn // 1000}k-sh3", synthetic_scene(n_syn)))
+    n_real = args.real_splats
+    if n_real is None:
+        n_real = 1_000_000 if groups and "early-stop" in groups and not args.scenes and not quick else 0
+    if n_real:
+        jobs.append((f"real-{n_real / 1e6:g}M", build_real_scene(n_real, seed=0, sources=load_real_sources())))
     if not jobs:
         raise SplatglError("nothing to measure: no scenes given, none found in "
                            f"{SHARED}, and --synthetic 0")
@@ -184,6 +196,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"{width}x{height}, {frames} frames per row along an orbit")
     print(table(rows))
     print(f"\nexact sort of {extra['sort_keys']} depth keys: {sort_ms:.1f} ms (median)")
+    stop_table = early_stop_table(rows)
+    if stop_table:
+        print("\n" + stop_table)
     defaults = [r for r in rows if r.config == "default"]
     for r in defaults:
         print(f"target check {r.scene}: default at {r.limit_ratio:.2f}x the limit row "

@@ -48,6 +48,8 @@ class Raster:
     depth: (H, W) float ``D = sum z alpha T`` (world units, not normalised).
     transmittance: (H, W) float ``T_final``.  n_contrib: (H, W) int32, 1-based position in the
     tile's list of the last splat blended (0: none), as 3DGS's ``n_contrib``.
+    n_blended: (H, W) int32, how many splats the pixel blended (alpha >= 1/255, before the
+    stop): the "reference fragments", the fill work a renderer that stops exactly must do.
     """
 
     color: np.ndarray
@@ -55,6 +57,7 @@ class Raster:
     depth: np.ndarray
     transmittance: np.ndarray
     n_contrib: np.ndarray
+    n_blended: np.ndarray | None = None
 
 
 def gaussian_power(conic: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
@@ -152,20 +155,22 @@ def _blend_chunk(t_prev: np.ndarray, alpha: np.ndarray, inclusive_stop: bool
 
 def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
                   tiles: np.ndarray, options: ReferenceOptions, chunk: int):
-    """Blend the tiles ``tiles`` (b,) completely; returns (T, C, D, n_contrib) per tile pixel."""
+    """Blend the tiles ``tiles`` (b,) completely; returns (T, C, D, n_contrib, n_blended) per
+    tile pixel."""
     dt = proj.dtype.type
     b = tiles.shape[0]
     out_t = np.ones((b, TILE_PIXELS), proj.dtype)
     out_c = np.zeros((b, TILE_PIXELS, 3), proj.dtype)
     out_d = np.zeros((b, TILE_PIXELS), proj.dtype)
     out_n = np.zeros((b, TILE_PIXELS), np.int32)
+    out_b = np.zeros((b, TILE_PIXELS), np.int32)
     start, end = ranges[tiles, 0], ranges[tiles, 1]
     rows = np.flatnonzero(end > start)
     lanes = np.arange(TILE_SIZE, dtype=np.float64) + 0.5
     gw = proj.grid[0]
     px = ((tiles % gw)[:, None] * TILE_SIZE + lanes).astype(proj.dtype)
     py = ((tiles // gw)[:, None] * TILE_SIZE + lanes).astype(proj.dtype)
-    t, c, d, nc = out_t[rows], out_c[rows], out_d[rows], out_n[rows]
+    t, c, d, nc, nb = out_t[rows], out_c[rows], out_d[rows], out_n[rows], out_b[rows]
     done = np.zeros((rows.size, TILE_PIXELS), bool)
     amax, inclusive = options.resolved_alpha_max, options.stop_inclusive
     ks = np.arange(chunk)
@@ -188,6 +193,7 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
         t = np.take_along_axis(t_seq, kept[:, None, :], axis=1)[:, 0]
         done |= kept < chunk
         blended = w > 0
+        nb = nb + blended.sum(axis=1, dtype=np.int32)
         last = chunk - np.argmax(blended[:, ::-1, :], axis=1)   # 1-based within the chunk
         nc = np.where(blended.any(axis=1), offset + last, nc).astype(np.int32)
         offset += chunk
@@ -196,8 +202,9 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
             stop = ~go
             out_t[rows[stop]], out_c[rows[stop]] = t[stop], c[stop]
             out_d[rows[stop]], out_n[rows[stop]] = d[stop], nc[stop]
-            rows, t, c, d, nc, done = rows[go], t[go], c[go], d[go], nc[go], done[go]
-    return out_t, out_c, out_d, out_n
+            out_b[rows[stop]] = nb[stop]
+            rows, t, c, d, nc, nb, done = rows[go], t[go], c[go], d[go], nc[go], nb[go], done[go]
+    return out_t, out_c, out_d, out_n, out_b
 
 
 def _untile(per_tile: np.ndarray, grid: tuple[int, int], height: int, width: int) -> np.ndarray:
@@ -239,6 +246,7 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
     c = np.zeros((n_tiles, TILE_PIXELS, 3), proj.dtype)
     d = np.zeros((n_tiles, TILE_PIXELS), proj.dtype)
     nc = np.zeros((n_tiles, TILE_PIXELS), np.int32)
+    nb = np.zeros((n_tiles, TILE_PIXELS), np.int32)
     values = np.asarray(sorted_values, np.int64)
 
     def run(tiles: np.ndarray):
@@ -264,15 +272,15 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
         else:
             for b in batches:
                 finished(run(b))
-    for tiles, (bt, bc, bd, bn) in results:
-        t[tiles], c[tiles], d[tiles], nc[tiles] = bt, bc, bd, bn
+    for tiles, (bt, bc, bd, bn, bb) in results:
+        t[tiles], c[tiles], d[tiles], nc[tiles], nb[tiles] = bt, bc, bd, bn, bb
     bg = np.asarray(background, proj.dtype)
     h, w = proj.height, proj.width
     t_img = _untile(t, proj.grid, h, w)
     color = _untile(c, proj.grid, h, w) + t_img[..., None] * bg
     return Raster(color=color, alpha=proj.dtype.type(1.0) - t_img,
                   depth=_untile(d, proj.grid, h, w), transmittance=t_img,
-                  n_contrib=_untile(nc, proj.grid, h, w))
+                  n_contrib=_untile(nc, proj.grid, h, w), n_blended=_untile(nb, proj.grid, h, w))
 
 
 def transmittance_trace(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarray,

@@ -30,6 +30,8 @@ class ReferenceImage:
         projected: the ``project`` stage's output (per-splat arrays).
         sorted_values: (M,) int64 splat index per sorted key.  ranges: (tiles, 2) int64.
         options: the convention used.
+        n_blended: (H, W) int32 splats blended per pixel (alpha >= 1/255, before the stop);
+            its sum is the "reference fragments" the benchmark compares fill work with.
     """
 
     color: np.ndarray
@@ -41,6 +43,7 @@ class ReferenceImage:
     sorted_values: np.ndarray
     ranges: np.ndarray
     options: ReferenceOptions
+    n_blended: np.ndarray | None = None
 
     @property
     def rgba(self) -> np.ndarray:
@@ -71,7 +74,8 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
     raster = rasterize(proj, values, ranges, settings.background, options, progress=progress)
     return ReferenceImage(color=raster.color, alpha=raster.alpha, depth=raster.depth,
                           transmittance=raster.transmittance, n_contrib=raster.n_contrib,
-                          projected=proj, sorted_values=values, ranges=ranges, options=options)
+                          projected=proj, sorted_values=values, ranges=ranges, options=options,
+                          n_blended=raster.n_blended)
 
 
 def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings | None = None,

@@ -73,7 +73,7 @@ def render_frame(renderer: Renderer, scene: Scene, camera: Camera, settings: Ren
         order = quad.visible_order(cam)  # cull + sort (draw() reuses it for this camera)
         t1 = time.perf_counter()
         target = quad.target(cam)
-        quad.draw(cam, target.fbo)  # upload + draw, ends with a finish
+        quad.draw(cam, target)  # upload + draw, ends with a finish
         t2 = time.perf_counter()
         return FrameResult(target.texture, None, True, t1 - t0, t2 - t1,
                            f"{len(order):,} visible / {scene.count:,}")

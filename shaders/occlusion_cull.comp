@@ -1,0 +1,127 @@
+// Early termination, splat-level occlusion cull and order-preserving compaction.
+//
+// Slots [u_start, u_end) of the sorted order form one draw batch.  A splat survives unless its
+// quad's screen rectangle lies only on stopped tiles (stop_tiles.comp; every pixel there has
+// T < T_MIN, so the depth test would reject each of its fragments anyway) or off the viewport.
+// Work group g owns the SEGMENT slots from u_start + g SEGMENT: it writes its survivors, in
+// sorted order, to survivors[seg_base + 0..n) and the draw command (4, n, 0, seg_base) as
+// command u_cmd_base + g, so a multi-draw-indirect over the batch's commands draws the
+// survivors front to back (commands run in order; the instanced attribute reads
+// survivors[baseInstance + instance]).  Variants: PREPARED (3DGS after quad_prepass.comp:
+// the survivor value is the slot, read back by quad_light.vert), SURFEL (2DGS, the value is the
+// splat index for surfel.vert), neither (3DGS vertex path, the splat index for quad.vert).
+// Twin: splatgl/early_stop.py occlusion_cull.
+#include "lib/camera.glsl"
+#include "lib/scene.glsl"
+#include "lib/project.glsl"
+#ifdef SURFEL
+#include "lib/surfel.glsl"
+#elif !defined(PREPARED)
+#include "lib/sh.glsl"
+#include "lib/splat_setup.glsl"
+#endif
+
+#define GROUP 256
+#define PER_INVOCATION 4
+layout(local_size_x = GROUP) in;
+layout(std430, binding = 5) readonly buffer Order { uint order[]; };
+#ifdef PREPARED
+layout(std430, binding = 6) readonly buffer Prepared { vec4 prepared[]; };
+#endif
+layout(std430, binding = 8) readonly buffer StopTiles { uint stopped[]; };
+layout(std430, binding = 9) writeonly buffer Survivors { uint survivors[]; };
+// DrawArraysIndirectCommand (count, instanceCount, first, baseInstance) in moderngl's 20-byte
+// stride (render_indirect passes stride 20 for arrays too): 5 uints per command.
+layout(std430, binding = 10) writeonly buffer Commands { uint commands[]; };
+uniform uint u_start;
+uniform uint u_end;
+uniform uint u_cmd_base;
+uniform ivec2 u_tiles;         // tile grid (columns, rows)
+uniform bool u_check_tiles;    // false on the first batch: nothing has stopped yet
+
+shared uint s_scan[GROUP];
+
+// Pixel rectangle [lo, hi] containing the splat's quad, and the value a survivor stores.
+// False: the splat draws nothing (culled by its own setup).
+bool splat_rect(uint k, out vec2 lo, out vec2 hi, out uint value) {
+#ifdef PREPARED
+    value = k;
+    vec4 d = prepared[4u * k + 3u];
+    if (d.z == 0.0) return false;
+    vec4 a = prepared[4u * k], b = prepared[4u * k + 1u];
+    vec2 half_size = abs(a.zw) + abs(b.xy);   // corners mean +- axis1 +- axis2
+    lo = a.xy - half_size;
+    hi = a.xy + half_size;
+    return true;
+#elif defined(SURFEL)
+    uint i = order[k];
+    value = i;
+    vec4 a = splat_a[i];
+    vec3 p = u_view_rot * a.xyz + u_view_trans;
+    if (p.z <= u_near) return false;
+    mat3 rot = quat_to_rotmat(splat_q[i]);
+    vec2 s = splat_s[i].xy;
+    vec2 center;
+    vec3 t0, t1, t2;
+    surfel_screen(p, u_view_rot * (rot[0] * s.x), u_view_rot * (rot[1] * s.y), center, t0, t1, t2);
+    return surfel_bounds(center, t0, t1, t2, a.w, lo, hi);
+#else
+    uint i = order[k];
+    value = i;
+    ScreenSplat s;
+    if (!setup_splat(i, s)) return false;
+    vec2 half_size = abs(s.axis1) + abs(s.axis2);
+    lo = s.mean2d - half_size;
+    hi = s.mean2d + half_size;
+    return true;
+#endif
+}
+
+// A quad covers the pixels whose centres (j + 0.5, i + 0.5) lie in it, all inside the pixel
+// range [floor(lo), floor(hi)]; it survives unless that range misses the viewport or every tile
+// it touches is stopped.  A NaN rectangle survives (the draw decides).
+bool survives(uint k, out uint value) {
+    vec2 lo, hi;
+    if (!splat_rect(k, lo, hi, value)) return false;
+    if (any(isnan(vec4(lo, hi)))) return true;
+    if (hi.x < 0.0 || hi.y < 0.0 || lo.x >= u_viewport.x || lo.y >= u_viewport.y) return false;
+    if (!u_check_tiles) return true;
+    ivec2 tlo = clamp(ivec2(floor(max(lo, vec2(0.0)))) / TILE_SIZE, ivec2(0), u_tiles - 1);
+    ivec2 thi = clamp(ivec2(floor(min(hi, u_viewport))) / TILE_SIZE, ivec2(0), u_tiles - 1);
+    for (int ty = tlo.y; ty <= thi.y; ++ty)
+        for (int tx = tlo.x; tx <= thi.x; ++tx)
+            if (stopped[ty * u_tiles.x + tx] == 0u) return true;
+    return false;
+}
+
+void main() {
+    uint l = gl_LocalInvocationID.x;
+    uint seg_base = u_start + gl_WorkGroupID.x * (GROUP * PER_INVOCATION);
+    uint first = seg_base + l * PER_INVOCATION;
+    uint values[PER_INVOCATION];
+    uint count = 0u;
+    for (uint j = 0u; j < PER_INVOCATION; ++j) {
+        uint k = first + j;
+        uint v;
+        if (k < u_end && survives(k, v)) values[count++] = v;
+    }
+    // Inclusive scan of the per-invocation counts (Hillis-Steele over the work group).
+    s_scan[l] = count;
+    barrier();
+    for (uint off = 1u; off < GROUP; off <<= 1) {
+        uint add = l >= off ? s_scan[l - off] : 0u;
+        barrier();
+        s_scan[l] += add;
+        barrier();
+    }
+    uint at = seg_base + s_scan[l] - count;
+    for (uint j = 0u; j < count; ++j) survivors[at + j] = values[j];
+    if (l == GROUP - 1u) {
+        uint c = 5u * (u_cmd_base + gl_WorkGroupID.x);
+        commands[c] = 4u;
+        commands[c + 1u] = s_scan[l];
+        commands[c + 2u] = 0u;
+        commands[c + 3u] = seg_base;
+        commands[c + 4u] = 0u;
+    }
+}

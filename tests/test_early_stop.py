@@ -1,0 +1,240 @@
+"""Early termination in the quad path (splatgl/early_stop.py): schedule, GPU passes against
+their NumPy twins, the accuracy bound against no stop and the reference, the batch hook."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import moderngl
+import numpy as np
+import pytest
+from hypothesis import given, settings as hsettings, strategies as st
+
+import splatgl.quad as quad_module
+from splatgl import early_stop as es
+from splatgl.constants import ALPHA_MAX, T_MIN
+from splatgl.quad import QuadRenderer
+from splatgl.render import default_camera
+from splatgl.scene import Scene, SplatKind
+from splatgl.settings import Precision, Preprocess, RenderSettings
+from splatgl.stress.build import at_pixel, front_camera, splats
+
+#: Weight a pixel may receive beyond the reference's stop (docs/early-stop.md): the reference
+#: stops with T (1 - alpha) < T_MIN, alpha <= ALPHA_MAX, so T < T_MIN / (1 - ALPHA_MAX) = 0.01.
+EXTRA_WEIGHT = T_MIN / (1.0 - ALPHA_MAX)
+#: float32 blending slack of the GPU (one ulp per blend over ~1000 layers).
+FLOAT_SLACK = 1e-4
+
+
+def dense_scene(n: int = 8000, seed: int = 0, kind: SplatKind = SplatKind.GAUSSIAN_3D) -> Scene:
+    """Overlapping opaque splats in a slab: most pixels saturate, many splats are hidden."""
+    rng = np.random.default_rng(seed)
+    ns = 2 if kind is SplatKind.SURFEL_2D else 3
+    means = np.column_stack([rng.uniform(-2.5, 2.5, n), rng.uniform(-1.8, 1.8, n), rng.uniform(0, 1.5, n)])
+    return Scene(means, rng.normal(size=(n, 4)), rng.normal(-2.2, 0.3, (n, ns)),
+                 rng.normal(3.0, 1.0, n), rng.normal(0, 0.5, (n, 1, 3)), kind)
+
+
+def _settings(**change) -> RenderSettings:
+    return dataclasses.replace(RenderSettings(), **change)
+
+
+@given(st.integers(0, 5_000_000), st.floats(1e-4, 1.0), st.floats(0.5, 3.0), st.integers(1, 10_000))
+@hsettings(max_examples=200, deadline=None)
+def test_batch_bounds_cover_the_order_in_bounded_increasing_batches(count, frac, growth, min_batch):
+    b = es.batch_bounds(count, frac, growth, min_batch)
+    assert b[0] == 0 and b[-1] == count
+    steps = np.diff(b)
+    assert (steps > 0).all() and (steps <= es.MAX_BATCH).all()
+    p = es.plain_bounds(count)
+    assert p[0] == 0 and p[-1] == count and (np.diff(p) <= es.MAX_BATCH).all()
+
+
+def test_twins_on_a_known_mask():
+    alpha = np.zeros((20, 35), np.float32)
+    alpha[:16, :16] = 1.0                     # tile (0, 0) fully stopped
+    alpha[:16, 16:32] = 1.0
+    alpha[3, 20] = np.float32(1.0 - 2e-4)     # T = 2e-4 >= T_MIN: tile (0, 1) stays open
+    alpha[16:, 32:] = 1.0                     # partial edge tile (1, 2): all its in-image pixels
+    tiles = es.stop_tiles(alpha)
+    assert tiles.tolist() == [[True, False, False], [False, False, True]]
+    lo = np.array([[1.0, 1.0], [1.0, 1.0], [-9.0, 2.0], [33.0, 17.0], [40.0, 3.0]])
+    hi = np.array([[14.0, 15.0], [17.0, 15.0], [-0.5, 5.0], [34.0, 19.9], [50.0, 4.0]])
+    keep = es.occlusion_cull(lo, hi, tiles, 35, 20)
+    # on stopped tile only / reaches an open tile / off-image / stopped edge tile / off-image
+    assert keep.tolist() == [False, True, False, False, False]
+
+
+def _gpu_passes(ctx, alpha: np.ndarray):
+    from splatgl.gl.shaders import ProgramCache
+
+    h, w = alpha.shape
+    rgba = np.zeros((h, w, 4), np.float32)
+    rgba[..., 3] = alpha
+    tex = ctx.texture((w, h), 4, rgba.tobytes(), dtype="f4")
+    depth = ctx.depth_renderbuffer((w, h))
+    mask_fbo = ctx.framebuffer(depth_attachment=depth)
+    mask_fbo.use()
+    mask_fbo.depth_mask = True
+    mask_fbo.clear(depth=1.0)
+    programs = ProgramCache(ctx)
+    passes = es.EarlyStopPasses(ctx, programs)
+    passes.prepare(1, [0, 1], w, h)
+    ctx.enable(moderngl.DEPTH_TEST)
+    ctx.depth_func = "<"
+    passes.mark(tex, mask_fbo)
+    ctx.disable(moderngl.DEPTH_TEST)
+    marked = np.frombuffer(mask_fbo.read(components=1, attachment=-1, dtype="f4"), np.float32).reshape(h, w) == 0.0
+    passes.reduce_tiles(tex, w, h)
+    ctx.memory_barrier()
+    gw, gh = -(-w // 16), -(-h // 16)
+    tiles = np.frombuffer(passes.tiles.read(size=4 * gw * gh), np.uint32).reshape(gh, gw).astype(bool)
+    passes.release()
+    programs.release()
+    for obj in (mask_fbo, depth, tex):
+        obj.release()
+    ctx.detect_framebuffer(0).use()
+    return marked, tiles
+
+
+def test_mark_and_tile_passes_match_their_twins(ctx):
+    rng = np.random.default_rng(3)
+    h, w = 37, 70
+    t = np.where(rng.random((h, w)) < 0.9, rng.uniform(0, 2e-4, (h, w)), rng.uniform(0, 1, (h, w)))
+    t[:16, 16:48] = 5e-5                       # two tiles certainly stopped
+    alpha = (1.0 - t).astype(np.float32)
+    marked, tiles = _gpu_passes(ctx, alpha)
+    np.testing.assert_array_equal(marked, es.stop_mask(alpha))
+    np.testing.assert_array_equal(tiles, es.stop_tiles(alpha))
+    assert tiles[0, 1] and tiles[0, 2]
+
+
+@pytest.mark.parametrize("preprocess", [Preprocess.COMPUTE, Preprocess.VERTEX])
+def test_occlusion_cull_matches_its_twin(ctx, monkeypatch, preprocess):
+    """Two batches: the GPU's tiles and survivors of batch 2 equal the twins' applied to the
+    alpha read back after batch 1 and the rectangles of the pre-pass."""
+    scene = dense_scene()
+    cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
+    quad = QuadRenderer(ctx, scene, _settings(early_stop=True, preprocess=Preprocess.COMPUTE))
+    n = len(quad.visible_order(cam))
+    split = n // 3
+    monkeypatch.setattr(quad_module, "batch_bounds", lambda count: [0, split, count])
+    after_first = {}
+
+    def hook(done, total):
+        if done == split:
+            after_first["alpha"] = quad.target(cam).read()[..., 3]
+
+    quad.render(cam, on_batch=hook)
+    alpha = after_first["alpha"]
+    tiles = es.stop_tiles(alpha)
+    gpu_tiles = np.frombuffer(quad._stop.tiles.read(size=4 * tiles.size), np.uint32)
+    np.testing.assert_array_equal(gpu_tiles.reshape(tiles.shape).astype(bool), tiles)
+    assert tiles.mean() > 0.2, "the scene must stop some tiles for the test to mean anything"
+    prepared = np.frombuffer(quad._prepared.read(size=64 * n), np.float32).reshape(n, 4, 4)
+    mean, a1, a2 = prepared[:, 0, :2], prepared[:, 0, 2:], prepared[:, 1, :2]
+    half = np.abs(a1) + np.abs(a2)
+    visible = prepared[:, 3, 2] != 0
+    lo, hi = mean - half, mean + half
+    first = es.occlusion_cull(lo[:split], hi[:split], None, cam.width, cam.height) & visible[:split]
+    second = es.occlusion_cull(lo[split:], hi[split:], tiles, cam.width, cam.height) & visible[split:]
+    n_cmd_first = -(-split // es.SEGMENT)
+    n_cmd = n_cmd_first + -(-(n - split) // es.SEGMENT)
+    stop = quad._stop
+    assert stop.survivor_count(n_cmd) - stop.survivor_count(n_cmd_first) == int(second.sum())
+    expected_culled = n - int(first.sum() + second.sum())
+    assert quad.last_occlusion_culled == expected_culled > 0.1 * n
+    quad.release()
+    if preprocess is Preprocess.VERTEX:  # the vertex path's cull computes the same rectangles
+        quad = QuadRenderer(ctx, scene, _settings(early_stop=True, preprocess=preprocess))
+        quad.render(cam)
+        assert quad.last_occlusion_culled == expected_culled
+        quad.release()
+
+
+def _bound_check(on, off, name):
+    """|on - off| <= EXTRA_WEIGHT max|c - bg| per pixel (colour below 1 here), and no pixel
+    moves away from what no-stop gives by more than the dropped tail can weigh."""
+    diff = np.abs(on - off)
+    assert diff.max() <= EXTRA_WEIGHT * max(1.0, float(off[..., :3].max())) + FLOAT_SLACK, name
+
+
+@pytest.mark.parametrize("kind,preprocess", [(SplatKind.GAUSSIAN_3D, Preprocess.COMPUTE),
+                                             (SplatKind.GAUSSIAN_3D, Preprocess.VERTEX),
+                                             (SplatKind.SURFEL_2D, Preprocess.VERTEX)])
+def test_on_stays_within_the_bound_of_off_and_culls(gl_renderer, kind, preprocess):
+    scene = dense_scene(kind=kind)
+    cam = front_camera(4.0, 50.0, 128, 96, target=(0.0, 0.0, 0.5))
+    on_settings = _settings(early_stop=True, preprocess=preprocess, background=(0.2, 0.4, 0.9))
+    off_settings = dataclasses.replace(on_settings, early_stop=False)
+    on = gl_renderer.render_layers(scene, cam, on_settings)
+    off = gl_renderer.render_layers(scene, cam, off_settings)
+    _bound_check(on.rgba, off.rgba, f"{kind.value} {preprocess.value}")
+    # Depth uses the same weights: bounded by the extra weight times the farthest depth.
+    assert np.abs(on.depth - off.depth).max() <= EXTRA_WEIGHT * 2.5 * 4.0 + 1e-3
+    quad = gl_renderer.renderer_for(scene, on_settings)
+    assert quad.last_times.occlusion_culled > 0.05 * quad.last_times.drawn  # 7-40% measured
+
+
+def test_half_precision_target_is_unchanged(gl_renderer):
+    """rgba16f stores A = 1 before T < 1e-4 is representable; blending then adds exactly 0."""
+    scene = dense_scene()
+    cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
+    on = gl_renderer.render(scene, cam, _settings(early_stop=True, precision=Precision.RGBA16F))
+    off = gl_renderer.render(scene, cam, _settings(early_stop=False, precision=Precision.RGBA16F))
+    np.testing.assert_array_equal(on, off)
+
+
+def test_no_stop_error_against_reference_never_grows(gl_renderer, shared_scenes):
+    """The accuracy claim on a real scene: per pixel, the stopped image is no farther from the
+    reference than the unstopped one (up to float slack), so PSNR cannot drop."""
+    from conftest import shared_file
+    from splatgl.formats import load_scene
+    from splatgl.metrics import image_errors
+    from splatgl.render import render_reference_rgba
+
+    scene = load_scene(shared_file(shared_scenes, "ply/donut_sh0.ply"))
+    cam = default_camera(scene, 160, 96)
+    ref = render_reference_rgba(scene, cam, RenderSettings())
+    on = gl_renderer.render(scene, cam, _settings(early_stop=True))
+    off = gl_renderer.render(scene, cam, _settings(early_stop=False))
+    assert (np.abs(on - ref) <= np.abs(off - ref) + FLOAT_SLACK).all()
+    assert image_errors(on, ref).psnr >= image_errors(off, ref).psnr - 0.01
+
+
+@pytest.mark.parametrize("early_stop", [True, False])
+def test_batch_hook_reports_progress_and_can_interrupt(gl_renderer, monkeypatch, early_stop):
+    scene = dense_scene(3000)
+    cam = front_camera(4.0, 50.0, 64, 48, target=(0.0, 0.0, 0.5))
+    settings = _settings(early_stop=early_stop)
+    quad = gl_renderer.renderer_for(scene, settings)
+    monkeypatch.setattr(es, "MAX_BATCH", 700)
+    monkeypatch.setattr(quad_module, "plain_bounds", lambda n: es.plain_bounds(n, 700))
+    seen = []
+    expected = quad.render(cam, on_batch=lambda done, total: seen.append((done, total)))
+    total = seen[-1][1]
+    assert seen[-1][0] == total and len(seen) >= 2
+    assert all(a[0] < b[0] for a, b in zip(seen, seen[1:]))
+
+    def stop(done, total):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        quad.render(cam, on_batch=stop)
+    assert not quad.ctx.error.startswith("GL_INVALID")
+    np.testing.assert_array_equal(quad.render(cam), expected)
+
+
+def test_reference_counts_blended_fragments():
+    """Eight stacked splats of opacity 0.8 centred on a pixel: T = 0.2^k, and the sixth would
+    take T to 6.4e-5 < 1e-4, so exactly five are blended there."""
+    from splatgl.reference import render_reference
+
+    cam = front_camera(5.0, 60.0, 32, 32)
+    means = [at_pixel(cam, 16.5, 16.5, 5.0 + 0.01 * i) for i in range(8)]
+    scene = splats(means, np.full((8, 3), 0.05), opacities=np.full(8, 0.8))
+    ref = render_reference(scene, cam)
+    assert ref.n_blended[16, 16] == 5
+    assert ref.n_blended[0, 0] == 0
+    # Away from the centre, alpha < 1/255 stops counting before the opacity stop does.
+    assert 0 < ref.n_blended[16, 18] <= 8
