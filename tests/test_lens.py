@@ -301,3 +301,14 @@ def test_cli_renders_panorama_fisheye_and_stereo(tmp_path, shared_scenes, capsys
                  "-o", str(tmp_path / "t.png")]) == 2
     assert "cannot draw equirectangular" in capsys.readouterr().err
     assert not (tmp_path / "t.png").exists()
+
+
+def test_bench_times_the_projections(capsys):
+    """`splatgl bench --groups projection`: the lens models against pinhole on the same poses."""
+    from splatgl.bench.configs import configurations
+    from splatgl.settings import RenderSettings as RS
+    rows = [c for c in configurations(RS(), 0, groups={"projection"}) if c.group == "projection"]
+    assert [c.projection for c in rows] == ["fisheye", "equirectangular"]
+    assert main(["bench", "--quick", "--groups", "projection"]) == 0
+    out = capsys.readouterr().out
+    assert "projection=fisheye" in out and "default" in out

@@ -23,15 +23,19 @@ class BenchConfig:
     Attributes:
         name: short label, e.g. ``precision=rgba16f``.
         group: the question the row answers (precision, extent, sort, sh, resort, preprocess,
-            cull, early-stop, renderer, limit, default).
+            cull, early-stop, projection, renderer, limit, default).
         kind: which renderer draws it.
         settings: the full settings (the default with one thing changed).
+        projection: the camera model the row renders its path with (group ``projection``:
+            the orbit's poses and image size through :func:`splatgl.lens.with_projection`);
+            None keeps the path's pinhole cameras.
     """
 
     name: str
     group: str
     kind: RowKind
     settings: RenderSettings
+    projection: str | None = None
 
 
 def configurations(base: RenderSettings, scene_sh_degree: int, quick: bool = False,
@@ -56,6 +60,8 @@ def configurations(base: RenderSettings, scene_sh_degree: int, quick: bool = Fal
     rows.append(q("cull=off", "cull", cull=not base.cull))
     rows.append(q(f"early-stop={'off' if base.early_stop else 'on'}", "early-stop",
                   early_stop=not base.early_stop))
+    rows += [BenchConfig(f"projection={p}", "projection", RowKind.QUAD, base, p)
+             for p in ("fisheye", "equirectangular")]
     rows.append(BenchConfig("tile", "renderer", RowKind.TILE, base))
     rows.append(BenchConfig("reference", "renderer", RowKind.REFERENCE, base))
     rows.append(BenchConfig("limit", "limit", RowKind.LIMIT, base))

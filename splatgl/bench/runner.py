@@ -11,6 +11,7 @@ from typing import Callable
 import numpy as np
 
 from ..camera import Camera, orbit
+from ..lens import with_projection
 from ..metrics import image_errors
 from ..render import Renderer, default_camera, render_reference_rgba
 from ..scene import Scene
@@ -182,10 +183,14 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
         runner = _Runner(renderer, scene, config)
         if config.kind is RowKind.QUAD:
             runner.impl.gpu_timer = True
-        runner.render(warm)  # compile, upload, allocate
-        runner.render(cameras[-1])
+        # Projection rows time the same poses and image size through another camera model;
+        # their accuracy against the reference is checked in tests/test_lens.py, not here.
+        path = ([with_projection(c, config.projection) for c in cameras]
+                if config.projection else cameras)
+        runner.render(with_projection(warm, config.projection) if config.projection else warm)
+        runner.render(path[-1])
         times, stages, gpu, drawn, errs, occluded = [], [], [], [], [], []
-        for i, cam in enumerate(cameras):
+        for i, cam in enumerate(path):
             t0 = time.perf_counter()
             img = runner.render(cam)
             times.append((time.perf_counter() - t0) * 1e3)
@@ -195,12 +200,12 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             occluded.append(getattr(last, "occlusion_culled", None))
             if config.kind is RowKind.QUAD and runner.impl.last_gpu_draw_ns is not None:
                 gpu.append(runner.impl.last_gpu_draw_ns / 1e6)
-            if i in refs and config.kind is not RowKind.LIMIT:
+            if i in refs and config.kind is not RowKind.LIMIT and not config.projection:
                 errs.append(image_errors(img, refs[i]))
         shaded = kept = eff = None
         if config.kind is RowKind.QUAD:
             runner.impl.gpu_timer = False
-            shaded, kept = runner.impl.count_fragments(cameras[0])
+            shaded, kept = runner.impl.count_fragments(path[0])
             eff = kept / shaded if shaded else None
         runner.release()
         keys = stages[0].keys() if stages else []
