@@ -28,7 +28,7 @@ def test_configurations_cover_every_question():
     rows = configurations(RenderSettings(), scene_sh_degree=3)
     groups = {r.group for r in rows}
     assert groups == {"default", "precision", "extent", "sort", "sh", "resort", "preprocess", "cull",
-                      "early-stop", "renderer", "limit"}
+                      "early-stop", "projection", "renderer", "limit"}
     assert [r.name for r in rows if r.group == "early-stop"] == ["early-stop=on"]
     assert {r.name for r in rows if r.group == "sh"} == {"sh<=0", "sh<=1", "sh<=2", "sh=half"}
     assert [r.kind for r in rows if r.group == "renderer"] == [RowKind.TILE, RowKind.REFERENCE]
