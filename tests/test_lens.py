@@ -312,3 +312,22 @@ def test_bench_times_the_projections(capsys):
     assert main(["bench", "--quick", "--groups", "projection"]) == 0
     out = capsys.readouterr().out
     assert "projection=fisheye" in out and "default" in out
+
+
+@pytest.mark.parametrize("line,k", [
+    ("1 OPENCV_FISHEYE 100 80 20 22 50 40 0.05 -0.01 0.002 -0.0003", FISHEYE_K),
+    ("1 SIMPLE_RADIAL_FISHEYE 100 80 20 50 40 0.05", (0.05, 0.0, 0.0, 0.0)),
+    ("1 RADIAL_FISHEYE 100 80 20 50 40 0.05 -0.01", (0.05, -0.01, 0.0, 0.0)),
+])
+def test_colmap_fisheye_models_load_and_project(tmp_path, line, k):
+    """COLMAP's fisheye models are OpenCV's theta_d polynomial: a point 90 degrees to the right
+    of the axis lands at u = cx + fx theta_d(pi / 2)."""
+    from splatgl.datasets.colmap import load_colmap
+    (tmp_path / "cameras.txt").write_text(line + "\n")
+    (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
+    cam = load_colmap(tmp_path)[0].camera
+    assert cam.projection is Projection.FISHEYE and cam.distortion == pytest.approx(k)
+    theta = math.pi / 2
+    theta_d = theta * (1 + sum(c * theta ** (2 * i + 2) for i, c in enumerate(k)))
+    u, v = pm.project_means(np.array([[1.0, 0.0, 0.0]]), cam)[0]
+    assert u == pytest.approx(50 + cam.fx * theta_d) and v == pytest.approx(40)

@@ -2,10 +2,12 @@
 
 Axes: COLMAP stores world-to-camera poses in OpenCV axes (+x right, +y down, +z forward) as a
 unit quaternion ``(qw, qx, qy, qz)`` and translation ``t``: ``p_cam = R(q) p_world + t``;
-the pixel centre of the top-left pixel is (0.5, 0.5), splatgl's convention too.  Only
-undistorted models are accepted: PINHOLE ``(fx, fy, cx, cy)`` and SIMPLE_PINHOLE
-``(f, cx, cy)``; any other model is rejected by name (undistort with ``colmap
-image_undistorter`` first, as 3DGS training does).
+the pixel centre of the top-left pixel is (0.5, 0.5), splatgl's convention too.  Accepted
+models: the undistorted PINHOLE ``(fx, fy, cx, cy)`` and SIMPLE_PINHOLE ``(f, cx, cy)``, and
+the fisheye models splatgl renders exactly (:mod:`splatgl.lens`, ``theta_d = theta (1 + k1
+theta^2 + ...)``): OPENCV_FISHEYE ``(fx, fy, cx, cy, k1, k2, k3, k4)``, SIMPLE_RADIAL_FISHEYE
+``(f, cx, cy, k)`` and RADIAL_FISHEYE ``(f, cx, cy, k1, k2)``.  Any other model is rejected by
+name (undistort with ``colmap image_undistorter`` first, as 3DGS training does).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera, check_rigid_pose
+from ..camera import Camera, Projection, check_rigid_pose
 from ..paths.quaternion import matrix_to_quaternion, quaternion_to_matrix
 from ..errors import CameraError
 from .views import View
@@ -29,7 +31,7 @@ MODELS = {
     11: ("RAD_TAN_THIN_PRISM_FISHEYE", 16),
 }
 _BY_NAME = {name: (mid, n) for mid, (name, n) in MODELS.items()}
-SUPPORTED = ("PINHOLE", "SIMPLE_PINHOLE")
+SUPPORTED = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV_FISHEYE", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE")
 
 
 @dataclass(frozen=True)
@@ -145,15 +147,22 @@ def _read_images_txt(path: Path) -> list[tuple[str, np.ndarray, np.ndarray, int]
     return images
 
 
-def _intrinsics(path: Path, cam_id: int, cam: _Intrinsics) -> tuple[float, float, float, float]:
+def _intrinsics(path: Path, cam_id: int, cam: _Intrinsics) -> dict:
+    """Camera keyword arguments (fx, fy, cx, cy, and projection/distortion for fisheyes)."""
     if cam.model not in SUPPORTED:
         raise CameraError(f"{path}: camera {cam_id}: COLMAP model {cam.model} has lens distortion, "
                           f"which splatgl does not render; undistort the images first "
                           f"(supported: {', '.join(SUPPORTED)})")
+    p = cam.params
     if cam.model == "SIMPLE_PINHOLE":
-        f, cx, cy = cam.params
-        return f, f, cx, cy
-    return tuple(cam.params)  # type: ignore[return-value]
+        return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2])
+    if cam.model == "PINHOLE":
+        return dict(fx=p[0], fy=p[1], cx=p[2], cy=p[3])
+    fisheye = {"projection": Projection.FISHEYE}
+    if cam.model == "OPENCV_FISHEYE":
+        return dict(fx=p[0], fy=p[1], cx=p[2], cy=p[3], distortion=tuple(p[4:8]), **fisheye)
+    k = (p[3], 0.0) if cam.model == "SIMPLE_RADIAL_FISHEYE" else (p[3], p[4])
+    return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2], distortion=(*k, 0.0, 0.0), **fisheye)
 
 
 def is_colmap_model(path: Path) -> bool:
@@ -196,9 +205,9 @@ def load_colmap(model_dir: Path, images_dir: Path | None = None) -> list[View]:
         w2c = np.eye(4)
         w2c[:3, :3], w2c[:3, 3] = rot, t
         c = cams[cam_id]
-        fx, fy, cx, cy = _intrinsics(cam_path, cam_id, c)
+        intrinsics = _intrinsics(cam_path, cam_id, c)
         try:
-            camera = Camera(c.width, c.height, fx, fy, cx, cy, w2c)
+            camera = Camera(c.width, c.height, world_to_camera=w2c, **intrinsics)
         except CameraError as exc:
             raise CameraError(f"{cam_path}: camera {cam_id}: {exc}") from None
         image = images_dir / name if images_dir is not None and (images_dir / name).is_file() else None
