@@ -133,6 +133,9 @@ class QuadRenderer:
         self._count_fragments = False
         #: Time the draw with a GL timer query too (the benchmark); result in last_gpu_draw_ns.
         self.gpu_timer = False
+        #: Told the splats drawn after each batch (set per frame by ``Renderer.render(...,
+        #: progress=...)``, :mod:`splatgl.progress`); Ctrl-C is seen between batches.
+        self.progress = None
         self.last_gpu_draw_ns: int | None = None
         self._query: moderngl.Query | None = None
         self._stop = EarlyStopPasses(ctx, self.programs) if settings.early_stop else None
@@ -409,7 +412,10 @@ class QuadRenderer:
     def render_layers(self, camera: Camera, depth: bool = True,
                       on_batch: BatchHook | None = None) -> RenderOutput:
         """Colour and (with ``depth``) the accumulated depth layer, from the same pass;
-        ``on_batch`` as in :meth:`draw`."""
+        ``on_batch`` as in :meth:`draw`; without one, :attr:`progress` hears each batch."""
+        if on_batch is None and self.progress is not None:
+            report = self.progress
+            on_batch = lambda done, total: report(done, total, "quad: drawing splats")  # noqa: E731
         target = self.target(camera, depth)
         self.draw(camera, target, depth, on_batch)
         t0 = time.perf_counter()

@@ -238,3 +238,18 @@ def test_reference_counts_blended_fragments():
     assert ref.n_blended[0, 0] == 0
     # Away from the centre, alpha < 1/255 stops counting before the opacity stop does.
     assert 0 < ref.n_blended[16, 18] <= 8
+
+
+def test_renderer_progress_reaches_the_quad_draw(gl_renderer, monkeypatch):
+    """``Renderer.render(..., progress=cb)`` (what the commands pass) hears the quad path's
+    batches, and the image is the one drawn without a listener."""
+    scene = dense_scene(3000)
+    cam = front_camera(4.0, 50.0, 64, 48, target=(0.0, 0.0, 0.5))
+    settings = _settings(early_stop=False)
+    monkeypatch.setattr(quad_module, "plain_bounds", lambda n: es.plain_bounds(n, 700))
+    plain = gl_renderer.render(scene, cam, settings)
+    heard = []
+    img = gl_renderer.render(scene, cam, settings, progress=lambda d, t, what: heard.append((d, t, what)))
+    assert len(heard) >= 2 and heard[-1][0] == heard[-1][1]
+    assert {w for _, _, w in heard} == {"quad: drawing splats"}
+    np.testing.assert_array_equal(img, plain)
