@@ -43,7 +43,7 @@ vec4 fisheye_terms(vec3 p) {
 vec3 eye_space(vec3 p) {
     if (u_ods_eye == 0.0) return p;
     float d = max(length(p.xz), abs(u_ods_eye));
-    float phi = atan(p.x, p.z) - asin(u_ods_eye / d);
+    float phi = (p.x == 0.0 && p.z == 0.0 ? 0.0 : atan(p.x, p.z)) - asin(u_ods_eye / d);
     return p - u_ods_eye * vec3(cos(phi), 0.0, -sin(phi));
 }
 #endif
@@ -54,7 +54,10 @@ vec2 project_lens(vec3 p) {
     return u_intrinsics.xy * s * p.xy + u_intrinsics.zw;
 #else
     float r = sqrt(p.x * p.x + p.z * p.z);
-    return u_intrinsics.xy * vec2(atan(p.x, p.z), atan(p.y, r)) + u_intrinsics.zw;
+    // GLSL leaves atan(0, 0) undefined; at an exact pole the longitude is 0, as atan2 gives
+    // (stress case equirect_poles: llvmpipe's value moved the pole band's half-turn clip).
+    float lon = (p.x == 0.0 && p.z == 0.0) ? 0.0 : atan(p.x, p.z);
+    return u_intrinsics.xy * vec2(lon, atan(p.y, r)) + u_intrinsics.zw;
 #endif
 }
 
