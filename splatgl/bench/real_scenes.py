@@ -40,9 +40,15 @@ LOG_SCALE_JITTER = 0.05
 
 
 def shared_scenes_dir() -> Path:
-    """``$SPLATGL_SHARED_SCENES`` or ``../shared/scenes`` beside the repository checkout."""
+    """The shared real scenes: ``$SPLATGL_SHARED_SCENES``, else ``../shared/scenes`` beside the
+    current directory (a checkout's root, as CI and the README run from), else beside the
+    source tree this module was imported from (an editable install)."""
     env = os.environ.get("SPLATGL_SHARED_SCENES")
-    return Path(env) if env else Path(__file__).resolve().parents[3] / "shared" / "scenes"
+    if env:
+        return Path(env)
+    candidates = (Path.cwd().resolve().parent / "shared" / "scenes",
+                  Path(__file__).resolve().parents[3] / "shared" / "scenes")
+    return next((c for c in candidates if c.is_dir()), candidates[0])
 
 
 def load_real_sources(names: Sequence[str] = REAL_SOURCES, root: Path | None = None) -> list[Scene]:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bench.early_stop_report import early_stop_table
-from ..bench.real_scenes import build_real_scene, load_real_sources
+from ..bench.real_scenes import build_real_scene, load_real_sources, shared_scenes_dir
 from ..bench.report import plot, table, write_csv, write_json
 from ..bench.configs import configurations
 from ..bench.machine import describe, machine_info
@@ -50,7 +50,6 @@ examples:
   splatgl bench --groups extent,preprocess
   splatgl bench --groups early-stop          (on against off; adds a 1M-splat real-data scene)"""
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "scenes"
 REAL = ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply", "compressed_ply/guitar.compressed.ply"]
 
 
@@ -162,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
         if quick:
             jobs.append(("demo", load_scene(demo_scene_path())))
         else:
-            jobs += [(Path(r).name, load_scene(SHARED / r)) for r in REAL if (SHARED / r).is_file()]
+            shared = shared_scenes_dir()
+            jobs += [(Path(r).name, load_scene(shared / r)) for r in REAL if (shared / r).is_file()]
     n_syn = args.synthetic if args.synthetic is not None else (150_000 if not args.scenes and not quick else 0)
     if n_syn:
         jobs.append((f"synthetic-{n_syn // 1000}k-sh3", synthetic_scene(n_syn)))
@@ -173,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
         jobs.append((f"real-{n_real / 1e6:g}M", build_real_scene(n_real, seed=0, sources=load_real_sources())))
     if not jobs:
         raise SplatglError("nothing to measure: no scenes given, none found in "
-                           f"{SHARED}, and --synthetic 0")
+                           f"{shared_scenes_dir()}, and --synthetic 0")
     progress = StderrProgress() if enabled() else None
     rows = []
     with Renderer() as renderer:
