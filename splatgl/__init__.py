@@ -67,7 +67,8 @@ sys.modules[__name__].__class__ = _Package
 
 if TYPE_CHECKING:  # static analysers see the names directly
     from .camera import Camera, Projection, look_at, orbit
-    from .camera_io import load_camera, load_cameras, save_camera
+    from .camera_io import load_camera, save_camera
+    from .datasets import load_cameras
     from .errors import CameraError, ContextError, SceneFormatError, ShaderError, SplatglError
     from .formats import load_scene, save_scene
     from .render import Renderer, default_camera, render

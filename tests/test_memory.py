@@ -3,20 +3,14 @@ tests/test_loader_messages.py): the GPU upload and the cull's per-scene data are
 
 from __future__ import annotations
 
-import subprocess
-import sys
-import tracemalloc
 
 import numpy as np
 import pytest
 
 from splatgl.cull import CullData
-from splatgl.errors import SceneFormatError
-from splatgl.formats import load_scene
 from splatgl.gl import scene_buffers
 from splatgl.scene import Scene
 
-from conftest import shared_file
 
 
 def _scene(n: int, degree: int) -> Scene:

@@ -3,7 +3,6 @@ device sort identical to the CPU sort, sizes parsed, slopes fitted exactly on a 
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from splatgl.bench.lod_bench import bench_lod, summary

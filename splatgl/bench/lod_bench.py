@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from .report import save_figure
 
 #: Fly-through distances, in multiples of the framing distance.
 FLY_FAR, FLY_NEAR = 6.0, 0.5
@@ -197,10 +198,7 @@ def plot(path: Path, rows: list[LodFrame]) -> None:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    tmp = path.with_name(path.stem + ".partial" + path.suffix)
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> int:

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from .scale import ScaleRow  # noqa: F401 (annotations)
+from .report import save_figure
 
 #: The figures whose growth with the splat count is fitted and plotted: (label, getter).
 SERIES = (
@@ -106,10 +107,7 @@ def plot(path: Path, rows: list[ScaleRow]) -> None:
     ax_t.set_title("time against scene size")
     ax_m.set_title("peak resident memory against scene size")
     fig.tight_layout()
-    tmp = path.with_name(path.stem + ".partial" + path.suffix)
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
+    save_figure(fig, path)
 
 
 def main(argv=None) -> int:
