@@ -43,6 +43,16 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--workers", type=int, default=1, metavar="N",
                    help="render in N local processes, each with its own context and copy of the "
                         "scene, on contiguous chunks of the path (image output only; default 1)")
+    g.add_argument("--executor", choices=("local", "ray"), default="local",
+                   help="where the frames render: 'local' (this process, or --workers processes) "
+                        "or 'ray' (Ray tasks of up to 32 frames, on a local Ray or the cluster "
+                        "at --ray-address; install with pip install 'splatgl[ray]')")
+    g.add_argument("--ray-address", default=None, metavar="ADDRESS",
+                   help="with --executor ray: the cluster to join ('auto' for the one this node "
+                        "belongs to; default: start a local Ray)")
+    g.add_argument("--ray-gpus", type=float, default=0.0, metavar="N",
+                   help="with --executor ray: GPUs each task reserves (default 0, so CPU-only "
+                        "clusters work)")
     g.add_argument("--fps", type=float, default=None,
                    help="video frame rate (default: the path file's, else 30)")
 
@@ -84,6 +94,13 @@ def run_path(args: argparse.Namespace) -> int:
     target = FrameTarget.parse(args.output, args.format)
     if args.workers < 1:
         raise SplatglError(f"--workers must be at least 1, got {args.workers}")
+    if args.executor == "ray" and args.workers != 1:
+        raise SplatglError("--workers is for --executor local; Ray decides where its tasks run")
+    if args.executor == "ray" and target.is_video:
+        raise SplatglError(f"{args.output}: --executor ray renders image frames; write a video with one process")
+    if args.executor == "ray":
+        from ..distributed.ray_executor import import_ray
+        import_ray()  # the install hint before the scene loads
     if args.workers > 1 and target.is_video:
         raise SplatglError(f"{args.output}: --workers renders image frames; write a video with one process")
     if args.resume and target.is_video:
@@ -95,7 +112,14 @@ def run_path(args: argparse.Namespace) -> int:
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
     kind = RendererKind(args.renderer)
-    if args.workers != 1:
+    if args.executor == "ray":
+        from ..distributed.ray_executor import render_frames_ray
+
+        result = render_frames_ray(args.scene if args.scene is not None else demo_scene_path(),
+                                   cameras, settings, target, kind, args.bit_depth, args.resume,
+                                   args.drop_invalid, default_progress(), args.ray_address,
+                                   args.ray_gpus)
+    elif args.workers != 1:
         from ..workers import render_frames_parallel
 
         result = render_frames_parallel(args.scene if args.scene is not None else demo_scene_path(),
