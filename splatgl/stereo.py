@@ -51,3 +51,34 @@ def combine(left: RenderOutput, right: RenderOutput, layout: StereoLayout) -> Re
     if left.depth is not None and right.depth is not None:
         depth = np.concatenate([left.depth, right.depth], axis=axis)
     return RenderOutput(np.concatenate([left.rgba, right.rgba], axis=axis), depth)
+
+
+class StereoRenderer:
+    """A :class:`~splatgl.render.Renderer` whose every view is a stereo frame (both eyes in one
+    image, ``layout`` side by side or top-bottom): what ``render --path ... --stereo`` renders
+    each camera of a path with.  Everything else is delegated to the wrapped renderer."""
+
+    def __init__(self, renderer, ipd: float, layout: StereoLayout):
+        if StereoLayout(layout) is StereoLayout.SEPARATE:
+            raise CameraError("--stereo-layout separate writes two files per view; for a path use "
+                              "side-by-side or top-bottom")
+        eye_cameras(Camera.from_fov(2, 2, 60.0), ipd)  # checks the IPD once, up front
+        self._renderer, self.ipd, self.layout = renderer, float(ipd), StereoLayout(layout)
+
+    def __getattr__(self, name):
+        return getattr(self._renderer, name)
+
+    def render_layers(self, scene, camera, settings, kind, progress=None) -> RenderOutput:
+        left, right = (self._renderer.render_layers(scene, eye, settings, kind, progress)
+                       for eye in eye_cameras(camera, self.ipd))
+        return combine(left, right, self.layout)
+
+    def render(self, scene, camera, settings, kind, progress=None) -> np.ndarray:
+        left, right = (RenderOutput(self._renderer.render(scene, eye, settings, kind, progress), None)
+                       for eye in eye_cameras(camera, self.ipd))
+        return combine(left, right, self.layout).rgba
+
+    def render_many(self, scene, cameras, settings, kind, depth: bool = False):
+        """Stereo frames of ``cameras``, one after another (as :meth:`Renderer.render_many`)."""
+        for camera in cameras:
+            yield (self.render_layers if depth else self.render)(scene, camera, settings, kind)

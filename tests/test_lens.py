@@ -331,3 +331,26 @@ def test_colmap_fisheye_models_load_and_project(tmp_path, line, k):
     theta_d = theta * (1 + sum(c * theta ** (2 * i + 2) for i, c in enumerate(k)))
     u, v = pm.project_means(np.array([[1.0, 0.0, 0.0]]), cam)[0]
     assert u == pytest.approx(50 + cam.fx * theta_d) and v == pytest.approx(40)
+
+
+def test_path_renders_projection_and_stereo_frames(tmp_path, shared_scenes, gl_renderer):
+    """`render --path orbit:2 --projection equirectangular --stereo`: each frame is both eyes of
+    that orbit camera as a panorama, exactly what the API renders for it."""
+    from splatgl.image_io import write_image
+    from splatgl.paths import orbit
+    from splatgl.stereo import StereoLayout, StereoRenderer
+    scene_path = shared_file(shared_scenes, "ply/donut_sh0.ply")
+    out = tmp_path / "f"
+    assert main(["render", str(scene_path), "--path", "orbit:2", "--width", "64", "--height", "32",
+                 "--projection", "equirectangular", "--stereo", "0.02", "--stereo-layout",
+                 "top-bottom", "-o", f"{out}/"]) == 0
+    scene = load_scene(scene_path)
+    cams = [lens.with_projection(c, "equirectangular") for c in orbit(scene, 2, 64, 32)]
+    stereo = StereoRenderer(gl_renderer, 0.02, StereoLayout.TOP_BOTTOM)
+    for k, cam in enumerate(cams):
+        want = stereo.render(scene, cam, RenderSettings(), "quad")
+        write_image(tmp_path / "want.png", want)
+        np.testing.assert_array_equal(read_image(out / f"{k:05d}.png"), read_image(tmp_path / "want.png"))
+    assert read_image(out / "00000.png").shape[:2] == (64, 64)
+    assert main(["render", str(scene_path), "--path", "orbit:2", "--stereo", "0.02",
+                 "--workers", "2", "-o", f"{tmp_path}/w/"]) == 2

@@ -17,7 +17,9 @@ from ..paths import orbit
 from ..progress import default_progress
 from ..render import Renderer
 from ..scene import Scene
+from ..lens import with_projection
 from ..settings import RendererKind
+from ..stereo import StereoLayout, StereoRenderer
 from ._common import demo_scene_path, load_scene_arg, settings_from_args
 
 DEFAULT_FPS = 30.0
@@ -83,6 +85,8 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
         cams = [_sized(v.camera, args.width, args.height) for v in views]
     if args.select:
         cams = [cams[i] for i in select_indices(args.select, len(cams), spec)]
+    if getattr(args, "projection", None):   # the path's poses and sizes through another model
+        cams = [with_projection(c, args.projection, args.fov) for c in cams]
     return cams, fps
 
 
@@ -94,6 +98,8 @@ def run_path(args: argparse.Namespace) -> int:
     target = FrameTarget.parse(args.output, args.format)
     if args.workers < 1:
         raise SplatglError(f"--workers must be at least 1, got {args.workers}")
+    if args.stereo is not None and (args.executor == "ray" or args.workers != 1):
+        raise SplatglError("--stereo renders paths in one process (not with --workers or --executor ray)")
     if args.executor == "ray" and args.workers != 1:
         raise SplatglError("--workers is for --executor local; Ray decides where its tasks run")
     if args.executor == "ray" and target.is_video:
@@ -127,6 +133,8 @@ def run_path(args: argparse.Namespace) -> int:
                                         args.resume, args.drop_invalid, default_progress())
     else:
         with Renderer() as renderer:
+            if args.stereo is not None:    # each frame holds both eyes
+                renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
             result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
                                    args.resume, fps, default_progress())
     where = target.video if target.is_video else target.pattern

@@ -66,6 +66,8 @@ def _render_args(args: argparse.Namespace) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.stereo is not None:
+        raise SplatglError("the viewer shows one view; render stereo pairs with splatgl render --stereo")
     if args.benchmark is not None and args.benchmark < 1:
         raise SplatglError(f"--benchmark needs at least 1 frame, got {args.benchmark}")
     check_convention(args, args.renderer)
