@@ -255,3 +255,35 @@ def test_bad_scene_exits_2_without_traceback(tmp_path):
                        text=True, timeout=60, env={**os.environ, "DISPLAY": ""})
     assert r.returncode == 2
     assert "Traceback" not in r.stderr and "error" in r.stderr
+
+
+def test_stereo_and_projection_views(xvfb_display, demo, tmp_path):
+    """``view --stereo``: both eyes side by side in the window, each the fitted half view, equal
+    to the headless render of that eye; ``--projection`` shows the model flat."""
+    from splatgl.errors import ContextError
+    from splatgl.render import default_camera
+    from splatgl.settings import RenderSettings
+    from splatgl.stereo import eye_cameras
+    from splatgl.viewer import controls
+    from splatgl.viewer.app import Viewer, ViewerOptions
+
+    path, scene = demo
+    settings = RenderSettings(background=(0.1, 0.2, 0.3))
+    options = ViewerOptions(visible=True, screenshot_dir=tmp_path, render_args=(str(path),),
+                            vsync=False, stereo=0.05, projection="fisheye", fisheye_fov=180.0)
+    try:
+        v = Viewer(scene, settings, default_camera(scene, W, H), options=options)
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
+    try:
+        assert v.step(0.0)
+        img = v.last.image
+        assert img.shape[:2] == (v.size[1], v.size[0])
+        cam = v.camera()
+        assert cam.projection.value == "fisheye"
+        half = controls.fit_camera(cam, cam.width // 2, cam.height)
+        left = v.renderer.render(scene, eye_cameras(half, 0.05)[0], settings)
+        np.testing.assert_array_equal(img[:, :half.width], left)
+        assert not np.array_equal(img[:, :half.width], img[:, half.width:2 * half.width])
+    finally:
+        v.close()

@@ -66,8 +66,8 @@ def _render_args(args: argparse.Namespace) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.stereo is not None:
-        raise SplatglError("the viewer shows one view; render stereo pairs with splatgl render --stereo")
+    if args.stereo is not None and args.stereo_layout != "side-by-side":
+        raise SplatglError("the viewer shows stereo side by side; --stereo-layout is for render")
     if args.benchmark is not None and args.benchmark < 1:
         raise SplatglError(f"--benchmark needs at least 1 frame, got {args.benchmark}")
     check_convention(args, args.renderer)
@@ -93,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
                             vsync=not args.no_vsync and args.benchmark is None,
                             up=tuple(float(v) for v in up),
                             projection=args.projection if args.projection not in (None, "perspective") else None,
-                            fisheye_fov=args.fov if args.projection == "fisheye" else None)
+                            fisheye_fov=args.fov if args.projection == "fisheye" else None,
+                            stereo=args.stereo)
     with Viewer(scene, settings, camera, cameras, args.camera_index or 0,
                 RendererKind(args.renderer), options) as viewer:
         print(f"OpenGL {viewer.ctx.info['GL_VERSION']} on {viewer.ctx.info['GL_RENDERER']}", flush=True)

@@ -19,6 +19,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import SplatglError
 from ..lens import with_projection
+from ..stereo import StereoLayout, StereoRenderer
 from ..gl.context import REQUIRED_VERSION, create_glfw_context, create_glfw_window
 from ..render import Renderer
 from ..scene import Scene
@@ -57,6 +58,8 @@ class ViewerOptions:
         up: (3,) world direction the orbit keeps up on screen (``--up``; default world -y).
         projection: show every view with this camera model instead (``--projection``; fisheye
             or equirectangular images are shown flat), ``fisheye_fov`` degrees for a fisheye.
+        stereo: interpupillary distance (``--stereo``): the colour view shows both eyes side by
+            side, each in half the window (depth and difference views stay one eye).
     """
 
     title: str = "splatgl view"
@@ -67,6 +70,7 @@ class ViewerOptions:
     up: tuple[float, float, float] = (0.0, -1.0, 0.0)
     projection: str | None = None
     fisheye_fov: float | None = None
+    stereo: float | None = None
 
 
 class Viewer:
@@ -267,6 +271,22 @@ class Viewer:
             cam = with_projection(cam, self.options.projection, self.options.fisheye_fov)
         return cam
 
+    def _render(self, camera: Camera) -> FrameResult:
+        """One frame of ``camera``: :func:`render_frame`, or with ``options.stereo`` (colour
+        view) both eyes side by side, each eye the view fitted to half the window."""
+        if self.options.stereo is None or self.view is not ViewMode.COLOR:
+            return render_frame(self.renderer, self.scene, camera, self.settings, self.kind, self.view)
+        half = controls.fit_camera(camera, max(camera.width // 2, 1), camera.height)
+        stereo = StereoRenderer(self.renderer, self.options.stereo, StereoLayout.SIDE_BY_SIDE)
+        t0 = time.perf_counter()
+        image = stereo.render(self.scene, half, self.settings, self.kind)
+        if image.shape[1] < camera.width:   # an odd width: one column of background
+            pad = np.zeros((image.shape[0], camera.width - image.shape[1], 4), np.float32)
+            pad[..., :3] = self.settings.background
+            image = np.concatenate([image, pad], axis=1)
+        return FrameResult(None, image, False, 0.0, time.perf_counter() - t0,
+                           f"stereo, IPD {self.options.stereo:g}")
+
     def screenshot(self) -> tuple[Path, Path]:
         """Write what ``splatgl render`` writes from the current camera, and that camera."""
         glfw.make_context_current(self.window)
@@ -317,8 +337,7 @@ class Viewer:
         if key != self._rendered_key:
             t0 = time.perf_counter()
             try:
-                self.last = render_frame(self.renderer, self.scene, camera, self.settings,
-                                         self.kind, self.view)
+                self.last = self._render(camera)
             except NotImplementedError as exc:  # e.g. the quad path and 2DGS surfels
                 self.message = str(exc)
                 self.kind = RendererKind.TILE
