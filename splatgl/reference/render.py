@@ -58,7 +58,7 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
     """Render ``scene`` with the NumPy per-tile reference rasterizer.
 
     Args:
-        scene: 3DGS scene (surfels raise NotImplementedError).
+        scene: a 3DGS or 2DGS (surfel) scene.
         camera: perspective or orthographic camera; the image is camera.height x camera.width.
         settings: background, near plane, antialiasing, SH cap (default RenderSettings()).
         dtype: float32 (GPU-like) or float64.
