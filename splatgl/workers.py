@@ -34,7 +34,10 @@ def chunks(count: int, workers: int) -> list[range]:
 
 
 @dataclass(frozen=True)
-class _Job:
+class ChunkJob:
+    """One worker's (or Ray task's) share of a path: cameras ``first_frame ..``, the scene file
+    and how to render and write them."""
+
     scene_path: Path
     drop_invalid: bool
     cameras: tuple[Camera, ...]
@@ -46,7 +49,7 @@ class _Job:
     resume: bool
 
 
-def _worker(job: _Job, messages) -> None:
+def _worker(job: ChunkJob, messages) -> None:
     from .batch import render_frames
     from .formats import load_scene
     from .render import Renderer
@@ -87,7 +90,7 @@ def render_frames_parallel(scene_path: Path, cameras: Sequence[Camera], settings
     procs = []
     t0 = time.perf_counter()
     for part in chunks(len(cameras), workers):
-        job = _Job(Path(scene_path), drop_invalid, tuple(cameras[i] for i in part), part.start, settings,
+        job = ChunkJob(Path(scene_path), drop_invalid, tuple(cameras[i] for i in part), part.start, settings,
                    target, kind, bit_depth, resume)
         p = ctx.Process(target=_worker, args=(job, messages), daemon=True)
         p.start()

@@ -20,7 +20,6 @@ from __future__ import annotations
 import os
 import tempfile
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -30,7 +29,7 @@ from ..errors import SplatglError
 from ..frame_output import FrameTarget
 from ..progress import ProgressCallback
 from ..settings import RenderSettings, RendererKind
-from ..workers import chunks
+from ..workers import ChunkJob, chunks
 
 #: How to get Ray, for the one-line error where it is missing.
 INSTALL_HINT = "--executor ray needs Ray: pip install 'splatgl[ray]'"
@@ -53,21 +52,6 @@ def import_ray():
     return ray
 
 
-@dataclass(frozen=True)
-class ChunkJob:
-    """One task: cameras ``first_frame ..`` of the path, and how to render and write them."""
-
-    suffix: str
-    drop_invalid: bool
-    cameras: tuple[Camera, ...]
-    first_frame: int
-    settings: RenderSettings
-    target: FrameTarget
-    kind: RendererKind
-    bit_depth: int
-    resume: bool
-
-
 def render_chunk(scene_bytes: bytes, job: ChunkJob) -> tuple[int, int, float, float]:
     """Body of a Ray task: (written, skipped, seconds, render_seconds) of one chunk."""
     from ..batch import render_frames
@@ -79,7 +63,7 @@ def render_chunk(scene_bytes: bytes, job: ChunkJob) -> tuple[int, int, float, fl
         Path(marker).write_text("killed once\n")
         os._exit(1)  # the worker dies mid-run, as a preempted or crashed node would
     with tempfile.TemporaryDirectory(prefix="splatgl-ray-") as tmp:
-        path = Path(tmp) / f"scene{job.suffix}"
+        path = Path(tmp) / f"scene{job.scene_path.suffix}"   # the bytes came through Ray
         path.write_bytes(scene_bytes)
         scene = load_scene(path, drop_invalid=job.drop_invalid)
     with Renderer() as renderer:
@@ -120,7 +104,7 @@ def render_frames_ray(scene_path: Path, cameras: Sequence[Camera], settings: Ren
     pending, sizes = [], {}
     t0 = time.perf_counter()
     for part in chunks(len(cameras), n_tasks):
-        job = ChunkJob(Path(scene_path).suffix, drop_invalid, tuple(cameras[i] for i in part),
+        job = ChunkJob(Path(scene_path), drop_invalid, tuple(cameras[i] for i in part),
                        part.start, settings, target, RendererKind(kind), bit_depth, resume)
         ref = remote.remote(scene_ref, job)
         pending.append(ref)
