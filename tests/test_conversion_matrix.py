@@ -17,28 +17,14 @@ import numpy as np
 import pytest
 
 from conftest import shared_file
+from test_convert import REAL_FILES
 from splatgl.convert import ATTRIBUTES, conversion_error, error_bounds
 from splatgl.formats import load_scene, save_scene, writer_for
 
 #: Largest subsample of a real scene used here.
 MAX_SPLATS = 6000
 
-SOURCES = [
-    "ply/donut_sh0.ply",
-    "compressed_ply/biker.compressed.ply",
-    "compressed_ply/guitar.compressed.ply",
-    "spz/biker_v4.spz",
-    "spz/donut_sh0_v2.spz",
-    "fixtures/test64_sh3.compressed.ply",
-    "fixtures/minimal.splat",
-    "fixtures/minimal.ksplat",
-    "fixtures/minimal-v2.spz",
-    "fixtures/minimal-v3.spz",
-    "fixtures/minimal-v4.spz",
-    "fixtures/minimal-raw.spz",
-    "written:sog",
-    "written:glb",
-]
+SOURCES = REAL_FILES + ["written:sog", "written:glb"]
 
 #: (output name, writer options)
 TARGETS = [

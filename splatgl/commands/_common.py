@@ -45,37 +45,27 @@ def parse_rgb(text: str) -> tuple[float, float, float]:
     return tuple(parts)
 
 
-def positive_int(text: str) -> int:
-    """An argparse type: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
-    return value
+def _argument_type(convert, ok, kind: str, requirement: str):
+    """An argparse type: ``convert(text)`` (else "expected {kind}"), kept only where ``ok``."""
+    def parse(text: str):
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {kind}, got {text!r}") from None
+        if not ok(value):
+            shown = value if isinstance(value, int) else repr(text)
+            raise argparse.ArgumentTypeError(f"must be {requirement}, got {shown}")
+        return value
+    return parse
 
 
-def non_negative_int(text: str) -> int:
-    """An argparse type: an integer >= 0."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
-    return value
-
-
-def positive_float(text: str) -> float:
-    """An argparse type: a finite number > 0 (not nan, not inf)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
-    return value
+#: An integer >= 1.
+positive_int = _argument_type(int, lambda v: v >= 1, "a whole number", "at least 1")
+#: An integer >= 0.
+non_negative_int = _argument_type(int, lambda v: v >= 0, "a whole number", "0 or more")
+#: A finite number > 0 (not nan, not inf).
+positive_float = _argument_type(float, lambda v: math.isfinite(v) and v > 0.0, "a number",
+                                "a finite number > 0")
 
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
