@@ -10,6 +10,10 @@
 // the tile (o exp(-q_min / 2) < 1/255, q_min from conic_min_over_box, with a safety margin) is
 // dropped from the batch before blending, keeping the order of the others; and a pixel skips
 // exp() where power is below that splat's cut-off by the same margin.
+// Long lists run in passes (u_pass of u_passes, each over at most TILE_LIST_CHUNK entries of every
+// tile's list), carrying (C, +-T) in out_rgba and D in out_depth between passes (T negated once
+// the pixel stopped): llvmpipe ends every loop of an invocation after 65535 iterations in all,
+// and one pass stays well below that, so a tile of 50k splats is not cut short.
 // SURFEL (2DGS, twin: reference/rasterize.py's surfel branch, splatgl/surfel.py surfel_alpha):
 // every splat of the tile's list is kept (its tile rectangle is already the box_rect of its
 // pixel box) and a pixel evaluates the ray-splat intersection instead of the conic:
@@ -31,14 +35,16 @@ const uint TILE_PIXELS = uint(TILE_SIZE * TILE_SIZE);
 const float Q_MARGIN_REL = 1.0e-3;
 const float Q_MARGIN_ABS = 1.0e-2;
 
-layout(std430, binding = TILE_BINDING_OUT_RGBA) writeonly buffer OutRGBA { vec4 out_rgba[]; };
-layout(std430, binding = TILE_BINDING_OUT_DEPTH) writeonly buffer OutDepth { float out_depth[]; };
+layout(std430, binding = TILE_BINDING_OUT_RGBA) buffer OutRGBA { vec4 out_rgba[]; };
+layout(std430, binding = TILE_BINDING_OUT_DEPTH) buffer OutDepth { float out_depth[]; };
 
 uniform uvec2 u_grid;        // (tiles_x, tiles_y)
 uniform uvec2 u_size;        // (width, height) in pixels
 uniform vec3 u_background;   // composited as C + T_final bg
 uniform uint u_index_mask;   // low bits of a packed key holding the splat index
 uniform uint u_tile_row0;    // first tile row of this dispatch (the image is drawn in bands)
+uniform uint u_pass;         // this pass (0-based) over the tiles' lists ...
+uniform uint u_passes;       // ... of this many, each over TILE_LIST_CHUNK entries per tile
 
 shared vec4 s_mean_cut[TILE_PIXELS];   // (u, v, power cut-off, view z) of the kept splats
 shared vec4 s_conic_o[TILE_PIXELS];    // (a, b, c, opacity)
@@ -63,11 +69,21 @@ void main() {
     vec2 box_lo = vec2(group * uint(TILE_SIZE)) + 0.5;
     vec2 box_hi = min(box_lo + float(TILE_SIZE - 1), vec2(u_size) - 0.5);
     uvec2 range = tile_ranges[tile];
+    uint first = range.x + min(range.y - range.x, u_pass * uint(TILE_LIST_CHUNK));
+    range = uvec2(first, min(range.y, first + uint(TILE_LIST_CHUNK)));
+    uint o = inside ? pix.y * u_size.x + pix.x : 0u;
 
     bool done = !inside;
     float T = 1.0;
     vec3 C = vec3(0.0);
     float D = 0.0;
+    if (u_pass > 0u && inside) {                 // resume the previous pass's state
+        vec4 state = out_rgba[o];
+        C = state.rgb;
+        T = abs(state.w);
+        done = state.w < 0.0;
+        D = out_depth[o];
+    }
     for (uint base = range.x; base < range.y; base += TILE_PIXELS) {
         memoryBarrierShared();
         barrier();                                // the previous batch is consumed
@@ -165,8 +181,8 @@ void main() {
         }
     }
     if (inside) {
-        uint o = pix.y * u_size.x + pix.x;
-        out_rgba[o] = vec4(C + T * u_background, 1.0 - T);
+        bool last = u_pass + 1u == u_passes;
+        out_rgba[o] = last ? vec4(C + T * u_background, 1.0 - T) : vec4(C, done ? -T : T);
         out_depth[o] = D;
     }
 }

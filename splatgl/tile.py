@@ -59,6 +59,12 @@ DEPTH_BITS = 31
 #: Tiles per rasterize dispatch, at most: the image is drawn in bands of whole tile rows, with a
 #: finish between bands, so a long frame reports progress and Ctrl-C stops it within one band.
 RASTER_BAND_TILES = 512
+#: Entries of a tile's sorted list one rasterize pass blends at most; longer lists take more
+#: passes (the pixel state carried in the output buffers).  llvmpipe ends all loops of an
+#: invocation after 65535 iterations in total (gallivm's LP_MAX_TGSI_LOOP_ITERATIONS), which a
+#: single pass over a 55k-splat tile exceeded, leaving the tile blank; a pass of 16384 entries
+#: runs about 2 x 16384 + 64 iterations (the blend loop, and the serial scan of invocation 0).
+TILE_LIST_CHUNK = 16384
 
 
 def tile_grid(width: int, height: int) -> tuple[int, int]:
@@ -213,6 +219,7 @@ class TileRenderer:
     def _defines(self, layout: KeyLayout | None = None) -> dict[str, object]:
         d: dict[str, object] = {f"TILE_BINDING_{k}": v for k, v in BINDINGS.items()}
         d["SPLAT_GROUP"] = SPLAT_GROUP
+        d["TILE_LIST_CHUNK"] = TILE_LIST_CHUNK
         if layout is not None and layout.packed:
             d["KEY_PACKED"] = 1
         if self.surfel:
@@ -299,7 +306,10 @@ class TileRenderer:
         self._bufs["RANGES"].ensure(n_tiles * 8).write(ranges.tobytes())
         return ranges
 
-    def _rasterize(self, camera: Camera, layout: KeyLayout, grid: tuple[int, int]) -> None:
+    def _rasterize(self, camera: Camera, layout: KeyLayout, grid: tuple[int, int],
+                   ranges: np.ndarray) -> None:
+        longest = int((ranges[:, 1] - ranges[:, 0]).max(initial=0))
+        passes = max(1, -(-longest // TILE_LIST_CHUNK))
         pixels = camera.width * camera.height
         self._bufs["OUT_RGBA"].ensure(pixels * 16)
         self._bufs["OUT_DEPTH"].ensure(pixels * 4)
@@ -311,9 +321,14 @@ class TileRenderer:
         self._set(prog, u_grid=grid, u_size=(camera.width, camera.height),
                   u_background=self.settings.background, u_index_mask=layout.index_mask)
         band = max(1, RASTER_BAND_TILES // grid[0])  # tile rows per dispatch
+        self._set(prog, u_passes=passes)
         for row0 in range(0, grid[1], band):
             self._set(prog, u_tile_row0=row0)
-            prog.run(grid[0], min(band, grid[1] - row0), 1)
+            for p in range(passes):
+                self._set(prog, u_pass=p)
+                prog.run(grid[0], min(band, grid[1] - row0), 1)
+                if p + 1 < passes:
+                    self.ctx.memory_barrier()     # the next pass reads this one's state
             if band < grid[1]:
                 self.ctx.finish()  # Python sees Ctrl-C / SIGTERM here, between bands
                 if self.progress is not None:
@@ -351,9 +366,9 @@ class TileRenderer:
         if total:
             keys = self._sort(layout, total)
         lap()
-        self._ranges(layout, keys, n_tiles)
+        ranges = self._ranges(layout, keys, n_tiles)
         lap()
-        self._rasterize(camera, layout, grid)
+        self._rasterize(camera, layout, grid, ranges)
         lap()
         self._frame_clock = (clock, total)
         return layout, counts, emitted, keys

@@ -99,6 +99,31 @@ def test_unpacked_key_layout_matches_reference(ctx, monkeypatch, artifacts_dir):
     assert_close(image, render_reference(scene, CAM, settings).rgba, TOL, "tile_unpacked", artifacts_dir)
 
 
+@pytest.mark.parametrize("surfels", [False, True], ids=["3dgs", "surfels"])
+def test_list_passes_equal_one_pass(ctx, monkeypatch, surfels):
+    """Tiles whose lists are longer than TILE_LIST_CHUNK are blended in several passes, the
+    pixel state (C, T, stopped, D) carried in the output buffers in float32: the same values
+    one pass computes, so the images are identical, bit for bit (stopped pixels included)."""
+    from test_tile_surfels import PERSPECTIVE, random_surfels
+
+    scene = random_surfels(3000, 7) if surfels else random_scene(3000, seed=11)
+    cam = PERSPECTIVE if surfels else CAM
+    settings = RenderSettings(background=(0.2, 0.4, 0.9))
+    renderer = TileRenderer(ctx, scene, settings)
+    try:
+        one = renderer.render_layers(cam)
+        ranges = renderer.debug_stages(cam).ranges
+        longest = int((ranges[:, 1] - ranges[:, 0]).max())
+        monkeypatch.setattr(tile_mod, "TILE_LIST_CHUNK", 100)  # up to ~10 passes
+        renderer.programs = type(renderer.programs)(ctx)      # recompile with the new define
+        many = renderer.render_layers(cam)
+    finally:
+        renderer.release()
+    assert longest > 400 and (one.rgba[..., 3] > 0.999).any()   # passes, and near-stopped pixels
+    np.testing.assert_array_equal(many.rgba, one.rgba)
+    np.testing.assert_array_equal(many.depth, one.depth)
+
+
 @pytest.mark.parametrize("name, settings, camera, sh_degree", [
     ("default", RenderSettings(), CAM, 1),
     ("aa_bg_sh3", RenderSettings(antialias=True, background=(0.2, 0.4, 0.9)), CAM, 3),
