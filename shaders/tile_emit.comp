@@ -2,26 +2,33 @@
 // Twin: splatgl/reference/binning.py emit_keys().  Splat i writes one key per tile of its
 // rectangle, rows top to bottom and each row left to right, starting at tile_offsets[i]; the
 // key orders by tile_id = y * tiles_x + x, then by the float bits of view z (lib/tile_common).
+// A dispatch writes the keys u_first .. u_first + TILE_EMIT_CHUNK - 1 of each splat (one loop over
+// the rectangle's row-major index): llvmpipe ends an invocation's loops after 65535 iterations
+// in all, which one splat covering a 4096 x 4096 image would reach, so splatgl/tile.py issues
+// as many dispatches as the largest rectangle needs (one, below 32768 tiles).
 #include "lib/tile_common.glsl"
 
 layout(local_size_x = SPLAT_GROUP) in;
 
 uniform uint u_count;   // number of splats N
 uniform uvec2 u_grid;   // (tiles_x, tiles_y)
+uniform uint u_first;   // first key of each splat's rectangle this dispatch writes
 
 void main() {
     uint i = splat_invocation();
-    if (i >= u_count || tiles_touched[i] == 0u) return;
-    uint k = tile_offsets[i];
+    if (i >= u_count) return;
+    uint touched = tiles_touched[i];
+    if (touched <= u_first) return;
     uvec4 rect = proj_rect[i];
+    uint width = rect.z - rect.x;
+    uint base = tile_offsets[i];
     uint depth_bits = floatBitsToUint(proj_mean_depth[i].z);  // z > near > 0: sign bit clear
-    for (uint y = rect.y; y < rect.w; ++y) {
-        for (uint x = rect.x; x < rect.z; ++x) {
-            sort_keys[k] = tile_key(y * u_grid.x + x, depth_bits, i);
+    uint last = min(touched, u_first + uint(TILE_EMIT_CHUNK));
+    for (uint j = u_first; j < last; ++j) {
+        uint y = rect.y + j / width, x = rect.x + j % width;
+        sort_keys[base + j] = tile_key(y * u_grid.x + x, depth_bits, i);
 #ifndef KEY_PACKED
-            sort_values[k] = i;
+        sort_values[base + j] = i;
 #endif
-            ++k;
-        }
     }
 }

@@ -65,6 +65,9 @@ RASTER_BAND_TILES = 512
 #: single pass over a 55k-splat tile exceeded, leaving the tile blank; a pass of 16384 entries
 #: runs about 2 x 16384 + 64 iterations (the blend loop, and the serial scan of invocation 0).
 TILE_LIST_CHUNK = 16384
+#: Keys of one splat's tile rectangle one emit dispatch writes at most (the same loop limit: a
+#: splat covering a 4096 x 4096 image has 65536 tiles); larger rectangles take more dispatches.
+TILE_EMIT_CHUNK = 32768
 
 
 def tile_grid(width: int, height: int) -> tuple[int, int]:
@@ -220,6 +223,7 @@ class TileRenderer:
         d: dict[str, object] = {f"TILE_BINDING_{k}": v for k, v in BINDINGS.items()}
         d["SPLAT_GROUP"] = SPLAT_GROUP
         d["TILE_LIST_CHUNK"] = TILE_LIST_CHUNK
+        d["TILE_EMIT_CHUNK"] = TILE_EMIT_CHUNK
         if layout is not None and layout.packed:
             d["KEY_PACKED"] = 1
         if self.surfel:
@@ -268,7 +272,8 @@ class TileRenderer:
             self._bufs["OFFSETS"].buf.write((ends - counts).astype(np.uint32).tobytes())
         return counts, total
 
-    def _emit(self, layout: KeyLayout, grid: tuple[int, int], total: int) -> None:
+    def _emit(self, layout: KeyLayout, grid: tuple[int, int], total: int,
+              counts: np.ndarray) -> None:
         self._bufs["KEYS"].ensure(total * 8)
         if not layout.packed:
             self._bufs["VALUES"].ensure(total * 4)
@@ -276,7 +281,9 @@ class TileRenderer:
         prog = self.programs.compute("tile_emit.comp", self._defines(layout))
         self._set(prog, u_count=self.count, u_grid=grid, u_tile_shift=layout.tile_shift,
                   u_depth_shift=layout.depth_shift)
-        prog.run(*_splat_groups(self.count))
+        for first in range(0, int(counts.max(initial=0)), TILE_EMIT_CHUNK):
+            self._set(prog, u_first=first)
+            prog.run(*_splat_groups(self.count))
         self.ctx.memory_barrier()
 
     def _read_keys(self, layout: KeyLayout, total: int) -> tuple[np.ndarray, np.ndarray | None]:
@@ -359,7 +366,7 @@ class TileRenderer:
             counts, total = self._scan()
         lap()
         if total:
-            self._emit(layout, grid, total)
+            self._emit(layout, grid, total, counts)
             if stages:
                 emitted = self._read_keys(layout, total)
         lap()

@@ -99,6 +99,21 @@ def test_unpacked_key_layout_matches_reference(ctx, monkeypatch, artifacts_dir):
     assert_close(image, render_reference(scene, CAM, settings).rgba, TOL, "tile_unpacked", artifacts_dir)
 
 
+def test_emit_in_several_dispatches_matches_reference(ctx, monkeypatch):
+    """Rectangles larger than TILE_EMIT_CHUNK tiles are emitted over several dispatches; the
+    keys and their order stay the reference's."""
+    monkeypatch.setattr(tile_mod, "TILE_EMIT_CHUNK", 3)
+    scene, settings = random_scene(2000, seed=3), RenderSettings()
+    renderer = TileRenderer(ctx, scene, settings)
+    try:
+        got = renderer.debug_stages(CAM)
+    finally:
+        renderer.release()
+    assert got.tiles_touched.max() > 3 * 3                      # at least 4 dispatches
+    proj = project(scene, CAM, settings, np.float32)
+    assert_stages_match_reference(got, proj, min_keys=5000)
+
+
 @pytest.mark.parametrize("surfels", [False, True], ids=["3dgs", "surfels"])
 def test_list_passes_equal_one_pass(ctx, monkeypatch, surfels):
     """Tiles whose lists are longer than TILE_LIST_CHUNK are blended in several passes, the
