@@ -12,28 +12,12 @@ import numpy as np
 
 from . import lens
 from .camera import Camera
+from .quaternion import quat_to_rotmat  # noqa: F401 (the projection's rotations; re-exported)
 from .constants import (
     ALPHA_MIN, DET_CANCEL_RATIO, EXTENT_DISCRIMINANT_FLOOR, EXTENT_SIGMAS, JACOBIAN_CLAMP, LOW_PASS,
     AA_MIN_FACTOR,
     SH_C0, SH_C1, SH_C2, SH_C3, SH_OFFSET, sh_coeff_count,
 )
-
-
-def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
-    """(N, 4) quaternions (w, x, y, z), any norm -> (N, 3, 3) rotation matrices (normalised)."""
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    r = np.empty(q.shape[:-1] + (3, 3), q.dtype)
-    r[..., 0, 0] = 1 - 2 * (y * y + z * z)
-    r[..., 0, 1] = 2 * (x * y - w * z)
-    r[..., 0, 2] = 2 * (x * z + w * y)
-    r[..., 1, 0] = 2 * (x * y + w * z)
-    r[..., 1, 1] = 1 - 2 * (x * x + z * z)
-    r[..., 1, 2] = 2 * (y * z - w * x)
-    r[..., 2, 0] = 2 * (x * z - w * y)
-    r[..., 2, 1] = 2 * (y * z + w * x)
-    r[..., 2, 2] = 1 - 2 * (x * x + y * y)
-    return r
 
 
 def covariance_3d(rot: np.ndarray, scales: np.ndarray) -> np.ndarray:

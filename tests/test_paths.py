@@ -14,7 +14,7 @@ from splatgl.camera import Camera, look_at
 from splatgl.datasets.sources import load_source
 from splatgl.errors import CameraError
 from splatgl.paths import ellipse, focus_point, interpolate, orbit, spiral
-from splatgl.paths.quaternion import matrix_to_quaternion, quaternion_to_matrix
+from splatgl.quaternion import quat_to_rotmat, rotmat_to_quat
 from splatgl.paths.spline import sample_poses
 from splatgl.scene import Scene
 
@@ -68,7 +68,7 @@ def test_quaternion_round_trip():
         q = rng.normal(size=4)
         q /= np.linalg.norm(q)
         q = q if q[0] >= 0 else -q
-        np.testing.assert_allclose(matrix_to_quaternion(quaternion_to_matrix(q)), q, atol=1e-12)
+        np.testing.assert_allclose(rotmat_to_quat(quat_to_rotmat(q)), q, atol=1e-12)
 
 
 def _path_file(tmp_path, **kw):

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..camera import Camera, Projection, check_rigid_pose
-from ..paths.quaternion import matrix_to_quaternion, quaternion_to_matrix
+from ..quaternion import quat_to_rotmat, rotmat_to_quat
 from ..errors import CameraError
 from .views import View
 
@@ -200,7 +200,7 @@ def load_colmap(model_dir: Path, images_dir: Path | None = None) -> list[View]:
             raise CameraError(f"{where}: camera id {cam_id} is not in {cam_path}")
         if not (np.isfinite(q).all() and np.isfinite(t).all()) or not np.linalg.norm(q) > 0:
             raise CameraError(f"{where}: pose must be finite with a non-zero quaternion")
-        rot = quaternion_to_matrix(q)
+        rot = quat_to_rotmat(np.asarray(q, np.float64))
         check_rigid_pose(rot, f"{where}: quaternion's rotation")
         w2c = np.eye(4)
         w2c[:3, :3], w2c[:3, 3] = rot, t
@@ -221,7 +221,7 @@ def write_colmap(model_dir: Path, views: list[View], binary: bool = True) -> Non
     """Write ``views`` as a COLMAP model (one PINHOLE camera per view, no 2D points)."""
     model_dir = Path(model_dir)
     model_dir.mkdir(parents=True, exist_ok=True)
-    poses = [(v.name, matrix_to_quaternion(v.camera.rotation), v.camera.translation, v.camera)
+    poses = [(v.name, rotmat_to_quat(v.camera.rotation), v.camera.translation, v.camera)
              for v in views]
     if binary:
         cams = struct.pack("<Q", len(views))

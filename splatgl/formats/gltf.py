@@ -43,6 +43,7 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SceneFormatError
+from ..quaternion import quat_multiply, quat_to_rotmat, rotmat_to_quat
 from ..scene import Scene, SplatKind, activate
 from . import _binary, spz
 from . import quantise as qz
@@ -217,46 +218,12 @@ def _local_matrix(path, node: dict, index) -> np.ndarray:
             return np.asarray(node["matrix"], np.float64).reshape(4, 4).T  # column-major
         m = np.eye(4)
         x, y, z, w = np.asarray(node.get("rotation", [0, 0, 0, 1]), np.float64)
-        m[:3, :3] = _quat_matrix(np.array([w, x, y, z]))
+        m[:3, :3] = quat_to_rotmat(np.array([w, x, y, z], np.float64))
         m[:3, :3] *= np.asarray(node.get("scale", [1, 1, 1]), np.float64)[None, :]
         m[:3, 3] = np.asarray(node.get("translation", [0, 0, 0]), np.float64)
         return m
     except (TypeError, ValueError):
         raise SceneFormatError(path, f"nodes[{index}]: bad transform", "nodes") from None
-
-
-def _quat_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
-def _matrix_quat(r: np.ndarray) -> np.ndarray:
-    """(w, x, y, z) of a rotation matrix (Shepperd's method, via the largest diagonal term)."""
-    t = np.trace(r)
-    if t > 0:
-        s = 2.0 * math.sqrt(1.0 + t)
-        return np.array([0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s,
-                         (r[1, 0] - r[0, 1]) / s])
-    i = int(np.argmax(np.diag(r)))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    s = 2.0 * math.sqrt(max(1e-300, 1.0 + r[i, i] - r[j, j] - r[k, k]))
-    q = np.empty(4)
-    q[0] = (r[k, j] - r[j, k]) / s
-    q[1 + i] = 0.25 * s
-    q[1 + j] = (r[j, i] + r[i, j]) / s
-    q[1 + k] = (r[k, i] + r[i, k]) / s
-    return q
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of (w, x, y, z) quaternions ``a`` (4,) and ``b`` (N, 4)."""
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b.T
-    return np.stack([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2],
-                    axis=1)
 
 
 def _primitive(doc: _Document, prim: dict, where: str) -> tuple[np.ndarray, ...]:
@@ -337,7 +304,7 @@ def _transform(path, parts, matrix: np.ndarray) -> tuple[np.ndarray, ...]:
                                      "supported (the SH coefficients would need rotating)", "nodes")
     means = means @ m.T + matrix[:3, 3]
     if rotates:
-        quats = _quat_mul(_matrix_quat(r), quats)
+        quats = quat_multiply(rotmat_to_quat(r), quats)
     return means, quats, log_scales + math.log(lengths[0]), logits, sh
 
 

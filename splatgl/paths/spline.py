@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .quaternion import matrix_to_quaternion, qconj, qexp, qlog, qmul, quaternion_to_matrix
+from ..quaternion import (quat_conjugate, quat_exp, quat_log, quat_multiply, quat_to_rotmat,
+                          rotmat_to_quat)
 
 
 def slerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
@@ -41,10 +42,10 @@ def squad_controls(quats: np.ndarray, loop: bool) -> np.ndarray:
     for i in range(n):
         prev = quats[(i - 1) % n] if loop or i > 0 else quats[i]
         nxt = quats[(i + 1) % n] if loop or i < n - 1 else quats[i]
-        inv = qconj(quats[i])
-        a, b = qmul(inv, nxt), qmul(inv, prev)
+        inv = quat_conjugate(quats[i])
+        a, b = quat_multiply(inv, nxt), quat_multiply(inv, prev)
         a, b = (a if a[0] >= 0 else -a), (b if b[0] >= 0 else -b)
-        s[i] = qmul(quats[i], qexp(-0.25 * (qlog(a) + qlog(b))))
+        s[i] = quat_multiply(quats[i], quat_exp(-0.25 * (quat_log(a) + quat_log(b))))
     return s
 
 
@@ -107,7 +108,7 @@ def sample_poses(camera_to_world: np.ndarray, fovs: np.ndarray, times: np.ndarra
     period = (times[-1] - times[0]) + (times[1] - times[0] if k_count > 1 else 1.0)
     pos = c2w[:, :3, 3]
     tang = _tangents(pos, times, loop, period)
-    quats = _same_hemisphere(np.array([matrix_to_quaternion(m[:3, :3]) for m in c2w]))
+    quats = _same_hemisphere(rotmat_to_quat(np.asarray(c2w)[:, :3, :3]))
     ctrl = squad_controls(quats, loop) if rotation == "squad" else quats
     out_m = np.empty((len(samples), 4, 4))
     out_f = np.empty(len(samples))
@@ -126,6 +127,6 @@ def sample_poses(camera_to_world: np.ndarray, fovs: np.ndarray, times: np.ndarra
         if rotation == "squad":
             q = slerp(q, slerp(ctrl[k], ctrl[k1], u), 2.0 * u * (1.0 - u))
         m = np.eye(4)
-        m[:3, :3], m[:3, 3] = quaternion_to_matrix(q), p
+        m[:3, :3], m[:3, 3] = quat_to_rotmat(q), p
         out_m[i], out_f[i] = m, (1.0 - u) * fovs[k] + u * fovs[k1]
     return out_m, out_f

@@ -6,8 +6,6 @@ case can hold values the loaders would reject (zero quaternions, infinite logits
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..camera import Camera, look_at
@@ -20,22 +18,6 @@ WIDTH, HEIGHT = 64, 48
 #: Distinct colours, cycled over the splats of a case.
 PALETTE = np.array([[0.9, 0.2, 0.1], [0.1, 0.8, 0.3], [0.2, 0.3, 0.95], [0.95, 0.85, 0.1],
                     [0.7, 0.2, 0.9], [0.1, 0.9, 0.9], [0.6, 0.6, 0.6]])
-
-
-def quat_axis_angle(axis, degrees: float) -> np.ndarray:
-    """(4,) unit quaternion (w, x, y, z) of a rotation by ``degrees`` about ``axis``."""
-    a = np.asarray(axis, np.float64)
-    a = a / np.linalg.norm(a)
-    h = math.radians(degrees) / 2.0
-    return np.concatenate([[math.cos(h)], math.sin(h) * a])
-
-
-def quat_mul(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
-    """Hamilton product ``q1 q2`` (rotate by q2, then by q1)."""
-    w1, x1, y1, z1 = q1
-    w2, x2, y2, z2 = q2
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
 
 
 def splats(means, scales, quats=None, opacities=None, logits=None, rgb=None, sh_rest=None,

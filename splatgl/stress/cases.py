@@ -17,7 +17,8 @@ import numpy as np
 from ..camera import Camera, look_at
 from ..scene import Scene, SplatKind
 from ..settings import Precision, RenderSettings
-from .build import HEIGHT, WIDTH, at_pixel, front_camera, quat_axis_angle, quat_mul, splats
+from ..quaternion import quat_axis_angle, quat_multiply
+from .build import HEIGHT, WIDTH, at_pixel, front_camera, splats
 
 #: Why the default bounds are what they are (printed with the report).
 BOUND_NOTES = {
@@ -95,8 +96,8 @@ def _aniso(tilt_deg: float) -> Callable[[], Setup]:
     ``tilt_deg`` (0 face-on, 90 edge-on), the needle also turned 30 degrees in the plane."""
     def build() -> Setup:
         cam = front_camera()
-        needle = quat_mul(quat_axis_angle([0, 0, 1], 30.0), quat_axis_angle([0, 1, 0], tilt_deg))
-        pancake = quat_mul(quat_axis_angle([0, 0, 1], 30.0), quat_axis_angle([1, 0, 0], tilt_deg))
+        needle = quat_multiply(quat_axis_angle([0, 0, 1], 30.0), quat_axis_angle([0, 1, 0], tilt_deg))
+        pancake = quat_multiply(quat_axis_angle([0, 0, 1], 30.0), quat_axis_angle([1, 0, 0], tilt_deg))
         means = [at_pixel(cam, 20, 24, 5.0), at_pixel(cam, 44, 24, 5.2)]
         scales = [[0.6, 6e-7, 6e-7], [0.6, 0.6, 6e-7]]
         return Setup(splats(means, scales, [needle, pancake]), cam)
@@ -108,7 +109,7 @@ def _det_nonpositive() -> Setup:
     cancels to zero or below in float32 at 45 degrees, though it is 0.6 lambda + 0.09 > 0."""
     cam = front_camera()
     q = [quat_axis_angle([0, 0, 1], 45.0), quat_axis_angle([0, 0, 1], -30.0),
-         quat_mul(quat_axis_angle([0, 0, 1], 45.0), quat_axis_angle([1, 0, 0], 60.0))]
+         quat_multiply(quat_axis_angle([0, 0, 1], 45.0), quat_axis_angle([1, 0, 0], 60.0))]
     means = [at_pixel(cam, 32, 24, 5.0), at_pixel(cam, 20, 30, 6.0), at_pixel(cam, 40, 20, 7.0)]
     scales = [[1e3, 1e-6, 1e-6], [3e2, 1e-6, 1e-6], [1e3, 1e3, 1e-6]]
     return Setup(splats(means, scales, q, opacities=[0.3, 0.3, 0.3]), cam)
@@ -118,7 +119,7 @@ def _det_nonpositive() -> Setup:
 def _quat_norms() -> Setup:
     cam = front_camera()
     norms = 10.0 ** np.arange(-6, 7)
-    q = quat_mul(quat_axis_angle([0, 0, 1], 40.0), quat_axis_angle([1, 0, 0], 30.0))
+    q = quat_multiply(quat_axis_angle([0, 0, 1], 40.0), quat_axis_angle([1, 0, 0], 30.0))
     means = [at_pixel(cam, 6 + 4.5 * i, 16 + (i % 3) * 8, 5.0 + 0.01 * i) for i in range(len(norms))]
     scales = np.tile([0.5, 0.08, 0.02], (len(norms), 1))
     scene = splats(means, scales, np.outer(norms, q))
@@ -268,7 +269,7 @@ def _surfels_edge_on() -> Setup:
     cam = front_camera()
     turn = quat_axis_angle([0, 0, 1], 45.0)
     tilts = [90.0, 90.0 - 0.057, 89.0, 0.0]
-    q = [quat_mul(turn, quat_axis_angle([1, 0, 0], t)) for t in tilts]
+    q = [quat_multiply(turn, quat_axis_angle([1, 0, 0], t)) for t in tilts]
     q.append(quat_axis_angle([0, 1, 0], 90.0))        # edge-on about the other axis
     means = [at_pixel(cam, 10 + 11 * i, 24, 5.0 + 0.1 * i) for i in range(5)]
     scene = splats(means, np.full((5, 2), 0.5), q, kind=SplatKind.SURFEL_2D)
