@@ -21,6 +21,7 @@ import numpy as np
 
 from .camera import Camera, Projection, check_rigid_pose
 from .errors import CameraError
+from .json_fields import read_json
 
 
 def _number(path: Path, where: str, obj: dict, key: str) -> float:
@@ -134,14 +135,7 @@ def camera_from_3dgs(entry: dict, path: Path, index: int) -> Camera:
 def load_cameras(path: str | Path) -> list[Camera]:
     """Every camera in a file of either form (a list of one for form (a))."""
     path = Path(path)
-    try:
-        obj = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise CameraError(f"{path}: no such camera file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CameraError(f"{path}: cannot read camera file ({exc})") from None
-    except json.JSONDecodeError as exc:
-        raise CameraError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    obj = read_json(path, "camera file")
     if isinstance(obj, list):
         if not obj:
             raise CameraError(f"{path}: the camera list is empty")

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..camera import Camera, check_rigid_pose
 from ..errors import CameraError
-from ._json import entries, matrix, number
+from ..json_fields import entries, matrix, number
 from .nerf import GL_TO_CV
 from .views import View
 

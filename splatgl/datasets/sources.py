@@ -19,7 +19,7 @@ from ..camera import Camera
 from ..camera_io import camera_from_json
 from ..errors import CameraError
 from . import colmap, gs_cameras, nerf, nerfstudio_path
-from ._json import read_json
+from ..json_fields import read_json
 from .views import View
 
 _JSON_NAMES = ("transforms.json", "cameras.json", "camera_path.json")

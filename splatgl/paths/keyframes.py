@@ -37,7 +37,7 @@ import numpy as np
 
 from ..camera import Camera, check_rigid_pose, look_at
 from ..errors import CameraError
-from ..datasets._json import entries, matrix, number
+from ..json_fields import entries, matrix, number
 from .spline import sample_poses
 
 FORMAT_KEY = "splatgl_path"

@@ -1,5 +1,5 @@
-"""Small JSON helpers shared by the camera loaders: read a file, fetch typed fields with errors
-that name the file, the entry and the field."""
+"""Small JSON helpers shared by every camera loader (camera files, datasets, camera paths):
+read a file, fetch typed fields with errors that name the file, the entry and the field."""
 
 from __future__ import annotations
 
@@ -9,16 +9,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import CameraError
+from .errors import CameraError
 
 
-def read_json(path: Path) -> object:
+def read_json(path: Path, what: str = "file") -> object:
+    """The parsed JSON of ``path``; a one-line CameraError naming it (as ``what``) otherwise."""
     try:
         return json.loads(Path(path).read_text())
     except FileNotFoundError:
-        raise CameraError(f"{path}: no such file") from None
+        raise CameraError(f"{path}: no such {what}") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise CameraError(f"{path}: cannot read ({exc})") from None
+        raise CameraError(f"{path}: cannot read {what} ({exc})") from None
     except json.JSONDecodeError as exc:
         raise CameraError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
 
