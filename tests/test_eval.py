@@ -176,3 +176,30 @@ def test_split_views_is_every_eighth():
     views = [View(str(i), Camera.from_fov(8, 8, 40.0)) for i in range(20)]
     assert [v.name for v in split_views(views, Split.TEST)] == ["0", "8", "16"]
     assert len(split_views(views, Split.TRAIN)) == 17
+
+
+def _summary_counts(out: str, unit: str) -> tuple[list[int], int]:
+    """Per-worker counts and the total of the summary ``worker i (...): N unit ...`` lines."""
+    workers = [int(line.split("): ")[1].split()[0]) for line in out.splitlines() if line.startswith("worker ")]
+    total = [int(line.split()[1]) for line in out.splitlines() if line.startswith(f"total: ")]
+    assert len(total) == 1 and all(f" {unit} in " in line for line in out.splitlines()
+                                   if line.startswith(("worker ", "total: "))), out
+    return workers, total[0]
+
+
+def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path):
+    """The views split over 2 processes: CSV, JSON and the worst-views sheet byte-identical to
+    one process's; the summary's per-worker views add up to the total."""
+    files = {}
+    for n in (1, 2):
+        code, out, err = _run(capsys, "--dataset", dataset, "--workers", n, "--csv", tmp_path / f"{n}.csv",
+                              "--json", tmp_path / f"{n}.json", "--sheet", tmp_path / f"{n}.png", "--worst", "3")
+        assert code == 0, err
+        files[n] = [(tmp_path / f"{n}.{ext}").read_bytes() for ext in ("csv", "json", "png")]
+        table = out.split("\nw")[0]   # up to the summary or the "wrote" lines
+        if n == 1:
+            one_table = table
+            assert "worker " not in out
+    assert files[2] == files[1] and table == one_table
+    workers, total = _summary_counts(out, "views")
+    assert len(workers) == 2 and sum(workers) == total == N_VIEWS
