@@ -28,6 +28,9 @@ from .progress import ProgressCallback
 
 #: ``report(done, total)``: units of one task finished so far (the runner adds the tasks up).
 TaskProgress = Callable[[int, int], None]
+#: Test hook: a file path; the first worker process (local or Ray) to start a task while the
+#: file is missing creates it and dies, as a killed or preempted worker would.
+KILL_ONCE_ENV = "SPLATGL_TEST_KILL_ONCE"
 
 
 class ExecutorKind(enum.Enum):
@@ -110,6 +113,17 @@ class Task(Protocol):
 
     def run(self, files: Files, report: TaskProgress) -> Done:
         """Do the work; call ``report(done, total)`` as units finish."""
+
+
+def die_once_for_test(flush: Callable[[], None] | None = None) -> None:
+    """The :data:`KILL_ONCE_ENV` hook; only worker processes call it (``flush``: send what the
+    worker has queued for the parent first)."""
+    marker = os.environ.get(KILL_ONCE_ENV)
+    if marker and not Path(marker).exists():
+        Path(marker).write_text("killed once\n")
+        if flush is not None:
+            flush()
+        os._exit(1)
 
 
 def run_here(task: Task, files: Files, report: TaskProgress, ip: str | None = None) -> TaskReport:

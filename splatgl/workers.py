@@ -19,7 +19,7 @@ import signal
 from typing import Optional, Sequence
 
 from .errors import SplatglError
-from .executor import Files, ProgressSum, Task, TaskReport, run_here
+from .executor import Files, ProgressSum, Task, TaskReport, die_once_for_test, run_here
 from .progress import ProgressCallback
 
 #: Seconds the parent waits on the message queue before checking that the workers live.
@@ -41,6 +41,7 @@ def _worker(todo, messages) -> None:
                 return
             task_index, task = item
             messages.put(("start", task_index, os.getpid()))
+            die_once_for_test(lambda: (messages.close(), messages.join_thread()))
             report = run_here(task, Files(), lambda d, t, i=task_index: messages.put(("progress", i, (d, t))))
             messages.put(("done", task_index, report))
     except SplatglError as exc:

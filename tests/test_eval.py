@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import summary_counts
 from splatgl.camera import Camera, orbit
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
@@ -178,15 +179,6 @@ def test_split_views_is_every_eighth():
     assert len(split_views(views, Split.TRAIN)) == 17
 
 
-def _summary_counts(out: str, unit: str) -> tuple[list[int], int]:
-    """Per-worker counts and the total of the summary ``worker i (...): N unit ...`` lines."""
-    workers = [int(line.split("): ")[1].split()[0]) for line in out.splitlines() if line.startswith("worker ")]
-    total = [int(line.split()[1]) for line in out.splitlines() if line.startswith(f"total: ")]
-    assert len(total) == 1 and all(f" {unit} in " in line for line in out.splitlines()
-                                   if line.startswith(("worker ", "total: "))), out
-    return workers, total[0]
-
-
 def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path):
     """The views split over 2 processes: CSV, JSON and the worst-views sheet byte-identical to
     one process's; the summary's per-worker views add up to the total."""
@@ -201,5 +193,5 @@ def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path):
             one_table = table
             assert "worker " not in out
     assert files[2] == files[1] and table == one_table
-    workers, total = _summary_counts(out, "views")
+    workers, total = summary_counts(out, "views")
     assert len(workers) == 2 and sum(workers) == total == N_VIEWS

@@ -18,13 +18,12 @@ Install with ``pip install 'splatgl[ray]'``.
 from __future__ import annotations
 
 import contextlib
-import os
 import tempfile
 from pathlib import Path
 from typing import Iterator, Optional, Sequence
 
 from ..errors import SplatglError
-from ..executor import Files, ProgressSum, Task, TaskReport, run_here
+from ..executor import Files, ProgressSum, Task, TaskReport, die_once_for_test, run_here
 from ..progress import ProgressCallback
 
 #: How to get Ray, for the one-line error where it is missing.
@@ -34,9 +33,6 @@ INSTALL_HINT = "--executor ray needs Ray: pip install 'splatgl[ray]'"
 MAX_CHUNK_FRAMES = 32
 #: Retries of a task whose worker died or that raised.
 MAX_RETRIES = 3
-#: Test hook: a file path; the first task to find it missing creates it and kills its worker,
-#: so tests can check that a killed worker's task is retried.
-KILL_ONCE_ENV = "SPLATGL_TEST_RAY_KILL_ONCE"
 
 
 def import_ray():
@@ -66,10 +62,7 @@ class ShippedFiles(Files):
 
 def run_task(task: Task, refs: dict[str, object]) -> TaskReport:
     """Body of a Ray task: run ``task`` with its input files from the object store."""
-    marker = os.environ.get(KILL_ONCE_ENV)
-    if marker and not Path(marker).exists():
-        Path(marker).write_text("killed once\n")
-        os._exit(1)  # the worker dies mid-run, as a preempted or crashed node would
+    die_once_for_test()  # tests: the worker dies mid-run, as a preempted or crashed node would
     import ray
 
     return run_here(task, ShippedFiles(refs), lambda done, total: None, ray.util.get_node_ip_address())
