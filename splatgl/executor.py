@@ -172,13 +172,17 @@ def summary(run: RunResult, unit: str = "frames") -> str:
     for n, (worker, reports) in enumerate(workers.items()):
         count = sum(r.done.count for r in reports)
         busy = sum(r.seconds for r in reports)
-        tasks = f", {len(reports)} tasks" if len(reports) > 1 else ""
+        tasks = f", {_count(len(reports), 'task')}" if len(reports) > 1 else ""
         lines.append(f"worker {n} ({worker}): {count} {unit} in {busy:.1f} s, "
                      f"{_rate(count, busy)} {unit}/s{tasks}")
     total = sum(r.done.count for r in run.reports)
     lines.append(f"total: {total} {unit} in {run.seconds:.1f} s, {_rate(total, run.seconds)} {unit}/s "
-                 f"({len(workers)} workers, {len(run.reports)} tasks)")
+                 f"({_count(len(workers), 'worker')}, {_count(len(run.reports), 'task')})")
     return "\n".join(lines)
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def _rate(count: int, seconds: float) -> str:
@@ -234,6 +238,8 @@ class ProgressSum:
         self.meter = FrameMeter(sum(self.total), progress, unit=unit)
 
     def __call__(self, task: int, done: int, total: int) -> None:
+        if (self.done[task], self.total[task]) == (done, total):
+            return  # nothing new (a task's end after its last frame): no repeated line
         self.done[task], self.total[task] = done, total
         self.meter.total = sum(self.total)
         n = sum(self.done)

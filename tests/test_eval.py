@@ -179,9 +179,11 @@ def test_split_views_is_every_eighth():
     assert len(split_views(views, Split.TRAIN)) == 17
 
 
-def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path):
+def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path, monkeypatch):
     """The views split over 2 processes: CSV, JSON and the worst-views sheet byte-identical to
-    one process's; the summary's per-worker views add up to the total."""
+    one process's; one progress line counts both workers' views; the summary's per-worker views
+    add up to the total."""
+    monkeypatch.setenv("SPLATGL_PROGRESS", "1")
     files = {}
     for n in (1, 2):
         code, out, err = _run(capsys, "--dataset", dataset, "--workers", n, "--csv", tmp_path / f"{n}.csv",
@@ -193,5 +195,6 @@ def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path):
             one_table = table
             assert "worker " not in out
     assert files[2] == files[1] and table == one_table
+    assert err.count(f"100.0% ({N_VIEWS} / {N_VIEWS})") == 1 and "views/s, ETA" in err, err
     workers, total = summary_counts(out, "views")
     assert len(workers) == 2 and sum(workers) == total == N_VIEWS
