@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -107,3 +111,24 @@ def test_dead_worker_names_its_frames(tmp_path, capsys, monkeypatch):
     assert (tmp_path / "killed").is_file() and len(os.listdir(tmp_path / "f")) < 6
     assert main([*ARGS, "-o", str(tmp_path / "f"), "--workers", "2", "--resume"]) == 0
     assert sorted(os.listdir(tmp_path / "f")) == [f"{k:05d}.png" for k in range(6)]
+
+
+def test_sigterm_mid_video_leaves_no_video_and_resume_encodes(tmp_path):
+    """SIGTERM while the workers render: exit 143, no video (nor a partial one), the finished
+    frames kept whole for --resume, no worker left running."""
+    pytest.importorskip("av", reason="PyAV is not installed (pip install 'splatgl[video]')")
+    out = tmp_path / "v.mp4"
+    argv = [sys.executable, "-m", "splatgl", *ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    frames = frame_folder(out)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and len(list(frames.glob("*.png"))) < 2:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143 and err.strip().endswith("splatgl: terminated"), err
+    assert os.listdir(tmp_path) == [frames.name]
+    kept = sorted(frames.iterdir())
+    assert 2 <= len(kept) < 200 and all(p.name[0].isdigit() for p in kept)   # no partial files
+    assert main([*ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2", "--resume"]) == 0
+    assert len(_video(out)) == 200 and os.listdir(tmp_path) == ["v.mp4"]

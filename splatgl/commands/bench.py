@@ -149,6 +149,10 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    executor = executor_from_args(args)
+    if args.scale and executor.sharded:
+        raise SplatglError("--scale measures in one process (memory and load times); "
+                           "--workers and --executor ray shard the scene benchmark")
     if args.scale:
         from ..bench.scale_cli import run_scale_command
         return run_scale_command(args)
@@ -180,7 +184,6 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError("nothing to measure: no scenes given, none found in "
                            f"{shared_scenes_dir()}, and --synthetic 0")
     savings = args.savings or not quick
-    executor = executor_from_args(args)
     run = None
     if executor.sharded:    # one scene per task, each in its own worker
         run = run_tasks([BenchSceneTask(spec, options, savings) for spec in specs], executor, "steps",
