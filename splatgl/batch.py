@@ -51,11 +51,12 @@ def _clock(seconds: float) -> str:
 
 
 class FrameMeter:
-    """Reports ``frames (F fps, ETA m:ss)`` through a :data:`ProgressCallback`."""
+    """Reports ``frames (F fps, ETA m:ss)`` through a :data:`ProgressCallback` (``unit``
+    names what is counted: ``views (F/s, ETA m:ss)``)."""
 
     def __init__(self, total: int, progress: Optional[ProgressCallback],
-                 clock: Callable[[], float] = time.monotonic):
-        self.total, self.progress, self.clock = total, progress, clock
+                 clock: Callable[[], float] = time.monotonic, unit: str = "frames"):
+        self.total, self.progress, self.clock, self.unit = total, progress, clock, unit
         self.start = clock()
 
     def __call__(self, done: int, rendered: int) -> None:
@@ -66,9 +67,10 @@ class FrameMeter:
         if rendered > 0 and elapsed > 0:
             fps = rendered / elapsed
             eta = (self.total - done) / fps
-            what = f"frames ({fps:.2f} fps, ETA {_clock(eta)})"
+            rate = "fps" if self.unit == "frames" else f"{self.unit}/s"
+            what = f"{self.unit} ({fps:.2f} {rate}, ETA {_clock(eta)})"
         else:
-            what = "frames"
+            what = self.unit
         self.progress(done, self.total, what)
 
 

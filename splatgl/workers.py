@@ -1,11 +1,13 @@
-"""``--workers N``: render a frame list in N local processes, each with its own headless
-context and its own copy of the scene, in contiguous chunks (neighbouring cameras keep the
-depth order similar, so each worker's sort stays warm).
+"""``--workers N``: run tasks (:mod:`splatgl.executor`) in N local processes, each with its
+own headless context and its own copy of the scene.
 
-Each worker runs :func:`splatgl.batch.render_frames` on its chunk, writing frames under their
-global numbers, so the files are the same, frame by frame, as a single-process render.  Workers
-report each finished frame on a queue; the parent shows one progress line for all of them.
-Video output is not sharded (render frames, or use one process).
+The processes are spawned (a fresh interpreter: no inherited GL state) and take tasks from one
+queue in order, so a render's contiguous chunks keep each worker's sort warm and a benchmark's
+scenes spread over the workers as they free up.  Workers report progress and results on a
+second queue; the parent shows one progress line for all of them.  Ctrl-C / SIGTERM interrupts
+every worker (SIGINT), which unwinds like a single process (a frame in hand is finished or
+dropped, never half-written); the parent then re-raises.  A worker that dies without reporting
+(killed) stops the run with an error naming its task.
 """
 
 from __future__ import annotations
@@ -14,17 +16,14 @@ import multiprocessing as mp
 import os
 import queue
 import signal
-import time
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Optional, Sequence
 
-from .batch import BatchResult, FrameMeter
-from .camera import Camera
 from .errors import SplatglError
-from .frame_output import FrameTarget
+from .executor import Files, ProgressSum, Task, TaskReport, die_once_for_test, run_here
 from .progress import ProgressCallback
-from .settings import RenderSettings, RendererKind
+
+#: Seconds the parent waits on the message queue before checking that the workers live.
+POLL_SECONDS = 0.5
 
 
 def chunks(count: int, workers: int) -> list[range]:
@@ -33,105 +32,84 @@ def chunks(count: int, workers: int) -> list[range]:
     return [range(a, b) for a, b in zip(bounds, bounds[1:]) if b > a]
 
 
-@dataclass(frozen=True)
-class ChunkJob:
-    """One worker's (or Ray task's) share of a path: cameras ``first_frame ..``, the scene file
-    and how to render and write them."""
-
-    scene_path: Path
-    drop_invalid: bool
-    cameras: tuple[Camera, ...]
-    first_frame: int
-    settings: RenderSettings
-    target: FrameTarget
-    kind: RendererKind
-    bit_depth: int
-    resume: bool
-
-
-def _worker(job: ChunkJob, messages) -> None:
-    from .batch import render_frames
-    from .formats import load_scene
-    from .render import Renderer
-
+def _worker(todo, messages) -> None:
+    task_index = None
     try:
-        scene = load_scene(job.scene_path, drop_invalid=job.drop_invalid, progress=lambda *a: None)
-        with Renderer() as renderer:
-            result = render_frames(renderer, scene, job.cameras, job.settings, job.target, job.kind,
-                                   job.bit_depth, job.resume,
-                                   progress=lambda done, total, what: messages.put(("frame", (job.first_frame, done))),
-                                   first_frame=job.first_frame)
-        messages.put(("done", (result.written, result.skipped, result.seconds, result.render_seconds)))
+        while True:
+            item = todo.get()
+            if item is None:
+                return
+            task_index, task = item
+            messages.put(("start", task_index, os.getpid()))
+            die_once_for_test(lambda: (messages.close(), messages.join_thread()))
+            report = run_here(task, Files(), lambda d, t, i=task_index: messages.put(("progress", i, (d, t))))
+            messages.put(("done", task_index, report))
     except SplatglError as exc:
-        messages.put(("error", str(exc)))
+        messages.put(("error", task_index, str(exc)))
     except KeyboardInterrupt:
-        messages.put(("interrupted", None))
+        messages.put(("interrupted", task_index, None))
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which raises
-        messages.put(("error", f"worker {os.getpid()} failed: {type(exc).__name__}: {exc}"))
+        messages.put(("error", task_index, f"worker {os.getpid()} failed: {type(exc).__name__}: {exc}"))
 
 
-def render_frames_parallel(scene_path: Path, cameras: Sequence[Camera], settings: RenderSettings,
-                           target: FrameTarget, workers: int, kind: RendererKind = RendererKind.QUAD,
-                           bit_depth: int = 8, resume: bool = False, drop_invalid: bool = False,
-                           progress: Optional[ProgressCallback] = None) -> BatchResult:
-    """Render ``cameras`` to image ``target`` in ``workers`` spawned processes.
-
-    Returns the summed :class:`BatchResult` (``seconds`` is the parent's wall time).
-    Ctrl-C / SIGTERM interrupts every worker (SIGINT), which finish or drop the frame in hand
-    atomically; the parent then re-raises.
-    """
-    if target.is_video:
-        raise SplatglError("--workers renders image frames; write a video with one process")
+def run_local(tasks: Sequence[Task], workers: int, unit: str = "frames",
+              progress: Optional[ProgressCallback] = None, hint: str = "") -> list[TaskReport]:
+    """Run ``tasks`` in ``workers`` spawned processes (1: in this process); reports in task
+    order.  ``hint`` ends the message of a worker that died (e.g. how to resume)."""
     if workers < 1:
         raise SplatglError(f"--workers must be at least 1, got {workers}")
-    target.prepare()
-    ctx = mp.get_context("spawn")  # a fresh interpreter per worker: no inherited GL state
-    messages = ctx.Queue()
+    meter = ProgressSum(tasks, unit, progress)
+    if workers == 1:
+        return [run_here(t, Files(), lambda d, n, i=i: meter(i, d, n)) for i, t in enumerate(tasks)]
+    ctx = mp.get_context("spawn")
+    todo, messages = ctx.Queue(), ctx.Queue()
+    for item in enumerate(tasks):
+        todo.put(item)
     procs = []
-    t0 = time.perf_counter()
-    for part in chunks(len(cameras), workers):
-        job = ChunkJob(Path(scene_path), drop_invalid, tuple(cameras[i] for i in part), part.start, settings,
-                   target, kind, bit_depth, resume)
-        p = ctx.Process(target=_worker, args=(job, messages), daemon=True)
-        p.start()
-        procs.append(p)
-    meter = FrameMeter(len(cameras), progress)
-    per_worker: dict[int, int] = {}
-    totals = [0, 0, 0.0, 0.0]
-    finished = 0
-    error = None
+    for _ in range(min(workers, len(tasks))):
+        todo.put(None)
+        procs.append(ctx.Process(target=_worker, args=(todo, messages), daemon=True))
+        procs[-1].start()
+    reports: list[Optional[TaskReport]] = [None] * len(tasks)
+    running: dict[int, int] = {}  # pid -> task index
+    ended = 0  # polls that found every worker gone (one more poll drains their last messages)
     try:
-        while finished < len(procs):
+        while any(r is None for r in reports):
             try:
-                kind_, payload = messages.get(timeout=0.5)
+                kind, i, payload = messages.get(timeout=POLL_SECONDS)
             except queue.Empty:
-                if all(not p.is_alive() for p in procs):
-                    raise SplatglError("a worker process died without reporting (killed?); "
-                                       "re-run with --resume to finish the missing frames") from None
+                _check_alive(procs, running, tasks, hint)
+                ended = ended + 1 if all(not p.is_alive() for p in procs) else 0
+                if ended > 1:
+                    raise SplatglError("every worker process ended with tasks left undone") from None
                 continue
-            if kind_ == "frame":
-                first, count = payload
-                per_worker[first] = count
-                done = sum(per_worker.values())
-                meter(done, done)
-            elif kind_ == "done":
-                finished += 1
-                for i, v in enumerate(payload):
-                    totals[i] += v
+            if kind == "start":
+                running[payload] = i
+            elif kind == "progress":
+                meter(i, *payload)
+            elif kind == "done":
+                reports[i] = payload
+                running.pop(payload.worker.pid, None)
+                meter(i, meter.total[i], meter.total[i])
+            elif kind == "interrupted":
+                raise KeyboardInterrupt
             else:
-                finished += 1
-                error = error or (payload if kind_ == "error" else None)
-                if kind_ == "interrupted":
-                    raise KeyboardInterrupt
-        if error:
-            raise SplatglError(error)
+                raise SplatglError(payload)
     except BaseException:
         for p in procs:
             if p.is_alive() and p.pid is not None:
-                os.kill(p.pid, signal.SIGINT)  # unwinds like Ctrl-C: no half-written frame
+                os.kill(p.pid, signal.SIGINT)  # unwinds like Ctrl-C: no half-written output
         for p in procs:
             p.join(timeout=30)
         raise
     for p in procs:
         p.join()
-    return BatchResult(int(totals[0]), int(totals[1]), time.perf_counter() - t0, totals[3])
+    return reports
+
+
+def _check_alive(procs, running: dict[int, int], tasks: Sequence[Task], hint: str) -> None:
+    for p in procs:
+        if p.exitcode not in (None, 0):
+            what = f" on {tasks[running[p.pid]].label()}" if p.pid in running else ""
+            raise SplatglError(f"worker process {p.pid} died{what} (exit code {p.exitcode}) "
+                               f"without reporting (killed?){'; ' + hint if hint else ''}") from None

@@ -152,3 +152,14 @@ def shared_file(shared_scenes: Path, name: str) -> Path:
     if not path.is_file():
         pytest.skip(f"{path} not present")
     return path
+
+
+def summary_counts(out: str, unit: str) -> tuple[list[int], int]:
+    """Per-worker counts and the total of the summary that ``--workers`` / ``--executor ray``
+    print (``worker i (host, pid P): N unit in S s, R unit/s`` ... ``total: N unit in ...``)."""
+    lines = [line for line in out.splitlines() if line.startswith(("worker ", "total: "))]
+    assert lines and all(f" {unit} in " in line for line in lines), out
+    workers = [int(line.split("): ")[1].split()[0]) for line in lines if line.startswith("worker ")]
+    totals = [int(line.split()[1]) for line in lines if line.startswith("total: ")]
+    assert len(totals) == 1, out
+    return workers, totals[0]

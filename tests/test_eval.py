@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import summary_counts
 from splatgl.camera import Camera, orbit
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
@@ -176,3 +177,24 @@ def test_split_views_is_every_eighth():
     views = [View(str(i), Camera.from_fov(8, 8, 40.0)) for i in range(20)]
     assert [v.name for v in split_views(views, Split.TEST)] == ["0", "8", "16"]
     assert len(split_views(views, Split.TRAIN)) == 17
+
+
+def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path, monkeypatch):
+    """The views split over 2 processes: CSV, JSON and the worst-views sheet byte-identical to
+    one process's; one progress line counts both workers' views; the summary's per-worker views
+    add up to the total."""
+    monkeypatch.setenv("SPLATGL_PROGRESS", "1")
+    files = {}
+    for n in (1, 2):
+        code, out, err = _run(capsys, "--dataset", dataset, "--workers", n, "--csv", tmp_path / f"{n}.csv",
+                              "--json", tmp_path / f"{n}.json", "--sheet", tmp_path / f"{n}.png", "--worst", "3")
+        assert code == 0, err
+        files[n] = [(tmp_path / f"{n}.{ext}").read_bytes() for ext in ("csv", "json", "png")]
+        table = out.split("\nw")[0]   # up to the summary or the "wrote" lines
+        if n == 1:
+            one_table = table
+            assert "worker " not in out
+    assert files[2] == files[1] and table == one_table
+    assert err.count(f"100.0% ({N_VIEWS} / {N_VIEWS})") == 1 and "views/s, ETA" in err, err
+    workers, total = summary_counts(out, "views")
+    assert len(workers) == 2 and sum(workers) == total == N_VIEWS

@@ -84,7 +84,11 @@ def test_video_output(tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--path", "orbit:2", "-o", "{t}/x.png"], "many frames need a folder or a pattern such as"),
     (["--path", "orbit:2", "-o", "{t}/x_%d_%d.png"], "needs exactly one integer field"),
-    (["--path", "orbit:2", "-o", "{t}/x.mp4", "--resume"], "a video cannot be resumed"),
+    (["--path", "orbit:2", "-o", "{t}/x.mp4", "--resume"], "a video rendered in one process cannot be resumed"),
+    (["--path", "orbit:2", "-o", "{t}/x.mp4", "--width", "95", "--height", "64", "--workers", "2"],
+     "needs an even width and height, got 95x64"),
+    (["--path", "orbit:2", "-o", "{t}/f", "--ray-gpus", "1"], "--ray-address and --ray-gpus need --executor ray"),
+    (["--path", "orbit:2", "-o", "{t}/f", "--workers", "0"], "--workers must be at least 1, got 0"),
     (["--path", "orbit:2", "-o", "{t}/x.mp4", "--width", "95", "--height", "64"], "needs an even width and height, got 95x64"),
     (["--path", "orbit:x", "-o", "{t}/f"], "expected orbit or orbit:FRAMES"),
     (["--path", "{t}/none.json", "-o", "{t}/f"], "none.json: no such file or folder"),

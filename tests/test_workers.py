@@ -2,11 +2,22 @@
 
 from __future__ import annotations
 
-import numpy as np
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
+import numpy as np
+import pytest
+
+from conftest import summary_counts
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.image_io import read_image
+from splatgl.distributed.render import frame_folder
+from splatgl.executor import KILL_ONCE_ENV
 from splatgl.workers import chunks
 
 
@@ -30,6 +41,94 @@ def test_two_workers_write_the_single_process_files(tmp_path, capsys):
     assert "wrote 1 frames" in capsys.readouterr().out
 
 
-def test_workers_refuse_video(tmp_path, capsys):
-    assert main(["render", "--path", "orbit:2", "--workers", "2", "-o", str(tmp_path / "v.mp4")]) == 2
-    assert "--workers renders image frames; write a video with one process" in capsys.readouterr().err
+ARGS = ["render", "--path", "orbit:6", "--width", "96", "--height", "64"]
+
+
+def _video(path: Path) -> list[np.ndarray]:
+    from splatgl.video import read_video_frames
+
+    return read_video_frames(path)
+
+
+@pytest.fixture(scope="module")
+def one_process_video(tmp_path_factory):
+    pytest.importorskip("av", reason="PyAV is not installed (pip install 'splatgl[video]')")
+    out = tmp_path_factory.mktemp("one") / "one.mp4"
+    assert main([*ARGS, "-o", str(out)]) == 0
+    return out
+
+
+def test_two_workers_video_equals_the_single_process_video(one_process_video, tmp_path, capsys):
+    """Workers write PNG frames quantised as the video writer quantises, so the encoder sees the
+    same pixels: the decoded frames are equal (here the files too: x264 is deterministic)."""
+    out = tmp_path / "two.mp4"
+    capsys.readouterr()
+    assert main([*ARGS, "-o", str(out), "--workers", "2"]) == 0
+    text = capsys.readouterr().out
+    one, two = _video(one_process_video), _video(out)
+    assert len(two) == 6 and all(np.array_equal(a, b) for a, b in zip(one, two))
+    assert os.listdir(tmp_path) == ["two.mp4"]          # the frame folder is gone
+    workers, total = summary_counts(text, "frames")
+    assert workers == [3, 3] and total == 6
+
+
+def test_failed_assembly_keeps_frames_and_resume_finishes(one_process_video, tmp_path, capsys, monkeypatch):
+    """No video (not even a partial one) when assembling fails; the frames stay, and --resume
+    renders only the missing ones before encoding."""
+    from splatgl.distributed import render as sharded
+    from splatgl.errors import SplatglError
+
+    def fail(*args, **kwargs):
+        raise SplatglError("disk full")
+
+    out = tmp_path / "v.mp4"
+    with monkeypatch.context() as m:
+        m.setattr(sharded, "assemble_video", fail)
+        assert main([*ARGS, "-o", str(out), "--workers", "2"]) == 2
+    assert "disk full" in capsys.readouterr().err
+    frames = frame_folder(out)
+    assert os.listdir(tmp_path) == [frames.name] and len(os.listdir(frames)) == 6
+    for k in (1, 4):
+        (frames / f"{k:05d}.png").unlink()
+    assert main([*ARGS, "-o", str(out), "--workers", "2", "--resume"]) == 0
+    assert "wrote 2 frames" in capsys.readouterr().out
+    assert all(np.array_equal(a, b) for a, b in zip(_video(one_process_video), _video(out)))
+    assert os.listdir(tmp_path) == ["v.mp4"]
+
+
+def test_one_process_video_cannot_resume(tmp_path, capsys):
+    assert main([*ARGS, "-o", str(tmp_path / "v.mp4"), "--resume"]) == 2
+    assert "cannot be resumed; render it with --workers N or --executor ray" in capsys.readouterr().err
+
+
+def test_dead_worker_names_its_frames(tmp_path, capsys, monkeypatch):
+    """A worker killed mid-chunk stops the run with a one-line error naming the chunk; the
+    frames that exist are whole, and --resume finishes the path."""
+    monkeypatch.setenv(KILL_ONCE_ENV, str(tmp_path / "killed"))
+    assert main([*ARGS, "-o", str(tmp_path / "f"), "--workers", "2"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and " died on frames " in err and "re-run with --resume" in err, err
+    assert (tmp_path / "killed").is_file() and len(os.listdir(tmp_path / "f")) < 6
+    assert main([*ARGS, "-o", str(tmp_path / "f"), "--workers", "2", "--resume"]) == 0
+    assert sorted(os.listdir(tmp_path / "f")) == [f"{k:05d}.png" for k in range(6)]
+
+
+def test_sigterm_mid_video_leaves_no_video_and_resume_encodes(tmp_path):
+    """SIGTERM while the workers render: exit 143, no video (nor a partial one), the finished
+    frames kept whole for --resume, no worker left running."""
+    pytest.importorskip("av", reason="PyAV is not installed (pip install 'splatgl[video]')")
+    out = tmp_path / "v.mp4"
+    argv = [sys.executable, "-m", "splatgl", *ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2"]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    frames = frame_folder(out)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and len(list(frames.glob("*.png"))) < 2:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143 and err.strip().endswith("splatgl: terminated"), err
+    assert os.listdir(tmp_path) == [frames.name]
+    kept = sorted(frames.iterdir())
+    assert 2 <= len(kept) < 200 and all(p.name[0].isdigit() for p in kept)   # no partial files
+    assert main([*ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2", "--resume"]) == 0
+    assert len(_video(out)) == 200 and os.listdir(tmp_path) == ["v.mp4"]

@@ -12,6 +12,7 @@ from ..batch import render_frames
 from ..camera import Camera
 from ..datasets import load_source, select_indices
 from ..errors import SplatglError
+from ..executor import add_executor_arguments, executor_from_args, summary
 from ..frame_output import FrameTarget
 from ..paths import orbit
 from ..progress import default_progress
@@ -39,24 +40,16 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                         "comma-separated (e.g. 0:100:5 or 0,3,7)")
     g.add_argument("--resume", action="store_true",
                    help="skip frames whose files already exist (frames are written atomically, "
-                        "so an existing file is complete)")
+                        "so an existing file is complete); for a video with --workers or "
+                        "--executor ray, the frames kept from a stopped run")
     g.add_argument("--format", default="png", choices=("png", "tif", "exr"),
                    help="image format when -o is a folder (default png)")
-    g.add_argument("--workers", type=int, default=1, metavar="N",
-                   help="render in N local processes, each with its own context and copy of the "
-                        "scene, on contiguous chunks of the path (image output only; default 1)")
-    g.add_argument("--executor", choices=("local", "ray"), default="local",
-                   help="where the frames render: 'local' (this process, or --workers processes) "
-                        "or 'ray' (Ray tasks of up to 32 frames, on a local Ray or the cluster "
-                        "at --ray-address; install with pip install 'splatgl[ray]')")
-    g.add_argument("--ray-address", default=None, metavar="ADDRESS",
-                   help="with --executor ray: the cluster to join ('auto' for the one this node "
-                        "belongs to; default: start a local Ray)")
-    g.add_argument("--ray-gpus", type=float, default=0.0, metavar="N",
-                   help="with --executor ray: GPUs each task reserves (default 0, so CPU-only "
-                        "clusters work)")
     g.add_argument("--fps", type=float, default=None,
                    help="video frame rate (default: the path file's, else 30)")
+    add_executor_arguments(p, "contiguous chunks of the path (a video is encoded here once "
+                              "every frame exists; its frames wait in .NAME.mp4.frames/, kept for "
+                              "--resume if the run stops)",
+                           "Ray tasks of up to 32 frames")
 
 
 def _sized(cam: Camera, width: int | None, height: int | None) -> Camera:
@@ -96,21 +89,13 @@ def run_path(args: argparse.Namespace) -> int:
     if args.depth_png is not None:
         raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
     target = FrameTarget.parse(args.output, args.format)
-    if args.workers < 1:
-        raise SplatglError(f"--workers must be at least 1, got {args.workers}")
-    if args.stereo is not None and (args.executor == "ray" or args.workers != 1):
+    executor = executor_from_args(args)
+    if args.stereo is not None and executor.sharded:
         raise SplatglError("--stereo renders paths in one process (not with --workers or --executor ray)")
-    if args.executor == "ray" and args.workers != 1:
-        raise SplatglError("--workers is for --executor local; Ray decides where its tasks run")
-    if args.executor == "ray" and target.is_video:
-        raise SplatglError(f"{args.output}: --executor ray renders image frames; write a video with one process")
-    if args.executor == "ray":
-        from ..distributed.ray_executor import import_ray
-        import_ray()  # the install hint before the scene loads
-    if args.workers > 1 and target.is_video:
-        raise SplatglError(f"{args.output}: --workers renders image frames; write a video with one process")
-    if args.resume and target.is_video:
-        raise SplatglError(f"{args.output}: a video cannot be resumed; render frames to a folder instead")
+    if args.resume and target.is_video and not executor.sharded:
+        raise SplatglError(f"{args.output}: a video rendered in one process cannot be resumed; "
+                           "render it with --workers N or --executor ray (their frames are kept "
+                           "until the video is assembled)")
     scene = load_scene_arg(args)
     settings = settings_from_args(args)
     cameras, source_fps = path_cameras(args, scene)
@@ -118,19 +103,13 @@ def run_path(args: argparse.Namespace) -> int:
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
     kind = RendererKind(args.renderer)
-    if args.executor == "ray":
-        from ..distributed.ray_executor import render_frames_ray
+    run = None
+    if executor.sharded:
+        from ..distributed.render import render_sharded
 
-        result = render_frames_ray(args.scene if args.scene is not None else demo_scene_path(),
-                                   cameras, settings, target, kind, args.bit_depth, args.resume,
-                                   args.drop_invalid, default_progress(), args.ray_address,
-                                   args.ray_gpus)
-    elif args.workers != 1:
-        from ..workers import render_frames_parallel
-
-        result = render_frames_parallel(args.scene if args.scene is not None else demo_scene_path(),
-                                        cameras, settings, target, args.workers, kind, args.bit_depth,
-                                        args.resume, args.drop_invalid, default_progress())
+        result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
+                                     cameras, settings, target, executor, kind, args.bit_depth,
+                                     args.resume, args.drop_invalid, fps, default_progress())
     else:
         with Renderer() as renderer:
             if args.stereo is not None:    # each frame holds both eyes
@@ -141,6 +120,8 @@ def run_path(args: argparse.Namespace) -> int:
     skipped = f", {result.skipped} already there" if result.skipped else ""
     print(f"wrote {result.written} frames to {where}{skipped} ({cameras[0].width}x{cameras[0].height}, "
           f"{scene.count} splats, {kind.value}, {result.fps:.2f} frames/s)")
+    if run is not None:
+        print(summary(run, "frames"))
     if args.timings:
         ratio = result.seconds / result.render_seconds if result.render_seconds > 0 else float("nan")
         print(f"timings: {result.seconds:.3f} s for {result.written} frames; renderer stages "

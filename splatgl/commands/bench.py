@@ -10,17 +10,17 @@ from pathlib import Path
 import numpy as np
 
 from ..bench.early_stop_report import early_stop_table
-from ..bench.real_scenes import build_real_scene, load_real_sources, shared_scenes_dir
+from ..bench.real_scenes import shared_scenes_dir
 from ..bench.report import plot, table, write_csv, write_json
 from ..bench.configs import configurations
 from ..bench.machine import describe, machine_info
-from ..bench.runner import BenchOptions, bench_scene, sort_benchmark
-from ..bench.savings import savings_rows
+from ..bench.runner import BenchOptions, sort_benchmark
+from ..bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
 from ..errors import SplatglError
+from ..executor import add_executor_arguments, executor_from_args, run_tasks, summary
 from ..limits import check_image_size
 from ..output_files import OutputFiles
-from ..formats import load_scene
-from ..progress import StderrProgress, enabled
+from ..progress import StderrProgress, default_progress, enabled
 from ..render import Renderer
 from ..scene import Scene
 from ..settings import RenderSettings
@@ -48,7 +48,8 @@ examples:
   splatgl bench --quick
   splatgl bench scene.ply --width 1280 --height 720 --out bench-results
   splatgl bench --groups extent,preprocess
-  splatgl bench --groups early-stop          (on against off; adds a 1M-splat real-data scene)"""
+  splatgl bench --groups early-stop          (on against off; adds a 1M-splat real-data scene)
+  splatgl bench a.ply b.ply c.ply --executor ray --ray-address auto   (one scene per Ray task)"""
 
 REAL = ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply", "compressed_ply/guitar.compressed.ply"]
 
@@ -100,6 +101,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also run the paired rows that prove each skipped cost: SH0 against the "
                         "same scene padded to SH3, 90%% off-screen culled and not, still against "
                         "moving camera (on by default without --quick)")
+    add_executor_arguments(p, "one scene per task (timings of workers running at once on one "
+                              "machine share its cores: for fair timings use one worker per "
+                              "machine, i.e. Ray across machines)",
+                           "one task per scene")
 
 
 def _parse_groups(text: str | None) -> frozenset[str] | None:
@@ -144,6 +149,10 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    executor = executor_from_args(args)
+    if args.scale and executor.sharded:
+        raise SplatglError("--scale measures in one process (memory and load times); "
+                           "--workers and --executor ray shard the scene benchmark")
     if args.scale:
         from ..bench.scale_cli import run_scale_command
         return run_scale_command(args)
@@ -156,37 +165,46 @@ def run(args: argparse.Namespace) -> int:
     _check_out(args.out)
     options = BenchOptions(width, height, frames, error_frames=tuple(sorted({frames // 3, 2 * frames // 3, frames - 1}))
                            if not quick else (frames - 1,), quick=quick, groups=groups)
-    jobs = [(p.name, load_scene(p)) for p in args.scenes]
-    if not jobs:
+    specs = [SceneSpec(p.name, p) for p in args.scenes]
+    if not specs:
         if quick:
-            jobs.append(("demo", load_scene(demo_scene_path())))
+            specs.append(SceneSpec("demo", demo_scene_path()))
         else:
             shared = shared_scenes_dir()
-            jobs += [(Path(r).name, load_scene(shared / r)) for r in REAL if (shared / r).is_file()]
+            specs += [SceneSpec(Path(r).name, shared / r) for r in REAL if (shared / r).is_file()]
     n_syn = args.synthetic if args.synthetic is not None else (150_000 if not args.scenes and not quick else 0)
     if n_syn:
-        jobs.append((f"synthetic-{n_syn // 1000}k-sh3", synthetic_scene(n_syn)))
+        specs.append(SceneSpec(f"synthetic-{n_syn // 1000}k-sh3", synthetic=n_syn))
     n_real = args.real_splats
     if n_real is None:
         n_real = 1_000_000 if groups and "early-stop" in groups and not args.scenes and not quick else 0
     if n_real:
-        jobs.append((f"real-{n_real / 1e6:g}M", build_real_scene(n_real, seed=0, sources=load_real_sources())))
-    if not jobs:
+        specs.append(SceneSpec(f"real-{n_real / 1e6:g}M", real_splats=n_real))
+    if not specs:
         raise SplatglError("nothing to measure: no scenes given, none found in "
                            f"{shared_scenes_dir()}, and --synthetic 0")
-    progress = StderrProgress() if enabled() else None
-    rows = []
-    with Renderer() as renderer:
-        check_image_size(width, height, "--width/--height: image", "quad", renderer.ctx)
-        machine = machine_info(renderer.ctx.info.get("GL_RENDERER", "?"))  # before the context closes
-        for name, scene in jobs:
-            rows += bench_scene(renderer, name, scene, options, progress=progress)
-            if args.savings or not quick:
-                rows += savings_rows(renderer, name, scene, options)
+    savings = args.savings or not quick
+    run = None
+    if executor.sharded:    # one scene per task, each in its own worker
+        run = run_tasks([BenchSceneTask(spec, options, savings) for spec in specs], executor, "steps",
+                        default_progress())
+        rows = [row for scene_rows, _ in run.values for row in scene_rows]
+        machine = run.values[0][1]
+    else:
+        progress = StderrProgress() if enabled() else None
+        rows = []
+        with Renderer() as renderer:
+            check_image_size(width, height, "--width/--height: image", "quad", renderer.ctx)
+            machine = machine_info(renderer.ctx.info.get("GL_RENDERER", "?"))  # before the context closes
+            for spec in specs:
+                rows += measure_scene(renderer, spec, spec.load(), options, savings, progress)
     sort_ms = sort_benchmark(100_000 if quick else 1_000_000)
     extra = {"width": width, "height": height, "frames": frames,
              "sort_exact_ms": sort_ms, "sort_keys": 100_000 if quick else 1_000_000,
              "renderer": machine["gl_renderer"], "machine": machine}
+    if run is not None:  # where each scene was measured
+        extra["workers"] = [{"scene": spec.name, "worker": str(r.worker), "seconds": r.seconds,
+                             "rows": r.done.count} for spec, r in zip(specs, run.reports)]
     if args.out is not None:
         _write_out(args.out, rows, extra)
     if args.json:
@@ -203,6 +221,8 @@ def run(args: argparse.Namespace) -> int:
     for r in defaults:
         print(f"target check {r.scene}: default at {r.limit_ratio:.2f}x the limit row "
               f"(target <= 1.5), fragment efficiency {r.fragment_efficiency:.3f} (target >= 0.5)")
+    if run is not None:
+        print(summary(run, "rows"))
     if args.out is not None:
         print(f"wrote {args.out / 'bench.csv'}, bench.json, bench.png")
     return 0

@@ -9,12 +9,14 @@ from ..atomic import atomic_write_text
 from ..datasets.dataset import MAX_WIDTH, Split, load_dataset
 from ..datasets.sources import select_indices
 from ..errors import SplatglError
+from ..executor import add_executor_arguments, executor_from_args, summary
 from ..evaluate import evaluate, worst_sheet
 from ..image_io import write_image
 from ..progress import default_progress
 from ..render import Renderer
 from ..settings import RendererKind
-from ._common import add_scene_arguments, add_settings_arguments, load_scene_arg, settings_from_args
+from ._common import (add_scene_arguments, add_settings_arguments, demo_scene_path, load_scene_arg,
+                      settings_from_args)
 
 NAME = "eval"
 ORDER = 25
@@ -33,7 +35,9 @@ same as scikit-image with gaussian_weights=True, use_sample_covariance=False).
 examples:
   splatgl eval point_cloud.ply --dataset garden --images images_4 --split test
   splatgl eval lego.ply --dataset nerf_synthetic/lego --split test --background 1,1,1 --json lego.json
-  splatgl eval scene.ply --dataset garden --csv scores.csv --sheet worst.png --worst 4"""
+  splatgl eval scene.ply --dataset garden --csv scores.csv --sheet worst.png --worst 4
+  splatgl eval scene.ply --dataset garden --workers 2          (views split over 2 processes)
+  splatgl eval scene.ply --dataset /shared/garden --executor ray --ray-address auto"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -58,6 +62,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write a picture of the worst views: render | photograph | error heat map")
     o.add_argument("--worst", type=int, default=4, help="views on the sheet (default 4)")
     add_settings_arguments(p)
+    add_executor_arguments(p, "contiguous chunks of the views (the scores merge into the same "
+                              "table, CSV and JSON as one process's)",
+                           "Ray tasks of up to 32 views; the dataset must be on a file system "
+                           "every node shares")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,12 +78,24 @@ def run(args: argparse.Namespace) -> int:
     views = load_dataset(args.dataset, args.images, args.split, args.max_width)
     if args.select:
         views = [views[i] for i in select_indices(args.select, len(views), str(args.dataset))]
-    scene = load_scene_arg(args)
+    executor = executor_from_args(args)
     settings = settings_from_args(args)
-    with Renderer() as renderer:
-        result, worst = evaluate(renderer, scene, views, settings, RendererKind(args.renderer),
-                                 args.worst if args.sheet is not None else 0, default_progress())
+    keep = args.worst if args.sheet is not None else 0
+    run = None
+    if executor.sharded:   # the workers load the scene; this process only merges
+        from ..distributed.evaluate import evaluate_sharded
+
+        result, worst, run = evaluate_sharded(args.scene if args.scene is not None else demo_scene_path(),
+                                              views, executor, settings, RendererKind(args.renderer),
+                                              keep, args.drop_invalid, default_progress())
+    else:
+        scene = load_scene_arg(args)
+        with Renderer() as renderer:
+            result, worst = evaluate(renderer, scene, views, settings, RendererKind(args.renderer),
+                                     keep, default_progress())
     print(result.table())
+    if run is not None:
+        print(summary(run, "views"))
     if args.csv is not None:
         atomic_write_text(args.csv, result.csv())
         print(f"wrote {args.csv}")

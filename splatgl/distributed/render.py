@@ -1,0 +1,134 @@
+"""A camera path's frames rendered by several processes or machines (``render --path`` with
+``--workers N`` or ``--executor ray``), as tasks of :mod:`splatgl.executor`.
+
+Each :class:`RenderChunk` renders a contiguous run of the path with
+:func:`splatgl.batch.render_frames`, writing frames under their global numbers, so the files
+equal a single-process render's frame by frame.
+
+A video output is assembled once all frames exist: the workers write 8-bit PNG frames to a
+hidden folder beside the video (``.NAME.mp4.frames/``), quantised exactly as the video writer
+quantises (``clip(rgb) * 255 + 0.5``, truncated), so the encoder sees the same pixels as in a
+single-process run; then this process encodes them with :class:`splatgl.video.VideoWriter`
+(temporary file renamed when complete) and deletes the folder.  If anything fails or is
+interrupted the folder stays, no video is written, and ``--resume`` renders only the frames
+still missing before encoding.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+from ..batch import BatchResult, FrameMeter
+from ..camera import Camera
+from ..executor import Done, Executor, ExecutorKind, Files, RunResult, TaskProgress, run_tasks
+from ..frame_output import FrameTarget
+from ..progress import ProgressCallback
+from ..settings import RenderSettings, RendererKind
+from ..workers import chunks
+from .ray_executor import MAX_CHUNK_FRAMES
+
+#: What a failed sharded render tells the user.
+RESUME_HINT = "re-run with --resume to render the missing frames"
+
+
+@dataclass(frozen=True)
+class RenderChunk:
+    """Cameras ``first_frame ..`` of a path: the scene file and how to render and write them."""
+
+    scene_path: Path
+    drop_invalid: bool
+    cameras: tuple[Camera, ...]
+    first_frame: int
+    settings: RenderSettings
+    target: FrameTarget
+    kind: RendererKind
+    bit_depth: int
+    resume: bool
+
+    @property
+    def units(self) -> int:
+        return len(self.cameras)
+
+    def inputs(self) -> tuple[Path, ...]:
+        return (self.scene_path,)
+
+    def label(self) -> str:
+        return f"frames {self.first_frame}-{self.first_frame + len(self.cameras) - 1}"
+
+    def run(self, files: Files, report: TaskProgress) -> Done:
+        from ..batch import render_frames
+        from ..formats import load_scene
+        from ..render import Renderer
+
+        with files.local(self.scene_path) as path:
+            scene = load_scene(path, drop_invalid=self.drop_invalid, progress=lambda *a: None)
+        with Renderer() as renderer:
+            result = render_frames(renderer, scene, self.cameras, self.settings, self.target, self.kind,
+                                   self.bit_depth, self.resume,
+                                   progress=lambda done, total, what: report(done, total),
+                                   first_frame=self.first_frame)
+        return Done(result, result.written)
+
+
+def frame_folder(video: Path) -> Path:
+    """The hidden folder beside ``video`` that holds its frames until it is assembled."""
+    return video.with_name(f".{video.name}.frames")
+
+
+def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: RenderSettings,
+                   target: FrameTarget, executor: Executor, kind: RendererKind = RendererKind.QUAD,
+                   bit_depth: int = 8, resume: bool = False, drop_invalid: bool = False,
+                   fps: float = 30.0, progress: Optional[ProgressCallback] = None
+                   ) -> tuple[BatchResult, RunResult]:
+    """Render ``cameras`` to ``target`` (images or a video, module doc) on ``executor``:
+    local workers get one contiguous chunk each, Ray tasks at most :data:`MAX_CHUNK_FRAMES`.
+
+    Returns the summed :class:`BatchResult` (``seconds``: wall time including the video's
+    encoding) and the run's per-task reports (for :func:`splatgl.executor.summary`).
+    """
+    frames = target
+    if target.is_video:
+        from ..video import _import_av, check_video_size
+
+        _import_av()  # the install hint and the size check before any frame renders
+        check_video_size(target.video, cameras[0].width, cameras[0].height)
+        target.prepare()
+        frames = FrameTarget.parse(frame_folder(target.video), "png")
+        bit_depth = 8  # what the video holds; quantised as VideoWriter quantises
+    frames.prepare()
+    n_tasks = (executor.workers if executor.kind is ExecutorKind.LOCAL
+               else math.ceil(len(cameras) / MAX_CHUNK_FRAMES))
+    tasks = [RenderChunk(Path(scene_path), drop_invalid, tuple(cameras[i] for i in part), part.start,
+                         settings, frames, RendererKind(kind), bit_depth, resume)
+             for part in chunks(len(cameras), n_tasks)]
+    run = run_tasks(tasks, executor, "frames", progress, RESUME_HINT)
+    results = run.values
+    seconds = run.seconds
+    if target.is_video:
+        seconds += assemble_video(frames, len(cameras), target.video, fps, progress)
+        shutil.rmtree(frame_folder(target.video))
+    return BatchResult(sum(r.written for r in results), sum(r.skipped for r in results), seconds,
+                       sum(r.render_seconds for r in results)), run
+
+
+def assemble_video(frames: FrameTarget, count: int, video: Path, fps: float,
+                   progress: Optional[ProgressCallback] = None) -> float:
+    """Encode frame files ``0 .. count - 1`` of ``frames`` into ``video`` (atomically: the
+    video appears complete or not at all).  Returns the seconds it took."""
+    import time
+
+    from ..image_io import read_image
+    from ..video import VideoWriter
+
+    t0 = time.perf_counter()
+    first = read_image(frames.frame_path(0))
+    meter = FrameMeter(count, progress, unit="frames encoded")
+    with VideoWriter(video, first.shape[1], first.shape[0], fps) as writer:
+        for k in range(count):
+            writer.write(first if k == 0 else read_image(frames.frame_path(k)))
+            meter(k + 1, k + 1)
+    return time.perf_counter() - t0
