@@ -235,6 +235,12 @@ class QuadRenderer:
         self._order_key, self._order = key, order
         return order
 
+    @property
+    def order_times(self) -> tuple[float, float]:
+        """Seconds of the last :meth:`visible_order`'s ``(cull, sort)`` stages (0 when the
+        order was reused)."""
+        return self._times_cull, self._times_sort
+
     def sort_visible(self, depth: np.ndarray, keep: np.ndarray) -> np.ndarray:
         """The sort stage the settings choose: (M,) uint32 ``keep`` front to back by ``depth``."""
         if self.settings.sort_key is SortKey.GPU:
