@@ -18,8 +18,10 @@ import moderngl
 import numpy as np
 
 from .camera import Camera
-from .cull import CullData, cull_visible
+from .cull import CullData
+from .cull_chunks import ChunkedCull, keys_order, keys_pairs
 from .gl.radix_sort import RadixSorter, device_depth_sort
+from .lens_cull import lens_visible_keys
 from .early_stop import (COMMAND_BYTES, BatchHook, EarlyStopPasses, batch_bounds, plain_bounds)
 from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
@@ -122,7 +124,8 @@ class QuadRenderer:
         self.programs = programs or ProgramCache(ctx)
         self.near = resolve_near(settings, scene.robust_radius)
         self.buffers = SceneBuffers(ctx, scene, settings.half_sh)
-        self._cull_data: CullData | None = None  # built on the first culled view
+        self._chunks: ChunkedCull | None = None  # built on the first culled view
+        self._cull_data: CullData | None = None  # the LOD renderer's (its cut's rows)
         self._sorter: RadixSorter | None = None  # built on the first device sort
         self._index_buffer: moderngl.Buffer | None = None
         self._prepared: moderngl.Buffer | None = None
@@ -213,23 +216,26 @@ class QuadRenderer:
             return self._order
         self._stale_frames = 0
         t0 = time.perf_counter()
-        if camera.is_lens:   # distance keys; equirect seam splats twice (splatgl/lens.py)
-            p_cam = to_camera(self.scene.relative_means, anchored_camera(camera, self.scene.anchor))
-            kept = np.flatnonzero(lens.lens_cull(p_cam, self.scene.opacities, camera, self.near))
-            reach = lens.splat_reach(self.scene.scales[kept].max(axis=1) * camera.scale,
-                                     self.scene.opacities[kept])
-            depth, keep = lens.lens_order(p_cam, kept, reach, camera)
-        elif self.settings.cull:
-            if self._cull_data is None:
-                self._cull_data = CullData.from_scene(self.scene)
-            keep, depth = cull_visible(self._cull_data, anchored_camera(camera, self.scene.anchor),
-                                       self.near, self.settings.antialias, camera.scale)
+        anchored = anchored_camera(camera, self.scene.anchor)
+        if camera.is_lens or self.settings.cull:
+            if self._chunks is None:
+                self._chunks = ChunkedCull.from_scene(self.scene)
+            if camera.is_lens:   # distance keys; equirect seam splats twice (splatgl/lens.py)
+                keys = lens_visible_keys(self._chunks, anchored, self.near, camera.scale)
+            else:
+                keys = self._chunks.visible_keys(anchored, self.near, self.settings.antialias,
+                                                 camera.scale)
+            t1 = time.perf_counter()
+            if self.settings.sort_key is SortKey.EXACT:
+                order = keys_order(keys)
+            else:
+                order = self.sort_visible(*keys_pairs(keys, self.scene.count))
         else:
-            p_cam = to_camera(self.scene.relative_means, anchored_camera(camera, self.scene.anchor))
+            p_cam = to_camera(self.scene.relative_means, anchored)
             keep = np.flatnonzero(p_cam[:, 2] > self.near).astype(np.uint32)  # keys need z > 0
             depth = p_cam[keep, 2]
-        t1 = time.perf_counter()
-        order = self.sort_visible(depth, keep)
+            t1 = time.perf_counter()
+            order = self.sort_visible(depth, keep)
         t2 = time.perf_counter()
         self._times_cull, self._times_sort = t1 - t0, t2 - t1
         self._order_key, self._order = key, order
