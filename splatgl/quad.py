@@ -46,7 +46,8 @@ PREPASS_GROUP = 128
 @dataclass(frozen=True)
 class QuadTimes:
     """Wall-clock seconds of each stage of one quad-path frame (``prepass`` is 0 unless the
-    per-splat math runs in the compute pre-pass); ``drawn`` counts the instances drawn."""
+    per-splat math runs in the compute pre-pass); ``drawn`` counts the instances drawn.
+    ``cull`` includes writing the sort keys; ``sort`` is the sort of those keys."""
 
     cull: float
     sort: float
@@ -57,10 +58,14 @@ class QuadTimes:
     drawn: int = 0
     #: Splats the early-termination occlusion cull dropped (0 with early_stop off).
     occlusion_culled: int = 0
+    #: Seconds this frame spent building the scene's chunked cull data (the first culled view
+    #: only; :class:`splatgl.cull_chunks.ChunkedCull`), apart from the per-view ``cull``.
+    cull_build: float = 0.0
 
     @property
     def total(self) -> float:
-        return self.cull + self.sort + self.upload + self.prepass + self.draw + self.readback
+        return (self.cull_build + self.cull + self.sort + self.upload + self.prepass + self.draw
+                + self.readback)
 
 
 def composite(rgba: np.ndarray, background: tuple[float, float, float]) -> np.ndarray:
@@ -145,7 +150,7 @@ class QuadRenderer:
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self._plain_command: moderngl.Buffer | None = None
         self._occlusion_culled = 0
-        self._times_cull = self._times_sort = self._times_upload = 0.0
+        self._times_cull = self._times_sort = self._times_upload = self._times_build = 0.0
         self._times_prepass = self._times_draw = 0.0
         self.last_times: QuadTimes | None = None
 
@@ -207,7 +212,7 @@ class QuadRenderer:
         """
         key = (camera.world_to_camera.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy,
                camera.width, camera.height, camera.projection, camera.distortion, camera.ods_eye)
-        self._times_cull = self._times_sort = 0.0
+        self._times_cull = self._times_sort = self._times_build = 0.0
         if key == self._order_key:
             return self._order
         if self._order_key is not None and self._stale_frames + 1 < self.settings.resort_interval:
@@ -215,11 +220,13 @@ class QuadRenderer:
             self._order_key = key
             return self._order
         self._stale_frames = 0
+        if (camera.is_lens or self.settings.cull) and self._chunks is None:
+            tb = time.perf_counter()
+            self._chunks = ChunkedCull.from_scene(self.scene)
+            self._times_build = time.perf_counter() - tb
         t0 = time.perf_counter()
         anchored = anchored_camera(camera, self.scene.anchor)
         if camera.is_lens or self.settings.cull:
-            if self._chunks is None:
-                self._chunks = ChunkedCull.from_scene(self.scene)
             if camera.is_lens:   # distance keys; equirect seam splats twice (splatgl/lens.py)
                 keys = lens_visible_keys(self._chunks, anchored, self.near, camera.scale)
             else:
@@ -436,7 +443,7 @@ class QuadRenderer:
         t1 = time.perf_counter()
         self.last_times = QuadTimes(self._times_cull, self._times_sort, self._times_upload,
                                     self._times_prepass, self._times_draw, t1 - t0, self._drawn,
-                                    self._occlusion_culled)
+                                    self._occlusion_culled, self._times_build)
         return RenderOutput(composite(rgba, self.settings.background), d)
 
     def prepare_geometry(self, camera: Camera) -> int:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from splatgl import lens
+from splatgl import cull_chunks, lens
 from splatgl.camera import Camera, look_at
 from splatgl.cull import CullData, cull
 from splatgl.cull_chunks import ChunkedCull, keys_order, keys_pairs
@@ -52,9 +52,14 @@ def _cameras():
             Camera.from_fov(640, 360, 30.0, scaled), Camera.orthographic(200, 150, 40.0, far)]
 
 
+@pytest.mark.parametrize("whole_share", [1.0, 0.0], ids=["chunks", "one-pass"])
 @pytest.mark.parametrize("antialias", [False, True])
 @pytest.mark.parametrize("cam_index", range(5))
-def test_chunked_cull_keeps_what_the_float64_cull_keeps(cam_index, antialias):
+def test_chunked_cull_keeps_what_the_float64_cull_keeps(cam_index, antialias, whole_share,
+                                                        monkeypatch):
+    """Through the chunks (boundary rows never handed to the one-pass fallback) and through
+    the fallback."""
+    monkeypatch.setattr(cull_chunks, "WHOLE_SHARE", whole_share)
     points, max_scale, opac = _clustered(30_000, 3 + cam_index)
     camera = _cameras()[cam_index]
     chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=32, group=8)
@@ -82,7 +87,11 @@ def test_chunked_cull_property(seed, eye, target, fov, cx, near, scale):
     camera = dataclasses.replace(Camera.from_fov(300, 200, fov, pose), cx=cx)
     points, max_scale, opac = _clustered(4000, seed)
     chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=16, group=4)
-    got = np.sort(chunks.visible_keys(camera, near, False, camera.scale))
+    share, cull_chunks.WHOLE_SHARE = cull_chunks.WHOLE_SHARE, 1.0  # always through the chunks
+    try:
+        got = np.sort(chunks.visible_keys(camera, near, False, camera.scale))
+    finally:
+        cull_chunks.WHOLE_SHARE = share
     np.testing.assert_array_equal(got, _want_keys(points, max_scale, opac, camera, near))
 
 
