@@ -190,6 +190,10 @@ class ChunkedCull:
             out += idx.size
         return self._keys[:out]
 
+    def key_buffer(self) -> np.ndarray:
+        """(M,) uint64 buffer the culls write keys into (one per drawable splat, reused)."""
+        return self._keys
+
     def _depth_keys(self, r: np.ndarray, t: np.float32, a: int, b: int, out: int) -> int:
         """Keys of every splat of rows ``a:b`` into the buffer from ``out``; returns the new
         end.  Depths ``r . p + t`` by cull_visible's own operations

@@ -33,7 +33,8 @@ ANGLE_BAND = 1e-4
 
 def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: float = 1.0
                       ) -> np.ndarray:
-    """(K,) uint64 unsorted sort keys of a lens camera's kept splats and seam copies.
+    """(K,) uint64 unsorted sort keys of a lens camera's kept splats and seam copies (without
+    copies, a view of ``chunks``' key buffer, which the next cull overwrites).
 
     ``camera`` anchored to ``chunks.data.xyz``'s origin; ``scale``: the model's uniform scale
     (multiplies the world reach of the seam test).  Same keys as :func:`splatgl.lens.lens_cull`
@@ -52,7 +53,7 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
     block = min(CULL_BLOCK, max(n, 1))
     x, y, z, d, tmp = (np.empty(block, np.float32) for _ in range(5))
     keep, band = np.empty(block, bool), np.empty(block, bool)
-    out = []
+    keys, out, copies = chunks.key_buffer(), 0, []
     for start in range(0, n, block):
         stop = min(n, start + block)
         m = stop - start
@@ -79,28 +80,29 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
             if doubt.size:
                 theta = np.arctan2(np.hypot(xb[doubt], yb[doubt]), zb[doubt])
                 kb[doubt[theta > limit32]] = False
-        idx = np.flatnonzero(kb)
-        depth = db[idx]
-        index = chunks.index[start + idx]
-        out.append(depth_keys(depth, index))
-        if equirect and idx.size:
-            copies = _seam_copies(chunks, start + idx, xb[idx], yb[idx], zb[idx], depth, camera,
-                                  scale)
-            out.append(depth_keys(depth[copies], index[copies] | WRAP_FLAG))
-    return np.concatenate(out) if out else np.zeros(0, np.uint64)
+        if equirect:  # seam candidates from a float32 bound of the reach, on the whole block
+            np.multiply(data.radius[start:stop], np.float32(scale), out=tb)
+            tb += db * np.float32(4.0 / camera.fx)
+            tb *= np.float32(1.0 + ANGLE_BAND)
+            cand = np.flatnonzero(kb & (np.abs(xb) < tb) & (zb < tb))
+            if cand.size:
+                cand = cand[_seam_copies(chunks, start + cand, xb[cand], yb[cand], zb[cand],
+                                         camera, scale)]
+                copies.append(depth_keys(db[cand], chunks.index[start + cand] | WRAP_FLAG))
+        if kb.all():  # no compaction
+            depth_keys(db, chunks.index[start:stop], keys[out:out + m])
+            out += m
+        else:
+            idx = np.flatnonzero(kb)
+            depth_keys(db[idx], chunks.index[start + idx], keys[out:out + idx.size])
+            out += idx.size
+    return np.concatenate([keys[:out], *copies]) if copies else keys[:out]
 
 
-def _seam_copies(chunks: ChunkedCull, rows: np.ndarray, x, y, z, dist, camera: Camera,
+def _seam_copies(chunks: ChunkedCull, rows: np.ndarray, x, y, z, camera: Camera,
                  scale: float) -> np.ndarray:
-    """Indices into ``rows`` of the kept splats :func:`splatgl.lens.wrap_copies` duplicates:
-    a float32 candidate bound first, the float64 test on the candidates."""
+    """(R,) bool: which of the kept splats ``rows`` (with camera-space ``x, y, z`` (R,)
+    float32) :func:`splatgl.lens.wrap_copies` duplicates (its float64 test, its reach)."""
     data = chunks.data
-    reach = (data.radius[rows] * np.float32(scale) + dist * np.float32(4.0 / camera.fx)) \
-        * np.float32(1.0 + ANGLE_BAND)
-    cand = np.flatnonzero((np.abs(x) < reach) & (z < reach))
-    if not cand.size:
-        return cand
-    r = rows[cand]
-    radius = splat_reach(data.max_scale[r] * scale, data.opacities[r])
-    p = np.stack([x[cand], y[cand], z[cand]], 1)
-    return cand[wrap_copies(p, radius, camera)]
+    radius = splat_reach(data.max_scale[rows] * scale, data.opacities[rows])
+    return wrap_copies(np.stack([x, y, z], 1), radius, camera)
