@@ -162,8 +162,7 @@ class CullData:
 
 
 def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = False,
-                 scale: float = 1.0, sides: tuple[bool, bool, bool, bool] = (True,) * 4
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """The splats :func:`cull` keeps, with their view depths: ``(indices (M,) uint32 ascending,
     z (M,) float32)``.
 
@@ -181,10 +180,6 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
     ``lambda >= LOW_PASS``, so ``o exp(-d^2 / (2 lambda)) >= 1/255`` whenever
     ``k^2 = 2 ln(255 o) >= 0.5 / LOW_PASS``).  With antialiasing every survivor takes it.
     Orthographic cameras take :func:`cull` as is.
-
-    ``sides`` (right, left, bottom, top image edge): a side given as False is neither tested nor
-    counted as a reason to run the peak bound; only for rows whose centres the caller knows lie
-    strictly inside that side's plane (:mod:`splatgl.cull_chunks` for its boundary chunks).
     """
     n = data.count
     if camera.is_orthographic:
@@ -217,26 +212,19 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
         rad = data.radius[start:stop]
         ib.fill(True)
         for axis, (a_hi, b_hi, a_lo, b_lo, lo, hi) in enumerate(planes):
-            use_hi, use_lo = sides[2 * axis], sides[2 * axis + 1]
-            if not (use_hi or use_lo):
-                continue
             view_axis(data.xyz, start, stop, r[axis], t[axis], vb, wb)
-            for a, b, upper, use in ((a_hi, b_hi, True, use_hi), (a_lo, b_lo, False, use_lo)):
-                if not use:
-                    continue
+            for a, b, upper in ((a_hi, b_hi, True), (a_lo, b_lo, False)):
                 np.multiply(rad, b, out=wb)
                 np.multiply(zb, a, out=ub)
                 wb += ub
                 (np.less_equal if upper else np.greater_equal)(vb, wb, out=tb)
                 kb &= tb
-            if use_hi:
-                np.multiply(zb, hi, out=wb)
-                np.less_equal(vb, wb, out=tb)
-                ib &= tb
-            if use_lo:
-                np.multiply(zb, lo, out=wb)
-                np.greater_equal(vb, wb, out=tb)
-                ib &= tb
+            np.multiply(zb, hi, out=wb)
+            np.less_equal(vb, wb, out=tb)
+            ib &= tb
+            np.multiply(zb, lo, out=wb)
+            np.greater_equal(vb, wb, out=tb)
+            ib &= tb
         idx = np.flatnonzero(kb)
         if not idx.size:
             continue

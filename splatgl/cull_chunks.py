@@ -60,12 +60,10 @@ class Spheres:
         return Spheres(self.centre[ids], self.r_centre[ids], self.r_max[ids], self.plain[ids])
 
     def classify(self, camera: Camera, near: float, scale: float = 1.0
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(accept, reject, sides)`` for a perspective ``camera`` anchored to the rows' frame
-        (float64; the tests are in the module doc): accept (C,) bool, every splat is kept with
-        no per-splat test; reject (C,) bool, none is; sides (C, 4) bool, the image sides (right,
-        left, bottom, top) whose plane the chunk's centres do not lie strictly inside (the
-        per-splat cull tests only those: :func:`~splatgl.cull.cull_visible`'s ``sides``)."""
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """``(accept, reject)`` (C,) bool for a perspective ``camera`` anchored to the rows'
+        frame (float64; the tests are in the module doc): accept, every splat is kept with no
+        per-splat test; reject, none is."""
         rot, t = camera.rotation, camera.translation
         cam = self.centre @ rot.T + t                       # (C, 3) centres, camera space
         s = float(np.linalg.norm(rot, axis=1).max())        # camera-space length per world unit
@@ -74,16 +72,16 @@ class Spheres:
         slack = ROUNDING * (np.linalg.norm(cam, axis=1) + rc + s * np.linalg.norm(self.centre, axis=1)
                             + float(np.linalg.norm(t)))
         x, y, z = cam[:, 0], cam[:, 1], cam[:, 2]
+        accept = self.plain & (z - rc > near + slack)
         reject = z + rc < near - slack
-        sides = np.empty((z.size, 4), bool)
-        for axis, (coord, f, c, size) in enumerate(((x, camera.fx, camera.cx, camera.width),
-                                                    (y, camera.fy, camera.cy, camera.height))):
+        for coord, f, c, size in ((x, camera.fx, camera.cx, camera.width),
+                                  (y, camera.fy, camera.cy, camera.height)):
             lo, hi = -c / f, (size - c) / f
             n_hi, n_lo = np.hypot(1.0, hi), np.hypot(1.0, lo)
             # centres strictly inside the image's pyramid: every plane test and the peak
             # bound (centre inside the image, not faint) keep the splat
-            sides[:, 2 * axis] = (coord - hi * z) / n_hi >= -(rc + slack)
-            sides[:, 2 * axis + 1] = (lo * z - coord) / n_lo >= -(rc + slack)
+            accept &= (coord - hi * z) / n_hi < -(rc + slack)
+            accept &= (lo * z - coord) / n_lo < -(rc + slack)
             # every splat beyond a side plane widened by the screen margin and its reach:
             # x - a z > n r for all splats, with a = s + n m / f (cull_visible's rearranged test)
             a_hi, a_lo = hi + n_hi * MARGIN_PX / f, lo - n_lo * MARGIN_PX / f
@@ -91,8 +89,7 @@ class Spheres:
                        > n_hi * reach + slack * np.hypot(1.0, a_hi))
             reject |= (a_lo * z - coord - rc * np.hypot(1.0, a_lo)
                        > n_lo * reach + slack * np.hypot(1.0, a_lo))
-        accept = self.plain & (z - rc > near + slack) & ~sides.any(axis=1)
-        return accept & ~reject, reject, sides
+        return accept & ~reject, reject
 
 
 class ChunkedCull:
@@ -167,20 +164,16 @@ class ChunkedCull:
             # compensation factor runs on every splat
             idx, z = cull_visible(self.data, camera, near, antialias, scale)
             return depth_keys(z, self.index[idx], self._keys[:idx.size])
-        accept_g, reject_g, _ = self.groups.classify(camera, near, scale)
+        accept_g, reject_g = self.groups.classify(camera, near, scale)
         accept = np.repeat(accept_g, self.group)[:n_chunks]
         test_g = np.flatnonzero(~(accept_g | reject_g))
         # the boundary groups' chunks, one by one
         ids = (test_g[:, None] * self.group + np.arange(self.group)).ravel()
         ids = ids[ids < n_chunks]
-        accept_c, reject_c, sides_c = self.chunks.take(ids).classify(camera, near, scale)
+        accept_c, reject_c = self.chunks.take(ids).classify(camera, near, scale)
         accept[ids[accept_c]] = True
         test = np.zeros(n_chunks, bool)
-        boundary = ~(accept_c | reject_c)
-        test[ids[boundary]] = True
-        # boundary chunks grouped by the sides they straddle (4 bits)
-        side_code = np.zeros(n_chunks, np.int8)
-        side_code[ids[boundary]] = sides_c[boundary] @ (1 << np.arange(4))
+        test[ids[~(accept_c | reject_c)]] = True
         sizes = np.diff(self.starts)
         if sizes[test].sum() > WHOLE_SHARE * self.index.size:  # mostly boundary: one pass
             idx, z = cull_visible(self.data, camera, near, antialias, scale)
@@ -190,10 +183,9 @@ class ChunkedCull:
         t = camera.translation.astype(np.float32)[2]
         for a, b in _runs(accept, self.starts):
             out = self._depth_keys(r, t, a, b, out)
-        for code in np.unique(side_code[test]):
-            rows = _rows(np.flatnonzero(test & (side_code == code)), self.starts)
-            sides = tuple(bool(code >> k & 1) for k in range(4))
-            idx, z = cull_visible(self.data.subset(rows), camera, near, antialias, scale, sides)
+        if test.any():
+            rows = _rows(np.flatnonzero(test), self.starts)
+            idx, z = cull_visible(self.data.subset(rows), camera, near, antialias, scale)
             depth_keys(z, self.index[rows[idx]], self._keys[out:out + idx.size])
             out += idx.size
         return self._keys[:out]

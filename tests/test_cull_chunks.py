@@ -68,7 +68,7 @@ def test_chunked_cull_keeps_what_the_float64_cull_keeps(cam_index, antialias, wh
     assert 0 < want.size < points.shape[0]
     np.testing.assert_array_equal(got, want)
     if not camera.is_orthographic:  # every kind of chunk occurs, so each branch was checked
-        accept, reject, _ = chunks.chunks.classify(camera, 0.05, camera.scale)
+        accept, reject = chunks.chunks.classify(camera, 0.05, camera.scale)
         assert accept.any() and reject.any() and (~(accept | reject)).any()
 
 
