@@ -139,7 +139,8 @@ class CullData:
         that order (no recomputation)."""
         out = object.__new__(CullData)
         # each row of xyz must be contiguous (the cull streams rows); a column slice keeps that
-        out.xyz = self.xyz[:, rows] if isinstance(rows, slice) else np.ascontiguousarray(self.xyz[:, rows])
+        # (np.take: fancy indexing on the second axis gives a non-contiguous array, twice as slow)
+        out.xyz = self.xyz[:, rows] if isinstance(rows, slice) else np.take(self.xyz, rows, axis=1)
         for name in ("max_scale", "opacities", "radius", "alive", "faint"):
             setattr(out, name, getattr(self, name)[rows])
         return out
@@ -205,13 +206,13 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
         m = stop - start
         zb, vb, wb, ub = z[:m], v[:m], w[:m], u[:m]
         kb, ib, tb = keep[:m], inside[:m], tmp[:m]
-        _row(data.xyz, start, stop, r[2], t[2], zb, wb)
+        view_axis(data.xyz, start, stop, r[2], t[2], zb, wb)
         np.greater(zb, near32, out=kb)
         kb &= data.alive[start:stop]
         rad = data.radius[start:stop]
         ib.fill(True)
         for axis, (a_hi, b_hi, a_lo, b_lo, lo, hi) in enumerate(planes):
-            _row(data.xyz, start, stop, r[axis], t[axis], vb, wb)
+            view_axis(data.xyz, start, stop, r[axis], t[axis], vb, wb)
             for a, b, upper in ((a_hi, b_hi, True), (a_lo, b_lo, False)):
                 np.multiply(rad, b, out=wb)
                 np.multiply(zb, a, out=ub)
@@ -246,7 +247,7 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
     return np.concatenate(out_idx), np.concatenate(out_z)
 
 
-def _row(xyz: np.ndarray, start: int, stop: int, r: np.ndarray, t, out: np.ndarray,
+def view_axis(xyz: np.ndarray, start: int, stop: int, r: np.ndarray, t, out: np.ndarray,
          tmp: np.ndarray) -> None:
     """``out = r . p + t`` for the block ``start:stop`` of (3, N) points (one camera axis)."""
     np.multiply(xyz[0, start:stop], r[0], out=out)

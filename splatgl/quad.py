@@ -18,8 +18,10 @@ import moderngl
 import numpy as np
 
 from .camera import Camera
-from .cull import CullData, cull_visible
+from .cull import CullData
+from .cull_chunks import ChunkedCull, keys_order, keys_pairs
 from .gl.radix_sort import RadixSorter, device_depth_sort
+from .lens_cull import lens_visible_keys
 from .early_stop import (COMMAND_BYTES, BatchHook, EarlyStopPasses, batch_bounds, plain_bounds)
 from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
@@ -44,7 +46,8 @@ PREPASS_GROUP = 128
 @dataclass(frozen=True)
 class QuadTimes:
     """Wall-clock seconds of each stage of one quad-path frame (``prepass`` is 0 unless the
-    per-splat math runs in the compute pre-pass); ``drawn`` counts the instances drawn."""
+    per-splat math runs in the compute pre-pass); ``drawn`` counts the instances drawn.
+    ``cull`` includes writing the sort keys; ``sort`` is the sort of those keys."""
 
     cull: float
     sort: float
@@ -55,10 +58,14 @@ class QuadTimes:
     drawn: int = 0
     #: Splats the early-termination occlusion cull dropped (0 with early_stop off).
     occlusion_culled: int = 0
+    #: Seconds this frame spent building the scene's chunked cull data (the first culled view
+    #: only; :class:`splatgl.cull_chunks.ChunkedCull`), apart from the per-view ``cull``.
+    cull_build: float = 0.0
 
     @property
     def total(self) -> float:
-        return self.cull + self.sort + self.upload + self.prepass + self.draw + self.readback
+        return (self.cull_build + self.cull + self.sort + self.upload + self.prepass + self.draw
+                + self.readback)
 
 
 def composite(rgba: np.ndarray, background: tuple[float, float, float]) -> np.ndarray:
@@ -122,7 +129,8 @@ class QuadRenderer:
         self.programs = programs or ProgramCache(ctx)
         self.near = resolve_near(settings, scene.robust_radius)
         self.buffers = SceneBuffers(ctx, scene, settings.half_sh)
-        self._cull_data: CullData | None = None  # built on the first culled view
+        self._chunks: ChunkedCull | None = None  # built on the first culled view
+        self._cull_data: CullData | None = None  # the LOD renderer's (its cut's rows)
         self._sorter: RadixSorter | None = None  # built on the first device sort
         self._index_buffer: moderngl.Buffer | None = None
         self._prepared: moderngl.Buffer | None = None
@@ -142,7 +150,7 @@ class QuadRenderer:
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self._plain_command: moderngl.Buffer | None = None
         self._occlusion_culled = 0
-        self._times_cull = self._times_sort = self._times_upload = 0.0
+        self._times_cull = self._times_sort = self._times_upload = self._times_build = 0.0
         self._times_prepass = self._times_draw = 0.0
         self.last_times: QuadTimes | None = None
 
@@ -204,7 +212,7 @@ class QuadRenderer:
         """
         key = (camera.world_to_camera.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy,
                camera.width, camera.height, camera.projection, camera.distortion, camera.ods_eye)
-        self._times_cull = self._times_sort = 0.0
+        self._times_cull = self._times_sort = self._times_build = 0.0
         if key == self._order_key:
             return self._order
         if self._order_key is not None and self._stale_frames + 1 < self.settings.resort_interval:
@@ -212,28 +220,39 @@ class QuadRenderer:
             self._order_key = key
             return self._order
         self._stale_frames = 0
+        if (camera.is_lens or self.settings.cull) and self._chunks is None:
+            tb = time.perf_counter()
+            self._chunks = ChunkedCull.from_scene(self.scene)
+            self._times_build = time.perf_counter() - tb
         t0 = time.perf_counter()
-        if camera.is_lens:   # distance keys; equirect seam splats twice (splatgl/lens.py)
-            p_cam = to_camera(self.scene.relative_means, anchored_camera(camera, self.scene.anchor))
-            kept = np.flatnonzero(lens.lens_cull(p_cam, self.scene.opacities, camera, self.near))
-            reach = lens.splat_reach(self.scene.scales[kept].max(axis=1) * camera.scale,
-                                     self.scene.opacities[kept])
-            depth, keep = lens.lens_order(p_cam, kept, reach, camera)
-        elif self.settings.cull:
-            if self._cull_data is None:
-                self._cull_data = CullData.from_scene(self.scene)
-            keep, depth = cull_visible(self._cull_data, anchored_camera(camera, self.scene.anchor),
-                                       self.near, self.settings.antialias, camera.scale)
+        anchored = anchored_camera(camera, self.scene.anchor)
+        if camera.is_lens or self.settings.cull:
+            if camera.is_lens:   # distance keys; equirect seam splats twice (splatgl/lens.py)
+                keys = lens_visible_keys(self._chunks, anchored, self.near, camera.scale)
+            else:
+                keys = self._chunks.visible_keys(anchored, self.near, self.settings.antialias,
+                                                 camera.scale)
+            t1 = time.perf_counter()
+            if self.settings.sort_key is SortKey.EXACT:
+                order = keys_order(keys)
+            else:
+                order = self.sort_visible(*keys_pairs(keys, self.scene.count))
         else:
-            p_cam = to_camera(self.scene.relative_means, anchored_camera(camera, self.scene.anchor))
+            p_cam = to_camera(self.scene.relative_means, anchored)
             keep = np.flatnonzero(p_cam[:, 2] > self.near).astype(np.uint32)  # keys need z > 0
             depth = p_cam[keep, 2]
-        t1 = time.perf_counter()
-        order = self.sort_visible(depth, keep)
+            t1 = time.perf_counter()
+            order = self.sort_visible(depth, keep)
         t2 = time.perf_counter()
         self._times_cull, self._times_sort = t1 - t0, t2 - t1
         self._order_key, self._order = key, order
         return order
+
+    @property
+    def order_times(self) -> tuple[float, float]:
+        """Seconds of the last :meth:`visible_order`'s ``(cull, sort)`` stages (0 when the
+        order was reused)."""
+        return self._times_cull, self._times_sort
 
     def sort_visible(self, depth: np.ndarray, keep: np.ndarray) -> np.ndarray:
         """The sort stage the settings choose: (M,) uint32 ``keep`` front to back by ``depth``."""
@@ -424,7 +443,7 @@ class QuadRenderer:
         t1 = time.perf_counter()
         self.last_times = QuadTimes(self._times_cull, self._times_sort, self._times_upload,
                                     self._times_prepass, self._times_draw, t1 - t0, self._drawn,
-                                    self._occlusion_culled)
+                                    self._occlusion_culled, self._times_build)
         return RenderOutput(composite(rgba, self.settings.background), d)
 
     def prepare_geometry(self, camera: Camera) -> int:

@@ -7,13 +7,27 @@ depth order (ties keep input order, as the reference's stable radix sort does).
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
+if sys.byteorder != "little":  # keys are written as (low word, high word) uint32 pairs
+    raise ImportError("splatgl.sort assumes a little-endian machine")
 
-def depth_keys(depth: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """(M,) uint64 keys ``(float_bits(z) << 32) | index`` for positive depths (M,)."""
-    bits = np.ascontiguousarray(depth, dtype=np.float32).view(np.uint32).astype(np.uint64)
-    return (bits << np.uint64(32)) | indices.astype(np.uint64)
+
+def depth_keys(depth: np.ndarray, indices: np.ndarray, out: np.ndarray | None = None
+               ) -> np.ndarray:
+    """(M,) uint64 keys ``(float_bits(z) << 32) | index`` for positive depths (M,) and uint32
+    indices (M,), into ``out`` (M,) uint64 where given.
+
+    Written as the keys' two little-endian uint32 words (two strided copies; half the time of
+    widening, shifting and or-ing whole uint64 arrays).
+    """
+    keys = np.empty(len(depth), np.uint64) if out is None else out
+    words = keys.view(np.uint32).reshape(-1, 2)
+    words[:, 0] = indices
+    words[:, 1] = np.asarray(depth, np.float32).view(np.uint32)
+    return keys
 
 
 def depth_sort(depth: np.ndarray, indices: np.ndarray) -> np.ndarray:

@@ -118,7 +118,7 @@ def test_timings_show_counts_as_counts(tmp_path, capsys):
     rc, out, _ = run_cli(capsys, "render", "-o", tmp_path / "x.png", "--width", "48", "--height",
                          "32", "--timings")
     line = next(t for t in out.splitlines() if t.startswith("timings:"))
-    assert "drawn 1,604, occlusion_culled 0 (stages total" in line
+    assert "drawn 1,604, occlusion_culled 0, cull_build " in line
     assert "drawn 1604" not in line and " ms, drawn" in line
     rc, out, _ = run_cli(capsys, "render", "-o", tmp_path / "x.png", "--width", "48", "--height",
                          "32", "--timings", "--renderer", "tile")

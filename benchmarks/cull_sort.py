@@ -1,0 +1,92 @@
+"""Cull against sort on the scale benchmark's scenes (issue 18, item 3): per camera model.
+
+Runs only the quad path's order stage (``QuadRenderer.visible_order``: cull, key construction,
+sort; no draw) on an orbit of views, for a pinhole camera that frames the whole scene (almost
+every splat visible), a pinhole camera at 0.2x that distance (most of the scene outside the
+frustum), a 180-degree fisheye and an equirectangular panorama, and prints the median cull and
+sort times and their ratio.  Run it under the timing gate on a shared machine::
+
+    /work/tools/timed python benchmarks/cull_sort.py --sizes 0.1M,1M --frames 5
+
+The scenes are the scale benchmark's (``splatgl.bench.scale.scene_file``, built on first use).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+
+import numpy as np
+
+from splatgl.bench.scale import scene_file
+from splatgl.bench.scale_cli import _cpu_model, parse_sizes
+from splatgl.camera import orbit
+from splatgl.formats import load_scene
+from splatgl.lens import with_projection
+from splatgl.quad import QuadRenderer
+from splatgl.render import Renderer, default_camera
+from splatgl.settings import RenderSettings
+
+VIEWS = ("pinhole", "pinhole-close", "fisheye", "equirect")
+
+
+def cameras(scene, view: str, frames: int, width: int, height: int):
+    """``frames + 1`` cameras of an orbit (2 degrees a step) for ``view``."""
+    base = default_camera(scene, width, height)
+    lo, hi = scene.robust_bounds
+    centre = 0.5 * (lo + hi)
+    dist = float(np.linalg.norm(base.center - centre)) * (0.2 if view == "pinhole-close" else 1.0)
+    cams = [base.with_pose(orbit(centre, dist, 2.0 * i, 20.0)) for i in range(frames + 1)]
+    if view == "fisheye":
+        return [with_projection(c, "fisheye", 180.0) for c in cams]
+    if view == "equirect":
+        return [with_projection(c, "equirectangular") for c in cams]
+    return cams
+
+
+def measure(n: int, frames: int, width: int, height: int) -> list[dict]:
+    renderer = Renderer()
+    scene = load_scene(scene_file(n, 0), progress=lambda *a: None)
+    quad = QuadRenderer(renderer.ctx, scene, RenderSettings(), renderer.programs)
+    rows = []
+    for view in VIEWS:
+        cull, sort, kept = [], [], 0
+        for i, cam in enumerate(cameras(scene, view, frames, width, height)):
+            order = quad.visible_order(cam)
+            if i:  # the first view builds the cull data
+                c, s = quad.order_times
+                cull.append(c)
+                sort.append(s)
+            kept = order.size
+        c, s = statistics.median(cull), statistics.median(sort)
+        rows.append({"splats": n, "view": view, "kept": int(kept), "cull_ms": 1e3 * c,
+                     "sort_ms": 1e3 * s, "cull_over_sort": c / s})
+    quad.release()
+    renderer.close()
+    return rows
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--sizes", default="0.1M,1M", help="scene sizes (splats), 'k'/'M' suffixes")
+    p.add_argument("--frames", type=int, default=5, help="timed views per camera model")
+    p.add_argument("--width", type=int, default=1280)
+    p.add_argument("--height", type=int, default=720)
+    p.add_argument("--json", help="also write the rows to this JSON file")
+    args = p.parse_args()
+    print(f"# {_cpu_model()}; medians of {args.frames} views; {args.width}x{args.height}")
+    print(f"{'splats':>9} {'view':>14} {'kept':>9} {'cull ms':>8} {'sort ms':>8} {'cull/sort':>9}")
+    rows = []
+    for n in parse_sizes(args.sizes, (100_000, 1_000_000), "--sizes"):
+        for r in measure(n, args.frames, args.width, args.height):
+            rows.append(r)
+            print(f"{r['splats']:>9,} {r['view']:>14} {r['kept']:>9,} {r['cull_ms']:>8.1f} "
+                  f"{r['sort_ms']:>8.1f} {r['cull_over_sort']:>9.2f}", flush=True)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(rows, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()

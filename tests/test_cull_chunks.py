@@ -1,0 +1,186 @@
+"""The chunked cull (:mod:`splatgl.cull_chunks`) and the fused lens cull (:mod:`splatgl.lens_cull`)
+keep exactly what the float64 cull and the old lens stages keep, with the same depth bits, so
+the sorted order (and so the image) is unchanged; on random scenes and cameras and on a real one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from splatgl import cull_chunks, lens
+from splatgl.camera import Camera, look_at
+from splatgl.cull import CullData, cull
+from splatgl.cull_chunks import ChunkedCull, keys_order, keys_pairs
+from splatgl.lens_cull import lens_visible_keys
+from splatgl.project import anchored_camera, to_camera
+from splatgl.sort import depth_keys, depth_sort
+
+FISHEYE_K = (0.05, -0.01, 0.002, -0.0003)
+
+
+def _clustered(n: int, seed: int):
+    """(N, 3) float32 centres in clusters (so whole chunks fall inside and outside a view),
+    log-normal max scales with some large splats, opacities spanning the faint range."""
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-4, 4, (max(n // 200, 1), 3))
+    points = (centres[rng.integers(0, len(centres), n)] + rng.normal(0, 0.25, (n, 3)))
+    max_scale = np.exp(rng.normal(-3.5, 1.0, n))
+    opac = np.concatenate([rng.uniform(0, 0.02, n // 5), rng.uniform(0, 1, n - n // 5)])
+    return points.astype(np.float32), max_scale.astype(np.float32), rng.permutation(opac).astype(np.float32)
+
+
+def _want_keys(points, max_scale, opac, camera, near, antialias=False):
+    """Sorted keys of the float64 cull's splats with float32 camera-space z."""
+    keep = np.flatnonzero(cull(to_camera(points, camera), max_scale * camera.scale, opac, camera,
+                               near, antialias))
+    z = to_camera(points, camera)[keep, 2]
+    return np.sort(depth_keys(z, keep.astype(np.uint32)))
+
+
+def _cameras():
+    far = look_at(np.array([0.3, -0.5, -7.0]), np.array([3.0, 1.0, 0.0]))
+    inside = look_at(np.array([0.2, 0.1, -0.5]), np.array([1.0, 0.5, 2.0]))
+    edge = look_at(np.array([-9.0, 0.0, -4.0]), np.array([2.0, 0.0, 3.0]))
+    scaled = far.copy()
+    scaled[:3, :3] *= 2.5  # a model transform's uniform scale folded in
+    return [Camera.from_fov(640, 360, 50.0, far), Camera.from_fov(300, 400, 80.0, inside),
+            Camera(320, 200, 260.0, 240.0, 40.0, 170.0, edge),
+            Camera.from_fov(640, 360, 30.0, scaled), Camera.orthographic(200, 150, 40.0, far)]
+
+
+@pytest.mark.parametrize("whole_share", [1.0, 0.0], ids=["chunks", "one-pass"])
+@pytest.mark.parametrize("antialias", [False, True])
+@pytest.mark.parametrize("cam_index", range(5))
+def test_chunked_cull_keeps_what_the_float64_cull_keeps(cam_index, antialias, whole_share,
+                                                        monkeypatch):
+    """Through the chunks (boundary rows never handed to the one-pass fallback) and through
+    the fallback."""
+    monkeypatch.setattr(cull_chunks, "WHOLE_SHARE", whole_share)
+    points, max_scale, opac = _clustered(30_000, 3 + cam_index)
+    camera = _cameras()[cam_index]
+    chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=32, group=8)
+    got = np.sort(chunks.visible_keys(camera, 0.05, antialias, camera.scale))
+    want = _want_keys(points, max_scale, opac, camera, 0.05, antialias)
+    assert 0 < want.size < points.shape[0]
+    np.testing.assert_array_equal(got, want)
+    if not camera.is_orthographic:  # every kind of chunk occurs, so each branch was checked
+        accept, reject = chunks.chunks.classify(camera, 0.05, camera.scale)
+        assert accept.any() and reject.any() and (~(accept | reject)).any()
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 10_000), eye=st.tuples(*[st.floats(-8, 8)] * 3),
+       target=st.tuples(*[st.floats(-3, 3)] * 3), fov=st.floats(20, 120),
+       cx=st.floats(-50, 350), near=st.floats(0.01, 2.0), scale=st.floats(0.3, 3.0))
+def test_chunked_cull_property(seed, eye, target, fov, cx, near, scale):
+    """Any pose, field of view, principal point, near plane and model scale: the same splats,
+    the same depth bits as the float64 cull (ties and ordering then follow)."""
+    eye, target = np.array(eye), np.array(target)
+    if np.linalg.norm(eye - target) < 1e-3:
+        return
+    pose = look_at(eye, target)
+    pose[:3, :3] *= scale
+    camera = dataclasses.replace(Camera.from_fov(300, 200, fov, pose), cx=cx)
+    points, max_scale, opac = _clustered(4000, seed)
+    chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=16, group=4)
+    share, cull_chunks.WHOLE_SHARE = cull_chunks.WHOLE_SHARE, 1.0  # always through the chunks
+    try:
+        got = np.sort(chunks.visible_keys(camera, near, False, camera.scale))
+    finally:
+        cull_chunks.WHOLE_SHARE = share
+    np.testing.assert_array_equal(got, _want_keys(points, max_scale, opac, camera, near))
+
+
+def test_keys_order_and_pairs_feed_every_sort_as_before():
+    """The exact sort of the keys is depth_sort's order; keys_pairs gives the device and bucket
+    sorts ascending indices with their depths, seam copies after the rest."""
+    rng = np.random.default_rng(5)
+    idx = np.sort(rng.choice(5000, 1200, replace=False)).astype(np.uint32)
+    z = rng.choice(np.float32([0.5, 1.0, 2.0, 3.5]), idx.size)  # many ties
+    copies = idx[::7] | lens.WRAP_FLAG
+    keys = rng.permutation(np.concatenate([depth_keys(z, idx), depth_keys(z[::7], copies)]))
+    all_z, all_idx = np.concatenate([z, z[::7]]), np.concatenate([idx, copies])
+    np.testing.assert_array_equal(keys_order(keys), depth_sort(all_z, all_idx))
+    depth, index = keys_pairs(keys, 5000)
+    np.testing.assert_array_equal(index, all_idx)
+    np.testing.assert_array_equal(depth, all_z)
+
+
+def _old_lens_keys(points, max_scale, opac, camera, near):
+    """The lens stages as the quad path ran them before the fused cull (sorted keys)."""
+    p_cam = to_camera(points, camera)
+    kept = np.flatnonzero(lens.lens_cull(p_cam, opac, camera, near))
+    reach = lens.splat_reach(max_scale[kept] * camera.scale, opac[kept])
+    depth, keep = lens.lens_order(p_cam, kept, reach, camera)
+    return np.sort(depth_keys(depth, keep)), keep
+
+
+def _lens_cameras():
+    pose = look_at(np.array([0.5, -0.3, -1.0]), np.array([0.0, 0.0, 2.0]))
+    return [Camera.fisheye(96, 64, 200, pose, FISHEYE_K), Camera.fisheye(64, 64, 120, pose),
+            Camera.equirectangular(128, 64, pose),
+            dataclasses.replace(Camera.equirectangular(128, 64, pose), ods_eye=-0.032)]
+
+
+@pytest.mark.parametrize("cam_index", range(4), ids=["fisheye_k", "fisheye", "equirect", "ods"])
+def test_lens_cull_keeps_what_the_old_lens_stages_keep(cam_index):
+    points, max_scale, opac = _clustered(20_000, 17)
+    camera = _lens_cameras()[cam_index]
+    if camera.projection is lens.Projection.FISHEYE:
+        # splats on the angle limit's cone, inside and outside by float32 rounding: the band
+        # where the exact arctan2 test decides
+        limit = lens.fisheye_theta_limit(camera)
+        theta = limit + np.linspace(-3e-6, 3e-6, 600)
+        phi = np.linspace(0, 2 * np.pi, 600)
+        cone = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], 1) * 2.0
+        world = (cone - camera.translation) @ camera.rotation  # camera -> world
+        points[:600] = world.astype(np.float32)
+    chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=32, group=8)
+    want, keep = _old_lens_keys(points, max_scale, opac, camera, 0.05)
+    got = np.sort(lens_visible_keys(chunks, camera, 0.05, camera.scale))
+    np.testing.assert_array_equal(got, want)
+    assert 0 < want.size
+    if camera.projection is lens.Projection.EQUIRECTANGULAR:
+        assert (keep >= lens.WRAP_FLAG).any()  # seam copies were made and matched
+    else:
+        assert want.size < points.shape[0]
+
+
+@pytest.mark.parametrize("name", ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply"])
+def test_real_scene_orders_unchanged(shared_scenes, name):
+    """On real scenes, pinhole (framing and close), fisheye and equirect views: the quad path's
+    new cull stages give exactly the order of the old stages (cull_visible + depth_sort, and
+    lens_cull + lens_order + depth_sort), so the rendered images are identical."""
+    from splatgl.camera import orbit
+    from splatgl.cull import cull_visible
+    from splatgl.formats import load_scene
+    from splatgl.render import default_camera
+    from splatgl.settings import RenderSettings, resolve_near
+
+    from conftest import shared_file
+
+    scene = load_scene(shared_file(shared_scenes, name), progress=lambda *a: None)
+    near = resolve_near(RenderSettings(), scene.robust_radius)
+    data = CullData.from_scene(scene)
+    chunks = ChunkedCull(data)
+    base = default_camera(scene, 320, 180)
+    centre = 0.5 * (scene.robust_bounds[0] + scene.robust_bounds[1])
+    dist = float(np.linalg.norm(base.center - centre))
+    for factor, azimuth in ((1.0, 0.0), (0.3, 40.0), (0.1, 200.0)):
+        cam = base.with_pose(orbit(centre, dist * factor, azimuth, 20.0))
+        anchored = anchored_camera(cam, scene.anchor)
+        idx, z = cull_visible(data, anchored, near)
+        np.testing.assert_array_equal(keys_order(chunks.visible_keys(anchored, near)),
+                                      depth_sort(z, idx))
+        for projection in ("fisheye", "equirectangular"):
+            lcam = anchored_camera(lens.with_projection(cam, projection), scene.anchor)
+            p_cam = to_camera(scene.relative_means, lcam)
+            kept = np.flatnonzero(lens.lens_cull(p_cam, scene.opacities, lcam, near))
+            reach = lens.splat_reach(scene.scales[kept].max(axis=1), scene.opacities[kept])
+            depth, keep = lens.lens_order(p_cam, kept, reach, lcam)
+            np.testing.assert_array_equal(keys_order(lens_visible_keys(chunks, lcam, near)),
+                                          depth_sort(depth, keep))
