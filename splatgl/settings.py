@@ -66,7 +66,7 @@ class GpuStorage(enum.Enum):
 
     FLOAT32: every attribute float32 (64 / 244 B).
     HALF_SH: SH coefficients 1.. as float16 (64 / 154 B).
-    COMPACT: means float32; opacity 16-bit; rotation smallest-three 10-10-10-2; scales and
+    COMPACT: means float32; opacity 16-bit; rotation smallest-three, 15 bits a component; scales and
         SH DC float16; SH coefficients 1.. float16 (32 / 122 B).  Error bounds and the measured
         image cost: :mod:`splatgl.storage`, docs/scale.md.
     """

@@ -9,11 +9,12 @@ word  content
 ====  =======================================================================================
 0-2   mean - scene anchor, float32 bits (positions keep full precision: the camera's distance
       to a splat far from the anchor would lose pixels with float16)
-3     opacity, unorm with :data:`~splatgl.constants.COMPACT_OPACITY_BITS` bits (low bits)
+3     opacity, unorm with :data:`~splatgl.constants.COMPACT_OPACITY_BITS` (16) bits (bits 0-15),
+      and the third rotation component (bits 16-30)
 4     rotation, smallest-three: the three smaller components of the unit quaternion (w, x, y, z)
       with the largest made >= 0, each in [-1/sqrt 2, 1/sqrt 2] as a
-      :data:`~splatgl.constants.COMPACT_QUAT_BITS`-bit unorm (bits 0-9, 10-19, 20-29), and the
-      index of the largest (bits 30-31)
+      :data:`~splatgl.constants.COMPACT_QUAT_BITS` (15)-bit unorm: the first two here (bits
+      0-14, 15-29), the third in word 3; the index of the largest in bits 30-31
 5-7   float16 pairs (low half first, as GLSL's packHalf2x16): (scale.x, scale.y),
       (scale.z, dc.r), (dc.g, dc.b); scales are stored in units of ``2^e`` per scene
       (:func:`scale_exponent`) so the largest lands at or below 2^15, inside float16's range
@@ -94,8 +95,8 @@ def encode_compact(relative_means: np.ndarray, opacities: np.ndarray, rotations:
     if m:
         largest, rest = smallest_three(rotations)
         k = np.rint((np.clip(rest / _QUAT_RANGE, -1.0, 1.0) * 0.5 + 0.5) * _QUAT_LEVELS).astype(np.uint32)
-        b = COMPACT_QUAT_BITS
-        words[:, 4] = k[:, 0] | (k[:, 1] << b) | (k[:, 2] << 2 * b) | (largest.astype(np.uint32) << 30)
+        words[:, 4] = k[:, 0] | (k[:, 1] << COMPACT_QUAT_BITS) | (largest.astype(np.uint32) << 30)
+        words[:, 3] |= k[:, 2] << COMPACT_OPACITY_BITS
     s = np.zeros((m, 3))
     s[:, :scales.shape[1]] = np.ldexp(np.asarray(scales, np.float64), -exponent)
     h = _half_bits(np.concatenate([s, np.asarray(dc, np.float64)], axis=1))  # (m, 6)
@@ -121,8 +122,8 @@ def decode_compact(words: np.ndarray, exponent: int) -> CompactDecoded:
     m = words.shape[0]
     means = np.ascontiguousarray(words[:, 0:3]).view(np.float32).astype(np.float64)
     opacities = (words[:, 3] & _OPACITY_LEVELS) / _OPACITY_LEVELS
-    b = COMPACT_QUAT_BITS
-    k = np.stack([(words[:, 4] >> (i * b)) & _QUAT_LEVELS for i in range(3)], axis=1)
+    k = np.stack([words[:, 4], words[:, 4] >> COMPACT_QUAT_BITS, words[:, 3] >> COMPACT_OPACITY_BITS],
+                 axis=1) & _QUAT_LEVELS
     c = (k / _QUAT_LEVELS * 2.0 - 1.0) * _QUAT_RANGE
     largest = (words[:, 4] >> 30).astype(np.intp)
     q = np.zeros((m, 4))

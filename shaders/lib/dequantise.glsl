@@ -2,12 +2,13 @@
 // decode_compact; --gpu-storage compact).  Needs COMPACT_QUAT_BITS, COMPACT_OPACITY_BITS and the
 // per-scene COMPACT_SCALE_UNIT (2^e, storage.scale_exponent) as defines.
 
-// Unit quaternion (w, x, y, z) from its smallest-three word: three COMPACT_QUAT_BITS unorms
-// mapping [-1/sqrt 2, 1/sqrt 2], the index of the largest (>= 0) component in bits 30-31; the
-// largest is sqrt(1 - |others|^2).
-vec4 decode_rotation(uint word) {
+// Unit quaternion (w, x, y, z) from its smallest-three words: three COMPACT_QUAT_BITS unorms
+// mapping [-1/sqrt 2, 1/sqrt 2] (two in `word` bits 0.., the third in `word3` above the
+// opacity), the index of the largest (>= 0) component in `word` bits 30-31; the largest is
+// sqrt(1 - |others|^2).
+vec4 decode_rotation(uint word, uint word3) {
     uint mask = (1u << uint(COMPACT_QUAT_BITS)) - 1u;
-    uvec3 k = uvec3(word, word >> uint(COMPACT_QUAT_BITS), word >> uint(2 * COMPACT_QUAT_BITS)) & mask;
+    uvec3 k = uvec3(word, word >> uint(COMPACT_QUAT_BITS), word3 >> uint(COMPACT_OPACITY_BITS)) & mask;
     vec3 c = (vec3(k) / float(mask) * 2.0 - 1.0) * 0.70710678118654752;
     float l = sqrt(max(0.0, 1.0 - dot(c, c)));
     uint largest = word >> 30u;
@@ -17,7 +18,7 @@ vec4 decode_rotation(uint word) {
     return vec4(c, l);
 }
 
-// Linear opacity from its COMPACT_OPACITY_BITS unorm (low bits of the word).
+// Linear opacity from its COMPACT_OPACITY_BITS unorm (low bits of word 3).
 float decode_opacity(uint word) {
     uint mask = (1u << uint(COMPACT_OPACITY_BITS)) - 1u;
     return float(word & mask) / float(mask);

@@ -16,7 +16,9 @@ vec4 splat_mean_opacity(uint i) {
     uvec4 w = splat_packed[2u * i];
     return vec4(uintBitsToFloat(w.xyz), decode_opacity(w.w));
 }
-vec4 splat_rotation(uint i) { return decode_rotation(splat_packed[2u * i + 1u].x); }
+vec4 splat_rotation(uint i) {
+    return decode_rotation(splat_packed[2u * i + 1u].x, splat_packed[2u * i].w);
+}
 vec3 splat_scale(uint i) {
     vec3 scale, dc;
     decode_scale_dc(splat_packed[2u * i + 1u].yzw, scale, dc);

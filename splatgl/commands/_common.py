@@ -158,9 +158,9 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                    help="how the scene is stored on the GPU (quad and tile renderers), bytes per "
                         "splat at SH degree 0 / 3: 'float32' 64 / 244 (exact); 'half-sh' 64 / 154 "
                         "(SH coefficients 1.. as float16, colour error below 2e-4); 'compact' "
-                        "32 / 122 (also opacity 16-bit, rotation 10 bits per component, scales "
-                        "and base colour float16: PSNR >= 50 dB against float32 on the shared "
-                        "real scenes; docs/scale.md)")
+                        "32 / 122 (also opacity 16-bit, rotation 15 bits per component, scales "
+                        "and base colour float16: PSNR >= 80 dB against float32 on every shared "
+                        "real scene; docs/scale.md)")
     g.add_argument("--half-sh", dest="gpu_storage", action="store_const", const="half-sh",
                    help="the same as --gpu-storage half-sh (kept for older scripts)")
     g.add_argument("--transform", type=str, default=None, metavar="JSON",
