@@ -62,15 +62,20 @@ def gpu_bytes_per_splat(storage: GpuStorage, sh_degree: int) -> int:
     return base + 2 * rest
 
 
-def scale_exponent(log_scales: np.ndarray) -> int:
+def scale_exponent(log_scales: np.ndarray, block: int = 1 << 16) -> int:
     """The per-scene exponent ``e``: scales are stored as float16 of ``scale / 2^e``, with ``e``
-    the smallest integer putting the largest finite scale at or below ``2^15`` (0 for an empty
-    scene).  ``log_scales``: (N, S) natural-log scales as the scene holds them."""
-    finite = np.asarray(log_scales)[np.isfinite(log_scales)] if np.size(log_scales) else []
-    if len(finite) == 0:
+    the smallest integer putting the largest finite scale at or below ``2^15`` (0 when none is
+    finite).  ``log_scales``: (N, S) natural-log scales as the scene holds them; read ``block``
+    rows at a time (no full-size temporary)."""
+    top = -math.inf
+    for start in range(0, len(log_scales), block):
+        part = np.asarray(log_scales[start:start + block])
+        finite = np.isfinite(part)
+        if finite.any():
+            top = max(top, float(part[finite].max()))
+    if not math.isfinite(top):
         return 0
-    top = float(np.max(finite)) / math.log(2.0)  # log2 of the largest scale
-    return int(np.clip(math.ceil(top) - HALF_MAX_EXP, -100, 100))
+    return int(np.clip(math.ceil(top / math.log(2.0)) - HALF_MAX_EXP, -100, 100))
 
 
 def _half_bits(values: np.ndarray) -> np.ndarray:

@@ -128,8 +128,9 @@ def test_shader_decodes_what_the_twin_decodes(gl_renderer, kind, preprocess, ear
     assert np.abs(compact - full).max() > 1e-4 and np.abs(compact - full).max() < COMPACT_MAX_ABS
 
 
-def test_tile_renderer_reads_the_compact_layout(gl_renderer):
-    scene = _scene(degree=2)
+@pytest.mark.parametrize("kind", list(SplatKind))
+def test_tile_renderer_reads_the_compact_layout(gl_renderer, kind):
+    scene = _scene(degree=2, kind=kind)
     cam = default_camera(scene, 96, 72)
     compact = gl_renderer.render(scene, cam, RenderSettings(gpu_storage="compact"), RendererKind.TILE)
     twin = gl_renderer.render(_twin_scene(scene), cam, RenderSettings(gpu_storage="half-sh"),
