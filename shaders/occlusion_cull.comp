@@ -56,11 +56,11 @@ bool splat_rect(uint k, out vec2 lo, out vec2 hi, out uint value) {
 #elif defined(SURFEL)
     uint i = order[k];
     value = i;
-    vec4 a = splat_a[i];
+    vec4 a = splat_mean_opacity(i);
     vec3 p = u_view_rot * a.xyz + u_view_trans;
     if (p.z <= u_near) return false;
-    mat3 rot = quat_to_rotmat(splat_q[i]);
-    vec2 s = splat_s[i].xy;
+    mat3 rot = quat_to_rotmat(splat_rotation(i));
+    vec2 s = splat_scale(i).xy;
     vec2 center;
     vec3 t0, t1, t2;
     surfel_screen(p, u_view_rot * (rot[0] * s.x), u_view_rot * (rot[1] * s.y), center, t0, t1, t2);

@@ -21,11 +21,11 @@ const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothi
 
 void main() {
     uint i = splat_index;
-    vec4 a = splat_a[i];
+    vec4 a = splat_mean_opacity(i);
     vec3 p = u_view_rot * a.xyz + u_view_trans;
     if (p.z <= u_near) { gl_Position = CULLED; return; }  // view z of the centre, before the divide
-    mat3 rot = quat_to_rotmat(splat_q[i]);
-    vec2 s = splat_s[i].xy;
+    mat3 rot = quat_to_rotmat(splat_rotation(i));
+    vec2 s = splat_scale(i).xy;
     vec3 a_u = u_view_rot * (rot[0] * s.x);  // camera-space s_u t_u
     vec3 a_v = u_view_rot * (rot[1] * s.y);  // camera-space s_v t_v
     vec2 center;
@@ -44,5 +44,5 @@ void main() {
     v_t2 = t2;
     v_depth_row = vec3(a_u.z, a_v.z, p.z);
     vec3 dir = normalize(a.xyz - u_cam_center);
-    v_color = vec4(sh_color(i, splat_dc[i].rgb, dir), a.w);
+    v_color = vec4(sh_color(i, splat_sh_dc(i), dir), a.w);
 }

@@ -28,12 +28,12 @@ void main() {
     if (i >= u_count) return;
     tiles_touched[i] = 0u;
     proj_rect[i] = uvec4(0u);
-    vec4 a = splat_a[i];
+    vec4 a = splat_mean_opacity(i);
     // p_c = R_cw p_w + t_cw (DESIGN.md 1); near cull on the centre's view z.
     vec3 p = u_view_rot * a.xyz + u_view_trans;
     if (!(p.z > u_near)) return;
-    mat3 rot = quat_to_rotmat(splat_q[i]);
-    vec2 s = splat_s[i].xy;
+    mat3 rot = quat_to_rotmat(splat_rotation(i));
+    vec2 s = splat_scale(i).xy;
     vec3 a_u = u_view_rot * (rot[0] * s.x);   // camera-space s_u t_u (columns of W H, eq. 5)
     vec3 a_v = u_view_rot * (rot[1] * s.y);   // camera-space s_v t_v
     vec2 center;
@@ -42,7 +42,7 @@ void main() {
     vec2 lo, hi;
     // Box of the k-sigma ellipse (dual conic) united with the low-pass disc, clamped.
     if (!surfel_bounds(center, t0, t1, t2, a.w, lo, hi)) return;
-    vec3 color = sh_color(i, splat_dc[i].rgb, normalize(a.xyz - u_cam_center));
+    vec3 color = sh_color(i, splat_sh_dc(i), normalize(a.xyz - u_cam_center));
     vec3 depth_row = vec3(a_u.z, a_v.z, p.z);
     if (!finite3(color) || !finite3(depth_row)) return;
     // box_rect (reference/stages.py): box c +- h with c = (lo + hi) / 2, h = (hi - lo) / 2; in
@@ -71,15 +71,16 @@ void main() {
     if (i >= u_count) return;
     tiles_touched[i] = 0u;
     proj_rect[i] = uvec4(0u);
-    vec4 a = splat_a[i];
+    vec4 a = splat_mean_opacity(i);
     // p_c = R_cw p_w + t_cw (DESIGN.md 1); cull on view z before the perspective divide
     // (fisheye: distance and angle from the axis, lib/project.glsl in_view).
     vec3 p = u_view_rot * a.xyz + u_view_trans;
     if (!in_view(p)) return;
     // Sigma' = J W Sigma W^T J^T + 0.3 I (EWA, low-pass dilation).
-    mat3 rot = quat_to_rotmat(splat_q[i]);
-    vec3 cov = covariance_2d(covariance_3d(rot, splat_s[i].xyz), p);
-    float det = covariance_2d_det(cov, screen_factor(rot, splat_s[i].xyz, p));  // > 0 (see project.glsl)
+    mat3 rot = quat_to_rotmat(splat_rotation(i));
+    vec3 scale = splat_scale(i);
+    vec3 cov = covariance_2d(covariance_3d(rot, scale), p);
+    float det = covariance_2d_det(cov, screen_factor(rot, scale, p));  // > 0 (see project.glsl)
     vec3 con = conic(cov, det);
     if (!(det > 0.0)) return;
     float opacity = a.w;
@@ -89,7 +90,7 @@ void main() {
 #endif
     vec2 mean2d = project_mean(p);                      // u = fx x/z + cx, v = fy y/z + cy
     // c = max(sum h_lm Y_lm(d) + 0.5, 0), d = normalize(p_w - camera centre).
-    vec3 color = sh_color(i, splat_dc[i].rgb, normalize(a.xyz - u_cam_center));
+    vec3 color = sh_color(i, splat_sh_dc(i), normalize(a.xyz - u_cam_center));
     if (!finite2(mean2d) || !finite3(cov) || !finite3(con) || !finite3(color)
         || isnan(opacity) || isinf(opacity)) return;
     // Radius ceil(3 sqrt(lambda_max)); 3DGS getRect on p = mean2d - 0.5 (pixel-index

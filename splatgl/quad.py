@@ -128,7 +128,7 @@ class QuadRenderer:
                              and scene.kind is SplatKind.GAUSSIAN_3D)
         self.programs = programs or ProgramCache(ctx)
         self.near = resolve_near(settings, scene.robust_radius)
-        self.buffers = SceneBuffers(ctx, scene, settings.half_sh)
+        self.buffers = SceneBuffers(ctx, scene, settings.gpu_storage)
         self._chunks: ChunkedCull | None = None  # built on the first culled view
         self._cull_data: CullData | None = None  # the LOD renderer's (its cut's rows)
         self._sorter: RadixSorter | None = None  # built on the first device sort
@@ -174,8 +174,7 @@ class QuadRenderer:
             defines["DEPTH_OUTPUT"] = 1
         if self._count_fragments:
             defines["COUNT_FRAGMENTS"] = 1
-        if self.buffers.half_sh:
-            defines["SH_HALF"] = 1
+        defines.update(self.buffers.defines())
         if self.settings.early_stop:
             defines["EARLY_STOP"] = 1
             if self.uses_prepass:

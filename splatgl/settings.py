@@ -59,6 +59,23 @@ class Preprocess(enum.Enum):
     COMPUTE = "compute"
 
 
+class GpuStorage(enum.Enum):
+    """How the quad path (and the tile renderer) store the scene on the GPU.
+
+    Bytes per splat at SH degree 0 / 3 (:func:`splatgl.storage.gpu_bytes_per_splat`):
+
+    FLOAT32: every attribute float32 (64 / 244 B).
+    HALF_SH: SH coefficients 1.. as float16 (64 / 154 B).
+    COMPACT: means float32; opacity 16-bit; rotation smallest-three, 15 bits a component; scales and
+        SH DC float16; SH coefficients 1.. float16 (32 / 122 B).  Error bounds and the measured
+        image cost: :mod:`splatgl.storage`, docs/scale.md.
+    """
+
+    FLOAT32 = "float32"
+    HALF_SH = "half-sh"
+    COMPACT = "compact"
+
+
 class Convention(enum.Enum):
     """Which published rasterizer's rules the NumPy reference follows (``Compat`` there).
 
@@ -101,8 +118,8 @@ class RenderSettings:
             on every scene, 13% on a 150k SH3 scene, identical images); surfels always use
             their vertex stage.
         cull: the quad path's CPU frustum/opacity cull (the near plane is always applied).
-        half_sh: store SH coefficients 1.. as float16 in the quad path (half the memory and
-            bandwidth; the benchmark reports the error against float32).
+        gpu_storage: how the scene's attributes are stored on the GPU (:class:`GpuStorage`);
+            the benchmark's ``storage`` rows report bytes per splat and the PSNR cost.
         convention: the published rasterizer rules the NumPy reference follows (only the
             reference reads it).
         early_stop: quad path early termination (splatgl/early_stop.py): batched draws that
@@ -124,7 +141,7 @@ class RenderSettings:
     resort_interval: int = 1
     preprocess: Preprocess = Preprocess.COMPUTE
     cull: bool = True
-    half_sh: bool = False
+    gpu_storage: GpuStorage = GpuStorage.FLOAT32
     convention: Convention = Convention.INRIA
     early_stop: bool = False
 
@@ -138,13 +155,13 @@ class RenderSettings:
         object.__setattr__(self, "sort_key", SortKey(self.sort_key))
         object.__setattr__(self, "preprocess", Preprocess(self.preprocess))
         object.__setattr__(self, "convention", Convention(self.convention))
+        object.__setattr__(self, "gpu_storage", GpuStorage(self.gpu_storage))
         if int(self.resort_interval) != self.resort_interval or self.resort_interval < 1:
             raise SplatglError(f"resort interval must be a positive integer, got {self.resort_interval}")
         if self.near is not None and not self.near > 0.0:
             raise SplatglError(f"near plane must be positive, got {self.near}")
         if self.sh_degree is not None and not 0 <= self.sh_degree <= MAX_SH_DEGREE:
             raise SplatglError(f"SH degree cap must be 0..{MAX_SH_DEGREE}, got {self.sh_degree}")
-
 
 def resolve_near(settings: RenderSettings, scene_radius: float) -> float:
     """The near plane to use: the explicit setting, or ``min(0.2, 0.01 * scene_radius)``.

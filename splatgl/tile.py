@@ -206,7 +206,7 @@ class TileRenderer:
         self.near = resolve_near(settings, scene.robust_radius)
         self.surfel = scene.kind is SplatKind.SURFEL_2D
         self.count = scene.count
-        self.scene_buffers = SceneBuffers(ctx, scene) if self.count else None
+        self.scene_buffers = SceneBuffers(ctx, scene, settings.gpu_storage) if self.count else None
         self._max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
         self._bufs = {name: _Buffer(ctx, b) for name, b in BINDINGS.items()}
         n = self.count
@@ -235,6 +235,7 @@ class TileRenderer:
         d = self._defines()
         d["SH_DEGREE"] = self.scene.sh_degree if cap is None else min(cap, self.scene.sh_degree)
         d["SH_REST_COEFFS"] = self.scene_buffers.sh_rest_coeffs
+        d.update(self.scene_buffers.defines())
         if self.settings.antialias:
             d["ANTIALIAS"] = 1
         lens.require_support(camera, self.surfel, "tile", equirect=False)

@@ -27,10 +27,11 @@ def test_pareto_front():
 def test_configurations_cover_every_question():
     rows = configurations(RenderSettings(), scene_sh_degree=3)
     groups = {r.group for r in rows}
-    assert groups == {"default", "precision", "extent", "sort", "sh", "resort", "preprocess", "cull",
+    assert groups == {"default", "precision", "extent", "sort", "sh", "storage", "resort", "preprocess", "cull",
                       "early-stop", "projection", "renderer", "limit"}
     assert [r.name for r in rows if r.group == "early-stop"] == ["early-stop=on"]
-    assert {r.name for r in rows if r.group == "sh"} == {"sh<=0", "sh<=1", "sh<=2", "sh=half"}
+    assert {r.name for r in rows if r.group == "sh"} == {"sh<=0", "sh<=1", "sh<=2"}
+    assert [r.name for r in rows if r.group == "storage"] == ["storage=half-sh", "storage=compact"]
     assert [r.kind for r in rows if r.group == "renderer"] == [RowKind.TILE, RowKind.REFERENCE]
     quick = configurations(RenderSettings(), 0, quick=True)
     assert len(quick) < len(rows) and {r.group for r in quick} >= {"default", "limit", "extent"}
@@ -65,6 +66,26 @@ def test_bench_scene_rows_and_limit(gl_renderer):
     assert by["default"].drawn <= n and by["default"].fragment_efficiency > 0.5
     assert all(r.frame_ms > 0 and r.frame_ms_p10 <= r.frame_ms <= r.frame_ms_p90 for r in rows)
     assert by["sh<=0"].psnr < by["default"].psnr  # dropping SH bands costs accuracy
+
+
+def test_storage_rows_report_bytes_and_psnr_against_float32(gl_renderer):
+    from splatgl.bench.storage_report import storage_table
+
+    rng = np.random.default_rng(2)
+    n = 300
+    scene = Scene(rng.normal(size=(n, 3)), rng.normal(size=(n, 4)), rng.normal(-2.5, 0.3, (n, 3)),
+                  rng.normal(1.0, 1.0, n), rng.normal(0, 0.2, (n, 4, 3)))
+    rows = bench_scene(gl_renderer, "syn", scene,
+                       BenchOptions(64, 48, 2, error_frames=(1,), groups=frozenset({"storage"})))
+    by = {r.config: r for r in rows}
+    # SH degree 1: 9 rest values per splat, float32 / float16 (splatgl/storage.py).
+    assert [by[c].gpu_bytes_per_splat for c in ("default", "storage=half-sh", "storage=compact")] \
+        == [64 + 36, 64 + 18, 32 + 18]
+    assert by["default"].psnr_float32 is None
+    assert 60 < by["storage=compact"].psnr_float32 < by["storage=half-sh"].psnr_float32
+    assert by["storage=compact"].psnr > 50  # against the reference
+    lines = storage_table(rows).splitlines()
+    assert len(lines) == 4 and lines[3].split()[1:4] == ["storage=compact", "50.0", "2.00"]
 
 
 def test_bench_quick_cli_writes_table_csv_json_plot(tmp_path, capsys):

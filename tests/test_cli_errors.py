@@ -186,7 +186,7 @@ def test_bench_arguments_fail_before_measuring(tmp_path, capsys):
                     "bench.csv, bench.json and bench.png")
     expect_one_line(capsys, tmp_path, ["bench", "--quick", "--groups", "bogus,extent"],
                     "splatgl: error: --groups: unknown group(s) bogus; valid: precision, extent, "
-                    "sort, sh, resort, preprocess, cull, early-stop, projection, renderer")
+                    "sort, sh, storage, resort, preprocess, cull, early-stop, projection, renderer")
     expect_one_line(capsys, tmp_path, ["bench", "--synthetic", "-5"],
                     "splatgl bench: error: argument --synthetic: must be 0 or more, got -5 "
                     "(see splatgl bench --help)")

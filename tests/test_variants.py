@@ -101,7 +101,7 @@ def test_half_float_sh_storage_error_is_bounded(gl_renderer, degree):
     scene = _scene(degree=degree)
     cam = default_camera(scene, 96, 72)
     full = gl_renderer.render(scene, cam)
-    half = gl_renderer.render(scene, cam, RenderSettings(half_sh=True))
+    half = gl_renderer.render(scene, cam, RenderSettings(gpu_storage="half-sh"))
     bound = 15 * 1.1 * float(np.abs(scene.sh[:, 1:]).max()) * 2.0 ** -11
     diff = float(np.abs(full - half).max())
     assert 0 < diff < bound  # not identical (the storage really changed), and bounded

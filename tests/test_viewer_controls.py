@@ -136,7 +136,7 @@ def test_screenshot_command_line_reproduces_the_settings():
 
     settings = RenderSettings(background=(0.1, 0.2, 0.3), precision="rgba16f", extent="fast",
                               near=0.05, antialias=True, sh_degree=1, preprocess="vertex",
-                              sort_key="bucket16", half_sh=True)
+                              sort_key="bucket16", gpu_storage="compact")
     argv = ["render", "-o", "x.png", *settings_arguments(settings, RendererKind.TILE)]
     args = build_parser().parse_args(argv)
     assert settings_from_args(args) == settings

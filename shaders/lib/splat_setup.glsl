@@ -38,15 +38,16 @@ void quad_axes(vec3 cov, float det, float opacity, out vec2 axis1, out vec2 axis
 // splat is culled (behind the near plane, or a non-positive-definite 2D covariance).
 bool setup_splat(uint idx, out ScreenSplat s) {
     uint i = idx & 0x7fffffffu;
-    vec4 a = splat_a[i];
+    vec4 a = splat_mean_opacity(i);
     vec3 p = u_view_rot * a.xyz + u_view_trans;
 #ifdef EQUIRECT
     p = eye_space(p);  // omni-directional stereo: the eye that sees this splat
 #endif
     if (!in_view(p)) return false;  // view z (lens models: distance), before any divide
-    mat3 rot = quat_to_rotmat(splat_q[i]);
-    vec3 cov = covariance_2d(covariance_3d(rot, splat_s[i].xyz), p);
-    float det = covariance_2d_det(cov, screen_factor(rot, splat_s[i].xyz, p));  // > 0 (see project.glsl)
+    mat3 rot = quat_to_rotmat(splat_rotation(i));
+    vec3 scale = splat_scale(i);
+    vec3 cov = covariance_2d(covariance_3d(rot, scale), p);
+    float det = covariance_2d_det(cov, screen_factor(rot, scale, p));  // > 0 (see project.glsl)
     s.conic = conic(cov, det);
     if (!(det > 0.0)) return false;
     s.opacity = a.w;
@@ -61,6 +62,6 @@ bool setup_splat(uint idx, out ScreenSplat s) {
 #endif
     quad_axes(cov, det, s.opacity, s.axis1, s.axis2);
     s.depth = view_depth(p);
-    s.color = sh_color(i, splat_dc[i].rgb, normalize(a.xyz - u_cam_center));
+    s.color = sh_color(i, splat_sh_dc(i), normalize(a.xyz - u_cam_center));
     return true;
 }

@@ -6,7 +6,7 @@ import dataclasses
 import enum
 from dataclasses import dataclass
 
-from ..settings import Precision, Preprocess, QuadExtent, RenderSettings, SortKey
+from ..settings import GpuStorage, Precision, Preprocess, QuadExtent, RenderSettings, SortKey
 
 
 class RowKind(enum.Enum):
@@ -22,7 +22,7 @@ class BenchConfig:
 
     Attributes:
         name: short label, e.g. ``precision=rgba16f``.
-        group: the question the row answers (precision, extent, sort, sh, resort, preprocess,
+        group: the question the row answers (precision, extent, sort, sh, storage, resort, preprocess,
             cull, early-stop, projection, renderer, limit, default).
         kind: which renderer draws it.
         settings: the full settings (the default with one thing changed).
@@ -52,8 +52,8 @@ def configurations(base: RenderSettings, scene_sh_degree: int, quick: bool = Fal
     rows += [q(f"extent={e.value}", "extent", extent=e) for e in QuadExtent if e is not base.extent]
     rows += [q(f"sort={k.value}", "sort", sort_key=k) for k in SortKey if k is not base.sort_key]
     rows += [q(f"sh<={d}", "sh", sh_degree=d) for d in range(scene_sh_degree)]
-    if scene_sh_degree > 0:
-        rows.append(q("sh=half", "sh", half_sh=not base.half_sh))
+    rows += [q(f"storage={m.value}", "storage", gpu_storage=m)
+             for m in GpuStorage if m is not base.gpu_storage]
     rows += [q(f"resort/{n}", "resort", resort_interval=n) for n in (4, 16)]
     rows += [q(f"preprocess={p.value}", "preprocess", preprocess=p)
              for p in Preprocess if p is not base.preprocess]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import statistics
 import time
@@ -12,10 +13,10 @@ import numpy as np
 
 from ..camera import Camera, orbit
 from ..lens import with_projection
-from ..metrics import image_errors
+from ..metrics import image_errors, psnr
 from ..render import Renderer, default_camera, render_reference_rgba
 from ..scene import Scene
-from ..settings import RendererKind, RenderSettings
+from ..settings import GpuStorage, RendererKind, RenderSettings
 from ..sort import depth_sort
 from .configs import BenchConfig, RowKind, configurations
 from .limit import LimitRenderer
@@ -72,11 +73,16 @@ class BenchRow:
     #: NumPy reference's blended fragments (alpha >= 1/255 before the stop) on the counting view.
     occlusion_culled: int | None = None
     reference_fragments: int | None = None
+    #: Quad rows: the scene's GPU storage bytes per splat.  Group ``storage``: the lowest PSNR
+    #: over the error frames against the same settings with float32 storage.
+    gpu_bytes_per_splat: float | None = None
+    psnr_float32: float | None = None
 
     def as_dict(self) -> dict:
         d = asdict(self)
-        if d["psnr"] is not None and math.isinf(d["psnr"]):
-            d["psnr"] = None  # JSON has no infinity; None reads as "identical"
+        for key in ("psnr", "psnr_float32"):
+            if d[key] is not None and math.isinf(d[key]):
+                d[key] = None  # JSON has no infinity; None reads as "identical"
         return d
 
 
@@ -164,6 +170,14 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
         ref_ms.append((time.perf_counter() - t0) * 1e3)
         tick(f"reference frame {i}")
 
+    f32_images: dict[int, np.ndarray] = {}
+    if any(c.group == "storage" for c in configs):
+        # What the storage rows are measured against: the same settings with float32 storage.
+        f32 = _Runner(renderer, scene, dataclasses.replace(
+            configs[0], settings=dataclasses.replace(base, gpu_storage=GpuStorage.FLOAT32)))
+        f32_images = {i: f32.render(cameras[i]) for i in err_frames}
+        f32.release()
+
     # Warm-up pass over the whole path with the first configuration, untimed: the first
     # frames after loading a scene ran ~20% slow (page faults, llvmpipe's shader JIT),
     # which made the default row (always first) look worse than the same settings later.
@@ -189,7 +203,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
                 if config.projection else cameras)
         runner.render(with_projection(warm, config.projection) if config.projection else warm)
         runner.render(path[-1])
-        times, stages, gpu, drawn, errs, occluded = [], [], [], [], [], []
+        times, stages, gpu, drawn, errs, occluded, f32_psnr = [], [], [], [], [], [], []
         for i, cam in enumerate(path):
             t0 = time.perf_counter()
             img = runner.render(cam)
@@ -202,8 +216,11 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
                 gpu.append(runner.impl.last_gpu_draw_ns / 1e6)
             if i in refs and config.kind is not RowKind.LIMIT and not config.projection:
                 errs.append(image_errors(img, refs[i]))
-        shaded = kept = eff = None
+            if config.group == "storage" and i in f32_images:
+                f32_psnr.append(psnr(img[..., :3], f32_images[i][..., :3]))
+        shaded = kept = eff = bytes_per_splat = None
         if config.kind is RowKind.QUAD:
+            bytes_per_splat = runner.impl.buffers.nbytes / max(scene.count, 1)
             runner.impl.gpu_timer = False
             shaded, kept = runner.impl.count_fragments(path[0])
             eff = kept / shaded if shaded else None
@@ -222,6 +239,8 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             occlusion_culled=(int(statistics.median(occluded)) if config.kind is RowKind.QUAD
                               and None not in occluded and occluded else None),
             reference_fragments=ref_fragments if config.kind is RowKind.QUAD else None,
+            gpu_bytes_per_splat=bytes_per_splat,
+            psnr_float32=min(f32_psnr) if f32_psnr else None,
         ))
         tick(config.name)
     limit = next((r.frame_ms for r in rows if r.group == "limit"), None)

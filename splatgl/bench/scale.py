@@ -44,7 +44,9 @@ class ScaleOptions:
         tile_max: time the tile renderer on scenes up to this many splats (0: never; on
             llvmpipe it takes seconds a frame from 0.1M up).
         gpu_sort: also time the device radix sort.
-        half_sh: upload SH as float16 (the compact storage option).
+        gpu_storage: the storage of the measured quad and tile renders (:class:`GpuStorage`
+            value).  compact: also render the last frame per resolution with compact storage
+            (after the memory figures) for its bytes per splat and PSNR against the measured one.
         cache: folder of the built PLY files (default: a splatgl-scale folder in the temp dir).
     """
 
@@ -54,7 +56,8 @@ class ScaleOptions:
     frames: int = 3
     tile_max: int = 1_000_000
     gpu_sort: bool = True
-    half_sh: bool = False
+    gpu_storage: str = "float32"
+    compact: bool = True
     cache: Path | None = None
 
 
@@ -83,6 +86,8 @@ class ScaleRow:
     tile_frame_ms: float | None = None
     sort_gpu_ms: float | None = None
     gpu_sort_identical: bool | None = None
+    compact_bytes_per_splat: float | None = None
+    compact_psnr: float | None = None
 
 
 def scene_file(n: int, sh_degree: int, cache: Path | None = None) -> Path:
@@ -148,9 +153,9 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
     rss_load = _peak_rss_mb() - base
     arrays = (scene.means, scene.quats, scene.log_scales, scene.opacity_logits, scene.sh)
     decoded = sum(a.nbytes for a in arrays) / 1e6
-    settings = RenderSettings(half_sh=options.half_sh)
+    settings = RenderSettings(gpu_storage=options.gpu_storage)
     quad = QuadRenderer(renderer.ctx, scene, settings, renderer.programs)
-    rows = []
+    rows, last_views = [], []
     for width, height in options.resolutions:
         base_cam = default_camera(scene, width, height)
         centre = 0.5 * (scene.robust_bounds[0] + scene.robust_bounds[1])
@@ -158,8 +163,9 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
         cams = [base_cam.with_pose(orbit(centre, dist, 2.0 * i, 20.0)) for i in range(options.frames + 1)]
         times = []
         for cam in cams:
-            quad.render(cam)
+            image = quad.render(cam)
             times.append(quad.last_times)
+        last_views.append((cams[-1], image))
         times = times[1:]  # the first frame compiles programs and builds the cull data
         stages = {k: 1e3 * _median([getattr(t, k) for t in times])
                   for k in ("cull", "sort", "upload", "prepass", "draw", "readback")}
@@ -195,8 +201,30 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
                              quad.buffers.nbytes / scene.count, visible, stages, frame, tile_ms,
                              sort_gpu, identical))
     quad.release()
+    if options.compact:
+        rows = _with_compact(renderer, scene, last_views, rows)
     renderer.close()
     return rows
+
+
+def _with_compact(renderer, scene, views, rows: list[ScaleRow]) -> list[ScaleRow]:
+    """``rows`` with the compact storage's bytes per splat and its PSNR against each row's
+    last frame (``views``: (camera, image) per row), rendered by a second quad renderer."""
+    from dataclasses import replace
+
+    from ..metrics import psnr
+    from ..quad import QuadRenderer
+    from ..settings import GpuStorage, RenderSettings
+
+    quad = QuadRenderer(renderer.ctx, scene, RenderSettings(gpu_storage=GpuStorage.COMPACT),
+                        renderer.programs)
+    out = []
+    for row, (cam, image) in zip(rows, views):
+        value = psnr(quad.render(cam)[..., :3], image[..., :3])
+        out.append(replace(row, compact_bytes_per_splat=quad.buffers.nbytes / scene.count,
+                           compact_psnr=None if value == float("inf") else value))
+    quad.release()
+    return out
 
 
 def run_scale(options: ScaleOptions, log=print) -> list[ScaleRow]:

@@ -45,8 +45,7 @@ def run_scale_command(args: argparse.Namespace) -> int:
     sh3 = parse_sizes(args.sh3_sizes, SH3_SIZES, "--sh3-sizes")
     resolutions = ((args.width, args.height),) if args.width and args.height else ScaleOptions.resolutions
     frames = args.frames or ScaleOptions.frames
-    options = ScaleOptions(sizes=sizes, sh3_sizes=sh3, resolutions=resolutions, frames=frames,
-                           half_sh=args.half_sh if hasattr(args, "half_sh") else False)
+    options = ScaleOptions(sizes=sizes, sh3_sizes=sh3, resolutions=resolutions, frames=frames)
     rows = run_scale(options, log=lambda m: print(m, flush=True))
     if not rows:
         raise SplatglError("scale benchmark: no size could be measured")

@@ -52,7 +52,8 @@ def _f(v, spec):
 def table(rows: list[ScaleRow]) -> str:
     head = (f"{'splats':>9} {'SH':>2} {'size':>9} {'load s':>6} {'RSS load':>8} {'RSS peak':>8} "
             f"{'xdecoded':>8} {'GPU B/spl':>9} {'visible':>9} {'cull':>7} {'sort':>7} "
-            f"{'sortGPU':>8} {'prepass':>7} {'draw':>8} {'quad ms':>8} {'tile ms':>8} {'same':>4}")
+            f"{'sortGPU':>8} {'prepass':>7} {'draw':>8} {'quad ms':>8} {'tile ms':>8} {'same':>4} "
+            f"{'cmp B/spl':>9} {'cmp PSNR':>8}")
     out = [head]
     for r in rows:
         out.append(
@@ -61,7 +62,11 @@ def table(rows: list[ScaleRow]) -> str:
             f"{r.gpu_bytes_per_splat:>9.0f} {r.visible:>9,} {r.stages_ms['cull']:>7.1f} "
             f"{r.stages_ms['sort']:>7.1f} {_f(r.sort_gpu_ms, '8.1f'):>8} "
             f"{r.stages_ms['prepass']:>7.1f} {r.stages_ms['draw']:>8.1f} {r.quad_frame_ms:>8.1f} "
-            f"{_f(r.tile_frame_ms, '8.1f'):>8} {_f(r.gpu_sort_identical, ''):>4}")
+            f"{_f(r.tile_frame_ms, '8.1f'):>8} {_f(r.gpu_sort_identical, ''):>4} "
+            f"{_f(r.compact_bytes_per_splat, '9.0f'):>9} {_f(r.compact_psnr, '8.1f'):>8}")
+    if any(r.compact_bytes_per_splat for r in rows):
+        out.append("cmp: --gpu-storage compact, its GPU bytes per splat and the PSNR (dB) of its "
+                   "last frame against the measured storage's")
     for res, fits in slopes(rows).items():
         text = ", ".join(f"{name} {_f(s, '.2f')}" for name, s in fits.items())
         out.append(f"log-log slope over the SH0 sizes at {res}: {text}")

@@ -16,8 +16,8 @@ from ..limits import MAX_IMAGE_SIDE, check_image_size
 from ..formats.metadata import antialias_tag
 from ..render import default_camera
 from ..scene import Scene
-from ..settings import (Convention, Precision, Preprocess, QuadExtent, RendererKind, RenderSettings,
-                        SortKey)
+from ..settings import (Convention, GpuStorage, Precision, Preprocess, QuadExtent, RendererKind,
+                        RenderSettings, SortKey)
 from ..stereo import StereoLayout
 from ..transform import parse_transform
 from ..camera_up import UP_CHOICES, resolve_up
@@ -154,8 +154,15 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                    help="quad path early termination: stop shading pixels whose transmittance "
                         "fell below 1e-4 and drop splats that land only on such pixels "
                         "(default off, chosen by the benchmark on llvmpipe)")
-    g.add_argument("--half-sh", action="store_true",
-                   help="store SH coefficients as float16 in the quad path (half the memory)")
+    g.add_argument("--gpu-storage", choices=[m.value for m in GpuStorage], default="float32",
+                   help="how the scene is stored on the GPU (quad and tile renderers), bytes per "
+                        "splat at SH degree 0 / 3: 'float32' 64 / 244 (exact); 'half-sh' 64 / 154 "
+                        "(SH coefficients 1.. as float16, colour error below 2e-4); 'compact' "
+                        "32 / 122 (also opacity 16-bit, rotation 15 bits per component, scales "
+                        "and base colour float16: PSNR >= 80 dB against float32 on every shared "
+                        "real scene; docs/scale.md)")
+    g.add_argument("--half-sh", dest="gpu_storage", action="store_const", const="half-sh",
+                   help="the same as --gpu-storage half-sh (kept for older scripts)")
     g.add_argument("--transform", type=str, default=None, metavar="JSON",
                    help='place the scene in the world: inline JSON or a JSON file, e.g. '
                         '\'{"rotate_deg": [0, 90, 0], "translate": [0, 0, 1], "scale": 2}\' '
@@ -189,7 +196,7 @@ def settings_from_args(args: argparse.Namespace) -> RenderSettings:
     return RenderSettings(background=args.background, precision=args.precision, extent=args.extent,
                           near=args.near, antialias=antialias_from_args(args),
                           sh_degree=args.sh_degree,
-                          model=model, sort_key=args.sort, half_sh=args.half_sh,
+                          model=model, sort_key=args.sort, gpu_storage=args.gpu_storage,
                           convention=args.convention, **optional)
 
 

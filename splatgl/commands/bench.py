@@ -11,6 +11,7 @@ import numpy as np
 
 from ..bench.early_stop_report import early_stop_table
 from ..bench.real_scenes import shared_scenes_dir
+from ..bench.storage_report import storage_table
 from ..bench.report import plot, table, write_csv, write_json
 from ..bench.configs import configurations
 from ..bench.machine import describe, machine_info
@@ -217,6 +218,9 @@ def run(args: argparse.Namespace) -> int:
     stop_table = early_stop_table(rows)
     if stop_table:
         print("\n" + stop_table)
+    store_table = storage_table(rows)
+    if store_table:
+        print("\n" + store_table)
     defaults = [r for r in rows if r.config == "default"]
     for r in defaults:
         print(f"target check {r.scene}: default at {r.limit_ratio:.2f}x the limit row "

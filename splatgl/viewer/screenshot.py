@@ -11,7 +11,7 @@ from ..image_io import write_image
 from ..output_files import OutputFiles
 from ..render import Renderer
 from ..scene import Scene
-from ..settings import RendererKind, RenderSettings
+from ..settings import GpuStorage, RendererKind, RenderSettings
 
 PREFIX = "splatgl-view-"
 
@@ -37,8 +37,8 @@ def settings_arguments(settings: RenderSettings, kind: RendererKind) -> list[str
     if settings.sh_degree is not None:
         args += ["--sh-degree", str(settings.sh_degree)]
     args += ["--preprocess", settings.preprocess.value, "--sort", settings.sort_key.value]
-    if settings.half_sh:
-        args.append("--half-sh")
+    if settings.gpu_storage is not GpuStorage.FLOAT32:
+        args += ["--gpu-storage", settings.gpu_storage.value]
     return args
 
 
