@@ -10,7 +10,10 @@ frame at FINE_FAR x), in small steps such as an animation takes.  Per frame: fra
 in the cut, cut-selection time, PSNR and SSIM against the full-detail frame, and between
 consecutive frames the change the LOD adds beyond full detail's own change,
 ``D = (L[k+1] - L[k]) - (F[k+1] - F[k])`` (max and mean of ``|D|`` over pixels and RGB, and as
-a PSNR), beside full detail's own change ``|F[k+1] - F[k]|``.
+a PSNR), beside full detail's own change ``|F[k+1] - F[k]|``; and the change the cut alone
+makes, ``|L[k+1] - L'[k+1]|`` with ``L'[k+1]`` drawn at frame k+1's camera through frame k's
+cut (its nodes and weights): ``D`` also holds how the LOD's approximation error moves with
+the view, this does not.
 
 Run: ``splatgl bench --lod --sizes 3M,6M --out DIR`` (or ``python -m splatgl.bench.lod_bench``):
 table, lod.json, lod.png (the Pareto plot of frame time against RMS error per path).
@@ -34,7 +37,7 @@ FLY_FAR, FLY_NEAR = 6.0, 0.5
 #: Frames with at least this distance multiple count as far views.
 FAR_FROM = 3.0
 #: Fine paths (popping): start distance multiple, fly-in factor per frame, orbit degrees per frame.
-FINE_FAR, FINE_STEP, FINE_DEGREES = 3.0, 0.97, 1.0
+FINE_FAR, FINE_STEP, FINE_DEGREES = 6.0, 0.97, 1.0
 #: Path sets: coarse (time and error from far to close) and fine (popping between frames).
 PATH_SETS = ("coarse", "fine")
 
@@ -56,6 +59,8 @@ class LodFrame:
     popping_psnr: float | None
     pop_max: float | None = None  # max |D| over pixels and RGB (see the module docstring)
     pop_mean: float | None = None  # mean |D|
+    cut_change_max: float | None = None  # max |L[k] - L'[k]|, L' drawn with frame k-1's cut
+    cut_change_mean: float | None = None  # mean |L[k] - L'[k]|
     full_change_max: float | None = None  # max |F[k+1] - F[k]|
     full_change_mean: float | None = None  # mean |F[k+1] - F[k]|
 
@@ -141,22 +146,29 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
         for path, cams in paths.items():
             imgs, ms = reference[path]
             r.render(cams[0][1])
-            prev = None
+            prev = prev_cut = None
             for k, (m, cam) in enumerate(cams):
                 img = r.render(cam)[..., :3].astype(np.float64)
-                t = r.last_times
-                mse = float(np.mean((img - imgs[k]) ** 2))
-                pop = ()
+                t, cut = r.last_times, r.last_cut
+                frame = dict(scene=name, path=path, config=label, frame=k, distance=m,
+                             frame_ms=t.total * 1e3, full_ms=ms[k], drawn=t.drawn,
+                             cut_nodes=r.last_cut_nodes, cut_ms=r.last_cut_s * 1e3,
+                             psnr=_psnr(float(np.mean((img - imgs[k]) ** 2))),
+                             ssim=ssim(img.astype(np.float32), imgs[k].astype(np.float32)),
+                             popping_psnr=None)
                 if prev is not None:
                     own = imgs[k] - imgs[k - 1]
                     d = np.abs((img - prev) - own)
-                    pop = (_psnr(float(np.mean(d * d))), float(d.max()), float(d.mean()),
-                           float(np.abs(own).max()), float(np.abs(own).mean()))
-                prev = img
-                rows.append(LodFrame(name, path, label, k, m, t.total * 1e3, ms[k], t.drawn,
-                                     r.last_cut_nodes, r.last_cut_s * 1e3, _psnr(mse),
-                                     ssim(img.astype(np.float32), imgs[k].astype(np.float32)),
-                                     *(pop or (None,))))
+                    r.cut_override = prev_cut  # this camera, the previous frame's cut
+                    frozen = np.abs(img - r.render(cam)[..., :3].astype(np.float64))
+                    r.cut_override = None
+                    frame.update(popping_psnr=_psnr(float(np.mean(d * d))), pop_max=float(d.max()),
+                                 pop_mean=float(d.mean()), cut_change_max=float(frozen.max()),
+                                 cut_change_mean=float(frozen.mean()),
+                                 full_change_max=float(np.abs(own).max()),
+                                 full_change_mean=float(np.abs(own).mean()))
+                prev, prev_cut = img, cut
+                rows.append(LodFrame(**frame))
             log(f"lod bench {name} {path} {label}: done")
         r.release()
     ctx.release()
@@ -186,6 +198,8 @@ def summary(rows: list[LodFrame]) -> list[dict]:
             "min_popping_psnr": min(pops) if pops else None,
             "pop_max": max((r.pop_max for r in steps), default=None),
             "pop_mean": statistics.mean(r.pop_mean for r in steps) if steps else None,
+            "cut_change_max": max((r.cut_change_max for r in steps), default=None),
+            "cut_change_mean": statistics.mean(r.cut_change_mean for r in steps) if steps else None,
             "full_change_max": max((r.full_change_max for r in steps), default=None),
             "full_change_mean": statistics.mean(r.full_change_mean for r in steps) if steps else None,
             "cut_nodes": statistics.median(r.cut_nodes for r in sub),
@@ -198,13 +212,15 @@ def table(summ: list[dict]) -> str:
     f = lambda v, s: "-" if v is None else ("inf" if isinstance(v, float) and math.isinf(v) else format(v, s))
     out = [f"{'scene':>5} {'path':>10} {'config':>16} {'ms':>8} {'full ms':>8} {'far x':>6} "
            f"{'max LOD/full':>12} {'min PSNR':>8} {'min SSIM':>8} {'pop PSNR':>8} {'pop max':>7} "
-           f"{'pop mean':>8} {'F max':>6} {'F mean':>7} {'cut nodes':>10} {'cut ms':>7}"]
+           f"{'pop mean':>8} {'cut max':>7} {'cut mean':>8} {'F max':>6} {'F mean':>7} "
+           f"{'cut nodes':>10} {'cut ms':>7}"]
     for s in summ:
         out.append(f"{s['scene']:>5} {s['path']:>10} {s['config']:>16} {s['frame_ms']:>8.0f} "
                    f"{s['full_ms']:>8.0f} {f(s['far_speedup'], '.2f'):>6} {s['slowest_ratio']:>12.2f} "
                    f"{f(s['min_psnr'], '.1f'):>8} {s['min_ssim']:>8.4f} "
                    f"{f(s['min_popping_psnr'], '.1f'):>8} {f(s['pop_max'], '.3f'):>7} "
-                   f"{f(s['pop_mean'], '.5f'):>8} {f(s['full_change_max'], '.3f'):>6} "
+                   f"{f(s['pop_mean'], '.5f'):>8} {f(s['cut_change_max'], '.3f'):>7} "
+                   f"{f(s['cut_change_mean'], '.5f'):>8} {f(s['full_change_max'], '.3f'):>6} "
                    f"{f(s['full_change_mean'], '.4f'):>7} {s['cut_nodes']:>10,.0f} {s['cut_ms']:>7.0f}")
     return "\n".join(out)
 

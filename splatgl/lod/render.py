@@ -91,21 +91,30 @@ class LodRenderer(QuadRenderer):
         #: This view's opacity weight per sorted slot, (K,) float32, or None (all 1).
         self.slot_weights: np.ndarray | None = None
         self._node_weight: np.ndarray | None = None  # (M,) scratch: weight by node row
+        #: The last view's cut, (rows, weights or None); the leaves when it skipped the cut.
+        self.last_cut: tuple[np.ndarray, np.ndarray | None] | None = None
+        #: Draw this cut, (rows ascending, weights or None), instead of selecting one per view.
+        self.cut_override: tuple[np.ndarray, np.ndarray | None] | None = None
         self._weight_buffer = None
 
     def visible_order(self, camera: Camera) -> np.ndarray:
         """Cut, cull and sort for ``camera``: (M,) uint32 node rows, front to back.
 
         Without a budget, a view no farther from the scene (the root's centre) than one whose
-        cut drew at least SKIP_NODES_PER_LEAF nodes per leaf it stood for (:func:`leaves_covered`) skips the cut and culls the leaves (a contiguous
-        view of the cull data): close views cost what full detail costs.
+        cut drew at least SKIP_NODES_PER_LEAF nodes per leaf it stood for
+        (:func:`leaves_covered`) skips the cut and culls the leaves (a contiguous view of the
+        cull data): close views cost what full detail costs.  With ``cut_override`` set to
+        ``(rows, weights)`` (an earlier view's ``last_cut``) that cut is drawn instead: what the
+        benchmark compares against to measure the change the cut alone makes between frames.
         """
         t0 = time.perf_counter()
         n_leaves = self.tree.level_size(0)
         dist = float(np.linalg.norm(camera.center - self._root))
         if self._cull_data is None:
             self._cull_data = CullData.from_scene(self.scene)
-        if self.lod.budget is None and self.skip_within is not None and dist <= self.skip_within:
+        override = self.cut_override
+        if (override is None and self.lod.budget is None and self.skip_within is not None
+                and dist <= self.skip_within):
             keep, depth = cull_visible(self._cull_data.subset(slice(0, n_leaves)),
                                        anchored_camera(camera, self.scene.anchor), self.near,
                                        self.settings.antialias, camera.scale)
@@ -114,15 +123,19 @@ class LodRenderer(QuadRenderer):
             self._times_cull, self._times_sort = t2 - t0, time.perf_counter() - t2
             self.last_cut_nodes, self.last_cut_s = n_leaves, 0.0
             self._order_key, self._order, self.slot_weights = None, order, None
+            self.last_cut = (np.arange(n_leaves), None)
             return order
-        if self.lod.budget is not None:
+        if override is not None:
+            ids, weights = override
+        elif self.lod.budget is not None:
             ids, weights, self.last_threshold_px = select_cut_budget(
                 self.cut_data, camera, self.lod.budget, self.lod.threshold_px, self.lod.band)
         else:
             ids, weights = select_cut_weights(self.cut_data, camera, self.lod.threshold_px,
                                               self.lod.band)
         t1 = time.perf_counter()
-        if ids.size and ids.size >= SKIP_NODES_PER_LEAF * leaves_covered(self.tree, ids, weights):
+        if (override is None and ids.size
+                and ids.size >= SKIP_NODES_PER_LEAF * leaves_covered(self.tree, ids, weights)):
             self.skip_within = max(self.skip_within or 0.0, dist)
         keep, depth = cull_visible(self._cull_data.subset(ids),
                                    anchored_camera(camera, self.scene.anchor), self.near,
@@ -139,6 +152,7 @@ class LodRenderer(QuadRenderer):
         t3 = time.perf_counter()
         self._times_cull, self._times_sort = t2 - t0, t3 - t2
         self.last_cut_nodes, self.last_cut_s = int(ids.size), t1 - t0
+        self.last_cut = (ids, weights)
         self._order_key, self._order = None, order
         return order
 
