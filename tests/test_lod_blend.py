@@ -180,3 +180,24 @@ def test_cli_lod_blend(tmp_path, shared_scenes):
     assert proc.returncode == 2
     assert proc.stderr.strip() == ("splatgl: error: --lod-blend must be a ratio of at least 1 "
                                    "(1: no blending), got 0.5")
+
+
+def test_cut_override_draws_an_earlier_views_cut(ctx, biker):
+    """What the benchmark's cut-change measure rests on: the same camera through its own cut
+    (given back as ``cut_override``) draws the same image bit for bit; a nearer camera through
+    the farther view's cut draws fewer nodes than its own cut."""
+    scene, tree = biker
+    far = default_camera(scene, 96, 64, distance_scale=4.0)
+    near = default_camera(scene, 96, 64, distance_scale=3.0)
+    lod = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0, band=2.0))
+    try:
+        img = lod.render(far)
+        cut = lod.last_cut
+        lod.cut_override = cut
+        np.testing.assert_array_equal(lod.render(far), img)
+        frozen_nodes = lod.last_cut_nodes
+        lod.cut_override = None
+        lod.render(near)
+        assert lod.last_cut_nodes > frozen_nodes and lod.last_cut is not cut
+    finally:
+        lod.release()

@@ -113,7 +113,12 @@ def configurations(thresholds, budgets, bands) -> list[tuple[str, object]]:
 
 
 def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds, budgets,
-              log=print, bands=(2.0,), paths: str = "coarse") -> list[LodFrame]:
+              log=print, bands=(2.0,), paths: str = "coarse",
+              cut_change: bool | None = None) -> list[LodFrame]:
+    """Rows per (config, path, frame).  ``cut_change`` (default: on for the fine paths) also
+    draws each frame through the previous frame's cut (one more render a frame)."""
+    if cut_change is None:
+        cut_change = paths == "fine"
     from ..formats import load_scene
     from ..gl.context import create_headless_context
     from ..lod.io import read_lod
@@ -159,14 +164,15 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
                 if prev is not None:
                     own = imgs[k] - imgs[k - 1]
                     d = np.abs((img - prev) - own)
-                    r.cut_override = prev_cut  # this camera, the previous frame's cut
-                    frozen = np.abs(img - r.render(cam)[..., :3].astype(np.float64))
-                    r.cut_override = None
                     frame.update(popping_psnr=_psnr(float(np.mean(d * d))), pop_max=float(d.max()),
-                                 pop_mean=float(d.mean()), cut_change_max=float(frozen.max()),
-                                 cut_change_mean=float(frozen.mean()),
-                                 full_change_max=float(np.abs(own).max()),
+                                 pop_mean=float(d.mean()), full_change_max=float(np.abs(own).max()),
                                  full_change_mean=float(np.abs(own).mean()))
+                    if cut_change:
+                        r.cut_override = prev_cut  # this camera, the previous frame's cut
+                        frozen = np.abs(img - r.render(cam)[..., :3].astype(np.float64))
+                        r.cut_override = None
+                        frame.update(cut_change_max=float(frozen.max()),
+                                     cut_change_mean=float(frozen.mean()))
                 prev, prev_cut = img, cut
                 rows.append(LodFrame(**frame))
             log(f"lod bench {name} {path} {label}: done")
@@ -188,6 +194,7 @@ def summary(rows: list[LodFrame]) -> list[dict]:
         psnrs = [r.psnr if r.psnr is not None else float("inf") for r in sub]
         pops = [r.popping_psnr for r in sub if r.popping_psnr is not None]
         steps = [r for r in sub if r.pop_max is not None]
+        cuts = [r for r in sub if r.cut_change_max is not None]
         out.append({
             "scene": scene, "path": path, "config": config,
             "frame_ms": statistics.median(r.frame_ms for r in sub),
@@ -198,8 +205,8 @@ def summary(rows: list[LodFrame]) -> list[dict]:
             "min_popping_psnr": min(pops) if pops else None,
             "pop_max": max((r.pop_max for r in steps), default=None),
             "pop_mean": statistics.mean(r.pop_mean for r in steps) if steps else None,
-            "cut_change_max": max((r.cut_change_max for r in steps), default=None),
-            "cut_change_mean": statistics.mean(r.cut_change_mean for r in steps) if steps else None,
+            "cut_change_max": max((r.cut_change_max for r in cuts), default=None),
+            "cut_change_mean": statistics.mean(r.cut_change_mean for r in cuts) if cuts else None,
             "full_change_max": max((r.full_change_max for r in steps), default=None),
             "full_change_mean": statistics.mean(r.full_change_mean for r in steps) if steps else None,
             "cut_nodes": statistics.median(r.cut_nodes for r in sub),
