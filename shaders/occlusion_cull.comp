@@ -69,7 +69,7 @@ bool splat_rect(uint k, out vec2 lo, out vec2 hi, out uint value) {
     uint i = order[k];
     value = i;
     ScreenSplat s;
-    if (!setup_splat(i, s)) return false;
+    if (!setup_splat(i, 1.0, s)) return false;
     vec2 half_size = abs(s.axis1) + abs(s.axis2);
     lo = s.mean2d - half_size;
     hi = s.mean2d + half_size;

@@ -12,6 +12,6 @@ in uint splat_index;          // from the per-view sorted index buffer (divisor 
 
 void main() {
     ScreenSplat s;
-    if (!setup_splat(splat_index, s)) { gl_Position = CULLED; return; }
+    if (!setup_splat(splat_index, 1.0, s)) { gl_Position = CULLED; return; }
     emit_corner(s.mean2d, s.axis1, s.axis2, s.conic, s.color, s.opacity, s.depth);
 }

@@ -1,7 +1,8 @@
 // Quad path, compute pre-pass: the per-splat math of quad.vert done once per splat (not once
 // per corner), for the sorted visible splats, into `prepared` for quad_light.vert.
 // Layout per sorted slot k (4 vec4): (mean2d, axis1), (axis2, conic.ab), (conic.c, color),
-// (opacity, depth, visible, 0).  Twin: splatgl/project.py, as for quad.vert.
+// (opacity, depth, visible, 0).  Twin: splatgl/project.py, as for quad.vert; with
+// OPACITY_WEIGHT, the scene with those opacities scaled (splatgl/lod/render.py blended_scene).
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"
 #include "lib/project.glsl"
@@ -11,13 +12,21 @@
 layout(local_size_x = 128) in;
 layout(std430, binding = 5) readonly buffer Order { uint order[]; };
 layout(std430, binding = 6) writeonly buffer Prepared { vec4 prepared[]; };
+#ifdef OPACITY_WEIGHT
+// Level-of-detail blend: a factor on each sorted slot's opacity (splatgl/lod/render.py).
+layout(std430, binding = 11) readonly buffer OpacityWeight { float opacity_weight[]; };
+#endif
 uniform uint u_count;
 
 void main() {
     uint k = gl_GlobalInvocationID.x;
     if (k >= u_count) return;
     ScreenSplat s;
-    bool ok = setup_splat(order[k], s);
+#ifdef OPACITY_WEIGHT
+    bool ok = setup_splat(order[k], opacity_weight[k], s);
+#else
+    bool ok = setup_splat(order[k], 1.0, s);
+#endif
     prepared[4u * k + 3u] = vec4(s.opacity, s.depth, ok ? 1.0 : 0.0, 0.0);
     if (!ok) return;
     prepared[4u * k] = vec4(s.mean2d, s.axis1);

@@ -37,6 +37,9 @@ from .sort import bucket_sort, depth_sort
 BINDING_ORDER, BINDING_PREPARED = 5, 6
 #: Storage binding of the benchmark's fragment counters (shaders/quad.frag, COUNT_FRAGMENTS).
 BINDING_FRAGMENT_COUNTS = 7
+#: Storage binding of the pre-pass's per-slot opacity weights (OPACITY_WEIGHT; after early
+#: termination's 8..10): the level-of-detail blend, splatgl/lod/render.py.
+BINDING_OPACITY_WEIGHT = 11
 #: Bytes per splat of the pre-pass output (4 vec4, see shaders/quad_prepass.comp).
 PREPARED_BYTES = 64
 #: Work-group size of shaders/quad_prepass.comp.

@@ -95,8 +95,10 @@ def test_cut_grows_with_smaller_thresholds_and_budget_fits():
     camera = Camera.from_fov(320, 180, 60.0, look_at(np.array([0.5, -0.2, -8.0]), np.zeros(3)))
     sizes = [select_cut(data, camera, t).size for t in (16.0, 4.0, 1.0, 0.25)]
     assert sizes == sorted(sizes) and sizes[0] < sizes[-1]
-    cut, t = select_cut_budget(data, camera, 500, threshold_px=0.25)
-    assert 0 < cut.size <= 500 and t > 0.25
+    cut, w, t = select_cut_budget(data, camera, 500, threshold_px=0.25)
+    assert 0 < cut.size <= 500 and t > 0.25 and w is None
+    cut, w, t = select_cut_budget(data, camera, 500, threshold_px=0.25, band=2.0)
+    assert 0 < cut.size <= 500 and t > 0.25 and w.shape == cut.shape
 
 
 def test_frustum_drops_subtrees_outside_the_view():
@@ -161,10 +163,11 @@ def test_cli_builds_and_renders_a_cut(tmp_path, shared_scenes):
 
 
 def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
-    """Once a view's cut is >= 90% leaves, views no farther draw the leaves directly: the same
-    image as full detail up to float32 rounding (the node scene's anchor, which every centre is
-    taken relative to, is not the leaves' own: measured 92.9 dB, max error 0.0018), no cut time."""
-    from splatgl.lod.render import LEAF_SHARE_SKIP
+    """Once a view's cut draws >= 0.75 nodes per leaf it stands for, views no farther draw the
+    leaves directly: the same image as full detail up to float32 rounding (the node scene's
+    anchor, which every centre is taken relative to, is not the leaves' own: measured 92.9 dB,
+    max error 0.0018), no cut time."""
+    from splatgl.lod.render import SKIP_NODES_PER_LEAF
 
     scene, tree = biker
     close = default_camera(scene, 96, 64, distance_scale=0.8)
@@ -174,7 +177,7 @@ def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
     try:
         lod.render(close)
         assert lod.last_cut_s > 0 and lod.skip_within is not None  # cut was mostly leaves
-        assert LEAF_SHARE_SKIP == 0.9
+        assert SKIP_NODES_PER_LEAF == 0.75
         got = lod.render(closer)
         assert lod.last_cut_s == 0.0 and lod.last_cut_nodes == scene.count
         assert image_errors(got, full.render(closer)).psnr >= 80.0

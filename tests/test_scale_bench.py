@@ -46,12 +46,24 @@ def test_measure_file_rows(tiny_file):
 
 
 def test_lod_bench_rows(tiny_file):
-    rows = bench_lod(tiny_file, 64, 48, 3, [1.0], [500], log=lambda m: None)
+    rows = bench_lod(tiny_file, 64, 48, 3, [1.0], [500], log=lambda m: None, bands=(2.0, 1.0))
     assert {(r.path, r.config) for r in rows} == {(p, c) for p in ("orbit", "fly")
-                                                  for c in ("T=1px", "budget=500")}
+                                                  for c in ("T=1px", "T=1px hard", "budget=500")}
     assert all(r.cut_nodes <= 500 for r in rows if r.config == "budget=500")
     fly = [r for r in rows if r.path == "fly" and r.config == "T=1px"]
     assert fly[0].distance == pytest.approx(6.0) and fly[-1].distance == pytest.approx(0.5)
     assert fly[0].cut_nodes < fly[-1].cut_nodes  # far: coarse, close: fine
+    assert fly[0].pop_max is None and fly[1].pop_max >= fly[1].pop_mean >= 0
+    assert fly[1].full_change_max > 0 and fly[1].cut_change_max is None  # coarse: not drawn
     s = summary(rows)
-    assert len(s) == 4 and all(x["min_ssim"] > 0 for x in s)
+    assert len(s) == 6 and all(x["min_ssim"] > 0 for x in s)
+    assert all(x["pop_max"] is not None and x["full_change_mean"] > 0 for x in s)
+    assert all(x["cut_change_max"] is None for x in s)
+
+
+def test_lod_bench_fine_paths(tiny_file):
+    rows = bench_lod(tiny_file, 64, 48, 3, [1.0], [], log=lambda m: None, paths="fine")
+    fly = [r for r in rows if r.path == "fly-fine"]
+    assert [r.distance for r in fly] == pytest.approx([6.0, 6.0 * 0.97, 6.0 * 0.97 ** 2])
+    assert {r.path for r in rows} == {"fly-fine", "orbit-fine"}
+    assert all(r.cut_change_max >= r.cut_change_mean >= 0 for r in rows if r.frame > 0)

@@ -34,9 +34,11 @@ void quad_axes(vec3 cov, float det, float opacity, out vec2 axis1, out vec2 axis
 }
 
 // Fills s for the splat of sorted entry idx (its index; with EQUIRECT the top bit marks the
-// second copy of a splat on the +-180 degree seam, splatgl/lens.py wrap_copies); false when the
-// splat is culled (behind the near plane, or a non-positive-definite 2D covariance).
-bool setup_splat(uint idx, out ScreenSplat s) {
+// second copy of a splat on the +-180 degree seam, splatgl/lens.py wrap_copies), its optical
+// depth scaled by weight (1.0, or a level-of-detail blend weight in (0, 1]: opacity o drawn as
+// 1 - (1 - o)^weight, splatgl/lod/cut.py); false when the splat is culled (behind the near
+// plane, or a non-positive-definite 2D covariance).
+bool setup_splat(uint idx, float weight, out ScreenSplat s) {
     uint i = idx & 0x7fffffffu;
     vec4 a = splat_mean_opacity(i);
     vec3 p = u_view_rot * a.xyz + u_view_trans;
@@ -50,7 +52,7 @@ bool setup_splat(uint idx, out ScreenSplat s) {
     float det = covariance_2d_det(cov, screen_factor(rot, scale, p));  // > 0 (see project.glsl)
     s.conic = conic(cov, det);
     if (!(det > 0.0)) return false;
-    s.opacity = a.w;
+    s.opacity = weight == 1.0 ? a.w : 1.0 - pow(1.0 - a.w, weight);
 #ifdef ANTIALIAS
     s.opacity *= antialias_factor(cov);
 #endif

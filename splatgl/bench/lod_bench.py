@@ -1,15 +1,22 @@
-"""Level-of-detail benchmark: frame time and error against full detail along two paths.
+"""Level-of-detail benchmark: frame time and error against full detail along camera paths.
 
 For a real-data scene (:func:`splatgl.bench.scale.scene_file`) and its hierarchy (built once
-and cached as ``.lod.ply`` beside it), render an orbit at the framing distance and a
-fly-through from far (FLY_FAR x the framing distance) to close (FLY_NEAR x), at full detail
-(the plain quad path) and with several cuts (pixel thresholds and splat budgets).  Per frame:
-frame time, nodes in the cut, cut-selection time, PSNR and SSIM against the full-detail frame.
-Popping: between consecutive frames the change the LOD adds beyond full detail's own change,
-``(L[k+1] - L[k]) - (F[k+1] - F[k])``, as a PSNR (higher: smoother).
+and cached as ``.lod.ply`` beside it), render camera paths at full detail (the plain quad
+path) and with several cuts (pixel thresholds with and without a transition band, splat
+budgets).  Paths: ``orbit`` at the framing distance and ``fly`` from far (FLY_FAR x the framing
+distance) to close (FLY_NEAR x), in a few large steps (frame time and error); for popping,
+``fly-fine`` (FINE_STEP closer a frame from FINE_FAR x) and ``orbit-fine`` (FINE_DEGREES a
+frame at FINE_FAR x), in small steps such as an animation takes.  Per frame: frame time, nodes
+in the cut, cut-selection time, PSNR and SSIM against the full-detail frame, and between
+consecutive frames the change the LOD adds beyond full detail's own change,
+``D = (L[k+1] - L[k]) - (F[k+1] - F[k])`` (max and mean of ``|D|`` over pixels and RGB, and as
+a PSNR), beside full detail's own change ``|F[k+1] - F[k]|``; and the change the cut alone
+makes, ``|L[k+1] - L'[k+1]|`` with ``L'[k+1]`` drawn at frame k+1's camera through frame k's
+cut (its nodes and weights): ``D`` also holds how the LOD's approximation error moves with
+the view, this does not.
 
-Run: ``python -m splatgl.bench.lod_bench --sizes 3M,6M --out DIR`` (table, lod.json,
-lod.png: the Pareto plot of frame time against RMS error per path).
+Run: ``splatgl bench --lod --sizes 3M,6M --out DIR`` (or ``python -m splatgl.bench.lod_bench``):
+table, lod.json, lod.png (the Pareto plot of frame time against RMS error per path).
 """
 
 from __future__ import annotations
@@ -29,6 +36,10 @@ from .report import save_figure
 FLY_FAR, FLY_NEAR = 6.0, 0.5
 #: Frames with at least this distance multiple count as far views.
 FAR_FROM = 3.0
+#: Fine paths (popping): start distance multiple, fly-in factor per frame, orbit degrees per frame.
+FINE_FAR, FINE_STEP, FINE_DEGREES = 6.0, 0.97, 1.0
+#: Path sets: coarse (time and error from far to close) and fine (popping between frames).
+PATH_SETS = ("coarse", "fine")
 
 
 @dataclass(frozen=True)
@@ -46,27 +57,36 @@ class LodFrame:
     psnr: float | None
     ssim: float
     popping_psnr: float | None
+    pop_max: float | None = None  # max |D| over pixels and RGB (see the module docstring)
+    pop_mean: float | None = None  # mean |D|
+    cut_change_max: float | None = None  # max |L[k] - L'[k]|, L' drawn with frame k-1's cut
+    cut_change_mean: float | None = None  # mean |L[k] - L'[k]|
+    full_change_max: float | None = None  # max |F[k+1] - F[k]|
+    full_change_mean: float | None = None  # mean |F[k+1] - F[k]|
 
 
 def _psnr(mse: float) -> float | None:
     return None if mse <= 0 else float(-10.0 * math.log10(mse))
 
 
-def cameras(scene, width: int, height: int, frames: int):
-    """{path name: [(distance multiple, camera)]}: an orbit and a far-to-close fly-through."""
+def cameras(scene, width: int, height: int, frames: int, paths: str = "coarse"):
+    """{path name: [(distance multiple, camera)]}: ``coarse``: an orbit over 90 degrees and a
+    far-to-close fly-through in ``frames`` frames each; ``fine``: a fly-in and an orbit in
+    small steps (FINE_STEP, FINE_DEGREES) from FINE_FAR x the framing distance."""
     from ..camera import orbit
     from ..render import default_camera
 
     base = default_camera(scene, width, height)
     centre = 0.5 * (scene.robust_bounds[0] + scene.robust_bounds[1])
     dist = float(np.linalg.norm(base.center - centre))
-    orbit_cams = [(1.0, base.with_pose(orbit(centre, dist, 90.0 * i / max(frames - 1, 1), 20.0)))
-                  for i in range(frames)]
-    fly = []
-    for i in range(frames):
-        m = FLY_FAR * (FLY_NEAR / FLY_FAR) ** (i / max(frames - 1, 1))  # geometric steps
-        fly.append((m, base.with_pose(orbit(centre, dist * m, 10.0, 20.0))))
-    return {"orbit": orbit_cams, "fly": fly}
+    at = lambda m, deg: (m, base.with_pose(orbit(centre, dist * m, deg, 20.0)))
+    if paths == "fine":
+        return {"fly-fine": [at(FINE_FAR * FINE_STEP ** i, 10.0) for i in range(frames)],
+                "orbit-fine": [at(FINE_FAR, 10.0 + FINE_DEGREES * i) for i in range(frames)]}
+    span = max(frames - 1, 1)
+    return {"orbit": [at(1.0, 90.0 * i / span) for i in range(frames)],
+            "fly": [at(FLY_FAR * (FLY_NEAR / FLY_FAR) ** (i / span), 10.0)  # geometric steps
+                    for i in range(frames)]}
 
 
 def lod_file(scene_path: Path) -> Path:
@@ -80,12 +100,29 @@ def lod_file(scene_path: Path) -> Path:
     return out
 
 
+def configurations(thresholds, budgets, bands) -> list[tuple[str, object]]:
+    """(label, LodSettings): every threshold at every band, then the budgets at the first band
+    (never finer than the smallest threshold)."""
+    from ..lod.render import LodSettings
+
+    name = lambda b: "" if b == bands[0] else (" hard" if b == 1 else f" band {b:g}")
+    out = [(f"T={t:g}px{name(b)}", LodSettings(threshold_px=t, band=b)) for t in thresholds for b in bands]
+    out += [(f"budget={n:,}", LodSettings(threshold_px=min(thresholds), budget=n, band=bands[0]))
+            for n in budgets]
+    return out
+
+
 def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds, budgets,
-              log=print) -> list[LodFrame]:
+              log=print, bands=(2.0,), paths: str = "coarse",
+              cut_change: bool | None = None) -> list[LodFrame]:
+    """Rows per (config, path, frame).  ``cut_change`` (default: on for the fine paths) also
+    draws each frame through the previous frame's cut (one more render a frame)."""
+    if cut_change is None:
+        cut_change = paths == "fine"
     from ..formats import load_scene
     from ..gl.context import create_headless_context
     from ..lod.io import read_lod
-    from ..lod.render import LodRenderer, LodSettings
+    from ..lod.render import LodRenderer
     from ..metrics import ssim
     from ..quad import QuadRenderer
     from ..settings import RenderSettings
@@ -96,7 +133,7 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
     leaves = load_scene(scene_path)
     ctx = create_headless_context()
     settings = RenderSettings()
-    paths = cameras(leaves, width, height, frames)
+    paths = cameras(leaves, width, height, frames, paths)
     full = QuadRenderer(ctx, leaves, settings)
     reference = {}
     for path, cams in paths.items():
@@ -108,26 +145,36 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
         reference[path] = (imgs, ms)
         log(f"lod bench {name} {path}: full detail {statistics.median(ms):.0f} ms median")
     full.release()
-    configs = [(f"T={t:g}px", LodSettings(threshold_px=t)) for t in thresholds]
-    configs += [(f"budget={b:,}", LodSettings(threshold_px=min(thresholds), budget=b)) for b in budgets]
     rows = []
-    for label, lod in configs:
+    for label, lod in configurations(thresholds, budgets, bands):
         r = LodRenderer(ctx, tree, settings, lod)
         for path, cams in paths.items():
             imgs, ms = reference[path]
             r.render(cams[0][1])
-            prev = None
+            prev = prev_cut = None
             for k, (m, cam) in enumerate(cams):
                 img = r.render(cam)[..., :3].astype(np.float64)
-                t = r.last_times
-                mse = float(np.mean((img - imgs[k]) ** 2))
-                pop = None
+                t, cut = r.last_times, r.last_cut
+                frame = dict(scene=name, path=path, config=label, frame=k, distance=m,
+                             frame_ms=t.total * 1e3, full_ms=ms[k], drawn=t.drawn,
+                             cut_nodes=r.last_cut_nodes, cut_ms=r.last_cut_s * 1e3,
+                             psnr=_psnr(float(np.mean((img - imgs[k]) ** 2))),
+                             ssim=ssim(img.astype(np.float32), imgs[k].astype(np.float32)),
+                             popping_psnr=None)
                 if prev is not None:
-                    pop = _psnr(float(np.mean(((img - prev) - (imgs[k] - imgs[k - 1])) ** 2)))
-                prev = img
-                rows.append(LodFrame(name, path, label, k, m, t.total * 1e3, ms[k], t.drawn,
-                                     r.last_cut_nodes, r.last_cut_s * 1e3, _psnr(mse),
-                                     ssim(img.astype(np.float32), imgs[k].astype(np.float32)), pop))
+                    own = imgs[k] - imgs[k - 1]
+                    d = np.abs((img - prev) - own)
+                    frame.update(popping_psnr=_psnr(float(np.mean(d * d))), pop_max=float(d.max()),
+                                 pop_mean=float(d.mean()), full_change_max=float(np.abs(own).max()),
+                                 full_change_mean=float(np.abs(own).mean()))
+                    if cut_change:
+                        r.cut_override = prev_cut  # this camera, the previous frame's cut
+                        frozen = np.abs(img - r.render(cam)[..., :3].astype(np.float64))
+                        r.cut_override = None
+                        frame.update(cut_change_max=float(frozen.max()),
+                                     cut_change_mean=float(frozen.mean()))
+                prev, prev_cut = img, cut
+                rows.append(LodFrame(**frame))
             log(f"lod bench {name} {path} {label}: done")
         r.release()
     ctx.release()
@@ -137,7 +184,8 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
 def summary(rows: list[LodFrame]) -> list[dict]:
     """Per (scene, path, config): median frame ms, median full ms, far-view speed-up (median
     of full / LOD over frames at >= FAR_FROM x), the slowest frame's LOD / full ratio, worst
-    PSNR and SSIM, worst popping PSNR, median cut nodes and cut ms."""
+    PSNR and SSIM, worst popping PSNR, the largest and the mean per-pixel change between
+    consecutive frames that the LOD adds (and full detail's own), median cut nodes and cut ms."""
     out = []
     keys = dict.fromkeys((r.scene, r.path, r.config) for r in rows)
     for scene, path, config in keys:
@@ -145,6 +193,8 @@ def summary(rows: list[LodFrame]) -> list[dict]:
         far = [r.full_ms / r.frame_ms for r in sub if r.distance >= FAR_FROM]
         psnrs = [r.psnr if r.psnr is not None else float("inf") for r in sub]
         pops = [r.popping_psnr for r in sub if r.popping_psnr is not None]
+        steps = [r for r in sub if r.pop_max is not None]
+        cuts = [r for r in sub if r.cut_change_max is not None]
         out.append({
             "scene": scene, "path": path, "config": config,
             "frame_ms": statistics.median(r.frame_ms for r in sub),
@@ -153,6 +203,12 @@ def summary(rows: list[LodFrame]) -> list[dict]:
             "slowest_ratio": max(r.frame_ms / r.full_ms for r in sub),
             "min_psnr": min(psnrs), "min_ssim": min(r.ssim for r in sub),
             "min_popping_psnr": min(pops) if pops else None,
+            "pop_max": max((r.pop_max for r in steps), default=None),
+            "pop_mean": statistics.mean(r.pop_mean for r in steps) if steps else None,
+            "cut_change_max": max((r.cut_change_max for r in cuts), default=None),
+            "cut_change_mean": statistics.mean(r.cut_change_mean for r in cuts) if cuts else None,
+            "full_change_max": max((r.full_change_max for r in steps), default=None),
+            "full_change_mean": statistics.mean(r.full_change_mean for r in steps) if steps else None,
             "cut_nodes": statistics.median(r.cut_nodes for r in sub),
             "cut_ms": statistics.median(r.cut_ms for r in sub),
         })
@@ -161,13 +217,18 @@ def summary(rows: list[LodFrame]) -> list[dict]:
 
 def table(summ: list[dict]) -> str:
     f = lambda v, s: "-" if v is None else ("inf" if isinstance(v, float) and math.isinf(v) else format(v, s))
-    out = [f"{'scene':>5} {'path':>5} {'config':>16} {'ms':>8} {'full ms':>8} {'far x':>6} "
-           f"{'max LOD/full':>12} {'min PSNR':>8} {'min SSIM':>8} {'pop PSNR':>8} {'cut nodes':>10} {'cut ms':>7}"]
+    out = [f"{'scene':>5} {'path':>10} {'config':>16} {'ms':>8} {'full ms':>8} {'far x':>6} "
+           f"{'max LOD/full':>12} {'min PSNR':>8} {'min SSIM':>8} {'pop PSNR':>8} {'pop max':>7} "
+           f"{'pop mean':>8} {'cut max':>7} {'cut mean':>8} {'F max':>6} {'F mean':>7} "
+           f"{'cut nodes':>10} {'cut ms':>7}"]
     for s in summ:
-        out.append(f"{s['scene']:>5} {s['path']:>5} {s['config']:>16} {s['frame_ms']:>8.0f} "
+        out.append(f"{s['scene']:>5} {s['path']:>10} {s['config']:>16} {s['frame_ms']:>8.0f} "
                    f"{s['full_ms']:>8.0f} {f(s['far_speedup'], '.2f'):>6} {s['slowest_ratio']:>12.2f} "
                    f"{f(s['min_psnr'], '.1f'):>8} {s['min_ssim']:>8.4f} "
-                   f"{f(s['min_popping_psnr'], '.1f'):>8} {s['cut_nodes']:>10,.0f} {s['cut_ms']:>7.0f}")
+                   f"{f(s['min_popping_psnr'], '.1f'):>8} {f(s['pop_max'], '.3f'):>7} "
+                   f"{f(s['pop_mean'], '.5f'):>8} {f(s['cut_change_max'], '.3f'):>7} "
+                   f"{f(s['cut_change_mean'], '.5f'):>8} {f(s['full_change_max'], '.3f'):>6} "
+                   f"{f(s['full_change_mean'], '.4f'):>7} {s['cut_nodes']:>10,.0f} {s['cut_ms']:>7.0f}")
     return "\n".join(out)
 
 
@@ -201,39 +262,88 @@ def plot(path: Path, rows: list[LodFrame]) -> None:
     save_figure(fig, path)
 
 
-def main(argv=None) -> int:
+def run_lod(sizes, width: int, height: int, frames: int, thresholds, budgets, bands,
+            paths: str = "coarse", out: Path | None = None, log=print) -> list[dict]:
+    """Measure every size (scene and hierarchy built and cached on first use), print the table,
+    and with ``out`` write lod.json and lod.png there (each atomically); the summary rows."""
+    from ..output_files import OutputFiles
     from .scale import scene_file
-    from .scale_cli import parse_sizes
 
-    p = argparse.ArgumentParser(prog="python -m splatgl.bench.lod_bench", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--sizes", default="3M,6M", help="scene sizes (default 3M,6M)")
-    p.add_argument("--width", type=int, default=1280)
-    p.add_argument("--height", type=int, default=720)
-    p.add_argument("--frames", type=int, default=5, help="frames per path (default 5)")
-    p.add_argument("--thresholds", default="1,2", help="pixel thresholds (default 1,2)")
-    p.add_argument("--budgets", default="1M,0.3M", help="splat budgets (default 1M,0.3M)")
-    p.add_argument("--out", type=Path, default=None)
-    args = p.parse_args(argv)
-    thresholds = [float(t) for t in args.thresholds.split(",")]
-    budgets = list(parse_sizes(args.budgets, (), "--budgets"))
     rows = []
-    for n in parse_sizes(args.sizes, (), "--sizes"):
+    for n in sizes:
         t0 = time.perf_counter()
         path = scene_file(n, 0)
         lod_file(path)
-        print(f"lod bench: {n:,} splats ready ({time.perf_counter() - t0:.0f} s)", flush=True)
-        rows += bench_lod(path, args.width, args.height, args.frames, thresholds, budgets,
-                          log=lambda m: print(m, flush=True))
+        log(f"lod bench: {n:,} splats ready ({time.perf_counter() - t0:.0f} s)")
+        rows += bench_lod(path, width, height, frames, thresholds, budgets, log=log, bands=bands,
+                          paths=paths)
     summ = summary(rows)
-    print(table(summ))
-    if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / "lod.json").write_text(json.dumps({"summary": summ, "frames": [asdict(r) for r in rows]},
-                                                      indent=1) + "\n")
-        plot(args.out / "lod.png", rows)
-        print(f"wrote {args.out / 'lod.json'}, lod.png")
+    log(table(summ))
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        files = OutputFiles({name: out / name for name in ("lod.json", "lod.png")})
+        with files:
+            files.temp("lod.json").write_text(json.dumps(
+                {"summary": summ, "frames": [asdict(r) for r in rows]}, indent=1) + "\n")
+            plot(files.temp("lod.png"), rows)
+        log(f"wrote {out / 'lod.json'}, lod.png")
+    return summ
+
+
+def _numbers(text: str, flag: str) -> list[float]:
+    from ..errors import SplatglError
+
+    try:
+        values = [float(t) for t in text.split(",")]
+    except ValueError:
+        raise SplatglError(f"{flag}: expected comma-separated numbers, got {text!r}") from None
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise SplatglError(f"{flag}: every value must be a finite number > 0, got {text!r}")
+    return values
+
+
+def run_lod_command(args: argparse.Namespace) -> int:
+    """``splatgl bench --lod`` (and ``python -m splatgl.bench.lod_bench``)."""
+    from ..errors import SplatglError
+    from .scale_cli import parse_sizes
+
+    paths = args.lod_paths or "coarse"
+    if paths not in PATH_SETS:
+        raise SplatglError(f"--lod-paths: expected one of {', '.join(PATH_SETS)}, got {paths!r}")
+    bands = _numbers(args.lod_blend or "2,1", "--lod-blend")
+    if min(bands) < 1:
+        raise SplatglError(f"--lod-blend: bands are ratios of at least 1, got {args.lod_blend!r}")
+    run_lod(parse_sizes(args.sizes or "3M,6M", (), "--sizes"), args.width or 1280,
+            args.height or 720, args.frames or 5,
+            _numbers(args.lod_thresholds or "1,2", "--lod-thresholds"),
+            list(parse_sizes(args.lod_budgets or "1M,0.3M", (), "--lod-budgets")), bands, paths,
+            args.out, log=lambda m: print(m, flush=True))
     return 0
+
+
+def add_lod_arguments(p: argparse.ArgumentParser) -> None:
+    """The --lod options (shared by ``splatgl bench`` and this module's own command line)."""
+    p.add_argument("--lod-thresholds", default=None, metavar="LIST",
+                   help="--lod pixel thresholds (default 1,2)")
+    p.add_argument("--lod-budgets", default=None, metavar="LIST",
+                   help="--lod splat budgets, at the first band (default 1M,0.3M; 'none')")
+    p.add_argument("--lod-blend", default=None, metavar="LIST",
+                   help="--lod transition bands, ratios (default 2,1: blended and hard cuts)")
+    p.add_argument("--lod-paths", default=None, choices=PATH_SETS,
+                   help="--lod camera paths: coarse (orbit and far-to-close fly-through, the "
+                        "default) or fine (small steps, for popping between frames)")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m splatgl.bench.lod_bench", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--sizes", default=None, help="scene sizes (default 3M,6M)")
+    p.add_argument("--width", type=int, default=None, help="default 1280")
+    p.add_argument("--height", type=int, default=None, help="default 720")
+    p.add_argument("--frames", type=int, default=None, help="frames per path (default 5)")
+    p.add_argument("--out", type=Path, default=None)
+    add_lod_arguments(p)
+    return run_lod_command(p.parse_args(argv))
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bench.early_stop_report import early_stop_table
+from ..bench.lod_bench import add_lod_arguments
 from ..bench.real_scenes import shared_scenes_dir
 from ..bench.storage_report import storage_table
 from ..bench.report import plot, table, write_csv, write_json
@@ -94,8 +95,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "shared real files (and one SH3 size), load time, peak memory, GPU bytes "
                         "per splat, cull/sort/pre-pass/draw and tile frame times, CPU and GPU "
                         "sort, log-log slopes (see splatgl/bench/scale.py)")
+    p.add_argument("--lod", action="store_true",
+                   help="the level-of-detail benchmark instead: scenes of --sizes splats (default "
+                        "3M,6M) and their hierarchies, frame time, PSNR/SSIM against full detail "
+                        "and popping between frames along camera paths, per cut (see "
+                        "splatgl/bench/lod_bench.py)")
     p.add_argument("--sizes", default=None, metavar="LIST",
-                   help="--scale sizes, e.g. 0.1M,0.3M,1M,3M,6M (the default); 'k' and 'M' suffixes")
+                   help="--scale sizes, e.g. 0.1M,0.3M,1M,3M,6M (the default); 'k' and 'M' suffixes; "
+                        "--lod sizes (default 3M,6M)")
     p.add_argument("--sh3-sizes", default=None, metavar="LIST",
                    help="--scale sizes also measured at SH degree 3 (default 1M; 'none' for none)")
     p.add_argument("--savings", action="store_true",
@@ -106,6 +113,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                               "machine share its cores: for fair timings use one worker per "
                               "machine, i.e. Ray across machines)",
                            "one task per scene")
+    add_lod_arguments(p)
 
 
 def _parse_groups(text: str | None) -> frozenset[str] | None:
@@ -151,12 +159,16 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
-    if args.scale and executor.sharded:
-        raise SplatglError("--scale measures in one process (memory and load times); "
+    if (args.scale or args.lod) and executor.sharded:
+        mode = "--scale" if args.scale else "--lod"
+        raise SplatglError(f"{mode} measures in one process (memory, load and frame times); "
                            "--workers and --executor ray shard the scene benchmark")
     if args.scale:
         from ..bench.scale_cli import run_scale_command
         return run_scale_command(args)
+    if args.lod:
+        from ..bench.lod_bench import run_lod_command
+        return run_lod_command(args)
     quick = args.quick
     width = args.width or (160 if quick else 1280)
     height = args.height or (120 if quick else 720)

@@ -57,6 +57,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "bounding sphere projects to at most PX pixels (e.g. 1)")
     p.add_argument("--lod-budget", type=int, default=None, metavar="N",
                    help="level of detail: the finest cut of at most N nodes per view")
+    p.add_argument("--lod-blend", type=float, default=None, metavar="RATIO",
+                   help="level of detail: nodes projecting to between PX and RATIO x PX pixels are "
+                        "drawn as a blend of themselves and their children (opacity weights), so "
+                        "a path's frames change smoothly instead of popping; 1 for no blending "
+                        "(default 2)")
     add_camera_arguments(p)
     add_settings_arguments(p)
     add_path_arguments(p)
@@ -78,9 +83,10 @@ def run(args: argparse.Namespace) -> int:
     outputs = OutputFiles({**names, "--depth-png": args.depth_png})
     scene, settings, camera = inputs_from_args(args)
     want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
-    lod = args.lod_threshold is not None or args.lod_budget is not None
+    lod = any(v is not None for v in (args.lod_threshold, args.lod_budget, args.lod_blend))
     if lod and stereo is not None:
-        raise SplatglError("--stereo and --lod-threshold/--lod-budget cannot be combined yet")
+        raise SplatglError("--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be "
+                           "combined yet")
     times = None
     if lod:
         from ..lod.command import render_lod

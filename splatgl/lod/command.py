@@ -1,4 +1,4 @@
-"""``splatgl render --lod-threshold/--lod-budget``: one view of a ``.lod.ply`` through the cut."""
+"""``splatgl render --lod-threshold/--lod-budget/--lod-blend``: one view of a ``.lod.ply`` through the cut."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from ..settings import RenderSettings
 from ..transform import apply_model
 from .io import is_lod_file, read_lod
 from .render import LodRenderer, LodSettings
-from .cut import DEFAULT_THRESHOLD_PX
+from .cut import DEFAULT_BAND, DEFAULT_THRESHOLD_PX
 
 
 def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camera,
@@ -27,7 +27,7 @@ def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camer
         raise SplatglError(f"{args.scene}: not a level-of-detail file; build one with "
                            "'splatgl lod SCENE -o SCENE.lod.ply'")
     lod = LodSettings(args.lod_threshold if args.lod_threshold is not None else DEFAULT_THRESHOLD_PX,
-                      args.lod_budget)
+                      args.lod_budget, args.lod_blend if args.lod_blend is not None else DEFAULT_BAND)
     tree = read_lod(args.scene)
     ctx = create_headless_context()
     renderer = LodRenderer(ctx, tree, settings, lod)

@@ -10,7 +10,10 @@ candidates are the children of the previous level's nodes that were too large.  
 sphere lies wholly outside the view frustum are dropped with their subtrees (nothing in them
 can touch the image).
 
-With a splat budget the threshold is searched (on a log scale) for the finest cut that fits.
+With a transition band (:func:`select_cut_weights`) nodes near the threshold are drawn as a
+blend of parent and children (opacity weights), so the cut changes continuously as the camera
+moves.  With a splat budget the threshold is searched (on a log scale) for the finest cut that
+fits.
 """
 
 from __future__ import annotations
@@ -25,6 +28,10 @@ from ..project import anchored_camera
 #: Default threshold: nodes whose sphere projects to at most this many pixels (radius) stand
 #: for their subtree.
 DEFAULT_THRESHOLD_PX = 1.0
+#: Default transition band, a ratio: nodes whose projected size is between the threshold and
+#: this many times it are drawn as a blend of themselves and their children (2: about one
+#: level of the tree, whose radii roughly halve per level).
+DEFAULT_BAND = 2.0
 #: Budget search: at most this many cuts per view, stopping within this fraction of the budget.
 BUDGET_STEPS = 8
 BUDGET_TOLERANCE = 0.1
@@ -100,64 +107,100 @@ def _dense(data: CutData, view: _View, lo: int, hi: int):
     return size, inside
 
 
-def select_cut(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX) -> np.ndarray:
-    """(K,) int64 node rows of the cut at ``threshold_px``, ascending.
+def expansion(size: np.ndarray, threshold_px: float, band: float) -> np.ndarray:
+    """How far each node is replaced by its children, in [0, 1], from its projected size
+    (float32 px): 0 at or below ``threshold_px``, 1 from ``band * threshold_px`` up, linear in
+    between (``band`` > 1: the transition band, a ratio; above the threshold, so the band costs
+    only the partly drawn parents, not a finer cut); ``band`` == 1: a step at the threshold."""
+    if not np.isfinite(threshold_px):  # the root level's cut
+        return np.zeros(size.shape, np.float32)
+    t = np.float32(threshold_px)
+    if band <= 1.0:
+        return (size > t).astype(np.float32)
+    e = (size - t) * np.float32(1.0 / (threshold_px * (band - 1.0)))
+    return np.clip(e, np.float32(0.0), np.float32(1.0), out=e)
 
-    Level by level from the root: ``expanded`` marks the level's nodes that are in view and
-    larger than the threshold (their children are the next level's candidates).  A level whose
-    candidates are many is evaluated whole (contiguous) and masked; otherwise only the
-    candidates are gathered.
+
+def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX,
+                       band: float = 1.0) -> tuple[np.ndarray, np.ndarray | None]:
+    """The cut with a transition band: ``(rows, weights)``, rows (K,) int64 ascending, weights
+    (K,) float32 in (0, 1] (the factor on each node's opacity), or None when every weight is 1.
+
+    A node's expansion ``e`` (:func:`expansion`) rises from 0 to 1 as its projected size crosses
+    the band ``[T, band T]``; it is drawn with weight ``A (1 - e)``, where ``A`` is the product
+    of its ancestors' ``e``, and its children are visited while ``A e > 0``.  Along every
+    root-to-leaf path in view the weights sum to 1 (they telescope), and as the camera moves
+    they change continuously with the sizes: a parent fades out as its children fade in, with
+    no jump.  A weight scales the node's optical depth: opacity ``o`` is drawn as
+    ``1 - (1 - o) ** w`` (so a parent and its children at weights ``w`` and ``1 - w`` cover what
+    either covers alone where they overlap).  ``band`` == 1 is the plain cut
+    (:func:`select_cut`): every weight 1.
+
+    Level by level from the root: ``carry`` holds, over the level above's nodes, ``A e`` (0 for
+    nodes not expanded).  A level whose candidates are many is evaluated whole (contiguous) and
+    masked; otherwise only the candidates are gathered.
     """
     offsets, b = data.offsets, data.branching
     view = _View(data, camera)
     top = len(offsets) - 2
-    expanded = None  # bool mask over the level above's nodes
-    chosen = []
+    blend = band > 1.0
+    carry = None  # float32 A * e over the level above's nodes
+    rows, weights = [], []
     for level in range(top, -1, -1):
         lo, hi = int(offsets[level]), int(offsets[level + 1])
         n = hi - lo
-        if expanded is None:
-            cand_mask = np.ones(n, bool)
-        else:
-            cand_mask = np.repeat(expanded, b)[:n]
-        n_cand = int(np.count_nonzero(cand_mask))
+        above = np.ones(n, np.float32) if carry is None else np.repeat(carry, b)[:n]
+        n_cand = int(np.count_nonzero(above))
         if n_cand == 0:
             break
-        if n_cand >= DENSE_FRACTION * n:
+        if n_cand >= DENSE_FRACTION * n:  # whole level, contiguous, masked
             size, inside = _dense(data, view, lo, hi)
-            keep = cand_mask & inside
-            if level == 0:
-                chosen.append(np.flatnonzero(keep) + lo)
-                break
-            fine = size <= np.float32(threshold_px)
-            chosen.append(np.flatnonzero(keep & fine) + lo)
-            expanded = keep & ~fine
-        else:
-            local = np.flatnonzero(cand_mask)
+            above[~inside] = 0
+            e = np.zeros(n, np.float32) if level == 0 else expansion(size, threshold_px, band)
+            drawn = np.flatnonzero((above > 0) & (e < 1))
+            carry = above * e
+            a, e = above[drawn], e[drawn]
+        else:  # only the candidates, gathered
+            local = np.flatnonzero(above)
             size, inside = view.test(data.centres[:, local + lo], data.radius[local + lo])
             local, size = local[inside], size[inside]
-            if level == 0:
-                chosen.append(local + lo)
-                break
-            fine = size <= np.float32(threshold_px)
-            chosen.append(local[fine] + lo)
-            expanded = np.zeros(n, bool)
-            expanded[local[~fine]] = True
-    return np.sort(np.concatenate(chosen)) if chosen else np.zeros(0, np.int64)
+            e = np.zeros(local.size, np.float32) if level == 0 else expansion(size, threshold_px, band)
+            a = above[local]
+            carry = np.zeros(n, np.float32)
+            carry[local] = a * e
+            keep = e < 1
+            drawn, a, e = local[keep], a[keep], e[keep]
+        rows.append(drawn + lo)
+        if blend:
+            weights.append(a * (1 - e))
+    if not rows:
+        return np.zeros(0, np.int64), None
+    # Levels occupy ascending row ranges and were visited top-down: reversed, they are sorted.
+    rows_all = np.concatenate(rows[::-1])
+    return rows_all, (np.concatenate(weights[::-1]) if blend else None)
+
+
+def select_cut(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX) -> np.ndarray:
+    """(K,) int64 node rows of the cut at ``threshold_px`` (no band), ascending: every node in
+    view of size <= threshold_px whose parent is larger, plus the leaves still larger."""
+    return select_cut_weights(data, camera, threshold_px)[0]
 
 
 def select_cut_budget(data: CutData, camera: Camera, budget: int,
-                      threshold_px: float = DEFAULT_THRESHOLD_PX) -> tuple[np.ndarray, float]:
-    """The finest cut of at most ``budget`` nodes, not finer than ``threshold_px``:
-    ``(node rows, threshold used)``.  The threshold is searched on a log scale (a cut's count
-    falls roughly as the threshold squared), BUDGET_STEPS cuts at most."""
-    t_ok, cut_ok = None, None
+                      threshold_px: float = DEFAULT_THRESHOLD_PX, band: float = 1.0
+                      ) -> tuple[np.ndarray, np.ndarray | None, float]:
+    """The finest cut of at most ``budget`` drawn nodes, not finer than ``threshold_px``:
+    ``(node rows, weights, threshold used)`` (rows and weights as :func:`select_cut_weights`
+    gives them for that threshold and ``band``).  The threshold is searched on a log scale (a
+    cut's count falls roughly as the threshold squared), BUDGET_STEPS cuts at most; it changes
+    from view to view, so a budget's cut is not continuous along a path, band or not."""
+    ok = None
     lo, hi = threshold_px, None  # lo: known too many nodes (or the floor), hi: known to fit
     t = threshold_px
     for _ in range(BUDGET_STEPS):
-        cut = select_cut(data, camera, t)
+        cut, w = select_cut_weights(data, camera, t, band)
         if cut.size <= budget:
-            t_ok, cut_ok, hi = t, cut, t
+            ok, hi = (cut, w, t), t
             if t <= threshold_px or cut.size >= (1.0 - BUDGET_TOLERANCE) * budget:
                 break
         else:
@@ -166,7 +209,6 @@ def select_cut_budget(data: CutData, camera: Camera, budget: int,
             t = t * max(1.25, float(np.sqrt(cut.size / budget)))
         else:
             t = float(np.sqrt(lo * hi))
-    if cut_ok is None:  # even the last threshold was too fine: take the root level's cut
-        t_ok = float("inf")
-        cut_ok = select_cut(data, camera, t_ok)
-    return cut_ok, t_ok
+    if ok is None:  # even the last threshold was too fine: take the root level's cut
+        ok = (*select_cut_weights(data, camera, float("inf"), band), float("inf"))
+    return ok

@@ -3,7 +3,10 @@
 :class:`LodRenderer` is a :class:`splatgl.quad.QuadRenderer` over every node of a
 :class:`splatgl.lod.build.LodTree` (leaves and merged parents, uploaded once); per view its
 cull stage first selects the cut (:mod:`splatgl.lod.cut`), then culls and sorts only the cut's
-nodes.  Everything after (pre-pass, draw, blending, read-back) is the quad path's own.
+nodes.  With a transition band the cut's nodes carry opacity weights: they go to the device
+as one float per sorted slot, which the compute pre-pass applies to the opacity as a factor on
+its optical depth, ``1 - (1 - o) ** w`` (shaders/quad_prepass.comp, OPACITY_WEIGHT).  Everything after (draw, blending, read-back) is
+the quad path's own.  NumPy twin of the weighting: :func:`blended_scene`.
 """
 
 from __future__ import annotations
@@ -19,16 +22,18 @@ from ..cull import CullData, cull_visible
 from ..errors import SplatglError
 from ..gl.shaders import ProgramCache
 from ..project import anchored_camera
-from ..quad import QuadRenderer
+from ..quad import BINDING_OPACITY_WEIGHT, QuadRenderer
+from ..scene import Scene
 from ..settings import RenderSettings
 from .build import LodTree
-from .cut import DEFAULT_THRESHOLD_PX, CutData, select_cut, select_cut_budget
+from .cut import DEFAULT_BAND, DEFAULT_THRESHOLD_PX, CutData, select_cut_budget, select_cut_weights
 
 
-#: A cut with at least this share of leaves saves too little to pay for its own selection
-#: (measured on the 6M scene: 90-95% leaves made frames up to 1.28x slower than full detail).
-#: Views no farther from the scene than such a view then draw the leaves directly.
-LEAF_SHARE_SKIP = 0.9
+#: A cut that draws at least this many nodes per leaf it stands for saves too little to pay for
+#: its own selection (measured on the 6M scene: cuts of 90-95% leaves, about 0.77-0.87 nodes a
+#: leaf, made frames up to 1.28x slower than full detail).  Views no farther from the scene
+#: than such a view then draw the leaves directly.
+SKIP_NODES_PER_LEAF = 0.75
 
 
 @dataclass(frozen=True)
@@ -40,14 +45,23 @@ class LodSettings:
             stand for their subtree (smaller: finer and slower).
         budget: at most this many nodes per view (the finest cut that fits, never finer than
             ``threshold_px``); None: no budget.
+        band: transition band, a ratio >= 1: nodes projecting to between ``threshold_px`` and
+            ``band * threshold_px`` are drawn as a blend of themselves and their children
+            (opacity weights, :func:`splatgl.lod.cut.select_cut_weights`), so the image changes
+            continuously along a path; 1: the plain cut (a node switches to its children at
+            once).  Needs the compute pre-pass (the default ``preprocess``).
     """
 
     threshold_px: float = DEFAULT_THRESHOLD_PX
     budget: int | None = None
+    band: float = DEFAULT_BAND
 
     def __post_init__(self) -> None:
         if not self.threshold_px > 0.0:
             raise SplatglError(f"--lod-threshold must be positive, got {self.threshold_px}")
+        if not (self.band >= 1.0 and np.isfinite(self.band)):
+            raise SplatglError(f"--lod-blend must be a ratio of at least 1 (1: no blending), "
+                               f"got {self.band}")
         if self.budget is not None and self.budget < 1:
             raise SplatglError(f"--lod-budget must be at least 1, got {self.budget}")
 
@@ -62,29 +76,45 @@ class LodRenderer(QuadRenderer):
     def __init__(self, ctx: moderngl.Context, tree: LodTree, settings: RenderSettings,
                  lod: LodSettings = LodSettings(), programs: ProgramCache | None = None):
         super().__init__(ctx, tree.nodes, settings, programs)
+        if lod.band > 1.0 and not self.uses_prepass:
+            raise SplatglError(f"--lod-blend {lod.band:g} weights opacities in the compute "
+                               "pre-pass: use --preprocess compute (the default), or --lod-blend 1")
         self.tree = tree
         self.lod = lod
         self.cut_data = CutData.from_tree(tree)
         self.last_cut_nodes = 0
         self.last_cut_s = 0.0
         self.last_threshold_px = lod.threshold_px
-        #: Views at most this far from the root's centre draw the leaves (see LEAF_SHARE_SKIP).
+        #: Views at most this far from the root's centre draw the leaves (see SKIP_NODES_PER_LEAF).
         self.skip_within: float | None = None
         self._root = tree.nodes.means[-1].astype(np.float64)
+        #: This view's opacity weight per sorted slot, (K,) float32, or None (all 1).
+        self.slot_weights: np.ndarray | None = None
+        self._node_weight: np.ndarray | None = None  # (M,) scratch: weight by node row
+        #: The last view's cut, (rows, weights or None); the leaves when it skipped the cut.
+        self.last_cut: tuple[np.ndarray, np.ndarray | None] | None = None
+        #: Draw this cut, (rows ascending, weights or None), instead of selecting one per view.
+        self.cut_override: tuple[np.ndarray, np.ndarray | None] | None = None
+        self._weight_buffer = None
 
     def visible_order(self, camera: Camera) -> np.ndarray:
         """Cut, cull and sort for ``camera``: (M,) uint32 node rows, front to back.
 
         Without a budget, a view no farther from the scene (the root's centre) than one whose
-        cut was at least LEAF_SHARE_SKIP leaves skips the cut and culls the leaves (a contiguous
-        view of the cull data): close views cost what full detail costs.
+        cut drew at least SKIP_NODES_PER_LEAF nodes per leaf it stood for
+        (:func:`leaves_covered`) skips the cut and culls the leaves (a contiguous view of the
+        cull data): close views cost what full detail costs.  With ``cut_override`` set to
+        ``(rows, weights)`` (an earlier view's ``last_cut``) that cut is drawn instead: what the
+        benchmark compares against to measure the change the cut alone makes between frames.
         """
         t0 = time.perf_counter()
         n_leaves = self.tree.level_size(0)
         dist = float(np.linalg.norm(camera.center - self._root))
         if self._cull_data is None:
             self._cull_data = CullData.from_scene(self.scene)
-        if self.lod.budget is None and self.skip_within is not None and dist <= self.skip_within:
+        override = self.cut_override
+        if (override is None and self.lod.budget is None and self.skip_within is not None
+                and dist <= self.skip_within):
             keep, depth = cull_visible(self._cull_data.subset(slice(0, n_leaves)),
                                        anchored_camera(camera, self.scene.anchor), self.near,
                                        self.settings.antialias, camera.scale)
@@ -92,24 +122,100 @@ class LodRenderer(QuadRenderer):
             order = self.sort_visible(depth, keep)
             self._times_cull, self._times_sort = t2 - t0, time.perf_counter() - t2
             self.last_cut_nodes, self.last_cut_s = n_leaves, 0.0
-            self._order_key, self._order = None, order
+            self._order_key, self._order, self.slot_weights = None, order, None
+            self.last_cut = (np.arange(n_leaves), None)
             return order
-        if self.lod.budget is not None:
-            ids, self.last_threshold_px = select_cut_budget(self.cut_data, camera, self.lod.budget,
-                                                            self.lod.threshold_px)
+        if override is not None:
+            ids, weights = override
+        elif self.lod.budget is not None:
+            ids, weights, self.last_threshold_px = select_cut_budget(
+                self.cut_data, camera, self.lod.budget, self.lod.threshold_px, self.lod.band)
         else:
-            ids = select_cut(self.cut_data, camera, self.lod.threshold_px)
+            ids, weights = select_cut_weights(self.cut_data, camera, self.lod.threshold_px,
+                                              self.lod.band)
         t1 = time.perf_counter()
-        if ids.size and np.count_nonzero(ids < n_leaves) >= LEAF_SHARE_SKIP * ids.size:
+        if (override is None and ids.size
+                and ids.size >= SKIP_NODES_PER_LEAF * leaves_covered(self.tree, ids, weights)):
             self.skip_within = max(self.skip_within or 0.0, dist)
         keep, depth = cull_visible(self._cull_data.subset(ids),
                                    anchored_camera(camera, self.scene.anchor), self.near,
                                    self.settings.antialias, camera.scale)
-        keep = ids[keep].astype(np.uint32)  # ids ascending: ties still by row
+        kept = ids[keep].astype(np.uint32)  # ids ascending: ties still by row
         t2 = time.perf_counter()
-        order = self.sort_visible(depth, keep)
+        order = self.sort_visible(depth, kept)
+        self.slot_weights = None
+        if weights is not None and (weights < 1).any():
+            if self._node_weight is None:
+                self._node_weight = np.ones(self.scene.count, np.float32)
+            self._node_weight[kept] = weights[keep]
+            self.slot_weights = self._node_weight[order]  # into sorted order
         t3 = time.perf_counter()
         self._times_cull, self._times_sort = t2 - t0, t3 - t2
         self.last_cut_nodes, self.last_cut_s = int(ids.size), t1 - t0
+        self.last_cut = (ids, weights)
         self._order_key, self._order = None, order
         return order
+
+    # ------------------------------------------------------------------ opacity weights
+    def defines(self, camera: Camera, depth: bool = False) -> dict[str, object]:
+        defines = super().defines(camera, depth)
+        if self.slot_weights is not None:
+            defines["OPACITY_WEIGHT"] = 1
+        return defines
+
+    def _upload(self, order: np.ndarray, prog=None) -> None:
+        """The sorted rows, and this view's opacity weights (one float per slot) if any."""
+        super()._upload(order, prog)
+        w = self.slot_weights
+        if w is None:
+            return
+        data = w.tobytes()
+        if self._weight_buffer is None or self._weight_buffer.size < max(len(data), 4):
+            if self._weight_buffer is not None:
+                self._weight_buffer.release()
+            self._weight_buffer = self.ctx.buffer(reserve=max(len(data), 4))
+        if data:
+            self._weight_buffer.write(data)
+
+    def _prepass(self, camera: Camera, count: int, depth: bool) -> None:
+        if self.slot_weights is not None:
+            self._weight_buffer.bind_to_storage_buffer(BINDING_OPACITY_WEIGHT)
+        super()._prepass(camera, count, depth)
+
+    def release(self) -> None:
+        if self._weight_buffer is not None:
+            self._weight_buffer.release()
+            self._weight_buffer = None
+        super().release()
+
+
+def leaves_covered(tree: LodTree, rows: np.ndarray, weights: np.ndarray | None) -> float:
+    """How many leaves the cut ``rows`` (ascending, weights as :func:`select_cut_weights` gives)
+    stands for: each node's weight times the leaves under it (``branching ** level``, fewer for
+    a level's last node).  Weights along a path sum to 1, so this counts the leaves in view
+    whatever the band."""
+    bounds = np.searchsorted(rows, tree.offsets)  # rows are sorted: per-level ranges
+    n = tree.level_size(0)
+    total = 0.0
+    for level in range(tree.levels):
+        lo, hi = bounds[level], bounds[level + 1]
+        if hi == lo:
+            continue
+        w = np.ones(hi - lo) if weights is None else weights[lo:hi].astype(np.float64)
+        span = tree.branching ** level
+        total += float(w.sum()) * span
+        last = int(tree.offsets[level + 1]) - 1
+        if rows[hi - 1] == last:  # the level's last node holds only the leaves left over
+            total -= float(w[-1]) * (span - (n - (last - int(tree.offsets[level])) * span))
+    return total
+
+
+def blended_scene(tree: LodTree, rows: np.ndarray, weights: np.ndarray | None) -> Scene:
+    """NumPy twin of the opacity weights: the cut's nodes ``rows`` as a plain :class:`Scene`
+    with each opacity ``o`` replaced by ``1 - (1 - o) ** w``, which any renderer draws as the
+    pre-pass draws the weighted cut."""
+    sub = tree.nodes.subset(rows)
+    if weights is None:
+        return sub
+    o = 1.0 - (1.0 - sub.opacities.astype(np.float64)) ** weights.astype(np.float64)
+    return Scene.from_activated(sub.means, sub.quats, sub.scales, o, sub.sh, sub.kind)
