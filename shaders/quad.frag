@@ -4,10 +4,9 @@
 //   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).  Twin: splatgl/blend.py.
 // With DEPTH_OUTPUT, a second target gets (z alpha, 0, 0, alpha) under the same blend, so its
 // own alpha channel tracks the same transmittance and red accumulates D = sum z alpha T.
-#if defined(EARLY_STOP) && !defined(COUNT_RASTERISED)
+#ifdef EARLY_STOP
 // Early termination: depth/stencil tests before shading, so fragments on pixels the mark pass
-// stopped are never shaded (a shader with `discard` otherwise gets late tests).  The benchmark's
-// COUNT_RASTERISED variant leaves the tests late, so it counts every fragment rasterised.
+// stopped are never shaded (a shader with `discard` otherwise gets late tests).
 layout(early_fragment_tests) in;
 #endif
 flat in vec2 v_mean2d;

@@ -8,12 +8,7 @@
 #include "lib/sh.glsl"
 #include "lib/surfel.glsl"
 
-#ifdef PIECES
-in uvec3 splat_piece;         // (splat index, piece) from occlusion_cull.comp (divisor 1):
-                              // the box is cut to the piece's tiles (x0 | x1 << 16, y0 | y1 << 16)
-#else
 in uint splat_index;          // from the per-view sorted index buffer (divisor 1)
-#endif
 
 flat out vec2 v_center;       // projected centre c (pixels), the low-pass centre
 flat out vec3 v_t0;           // centred T'_0 = T_0 - c_x T_2 (third entry 0)
@@ -25,11 +20,7 @@ flat out vec4 v_color;        // (SH colour, opacity)
 const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothing rasterised
 
 void main() {
-#ifdef PIECES
-    uint i = splat_piece.x;
-#else
     uint i = splat_index;
-#endif
     vec4 a = splat_a[i];
     vec3 p = u_view_rot * a.xyz + u_view_trans;
     if (p.z <= u_near) { gl_Position = CULLED; return; }  // view z of the centre, before the divide
@@ -42,15 +33,6 @@ void main() {
     surfel_screen(p, a_u, a_v, center, t0, t1, t2);
     vec2 lo, hi;
     if (!surfel_bounds(center, t0, t1, t2, a.w, lo, hi)) { gl_Position = CULLED; return; }
-#ifdef PIECES
-    if (splat_piece.y != WHOLE_PIECE) {   // tile edges lie between pixel centres: same pixels
-        uvec2 p0 = uvec2(splat_piece.y & 0xFFFFu, splat_piece.z & 0xFFFFu);
-        uvec2 p1 = uvec2(splat_piece.y >> 16, splat_piece.z >> 16) + 1u;
-        lo = max(lo, vec2(p0) * float(TILE_SIZE));
-        hi = min(hi, vec2(p1) * float(TILE_SIZE));
-        if (any(greaterThanEqual(lo, hi))) { gl_Position = CULLED; return; }
-    }
-#endif
     vec2 corner = vec2(float(gl_VertexID & 1), float((gl_VertexID >> 1) & 1));
     vec2 pixel = mix(lo, hi, corner);
     // Image coordinates map to NDC without a y flip (see quad.vert): gl_FragCoord.xy are the

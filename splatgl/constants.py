@@ -33,9 +33,6 @@ ALPHA_MAX = 0.99
 ALPHA_MIN = 1.0 / 255.0
 #: Front-to-back blending stops when the transmittance would fall below this.
 T_MIN = 1e-4
-#: Early termination's tile clipping (splatgl/early_stop.py): the x field of a piece that is the
-#: splat's whole quad (a real piece packs tile columns x0 | x1 << 16, never all ones).
-WHOLE_PIECE = 0xFFFFFFFF
 #: Fixed quad half-size, in standard deviations, of the fast approximation (``--extent fast``):
 #: 2 sqrt(2), the corner distance web viewers use (their corner coordinate 2 times sqrt(2) sigma).
 FAST_CORNER_SIGMAS = 2.0 * math.sqrt(2.0)
@@ -139,7 +136,6 @@ def glsl_defines() -> dict[str, str]:
         "ALPHA_MAX": _glsl_float(ALPHA_MAX),
         "ALPHA_MIN": _glsl_float(ALPHA_MIN),
         "T_MIN": _glsl_float(T_MIN),
-        "WHOLE_PIECE": f"{WHOLE_PIECE:#x}u",
         "SH_OFFSET": _glsl_float(SH_OFFSET),
         "SURFEL_FILTER_INV_SQUARE": _glsl_float(SURFEL_FILTER_INV_SQUARE),
         "FAST_CORNER_SIGMAS": _glsl_float(FAST_CORNER_SIGMAS),

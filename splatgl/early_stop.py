@@ -8,10 +8,8 @@ The sorted splats are drawn in batches (:func:`batch_bounds`).  Between batches:
    fragments on marked pixels are rejected before shading.
 2. ``stop_tiles`` (shaders/stop_tiles.comp): 16 x 16 tiles whose pixels are all marked.
 3. ``occlusion_cull`` (shaders/occlusion_cull.comp): the next batch's splats whose quad
-   rectangle lies only on stopped tiles are dropped; a survivor that touches stopped tiles is
-   split into pieces covering only its open tiles (:func:`tile_pieces`), each drawn as its own
-   instance clipped to its tiles; the pieces are compacted in sorted order, one draw command per
-   1024 slots, and the batch is drawn with one multi-draw-indirect.
+   rectangle lies only on stopped tiles are dropped, the survivors compacted in order, one
+   draw command per 1024 slots, and the batch is drawn with one multi-draw-indirect.
 
 Accuracy (DESIGN.md section 2 and docs/early-stop.md).  A pixel is marked only after a batch
 ends with ``T < T_MIN``.  The reference adds splat k while ``T_k (1 - alpha_k) >= T_MIN``, so
@@ -24,10 +22,8 @@ error against the reference is at most ``0.01 max|c - bg|`` and never more weigh
 the stop.  The occlusion cull drops only splats whose every fragment the depth test would
 reject, so it changes no pixel.  On 8- and 16-bit targets ``1 - A < 1e-4`` holds only
 where ``A`` is stored as exactly 1, where blending adds nothing anyway: the image is unchanged.
-A splat's pieces never overlap and together cover its quad on every open tile, and a pixel on a
-stopped tile rejects every fragment anyway, so the split changes no pixel either.
 
-NumPy twins: :func:`stop_mask`, :func:`stop_tiles`, :func:`occlusion_cull`, :func:`tile_pieces`.
+NumPy twins: :func:`stop_mask`, :func:`stop_tiles`, :func:`occlusion_cull`.
 """
 
 from __future__ import annotations
@@ -38,20 +34,15 @@ from typing import Callable
 import moderngl
 import numpy as np
 
-from .constants import T_MIN, TILE_SIZE, WHOLE_PIECE
+from .constants import T_MIN, TILE_SIZE
 
 #: Slots per draw command of the occlusion cull (256 invocations x 4 slots, occlusion_cull.comp).
 SEGMENT = 1024
-#: Piece places per draw command: a segment whose pieces would not fit draws its survivors whole.
-PIECE_CAPACITY = 64 * SEGMENT
-#: Bytes per piece: (value, x0 | x1 << 16, y0 | y1 << 16), read as the instanced uvec3.
-PIECE_BYTES = 12
 #: Bytes per draw command: DrawArraysIndirectCommand (count, instanceCount, first, baseInstance)
-#: and one padding uint, since moderngl's render_indirect uses a 20-byte stride for arrays too;
-#: occlusion_cull.comp stores the segment's surviving splats there.
+#: and one padding uint, since moderngl's render_indirect uses a 20-byte stride for arrays too.
 COMMAND_BYTES = 20
 #: Storage bindings (after the quad path's 0..7).
-BINDING_STOP_TILES, BINDING_PIECES, BINDING_COMMANDS = 8, 9, 10
+BINDING_STOP_TILES, BINDING_SURVIVORS, BINDING_COMMANDS = 8, 9, 10
 #: Tiles per work group of shaders/stop_tiles.comp.
 TILES_GROUP = 64
 #: Texture unit the mark and tile passes sample the accumulation target from.
@@ -133,62 +124,6 @@ def occlusion_cull(lo: np.ndarray, hi: np.ndarray, tiles: np.ndarray | None, wid
     return keep & (n_open > 0)
 
 
-def tile_pieces(lo: np.ndarray, hi: np.ndarray, tiles: np.ndarray, width: int,
-                height: int) -> list[np.ndarray]:
-    """Per quad, its pieces as an (n, 4) int array of inclusive tile ranges (x0, x1, y0, y1).
-
-    Twin of occlusion_cull.comp's split: over the quad's tile rectangle (as
-    :func:`occlusion_cull`), per tile row each run of consecutive open tiles is a piece, and a
-    row holding a single run equal to the previous row's single run extends that piece.  A
-    culled quad has none; a quad with no stopped tile has one, its whole rectangle (drawn as
-    the whole quad).  Pieces are listed in the order the shader writes them.
-    """
-    keep = occlusion_cull(lo, hi, tiles, width, height)
-    gh, gw = tiles.shape
-    out = []
-    for q in range(len(keep)):
-        if not keep[q]:
-            out.append(np.zeros((0, 4), np.int64))
-            continue
-        x0, y0 = (np.clip(np.floor(np.maximum(lo[q], 0.0)).astype(np.int64) // TILE_SIZE, 0,
-                          [gw - 1, gh - 1]))
-        x1, y1 = (np.clip(np.floor(np.minimum(hi[q], [width, height])).astype(np.int64)
-                          // TILE_SIZE, 0, [gw - 1, gh - 1]))
-        pieces: list[tuple[int, int, int, int]] = []
-        pending = None
-        for ty in range(y0, y1 + 1):
-            row = ~tiles[ty, x0:x1 + 1]
-            edges = np.flatnonzero(np.diff(np.concatenate([[0], row.astype(np.int8), [0]])))
-            runs = [(x0 + a, x0 + b - 1) for a, b in zip(edges[::2], edges[1::2])]
-            if len(runs) == 1:
-                if pending is not None and pending[:2] == runs[0] and pending[3] == ty - 1:
-                    pending = (*runs[0], pending[2], ty)
-                else:
-                    if pending is not None:
-                        pieces.append(pending)
-                    pending = (*runs[0], ty, ty)
-            elif runs:
-                if pending is not None:
-                    pieces.append(pending)
-                    pending = None
-                pieces += [(a, b, ty, ty) for a, b in runs]
-        if pending is not None:
-            pieces.append(pending)
-        out.append(np.array(pieces, np.int64).reshape(-1, 4))
-    return out
-
-
-def decode_pieces(words: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(values (n,), ranges (n, 4) as (x0, x1, y0, y1), -1 for a whole quad) from (n, 3) uint32
-    pieces as occlusion_cull.comp writes them."""
-    words = np.asarray(words, np.uint32).reshape(-1, 3)
-    whole = words[:, 1] == WHOLE_PIECE
-    ranges = np.stack([words[:, 1] & 0xFFFF, words[:, 1] >> 16, words[:, 2] & 0xFFFF,
-                       words[:, 2] >> 16], axis=1).astype(np.int64)
-    ranges[whole] = -1
-    return words[:, 0].copy(), ranges
-
-
 # ----------------------------------------------------------------------------- GPU passes
 class EarlyStopPasses:
     """The GL objects and passes of early termination for one quad renderer.
@@ -202,7 +137,7 @@ class EarlyStopPasses:
         self.ctx = ctx
         self.programs = programs
         self.tiles: moderngl.Buffer | None = None
-        self.pieces: moderngl.Buffer | None = None
+        self.survivors: moderngl.Buffer | None = None
         self.commands: moderngl.Buffer | None = None
         self._mark_vao: moderngl.VertexArray | None = None
 
@@ -221,9 +156,9 @@ class EarlyStopPasses:
         gw, gh = -(-width // TILE_SIZE), -(-height // TILE_SIZE)
         self._grow("tiles", 4 * gw * gh).bind_to_storage_buffer(BINDING_STOP_TILES)
         self.tiles.clear()  # all open until the first mark
-        self._grow("pieces", PIECE_BYTES * PIECE_CAPACITY * n_cmd)
+        self._grow("survivors", 4 * count)
         self._grow("commands", COMMAND_BYTES * n_cmd)
-        self.pieces.bind_to_storage_buffer(BINDING_PIECES)
+        self.survivors.bind_to_storage_buffer(BINDING_SURVIVORS)
         self.commands.bind_to_storage_buffer(BINDING_COMMANDS)
         return n_cmd
 
@@ -247,34 +182,26 @@ class EarlyStopPasses:
         comp.run(group_x=-(-grid[0] * grid[1] // TILES_GROUP))
 
     def cull(self, comp: moderngl.ComputeShader, start: int, end: int, cmd_base: int,
-             width: int, height: int, check_tiles: bool, split: bool = True) -> int:
-        """occlusion_cull.comp over slots [start, end), survivors split into pieces over their
-        open tiles when ``split``; returns the commands written."""
+             width: int, height: int, check_tiles: bool) -> int:
+        """occlusion_cull.comp over slots [start, end); returns the commands written."""
         groups = -(-(end - start) // SEGMENT)
         comp["u_start"].value = start
         comp["u_end"].value = end
         comp["u_cmd_base"].value = cmd_base
         comp["u_tiles"].value = (-(-width // TILE_SIZE), -(-height // TILE_SIZE))
         comp["u_check_tiles"].value = check_tiles
-        comp["u_split"].value = split
         comp.run(group_x=groups)
         return groups
 
-    def read_commands(self, n_cmd: int) -> np.ndarray:
-        """(n_cmd, 5) uint32: the draw commands (count, pieces, 0, first place, survivors)."""
-        cmds = np.frombuffer(self.commands.read(size=n_cmd * COMMAND_BYTES), np.uint32)
-        return cmds.reshape(n_cmd, COMMAND_BYTES // 4)
-
     def survivor_count(self, n_cmd: int) -> int:
-        """Splats that survived the cull in the first ``n_cmd`` commands (after the frame)."""
-        return int(self.read_commands(n_cmd)[:, 4].sum()) if n_cmd else 0
-
-    def piece_count(self, n_cmd: int) -> int:
-        """Instances (pieces) the first ``n_cmd`` commands drew (after the frame)."""
-        return int(self.read_commands(n_cmd)[:, 1].sum()) if n_cmd else 0
+        """Sum of the instance counts of the first ``n_cmd`` commands (after the frame)."""
+        if n_cmd == 0:
+            return 0
+        cmds = np.frombuffer(self.commands.read(size=n_cmd * COMMAND_BYTES), np.uint32)
+        return int(cmds.reshape(n_cmd, COMMAND_BYTES // 4)[:, 1].sum())
 
     def release(self) -> None:
-        for obj in (self.tiles, self.pieces, self.commands, self._mark_vao):
+        for obj in (self.tiles, self.survivors, self.commands, self._mark_vao):
             if obj is not None:
                 obj.release()
-        self.tiles = self.pieces = self.commands = self._mark_vao = None
+        self.tiles = self.survivors = self.commands = self._mark_vao = None

@@ -20,8 +20,7 @@ import numpy as np
 from .camera import Camera
 from .cull import CullData, cull_visible
 from .gl.radix_sort import RadixSorter, device_depth_sort
-from .early_stop import (COMMAND_BYTES, PIECE_CAPACITY, BatchHook, EarlyStopPasses, batch_bounds,
-                         plain_bounds)
+from .early_stop import (COMMAND_BYTES, BatchHook, EarlyStopPasses, batch_bounds, plain_bounds)
 from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
@@ -131,7 +130,7 @@ class QuadRenderer:
         self._order_key: tuple | None = None
         self._order = np.zeros(0, np.uint32)
         self._stale_frames = 0
-        self._count_fragments: str | None = None  # "shaded" / "rasterised" while counting
+        self._count_fragments = False
         #: Time the draw with a GL timer query too (the benchmark); result in last_gpu_draw_ns.
         self.gpu_timer = False
         #: Told the splats drawn after each batch (set per frame by ``Renderer.render(...,
@@ -140,9 +139,6 @@ class QuadRenderer:
         self.last_gpu_draw_ns: int | None = None
         self._query: moderngl.Query | None = None
         self._stop = EarlyStopPasses(ctx, self.programs) if settings.early_stop else None
-        #: Early termination draws survivors as pieces over their open tiles (False: whole;
-        #: the benchmark compares both).
-        self.split_pieces = True
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self._plain_command: moderngl.Buffer | None = None
         self._occlusion_culled = 0
@@ -168,22 +164,20 @@ class QuadRenderer:
         defines.update(lens.projection_defines(camera))
         if depth:
             defines["DEPTH_OUTPUT"] = 1
-        if self._count_fragments is not None:
+        if self._count_fragments:
             defines["COUNT_FRAGMENTS"] = 1
-            if self._count_fragments == "rasterised":
-                defines["COUNT_RASTERISED"] = 1
         if self.buffers.half_sh:
             defines["SH_HALF"] = 1
         if self.settings.early_stop:
             defines["EARLY_STOP"] = 1
-            defines["PIECES"] = 1
+            if self.uses_prepass:
+                defines["SURVIVORS"] = 1
         return defines
 
     def _cull_program(self, camera: Camera) -> moderngl.ComputeShader:
         """occlusion_cull.comp in the variant that reads this path's splat rectangles."""
         defines = {k: v for k, v in self.defines(camera).items()
-                   if k not in ("EARLY_STOP", "PIECES", "COUNT_FRAGMENTS", "COUNT_RASTERISED")}
-        defines["PIECE_CAPACITY"] = PIECE_CAPACITY
+                   if k not in ("EARLY_STOP", "SURVIVORS", "COUNT_FRAGMENTS")}
         if self.uses_prepass:
             defines["PREPARED"] = 1
         elif self.scene.kind is SplatKind.SURFEL_2D:
@@ -262,17 +256,13 @@ class QuadRenderer:
 
     def _vertex_array(self, prog: moderngl.Program, source: moderngl.Buffer | None) -> moderngl.VertexArray:
         """The VAO drawing ``prog`` with its per-instance attribute read from ``source``: the
-        sorted indices, the occlusion cull's pieces (early termination), or none (the
-        pre-pass's instance k reads prepared[u_base + k])."""
+        sorted indices, the occlusion cull's survivors, or none (the pre-pass's instance k
+        reads prepared[u_base + k])."""
+        attribute = "splat_slot" if self.uses_prepass else "splat_index"
         key = (prog.glo, None if source is None else source.glo)
         vao = self._vaos.get(key)
         if vao is None:
-            if source is None:
-                content = []
-            elif self._stop is not None and source is self._stop.pieces:
-                content = [(source, "3u4/i", "splat_piece")]
-            else:
-                content = [(source, "u4/i", "splat_index")]
+            content = [] if source is None else [(source, "u4/i", attribute)]
             vao = self._vaos[key] = self.ctx.vertex_array(prog, content)
         return vao
 
@@ -352,8 +342,6 @@ class QuadRenderer:
                     self._draw_batches(camera, target, prog, len(order), on_batch)
         finally:
             self.ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST)
-            for plane in range(4):
-                self.ctx.disable_direct(0x3000 + plane)  # GL_CLIP_DISTANCE0..3 (pieces)
         self.ctx.finish()
         t2 = time.perf_counter()
         self._times_upload, self._times_prepass, self._times_draw = t1 - t0, tp - t1, t2 - tp
@@ -370,8 +358,7 @@ class QuadRenderer:
                     self.ctx.finish()
                     on_batch(end, count)
             return
-        # Early termination (splatgl/early_stop.py): mark, reduce to tiles, cull and split,
-        # draw the pieces.
+        # Early termination (splatgl/early_stop.py): mark, reduce to tiles, cull, draw survivors.
         stop, ctx = self._stop, self.ctx
         width, height = camera.width, camera.height
         bounds = batch_bounds(count)
@@ -379,12 +366,9 @@ class QuadRenderer:
         cull_prog = self._cull_program(camera)
         set_camera_uniforms(cull_prog, camera, self.near, self.scene.anchor)
         self._index_buffer.bind_to_storage_buffer(BINDING_ORDER)
-        vao = self._vertex_array(prog, stop.pieces)
+        vao = self._vertex_array(prog, stop.survivors)
         ctx.depth_func = "<"
         ctx.enable(moderngl.DEPTH_TEST)
-        if self.split_pieces:
-            for plane in range(4):
-                ctx.enable_direct(0x3000 + plane)  # GL_CLIP_DISTANCE0..3
         first = 0
         for b, (start, end) in enumerate(zip(bounds[:-1], bounds[1:])):
             if b > 0:
@@ -392,8 +376,7 @@ class QuadRenderer:
                 stop.mark(target.texture, target.mask_fbo)
                 stop.reduce_tiles(target.texture, width, height)
                 ctx.memory_barrier()
-            groups = stop.cull(cull_prog, start, end, first, width, height, check_tiles=b > 0,
-                               split=self.split_pieces)
+            groups = stop.cull(cull_prog, start, end, first, width, height, check_tiles=b > 0)
             ctx.memory_barrier()
             target.fbo.use()
             target.fbo.depth_mask = False
@@ -457,21 +440,19 @@ class QuadRenderer:
         self.ctx.finish()
         return len(order)
 
-    def count_fragments(self, camera: Camera, rasterised: bool = False) -> tuple[int, int]:
+    def count_fragments(self, camera: Camera) -> tuple[int, int]:
         """Draw once with counting shaders: (fragments shaded, fragments with alpha >= 1/255).
 
         Their ratio is the quad extent's fragment efficiency (the benchmark reports it).
-        With ``rasterised`` and early termination, the depth test runs after shading, so the
-        first figure counts every fragment rasterised, rejected ones included (same image).
         Atomic counters slow the draw, so this is a separate, untimed pass.
         """
         counts = self.ctx.buffer(np.zeros(2, np.uint32).tobytes())
         counts.bind_to_storage_buffer(BINDING_FRAGMENT_COUNTS)
-        self._count_fragments = "rasterised" if rasterised else "shaded"
+        self._count_fragments = True
         try:
             self.draw(camera, self.target(camera))
         finally:
-            self._count_fragments = None
+            self._count_fragments = False
         #: Time the draw with a GL timer query too (the benchmark); result in last_gpu_draw_ns.
         self.gpu_timer = False
         self.last_gpu_draw_ns: int | None = None
