@@ -72,6 +72,9 @@ class BenchRow:
     #: NumPy reference's blended fragments (alpha >= 1/255 before the stop) on the counting view.
     occlusion_culled: int | None = None
     reference_fragments: int | None = None
+    #: Fragments rasterised on the counting view, rejected by early termination's depth test
+    #: included (rows with early termination on only; otherwise the same as fragments_shaded).
+    fragments_rasterised: int | None = None
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -202,11 +205,13 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
                 gpu.append(runner.impl.last_gpu_draw_ns / 1e6)
             if i in refs and config.kind is not RowKind.LIMIT and not config.projection:
                 errs.append(image_errors(img, refs[i]))
-        shaded = kept = eff = None
+        shaded = kept = eff = rasterised = None
         if config.kind is RowKind.QUAD:
             runner.impl.gpu_timer = False
             shaded, kept = runner.impl.count_fragments(path[0])
             eff = kept / shaded if shaded else None
+            if config.settings.early_stop:
+                rasterised = runner.impl.count_fragments(path[0], rasterised=True)[0]
         runner.release()
         keys = stages[0].keys() if stages else []
         rows.append(BenchRow(
@@ -222,6 +227,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             occlusion_culled=(int(statistics.median(occluded)) if config.kind is RowKind.QUAD
                               and None not in occluded and occluded else None),
             reference_fragments=ref_fragments if config.kind is RowKind.QUAD else None,
+            fragments_rasterised=rasterised,
         ))
         tick(config.name)
     limit = next((r.frame_ms for r in rows if r.group == "limit"), None)
