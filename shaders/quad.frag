@@ -4,9 +4,11 @@
 //   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).  Twin: splatgl/blend.py.
 // With DEPTH_OUTPUT, a second target gets (z alpha, 0, 0, alpha) under the same blend, so its
 // own alpha channel tracks the same transmittance and red accumulates D = sum z alpha T.
-#ifdef EARLY_STOP
+#if defined(EARLY_STOP) && !defined(COUNT_RASTERISED)
 // Early termination: depth/stencil tests before shading, so fragments on pixels the mark pass
-// stopped are never shaded (a shader with `discard` otherwise gets late tests).
+// stopped are never shaded (a shader with `discard` otherwise gets late tests).  The benchmark's
+// COUNT_RASTERISED variant leaves the tests late, so its counter sees every fragment rasterised,
+// rejected ones included (the image is the same: the late test rejects the same fragments).
 layout(early_fragment_tests) in;
 #endif
 flat in vec2 v_mean2d;
@@ -19,7 +21,8 @@ in vec2 v_unit;                // corner coordinate in sigmas
 
 layout(location = 0) out vec4 out_color;
 #ifdef COUNT_FRAGMENTS
-// Benchmark variant: counts fragments shaded and fragments kept (alpha >= 1/255).
+// Benchmark variant: counts fragments shaded (with COUNT_RASTERISED: rasterised) and fragments
+// kept (alpha >= 1/255).
 layout(std430, binding = 7) buffer FragmentCounts { uint fragments_shaded; uint fragments_kept; };
 #endif
 #ifdef DEPTH_OUTPUT

@@ -141,7 +141,7 @@ class QuadRenderer:
         self._order_key: tuple | None = None
         self._order = np.zeros(0, np.uint32)
         self._stale_frames = 0
-        self._count_fragments = False
+        self._count_fragments: str | None = None  # "shaded" / "rasterised" while counting
         #: Time the draw with a GL timer query too (the benchmark); result in last_gpu_draw_ns.
         self.gpu_timer = False
         #: Told the splats drawn after each batch (set per frame by ``Renderer.render(...,
@@ -175,8 +175,10 @@ class QuadRenderer:
         defines.update(lens.projection_defines(camera))
         if depth:
             defines["DEPTH_OUTPUT"] = 1
-        if self._count_fragments:
+        if self._count_fragments is not None:
             defines["COUNT_FRAGMENTS"] = 1
+            if self._count_fragments == "rasterised":
+                defines["COUNT_RASTERISED"] = 1
         defines.update(self.buffers.defines())
         if self.settings.early_stop:
             defines["EARLY_STOP"] = 1
@@ -187,7 +189,7 @@ class QuadRenderer:
     def _cull_program(self, camera: Camera) -> moderngl.ComputeShader:
         """occlusion_cull.comp in the variant that reads this path's splat rectangles."""
         defines = {k: v for k, v in self.defines(camera).items()
-                   if k not in ("EARLY_STOP", "SURVIVORS", "COUNT_FRAGMENTS")}
+                   if k not in ("EARLY_STOP", "SURVIVORS", "COUNT_FRAGMENTS", "COUNT_RASTERISED")}
         if self.uses_prepass:
             defines["PREPARED"] = 1
         elif self.scene.kind is SplatKind.SURFEL_2D:
@@ -461,23 +463,22 @@ class QuadRenderer:
         self.ctx.finish()
         return len(order)
 
-    def count_fragments(self, camera: Camera) -> tuple[int, int]:
+    def count_fragments(self, camera: Camera, rasterised: bool = False) -> tuple[int, int]:
         """Draw once with counting shaders: (fragments shaded, fragments with alpha >= 1/255).
 
-        Their ratio is the quad extent's fragment efficiency (the benchmark reports it).
+        Their ratio is the quad extent's fragment efficiency (the benchmark reports it).  With
+        ``rasterised`` the first figure counts every fragment rasterised: with early
+        termination the depth test then runs after the counter, so the fragments it rejects
+        are counted too (without it, rasterised and shaded are the same).
         Atomic counters slow the draw, so this is a separate, untimed pass.
         """
         counts = self.ctx.buffer(np.zeros(2, np.uint32).tobytes())
         counts.bind_to_storage_buffer(BINDING_FRAGMENT_COUNTS)
-        self._count_fragments = True
+        self._count_fragments = "rasterised" if rasterised else "shaded"
         try:
             self.draw(camera, self.target(camera))
         finally:
-            self._count_fragments = False
-        #: Time the draw with a GL timer query too (the benchmark); result in last_gpu_draw_ns.
-        self.gpu_timer = False
-        self.last_gpu_draw_ns: int | None = None
-        self._query: moderngl.Query | None = None
+            self._count_fragments = None
         shaded, kept = np.frombuffer(counts.read(), np.uint32)
         counts.release()
         return int(shaded), int(kept)

@@ -66,6 +66,9 @@ def test_bench_scene_rows_and_limit(gl_renderer):
     assert by["default"].drawn <= n and by["default"].fragment_efficiency > 0.5
     assert all(r.frame_ms > 0 and r.frame_ms_p10 <= r.frame_ms <= r.frame_ms_p90 for r in rows)
     assert by["sh<=0"].psnr < by["default"].psnr  # dropping SH bands costs accuracy
+    on = by["early-stop=on"]  # rasterised counted only where early termination is on
+    assert by["default"].fragments_rasterised is None
+    assert on.fragments_shaded <= on.fragments_rasterised <= by["default"].fragments_shaded
 
 
 def test_storage_rows_report_bytes_and_psnr_against_float32(gl_renderer):

@@ -176,6 +176,30 @@ def test_on_stays_within_the_bound_of_off_and_culls(gl_renderer, kind, preproces
     assert quad.last_times.occlusion_culled > 0.05 * quad.last_times.drawn  # 7-40% measured
 
 
+def test_rasterised_count_includes_the_fragments_early_tests_reject(ctx, monkeypatch):
+    """One batch: nothing is marked, so on rasterises and shades exactly off's fragments.  Two
+    batches: the depth test rejects fragments after rasterising them (shaded < rasterised), and
+    the occlusion cull only removes quads (rasterised < off's), with the same image."""
+    scene = dense_scene()
+    cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
+    off = QuadRenderer(ctx, scene, _settings(early_stop=False))
+    on = QuadRenderer(ctx, scene, _settings(early_stop=True))
+    n = len(on.visible_order(cam))
+    off_shaded, off_kept = off.count_fragments(cam)
+    assert off.count_fragments(cam, rasterised=True) == (off_shaded, off_kept)
+    monkeypatch.setattr(quad_module, "batch_bounds", lambda count: [0, count])
+    assert on.count_fragments(cam) == on.count_fragments(cam, rasterised=True) == (off_shaded, off_kept)
+    monkeypatch.setattr(quad_module, "batch_bounds", lambda count: [0, n // 3, count])
+    image = on.render(cam)
+    shaded, kept = on.count_fragments(cam)
+    rasterised, kept_late = on.count_fragments(cam, rasterised=True)
+    np.testing.assert_array_equal(on.target(cam).read(), image)  # the late-test variant's image
+    assert shaded < 0.8 * rasterised and rasterised < off_shaded
+    assert kept < kept_late <= off_kept  # the late variant also counts rejected kept fragments
+    off.release()
+    on.release()
+
+
 def test_half_precision_target_is_unchanged(gl_renderer):
     """rgba16f stores A = 1 before T < 1e-4 is representable; blending then adds exactly 0."""
     scene = dense_scene()

@@ -1,8 +1,8 @@
 """The early-termination comparison of ``splatgl bench --groups early-stop``: on against off.
 
 Per scene: frame time with and without early termination (the same path, one run), fragments
-shaded (quad.frag invocations, from the untimed counting pass), splats the occlusion cull
-dropped, the NumPy reference's blended fragments (the floor of a renderer that stops exactly)
+shaded (quad.frag invocations, from the untimed counting pass), fragments rasterised with it on
+(those its depth test rejects before shading included), splats the occlusion cull dropped, the NumPy reference's blended fragments (the floor of a renderer that stops exactly)
 and the ratio to it, and PSNR against the reference.
 """
 
@@ -34,12 +34,13 @@ def early_stop_table(rows: list[BenchRow]) -> str:
         lines.append(
             f"{scene[:28]:<28} {on.splats:>9} {off.frame_ms:>8.1f} {on.frame_ms:>8.1f} "
             f"{off.frame_ms / on.frame_ms:>7.2f}x {_fmt(off.fragments_shaded, ',d'):>13} "
-            f"{_fmt(on.fragments_shaded, ',d'):>13} {_fmt(on.occlusion_culled, ',d'):>10} "
+            f"{_fmt(on.fragments_shaded, ',d'):>13} {_fmt(on.fragments_rasterised, ',d'):>13} "
+            f"{_fmt(on.occlusion_culled, ',d'):>10} "
             f"{_fmt(ref, ',d'):>13} {_fmt(ratio, '.2f'):>7} {_fmt(off.psnr, '.2f'):>7} "
             f"{_fmt(on.psnr, '.2f'):>7}")
     if not lines:
         return ""
     head = (f"{'early termination':<28} {'splats':>9} {'off ms':>8} {'on ms':>8} {'speedup':>8} "
-            f"{'shaded off':>13} {'shaded on':>13} {'occl-cull':>10} {'ref frags':>13} "
+            f"{'shaded off':>13} {'shaded on':>13} {'rast. on':>13} {'occl-cull':>10} {'ref frags':>13} "
             f"{'on/ref':>7} {'PSNR off':>7} {'PSNR on':>7}")
     return "\n".join([head] + lines)

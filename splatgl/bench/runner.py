@@ -77,6 +77,9 @@ class BenchRow:
     #: over the error frames against the same settings with float32 storage.
     gpu_bytes_per_splat: float | None = None
     psnr_float32: float | None = None
+    #: Fragments rasterised on the counting view, rejected by early termination's depth test
+    #: included (rows with early termination on only; otherwise the same as fragments_shaded).
+    fragments_rasterised: int | None = None
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -218,12 +221,14 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
                 errs.append(image_errors(img, refs[i]))
             if config.group == "storage" and i in f32_images:
                 f32_psnr.append(psnr(img[..., :3], f32_images[i][..., :3]))
-        shaded = kept = eff = bytes_per_splat = None
+        shaded = kept = eff = rasterised = bytes_per_splat = None
         if config.kind is RowKind.QUAD:
             bytes_per_splat = runner.impl.buffers.nbytes / max(scene.count, 1)
             runner.impl.gpu_timer = False
             shaded, kept = runner.impl.count_fragments(path[0])
             eff = kept / shaded if shaded else None
+            if config.settings.early_stop:
+                rasterised = runner.impl.count_fragments(path[0], rasterised=True)[0]
         runner.release()
         keys = stages[0].keys() if stages else []
         rows.append(BenchRow(
@@ -241,6 +246,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             reference_fragments=ref_fragments if config.kind is RowKind.QUAD else None,
             gpu_bytes_per_splat=bytes_per_splat,
             psnr_float32=min(f32_psnr) if f32_psnr else None,
+            fragments_rasterised=rasterised,
         ))
         tick(config.name)
     limit = next((r.frame_ms for r in rows if r.group == "limit"), None)
