@@ -88,6 +88,8 @@ bool survives(uint k, out uint value) {
     if (!u_check_tiles) return true;
     ivec2 tlo = clamp(ivec2(floor(max(lo, vec2(0.0)))) / TILE_SIZE, ivec2(0), u_tiles - 1);
     ivec2 thi = clamp(ivec2(floor(min(hi, u_viewport))) / TILE_SIZE, ivec2(0), u_tiles - 1);
+    ivec2 span = thi - tlo + 1;
+    if (span.x * span.y > OCCLUSION_MAX_TILES) return true;   // too many to walk (constants.py)
     for (int ty = tlo.y; ty <= thi.y; ++ty)
         for (int tx = tlo.x; tx <= thi.x; ++tx)
             if (stopped[ty * u_tiles.x + tx] == 0u) return true;

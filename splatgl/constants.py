@@ -111,6 +111,12 @@ RADIX_ITEMS = 16
 COMPACT_QUAT_BITS = 15
 COMPACT_OPACITY_BITS = 16
 
+#: Early termination's occlusion cull (shaders/occlusion_cull.comp) walks a quad's tiles until
+#: it meets an open one; a quad over more tiles than this is kept without the walk.  llvmpipe
+#: ends all loops of an invocation after 65535 iterations in total, and an invocation tests 4
+#: quads: 4 x 8192 stays below it.  No quad reaches it at 1920 x 1080 (8160 tiles).
+OCCLUSION_MAX_TILES = 8192
+
 
 def sh_coeff_count(degree: int) -> int:
     """Number of SH coefficients per colour channel for ``degree`` (1, 4, 9 or 16)."""
@@ -157,6 +163,7 @@ def glsl_defines() -> dict[str, str]:
         "RADIX_ITEMS": str(RADIX_ITEMS),
         "COMPACT_QUAT_BITS": str(COMPACT_QUAT_BITS),
         "COMPACT_OPACITY_BITS": str(COMPACT_OPACITY_BITS),
+        "OCCLUSION_MAX_TILES": str(OCCLUSION_MAX_TILES),
     }
     for i, c in enumerate(SH_C2):
         out[f"SH_C2_{i}"] = glsl_float(c)

@@ -34,6 +34,7 @@ from typing import Callable
 import moderngl
 import numpy as np
 
+from . import constants
 from .constants import T_MIN, TILE_SIZE
 
 #: Slots per draw command of the occlusion cull (256 invocations x 4 slots, occlusion_cull.comp).
@@ -105,7 +106,8 @@ def occlusion_cull(lo: np.ndarray, hi: np.ndarray, tiles: np.ndarray | None, wid
     """(M,) bool: which quads survive, from their pixel rectangles (M, 2) ``lo``/``hi``.
 
     A quad covers pixels within ``[floor(lo), floor(hi)]``; it is dropped when that range misses
-    the image or (``tiles`` given, as :func:`stop_tiles`) every tile it touches is stopped.
+    the image or (``tiles`` given, as :func:`stop_tiles`) every tile it touches is stopped and
+    they are at most ``constants.OCCLUSION_MAX_TILES`` (the shader's loop bound).
     """
     lo = np.asarray(lo, np.float64)
     hi = np.asarray(hi, np.float64)
@@ -121,7 +123,8 @@ def occlusion_cull(lo: np.ndarray, hi: np.ndarray, tiles: np.ndarray | None, wid
     open_sum[1:, 1:] = np.cumsum(np.cumsum(~tiles, axis=0), axis=1)
     x0, y0, x1, y1 = tlo[:, 0], tlo[:, 1], thi[:, 0] + 1, thi[:, 1] + 1
     n_open = open_sum[y1, x1] - open_sum[y0, x1] - open_sum[y1, x0] + open_sum[y0, x0]
-    return keep & (n_open > 0)
+    walked = (x1 - x0) * (y1 - y0) <= constants.OCCLUSION_MAX_TILES
+    return keep & ((n_open > 0) | ~walked)
 
 
 # ----------------------------------------------------------------------------- GPU passes

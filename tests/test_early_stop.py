@@ -152,6 +152,30 @@ def test_occlusion_cull_matches_its_twin(ctx, monkeypatch, preprocess):
         quad.release()
 
 
+def test_quads_over_too_many_tiles_skip_the_walk(ctx, monkeypatch):
+    """A quad over more than OCCLUSION_MAX_TILES tiles is kept without walking them (llvmpipe's
+    loop limit): with the bound at 1 tile only single-tile quads are culled, the GPU count
+    equals the twin's, and the image is unchanged (culled quads lie on stopped pixels only)."""
+    import splatgl.constants as constants
+
+    scene = dense_scene()
+    cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
+    base = QuadRenderer(ctx, scene, _settings(early_stop=True))
+    full = base.render(cam)
+    culled_full = base.last_occlusion_culled
+    base.release()
+    monkeypatch.setattr(constants, "OCCLUSION_MAX_TILES", 1)
+    capped = QuadRenderer(ctx, scene, _settings(early_stop=True))
+    image = capped.render(cam)
+    culled = capped.last_occlusion_culled
+    capped.release()
+    assert 0 < culled < culled_full
+    np.testing.assert_array_equal(image, full)
+    lo, hi = np.array([[0.0, 0.0], [0.0, 0.0]]), np.array([[15.0, 15.0], [40.0, 15.0]])
+    tiles = np.ones((4, 6), bool)                     # every tile stopped
+    assert es.occlusion_cull(lo, hi, tiles, 96, 64).tolist() == [False, True]
+
+
 def _bound_check(on, off, name):
     """|on - off| <= EXTRA_WEIGHT max|c - bg| per pixel (colour below 1 here), and no pixel
     moves away from what no-stop gives by more than the dropped tail can weigh."""

@@ -11,7 +11,8 @@ import pytest
 
 from splatgl.camera import Camera, look_at
 from splatgl.formats import load_scene
-from splatgl.lod.build import build_hierarchy, level_offsets, rotmat_to_quat
+from splatgl.lod.build import build_hierarchy, level_offsets
+from splatgl.quaternion import rotmat_to_quat
 from splatgl.lod.cut import CutData, select_cut, select_cut_budget
 from splatgl.lod.io import read_lod, write_lod
 from splatgl.lod.render import LodRenderer, LodSettings

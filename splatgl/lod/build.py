@@ -30,6 +30,7 @@ import numpy as np
 
 from ..constants import ALPHA_MAX, ALPHA_MIN
 from ..project import covariance_3d, quat_to_rotmat
+from ..quaternion import rotmat_to_quat
 from ..scene import Scene
 
 #: Default number of children per parent.
@@ -83,31 +84,6 @@ def morton_order(points: np.ndarray) -> np.ndarray:
         v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
         code |= v << np.uint64(axis)
     return np.argsort(code, kind="stable")
-
-
-def rotmat_to_quat(r: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) proper rotation matrices -> (N, 4) unit quaternions (w, x, y, z) (Shepperd's
-    method: the largest of the four diagonal combinations is the pivot, so no division by ~0)."""
-    m = r
-    t = np.stack([m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2], m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], 1)
-    pick = np.argmax(t, axis=1)
-    q = np.empty((r.shape[0], 4))
-    # w pivot
-    s = pick == 0
-    w = 0.5 * np.sqrt(np.maximum(1.0 + t[s, 0], 1e-300))
-    q[s] = np.stack([w, (m[s, 2, 1] - m[s, 1, 2]) / (4 * w), (m[s, 0, 2] - m[s, 2, 0]) / (4 * w),
-                     (m[s, 1, 0] - m[s, 0, 1]) / (4 * w)], 1)
-    for axis in range(3):
-        s = pick == axis + 1
-        i, j, k = axis, (axis + 1) % 3, (axis + 2) % 3
-        x = 0.5 * np.sqrt(np.maximum(1.0 + m[s, i, i] - m[s, j, j] - m[s, k, k], 1e-300))
-        out = np.empty((int(s.sum()), 4))
-        out[:, 0] = (m[s, k, j] - m[s, j, k]) / (4 * x)
-        out[:, 1 + i] = x
-        out[:, 1 + j] = (m[s, j, i] + m[s, i, j]) / (4 * x)
-        out[:, 1 + k] = (m[s, k, i] + m[s, i, k]) / (4 * x)
-        q[s] = out
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def _extent(opacity: np.ndarray, max_scale: np.ndarray) -> np.ndarray:
