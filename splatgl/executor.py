@@ -98,6 +98,13 @@ class Files:
         """A readable local path holding the contents of ``path`` while the block runs."""
         yield Path(path)
 
+    def load_scene(self, path: Path, drop_invalid: bool = False):
+        """The scene file ``path`` loaded quietly through :meth:`local` (every task's input)."""
+        from .formats import load_scene
+
+        with self.local(path) as local:
+            return load_scene(local, drop_invalid=drop_invalid, progress=lambda *a: None)
+
 
 class Task(Protocol):
     """A picklable piece of work (module doc)."""

@@ -46,11 +46,9 @@ class EvalChunk:
         return f"views {self.first}-{self.first + len(self.views) - 1}"
 
     def run(self, files: Files, report: TaskProgress) -> Done:
-        from ..formats import load_scene
         from ..render import Renderer
 
-        with files.local(self.scene_path) as path:
-            scene = load_scene(path, drop_invalid=self.drop_invalid, progress=lambda *a: None)
+        scene = files.load_scene(self.scene_path, self.drop_invalid)
         with Renderer() as renderer:
             result, worst = evaluate(renderer, scene, self.views, self.settings, self.kind,
                                      self.keep_worst, lambda done, total, what: report(done, total))

@@ -61,11 +61,9 @@ class RenderChunk:
 
     def run(self, files: Files, report: TaskProgress) -> Done:
         from ..batch import render_frames
-        from ..formats import load_scene
         from ..render import Renderer
 
-        with files.local(self.scene_path) as path:
-            scene = load_scene(path, drop_invalid=self.drop_invalid, progress=lambda *a: None)
+        scene = files.load_scene(self.scene_path, self.drop_invalid)
         with Renderer() as renderer:
             result = render_frames(renderer, scene, self.cameras, self.settings, self.target, self.kind,
                                    self.bit_depth, self.resume,
