@@ -1,7 +1,7 @@
 // Early termination, splat-level occlusion cull and order-preserving compaction.
 //
 // Slots [u_start, u_end) of the sorted order form one draw batch.  A splat survives unless its
-// quad's screen rectangle lies only on stopped tiles (stop_tiles.comp; every pixel there has
+// quad's screen rectangle lies only on stopped blocks (stop_tiles.comp; every pixel there has
 // T < T_MIN, so the depth test would reject each of its fragments anyway) or off the viewport.
 // Work group g owns the SEGMENT slots from u_start + g SEGMENT: it writes its survivors, in
 // sorted order, to survivors[seg_base + 0..n) and the draw command (4, n, 0, seg_base) as
@@ -77,22 +77,39 @@ bool splat_rect(uint k, out vec2 lo, out vec2 hi, out uint value) {
 #endif
 }
 
+// Bits of tile `tile`'s stop word (stop_tiles.comp: bit 4 by + bx per block) that the block
+// range [blo, bhi] (global block coordinates) covers.
+uint covered_blocks(ivec2 tile, ivec2 blo, ivec2 bhi) {
+    const int BLOCKS = TILE_SIZE / STOP_BLOCK_SIZE;
+    ivec2 a = clamp(blo - BLOCKS * tile, ivec2(0), ivec2(BLOCKS - 1));
+    ivec2 b = clamp(bhi - BLOCKS * tile, ivec2(0), ivec2(BLOCKS - 1));
+    uint row = (2u << uint(b.x)) - (1u << uint(a.x));          // bits a.x..b.x of one row
+    // One bit at the start of each covered row (0x1111-style); the product copies `row` there.
+    uint rows = ((1u << uint(BLOCKS * (b.y + 1))) - (1u << uint(BLOCKS * a.y))) / ((1u << BLOCKS) - 1u);
+    return row * rows;
+}
+
 // A quad covers the pixels whose centres (j + 0.5, i + 0.5) lie in it, all inside the pixel
-// range [floor(lo), floor(hi)]; it survives unless that range misses the viewport or every tile
-// it touches is stopped.  A NaN rectangle survives (the draw decides).
+// range [floor(lo), floor(hi)]; it survives unless that range misses the viewport or every
+// stop-mask block it touches is stopped.  A NaN rectangle survives (the draw decides).
 bool survives(uint k, out uint value) {
     vec2 lo, hi;
     if (!splat_rect(k, lo, hi, value)) return false;
     if (any(isnan(vec4(lo, hi)))) return true;
     if (hi.x < 0.0 || hi.y < 0.0 || lo.x >= u_viewport.x || lo.y >= u_viewport.y) return false;
     if (!u_check_tiles) return true;
-    ivec2 tlo = clamp(ivec2(floor(max(lo, vec2(0.0)))) / TILE_SIZE, ivec2(0), u_tiles - 1);
-    ivec2 thi = clamp(ivec2(floor(min(hi, u_viewport))) / TILE_SIZE, ivec2(0), u_tiles - 1);
+    ivec2 plo = ivec2(floor(max(lo, vec2(0.0))));
+    ivec2 phi = min(ivec2(floor(min(hi, u_viewport))), ivec2(u_viewport) - 1);
+    ivec2 tlo = clamp(plo / TILE_SIZE, ivec2(0), u_tiles - 1);
+    ivec2 thi = clamp(phi / TILE_SIZE, ivec2(0), u_tiles - 1);
     ivec2 span = thi - tlo + 1;
     if (span.x * span.y > OCCLUSION_MAX_TILES) return true;   // too many to walk (constants.py)
+    ivec2 blo = plo / STOP_BLOCK_SIZE, bhi = phi / STOP_BLOCK_SIZE;
     for (int ty = tlo.y; ty <= thi.y; ++ty)
-        for (int tx = tlo.x; tx <= thi.x; ++tx)
-            if (stopped[ty * u_tiles.x + tx] == 0u) return true;
+        for (int tx = tlo.x; tx <= thi.x; ++tx) {
+            uint need = covered_blocks(ivec2(tx, ty), blo, bhi);
+            if ((stopped[ty * u_tiles.x + tx] & need) != need) return true;
+        }
     return false;
 }
 

@@ -1,12 +1,14 @@
 // Quad path, fragment stage: conic opacity with the reference clamp and cut, DESIGN.md 1-2:
 //   alpha = min(0.99, o exp(power)), power = -0.5 (a dx^2 + c dy^2) - b dx dy,
-//   skipped when power > 0 or alpha < 1/255.  Output premultiplied (c alpha, alpha) for
+//   skipped (written as (0, 0, 0, 0), which the blend adds as exactly nothing) when power > 0
+//   or alpha < 1/255.  Output premultiplied (c alpha, alpha) for
 //   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).  Twin: splatgl/blend.py.
 // With DEPTH_OUTPUT, a second target gets (z alpha, 0, 0, alpha) under the same blend, so its
 // own alpha channel tracks the same transmittance and red accumulates D = sum z alpha T.
 #if defined(EARLY_STOP) && !defined(COUNT_RASTERISED)
 // Early termination: depth/stencil tests before shading, so fragments on pixels the mark pass
-// stopped are never shaded (a shader with `discard` otherwise gets late tests).  The benchmark's
+// stopped are never shaded.  The shader must not `discard` (llvmpipe then shades every fragment
+// and tests late, whatever this layout says).  The benchmark's
 // COUNT_RASTERISED variant leaves the tests late, so its counter sees every fragment rasterised,
 // rejected ones included (the image is the same: the late test rejects the same fragments).
 layout(early_fragment_tests) in;
@@ -36,11 +38,6 @@ void main() {
 #ifdef COUNT_FRAGMENTS
     atomicAdd(fragments_shaded, 1u);
 #endif
-#ifdef EQUIRECT
-    // Half a turn of longitude each side of the centre (splatgl/lens.py wrap_period): a splat
-    // at a pole spans the image once, and a seam splat's two copies never meet.
-    if (abs(gl_FragCoord.x - v_mean2d.x) > 0.5 * u_wrap_period) discard;
-#endif
 #ifdef EXTENT_FAST
     // The fast approximation: the quad spans a fixed FAST_CORNER_SIGMAS along the ellipse axes
     // and the conic in those coordinates is the identity.
@@ -49,14 +46,22 @@ void main() {
     vec2 d = gl_FragCoord.xy - v_mean2d;
     float power = -0.5 * (v_conic.x * d.x * d.x + v_conic.z * d.y * d.y) - v_conic.y * d.x * d.y;
 #endif
-    if (power > 0.0) discard;
     float alpha = min(ALPHA_MAX, v_color.a * exp(power));
-    if (alpha < ALPHA_MIN) discard;
-#ifdef COUNT_FRAGMENTS
-    atomicAdd(fragments_kept, 1u);
+    // Skipped fragments (power > 0 or alpha < 1/255) write (0, 0, 0, 0), which the blend adds
+    // as exactly nothing.  No `discard`: llvmpipe ignores early_fragment_tests in a shader that
+    // can discard, so early termination's rejected fragments were shaded all the same (2x the
+    // cost per rejected fragment, docs/early-stop.md).
+    bool skip = power > 0.0 || alpha < ALPHA_MIN;
+#ifdef EQUIRECT
+    // Half a turn of longitude each side of the centre (splatgl/lens.py wrap_period): a splat
+    // at a pole spans the image once, and a seam splat's two copies never meet.
+    skip = skip || abs(gl_FragCoord.x - v_mean2d.x) > 0.5 * u_wrap_period;
 #endif
-    out_color = vec4(v_color.rgb * alpha, alpha);
+#ifdef COUNT_FRAGMENTS
+    if (!skip) atomicAdd(fragments_kept, 1u);
+#endif
+    out_color = skip ? vec4(0.0) : vec4(v_color.rgb * alpha, alpha);
 #ifdef DEPTH_OUTPUT
-    out_depth = vec4(v_depth * alpha, 0.0, 0.0, alpha);
+    out_depth = skip ? vec4(0.0) : vec4(v_depth * alpha, 0.0, 0.0, alpha);
 #endif
 }

@@ -8,7 +8,7 @@
 
 #ifdef EARLY_STOP
 // Early termination: depth/stencil tests before shading, so fragments on pixels the mark pass
-// stopped are never shaded (a shader with `discard` otherwise gets late tests).
+// stopped are never shaded (the shader must not `discard`: see quad.frag).
 layout(early_fragment_tests) in;
 #endif
 flat in vec2 v_center;
@@ -27,9 +27,11 @@ void main() {
     vec2 d = gl_FragCoord.xy - v_center;
     float depth;
     float alpha = surfel_alpha(v_t0, v_t1, v_t2, v_depth_row, v_color.a, d, depth);
-    if (alpha < ALPHA_MIN) discard;
-    out_color = vec4(v_color.rgb * alpha, alpha);
+    // Skipped fragments write (0, 0, 0, 0), which the blend adds as exactly nothing: no
+    // `discard`, which makes llvmpipe ignore early_fragment_tests (quad.frag).
+    bool skip = alpha < ALPHA_MIN;
+    out_color = skip ? vec4(0.0) : vec4(v_color.rgb * alpha, alpha);
 #ifdef DEPTH_OUTPUT
-    out_depth = vec4(depth * alpha, 0.0, 0.0, alpha);
+    out_depth = skip ? vec4(0.0) : vec4(depth * alpha, 0.0, 0.0, alpha);
 #endif
 }

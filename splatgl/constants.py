@@ -116,6 +116,11 @@ COMPACT_OPACITY_BITS = 16
 #: ends all loops of an invocation after 65535 iterations in total, and an invocation tests 4
 #: quads: 4 x 8192 stays below it.  No quad reaches it at 1920 x 1080 (8160 tiles).
 OCCLUSION_MAX_TILES = 8192
+#: The stop mask's finer level: each 16 x 16 tile holds one bit per block of this many pixels
+#: square (4 x 4 blocks of 4 x 4 pixels, bits 0..15), set when all the block's pixels stopped.
+#: The occlusion cull tests a quad's pixel range against blocks, not whole tiles: on the shared
+#: scenes at 1280x720 this culled 1.2-2.1x as many splats as tiles alone (docs/early-stop.md).
+STOP_BLOCK_SIZE = 4
 
 
 def sh_coeff_count(degree: int) -> int:
@@ -164,6 +169,7 @@ def glsl_defines() -> dict[str, str]:
         "COMPACT_QUAT_BITS": str(COMPACT_QUAT_BITS),
         "COMPACT_OPACITY_BITS": str(COMPACT_OPACITY_BITS),
         "OCCLUSION_MAX_TILES": str(OCCLUSION_MAX_TILES),
+        "STOP_BLOCK_SIZE": str(STOP_BLOCK_SIZE),
     }
     for i, c in enumerate(SH_C2):
         out[f"SH_C2_{i}"] = glsl_float(c)

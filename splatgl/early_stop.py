@@ -6,9 +6,10 @@ The sorted splats are drawn in batches (:func:`batch_bounds`).  Between batches:
    transmittance ``T = 1 - A`` is below ``T_MIN`` (the reference's stop threshold); splat quads
    sit at depth 0.5 and are drawn with ``depth < stored`` and ``early_fragment_tests``, so their
    fragments on marked pixels are rejected before shading.
-2. ``stop_tiles`` (shaders/stop_tiles.comp): 16 x 16 tiles whose pixels are all marked.
+2. ``stop_tiles`` (shaders/stop_tiles.comp): one word per 16 x 16 tile, a bit per 4 x 4 block
+   whose pixels are all marked.
 3. ``occlusion_cull`` (shaders/occlusion_cull.comp): the next batch's splats whose quad
-   rectangle lies only on stopped tiles are dropped, the survivors compacted in order, one
+   rectangle lies only on stopped blocks are dropped, the survivors compacted in order, one
    draw command per 1024 slots, and the batch is drawn with one multi-draw-indirect.
 
 Accuracy (DESIGN.md section 2 and docs/early-stop.md).  A pixel is marked only after a batch
@@ -23,7 +24,7 @@ the stop.  The occlusion cull drops only splats whose every fragment the depth t
 reject, so it changes no pixel.  On 8- and 16-bit targets ``1 - A < 1e-4`` holds only
 where ``A`` is stored as exactly 1, where blending adds nothing anyway: the image is unchanged.
 
-NumPy twins: :func:`stop_mask`, :func:`stop_tiles`, :func:`occlusion_cull`.
+NumPy twins: :func:`stop_mask`, :func:`stop_tiles` (:func:`stop_blocks`), :func:`occlusion_cull`.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ import moderngl
 import numpy as np
 
 from . import constants
-from .constants import T_MIN, TILE_SIZE
+from .constants import STOP_BLOCK_SIZE, T_MIN, TILE_SIZE
 
 #: Slots per draw command of the occlusion cull (256 invocations x 4 slots, occlusion_cull.comp).
 SEGMENT = 1024
@@ -44,6 +45,8 @@ SEGMENT = 1024
 COMMAND_BYTES = 20
 #: Storage bindings (after the quad path's 0..7).
 BINDING_STOP_TILES, BINDING_SURVIVORS, BINDING_COMMANDS = 8, 9, 10
+#: A tile's stop word when all its blocks are stopped (16 blocks, shaders/stop_tiles.comp).
+TILE_STOPPED = (1 << (TILE_SIZE // STOP_BLOCK_SIZE) ** 2) - 1
 #: Tiles per work group of shaders/stop_tiles.comp.
 TILES_GROUP = 64
 #: Texture unit the mark and tile passes sample the accumulation target from.
@@ -91,14 +94,40 @@ def stop_mask(alpha: np.ndarray) -> np.ndarray:
     return (np.float32(1.0) - a) < np.float32(T_MIN)
 
 
-def stop_tiles(alpha: np.ndarray) -> np.ndarray:
-    """(rows, columns) bool: 16 x 16 tiles all of whose in-image pixels are stopped."""
+def stop_blocks(alpha: np.ndarray) -> np.ndarray:
+    """(rows * 4, columns * 4) bool: ``STOP_BLOCK_SIZE``-square blocks all of whose in-image
+    pixels are stopped, over the 16 x 16 tile grid (blocks past the image edge count as stopped)."""
     mask = stop_mask(alpha)
     h, w = mask.shape
     gh, gw = -(-h // TILE_SIZE), -(-w // TILE_SIZE)
     padded = np.ones((gh * TILE_SIZE, gw * TILE_SIZE), bool)
     padded[:h, :w] = mask
-    return padded.reshape(gh, TILE_SIZE, gw, TILE_SIZE).all(axis=(1, 3))
+    n = TILE_SIZE // STOP_BLOCK_SIZE
+    return padded.reshape(gh * n, STOP_BLOCK_SIZE, gw * n, STOP_BLOCK_SIZE).all(axis=(1, 3))
+
+
+def stop_tiles(alpha: np.ndarray) -> np.ndarray:
+    """(rows, columns) uint32 stop words of the 16 x 16 tiles, as shaders/stop_tiles.comp
+    writes them: bit ``4 by + bx`` set when block (bx, by) of the tile is stopped
+    (:func:`stop_blocks`); ``TILE_STOPPED`` when the whole tile is."""
+    return pack_blocks(stop_blocks(alpha))
+
+
+def pack_blocks(blocks: np.ndarray) -> np.ndarray:
+    """(rows, columns) uint32 tile words from a (rows * 4, columns * 4) bool block grid."""
+    n = TILE_SIZE // STOP_BLOCK_SIZE
+    gh, gw = blocks.shape[0] // n, blocks.shape[1] // n
+    per_tile = blocks.reshape(gh, n, gw, n).transpose(0, 2, 1, 3).reshape(gh, gw, n * n)
+    weights = (np.uint32(1) << np.arange(n * n, dtype=np.uint32))
+    return (per_tile.astype(np.uint32) * weights).sum(axis=2, dtype=np.uint32)
+
+
+def unpack_blocks(tiles: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`pack_blocks`: the bool block grid of (rows, columns) tile words."""
+    n = TILE_SIZE // STOP_BLOCK_SIZE
+    gh, gw = tiles.shape
+    bits = (np.asarray(tiles, np.uint32)[..., None] >> np.arange(n * n, dtype=np.uint32)) & 1
+    return bits.astype(bool).reshape(gh, gw, n, n).transpose(0, 2, 1, 3).reshape(gh * n, gw * n)
 
 
 def occlusion_cull(lo: np.ndarray, hi: np.ndarray, tiles: np.ndarray | None, width: int,
@@ -106,8 +135,8 @@ def occlusion_cull(lo: np.ndarray, hi: np.ndarray, tiles: np.ndarray | None, wid
     """(M,) bool: which quads survive, from their pixel rectangles (M, 2) ``lo``/``hi``.
 
     A quad covers pixels within ``[floor(lo), floor(hi)]``; it is dropped when that range misses
-    the image or (``tiles`` given, as :func:`stop_tiles`) every tile it touches is stopped and
-    they are at most ``constants.OCCLUSION_MAX_TILES`` (the shader's loop bound).
+    the image or (``tiles`` given, stop words as :func:`stop_tiles`) every block it touches is
+    stopped and its tiles are at most ``constants.OCCLUSION_MAX_TILES`` (the shader's loop bound).
     """
     lo = np.asarray(lo, np.float64)
     hi = np.asarray(hi, np.float64)
@@ -115,16 +144,24 @@ def occlusion_cull(lo: np.ndarray, hi: np.ndarray, tiles: np.ndarray | None, wid
     if tiles is None:
         return keep
     gh, gw = tiles.shape
-    size = np.array([width, height], np.float64)
-    tlo = np.clip(np.floor(np.maximum(lo, 0.0)).astype(np.int64) // TILE_SIZE, 0, [gw - 1, gh - 1])
-    thi = np.clip(np.floor(np.minimum(hi, size)).astype(np.int64) // TILE_SIZE, 0, [gw - 1, gh - 1])
-    # Open tiles' 2D prefix sums: a rectangle is all-stopped when it holds no open tile.
-    open_sum = np.zeros((gh + 1, gw + 1), np.int64)
-    open_sum[1:, 1:] = np.cumsum(np.cumsum(~tiles, axis=0), axis=1)
-    x0, y0, x1, y1 = tlo[:, 0], tlo[:, 1], thi[:, 0] + 1, thi[:, 1] + 1
+    blocks = unpack_blocks(tiles)
+    with np.errstate(invalid="ignore"):
+        plo = np.floor(np.maximum(lo, 0.0))
+        phi = np.minimum(np.floor(np.minimum(hi, [width, height])), [width - 1, height - 1])
+    plo = np.nan_to_num(plo).astype(np.int64)
+    phi = np.nan_to_num(phi).astype(np.int64)
+    tlo = np.clip(plo // TILE_SIZE, 0, [gw - 1, gh - 1])
+    thi = np.clip(phi // TILE_SIZE, 0, [gw - 1, gh - 1])
+    blo = np.clip(plo // STOP_BLOCK_SIZE, 0, [blocks.shape[1] - 1, blocks.shape[0] - 1])
+    bhi = np.clip(phi // STOP_BLOCK_SIZE, 0, [blocks.shape[1] - 1, blocks.shape[0] - 1])
+    # Open blocks' 2D prefix sums: a range is all-stopped when it holds no open block.
+    open_sum = np.zeros((blocks.shape[0] + 1, blocks.shape[1] + 1), np.int64)
+    open_sum[1:, 1:] = np.cumsum(np.cumsum(~blocks, axis=0), axis=1)
+    x0, y0, x1, y1 = blo[:, 0], blo[:, 1], bhi[:, 0] + 1, bhi[:, 1] + 1
     n_open = open_sum[y1, x1] - open_sum[y0, x1] - open_sum[y1, x0] + open_sum[y0, x0]
-    walked = (x1 - x0) * (y1 - y0) <= constants.OCCLUSION_MAX_TILES
-    return keep & ((n_open > 0) | ~walked)
+    walked = (thi[:, 0] - tlo[:, 0] + 1) * (thi[:, 1] - tlo[:, 1] + 1) <= constants.OCCLUSION_MAX_TILES
+    nan = np.isnan(lo).any(axis=1) | np.isnan(hi).any(axis=1)
+    return keep & ((n_open > 0) | ~walked | nan)
 
 
 # ----------------------------------------------------------------------------- GPU passes
@@ -176,7 +213,7 @@ class EarlyStopPasses:
         self._mark_vao.render(moderngl.TRIANGLES, vertices=3)
 
     def reduce_tiles(self, accum: moderngl.Texture, width: int, height: int) -> None:
-        """stop_tiles.comp: one flag per tile into the tiles buffer (binding 8)."""
+        """stop_tiles.comp: one stop word per tile into the tiles buffer (binding 8)."""
         comp = self.programs.compute("stop_tiles.comp")
         grid = (-(-width // TILE_SIZE), -(-height // TILE_SIZE))
         comp["u_size"].value = (width, height)

@@ -54,15 +54,23 @@ def test_twins_on_a_known_mask():
     alpha = np.zeros((20, 35), np.float32)
     alpha[:16, :16] = 1.0                     # tile (0, 0) fully stopped
     alpha[:16, 16:32] = 1.0
-    alpha[3, 20] = np.float32(1.0 - 2e-4)     # T = 2e-4 >= T_MIN: tile (0, 1) stays open
+    alpha[3, 20] = np.float32(1.0 - 2e-4)     # T = 2e-4 >= T_MIN: block (1, 0) of tile (0, 1) open
     alpha[16:, 32:] = 1.0                     # partial edge tile (1, 2): all its in-image pixels
     tiles = es.stop_tiles(alpha)
-    assert tiles.tolist() == [[True, False, False], [False, False, True]]
-    lo = np.array([[1.0, 1.0], [1.0, 1.0], [-9.0, 2.0], [33.0, 17.0], [40.0, 3.0]])
-    hi = np.array([[14.0, 15.0], [17.0, 15.0], [-0.5, 5.0], [34.0, 19.9], [50.0, 4.0]])
+    assert (tiles == es.TILE_STOPPED).tolist() == [[True, False, False], [False, False, True]]
+    assert tiles[0, 1] == es.TILE_STOPPED & ~(1 << 1)   # every block of tile (0, 1) but one
+    # Blocks past the image edge count as stopped: tile (0, 2) keeps its first block column
+    # (x 32..34) open, tile (1, 0) its first block row (y 16..19).
+    assert tiles[0, 2] == 0xEEEE and tiles[1, 0] == 0xFFF0
+    np.testing.assert_array_equal(es.unpack_blocks(tiles), es.stop_blocks(alpha))
+    lo = np.array([[1.0, 1.0], [1.0, 1.0], [-9.0, 2.0], [33.0, 17.0], [40.0, 3.0],
+                   [24.0, 8.0], [20.0, 2.0], [17.0, 4.0]])
+    hi = np.array([[14.0, 15.0], [20.5, 15.0], [-0.5, 5.0], [34.0, 19.9], [50.0, 4.0],
+                   [31.9, 15.0], [22.0, 5.0], [19.9, 9.0]])
     keep = es.occlusion_cull(lo, hi, tiles, 35, 20)
-    # on stopped tile only / reaches an open tile / off-image / stopped edge tile / off-image
-    assert keep.tolist() == [False, True, False, False, False]
+    # on a stopped tile only / reaches the open block of tile (0, 1) / off-image / stopped edge tile / off-image /
+    # stopped blocks of tile (0, 1) / its open block / the blocks beside it
+    assert keep.tolist() == [False, True, False, False, False, False, True, False]
 
 
 def _gpu_passes(ctx, alpha: np.ndarray):
@@ -88,7 +96,7 @@ def _gpu_passes(ctx, alpha: np.ndarray):
     passes.reduce_tiles(tex, w, h)
     ctx.memory_barrier()
     gw, gh = -(-w // 16), -(-h // 16)
-    tiles = np.frombuffer(passes.tiles.read(size=4 * gw * gh), np.uint32).reshape(gh, gw).astype(bool)
+    tiles = np.frombuffer(passes.tiles.read(size=4 * gw * gh), np.uint32).reshape(gh, gw)
     passes.release()
     programs.release()
     for obj in (mask_fbo, depth, tex):
@@ -106,7 +114,9 @@ def test_mark_and_tile_passes_match_their_twins(ctx):
     marked, tiles = _gpu_passes(ctx, alpha)
     np.testing.assert_array_equal(marked, es.stop_mask(alpha))
     np.testing.assert_array_equal(tiles, es.stop_tiles(alpha))
-    assert tiles[0, 1] and tiles[0, 2]
+    assert tiles[0, 1] == tiles[0, 2] == es.TILE_STOPPED
+    assert 0 < np.count_nonzero((tiles != 0) & (tiles != es.TILE_STOPPED)), "partly stopped tiles"
+
 
 
 @pytest.mark.parametrize("preprocess", [Preprocess.COMPUTE, Preprocess.VERTEX])
@@ -129,8 +139,8 @@ def test_occlusion_cull_matches_its_twin(ctx, monkeypatch, preprocess):
     alpha = after_first["alpha"]
     tiles = es.stop_tiles(alpha)
     gpu_tiles = np.frombuffer(quad._stop.tiles.read(size=4 * tiles.size), np.uint32)
-    np.testing.assert_array_equal(gpu_tiles.reshape(tiles.shape).astype(bool), tiles)
-    assert tiles.mean() > 0.2, "the scene must stop some tiles for the test to mean anything"
+    np.testing.assert_array_equal(gpu_tiles.reshape(tiles.shape), tiles)
+    assert (tiles == es.TILE_STOPPED).mean() > 0.2, "the scene must stop some tiles for the test to mean anything"
     prepared = np.frombuffer(quad._prepared.read(size=64 * n), np.float32).reshape(n, 4, 4)
     mean, a1, a2 = prepared[:, 0, :2], prepared[:, 0, 2:], prepared[:, 1, :2]
     half = np.abs(a1) + np.abs(a2)
@@ -172,7 +182,7 @@ def test_quads_over_too_many_tiles_skip_the_walk(ctx, monkeypatch):
     assert 0 < culled < culled_full
     np.testing.assert_array_equal(image, full)
     lo, hi = np.array([[0.0, 0.0], [0.0, 0.0]]), np.array([[15.0, 15.0], [40.0, 15.0]])
-    tiles = np.ones((4, 6), bool)                     # every tile stopped
+    tiles = np.full((4, 6), es.TILE_STOPPED, np.uint32)   # every tile stopped
     assert es.occlusion_cull(lo, hi, tiles, 96, 64).tolist() == [False, True]
 
 
