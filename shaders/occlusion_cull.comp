@@ -11,23 +11,11 @@
 // the survivor value is the slot, read back by quad_light.vert), SURFEL (2DGS, the value is the
 // splat index for surfel.vert), neither (3DGS vertex path, the splat index for quad.vert).
 // Twin: splatgl/early_stop.py occlusion_cull.
-#include "lib/camera.glsl"
-#include "lib/scene.glsl"
-#include "lib/project.glsl"
-#ifdef SURFEL
-#include "lib/surfel.glsl"
-#elif !defined(PREPARED)
-#include "lib/sh.glsl"
-#include "lib/splat_setup.glsl"
-#endif
+#include "lib/splat_rect.glsl"
 
 #define GROUP 256
 #define PER_INVOCATION 4
 layout(local_size_x = GROUP) in;
-layout(std430, binding = 5) readonly buffer Order { uint order[]; };
-#ifdef PREPARED
-layout(std430, binding = 6) readonly buffer Prepared { vec4 prepared[]; };
-#endif
 layout(std430, binding = 8) readonly buffer StopTiles { uint stopped[]; };
 layout(std430, binding = 9) writeonly buffer Survivors { uint survivors[]; };
 // DrawArraysIndirectCommand (count, instanceCount, first, baseInstance) in moderngl's 20-byte
@@ -40,42 +28,6 @@ uniform ivec2 u_tiles;         // tile grid (columns, rows)
 uniform bool u_check_tiles;    // false on the first batch: nothing has stopped yet
 
 shared uint s_scan[GROUP];
-
-// Pixel rectangle [lo, hi] containing the splat's quad, and the value a survivor stores.
-// False: the splat draws nothing (culled by its own setup).
-bool splat_rect(uint k, out vec2 lo, out vec2 hi, out uint value) {
-#ifdef PREPARED
-    value = k;
-    vec4 d = prepared[4u * k + 3u];
-    if (d.z == 0.0) return false;
-    vec4 a = prepared[4u * k], b = prepared[4u * k + 1u];
-    vec2 half_size = abs(a.zw) + abs(b.xy);   // corners mean +- axis1 +- axis2
-    lo = a.xy - half_size;
-    hi = a.xy + half_size;
-    return true;
-#elif defined(SURFEL)
-    uint i = order[k];
-    value = i;
-    vec4 a = splat_mean_opacity(i);
-    vec3 p = u_view_rot * a.xyz + u_view_trans;
-    if (p.z <= u_near) return false;
-    mat3 rot = quat_to_rotmat(splat_rotation(i));
-    vec2 s = splat_scale(i).xy;
-    vec2 center;
-    vec3 t0, t1, t2;
-    surfel_screen(p, u_view_rot * (rot[0] * s.x), u_view_rot * (rot[1] * s.y), center, t0, t1, t2);
-    return surfel_bounds(center, t0, t1, t2, a.w, lo, hi);
-#else
-    uint i = order[k];
-    value = i;
-    ScreenSplat s;
-    if (!setup_splat(i, 1.0, s)) return false;
-    vec2 half_size = abs(s.axis1) + abs(s.axis2);
-    lo = s.mean2d - half_size;
-    hi = s.mean2d + half_size;
-    return true;
-#endif
-}
 
 // Bits of tile `tile`'s stop word (stop_tiles.comp: bit 4 by + bx per block) that the block
 // range [blo, bhi] (global block coordinates) covers.
@@ -94,7 +46,8 @@ uint covered_blocks(ivec2 tile, ivec2 blo, ivec2 bhi) {
 // stop-mask block it touches is stopped.  A NaN rectangle survives (the draw decides).
 bool survives(uint k, out uint value) {
     vec2 lo, hi;
-    if (!splat_rect(k, lo, hi, value)) return false;
+    float area;
+    if (!splat_rect(k, lo, hi, value, area)) return false;
     if (any(isnan(vec4(lo, hi)))) return true;
     if (hi.x < 0.0 || hi.y < 0.0 || lo.x >= u_viewport.x || lo.y >= u_viewport.y) return false;
     if (!u_check_tiles) return true;

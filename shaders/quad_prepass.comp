@@ -1,7 +1,7 @@
 // Quad path, compute pre-pass: the per-splat math of quad.vert done once per splat (not once
 // per corner), for the sorted visible splats, into `prepared` for quad_light.vert.
 // Layout per sorted slot k (4 vec4): (mean2d, axis1), (axis2, conic.ab), (conic.c, color),
-// (opacity, depth, visible, 0).  Twin: splatgl/project.py, as for quad.vert; with
+// (opacity, depth, visible, fragments in the viewport: camera.glsl visible_area).  Twin: splatgl/project.py, as for quad.vert; with
 // OPACITY_WEIGHT, the scene with those opacities scaled (splatgl/lod/render.py blended_scene).
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"
@@ -27,8 +27,14 @@ void main() {
 #else
     bool ok = setup_splat(order[k], 1.0, s);
 #endif
-    prepared[4u * k + 3u] = vec4(s.opacity, s.depth, ok ? 1.0 : 0.0, 0.0);
-    if (!ok) return;
+    if (!ok) {
+        prepared[4u * k + 3u] = vec4(s.opacity, s.depth, 0.0, 0.0);
+        return;
+    }
+    vec2 half_size = abs(s.axis1) + abs(s.axis2);
+    float area = 4.0 * abs(s.axis1.x * s.axis2.y - s.axis1.y * s.axis2.x);
+    prepared[4u * k + 3u] = vec4(s.opacity, s.depth, 1.0,
+                                 visible_area(s.mean2d - half_size, s.mean2d + half_size, area));
     prepared[4u * k] = vec4(s.mean2d, s.axis1);
     prepared[4u * k + 1u] = vec4(s.axis2, s.conic.xy);
     prepared[4u * k + 2u] = vec4(s.conic.z, s.color);

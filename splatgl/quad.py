@@ -3,10 +3,11 @@
 Per view, only the sorted index buffer is uploaded; the scene's storage buffers are uploaded
 once.  The vertex stage (shaders/quad.vert) evaluates SH colour and the 2D covariance and sizes
 the quad; the fragment stage (shaders/quad.frag) evaluates the conic opacity.  Blending is
-front to back, (ONE_MINUS_DST_ALPHA, ONE), into a cleared (0, 0, 0, 0) target.  With
-``early_stop`` (the default) the sorted splats are drawn in batches and pixels that are already
-opaque stop receiving fragments (splatgl/early_stop.py); a draw calls ``on_batch(done, total)``
-between batches, which may raise KeyboardInterrupt to abandon the frame.
+front to back, (ONE_MINUS_DST_ALPHA, ONE), into a cleared (0, 0, 0, 0) target.  With early
+termination (``early_stop`` ON, or AUTO on a heavily overdrawn view) the sorted splats are drawn
+in batches and pixels that are already opaque stop receiving fragments (splatgl/early_stop.py);
+a draw calls ``on_batch(done, total)`` between batches, which may raise KeyboardInterrupt to
+abandon the frame.
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ from .output import RenderOutput
 from . import lens
 from .project import anchored_camera, near_threshold, to_camera
 from .scene import Scene, SplatKind
-from .settings import Preprocess, QuadExtent, RenderSettings, SortKey, resolve_near
+from .constants import EARLY_STOP_MIN_OVERDRAW
+from .settings import EarlyStop, Preprocess, QuadExtent, RenderSettings, SortKey, resolve_near
 from .sort import bucket_sort, depth_sort
 
 #: Storage bindings of the compute pre-pass (after the scene's 0..4).
@@ -64,11 +66,18 @@ class QuadTimes:
     #: Seconds this frame spent building the scene's chunked cull data (the first culled view
     #: only; :class:`splatgl.cull_chunks.ChunkedCull`), apart from the per-view ``cull``.
     cull_build: float = 0.0
+    #: ``--early-stop auto``: seconds of the coverage estimate (shaders/coverage.comp), the
+    #: fragments it estimated (0: no estimate), and the draw's batches; ``batched``: whether
+    #: the draw ran early termination (with OFF, or AUTO below its threshold, it did not).
+    coverage: float = 0.0
+    fragments_estimate: int = 0
+    batches: int = 1
+    batched: bool = False
 
     @property
     def total(self) -> float:
-        return (self.cull_build + self.cull + self.sort + self.upload + self.prepass + self.draw
-                + self.readback)
+        return (self.cull_build + self.cull + self.sort + self.upload + self.prepass + self.coverage
+                + self.draw + self.readback)
 
 
 def composite(rgba: np.ndarray, background: tuple[float, float, float]) -> np.ndarray:
@@ -149,12 +158,18 @@ class QuadRenderer:
         self.progress = None
         self.last_gpu_draw_ns: int | None = None
         self._query: moderngl.Query | None = None
-        self._stop = EarlyStopPasses(ctx, self.programs) if settings.early_stop else None
+        self._stop = (EarlyStopPasses(ctx, self.programs)
+                      if settings.early_stop is not EarlyStop.OFF else None)
+        #: Whether the current frame draws in early-termination batches (decided per frame,
+        #: :meth:`_decide_batches`), its coverage estimate, and the batches it drew.
+        self._batched = settings.early_stop is EarlyStop.ON
+        self._fragments_estimate = 0
+        self._batches = 1
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self._plain_command: moderngl.Buffer | None = None
         self._occlusion_culled = 0
         self._times_cull = self._times_sort = self._times_upload = self._times_build = 0.0
-        self._times_prepass = self._times_draw = 0.0
+        self._times_prepass = self._times_draw = self._times_coverage = 0.0
         self.last_times: QuadTimes | None = None
 
     # --------------------------------------------------------------------------- stages
@@ -180,21 +195,28 @@ class QuadRenderer:
             if self._count_fragments == "rasterised":
                 defines["COUNT_RASTERISED"] = 1
         defines.update(self.buffers.defines())
-        if self.settings.early_stop:
+        if self._batched:
             defines["EARLY_STOP"] = 1
             if self.uses_prepass:
                 defines["SURVIVORS"] = 1
         return defines
 
-    def _cull_program(self, camera: Camera) -> moderngl.ComputeShader:
-        """occlusion_cull.comp in the variant that reads this path's splat rectangles."""
-        defines = {k: v for k, v in self.defines(camera).items()
-                   if k not in ("EARLY_STOP", "SURVIVORS", "COUNT_FRAGMENTS", "COUNT_RASTERISED")}
+    def _compute_defines(self, camera: Camera, depth: bool = False) -> dict[str, object]:
+        """:meth:`defines` without the draw-only keys (early termination, fragment counting)."""
+        return {k: v for k, v in self.defines(camera, depth).items()
+                if k not in ("EARLY_STOP", "SURVIVORS", "COUNT_FRAGMENTS", "COUNT_RASTERISED")}
+
+    def _rect_program(self, camera: Camera, name: str) -> moderngl.ComputeShader:
+        """``name`` (occlusion_cull.comp, coverage.comp) in the variant that reads this path's
+        splat rectangles (shaders/lib/splat_rect.glsl), camera uniforms set."""
+        defines = self._compute_defines(camera)
         if self.uses_prepass:
             defines["PREPARED"] = 1
         elif self.scene.kind is SplatKind.SURFEL_2D:
             defines["SURFEL"] = 1
-        return self.programs.compute("occlusion_cull.comp", defines)
+        comp = self.programs.compute(name, defines)
+        set_camera_uniforms(comp, camera, self.near, self.scene.anchor)
+        return comp
 
     def program(self, camera: Camera, depth: bool = False) -> moderngl.Program:
         """The draw program: full per-corner math, or the light one after the pre-pass.
@@ -304,7 +326,7 @@ class QuadRenderer:
         self._prepared.bind_to_storage_buffer(BINDING_PREPARED)
         if count == 0:
             return
-        comp = self.programs.compute("quad_prepass.comp", self.defines(camera, depth))
+        comp = self.programs.compute("quad_prepass.comp", self._compute_defines(camera, depth))
         set_camera_uniforms(comp, camera, self.near, self.scene.anchor)
         comp["u_count"].value = count
         self._index_buffer.bind_to_storage_buffer(BINDING_ORDER)
@@ -314,7 +336,7 @@ class QuadRenderer:
     def target(self, camera: Camera, depth: bool = False) -> ColorTarget:
         size = (camera.width, camera.height)
         t = self._target
-        stop = self.settings.early_stop
+        stop = self._stop is not None
         if (t is None or t.size != size or t.precision is not self.settings.precision
                 or t.has_depth != depth or t.has_stop_mask != stop):
             if t is not None:
@@ -331,16 +353,19 @@ class QuadRenderer:
         (``target`` from :meth:`target`).  ``on_batch(done, total)`` is called after each batch
         of sorted splats; an exception it raises abandons the frame (GL state restored).
         """
+        lens.require_support(camera, self.scene.kind is SplatKind.SURFEL_2D, "quad")
         order = self.visible_order(camera)
-        prog = self.program(camera, depth)
         t0 = time.perf_counter()
-        self._upload(order, prog)
+        self._upload(order)
         t1 = time.perf_counter()
         self.buffers.bind()
         if self.uses_prepass:
             self._prepass(camera, len(order), depth)
             self.ctx.finish()
         tp = time.perf_counter()
+        self._batched = self._decide_batches(camera, len(order))
+        tc = time.perf_counter()
+        prog = self.program(camera, depth)
         set_camera_uniforms(prog, camera, self.near, self.scene.anchor)
         fbo = target.fbo
         fbo.use()
@@ -352,6 +377,7 @@ class QuadRenderer:
         self.ctx.blend_func = moderngl.ONE_MINUS_DST_ALPHA, moderngl.ONE
         self.ctx.blend_equation = moderngl.FUNC_ADD
         self._occlusion_culled = 0
+        self._batches = 0
         try:
             if len(order):
                 if self.gpu_timer:
@@ -367,14 +393,41 @@ class QuadRenderer:
             self.ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST)
         self.ctx.finish()
         t2 = time.perf_counter()
-        self._times_upload, self._times_prepass, self._times_draw = t1 - t0, tp - t1, t2 - tp
+        self._times_upload, self._times_prepass = t1 - t0, tp - t1
+        self._times_coverage, self._times_draw = tc - tp, t2 - tc
         self._drawn = len(order)
         return len(order)
 
+    def _decide_batches(self, camera: Camera, count: int) -> bool:
+        """Whether this frame draws in early-termination batches: always with ON, never with
+        OFF, and with AUTO when the coverage estimate reaches EARLY_STOP_MIN_OVERDRAW fragments
+        per image pixel (needs the order, scene and prepared quads bound)."""
+        self._fragments_estimate = 0
+        mode = self.settings.early_stop
+        if mode is EarlyStop.OFF or count == 0:
+            return False
+        if mode is EarlyStop.ON:
+            return True
+        self._index_buffer.bind_to_storage_buffer(BINDING_ORDER)
+        estimate = self._stop.coverage(self._rect_program(camera, "coverage.comp"), count)
+        self._fragments_estimate = int(round(estimate))
+        return estimate >= EARLY_STOP_MIN_OVERDRAW * camera.width * camera.height
+
+    @property
+    def last_batched(self) -> bool:
+        """Whether the last draw ran early termination's batches."""
+        return self._batched
+
+    @property
+    def last_fragments_estimate(self) -> int:
+        """The last AUTO frame's coverage estimate, fragments (0 when none was made)."""
+        return self._fragments_estimate
+
     def _draw_batches(self, camera: Camera, target: ColorTarget, prog: moderngl.Program, count: int,
                       on_batch: BatchHook | None) -> None:
-        if self._stop is None:
+        if not self._batched:
             bounds = plain_bounds(count)
+            self._batches = len(bounds) - 1
             for start, end in zip(bounds[:-1], bounds[1:]):
                 self._draw_range(prog, start, end - start)
                 if on_batch is not None:
@@ -385,9 +438,9 @@ class QuadRenderer:
         stop, ctx = self._stop, self.ctx
         width, height = camera.width, camera.height
         bounds = batch_bounds(count)
+        self._batches = len(bounds) - 1
         n_cmd = stop.prepare(count, bounds, width, height)
-        cull_prog = self._cull_program(camera)
-        set_camera_uniforms(cull_prog, camera, self.near, self.scene.anchor)
+        cull_prog = self._rect_program(camera, "occlusion_cull.comp")
         self._index_buffer.bind_to_storage_buffer(BINDING_ORDER)
         vao = self._vertex_array(prog, stop.survivors)
         ctx.depth_func = "<"
@@ -447,7 +500,9 @@ class QuadRenderer:
         t1 = time.perf_counter()
         self.last_times = QuadTimes(self._times_cull, self._times_sort, self._times_upload,
                                     self._times_prepass, self._times_draw, t1 - t0, self._drawn,
-                                    self._occlusion_culled, self._times_build)
+                                    self._occlusion_culled, self._times_build,
+                                    self._times_coverage, self._fragments_estimate, self._batches,
+                                    self._batched)
         return RenderOutput(composite(rgba, self.settings.background), d)
 
     def prepare_geometry(self, camera: Camera) -> int:

@@ -76,6 +76,22 @@ class GpuStorage(enum.Enum):
     COMPACT = "compact"
 
 
+class EarlyStop(enum.Enum):
+    """Early termination in the quad path (splatgl/early_stop.py).
+
+    ON: draw the sorted splats in batches; between batches, stop pixels whose transmittance
+        fell below the reference's 1e-4 and drop splats that land only on stopped pixels.
+    OFF: one plain draw, every fragment shaded.
+    AUTO: estimate the view's fragments per pixel first (the quads' summed area over the image,
+        shaders/coverage.comp) and batch only from ``constants.EARLY_STOP_MIN_OVERDRAW`` up:
+        below it the batches cost llvmpipe more than the fragments they save.
+    """
+
+    AUTO = "auto"
+    ON = "on"
+    OFF = "off"
+
+
 class Convention(enum.Enum):
     """Which published rasterizer's rules the NumPy reference follows (``Compat`` there).
 
@@ -122,12 +138,11 @@ class RenderSettings:
             the benchmark's ``storage`` rows report bytes per splat and the PSNR cost.
         convention: the published rasterizer rules the NumPy reference follows (only the
             reference reads it).
-        early_stop: quad path early termination (splatgl/early_stop.py): batched draws that
-            stop shading pixels whose transmittance fell below the reference's 1e-4, and drop
-            splats that would land only on such pixels.  Off by default by measurement on
-            llvmpipe (``splatgl bench --groups early-stop``, 1280x720): it halves the fragments
-            shaded but llvmpipe still rasterises rejected fragments and the batches serialise
-            its pipeline, so frames were 1.2x faster on donut and 1.2-1.4x slower on guitar.
+        early_stop: quad path early termination (:class:`EarlyStop`; ``True``/``False`` read as
+            ON/OFF).  AUTO by measurement (``splatgl bench --groups early-stop``, 1280x720 on
+            llvmpipe, docs/early-stop.md): batching paid 1.4x on the heavily overdrawn donut
+            (67 fragments per pixel) and cost 0-10% on biker and guitar (11-17 per pixel), so
+            AUTO batches only views above ``constants.EARLY_STOP_MIN_OVERDRAW``.
     """
 
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -143,7 +158,7 @@ class RenderSettings:
     cull: bool = True
     gpu_storage: GpuStorage = GpuStorage.FLOAT32
     convention: Convention = Convention.INRIA
-    early_stop: bool = False
+    early_stop: EarlyStop = EarlyStop.AUTO
 
     def __post_init__(self) -> None:
         bg = tuple(float(v) for v in self.background)
@@ -156,6 +171,9 @@ class RenderSettings:
         object.__setattr__(self, "preprocess", Preprocess(self.preprocess))
         object.__setattr__(self, "convention", Convention(self.convention))
         object.__setattr__(self, "gpu_storage", GpuStorage(self.gpu_storage))
+        if isinstance(self.early_stop, bool):
+            object.__setattr__(self, "early_stop", EarlyStop.ON if self.early_stop else EarlyStop.OFF)
+        object.__setattr__(self, "early_stop", EarlyStop(self.early_stop))
         if int(self.resort_interval) != self.resort_interval or self.resort_interval < 1:
             raise SplatglError(f"resort interval must be a positive integer, got {self.resort_interval}")
         if self.near is not None and not self.near > 0.0:

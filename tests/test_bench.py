@@ -29,7 +29,7 @@ def test_configurations_cover_every_question():
     groups = {r.group for r in rows}
     assert groups == {"default", "precision", "extent", "sort", "sh", "storage", "resort", "preprocess", "cull",
                       "early-stop", "projection", "renderer", "limit"}
-    assert [r.name for r in rows if r.group == "early-stop"] == ["early-stop=on"]
+    assert [r.name for r in rows if r.group == "early-stop"] == ["early-stop=on", "early-stop=off"]
     assert {r.name for r in rows if r.group == "sh"} == {"sh<=0", "sh<=1", "sh<=2"}
     assert [r.name for r in rows if r.group == "storage"] == ["storage=half-sh", "storage=compact"]
     assert [r.kind for r in rows if r.group == "renderer"] == [RowKind.TILE, RowKind.REFERENCE]
@@ -68,6 +68,8 @@ def test_bench_scene_rows_and_limit(gl_renderer):
     assert by["sh<=0"].psnr < by["default"].psnr  # dropping SH bands costs accuracy
     on = by["early-stop=on"]  # rasterised counted only where early termination is on
     assert by["default"].fragments_rasterised is None
+    # The default (auto) leaves this sparse scene's views unbatched; on batches every view.
+    assert by["default"].batched_share == 0.0 and on.batched_share == 1.0
     assert on.fragments_shaded <= on.fragments_rasterised <= by["default"].fragments_shaded
 
 

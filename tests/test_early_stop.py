@@ -196,7 +196,9 @@ def _bound_check(on, off, name):
 @pytest.mark.parametrize("kind,preprocess", [(SplatKind.GAUSSIAN_3D, Preprocess.COMPUTE),
                                              (SplatKind.GAUSSIAN_3D, Preprocess.VERTEX),
                                              (SplatKind.SURFEL_2D, Preprocess.VERTEX)])
-def test_on_stays_within_the_bound_of_off_and_culls(gl_renderer, kind, preprocess):
+def test_on_stays_within_the_bound_of_off_and_culls(gl_renderer, monkeypatch, kind, preprocess):
+    # A fine schedule (about 14 batches): many batch boundaries for the bound to hold across.
+    monkeypatch.setattr(quad_module, "batch_bounds", lambda count: es.batch_bounds(count, 1 / 64, 1.35))
     scene = dense_scene(kind=kind)
     cam = front_camera(4.0, 50.0, 128, 96, target=(0.0, 0.0, 0.5))
     on_settings = _settings(early_stop=True, preprocess=preprocess, background=(0.2, 0.4, 0.9))
@@ -311,3 +313,76 @@ def test_renderer_progress_reaches_the_quad_draw(gl_renderer, monkeypatch):
     assert len(heard) >= 2 and heard[-1][0] == heard[-1][1]
     assert {w for _, _, w in heard} == {"quad: drawing splats"}
     np.testing.assert_array_equal(img, plain)
+
+
+@pytest.mark.parametrize("kind,preprocess", [(SplatKind.GAUSSIAN_3D, Preprocess.COMPUTE),
+                                             (SplatKind.GAUSSIAN_3D, Preprocess.VERTEX),
+                                             (SplatKind.SURFEL_2D, Preprocess.VERTEX)])
+def test_coverage_estimate_matches_its_twin_and_the_fragments(ctx, kind, preprocess):
+    """``--early-stop auto``'s estimate (coverage.comp) equals its twin on the pre-pass's
+    quads (float32 sums: 1e-4 relative) and predicts the fragments a plain draw shades (each
+    quad's area against its pixel-centre count: within 3% over 8000 quads)."""
+    scene = dense_scene(kind=kind)
+    cam = front_camera(4.0, 50.0, 128, 96, target=(0.0, 0.0, 0.5))
+    auto = QuadRenderer(ctx, scene, _settings(early_stop="auto", preprocess=preprocess))
+    auto.render(cam)
+    estimate = auto.last_fragments_estimate
+    if kind is SplatKind.SURFEL_2D:   # the twin: the surfel boxes (clamped to the image)
+        from splatgl.project import to_camera
+        from splatgl.surfel import surfel_bounds, surfel_screen
+
+        screen = surfel_screen(scene.means, scene.rotations, scene.scales, cam)
+        boxes = surfel_bounds(screen, scene.opacities, cam, auto.near)
+        shown = boxes.visible & (to_camera(scene.means, cam)[:, 2] > auto.near)
+        twin = float((4.0 * boxes.half[:, 0] * boxes.half[:, 1])[shown].sum())
+        assert estimate == pytest.approx(twin, rel=1e-3) and estimate > 0
+        auto.release()
+        return
+    plain = QuadRenderer(ctx, scene, _settings(early_stop=False, preprocess=preprocess))
+    off_shaded, _ = plain.count_fragments(cam)
+    assert estimate == pytest.approx(off_shaded, rel=0.03)
+    if preprocess is Preprocess.COMPUTE:   # the twin, from the pre-pass's quads
+        n = plain.prepare_geometry(cam)
+        p = np.frombuffer(plain._prepared.read(size=64 * n), np.float32).reshape(n, 4, 4)
+        visible = p[:, 3, 2] != 0
+        mean, a1, a2 = p[visible, 0, :2], p[visible, 0, 2:], p[visible, 1, :2]
+        half = np.abs(a1) + np.abs(a2)
+        area = 4.0 * np.abs(a1[:, 0] * a2[:, 1] - a1[:, 1] * a2[:, 0])
+        twin = es.coverage(mean - half, mean + half, area, cam.width, cam.height)
+        assert estimate == pytest.approx(twin, rel=1e-4)
+    auto.release()
+    plain.release()
+
+
+def test_auto_batches_only_overdrawn_views(ctx, monkeypatch):
+    """AUTO draws exactly what OFF draws below its threshold and what ON draws above it."""
+    scene = dense_scene()
+    cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
+    images = {}
+    for mode in ("on", "off"):
+        r = QuadRenderer(ctx, scene, _settings(early_stop=mode))
+        images[mode] = r.render(cam)
+        assert r.last_batched is (mode == "on") and r.last_fragments_estimate == 0
+        r.release()
+    auto = QuadRenderer(ctx, scene, _settings(early_stop="auto"))
+    auto.render(cam)
+    per_pixel = auto.last_fragments_estimate / (cam.width * cam.height)
+    assert per_pixel > 2.0, "the dense scene overdraws"
+    for threshold, batched in ((per_pixel * 1.01, False), (per_pixel * 0.99, True)):
+        monkeypatch.setattr(quad_module, "EARLY_STOP_MIN_OVERDRAW", threshold)
+        image = auto.render(cam)
+        assert auto.last_batched is batched and auto.last_times.batched is batched
+        assert auto.last_times.batches == (3 if batched else 1)
+        np.testing.assert_array_equal(image, images["on" if batched else "off"])
+    auto.release()
+
+
+def test_settings_read_booleans_and_names_as_modes():
+    from splatgl.settings import EarlyStop
+
+    assert RenderSettings().early_stop is EarlyStop.AUTO
+    assert _settings(early_stop=True).early_stop is EarlyStop.ON
+    assert _settings(early_stop=False).early_stop is EarlyStop.OFF
+    assert _settings(early_stop="off").early_stop is EarlyStop.OFF
+    with pytest.raises(ValueError):
+        _settings(early_stop="sometimes")

@@ -10,3 +10,14 @@ uniform vec4 u_distortion;    // fisheye k1..k4 (FISHEYE only)
 uniform float u_theta_limit;  // fisheye: largest angle from the axis kept (radians)
 uniform float u_wrap_period;  // equirect: pixels per turn of longitude (2 pi fx)
 uniform float u_ods_eye;      // equirect ODS: signed eye offset on the eye circle (0: mono)
+
+// Fragments a quad of `area` pixels with bounding rectangle [lo, hi] puts in the viewport,
+// estimated as its area times the share of the rectangle inside (at most the viewport's area;
+// 0 for an empty or NaN rectangle).  Early termination's coverage estimate (coverage.comp).
+float visible_area(vec2 lo, vec2 hi, float area) {
+    vec2 size = hi - lo;
+    vec2 inside = max(min(hi, u_viewport) - max(lo, vec2(0.0)), vec2(0.0));
+    float rect = size.x * size.y;
+    if (!(rect > 0.0) || !(area > 0.0)) return 0.0;
+    return min(area * (inside.x * inside.y / rect), u_viewport.x * u_viewport.y);
+}

@@ -6,7 +6,8 @@ import dataclasses
 import enum
 from dataclasses import dataclass
 
-from ..settings import GpuStorage, Precision, Preprocess, QuadExtent, RenderSettings, SortKey
+from ..settings import (EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent, RenderSettings,
+                        SortKey)
 
 
 class RowKind(enum.Enum):
@@ -58,8 +59,8 @@ def configurations(base: RenderSettings, scene_sh_degree: int, quick: bool = Fal
     rows += [q(f"preprocess={p.value}", "preprocess", preprocess=p)
              for p in Preprocess if p is not base.preprocess]
     rows.append(q("cull=off", "cull", cull=not base.cull))
-    rows.append(q(f"early-stop={'off' if base.early_stop else 'on'}", "early-stop",
-                  early_stop=not base.early_stop))
+    rows += [q(f"early-stop={m.value}", "early-stop", early_stop=m)
+             for m in EarlyStop if m is not base.early_stop]
     rows += [BenchConfig(f"projection={p}", "projection", RowKind.QUAD, base, p)
              for p in ("fisheye", "equirectangular")]
     rows.append(BenchConfig("tile", "renderer", RowKind.TILE, base))

@@ -80,6 +80,9 @@ class BenchRow:
     #: Fragments rasterised on the counting view, rejected by early termination's depth test
     #: included (rows with early termination on only; otherwise the same as fragments_shaded).
     fragments_rasterised: int | None = None
+    #: Quad rows: the share of the timed frames drawn in early-termination batches (1 with
+    #: ``early-stop=on``, 0 with off, per view with auto).
+    batched_share: float | None = None
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -206,7 +209,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
                 if config.projection else cameras)
         runner.render(with_projection(warm, config.projection) if config.projection else warm)
         runner.render(path[-1])
-        times, stages, gpu, drawn, errs, occluded, f32_psnr = [], [], [], [], [], [], []
+        times, stages, gpu, drawn, errs, occluded, f32_psnr, batched = [], [], [], [], [], [], [], []
         for i, cam in enumerate(path):
             t0 = time.perf_counter()
             img = runner.render(cam)
@@ -215,6 +218,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             stages.append(_stage_ms(last))
             drawn.append(getattr(last, "drawn", None))
             occluded.append(getattr(last, "occlusion_culled", None))
+            batched.append(bool(getattr(last, "batched", False)))
             if config.kind is RowKind.QUAD and runner.impl.last_gpu_draw_ns is not None:
                 gpu.append(runner.impl.last_gpu_draw_ns / 1e6)
             if i in refs and config.kind is not RowKind.LIMIT and not config.projection:
@@ -227,7 +231,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             runner.impl.gpu_timer = False
             shaded, kept = runner.impl.count_fragments(path[0])
             eff = kept / shaded if shaded else None
-            if config.settings.early_stop:
+            if runner.impl.last_batched:  # the counting view ran early termination
                 rasterised = runner.impl.count_fragments(path[0], rasterised=True)[0]
         runner.release()
         keys = stages[0].keys() if stages else []
@@ -247,6 +251,8 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             gpu_bytes_per_splat=bytes_per_splat,
             psnr_float32=min(f32_psnr) if f32_psnr else None,
             fragments_rasterised=rasterised,
+            batched_share=(sum(batched) / len(batched)
+                           if config.kind is RowKind.QUAD and batched else None),
         ))
         tick(config.name)
     limit = next((r.frame_ms for r in rows if r.group == "limit"), None)

@@ -16,8 +16,9 @@ from ..limits import MAX_IMAGE_SIDE, check_image_size
 from ..formats.metadata import antialias_tag
 from ..render import default_camera
 from ..scene import Scene
-from ..settings import (Convention, GpuStorage, Precision, Preprocess, QuadExtent, RendererKind,
-                        RenderSettings, SortKey)
+from ..constants import EARLY_STOP_MIN_OVERDRAW
+from ..settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
+                        RendererKind, RenderSettings, SortKey)
 from ..stereo import StereoLayout
 from ..transform import parse_transform
 from ..camera_up import UP_CHOICES, resolve_up
@@ -150,10 +151,13 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                         "'gsplat' = per-axis opacity-aware extent up to 3.33 sigma, alpha clamp 0.999. "
                         "The quad and tile renderers follow the inria rules only, so 'gsplat' "
                         "needs --renderer reference (in compare: a reference on either side)")
-    g.add_argument("--early-stop", choices=["on", "off"], default=None,
-                   help="quad path early termination: stop shading pixels whose transmittance "
-                        "fell below 1e-4 and drop splats that land only on such pixels "
-                        "(default off, chosen by the benchmark on llvmpipe)")
+    g.add_argument("--early-stop", choices=[m.value for m in EarlyStop], default=None,
+                   help="quad path early termination: draw the sorted splats in batches, stop "
+                        "shading pixels whose transmittance fell below 1e-4 and drop splats that "
+                        "land only on such pixels. 'auto' (default) batches only views whose "
+                        "quads cover at least %g pixels per image pixel, where it pays on "
+                        "llvmpipe; 'on' always, 'off' never (docs/early-stop.md)"
+                        % EARLY_STOP_MIN_OVERDRAW)
     g.add_argument("--gpu-storage", choices=[m.value for m in GpuStorage], default="float32",
                    help="how the scene is stored on the GPU (quad and tile renderers), bytes per "
                         "splat at SH degree 0 / 3: 'float32' 64 / 244 (exact); 'half-sh' 64 / 154 "
@@ -192,7 +196,7 @@ def settings_from_args(args: argparse.Namespace) -> RenderSettings:
     model = parse_transform(args.transform) if args.transform else None
     optional = {"preprocess": args.preprocess} if args.preprocess else {}
     if getattr(args, "early_stop", None) is not None:
-        optional["early_stop"] = args.early_stop == "on"
+        optional["early_stop"] = EarlyStop(args.early_stop)
     return RenderSettings(background=args.background, precision=args.precision, extent=args.extent,
                           near=args.near, antialias=antialias_from_args(args),
                           sh_degree=args.sh_degree,
