@@ -121,11 +121,15 @@ OCCLUSION_MAX_TILES = 8192
 #: The occlusion cull tests a quad's pixel range against blocks, not whole tiles: on the shared
 #: scenes at 1280x720 this culled 1.2-2.1x as many splats as tiles alone (docs/early-stop.md).
 STOP_BLOCK_SIZE = 4
-#: ``--early-stop auto`` batches a view only when its quads cover at least this many pixels per
-#: image pixel (estimated fragments / image pixels, shaders/coverage.comp).  Measured at
-#: 1280x720 on llvmpipe (docs/early-stop.md): donut at 67 per pixel ran 1.4x faster batched,
-#: the 1M-splat real-data scene at 54 about 1.05x, guitar (11) and biker (17) 0.9-1.0x.
-EARLY_STOP_MIN_OVERDRAW = 40.0
+#: ``--early-stop auto`` batches a view only when its quads will rasterise (shaders/coverage.comp)
+#: at least EARLY_STOP_MIN_QUAD_FRAGMENTS fragments per drawn quad and EARLY_STOP_MIN_OVERDRAW
+#: per image pixel.  The cost model behind it (llvmpipe): batches save shading on the fragments
+#: after a pixel's stop, in proportion to fragments, but each batch boundary stops llvmpipe
+#: overlapping its single-threaded per-quad work with rasterisation, in proportion to quads.
+#: Measured at 1280x720 (docs/early-stop.md, 10 views of 4 scenes): every view at 328-5456
+#: fragments per quad ran 1.08-1.43x faster batched, every view at 35-112 ran 0.86-1.01x.
+EARLY_STOP_MIN_QUAD_FRAGMENTS = 200.0
+EARLY_STOP_MIN_OVERDRAW = 8.0
 
 
 def sh_coeff_count(degree: int) -> int:

@@ -31,7 +31,7 @@ from .output import RenderOutput
 from . import lens
 from .project import anchored_camera, near_threshold, to_camera
 from .scene import Scene, SplatKind
-from .constants import EARLY_STOP_MIN_OVERDRAW
+from .constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
 from .settings import EarlyStop, Preprocess, QuadExtent, RenderSettings, SortKey, resolve_near
 from .sort import bucket_sort, depth_sort
 
@@ -400,8 +400,9 @@ class QuadRenderer:
 
     def _decide_batches(self, camera: Camera, count: int) -> bool:
         """Whether this frame draws in early-termination batches: always with ON, never with
-        OFF, and with AUTO when the coverage estimate reaches EARLY_STOP_MIN_OVERDRAW fragments
-        per image pixel (needs the order, scene and prepared quads bound)."""
+        OFF, and with AUTO when the coverage estimate reaches EARLY_STOP_MIN_QUAD_FRAGMENTS
+        fragments per quad and EARLY_STOP_MIN_OVERDRAW per image pixel (constants.py; needs the
+        order, scene and prepared quads bound)."""
         self._fragments_estimate = 0
         mode = self.settings.early_stop
         if mode is EarlyStop.OFF or count == 0:
@@ -411,7 +412,8 @@ class QuadRenderer:
         self._index_buffer.bind_to_storage_buffer(BINDING_ORDER)
         estimate = self._stop.coverage(self._rect_program(camera, "coverage.comp"), count)
         self._fragments_estimate = int(round(estimate))
-        return estimate >= EARLY_STOP_MIN_OVERDRAW * camera.width * camera.height
+        return (estimate >= EARLY_STOP_MIN_QUAD_FRAGMENTS * count
+                and estimate >= EARLY_STOP_MIN_OVERDRAW * camera.width * camera.height)
 
     @property
     def last_batched(self) -> bool:

@@ -82,9 +82,10 @@ class EarlyStop(enum.Enum):
     ON: draw the sorted splats in batches; between batches, stop pixels whose transmittance
         fell below the reference's 1e-4 and drop splats that land only on stopped pixels.
     OFF: one plain draw, every fragment shaded.
-    AUTO: estimate the view's fragments per pixel first (the quads' summed area over the image,
-        shaders/coverage.comp) and batch only from ``constants.EARLY_STOP_MIN_OVERDRAW`` up:
-        below it the batches cost llvmpipe more than the fragments they save.
+    AUTO: estimate the fragments the view's quads will rasterise first (their summed area,
+        shaders/coverage.comp) and batch only views of large quads over an overdrawn image
+        (``constants.EARLY_STOP_MIN_QUAD_FRAGMENTS`` per quad, ``EARLY_STOP_MIN_OVERDRAW`` per
+        pixel): elsewhere the batches cost llvmpipe more than the fragments they save.
     """
 
     AUTO = "auto"
@@ -139,10 +140,9 @@ class RenderSettings:
         convention: the published rasterizer rules the NumPy reference follows (only the
             reference reads it).
         early_stop: quad path early termination (:class:`EarlyStop`; ``True``/``False`` read as
-            ON/OFF).  AUTO by measurement (``splatgl bench --groups early-stop``, 1280x720 on
-            llvmpipe, docs/early-stop.md): batching paid 1.4x on the heavily overdrawn donut
-            (67 fragments per pixel) and cost 0-10% on biker and guitar (11-17 per pixel), so
-            AUTO batches only views above ``constants.EARLY_STOP_MIN_OVERDRAW``.
+            ON/OFF).  AUTO by measurement (docs/early-stop.md, 1280x720 on llvmpipe): batching
+            ran 1.08-1.43x faster on views of 328-5456 fragments per quad and 0.86-1.01x on
+            views of 35-112, so AUTO batches only the former kind.
     """
 
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)

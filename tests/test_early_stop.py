@@ -354,8 +354,8 @@ def test_coverage_estimate_matches_its_twin_and_the_fragments(ctx, kind, preproc
     plain.release()
 
 
-def test_auto_batches_only_overdrawn_views(ctx, monkeypatch):
-    """AUTO draws exactly what OFF draws below its threshold and what ON draws above it."""
+def test_auto_batches_only_views_of_large_quads_over_an_overdrawn_image(ctx, monkeypatch):
+    """AUTO draws exactly what OFF draws below either threshold and what ON draws above both."""
     scene = dense_scene()
     cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
     images = {}
@@ -366,10 +366,13 @@ def test_auto_batches_only_overdrawn_views(ctx, monkeypatch):
         r.release()
     auto = QuadRenderer(ctx, scene, _settings(early_stop="auto"))
     auto.render(cam)
-    per_pixel = auto.last_fragments_estimate / (cam.width * cam.height)
-    assert per_pixel > 2.0, "the dense scene overdraws"
-    for threshold, batched in ((per_pixel * 1.01, False), (per_pixel * 0.99, True)):
-        monkeypatch.setattr(quad_module, "EARLY_STOP_MIN_OVERDRAW", threshold)
+    estimate = auto.last_fragments_estimate
+    per_pixel, per_quad = estimate / (cam.width * cam.height), estimate / auto.last_times.drawn
+    assert per_pixel > 2.0 and per_quad > 2.0, "the dense scene overdraws"
+    for pixel_min, quad_min, batched in ((per_pixel * 1.01, 0.0, False), (0.0, per_quad * 1.01, False),
+                                         (per_pixel * 0.99, per_quad * 0.99, True)):
+        monkeypatch.setattr(quad_module, "EARLY_STOP_MIN_OVERDRAW", pixel_min)
+        monkeypatch.setattr(quad_module, "EARLY_STOP_MIN_QUAD_FRAGMENTS", quad_min)
         image = auto.render(cam)
         assert auto.last_batched is batched and auto.last_times.batched is batched
         assert auto.last_times.batches == (3 if batched else 1)

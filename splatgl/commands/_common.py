@@ -16,7 +16,7 @@ from ..limits import MAX_IMAGE_SIDE, check_image_size
 from ..formats.metadata import antialias_tag
 from ..render import default_camera
 from ..scene import Scene
-from ..constants import EARLY_STOP_MIN_OVERDRAW
+from ..constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
 from ..settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
                         RendererKind, RenderSettings, SortKey)
 from ..stereo import StereoLayout
@@ -154,10 +154,10 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--early-stop", choices=[m.value for m in EarlyStop], default=None,
                    help="quad path early termination: draw the sorted splats in batches, stop "
                         "shading pixels whose transmittance fell below 1e-4 and drop splats that "
-                        "land only on such pixels. 'auto' (default) batches only views whose "
-                        "quads cover at least %g pixels per image pixel, where it pays on "
-                        "llvmpipe; 'on' always, 'off' never (docs/early-stop.md)"
-                        % EARLY_STOP_MIN_OVERDRAW)
+                        "land only on such pixels. 'auto' (default) batches a view only where "
+                        "its quads will rasterise at least %g fragments each and %g per image "
+                        "pixel, where batching paid on llvmpipe; 'on' always, 'off' never "
+                        "(docs/early-stop.md)" % (EARLY_STOP_MIN_QUAD_FRAGMENTS, EARLY_STOP_MIN_OVERDRAW))
     g.add_argument("--gpu-storage", choices=[m.value for m in GpuStorage], default="float32",
                    help="how the scene is stored on the GPU (quad and tile renderers), bytes per "
                         "splat at SH degree 0 / 3: 'float32' 64 / 244 (exact); 'half-sh' 64 / 154 "
