@@ -89,3 +89,16 @@ def test_errors_in_both_stages_map_to_their_own_files(tmp_path, gl_renderer):
     assert "v.vert:2(" in text and "undefined_v" in text
     if "undefined_f" in text:  # Mesa stops after the first failing stage
         assert "f.frag:4(" in text
+
+
+@pytest.mark.parametrize("name", ["quad.frag", "surfel.frag"])
+def test_splat_fragment_stages_never_discard(name):
+    """llvmpipe ignores layout(early_fragment_tests) in a shader that can discard, so early
+    termination's rejected fragments would be shaded all the same (docs/design.md, traps): the
+    splat fragment stages write (0, 0, 0, 0) for a skipped fragment instead.  Every variant's
+    expanded source (includes and all) is checked, comments aside."""
+    import re
+
+    for defines in ({}, {"EARLY_STOP": "1"}, {"EQUIRECT": "1", "DEPTH_OUTPUT": "1"}):
+        code = re.sub(r"//[^\n]*", "", preprocess(name, defines).text)
+        assert not re.search(r"\bdiscard\b", code), f"{name} {defines}"
