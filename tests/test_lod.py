@@ -164,10 +164,11 @@ def test_cli_builds_and_renders_a_cut(tmp_path, shared_scenes):
 
 
 def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
-    """Once a view's cut draws >= 0.75 nodes per leaf it stands for, views no farther draw the
-    leaves directly: the same image as full detail up to float32 rounding (the node scene's
-    anchor, which every centre is taken relative to, is not the leaves' own: measured 92.9 dB,
-    max error 0.0018), no cut time."""
+    """Once a view's cut draws >= 0.75 nodes per leaf it stands for, that view and views no
+    farther draw the leaves directly: the same image as full detail up to float32 rounding (the
+    node scene's anchor, which every centre is taken relative to, is not the leaves' own:
+    measured 92.9 dB, max error 0.0018); the deciding view pays its cut's selection, later ones
+    no cut time."""
     from splatgl.lod.render import SKIP_NODES_PER_LEAF
 
     scene, tree = biker
@@ -176,8 +177,10 @@ def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
     lod = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
     full = QuadRenderer(ctx, scene, RenderSettings())
     try:
-        lod.render(close)
+        got = lod.render(close)
         assert lod.last_cut_s > 0 and lod.skip_within is not None  # cut was mostly leaves
+        assert lod.last_cut_nodes == scene.count  # and this view already draws the leaves
+        assert image_errors(got, full.render(close)).psnr >= 80.0
         assert SKIP_NODES_PER_LEAF == 0.75
         got = lod.render(closer)
         assert lod.last_cut_s == 0.0 and lod.last_cut_nodes == scene.count

@@ -19,20 +19,21 @@ import numpy as np
 
 from ..camera import Camera
 from ..cull import CullData, cull_visible
+from ..cull_chunks import ChunkedCull, keys_order, keys_pairs
 from ..errors import SplatglError
 from ..gl.shaders import ProgramCache
 from ..project import anchored_camera
 from ..quad import BINDING_OPACITY_WEIGHT, QuadRenderer
 from ..scene import Scene
-from ..settings import RenderSettings
+from ..settings import RenderSettings, SortKey
 from .build import LodTree
 from .cut import DEFAULT_BAND, DEFAULT_THRESHOLD_PX, CutData, select_cut_budget, select_cut_weights
 
 
 #: A cut that draws at least this many nodes per leaf it stands for saves too little to pay for
 #: its own selection (measured on the 6M scene: cuts of 90-95% leaves, about 0.77-0.87 nodes a
-#: leaf, made frames up to 1.28x slower than full detail).  Views no farther from the scene
-#: than such a view then draw the leaves directly.
+#: leaf, made frames up to 1.28x slower than full detail).  Such a view, and every view no
+#: farther from the scene, draws the leaves directly, culled as full detail culls them.
 SKIP_NODES_PER_LEAF = 0.75
 
 
@@ -96,35 +97,28 @@ class LodRenderer(QuadRenderer):
         #: Draw this cut, (rows ascending, weights or None), instead of selecting one per view.
         self.cut_override: tuple[np.ndarray, np.ndarray | None] | None = None
         self._weight_buffer = None
+        self._leaf_chunks: ChunkedCull | None = None  # the leaves' chunked cull, on first use
 
     def visible_order(self, camera: Camera) -> np.ndarray:
         """Cut, cull and sort for ``camera``: (M,) uint32 node rows, front to back.
 
-        Without a budget, a view no farther from the scene (the root's centre) than one whose
-        cut drew at least SKIP_NODES_PER_LEAF nodes per leaf it stood for
-        (:func:`leaves_covered`) skips the cut and culls the leaves (a contiguous view of the
-        cull data): close views cost what full detail costs.  With ``cut_override`` set to
+        Without a budget, a view whose cut stands for at most 1 / SKIP_NODES_PER_LEAF leaves a
+        node (:func:`leaves_covered`), and from then on every view no farther from the scene
+        (the root's centre), draws the leaves instead, culled by chunks as full detail is:
+        close views cost what full detail costs (plus, on the view that decides, the cut's
+        selection).  With ``cut_override`` set to
         ``(rows, weights)`` (an earlier view's ``last_cut``) that cut is drawn instead: what the
         benchmark compares against to measure the change the cut alone makes between frames.
         """
         t0 = time.perf_counter()
-        n_leaves = self.tree.level_size(0)
+        self._times_build = 0.0
         dist = float(np.linalg.norm(camera.center - self._root))
         if self._cull_data is None:
             self._cull_data = CullData.from_scene(self.scene)
         override = self.cut_override
         if (override is None and self.lod.budget is None and self.skip_within is not None
                 and dist <= self.skip_within):
-            keep, depth = cull_visible(self._cull_data.subset(slice(0, n_leaves)),
-                                       anchored_camera(camera, self.scene.anchor), self.near,
-                                       self.settings.antialias, camera.scale)
-            t2 = time.perf_counter()
-            order = self.sort_visible(depth, keep)
-            self._times_cull, self._times_sort = t2 - t0, time.perf_counter() - t2
-            self.last_cut_nodes, self.last_cut_s = n_leaves, 0.0
-            self._order_key, self._order, self.slot_weights = None, order, None
-            self.last_cut = (np.arange(n_leaves), None)
-            return order
+            return self._leaves_order(camera, t0)
         if override is not None:
             ids, weights = override
         elif self.lod.budget is not None:
@@ -134,9 +128,13 @@ class LodRenderer(QuadRenderer):
             ids, weights = select_cut_weights(self.cut_data, camera, self.lod.threshold_px,
                                               self.lod.band)
         t1 = time.perf_counter()
-        if (override is None and ids.size
+        if (override is None and self.lod.budget is None and ids.size
                 and ids.size >= SKIP_NODES_PER_LEAF * leaves_covered(self.tree, ids, weights)):
             self.skip_within = max(self.skip_within or 0.0, dist)
+            order = self._leaves_order(camera, t1)
+            self.last_cut_s = t1 - t0
+            self._times_cull += t1 - t0
+            return order
         keep, depth = cull_visible(self._cull_data.subset(ids),
                                    anchored_camera(camera, self.scene.anchor), self.near,
                                    self.settings.antialias, camera.scale)
@@ -154,6 +152,37 @@ class LodRenderer(QuadRenderer):
         self.last_cut_nodes, self.last_cut_s = int(ids.size), t1 - t0
         self.last_cut = (ids, weights)
         self._order_key, self._order = None, order
+        return order
+
+    def _leaves_order(self, camera: Camera, t0: float) -> np.ndarray:
+        """Cull and sort the leaves alone (full detail) for ``camera``; stage times from ``t0``.
+
+        Pinhole views use the leaves' chunked cull (built on first use, timed as
+        ``cull_build``), as :class:`QuadRenderer` does for a plain scene; lens views the
+        per-splat cull of the leaves' rows (a contiguous view of the cull data)."""
+        n_leaves = self.tree.level_size(0)
+        leaves = self._cull_data.subset(slice(0, n_leaves))
+        anchored = anchored_camera(camera, self.scene.anchor)
+        if camera.is_lens:
+            keep, depth = cull_visible(leaves, anchored, self.near, self.settings.antialias,
+                                       camera.scale)
+            t2 = time.perf_counter()
+            order = self.sort_visible(depth, keep)
+        else:
+            if self._leaf_chunks is None:
+                tb = time.perf_counter()
+                self._leaf_chunks = ChunkedCull(leaves)
+                self._times_build = time.perf_counter() - tb
+                t0 += self._times_build
+            keys = self._leaf_chunks.visible_keys(anchored, self.near, self.settings.antialias,
+                                                  camera.scale)
+            t2 = time.perf_counter()
+            order = (keys_order(keys) if self.settings.sort_key is SortKey.EXACT
+                     else self.sort_visible(*keys_pairs(keys, self.scene.count)))
+        self._times_cull, self._times_sort = t2 - t0, time.perf_counter() - t2
+        self.last_cut_nodes, self.last_cut_s = n_leaves, 0.0
+        self._order_key, self._order, self.slot_weights = None, order, None
+        self.last_cut = (np.arange(n_leaves), None)
         return order
 
     # ------------------------------------------------------------------ opacity weights
