@@ -4,8 +4,8 @@ Per view, only the sorted index buffer is uploaded; the scene's storage buffers 
 once.  The vertex stage (shaders/quad.vert) evaluates SH colour and the 2D covariance and sizes
 the quad; the fragment stage (shaders/quad.frag) evaluates the conic opacity.  Blending is
 front to back, (ONE_MINUS_DST_ALPHA, ONE), into a cleared (0, 0, 0, 0) target.  With early
-termination (``early_stop`` ON, or AUTO on a heavily overdrawn view) the sorted splats are drawn
-in batches and pixels that are already opaque stop receiving fragments (splatgl/early_stop.py);
+termination (``early_stop`` ON, or AUTO on a view of large, overlapping quads) the sorted splats
+are drawn in batches and pixels that are already opaque stop receiving fragments (splatgl/early_stop.py);
 a draw calls ``on_batch(done, total)`` between batches, which may raise KeyboardInterrupt to
 abandon the frame.
 """
@@ -19,6 +19,7 @@ import moderngl
 import numpy as np
 
 from .camera import Camera
+from .constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
 from .cull import CullData
 from .cull_chunks import ChunkedCull, keys_order, keys_pairs
 from .gl.radix_sort import RadixSorter, device_depth_sort
@@ -31,7 +32,6 @@ from .output import RenderOutput
 from . import lens
 from .project import anchored_camera, near_threshold, to_camera
 from .scene import Scene, SplatKind
-from .constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
 from .settings import EarlyStop, Preprocess, QuadExtent, RenderSettings, SortKey, resolve_near
 from .sort import bucket_sort, depth_sort
 
