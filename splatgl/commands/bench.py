@@ -50,7 +50,7 @@ examples:
   splatgl bench --quick
   splatgl bench scene.ply --width 1280 --height 720 --out bench-results
   splatgl bench --groups extent,preprocess
-  splatgl bench --groups early-stop          (on against off; adds a 1M-splat real-data scene)
+  splatgl bench --groups early-stop          (auto, on and off; adds a 1M-splat real-data scene)
   splatgl bench a.ply b.ply c.ply --executor ray --ray-address auto   (one scene per Ray task)"""
 
 REAL = ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply", "compressed_ply/guitar.compressed.ply"]
