@@ -70,7 +70,30 @@ def test_bench_scene_rows_and_limit(gl_renderer):
     assert by["default"].fragments_rasterised is None
     # The default (auto) leaves this sparse scene's views unbatched; on batches every view.
     assert by["default"].batched_share == 0.0 and on.batched_share == 1.0
+    # Auto's estimate of a plain draw's fragments (area against pixel-centre counts of 300
+    # small quads: within 10%); on makes none.
+    assert by["default"].fragments_estimate == pytest.approx(by["default"].fragments_shaded, rel=0.1)
+    assert on.fragments_estimate is None
     assert on.fragments_shaded <= on.fragments_rasterised <= by["default"].fragments_shaded
+
+
+def test_early_stop_table_reads_modes_and_auto_decision():
+    from splatgl.bench.early_stop_report import early_stop_table
+    from splatgl.bench.runner import BenchRow
+
+    def row(config, group, ms, **kw):
+        return BenchRow("s.ply", 1000, config, group, "quad", ms, ms, ms, **kw)
+
+    rows = [row("default", "default", 80.0, batched_share=1.0, fragments_estimate=400_000,
+                drawn=1000),
+            row("early-stop=on", "early-stop", 75.0, fragments_shaded=100, reference_fragments=50),
+            row("early-stop=off", "early-stop", 100.0, fragments_shaded=300)]
+    head, line = early_stop_table(rows, pixels=20_000).splitlines()
+    assert "frag/quad" in head and "frag/px" in head
+    # off 100, on 75 (1.33x), auto 80 (1.25x), all batched, 400 per quad, 20 per pixel, on/ref 2
+    assert line.split()[1:12] == ["1000", "100.0", "75.0", "1.33x", "80.0", "1.25x", "100%", "400",
+                                  "20.0", "300", "100"]
+    assert early_stop_table(rows[:1]) == ""
 
 
 def test_storage_rows_report_bytes_and_psnr_against_float32(gl_renderer):

@@ -2,7 +2,8 @@
 
 Per scene: frame time without early termination (off), always batched (on) and with the
 default's per-view choice (auto), each on the same path in one run, with the speed-ups over
-off and the share of auto's frames it batched; fragments shaded (quad.frag invocations, from
+off, the share of auto's frames it batched and what it decided on (its estimate of the
+fragments a plain draw rasterises, per drawn quad and per image pixel); fragments shaded (quad.frag invocations, from
 the untimed counting pass) off and on, fragments rasterised with it on (those its depth test
 rejects before shading included), splats the occlusion cull dropped, the NumPy reference's
 blended fragments (the floor of a renderer that stops exactly) and on's ratio to it, and PSNR
@@ -34,8 +35,9 @@ def _ratio(a: float | None, b: float | None) -> float | None:
     return a / b if a is not None and b else None
 
 
-def early_stop_table(rows: list[BenchRow]) -> str:
-    """A table, one line per scene; empty when no early-stop rows ran."""
+def early_stop_table(rows: list[BenchRow], pixels: int | None = None) -> str:
+    """A table, one line per scene; empty when no early-stop rows ran.  ``pixels``: the image's
+    pixel count (for auto's fragments per pixel; '-' without)."""
     lines = []
     for scene in dict.fromkeys(r.scene for r in rows):
         modes = _by_mode([r for r in rows if r.scene == scene])
@@ -44,12 +46,16 @@ def early_stop_table(rows: list[BenchRow]) -> str:
             continue
         ref = on.reference_fragments
         ratio = _ratio(on.fragments_shaded, ref)
+        estimate = auto.fragments_estimate if auto else None
+        per_quad = _ratio(estimate, auto.drawn if auto else None)
+        per_pixel = _ratio(estimate, pixels)
         lines.append(
             f"{scene[:28]:<28} {on.splats:>9} {off.frame_ms:>8.1f} {on.frame_ms:>8.1f} "
             f"{off.frame_ms / on.frame_ms:>6.2f}x "
             f"{_fmt(auto.frame_ms if auto else None, '.1f'):>8} "
             f"{_fmt(_ratio(off.frame_ms, auto.frame_ms if auto else None), '.2f'):>6}x "
             f"{_fmt(auto.batched_share if auto else None, '.0%'):>7} "
+            f"{_fmt(per_quad, '.0f'):>9} {_fmt(per_pixel, '.1f'):>8} "
             f"{_fmt(off.fragments_shaded, ',d'):>13} "
             f"{_fmt(on.fragments_shaded, ',d'):>13} {_fmt(on.fragments_rasterised, ',d'):>13} "
             f"{_fmt(on.occlusion_culled, ',d'):>10} "
@@ -58,7 +64,7 @@ def early_stop_table(rows: list[BenchRow]) -> str:
     if not lines:
         return ""
     head = (f"{'early termination':<28} {'splats':>9} {'off ms':>8} {'on ms':>8} {'on':>7} "
-            f"{'auto ms':>8} {'auto':>7} {'batched':>7} "
+            f"{'auto ms':>8} {'auto':>7} {'batched':>7} {'frag/quad':>9} {'frag/px':>8} "
             f"{'shaded off':>13} {'shaded on':>13} {'rast. on':>13} {'occl-cull':>10} "
             f"{'ref frags':>13} {'on/ref':>7} {'PSNR off':>8} {'PSNR on':>7}")
     return "\n".join([head] + lines)

@@ -83,6 +83,9 @@ class BenchRow:
     #: Quad rows: the share of the timed frames drawn in early-termination batches (1 with
     #: ``early-stop=on``, 0 with off, per view with auto).
     batched_share: float | None = None
+    #: ``early-stop=auto`` rows: the coverage estimate of the fragments a plain draw would
+    #: rasterise (median over the path), which auto's decision rests on.
+    fragments_estimate: int | None = None
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -210,6 +213,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
         runner.render(with_projection(warm, config.projection) if config.projection else warm)
         runner.render(path[-1])
         times, stages, gpu, drawn, errs, occluded, f32_psnr, batched = [], [], [], [], [], [], [], []
+        estimates = []
         for i, cam in enumerate(path):
             t0 = time.perf_counter()
             img = runner.render(cam)
@@ -219,6 +223,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             drawn.append(getattr(last, "drawn", None))
             occluded.append(getattr(last, "occlusion_culled", None))
             batched.append(bool(getattr(last, "batched", False)))
+            estimates.append(getattr(last, "fragments_estimate", 0))
             if config.kind is RowKind.QUAD and runner.impl.last_gpu_draw_ns is not None:
                 gpu.append(runner.impl.last_gpu_draw_ns / 1e6)
             if i in refs and config.kind is not RowKind.LIMIT and not config.projection:
@@ -253,6 +258,8 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             fragments_rasterised=rasterised,
             batched_share=(sum(batched) / len(batched)
                            if config.kind is RowKind.QUAD and batched else None),
+            fragments_estimate=(int(statistics.median(estimates))
+                                if config.kind is RowKind.QUAD and any(estimates) else None),
         ))
         tick(config.name)
     limit = next((r.frame_ms for r in rows if r.group == "limit"), None)

@@ -227,7 +227,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{width}x{height}, {frames} frames per row along an orbit")
     print(table(rows))
     print(f"\nexact sort of {extra['sort_keys']} depth keys: {sort_ms:.1f} ms (median)")
-    stop_table = early_stop_table(rows)
+    stop_table = early_stop_table(rows, width * height)
     if stop_table:
         print("\n" + stop_table)
     store_table = storage_table(rows)
