@@ -84,6 +84,28 @@ def test_weights_sum_to_one_along_every_path(tree, threshold, band, distance):
     assert leaves_covered(tree, rows, w) == pytest.approx(N, rel=1e-4)  # all leaves in view
 
 
+@hsettings(max_examples=30, deadline=None)
+@given(threshold=st.floats(0.3, 12.0), band=st.floats(1.0, 3.0), distance=st.floats(3.0, 30.0),
+       leaves_at=st.floats(0.3, 1.0))
+def test_early_exit_before_the_leaves_matches_the_whole_cut(tree, threshold, band, distance,
+                                                            leaves_at):
+    """With every leaf in view, ``leaves_at`` stops before the leaf level exactly when the
+    whole cut draws at least that many nodes per leaf it stands for; otherwise the cut is the
+    same as without it."""
+    data = CutData.from_tree(tree)
+    cam = _camera(distance)
+    rows, w = select_cut_weights(data, cam, threshold, band)
+    ratio = rows.size / leaves_covered(tree, rows, w)
+    has_leaves = bool((rows < tree.offsets[1]).any())
+    got_rows, got_w = select_cut_weights(data, cam, threshold, band, leaves_at=leaves_at)
+    if got_rows is None:
+        assert got_w is None and has_leaves and ratio >= leaves_at * (1 - 1e-6)
+    else:
+        np.testing.assert_array_equal(got_rows, rows)
+        assert (got_w is None) == (w is None) and (w is None or np.array_equal(got_w, w))
+        assert not has_leaves or ratio < leaves_at * (1 + 1e-6)
+
+
 def test_no_band_is_the_plain_cut(tree):
     data = CutData.from_tree(tree)
     rows, w = select_cut_weights(data, _camera(6.0), 2.0, 1.0)

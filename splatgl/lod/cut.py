@@ -121,8 +121,26 @@ def expansion(size: np.ndarray, threshold_px: float, band: float) -> np.ndarray:
     return np.clip(e, np.float32(0.0), np.float32(1.0), out=e)
 
 
+def level_leaves(offsets: np.ndarray, branching: int, level: int, local: np.ndarray,
+                 weights: np.ndarray | None) -> float:
+    """Leaves that nodes ``local`` (ascending, indices within ``level``) stand for, each times
+    its weight (None: 1): ``branching ** level`` each, fewer for the level's last node, which
+    holds only the leaves left over."""
+    if not local.size:
+        return 0.0
+    w = np.ones(local.size) if weights is None else weights.astype(np.float64)
+    span = branching ** level
+    total = float(w.sum()) * span
+    n_leaves = int(offsets[1] - offsets[0])
+    last = int(offsets[level + 1] - offsets[level]) - 1
+    if local[-1] == last:
+        total -= float(w[-1]) * (span - (n_leaves - last * span))
+    return total
+
+
 def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX,
-                       band: float = 1.0) -> tuple[np.ndarray, np.ndarray | None]:
+                       band: float = 1.0, leaves_at: float | None = None
+                       ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The cut with a transition band: ``(rows, weights)``, rows (K,) int64 ascending, weights
     (K,) float32 in (0, 1] (the factor on each node's opacity), or None when every weight is 1.
 
@@ -139,6 +157,12 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     Level by level from the root: ``carry`` holds, over the level above's nodes, ``A e`` (0 for
     nodes not expanded).  A level whose candidates are many is evaluated whole (contiguous) and
     masked; otherwise only the candidates are gathered.
+
+    ``leaves_at`` (nodes per leaf): before the leaf level, the largest of all, if the cut so far
+    plus every candidate leaf would draw at least this many nodes per leaf they stand for,
+    return ``(None, None)`` without testing the leaves: the caller draws the leaves instead
+    (the candidates outside the view count as drawn here, which only errs towards the leaves,
+    whose image is full detail's).
     """
     offsets, b = data.offsets, data.branching
     view = _View(data, camera)
@@ -146,6 +170,7 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     blend = band > 1.0
     carry = None  # float32 A * e over the level above's nodes
     rows, weights = [], []
+    nodes = covered = 0.0  # so far: nodes drawn, and leaves they stand for (leaves_at only)
     for level in range(top, -1, -1):
         lo, hi = int(offsets[level]), int(offsets[level + 1])
         n = hi - lo
@@ -153,6 +178,9 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
         n_cand = int(np.count_nonzero(above))
         if n_cand == 0:
             break
+        if (level == 0 and leaves_at is not None
+                and nodes + n_cand >= leaves_at * (covered + float(above.sum(dtype=np.float64)))):
+            return None, None
         if n_cand >= DENSE_FRACTION * n:  # whole level, contiguous, masked
             size, inside = _dense(data, view, lo, hi)
             above[~inside] = 0
@@ -173,6 +201,9 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
         rows.append(drawn + lo)
         if blend:
             weights.append(a * (1 - e))
+        if leaves_at is not None:
+            nodes += drawn.size
+            covered += level_leaves(offsets, b, level, drawn, weights[-1] if blend else None)
     if not rows:
         return np.zeros(0, np.int64), None
     # Levels occupy ascending row ranges and were visited top-down: reversed, they are sorted.

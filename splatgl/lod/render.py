@@ -27,7 +27,8 @@ from ..quad import BINDING_OPACITY_WEIGHT, QuadRenderer
 from ..scene import Scene
 from ..settings import RenderSettings, SortKey
 from .build import LodTree
-from .cut import DEFAULT_BAND, DEFAULT_THRESHOLD_PX, CutData, select_cut_budget, select_cut_weights
+from .cut import (DEFAULT_BAND, DEFAULT_THRESHOLD_PX, CutData, level_leaves, select_cut_budget,
+                  select_cut_weights)
 
 
 #: A cut that draws at least this many nodes per leaf it stands for saves too little to pay for
@@ -126,10 +127,10 @@ class LodRenderer(QuadRenderer):
                 self.cut_data, camera, self.lod.budget, self.lod.threshold_px, self.lod.band)
         else:
             ids, weights = select_cut_weights(self.cut_data, camera, self.lod.threshold_px,
-                                              self.lod.band)
+                                              self.lod.band, leaves_at=SKIP_NODES_PER_LEAF)
         t1 = time.perf_counter()
-        if (override is None and self.lod.budget is None and ids.size
-                and ids.size >= SKIP_NODES_PER_LEAF * leaves_covered(self.tree, ids, weights)):
+        if ids is None or (override is None and self.lod.budget is None and ids.size
+                           and ids.size >= SKIP_NODES_PER_LEAF * leaves_covered(self.tree, ids, weights)):
             self.skip_within = max(self.skip_within or 0.0, dist)
             order = self._leaves_order(camera, t1)
             self.last_cut_s = t1 - t0
@@ -221,21 +222,15 @@ class LodRenderer(QuadRenderer):
 def leaves_covered(tree: LodTree, rows: np.ndarray, weights: np.ndarray | None) -> float:
     """How many leaves the cut ``rows`` (ascending, weights as :func:`select_cut_weights` gives)
     stands for: each node's weight times the leaves under it (``branching ** level``, fewer for
-    a level's last node).  Weights along a path sum to 1, so this counts the leaves in view
-    whatever the band."""
+    a level's last node; :func:`splatgl.lod.cut.level_leaves`).  Weights along a path sum to 1,
+    so this counts the leaves in view whatever the band."""
     bounds = np.searchsorted(rows, tree.offsets)  # rows are sorted: per-level ranges
-    n = tree.level_size(0)
     total = 0.0
     for level in range(tree.levels):
         lo, hi = bounds[level], bounds[level + 1]
-        if hi == lo:
-            continue
-        w = np.ones(hi - lo) if weights is None else weights[lo:hi].astype(np.float64)
-        span = tree.branching ** level
-        total += float(w.sum()) * span
-        last = int(tree.offsets[level + 1]) - 1
-        if rows[hi - 1] == last:  # the level's last node holds only the leaves left over
-            total -= float(w[-1]) * (span - (n - (last - int(tree.offsets[level])) * span))
+        total += level_leaves(tree.offsets, tree.branching, level,
+                              rows[lo:hi] - int(tree.offsets[level]),
+                              None if weights is None else weights[lo:hi])
     return total
 
 
