@@ -133,6 +133,13 @@ STOP_BLOCK_SIZE = 4
 #: overdrawn view that paid (donut from twice the framing distance, 1.12x).
 EARLY_STOP_MIN_QUAD_FRAGMENTS = 200.0
 EARLY_STOP_MIN_OVERDRAW = 8.0
+#: Batched views of at least this many fragments per quad take the fine schedule
+#: (early_stop.FINE_SCHEDULE, about 8 batches), others the coarse one (3 batches).  Larger quads
+#: save more shading per batch boundary for the same lost overlap: measured on llvmpipe at
+#: 1280x720 (docs/early-stop.md), donut close up at 5456 and 8685 fragments per quad ran 1.70x
+#: and 1.89x faster than off with 8 batches against 1.40x and 1.58x with 3; views at 328-1397
+#: ran as fast or faster with 3.
+EARLY_STOP_FINE_QUAD_FRAGMENTS = 3000.0
 
 
 def sh_coeff_count(degree: int) -> int:

@@ -1,9 +1,11 @@
 """Early termination for the quad path: stop shading pixels that are already opaque.
 
-With ``--early-stop on`` the sorted splats are drawn in batches (:func:`batch_bounds`); with
-``auto`` (the default) only views whose quads cover at least ``EARLY_STOP_MIN_OVERDRAW`` pixels
-per image pixel are, by ``coverage`` (shaders/coverage.comp), an estimate of the fragments the
-draw will rasterise; other views get one plain draw.  Between batches:
+``coverage`` (shaders/coverage.comp) first estimates the fragments a plain draw would
+rasterise.  With ``--early-stop on`` the sorted splats are then drawn in batches
+(:func:`batch_bounds`, COARSE_SCHEDULE or, for views of very large quads, FINE_SCHEDULE); with
+``auto`` (the default) only views of large quads over an overdrawn image are
+(``constants.EARLY_STOP_MIN_QUAD_FRAGMENTS``, ``EARLY_STOP_MIN_OVERDRAW``), and the other views
+get one plain draw.  Between batches:
 
 1. ``mark`` (shaders/stop_mark.*): a full-screen pass writes depth 0 wherever the accumulated
    transmittance ``T = 1 - A`` is below ``T_MIN`` (the reference's stop threshold); splat quads
@@ -62,12 +64,15 @@ TILES_GROUP = 64
 #: Texture unit the mark and tile passes sample the accumulation target from.
 ACCUM_UNIT = 0
 
-#: Batch schedule (chosen by measurement, docs/early-stop.md): the first batch holds this share
-#: of the sorted splats (at least MIN_BATCH), each next one GROWTH times the previous: three
-#: batches (1/8, 5/16, the rest).  Each batch costs llvmpipe its overlap of vertex work with
-#: rasterisation; finer schedules (12-16 batches) shaded fewer fragments but ran 5-20% slower.
-FIRST_BATCH_FRACTION = 1.0 / 8.0
-GROWTH = 2.5
+#: Batch schedules (chosen by measurement, docs/early-stop.md), (first share, growth): the first
+#: batch holds that share of the sorted splats (at least MIN_BATCH), each next one GROWTH times
+#: the previous.  Each batch boundary costs llvmpipe the overlap of its single-threaded per-quad
+#: work with rasterisation and saves shading in proportion to fragments, so views of large
+#: quads (``constants.EARLY_STOP_FINE_QUAD_FRAGMENTS`` per quad and more) take the fine schedule
+#: (about 8 batches), the others the coarse one (3 batches: 1/8, 5/16, the rest).
+COARSE_SCHEDULE = (1.0 / 8.0, 2.5)
+FINE_SCHEDULE = (1.0 / 64.0, 1.6)
+FIRST_BATCH_FRACTION, GROWTH = COARSE_SCHEDULE
 MIN_BATCH = 512
 #: No batch is longer than this (a long draw stays interruptible between batches; with early
 #: termination off, the draw is split into batches of this size only).

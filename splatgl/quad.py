@@ -19,12 +19,14 @@ import moderngl
 import numpy as np
 
 from .camera import Camera
-from .constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
+from .constants import (EARLY_STOP_FINE_QUAD_FRAGMENTS, EARLY_STOP_MIN_OVERDRAW,
+                        EARLY_STOP_MIN_QUAD_FRAGMENTS)
 from .cull import CullData
 from .cull_chunks import ChunkedCull, keys_order, keys_pairs
 from .gl.radix_sort import RadixSorter, device_depth_sort
 from .lens_cull import lens_visible_keys
-from .early_stop import (COMMAND_BYTES, BatchHook, EarlyStopPasses, batch_bounds, plain_bounds)
+from .early_stop import (COARSE_SCHEDULE, COMMAND_BYTES, FINE_SCHEDULE, BatchHook, EarlyStopPasses,
+                         batch_bounds, plain_bounds)
 from .gl.scene_buffers import SceneBuffers
 from .gl.shaders import ProgramCache
 from .gl.targets import ColorTarget
@@ -165,6 +167,7 @@ class QuadRenderer:
         self._batched = settings.early_stop is EarlyStop.ON
         self._fragments_estimate = 0
         self._batches = 1
+        self._schedule = COARSE_SCHEDULE  # the batch schedule of a batched frame
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self._plain_command: moderngl.Buffer | None = None
         self._occlusion_culled = 0
@@ -399,19 +402,24 @@ class QuadRenderer:
         return len(order)
 
     def _decide_batches(self, camera: Camera, count: int) -> bool:
-        """Whether this frame draws in early-termination batches: always with ON, never with
-        OFF, and with AUTO when the coverage estimate reaches EARLY_STOP_MIN_QUAD_FRAGMENTS
-        fragments per quad and EARLY_STOP_MIN_OVERDRAW per image pixel (constants.py; needs the
-        order, scene and prepared quads bound)."""
+        """Whether this frame draws in early-termination batches, and their schedule.
+
+        OFF: never.  ON and AUTO first estimate the fragments a plain draw would rasterise
+        (coverage.comp; needs the order, scene and prepared quads bound).  ON always batches,
+        AUTO from EARLY_STOP_MIN_QUAD_FRAGMENTS fragments per quad and EARLY_STOP_MIN_OVERDRAW
+        per image pixel; both take the fine schedule from EARLY_STOP_FINE_QUAD_FRAGMENTS per
+        quad, else the coarse one (constants.py)."""
         self._fragments_estimate = 0
         mode = self.settings.early_stop
         if mode is EarlyStop.OFF or count == 0:
             return False
-        if mode is EarlyStop.ON:
-            return True
         self._index_buffer.bind_to_storage_buffer(BINDING_ORDER)
         estimate = self._stop.coverage(self._rect_program(camera, "coverage.comp"), count)
         self._fragments_estimate = int(round(estimate))
+        fine = estimate >= EARLY_STOP_FINE_QUAD_FRAGMENTS * count
+        self._schedule = FINE_SCHEDULE if fine else COARSE_SCHEDULE
+        if mode is EarlyStop.ON:
+            return True
         return (estimate >= EARLY_STOP_MIN_QUAD_FRAGMENTS * count
                 and estimate >= EARLY_STOP_MIN_OVERDRAW * camera.width * camera.height)
 
@@ -439,7 +447,7 @@ class QuadRenderer:
         # Early termination (splatgl/early_stop.py): mark, reduce to tiles, cull, draw survivors.
         stop, ctx = self._stop, self.ctx
         width, height = camera.width, camera.height
-        bounds = batch_bounds(count)
+        bounds = batch_bounds(count, *self._schedule)
         self._batches = len(bounds) - 1
         n_cmd = stop.prepare(count, bounds, width, height)
         cull_prog = self._rect_program(camera, "occlusion_cull.comp")

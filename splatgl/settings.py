@@ -80,7 +80,9 @@ class EarlyStop(enum.Enum):
     """Early termination in the quad path (splatgl/early_stop.py).
 
     ON: draw the sorted splats in batches; between batches, stop pixels whose transmittance
-        fell below the reference's 1e-4 and drop splats that land only on stopped pixels.
+        fell below the reference's 1e-4 and drop splats that land only on stopped pixels.  The
+        schedule (3 batches, or about 8 for views of very large quads) follows the estimate
+        below.
     OFF: one plain draw, every fragment shaded.
     AUTO: estimate the fragments the view's quads will rasterise first (their summed area,
         shaders/coverage.comp) and batch only views of large quads over an overdrawn image

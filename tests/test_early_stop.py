@@ -128,7 +128,7 @@ def test_occlusion_cull_matches_its_twin(ctx, monkeypatch, preprocess):
     quad = QuadRenderer(ctx, scene, _settings(early_stop=True, preprocess=Preprocess.COMPUTE))
     n = len(quad.visible_order(cam))
     split = n // 3
-    monkeypatch.setattr(quad_module, "batch_bounds", lambda count: [0, split, count])
+    monkeypatch.setattr(quad_module, "batch_bounds", lambda count, *_: [0, split, count])
     after_first = {}
 
     def hook(done, total):
@@ -198,7 +198,7 @@ def _bound_check(on, off, name):
                                              (SplatKind.SURFEL_2D, Preprocess.VERTEX)])
 def test_on_stays_within_the_bound_of_off_and_culls(gl_renderer, monkeypatch, kind, preprocess):
     # A fine schedule (about 14 batches): many batch boundaries for the bound to hold across.
-    monkeypatch.setattr(quad_module, "batch_bounds", lambda count: es.batch_bounds(count, 1 / 64, 1.35))
+    monkeypatch.setattr(quad_module, "batch_bounds", lambda count, *_: es.batch_bounds(count, 1 / 64, 1.35))
     scene = dense_scene(kind=kind)
     cam = front_camera(4.0, 50.0, 128, 96, target=(0.0, 0.0, 0.5))
     on_settings = _settings(early_stop=True, preprocess=preprocess, background=(0.2, 0.4, 0.9))
@@ -223,9 +223,9 @@ def test_rasterised_count_includes_the_fragments_early_tests_reject(ctx, monkeyp
     n = len(on.visible_order(cam))
     off_shaded, off_kept = off.count_fragments(cam)
     assert off.count_fragments(cam, rasterised=True) == (off_shaded, off_kept)
-    monkeypatch.setattr(quad_module, "batch_bounds", lambda count: [0, count])
+    monkeypatch.setattr(quad_module, "batch_bounds", lambda count, *_: [0, count])
     assert on.count_fragments(cam) == on.count_fragments(cam, rasterised=True) == (off_shaded, off_kept)
-    monkeypatch.setattr(quad_module, "batch_bounds", lambda count: [0, n // 3, count])
+    monkeypatch.setattr(quad_module, "batch_bounds", lambda count, *_: [0, n // 3, count])
     image = on.render(cam)
     shaded, kept = on.count_fragments(cam)
     rasterised, kept_late = on.count_fragments(cam, rasterised=True)
@@ -362,7 +362,7 @@ def test_auto_batches_only_views_of_large_quads_over_an_overdrawn_image(ctx, mon
     for mode in ("on", "off"):
         r = QuadRenderer(ctx, scene, _settings(early_stop=mode))
         images[mode] = r.render(cam)
-        assert r.last_batched is (mode == "on") and r.last_fragments_estimate == 0
+        assert r.last_batched is (mode == "on") and (r.last_fragments_estimate > 0) is (mode == "on")
         r.release()
     auto = QuadRenderer(ctx, scene, _settings(early_stop="auto"))
     auto.render(cam)
@@ -377,6 +377,12 @@ def test_auto_batches_only_views_of_large_quads_over_an_overdrawn_image(ctx, mon
         assert auto.last_batched is batched and auto.last_times.batched is batched
         assert auto.last_times.batches == (3 if batched else 1)
         np.testing.assert_array_equal(image, images["on" if batched else "off"])
+    # Quads this large take the fine schedule (about 8 batches) once the bar is below them.
+    monkeypatch.setattr(quad_module, "EARLY_STOP_FINE_QUAD_FRAGMENTS", per_quad * 0.99)
+    image = auto.render(cam)
+    drawn = auto.last_times.drawn
+    assert auto.last_times.batches == len(es.batch_bounds(drawn, *es.FINE_SCHEDULE)) - 1 > 3
+    _bound_check(image, images["off"], "fine schedule")
     auto.release()
 
 
