@@ -67,3 +67,17 @@ def test_lod_bench_fine_paths(tiny_file):
     assert [r.distance for r in fly] == pytest.approx([6.0, 6.0 * 0.97, 6.0 * 0.97 ** 2])
     assert {r.path for r in rows} == {"fly-fine", "orbit-fine"}
     assert all(r.cut_change_max >= r.cut_change_mean >= 0 for r in rows if r.frame > 0)
+
+
+def test_lod_bench_switch_path_crosses_the_switch_to_the_leaves(tiny_file):
+    """The switch path is centred on the distance where the cut gives way to the leaves: the
+    frames before it draw a cut, the middle frame and those after draw the leaves, and the
+    middle frame's cut change is the switch's own pop (the change against the previous frame's
+    cut at the same camera), the frames after it none."""
+    rows = bench_lod(tiny_file, 64, 48, 6, [1.0], [], log=lambda m: None, paths="switch")
+    assert {r.path for r in rows} == {"fly-switch"}
+    d = [r.distance for r in rows]
+    assert d == pytest.approx([d[3] * 0.97 ** (i - 3) for i in range(6)])
+    assert [r.leaves for r in rows] == [False] * 3 + [True] * 3
+    assert rows[3].cut_change_max > 0 and rows[3].cut_ms > 0
+    assert all(r.cut_change_max == 0.0 for r in rows[4:])

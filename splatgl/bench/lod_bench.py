@@ -6,7 +6,9 @@ path) and with several cuts (pixel thresholds with and without a transition band
 budgets).  Paths: ``orbit`` at the framing distance and ``fly`` from far (FLY_FAR x the framing
 distance) to close (FLY_NEAR x), in a few large steps (frame time and error); for popping,
 ``fly-fine`` (FINE_STEP closer a frame from FINE_FAR x) and ``orbit-fine`` (FINE_DEGREES a
-frame at FINE_FAR x), in small steps such as an animation takes.  Per frame: frame time, nodes
+frame at FINE_FAR x), in small steps such as an animation takes; ``fly-switch`` (FINE_STEP
+closer a frame across the distance where the first configuration's cut gives way to the leaves,
+:func:`switch_distance`), the one change the transition band does not smooth.  Per frame: frame time, nodes
 in the cut, cut-selection time, PSNR and SSIM against the full-detail frame, and between
 consecutive frames the change the LOD adds beyond full detail's own change,
 ``D = (L[k+1] - L[k]) - (F[k+1] - F[k])`` (max and mean of ``|D|`` over pixels and RGB, and as
@@ -38,8 +40,9 @@ FLY_FAR, FLY_NEAR = 6.0, 0.5
 FAR_FROM = 3.0
 #: Fine paths (popping): start distance multiple, fly-in factor per frame, orbit degrees per frame.
 FINE_FAR, FINE_STEP, FINE_DEGREES = 6.0, 0.97, 1.0
-#: Path sets: coarse (time and error from far to close) and fine (popping between frames).
-PATH_SETS = ("coarse", "fine")
+#: Path sets: coarse (time and error from far to close), fine (popping between frames) and
+#: switch (popping where the renderer switches from the cut to drawing the leaves).
+PATH_SETS = ("coarse", "fine", "switch")
 
 
 @dataclass(frozen=True)
@@ -63,16 +66,19 @@ class LodFrame:
     cut_change_mean: float | None = None  # mean |L[k] - L'[k]|
     full_change_max: float | None = None  # max |F[k+1] - F[k]|
     full_change_mean: float | None = None  # mean |F[k+1] - F[k]|
+    leaves: bool = False  # the frame drew the leaves (no cut)
 
 
 def _psnr(mse: float) -> float | None:
     return None if mse <= 0 else float(-10.0 * math.log10(mse))
 
 
-def cameras(scene, width: int, height: int, frames: int, paths: str = "coarse"):
+def cameras(scene, width: int, height: int, frames: int, paths: str = "coarse",
+            switch_at: float | None = None):
     """{path name: [(distance multiple, camera)]}: ``coarse``: an orbit over 90 degrees and a
     far-to-close fly-through in ``frames`` frames each; ``fine``: a fly-in and an orbit in
-    small steps (FINE_STEP, FINE_DEGREES) from FINE_FAR x the framing distance."""
+    small steps (FINE_STEP, FINE_DEGREES) from FINE_FAR x the framing distance; ``switch``: a
+    fly-in in FINE_STEP steps whose middle frame is at the distance multiple ``switch_at``."""
     from ..camera import orbit
     from ..render import default_camera
 
@@ -80,6 +86,9 @@ def cameras(scene, width: int, height: int, frames: int, paths: str = "coarse"):
     centre = 0.5 * (scene.robust_bounds[0] + scene.robust_bounds[1])
     dist = float(np.linalg.norm(base.center - centre))
     at = lambda m, deg: (m, base.with_pose(orbit(centre, dist * m, deg, 20.0)))
+    if paths == "switch":
+        return {"fly-switch": [at(switch_at * FINE_STEP ** (i - frames // 2), 10.0)
+                               for i in range(frames)]}
     if paths == "fine":
         return {"fly-fine": [at(FINE_FAR * FINE_STEP ** i, 10.0) for i in range(frames)],
                 "orbit-fine": [at(FINE_FAR, 10.0 + FINE_DEGREES * i) for i in range(frames)]}
@@ -87,6 +96,26 @@ def cameras(scene, width: int, height: int, frames: int, paths: str = "coarse"):
     return {"orbit": [at(1.0, 90.0 * i / span) for i in range(frames)],
             "fly": [at(FLY_FAR * (FLY_NEAR / FLY_FAR) ** (i / span), 10.0)  # geometric steps
                     for i in range(frames)]}
+
+
+def switch_distance(scene, tree, width: int, height: int, lod, lo: float = 0.05,
+                    hi: float = 64.0) -> float:
+    """The distance multiple (on the fly-through's line) at which ``lod``'s cut first gives way
+    to the leaves (:func:`splatgl.lod.render.threshold_cut` returns None) when flying in: a
+    bisection on the log distance to 1%.  ``hi`` when even that far draws the leaves, ``lo``
+    when even that close draws a cut."""
+    from ..lod.cut import CutData
+    from ..lod.render import threshold_cut
+
+    data = CutData.from_tree(tree)
+    leaves = lambda m: threshold_cut(tree, data, cameras(scene, width, height, 1, "switch", m)
+                                     ["fly-switch"][0][1], lod)[0] is None
+    if leaves(hi) or not leaves(lo):
+        return hi if leaves(hi) else lo
+    while hi / lo > 1.01:  # leaves(lo), not leaves(hi)
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if leaves(mid) else (lo, mid)
+    return math.sqrt(lo * hi)
 
 
 def lod_file(scene_path: Path) -> Path:
@@ -118,7 +147,7 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
     """Rows per (config, path, frame).  ``cut_change`` (default: on for the fine paths) also
     draws each frame through the previous frame's cut (one more render a frame)."""
     if cut_change is None:
-        cut_change = paths == "fine"
+        cut_change = paths != "coarse"
     from ..formats import load_scene
     from ..gl.context import create_headless_context
     from ..lod.io import read_lod
@@ -133,7 +162,13 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
     leaves = load_scene(scene_path)
     ctx = create_headless_context()
     settings = RenderSettings()
-    paths = cameras(leaves, width, height, frames, paths)
+    configs = configurations(thresholds, budgets, bands)
+    switch_at = None
+    if paths == "switch":  # centred on the first configuration's switch
+        switch_at = switch_distance(leaves, tree, width, height, configs[0][1])
+        log(f"lod bench {name}: {configs[0][0]} switches to the leaves at {switch_at:.3g}x "
+            "the framing distance")
+    paths = cameras(leaves, width, height, frames, paths, switch_at)
     full = QuadRenderer(ctx, leaves, settings)
     reference = {}
     for path, cams in paths.items():
@@ -146,7 +181,7 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
         log(f"lod bench {name} {path}: full detail {statistics.median(ms):.0f} ms median")
     full.release()
     rows = []
-    for label, lod in configurations(thresholds, budgets, bands):
+    for label, lod in configs:
         r = LodRenderer(ctx, tree, settings, lod)
         for path, cams in paths.items():
             imgs, ms = reference[path]
@@ -158,6 +193,7 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
                 frame = dict(scene=name, path=path, config=label, frame=k, distance=m,
                              frame_ms=t.total * 1e3, full_ms=ms[k], drawn=t.drawn,
                              cut_nodes=r.last_cut_nodes, cut_ms=r.last_cut_s * 1e3,
+                             leaves=r.last_drew_leaves,
                              psnr=_psnr(float(np.mean((img - imgs[k]) ** 2))),
                              ssim=ssim(img.astype(np.float32), imgs[k].astype(np.float32)),
                              popping_psnr=None)
@@ -331,7 +367,9 @@ def add_lod_arguments(p: argparse.ArgumentParser) -> None:
                    help="--lod transition bands, ratios (default 2,1: blended and hard cuts)")
     p.add_argument("--lod-paths", default=None, choices=PATH_SETS,
                    help="--lod camera paths: coarse (orbit and far-to-close fly-through, the "
-                        "default) or fine (small steps, for popping between frames)")
+                        "default), fine (small steps, for popping between frames) or switch "
+                        "(small steps across the distance where the first threshold's cut "
+                        "gives way to the leaves: the popping of that switch)")
 
 
 def main(argv=None) -> int:

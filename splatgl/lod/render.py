@@ -87,6 +87,8 @@ class LodRenderer(QuadRenderer):
         self.last_cut_nodes = 0
         self.last_cut_s = 0.0
         self.last_threshold_px = lod.threshold_px
+        #: The last view drew the leaves instead of a cut (see SKIP_NODES_PER_LEAF).
+        self.last_drew_leaves = False
         #: Views at most this far from the root's centre draw the leaves (see SKIP_NODES_PER_LEAF).
         self.skip_within: float | None = None
         self._root = tree.nodes.means[-1].astype(np.float64)
@@ -126,11 +128,9 @@ class LodRenderer(QuadRenderer):
             ids, weights, self.last_threshold_px = select_cut_budget(
                 self.cut_data, camera, self.lod.budget, self.lod.threshold_px, self.lod.band)
         else:
-            ids, weights = select_cut_weights(self.cut_data, camera, self.lod.threshold_px,
-                                              self.lod.band, leaves_at=SKIP_NODES_PER_LEAF)
+            ids, weights = threshold_cut(self.tree, self.cut_data, camera, self.lod)
         t1 = time.perf_counter()
-        if ids is None or (override is None and self.lod.budget is None and ids.size
-                           and ids.size >= SKIP_NODES_PER_LEAF * leaves_covered(self.tree, ids, weights)):
+        if ids is None:
             self.skip_within = max(self.skip_within or 0.0, dist)
             order = self._leaves_order(camera, t1)
             self.last_cut_s = t1 - t0
@@ -151,6 +151,7 @@ class LodRenderer(QuadRenderer):
         t3 = time.perf_counter()
         self._times_cull, self._times_sort = t2 - t0, t3 - t2
         self.last_cut_nodes, self.last_cut_s = int(ids.size), t1 - t0
+        self.last_drew_leaves = False
         self.last_cut = (ids, weights)
         self._order_key, self._order = None, order
         return order
@@ -182,6 +183,7 @@ class LodRenderer(QuadRenderer):
                      else self.sort_visible(*keys_pairs(keys, self.scene.count)))
         self._times_cull, self._times_sort = t2 - t0, time.perf_counter() - t2
         self.last_cut_nodes, self.last_cut_s = n_leaves, 0.0
+        self.last_drew_leaves = True
         self._order_key, self._order, self.slot_weights = None, order, None
         self.last_cut = (np.arange(n_leaves), None)
         return order
@@ -217,6 +219,19 @@ class LodRenderer(QuadRenderer):
             self._weight_buffer.release()
             self._weight_buffer = None
         super().release()
+
+
+def threshold_cut(tree: LodTree, data: CutData, camera: Camera, lod: LodSettings
+                  ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The cut :class:`LodRenderer` draws for ``camera`` without a budget: ``(rows, weights)``
+    as :func:`select_cut_weights` gives them, or ``(None, None)`` when the view should draw the
+    leaves instead (its cut stands for at most ``1 / SKIP_NODES_PER_LEAF`` leaves a node)."""
+    ids, weights = select_cut_weights(data, camera, lod.threshold_px, lod.band,
+                                      leaves_at=SKIP_NODES_PER_LEAF)
+    if ids is None or (ids.size and ids.size >= SKIP_NODES_PER_LEAF
+                       * leaves_covered(tree, ids, weights)):
+        return None, None
+    return ids, weights
 
 
 def leaves_covered(tree: LodTree, rows: np.ndarray, weights: np.ndarray | None) -> float:
