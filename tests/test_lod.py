@@ -188,6 +188,15 @@ def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
         far = default_camera(scene, 96, 64, distance_scale=8.0)
         lod.render(far)
         assert lod.last_cut_s > 0 and lod.last_cut_nodes < scene.count  # far views still cut
+        # flying in from afar: the leaves' cull data was built in the background meanwhile
+        fly = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
+        fly.render(far)
+        assert not fly.last_drew_leaves and fly._leaf_build is not None
+        fly._leaf_build.result()
+        got = fly.render(close)
+        assert fly.last_drew_leaves and fly.last_times.cull_build < 0.05
+        assert image_errors(got, full.render(close)).psnr >= 80.0
+        fly.release()
     finally:
         lod.release()
         full.release()

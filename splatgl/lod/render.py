@@ -12,6 +12,7 @@ the quad path's own.  NumPy twin of the weighting: :func:`blended_scene`.
 from __future__ import annotations
 
 import time
+import threading
 from dataclasses import dataclass
 
 import moderngl
@@ -36,6 +37,30 @@ from .cut import (DEFAULT_BAND, DEFAULT_THRESHOLD_PX, CutData, level_leaves, sel
 #: leaf, made frames up to 1.28x slower than full detail).  Such a view, and every view no
 #: farther from the scene, draws the leaves directly, culled as full detail culls them.
 SKIP_NODES_PER_LEAF = 0.75
+
+
+class _Background:
+    """``fn(*args)`` on a daemon thread (NumPy releases the GIL in its sorts and reductions, so
+    the work overlaps the frames drawn meanwhile; a daemon does not hold up Ctrl-C or exit);
+    :meth:`result` waits for it and re-raises its exception."""
+
+    def __init__(self, fn, *args):
+        self._value = self._error = None
+        self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True,
+                                        name="splatgl-background")
+        self._thread.start()
+
+    def _run(self, fn, args) -> None:
+        try:
+            self._value = fn(*args)
+        except BaseException as exc:  # handed to the caller of result()
+            self._error = exc
+
+    def result(self):
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._value
 
 
 @dataclass(frozen=True)
@@ -100,7 +125,10 @@ class LodRenderer(QuadRenderer):
         #: Draw this cut, (rows ascending, weights or None), instead of selecting one per view.
         self.cut_override: tuple[np.ndarray, np.ndarray | None] | None = None
         self._weight_buffer = None
-        self._leaf_chunks: ChunkedCull | None = None  # the leaves' chunked cull, on first use
+        self._leaf_chunks: ChunkedCull | None = None  # the leaves' chunked cull
+        #: Builds the leaves' chunked cull in the background from the first view on, so that the
+        #: view that switches to the leaves does not stall on it (about 1 s at 3M splats).
+        self._leaf_build: _Background | None = None
 
     def visible_order(self, camera: Camera) -> np.ndarray:
         """Cut, cull and sort for ``camera``: (M,) uint32 node rows, front to back.
@@ -118,6 +146,9 @@ class LodRenderer(QuadRenderer):
         dist = float(np.linalg.norm(camera.center - self._root))
         if self._cull_data is None:
             self._cull_data = CullData.from_scene(self.scene)
+        if self._leaf_build is None and self.lod.budget is None:
+            leaves = self._cull_data.subset(slice(0, self.tree.level_size(0)))
+            self._leaf_build = _Background(ChunkedCull, leaves)
         override = self.cut_override
         if (override is None and self.lod.budget is None and self.skip_within is not None
                 and dist <= self.skip_within):
@@ -172,8 +203,9 @@ class LodRenderer(QuadRenderer):
             order = self.sort_visible(depth, keep)
         else:
             if self._leaf_chunks is None:
-                tb = time.perf_counter()
-                self._leaf_chunks = ChunkedCull(leaves)
+                tb = time.perf_counter()  # waits for the background build, or builds here
+                self._leaf_chunks = (self._leaf_build.result() if self._leaf_build is not None
+                                     else ChunkedCull(leaves))
                 self._times_build = time.perf_counter() - tb
                 t0 += self._times_build
             keys = self._leaf_chunks.visible_keys(anchored, self.near, self.settings.antialias,
