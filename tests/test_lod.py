@@ -188,10 +188,17 @@ def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
         far = default_camera(scene, 96, 64, distance_scale=8.0)
         lod.render(far)
         assert lod.last_cut_s > 0 and lod.last_cut_nodes < scene.count  # far views still cut
-        # flying in from afar: the leaves' cull data was built in the background meanwhile
+        # flying in from afar: a far view builds nothing; one near the switch starts building the
+        # leaves' cull data in the background, and the switch finds it ready
         fly = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
-        fly.render(far)
-        assert not fly.last_drew_leaves and fly._leaf_build is not None
+        fly.render(default_camera(scene, 96, 64, distance_scale=30.0))
+        assert not fly.last_drew_leaves and fly._leaf_build is None
+        for d in (8.0, 4.0, 2.0, 1.5, 1.2, 1.0):
+            if fly._leaf_build is not None:
+                break
+            fly.render(default_camera(scene, 96, 64, distance_scale=d))
+            assert not fly.last_drew_leaves
+        assert fly._leaf_build is not None
         fly._leaf_build.result()
         got = fly.render(close)
         assert fly.last_drew_leaves and fly.last_times.cull_build < 0.05
