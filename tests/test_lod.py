@@ -199,9 +199,10 @@ def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
             fly.render(default_camera(scene, 96, 64, distance_scale=d))
             assert not fly.last_drew_leaves
         assert fly._leaf_build is not None
-        fly._leaf_build.result()
+        built = fly._leaf_build.result()
         got = fly.render(close)
-        assert fly.last_drew_leaves and fly.last_times.cull_build < 0.05
+        # the switching view used the background build (the same object), built nothing itself
+        assert fly.last_drew_leaves and fly._leaf_chunks is built
         assert image_errors(got, full.render(close)).psnr >= 80.0
         fly.release()
     finally:

@@ -102,20 +102,24 @@ def switch_distance(scene, tree, width: int, height: int, lod, lo: float = 0.05,
                     hi: float = 64.0) -> float:
     """The distance multiple (on the fly-through's line) at which ``lod``'s cut first gives way
     to the leaves (:func:`splatgl.lod.render.threshold_cut` returns None) when flying in: a
-    bisection on the log distance to 1%.  ``hi`` when even that far draws the leaves, ``lo``
-    when even that close draws a cut."""
+    bisection on the log distance to 1%, returning its nearer end, which draws the leaves (so
+    a switch path's middle frame does, and the frame one FINE_STEP farther, beyond the 1%
+    bracket, draws a cut).  ``hi`` when even that far draws the leaves, ``lo`` when even that
+    close draws a cut."""
     from ..lod.cut import CutData
     from ..lod.render import threshold_cut
 
     data = CutData.from_tree(tree)
     leaves = lambda m: threshold_cut(tree, data, cameras(scene, width, height, 1, "switch", m)
                                      ["fly-switch"][0][1], lod)[0] is None
-    if leaves(hi) or not leaves(lo):
-        return hi if leaves(hi) else lo
+    if leaves(hi):
+        return hi
+    if not leaves(lo):
+        return lo
     while hi / lo > 1.01:  # leaves(lo), not leaves(hi)
         mid = math.sqrt(lo * hi)
         lo, hi = (mid, hi) if leaves(mid) else (lo, mid)
-    return math.sqrt(lo * hi)
+    return lo
 
 
 def lod_file(scene_path: Path) -> Path:
