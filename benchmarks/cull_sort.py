@@ -4,7 +4,8 @@ Runs only the quad path's order stage (``QuadRenderer.visible_order``: cull, key
 sort; no draw) on an orbit of views, for a pinhole camera that frames the whole scene (almost
 every splat visible), a pinhole camera at 0.2x that distance (most of the scene outside the
 frustum), a 180-degree fisheye and an equirectangular panorama, and prints the median cull and
-sort times and their ratio.  Run it under the timing gate on a shared machine::
+sort times and their ratio: for the NumPy cull and, where numba is installed (the ``fast``
+extra), for the compiled one (pinhole views).  Run it under the timing gate on a shared machine::
 
     /work/tools/timed python benchmarks/cull_sort.py --sizes 0.1M,1M --frames 5
 
@@ -19,6 +20,7 @@ import statistics
 
 import numpy as np
 
+from splatgl import cull_kernel
 from splatgl.bench.scale import scene_file
 from splatgl.bench.scale_cli import _cpu_model, parse_sizes
 from splatgl.camera import orbit
@@ -45,25 +47,45 @@ def cameras(scene, view: str, frames: int, width: int, height: int):
     return cams
 
 
+def _order_stage(quad, cams) -> tuple[float, float, int]:
+    """Median cull and sort seconds over ``cams[1:]`` (the first view builds the cull data)."""
+    cull, sort, kept = [], [], 0
+    for i, cam in enumerate(cams):
+        order = quad.visible_order(cam)
+        if i:
+            c, s = quad.order_times
+            cull.append(c)
+            sort.append(s)
+        kept = order.size
+    return statistics.median(cull), statistics.median(sort), kept
+
+
 def measure(n: int, frames: int, width: int, height: int) -> list[dict]:
+    """Per view: the NumPy cull, and the compiled cull where numba is installed (pinhole views;
+    the lens culls have no compiled pass), each against its own run's sort."""
     renderer = Renderer()
     scene = load_scene(scene_file(n, 0), progress=lambda *a: None)
     quad = QuadRenderer(renderer.ctx, scene, RenderSettings(), renderer.programs)
+    compiled = cull_kernel.kernel(wait=True) is not None  # loaded before anything is timed
     rows = []
-    for view in VIEWS:
-        cull, sort, kept = [], [], 0
-        for i, cam in enumerate(cameras(scene, view, frames, width, height)):
-            order = quad.visible_order(cam)
-            if i:  # the first view builds the cull data
-                c, s = quad.order_times
-                cull.append(c)
-                sort.append(s)
-            kept = order.size
-        c, s = statistics.median(cull), statistics.median(sort)
-        rows.append({"splats": n, "view": view, "kept": int(kept), "cull_ms": 1e3 * c,
-                     "sort_ms": 1e3 * s, "cull_over_sort": c / s})
-    quad.release()
-    renderer.close()
+    try:
+        for view in VIEWS:
+            cams = cameras(scene, view, frames, width, height)
+            cull_kernel.set_policy("off")
+            c, s, kept = _order_stage(quad, cams)
+            row = {"splats": n, "view": view, "kept": int(kept), "cull_ms": 1e3 * c,
+                   "sort_ms": 1e3 * s, "cull_over_sort": c / s, "compiled_cull_ms": None,
+                   "compiled_sort_ms": None, "compiled_cull_over_sort": None}
+            if compiled and not view.startswith(("fisheye", "equirect")):
+                cull_kernel.set_policy("wait")
+                c, s, _ = _order_stage(quad, cams)
+                row.update(compiled_cull_ms=1e3 * c, compiled_sort_ms=1e3 * s,
+                           compiled_cull_over_sort=c / s)
+            rows.append(row)
+    finally:
+        cull_kernel.set_policy("auto")
+        quad.release()
+        renderer.close()
     return rows
 
 
@@ -76,13 +98,18 @@ def main() -> None:
     p.add_argument("--json", help="also write the rows to this JSON file")
     args = p.parse_args()
     print(f"# {_cpu_model()}; medians of {args.frames} views; {args.width}x{args.height}")
-    print(f"{'splats':>9} {'view':>14} {'kept':>9} {'cull ms':>8} {'sort ms':>8} {'cull/sort':>9}")
+    print(f"# compiled cull (numba): {'yes' if cull_kernel.installed() else 'not installed'}")
+    print(f"{'splats':>9} {'view':>14} {'kept':>9} {'cull ms':>8} {'sort ms':>8} {'cull/sort':>9}"
+          f" {'compiled':>9} {'sort ms':>8} {'cull/sort':>9}")
     rows = []
+    f = lambda v, spec: "-" if v is None else format(v, spec)
     for n in parse_sizes(args.sizes, (100_000, 1_000_000), "--sizes"):
         for r in measure(n, args.frames, args.width, args.height):
             rows.append(r)
             print(f"{r['splats']:>9,} {r['view']:>14} {r['kept']:>9,} {r['cull_ms']:>8.1f} "
-                  f"{r['sort_ms']:>8.1f} {r['cull_over_sort']:>9.2f}", flush=True)
+                  f"{r['sort_ms']:>8.1f} {r['cull_over_sort']:>9.2f} "
+                  f"{f(r['compiled_cull_ms'], '.1f'):>9} {f(r['compiled_sort_ms'], '.1f'):>8} "
+                  f"{f(r['compiled_cull_over_sort'], '.2f'):>9}", flush=True)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1)

@@ -189,13 +189,7 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
         return keep.astype(np.uint32), np.ascontiguousarray(p_cam[keep, 2], np.float32)
     r = camera.rotation.astype(np.float32)
     t = camera.translation.astype(np.float32)
-    planes = []  # ((z coefficient, radius coefficient) upper, (...) lower, (lo, hi) slopes)
-    for f, c, size in ((camera.fx, camera.cx, camera.width), (camera.fy, camera.cy, camera.height)):
-        lo, hi = -c / f, (size - c) / f
-        n_hi, n_lo = np.sqrt(1.0 + hi * hi), np.sqrt(1.0 + lo * lo)
-        planes.append((np.float32(hi + n_hi * MARGIN_PX / f), np.float32(n_hi * scale),
-                       np.float32(lo - n_lo * MARGIN_PX / f), np.float32(-n_lo * scale),
-                       np.float32(lo), np.float32(hi)))
+    planes = plane_constants(camera, scale)
     near32 = near_threshold(near, np.float32)
     block = min(CULL_BLOCK, max(n, 1))
     z, v, w, u = (np.empty(block, np.float32) for _ in range(4))
@@ -235,9 +229,7 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
             for axis in range(2):
                 p[:, axis] = _row_at(data.xyz, start + check, r[axis], t[axis])
             p[:, 2] = zb[check]
-            bound = peak_alpha_bound(p, data.max_scale[start + check] * np.float32(scale),
-                                     data.opacities[start + check], camera, antialias)
-            kb[check[bound < ALPHA_MIN]] = False
+            kb[check[~peak_keeps(p, start + check, data, camera, antialias, scale)]] = False
             ok = kb[idx]
             idx, zk = idx[ok], zk[ok]
         out_idx.append((idx + start).astype(np.uint32))
@@ -245,6 +237,31 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
     if not out_idx:
         return np.zeros(0, np.uint32), np.zeros(0, np.float32)
     return np.concatenate(out_idx), np.concatenate(out_z)
+
+
+def plane_constants(camera: Camera, scale: float = 1.0) -> np.ndarray:
+    """(2, 6) float32 per image axis (x, y): ``a_hi, b_hi, a_lo, b_lo, lo, hi``.  A splat at
+    camera-space ``(v, z)`` on that axis with world radius ``rad`` passes the side planes when
+    ``v <= (rad * b_hi) + (z * a_hi)`` and ``v >= (rad * b_lo) + (z * a_lo)`` (float32, in that
+    order: :func:`cull_visible`'s rearranged plane test); its centre projects inside the image
+    when ``v <= z * hi`` and ``v >= z * lo``."""
+    out = np.empty((2, 6), np.float32)
+    for axis, (f, c, size) in enumerate(((camera.fx, camera.cx, camera.width),
+                                         (camera.fy, camera.cy, camera.height))):
+        lo, hi = -c / f, (size - c) / f
+        n_hi, n_lo = np.sqrt(1.0 + hi * hi), np.sqrt(1.0 + lo * lo)
+        out[axis] = (hi + n_hi * MARGIN_PX / f, n_hi * scale, lo - n_lo * MARGIN_PX / f,
+                     -n_lo * scale, lo, hi)
+    return out
+
+
+def peak_keeps(p: np.ndarray, rows: np.ndarray, data: "CullData", camera: Camera,
+               antialias: bool, scale: float) -> np.ndarray:
+    """(K,) bool: the splats ``rows`` of ``data`` at camera-space float32 points ``p`` (K, 3)
+    that the peak alpha bound keeps (:func:`peak_alpha_bound` not below 1/255)."""
+    bound = peak_alpha_bound(p, data.max_scale[rows] * np.float32(scale), data.opacities[rows],
+                             camera, antialias)
+    return ~(bound < ALPHA_MIN)
 
 
 def view_axis(xyz: np.ndarray, start: int, stop: int, r: np.ndarray, t, out: np.ndarray,

@@ -25,8 +25,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import cull_kernel
 from .camera import Camera
-from .cull import CULL_BLOCK, MARGIN_PX, CullData, cull_visible, view_axis
+from .cull import (CULL_BLOCK, MARGIN_PX, CullData, cull_visible, peak_keeps, plane_constants,
+                   view_axis)
+from .project import near_threshold
 from .lens import WRAP_FLAG
 from .lod.build import morton_order
 from .sort import depth_keys
@@ -42,6 +45,10 @@ GROUP = 16
 #: pass instead (gathering the boundary rows and the accepted runs' calls then cost more than
 #: they save; measured on the 0.1M scale scene from close by: 44% boundary, 1.3x slower).
 WHOLE_SHARE = 0.35
+#: From this culled view on, the compiled kernel (:mod:`splatgl.cull_kernel`, when numba is
+#: installed) is loaded in the background: a one-frame render never pays its import, a path or
+#: the viewer switch to it a few frames in.
+KERNEL_FROM_VIEW = 2
 #: Relative float32 rounding margin of the chunk tests: a chunk is accepted or rejected only
 #: when its splats' float32 depths and plane tests cannot fall on the other side (the per-splat
 #: float32 values are within a few ulp, 6e-8, of the exact ones; this is 1000x that).
@@ -141,6 +148,12 @@ class ChunkedCull:
                                   np.logical_and.reduceat(self.chunks.plain, g))
         self._keys = np.empty(self.index.size, np.uint64)
         self._z, self._tmp = np.empty(CULL_BLOCK, np.float32), np.empty(CULL_BLOCK, np.float32)
+        self.views = 0
+        #: Use the compiled kernel: None as :func:`splatgl.cull_kernel.policy` says (by default
+        #: once it is loaded), False never, True waiting for it to load.
+        self.compiled: bool | None = None
+        #: Which path the last view took: "compiled" or "numpy".
+        self.last_path = "numpy"
 
     @classmethod
     def from_scene(cls, scene) -> "ChunkedCull":
@@ -159,6 +172,8 @@ class ChunkedCull:
             raise ValueError("visible_keys takes pinhole and orthographic cameras; lens cameras "
                              "take splatgl.lens_cull.lens_visible_keys")
         n_chunks = self.starts.size - 1
+        self.views += 1
+        self.last_path = "numpy"
         if camera.is_orthographic or antialias or not n_chunks:
             # orthographic: cull_visible's own path; antialiasing: the peak bound with the
             # compensation factor runs on every splat
@@ -175,6 +190,10 @@ class ChunkedCull:
         test = np.zeros(n_chunks, bool)
         test[ids[~(accept_c | reject_c)]] = True
         sizes = np.diff(self.starts)
+        kern = self._kernel()
+        if kern is not None:
+            self.last_path = "compiled"
+            return self._compiled_keys(kern, camera, near, scale, accept, test, sizes)
         if sizes[test].sum() > WHOLE_SHARE * self.index.size:  # mostly boundary: one pass
             idx, z = cull_visible(self.data, camera, near, antialias, scale)
             return depth_keys(z, self.index[idx], self._keys[:idx.size])
@@ -189,6 +208,41 @@ class ChunkedCull:
             depth_keys(z, self.index[rows[idx]], self._keys[out:out + idx.size])
             out += idx.size
         return self._keys[:out]
+
+    def _kernel(self):
+        """The compiled kernel if this view should use it, else None (see :attr:`compiled`)."""
+        mode = self.compiled
+        if mode is None:
+            mode = {"auto": None, "off": False, "wait": True}[cull_kernel.policy()]
+        if mode is False:
+            return None
+        if mode or self.views >= KERNEL_FROM_VIEW:
+            cull_kernel.request()
+        return cull_kernel.kernel(wait=bool(mode))
+
+    def _compiled_keys(self, kern, camera: Camera, near: float, scale: float,
+                       accept: np.ndarray, test: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+        """:meth:`visible_keys` through the compiled pass over the chunks: accepted chunks'
+        depths, the boundary chunks' per-row tests, then the peak bound (NumPy, float64) on
+        the rows it applies to."""
+        flags = accept.astype(np.int8)
+        flags[test] = 2
+        n_test = int(sizes[test].sum())
+        check_rows = np.empty(n_test, np.int64)
+        check_p = np.empty((n_test, 3), np.float32)
+        xyz = self.data.xyz
+        n, c = kern(xyz[0], xyz[1], xyz[2], self.data.radius, self.data.faint, self.index,
+                    self.starts, flags, camera.rotation.astype(np.float32),
+                    camera.translation.astype(np.float32), plane_constants(camera, scale),
+                    near_threshold(near, np.float32), self._keys.view(np.uint32),
+                    self._keys.view(np.float32), check_rows, check_p)
+        if c:
+            rows, p = check_rows[:c], check_p[:c]
+            keep = peak_keeps(p, rows, self.data, camera, False, scale)
+            rows = rows[keep]
+            depth_keys(p[keep, 2], self.index[rows], self._keys[n:n + rows.size])
+            n += rows.size
+        return self._keys[:n]
 
     def key_buffer(self) -> np.ndarray:
         """(M,) uint64 buffer the culls write keys into (one per drawable splat, reused)."""

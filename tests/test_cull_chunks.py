@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from splatgl import cull_chunks, lens
+from splatgl import cull_chunks, cull_kernel, lens
 from splatgl.camera import Camera, look_at
 from splatgl.cull import CullData, cull
 from splatgl.cull_chunks import ChunkedCull, keys_order, keys_pairs
@@ -52,18 +52,34 @@ def _cameras():
             Camera.from_fov(640, 360, 30.0, scaled), Camera.orthographic(200, 150, 40.0, far)]
 
 
-@pytest.mark.parametrize("whole_share", [1.0, 0.0], ids=["chunks", "one-pass"])
+def _need_kernel():
+    """The compiled cull, loaded (the test extra installs numba; a load that fails is a bug)."""
+    if not cull_kernel.installed():
+        pytest.skip("numba not installed (pip install '.[fast]')")
+    assert cull_kernel.kernel(wait=True) is not None, "numba is installed but the kernel failed to load"
+
+
+PATHS = {"chunks": (1.0, False), "one-pass": (0.0, False), "compiled": (1.0, True)}
+
+
+@pytest.mark.parametrize("path", PATHS)
 @pytest.mark.parametrize("antialias", [False, True])
 @pytest.mark.parametrize("cam_index", range(5))
-def test_chunked_cull_keeps_what_the_float64_cull_keeps(cam_index, antialias, whole_share,
-                                                        monkeypatch):
-    """Through the chunks (boundary rows never handed to the one-pass fallback) and through
-    the fallback."""
+def test_chunked_cull_keeps_what_the_float64_cull_keeps(cam_index, antialias, path, monkeypatch):
+    """Through the chunks (boundary rows never handed to the one-pass fallback), through the
+    fallback, and through the compiled pass (numba; antialiasing and orthographic cameras take
+    the NumPy path there too)."""
+    whole_share, compiled = PATHS[path]
+    if compiled:
+        _need_kernel()
     monkeypatch.setattr(cull_chunks, "WHOLE_SHARE", whole_share)
     points, max_scale, opac = _clustered(30_000, 3 + cam_index)
     camera = _cameras()[cam_index]
     chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=32, group=8)
+    chunks.compiled = compiled
     got = np.sort(chunks.visible_keys(camera, 0.05, antialias, camera.scale))
+    assert chunks.last_path == ("compiled" if compiled and not antialias
+                                and not camera.is_orthographic else "numpy")
     want = _want_keys(points, max_scale, opac, camera, 0.05, antialias)
     assert 0 < want.size < points.shape[0]
     np.testing.assert_array_equal(got, want)
@@ -87,12 +103,15 @@ def test_chunked_cull_property(seed, eye, target, fov, cx, near, scale):
     camera = dataclasses.replace(Camera.from_fov(300, 200, fov, pose), cx=cx)
     points, max_scale, opac = _clustered(4000, seed)
     chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=16, group=4)
+    want = _want_keys(points, max_scale, opac, camera, near)
     share, cull_chunks.WHOLE_SHARE = cull_chunks.WHOLE_SHARE, 1.0  # always through the chunks
     try:
-        got = np.sort(chunks.visible_keys(camera, near, False, camera.scale))
+        for compiled in ([False, True] if cull_kernel.installed() else [False]):
+            chunks.compiled = compiled
+            got = np.sort(chunks.visible_keys(camera, near, False, camera.scale))
+            np.testing.assert_array_equal(got, want)
     finally:
         cull_chunks.WHOLE_SHARE = share
-    np.testing.assert_array_equal(got, _want_keys(points, max_scale, opac, camera, near))
 
 
 def test_keys_order_and_pairs_feed_every_sort_as_before():
@@ -174,8 +193,10 @@ def test_real_scene_orders_unchanged(shared_scenes, name):
         cam = base.with_pose(orbit(centre, dist * factor, azimuth, 20.0))
         anchored = anchored_camera(cam, scene.anchor)
         idx, z = cull_visible(data, anchored, near)
-        np.testing.assert_array_equal(keys_order(chunks.visible_keys(anchored, near)),
-                                      depth_sort(z, idx))
+        for compiled in ([False, True] if cull_kernel.installed() else [False]):
+            chunks.compiled = compiled
+            np.testing.assert_array_equal(keys_order(chunks.visible_keys(anchored, near)),
+                                          depth_sort(z, idx))
         for projection in ("fisheye", "equirectangular"):
             lcam = anchored_camera(lens.with_projection(cam, projection), scene.anchor)
             p_cam = to_camera(scene.relative_means, lcam)
@@ -184,3 +205,35 @@ def test_real_scene_orders_unchanged(shared_scenes, name):
             depth, keep = lens.lens_order(p_cam, kept, reach, lcam)
             np.testing.assert_array_equal(keys_order(lens_visible_keys(chunks, lcam, near)),
                                           depth_sort(depth, keep))
+
+
+def test_compiled_cull_is_loaded_in_the_background_from_the_second_view(monkeypatch):
+    """Default policy: the first view starts nothing (a one-frame render never imports
+    numba); from the second view on the kernel is requested; views take the NumPy path until
+    it has loaded and the compiled one after; "off" never takes it; an unknown policy is
+    refused."""
+    _need_kernel()
+    loaded = cull_kernel.kernel()
+    points, max_scale, opac = _clustered(5000, 7)
+    camera = _cameras()[1]
+    requests = []
+    monkeypatch.setattr(cull_kernel, "request", lambda: requests.append(1))
+    monkeypatch.setattr(cull_kernel, "kernel", lambda wait=False: None)  # not loaded yet
+    chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=16, group=4)
+    first = np.sort(chunks.visible_keys(camera, 0.05))
+    assert chunks.last_path == "numpy" and not requests
+    second = np.sort(chunks.visible_keys(camera, 0.05))
+    assert chunks.last_path == "numpy" and len(requests) == 1
+    monkeypatch.setattr(cull_kernel, "kernel", lambda wait=False: loaded)  # now loaded
+    third = np.sort(chunks.visible_keys(camera, 0.05))
+    assert chunks.last_path == "compiled"
+    np.testing.assert_array_equal(first, second)
+    np.testing.assert_array_equal(first, third)
+    cull_kernel.set_policy("off")
+    try:
+        chunks.visible_keys(camera, 0.05)
+        assert chunks.last_path == "numpy"
+    finally:
+        cull_kernel.set_policy("auto")
+    with pytest.raises(ValueError, match="policy must be one of auto, off, wait, got 'fast'"):
+        cull_kernel.set_policy("fast")

@@ -12,12 +12,12 @@ the quad path's own.  NumPy twin of the weighting: :func:`blended_scene`.
 from __future__ import annotations
 
 import time
-import threading
 from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 
+from ..background import Background
 from ..camera import Camera
 from ..cull import CullData, cull_visible
 from ..cull_chunks import ChunkedCull, keys_order, keys_pairs
@@ -40,30 +40,6 @@ SKIP_NODES_PER_LEAF = 0.75
 #: From this many nodes per leaf on, the leaves' chunked cull is built in the background, ready
 #: for the switch (on the 1M scene the cut reaches 0.5 about 1.6x farther out than the switch).
 PREFETCH_NODES_PER_LEAF = 0.5
-
-
-class _Background:
-    """``fn(*args)`` on a daemon thread (NumPy releases the GIL in its sorts and reductions, so
-    the work overlaps the frames drawn meanwhile; a daemon does not hold up Ctrl-C or exit);
-    :meth:`result` waits for it and re-raises its exception."""
-
-    def __init__(self, fn, *args):
-        self._value = self._error = None
-        self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True,
-                                        name="splatgl-background")
-        self._thread.start()
-
-    def _run(self, fn, args) -> None:
-        try:
-            self._value = fn(*args)
-        except BaseException as exc:  # handed to the caller of result()
-            self._error = exc
-
-    def result(self):
-        self._thread.join()
-        if self._error is not None:
-            raise self._error
-        return self._value
 
 
 @dataclass(frozen=True)
@@ -132,7 +108,7 @@ class LodRenderer(QuadRenderer):
         #: Builds the leaves' chunked cull in the background once a view's cut comes near the
         #: switch (PREFETCH_NODES_PER_LEAF), so that the view that switches to the leaves does
         #: not stall on it (about 1 s at 3M splats), and far views never pay for it.
-        self._leaf_build: _Background | None = None
+        self._leaf_build: Background | None = None
 
     def visible_order(self, camera: Camera) -> np.ndarray:
         """Cut, cull and sort for ``camera``: (M,) uint32 node rows, front to back.
@@ -163,7 +139,7 @@ class LodRenderer(QuadRenderer):
             ids, weights, per_leaf = threshold_cut(self.tree, self.cut_data, camera, self.lod)
             if per_leaf >= PREFETCH_NODES_PER_LEAF and self._leaf_build is None:
                 leaves = self._cull_data.subset(slice(0, self.tree.level_size(0)))
-                self._leaf_build = _Background(ChunkedCull, leaves)
+                self._leaf_build = Background(ChunkedCull, leaves, name="splatgl-lod-leaves")
         t1 = time.perf_counter()
         if ids is None:
             self.skip_within = max(self.skip_within or 0.0, dist)

@@ -1,0 +1,70 @@
+"""Optional compiled cull: the chunked cull's per-row work in one pass (numba, the ``fast``
+extra), loaded in the background so that nothing waits for it.
+
+With NumPy the chunked cull pays a few microseconds per call, and a view from inside a scene
+splits into hundreds of runs of kept chunks plus a gathered per-row test of the boundary
+chunks, so at 1M splats its cull costs more than the sort (docs/scale.md).  One compiled loop
+over the chunks does the same float32 operations without the calls.  Importing numba takes
+about 0.4 s and compiling the kernel the first time a few seconds (then numba's on-disk cache),
+so :func:`request` starts that on a daemon thread and :func:`kernel` hands the kernel out only
+once it is ready: until then, and wherever numba is missing, the NumPy path runs.  Both give
+the same keys, bit for bit (tests/test_cull_chunks.py), so switching between them mid-session
+changes no image.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+
+from .background import Background
+
+_loader: Background | None = None
+#: How chunked culls that do not say otherwise (``ChunkedCull.compiled`` None) use the kernel:
+#: "auto" once loaded (from the second view on), "off" never, "wait" always (waiting for the
+#: load).  Set with :func:`set_policy` (the benchmark measures both paths this way).
+POLICIES = ("auto", "off", "wait")
+_policy = "auto"
+
+
+def installed() -> bool:
+    """numba is importable (the ``fast`` extra)."""
+    return importlib.util.find_spec("numba") is not None
+
+
+def _load():
+    from . import _cull_numba
+
+    _cull_numba.warm_up()
+    return _cull_numba.chunk_pass
+
+
+def request() -> None:
+    """Start loading the kernel in the background (once per process; nothing without numba)."""
+    global _loader
+    if _loader is None and installed():
+        _loader = Background(_load, name="splatgl-cull-kernel")
+
+
+def kernel(wait: bool = False):
+    """The compiled ``chunk_pass`` if it is loaded (``wait``: after waiting for the load that
+    :func:`request` started, starting it if needed), else None; a failed load gives None."""
+    if wait:
+        request()
+    if _loader is None or not (wait or _loader.done()):
+        return None
+    try:
+        return _loader.result()
+    except Exception:  # a broken numba install: the NumPy path serves
+        return None
+
+
+def set_policy(policy: str) -> None:
+    """Set the process-wide policy (one of :data:`POLICIES`)."""
+    global _policy
+    if policy not in POLICIES:
+        raise ValueError(f"cull kernel policy must be one of {', '.join(POLICIES)}, got {policy!r}")
+    _policy = policy
+
+
+def policy() -> str:
+    return _policy
