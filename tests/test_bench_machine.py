@@ -26,8 +26,12 @@ def test_machine_info_from_cpuinfo_text():
         "AMD EPYC 7B13", "avx2", "llvmpipe (LLVM 15.0.6, 256 bits)")
     assert info["cores"] >= 1
     assert machine_info("x", XEON)["simd"] == "avx512"
+    from splatgl import cull_kernel
+
+    cull = "compiled (numba)" if cull_kernel.installed() else "numpy"
+    assert info["cull"] == cull
     assert describe(info) == (f"machine: AMD EPYC 7B13 (avx2), {info['cores']} cores, "
-                              "GL renderer llvmpipe (LLVM 15.0.6, 256 bits)")
+                              f"GL renderer llvmpipe (LLVM 15.0.6, 256 bits), cull {cull}")
 
 
 def test_this_machine_is_described():

@@ -42,7 +42,11 @@ def test_measure_file_rows(tiny_file):
     assert 60.0 < row.compact_psnr < 200.0  # changed, within the stated cost (tests/test_storage.py)
     assert 0 < row.visible <= 3000 and row.tile_frame_ms > 0 and row.quad_frame_ms > 0
     assert set(row.stages_ms) == {"cull", "sort", "upload", "prepass", "draw", "readback"}
+    from splatgl import cull_kernel
+
+    assert row.cull_compiled is cull_kernel.installed()  # loaded before the timed frames
     assert "3,000" in table([row])
+    assert ("cull: the compiled kernel (numba)" if row.cull_compiled else "cull: NumPy") in table([row])
 
 
 def test_lod_bench_rows(tiny_file):

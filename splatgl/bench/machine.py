@@ -53,12 +53,16 @@ def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
         cores = os.cpu_count() or 1
+    from .. import cull_kernel
+
     return {"cpu": model or platform.processor() or platform.machine() or "?",
             "simd": simd_level(flags), "cores": cores,
-            "gl_renderer": gl_renderer or "?", "platform": platform.platform(terse=True)}
+            "gl_renderer": gl_renderer or "?", "platform": platform.platform(terse=True),
+            "cull": "compiled (numba)" if cull_kernel.installed() else "numpy"}
 
 
 def describe(info: dict) -> str:
-    """One line: ``machine: AMD EPYC (avx2), 2 cores, GL renderer llvmpipe (...)``."""
+    """One line: ``machine: AMD EPYC (avx2), 2 cores, GL renderer llvmpipe (...), cull numpy``
+    (the cull path matters to the cull figures: the compiled one where numba is installed)."""
     return (f"machine: {info['cpu']} ({info['simd']}), {info['cores']} cores, "
-            f"GL renderer {info['gl_renderer']}")
+            f"GL renderer {info['gl_renderer']}, cull {info.get('cull', '?')}")

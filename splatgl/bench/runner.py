@@ -153,6 +153,9 @@ class _Runner:
 def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptions,
                 base: RenderSettings = RenderSettings(), progress: Progress | None = None) -> list[BenchRow]:
     """All rows for one scene.  The reference images of the error frames are computed once."""
+    from .. import cull_kernel
+
+    cull_kernel.kernel(wait=True)  # where installed, every timed row takes the compiled cull
     cameras = orbit_path(scene, options)
     warm = orbit_path(scene, BenchOptions(options.width, options.height, 1, options.orbit_step), start=-3)[0]
     err_frames = [i for i in options.error_frames if i < len(cameras)] or [len(cameras) - 1]

@@ -88,6 +88,7 @@ class ScaleRow:
     gpu_sort_identical: bool | None = None
     compact_bytes_per_splat: float | None = None
     compact_psnr: float | None = None
+    cull_compiled: bool = False  # the cull ran the compiled kernel (numba installed)
 
 
 def scene_file(n: int, sh_degree: int, cache: Path | None = None) -> Path:
@@ -146,6 +147,10 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
 
     renderer = Renderer()  # the context first: its driver memory is not the scene's
     _modules()  # and every format module imported: their code is not the scene either
+    from .. import cull_kernel
+    # the compiled cull (where numba is installed) loaded before anything is measured: its
+    # import is not the scene's memory, and every timed frame takes the same cull path
+    compiled = cull_kernel.kernel(wait=True) is not None
     base = _rss_mb()
     t0 = time.perf_counter()
     scene = load_scene(path, progress=lambda *a: None)
@@ -199,7 +204,7 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
         rows.append(ScaleRow(scene.count, scene.sh_degree, width, height, load_s,
                              path.stat().st_size / 1e6, decoded, rss_load, rss_peak,
                              quad.buffers.nbytes / scene.count, visible, stages, frame, tile_ms,
-                             sort_gpu, identical))
+                             sort_gpu, identical, cull_compiled=compiled))
     quad.release()
     if options.compact:
         rows = _with_compact(renderer, scene, last_views, rows)

@@ -64,6 +64,10 @@ def table(rows: list[ScaleRow]) -> str:
             f"{r.stages_ms['prepass']:>7.1f} {r.stages_ms['draw']:>8.1f} {r.quad_frame_ms:>8.1f} "
             f"{_f(r.tile_frame_ms, '8.1f'):>8} {_f(r.gpu_sort_identical, ''):>4} "
             f"{_f(r.compact_bytes_per_splat, '9.0f'):>9} {_f(r.compact_psnr, '8.1f'):>8}")
+    if rows:
+        out.append("cull: " + ("the compiled kernel (numba)" if all(r.cull_compiled for r in rows)
+                               else "NumPy" if not any(r.cull_compiled for r in rows)
+                               else "compiled on some rows, NumPy on others"))
     if any(r.compact_bytes_per_splat for r in rows):
         out.append("cmp: --gpu-storage compact, its GPU bytes per splat and the PSNR (dB) of its "
                    "last frame against the measured storage's")
