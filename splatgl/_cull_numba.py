@@ -12,6 +12,21 @@ import numba
 import numpy as np
 
 
+@numba.njit(inline="always", fastmath=False)
+def _axis(xi, yi, zi, a, b, c, t):
+    """One camera axis ``((x a + y b) + z c) + t`` in float32, :func:`splatgl.cull.view_axis`'s order."""
+    d = xi * a
+    d = d + yi * b
+    d = d + zi * c
+    return d + t
+
+
+@numba.njit(inline="always", fastmath=False)
+def _between_planes(u, d, rad, a_hi, b_hi, a_lo, b_lo):
+    """The side-plane test of one image axis (:func:`splatgl.cull.plane_constants`)."""
+    return u <= rad * b_hi + d * a_hi and u >= rad * b_lo + d * a_lo
+
+
 @numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
 def chunk_pass(x, y, z, radius, faint, index, starts, flags, rot, trans, planes, near32,
                keys_u32, keys_f32, check_rows, check_p):
@@ -37,37 +52,21 @@ def chunk_pass(x, y, z, radius, faint, index, starts, flags, rot, trans, planes,
         a, b = starts[k], starts[k + 1]
         if f == 1:
             for i in range(a, b):
-                d = x[i] * r20
-                d = d + y[i] * r21
-                d = d + z[i] * r22
-                d = d + t2
+                d = _axis(x[i], y[i], z[i], r20, r21, r22, t2)
                 keys_u32[2 * n] = index[i]
                 keys_f32[2 * n + 1] = d
                 n += 1
             continue
         for i in range(a, b):
-            d = x[i] * r20
-            d = d + y[i] * r21
-            d = d + z[i] * r22
-            d = d + t2
+            d = _axis(x[i], y[i], z[i], r20, r21, r22, t2)
             if not d > near32:
                 continue
             rad = radius[i]
-            u = x[i] * r00
-            u = u + y[i] * r01
-            u = u + z[i] * r02
-            u = u + t0
-            if not u <= rad * bx_hi + d * ax_hi:
+            u = _axis(x[i], y[i], z[i], r00, r01, r02, t0)
+            if not _between_planes(u, d, rad, ax_hi, bx_hi, ax_lo, bx_lo):
                 continue
-            if not u >= rad * bx_lo + d * ax_lo:
-                continue
-            v = x[i] * r10
-            v = v + y[i] * r11
-            v = v + z[i] * r12
-            v = v + t1
-            if not v <= rad * by_hi + d * ay_hi:
-                continue
-            if not v >= rad * by_lo + d * ay_lo:
+            v = _axis(x[i], y[i], z[i], r10, r11, r12, t1)
+            if not _between_planes(v, d, rad, ay_hi, by_hi, ay_lo, by_lo):
                 continue
             inside = u <= d * x_hi and u >= d * x_lo and v <= d * y_hi and v >= d * y_lo
             if inside and not faint[i]:
