@@ -1,15 +1,26 @@
-"""The chunked cull's per-row work as one compiled pass (numba); imported only through
+"""The chunked cull's per-view work as one compiled pass (numba); imported only through
 :mod:`splatgl.cull_kernel`, which keeps numba optional.
 
 Every float32 operation is the NumPy path's own, in the same order (:func:`splatgl.cull.view_axis`
 for the depths and camera-space coordinates, :func:`splatgl.cull.plane_constants`' tests), with
 no fast-math, so the kept rows and the depth bits are the same (tested against the NumPy path).
+The chunk classification only skips work (conservative either way), and the float64 peak bound
+hands the rows it cannot call for certain back to NumPy, so those stay the same too.
 """
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
+
+from .constants import ALPHA_MIN, LOW_PASS
+
+#: A compiled peak-alpha bound this close to 1/255 (relative) is not trusted to fall on the
+#: same side as NumPy's (exp and the order of a few float64 operations may differ in the last
+#: bits): such rows go back to :func:`splatgl.cull.peak_keeps`.
+PEAK_UNSURE = 1e-6
 
 
 @numba.njit(inline="always", fastmath=False)
@@ -27,14 +38,77 @@ def _between_planes(u, d, rad, a_hi, b_hi, a_lo, b_lo):
     return u <= rad * b_hi + d * a_hi and u >= rad * b_lo + d * a_lo
 
 
+@numba.njit(inline="always", fastmath=False)
+def _sphere_class(sph, k, rot, t, view, sides):
+    """:meth:`splatgl.cull_chunks.Spheres.classify` of sphere ``k`` (a row of ``Spheres.packed``)
+    in float64: 1 accept, 0 reject, 2 test its splats."""
+    cx, cy, cz = sph[k, 0], sph[k, 1], sph[k, 2]
+    x = rot[0, 0] * cx + rot[0, 1] * cy + rot[0, 2] * cz + t[0]
+    y = rot[1, 0] * cx + rot[1, 1] * cy + rot[1, 2] * cz + t[1]
+    z = rot[2, 0] * cx + rot[2, 1] * cy + rot[2, 2] * cz + t[2]
+    s, near, t_norm, scale = view[0], view[1], view[2], view[3]
+    rc = sph[k, 3] * s
+    reach = sph[k, 4] * scale
+    slack = 1e-4 * (math.sqrt(x * x + y * y + z * z) + rc
+                    + s * math.sqrt(cx * cx + cy * cy + cz * cz) + t_norm)
+    if z + rc < near - slack:
+        return 0
+    accept = sph[k, 5] != 0.0 and z - rc > near + slack
+    for axis in range(2):
+        c = x if axis == 0 else y
+        hi, lo, n_hi, n_lo = sides[axis, 0], sides[axis, 1], sides[axis, 2], sides[axis, 3]
+        a_hi, a_lo, h_hi, h_lo = sides[axis, 4], sides[axis, 5], sides[axis, 6], sides[axis, 7]
+        if c - a_hi * z - rc * h_hi > n_hi * reach + slack * h_hi:
+            return 0
+        if a_lo * z - c - rc * h_lo > n_lo * reach + slack * h_lo:
+            return 0
+        accept = accept and (c - hi * z) / n_hi < -(rc + slack) and (lo * z - c) / n_lo < -(rc + slack)
+    return 1 if accept else 2
+
+
+@numba.njit(inline="always", fastmath=False)
+def _peak_bound(u, v, d, max_scale, opacity, peak):
+    """:func:`splatgl.cull.peak_alpha_bound` (perspective, no antialiasing) of one splat at
+    camera-space float32 ``(u, v, d)``, d > 0; ``peak`` = fx, fy, cx, cy, width, height, the
+    Jacobian's clamps on x/z and y/z, and the radius scale (float32 in NumPy's product)."""
+    fx, fy, px, py = peak[0], peak[1], peak[2], peak[3]
+    x, y, z = np.float64(u), np.float64(v), np.float64(d)
+    xc = min(max(x / z, -peak[6]), peak[6])
+    yc = min(max(y / z, -peak[7]), peak[7])
+    jf2 = (fx * fx * (1 + xc * xc) + fy * fy * (1 + yc * yc)) / (z * z)
+    pu, pv = fx * x / z + px, fy * y / z + py
+    ms = np.float64(max_scale * np.float32(peak[8]))
+    lam = jf2 * ms * ms + LOW_PASS
+    nu = min(max(np.rint(pu - 0.5), 0.0), peak[4] - 1) + 0.5
+    nv = min(max(np.rint(pv - 0.5), 0.0), peak[5] - 1) + 0.5
+    d2 = (pu - nu) ** 2 + (pv - nv) ** 2
+    return np.float64(opacity) * math.exp(-0.5 * d2 / lam)
+
+
 @numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
-def chunk_pass(x, y, z, radius, faint, index, starts, flags, rot, trans, planes, near32,
-               keys_u32, keys_f32, check_rows, check_p):
-    """Per chunk ``k`` by ``flags[k]``: 0 skip, 1 keep every row (depth only), 2 the per-row
-    near and side-plane tests.  Kept rows' keys go to ``keys_u32[2 n] = index`` and
-    ``keys_f32[2 n + 1] = z`` (two views of the uint64 key buffer), except tested rows whose
-    centre projects outside the image or that are faint: those go to ``check_rows`` /
-    ``check_p`` (camera-space x, y, z) for the peak alpha bound.  Returns (keys, checks)."""
+def view_pass(g0, g1, out0, groups, chunks, group, x, y, z, radius, faint, max_scale, opacity,
+              index, starts, rot64, trans64, view, sides, rot, trans, planes, near32, peak,
+              keys_u32, keys_f32, unsure_rows, unsure_p):
+    """A whole pinhole view of the chunked cull in one pass: each group of ``group`` chunks
+    classified (:func:`_sphere_class` on ``groups``), a boundary group's chunks one by one
+    (on ``chunks``); then per chunk by its class: an accepted chunk's rows take the depth
+    only, a tested chunk's rows the near and side-plane tests (:func:`splatgl.cull.cull_visible`'s
+    float32 operations) and, where the centre projects outside the image or the splat is faint,
+    the peak alpha bound.  Kept rows' keys go to ``keys_u32[2 n] = index`` and
+    ``keys_f32[2 n + 1] = z`` (two views of the uint64 key buffer); rows whose bound is within :data:`PEAK_UNSURE` of
+    1/255 go to ``unsure_rows`` / ``unsure_p`` (up to their size; counted past it).
+    Only the groups ``g0:g1`` and their rows, keys written from key ``out0`` on (two calls on
+    disjoint group ranges can run at once: it releases the GIL, and a range's keys never
+    outnumber its rows, so keys written from its first row stay inside it).
+    Returns (keys, unsure)."""
+    n_chunks = starts.size - 1
+    k0, k1 = g0 * group, min(n_chunks, g1 * group)
+    flags = np.zeros(k1 - k0, np.int8)
+    for g in range(g0, g1):
+        cls = _sphere_class(groups, g, rot64, trans64, view, sides)
+        lo, hi = g * group, min(n_chunks, (g + 1) * group)
+        for k in range(lo, hi):
+            flags[k - k0] = cls if cls != 2 else _sphere_class(chunks, k, rot64, trans64, view, sides)
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
     r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
@@ -43,10 +117,12 @@ def chunk_pass(x, y, z, radius, faint, index, starts, flags, rot, trans, planes,
                                               planes[0, 3], planes[0, 4], planes[0, 5])
     ay_hi, by_hi, ay_lo, by_lo, y_lo, y_hi = (planes[1, 0], planes[1, 1], planes[1, 2],
                                               planes[1, 3], planes[1, 4], planes[1, 5])
-    n = 0
+    lo_sure, hi_sure = ALPHA_MIN * (1.0 - PEAK_UNSURE), ALPHA_MIN * (1.0 + PEAK_UNSURE)
+    cap = unsure_rows.size
+    n = out0
     c = 0
-    for k in range(flags.size):
-        f = flags[k]
+    for k in range(k0, k1):
+        f = flags[k - k0]
         if f == 0:
             continue
         a, b = starts[k], starts[k + 1]
@@ -69,23 +145,30 @@ def chunk_pass(x, y, z, radius, faint, index, starts, flags, rot, trans, planes,
             if not _between_planes(v, d, rad, ay_hi, by_hi, ay_lo, by_lo):
                 continue
             inside = u <= d * x_hi and u >= d * x_lo and v <= d * y_hi and v >= d * y_lo
-            if inside and not faint[i]:
-                keys_u32[2 * n] = index[i]
-                keys_f32[2 * n + 1] = d
-                n += 1
-            else:
-                check_rows[c] = i
-                check_p[c, 0] = u
-                check_p[c, 1] = v
-                check_p[c, 2] = d
-                c += 1
-    return n, c
+            if not inside or faint[i]:
+                bound = _peak_bound(u, v, d, max_scale[i], opacity[i], peak)
+                if bound < lo_sure:
+                    continue
+                if bound <= hi_sure:  # too close to call here (a NaN bound is kept, as NumPy keeps it)
+                    if c < cap:
+                        unsure_rows[c] = i
+                        unsure_p[c, 0] = u
+                        unsure_p[c, 1] = v
+                        unsure_p[c, 2] = d
+                    c += 1
+                    continue
+            keys_u32[2 * n] = index[i]
+            keys_f32[2 * n + 1] = d
+            n += 1
+    return n - out0, c
 
 
 def warm_up() -> None:
     """Compile (or load from numba's cache) the kernel for the argument types the cull uses."""
     f4, u4 = np.zeros(2, np.float32), np.zeros(2, np.uint32)
-    chunk_pass(f4, f4, f4, f4, np.zeros(2, np.bool_), u4, np.array([0, 2], np.int64),
-               np.array([2], np.int8), np.eye(3, dtype=np.float32), np.zeros(3, np.float32),
-               np.zeros((2, 6), np.float32), np.float32(0.0), np.zeros(4, np.uint32),
-               np.zeros(4, np.float32), np.zeros(2, np.int64), np.zeros((2, 3), np.float32))
+    sph = np.zeros((1, 6))
+    view_pass(0, 1, 0, sph, sph, 16, f4, f4, f4, f4, np.zeros(2, np.bool_), f4, f4, u4,
+              np.array([0, 2], np.int64), np.eye(3), np.zeros(3), np.zeros(4), np.zeros((2, 8)),
+              np.eye(3, dtype=np.float32), np.zeros(3, np.float32), np.zeros((2, 6), np.float32),
+              np.float32(0.0), np.zeros(9), np.zeros(4, np.uint32), np.zeros(4, np.float32),
+              np.zeros(2, np.int64), np.zeros((2, 3), np.float32))

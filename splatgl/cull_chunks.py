@@ -27,6 +27,7 @@ import numpy as np
 
 from . import cull_kernel
 from .camera import Camera
+from .constants import JACOBIAN_CLAMP
 from .cull import (CULL_BLOCK, MARGIN_PX, CullData, cull_visible, peak_keeps, plane_constants,
                    view_axis)
 from .project import near_threshold
@@ -49,6 +50,12 @@ WHOLE_SHARE = 0.35
 #: installed) is loaded in the background: a one-frame render never pays its import, a path or
 #: the viewer switch to it a few frames in.
 KERNEL_FROM_VIEW = 2
+#: Room for the rows whose peak bound the compiled pass leaves to NumPy (within 1e-6 of 1/255:
+#: almost never any; more than this and the view takes the NumPy path).
+UNSURE_ROWS = 1024
+#: From this many drawable splats on, the compiled pass runs on two threads (half the groups
+#: each); below, starting the second costs about what it saves.
+SPLIT_ROWS = 1 << 17
 #: Relative float32 rounding margin of the chunk tests: a chunk is accepted or rejected only
 #: when its splats' float32 depths and plane tests cannot fall on the other side (the per-splat
 #: float32 values are within a few ulp, 6e-8, of the exact ones; this is 1000x that).
@@ -66,6 +73,15 @@ class Spheres:
     def take(self, ids: np.ndarray) -> "Spheres":
         return Spheres(self.centre[ids], self.r_centre[ids], self.r_max[ids], self.plain[ids])
 
+    @property
+    def packed(self) -> np.ndarray:
+        """(C, 6) float64 rows ``centre x, y, z, r_centre, r_max, plain`` (the compiled pass's
+        input; built on first use)."""
+        if getattr(self, "_packed", None) is None:
+            self._packed = np.column_stack([self.centre, self.r_centre, self.r_max,
+                                            self.plain]).astype(np.float64)
+        return self._packed
+
     def classify(self, camera: Camera, near: float, scale: float = 1.0
                  ) -> tuple[np.ndarray, np.ndarray]:
         """``(accept, reject)`` (C,) bool for a perspective ``camera`` anchored to the rows'
@@ -73,30 +89,42 @@ class Spheres:
         per-splat test; reject, none is."""
         rot, t = camera.rotation, camera.translation
         cam = self.centre @ rot.T + t                       # (C, 3) centres, camera space
-        s = float(np.linalg.norm(rot, axis=1).max())        # camera-space length per world unit
+        view, sides = sphere_constants(camera, near, scale)
+        s, _, t_norm, _ = view
         rc = self.r_centre * s
         reach = self.r_max * scale
         slack = ROUNDING * (np.linalg.norm(cam, axis=1) + rc + s * np.linalg.norm(self.centre, axis=1)
-                            + float(np.linalg.norm(t)))
+                            + t_norm)
         x, y, z = cam[:, 0], cam[:, 1], cam[:, 2]
         accept = self.plain & (z - rc > near + slack)
         reject = z + rc < near - slack
-        for coord, f, c, size in ((x, camera.fx, camera.cx, camera.width),
-                                  (y, camera.fy, camera.cy, camera.height)):
-            lo, hi = -c / f, (size - c) / f
-            n_hi, n_lo = np.hypot(1.0, hi), np.hypot(1.0, lo)
+        for coord, (hi, lo, n_hi, n_lo, a_hi, a_lo, h_hi, h_lo) in ((x, sides[0]), (y, sides[1])):
             # centres strictly inside the image's pyramid: every plane test and the peak
             # bound (centre inside the image, not faint) keep the splat
             accept &= (coord - hi * z) / n_hi < -(rc + slack)
             accept &= (lo * z - coord) / n_lo < -(rc + slack)
             # every splat beyond a side plane widened by the screen margin and its reach:
             # x - a z > n r for all splats, with a = s + n m / f (cull_visible's rearranged test)
-            a_hi, a_lo = hi + n_hi * MARGIN_PX / f, lo - n_lo * MARGIN_PX / f
-            reject |= (coord - a_hi * z - rc * np.hypot(1.0, a_hi)
-                       > n_hi * reach + slack * np.hypot(1.0, a_hi))
-            reject |= (a_lo * z - coord - rc * np.hypot(1.0, a_lo)
-                       > n_lo * reach + slack * np.hypot(1.0, a_lo))
+            reject |= coord - a_hi * z - rc * h_hi > n_hi * reach + slack * h_hi
+            reject |= a_lo * z - coord - rc * h_lo > n_lo * reach + slack * h_lo
         return accept & ~reject, reject
+
+
+def sphere_constants(camera: Camera, near: float, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per-view constants of :meth:`Spheres.classify` (float64): ``view = (s, near, |t|,
+    scale)`` with ``s`` the camera-space length of a world unit, and ``sides`` (2, 8), per
+    image axis ``hi, lo`` (the image edges' slopes), ``n_hi, n_lo`` (``hypot(1, slope)``),
+    ``a_hi, a_lo`` (the slopes widened by the screen margin) and ``hypot(1, a)`` of those."""
+    s = float(np.linalg.norm(camera.rotation, axis=1).max())
+    view = np.array([s, near, float(np.linalg.norm(camera.translation)), scale], np.float64)
+    sides = np.empty((2, 8), np.float64)
+    for axis, (f, c, size) in enumerate(((camera.fx, camera.cx, camera.width),
+                                         (camera.fy, camera.cy, camera.height))):
+        lo, hi = -c / f, (size - c) / f
+        n_hi, n_lo = np.hypot(1.0, hi), np.hypot(1.0, lo)
+        a_hi, a_lo = hi + n_hi * MARGIN_PX / f, lo - n_lo * MARGIN_PX / f
+        sides[axis] = hi, lo, n_hi, n_lo, a_hi, a_lo, np.hypot(1.0, a_hi), np.hypot(1.0, a_lo)
+    return view, sides
 
 
 class ChunkedCull:
@@ -149,6 +177,15 @@ class ChunkedCull:
         self._keys = np.empty(self.index.size, np.uint64)
         self._z, self._tmp = np.empty(CULL_BLOCK, np.float32), np.empty(CULL_BLOCK, np.float32)
         self.views = 0
+        #: Rows the compiled pass could not decide for certain (and their camera-space points),
+        #: one pair of buffers per half of the groups.
+        self._unsure = [(np.empty(UNSURE_ROWS, np.int64), np.empty((UNSURE_ROWS, 3), np.float32))
+                        for _ in range(2)]
+        #: First group of the second half (the compiled pass's two threads), or 0: one thread.
+        self._split = 0
+        if self.index.size >= SPLIT_ROWS:
+            group_rows = self.starts[np.arange(0, self.starts.size - 1, group)]
+            self._split = int(np.searchsorted(group_rows, self.index.size // 2))
         #: Use the compiled kernel: None as :func:`splatgl.cull_kernel.policy` says (by default
         #: once it is loaded), False never, True waiting for it to load.
         self.compiled: bool | None = None
@@ -179,6 +216,12 @@ class ChunkedCull:
             # compensation factor runs on every splat
             idx, z = cull_visible(self.data, camera, near, antialias, scale)
             return depth_keys(z, self.index[idx], self._keys[:idx.size])
+        kern = self._kernel()
+        if kern is not None:
+            keys = self._compiled_keys(kern, camera, near, scale)
+            if keys is not None:
+                self.last_path = "compiled"
+                return keys
         accept_g, reject_g = self.groups.classify(camera, near, scale)
         accept = np.repeat(accept_g, self.group)[:n_chunks]
         test_g = np.flatnonzero(~(accept_g | reject_g))
@@ -190,10 +233,6 @@ class ChunkedCull:
         test = np.zeros(n_chunks, bool)
         test[ids[~(accept_c | reject_c)]] = True
         sizes = np.diff(self.starts)
-        kern = self._kernel()
-        if kern is not None:
-            self.last_path = "compiled"
-            return self._compiled_keys(kern, camera, near, scale, accept, test, sizes)
         if sizes[test].sum() > WHOLE_SHARE * self.index.size:  # mostly boundary: one pass
             idx, z = cull_visible(self.data, camera, near, antialias, scale)
             return depth_keys(z, self.index[idx], self._keys[:idx.size])
@@ -220,28 +259,55 @@ class ChunkedCull:
             cull_kernel.request()
         return cull_kernel.kernel(wait=bool(mode))
 
-    def _compiled_keys(self, kern, camera: Camera, near: float, scale: float,
-                       accept: np.ndarray, test: np.ndarray, sizes: np.ndarray) -> np.ndarray:
-        """:meth:`visible_keys` through the compiled pass over the chunks: accepted chunks'
-        depths, the boundary chunks' per-row tests, then the peak bound (NumPy, float64) on
-        the rows it applies to."""
-        flags = accept.astype(np.int8)
-        flags[test] = 2
-        n_test = int(sizes[test].sum())
-        check_rows = np.empty(n_test, np.int64)
-        check_p = np.empty((n_test, 3), np.float32)
-        xyz = self.data.xyz
-        n, c = kern(xyz[0], xyz[1], xyz[2], self.data.radius, self.data.faint, self.index,
-                    self.starts, flags, camera.rotation.astype(np.float32),
-                    camera.translation.astype(np.float32), plane_constants(camera, scale),
-                    near_threshold(near, np.float32), self._keys.view(np.uint32),
-                    self._keys.view(np.float32), check_rows, check_p)
-        if c:
-            rows, p = check_rows[:c], check_p[:c]
-            keep = peak_keeps(p, rows, self.data, camera, False, scale)
-            rows = rows[keep]
-            depth_keys(p[keep, 2], self.index[rows], self._keys[n:n + rows.size])
-            n += rows.size
+    def _compiled_keys(self, kern, camera: Camera, near: float, scale: float
+                       ) -> np.ndarray | None:
+        """:meth:`visible_keys` through the compiled pass (:func:`splatgl._cull_numba.view_pass`),
+        with NumPy's peak bound on the few rows it leaves undecided; None in the unlikely case
+        that those overflow their buffer (the NumPy path then serves the view).
+
+        From :data:`SPLIT_ROWS` rows on, the groups are split in two halves by rows, the second
+        run on :func:`splatgl.cull_kernel.helper`'s thread at the same time, and its keys then
+        moved down behind the first half's."""
+        xyz, data = self.data.xyz, self.data
+        tx, ty = camera.tan_half_fov
+        peak = np.array([camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height,
+                         JACOBIAN_CLAMP * tx, JACOBIAN_CLAMP * ty, scale], np.float64)
+        view, sides = sphere_constants(camera, near, scale)
+        args = (self.groups.packed, self.chunks.packed, self.group, xyz[0], xyz[1], xyz[2],
+                data.radius, data.faint, data.max_scale, data.opacities, self.index, self.starts,
+                camera.rotation.astype(np.float64), camera.translation.astype(np.float64), view,
+                sides, camera.rotation.astype(np.float32), camera.translation.astype(np.float32),
+                plane_constants(camera, scale), near_threshold(near, np.float32), peak,
+                self._keys.view(np.uint32), self._keys.view(np.float32))
+        n_groups = self.groups.packed.shape[0]
+        split = self._split
+        pool = cull_kernel.helper() if split else None
+        unsure = self._unsure
+        if pool is None:
+            n, c = kern(0, n_groups, 0, *args, *unsure[0])
+            parts = [(0, n, c, unsure[0])]
+        else:
+            out1 = int(self.starts[split * self.group])
+            second = pool.submit(kern, split, n_groups, out1, *args, *unsure[1])
+            try:
+                n0, c0 = kern(0, split, 0, *args, *unsure[0])
+            finally:
+                n1, c1 = second.result()  # its writes must end before the buffer is reused
+            parts = [(0, n0, c0, unsure[0]), (out1, n1, c1, unsure[1])]
+        if any(c > UNSURE_ROWS for *_, c, _ in parts):
+            return None
+        n = parts[0][1]
+        if len(parts) == 2:
+            out1, n1 = parts[1][:2]
+            self._keys[n:n + n1] = self._keys[out1:out1 + n1]  # overlapping: NumPy buffers it
+            n += n1
+        for *_, c, (rows, p) in parts:
+            if c:
+                rows, p = rows[:c], p[:c]
+                keep = peak_keeps(p, rows, data, camera, False, scale)
+                rows = rows[keep]
+                depth_keys(p[keep, 2], self.index[rows], self._keys[n:n + rows.size])
+                n += rows.size
         return self._keys[:n]
 
     def key_buffer(self) -> np.ndarray:

@@ -15,10 +15,13 @@ changes no image.
 from __future__ import annotations
 
 import importlib.util
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 from .background import Background
 
 _loader: Background | None = None
+_helper: ThreadPoolExecutor | None = None
 #: How chunked culls that do not say otherwise (``ChunkedCull.compiled`` None) use the kernel:
 #: "auto" once loaded (from the second view on), "off" never, "wait" always (waiting for the
 #: load).  Set with :func:`set_policy` (the benchmark measures both paths this way).
@@ -35,7 +38,7 @@ def _load():
     from . import _cull_numba
 
     _cull_numba.warm_up()
-    return _cull_numba.chunk_pass
+    return _cull_numba.view_pass
 
 
 def request() -> None:
@@ -46,7 +49,7 @@ def request() -> None:
 
 
 def kernel(wait: bool = False):
-    """The compiled ``chunk_pass`` if it is loaded (``wait``: after waiting for the load that
+    """The compiled ``view_pass`` if it is loaded (``wait``: after waiting for the load that
     :func:`request` started, starting it if needed), else None; a failed load gives None."""
     if wait:
         request()
@@ -68,3 +71,12 @@ def set_policy(policy: str) -> None:
 
 def policy() -> str:
     return _policy
+
+
+def helper() -> ThreadPoolExecutor | None:
+    """One worker thread that runs part of a view's compiled pass while the calling thread runs
+    the rest (the kernel releases the GIL); None on a machine with a single core."""
+    global _helper
+    if _helper is None and len(os.sched_getaffinity(0)) > 1:
+        _helper = ThreadPoolExecutor(max_workers=1, thread_name_prefix="splatgl-cull")
+    return _helper

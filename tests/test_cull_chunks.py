@@ -59,7 +59,8 @@ def _need_kernel():
     assert cull_kernel.kernel(wait=True) is not None, "numba is installed but the kernel failed to load"
 
 
-PATHS = {"chunks": (1.0, False), "one-pass": (0.0, False), "compiled": (1.0, True)}
+PATHS = {"chunks": (1.0, False, False), "one-pass": (0.0, False, False),
+         "compiled": (1.0, True, False), "compiled-2-threads": (1.0, True, True)}
 
 
 @pytest.mark.parametrize("path", PATHS)
@@ -68,15 +69,17 @@ PATHS = {"chunks": (1.0, False), "one-pass": (0.0, False), "compiled": (1.0, Tru
 def test_chunked_cull_keeps_what_the_float64_cull_keeps(cam_index, antialias, path, monkeypatch):
     """Through the chunks (boundary rows never handed to the one-pass fallback), through the
     fallback, and through the compiled pass (numba; antialiasing and orthographic cameras take
-    the NumPy path there too)."""
-    whole_share, compiled = PATHS[path]
+    the NumPy path there too), on one thread and split over two."""
+    whole_share, compiled, split = PATHS[path]
     if compiled:
         _need_kernel()
     monkeypatch.setattr(cull_chunks, "WHOLE_SHARE", whole_share)
+    monkeypatch.setattr(cull_chunks, "SPLIT_ROWS", 1 if split else 10 ** 9)
     points, max_scale, opac = _clustered(30_000, 3 + cam_index)
     camera = _cameras()[cam_index]
     chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=32, group=8)
     chunks.compiled = compiled
+    assert bool(chunks._split) == split
     got = np.sort(chunks.visible_keys(camera, 0.05, antialias, camera.scale))
     assert chunks.last_path == ("compiled" if compiled and not antialias
                                 and not camera.is_orthographic else "numpy")
@@ -237,3 +240,32 @@ def test_compiled_cull_is_loaded_in_the_background_from_the_second_view(monkeypa
         cull_kernel.set_policy("auto")
     with pytest.raises(ValueError, match="policy must be one of auto, off, wait, got 'fast'"):
         cull_kernel.set_policy("fast")
+
+
+def test_compiled_cull_leaves_undecidable_peak_bounds_to_numpy(monkeypatch):
+    """Faint splats centred on pixel centres have a peak bound equal to their float32 opacity,
+    within 6e-8 of 1/255: too close for the compiled float64 bound to call (exp may differ from
+    NumPy's in the last bits), so it hands them to NumPy's bound and the keys stay the float64
+    cull's.  With no room for such rows the view takes the NumPy path instead."""
+    _need_kernel()
+    rng = np.random.default_rng(5)
+    camera = Camera(64, 48, 100.0, 100.0, 32.5, 24.5, np.eye(4))
+    # background: clustered splats in front of the camera; then three faint ones on centres
+    points, max_scale, opac = _clustered(3000, 11)
+    points[:, 2] += 12.0
+    o = np.float32(1 / 255)
+    while float(o) < 1 / 255:
+        o = np.nextafter(o, np.float32(1))
+    edge = np.array([[0.0, 0.0, 5.0], [0.1, -0.1, 10.0], [-0.2, 0.2, 20.0]], np.float32)
+    points = np.concatenate([points, edge])
+    max_scale = np.concatenate([max_scale, rng.uniform(0.001, 0.01, 3).astype(np.float32)])
+    opac = np.concatenate([opac, np.full(3, o, np.float32)])
+    want = _want_keys(points, max_scale, opac, camera, 0.05)
+    assert np.isin(np.arange(3000, 3003), want.view(np.uint32)[0::2]).all()  # kept, just
+    chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=16, group=4)
+    chunks.compiled = True
+    np.testing.assert_array_equal(np.sort(chunks.visible_keys(camera, 0.05)), want)
+    assert chunks.last_path == "compiled"
+    monkeypatch.setattr(cull_chunks, "UNSURE_ROWS", 0)  # no room: every such row overflows
+    np.testing.assert_array_equal(np.sort(chunks.visible_keys(camera, 0.05)), want)
+    assert chunks.last_path == "numpy"
