@@ -85,6 +85,85 @@ def _peak_bound(u, v, d, max_scale, opacity, peak):
     return np.float64(opacity) * math.exp(-0.5 * d2 / lam)
 
 
+@numba.njit(inline="always")
+def _rigid(rot, trans):
+    """The camera's float32 rotation rows and translation as one tuple (r00 .. r22, t0, t1, t2)."""
+    return (rot[0, 0], rot[0, 1], rot[0, 2], rot[1, 0], rot[1, 1], rot[1, 2],
+            rot[2, 0], rot[2, 1], rot[2, 2], trans[0], trans[1], trans[2])
+
+
+@numba.njit(inline="always")
+def _planes(planes):
+    """:func:`splatgl.cull.plane_constants` as one tuple (x axis's six, then y's)."""
+    return (planes[0, 0], planes[0, 1], planes[0, 2], planes[0, 3], planes[0, 4], planes[0, 5],
+            planes[1, 0], planes[1, 1], planes[1, 2], planes[1, 3], planes[1, 4], planes[1, 5])
+
+
+@numba.njit(inline="always", fastmath=False)
+def _row_test(xi, yi, zi, rad, is_faint, max_scale, opacity, rt, pl, near32, peak):
+    """:func:`splatgl.cull.cull_visible`'s tests of one splat (float32, its operations in its
+    order; the peak bound in float64): ``(status, u, v, d)`` with status 0 culled, 1 kept, 2
+    kept or culled by a peak bound within :data:`PEAK_UNSURE` of 1/255 (NumPy decides), and
+    ``(u, v, d)`` its camera-space point."""
+    d = _axis(xi, yi, zi, rt[6], rt[7], rt[8], rt[11])
+    if not d > near32:
+        return 0, d, d, d
+    u = _axis(xi, yi, zi, rt[0], rt[1], rt[2], rt[9])
+    if not _between_planes(u, d, rad, pl[0], pl[1], pl[2], pl[3]):
+        return 0, u, u, d
+    v = _axis(xi, yi, zi, rt[3], rt[4], rt[5], rt[10])
+    if not _between_planes(v, d, rad, pl[6], pl[7], pl[8], pl[9]):
+        return 0, u, v, d
+    inside = u <= d * pl[5] and u >= d * pl[4] and v <= d * pl[11] and v >= d * pl[10]
+    if inside and not is_faint:
+        return 1, u, v, d
+    bound = _peak_bound(u, v, d, max_scale, opacity, peak)
+    if bound < ALPHA_MIN * (1.0 - PEAK_UNSURE):
+        return 0, u, v, d
+    if bound <= ALPHA_MIN * (1.0 + PEAK_UNSURE):  # a NaN bound is kept, as NumPy keeps it
+        return 2, u, v, d
+    return 1, u, v, d
+
+
+@numba.njit(inline="always")
+def _note_unsure(unsure_rows, unsure_p, c, row, u, v, d):
+    """Record undecided row ``c`` (while there is room; counted past it); returns ``c + 1``."""
+    if c < unsure_rows.size:
+        unsure_rows[c] = row
+        unsure_p[c, 0] = u
+        unsure_p[c, 1] = v
+        unsure_p[c, 2] = d
+    return c + 1
+
+
+@numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
+def rows_pass(rows, x, y, z, radius, alive, faint, max_scale, opacity, rot, trans, planes,
+              near32, peak, keys_u32, keys_f32, unsure_rows, unsure_p):
+    """The cull of the rows ``rows`` of a :class:`splatgl.cull.CullData` (its arrays as given)
+    without gathering them: each alive row takes :func:`_row_test`; kept rows' keys are written
+    as :func:`view_pass` writes them, with the row itself as the index; undecided rows go to
+    ``unsure_rows`` (as positions in ``rows``) / ``unsure_p``.  Returns (keys, unsure)."""
+    rt = _rigid(rot, trans)
+    pl = _planes(planes)
+    n = 0
+    c = 0
+    for j in range(rows.size):
+        i = rows[j]
+        if not alive[i]:
+            continue
+        status, u, v, d = _row_test(x[i], y[i], z[i], radius[i], faint[i], max_scale[i],
+                                    opacity[i], rt, pl, near32, peak)
+        if status == 0:
+            continue
+        if status == 2:
+            c = _note_unsure(unsure_rows, unsure_p, c, j, u, v, d)
+            continue
+        keys_u32[2 * n] = i
+        keys_f32[2 * n + 1] = d
+        n += 1
+    return n, c
+
+
 @numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
 def view_pass(g0, g1, out0, groups, chunks, group, x, y, z, radius, faint, max_scale, opacity,
               index, starts, rot64, trans64, view, sides, rot, trans, planes, near32, peak,
@@ -109,16 +188,9 @@ def view_pass(g0, g1, out0, groups, chunks, group, x, y, z, radius, faint, max_s
         lo, hi = g * group, min(n_chunks, (g + 1) * group)
         for k in range(lo, hi):
             flags[k - k0] = cls if cls != 2 else _sphere_class(chunks, k, rot64, trans64, view, sides)
-    r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
-    r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
-    r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
-    t0, t1, t2 = trans[0], trans[1], trans[2]
-    ax_hi, bx_hi, ax_lo, bx_lo, x_lo, x_hi = (planes[0, 0], planes[0, 1], planes[0, 2],
-                                              planes[0, 3], planes[0, 4], planes[0, 5])
-    ay_hi, by_hi, ay_lo, by_lo, y_lo, y_hi = (planes[1, 0], planes[1, 1], planes[1, 2],
-                                              planes[1, 3], planes[1, 4], planes[1, 5])
-    lo_sure, hi_sure = ALPHA_MIN * (1.0 - PEAK_UNSURE), ALPHA_MIN * (1.0 + PEAK_UNSURE)
-    cap = unsure_rows.size
+    rt = _rigid(rot, trans)
+    pl = _planes(planes)
+    r20, r21, r22, t2 = rt[6], rt[7], rt[8], rt[11]
     n = out0
     c = 0
     for k in range(k0, k1):
@@ -134,29 +206,13 @@ def view_pass(g0, g1, out0, groups, chunks, group, x, y, z, radius, faint, max_s
                 n += 1
             continue
         for i in range(a, b):
-            d = _axis(x[i], y[i], z[i], r20, r21, r22, t2)
-            if not d > near32:
+            status, u, v, d = _row_test(x[i], y[i], z[i], radius[i], faint[i], max_scale[i],
+                                        opacity[i], rt, pl, near32, peak)
+            if status == 0:
                 continue
-            rad = radius[i]
-            u = _axis(x[i], y[i], z[i], r00, r01, r02, t0)
-            if not _between_planes(u, d, rad, ax_hi, bx_hi, ax_lo, bx_lo):
+            if status == 2:
+                c = _note_unsure(unsure_rows, unsure_p, c, i, u, v, d)
                 continue
-            v = _axis(x[i], y[i], z[i], r10, r11, r12, t1)
-            if not _between_planes(v, d, rad, ay_hi, by_hi, ay_lo, by_lo):
-                continue
-            inside = u <= d * x_hi and u >= d * x_lo and v <= d * y_hi and v >= d * y_lo
-            if not inside or faint[i]:
-                bound = _peak_bound(u, v, d, max_scale[i], opacity[i], peak)
-                if bound < lo_sure:
-                    continue
-                if bound <= hi_sure:  # too close to call here (a NaN bound is kept, as NumPy keeps it)
-                    if c < cap:
-                        unsure_rows[c] = i
-                        unsure_p[c, 0] = u
-                        unsure_p[c, 1] = v
-                        unsure_p[c, 2] = d
-                    c += 1
-                    continue
             keys_u32[2 * n] = index[i]
             keys_f32[2 * n + 1] = d
             n += 1
@@ -172,3 +228,7 @@ def warm_up() -> None:
               np.eye(3, dtype=np.float32), np.zeros(3, np.float32), np.zeros((2, 6), np.float32),
               np.float32(0.0), np.zeros(9), np.zeros(4, np.uint32), np.zeros(4, np.float32),
               np.zeros(2, np.int64), np.zeros((2, 3), np.float32))
+    rows_pass(np.zeros(1, np.int64), f4, f4, f4, f4, np.ones(2, np.bool_), np.zeros(2, np.bool_),
+              f4, f4, np.eye(3, dtype=np.float32), np.zeros(3, np.float32),
+              np.zeros((2, 6), np.float32), np.float32(0.0), np.zeros(9), np.zeros(4, np.uint32),
+              np.zeros(4, np.float32), np.zeros(2, np.int64), np.zeros((2, 3), np.float32))

@@ -46,10 +46,6 @@ GROUP = 16
 #: pass instead (gathering the boundary rows and the accepted runs' calls then cost more than
 #: they save; measured on the 0.1M scale scene from close by: 44% boundary, 1.3x slower).
 WHOLE_SHARE = 0.35
-#: From this culled view on, the compiled kernel (:mod:`splatgl.cull_kernel`, when numba is
-#: installed) is loaded in the background: a one-frame render never pays its import, a path or
-#: the viewer switch to it a few frames in.
-KERNEL_FROM_VIEW = 2
 #: Room for the rows whose peak bound the compiled pass leaves to NumPy (within 1e-6 of 1/255:
 #: almost never any; more than this and the view takes the NumPy path).
 UNSURE_ROWS = 1024
@@ -249,15 +245,8 @@ class ChunkedCull:
         return self._keys[:out]
 
     def _kernel(self):
-        """The compiled kernel if this view should use it, else None (see :attr:`compiled`)."""
-        mode = self.compiled
-        if mode is None:
-            mode = {"auto": None, "off": False, "wait": True}[cull_kernel.policy()]
-        if mode is False:
-            return None
-        if mode or self.views >= KERNEL_FROM_VIEW:
-            cull_kernel.request()
-        return cull_kernel.kernel(wait=bool(mode))
+        """The compiled kernels if this view should use them, else None (see :attr:`compiled`)."""
+        return cull_kernel.for_view(self.views, self.compiled)
 
     def _compiled_keys(self, kern, camera: Camera, near: float, scale: float
                        ) -> np.ndarray | None:
@@ -269,9 +258,7 @@ class ChunkedCull:
         run on :func:`splatgl.cull_kernel.helper`'s thread at the same time, and its keys then
         moved down behind the first half's."""
         xyz, data = self.data.xyz, self.data
-        tx, ty = camera.tan_half_fov
-        peak = np.array([camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height,
-                         JACOBIAN_CLAMP * tx, JACOBIAN_CLAMP * ty, scale], np.float64)
+        peak = peak_constants(camera, scale)
         view, sides = sphere_constants(camera, near, scale)
         args = (self.groups.packed, self.chunks.packed, self.group, xyz[0], xyz[1], xyz[2],
                 data.radius, data.faint, data.max_scale, data.opacities, self.index, self.starts,
@@ -284,13 +271,13 @@ class ChunkedCull:
         pool = cull_kernel.helper() if split else None
         unsure = self._unsure
         if pool is None:
-            n, c = kern(0, n_groups, 0, *args, *unsure[0])
+            n, c = kern.view_pass(0, n_groups, 0, *args, *unsure[0])
             parts = [(0, n, c, unsure[0])]
         else:
             out1 = int(self.starts[split * self.group])
-            second = pool.submit(kern, split, n_groups, out1, *args, *unsure[1])
+            second = pool.submit(kern.view_pass, split, n_groups, out1, *args, *unsure[1])
             try:
-                n0, c0 = kern(0, split, 0, *args, *unsure[0])
+                n0, c0 = kern.view_pass(0, split, 0, *args, *unsure[0])
             finally:
                 n1, c1 = second.result()  # its writes must end before the buffer is reused
             parts = [(0, n0, c0, unsure[0]), (out1, n1, c1, unsure[1])]
@@ -302,12 +289,8 @@ class ChunkedCull:
             self._keys[n:n + n1] = self._keys[out1:out1 + n1]  # overlapping: NumPy buffers it
             n += n1
         for *_, c, (rows, p) in parts:
-            if c:
-                rows, p = rows[:c], p[:c]
-                keep = peak_keeps(p, rows, data, camera, False, scale)
-                rows = rows[keep]
-                depth_keys(p[keep, 2], self.index[rows], self._keys[n:n + rows.size])
-                n += rows.size
+            n = settle_unsure(self._keys, n, rows[:c], self.index[rows[:c]], p[:c], data,
+                              camera, scale)
         return self._keys[:n]
 
     def key_buffer(self) -> np.ndarray:
@@ -367,3 +350,51 @@ def keys_pairs(keys: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
         depths.append(depth[idx].view(np.float32))
         indices.append(idx | np.uint32(flag))
     return np.concatenate(depths), np.concatenate(indices)
+
+
+def rows_keys(data: CullData, rows: np.ndarray, camera: Camera, near: float,
+              antialias: bool = False, scale: float = 1.0, kern=None,
+              out: np.ndarray | None = None) -> np.ndarray:
+    """(K,) uint64 sort keys ``(float_bits(z) << 32) | row`` of the rows ``rows`` (ascending
+    int64) of ``data`` that :func:`~splatgl.cull.cull_visible` keeps, in row order; ``kern``
+    (:func:`splatgl.cull_kernel.for_view`'s kernels, not with antialiasing) culls them in place
+    without gathering them, else NumPy culls the gathered rows; ``out`` (at least ``rows.size``)
+    is written to and a view of it returned."""
+    keys = np.empty(rows.size, np.uint64) if out is None or out.size < rows.size else out
+    if kern is None or antialias or camera.is_orthographic:
+        idx, z = cull_visible(data.subset(rows), camera, near, antialias, scale)
+        return depth_keys(z, rows[idx].astype(np.uint32), keys[:idx.size])
+    peak = peak_constants(camera, scale)
+    unsure = np.empty(UNSURE_ROWS, np.int64), np.empty((UNSURE_ROWS, 3), np.float32)
+    xyz = data.xyz
+    n, c = kern.rows_pass(rows, xyz[0], xyz[1], xyz[2], data.radius, data.alive, data.faint,
+                          data.max_scale, data.opacities, camera.rotation.astype(np.float32),
+                          camera.translation.astype(np.float32), plane_constants(camera, scale),
+                          near_threshold(near, np.float32), peak, keys.view(np.uint32),
+                          keys.view(np.float32), *unsure)
+    if c > UNSURE_ROWS:  # too many undecided rows (almost never): NumPy culls the view
+        return rows_keys(data, rows, camera, near, antialias, scale, None, out)
+    at = rows[unsure[0][:c]]
+    return keys[:settle_unsure(keys, n, at, at.astype(np.uint32), unsure[1][:c], data, camera,
+                               scale)]
+
+
+def peak_constants(camera: Camera, scale: float) -> np.ndarray:
+    """(9,) float64 per-view constants of the compiled peak alpha bound: fx, fy, cx, cy, width,
+    height, the Jacobian's clamps on x/z and y/z, and the radius scale."""
+    tx, ty = camera.tan_half_fov
+    return np.array([camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height,
+                     JACOBIAN_CLAMP * tx, JACOBIAN_CLAMP * ty, scale], np.float64)
+
+
+def settle_unsure(keys: np.ndarray, n: int, rows: np.ndarray, index: np.ndarray, p: np.ndarray,
+                  data: CullData, camera: Camera, scale: float) -> int:
+    """NumPy's peak bound on the rows ``rows`` of ``data`` that a compiled pass left undecided
+    (camera-space points ``p``): the kept ones' keys (with scene indices ``index``) written to
+    ``keys`` from ``n`` on; returns the new count."""
+    if not rows.size:
+        return n
+    keep = peak_keeps(p, rows, data, camera, False, scale)
+    k = int(keep.sum())
+    depth_keys(p[keep, 2], index[keep], keys[n:n + k])
+    return n + k

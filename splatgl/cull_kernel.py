@@ -27,6 +27,9 @@ _helper: ThreadPoolExecutor | None = None
 #: load).  Set with :func:`set_policy` (the benchmark measures both paths this way).
 POLICIES = ("auto", "off", "wait")
 _policy = "auto"
+#: From this culled view on, the kernels are loaded in the background: a one-frame render never
+#: pays numba's import, a path or the viewer switch to them a few frames in.
+FROM_VIEW = 2
 
 
 def installed() -> bool:
@@ -38,7 +41,7 @@ def _load():
     from . import _cull_numba
 
     _cull_numba.warm_up()
-    return _cull_numba.view_pass
+    return _cull_numba
 
 
 def request() -> None:
@@ -49,7 +52,8 @@ def request() -> None:
 
 
 def kernel(wait: bool = False):
-    """The compiled ``view_pass`` if it is loaded (``wait``: after waiting for the load that
+    """The compiled kernels (the module :mod:`splatgl._cull_numba`: ``view_pass``,
+    ``rows_pass``) if it is loaded (``wait``: after waiting for the load that
     :func:`request` started, starting it if needed), else None; a failed load gives None."""
     if wait:
         request()
@@ -59,6 +63,20 @@ def kernel(wait: bool = False):
         return _loader.result()
     except Exception:  # a broken numba install: the NumPy path serves
         return None
+
+
+def for_view(views: int, compiled: bool | None = None):
+    """The kernels for a cull's ``views``-th view (counting from 1), or None for the NumPy
+    path: ``compiled`` False never, True always (waiting for the load), None as :func:`policy`
+    says (by default once loaded, requested from view :data:`FROM_VIEW` on)."""
+    mode = compiled
+    if mode is None:
+        mode = {"auto": None, "off": False, "wait": True}[_policy]
+    if mode is False:
+        return None
+    if mode or views >= FROM_VIEW:
+        request()
+    return kernel(wait=bool(mode))
 
 
 def set_policy(policy: str) -> None:

@@ -269,3 +269,27 @@ def test_compiled_cull_leaves_undecidable_peak_bounds_to_numpy(monkeypatch):
     monkeypatch.setattr(cull_chunks, "UNSURE_ROWS", 0)  # no room: every such row overflows
     np.testing.assert_array_equal(np.sort(chunks.visible_keys(camera, 0.05)), want)
     assert chunks.last_path == "numpy"
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+@pytest.mark.parametrize("cam_index", range(5))
+def test_rows_keys_cull_a_subset_as_the_float64_cull_does(cam_index, compiled):
+    """The cull of a LOD cut's rows (a sorted subset, culled in place): the keys of the rows
+    the float64 cull keeps among them, with the row as the index, compiled or gathered."""
+    from splatgl.cull_chunks import rows_keys
+
+    kern = None
+    if compiled:
+        _need_kernel()
+        kern = cull_kernel.kernel()
+    points, max_scale, opac = _clustered(20_000, 40 + cam_index)
+    camera = _cameras()[cam_index]
+    rows = np.flatnonzero(np.random.default_rng(cam_index).random(20_000) < 0.4)
+    want = _want_keys(points[rows], max_scale[rows], opac[rows], camera, 0.05)
+    words = want.view(np.uint32).reshape(-1, 2)
+    words[:, 0] = rows[words[:, 0]]  # positions in the subset -> rows
+    out = np.empty(rows.size, np.uint64)
+    got = rows_keys(CullData(points, max_scale, opac), rows, camera, 0.05, False, camera.scale,
+                    kern, out)
+    assert 0 < want.size < rows.size and np.shares_memory(got, out)
+    np.testing.assert_array_equal(np.sort(got), np.sort(want))

@@ -223,3 +223,32 @@ def test_cut_override_draws_an_earlier_views_cut(ctx, biker):
         assert lod.last_cut_nodes > frozen_nodes and lod.last_cut is not cut
     finally:
         lod.release()
+
+
+@pytest.mark.parametrize("sort", ["exact", "bucket16"])
+def test_cut_cull_compiled_or_numpy_same_order_and_weights(ctx, biker, sort):
+    """The cut's cull runs compiled (numba, in place over the cut's rows) or in NumPy (over
+    the gathered rows): the same sorted rows and the same per-slot weights either way, for the
+    exact sort and for a sort that takes depths (keys_pairs)."""
+    from splatgl import cull_kernel
+    from splatgl.settings import SortKey
+
+    if cull_kernel.kernel(wait=True) is None:
+        pytest.skip("numba not installed (pip install '.[fast]')")
+    scene, tree = biker
+    settings = RenderSettings(sort_key=SortKey(sort))
+    got = {}
+    for policy in ("off", "wait"):
+        cull_kernel.set_policy(policy)
+        lod = LodRenderer(ctx, tree, settings, LodSettings(threshold_px=1.0, band=2.0))
+        try:
+            for scale in (2.5, 3.5):  # two views: the second is where "auto" would switch
+                camera = default_camera(scene, 200, 112, distance_scale=scale)
+                got[policy, scale] = (lod.visible_order(camera).copy(), lod.slot_weights)
+                assert not lod.last_drew_leaves and lod.slot_weights is not None
+        finally:
+            cull_kernel.set_policy("auto")
+            lod.release()
+    for scale in (2.5, 3.5):
+        for a, b in zip(got["off", scale], got["wait", scale]):
+            np.testing.assert_array_equal(a, b)

@@ -17,10 +17,11 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from .. import cull_kernel
 from ..background import Background
 from ..camera import Camera
 from ..cull import CullData, cull_visible
-from ..cull_chunks import ChunkedCull, keys_order, keys_pairs
+from ..cull_chunks import ChunkedCull, keys_order, keys_pairs, rows_keys
 from ..errors import SplatglError
 from ..gl.shaders import ProgramCache
 from ..project import anchored_camera
@@ -109,6 +110,8 @@ class LodRenderer(QuadRenderer):
         #: switch (PREFETCH_NODES_PER_LEAF), so that the view that switches to the leaves does
         #: not stall on it (about 1 s at 3M splats), and far views never pay for it.
         self._leaf_build: Background | None = None
+        self._cut_views = 0  # views that culled a cut (the compiled cull from the second on)
+        self._cut_keys: np.ndarray | None = None  # (>= K,) uint64 key buffer of the cut's cull
 
     def visible_order(self, camera: Camera) -> np.ndarray:
         """Cut, cull and sort for ``camera``: (M,) uint32 node rows, front to back.
@@ -147,17 +150,20 @@ class LodRenderer(QuadRenderer):
             self.last_cut_s = t1 - t0
             self._times_cull += t1 - t0
             return order
-        keep, depth = cull_visible(self._cull_data.subset(ids),
-                                   anchored_camera(camera, self.scene.anchor), self.near,
-                                   self.settings.antialias, camera.scale)
-        kept = ids[keep].astype(np.uint32)  # ids ascending: ties still by row
+        self._cut_views += 1
+        if self._cut_keys is None or self._cut_keys.size < ids.size:
+            self._cut_keys = np.empty(ids.size, np.uint64)
+        keys = rows_keys(self._cull_data, ids, anchored_camera(camera, self.scene.anchor),
+                         self.near, self.settings.antialias, camera.scale,
+                         cull_kernel.for_view(self._cut_views), self._cut_keys)
         t2 = time.perf_counter()
-        order = self.sort_visible(depth, kept)
+        order = (keys_order(keys) if self.settings.sort_key is SortKey.EXACT  # ties by row
+                 else self.sort_visible(*keys_pairs(keys, self.scene.count)))
         self.slot_weights = None
         if weights is not None and (weights < 1).any():
             if self._node_weight is None:
                 self._node_weight = np.ones(self.scene.count, np.float32)
-            self._node_weight[kept] = weights[keep]
+            self._node_weight[ids] = weights  # only the kept rows are read back
             self.slot_weights = self._node_weight[order]  # into sorted order
         t3 = time.perf_counter()
         self._times_cull, self._times_sort = t2 - t0, t3 - t2
