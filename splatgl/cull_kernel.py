@@ -17,6 +17,7 @@ from __future__ import annotations
 import importlib.util
 import os
 from concurrent.futures import ThreadPoolExecutor
+from types import SimpleNamespace
 
 from .background import Background
 
@@ -39,9 +40,12 @@ def installed() -> bool:
 
 def _load():
     from . import _cull_numba
+    from .lod import _cut_numba
 
     _cull_numba.warm_up()
-    return _cull_numba
+    _cut_numba.warm_up()
+    return SimpleNamespace(view_pass=_cull_numba.view_pass, rows_pass=_cull_numba.rows_pass,
+                           cut_pass=_cut_numba.cut_pass)
 
 
 def request() -> None:
@@ -52,8 +56,8 @@ def request() -> None:
 
 
 def kernel(wait: bool = False):
-    """The compiled kernels (the module :mod:`splatgl._cull_numba`: ``view_pass``,
-    ``rows_pass``) if it is loaded (``wait``: after waiting for the load that
+    """The compiled kernels (``view_pass`` and ``rows_pass`` of :mod:`splatgl._cull_numba`,
+    ``cut_pass`` of :mod:`splatgl.lod._cut_numba`) if it is loaded (``wait``: after waiting for the load that
     :func:`request` started, starting it if needed), else None; a failed load gives None."""
     if wait:
         request()

@@ -252,3 +252,31 @@ def test_cut_cull_compiled_or_numpy_same_order_and_weights(ctx, biker, sort):
     for scale in (2.5, 3.5):
         for a, b in zip(got["off", scale], got["wait", scale]):
             np.testing.assert_array_equal(a, b)
+
+
+@hsettings(max_examples=40, deadline=None)
+@given(threshold=st.floats(0.3, 12.0), band=st.sampled_from([1.0, 1.5, 2.0, 3.0]),
+       distance=st.floats(0.5, 30.0), fov=st.floats(30.0, 110.0),
+       leaves_at=st.sampled_from([None, 0.5, 0.75, 1.0]), ortho=st.booleans())
+def test_compiled_cut_selects_what_numpy_selects(tree, threshold, band, distance, fov,
+                                                 leaves_at, ortho):
+    """The compiled cut (numba; over the candidates only) gives the NumPy cut's rows and the
+    same weight bits, or the same decision to draw the leaves, for cameras inside and outside
+    the scene (frustum tests), perspective and orthographic, any band, and the root's cut."""
+    from splatgl import cull_kernel
+
+    kern = cull_kernel.kernel(wait=True)
+    if kern is None:
+        pytest.skip("numba not installed (pip install '.[fast]')")
+    data = CutData.from_tree(tree)
+    pose = look_at(np.array([0.3, 0.2, -distance]), np.array([0.4, -0.1, 0.0]))
+    cam = (Camera.orthographic(320, 180, 120.0 / (1 + distance), pose) if ortho
+           else Camera.from_fov(320, 180, fov, pose))
+    for t in (threshold, np.inf):
+        want = select_cut_weights(data, cam, t, band, leaves_at)
+        got = select_cut_weights(data, cam, t, band, leaves_at, kern=kern)
+        for a, b in zip(got, want):
+            assert (a is None) == (b is None)
+            if a is not None:
+                assert a.dtype == b.dtype
+                np.testing.assert_array_equal(a, b)

@@ -139,7 +139,7 @@ def level_leaves(offsets: np.ndarray, branching: int, level: int, local: np.ndar
 
 
 def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX,
-                       band: float = 1.0, leaves_at: float | None = None
+                       band: float = 1.0, leaves_at: float | None = None, kern=None
                        ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The cut with a transition band: ``(rows, weights)``, rows (K,) int64 ascending, weights
     (K,) float32 in (0, 1] (the factor on each node's opacity), or None when every weight is 1.
@@ -163,9 +163,14 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     return ``(None, None)`` without testing the leaves: the caller draws the leaves instead
     (the candidates outside the view count as drawn here, which only errs towards the leaves,
     whose image is full detail's).
+
+    ``kern``: :func:`splatgl.cull_kernel.for_view`'s kernels, whose ``cut_pass`` walks the same
+    levels compiled, over the candidates only (the same rows and weights); None: NumPy.
     """
     offsets, b = data.offsets, data.branching
     view = _View(data, camera)
+    if kern is not None:
+        return _compiled_cut(kern, data, view, threshold_px, band, leaves_at)
     top = len(offsets) - 2
     blend = band > 1.0
     carry = None  # float32 A * e over the level above's nodes
@@ -211,6 +216,26 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     return rows_all, (np.concatenate(weights[::-1]) if blend else None)
 
 
+def _compiled_cut(kern, data: CutData, view: _View, threshold_px: float, band: float,
+                  leaves_at: float | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """:func:`select_cut_weights` through the compiled ``cut_pass``."""
+    n = int(data.offsets[-1])
+    rows, weights = np.empty(n, np.int64), np.empty(n, np.float32)
+    finite = bool(np.isfinite(threshold_px))
+    mode = 0 if not finite else (1 if band <= 1.0 else 2)
+    ramp = 1.0 / (threshold_px * (band - 1.0)) if mode == 2 else 0.0
+    planes = np.array([v for axis in view.planes for v in axis], np.float32)
+    count = kern.cut_pass(data.centres[0], data.centres[1], data.centres[2], data.radius,
+                          np.asarray(data.offsets, np.int64), int(data.branching), view.r, view.t,
+                          view.scale, view.f, bool(view.ortho), planes, mode,
+                          np.float32(threshold_px if finite else 0.0), np.float32(ramp),
+                          band > 1.0, -1.0 if leaves_at is None else float(leaves_at), rows,
+                          weights)
+    if count < 0:
+        return None, None
+    return rows[:count], (weights[:count] if band > 1.0 else None)
+
+
 def select_cut(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX) -> np.ndarray:
     """(K,) int64 node rows of the cut at ``threshold_px`` (no band), ascending: every node in
     view of size <= threshold_px whose parent is larger, plus the leaves still larger."""
@@ -218,18 +243,19 @@ def select_cut(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRE
 
 
 def select_cut_budget(data: CutData, camera: Camera, budget: int,
-                      threshold_px: float = DEFAULT_THRESHOLD_PX, band: float = 1.0
+                      threshold_px: float = DEFAULT_THRESHOLD_PX, band: float = 1.0, kern=None
                       ) -> tuple[np.ndarray, np.ndarray | None, float]:
     """The finest cut of at most ``budget`` drawn nodes, not finer than ``threshold_px``:
     ``(node rows, weights, threshold used)`` (rows and weights as :func:`select_cut_weights`
     gives them for that threshold and ``band``).  The threshold is searched on a log scale (a
     cut's count falls roughly as the threshold squared), BUDGET_STEPS cuts at most; it changes
-    from view to view, so a budget's cut is not continuous along a path, band or not."""
+    from view to view, so a budget's cut is not continuous along a path, band or not.
+    ``kern`` as :func:`select_cut_weights` takes it."""
     ok = None
     lo, hi = threshold_px, None  # lo: known too many nodes (or the floor), hi: known to fit
     t = threshold_px
     for _ in range(BUDGET_STEPS):
-        cut, w = select_cut_weights(data, camera, t, band)
+        cut, w = select_cut_weights(data, camera, t, band, kern=kern)
         if cut.size <= budget:
             ok, hi = (cut, w, t), t
             if t <= threshold_px or cut.size >= (1.0 - BUDGET_TOLERANCE) * budget:
@@ -241,5 +267,5 @@ def select_cut_budget(data: CutData, camera: Camera, budget: int,
         else:
             t = float(np.sqrt(lo * hi))
     if ok is None:  # even the last threshold was too fine: take the root level's cut
-        ok = (*select_cut_weights(data, camera, float("inf"), band), float("inf"))
+        ok = (*select_cut_weights(data, camera, float("inf"), band, kern=kern), float("inf"))
     return ok

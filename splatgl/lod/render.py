@@ -110,7 +110,7 @@ class LodRenderer(QuadRenderer):
         #: switch (PREFETCH_NODES_PER_LEAF), so that the view that switches to the leaves does
         #: not stall on it (about 1 s at 3M splats), and far views never pay for it.
         self._leaf_build: Background | None = None
-        self._cut_views = 0  # views that culled a cut (the compiled cull from the second on)
+        self._views = 0  # views so far (the compiled kernels are requested from the second on)
         self._cut_keys: np.ndarray | None = None  # (>= K,) uint64 key buffer of the cut's cull
 
     def visible_order(self, camera: Camera) -> np.ndarray:
@@ -130,6 +130,8 @@ class LodRenderer(QuadRenderer):
         if self._cull_data is None:
             self._cull_data = CullData.from_scene(self.scene)
         override = self.cut_override
+        self._views += 1
+        kern = cull_kernel.for_view(self._views)  # compiled selection and cull, once loaded
         if (override is None and self.lod.budget is None and self.skip_within is not None
                 and dist <= self.skip_within):
             return self._leaves_order(camera, t0)
@@ -137,9 +139,9 @@ class LodRenderer(QuadRenderer):
             ids, weights = override
         elif self.lod.budget is not None:
             ids, weights, self.last_threshold_px = select_cut_budget(
-                self.cut_data, camera, self.lod.budget, self.lod.threshold_px, self.lod.band)
+                self.cut_data, camera, self.lod.budget, self.lod.threshold_px, self.lod.band, kern)
         else:
-            ids, weights, per_leaf = threshold_cut(self.tree, self.cut_data, camera, self.lod)
+            ids, weights, per_leaf = threshold_cut(self.tree, self.cut_data, camera, self.lod, kern)
             if per_leaf >= PREFETCH_NODES_PER_LEAF and self._leaf_build is None:
                 leaves = self._cull_data.subset(slice(0, self.tree.level_size(0)))
                 self._leaf_build = Background(ChunkedCull, leaves, name="splatgl-lod-leaves")
@@ -150,12 +152,11 @@ class LodRenderer(QuadRenderer):
             self.last_cut_s = t1 - t0
             self._times_cull += t1 - t0
             return order
-        self._cut_views += 1
         if self._cut_keys is None or self._cut_keys.size < ids.size:
             self._cut_keys = np.empty(ids.size, np.uint64)
         keys = rows_keys(self._cull_data, ids, anchored_camera(camera, self.scene.anchor),
                          self.near, self.settings.antialias, camera.scale,
-                         cull_kernel.for_view(self._cut_views), self._cut_keys)
+                         kern, self._cut_keys)
         t2 = time.perf_counter()
         order = (keys_order(keys) if self.settings.sort_key is SortKey.EXACT  # ties by row
                  else self.sort_visible(*keys_pairs(keys, self.scene.count)))
@@ -239,14 +240,15 @@ class LodRenderer(QuadRenderer):
         super().release()
 
 
-def threshold_cut(tree: LodTree, data: CutData, camera: Camera, lod: LodSettings
+def threshold_cut(tree: LodTree, data: CutData, camera: Camera, lod: LodSettings, kern=None
                   ) -> tuple[np.ndarray | None, np.ndarray | None, float]:
     """The cut :class:`LodRenderer` draws for ``camera`` without a budget: ``(rows, weights,
     nodes per leaf)``, rows and weights as :func:`select_cut_weights` gives them, or ``(None,
     None, 1.0)`` when the view should draw the leaves instead (its cut stands for at most
-    ``1 / SKIP_NODES_PER_LEAF`` leaves a node)."""
+    ``1 / SKIP_NODES_PER_LEAF`` leaves a node).  ``kern``: the compiled kernels
+    (:func:`splatgl.cull_kernel.for_view`), or None for NumPy: the same cut."""
     ids, weights = select_cut_weights(data, camera, lod.threshold_px, lod.band,
-                                      leaves_at=SKIP_NODES_PER_LEAF)
+                                      leaves_at=SKIP_NODES_PER_LEAF, kern=kern)
     if ids is None:
         return None, None, 1.0
     covered = leaves_covered(tree, ids, weights) if ids.size else 0.0

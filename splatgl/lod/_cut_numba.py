@@ -1,0 +1,147 @@
+"""The level-of-detail cut's selection as one compiled pass (numba); imported only through
+:mod:`splatgl.cull_kernel`, which keeps numba optional.
+
+:func:`cut_pass` walks the tree top-down as :func:`splatgl.lod.cut.select_cut_weights` does, but
+over each level's candidates only, with no per-level NumPy calls: the same float32 operations
+in the same order (``_View.test``'s size and frustum tests, :func:`~splatgl.lod.cut.expansion`,
+the weights ``a (1 - e)`` and the carry ``a e``), so the same rows and the same weight bits
+(tested against the NumPy path).  The one float64 decision, whether the cut would draw at
+least ``leaves_at`` nodes per leaf, sums in another order than NumPy and could differ from it
+only where the two sides are equal to rounding.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+F32 = np.float32
+
+
+@numba.njit(inline="always", fastmath=False)
+def _node_test(cx, cy, cz, rad, rt, scale, f, ortho, planes):
+    """``(projected radius px, sphere touches the frustum)`` of one node (float32,
+    ``splatgl.lod.cut._View.test``'s operations)."""
+    rad = rad * scale
+    p0 = cx * rt[0] + cy * rt[1] + cz * rt[2] + rt[9]
+    p1 = cx * rt[3] + cy * rt[4] + cz * rt[5] + rt[10]
+    p2 = cx * rt[6] + cy * rt[7] + cz * rt[8] + rt[11]
+    inside = p2 + rad > F32(0)
+    if ortho:
+        return rad * f, inside
+    d = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    gap = d - rad
+    size = f * rad / gap if gap > F32(0) else F32(np.inf)
+    inside = (inside and p0 - planes[2] * p2 <= rad * planes[3]
+              and planes[0] * p2 - p0 <= rad * planes[1]
+              and p1 - planes[6] * p2 <= rad * planes[7]
+              and planes[4] * p2 - p1 <= rad * planes[5])
+    return size, inside
+
+
+@numba.njit(inline="always", fastmath=False)
+def _expansion(size, mode, t, k):
+    """:func:`splatgl.lod.cut.expansion` of one size: mode 0 the root level's cut (0), 1 a step
+    at ``t``, 2 the ramp ``(size - t) k`` clipped to [0, 1] (a NaN stays NaN, as np.clip)."""
+    if mode == 0:
+        return F32(0)
+    if mode == 1:
+        return F32(1) if size > t else F32(0)
+    e = (size - t) * k
+    if e < F32(0):
+        return F32(0)
+    if e > F32(1):
+        return F32(1)
+    return e
+
+
+@numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
+def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, ortho, planes,
+             mode, t, k, blend, leaves_at, out_rows, out_w):
+    """The cut of :func:`splatgl.lod.cut.select_cut_weights` into ``out_rows`` (int64, rows
+    ascending) and ``out_w`` (float32 weights, written with ``blend``), both at least the node
+    count long.  ``planes`` (8,) float32 per axis ``lo, n_lo, hi, n_hi``; ``mode``, ``t``, ``k``
+    as :func:`_expansion` takes them; ``leaves_at`` < 0 for none.  Returns the count, or -1
+    when the cut would draw at least ``leaves_at`` nodes per leaf (draw the leaves instead)."""
+    rt = (rot[0, 0], rot[0, 1], rot[0, 2], rot[1, 0], rot[1, 1], rot[1, 2],
+          rot[2, 0], rot[2, 1], rot[2, 2], trans[0], trans[1], trans[2])
+    levels = offsets.size - 1
+    n_leaves = offsets[1] - offsets[0]
+    # Each level's drawn rows (ascending) are stacked from the outputs' end downwards, the top
+    # level highest: with level 0 lowest that is the rows' ascending order; moved to the front
+    # at the end.  Before a level, room for all its candidates is taken below the stack.
+    pos = out_rows.size
+    cand = np.arange(offsets[levels] - offsets[levels - 1])  # local indices, ascending
+    cand_a = np.ones(cand.size, np.float32)                  # their ancestors' weight A
+    nodes = 0.0
+    covered = 0.0
+    for level in range(levels - 1, -1, -1):
+        if cand.size == 0:
+            break
+        lo = offsets[level]
+        n = offsets[level + 1] - lo
+        if level == 0 and leaves_at >= 0.0:
+            s = 0.0
+            for j in range(cand.size):
+                s += np.float64(cand_a[j])
+            if nodes + cand.size >= leaves_at * (covered + s):
+                return -1
+        below = offsets[level] - offsets[level - 1] if level else 0
+        nxt = np.empty(below, np.int64)
+        nxt_a = np.empty(below, np.float32)
+        m = 0
+        base = pos - cand.size
+        d = 0
+        w_sum = 0.0
+        last_w = 0.0
+        for j in range(cand.size):
+            local = cand[j]
+            row = lo + local
+            size, inside = _node_test(cx[row], cy[row], cz[row], radius[row], rt, scale, f,
+                                      ortho, planes)
+            if not inside:
+                continue
+            a = cand_a[j]
+            e = F32(0) if level == 0 else _expansion(size, mode, t, k)
+            if e < F32(1):
+                out_rows[base + d] = row
+                w = a * (F32(1) - e) if blend else F32(1)
+                out_w[base + d] = w
+                w_sum += np.float64(w)
+                last_w = np.float64(w)
+                d += 1
+            c = a * e
+            if level and c != F32(0):  # nonzero (a NaN too, as np.count_nonzero counts it)
+                first = local * branching
+                for child in range(first, min(first + branching, below)):
+                    nxt[m] = child
+                    nxt_a[m] = c
+                    m += 1
+        # the drawn rows down against the stack (backwards: the ranges may overlap)
+        for q in range(d - 1, -1, -1):
+            out_rows[pos - d + q] = out_rows[base + q]
+            out_w[pos - d + q] = out_w[base + q]
+        pos -= d
+        if leaves_at >= 0.0 and d:  # splatgl.lod.cut.level_leaves of the drawn rows
+            span = np.float64(branching) ** level
+            stands_for = w_sum * span
+            last = n - 1
+            if out_rows[pos + d - 1] - lo == last:
+                stands_for -= last_w * (span - (n_leaves - last * span))
+            nodes += d
+            covered += stands_for
+        cand = nxt[:m]
+        cand_a = nxt_a[:m]
+    count = out_rows.size - pos
+    for q in range(count):
+        out_rows[q] = out_rows[pos + q]
+        out_w[q] = out_w[pos + q]
+    return count
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) for the argument types the cut uses."""
+    f4 = np.zeros(3, np.float32)
+    cut_pass(f4, f4, f4, f4, np.array([0, 2, 3], np.int64), 2, np.eye(3, dtype=np.float32),
+             np.zeros(3, np.float32), F32(1), F32(1), False, np.zeros(8, np.float32), 2, F32(1),
+             F32(1), True, -1.0, np.zeros(3, np.int64), np.zeros(3, np.float32))
