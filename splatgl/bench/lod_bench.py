@@ -306,9 +306,11 @@ def run_lod(sizes, width: int, height: int, frames: int, thresholds, budgets, ba
             paths: str = "coarse", out: Path | None = None, log=print) -> list[dict]:
     """Measure every size (scene and hierarchy built and cached on first use), print the table,
     and with ``out`` write lod.json and lod.png there (each atomically); the summary rows."""
+    from .. import cull_kernel
     from ..output_files import OutputFiles
     from .scale import scene_file
 
+    cull_kernel.kernel(wait=True)  # where installed, every timed frame takes the compiled kernels
     rows = []
     for n in sizes:
         t0 = time.perf_counter()
