@@ -15,7 +15,11 @@ the cull's opacity-aware radius).  Per view, in float64 over the chunks only:
   peak-alpha bound applies to every splat, and orthographic cameras) take the per-splat cull
   :func:`splatgl.cull.cull_visible` on their rows.
 
-So the kept set is exactly :func:`~splatgl.cull.cull_visible`'s.  The output is the sort's
+So the kept set is exactly :func:`~splatgl.cull.cull_visible`'s.  Where numba is installed
+(:mod:`splatgl.cull_kernel`) a pinhole view runs as one compiled pass instead: the same chunk
+tests, the same float32 row tests, the float64 peak bound (rows it cannot call for certain go
+back to NumPy's), on two threads from :data:`SPLIT_ROWS` splats; :func:`rows_keys` culls an
+arbitrary set of rows (a LOD cut's) the same way.  The output is the sort's
 uint64 keys ``(float_bits(z) << 32) | index`` in chunk order; the exact sort orders them by
 value (ties by index, as :func:`splatgl.sort.depth_sort` does), so the order of the keys
 before the sort does not matter.

@@ -1,15 +1,16 @@
-"""Optional compiled cull: the chunked cull's per-row work in one pass (numba, the ``fast``
-extra), loaded in the background so that nothing waits for it.
+"""Optional compiled kernels (numba, the ``fast`` extra), loaded in the background so that
+nothing waits for them: the chunked cull of a pinhole view (``view_pass``), the cull of a LOD
+cut's rows in place (``rows_pass``) and the LOD cut's selection (``cut_pass``).
 
-With NumPy the chunked cull pays a few microseconds per call, and a view from inside a scene
-splits into hundreds of runs of kept chunks plus a gathered per-row test of the boundary
-chunks, so at 1M splats its cull costs more than the sort (docs/scale.md).  One compiled loop
-over the chunks does the same float32 operations without the calls.  Importing numba takes
-about 0.4 s and compiling the kernel the first time a few seconds (then numba's on-disk cache),
-so :func:`request` starts that on a daemon thread and :func:`kernel` hands the kernel out only
-once it is ready: until then, and wherever numba is missing, the NumPy path runs.  Both give
-the same keys, bit for bit (tests/test_cull_chunks.py), so switching between them mid-session
-changes no image.
+With NumPy these pay a few microseconds per call: a view from inside a scene splits into
+hundreds of runs of kept chunks plus a gathered per-row test of the boundary chunks, and a cut
+walks its levels in a dozen array passes each, so at 1M splats the cull cost more than the sort
+(docs/scale.md).  One compiled loop does the same float32 operations without the calls.
+Importing numba takes about 0.4 s and compiling the kernels the first time a few seconds (then
+numba's on-disk cache), so :func:`request` starts that on a daemon thread and :func:`kernel`
+hands them out only once they are ready: until then, and wherever numba is missing, the NumPy
+paths run.  Both give the same keys and cuts, bit for bit (tests/test_cull_chunks.py,
+tests/test_lod_blend.py), so switching between them mid-session changes no image.
 """
 
 from __future__ import annotations

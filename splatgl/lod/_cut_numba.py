@@ -18,7 +18,7 @@ import numpy as np
 F32 = np.float32
 
 
-@numba.njit(inline="always", fastmath=False)
+@numba.njit(inline="always", fastmath=False, error_model="numpy")
 def _node_test(cx, cy, cz, rad, rt, scale, f, ortho, planes):
     """``(projected radius px, sphere touches the frustum)`` of one node (float32,
     ``splatgl.lod.cut._View.test``'s operations)."""
@@ -39,7 +39,37 @@ def _node_test(cx, cy, cz, rad, rt, scale, f, ortho, planes):
     return size, inside
 
 
-@numba.njit(inline="always", fastmath=False)
+@numba.njit(inline="always", fastmath=False, error_model="numpy")
+def _level_test(cx, cy, cz, radius, lo, n, rt, scale, f, ortho, planes, sizes, inside):
+    """:func:`_node_test` of the rows ``lo:lo + n`` into ``sizes`` / ``inside``, as one loop
+    without branches (for a level whose candidates are most of it: LLVM vectorises it)."""
+    for q in range(n):
+        size, ins = _node_test_flat(cx[lo + q], cy[lo + q], cz[lo + q], radius[lo + q], rt,
+                                    scale, f, ortho, planes)
+        sizes[q] = size
+        inside[q] = ins
+
+
+@numba.njit(inline="always", fastmath=False, error_model="numpy")
+def _node_test_flat(cx, cy, cz, rad, rt, scale, f, ortho, planes):
+    """:func:`_node_test`, every operation done and the results selected (no early exits)."""
+    rad = rad * scale
+    p0 = cx * rt[0] + cy * rt[1] + cz * rt[2] + rt[9]
+    p1 = cx * rt[3] + cy * rt[4] + cz * rt[5] + rt[10]
+    p2 = cx * rt[6] + cy * rt[7] + cz * rt[8] + rt[11]
+    front = p2 + rad > F32(0)
+    d = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+    gap = d - rad
+    q = f * rad / gap
+    persp = q if gap > F32(0) else F32(np.inf)
+    sides = ((p0 - planes[2] * p2 <= rad * planes[3]) & (planes[0] * p2 - p0 <= rad * planes[1])
+             & (p1 - planes[6] * p2 <= rad * planes[7]) & (planes[4] * p2 - p1 <= rad * planes[5]))
+    if ortho:
+        return rad * f, front
+    return persp, front & sides
+
+
+@numba.njit(inline="always", fastmath=False, error_model="numpy")
 def _expansion(size, mode, t, k):
     """:func:`splatgl.lod.cut.expansion` of one size: mode 0 the root level's cut (0), 1 a step
     at ``t``, 2 the ramp ``(size - t) k`` clipped to [0, 1] (a NaN stays NaN, as np.clip)."""
@@ -55,68 +85,83 @@ def _expansion(size, mode, t, k):
     return e
 
 
-@numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
+@numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False, error_model="numpy")
 def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, ortho, planes,
-             mode, t, k, blend, leaves_at, out_rows, out_w):
-    """The cut of :func:`splatgl.lod.cut.select_cut_weights` into ``out_rows`` (int64, rows
-    ascending) and ``out_w`` (float32 weights, written with ``blend``), both at least the node
-    count long.  ``planes`` (8,) float32 per axis ``lo, n_lo, hi, n_hi``; ``mode``, ``t``, ``k``
-    as :func:`_expansion` takes them; ``leaves_at`` < 0 for none.  Returns the count, or -1
-    when the cut would draw at least ``leaves_at`` nodes per leaf (draw the leaves instead)."""
+             mode, t, k, blend, leaves_at, dense_fraction, sizes, inside, out_rows, out_w):
+    """The cut of :func:`splatgl.lod.cut.select_cut_weights` into the tails ``out_rows[pos:]``
+    (int64, rows ascending) and ``out_w[pos:]`` (float32 weights, 1 without ``blend``), both at
+    least the node count long.  ``planes`` (8,) float32 per axis ``lo, n_lo, hi, n_hi``; ``mode``, ``t``, ``k``
+    as :func:`_expansion` takes them; ``leaves_at`` < 0 for none.  A level whose candidates are
+    at least ``dense_fraction`` of it is tested whole first (:func:`_level_test`, into the
+    scratch ``sizes`` float32 / ``inside`` bool, each at least the largest level long).  Returns ``pos``, or -1 when
+    the cut would draw at least ``leaves_at`` nodes per leaf (draw the leaves instead)."""
     rt = (rot[0, 0], rot[0, 1], rot[0, 2], rot[1, 0], rot[1, 1], rot[1, 2],
           rot[2, 0], rot[2, 1], rot[2, 2], trans[0], trans[1], trans[2])
     levels = offsets.size - 1
     n_leaves = offsets[1] - offsets[0]
     # Each level's drawn rows (ascending) are stacked from the outputs' end downwards, the top
-    # level highest: with level 0 lowest that is the rows' ascending order; moved to the front
-    # at the end.  Before a level, room for all its candidates is taken below the stack.
+    # level highest: with level 0 lowest that is the rows' ascending order (so no pass moves
+    # them; only the pages of the tail are touched).  Before a level, room for all its
+    # candidates is taken below the stack.
     pos = out_rows.size
-    cand = np.arange(offsets[levels] - offsets[levels - 1])  # local indices, ascending
-    cand_a = np.ones(cand.size, np.float32)                  # their ancestors' weight A
+    # A level's candidates are the children of the level above's expanded nodes, kept as those
+    # parents (local index, carry A e) rather than the children, four times fewer; the top
+    # level's candidates are all its nodes (a single parent of weight 1 standing above them).
+    top = offsets[levels] - offsets[levels - 1]
+    par = np.zeros(1, np.int64)
+    par_c = np.ones(1, np.float32)
+    n_cand = top
     nodes = 0.0
     covered = 0.0
     for level in range(levels - 1, -1, -1):
-        if cand.size == 0:
+        if n_cand == 0:
             break
         lo = offsets[level]
         n = offsets[level + 1] - lo
+        fan = n if level == levels - 1 else branching  # children per parent
         if level == 0 and leaves_at >= 0.0:
-            s = 0.0
-            for j in range(cand.size):
-                s += np.float64(cand_a[j])
-            if nodes + cand.size >= leaves_at * (covered + s):
+            s = 0.0  # the candidates' summed weight A (each parent's carry, per child)
+            for j in range(par.size):
+                s += np.float64(par_c[j]) * (min(par[j] * fan + fan, n) - par[j] * fan)
+            if nodes + n_cand >= leaves_at * (covered + s):
                 return -1
         below = offsets[level] - offsets[level - 1] if level else 0
-        nxt = np.empty(below, np.int64)
-        nxt_a = np.empty(below, np.float32)
+        nxt = np.empty(min(n, below), np.int64)  # this level's expanded nodes
+        nxt_c = np.empty(nxt.size, np.float32)
         m = 0
-        base = pos - cand.size
+        n_next = 0
+        dense = n_cand >= dense_fraction * n
+        if dense:
+            _level_test(cx, cy, cz, radius, lo, n, rt, scale, f, ortho, planes, sizes, inside)
+        base = pos - n_cand
         d = 0
         w_sum = 0.0
         last_w = 0.0
-        for j in range(cand.size):
-            local = cand[j]
-            row = lo + local
-            size, inside = _node_test(cx[row], cy[row], cz[row], radius[row], rt, scale, f,
-                                      ortho, planes)
-            if not inside:
-                continue
-            a = cand_a[j]
-            e = F32(0) if level == 0 else _expansion(size, mode, t, k)
-            if e < F32(1):
-                out_rows[base + d] = row
-                w = a * (F32(1) - e) if blend else F32(1)
-                out_w[base + d] = w
-                w_sum += np.float64(w)
-                last_w = np.float64(w)
-                d += 1
-            c = a * e
-            if level and c != F32(0):  # nonzero (a NaN too, as np.count_nonzero counts it)
-                first = local * branching
-                for child in range(first, min(first + branching, below)):
-                    nxt[m] = child
-                    nxt_a[m] = c
+        for j in range(par.size):
+            a = par_c[j]
+            for local in range(par[j] * fan, min(par[j] * fan + fan, n)):
+                row = lo + local
+                if dense:
+                    size, ins = sizes[local], inside[local]
+                else:
+                    size, ins = _node_test(cx[row], cy[row], cz[row], radius[row], rt, scale,
+                                           f, ortho, planes)
+                if not ins:
+                    continue
+                e = F32(0) if level == 0 else _expansion(size, mode, t, k)
+                if e < F32(1):
+                    out_rows[base + d] = row
+                    w = a * (F32(1) - e) if blend else F32(1)
+                    out_w[base + d] = w
+                    w_sum += np.float64(w)
+                    last_w = np.float64(w)
+                    d += 1
+                c = a * e
+                if level and c != F32(0):  # nonzero (a NaN too, as np.count_nonzero counts it)
+                    nxt[m] = local
+                    nxt_c[m] = c
                     m += 1
+                    n_next += min(local * branching + branching, below) - local * branching
         # the drawn rows down against the stack (backwards: the ranges may overlap)
         for q in range(d - 1, -1, -1):
             out_rows[pos - d + q] = out_rows[base + q]
@@ -130,13 +175,10 @@ def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, ortho
                 stands_for -= last_w * (span - (n_leaves - last * span))
             nodes += d
             covered += stands_for
-        cand = nxt[:m]
-        cand_a = nxt_a[:m]
-    count = out_rows.size - pos
-    for q in range(count):
-        out_rows[q] = out_rows[pos + q]
-        out_w[q] = out_w[pos + q]
-    return count
+        par = nxt[:m]
+        par_c = nxt_c[:m]
+        n_cand = n_next
+    return pos
 
 
 def warm_up() -> None:
@@ -144,4 +186,5 @@ def warm_up() -> None:
     f4 = np.zeros(3, np.float32)
     cut_pass(f4, f4, f4, f4, np.array([0, 2, 3], np.int64), 2, np.eye(3, dtype=np.float32),
              np.zeros(3, np.float32), F32(1), F32(1), False, np.zeros(8, np.float32), 2, F32(1),
-             F32(1), True, -1.0, np.zeros(3, np.int64), np.zeros(3, np.float32))
+             F32(1), True, -1.0, 0.25, np.zeros(3, np.float32), np.zeros(3, np.bool_),
+             np.zeros(3, np.int64), np.zeros(3, np.float32))

@@ -18,6 +18,7 @@ fits.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,6 +62,9 @@ class CutData:
 DENSE_FRACTION = 0.25
 #: Rows per block of a dense level pass (float32 temporaries stay in cache).
 BLOCK = 1 << 15
+#: Per-thread scratch of the compiled cut (a level's sizes and frustum flags), reused between
+#: views: fresh arrays of a few 10 MB cost their page faults on every view.
+_SCRATCH = threading.local()
 
 
 class _View:
@@ -221,19 +225,23 @@ def _compiled_cut(kern, data: CutData, view: _View, threshold_px: float, band: f
     """:func:`select_cut_weights` through the compiled ``cut_pass``."""
     n = int(data.offsets[-1])
     rows, weights = np.empty(n, np.int64), np.empty(n, np.float32)
+    widest = int(np.diff(data.offsets).max())
+    scratch = getattr(_SCRATCH, "arrays", None)
+    if scratch is None or scratch[0].size < widest:
+        scratch = _SCRATCH.arrays = np.empty(widest, np.float32), np.empty(widest, bool)
     finite = bool(np.isfinite(threshold_px))
     mode = 0 if not finite else (1 if band <= 1.0 else 2)
     ramp = 1.0 / (threshold_px * (band - 1.0)) if mode == 2 else 0.0
     planes = np.array([v for axis in view.planes for v in axis], np.float32)
-    count = kern.cut_pass(data.centres[0], data.centres[1], data.centres[2], data.radius,
+    pos = kern.cut_pass(data.centres[0], data.centres[1], data.centres[2], data.radius,
                           np.asarray(data.offsets, np.int64), int(data.branching), view.r, view.t,
                           view.scale, view.f, bool(view.ortho), planes, mode,
                           np.float32(threshold_px if finite else 0.0), np.float32(ramp),
-                          band > 1.0, -1.0 if leaves_at is None else float(leaves_at), rows,
-                          weights)
-    if count < 0:
+                          band > 1.0, -1.0 if leaves_at is None else float(leaves_at),
+                          DENSE_FRACTION, *scratch, rows, weights)
+    if pos < 0:
         return None, None
-    return rows[:count], (weights[:count] if band > 1.0 else None)
+    return rows[pos:], (weights[pos:] if band > 1.0 else None)
 
 
 def select_cut(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX) -> np.ndarray:
