@@ -5,7 +5,7 @@ sort; no draw) on an orbit of views, for a pinhole camera that frames the whole 
 every splat visible), a pinhole camera at 0.2x that distance (most of the scene outside the
 frustum), a 180-degree fisheye and an equirectangular panorama, and prints the median cull and
 sort times and their ratio: for the NumPy cull and, where numba is installed (the ``fast``
-extra), for the compiled one (pinhole views).  Run it under the timing gate on a shared machine::
+extra), for the compiled one.  Run it under the timing gate on a shared machine::
 
     /work/tools/timed python benchmarks/cull_sort.py --sizes 0.1M,1M --frames 5
 
@@ -61,8 +61,8 @@ def _order_stage(quad, cams) -> tuple[float, float, int]:
 
 
 def measure(n: int, frames: int, width: int, height: int) -> list[dict]:
-    """Per view: the NumPy cull, and the compiled cull where numba is installed (pinhole views;
-    the lens culls have no compiled pass), each against its own run's sort."""
+    """Per view: the NumPy cull, and the compiled cull where numba is installed, each against
+    its own run's sort."""
     renderer = Renderer()
     scene = load_scene(scene_file(n, 0), progress=lambda *a: None)
     quad = QuadRenderer(renderer.ctx, scene, RenderSettings(), renderer.programs)
@@ -76,7 +76,7 @@ def measure(n: int, frames: int, width: int, height: int) -> list[dict]:
             row = {"splats": n, "view": view, "kept": int(kept), "cull_ms": 1e3 * c,
                    "sort_ms": 1e3 * s, "cull_over_sort": c / s, "compiled_cull_ms": None,
                    "compiled_sort_ms": None, "compiled_cull_over_sort": None}
-            if compiled and not view.startswith(("fisheye", "equirect")):
+            if compiled:
                 cull_kernel.set_policy("wait")
                 c, s, _ = _order_stage(quad, cams)
                 row.update(compiled_cull_ms=1e3 * c, compiled_sort_ms=1e3 * s,

@@ -1,6 +1,7 @@
 """Optional compiled kernels (numba, the ``fast`` extra), loaded in the background so that
-nothing waits for them: the chunked cull of a pinhole view (``view_pass``), the cull of a LOD
-cut's rows in place (``rows_pass``) and the LOD cut's selection (``cut_pass``).
+nothing waits for them: the chunked cull of a pinhole view (``view_pass``), the cull of a lens
+camera's view (``lens_pass``), the cull of a LOD cut's rows in place (``rows_pass``) and the
+LOD cut's selection (``cut_pass``).
 
 With NumPy these pay a few microseconds per call: a view from inside a scene splits into
 hundreds of runs of kept chunks plus a gathered per-row test of the boundary chunks, and a cut
@@ -46,7 +47,7 @@ def _load():
     _cull_numba.warm_up()
     _cut_numba.warm_up()
     return SimpleNamespace(view_pass=_cull_numba.view_pass, rows_pass=_cull_numba.rows_pass,
-                           cut_pass=_cut_numba.cut_pass)
+                           lens_pass=_cull_numba.lens_pass, cut_pass=_cut_numba.cut_pass)
 
 
 def request() -> None:
@@ -57,7 +58,8 @@ def request() -> None:
 
 
 def kernel(wait: bool = False):
-    """The compiled kernels (``view_pass`` and ``rows_pass`` of :mod:`splatgl._cull_numba`,
+    """The compiled kernels (``view_pass``, ``rows_pass`` and ``lens_pass`` of
+    :mod:`splatgl._cull_numba`,
     ``cut_pass`` of :mod:`splatgl.lod._cut_numba`) if it is loaded (``wait``: after waiting for the load that
     :func:`request` started, starting it if needed), else None; a failed load gives None."""
     if wait:

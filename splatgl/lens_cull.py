@@ -47,9 +47,18 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
     near32 = np.float32(near)  # lens_visible compares float32 distances with the Python float
     fisheye = camera.projection is Projection.FISHEYE
     equirect = camera.projection is Projection.EQUIRECTANGULAR
+    limit32 = cos_limit = np.float32(0.0)
     if fisheye:
         limit = fisheye_theta_limit(camera)
         limit32, cos_limit = np.float32(limit), np.float32(np.cos(limit))
+    chunks.views += 1
+    chunks.last_path = "numpy"
+    kern = chunks._kernel() if not camera.ods_eye else None
+    if kern is not None:
+        keys = _compiled_keys(kern, chunks, camera, near32, limit32, cos_limit, scale)
+        if keys is not None:
+            chunks.last_path = "compiled"
+            return keys
     block = min(CULL_BLOCK, max(n, 1))
     x, y, z, d, tmp = (np.empty(block, np.float32) for _ in range(5))
     keep, band = np.empty(block, bool), np.empty(block, bool)
@@ -106,3 +115,57 @@ def _seam_copies(chunks: ChunkedCull, rows: np.ndarray, x, y, z, camera: Camera,
     data = chunks.data
     radius = splat_reach(data.max_scale[rows] * scale, data.opacities[rows])
     return wrap_copies(np.stack([x, y, z], 1), radius, camera)
+
+
+#: Room per half of the rows for the compiled pass's fisheye rows near the cone and equirect
+#: seam candidates (more and the view takes the NumPy path).
+LIST_ROWS = 1 << 16
+
+
+def _compiled_keys(kern, chunks: ChunkedCull, camera: Camera, near32: np.float32,
+                   limit32: np.float32, cos_limit: np.float32, scale: float) -> np.ndarray | None:
+    """:func:`lens_visible_keys` through the compiled ``lens_pass`` (over two threads from
+    :data:`splatgl.cull_chunks.SPLIT_ROWS` rows, as the pinhole pass): NumPy's ``arctan2`` on
+    the fisheye rows it leaves in doubt, NumPy's float64 seam test on its candidates; None if
+    either list overflows."""
+    from . import cull_chunks, cull_kernel
+
+    data, keys = chunks.data, chunks.key_buffer()
+    n = data.count
+    mode = {Projection.FISHEYE: 1, Projection.EQUIRECTANGULAR: 2}.get(camera.projection, 0)
+    args = (data.xyz[0], data.xyz[1], data.xyz[2], data.radius, chunks.index,
+            camera.rotation.astype(np.float32), camera.translation.astype(np.float32), near32,
+            mode, cos_limit, np.float32(ANGLE_BAND), np.float32(scale),
+            np.float32(4.0 / camera.fx), keys.view(np.uint32), keys.view(np.float32))
+    lists = lambda: (np.empty(LIST_ROWS, np.int64), np.empty((LIST_ROWS, 4), np.float32),
+                     np.empty(LIST_ROWS, np.int64), np.empty((LIST_ROWS, 4), np.float32))
+    pool = cull_kernel.helper() if n >= cull_chunks.SPLIT_ROWS else None
+    starts = [0] if pool is None else [0, n // 2]
+    found = [lists() for _ in starts]
+    if pool is None:
+        results = [kern.lens_pass(0, n, 0, *args, *found[0])]
+    else:
+        second = pool.submit(kern.lens_pass, n // 2, n, n // 2, *args, *found[1])
+        try:
+            first = kern.lens_pass(0, n // 2, 0, *args, *found[0])
+        finally:
+            last = second.result()  # its writes must end before the buffer is reused
+        results = [first, last]
+    if any(nd > LIST_ROWS or ns > LIST_ROWS for _, nd, ns in results):
+        return None
+    out = 0
+    for at, (count, _, _) in zip(starts, results):
+        keys[out:out + count] = keys[at:at + count]  # overlapping: NumPy buffers it
+        out += count
+    copies = []
+    for (_, nd, ns), (doubt, doubt_p, seam, seam_p) in zip(results, found):
+        if nd:  # near the fisheye's cone: the float32 arctan2 test, as the NumPy path
+            rows, p = doubt[:nd], doubt_p[:nd]
+            ok = ~(np.arctan2(np.hypot(p[:, 0], p[:, 1]), p[:, 2]) > limit32)
+            depth_keys(p[ok, 3], chunks.index[rows[ok]], keys[out:out + int(ok.sum())])
+            out += int(ok.sum())
+        if ns:  # near the equirect seam: the float64 copy test on the candidates
+            rows, p = seam[:ns], seam_p[:ns]
+            pick = _seam_copies(chunks, rows, p[:, 0], p[:, 1], p[:, 2], camera, scale)
+            copies.append(depth_keys(p[pick, 3], chunks.index[rows[pick]] | WRAP_FLAG))
+    return np.concatenate([keys[:out], *copies]) if copies else keys[:out]

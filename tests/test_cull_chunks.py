@@ -148,8 +148,13 @@ def _lens_cameras():
             dataclasses.replace(Camera.equirectangular(128, 64, pose), ods_eye=-0.032)]
 
 
+@pytest.mark.parametrize("path", ["numpy", "compiled", "compiled-2-threads"])
 @pytest.mark.parametrize("cam_index", range(4), ids=["fisheye_k", "fisheye", "equirect", "ods"])
-def test_lens_cull_keeps_what_the_old_lens_stages_keep(cam_index):
+def test_lens_cull_keeps_what_the_old_lens_stages_keep(cam_index, path, monkeypatch):
+    """NumPy and compiled (one thread, two; an ODS camera takes the NumPy path there too)."""
+    if path != "numpy":
+        _need_kernel()
+    monkeypatch.setattr(cull_chunks, "SPLIT_ROWS", 1 if path.endswith("threads") else 10 ** 9)
     points, max_scale, opac = _clustered(20_000, 17)
     camera = _lens_cameras()[cam_index]
     if camera.projection is lens.Projection.FISHEYE:
@@ -162,8 +167,10 @@ def test_lens_cull_keeps_what_the_old_lens_stages_keep(cam_index):
         world = (cone - camera.translation) @ camera.rotation  # camera -> world
         points[:600] = world.astype(np.float32)
     chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=32, group=8)
+    chunks.compiled = path != "numpy"
     want, keep = _old_lens_keys(points, max_scale, opac, camera, 0.05)
     got = np.sort(lens_visible_keys(chunks, camera, 0.05, camera.scale))
+    assert chunks.last_path == ("compiled" if path != "numpy" and not camera.ods_eye else "numpy")
     np.testing.assert_array_equal(got, want)
     assert 0 < want.size
     if camera.projection is lens.Projection.EQUIRECTANGULAR:
