@@ -126,7 +126,9 @@ def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, ortho
             if nodes + n_cand >= leaves_at * (covered + s):
                 return -1
         below = offsets[level] - offsets[level - 1] if level else 0
-        nxt = np.empty(min(n, below), np.int64)  # this level's expanded nodes
+        # this level's expanded nodes (at most all of it; one spare slot at the leaves, which
+        # expand nothing but are written to unconditionally below)
+        nxt = np.empty(n if level else 1, np.int64)
         nxt_c = np.empty(nxt.size, np.float32)
         m = 0
         n_next = 0
@@ -146,22 +148,24 @@ def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, ortho
                 else:
                     size, ins = _node_test(cx[row], cy[row], cz[row], radius[row], rt, scale,
                                            f, ortho, planes)
-                if not ins:
-                    continue
+                # written unconditionally and counted by the tests (no branches to mispredict:
+                # slots past the count are overwritten or never read)
                 e = F32(0) if level == 0 else _expansion(size, mode, t, k)
-                if e < F32(1):
-                    out_rows[base + d] = row
-                    w = a * (F32(1) - e) if blend else F32(1)
-                    out_w[base + d] = w
-                    w_sum += np.float64(w)
-                    last_w = np.float64(w)
-                    d += 1
+                w = a * (F32(1) - e) if blend else F32(1)
+                drawn = ins & (e < F32(1))
+                out_rows[base + d] = row
+                out_w[base + d] = w
+                w_sum += np.float64(w) if drawn else 0.0
+                last_w = np.float64(w) if drawn else last_w
+                d += drawn
                 c = a * e
-                if level and c != F32(0):  # nonzero (a NaN too, as np.count_nonzero counts it)
-                    nxt[m] = local
-                    nxt_c[m] = c
-                    m += 1
-                    n_next += min(local * branching + branching, below) - local * branching
+                # expanded: nonzero carry (a NaN too, as np.count_nonzero counts it)
+                expand = ins & (level > 0) & (c != F32(0))
+                nxt[m] = local
+                nxt_c[m] = c
+                m += expand
+                n_next += (min(local * branching + branching, below) - local * branching
+                           if expand else 0)
         # the drawn rows down against the stack (backwards: the ranges may overlap)
         for q in range(d - 1, -1, -1):
             out_rows[pos - d + q] = out_rows[base + q]
