@@ -8,9 +8,9 @@ hundreds of runs of kept chunks plus a gathered per-row test of the boundary chu
 walks its levels in a dozen array passes each, so at 1M splats the cull cost more than the sort
 (docs/scale.md).  One compiled loop does the same float32 operations without the calls.
 Importing numba and compiling the four kernels takes about 9 s the first time on this machine,
-then about 1 s from numba's on-disk cache, so :func:`request` starts that on a daemon thread and :func:`kernel`
-hands them out only once they are ready: until then, and wherever numba is missing, the NumPy
-paths run.  Both give the same keys and cuts, bit for bit (tests/test_cull_chunks.py,
+then about 1 s from numba's on-disk cache, so :func:`request` starts that on a daemon thread
+and :func:`kernel` hands them out only once they are ready: until then, and wherever numba is
+missing, the NumPy paths run.  Both give the same keys and cuts, bit for bit (tests/test_cull_chunks.py,
 tests/test_lod_blend.py), so switching between them mid-session changes no image.
 """
 
