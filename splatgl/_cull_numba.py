@@ -136,6 +136,22 @@ def _note_unsure(unsure_rows, unsure_p, c, row, u, v, d):
     return c + 1
 
 
+@numba.njit(inline="always")
+def _cull_row(x, y, z, radius, faint, max_scale, opacity, i, key_index, note_as, rt, pl, near32,
+              peak, keys_u32, keys_f32, n, unsure_rows, unsure_p, c):
+    """:func:`_row_test` of row ``i``: kept, its key (with ``key_index``) written at ``n``;
+    undecided, noted as ``note_as``.  Returns the new ``(n, c)``."""
+    status, u, v, d = _row_test(x[i], y[i], z[i], radius[i], faint[i], max_scale[i], opacity[i],
+                                rt, pl, near32, peak)
+    if status == 1:
+        keys_u32[2 * n] = key_index
+        keys_f32[2 * n + 1] = d
+        n += 1
+    elif status == 2:
+        c = _note_unsure(unsure_rows, unsure_p, c, note_as, u, v, d)
+    return n, c
+
+
 @numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
 def rows_pass(rows, x, y, z, radius, alive, faint, max_scale, opacity, rot, trans, planes,
               near32, peak, keys_u32, keys_f32, unsure_rows, unsure_p):
@@ -151,16 +167,8 @@ def rows_pass(rows, x, y, z, radius, alive, faint, max_scale, opacity, rot, tran
         i = rows[j]
         if not alive[i]:
             continue
-        status, u, v, d = _row_test(x[i], y[i], z[i], radius[i], faint[i], max_scale[i],
-                                    opacity[i], rt, pl, near32, peak)
-        if status == 0:
-            continue
-        if status == 2:
-            c = _note_unsure(unsure_rows, unsure_p, c, j, u, v, d)
-            continue
-        keys_u32[2 * n] = i
-        keys_f32[2 * n + 1] = d
-        n += 1
+        n, c = _cull_row(x, y, z, radius, faint, max_scale, opacity, i, i, j, rt, pl, near32,
+                         peak, keys_u32, keys_f32, n, unsure_rows, unsure_p, c)
     return n, c
 
 
@@ -206,16 +214,8 @@ def view_pass(g0, g1, out0, groups, chunks, group, x, y, z, radius, faint, max_s
                 n += 1
             continue
         for i in range(a, b):
-            status, u, v, d = _row_test(x[i], y[i], z[i], radius[i], faint[i], max_scale[i],
-                                        opacity[i], rt, pl, near32, peak)
-            if status == 0:
-                continue
-            if status == 2:
-                c = _note_unsure(unsure_rows, unsure_p, c, i, u, v, d)
-                continue
-            keys_u32[2 * n] = index[i]
-            keys_f32[2 * n + 1] = d
-            n += 1
+            n, c = _cull_row(x, y, z, radius, faint, max_scale, opacity, i, index[i], i, rt, pl,
+                             near32, peak, keys_u32, keys_f32, n, unsure_rows, unsure_p, c)
     return n - out0, c
 
 
