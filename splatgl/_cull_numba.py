@@ -46,11 +46,11 @@ def _sphere_class(sph, k, rot, t, view, sides):
     x = rot[0, 0] * cx + rot[0, 1] * cy + rot[0, 2] * cz + t[0]
     y = rot[1, 0] * cx + rot[1, 1] * cy + rot[1, 2] * cz + t[1]
     z = rot[2, 0] * cx + rot[2, 1] * cy + rot[2, 2] * cz + t[2]
-    s, near, t_norm, scale = view[0], view[1], view[2], view[3]
+    s, near, t_norm, scale, rounding = view[0], view[1], view[2], view[3], view[4]
     rc = sph[k, 3] * s
     reach = sph[k, 4] * scale
-    slack = 1e-4 * (math.sqrt(x * x + y * y + z * z) + rc
-                    + s * math.sqrt(cx * cx + cy * cy + cz * cz) + t_norm)
+    slack = rounding * (math.sqrt(x * x + y * y + z * z) + rc
+                        + s * math.sqrt(cx * cx + cy * cy + cz * cz) + t_norm)
     if z + rc < near - slack:
         return 0
     accept = sph[k, 5] != 0.0 and z - rc > near + slack
@@ -62,7 +62,8 @@ def _sphere_class(sph, k, rot, t, view, sides):
             return 0
         if a_lo * z - c - rc * h_lo > n_lo * reach + slack * h_lo:
             return 0
-        accept = accept and (c - hi * z) / n_hi < -(rc + slack) and (lo * z - c) / n_lo < -(rc + slack)
+        accept = (accept and (c - hi * z) / n_hi < -(rc + slack)
+                  and (lo * z - c) / n_lo < -(rc + slack))
     return 1 if accept else 2
 
 
@@ -179,11 +180,12 @@ def view_pass(g0, g1, out0, groups, chunks, group, x, y, z, radius, faint, max_s
     """A whole pinhole view of the chunked cull in one pass: each group of ``group`` chunks
     classified (:func:`_sphere_class` on ``groups``), a boundary group's chunks one by one
     (on ``chunks``); then per chunk by its class: an accepted chunk's rows take the depth
-    only, a tested chunk's rows the near and side-plane tests (:func:`splatgl.cull.cull_visible`'s
-    float32 operations) and, where the centre projects outside the image or the splat is faint,
-    the peak alpha bound.  Kept rows' keys go to ``keys_u32[2 n] = index`` and
-    ``keys_f32[2 n + 1] = z`` (two views of the uint64 key buffer); rows whose bound is within :data:`PEAK_UNSURE` of
-    1/255 go to ``unsure_rows`` / ``unsure_p`` (up to their size; counted past it).
+    only, a tested chunk's rows the near and side-plane tests
+    (:func:`splatgl.cull.cull_visible`'s float32 operations) and, where the centre projects
+    outside the image or the splat is faint, the peak alpha bound.  Kept rows' keys go to
+    ``keys_u32[2 n] = index`` and ``keys_f32[2 n + 1] = z`` (two views of the uint64 key
+    buffer); rows whose bound is within :data:`PEAK_UNSURE` of 1/255 go to ``unsure_rows`` /
+    ``unsure_p`` (up to their size; counted past it).
     Only the groups ``g0:g1`` and their rows, keys written from key ``out0`` on (two calls on
     disjoint group ranges can run at once: it releases the GIL, and a range's keys never
     outnumber its rows, so keys written from its first row stay inside it).
@@ -195,7 +197,8 @@ def view_pass(g0, g1, out0, groups, chunks, group, x, y, z, radius, faint, max_s
         cls = _sphere_class(groups, g, rot64, trans64, view, sides)
         lo, hi = g * group, min(n_chunks, (g + 1) * group)
         for k in range(lo, hi):
-            flags[k - k0] = cls if cls != 2 else _sphere_class(chunks, k, rot64, trans64, view, sides)
+            flags[k - k0] = (cls if cls != 2
+                             else _sphere_class(chunks, k, rot64, trans64, view, sides))
     rt = _rigid(rot, trans)
     pl = _planes(planes)
     r20, r21, r22, t2 = rt[6], rt[7], rt[8], rt[11]
@@ -239,9 +242,10 @@ def lens_pass(a, b, out0, x, y, z, radius, index, rot, trans, near32, mode, cos_
     written from key ``out0`` on (as :func:`view_pass` writes them, distance for depth): the
     distance ``|p|`` beyond the near plane and, with ``mode`` 1 (fisheye), the cheap cone test
     ``z - |p| cos_limit >= 0``.  Rows within ``band`` of the cone go to ``doubt_rows`` /
-    ``doubt_p`` (x, y, z, |p|) unkept (NumPy's ``arctan2`` decides them); with ``mode`` 2 (equirectangular)
-    kept rows within the float32 seam bound ``(radius seam_scale + |p| seam_px)`` also go to
-    ``seam_rows`` / ``seam_p`` (x, y, z, |p|) for NumPy's float64 copy test.  Both lists are
+    ``doubt_p`` (x, y, z, |p|) unkept (NumPy's ``arctan2`` decides them); with ``mode`` 2
+    (equirectangular) kept rows within the float32 seam bound
+    ``(radius seam_scale + |p| seam_px)`` also go to ``seam_rows`` / ``seam_p`` (x, y, z, |p|)
+    for NumPy's float64 copy test.  Both lists are
     counted past their size.  Returns (keys, doubts, seam candidates)."""
     rt = _rigid(rot, trans)
     n = out0
@@ -277,7 +281,7 @@ def warm_up() -> None:
     f4, u4 = np.zeros(2, np.float32), np.zeros(2, np.uint32)
     sph = np.zeros((1, 6))
     view_pass(0, 1, 0, sph, sph, 16, f4, f4, f4, f4, np.zeros(2, np.bool_), f4, f4, u4,
-              np.array([0, 2], np.int64), np.eye(3), np.zeros(3), np.zeros(4), np.zeros((2, 8)),
+              np.array([0, 2], np.int64), np.eye(3), np.zeros(3), np.zeros(5), np.zeros((2, 8)),
               np.eye(3, dtype=np.float32), np.zeros(3, np.float32), np.zeros((2, 6), np.float32),
               np.float32(0.0), np.zeros(9), np.zeros(4, np.uint32), np.zeros(4, np.float32),
               np.zeros(2, np.int64), np.zeros((2, 3), np.float32))

@@ -90,7 +90,7 @@ class Spheres:
         rot, t = camera.rotation, camera.translation
         cam = self.centre @ rot.T + t                       # (C, 3) centres, camera space
         view, sides = sphere_constants(camera, near, scale)
-        s, _, t_norm, _ = view
+        s, _, t_norm, _, _ = view
         rc = self.r_centre * s
         reach = self.r_max * scale
         slack = ROUNDING * (np.linalg.norm(cam, axis=1) + rc + s * np.linalg.norm(self.centre, axis=1)
@@ -112,11 +112,12 @@ class Spheres:
 
 def sphere_constants(camera: Camera, near: float, scale: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-view constants of :meth:`Spheres.classify` (float64): ``view = (s, near, |t|,
-    scale)`` with ``s`` the camera-space length of a world unit, and ``sides`` (2, 8), per
+    scale, ROUNDING)`` with ``s`` the camera-space length of a world unit, and ``sides`` (2, 8), per
     image axis ``hi, lo`` (the image edges' slopes), ``n_hi, n_lo`` (``hypot(1, slope)``),
     ``a_hi, a_lo`` (the slopes widened by the screen margin) and ``hypot(1, a)`` of those."""
     s = float(np.linalg.norm(camera.rotation, axis=1).max())
-    view = np.array([s, near, float(np.linalg.norm(camera.translation)), scale], np.float64)
+    view = np.array([s, near, float(np.linalg.norm(camera.translation)), scale, ROUNDING],
+                    np.float64)
     sides = np.empty((2, 8), np.float64)
     for axis, (f, c, size) in enumerate(((camera.fx, camera.cx, camera.width),
                                          (camera.fy, camera.cy, camera.height))):

@@ -10,8 +10,9 @@ walks its levels in a dozen array passes each, so at 1M splats the cull cost mor
 Importing numba and compiling the four kernels takes about 9 s the first time on this machine,
 then about 1 s from numba's on-disk cache, so :func:`request` starts that on a daemon thread
 and :func:`kernel` hands them out only once they are ready: until then, and wherever numba is
-missing, the NumPy paths run.  Both give the same keys and cuts, bit for bit (tests/test_cull_chunks.py,
-tests/test_lod_blend.py), so switching between them mid-session changes no image.
+missing, the NumPy paths run.  Both give the same keys and cuts, bit for bit
+(tests/test_cull_chunks.py, tests/test_lod_blend.py), so switching between them mid-session
+changes no image.
 """
 
 from __future__ import annotations
@@ -59,9 +60,9 @@ def request() -> None:
 
 def kernel(wait: bool = False):
     """The compiled kernels (``view_pass``, ``rows_pass`` and ``lens_pass`` of
-    :mod:`splatgl._cull_numba`,
-    ``cut_pass`` of :mod:`splatgl.lod._cut_numba`) if it is loaded (``wait``: after waiting for the load that
-    :func:`request` started, starting it if needed), else None; a failed load gives None."""
+    :mod:`splatgl._cull_numba`, ``cut_pass`` of :mod:`splatgl.lod._cut_numba`) if they are
+    loaded (``wait``: after waiting for the load that :func:`request` started, starting it if
+    needed), else None; a failed load gives None."""
     if wait:
         request()
     if _loader is None or not (wait or _loader.done()):

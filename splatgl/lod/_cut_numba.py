@@ -90,11 +90,12 @@ def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, ortho
              mode, t, k, blend, leaves_at, dense_fraction, sizes, inside, out_rows, out_w):
     """The cut of :func:`splatgl.lod.cut.select_cut_weights` into the tails ``out_rows[pos:]``
     (int64, rows ascending) and ``out_w[pos:]`` (float32 weights, 1 without ``blend``), both at
-    least the node count long.  ``planes`` (8,) float32 per axis ``lo, n_lo, hi, n_hi``; ``mode``, ``t``, ``k``
-    as :func:`_expansion` takes them; ``leaves_at`` < 0 for none.  A level whose candidates are
-    at least ``dense_fraction`` of it is tested whole first (:func:`_level_test`, into the
-    scratch ``sizes`` float32 / ``inside`` bool, each at least the largest level long).  Returns ``pos``, or -1 when
-    the cut would draw at least ``leaves_at`` nodes per leaf (draw the leaves instead)."""
+    least the node count long.  ``planes`` (8,) float32 per axis ``lo, n_lo, hi, n_hi``;
+    ``mode``, ``t``, ``k`` as :func:`_expansion` takes them; ``leaves_at`` < 0 for none.  A
+    level whose candidates are at least ``dense_fraction`` of it is tested whole first
+    (:func:`_level_test`, into the scratch ``sizes`` float32 / ``inside`` bool, each at least
+    the largest level long).  Returns ``pos``, or -1 when the cut would draw at least
+    ``leaves_at`` nodes per leaf (draw the leaves instead)."""
     rt = (rot[0, 0], rot[0, 1], rot[0, 2], rot[1, 0], rot[1, 1], rot[1, 2],
           rot[2, 0], rot[2, 1], rot[2, 2], trans[0], trans[1], trans[2])
     levels = offsets.size - 1
