@@ -106,3 +106,15 @@ def helper() -> ThreadPoolExecutor | None:
     if _helper is None and len(os.sched_getaffinity(0)) > 1:
         _helper = ThreadPoolExecutor(max_workers=1, thread_name_prefix="splatgl-cull")
     return _helper
+
+
+def _after_fork_in_child() -> None:
+    """A forked child has none of its parent's threads: the helper thread is made anew on
+    demand, and a load still under way in the parent is started again when requested."""
+    global _helper, _loader
+    _helper = None
+    if _loader is not None and not _loader.done():
+        _loader = None
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)

@@ -300,3 +300,28 @@ def test_rows_keys_cull_a_subset_as_the_float64_cull_does(cam_index, compiled):
                     kern, out)
     assert 0 < want.size < rows.size and np.shares_memory(got, out)
     np.testing.assert_array_equal(np.sort(got), np.sort(want))
+
+
+def test_compiled_cull_in_a_forked_child(monkeypatch):
+    """A process forked after the helper thread started (a fork-based worker pool) culls on
+    two threads too, instead of waiting for a thread it does not have."""
+    import multiprocessing as mp
+
+    _need_kernel()
+    monkeypatch.setattr(cull_chunks, "SPLIT_ROWS", 1)
+    points, max_scale, opac = _clustered(20_000, 23)
+    camera = _cameras()[1]
+    chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=32, group=8)
+    chunks.compiled = True
+    want = np.sort(chunks.visible_keys(camera, 0.05))  # the helper thread now exists
+    assert cull_kernel.helper() is not None
+    ctx = mp.get_context("fork")
+    with ctx.Pool(1) as pool:
+        got = pool.apply_async(_child_keys, (chunks, camera)).get(timeout=60)
+    np.testing.assert_array_equal(got, want)
+
+
+def _child_keys(chunks, camera):
+    keys = np.sort(chunks.visible_keys(camera, 0.05))
+    assert chunks.last_path == "compiled"
+    return keys
