@@ -11,12 +11,11 @@ time of each renderer over a few frames (quad and tile warmed up first).
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 from splatgl import RenderSettings, Renderer, RendererKind, default_camera, load_scene
+from splatgl.bench.runner import median_seconds
 from splatgl.errors import SplatglError
 from splatgl.metrics import image_errors
 from splatgl.render import render_reference_rgba
@@ -30,12 +29,9 @@ SCENES = ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply",
 
 
 def timed(fn, repeats: int):
-    times, out = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return out, statistics.median(times)
+    """``(last result, median seconds)`` of ``repeats`` calls of ``fn``."""
+    seconds, out = median_seconds(fn, repeats)
+    return out, seconds
 
 
 def main(argv=None) -> int:

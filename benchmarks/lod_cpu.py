@@ -14,15 +14,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
-import time
 
 import numpy as np
 
 from splatgl import cull_kernel
 from splatgl.bench.lod_bench import cameras, lod_file
 from splatgl.bench.scale import scene_file
-from splatgl.bench.scale_cli import _cpu_model, parse_sizes
+from splatgl.bench.machine import describe, machine_info
+from splatgl.bench.runner import median_seconds
+from splatgl.bench.scale_cli import parse_sizes
 from splatgl.cull import CullData
 from splatgl.cull_chunks import keys_order, rows_keys
 from splatgl.lod.cut import CutData, select_cut_weights
@@ -34,12 +34,8 @@ from splatgl.settings import RenderSettings, resolve_near
 
 def _median_ms(fn, repeats: int):
     """(median milliseconds, last result) of ``repeats`` calls of ``fn``."""
-    times, result = [], None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - t)
-    return 1e3 * statistics.median(times), result
+    seconds, result = median_seconds(fn, repeats)
+    return 1e3 * seconds, result
 
 
 def measure(n: int, repeats: int, kern) -> list[dict]:
@@ -79,7 +75,7 @@ def main() -> None:
     kern = cull_kernel.kernel(wait=True)
     if kern is None:
         raise SystemExit("lod_cpu.py: needs numba (pip install '.[fast]')")
-    print(f"# {_cpu_model()}; medians of {args.repeats}; T=1px, band 2; ms")
+    print(f"# {describe(machine_info())}; medians of {args.repeats}; T=1px, band 2; ms")
     print(f"{'splats':>9} {'dist':>5} {'nodes':>9} {'select np':>9} {'compiled':>8} "
           f"{'cull np':>8} {'compiled':>8} {'sort':>6} same")
     out = open(args.json_lines, "w") if args.json_lines else None

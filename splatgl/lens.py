@@ -196,6 +196,11 @@ def wrap_period(camera: Camera) -> float | None:
     return 2.0 * math.pi * camera.fx
 
 
+#: Screen margin (pixels) of the equirect seam test: a splat whose reach comes this close to
+#: the seam is drawn on both sides.
+SEAM_MARGIN_PX = 4.0
+
+
 def wrap_copies(p_cam: np.ndarray, radius: np.ndarray, camera: Camera) -> np.ndarray:
     """(N,) bool: equirect splats that may reach across the +-180 degree seam (drawn twice).
 
@@ -206,7 +211,7 @@ def wrap_copies(p_cam: np.ndarray, radius: np.ndarray, camera: Camera) -> np.nda
     if camera.projection is not Projection.EQUIRECTANGULAR:
         return np.zeros(p_cam.shape[0], bool)
     dist = np.sqrt(np.einsum("ni,ni->n", p_cam, p_cam).astype(np.float64))
-    reach = radius.astype(np.float64) + 4.0 * dist / camera.fx   # + 4 px of margin
+    reach = radius.astype(np.float64) + SEAM_MARGIN_PX * dist / camera.fx
     return (np.abs(p_cam[:, 0]) < reach) & (p_cam[:, 2] < reach)
 
 

@@ -23,7 +23,8 @@ import numpy as np
 from .camera import Camera, Projection
 from .cull import CULL_BLOCK, view_axis
 from .cull_chunks import ChunkedCull
-from .lens import WRAP_FLAG, eye_space, fisheye_theta_limit, splat_reach, wrap_copies
+from .lens import (SEAM_MARGIN_PX, WRAP_FLAG, eye_space, fisheye_theta_limit, splat_reach,
+                   wrap_copies)
 from .sort import depth_keys
 
 #: Relative width of the band around a cheap test's boundary where the exact test decides
@@ -91,7 +92,7 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
                 kb[doubt[theta > limit32]] = False
         if equirect:  # seam candidates from a float32 bound of the reach, on the whole block
             np.multiply(data.radius[start:stop], np.float32(scale), out=tb)
-            tb += db * np.float32(4.0 / camera.fx)
+            tb += db * np.float32(SEAM_MARGIN_PX / camera.fx)
             tb *= np.float32(1.0 + ANGLE_BAND)
             cand = np.flatnonzero(kb & (np.abs(xb) < tb) & (zb < tb))
             if cand.size:
@@ -136,7 +137,8 @@ def _compiled_keys(kern, chunks: ChunkedCull, camera: Camera, near32: np.float32
     args = (data.xyz[0], data.xyz[1], data.xyz[2], data.radius, chunks.index,
             camera.rotation.astype(np.float32), camera.translation.astype(np.float32), near32,
             mode, cos_limit, np.float32(ANGLE_BAND), np.float32(scale),
-            np.float32(4.0 / camera.fx), keys.view(np.uint32), keys.view(np.float32))
+            np.float32(SEAM_MARGIN_PX / camera.fx), keys.view(np.uint32),
+            keys.view(np.float32))
     lists = lambda: (np.empty(LIST_ROWS, np.int64), np.empty((LIST_ROWS, 4), np.float32),
                      np.empty(LIST_ROWS, np.int64), np.empty((LIST_ROWS, 4), np.float32))
     pool = cull_kernel.helper() if n >= cull_chunks.SPLIT_ROWS else None

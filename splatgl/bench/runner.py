@@ -105,17 +105,23 @@ def orbit_path(scene: Scene, options: BenchOptions, start: int = 0) -> list[Came
             for i in range(options.frames)]
 
 
+def median_seconds(fn, repeats: int):
+    """``(median seconds, last result)`` of ``repeats`` calls of ``fn()`` (the benchmarks'
+    scripts time single stages this way)."""
+    times, result = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), result
+
+
 def sort_benchmark(n: int = 1_000_000, repeats: int = 7, seed: int = 0) -> float:
     """Median milliseconds of the exact 32-bit depth sort of ``n`` keys."""
     rng = np.random.default_rng(seed)
     depth = rng.uniform(0.1, 100.0, n).astype(np.float32)
     idx = np.arange(n, dtype=np.uint32)
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        depth_sort(depth, idx)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times) * 1e3
+    return median_seconds(lambda: depth_sort(depth, idx), repeats)[0] * 1e3
 
 
 def _stage_ms(times) -> dict[str, float]:
