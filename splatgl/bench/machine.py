@@ -61,6 +61,18 @@ def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None
             "cull": "compiled (numba)" if cull_kernel.installed() else "numpy"}
 
 
+def probe_machine() -> dict:
+    """:func:`machine_info` with the GL renderer of a headless context made (and released) for
+    the purpose, as every benchmark gets it (:func:`splatgl.gl.context.renderer_name`)."""
+    from ..gl.context import create_headless_context, renderer_name
+
+    ctx = create_headless_context()
+    try:
+        return machine_info(renderer_name(ctx))
+    finally:
+        ctx.release()
+
+
 def describe(info: dict) -> str:
     """One line: ``machine: AMD EPYC (avx2), 2 cores, GL renderer llvmpipe (...), cull numpy``
     (the cull path matters to the cull figures: the compiled one where numba is installed)."""

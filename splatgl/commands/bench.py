@@ -21,6 +21,7 @@ from ..bench.runner import BenchOptions, sort_benchmark
 from ..bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
 from ..errors import SplatglError
 from ..executor import add_executor_arguments, executor_from_args, run_tasks, summary
+from ..gl.context import renderer_name
 from ..limits import check_image_size
 from ..output_files import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
@@ -213,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
         rows = []
         with Renderer() as renderer:
             check_image_size(width, height, "--width/--height: image", "quad", renderer.ctx)
-            machine = machine_info(renderer.ctx.info.get("GL_RENDERER", "?"))  # before the context closes
+            machine = machine_info(renderer_name(renderer.ctx))  # before the context closes
             for spec in specs:
                 rows += measure_scene(renderer, spec, spec.load(), options, savings, progress)
     sort_ms = sort_benchmark(100_000 if quick else 1_000_000)
