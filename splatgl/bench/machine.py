@@ -42,6 +42,10 @@ def simd_level(flags: set[str]) -> str:
     return "unknown"
 
 
+#: The GL renderer field of benchmarks that make no OpenGL context (CPU stages alone).
+CPU_ONLY = "none (CPU only)"
+
+
 def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None) -> dict:
     """``{"cpu", "simd", "cores", "gl_renderer", "platform"}`` of this machine.
 
