@@ -65,7 +65,7 @@ def test_hardware_device_is_chosen_before_software(fake_egl):
                 {1: "NVIDIA H100 80GB HBM3/PCIe/SSE2"})
     ctx = context._create_egl()
     assert created == [1]  # the software device is never opened
-    assert ctx.extra == {"egl_device": 1, "egl_devices": 2}
+    assert ctx.extra == {"egl_device": 1, "egl_devices": 2, "egl_skipped": []}
     assert context.renderer_name(ctx) == "NVIDIA H100 80GB HBM3/PCIe/SSE2 (EGL device 1 of 2)"
 
 
@@ -76,6 +76,7 @@ def test_a_device_that_fails_is_skipped(fake_egl):
     ctx = context._create_egl()
     assert created == [0, 1]
     assert ctx.info["GL_RENDERER"] == "NVIDIA A10G/PCIe/SSE2"
+    assert ctx.extra["egl_skipped"] == ["device 0: eglInitialize failed (0x3001)"]
 
 
 def test_software_renderer_on_a_hardware_device_is_the_last_resort(fake_egl):

@@ -128,3 +128,32 @@ def test_without_nvidia_smi_it_says_so(tmp_path):
     assert r.stderr.startswith("gpu_check: error: nvidia-smi not found: this check is for a machine "
                                "with an NVIDIA GPU")
     assert not (tmp_path / "o").exists()
+
+
+def test_gpu_probe_in_process(tmp_path, monkeypatch, capsys):
+    """The probe on this machine's context: the JSON and the printed renderer agree; a bad
+    SPLATGL_EGL_DEVICE is one line and exit 2 (no JSON)."""
+    from splatgl.bench import gpu_probe
+    from splatgl.errors import ContextError
+    from splatgl.gl.context import create_headless_context, renderer_name
+
+    for name in ("SPLATGL_EGL_DEVICE", "GLCONTEXT_DEVICE_INDEX", "SPLATGL_GL_BACKEND"):
+        monkeypatch.delenv(name, raising=False)
+    try:
+        ctx = create_headless_context()
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL: {exc}")
+    name, raw = renderer_name(ctx), ctx.info["GL_RENDERER"]
+    ctx.release()
+    out = tmp_path / "machine.json"
+    rc = gpu_probe.main(["--out", str(out), "--commit", "abc", "--allow-software"])
+    assert rc == 0
+    doc = json.loads(out.read_text())
+    assert doc["machine"]["gl_renderer"] == name and doc["gl"]["renderer"] == raw
+    assert doc["commit"] == "abc" and doc["gl"]["version_code"] >= 430
+    assert f"GL renderer: {raw}\n" in capsys.readouterr().out
+    monkeypatch.setenv("SPLATGL_EGL_DEVICE", "99")
+    assert gpu_probe.main(["--out", str(tmp_path / "bad.json")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "SPLATGL_EGL_DEVICE=99: no such EGL device" in err
+    assert not (tmp_path / "bad.json").exists()

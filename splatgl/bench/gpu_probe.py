@@ -54,6 +54,7 @@ def probe(commit: str | None = None) -> dict:
                "version": info.get("GL_VERSION", "?"), "version_code": version,
                "software": is_software_renderer(info.get("GL_RENDERER", "")),
                "egl_device": extra.get("egl_device"),
+               "egl_skipped": extra.get("egl_skipped", []),
                "backend": "osmesa" if "osmesa_loader" in extra else "egl"},
         "egl_device_list": describe_devices(devices),
         "egl_devices": None if devices is None else [
@@ -90,6 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"GL renderer: {gl['renderer']}")
     print(f"GL vendor: {gl['vendor']}; GL version: {gl['version']}; "
           f"{doc['egl_device_list']}")
+    for reason in gl["egl_skipped"]:
+        print(f"EGL device skipped: {reason}")
     if gl["software"]:
         what = "allowed (--allow-software)" if args.allow_software else "error"
         print(f"gpu_probe: {what}: GL renderer '{gl['renderer']}' is a software rasteriser, "

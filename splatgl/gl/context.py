@@ -102,8 +102,9 @@ def _first_line(exc: BaseException) -> str:
 def _create_egl() -> moderngl.Context:
     """EGL on the device ``$SPLATGL_EGL_DEVICE`` names, else, where EGL lists several, on the
     first hardware device that gives a context with a hardware GL_RENDERER (software devices
-    last).  ``ctx.extra`` records ``egl_device`` (the index, None for the default) and
-    ``egl_devices`` (how many EGL listed, None where it could not list them)."""
+    last).  ``ctx.extra`` records ``egl_device`` (the index, None for the default),
+    ``egl_devices`` (how many EGL listed, None where it could not list them) and, where devices
+    were tried, ``egl_skipped`` (why each one before the chosen one gave no context)."""
     devices = egl_devices.query_devices()
     count = None if devices is None else len(devices)
     asked = egl_devices.override_text(os.environ)
@@ -127,7 +128,7 @@ def _create_egl() -> moderngl.Context:
         except Exception as exc:  # a device EGL lists but cannot drive (no driver for it)
             failures.append(f"device {index}: {_first_line(exc)}")
             continue
-        ctx.extra = {"egl_device": index, "egl_devices": count}
+        ctx.extra = {"egl_device": index, "egl_devices": count, "egl_skipped": list(failures)}
         if not egl_devices.is_software_renderer(ctx.info.get("GL_RENDERER", "")):
             if fallback is not None:
                 fallback.release()
