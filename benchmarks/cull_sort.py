@@ -22,7 +22,7 @@ import numpy as np
 
 from splatgl import cull_kernel
 from splatgl.bench.scale import scene_file
-from splatgl.bench.machine import describe, machine_info
+from splatgl.bench.machine import CPU_ONLY, describe, machine_info
 from splatgl.bench.scale_cli import parse_sizes
 from splatgl.camera import orbit
 from splatgl.formats import load_scene
@@ -98,7 +98,7 @@ def main() -> None:
     p.add_argument("--height", type=int, default=720)
     p.add_argument("--json", help="also write the rows to this JSON file")
     args = p.parse_args()
-    print(f"# {describe(machine_info())}; medians of {args.frames} views; "
+    print(f"# {describe(machine_info(CPU_ONLY))}; medians of {args.frames} views; "
           f"{args.width}x{args.height}")
     print(f"# compiled cull (numba): {'yes' if cull_kernel.installed() else 'not installed'}")
     print(f"{'splats':>9} {'view':>14} {'kept':>9} {'cull ms':>8} {'sort ms':>8} {'cull/sort':>9}"

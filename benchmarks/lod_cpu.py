@@ -20,7 +20,7 @@ import numpy as np
 from splatgl import cull_kernel
 from splatgl.bench.lod_bench import cameras, lod_file
 from splatgl.bench.scale import scene_file
-from splatgl.bench.machine import describe, machine_info
+from splatgl.bench.machine import CPU_ONLY, describe, machine_info
 from splatgl.bench.runner import median_seconds
 from splatgl.bench.scale_cli import parse_sizes
 from splatgl.cull import CullData
@@ -75,7 +75,7 @@ def main() -> None:
     kern = cull_kernel.kernel(wait=True)
     if kern is None:
         raise SystemExit("lod_cpu.py: needs numba (pip install '.[fast]')")
-    print(f"# {describe(machine_info())}; medians of {args.repeats}; T=1px, band 2; ms")
+    print(f"# {describe(machine_info(CPU_ONLY))}; medians of {args.repeats}; T=1px, band 2; ms")
     print(f"{'splats':>9} {'dist':>5} {'nodes':>9} {'select np':>9} {'compiled':>8} "
           f"{'cull np':>8} {'compiled':>8} {'sort':>6} same")
     out = open(args.json_lines, "w") if args.json_lines else None

@@ -28,8 +28,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from splatgl.bench.real_scenes import shared_scenes_dir
+
 REPO = Path(__file__).resolve().parent.parent
-SHARED = Path(os.environ.get("SPLATGL_SHARED_SCENES", REPO.parent / "shared" / "scenes"))
+SHARED = shared_scenes_dir(REPO)
 TIMINGS = re.compile(r"timings: ([\d.]+) s for (\d+) frames; renderer stages ([\d.]+) s")
 STAGES = re.compile(r"(\w+) ([\d.]+) ms")
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -11,9 +10,11 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def shared_scenes_dir() -> Path:
-    """``$SPLATGL_SHARED_SCENES`` or ``../shared/scenes`` beside the repository."""
-    env = os.environ.get("SPLATGL_SHARED_SCENES")
-    return Path(env) if env else REPO.parent / "shared" / "scenes"
+    """``$SPLATGL_SHARED_SCENES`` or ``../shared/scenes`` beside the repository (the library's
+    one lookup, from the repository root whatever the working directory)."""
+    from splatgl.bench.real_scenes import shared_scenes_dir as lookup
+
+    return lookup(REPO)
 
 
 @pytest.fixture(scope="session")

@@ -122,6 +122,10 @@ def test_bench_quick_cli_writes_table_csv_json_plot(tmp_path, capsys):
     assert "limit" in out and "target check demo" in out and "exact sort" in out
     data = json.loads((tmp_path / "bench.json").read_text())
     assert {r["config"] for r in data["rows"]} >= {"default", "tile", "reference", "limit"}
+    # The machine line names the GL renderer (which device ran the rows), in the JSON too.
+    renderer = data["machine"]["gl_renderer"]
+    assert renderer not in ("", "?") and data["renderer"] == renderer
+    assert f"GL renderer {renderer}, cull" in out
     with open(tmp_path / "bench.csv") as fh:
         assert len(list(csv.DictReader(fh))) == len(data["rows"])
     png = read_image(tmp_path / "bench.png")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from splatgl.bench.machine import describe, machine_info, simd_level
 
 EPYC = """processor\t: 0
@@ -37,3 +39,19 @@ def test_machine_info_from_cpuinfo_text():
 def test_this_machine_is_described():
     info = machine_info()
     assert info["cpu"] and info["simd"] in ("avx512", "avx2", "avx", "sse4.2", "neon", "unknown")
+
+
+def test_probe_machine_names_the_contexts_renderer():
+    from splatgl.bench.machine import probe_machine
+    from splatgl.errors import ContextError
+    from splatgl.gl.context import create_headless_context, renderer_name
+
+    try:
+        ctx = create_headless_context()
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL: {exc}")
+    name = renderer_name(ctx)
+    ctx.release()
+    info = probe_machine()
+    assert info["gl_renderer"] == name and name not in ("", "?")
+    assert f"GL renderer {name}, cull" in describe(info)

@@ -67,3 +67,41 @@ def test_real_sources_build(shared_scenes):
     # Copies keep their source's opacities (a real distribution, not a synthetic one).
     assert np.median(scene.opacities) == pytest.approx(
         np.median(np.concatenate([s.opacities for s in sources])), abs=0.05)
+
+
+def test_shared_scenes_lookup_env_then_working_directory(tmp_path, monkeypatch):
+    """One lookup for the bench and the tests: the variable, else ../shared/scenes from the
+    working directory (never beside the installed package's files)."""
+    from splatgl.bench import real_scenes
+    from splatgl.bench.real_scenes import shared_scenes_dir
+
+    work = tmp_path / "checkout"
+    work.mkdir()
+    # An installed package whose folder happens to have a shared/scenes three levels up: not used.
+    site = tmp_path / "site"
+    (site / "shared" / "scenes").mkdir(parents=True)
+    monkeypatch.setattr(real_scenes, "__file__", str(site / "lib" / "splatgl" / "bench" / "real_scenes.py"))
+    monkeypatch.chdir(work)
+    monkeypatch.delenv("SPLATGL_SHARED_SCENES", raising=False)
+    assert shared_scenes_dir() == tmp_path / "shared" / "scenes"
+    assert shared_scenes_dir(tmp_path / "a" / "repo") == tmp_path / "a" / "shared" / "scenes"
+    monkeypatch.setenv("SPLATGL_SHARED_SCENES", str(tmp_path / "elsewhere"))
+    assert shared_scenes_dir() == tmp_path / "elsewhere"
+    assert shared_scenes_dir(tmp_path / "a" / "repo") == tmp_path / "elsewhere"
+
+
+def test_missing_real_scene_names_folder_and_variable(tmp_path, monkeypatch):
+    monkeypatch.setenv("SPLATGL_SHARED_SCENES", str(tmp_path))
+    with pytest.raises(SplatglError, match=r"donut_sh0.ply: real scene not found \(set SPLATGL_SHARED_SCENES\)"):
+        load_real_sources()
+
+
+def test_bench_help_says_where_it_looks(tmp_path, monkeypatch, capsys):
+    from splatgl.cli import main
+
+    monkeypatch.setenv("SPLATGL_SHARED_SCENES", str(tmp_path / "scenes"))
+    with pytest.raises(SystemExit):
+        main(["bench", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "$SPLATGL_SHARED_SCENES if set, else ../shared/scenes from the working directory" in text
+    assert f"(here: {tmp_path / 'scenes'})" in text

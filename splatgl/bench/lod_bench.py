@@ -310,7 +310,11 @@ def run_lod(sizes, width: int, height: int, frames: int, thresholds, budgets, ba
     from ..output_files import OutputFiles
     from .scale import scene_file
 
+    from .machine import describe, probe_machine
+
     cull_kernel.kernel(wait=True)  # where installed, every timed frame takes the compiled kernels
+    machine = probe_machine()
+    log(describe(machine))
     rows = []
     for n in sizes:
         t0 = time.perf_counter()
@@ -326,7 +330,8 @@ def run_lod(sizes, width: int, height: int, frames: int, thresholds, budgets, ba
         files = OutputFiles({name: out / name for name in ("lod.json", "lod.png")})
         with files:
             files.temp("lod.json").write_text(json.dumps(
-                {"summary": summ, "frames": [asdict(r) for r in rows]}, indent=1) + "\n")
+                {"machine": machine, "summary": summ, "frames": [asdict(r) for r in rows]},
+                indent=1) + "\n")
             plot(files.temp("lod.png"), rows)
         log(f"wrote {out / 'lod.json'}, lod.png")
     return summ

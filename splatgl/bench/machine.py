@@ -42,6 +42,10 @@ def simd_level(flags: set[str]) -> str:
     return "unknown"
 
 
+#: The GL renderer field of benchmarks that make no OpenGL context (CPU stages alone).
+CPU_ONLY = "none (CPU only)"
+
+
 def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None) -> dict:
     """``{"cpu", "simd", "cores", "gl_renderer", "platform"}`` of this machine.
 
@@ -59,6 +63,18 @@ def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None
             "simd": simd_level(flags), "cores": cores,
             "gl_renderer": gl_renderer or "?", "platform": platform.platform(terse=True),
             "cull": "compiled (numba)" if cull_kernel.installed() else "numpy"}
+
+
+def probe_machine() -> dict:
+    """:func:`machine_info` with the GL renderer of a headless context made (and released) for
+    the purpose, as every benchmark gets it (:func:`splatgl.gl.context.renderer_name`)."""
+    from ..gl.context import create_headless_context, renderer_name
+
+    ctx = create_headless_context()
+    try:
+        return machine_info(renderer_name(ctx))
+    finally:
+        ctx.release()
 
 
 def describe(info: dict) -> str:

@@ -39,16 +39,26 @@ POSITION_JITTER = 0.25
 LOG_SCALE_JITTER = 0.05
 
 
-def shared_scenes_dir() -> Path:
-    """The shared real scenes: ``$SPLATGL_SHARED_SCENES``, else ``../shared/scenes`` beside the
-    current directory (a checkout's root, as CI and the README run from), else beside the
-    source tree this module was imported from (an editable install)."""
-    env = os.environ.get("SPLATGL_SHARED_SCENES")
+#: The environment variable naming the shared real scenes folder.
+SHARED_SCENES_ENV = "SPLATGL_SHARED_SCENES"
+
+
+def shared_scenes_dir(base: Path | str | None = None) -> Path:
+    """The shared real scenes folder: ``$SPLATGL_SHARED_SCENES`` when set, else
+    ``../shared/scenes`` relative to ``base`` (default: the current working directory; the
+    tests pass the repository root).  The one lookup of the bench, the scale benchmark and the
+    tests; the folder may not exist (callers say so, or skip)."""
+    env = os.environ.get(SHARED_SCENES_ENV)
     if env:
         return Path(env)
-    candidates = (Path.cwd().resolve().parent / "shared" / "scenes",
-                  Path(__file__).resolve().parents[3] / "shared" / "scenes")
-    return next((c for c in candidates if c.is_dir()), candidates[0])
+    root = Path.cwd() if base is None else Path(base)
+    return Path(os.path.abspath(root)).parent / "shared" / "scenes"
+
+
+def shared_scenes_help() -> str:
+    """Where :func:`shared_scenes_dir` looks, for ``--help`` texts and error messages."""
+    return (f"${SHARED_SCENES_ENV} if set, else ../shared/scenes from the working directory "
+            f"(here: {shared_scenes_dir()})")
 
 
 def load_real_sources(names: Sequence[str] = REAL_SOURCES, root: Path | None = None) -> list[Scene]:
@@ -59,7 +69,7 @@ def load_real_sources(names: Sequence[str] = REAL_SOURCES, root: Path | None = N
     root = shared_scenes_dir() if root is None else Path(root)
     missing = [n for n in names if not (root / n).is_file()]
     if missing:
-        raise SplatglError(f"{root / missing[0]}: real scene not found (set SPLATGL_SHARED_SCENES)")
+        raise SplatglError(f"{root / missing[0]}: real scene not found (set {SHARED_SCENES_ENV})")
     return [load_scene(root / n) for n in names]
 
 

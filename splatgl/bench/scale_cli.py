@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import platform
 
 from ..errors import SplatglError
+from .machine import describe, probe_machine
 from .scale import SH3_SIZES, SIZES, ScaleOptions, run_scale
 from .scale_report import plot, table, write_json
 
@@ -30,32 +30,21 @@ def parse_sizes(text: str | None, default: tuple[int, ...], flag: str) -> tuple[
     return tuple(out)
 
 
-def _cpu_model() -> str:
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "?"
-
-
 def run_scale_command(args: argparse.Namespace) -> int:
     sizes = parse_sizes(args.sizes, SIZES, "--sizes")
     sh3 = parse_sizes(args.sh3_sizes, SH3_SIZES, "--sh3-sizes")
     resolutions = ((args.width, args.height),) if args.width and args.height else ScaleOptions.resolutions
     frames = args.frames or ScaleOptions.frames
     options = ScaleOptions(sizes=sizes, sh3_sizes=sh3, resolutions=resolutions, frames=frames)
+    machine = probe_machine()  # first: a run on the wrong device is seen before it starts
+    print(describe(machine), flush=True)
     rows = run_scale(options, log=lambda m: print(m, flush=True))
     if not rows:
         raise SplatglError("scale benchmark: no size could be measured")
-    from ..gl.context import create_headless_context
-    ctx = create_headless_context()
-    extra = {"cpu": _cpu_model(), "gl_renderer": ctx.info.get("GL_RENDERER", "?"),
-             "frames": frames}
-    ctx.release()
-    print(f"scale benchmark, CPU {extra['cpu']}, GL renderer {extra['gl_renderer']}, "
-          f"median of {frames} frames along an orbit per size and resolution")
+    extra = {"cpu": machine["cpu"], "gl_renderer": machine["gl_renderer"], "frames": frames,
+             "machine": machine}
+    print(f"scale benchmark, median of {frames} frames along an orbit per size and resolution; "
+          + describe(machine))
     print(table(rows))
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)

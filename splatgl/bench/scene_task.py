@@ -81,13 +81,14 @@ class BenchSceneTask:
     def run(self, files: Files, report: TaskProgress) -> Done:
         from ..limits import check_image_size
         from ..render import Renderer
+        from ..gl.context import renderer_name
         from .machine import machine_info
 
         scene = self.spec.load(files)
         with Renderer() as renderer:
             check_image_size(self.options.width, self.options.height, "--width/--height: image",
                              "quad", renderer.ctx)
-            machine = machine_info(renderer.ctx.info.get("GL_RENDERER", "?"))
+            machine = machine_info(renderer_name(renderer.ctx))
             rows = measure_scene(renderer, self.spec, scene, self.options, self.savings,
                                  lambda done, total, what: report(done, total))
         return Done((rows, machine), len(rows))

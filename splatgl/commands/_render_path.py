@@ -14,6 +14,7 @@ from ..datasets import load_source, select_indices
 from ..errors import SplatglError
 from ..executor import add_executor_arguments, executor_from_args, summary
 from ..frame_output import FrameTarget
+from ..gl.context import NO_GL_RENDERER, renderer_name
 from ..paths import orbit
 from ..progress import default_progress
 from ..render import Renderer
@@ -104,6 +105,7 @@ def run_path(args: argparse.Namespace) -> int:
         raise SplatglError(f"--fps must be positive, got {fps}")
     kind = RendererKind(args.renderer)
     run = None
+    gl_name = "not known here (the frames were rendered by workers)"
     if executor.sharded:
         from ..distributed.render import render_sharded
 
@@ -112,6 +114,7 @@ def run_path(args: argparse.Namespace) -> int:
                                      args.resume, args.drop_invalid, fps, default_progress())
     else:
         with Renderer() as renderer:
+            gl_name = renderer_name(renderer.ctx) if kind is not RendererKind.REFERENCE else NO_GL_RENDERER
             if args.stereo is not None:    # each frame holds both eyes
                 renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
             result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
@@ -123,6 +126,7 @@ def run_path(args: argparse.Namespace) -> int:
     if run is not None:
         print(summary(run, "frames"))
     if args.timings:
+        print(f"GL renderer: {gl_name}")
         ratio = result.seconds / result.render_seconds if result.render_seconds > 0 else float("nan")
         print(f"timings: {result.seconds:.3f} s for {result.written} frames; renderer stages "
               f"{result.render_seconds:.3f} s; ratio {ratio:.3f}")

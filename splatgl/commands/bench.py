@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import textwrap
 from pathlib import Path
 
 import numpy as np
 
 from ..bench.early_stop_report import early_stop_table
 from ..bench.lod_bench import add_lod_arguments
-from ..bench.real_scenes import shared_scenes_dir
+from ..bench.real_scenes import shared_scenes_dir, shared_scenes_help
 from ..bench.storage_report import storage_table
 from ..bench.report import plot, table, write_csv, write_json
 from ..bench.configs import configurations
@@ -20,6 +21,7 @@ from ..bench.runner import BenchOptions, sort_benchmark
 from ..bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
 from ..errors import SplatglError
 from ..executor import add_executor_arguments, executor_from_args, run_tasks, summary
+from ..gl.context import renderer_name
 from ..limits import check_image_size
 from ..output_files import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
@@ -43,8 +45,11 @@ machine's OpenGL can do.  Each row: median frame time with its 10-90% spread ove
 real timer queries, splats drawn, fragments shaded against fragments with alpha >= 1/255,
 and PSNR / max error / share of pixels off by more than 1/255 against the reference.
 
-Without scenes: the real scenes in ../shared/scenes (if present) and a synthetic 150k SH3
-scene; with --quick: the bundled demo at 160x120, a few frames, one row per question (CI).
+Without scenes: the shared real scenes (if present) and a synthetic 150k SH3 scene; with
+--quick: the bundled demo at 160x120, a few frames, one row per question (CI).  The shared
+scenes folder (also the source of the --real-splats, --scale and --lod scenes) is
+$SPLATGL_SHARED_SCENES when set, else ../shared/scenes from the working directory (its path
+is printed at the end of this help).
 
 examples:
   splatgl bench --quick
@@ -70,6 +75,7 @@ def _group_names() -> tuple[str, ...]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.epilog = textwrap.fill("shared real scenes: " + shared_scenes_help(), 90, break_long_words=False)
     p.add_argument("scenes", nargs="*", type=Path, help="scene files (default: see above)")
     p.add_argument("--quick", action="store_true", help="small and fast: the demo scene, few rows (CI)")
     p.add_argument("--width", type=positive_int, default=None, help="image width (default 1280; quick 160)")
@@ -194,8 +200,8 @@ def run(args: argparse.Namespace) -> int:
     if n_real:
         specs.append(SceneSpec(f"real-{n_real / 1e6:g}M", real_splats=n_real))
     if not specs:
-        raise SplatglError("nothing to measure: no scenes given, none found in "
-                           f"{shared_scenes_dir()}, and --synthetic 0")
+        raise SplatglError(f"nothing to measure: no scenes given, none found in {shared_scenes_help()}, "
+                           "and --synthetic 0")
     savings = args.savings or not quick
     run = None
     if executor.sharded:    # one scene per task, each in its own worker
@@ -208,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
         rows = []
         with Renderer() as renderer:
             check_image_size(width, height, "--width/--height: image", "quad", renderer.ctx)
-            machine = machine_info(renderer.ctx.info.get("GL_RENDERER", "?"))  # before the context closes
+            machine = machine_info(renderer_name(renderer.ctx))  # before the context closes
             for spec in specs:
                 rows += measure_scene(renderer, spec, spec.load(), options, savings, progress)
     sort_ms = sort_benchmark(100_000 if quick else 1_000_000)

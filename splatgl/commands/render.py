@@ -7,6 +7,7 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from ..errors import SplatglError
+from ..gl.context import NO_GL_RENDERER, renderer_name
 from ..image_io import write_image
 from ..output import RenderOutput
 from ..output_files import OutputFiles
@@ -90,12 +91,12 @@ def run(args: argparse.Namespace) -> int:
     times = None
     if lod:
         from ..lod.command import render_lod
-        out, times = render_lod(args, settings, camera, want_depth)
+        out, times, gl_name = render_lod(args, settings, camera, want_depth)
         eyes = [out]
         kind_text = f"{kind.value}, level of detail"
     else:
         cameras = list(eye_cameras(camera, args.stereo)) if stereo is not None else [camera]
-        eyes, times = _render(args, scene, settings, cameras, kind, want_depth)
+        eyes, times, gl_name = _render(args, scene, settings, cameras, kind, want_depth)
         kind_text = kind.value
     if stereo is StereoLayout.SEPARATE:
         with outputs:
@@ -104,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
                             depth=eye.expected_depth() if want_depth else None)
         for path in names.values():
             print(f"wrote {path} ({camera.width}x{camera.height}, {scene.count} splats, {kind_text})")
+        _print_timings(args, gl_name, times)
         return 0
     out = combine(eyes[0], eyes[1], stereo) if stereo is not None else eyes[0]
     depth = out.expected_depth() if want_depth else None
@@ -115,15 +117,24 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {args.depth_png} (expected depth)")
     height, width = out.rgba.shape[:2]
     print(f"wrote {args.output} ({width}x{height}, {scene.count} splats, {kind_text})")
-    if args.timings and times is not None:
-        print(f"timings: {format_timings(times)}")
+    _print_timings(args, gl_name, times)
     return 0
 
 
+def _print_timings(args: argparse.Namespace, gl_name: str, times) -> None:
+    """With --timings: the GL renderer (which device ran the frame) and the stage times."""
+    if args.timings:
+        print(f"GL renderer: {gl_name}")
+        if times is not None:
+            print(f"timings: {format_timings(times)}")
+
+
 def _render(args, scene, settings, cameras, kind, want_depth):
-    """(a RenderOutput per camera, the renderer's last_times or None): one context for all."""
+    """(a RenderOutput per camera, the renderer's last_times or None, the GL renderer's name):
+    one context for all."""
     progress = default_progress()
     times = None
+    gl_name = NO_GL_RENDERER
     outs = []
     with Renderer() if kind is not RendererKind.REFERENCE else nullcontext() as renderer:
         for camera in cameras:
@@ -136,4 +147,5 @@ def _render(args, scene, settings, cameras, kind, want_depth):
                 outs.append(RenderOutput(renderer.render(scene, camera, settings, kind, progress), None))
         if renderer is not None:
             times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
-    return outs, times
+            gl_name = renderer_name(renderer.ctx)
+    return outs, times, gl_name

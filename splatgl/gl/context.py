@@ -2,7 +2,9 @@
 
 Headless: EGL through moderngl (``backend='egl'``, works with or without DISPLAY), falling back to
 OSMesa through ctypes (``libOSMesa``, Debian ``libosmesa6``) where EGL is missing.  The
-environment variable ``SPLATGL_GL_BACKEND`` (``egl`` or ``osmesa``) forces one.
+environment variable ``SPLATGL_GL_BACKEND`` (``egl`` or ``osmesa``) forces one.  Where EGL lists
+several devices (a GPU beside Mesa's llvmpipe), a hardware one is used first;
+``SPLATGL_EGL_DEVICE=N`` picks device N (:mod:`splatgl.gl.egl_devices`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import os
 import moderngl
 
 from ..errors import ContextError
+from . import egl_devices
 
 #: Compute shaders (the tile renderer) and storage buffers need OpenGL 4.3.
 REQUIRED_VERSION = 430
@@ -85,8 +88,60 @@ class _OSMesaLoader:
             self._ctx = None
 
 
+def _egl_on(device: int | None) -> moderngl.Context:
+    """An EGL context on EGL device ``device`` (None: glcontext's default, device 0)."""
+    extra = {} if device is None else {"device_index": device}
+    return moderngl.create_context(standalone=True, backend="egl", require=REQUIRED_VERSION, **extra)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 def _create_egl() -> moderngl.Context:
-    return moderngl.create_context(standalone=True, backend="egl", require=REQUIRED_VERSION)
+    """EGL on the device ``$SPLATGL_EGL_DEVICE`` names, else, where EGL lists several, on the
+    first hardware device that gives a context with a hardware GL_RENDERER (software devices
+    last).  ``ctx.extra`` records ``egl_device`` (the index, None for the default),
+    ``egl_devices`` (how many EGL listed, None where it could not list them) and, where devices
+    were tried, ``egl_skipped`` (why each one before the chosen one gave no context)."""
+    devices = egl_devices.query_devices()
+    count = None if devices is None else len(devices)
+    asked = egl_devices.override_text(os.environ)
+    if asked is not None:
+        index = egl_devices.parse_override(asked, devices)
+        try:
+            ctx = _egl_on(index)
+        except Exception as exc:
+            raise ContextError(f"{egl_devices.DEVICE_ENV}={asked}: {_first_line(exc)}; "
+                               f"{egl_devices.describe_devices(devices)}") from None
+        ctx.extra = {"egl_device": index, "egl_devices": count}
+        return ctx
+    if devices is None or len(devices) <= 1:
+        ctx = _egl_on(None)
+        ctx.extra = {"egl_device": None, "egl_devices": count}
+        return ctx
+    fallback, failures = None, []
+    for index in egl_devices.candidate_order(devices):
+        try:
+            ctx = _egl_on(index)
+        except Exception as exc:  # a device EGL lists but cannot drive (no driver for it)
+            failures.append(f"device {index}: {_first_line(exc)}")
+            continue
+        ctx.extra = {"egl_device": index, "egl_devices": count, "egl_skipped": list(failures)}
+        if not egl_devices.is_software_renderer(ctx.info.get("GL_RENDERER", "")):
+            if fallback is not None:
+                fallback.release()
+                make_current(ctx)
+            return ctx
+        if fallback is None:
+            fallback = ctx  # software: used only if no device gives hardware rendering
+        else:
+            ctx.release()
+            make_current(fallback)
+    if fallback is not None:
+        return fallback
+    raise ContextError("no EGL device gave a context (" + "; ".join(failures) + ")")
 
 
 def _create_osmesa() -> moderngl.Context:
@@ -109,11 +164,17 @@ def create_headless_context(backend: Backend | str | None = None) -> moderngl.Co
     Raises :class:`ContextError` listing every backend tried and why it failed.
     """
     chosen = backend or os.environ.get("SPLATGL_GL_BACKEND") or None
+    device_asked = egl_devices.override_text(os.environ) is not None
+    if device_asked and chosen is None:
+        chosen = Backend.EGL  # a device was named: no quiet fall-back to OSMesa
     if chosen is not None:
         try:
             order = [Backend(chosen)]
         except ValueError:
             raise ContextError(f"unknown OpenGL backend {chosen!r} (choose egl or osmesa)") from None
+        if device_asked and order != [Backend.EGL]:
+            raise ContextError(f"{egl_devices.DEVICE_ENV} names an EGL device, but the OpenGL "
+                               f"backend is {order[0].value}")
     else:
         order = [Backend.EGL, Backend.OSMESA]
     failures = []
@@ -121,8 +182,27 @@ def create_headless_context(backend: Backend | str | None = None) -> moderngl.Co
         try:
             return _FACTORIES[b]()
         except Exception as exc:  # each backend fails in its own way; all are reported below
-            failures.append(f"{b.value}: {str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__}")
+            failures.append(f"{b.value}: {_first_line(exc)}")
     raise ContextError("could not create an OpenGL 4.3 context; tried " + "; ".join(failures))
+
+
+#: What ``--timings`` and the machine line say where no OpenGL ran (the NumPy reference).
+NO_GL_RENDERER = "none (NumPy reference, CPU only)"
+
+
+def renderer_name(ctx: moderngl.Context) -> str:
+    """The context's GL_RENDERER, with the EGL device where EGL listed several or one was
+    named (``NVIDIA H100 80GB HBM3/PCIe/SSE2 (EGL device 0 of 2)``): what benchmarks and
+    ``--timings`` print."""
+    name = ctx.info.get("GL_RENDERER", "?")
+    extra = getattr(ctx, "extra", None)
+    extra = extra if isinstance(extra, dict) else {}
+    if "osmesa_loader" in extra:
+        return f"{name} (OSMesa)"
+    index, count = extra.get("egl_device"), extra.get("egl_devices")
+    if index is not None and (count or 0) != 1:
+        return f"{name} (EGL device {index} of {count if count else '?'})"
+    return name
 
 
 def create_window_context() -> moderngl.Context:

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 
 from ..camera import Camera
 from ..errors import SplatglError
-from ..gl.context import create_headless_context
+from ..gl.context import create_headless_context, renderer_name
 from ..output import RenderOutput
 from ..settings import RenderSettings
 from ..transform import apply_model
@@ -17,9 +17,10 @@ from .cut import DEFAULT_BAND, DEFAULT_THRESHOLD_PX
 
 
 def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camera,
-               want_depth: bool) -> tuple[RenderOutput, SimpleNamespace]:
+               want_depth: bool) -> tuple[RenderOutput, SimpleNamespace, str]:
     """Render ``args.scene`` (a .lod.ply) with the cut ``args`` asks for: (layers, times with
-    ``cut_nodes`` and ``cut`` (seconds) beside the quad path's stage times)."""
+    ``cut_nodes`` and ``cut`` (seconds) beside the quad path's stage times, the GL renderer's
+    name)."""
     if args.renderer != "quad":
         raise SplatglError(f"--lod-threshold/--lod-budget render through the quad path, not "
                            f"--renderer {args.renderer}")
@@ -30,6 +31,7 @@ def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camer
                       args.lod_budget, args.lod_blend if args.lod_blend is not None else DEFAULT_BAND)
     tree = read_lod(args.scene)
     ctx = create_headless_context()
+    gl_name = renderer_name(ctx)
     renderer = LodRenderer(ctx, tree, settings, lod)
     try:
         out = renderer.render_layers(apply_model(camera, settings.model), depth=want_depth)
@@ -39,4 +41,4 @@ def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camer
     finally:
         renderer.release()
         ctx.release()
-    return out, times
+    return out, times, gl_name

@@ -1,0 +1,208 @@
+#!/usr/bin/env bash
+# Ready for a GPU (issue 25): on a machine with an NVIDIA GPU, check that splatgl renders on it
+# (EGL picks the GPU, not llvmpipe: the GL renderer string is printed and checked), then run the
+# test suite, `splatgl bench` on the shared scenes, the early-termination group and the scale
+# benchmark up to 6M splats, and write every result with the machine line into one folder.
+#
+# usage: benchmarks/gpu_check.sh [options] OUT_DIR
+#   --venv DIR     the virtual environment to use (default: .venv in the repository); made with
+#                  $PYTHON -m venv where missing; the project is installed into it with
+#                  pip install '.[test,fast,bench]' (PyPI must be reachable)
+#   --no-install   use $PYTHON as it is (splatgl with its test, fast and bench extras installed)
+#   --steps LIST   the steps after the renderer check (which always runs), comma-separated, of
+#                  tests,bench,early-stop,scale (default all); with --steps OUT_DIR may hold an
+#                  earlier run, whose files of those steps are replaced
+#   --quick        tiny sizes and a few tests, to try the script itself (no benchmark figures)
+#   --dry-run      print the commands; run and check nothing
+# environment:
+#   SPLATGL_SHARED_SCENES  the shared real scenes (default ../shared/scenes beside the repository)
+#   SPLATGL_EGL_DEVICE=N   render on EGL device N (default: the first hardware device)
+#   SPLATGL_GPU_CHECK_ALLOW_SOFTWARE=1  go on without nvidia-smi and on a software renderer
+#   PYTHON                 the interpreter (default python3)
+# OUT_DIR gets: summary.txt (every step ok or FAILED, with seconds); machine.txt and machine.json
+# (the machine line, GL renderer, vendor and version, the EGL devices and vendor files, versions,
+# commit); nvidia-smi.txt; install.log; pytest.txt, pytest.xml (JUnit) and test-artifacts/ (the
+# images of failed image tests); bench.txt and bench/; early-stop.txt and early-stop/; scale.txt
+# and scale/ (runs a-d merged into scale/scale.json and scale.png).  Exit status 0 when every step
+# passed, 1 when one failed (a software renderer or a failed install stops at once), 2 on bad usage.
+# shellcheck disable=SC2317  # install_env and scale_all are called through step "$@"
+set -euo pipefail
+
+REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+PYTHON=${PYTHON:-python3}
+ALL_STEPS="tests,bench,early-stop,scale"
+REAL_FILES=(ply/donut_sh0.ply compressed_ply/biker.compressed.ply compressed_ply/guitar.compressed.ply)
+
+usage() { sed -n '2,/^# shellcheck/{/^# shellcheck/d;s/^# \{0,1\}//;p}' "${BASH_SOURCE[0]}"; }
+bad_usage() { echo "gpu_check: error: $*" >&2; exit 2; }
+die() { echo "gpu_check: error: $*" >&2; exit 1; }
+
+venv="$REPO/.venv" install=1 steps=$ALL_STEPS steps_given=0 quick=0 dry=0 out=""
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --venv) [ $# -ge 2 ] || bad_usage "--venv needs a folder"; venv=$2; shift 2 ;;
+    --no-install) install=0; shift ;;
+    --steps) [ $# -ge 2 ] || bad_usage "--steps needs a list"; steps=$2; steps_given=1; shift 2 ;;
+    --quick) quick=1; shift ;;
+    --dry-run) dry=1; shift ;;
+    -h|--help) usage; exit 0 ;;
+    -*) bad_usage "unknown option $1 (see --help)" ;;
+    *) [ -z "$out" ] || bad_usage "one output folder, got '$out' and '$1'"; out=$1; shift ;;
+  esac
+done
+[ -n "$out" ] || bad_usage "no output folder (usage: benchmarks/gpu_check.sh [options] OUT_DIR)"
+for s in ${steps//,/ }; do
+  case ",$ALL_STEPS,renderer," in *",$s,"*) ;; *) bad_usage "--steps: unknown step '$s' (steps: $ALL_STEPS)" ;; esac
+done
+wants() { case ",$steps," in *",$1,"*) return 0 ;; *) return 1 ;; esac; }
+
+out=$(realpath -m "$out")
+venv=$(realpath -m "$venv")
+scenes=$(realpath -m "${SPLATGL_SHARED_SCENES:-$REPO/../shared/scenes}")
+export SPLATGL_SHARED_SCENES=$scenes
+cd "$REPO"
+export SPLATGL_PROGRESS=${SPLATGL_PROGRESS:-0}   # logs without progress bars
+allow_software=${SPLATGL_GPU_CHECK_ALLOW_SOFTWARE:-0}
+failed=0
+
+# Print a command (words quoted where the shell needs it); run it unless --dry-run.
+run() {
+  local a line="+"
+  for a in "$@"; do
+    if [[ $a =~ ^[A-Za-z0-9_./=,:+@%-]+$ ]]; then line+=" $a"
+    elif [[ $a != *"'"* ]]; then line+=" '$a'"
+    else line+=" $(printf '%q' "$a")"; fi
+  done
+  echo "$line"
+  [ "$dry" -eq 1 ] || "$@"
+}
+
+# step NAME LOG COMMAND...: run COMMAND with its output also in LOG, record ok/FAILED and time.
+step() {
+  local name=$1 log=$2 rc t0=$SECONDS
+  shift 2
+  echo "== $name"
+  if [ "$dry" -eq 1 ]; then "$@"; return 0; fi
+  set +e
+  "$@" 2>&1 | tee "$log"
+  rc=${PIPESTATUS[0]}
+  set -e
+  if [ "$rc" -eq 0 ]; then
+    echo "$name: ok ($((SECONDS - t0)) s)" >> "$out/summary.txt"
+  else
+    echo "$name: FAILED (exit $rc, $((SECONDS - t0)) s; see $(basename "$log"))" >> "$out/summary.txt"
+    failed=1
+  fi
+  return "$rc"
+}
+
+# ---------------------------------------------------------------- checks before any long work
+if [ "$dry" -eq 0 ]; then
+  if [ -e "$out" ] && [ ! -d "$out" ]; then bad_usage "$out is a file, not a folder"; fi
+  if [ "$steps_given" -eq 0 ] && [ -d "$out" ] && [ -n "$(ls -A "$out")" ]; then
+    bad_usage "$out already holds results; name a new folder (or re-run some steps with --steps)"
+  fi
+  if ! command -v nvidia-smi >/dev/null; then
+    [ "$allow_software" = 1 ] || die "nvidia-smi not found: this check is for a machine with an NVIDIA GPU and its driver (SPLATGL_GPU_CHECK_ALLOW_SOFTWARE=1 tries it without one)"
+    echo "gpu_check: warning: no nvidia-smi (allowed by SPLATGL_GPU_CHECK_ALLOW_SOFTWARE=1)" >&2
+  fi
+  if wants tests || wants bench || wants early-stop || wants scale; then
+    for f in "${REAL_FILES[@]}"; do
+      [ -f "$scenes/$f" ] || die "$scenes/$f: shared real scene not found (set SPLATGL_SHARED_SCENES to the shared scenes folder)"
+    done
+  fi
+  mkdir -p "$out"
+  { echo "gpu_check $(date -u +%Y-%m-%dT%H:%M:%SZ) on $(hostname)"
+    echo "repository $REPO, shared scenes $scenes, steps $steps$([ "$quick" -eq 1 ] && echo ' (--quick)')"
+  } >> "$out/summary.txt"
+fi
+commit=$(git -C "$REPO" rev-parse HEAD 2>/dev/null || echo unknown)
+if [ "$commit" != unknown ] && [ -n "$(git -C "$REPO" status --porcelain --untracked-files=no 2>/dev/null)" ]; then
+  commit="$commit (with local changes)"
+fi
+
+# ---------------------------------------------------------------- the GPU and the environment
+if command -v nvidia-smi >/dev/null || [ "$dry" -eq 1 ]; then
+  if [ "$dry" -eq 1 ]; then run nvidia-smi; else nvidia-smi > "$out/nvidia-smi.txt" 2>&1 || true; fi
+  run nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader || true
+fi
+
+install_env() {
+  if [ ! -x "$venv/bin/python" ]; then
+    run "$PYTHON" -m venv "$venv" || { echo "could not make a venv (Debian: apt-get install python3-venv)"; return 1; }
+  fi
+  run "$venv/bin/python" -m pip install -q --upgrade pip \
+    && run "$venv/bin/python" -m pip install '.[test,fast,bench]'
+}
+if [ "$install" -eq 1 ]; then
+  step install "$out/install.log" install_env || die "the install failed; see $out/install.log"
+  py="$venv/bin/python"
+else
+  py=$(command -v "$PYTHON") || die "$PYTHON not found"
+fi
+
+# ---------------------------------------------------------------- the renderer (stops on software)
+probe=("$py" -m splatgl.bench.gpu_probe --out "$out/machine.json" --commit "$commit")
+[ "$allow_software" = 1 ] && probe+=(--allow-software)
+step renderer "$out/machine.txt" run "${probe[@]}" \
+  || die "the GL renderer check failed (see $out/machine.txt); nothing else was run"
+
+# ---------------------------------------------------------------- tests and benchmarks
+if wants tests; then
+  tests=()
+  [ "$quick" -eq 1 ] && tests=(tests/test_context.py tests/test_egl_devices.py)
+  stamp="$out/.tests-started"
+  [ "$dry" -eq 1 ] || touch "$stamp"
+  step tests "$out/pytest.txt" run "$py" -m pytest -ra --junitxml="$out/pytest.xml" ${tests[@]+"${tests[@]}"} || true
+  if [ "$dry" -eq 0 ]; then   # the images of the image tests that failed in this run
+    if [ -d test-artifacts ]; then
+      find test-artifacts -type f -newer "$stamp" -print0 | xargs -0 -r cp --parents -t "$out"
+    fi
+    rm -f "$stamp"
+  fi
+fi
+
+if wants bench; then
+  if [ "$quick" -eq 1 ]; then args=(--quick --frames 2); else args=(); fi
+  step bench "$out/bench.txt" run "$py" -m splatgl bench ${args[@]+"${args[@]}"} --out "$out/bench" || true
+fi
+
+if wants early-stop; then
+  if [ "$quick" -eq 1 ]; then args=(--quick --frames 2 --real-splats 20000); else args=(); fi
+  step early-stop "$out/early-stop.txt" \
+    run "$py" -m splatgl bench --groups early-stop ${args[@]+"${args[@]}"} --out "$out/early-stop" || true
+fi
+
+# The scale benchmark in benchmarks/scale.sh's four runs (each short; a failed size keeps the
+# others), merged into one table, JSON and plot.
+scale_all() {
+  local s="$out/scale" rc=0
+  if [ "$quick" -eq 1 ]; then
+    run "$py" -m splatgl bench --scale --sizes 0.02M --sh3-sizes none --width 64 --height 48 \
+      --frames 2 --out "$s/a" || return 1
+    run "$py" -m splatgl.bench.scale_report "$s/a/scale.json" --out "$s" || return 1
+    return 0
+  fi
+  run "$py" -m splatgl bench --scale --sizes 0.1M,0.3M --sh3-sizes none --out "$s/a" || rc=1
+  run "$py" -m splatgl bench --scale --sizes 1M --sh3-sizes 1M --out "$s/b" || rc=1
+  run "$py" -m splatgl bench --scale --sizes 3M,6M --sh3-sizes none --out "$s/c" || rc=1
+  run "$py" -m splatgl bench --scale --sizes none --sh3-sizes 6M --width 1280 --height 720 \
+    --out "$s/d" || rc=1
+  local parts=()   # the runs that wrote their JSON
+  for r in a b c d; do
+    if [ "$dry" -eq 1 ] || [ -f "$s/$r/scale.json" ]; then parts+=("$s/$r/scale.json"); fi
+  done
+  if [ ${#parts[@]} -gt 0 ]; then
+    run "$py" -m splatgl.bench.scale_report "${parts[@]}" --out "$s" || rc=1
+  fi
+  return "$rc"
+}
+if wants scale; then
+  step scale "$out/scale.txt" scale_all || true
+fi
+
+if [ "$dry" -eq 0 ]; then
+  echo "== summary ($out/summary.txt)"
+  cat "$out/summary.txt"
+fi
+exit "$failed"
