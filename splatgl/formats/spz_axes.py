@@ -133,7 +133,8 @@ class Axes:
 
     def as_dict(self) -> dict:
         return {"stored": self.stored, "read_as": SCENE_AXES, "source": self.source,
-                "note": self.note, "extensions": list(self.extensions)}
+                "note": self.note, "extensions": list(self.extensions),
+                "description": self.describe()}
 
 
 def check_choice(axes: str | None) -> str | None:
