@@ -163,9 +163,9 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
     ``progress`` is passed to :func:`load_scene` for both reads.  ``writer_options`` go to the
     writer (``version=2`` for SPZ).  ``spz_axes`` ("rub"/"rdf", see
     :mod:`splatgl.formats.spz_axes`) applies to each SPZ side: the axes assumed for an input
-    that records none, and the axes the output is written in.  For lossy writers the error dictionary also holds
-    ``bounds`` (per attribute, what the format's quantisation allows for this scene; None where
-    no a-priori bound exists) and ``within_bounds``.  Writers that reorder the splats (SOG,
+    that records none, and the axes the output is written in.  For lossy writers the error
+    dictionary also holds ``bounds`` (per attribute, what the format's quantisation allows for
+    this scene; None where no a-priori bound exists) and ``within_bounds``.  Writers that reorder the splats (SOG,
     compressed PLY) are compared row by row in the order written.
 
     Raises :class:`SplatglError` for a missing or malformed input, an output format that cannot

@@ -110,7 +110,8 @@ def test_reader_honours_the_record_in_gzip_and_raw_bodies(tmp_path, version):
     body = body[:-len(spz_axes.encode_record("RUB"))] if body[14] & 2 else body
     path = tmp_path / "s.spz"
     for code, name in ((4, "RUB"), (6, "RDF"), (1, "LDB"), (8, "RUF")):
-        for data in (gzip.compress(with_records(body, record(code))), with_records(body, record(code))):
+        raw = with_records(body, record(code))
+        for data in (gzip.compress(raw), raw):
             path.write_bytes(data)
             got = load_scene(path)
             expect = s.means * spz_axes.axis_signs("RUB") * spz_axes.axis_signs(name)
@@ -236,3 +237,20 @@ def test_cli_says_how_the_axes_were_read(tmp_path, capsys):
     assert result["input_spz_axes"]["stored"] == "RUB" and result["output_spz_axes"] is None
     assert main(["convert", str(src), str(tmp_path / "x.ply"), "--spz-axes", "rdf"]) == 2
     assert "--spz-axes applies to .spz files only" in capsys.readouterr().err
+
+
+def test_rendering_commands_take_the_option_but_not_to_workers(tmp_path, capsys):
+    import argparse
+
+    from splatgl.commands._common import load_scene_arg
+
+    s = random_scene(20, degree=0)
+    path = tmp_path / "s.spz"
+    save_scene(path, s)  # version 3, RUB, no record
+    args = argparse.Namespace(scene=path, drop_invalid=False, spz_axes="rdf")
+    np.testing.assert_allclose(load_scene_arg(args).means, s.means * [1, -1, -1], atol=1e-3)
+    assert main(["render", str(path), "--spz-axes", "rdf", "--path", "orbit:2", "--workers", "2",
+                 "-o", str(tmp_path / "f%02d.png"), "--width", "16", "--height", "16"]) == 2
+    err = capsys.readouterr().err
+    assert "--spz-axes does not reach --workers" in err and err.count("\n") == 1
+    assert not list(tmp_path.glob("f*.png"))
