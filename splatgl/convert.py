@@ -18,6 +18,7 @@ import numpy as np
 from .constants import SH_C0
 from .errors import SplatglError
 from .formats import detect_format, load_scene, save_scene, writer_for
+from .formats.spz_axes import Axes, check_choice as check_spz_axes
 from .scene import Scene
 
 #: Highest SH degree each writable format stores (formats not listed store degree 3).
@@ -134,6 +135,9 @@ class Conversion:
     output_bytes: int
     seconds: float
     error: dict
+    #: For SPZ files: how the input / output's axes were decided, else None.
+    input_axes: Axes | None = None
+    output_axes: Axes | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready dictionary (paths as strings)."""
@@ -143,21 +147,25 @@ class Conversion:
             "splats": self.count, "sh_degree_in": self.sh_degree_in,
             "sh_degree_out": self.sh_degree_out, "output_bytes": self.output_bytes,
             "seconds": self.seconds, "error": self.error,
+            "input_spz_axes": self.input_axes and self.input_axes.as_dict(),
+            "output_spz_axes": self.output_axes and self.output_axes.as_dict(),
         }
 
 
 def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = False,
             sh_degree: int | None = None, force: bool = False, progress=None,
-            **writer_options) -> Conversion:
+            spz_axes: str | None = None, **writer_options) -> Conversion:
     """Convert the scene file ``source`` to ``output`` (format from its extension).
 
     ``sh_degree`` caps the SH degree written (never pads).  A format that stores fewer SH bands
     than the scene has (.splat: degree 0) drops the rest with a :class:`UserWarning`.  Refuses to
     replace an existing ``output`` unless ``force``; the file appears only when complete.
     ``progress`` is passed to :func:`load_scene` for both reads.  ``writer_options`` go to the
-    writer (``version=2`` for SPZ).  For lossy writers the error dictionary also holds
-    ``bounds`` (per attribute, what the format's quantisation allows for this scene; None where
-    no a-priori bound exists) and ``within_bounds``.  Writers that reorder the splats (SOG,
+    writer (``version=2`` for SPZ).  ``spz_axes`` ("rub"/"rdf", see
+    :mod:`splatgl.formats.spz_axes`) applies to each SPZ side: the axes assumed for an input
+    that records none, and the axes the output is written in.  For lossy writers the error
+    dictionary also holds ``bounds`` (per attribute, what the format's quantisation allows for
+    this scene; None where no a-priori bound exists) and ``within_bounds``.  Writers that reorder the splats (SOG,
     compressed PLY) are compared row by row in the order written.
 
     Raises :class:`SplatglError` for a missing or malformed input, an output format that cannot
@@ -170,8 +178,15 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
     if sh_degree is not None and not 0 <= sh_degree <= 3:
         raise SplatglError(f"--sh-degree must be 0-3, got {sh_degree}")
     t0 = time.perf_counter()
+    spz_axes = check_spz_axes(spz_axes)
     source_format = detect_format(source).NAME
-    scene = load_scene(source, drop_invalid=drop_invalid, progress=progress)
+    axes_in = spz_axes if source_format == "spz" else None
+    axes_out = spz_axes if writer.NAME == "spz" else None
+    if spz_axes is not None and axes_in is axes_out is None:
+        raise SplatglError(f"{source} -> {output}: --spz-axes applies to .spz files only")
+    if axes_out is not None:
+        writer_options["axes"] = axes_out
+    scene = load_scene(source, drop_invalid=drop_invalid, progress=progress, spz_axes=axes_in)
     degree = scene.sh_degree if sh_degree is None else min(sh_degree, scene.sh_degree)
     limit = MAX_SH_DEGREE_OF_FORMAT.get(writer.NAME, 3)
     if degree > limit:
@@ -185,7 +200,7 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
         raise SplatglError(f"{output}: cannot write: {exc.strerror or exc}") from None
     bounds = error_bounds(writer, written, **writer_options)
     del written
-    back = load_scene(output, progress=progress)
+    back = load_scene(output, progress=progress, spz_axes=axes_out)
     if order is not None:
         scene = scene.subset(order)
     error = conversion_error(scene, back)
@@ -193,4 +208,14 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
     error["within_bounds"] = within_bounds(error, bounds)
     size = getattr(writer, "stored_bytes", lambda p: p.stat().st_size)(output)
     return Conversion(source, output, source_format, writer.NAME, scene.count, scene.sh_degree,
-                      back.sh_degree, size, time.perf_counter() - t0, error)
+                      back.sh_degree, size, time.perf_counter() - t0, error,
+                      _axes(source, source_format, axes_in), _axes(output, writer.NAME, axes_out))
+
+
+def _axes(path: Path, format_name: str, axes: str | None) -> Axes | None:
+    if format_name != "spz":
+        return None
+    from .formats.spz import read_axes
+    with warnings.catch_warnings():  # a conflict with the file was reported on loading
+        warnings.simplefilter("ignore")
+        return read_axes(path, axes)

@@ -67,4 +67,6 @@ def format_info(path: str | Path, scene: Scene, info: dict) -> str:
         f"scale:       min {s['min']:.4g}  median {s['median']:.4g}  max {s['max']:.4g}",
         f"anisotropy:  median {a['median']:.4g}  max {a['max']:.4g} (largest / smallest scale)",
     ]
+    if "spz_axes" in info:  # an SPZ file: which axes it stores (splatgl.formats.spz_axes)
+        lines.append(f"axes:        {info['spz_axes']['description']}")
     return "\n".join(lines)

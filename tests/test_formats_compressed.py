@@ -16,7 +16,7 @@ import pytest
 
 from splatgl.constants import SH_C0
 from splatgl.errors import SceneFormatError
-from splatgl.formats import compressed_ply, detect_format, ksplat, load_scene, spz
+from splatgl.formats import compressed_ply, detect_format, ksplat, load_scene, spz, spz_axes
 
 # --- independent reference decoders -----------------------------------------------------------
 
@@ -189,17 +189,6 @@ def test_spz_biker_v4_loads(shared_scenes):
     assert_sane(scene)
 
 
-def test_spz_flip_yz_negates_y_z_and_matching_sh():
-    """FLIP_YZ_SH_SIGNS equals Y_k(x, -y, -z) / Y_k(x, y, z) for the 15 higher-order bases."""
-    x, y, z = 0.3, 0.5, 0.81
-    basis = lambda x, y, z: np.array([  # noqa: E731 - unnormalised 3DGS basis, degrees 1..3
-        y, z, x, x * y, y * z, 2 * z * z - x * x - y * y, x * z, x * x - y * y,
-        y * (3 * x * x - y * y), x * y * z, y * (4 * z * z - x * x - y * y),
-        z * (2 * z * z - 3 * x * x - 3 * y * y), x * (4 * z * z - x * x - y * y),
-        z * (x * x - y * y), x * (x * x - 3 * y * y)])
-    assert np.allclose(basis(x, -y, -z), spz.FLIP_YZ_SH_SIGNS * basis(x, y, z))
-
-
 def _spz_body(version: int, count: int, sh_degree: int, rng) -> tuple[bytes, dict]:
     """A raw SPZ body with random attribute bytes, and those bytes by attribute."""
     header = spz.Header(version, count, sh_degree, 10, 0, 0)
@@ -215,12 +204,13 @@ def test_spz_sh_layout_is_coefficient_major_rgb_interleaved(tmp_path, version):
     body, arrays = _spz_body(version, 5, 2, rng)
     path = tmp_path / "sh.spz"
     path.write_bytes(gzip.compress(body))
-    scene = spz.read_spz(path, flip_yz=False)
+    scene = spz.read_spz(path, axes="rdf")
     want = (arrays["sh"].astype(np.float64) - 128) / 128
     assert scene.sh.shape == (5, 9, 3)
     assert np.allclose(scene.sh[:, 1:].reshape(5, 24), want)
-    flipped = spz.read_spz(path, flip_yz=True)
-    assert np.allclose(flipped.sh[:, 1:], scene.sh[:, 1:] * spz.FLIP_YZ_SH_SIGNS[:8, None])
+    flipped = spz.read_spz(path, axes="rub")
+    signs = spz_axes.sh_signs(np.array([1, -1, -1]), 8)
+    assert np.allclose(flipped.sh[:, 1:], scene.sh[:, 1:] * signs[:, None])
     assert np.allclose(flipped.means, scene.means * [1, -1, -1])
 
 

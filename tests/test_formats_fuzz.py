@@ -208,7 +208,7 @@ def test_spz_v4_num_points_and_relabel(tmp_path, shared_scenes):
 
 @pytest.mark.parametrize("field,value,fragment", [
     ("fractionalBits", 24, "fractionalBits"), ("fractionalBits", 31, "fractionalBits"),
-    ("fractionalBits", 255, "fractionalBits"), ("flags", 0x02, "extension"),
+    ("fractionalBits", 255, "fractionalBits"), ("flags", 0x04, "unknown bits 0x04"),
     ("flags", 0x80, "unknown bits 0x80"), ("reserved", 1, "reserved"),
     ("shDegree", 4, "shDegree"), ("version", 5, "version"), ("magic", b"NGSQ", "magic"),
 ])

@@ -21,6 +21,7 @@ from ..settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess
                         RendererKind, RenderSettings, SortKey)
 from ..stereo import StereoLayout
 from ..transform import parse_transform
+from ._spz_axes import add_spz_axes_argument
 from ..camera_up import UP_CHOICES, resolve_up
 
 
@@ -75,6 +76,7 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drop-invalid", action="store_true",
                    help="drop rows with NaN/Inf values or zero quaternions (with a warning that "
                         "counts them) instead of rejecting the file")
+    add_spz_axes_argument(p)
 
 
 def add_camera_arguments(p: argparse.ArgumentParser) -> None:
@@ -176,7 +178,8 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
 
 def load_scene_arg(args: argparse.Namespace) -> Scene:
     path = args.scene if args.scene is not None else demo_scene_path()
-    return load_scene(path, drop_invalid=args.drop_invalid)
+    return load_scene(path, drop_invalid=args.drop_invalid,
+                      spz_axes=getattr(args, "spz_axes", None))
 
 
 def antialias_from_args(args: argparse.Namespace) -> bool:

@@ -23,6 +23,7 @@ from ..lens import with_projection
 from ..settings import RendererKind
 from ..stereo import StereoLayout, StereoRenderer
 from ._common import demo_scene_path, load_scene_arg, settings_from_args
+from ._spz_axes import check_not_sharded
 
 DEFAULT_FPS = 30.0
 DEFAULT_ORBIT_FRAMES = 120
@@ -91,6 +92,7 @@ def run_path(args: argparse.Namespace) -> int:
         raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
     target = FrameTarget.parse(args.output, args.format)
     executor = executor_from_args(args)
+    check_not_sharded(args, executor.sharded)
     if args.stereo is not None and executor.sharded:
         raise SplatglError("--stereo renders paths in one process (not with --workers or --executor ray)")
     if args.resume and target.is_video and not executor.sharded:

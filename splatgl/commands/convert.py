@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..convert import convert
 from ..errors import SplatglError
+from ._spz_axes import add_spz_axes_argument
 
 NAME = "convert"
 ORDER = 25
@@ -19,7 +20,7 @@ names:
   .compressed.ply   PlayCanvas chunks: 11-10-11-bit position and log-scale per 256 splats,
                     10-bit smallest-three rotation, 8-bit colour and opacity, 8-bit SH
   .spz              Niantic SPZ v3 (or --spz-version 2), gzip: 24-bit fixed-point position,
-                    8-bit colour, opacity, log-scale and SH
+                    8-bit colour, opacity, log-scale and SH; RUB axes, or --spz-axes rdf
   .sog / meta.json  PlayCanvas SOG v2 (zip bundle / folder of lossless WebP): 16-bit log
                     position, 256-entry codebooks, 8-bit rotation, k-means SH palette
   .glb / .gltf      glTF 2.0 with KHR_gaussian_splatting, float32 (glTF axes: y up)
@@ -31,11 +32,18 @@ colour (0-1 colour units) and the higher SH bands kept.  For lossy formats each 
 shows the bound the format's quantisation implies for this scene (values outside a format's
 fixed range are clipped, and the bound includes the distance clipped); "!" marks a bound
 exceeded, which would be a bug.  SOG's SH palette has no a-priori bound (k-means).
+SPZ axes: a file's SPZ_ADOBE_coordinate_system extension says which axes it stores; where it
+has none, versions 3-4 are RUB (the SPZ specification) and versions 1-2 as stored, unless
+--spz-axes says otherwise (splat-transform 3.x writes PLY's RDF unconverted: --spz-axes rdf).
+--spz-axes applies to each .spz side: how an input without the extension is read, and which
+axes the output stores (rdf, and version 2, are recorded with the extension).  The axes each
+SPZ file was read with are printed.
 
 examples:
   splatgl convert scene.compressed.ply scene.ply
   splatgl convert scene.ply scene.sog
   splatgl convert scene.ply scene.spz --spz-version 2
+  splatgl convert from-splat-transform-3.spz scene.ply --spz-axes rdf
   splatgl convert scene.ply scene.splat --json
   splatgl convert scene.ply small.ply --sh-degree 1 --force"""
 
@@ -53,6 +61,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spz-version", type=int, choices=(2, 3), default=None, metavar="V",
                    help="SPZ version to write for .spz output: 3 (default; smallest-three "
                         "rotations, RUB axes) or 2 (3-byte rotations)")
+    add_spz_axes_argument(p, "for .spz files that record none: rub (the SPZ specification; "
+                             "default for versions 3-4) or rdf (PLY axes as is; splat-transform "
+                             "3.x); for .spz output, the axes written (default rub for version 3)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
 
 
@@ -74,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
             raise SplatglError(f"{args.output}: --spz-version applies to .spz output only")
         options["version"] = args.spz_version
     result = convert(args.input, args.output, drop_invalid=args.drop_invalid,
-                     sh_degree=args.sh_degree, force=args.force, **options)
+                     sh_degree=args.sh_degree, force=args.force, spz_axes=args.spz_axes,
+                     **options)
     if args.json:
         print(json.dumps(result.as_dict()))
         return 0
@@ -83,6 +95,9 @@ def run(args: argparse.Namespace) -> int:
           f"{result.count:,} splats, SH degree {result.sh_degree_out} "
           f"(input: {result.source_format}, SH degree {result.sh_degree_in}) "
           f"in {result.seconds:.2f} s")
+    for side, axes in (("input", result.input_axes), ("output", result.output_axes)):
+        if axes is not None:
+            print(f"SPZ axes of the {side}: {axes.describe()}")
     if e["bit_exact"]:
         print("round trip: bit-exact (every stored value identical)")
         return 0

@@ -17,6 +17,7 @@ from ..render import Renderer
 from ..settings import RendererKind
 from ._common import (add_scene_arguments, add_settings_arguments, demo_scene_path, load_scene_arg,
                       settings_from_args)
+from ._spz_axes import check_not_sharded
 
 NAME = "eval"
 ORDER = 25
@@ -79,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
     if args.select:
         views = [views[i] for i in select_indices(args.select, len(views), str(args.dataset))]
     executor = executor_from_args(args)
+    check_not_sharded(args, executor.sharded)
     settings = settings_from_args(args)
     keep = args.worst if args.sheet is not None else 0
     run = None

@@ -4,18 +4,21 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 from pathlib import Path
 
 from ..formats import detect_format, load_scene
 from ..info import format_info, scene_info
+from ._spz_axes import add_spz_axes_argument
 
 NAME = "info"
 HELP = "print a scene's splat count, SH degree, bounds and value ranges"
 DESCRIPTION = (
     "Load a scene file (format detected from its content, else its extension), validate every\n"
     "row, and print its statistics: count, kind, SH degree, bounds (full and 1-99 percentile),\n"
-    "opacity, scale and anisotropy ranges.  Bad input exits with status 2 and one line naming\n"
-    "the file and the field."
+    "opacity, scale and anisotropy ranges; for SPZ, which axes the file stores and how that was\n"
+    "decided (its SPZ_ADOBE_coordinate_system extension, else --spz-axes, else the version's\n"
+    "default).  Bad input exits with status 2 and one line naming the file and the field."
 )
 ORDER = 20
 
@@ -26,11 +29,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop rows holding NaN/Inf or degenerate quaternions (with a "
                              "warning) instead of rejecting the file")
+    add_spz_axes_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    scene = load_scene(args.scene, drop_invalid=args.drop_invalid)
+    scene = load_scene(args.scene, drop_invalid=args.drop_invalid, spz_axes=args.spz_axes)
     info = {"format": detect_format(args.scene).NAME, **scene_info(scene)}
+    if info["format"] == "spz":
+        from ..formats.spz import read_axes
+        with warnings.catch_warnings():  # a conflict with the file was reported on loading
+            warnings.simplefilter("ignore")
+            info["spz_axes"] = read_axes(args.scene, args.spz_axes).as_dict()
     if args.json:
         print(json.dumps({"path": str(args.scene), **info}, indent=2))
     else:

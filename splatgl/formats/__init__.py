@@ -64,7 +64,8 @@ def detect_format(path: Path) -> ModuleType:
     raise SceneFormatError(path, f"unknown scene format (supported: {names})")
 
 
-def load_scene(path: str | Path, drop_invalid: bool = False, progress=None) -> Scene:
+def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
+               spz_axes: str | None = None) -> Scene:
     """Load a scene file of any supported format.
 
     Raises :class:`SceneFormatError` (naming file, field and values) for anything malformed.
@@ -72,15 +73,23 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None) -> S
     warning instead of rejected.  ``progress(done, total, what)`` (see :mod:`splatgl.progress`)
     is handed to readers that read in chunks (those whose ``read`` takes ``progress``); when it
     is None, a stderr meter is used if stderr is a terminal or ``SPLATGL_PROGRESS=1``.
+    ``spz_axes`` ("rub" or "rdf"): the axes of an SPZ file that records none (see
+    :mod:`splatgl.formats.spz_axes`); refused for other formats.
     """
     path = Path(path)
     mod = detect_format(path)
     read = reader_guard(mod.read)  # every format, including any added later
+    options = {"drop_invalid": drop_invalid}
+    if spz_axes is not None:
+        if mod.NAME != "spz":
+            raise SceneFormatError(path, f"--spz-axes applies to SPZ files only (this is "
+                                         f"{mod.NAME})")
+        options["axes"] = spz_axes
     if "progress" not in inspect.signature(mod.read).parameters:
-        return read(path, drop_invalid=drop_invalid)
+        return read(path, **options)
     if progress is None:
         progress = default_progress()
-    return read(path, drop_invalid=drop_invalid, progress=progress)
+    return read(path, progress=progress, **options)
 
 
 def writer_for(path: str | Path) -> ModuleType:

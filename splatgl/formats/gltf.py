@@ -233,7 +233,7 @@ def _primitive(doc: _Document, prim: dict, where: str) -> tuple[np.ndarray, ...]
     if isinstance(spz_ext, dict):
         data, offset, length, _ = doc.view(spz_ext.get("bufferView"))
         means, quats, log_scales, logits, sh = spz.decode(doc.path, data[offset:offset + length],
-                                                          flip_yz=True)
+                                                          axes="rub")
         return _turn(np.asarray(means, np.float64), np.asarray(quats, np.float64),
                      log_scales, logits, sh)
     attrs = prim.get("attributes")

@@ -3,12 +3,13 @@
 Header, 16 bytes little endian: ``uint32 magic 0x5053474e ('NGSP')``, ``uint32 version``,
 ``uint32 numPoints``, ``uint8 shDegree`` (0-3), ``uint8 fractionalBits`` (0-23),
 ``uint8 flags`` (bit 0: trained with antialiasing, not represented in :class:`Scene`; bit 1:
-extension records follow, refused), ``uint8 reserved`` (0; version 4: number of streams).
+extension records follow), ``uint8 reserved`` (0; version 4: number of streams).
 
 Versions 1-3: the header and the attribute arrays, one after another, gzip-compressed (a raw,
 un-gzipped body is accepted too); the body must hold exactly ``numPoints`` points and the gzip
-trailer (CRC-32, length) must match.  Version 4 (not gzip): a 32-byte header, ``uint32
-tocByteOffset`` (32) at byte 16 and 12 reserved bytes, then at ``tocByteOffset`` one
+trailer (CRC-32, length) must match; extension records (flags bit 1) follow the arrays.
+Version 4 (not gzip): a 32-byte header, ``uint32 tocByteOffset`` at byte 16 and 12 reserved
+bytes, extension records up to ``tocByteOffset`` (32 without them), then there one
 ``(uint64 compressedSize, uint64 uncompressedSize)`` per stream, then the streams back to back
 up to the end of the file, each one zstd frame holding one attribute array laid out as in
 version 3.  Layout determined from the two version 4 files in
@@ -28,18 +29,13 @@ rotations  3 bytes   versions 1-2: (x, y, z) ``b / 127.5 - 1``, ``w = sqrt(1 - |
 sh         3 S bytes ``(b - 128) / 128``, coefficient-major with RGB interleaved
 =========  ========  ===========================================================================
 
-Axes: the Niantic spec says SPZ stores RUB (OpenGL) axes, while 3DGS PLY (and so
-:class:`Scene`) uses RDF.  In the shared files the version decides: every version 3-4 file
-matches its source only with y and z negated (``biker_v4.spz`` against ``biker.compressed.ply``,
-``minimal-v3/-v4.spz`` against ``minimal.splat``), every version 2 file matches with no flip
-(``donut_sh0_v2.spz`` from spz-js against ``donut_sh0.ply``, ``minimal-v2/-raw.spz``).  So by
-default versions 1-2 are read as stored and versions 3-4 are converted RUB -> RDF (means,
-quaternion vector part and the odd SH coefficients); :func:`read_spz` can force either.
+Axes: RDF in :class:`Scene`; which axes a file stores and the conversion are decided in
+:mod:`.spz_axes` (its extension record, else ``axes``/``--spz-axes``, else RUB for versions 3-4
+as the SPZ specification says and the stored axes for versions 1-2).
 """
 
 from __future__ import annotations
 
-import math
 import shutil
 import struct
 import subprocess
@@ -52,7 +48,7 @@ import numpy as np
 
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate
-from . import _binary
+from . import _binary, spz_attributes, spz_axes
 from ._memory import check_memory
 from ._messages import quote, reader_guard
 
@@ -64,9 +60,6 @@ HEADER_BYTES = struct.calcsize(HEADER_FORMAT)
 SUPPORTED_VERSIONS = (1, 2, 3, 4)
 #: f_dc = (c / 255 - 0.5) / COLOR_SCALE (verified against donut_sh0.ply).
 COLOR_SCALE = 0.15
-#: SH sign changes when negating y and z (a 180-degree turn about x), coefficients 1..15 in the
-#: 3DGS basis order (degree 1: y z x; degree 2: xy yz zz xz xx-yy; degree 3: ...).
-FLIP_YZ_SH_SIGNS = np.array([-1, -1, 1, -1, 1, 1, -1, 1, -1, 1, -1, -1, 1, -1, 1], np.float32)
 #: zstd frame magic (version 4 streams).
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 
@@ -74,8 +67,7 @@ ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 #: Highest fractionalBits: positions are 24-bit signed fixed point, so with more than 23
 #: fractional bits no position could reach 1 (writers use 12; the minimal fixtures 8).
 MAX_FRACTIONAL_BITS = 23
-#: Flag bits: 0x1 trained with antialiasing; 0x2 extension records follow the header
-#: (Niantic's reader); splatgl reads no extensions, and they can change how SH decode.
+#: Flag bits: 0x1 trained with antialiasing; 0x2 extension records follow (see :mod:`.spz_axes`).
 FLAG_ANTIALIASED = 0x1
 FLAG_EXTENSIONS = 0x2
 #: Version 4: the header is 32 bytes; ``uint32 tocByteOffset`` at byte 16, 12 reserved bytes.
@@ -128,9 +120,8 @@ def parse_header(path, data: bytes) -> Header:
     """The header at the start of ``data`` (decompressed), every field bounded.
 
     version 1-4; shDegree 0-3; fractionalBits 0-:data:`MAX_FRACTIONAL_BITS` (unused by
-    version 1's float16 positions); flags only bit 0 (bit 1, extensions, is refused: they can
-    change the decoding); the reserved byte 0 in versions 1-3 and, in version 4, the stream
-    count, exactly one stream per attribute array.
+    version 1's float16 positions); flags bits 0-1; the reserved byte 0 in versions 1-3 and,
+    in version 4, the stream count, exactly one stream per attribute array.
     """
     magic, *fields = _binary.unpack(path, HEADER_FORMAT, data, 0, "SPZ header")
     if magic != MAGIC:
@@ -146,13 +137,11 @@ def parse_header(path, data: bytes) -> Header:
         raise SceneFormatError(path, f"{header.fractional_bits} is outside 0-"
                                      f"{MAX_FRACTIONAL_BITS} (positions are 24-bit signed fixed "
                                      "point; writers use 12)", "fractionalBits")
-    if header.flags & FLAG_EXTENSIONS:
-        raise SceneFormatError(path, f"flags 0x{header.flags:02x}: bit 1 (extension records) is "
-                                     "set; SPZ extensions are not supported", "flags")
-    if header.flags & ~FLAG_ANTIALIASED:
+    known = FLAG_ANTIALIASED | FLAG_EXTENSIONS
+    if header.flags & ~known:
         raise SceneFormatError(path, f"flags 0x{header.flags:02x}: unknown bits "
-                                     f"0x{header.flags & ~FLAG_ANTIALIASED:02x} set (only bit 0, "
-                                     "antialiased, is defined)", "flags")
+                                     f"0x{header.flags & ~known:02x} set (bit 0, antialiased, "
+                                     "and bit 1, extensions, are defined)", "flags")
     streams = len(header.attribute_bytes())
     if header.version == 4 and header.reserved != streams:
         raise SceneFormatError(path, f"{header.reserved} streams, expected {streams} for SH "
@@ -180,11 +169,12 @@ def _zlib_message(exc: zlib.error) -> str:
 
 
 def _gunzip(path, data: bytes) -> bytes:
-    """Inflate a gzip SPZ: exactly the body the header declares, then the gzip trailer.
+    """Inflate a gzip SPZ: exactly the body the header declares (and, with flags bit 1, at most
+    :data:`~.spz_axes.MAX_EXTENSION_BYTES` of extension records), then the gzip trailer.
 
-    Never inflates more than the header says plus one byte (more is an error: numPoints too
-    small), and reads to the end of the stream, so zlib checks the trailer's CRC-32 and
-    length.  Bytes after the stream are an error too.
+    Never inflates more than that plus one byte (more is an error: numPoints too small), and
+    reads to the end of the stream, so zlib checks the trailer's CRC-32 and length.  Bytes
+    after the stream are an error too.
     """
     inflater = zlib.decompressobj(wbits=31)
     try:
@@ -208,7 +198,12 @@ def _gunzip(path, data: bytes) -> bytes:
             raise SceneFormatError(
                 path, f"truncated: the gzip body ends after {len(body)} bytes; numPoints "
                 f"{header.count} x {header.point_bytes()} bytes needs {want}", "numPoints")
-        if inflater.decompress(inflater.unconsumed_tail, 1):
+        if header.flags & FLAG_EXTENSIONS:
+            body += inflater.decompress(inflater.unconsumed_tail, spz_axes.MAX_EXTENSION_BYTES + 1)
+            if len(body) > want + spz_axes.MAX_EXTENSION_BYTES:
+                raise SceneFormatError(path, f"more than {spz_axes.MAX_EXTENSION_BYTES} bytes of "
+                                             "extension records after the arrays", "extensions")
+        elif inflater.decompress(inflater.unconsumed_tail, 1):
             raise SceneFormatError(
                 path, f"the gzip body holds more than the {want} bytes numPoints {header.count}"
                 f" x {header.point_bytes()} bytes declares", "numPoints")
@@ -223,18 +218,27 @@ def _gunzip(path, data: bytes) -> bytes:
     return head + body
 
 
-def _streams(path, data: bytes, header: Header) -> list[bytes]:
-    """The decompressed attribute arrays of a version 4 container, sizes checked.
-
-    The table of contents must follow the 32-byte header, the streams must follow the table
-    back to back and end at the end of the file.
-    """
-    expected = header.attribute_bytes()
+def _v4_zone(path, data: bytes, header: Header) -> tuple[int, bytes]:
+    """``tocByteOffset`` of a version 4 file and its extension records' bytes (32 to there)."""
     (toc,) = _binary.unpack(path, "<I", data, HEADER_BYTES, "version 4 table offset")
     _binary.need(path, data, 0, V4_HEADER_BYTES, "version 4 header")
-    if toc != V4_HEADER_BYTES:
+    if toc != V4_HEADER_BYTES and not header.flags & FLAG_EXTENSIONS:
         raise SceneFormatError(path, f"{toc}, expected {V4_HEADER_BYTES} (the table follows the"
-                                     " header when there are no extensions)", "tocByteOffset")
+                                     " header when flags bit 1, extensions, is clear)",
+                               "tocByteOffset")
+    if not V4_HEADER_BYTES <= toc <= len(data):
+        raise SceneFormatError(path, f"{toc}, outside the file's {V4_HEADER_BYTES}-{len(data)}",
+                               "tocByteOffset")
+    return toc, data[V4_HEADER_BYTES:toc]
+
+
+def _streams(path, data: bytes, header: Header, toc: int) -> list[bytes]:
+    """The decompressed attribute arrays of a version 4 container, sizes checked.
+
+    The table of contents sits at ``toc`` (after the header and extension records), the
+    streams must follow the table back to back and end at the end of the file.
+    """
+    expected = header.attribute_bytes()
     table = _binary.array(path, data, toc, "<u8", 2 * header.reserved, "stream table")
     offset = toc + table.nbytes
     total = sum(int(table[i]) for i in range(0, table.size, 2))
@@ -331,112 +335,98 @@ def _read_upto(read, limit: int) -> bytes:
     return b"".join(parts)
 
 
-def _arrays(path, data: bytes) -> tuple[Header, dict[str, np.ndarray]]:
-    """Header and each attribute as a uint8 (n, bytes per point) array."""
+def _container(path, data: bytes) -> tuple[Header, bytes, bytes]:
+    """Header, the (inflated) file and its extension records' bytes; sizes checked."""
     gzipped = data.startswith(b"\x1f\x8b")
     if gzipped:
         data = _gunzip(path, data)  # versions 1-3 only
     header = parse_header(path, data)
+    if header.version == 4:
+        _, zone = _v4_zone(path, data, header)
+        return header, data, zone
+    per_point = header.point_bytes()
+    body = _binary.check_fits(path, header.count, per_point, len(data) - HEADER_BYTES,
+                              f"{header.count} points", "numPoints")
+    zone = data[HEADER_BYTES + body:]
+    if len(zone) > spz_axes.MAX_EXTENSION_BYTES and header.flags & FLAG_EXTENSIONS:
+        raise SceneFormatError(path, f"{len(zone)} bytes after the arrays, more than the "
+                                     f"{spz_axes.MAX_EXTENSION_BYTES} extension records may take "
+                                     "(a wrong numPoints?)", "numPoints")
+    if zone and not header.flags & FLAG_EXTENSIONS:
+        raise SceneFormatError(
+            path, f"the body holds {len(data) - HEADER_BYTES} bytes, but numPoints "
+            f"{header.count} x {per_point} bytes declares {body} (a wrong numPoints or "
+            f"version, or not a version {header.version} body)", "numPoints")
+    if not gzipped:
+        _check_memory(path, header, len(data))
+    return header, data, zone
+
+
+def _arrays(path, data: bytes) -> tuple[Header, dict[str, np.ndarray], list]:
+    """Header, each attribute as a uint8 (n, bytes per point) array, and the extension
+    records ``(type, payload)``."""
+    header, data, zone = _container(path, data)
+    records = spz_axes.parse_records(path, zone)
     layout = header.attribute_bytes()
     if header.version == 4:
-        blobs = _streams(path, data, header)
+        blobs = _streams(path, data, header, V4_HEADER_BYTES + len(zone))
     else:
-        per_point = header.point_bytes()
-        body = _binary.check_fits(path, header.count, per_point, len(data) - HEADER_BYTES,
-                                  f"{header.count} points", "numPoints")
-        if body != len(data) - HEADER_BYTES:
-            raise SceneFormatError(
-                path, f"the body holds {len(data) - HEADER_BYTES} bytes, but numPoints "
-                f"{header.count} x {per_point} bytes declares {body} (a wrong numPoints or "
-                f"version, or not a version {header.version} body)", "numPoints")
-        if not gzipped:
-            _check_memory(path, header, len(data))
         blobs, offset = [], HEADER_BYTES
         for _, b in layout:
             blobs.append(data[offset:offset + b * header.count])
             offset += b * header.count
     arrays = {name: np.frombuffer(blob, np.uint8).reshape(header.count, b)
               for (name, b), blob in zip(layout, blobs)}
-    return header, arrays
+    return header, arrays, records
 
 
-def _positions(header: Header, raw: np.ndarray) -> np.ndarray:
-    if header.version == 1:
-        return raw.copy().view("<f2").astype(np.float64)
-    b = raw.reshape(-1, 3, 3).astype(np.int32)
-    fixed = b[..., 0] | (b[..., 1] << 8) | (b[..., 2] << 16)
-    fixed = np.where(fixed & 0x800000, fixed - (1 << 24), fixed)
-    return fixed * 2.0 ** -header.fractional_bits
+def read_axes(path, axes: str | None = None) -> spz_axes.Axes:
+    """How :func:`read_spz` decides the axes of the SPZ file ``path`` (see :mod:`.spz_axes`),
+    from its header and extension records (a gzip body is inflated, nothing is decoded)."""
+    header, _, zone = _container(path, _binary.read_bytes(path))
+    return spz_axes.resolve(path, header.version, spz_axes.parse_records(path, zone), axes)
 
 
-def unpack_rotation_xyz(raw: np.ndarray) -> np.ndarray:
-    """(N, 4) float64 (w, x, y, z) from (N, 3) uint8 x, y, z (versions 1-2), w >= 0."""
-    xyz = raw / 127.5 - 1.0
-    w = np.sqrt(np.maximum(0.0, 1.0 - (xyz * xyz).sum(axis=1)))
-    return np.concatenate([w[:, None], xyz], axis=1)
-
-
-def unpack_rotation_smallest3(raw: np.ndarray) -> np.ndarray:
-    """(N, 4) float64 (w, x, y, z) from (N, 4) uint8 smallest-three words (versions 3-4)."""
-    b = raw.astype(np.uint32)
-    word = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16) | (b[:, 3] << 24)
-    largest = (word >> 30).astype(np.intp)
-    xyzw = np.zeros((raw.shape[0], 4))
-    for i in range(3, -1, -1):
-        mine = largest != i
-        value = (word & 511) / 511.0 * math.sqrt(0.5)
-        value = np.where((word >> 9) & 1, -value, value)
-        xyzw[:, i] = np.where(mine, value, 0.0)
-        word = np.where(mine, word >> 10, word)
-    rows = np.arange(raw.shape[0])
-    xyzw[rows, largest] = np.sqrt(np.maximum(0.0, 1.0 - (xyzw * xyzw).sum(axis=1)))
-    return xyzw[:, [3, 0, 1, 2]]
-
-
-def flips_by_default(version: int) -> bool:
-    """Whether a file of this SPZ ``version`` is converted RUB -> RDF (see the module notes)."""
-    return version >= 3
-
-
-def decode(path, data: bytes, flip_yz: bool | None = None) -> tuple[np.ndarray, ...]:
-    """Raw scene arrays ``(means (N, 3), quats (N, 4) w-first, log_scales (N, 3),
-    opacity_logits (N,), sh (N, K, 3))`` of an SPZ file's bytes.
-
-    ``flip_yz`` converts RUB to RDF axes (negates y and z of the means, of the quaternion's
-    vector part and the matching SH coefficients); None decides by version
-    (:func:`flips_by_default`).
-    """
-    header, a = _arrays(path, data)
-    if flip_yz is None:
-        flip_yz = flips_by_default(header.version)
-    means = _positions(header, a["positions"])
+def decode_with_axes(path, data: bytes, axes: str | None = None):
+    """:func:`decode`'s arrays, and the :class:`~.spz_axes.Axes` they were converted from."""
+    header, a, records = _arrays(path, data)
+    stored = spz_axes.resolve(path, header.version, records, axes)
+    means = spz_attributes.positions(a["positions"], header.version, header.fractional_bits)
     logits = _binary.logit(a["alphas"][:, 0] / 255.0)
     dc = (a["colors"] / 255.0 - 0.5) / COLOR_SCALE
     log_scales = (a["scales"] / 16.0 - 10.0).astype(np.float32)
     if header.version >= 3:
-        quats = unpack_rotation_smallest3(a["rotations"])
+        quats = spz_attributes.unpack_rotation_smallest3(a["rotations"])
     else:
-        quats = unpack_rotation_xyz(a["rotations"])
+        quats = spz_attributes.unpack_rotation_xyz(a["rotations"])
     k = (header.sh_degree + 1) ** 2
     sh = np.empty((header.count, k, 3), np.float32)
     sh[:, 0] = dc
     if k > 1:
         sh[:, 1:] = ((a["sh"].astype(np.float32) - 128.0) / 128.0).reshape(-1, k - 1, 3)
-    if flip_yz:
-        means[:, 1:] *= -1.0
-        quats[:, 2:] *= -1.0
-        sh[:, 1:] *= FLIP_YZ_SH_SIGNS[: k - 1, None]
-    return means, quats, log_scales, logits, sh
+    if stored.stored != spz_axes.SCENE_AXES:
+        spz_axes.flip_axes(means, quats, sh, spz_axes.axis_signs(stored.stored))
+    return (means, quats, log_scales, logits, sh), stored
+
+
+def decode(path, data: bytes, axes: str | None = None) -> tuple[np.ndarray, ...]:
+    """Raw scene arrays ``(means (N, 3), quats (N, 4) w-first, log_scales (N, 3),
+    opacity_logits (N,), sh (N, K, 3))`` of an SPZ file's bytes, in RDF axes.
+
+    The stored axes are what the file's extension records, else ``axes`` ("rub" or "rdf"),
+    else the version's default (:func:`.spz_axes.resolve`).
+    """
+    return decode_with_axes(path, data, axes)[0]
 
 
 @reader_guard
-def read_spz(path: Path, drop_invalid: bool = False, flip_yz: bool | None = None) -> Scene:
-    """Load an SPZ file as a 3DGS :class:`Scene`; ``flip_yz`` as in :func:`decode`."""
-    raw = decode(path, _binary.read_bytes(path), flip_yz)
+def read_spz(path: Path, drop_invalid: bool = False, axes: str | None = None) -> Scene:
+    """Load an SPZ file as a 3DGS :class:`Scene`; ``axes`` as in :func:`decode`."""
+    raw = decode(path, _binary.read_bytes(path), axes)
     return activate(path, *raw, SplatKind.GAUSSIAN_3D, drop_invalid)
 
 
 @reader_guard
-def read(path: Path, drop_invalid: bool = False) -> Scene:
-    """Load an SPZ file, converting axes by version (see the module notes)."""
-    return read_spz(path, drop_invalid)
+def read(path: Path, drop_invalid: bool = False, axes: str | None = None) -> Scene:
+    """Load an SPZ file, its axes decided as :mod:`.spz_axes` describes."""
+    return read_spz(path, drop_invalid, axes)

@@ -1,9 +1,12 @@
 """Writer of Niantic SPZ (``*.spz``), versions 2 and 3 (gzip), read back by :mod:`.spz`.
 
-Layout and decoding are described in :mod:`splatgl.formats.spz`.  Axes follow that reader: a
-version 3 file stores RUB axes (y and z negated against the scene's RDF, with the matching SH
-signs), a version 2 file stores the scene's axes as they are (what the v2 files in the shared
-scenes hold).  Quantisation (constants in :mod:`splatgl.formats.quantise`):
+Layout and decoding are described in :mod:`splatgl.formats.spz`.  Axes (:mod:`.spz_axes`):
+``axes`` "rub" or "rdf", by default RUB for version 3 (the SPZ specification: y and z negated
+against the scene's RDF, with the matching SH signs) and RDF as is for version 2 (what version 2
+files hold).  Every file but a version 3 one in RUB also records its axes in an
+``SPZ_ADOBE_coordinate_system`` extension record (flags bit 1, after the arrays), so that
+readers following the specification and splatgl's own version defaults both read it right.
+Quantisation (constants in :mod:`splatgl.formats.quantise`):
 
 - positions: 24-bit fixed point with 12 fractional bits (fewer when the scene's extent needs
   them: the header records the count), error at most half a step per axis;
@@ -24,7 +27,8 @@ import numpy as np
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind
 from . import quantise as qz
-from .spz import FLIP_YZ_SH_SIGNS, HEADER_FORMAT, MAGIC, flips_by_default
+from . import spz_axes
+from .spz import FLAG_EXTENSIONS, HEADER_FORMAT, MAGIC
 
 NAME = "spz"
 EXTENSIONS = (".spz",)
@@ -73,24 +77,29 @@ def _rotations_smallest3(q: np.ndarray) -> np.ndarray:
     return word.astype("<u4").view(np.uint8).reshape(-1, 4)
 
 
+def stored_axes(version: int, axes: str | None = None) -> str:
+    """The axes a file of ``version`` is written in: ``axes`` ("rub"/"rdf") or the default."""
+    axes = spz_axes.check_choice(axes)
+    return spz_axes.default_axes(version) if axes is None else axes.upper()
+
+
 def encode(scene: Scene, version: int = DEFAULT_VERSION, antialiased: bool = False,
-           flip_yz: bool | None = None, path=None) -> bytes:
-    """The uncompressed SPZ body (header and attribute arrays) of ``scene``."""
+           axes: str | None = None, path=None) -> bytes:
+    """The uncompressed SPZ body (header, attribute arrays, extension record) of ``scene``."""
     if version not in VERSIONS:
         raise SceneFormatError(path, f"cannot write SPZ version {version} (writable: "
                                      f"{', '.join(map(str, VERSIONS))})", "version")
     if scene.kind is not SplatKind.GAUSSIAN_3D:
         raise SceneFormatError(path, "SPZ stores 3D Gaussians only; cannot write a 2DGS surfel "
                                      "scene (write .ply instead)", "scale")
-    flip = flips_by_default(version) if flip_yz is None else flip_yz
+    stored = stored_axes(version, axes)
     means = scene.means.astype(np.float64)
     q = scene.rotations.astype(np.float64)
-    k = scene.sh.shape[1]
-    rest = scene.sh[:, 1:].astype(np.float64)
-    if flip:
-        means = means * [1.0, -1.0, -1.0]
-        q = q * [1.0, 1.0, -1.0, -1.0]
-        rest = rest * FLIP_YZ_SH_SIGNS[: k - 1, None]
+    sh = scene.sh.astype(np.float64)
+    if stored != spz_axes.SCENE_AXES:
+        spz_axes.flip_axes(means, q, sh, spz_axes.axis_signs(stored))
+    rest = sh[:, 1:]
+    record = b"" if (version, stored) == (3, spz_axes.SPEC_AXES) else spz_axes.encode_record(stored)
     bits = fractional_bits(means)
     fixed = np.rint(means * 2.0 ** bits).astype(np.int64) & 0xFFFFFF
     positions = np.stack([(fixed >> s) & 0xFF for s in (0, 8, 16)], axis=-1).astype(np.uint8)
@@ -99,15 +108,18 @@ def encode(scene: Scene, version: int = DEFAULT_VERSION, antialiased: bool = Fal
     scales = _byte((scene.log_scales.astype(np.float64) + qz.SPZ_SCALE_OFFSET) * qz.SPZ_SCALE_STEPS)
     rotations = _rotations_smallest3(q) if version >= 3 else _rotations_xyz(q)
     sh = _byte(rest * qz.SPZ_SH_SCALE + 128.0)
+    flags = (FLAG_ANTIALIASED if antialiased else 0) | (FLAG_EXTENSIONS if record else 0)
     header = struct.pack(HEADER_FORMAT, MAGIC, version, scene.count, scene.sh_degree, bits,
-                         FLAG_ANTIALIASED if antialiased else 0, 0)
+                         flags, 0)
     parts = [positions, alphas, colours, scales, rotations, sh]
-    return header + b"".join(np.ascontiguousarray(p).tobytes() for p in parts)
+    return header + b"".join(np.ascontiguousarray(p).tobytes() for p in parts) + record
 
 
-def write(path, scene: Scene, version: int = DEFAULT_VERSION, antialiased: bool = False) -> None:
-    """Write ``scene`` as a gzip SPZ file of ``version`` (2 or 3)."""
-    body = encode(scene, version, antialiased, path=path)
+def write(path, scene: Scene, version: int = DEFAULT_VERSION, antialiased: bool = False,
+          axes: str | None = None) -> None:
+    """Write ``scene`` as a gzip SPZ file of ``version`` (2 or 3) in ``axes`` (see
+    :func:`stored_axes`)."""
+    body = encode(scene, version, antialiased, axes, path=path)
     with open(path, "wb") as fh:
         fh.write(gzip.compress(body, GZIP_LEVEL, mtime=0))
 
