@@ -11,11 +11,12 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 from .errors import SplatglError
+from .image_io import IMAGE_SUFFIXES, inspect_image
 from .video import VIDEO_SUFFIXES
 
-IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".exr")
 DEFAULT_PATTERN = "%05d"
 
 
@@ -77,3 +78,42 @@ class FrameTarget:
             parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SplatglError(f"{parent}: cannot create the output folder ({exc.strerror})") from None
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """Which frames a run renders: ``todo`` (indices into its cameras), how many complete
+    frames it keeps (``skipped``) and how many damaged ones it renders again (``damaged``)."""
+
+    todo: list[int]
+    skipped: int = 0
+    damaged: int = 0
+
+
+def plan_frames(target: FrameTarget, sizes: Sequence[tuple[int, int]], numbers: Sequence[int],
+                bit_depth: int = 8, resume: bool = False) -> FramePlan:
+    """The frames to render of cameras whose frames are ``sizes`` (width, height) numbered
+    ``numbers``.  Without ``resume`` (or into a video): all of them.  With ``resume`` a frame
+    file that exists is kept only when it is complete (:func:`splatgl.image_io.inspect_image`:
+    a file cut short by a full disk or a killed run is rendered again); a complete frame of
+    another size, channel count or bit depth stops the run before any work, in one line."""
+    if not resume or target.is_video:
+        return FramePlan(list(range(len(sizes))))
+    channels = 5 if target.wants_depth else 3
+    todo, damaged = [], 0
+    for k, ((width, height), number) in enumerate(zip(sizes, numbers)):
+        path = target.frame_path(number)
+        if not path.exists():
+            todo.append(k)
+            continue
+        info = inspect_image(path)
+        if isinstance(info, str):
+            todo.append(k)
+            damaged += 1
+            continue
+        mismatch = info.mismatch(width, height, channels, bit_depth)
+        if mismatch is not None:
+            raise SplatglError(f"{path}: {mismatch} as this run renders its frames; --resume only "
+                               "completes frames of the same kind (render into another folder, "
+                               "or without --resume to replace them)")
+    return FramePlan(todo, len(sizes) - len(todo), damaged)

@@ -9,6 +9,7 @@ nothing behind.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -36,10 +37,29 @@ def check_image_suffix(path: str | Path, what: str = "") -> None:
                            f"use {', '.join(IMAGE_SUFFIXES[:-1])} or {IMAGE_SUFFIXES[-1]}")
 
 
-def image_file_problem(path: str | Path, width: int | None = None, height: int | None = None,
-                       channels: int | None = None, bit_depth: int | None = None) -> str | None:
-    """Why the image file ``path`` is not a complete image (of the given size, channel count
-    and, for PNG/TIFF, bits per channel), or None when it is.
+@dataclass(frozen=True)
+class ImageFileInfo:
+    """What a complete image file holds: size, channels, bits per channel (None: float)."""
+
+    width: int
+    height: int
+    channels: int
+    bits: int | None
+
+    def mismatch(self, width: int | None = None, height: int | None = None,
+                 channels: int | None = None, bit_depth: int | None = None) -> str | None:
+        """How this file differs from what was asked (None: it does not)."""
+        if width is not None and height is not None and (self.width, self.height) != (width, height):
+            return f"it is {self.width}x{self.height}, not {width}x{height}"
+        if channels is not None and self.channels != channels:
+            return f"it has {self.channels} channels, not {channels}"
+        if bit_depth is not None and self.bits is not None and self.bits != bit_depth:
+            return f"it has {self.bits} bits per channel, not {bit_depth}"
+        return None
+
+
+def inspect_image(path: str | Path) -> ImageFileInfo | str:
+    """The header of a complete image file, or why the file is not one (a string).
 
     Cheap enough to run on every frame: reads the header and the end of the data, not the
     pixels (PNG: the file must end with its IEND chunk; TIFF/EXR: the last scanline must
@@ -62,18 +82,20 @@ def image_file_problem(path: str | Path, width: int | None = None, height: int |
         return f"not a readable image ({' '.join(oiio.geterror().split())})"
     try:
         spec = inp.spec()
-        if (width, height) != (None, None) and (spec.width, spec.height) != (width, height):
-            return f"it is {spec.width}x{spec.height}, not {width}x{height}"
-        if channels is not None and spec.nchannels != channels:
-            return f"it has {spec.nchannels} channels, not {channels}"
-        bits = {"uint8": 8, "uint16": 16}.get(str(spec.format))
-        if bit_depth is not None and bits is not None and bits != bit_depth:
-            return f"it has {bits} bits per channel, not {bit_depth}"
         if path.suffix.lower() != ".png" and inp.read_scanline(spec.height - 1, 0, oiio.FLOAT) is None:
             return f"the file is cut short ({size} bytes: {' '.join(inp.geterror().split())})"
+        bits = {"uint8": 8, "uint16": 16}.get(str(spec.format))
+        return ImageFileInfo(spec.width, spec.height, spec.nchannels, bits)
     finally:
         inp.close()
-    return None
+
+
+def image_file_problem(path: str | Path, width: int | None = None, height: int | None = None,
+                       channels: int | None = None, bit_depth: int | None = None) -> str | None:
+    """Why ``path`` is not a complete image (:func:`inspect_image`) of the given size, channel
+    count and (PNG/TIFF) bits per channel, or None when it is one."""
+    info = inspect_image(path)
+    return info if isinstance(info, str) else info.mismatch(width, height, channels, bit_depth)
 
 
 def _clean(message: str, tmp: Path, target: Path) -> str:

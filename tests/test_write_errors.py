@@ -63,3 +63,48 @@ def test_render_to_a_full_disk_fails_in_one_line(tmp_path, capsys, full_disk):
     err = _one_line(capsys)
     assert err.startswith(f"splatgl: error: {out}: cannot write: the file is cut short"), err
     assert "wrote" not in capsys.readouterr().out and list(tmp_path.iterdir()) == []
+
+
+def _path(tmp_path, *argv) -> int:
+    return main(["render", str(demo_scene_path()), "--path", "orbit:4", *SIZE, *map(str, argv)])
+
+
+def test_path_frames_to_a_full_disk_fail_and_resume_completes(tmp_path, capsys, full_disk):
+    out = tmp_path / "fr"
+    with full_disk(500):
+        assert _path(tmp_path, "-o", out) == 2
+    assert _one_line(capsys).startswith(f"splatgl: error: {out / '00000.png'}: cannot write")
+    assert list(out.iterdir()) == []  # no frame, no temporary
+    assert _path(tmp_path, "-o", out, "--resume") == 0
+    assert "wrote 4 frames" in capsys.readouterr().out
+
+
+def test_resume_renders_damaged_frames_again(tmp_path, capsys):
+    """A frame file cut short (a full disk, a killed writer of another program) or empty is
+    not taken for a finished frame."""
+    whole, out = tmp_path / "whole", tmp_path / "fr"
+    assert _path(tmp_path, "-o", whole) == 0 and _path(tmp_path, "-o", out) == 0
+    data = (out / "00001.png").read_bytes()
+    (out / "00001.png").write_bytes(data[: len(data) // 2])
+    (out / "00002.png").write_bytes(b"")
+    (out / "00003.png").unlink()
+    capsys.readouterr()
+    assert _path(tmp_path, "-o", out, "--resume") == 0
+    assert "wrote 3 frames to" in (printed := capsys.readouterr().out)
+    assert "1 already there, 2 damaged ones rendered again" in printed
+    for k in range(4):
+        np.testing.assert_array_equal(read_image(out / f"{k:05d}.png"), read_image(whole / f"{k:05d}.png"))
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_resume_refuses_frames_of_another_size_before_rendering(tmp_path, capsys, workers):
+    out = tmp_path / "fr"
+    assert _path(tmp_path, "-o", out) == 0
+    (out / "00003.png").unlink()
+    capsys.readouterr()
+    assert main(["render", str(demo_scene_path()), "--path", "orbit:4", "--width", "64",
+                 "--height", "48", "-o", str(out), "--resume", "--workers", workers]) == 2
+    err = _one_line(capsys)
+    assert err.startswith(f"splatgl: error: {out / '00000.png'}: it is 96x64, not 64x48 as this run "
+                          "renders its frames; --resume only completes frames of the same kind"), err
+    assert not (out / "00003.png").exists()  # refused before any frame was rendered

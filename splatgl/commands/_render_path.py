@@ -21,7 +21,7 @@ from ..scene import Scene
 from ..lens import with_projection
 from ..settings import RendererKind
 from ..stereo import StereoLayout, StereoRenderer
-from ._common import demo_scene_path, load_scene_arg, settings_from_args
+from ._common import demo_scene_path, load_scene_arg, resize_keeping_aspect, settings_from_args
 
 DEFAULT_FPS = 30.0
 DEFAULT_ORBIT_FRAMES = 120
@@ -52,18 +52,14 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                            "Ray tasks of up to 32 frames")
 
 
-def _sized(cam: Camera, width: int | None, height: int | None) -> Camera:
-    if not (width or height):
-        return cam
-    w = width or round(cam.width * height / cam.height)
-    h = height or round(cam.height * width / cam.width)
-    return cam.resized(w, h)
-
-
-def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None]:
-    """The cameras ``--path`` names (with ``--select`` and ``--width/--height`` applied)."""
+def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None, list[int]]:
+    """The cameras ``--path`` names (with ``--select`` and ``--width/--height`` applied, as
+    ``--camera`` applies them: one of the two keeps each camera's aspect, both must match
+    it), the source's frame rate (None if it has none) and each camera's index in the source
+    (its frame number)."""
     spec = args.path
-    if spec == "orbit" or spec.startswith("orbit:"):
+    is_orbit = spec == "orbit" or spec.startswith("orbit:")
+    if is_orbit:
         try:
             frames = int(spec.split(":", 1)[1]) if ":" in spec else DEFAULT_ORBIT_FRAMES
         except ValueError:
@@ -75,12 +71,17 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
         fps = None
     else:
         views, fps = load_source(spec)
-        cams = [_sized(v.camera, args.width, args.height) for v in views]
+        cams = [v.camera for v in views]
+    numbers = list(range(len(cams)))
     if args.select:
-        cams = [cams[i] for i in select_indices(args.select, len(cams), spec)]
+        numbers = select_indices(args.select, len(cams), spec)
+    cams = [cams[i] for i in numbers]
+    if not is_orbit and (args.width or args.height):
+        cams = [resize_keeping_aspect(c, args.width, args.height, f"{spec} (camera {i})")
+                for i, c in zip(numbers, cams)]
     if getattr(args, "projection", None):   # the path's poses and sizes through another model
         cams = [with_projection(c, args.projection, args.fov) for c in cams]
-    return cams, fps
+    return cams, fps, numbers
 
 
 def run_path(args: argparse.Namespace) -> int:
@@ -98,7 +99,7 @@ def run_path(args: argparse.Namespace) -> int:
                            "until the video is assembled)")
     scene = load_scene_arg(args)
     settings = settings_from_args(args)
-    cameras, source_fps = path_cameras(args, scene)
+    cameras, source_fps, numbers = path_cameras(args, scene)
     fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
@@ -109,15 +110,17 @@ def run_path(args: argparse.Namespace) -> int:
 
         result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
                                      cameras, settings, target, executor, kind, args.bit_depth,
-                                     args.resume, args.drop_invalid, fps, default_progress())
+                                     args.resume, args.drop_invalid, fps, default_progress(), numbers)
     else:
         with Renderer() as renderer:
             if args.stereo is not None:    # each frame holds both eyes
                 renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
             result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
-                                   args.resume, fps, default_progress())
+                                   args.resume, fps, default_progress(), numbers=numbers)
     where = target.video if target.is_video else target.pattern
     skipped = f", {result.skipped} already there" if result.skipped else ""
+    if result.damaged:
+        skipped += f", {result.damaged} damaged ones rendered again"
     print(f"wrote {result.written} frames to {where}{skipped} ({cameras[0].width}x{cameras[0].height}, "
           f"{scene.count} splats, {kind.value}, {result.fps:.2f} frames/s)")
     if run is not None:
