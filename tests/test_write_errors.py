@@ -108,3 +108,60 @@ def test_resume_refuses_frames_of_another_size_before_rendering(tmp_path, capsys
     assert err.startswith(f"splatgl: error: {out / '00000.png'}: it is 96x64, not 64x48 as this run "
                           "renders its frames; --resume only completes frames of the same kind"), err
     assert not (out / "00003.png").exists()  # refused before any frame was rendered
+
+
+SCENE_NAMES = ["a.ply", "a.compressed.ply", "a.splat", "a.spz", "a.sog", "meta.json", "a.glb", "a.gltf"]
+
+
+@pytest.mark.parametrize("name", SCENE_NAMES)
+def test_scene_writers_fail_in_one_line_and_leave_nothing(tmp_path, full_disk, name):
+    """Every format (the SOG folder form with its textures too) on a full disk: one line naming
+    the file, not its temporary, and an empty folder (the folder form left its .webp files and
+    a .partial behind)."""
+    import warnings
+
+    from splatgl.formats import load_scene, save_scene
+
+    scene = load_scene(demo_scene_path())
+    with warnings.catch_warnings(), full_disk(1500), pytest.raises(SplatglError) as info:
+        warnings.simplefilter("ignore")
+        save_scene(tmp_path / name, scene)
+    assert str(info.value).startswith(f"{tmp_path / name}: cannot write"), info.value
+    assert "partial" not in str(info.value) and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ["a.ply", "a.compressed.ply", "a.spz", "a.sog", "a.glb"])
+def test_written_problem_finds_a_scene_file_cut_short(tmp_path, name):
+    import warnings
+
+    from splatgl.formats import load_scene, save_scene
+    from splatgl.formats.written import written_problem
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        save_scene(tmp_path / name, load_scene(demo_scene_path()))
+    assert written_problem(tmp_path / name) is None
+    data = (tmp_path / name).read_bytes()
+    for keep in (0, 10, len(data) // 2, len(data) - 1):
+        (tmp_path / "cut").write_bytes(data[:keep])
+        assert written_problem(tmp_path / "cut") is not None, keep
+
+
+def test_convert_lod_and_camera_files_on_a_full_disk(tmp_path, capsys, full_disk):
+    from splatgl.camera_io import save_camera
+    from splatgl.render import default_camera
+    from splatgl.formats import load_scene
+
+    out = tmp_path / "out"
+    out.mkdir()
+    for argv, target in ((["convert", str(demo_scene_path()), str(out / "meta.json")], out / "meta.json"),
+                         (["lod", str(demo_scene_path()), "-o", str(out / "d.lod.ply")], out / "d.lod.ply")):
+        with full_disk(1500):
+            assert main(argv) == 2
+        assert _one_line(capsys).startswith(f"splatgl: error: {target}: cannot write"), argv
+        assert list(out.iterdir()) == []
+    camera = default_camera(load_scene(demo_scene_path()), 64, 48)
+    (out / "cam.json").write_text("old")
+    with full_disk(100), pytest.raises(SplatglError, match=f"^{out / 'cam.json'}: cannot write"):
+        save_camera(out / "cam.json", camera)
+    assert [p.name for p in out.iterdir()] == ["cam.json"] and (out / "cam.json").read_text() == "old"
