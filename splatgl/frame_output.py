@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import enum
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -72,12 +73,15 @@ class FrameTarget:
         return Path(self.pattern % index)
 
     def prepare(self) -> None:
-        """Create the folder the frames or the video go into."""
+        """Create the folder the frames or the video go into; refuse one that is not writable
+        (before any frame renders)."""
         parent = self.video.parent if self.is_video else self.frame_path(0).parent
         try:
             parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SplatglError(f"{parent}: cannot create the output folder ({exc.strerror})") from None
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise SplatglError(f"{parent}: the output folder is not writable")
 
 
 @dataclass(frozen=True)

@@ -165,3 +165,20 @@ def test_convert_lod_and_camera_files_on_a_full_disk(tmp_path, capsys, full_disk
     with full_disk(100), pytest.raises(SplatglError, match=f"^{out / 'cam.json'}: cannot write"):
         save_camera(out / "cam.json", camera)
     assert [p.name for p in out.iterdir()] == ["cam.json"] and (out / "cam.json").read_text() == "old"
+
+
+def test_video_to_a_full_or_read_only_folder_fails_in_one_line(tmp_path, capsys, full_disk, monkeypatch):
+    """av.error.OSError came out as a traceback; the video's temporary is never named."""
+    pytest.importorskip("av")
+    out = tmp_path / "v.mp4"
+    for limit in (0, 3000):  # nothing fits (the container header) / the disk fills while encoding
+        with full_disk(limit):
+            assert _path(tmp_path, "-o", out) == 2
+        assert _one_line(capsys) == f"splatgl: error: {out}: cannot write (File too large)"
+        assert list(tmp_path.iterdir()) == []
+    import splatgl.frame_output as frame_output
+
+    real = frame_output.os.access
+    monkeypatch.setattr(frame_output.os, "access", lambda p, mode: False if str(p) == str(tmp_path) else real(p, mode))
+    assert _path(tmp_path, "-o", out) == 2
+    assert _one_line(capsys) == f"splatgl: error: {tmp_path}: the output folder is not writable"
