@@ -208,3 +208,30 @@ def test_bench_group_other_than_renderer_finishes_and_writes(tmp_path, capsys):
     assert {r["config"] for r in data["rows"]} == {"default", "extent=square", "limit"}
     assert stdout.startswith("machine: ") and data["machine"]["gl_renderer"] in stdout
     assert sorted(p.name for p in out.iterdir()) == ["bench.csv", "bench.json", "bench.png"]
+
+
+def test_zero_sizes_and_closed_renderers_are_one_line_errors(tmp_path, capsys):
+    """They were tracebacks: ZeroDivisionError from `path orbit --width 0` and from
+    default_camera(scene, 0, 0); AttributeError from a Renderer used after close()."""
+    from splatgl.commands._common import demo_scene_path
+    from splatgl.errors import CameraError, SplatglError
+    from splatgl.formats import load_scene
+    from splatgl.render import Renderer, default_camera
+
+    expect_one_line(capsys, tmp_path, ["path", "orbit", "--width", "0", "-o", tmp_path / "p.json"],
+                    "splatgl path orbit: error: argument --width: must be at least 1, got 0 "
+                    "(see splatgl path orbit --help)")
+    scene = load_scene(demo_scene_path())
+    for size, field in (((0, 0), "width"), ((8, 0), "height"), ((8.5, 4), "width")):
+        with pytest.raises(CameraError, match=f"^camera {field} must be a positive integer, got"):
+            default_camera(scene, *size)
+    with pytest.raises(CameraError, match=r"^field of view must be in \(0, 180\) degrees, got 0"):
+        default_camera(scene, 8, 8, 0.0)
+    camera = default_camera(scene, 16, 12)
+    with Renderer() as renderer:
+        assert renderer.render(scene, camera).shape == (12, 16, 4)
+    renderer.close()  # a second close does nothing
+    for call in (lambda: renderer.render(scene, camera), lambda: next(renderer.render_many(scene, [camera])),
+                 lambda: renderer.render_layers(scene, camera)):
+        with pytest.raises(SplatglError, match="^this Renderer is closed"):
+            call()
