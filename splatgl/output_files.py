@@ -33,6 +33,24 @@ from .errors import SplatglError
 _FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
+def check_output_path(path: str | Path, name: str = "", overwrite: bool = True) -> None:
+    """Refuse, in one line naming option ``name`` (if any) and ``path``, an output path that
+    cannot be written: an existing directory, a folder that does not exist or is not
+    writable, an existing file without ``overwrite``.  What every command checks before its
+    work."""
+    path = Path(path)
+    where = f"{name} {path}" if name else str(path)
+    if path.is_dir():
+        raise SplatglError(f"{where}: is a directory; give a file name")
+    parent = Path(os.path.abspath(path)).parent
+    if not parent.is_dir():
+        raise SplatglError(f"{where}: folder {path.parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise SplatglError(f"{where}: folder {path.parent} is not writable")
+    if path.exists() and not overwrite:
+        raise SplatglError(f"{where}: exists (use --force to replace it)")
+
+
 class OutputFiles:
     """Named output paths, checked at construction and committed together.
 
@@ -57,15 +75,7 @@ class OutputFiles:
                 raise SplatglError(f"{name} {path}: the same file as {seen[key]}; give each "
                                    "output its own name")
             seen[key] = name
-            if path.is_dir():
-                raise SplatglError(f"{name} {path}: is a directory; give a file name")
-            parent = key.parent
-            if not parent.is_dir():
-                raise SplatglError(f"{name} {path}: folder {path.parent} does not exist")
-            if not os.access(parent, os.W_OK | os.X_OK):
-                raise SplatglError(f"{name} {path}: folder {path.parent} is not writable")
-            if path.exists() and not overwrite:
-                raise SplatglError(f"{name} {path}: exists (use --force to replace it)")
+            check_output_path(path, name, overwrite)
 
     def temp(self, name: str) -> Path:
         """The temporary to write option ``name``'s file to (inside the ``with`` block)."""

@@ -235,3 +235,23 @@ def test_zero_sizes_and_closed_renderers_are_one_line_errors(tmp_path, capsys):
                  lambda: renderer.render_layers(scene, camera)):
         with pytest.raises(SplatglError, match="^this Renderer is closed"):
             call()
+
+
+def test_output_names_and_folders_are_checked_before_the_work(tmp_path, capsys, monkeypatch):
+    """`render -o x.bmp` (or no suffix) failed after rendering, `lod -o nodir/x.lod.ply` after
+    building the hierarchy."""
+    import splatgl.commands.render as render_command
+    import splatgl.lod.build as lod_build
+    from splatgl.commands._common import demo_scene_path
+
+    monkeypatch.setattr(render_command, "inputs_from_args", lambda args: pytest.fail("rendered"))
+    monkeypatch.setattr(lod_build, "build_hierarchy", lambda *a, **k: pytest.fail("built"))
+    for name, shown in (("x.bmp", "'.bmp'"), ("x", "no suffix")):
+        expect_one_line(capsys, tmp_path, ["render", "-o", tmp_path / name],
+                        f"splatgl: error: -o {tmp_path / name}: unsupported image format ({shown}); "
+                        "use .png, .tif, .tiff or .exr")
+    out = tmp_path / "nodir" / "x.lod.ply"
+    expect_one_line(capsys, tmp_path, ["lod", demo_scene_path(), "-o", out],
+                    f"splatgl: error: -o {out}: folder {out.parent} does not exist")
+    expect_one_line(capsys, tmp_path, ["convert", demo_scene_path(), out.with_name("x.spz")],
+                    f"splatgl: error: {out.with_name('x.spz')}: folder {out.parent} does not exist")

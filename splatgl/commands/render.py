@@ -7,7 +7,7 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from ..errors import SplatglError
-from ..image_io import write_image
+from ..image_io import check_image_suffix, write_image
 from ..output import RenderOutput
 from ..output_files import OutputFiles
 from ..progress import default_progress
@@ -81,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         names = {"-o": args.output}
     outputs = OutputFiles({**names, "--depth-png": args.depth_png})
+    check_image_suffix(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     scene, settings, camera = inputs_from_args(args)
     want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
     lod = any(v is not None for v in (args.lod_threshold, args.lod_budget, args.lod_blend))
