@@ -1,9 +1,11 @@
 """Where a batch of frames goes: a folder, a printf pattern, or a video file.
 
-- ``frames/`` (an existing folder, or a name without an image/video suffix): files
+- ``frames/`` (an existing folder, a name without a suffix, or one ending in ``/``): files
   ``frames/00000.png``, ``00001.png``, ... (``image_format`` picks png, tif or exr);
 - ``frames/%05d.exr``: a printf pattern with one integer field (the frame index);
 - ``flythrough.mp4`` (``.mov``, ``.mkv``): an H.264 video (:mod:`splatgl.video`).
+
+Any other suffix (``f.avi``, ``f.gif``, ``f.jpg``) is refused, never taken for a folder.
 """
 
 from __future__ import annotations
@@ -52,9 +54,15 @@ class FrameTarget:
             if a == b:
                 raise SplatglError(f"{text}: the pattern's field does not change with the frame index")
             return cls(TargetKind.IMAGES, pattern=text)
-        if suffix in IMAGE_SUFFIXES and not Path(text).is_dir():
+        folder = Path(text).is_dir() or text.endswith(("/", os.sep))
+        if suffix in IMAGE_SUFFIXES and not folder:
             raise SplatglError(f"{text}: many frames need a folder or a pattern such as "
                                f"{Path(text).with_name(Path(text).stem + '_%05d' + suffix)}")
+        if suffix and not folder:  # f.avi, f.gif, f.jpg: never a folder of PNGs named so
+            raise SplatglError(
+                f"{text}: unknown output type '{suffix}'; give a video ({', '.join(VIDEO_SUFFIXES)}), "
+                f"a frame pattern such as {Path(text).stem}_%05d.png ({', '.join(IMAGE_SUFFIXES)}) "
+                "or a folder (a name without a suffix, or ending in /)")
         fmt = image_format.lower().lstrip(".")
         if "." + fmt not in IMAGE_SUFFIXES:
             raise SplatglError(f"--format must be one of png, tif, exr; got {image_format!r}")

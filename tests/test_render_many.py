@@ -105,6 +105,10 @@ def test_video_output(tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--path", "orbit:2", "-o", "{t}/x.png"], "many frames need a folder or a pattern such as"),
     (["--path", "orbit:2", "-o", "{t}/x_%d_%d.png"], "needs exactly one integer field"),
+    (["--path", "orbit:2", "-o", "{t}/f.avi"], "{t}/f.avi: unknown output type '.avi'; give a video "
+     "(.mp4, .mov, .mkv), a frame pattern such as f_%05d.png (.png, .tif, .tiff, .exr) or a folder "
+     "(a name without a suffix, or ending in /)"),
+    (["--path", "orbit:2", "-o", "{t}/f.jpg"], "{t}/f.jpg: unknown output type '.jpg'"),
     (["--path", "orbit:2", "-o", "{t}/x.mp4", "--resume"], "a video rendered in one process cannot be resumed"),
     (["--path", "orbit:2", "-o", "{t}/x.mp4", "--width", "95", "--height", "64", "--workers", "2"],
      "needs an even width and height, got 95x64"),
@@ -118,7 +122,8 @@ def test_video_output(tmp_path, capsys):
 def test_bad_path_arguments_one_line(tmp_path, capsys, argv, message):
     assert _render(*[a.replace("{t}", str(tmp_path)) for a in argv]) == 2
     err = capsys.readouterr().err
-    assert message in err and len(err.strip().splitlines()) == 1, err
+    assert message.replace("{t}", str(tmp_path)) in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_interrupt_leaves_complete_frames_only_and_resume_finishes(tmp_path, monkeypatch, capsys):
@@ -235,3 +240,25 @@ def test_path_sizes_follow_the_camera_rule(tmp_path, capsys):
     assert read_image(tmp_path / "f" / "00001.png").shape == (32, 48, 3)
     np.testing.assert_array_equal(read_image(tmp_path / "f" / "00001.png"),
                                   read_image(tmp_path / "g" / "00001.png"))
+
+
+def test_a_folder_with_a_dot_needs_the_slash(tmp_path, capsys):
+    assert _render("--path", "orbit:2", *SIZE, "-o", f"{tmp_path / 'run.1'}/") == 0
+    assert sorted(p.name for p in (tmp_path / "run.1").iterdir()) == ["00000.png", "00001.png"]
+
+
+@pytest.mark.parametrize("layout, shape", [("side-by-side", (64, 192, 3)), ("top-bottom", (128, 96, 3))])
+def test_stereo_paths_go_to_video_at_the_doubled_size(tmp_path, layout, shape):
+    """Each video frame holds both eyes (it failed: "every video frame must be 96x64, got
+    192x64")."""
+    pytest.importorskip("av")
+    from splatgl.video import read_video_frames
+
+    stereo = ["--stereo", "0.05", "--stereo-layout", layout]
+    assert _render("--path", "orbit:3", *SIZE, *stereo, "-o", tmp_path / "v.mp4") == 0
+    assert _render("--path", "orbit:3", *SIZE, *stereo, "-o", tmp_path / "png") == 0
+    frames = read_video_frames(tmp_path / "v.mp4")
+    assert len(frames) == 3 and all(f.shape == shape for f in frames)
+    for k, f in enumerate(frames):
+        png = read_image(tmp_path / "png" / f"{k:05d}.png")
+        assert png.shape == shape and np.abs(f / 255.0 - png).mean() < 5 / 255

@@ -40,7 +40,7 @@ examples:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("-o", "--output", type=Path, required=True,
+    p.add_argument("-o", "--output", required=True,  # text: with --path a trailing / matters
                    help="output image (.png, .tif, .exr); with --path a folder, a pattern such as "
                         "frames/%%05d.png, or a video (.mp4)")
     p.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
@@ -70,6 +70,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.path is not None:
         return run_path(args)
+    args.output = Path(args.output)
     kind = RendererKind(args.renderer)
     check_convention(args, kind)
     if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
