@@ -19,6 +19,8 @@ from ..progress import default_progress
 from ..render import Renderer
 from ..scene import Scene
 from ..lens import with_projection
+from ..lod.command import LodFrames, lod_settings_from_args
+from ..lod.io import read_lod
 from ..settings import RendererKind
 from ..stereo import StereoLayout, StereoRenderer
 from ._common import demo_scene_path, load_scene_arg, resize_keeping_aspect, settings_from_args
@@ -93,11 +95,17 @@ def run_path(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
     if args.stereo is not None and executor.sharded:
         raise SplatglError("--stereo renders paths in one process (not with --workers or --executor ray)")
+    lod = lod_settings_from_args(args)
+    if lod is not None and args.stereo is not None:
+        raise SplatglError("--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be "
+                           "combined yet")
     if args.resume and target.is_video and not executor.sharded:
         raise SplatglError(f"{args.output}: a video rendered in one process cannot be resumed; "
                            "render it with --workers N or --executor ray (their frames are kept "
                            "until the video is assembled)")
-    scene = load_scene_arg(args)
+    tree = read_lod(args.scene) if lod is not None else None
+    # the scene frames the orbit and is counted in the summary: a LOD file's leaves
+    scene = load_scene_arg(args) if tree is None else tree.nodes.subset(slice(0, tree.level_size(0)))
     settings = settings_from_args(args)
     cameras, source_fps, numbers = path_cameras(args, scene)
     fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)
@@ -110,9 +118,10 @@ def run_path(args: argparse.Namespace) -> int:
 
         result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
                                      cameras, settings, target, executor, kind, args.bit_depth,
-                                     args.resume, args.drop_invalid, fps, default_progress(), numbers)
+                                     args.resume, args.drop_invalid, fps, default_progress(), numbers,
+                                     lod)
     else:
-        with Renderer() as renderer:
+        with Renderer() if tree is None else LodFrames(tree, settings, lod) as renderer:
             if args.stereo is not None:    # each frame holds both eyes
                 renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
             result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
@@ -121,8 +130,9 @@ def run_path(args: argparse.Namespace) -> int:
     skipped = f", {result.skipped} already there" if result.skipped else ""
     if result.damaged:
         skipped += f", {result.damaged} damaged ones rendered again"
+    kind_text = f"{kind.value}, level of detail" if lod is not None else kind.value
     print(f"wrote {result.written} frames to {where}{skipped} ({cameras[0].width}x{cameras[0].height}, "
-          f"{scene.count} splats, {kind.value}, {result.fps:.2f} frames/s)")
+          f"{scene.count} splats, {kind_text}, {result.fps:.2f} frames/s)")
     if run is not None:
         print(summary(run, "frames"))
     if args.timings:

@@ -26,6 +26,7 @@ from ..batch import BatchResult, FrameMeter
 from ..camera import Camera
 from ..executor import Done, Executor, ExecutorKind, Files, RunResult, TaskProgress, run_tasks
 from ..frame_output import FrameTarget, plan_frames
+from ..lod.render import LodSettings
 from ..progress import ProgressCallback
 from ..settings import RenderSettings, RendererKind
 from ..workers import chunks
@@ -49,6 +50,8 @@ class RenderChunk:
     kind: RendererKind
     bit_depth: int
     resume: bool
+    #: Render the scene (a .lod.ply) through this cut (``render --lod-*``); None: full detail.
+    lod: Optional[LodSettings] = None
 
     @property
     def units(self) -> int:
@@ -64,8 +67,16 @@ class RenderChunk:
         from ..batch import render_frames
         from ..render import Renderer
 
-        scene = files.load_scene(self.scene_path, self.drop_invalid)
-        with Renderer() as renderer:
+        if self.lod is not None:
+            from ..lod.command import LodFrames
+            from ..lod.io import read_lod
+
+            with files.local(self.scene_path) as local:
+                tree = read_lod(local)
+            scene, renderer = None, LodFrames(tree, self.settings, self.lod)
+        else:
+            scene, renderer = files.load_scene(self.scene_path, self.drop_invalid), Renderer()
+        with renderer:
             result = render_frames(renderer, scene, self.cameras, self.settings, self.target, self.kind,
                                    self.bit_depth, self.resume,
                                    progress=lambda done, total, what: report(done, total),
@@ -82,11 +93,13 @@ def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: Render
                    target: FrameTarget, executor: Executor, kind: RendererKind = RendererKind.QUAD,
                    bit_depth: int = 8, resume: bool = False, drop_invalid: bool = False,
                    fps: float = 30.0, progress: Optional[ProgressCallback] = None,
-                   numbers: Optional[Sequence[int]] = None) -> tuple[BatchResult, RunResult]:
+                   numbers: Optional[Sequence[int]] = None, lod: Optional[LodSettings] = None
+                   ) -> tuple[BatchResult, RunResult]:
     """Render ``cameras`` to ``target`` (images or a video, module doc) on ``executor``:
     local workers get one contiguous chunk each, Ray tasks at most :data:`MAX_CHUNK_FRAMES`.
     Camera i is frame ``numbers[i]`` (default i), as in :func:`splatgl.batch.render_frames`;
-    with ``resume`` the frames there are checked here, before any task starts.
+    with ``resume`` the frames there are checked here, before any task starts.  ``lod``: every
+    task renders the scene file (a .lod.ply) through that cut.
 
     Returns the summed :class:`BatchResult` (``seconds``: wall time including the video's
     encoding) and the run's per-task reports (for :func:`splatgl.executor.summary`).
@@ -107,7 +120,7 @@ def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: Render
                else math.ceil(len(cameras) / MAX_CHUNK_FRAMES))
     tasks = [RenderChunk(Path(scene_path), drop_invalid, tuple(cameras[i] for i in part),
                          tuple(numbers[i] for i in part), settings, frames, RendererKind(kind),
-                         bit_depth, resume)
+                         bit_depth, resume, lod)
              for part in chunks(len(cameras), n_tasks)]
     run = run_tasks(tasks, executor, "frames", progress, RESUME_HINT)
     results = run.values
