@@ -111,7 +111,7 @@ def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: Render
         _import_av()  # the install hint and the size check before any frame renders
         check_video_size(target.video, cameras[0].width, cameras[0].height)
         target.prepare()
-        frames = FrameTarget.parse(frame_folder(target.video), "png")
+        frames = FrameTarget.parse(f"{frame_folder(target.video)}/", "png")  # a folder
         bit_depth = 8  # what the video holds; quantised as VideoWriter quantises
     numbers = list(range(len(cameras))) if numbers is None else list(numbers)
     plan = plan_frames(frames, [(c.width, c.height) for c in cameras], numbers, bit_depth, resume)
