@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import zipfile
 from pathlib import Path
 
@@ -40,6 +39,7 @@ from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate
 from . import _binary, kmeans, webp
 from . import quantise as qz
+from .written import write_together
 
 NAME = "sog"
 EXTENSIONS = (".sog", "meta.json")
@@ -379,34 +379,14 @@ def write(path, scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS) -> np.
     meta_bytes = json.dumps(meta).encode("utf-8")
     final = path.name[: -len(".partial")] if path.name.endswith(".partial") else path.name
     if final.lower().endswith(".json"):  # a folder: every texture, then meta.json
-        _write_folder(path, blobs, meta_bytes)
+        write_together({path.parent / name: blob for name, blob in blobs.items()},
+                       lambda: path.write_bytes(meta_bytes))
         return order
     with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as zf:  # WebP is compressed already
         for name, blob in blobs.items():
             zf.writestr(name, blob)
         zf.writestr("meta.json", meta_bytes)
     return order
-
-
-def _write_folder(path: Path, blobs: dict[str, bytes], meta_bytes: bytes) -> None:
-    """The folder form: every texture to a temporary beside ``path`` (meta.json's temporary),
-    each checked to hold all its bytes; only when all are written and meta.json too are the
-    textures renamed into place (meta.json's rename, last, is the caller's).  Any failure
-    removes every temporary and leaves the folder as it was."""
-    temps = {name: path.parent / f".{name}.partial{os.getpid()}" for name in blobs}
-    try:
-        for name, blob in blobs.items():
-            temps[name].write_bytes(blob)
-            if temps[name].stat().st_size != len(blob):
-                raise SceneFormatError(path.parent / name, f"cut short while writing "
-                                       f"({temps[name].stat().st_size} of {len(blob)} bytes)")
-        path.write_bytes(meta_bytes)
-        for name, tmp in list(temps.items()):
-            os.replace(tmp, path.parent / name)
-            del temps[name]
-    finally:
-        for tmp in temps.values():
-            tmp.unlink(missing_ok=True)
 
 
 def error_bounds(scene: Scene) -> dict:

@@ -9,6 +9,7 @@ reach its end.  Formats without such structure are checked for being non-empty.
 
 from __future__ import annotations
 
+import os
 import struct
 import zipfile
 import zlib
@@ -42,6 +43,28 @@ def write_checked(path: str | Path, write: Callable[[Path], T]) -> T:
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+def write_together(files: dict[Path, bytes], write_last: Callable[[], None]) -> None:
+    """Several files of one output, all or none: each of ``files`` (path -> bytes) to a
+    temporary beside it, checked to hold all its bytes, then ``write_last()`` (the file that
+    names them, such as SOG's meta.json, to the caller's own temporary); only then are they
+    renamed into place.  Any failure removes every temporary and leaves the folder as it was."""
+    temps = {path: path.with_name(f".{path.name}.partial{os.getpid()}") for path in files}
+    try:
+        for path, data in files.items():
+            temps[path].write_bytes(data)
+            size = temps[path].stat().st_size
+            if size != len(data):
+                raise SplatglError(f"{path}: cannot write: {size} of {len(data)} bytes written"
+                                   f"{disk_note(path.parent)}")
+        write_last()
+        for path, tmp in list(temps.items()):
+            os.replace(tmp, path)
+            del temps[path]
+    finally:
+        for tmp in temps.values():
+            tmp.unlink(missing_ok=True)
 
 
 def written_problem(path: str | Path) -> str | None:
