@@ -248,7 +248,7 @@ def test_a_folder_with_a_dot_needs_the_slash(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("layout, shape", [("side-by-side", (64, 192, 3)), ("top-bottom", (128, 96, 3))])
-def test_stereo_paths_go_to_video_at_the_doubled_size(tmp_path, layout, shape):
+def test_stereo_paths_go_to_video_at_the_doubled_size(tmp_path, capsys, layout, shape):
     """Each video frame holds both eyes (it failed: "every video frame must be 96x64, got
     192x64")."""
     pytest.importorskip("av")
@@ -256,6 +256,7 @@ def test_stereo_paths_go_to_video_at_the_doubled_size(tmp_path, layout, shape):
 
     stereo = ["--stereo", "0.05", "--stereo-layout", layout]
     assert _render("--path", "orbit:3", *SIZE, *stereo, "-o", tmp_path / "v.mp4") == 0
+    assert f"({shape[1]}x{shape[0]}, " in capsys.readouterr().out
     assert _render("--path", "orbit:3", *SIZE, *stereo, "-o", tmp_path / "png") == 0
     frames = read_video_frames(tmp_path / "v.mp4")
     assert len(frames) == 3 and all(f.shape == shape for f in frames)

@@ -113,6 +113,7 @@ def run_path(args: argparse.Namespace) -> int:
         raise SplatglError(f"--fps must be positive, got {fps}")
     kind = RendererKind(args.renderer)
     run = None
+    size = (cameras[0].width, cameras[0].height)
     if executor.sharded:
         from ..distributed.render import render_sharded
 
@@ -124,6 +125,7 @@ def run_path(args: argparse.Namespace) -> int:
         with Renderer() if tree is None else LodFrames(tree, settings, lod) as renderer:
             if args.stereo is not None:    # each frame holds both eyes
                 renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
+                size = renderer.frame_size(cameras[0])
             result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
                                    args.resume, fps, default_progress(), numbers=numbers)
     where = target.video if target.is_video else target.pattern
@@ -131,7 +133,7 @@ def run_path(args: argparse.Namespace) -> int:
     if result.damaged:
         skipped += f", {result.damaged} damaged ones rendered again"
     kind_text = f"{kind.value}, level of detail" if lod is not None else kind.value
-    print(f"wrote {result.written} frames to {where}{skipped} ({cameras[0].width}x{cameras[0].height}, "
+    print(f"wrote {result.written} frames to {where}{skipped} ({size[0]}x{size[1]}, "
           f"{scene.count} splats, {kind_text}, {result.fps:.2f} frames/s)")
     if run is not None:
         print(summary(run, "frames"))
