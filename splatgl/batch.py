@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Callable, Optional, Sequence
 
 from .camera import Camera
-from .frame_output import FrameTarget
+from .frame_output import FrameTarget, plan_frames
 from .image_io import write_image
 from .progress import ProgressCallback
 from .render import Renderer
@@ -38,6 +38,8 @@ class BatchResult:
     skipped: int
     seconds: float
     render_seconds: float
+    #: Of ``written``: frame files found damaged (cut short) by ``resume`` and rendered again.
+    damaged: int = 0
 
     @property
     def fps(self) -> float:
@@ -79,38 +81,46 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
                   kind: RendererKind = RendererKind.QUAD, bit_depth: int = 8,
                   resume: bool = False, fps: float = 30.0,
                   progress: Optional[ProgressCallback] = None,
-                  write_queue: int = WRITE_QUEUE, first_frame: int = 0) -> BatchResult:
+                  write_queue: int = WRITE_QUEUE, numbers: Optional[Sequence[int]] = None
+                  ) -> BatchResult:
     """Render ``cameras`` in order to ``target``.
 
-    Image frames are written atomically, so a frame file that exists is complete; with
-    ``resume`` those are skipped.  A video is written to a temporary file and renamed when
-    complete (removed on any error or interrupt).  ``write_queue`` frames may wait for the
-    writer thread while the next renders (0: write in line).  Camera i is written as frame
-    ``first_frame + i`` (a worker's contiguous chunk of a longer path).  Frame k is rendered exactly as
-    ``splatgl render --camera`` renders the same camera (same renderer call), so the files
-    are identical bit for bit.
+    Image frames are written atomically and checked, so a frame file is complete or absent;
+    with ``resume`` complete ones are kept and damaged ones (cut short, from older versions or
+    other programs) rendered again (:func:`splatgl.frame_output.plan_frames`, which also
+    refuses, before any work, frames of another size).  A video is written to a temporary
+    file and renamed when complete (removed on any error or interrupt).  ``write_queue``
+    frames may wait for the writer thread while the next renders (0: write in line).  Camera
+    i is written as frame ``numbers[i]`` (default ``i``: the camera's index in its source, so
+    parts of a path rendered apart never collide).  Frame k is rendered exactly as ``splatgl
+    render --camera`` renders the same camera (same renderer call), so the files are
+    identical bit for bit.  A renderer with a ``frame_size(camera)`` method (stereo: both
+    eyes in one frame) makes frames of that size.
     """
     from .video import VideoWriter
 
+    numbers = list(range(len(cameras))) if numbers is None else list(numbers)
+    if len(numbers) != len(cameras):
+        raise ValueError(f"{len(numbers)} frame numbers for {len(cameras)} cameras")
+    size_of = getattr(renderer, "frame_size", lambda c: (c.width, c.height))
+    plan = plan_frames(target, [size_of(c) for c in cameras], numbers, bit_depth, resume)
     target.prepare()
-    todo = [k for k in range(len(cameras))
-            if not (resume and not target.is_video and target.frame_path(first_frame + k).is_file())]
-    skipped = len(cameras) - len(todo)
+    todo = plan.todo
+    skipped = plan.skipped
     meter = FrameMeter(len(cameras), progress)
     render_seconds = 0.0
     t0 = time.perf_counter()
     video = None
     if target.is_video:
-        c0 = cameras[0]
-        video = VideoWriter(target.video, c0.width, c0.height, fps)
+        video = VideoWriter(target.video, *size_of(cameras[0]), fps)
 
     def save(k: int, out) -> None:
         if video is not None:
             video.write(out)
         elif target.wants_depth:
-            write_image(target.frame_path(first_frame + k), out.rgba, bit_depth, depth=out.expected_depth())
+            write_image(target.frame_path(numbers[k]), out.rgba, bit_depth, depth=out.expected_depth())
         else:
-            write_image(target.frame_path(first_frame + k), out, bit_depth)
+            write_image(target.frame_path(numbers[k]), out, bit_depth)
 
     # One writer thread encodes frame k while frame k + 1 renders (OpenImageIO and FFmpeg
     # release the GIL); it works in order, and at most ``write_queue`` frames wait for it.
@@ -141,4 +151,4 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
     if video is not None:
         video.close()
     meter(len(cameras), len(todo))
-    return BatchResult(len(todo), skipped, time.perf_counter() - t0, render_seconds)
+    return BatchResult(len(todo), skipped, time.perf_counter() - t0, render_seconds, plan.damaged)

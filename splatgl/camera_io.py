@@ -152,5 +152,8 @@ def load_camera(path: str | Path, index: int = 0) -> Camera:
 
 
 def save_camera(path: str | Path, camera: Camera) -> None:
-    """Write the single-camera JSON form (a) of ``camera``."""
-    Path(path).write_text(json.dumps(camera.to_json(), indent=2) + "\n")
+    """Write the single-camera JSON form (a) of ``camera``, atomically (a failed write raises
+    one line naming ``path`` and leaves the old file, if any)."""
+    from .atomic import atomic_write_text
+
+    atomic_write_text(path, json.dumps(camera.to_json(), indent=2) + "\n")

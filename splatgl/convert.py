@@ -17,6 +17,7 @@ import numpy as np
 
 from .constants import SH_C0
 from .errors import SplatglError
+from .output_files import check_output_path
 from .formats import detect_format, load_scene, save_scene, writer_for
 from .formats.spz_axes import Axes, check_choice as check_spz_axes
 from .scene import Scene
@@ -175,6 +176,7 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
     writer = writer_for(output)  # unsupported extension: fail before reading anything
     if output.exists() and not force:
         raise SplatglError(f"{output}: already exists (use --force to replace it)")
+    check_output_path(output)  # a missing or read-only folder: before reading anything
     if sh_degree is not None and not 0 <= sh_degree <= 3:
         raise SplatglError(f"--sh-degree must be 0-3, got {sh_degree}")
     t0 = time.perf_counter()

@@ -15,15 +15,40 @@ same extension, so writers that pick the format by name still do).  Leaving the 
 normally renames every temporary onto its target; an exception (a failed write, Ctrl-C,
 SIGTERM through :mod:`splatgl.cli`) removes them all, so no output is half-written and none is
 written alone.  If a rename itself fails midway (the disk vanished), the files renamed before
-it stay complete; none is ever partial.
+it stay complete; none is ever partial.  A failed write inside the block (a
+:class:`~splatgl.errors.SplatglError` or an ``OSError``) comes out as one line naming the
+target file, never the temporary.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
+from .atomic import write_error
 from .errors import SplatglError
+
+#: The errors of a write that found no room (disk full, quota, file size limit).
+_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def check_output_path(path: str | Path, name: str = "", overwrite: bool = True) -> None:
+    """Refuse, in one line naming option ``name`` (if any) and ``path``, an output path that
+    cannot be written: an existing directory, a folder that does not exist or is not
+    writable, an existing file without ``overwrite``.  What every command checks before its
+    work."""
+    path = Path(path)
+    where = f"{name} {path}" if name else str(path)
+    if path.is_dir():
+        raise SplatglError(f"{where}: is a directory; give a file name")
+    parent = Path(os.path.abspath(path)).parent
+    if not parent.is_dir():
+        raise SplatglError(f"{where}: folder {path.parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise SplatglError(f"{where}: folder {path.parent} is not writable")
+    if path.exists() and not overwrite:
+        raise SplatglError(f"{where}: exists (use --force to replace it)")
 
 
 class OutputFiles:
@@ -50,15 +75,7 @@ class OutputFiles:
                 raise SplatglError(f"{name} {path}: the same file as {seen[key]}; give each "
                                    "output its own name")
             seen[key] = name
-            if path.is_dir():
-                raise SplatglError(f"{name} {path}: is a directory; give a file name")
-            parent = key.parent
-            if not parent.is_dir():
-                raise SplatglError(f"{name} {path}: folder {path.parent} does not exist")
-            if not os.access(parent, os.W_OK | os.X_OK):
-                raise SplatglError(f"{name} {path}: folder {path.parent} is not writable")
-            if path.exists() and not overwrite:
-                raise SplatglError(f"{name} {path}: exists (use --force to replace it)")
+            check_output_path(path, name, overwrite)
 
     def temp(self, name: str) -> Path:
         """The temporary to write option ``name``'s file to (inside the ``with`` block)."""
@@ -78,10 +95,33 @@ class OutputFiles:
                     if not tmp.exists():
                         raise SplatglError(f"{name} {self.targets[name]}: nothing was written")
                 for name, tmp in list(self._temps.items()):
-                    os.replace(tmp, self.targets[name])
+                    try:
+                        os.replace(tmp, self.targets[name])
+                    except OSError as err:
+                        raise write_error(self.targets[name], err) from None
                     del self._temps[name]
+            elif issubclass(exc_type, (SplatglError, OSError)):
+                named = self._named(exc)
+                if named is not exc:
+                    raise named from None
         finally:
             self.discard()
+
+    def _named(self, exc: BaseException) -> BaseException:
+        """``exc`` naming the targets where it named their temporaries (an ``OSError`` on a
+        temporary becomes a one-line :class:`SplatglError`); else ``exc`` itself."""
+        if isinstance(exc, OSError) and self._temps:
+            for name, tmp in self._temps.items():
+                if exc.filename in (str(tmp), tmp):
+                    return write_error(self.targets[name], exc)
+            if exc.filename is None and exc.errno in _FULL:  # a write() fails without a name:
+                return write_error(self.targets[list(self._temps)[-1]], exc)  # the latest file
+        if not isinstance(exc, SplatglError):
+            return exc
+        text = str(exc)
+        for name, tmp in self._temps.items():
+            text = text.replace(str(tmp), str(self.targets[name])).replace(tmp.name, self.targets[name].name)
+        return exc if text == str(exc) else SplatglError(text)
 
     def discard(self) -> None:
         """Remove every temporary not yet renamed."""

@@ -16,6 +16,7 @@ import moderngl
 import numpy as np
 
 from .camera import Camera, orbit
+from .errors import CameraError, SplatglError
 from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
 from .limits import check_image_size
@@ -42,8 +43,16 @@ def default_camera(scene: Scene, width: int = 1280, height: int = 720,
     it looks along world +z; :func:`splatgl.camera_up.resolve_up` picks one for a scene), far
     enough that the box's bounding sphere fits the narrower fov, times ``distance_scale``
     (below 1 moves closer).  With a ``model`` transform the scene is framed where the transform
-    places it.
+    places it.  Raises :class:`~splatgl.errors.CameraError` for a size that is not a positive
+    integer, a field of view outside (0, 180) degrees or a distance scale that is not positive.
     """
+    for name, value in (("width", width), ("height", height)):
+        if isinstance(value, bool) or int(value) != value or value < 1:
+            raise CameraError(f"camera {name} must be a positive integer, got {value!r}")
+    if not 0.0 < fov_y_degrees < 180.0:
+        raise CameraError(f"field of view must be in (0, 180) degrees, got {fov_y_degrees}")
+    if not (math.isfinite(distance_scale) and distance_scale > 0.0):
+        raise CameraError(f"distance scale must be a finite number > 0, got {distance_scale}")
     lo, hi = scene.robust_bounds
     centre = 0.5 * (lo + hi)
     radius = max(scene.robust_radius, 1e-6)
@@ -77,6 +86,12 @@ class Renderer:
         self.programs = ProgramCache(self.ctx)
         self._paths: dict[tuple, object] = {}
         self._sizes_ok: set[tuple] = set()
+        self.closed = False
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise SplatglError("this Renderer is closed (its context was released): render "
+                               "inside its 'with' block, or create a new Renderer")
 
     def _check_size(self, camera: Camera, kind: RendererKind) -> None:
         """Refuse an image the context or the memory cannot hold, before allocating it."""
@@ -112,6 +127,7 @@ class Renderer:
         It makes ``self.ctx`` current; when other OpenGL contexts are created later, call
         :func:`splatgl.gl.context.make_current` before using the object directly.
         """
+        self._check_open()
         make_current(self.ctx)
         return self._path(scene, settings, kind)
 
@@ -123,6 +139,7 @@ class Renderer:
         reference, the tile renderer) during the frame.
         """
         kind = RendererKind(kind)
+        self._check_open()
         if kind is RendererKind.REFERENCE:
             return render_reference_rgba(scene, camera, settings, progress)
         make_current(self.ctx)  # another context may have been made current since
@@ -135,6 +152,7 @@ class Renderer:
                       progress: ProgressCallback | None = None) -> RenderOutput:
         """Colour, alpha and accumulated depth of one view (same pass, same weights)."""
         kind = RendererKind(kind)
+        self._check_open()
         if kind is RendererKind.REFERENCE:
             return render_reference_layers(scene, camera, settings, progress)
         make_current(self.ctx)
@@ -156,6 +174,11 @@ class Renderer:
             yield (self.render_layers if depth else self.render)(scene, camera, settings, kind)
 
     def close(self) -> None:
+        """Release every GPU object and the context (if this Renderer made it); closing twice
+        does nothing, rendering afterwards raises :class:`SplatglError`."""
+        if self.closed:
+            return
+        self.closed = True
         make_current(self.ctx)
         for path in self._paths.values():
             path.release()

@@ -68,6 +68,13 @@ class StereoRenderer:
     def __getattr__(self, name):
         return getattr(self._renderer, name)
 
+    def frame_size(self, camera: Camera) -> tuple[int, int]:
+        """(width, height) of ``camera``'s stereo frame: twice the width side by side, twice
+        the height top-bottom (what a video of these frames is sized by)."""
+        if self.layout is StereoLayout.SIDE_BY_SIDE:
+            return 2 * camera.width, camera.height
+        return camera.width, 2 * camera.height
+
     def render_layers(self, scene, camera, settings, kind, progress=None) -> RenderOutput:
         left, right = (self._renderer.render_layers(scene, eye, settings, kind, progress)
                        for eye in eye_cameras(camera, self.ipd))

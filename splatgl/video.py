@@ -1,9 +1,10 @@
 """H.264 video output through PyAV (FFmpeg's libraries, shipped inside the wheel: no system
 ffmpeg needed).  PyAV is the optional ``video`` extra: ``pip install 'splatgl[video]'``.
 
-The video is written to a hidden temporary file beside the target and renamed into place only
-when complete; if writing stops early (an error, Ctrl-C, SIGTERM) the temporary file is
-removed, so the target is either a complete, playable video or absent.
+The video is written to a hidden temporary file beside the target, read back (every frame's
+packet must be there) and renamed into place only when complete; if writing stops early (an
+error such as a full disk, Ctrl-C, SIGTERM) the temporary file is removed, so the target is
+either a complete, playable video or absent, and a failed write is one line naming the target.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .atomic import disk_note, write_error
 from .errors import SplatglError
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
@@ -102,13 +104,17 @@ class VideoWriter:
         self.width, self.height = width, height
         self.tmp = self.path.with_name(f".{self.path.stem}.partial{os.getpid()}{self.path.suffix}")
         self.frames = 0
-        self._container = av.open(str(self.tmp), mode="w")
+        self._container = None
         try:
+            self._container = av.open(str(self.tmp), mode="w")
             rate = Fraction(fps).limit_denominator(1001)
             self._stream = self._container.add_stream("libx264", rate=rate)
             self._stream.width, self._stream.height = width, height
             self._stream.pix_fmt = "yuv420p"
             self._stream.options = x264_options(crf)
+        except OSError as exc:
+            self.abort()
+            raise write_error(self.path, exc) from None
         except BaseException:
             self.abort()
             raise
@@ -120,25 +126,37 @@ class VideoWriter:
                                f"got {rgba.shape[1]}x{rgba.shape[0]}")
         rgb = np.ascontiguousarray((np.clip(rgba[..., :3], 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
         frame = self._av.VideoFrame.from_ndarray(rgb, format="rgb24").reformat(format="yuv420p")
-        for packet in self._stream.encode(frame):
-            self._container.mux(packet)
+        try:
+            for packet in self._stream.encode(frame):
+                self._container.mux(packet)
+        except OSError as exc:  # a full disk: the target is named, the temporary goes
+            self.abort()
+            raise write_error(self.path, exc) from None
         self.frames += 1
 
     def close(self) -> None:
-        """Flush the encoder, finish the file and rename it into place."""
+        """Flush the encoder, finish the file, check it (:func:`video_problem`) and rename it
+        into place."""
         try:
             for packet in self._stream.encode(None):
                 self._container.mux(packet)
             self._container.close()
+            problem = video_problem(self.tmp, self.frames)
+            if problem is not None:
+                raise SplatglError(f"{self.path}: cannot write: {problem}{disk_note(self.path.parent)}")
+            self.tmp.replace(self.path)
+        except OSError as exc:
+            self.abort()
+            raise write_error(self.path, exc) from None
         except BaseException:
             self.abort()
             raise
-        self.tmp.replace(self.path)
 
     def abort(self) -> None:
         """Stop without a video: close and delete the temporary file."""
         try:
-            self._container.close()
+            if self._container is not None:
+                self._container.close()
         except Exception:  # noqa: BLE001 - the file is deleted anyway
             pass
         if self.tmp.exists():
@@ -152,6 +170,18 @@ class VideoWriter:
             self.close()
         else:
             self.abort()
+
+
+def video_problem(path: str | Path, frames: int) -> str | None:
+    """Why the video file ``path`` does not hold ``frames`` frames (None when it does): its
+    container is read back and the packets of its video stream counted, without decoding."""
+    av = _import_av()
+    try:
+        with av.open(str(path)) as container:
+            count = sum(1 for packet in container.demux(video=0) if packet.size)
+    except (OSError, av.error.FFmpegError) as exc:
+        return f"the file cannot be read back ({' '.join(str(exc).split())})"
+    return None if count == frames else f"the file holds {count} of {frames} frames"
 
 
 def read_video_frames(path: str | Path) -> list[np.ndarray]:

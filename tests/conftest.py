@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -24,6 +27,30 @@ def shared_scenes() -> Path:
     if not path.is_dir():
         pytest.skip(f"real scenes folder not found at {path} (set SPLATGL_SHARED_SCENES)")
     return path
+
+
+@pytest.fixture
+def full_disk():
+    """``with full_disk(n):`` every file this process writes stops growing at ``n`` bytes, as on a
+    disk that fills up: writes past it fail (EFBIG) and C libraries that ignore their write
+    errors leave a file cut short.  Deterministic and unprivileged (RLIMIT_FSIZE with SIGXFSZ
+    ignored, restored afterwards); skips where the platform lacks it."""
+    resource = pytest.importorskip("resource", reason="RLIMIT_FSIZE needs the resource module (POSIX)")
+    if not hasattr(signal, "SIGXFSZ"):
+        pytest.skip("no SIGXFSZ on this platform")
+
+    @contextlib.contextmanager
+    def limit(nbytes: int):
+        soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+        old = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, hard))
+        try:
+            yield
+        finally:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+            signal.signal(signal.SIGXFSZ, old)
+
+    return limit
 
 
 @pytest.fixture

@@ -208,3 +208,50 @@ def test_bench_group_other_than_renderer_finishes_and_writes(tmp_path, capsys):
     assert {r["config"] for r in data["rows"]} == {"default", "extent=square", "limit"}
     assert stdout.startswith("machine: ") and data["machine"]["gl_renderer"] in stdout
     assert sorted(p.name for p in out.iterdir()) == ["bench.csv", "bench.json", "bench.png"]
+
+
+def test_zero_sizes_and_closed_renderers_are_one_line_errors(tmp_path, capsys):
+    """They were tracebacks: ZeroDivisionError from `path orbit --width 0` and from
+    default_camera(scene, 0, 0); AttributeError from a Renderer used after close()."""
+    from splatgl.commands._common import demo_scene_path
+    from splatgl.errors import CameraError, SplatglError
+    from splatgl.formats import load_scene
+    from splatgl.render import Renderer, default_camera
+
+    expect_one_line(capsys, tmp_path, ["path", "orbit", "--width", "0", "-o", tmp_path / "p.json"],
+                    "splatgl path orbit: error: argument --width: must be at least 1, got 0 "
+                    "(see splatgl path orbit --help)")
+    scene = load_scene(demo_scene_path())
+    for size, field in (((0, 0), "width"), ((8, 0), "height"), ((8.5, 4), "width")):
+        with pytest.raises(CameraError, match=f"^camera {field} must be a positive integer, got"):
+            default_camera(scene, *size)
+    with pytest.raises(CameraError, match=r"^field of view must be in \(0, 180\) degrees, got 0"):
+        default_camera(scene, 8, 8, 0.0)
+    camera = default_camera(scene, 16, 12)
+    with Renderer() as renderer:
+        assert renderer.render(scene, camera).shape == (12, 16, 4)
+    renderer.close()  # a second close does nothing
+    for call in (lambda: renderer.render(scene, camera), lambda: next(renderer.render_many(scene, [camera])),
+                 lambda: renderer.render_layers(scene, camera)):
+        with pytest.raises(SplatglError, match="^this Renderer is closed"):
+            call()
+
+
+def test_output_names_and_folders_are_checked_before_the_work(tmp_path, capsys, monkeypatch):
+    """`render -o x.bmp` (or no suffix) failed after rendering, `lod -o nodir/x.lod.ply` after
+    building the hierarchy."""
+    import splatgl.commands.render as render_command
+    import splatgl.lod.build as lod_build
+    from splatgl.commands._common import demo_scene_path
+
+    monkeypatch.setattr(render_command, "inputs_from_args", lambda args: pytest.fail("rendered"))
+    monkeypatch.setattr(lod_build, "build_hierarchy", lambda *a, **k: pytest.fail("built"))
+    for name, shown in (("x.bmp", "'.bmp'"), ("x", "no suffix")):
+        expect_one_line(capsys, tmp_path, ["render", "-o", tmp_path / name],
+                        f"splatgl: error: -o {tmp_path / name}: unsupported image format ({shown}); "
+                        "use .png, .tif, .tiff or .exr")
+    out = tmp_path / "nodir" / "x.lod.ply"
+    expect_one_line(capsys, tmp_path, ["lod", demo_scene_path(), "-o", out],
+                    f"splatgl: error: -o {out}: folder {out.parent} does not exist")
+    expect_one_line(capsys, tmp_path, ["convert", demo_scene_path(), out.with_name("x.spz")],
+                    f"splatgl: error: {out.with_name('x.spz')}: folder {out.parent} does not exist")

@@ -198,3 +198,34 @@ def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path, m
     assert err.count(f"100.0% ({N_VIEWS} / {N_VIEWS})") == 1 and "views/s, ETA" in err, err
     workers, total = summary_counts(out, "views")
     assert len(workers) == 2 and sum(workers) == total == N_VIEWS
+
+
+@pytest.mark.parametrize("reports, message", [
+    (["--csv", "{t}/nodir/x.csv"], "--csv {t}/nodir/x.csv: folder {t}/nodir does not exist"),
+    (["--csv", "{t}/e.csv", "--json", "{t}/e.csv"],
+     "--json {t}/e.csv: the same file as --csv; give each output its own name"),
+    (["--sheet", "{t}/w.bmp"],
+     "--sheet {t}/w.bmp: unsupported image format ('.bmp'); use .png, .tif, .tiff or .exr"),
+])
+def test_report_paths_are_checked_before_scoring(dataset, tmp_path, capsys, monkeypatch, reports, message):
+    """A report that cannot be written failed only after every view was scored (and the same
+    file as --csv and --json was accepted)."""
+    import splatgl.commands.eval as command
+
+    monkeypatch.setattr(command, "evaluate", lambda *a, **k: pytest.fail("scored before checking"))
+    code, out, err = _run(capsys, "--dataset", dataset, *[a.replace("{t}", str(tmp_path)) for a in reports])
+    assert (code, err) == (2, f"splatgl: error: {message.replace('{t}', str(tmp_path))}\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_reports_are_written_all_or_none(dataset, tmp_path, capsys, monkeypatch):
+    import splatgl.commands.eval as command
+
+    def failing(path, text):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(command, "atomic_write_text", lambda p, t: failing(p, t) if p.suffix == ".json"
+                        else (p.write_text(t)))
+    code, _, err = _run(capsys, "--dataset", dataset, "--csv", tmp_path / "e.csv", "--json", tmp_path / "e.json")
+    assert code == 2 and err.startswith(f"splatgl: error: {tmp_path / 'e.json'}: cannot write (No space"), err
+    assert list(tmp_path.iterdir()) == []  # not the CSV alone

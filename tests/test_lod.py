@@ -208,3 +208,63 @@ def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
     finally:
         lod.release()
         full.release()
+
+
+@pytest.fixture(scope="module")
+def demo_lod(tmp_path_factory):
+    """The demo scene's .lod.ply (1604 leaves, 538 parents)."""
+    from splatgl.cli import main
+    from splatgl.commands._common import demo_scene_path
+
+    out = tmp_path_factory.mktemp("lod") / "demo.lod.ply"
+    assert main(["lod", str(demo_scene_path()), "-o", str(out)]) == 0
+    return out
+
+
+PATH_ARGS = ["--path", "orbit:3", "--width", "96", "--height", "64"]
+
+
+def _frames(folder) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+@pytest.mark.parametrize("cut", [["--lod-budget", "300"], ["--lod-threshold", "8"]])
+def test_path_frames_are_the_one_view_lod_renders(demo_lod, tmp_path, capsys, cut):
+    """--lod-budget/--lod-threshold apply to every frame of a path (they were ignored: frames
+    byte-identical to full detail), in one process and in --workers processes; frame k is the
+    one-view LOD render of camera k (each view chooses its cut alone)."""
+    from splatgl.camera_io import save_camera
+    from splatgl.cli import main
+    from splatgl.image_io import read_image
+    from splatgl.paths import orbit
+
+    render = lambda *a: main(["render", str(demo_lod), *map(str, a)])
+    assert render(*PATH_ARGS, *cut, "-o", tmp_path / "lod") == 0
+    assert "level of detail" in capsys.readouterr().out
+    assert render(*PATH_ARGS, "-o", tmp_path / "full") == 0
+    lod, full = _frames(tmp_path / "lod"), _frames(tmp_path / "full")
+    assert len(lod) == 3
+    if "--lod-budget" in cut:  # worker processes (spawned: slow-ish, so once)
+        assert render(*PATH_ARGS, *cut, "-o", tmp_path / "two", "--workers", "2") == 0
+        assert _frames(tmp_path / "two") == lod
+    for k, cam in enumerate(orbit(load_scene(demo_lod), 3, 96, 64)):
+        name = f"{k:05d}.png"
+        assert not np.array_equal(read_image(tmp_path / "lod" / name), read_image(tmp_path / "full" / name))
+        save_camera(tmp_path / "cam.json", cam)
+        assert render("--camera", tmp_path / "cam.json", *cut, "-o", tmp_path / "one.png") == 0
+        np.testing.assert_array_equal(read_image(tmp_path / "one.png"), read_image(tmp_path / "lod" / name))
+    assert full != lod
+
+
+def test_path_lod_options_are_checked_before_the_work(demo_lod, tmp_path, capsys):
+    from splatgl.cli import main
+    from splatgl.commands._common import demo_scene_path
+
+    assert main(["render", str(demo_scene_path()), *PATH_ARGS, "--lod-budget", "9", "-o",
+                 str(tmp_path / "f")]) == 2
+    assert capsys.readouterr().err == (f"splatgl: error: {demo_scene_path()}: not a level-of-detail "
+                                       "file; build one with 'splatgl lod SCENE -o SCENE.lod.ply'\n")
+    assert main(["render", str(demo_lod), *PATH_ARGS, "--lod-budget", "9", "--stereo", "0.1", "-o",
+                 str(tmp_path / "f")]) == 2
+    assert "--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be combined" in capsys.readouterr().err
+    assert not (tmp_path / "f").exists()

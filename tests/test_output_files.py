@@ -99,3 +99,15 @@ def test_screenshot_writes_png_and_json_together_or_not_at_all(tmp_path, gl_rend
         screenshot.save_screenshot(gl_renderer, scene, camera, RenderSettings(), RendererKind.QUAD,
                                    tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([png.name, js.name])  # no lone JSON
+
+
+def test_a_failed_write_in_the_block_names_the_target(tmp_path, full_disk):
+    files = OutputFiles({"-o": tmp_path / "a.json", "--x": tmp_path / "b.txt"})
+    with pytest.raises(SplatglError) as info:
+        with files, full_disk(10):
+            files.temp("-o").write_text("x" * 100)
+    assert str(info.value).startswith(f"{tmp_path / 'a.json'}: cannot write (File too large")
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(SplatglError, match=f"^{tmp_path / 'b.txt'}: bad$"):
+        with files:
+            raise SplatglError(f"{files.temp('--x')}: bad")

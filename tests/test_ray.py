@@ -130,3 +130,26 @@ def test_ray_bench_one_task_per_scene(local_ray, tmp_path, capsys):
     assert [[r[k] for k in keys] for r in got["rows"]] == [[r[k] for k in keys] for r in one["rows"]]
     assert [w["scene"] for w in got["workers"]] == ["demo.ply", "synthetic-2k-sh3"]
     assert sum(w["rows"] for w in got["workers"]) == len(got["rows"])
+
+
+def test_ray_gpus_that_no_node_has_are_refused(local_ray, tmp_path, capsys):
+    """`--ray-gpus 1` on a machine without a GPU queued every task forever, silently."""
+    assert main(["render", *ARGS, "-o", f"{tmp_path / 'f'}/", "--executor", "ray", "--ray-gpus", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("splatgl: error: --ray-gpus 1: no node of the Ray cluster has 1 GPU (at most 0 "
+                   "on one of its 1 node), so no task could ever start; use --ray-gpus 0 (the "
+                   "default) or a cluster with GPUs\n")
+    assert not (tmp_path / "f").exists() or list((tmp_path / "f").iterdir()) == []
+
+
+def test_ray_renders_a_path_through_the_lod_cut(local_ray, tmp_path, capsys):
+    """--lod-budget applies in Ray tasks too: the frames of one process, not full detail."""
+    lod = tmp_path / "demo.lod.ply"
+    assert main(["lod", str(demo_scene_path()), "-o", str(lod)]) == 0
+    args = ["render", str(lod), "--path", "orbit:3", "--width", "96", "--height", "64"]
+    assert main([*args, "--lod-budget", "300", "-o", f"{tmp_path / 'one'}/"]) == 0
+    assert main([*args, "--lod-budget", "300", "-o", f"{tmp_path / 'ray'}/", "--executor", "ray"]) == 0
+    assert main([*args, "-o", f"{tmp_path / 'full'}/"]) == 0
+    one = _files(tmp_path / "one")
+    assert len(one) == 3 and _files(tmp_path / "ray") == one
+    assert all(one[name] != full for name, full in _files(tmp_path / "full").items())

@@ -43,6 +43,8 @@ def test_frame_k_equals_single_render_bit_for_bit(tmp_path, capsys, ext):
 
 
 def test_dataset_source_with_select_and_resume(tmp_path, capsys):
+    """Frame files carry the camera's own index in the source, so a selection's frames land
+    where the whole path's would."""
     from splatgl.datasets import colmap
     from splatgl.datasets.views import View
 
@@ -51,17 +53,36 @@ def test_dataset_source_with_select_and_resume(tmp_path, capsys):
     out = tmp_path / "frames"
     assert _render("--path", tmp_path / "data", "--select", "0:10:3", "-o", out) == 0
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["00000.png", "00001.png", "00002.png", "00003.png"]
-    first = read_image(out / "00001.png")
-    (out / "00002.png").unlink()
+    assert names == ["00000.png", "00003.png", "00006.png", "00009.png"]
+    first = read_image(out / "00003.png")
+    (out / "00006.png").unlink()
     before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
     capsys.readouterr()
     assert _render("--path", tmp_path / "data", "--select", "0:10:3", "-o", out, "--resume") == 0
     printed = capsys.readouterr().out
     assert "wrote 1 frames" in printed and "3 already there" in printed
     assert {p.name: p.stat().st_mtime_ns for p in out.iterdir() if p.name in before} == before
-    assert (out / "00002.png").is_file()
-    np.testing.assert_array_equal(read_image(out / "00001.png"), first)
+    assert (out / "00006.png").is_file()
+    np.testing.assert_array_equal(read_image(out / "00003.png"), first)
+
+
+def test_a_path_rendered_in_parts_equals_the_whole(tmp_path, capsys):
+    """`--select 0:3` then `--select 3:5 --resume` into one folder gives every frame, equal to
+    the whole path's (frames were numbered within the selection: the second part wrote
+    nothing, "3 already there", or overwrote the first)."""
+    path = tmp_path / "p.json"
+    assert main(["path", "orbit", str(demo_scene_path()), "--frames", "5", *SIZE, "-o", str(path)]) == 0
+    assert _render("--path", path, "--select", "0:3", "-o", tmp_path / "parts") == 0
+    capsys.readouterr()
+    assert _render("--path", path, "--select", "3:5", "-o", tmp_path / "parts", "--resume") == 0
+    assert "wrote 2 frames" in capsys.readouterr().out
+    assert _render("--path", path, "-o", tmp_path / "whole") == 0
+    names = sorted(p.name for p in (tmp_path / "whole").iterdir())
+    assert names == [f"{k:05d}.png" for k in range(5)]
+    assert sorted(p.name for p in (tmp_path / "parts").iterdir()) == names
+    for name in names:
+        np.testing.assert_array_equal(read_image(tmp_path / "parts" / name),
+                                      read_image(tmp_path / "whole" / name))
 
 
 def test_video_output(tmp_path, capsys):
@@ -84,6 +105,10 @@ def test_video_output(tmp_path, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--path", "orbit:2", "-o", "{t}/x.png"], "many frames need a folder or a pattern such as"),
     (["--path", "orbit:2", "-o", "{t}/x_%d_%d.png"], "needs exactly one integer field"),
+    (["--path", "orbit:2", "-o", "{t}/f.avi"], "{t}/f.avi: unknown output type '.avi'; give a video "
+     "(.mp4, .mov, .mkv), a frame pattern such as f_%05d.png (.png, .tif, .tiff, .exr) or a folder "
+     "(a name without a suffix, or ending in /)"),
+    (["--path", "orbit:2", "-o", "{t}/f.jpg"], "{t}/f.jpg: unknown output type '.jpg'"),
     (["--path", "orbit:2", "-o", "{t}/x.mp4", "--resume"], "a video rendered in one process cannot be resumed"),
     (["--path", "orbit:2", "-o", "{t}/x.mp4", "--width", "95", "--height", "64", "--workers", "2"],
      "needs an even width and height, got 95x64"),
@@ -97,7 +122,8 @@ def test_video_output(tmp_path, capsys):
 def test_bad_path_arguments_one_line(tmp_path, capsys, argv, message):
     assert _render(*[a.replace("{t}", str(tmp_path)) for a in argv]) == 2
     err = capsys.readouterr().err
-    assert message in err and len(err.strip().splitlines()) == 1, err
+    assert message.replace("{t}", str(tmp_path)) in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_interrupt_leaves_complete_frames_only_and_resume_finishes(tmp_path, monkeypatch, capsys):
@@ -196,3 +222,44 @@ def test_path_command_writes_files_render_reads(tmp_path, capsys):
     capsys.readouterr()
     assert main(["path", "spiral", "--cameras", str(tmp_path / "o.json"), "-o", str(tmp_path / "bad.txt")]) == 2
     assert "path files are JSON" in capsys.readouterr().err
+
+
+def test_path_sizes_follow_the_camera_rule(tmp_path, capsys):
+    """--width and --height over a path's cameras: as with --camera, one of them scales keeping
+    each camera's aspect and both must match it (they stretched the frames silently)."""
+    path = tmp_path / "p.json"
+    assert main(["path", "orbit", str(demo_scene_path()), "--frames", "2", *SIZE, "-o", str(path)]) == 0
+    capsys.readouterr()
+    assert _render("--path", path, "--width", "40", "--height", "40", "-o", tmp_path / "f") == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"splatgl: error: --width 40 --height 40 would stretch {path} (camera 0)'s 96x64 "
+                   "view (aspect 1.5, asked 1); give only one of them to scale keeping the aspect")
+    assert not (tmp_path / "f").exists()
+    assert _render("--path", path, "--height", "32", "-o", tmp_path / "f") == 0
+    assert _render("--path", path, "--width", "48", "--height", "32", "-o", tmp_path / "g") == 0
+    assert read_image(tmp_path / "f" / "00001.png").shape == (32, 48, 3)
+    np.testing.assert_array_equal(read_image(tmp_path / "f" / "00001.png"),
+                                  read_image(tmp_path / "g" / "00001.png"))
+
+
+def test_a_folder_with_a_dot_needs_the_slash(tmp_path, capsys):
+    assert _render("--path", "orbit:2", *SIZE, "-o", f"{tmp_path / 'run.1'}/") == 0
+    assert sorted(p.name for p in (tmp_path / "run.1").iterdir()) == ["00000.png", "00001.png"]
+
+
+@pytest.mark.parametrize("layout, shape", [("side-by-side", (64, 192, 3)), ("top-bottom", (128, 96, 3))])
+def test_stereo_paths_go_to_video_at_the_doubled_size(tmp_path, capsys, layout, shape):
+    """Each video frame holds both eyes (it failed: "every video frame must be 96x64, got
+    192x64")."""
+    pytest.importorskip("av")
+    from splatgl.video import read_video_frames
+
+    stereo = ["--stereo", "0.05", "--stereo-layout", layout]
+    assert _render("--path", "orbit:3", *SIZE, *stereo, "-o", tmp_path / "v.mp4") == 0
+    assert f"({shape[1]}x{shape[0]}, " in capsys.readouterr().out
+    assert _render("--path", "orbit:3", *SIZE, *stereo, "-o", tmp_path / "png") == 0
+    frames = read_video_frames(tmp_path / "v.mp4")
+    assert len(frames) == 3 and all(f.shape == shape for f in frames)
+    for k, f in enumerate(frames):
+        png = read_image(tmp_path / "png" / f"{k:05d}.png")
+        assert png.shape == shape and np.abs(f / 255.0 - png).mean() < 5 / 255

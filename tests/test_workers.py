@@ -39,6 +39,12 @@ def test_two_workers_write_the_single_process_files(tmp_path, capsys):
     (tmp_path / "two" / "00003.png").unlink()
     assert main([*args, "-o", str(tmp_path / "two"), "--workers", "2", "--resume"]) == 0
     assert "wrote 1 frames" in capsys.readouterr().out
+    # a selection's frames carry the cameras' own numbers, in every worker
+    assert main([*args, "-o", str(tmp_path / "sel"), "--workers", "2", "--select", "1:5:2"]) == 0
+    assert sorted(p.name for p in (tmp_path / "sel").iterdir()) == ["00001.png", "00003.png"]
+    for k in (1, 3):
+        np.testing.assert_array_equal(read_image(tmp_path / "one" / f"{k:05d}.png"),
+                                      read_image(tmp_path / "sel" / f"{k:05d}.png"))
 
 
 ARGS = ["render", "--path", "orbit:6", "--width", "96", "--height", "64"]

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from .scale import ScaleRow  # noqa: F401 (annotations)
+from ..atomic import atomic_write_text
 from .report import save_figure
 
 #: The figures whose growth with the splat count is fitted and plotted: (label, getter).
@@ -79,9 +80,7 @@ def table(rows: list[ScaleRow]) -> str:
 
 def write_json(path: Path, rows: list[ScaleRow], extra: dict) -> None:
     doc = {**extra, "slopes": slopes(rows), "rows": [asdict(r) for r in rows]}
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_text(json.dumps(doc, indent=1) + "\n")
-    tmp.replace(path)
+    atomic_write_text(path, json.dumps(doc, indent=1) + "\n")
 
 
 def plot(path: Path, rows: list[ScaleRow]) -> None:

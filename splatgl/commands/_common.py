@@ -235,14 +235,15 @@ def check_size(args: argparse.Namespace, camera: Camera, kind: RendererKind | st
     check_image_size(camera.width, camera.height, size_origin(args), kind, ctx)
 
 
-def _resize_keeping_aspect(args: argparse.Namespace, cam: Camera) -> Camera:
-    """The file's camera at --width and/or --height; both given must keep the file's aspect."""
-    w, h = args.width, args.height
+def resize_keeping_aspect(cam: Camera, width: int | None, height: int | None, what: str) -> Camera:
+    """``cam`` at ``width`` and/or ``height`` (--width/--height): one of them scales keeping the
+    aspect; both must keep it (``what`` names the camera's file in the message)."""
+    w, h = width, height
     if w and h:
         # Consistent when either side follows from the other by the rounding we apply below.
         if w != round(cam.width * h / cam.height) and h != round(cam.height * w / cam.width):
             raise SplatglError(
-                f"--width {w} --height {h} would stretch {args.camera}'s {cam.width}x{cam.height} "
+                f"--width {w} --height {h} would stretch {what}'s {cam.width}x{cam.height} "
                 f"view (aspect {cam.width / cam.height:.4g}, asked {w / h:.4g}); give only one of "
                 "them to scale keeping the aspect")
     w = w or max(1, round(cam.width * h / cam.height))
@@ -257,7 +258,7 @@ def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSet
     if args.camera is not None:
         cam = load_camera(args.camera, args.camera_index or 0)
         if args.width or args.height:
-            cam = _resize_keeping_aspect(args, cam)
+            cam = resize_keeping_aspect(cam, args.width, args.height, str(args.camera))
         check_image_size(cam.width, cam.height, size_origin(args), RendererKind.REFERENCE)
         return with_projection(cam, projection, args.fov) if projection else cam
     width, height = args.width or 1280, args.height or 720

@@ -20,9 +20,11 @@ from ..progress import default_progress
 from ..render import Renderer
 from ..scene import Scene
 from ..lens import with_projection
+from ..lod.command import LodFrames, lod_settings_from_args
+from ..lod.io import read_lod
 from ..settings import RendererKind
 from ..stereo import StereoLayout, StereoRenderer
-from ._common import demo_scene_path, load_scene_arg, settings_from_args
+from ._common import demo_scene_path, load_scene_arg, resize_keeping_aspect, settings_from_args
 from ._spz_axes import check_not_sharded
 
 DEFAULT_FPS = 30.0
@@ -54,18 +56,14 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                            "Ray tasks of up to 32 frames")
 
 
-def _sized(cam: Camera, width: int | None, height: int | None) -> Camera:
-    if not (width or height):
-        return cam
-    w = width or round(cam.width * height / cam.height)
-    h = height or round(cam.height * width / cam.width)
-    return cam.resized(w, h)
-
-
-def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None]:
-    """The cameras ``--path`` names (with ``--select`` and ``--width/--height`` applied)."""
+def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None, list[int]]:
+    """The cameras ``--path`` names (with ``--select`` and ``--width/--height`` applied, as
+    ``--camera`` applies them: one of the two keeps each camera's aspect, both must match
+    it), the source's frame rate (None if it has none) and each camera's index in the source
+    (its frame number)."""
     spec = args.path
-    if spec == "orbit" or spec.startswith("orbit:"):
+    is_orbit = spec == "orbit" or spec.startswith("orbit:")
+    if is_orbit:
         try:
             frames = int(spec.split(":", 1)[1]) if ":" in spec else DEFAULT_ORBIT_FRAMES
         except ValueError:
@@ -77,12 +75,17 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
         fps = None
     else:
         views, fps = load_source(spec)
-        cams = [_sized(v.camera, args.width, args.height) for v in views]
+        cams = [v.camera for v in views]
+    numbers = list(range(len(cams)))
     if args.select:
-        cams = [cams[i] for i in select_indices(args.select, len(cams), spec)]
+        numbers = select_indices(args.select, len(cams), spec)
+    cams = [cams[i] for i in numbers]
+    if not is_orbit and (args.width or args.height):
+        cams = [resize_keeping_aspect(c, args.width, args.height, f"{spec} (camera {i})")
+                for i, c in zip(numbers, cams)]
     if getattr(args, "projection", None):   # the path's poses and sizes through another model
         cams = [with_projection(c, args.projection, args.fov) for c in cams]
-    return cams, fps
+    return cams, fps, numbers
 
 
 def run_path(args: argparse.Namespace) -> int:
@@ -95,36 +98,48 @@ def run_path(args: argparse.Namespace) -> int:
     check_not_sharded(args, executor.sharded)
     if args.stereo is not None and executor.sharded:
         raise SplatglError("--stereo renders paths in one process (not with --workers or --executor ray)")
+    lod = lod_settings_from_args(args)
+    if lod is not None and args.stereo is not None:
+        raise SplatglError("--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be "
+                           "combined yet")
     if args.resume and target.is_video and not executor.sharded:
         raise SplatglError(f"{args.output}: a video rendered in one process cannot be resumed; "
                            "render it with --workers N or --executor ray (their frames are kept "
                            "until the video is assembled)")
-    scene = load_scene_arg(args)
+    tree = read_lod(args.scene) if lod is not None else None
+    # the scene frames the orbit and is counted in the summary: a LOD file's leaves
+    scene = load_scene_arg(args) if tree is None else tree.nodes.subset(slice(0, tree.level_size(0)))
     settings = settings_from_args(args)
-    cameras, source_fps = path_cameras(args, scene)
+    cameras, source_fps, numbers = path_cameras(args, scene)
     fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
     kind = RendererKind(args.renderer)
     run = None
     gl_name = "not known here (the frames were rendered by workers)"
+    size = (cameras[0].width, cameras[0].height)
     if executor.sharded:
         from ..distributed.render import render_sharded
 
         result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
                                      cameras, settings, target, executor, kind, args.bit_depth,
-                                     args.resume, args.drop_invalid, fps, default_progress())
+                                     args.resume, args.drop_invalid, fps, default_progress(), numbers,
+                                     lod)
     else:
-        with Renderer() as renderer:
+        with Renderer() if tree is None else LodFrames(tree, settings, lod) as renderer:
             gl_name = renderer_name(renderer.ctx) if kind is not RendererKind.REFERENCE else NO_GL_RENDERER
             if args.stereo is not None:    # each frame holds both eyes
                 renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
+                size = renderer.frame_size(cameras[0])
             result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
-                                   args.resume, fps, default_progress())
+                                   args.resume, fps, default_progress(), numbers=numbers)
     where = target.video if target.is_video else target.pattern
     skipped = f", {result.skipped} already there" if result.skipped else ""
-    print(f"wrote {result.written} frames to {where}{skipped} ({cameras[0].width}x{cameras[0].height}, "
-          f"{scene.count} splats, {kind.value}, {result.fps:.2f} frames/s)")
+    if result.damaged:
+        skipped += f", {result.damaged} damaged ones rendered again"
+    kind_text = f"{kind.value}, level of detail" if lod is not None else kind.value
+    print(f"wrote {result.written} frames to {where}{skipped} ({size[0]}x{size[1]}, "
+          f"{scene.count} splats, {kind_text}, {result.fps:.2f} frames/s)")
     if run is not None:
         print(summary(run, "frames"))
     if args.timings:

@@ -11,7 +11,8 @@ from ..datasets.sources import select_indices
 from ..errors import SplatglError
 from ..executor import add_executor_arguments, executor_from_args, summary
 from ..evaluate import evaluate, worst_sheet
-from ..image_io import write_image
+from ..image_io import check_image_suffix, write_image
+from ..output_files import OutputFiles
 from ..progress import default_progress
 from ..render import Renderer
 from ..settings import RendererKind
@@ -74,8 +75,11 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(f"--worst must be at least 1, got {args.worst}")
     if args.max_width < 0:
         raise SplatglError(f"--max-width must be 0 or positive, got {args.max_width}")
-    if args.sheet is not None and args.sheet.suffix.lower() not in (".png", ".tif", ".tiff", ".exr"):
-        raise SplatglError(f"{args.sheet}: --sheet needs a .png, .tif or .exr file name")
+    if args.sheet is not None:
+        check_image_suffix(args.sheet, "--sheet")
+    # every report path checked before the views are scored (the same file twice, a missing
+    # folder); the reports are then written all or none
+    outputs = OutputFiles({"--csv": args.csv, "--json": args.json, "--sheet": args.sheet})
     views = load_dataset(args.dataset, args.images, args.split, args.max_width)
     if args.select:
         views = [views[i] for i in select_indices(args.select, len(views), str(args.dataset))]
@@ -98,13 +102,17 @@ def run(args: argparse.Namespace) -> int:
     print(result.table())
     if run is not None:
         print(summary(run, "views"))
+    with outputs:
+        if args.csv is not None:
+            atomic_write_text(outputs.temp("--csv"), result.csv())
+        if args.json is not None:
+            atomic_write_text(outputs.temp("--json"), result.json())
+        if args.sheet is not None:
+            write_image(outputs.temp("--sheet"), worst_sheet(worst))
     if args.csv is not None:
-        atomic_write_text(args.csv, result.csv())
         print(f"wrote {args.csv}")
     if args.json is not None:
-        atomic_write_text(args.json, result.json())
         print(f"wrote {args.json}")
     if args.sheet is not None:
-        write_image(args.sheet, worst_sheet(worst))
         print(f"wrote {args.sheet} ({len(worst)} worst views)")
     return 0

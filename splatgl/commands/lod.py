@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..errors import SplatglError
 from ..formats import load_scene
+from ..output_files import check_output_path
 from ..progress import StderrProgress, enabled
 from ..scene import SplatKind
 
@@ -55,8 +56,7 @@ def run(args: argparse.Namespace) -> int:
     if not 2 <= args.branching <= 64:
         raise SplatglError(f"--branching must be 2-64, got {args.branching}")
     out = args.output or default_output(args.scene)
-    if out.exists() and not args.force:
-        raise SplatglError(f"{out}: exists; use --force to replace it")
+    check_output_path(out, "-o", overwrite=args.force)  # before the (long) build
     progress = StderrProgress() if enabled() else None
     scene = load_scene(args.scene, progress=progress)
     if scene.kind is not SplatKind.GAUSSIAN_3D:

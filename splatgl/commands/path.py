@@ -12,7 +12,7 @@ from ..datasets.views import View
 from ..errors import SplatglError
 from ..paths import ellipse, interpolate, orbit, path_json, spiral
 from ..paths.keyframes import write_path
-from ._common import add_scene_arguments, load_scene_arg
+from ._common import add_scene_arguments, load_scene_arg, positive_int
 
 NAME = "path"
 ORDER = 15
@@ -60,8 +60,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o.add_argument("--elevation", type=float, default=20.0, help="degrees above the horizon (default 20)")
     o.add_argument("--radius", type=float, default=None, help="distance from the centre (default: the framing distance)")
     o.add_argument("--fov", type=float, default=50.0, help="vertical field of view, degrees (default 50)")
-    o.add_argument("--width", type=int, default=1280, help="image width (default 1280)")
-    o.add_argument("--height", type=int, default=720, help="image height (default 720)")
+    o.add_argument("--width", type=positive_int, default=1280, help="image width (default 1280)")
+    o.add_argument("--height", type=positive_int, default=720, help="image height (default 720)")
     s = sub.add_parser("spiral", help="forward-facing spiral through the cameras")
     cameras(s)
     common(s)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..errors import SplatglError
 from ..gl.context import NO_GL_RENDERER, renderer_name
-from ..image_io import write_image
+from ..image_io import check_image_suffix, write_image
 from ..output import RenderOutput
 from ..output_files import OutputFiles
 from ..progress import default_progress
@@ -41,7 +41,7 @@ examples:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("-o", "--output", type=Path, required=True,
+    p.add_argument("-o", "--output", required=True,  # text: with --path a trailing / matters
                    help="output image (.png, .tif, .exr); with --path a folder, a pattern such as "
                         "frames/%%05d.png, or a video (.mp4)")
     p.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
@@ -71,6 +71,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.path is not None:
         return run_path(args)
+    args.output = Path(args.output)
     kind = RendererKind(args.renderer)
     check_convention(args, kind)
     if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
@@ -82,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         names = {"-o": args.output}
     outputs = OutputFiles({**names, "--depth-png": args.depth_png})
+    check_image_suffix(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     scene, settings, camera = inputs_from_args(args)
     want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
     lod = any(v is not None for v in (args.lod_threshold, args.lod_budget, args.lod_blend))

@@ -80,6 +80,20 @@ def connect(address: str | None):
     return ray
 
 
+def check_gpus(ray, num_gpus: float) -> None:
+    """Refuse ``--ray-gpus N`` where no live node of the cluster has N GPUs: Ray would queue
+    every task forever, silently (a machine without a GPU, a CPU-only cluster)."""
+    if not num_gpus > 0:
+        return
+    nodes = [n for n in ray.nodes() if n.get("Alive")]
+    most = max((float(n.get("Resources", {}).get("GPU", 0.0)) for n in nodes), default=0.0)
+    if most < num_gpus:
+        raise SplatglError(f"--ray-gpus {num_gpus:g}: no node of the Ray cluster has {num_gpus:g} "
+                           f"GPU{'s' if num_gpus != 1 else ''} (at most {most:g} on one of its "
+                           f"{len(nodes)} node{'s' if len(nodes) != 1 else ''}), so no task "
+                           "could ever start; use --ray-gpus 0 (the default) or a cluster with GPUs")
+
+
 def run_ray(tasks: Sequence[Task], address: str | None = None, num_gpus: float = 0.0,
             unit: str = "frames", progress: Optional[ProgressCallback] = None,
             hint: str = "") -> list[TaskReport]:
@@ -92,6 +106,7 @@ def run_ray(tasks: Sequence[Task], address: str | None = None, num_gpus: float =
     if not num_gpus >= 0:
         raise SplatglError(f"--ray-gpus must be 0 or more, got {num_gpus}")
     ray = connect(address)
+    check_gpus(ray, num_gpus)
     remote = ray.remote(num_gpus=num_gpus, max_retries=MAX_RETRIES, retry_exceptions=True)(run_task)
     shipped: dict[str, object] = {}
     for task in tasks:

@@ -25,7 +25,8 @@ from typing import Optional, Sequence
 from ..batch import BatchResult, FrameMeter
 from ..camera import Camera
 from ..executor import Done, Executor, ExecutorKind, Files, RunResult, TaskProgress, run_tasks
-from ..frame_output import FrameTarget
+from ..frame_output import FrameTarget, plan_frames
+from ..lod.render import LodSettings
 from ..progress import ProgressCallback
 from ..settings import RenderSettings, RendererKind
 from ..workers import chunks
@@ -37,17 +38,20 @@ RESUME_HINT = "re-run with --resume to render the missing frames"
 
 @dataclass(frozen=True)
 class RenderChunk:
-    """Cameras ``first_frame ..`` of a path: the scene file and how to render and write them."""
+    """Cameras of a path written as frames ``numbers``: the scene file and how to render and
+    write them."""
 
     scene_path: Path
     drop_invalid: bool
     cameras: tuple[Camera, ...]
-    first_frame: int
+    numbers: tuple[int, ...]
     settings: RenderSettings
     target: FrameTarget
     kind: RendererKind
     bit_depth: int
     resume: bool
+    #: Render the scene (a .lod.ply) through this cut (``render --lod-*``); None: full detail.
+    lod: Optional[LodSettings] = None
 
     @property
     def units(self) -> int:
@@ -57,18 +61,26 @@ class RenderChunk:
         return (self.scene_path,)
 
     def label(self) -> str:
-        return f"frames {self.first_frame}-{self.first_frame + len(self.cameras) - 1}"
+        return f"frames {self.numbers[0]}-{self.numbers[-1]}"
 
     def run(self, files: Files, report: TaskProgress) -> Done:
         from ..batch import render_frames
         from ..render import Renderer
 
-        scene = files.load_scene(self.scene_path, self.drop_invalid)
-        with Renderer() as renderer:
+        if self.lod is not None:
+            from ..lod.command import LodFrames
+            from ..lod.io import read_lod
+
+            with files.local(self.scene_path) as local:
+                tree = read_lod(local)
+            scene, renderer = None, LodFrames(tree, self.settings, self.lod)
+        else:
+            scene, renderer = files.load_scene(self.scene_path, self.drop_invalid), Renderer()
+        with renderer:
             result = render_frames(renderer, scene, self.cameras, self.settings, self.target, self.kind,
                                    self.bit_depth, self.resume,
                                    progress=lambda done, total, what: report(done, total),
-                                   first_frame=self.first_frame)
+                                   numbers=self.numbers)
         return Done(result, result.written)
 
 
@@ -80,10 +92,14 @@ def frame_folder(video: Path) -> Path:
 def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: RenderSettings,
                    target: FrameTarget, executor: Executor, kind: RendererKind = RendererKind.QUAD,
                    bit_depth: int = 8, resume: bool = False, drop_invalid: bool = False,
-                   fps: float = 30.0, progress: Optional[ProgressCallback] = None
+                   fps: float = 30.0, progress: Optional[ProgressCallback] = None,
+                   numbers: Optional[Sequence[int]] = None, lod: Optional[LodSettings] = None
                    ) -> tuple[BatchResult, RunResult]:
     """Render ``cameras`` to ``target`` (images or a video, module doc) on ``executor``:
     local workers get one contiguous chunk each, Ray tasks at most :data:`MAX_CHUNK_FRAMES`.
+    Camera i is frame ``numbers[i]`` (default i), as in :func:`splatgl.batch.render_frames`;
+    with ``resume`` the frames there are checked here, before any task starts.  ``lod``: every
+    task renders the scene file (a .lod.ply) through that cut.
 
     Returns the summed :class:`BatchResult` (``seconds``: wall time including the video's
     encoding) and the run's per-task reports (for :func:`splatgl.executor.summary`).
@@ -95,38 +111,41 @@ def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: Render
         _import_av()  # the install hint and the size check before any frame renders
         check_video_size(target.video, cameras[0].width, cameras[0].height)
         target.prepare()
-        frames = FrameTarget.parse(frame_folder(target.video), "png")
+        frames = FrameTarget.parse(f"{frame_folder(target.video)}/", "png")  # a folder
         bit_depth = 8  # what the video holds; quantised as VideoWriter quantises
+    numbers = list(range(len(cameras))) if numbers is None else list(numbers)
+    plan = plan_frames(frames, [(c.width, c.height) for c in cameras], numbers, bit_depth, resume)
     frames.prepare()
     n_tasks = (executor.workers if executor.kind is ExecutorKind.LOCAL
                else math.ceil(len(cameras) / MAX_CHUNK_FRAMES))
-    tasks = [RenderChunk(Path(scene_path), drop_invalid, tuple(cameras[i] for i in part), part.start,
-                         settings, frames, RendererKind(kind), bit_depth, resume)
+    tasks = [RenderChunk(Path(scene_path), drop_invalid, tuple(cameras[i] for i in part),
+                         tuple(numbers[i] for i in part), settings, frames, RendererKind(kind),
+                         bit_depth, resume, lod)
              for part in chunks(len(cameras), n_tasks)]
     run = run_tasks(tasks, executor, "frames", progress, RESUME_HINT)
     results = run.values
     seconds = run.seconds
     if target.is_video:
-        seconds += assemble_video(frames, len(cameras), target.video, fps, progress)
+        seconds += assemble_video(frames, numbers, target.video, fps, progress)
         shutil.rmtree(frame_folder(target.video))
     return BatchResult(sum(r.written for r in results), sum(r.skipped for r in results), seconds,
-                       sum(r.render_seconds for r in results)), run
+                       sum(r.render_seconds for r in results), plan.damaged), run
 
 
-def assemble_video(frames: FrameTarget, count: int, video: Path, fps: float,
+def assemble_video(frames: FrameTarget, numbers: Sequence[int], video: Path, fps: float,
                    progress: Optional[ProgressCallback] = None) -> float:
-    """Encode frame files ``0 .. count - 1`` of ``frames`` into ``video`` (atomically: the
-    video appears complete or not at all).  Returns the seconds it took."""
+    """Encode frame files ``numbers`` of ``frames``, in that order, into ``video`` (atomically:
+    the video appears complete or not at all).  Returns the seconds it took."""
     import time
 
     from ..image_io import read_image
     from ..video import VideoWriter
 
     t0 = time.perf_counter()
-    first = read_image(frames.frame_path(0))
-    meter = FrameMeter(count, progress, unit="frames encoded")
+    first = read_image(frames.frame_path(numbers[0]))
+    meter = FrameMeter(len(numbers), progress, unit="frames encoded")
     with VideoWriter(video, first.shape[1], first.shape[0], fps) as writer:
-        for k in range(count):
-            writer.write(first if k == 0 else read_image(frames.frame_path(k)))
+        for k, number in enumerate(numbers):
+            writer.write(first if k == 0 else read_image(frames.frame_path(number)))
             meter(k + 1, k + 1)
     return time.perf_counter() - t0

@@ -104,18 +104,14 @@ def writer_for(path: str | Path) -> ModuleType:
 
 
 def save_scene(path: str | Path, scene: Scene, **options):
-    """Write ``scene`` in the format the extension names, atomically (temp file, then rename).
+    """Write ``scene`` in the format the extension names, atomically (temp file, checked to be
+    complete by :func:`splatgl.formats.written.written_problem`, then renamed).
 
     ``options`` go to the writer (e.g. ``version=2`` for SPZ).  Returns what the writer returns:
-    None, or the (N,) row order written when the writer reorders the splats.
+    None, or the (N,) row order written when the writer reorders the splats.  A failed or short
+    write (a full disk) raises :class:`SplatglError` naming ``path`` and leaves nothing.
     """
-    path = Path(path)
+    from .written import write_checked
+
     mod = writer_for(path)
-    tmp = path.with_name(path.name + ".partial")
-    try:
-        order = mod.write(tmp, scene, **options)
-        tmp.replace(path)
-        return order
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    return write_checked(path, lambda tmp: mod.write(tmp, scene, **options))

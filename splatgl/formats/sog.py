@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import zipfile
 from pathlib import Path
 
@@ -40,6 +39,7 @@ from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate
 from . import _binary, kmeans, webp
 from . import quantise as qz
+from .written import write_together
 
 NAME = "sog"
 EXTENSIONS = (".sog", "meta.json")
@@ -378,12 +378,9 @@ def write(path, scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS) -> np.
     blobs = {name: webp.encode(rgba) for name, rgba in textures.items()}
     meta_bytes = json.dumps(meta).encode("utf-8")
     final = path.name[: -len(".partial")] if path.name.endswith(".partial") else path.name
-    if final.lower().endswith(".json"):  # a folder: each texture atomically, then meta.json
-        for name, blob in blobs.items():
-            tmp = path.parent / (name + ".partial")
-            tmp.write_bytes(blob)
-            os.replace(tmp, path.parent / name)
-        path.write_bytes(meta_bytes)
+    if final.lower().endswith(".json"):  # a folder: every texture, then meta.json
+        write_together({path.parent / name: blob for name, blob in blobs.items()},
+                       lambda: path.write_bytes(meta_bytes))
         return order
     with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as zf:  # WebP is compressed already
         for name, blob in blobs.items():

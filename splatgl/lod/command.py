@@ -1,19 +1,87 @@
-"""``splatgl render --lod-threshold/--lod-budget/--lod-blend``: one view of a ``.lod.ply`` through the cut."""
+"""``splatgl render --lod-threshold/--lod-budget/--lod-blend``: views of a ``.lod.ply`` through
+the cut, one view or every frame of a ``--path`` (in this process, ``--workers`` processes or
+Ray tasks: each frame is the one-view render of its camera, bit for bit)."""
 
 from __future__ import annotations
 
 import argparse
 from types import SimpleNamespace
+from typing import Iterable, Iterator
 
 from ..camera import Camera
 from ..errors import SplatglError
-from ..gl.context import create_headless_context, renderer_name
+from ..gl.context import create_headless_context, make_current, renderer_name
 from ..output import RenderOutput
 from ..settings import RenderSettings
 from ..transform import apply_model
+from .build import LodTree
 from .io import is_lod_file, read_lod
 from .render import LodRenderer, LodSettings
 from .cut import DEFAULT_BAND, DEFAULT_THRESHOLD_PX
+
+
+def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
+    """The cut ``--lod-threshold/--lod-budget/--lod-blend`` ask for (None: no option given),
+    checked before any work: the quad renderer, a ``.lod.ply`` scene, valid values."""
+    if all(getattr(args, name, None) is None for name in ("lod_threshold", "lod_budget", "lod_blend")):
+        return None
+    if args.renderer != "quad":
+        raise SplatglError(f"--lod-threshold/--lod-budget render through the quad path, not "
+                           f"--renderer {args.renderer}")
+    if args.scene is None or not is_lod_file(args.scene):
+        raise SplatglError(f"{args.scene}: not a level-of-detail file; build one with "
+                           "'splatgl lod SCENE -o SCENE.lod.ply'")
+    return LodSettings(args.lod_threshold if args.lod_threshold is not None else DEFAULT_THRESHOLD_PX,
+                       args.lod_budget, args.lod_blend if args.lod_blend is not None else DEFAULT_BAND)
+
+
+class LodFrames:
+    """Views of a LOD tree through the cut, with the interface :func:`splatgl.batch.render_frames`
+    renders with (``render_many``, ``renderer_for``); owns its context (use as a context manager).
+
+    Every view chooses its cut alone: the renderer's memory of views close enough to draw the
+    leaves (:attr:`LodRenderer.skip_within`, a speed-up for interactive paths) is cleared
+    before each, so frame k of a path is the one-view render of camera k whatever came before
+    it (another chunk in another worker, or nothing).
+    """
+
+    def __init__(self, tree: LodTree, settings: RenderSettings, lod: LodSettings):
+        self.settings = settings
+        self.ctx = create_headless_context()
+        try:
+            self.renderer = LodRenderer(self.ctx, tree, settings, lod)
+        except BaseException:
+            self.ctx.release()
+            raise
+
+    def render_view(self, camera: Camera, depth: bool = False) -> RenderOutput:
+        make_current(self.ctx)
+        self.renderer.skip_within = None
+        return self.renderer.render_layers(apply_model(camera, self.settings.model), depth=depth)
+
+    def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
+                    depth: bool = False) -> Iterator:
+        """Frames of ``cameras`` (``scene``, ``settings`` and ``kind`` are the tree's, given at
+        construction): (H, W, 4) arrays, or :class:`RenderOutput` with ``depth``."""
+        for camera in cameras:
+            out = self.render_view(camera, depth)
+            yield out if depth else out.rgba
+
+    def renderer_for(self, scene=None, settings=None, kind=None) -> LodRenderer:
+        return self.renderer
+
+    def close(self) -> None:
+        if self.ctx is not None:
+            make_current(self.ctx)
+            self.renderer.release()
+            self.ctx.release()
+            self.ctx = None
+
+    def __enter__(self) -> "LodFrames":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camera,
@@ -21,24 +89,12 @@ def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camer
     """Render ``args.scene`` (a .lod.ply) with the cut ``args`` asks for: (layers, times with
     ``cut_nodes`` and ``cut`` (seconds) beside the quad path's stage times, the GL renderer's
     name)."""
-    if args.renderer != "quad":
-        raise SplatglError(f"--lod-threshold/--lod-budget render through the quad path, not "
-                           f"--renderer {args.renderer}")
-    if args.scene is None or not is_lod_file(args.scene):
-        raise SplatglError(f"{args.scene}: not a level-of-detail file; build one with "
-                           "'splatgl lod SCENE -o SCENE.lod.ply'")
-    lod = LodSettings(args.lod_threshold if args.lod_threshold is not None else DEFAULT_THRESHOLD_PX,
-                      args.lod_budget, args.lod_blend if args.lod_blend is not None else DEFAULT_BAND)
-    tree = read_lod(args.scene)
-    ctx = create_headless_context()
-    gl_name = renderer_name(ctx)
-    renderer = LodRenderer(ctx, tree, settings, lod)
-    try:
-        out = renderer.render_layers(apply_model(camera, settings.model), depth=want_depth)
+    lod = lod_settings_from_args(args)
+    with LodFrames(read_lod(args.scene), settings, lod) as frames:
+        gl_name = renderer_name(frames.ctx)
+        out = frames.render_view(camera, want_depth)
+        renderer = frames.renderer
         times = SimpleNamespace(**vars(renderer.last_times), cut_nodes=renderer.last_cut_nodes,
                                 cut=renderer.last_cut_s,
                                 threshold=f"{renderer.last_threshold_px:.2f} px")
-    finally:
-        renderer.release()
-        ctx.release()
     return out, times, gl_name

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import SceneFormatError
 from ..formats import ply
+from ..formats.written import write_checked
 from ..scene import Scene, activate
 from .build import LodTree, bounding_radii, level_offsets
 
@@ -20,20 +21,15 @@ _COMMENT = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
 
 
 def write_lod(path: Path, tree: LodTree) -> None:
-    """Write ``tree`` (atomically: a temp file, then rename)."""
-    path = Path(path)
+    """Write ``tree`` (atomically: a temp file, checked to be complete, then renamed; a failed
+    write raises one line naming ``path``)."""
     n = tree.level_size(0)
     leaves = tree.nodes.subset(slice(0, n))
     inner = tree.nodes.subset(slice(n, None))
-    tmp = path.with_name(path.name + ".partial")
-    try:
-        ply.write_elements(tmp, [("vertex", ply.scene_to_vertices(leaves, normals=False)),
-                                 (ELEMENT, ply.scene_to_vertices(inner, normals=False))],
-                           comments=("written by splatgl lod", f"lod branching {tree.branching}"))
-        tmp.replace(path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    write_checked(path, lambda tmp: ply.write_elements(
+        tmp, [("vertex", ply.scene_to_vertices(leaves, normals=False)),
+              (ELEMENT, ply.scene_to_vertices(inner, normals=False))],
+        comments=("written by splatgl lod", f"lod branching {tree.branching}")))
 
 
 def is_lod_file(path: Path) -> bool:
