@@ -22,6 +22,7 @@ import numpy as np
 from .camera import Camera, Projection, check_rigid_pose
 from .errors import CameraError
 from .json_fields import read_json
+from .lens import adapt_camera
 
 
 def _number(path: Path, where: str, obj: dict, key: str) -> float:
@@ -143,12 +144,20 @@ def load_cameras(path: str | Path) -> list[Camera]:
     return [camera_from_json(obj, path)]
 
 
-def load_camera(path: str | Path, index: int = 0) -> Camera:
-    """Camera ``index`` of a camera file (index 0 for a single-camera JSON)."""
+def load_camera(path: str | Path, index: int = 0, *, width: int | None = None,
+                height: int | None = None, projection: Projection | str | None = None,
+                fov_degrees: float | None = None) -> Camera:
+    """Camera ``index`` of a camera file (index 0 for a single-camera JSON).
+
+    ``width``, ``height``, ``projection`` and ``fov_degrees`` adapt it as ``--camera`` with
+    ``--width``, ``--height``, ``--projection`` and ``--fov`` do (:func:`splatgl.lens.adapt_camera`):
+    the file's own intrinsics scale keeping its aspect; another projection or a field of view
+    keeps only its pose, at any size (an equirectangular panorama defaults to 2:1).
+    """
     cams = load_cameras(path)
     if not -len(cams) <= index < len(cams):
         raise CameraError(f"{path}: camera index {index} out of range (the file has {len(cams)} camera(s))")
-    return cams[index]
+    return adapt_camera(cams[index], width, height, projection, fov_degrees, str(path))
 
 
 def save_camera(path: str | Path, camera: Camera) -> None:

@@ -18,10 +18,11 @@ from ..paths import orbit
 from ..progress import default_progress
 from ..render import Renderer
 from ..scene import Scene
-from ..lens import with_projection
+from ..lens import adapt_camera, with_projection
 from ..settings import RendererKind
 from ..stereo import StereoLayout, StereoRenderer
-from ._common import demo_scene_path, load_scene_arg, settings_from_args
+from ._common import (default_size, demo_scene_path, load_scene_arg, projection_from_args,
+                      settings_from_args)
 
 DEFAULT_FPS = 30.0
 DEFAULT_ORBIT_FRAMES = 120
@@ -52,34 +53,32 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                            "Ray tasks of up to 32 frames")
 
 
-def _sized(cam: Camera, width: int | None, height: int | None) -> Camera:
-    if not (width or height):
-        return cam
-    w = width or round(cam.width * height / cam.height)
-    h = height or round(cam.height * width / cam.width)
-    return cam.resized(w, h)
-
-
 def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None]:
-    """The cameras ``--path`` names (with ``--select`` and ``--width/--height`` applied)."""
+    """The cameras ``--path`` names (with ``--select``, ``--width/--height``, ``--projection``
+    and ``--fov`` applied as to a ``--camera`` file: :func:`splatgl.lens.adapt_camera`)."""
     spec = args.path
-    if spec == "orbit" or spec.startswith("orbit:"):
+    projection = projection_from_args(args)
+    is_orbit = spec == "orbit" or spec.startswith("orbit:")
+    if is_orbit:
         try:
             frames = int(spec.split(":", 1)[1]) if ":" in spec else DEFAULT_ORBIT_FRAMES
         except ValueError:
             raise SplatglError(f"--path {spec}: expected orbit or orbit:FRAMES") from None
         if frames < 1:
             raise SplatglError(f"--path {spec}: the number of frames must be positive")
-        w, h = args.width or 1280, args.height or 720
-        cams = orbit(scene, frames, w, h, args.fov if args.fov is not None else 50.0)
+        w, h = default_size(args, projection)
+        lens = projection in ("fisheye", "equirectangular")
+        cams = orbit(scene, frames, w, h, args.fov if args.fov is not None and not lens else 50.0)
+        if projection:
+            cams = [with_projection(c, projection, args.fov if lens else None) for c in cams]
         fps = None
     else:
         views, fps = load_source(spec)
-        cams = [_sized(v.camera, args.width, args.height) for v in views]
+        cams = [v.camera for v in views]
     if args.select:
         cams = [cams[i] for i in select_indices(args.select, len(cams), spec)]
-    if getattr(args, "projection", None):   # the path's poses and sizes through another model
-        cams = [with_projection(c, args.projection, args.fov) for c in cams]
+    if not is_orbit:
+        cams = [adapt_camera(c, args.width, args.height, projection, args.fov, spec) for c in cams]
     return cams, fps
 
 
