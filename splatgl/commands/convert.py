@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from ..convert import convert
 from ..errors import SplatglError
+from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "convert"
 ORDER = 25
@@ -37,6 +37,7 @@ examples:
   splatgl convert scene.ply scene.sog
   splatgl convert scene.ply scene.spz --spz-version 2
   splatgl convert scene.ply scene.splat --json
+  splatgl convert scene.ply scene.spz --json report.json
   splatgl convert scene.ply small.ply --sh-degree 1 --force"""
 
 
@@ -53,7 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spz-version", type=int, choices=(2, 3), default=None, metavar="V",
                    help="SPZ version to write for .spz output: 3 (default; smallest-three "
                         "rotations, RUB axes) or 2 (3-byte rotations)")
-    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    add_json_argument(p, "the result (one object)")
 
 
 def _row(label: str, stats: dict | None, unit: str, bound: float | None = None,
@@ -73,11 +74,19 @@ def run(args: argparse.Namespace) -> int:
         if not args.output.name.lower().endswith(".spz"):
             raise SplatglError(f"{args.output}: --spz-version applies to .spz output only")
         options["version"] = args.spz_version
+    check_json_target(args, {"IN": args.input, "OUT": args.output})
     result = convert(args.input, args.output, drop_invalid=args.drop_invalid,
                      sh_degree=args.sh_degree, force=args.force, **options)
-    if args.json:
-        print(json.dumps(result.as_dict()))
+    if json_to_stdout(args):
+        emit_json(args, result.as_dict())
         return 0
+    _print_result(result)
+    if args.json is not None:
+        emit_json(args, result.as_dict())
+    return 0
+
+
+def _print_result(result) -> None:
     e = result.error
     print(f"wrote {result.output} ({result.output_format}, {result.output_bytes:,} bytes): "
           f"{result.count:,} splats, SH degree {result.sh_degree_out} "
@@ -85,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
           f"in {result.seconds:.2f} s")
     if e["bit_exact"]:
         print("round trip: bit-exact (every stored value identical)")
-        return 0
+        return
     b = e.get("bounds") or {}
     print("round-trip error, max / mean" + (" (bound):" if b else ":"))
     print(_row("position", e["position"], "world units", b.get("position")))
@@ -100,4 +109,3 @@ def run(args: argparse.Namespace) -> int:
         kept = "dropped" if result.sh_degree_out == 0 else f"degrees 1-{result.sh_degree_out}"
         print(_row("SH rest", e["sh_rest"], f"({kept})", b.get("sh_rest")) if e["sh_rest"] else
               f"  SH rest      {kept}")
-    return 0

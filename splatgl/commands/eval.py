@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..atomic import atomic_write_text
@@ -17,6 +18,7 @@ from ..render import Renderer
 from ..settings import RendererKind
 from ._common import (add_scene_arguments, add_settings_arguments, demo_scene_path, load_scene_arg,
                       settings_from_args)
+from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "eval"
 ORDER = 25
@@ -35,6 +37,7 @@ same as scikit-image with gaussian_weights=True, use_sample_covariance=False).
 examples:
   splatgl eval point_cloud.ply --dataset garden --images images_4 --split test
   splatgl eval lego.ply --dataset nerf_synthetic/lego --split test --background 1,1,1 --json lego.json
+  splatgl eval scene.ply --dataset garden --json - | jq .mean        (the JSON alone on stdout)
   splatgl eval scene.ply --dataset garden --csv scores.csv --sheet worst.png --worst 4
   splatgl eval scene.ply --dataset garden --workers 2          (views split over 2 processes)
   splatgl eval scene.ply --dataset /shared/garden --executor ray --ray-address auto"""
@@ -57,7 +60,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="renderer (default quad)")
     o = p.add_argument_group("reports")
     o.add_argument("--csv", type=Path, default=None, metavar="FILE", help="write per-view scores and means as CSV")
-    o.add_argument("--json", type=Path, default=None, metavar="FILE", help="write per-view scores and means as JSON")
+    add_json_argument(o, "per-view scores and means")
     o.add_argument("--sheet", type=Path, default=None, metavar="FILE",
                    help="write a picture of the worst views: render | photograph | error heat map")
     o.add_argument("--worst", type=int, default=4, help="views on the sheet (default 4)")
@@ -75,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(f"--max-width must be 0 or positive, got {args.max_width}")
     if args.sheet is not None and args.sheet.suffix.lower() not in (".png", ".tif", ".tiff", ".exr"):
         raise SplatglError(f"{args.sheet}: --sheet needs a .png, .tif or .exr file name")
+    check_json_target(args, {"SCENE": args.scene, "--csv": args.csv, "--sheet": args.sheet})
     views = load_dataset(args.dataset, args.images, args.split, args.max_width)
     if args.select:
         views = [views[i] for i in select_indices(args.select, len(views), str(args.dataset))]
@@ -93,16 +97,17 @@ def run(args: argparse.Namespace) -> int:
         with Renderer() as renderer:
             result, worst = evaluate(renderer, scene, views, settings, RendererKind(args.renderer),
                                      keep, default_progress())
-    print(result.table())
-    if run is not None:
-        print(summary(run, "views"))
+    text = sys.stderr if json_to_stdout(args) else sys.stdout   # stdout: the JSON alone
+    if not json_to_stdout(args):
+        print(result.table())
+        if run is not None:
+            print(summary(run, "views"))
     if args.csv is not None:
         atomic_write_text(args.csv, result.csv())
-        print(f"wrote {args.csv}")
+        print(f"wrote {args.csv}", file=text)
     if args.json is not None:
-        atomic_write_text(args.json, result.json())
-        print(f"wrote {args.json}")
+        emit_json(args, result.json())
     if args.sheet is not None:
         write_image(args.sheet, worst_sheet(worst))
-        print(f"wrote {args.sheet} ({len(worst)} worst views)")
+        print(f"wrote {args.sheet} ({len(worst)} worst views)", file=text)
     return 0
