@@ -126,3 +126,9 @@ def test_fov_with_a_camera_file_sets_the_field_of_view(cam_file, tmp_path, capsy
     cam = camera_from_args(args, None)
     assert (cam.width, cam.height) == (64, 48) and cam.fy == pytest.approx(24.0)
     np.testing.assert_array_equal(cam.world_to_camera, POSE)
+
+
+def test_compare_refuses_stereo_it_would_ignore(capsys):
+    rc = main(["compare", "--stereo", "0.1", "--width", "32", "--height", "24"])
+    assert (rc, capsys.readouterr().err) == (2, "splatgl: error: --stereo renders with splatgl "
+                                                "render or view; compare measures one view\n")

@@ -20,6 +20,7 @@ from ..bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
 from ..errors import SplatglError
 from ..executor import add_executor_arguments, executor_from_args, run_tasks, summary
 from ..limits import check_image_size
+from ..metrics import check_ssim_size
 from ..output_files import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
 from ..render import Renderer
@@ -178,6 +179,7 @@ def run(args: argparse.Namespace) -> int:
     frames = args.frames or (4 if quick else 12)
     groups = _parse_groups(args.groups)
     check_image_size(width, height, "--width/--height: image", "quad")
+    check_ssim_size(width, height, "--width/--height: image")   # the error columns
     _check_out(args.out)
     check_json_target(args, {"--out (bench.json)": args.out / "bench.json" if args.out else None})
     options = BenchOptions(width, height, frames, error_frames=tuple(sorted({frames // 3, 2 * frames // 3, frames - 1}))

@@ -10,11 +10,13 @@ from ..pictures import heatmap, side_by_side
 from ..image_io import write_image
 from ..output_files import OutputFiles
 from ..progress import default_progress
-from ..metrics import depth_errors, image_errors
+from ..errors import SplatglError
+from ..metrics import check_ssim_size, depth_errors, image_errors
 from ..render import Renderer
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      check_convention, check_size, inputs_from_args, positive_float)
+                      check_convention, check_size, inputs_from_args, positive_float,
+                      size_origin)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "compare"
@@ -57,7 +59,10 @@ def run(args: argparse.Namespace) -> int:
     files = OutputFiles({"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
     check_json_target(args, {"SCENE": args.scene, "--side-by-side": args.side_by_side,
                              "--heatmap": args.heatmap})
+    if args.stereo is not None:
+        raise SplatglError("--stereo renders with splatgl render or view; compare measures one view")
     scene, settings, camera = inputs_from_args(args)
+    check_ssim_size(camera.width, camera.height, size_origin(args))
     progress = default_progress()
     outputs, seconds = [], []
     with Renderer() as renderer:
