@@ -21,8 +21,8 @@ from ..scene import Scene
 from ..lens import adapt_camera, with_projection
 from ..settings import RendererKind
 from ..stereo import StereoLayout, StereoRenderer
-from ._common import (default_size, demo_scene_path, load_scene_arg, projection_from_args,
-                      settings_from_args)
+from ._common import (default_size, demo_scene_path, load_scene_arg, positive_float,
+                      projection_from_args, settings_from_args)
 
 DEFAULT_FPS = 30.0
 DEFAULT_ORBIT_FRAMES = 120
@@ -43,14 +43,28 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                    help="skip frames whose files already exist (frames are written atomically, "
                         "so an existing file is complete); for a video with --workers or "
                         "--executor ray, the frames kept from a stopped run")
-    g.add_argument("--format", default="png", choices=("png", "tif", "exr"),
-                   help="image format when -o is a folder (default png)")
-    g.add_argument("--fps", type=float, default=None,
+    g.add_argument("--format", default=None, choices=("png", "tif", "exr"),
+                   help="image format when -o is a folder (default png; refused with a video or "
+                        "a pattern, whose suffix says it)")
+    g.add_argument("--fps", type=positive_float, default=None,
                    help="video frame rate (default: the path file's, else 30)")
-    add_executor_arguments(p, "contiguous chunks of the path (a video is encoded here once "
-                              "every frame exists; its frames wait in .NAME.mp4.frames/, kept for "
-                              "--resume if the run stops)",
-                           "Ray tasks of up to 32 frames")
+    executor = add_executor_arguments(p, "contiguous chunks of the path (a video is encoded here "
+                                         "once every frame exists; its frames wait in "
+                                         ".NAME.mp4.frames/, kept for --resume if the run stops)",
+                                      "Ray tasks of up to 32 frames")
+    # What only --path uses, with its defaults: given without --path, it is refused.
+    p.set_defaults(_path_only=[(a.option_strings[0], a.dest, a.default)
+                               for a in g._group_actions[1:] + executor._group_actions])
+
+
+def refuse_path_only_options(args: argparse.Namespace) -> None:
+    """One line naming the options that only --path uses, when given without it."""
+    given = [opt for opt, dest, default in getattr(args, "_path_only", ())
+             if getattr(args, dest) != default]
+    if given:
+        verb = "applies" if len(given) == 1 else "apply"
+        raise SplatglError(f"{', '.join(given)} {verb} to --path only (many frames); without "
+                           "--path, render draws one view")
 
 
 def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None]:
