@@ -202,6 +202,22 @@ def test_colmap_models_with_zero_distortion_are_pinholes(tmp_path, line, fx, fy)
         splatgl.load_cameras(tmp_path)
 
 
+@pytest.mark.parametrize("where", ["", "sparse/0"])
+def test_half_a_colmap_model_names_what_is_missing(tmp_path, where):
+    """A COLMAP folder without images.txt said "no transforms.json" (eval) or "holds no camera
+    source"; now it names the model and the missing file."""
+    from splatgl.datasets.dataset import load_dataset
+    model = tmp_path / where
+    model.mkdir(parents=True, exist_ok=True)
+    (model / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5 5\n")
+    (model / "points3D.txt").write_text("")
+    line = f"{model}: COLMAP model with cameras.txt, points3D.txt but no images.txt"
+    assert _err(tmp_path) == line
+    with pytest.raises(CameraError) as info:
+        load_dataset(tmp_path)
+    assert str(info.value) == line
+
+
 def test_select_ranges():
     assert select_indices("0:12:5", 12) == [0, 5, 10]
     assert select_indices("1,3,-1", 12) == [1, 3, 11]

@@ -185,6 +185,19 @@ def is_colmap_model(path: Path) -> bool:
                                  for e in (".bin", ".txt"))
 
 
+def incomplete_model(root: Path) -> str | None:
+    """What is missing where ``root`` (or its ``sparse/0``, ``sparse``) holds half a COLMAP
+    model, e.g. ``"garden/sparse/0: COLMAP model with cameras.bin but no images.bin"``; else None."""
+    for cand in (root, root / "sparse" / "0", root / "sparse"):
+        for ext in (".bin", ".txt"):
+            have = [n for n in ("cameras", "images", "points3D") if (cand / f"{n}{ext}").is_file()]
+            missing = [n for n in ("cameras", "images") if n not in have]
+            if have and missing:
+                return (f"{cand}: COLMAP model with {', '.join(n + ext for n in have)} but no "
+                        f"{' or '.join(n + ext for n in missing)}")
+    return None
+
+
 def find_model(root: Path) -> Path | None:
     """The COLMAP model folder of a dataset: ``root`` itself, ``root/sparse/0`` or ``root/sparse``."""
     for cand in (root, root / "sparse" / "0", root / "sparse"):

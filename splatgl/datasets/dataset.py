@@ -112,6 +112,9 @@ def load_dataset(root: str | Path, images: str | None = None, split: Split | str
         if missing is not None:
             raise CameraError(f"{folder / missing.name}: photograph of COLMAP image {missing.name!r} not found")
     else:
+        half = colmap.incomplete_model(root)
+        if half is not None and not any(root.glob("transforms*.json")):
+            raise CameraError(half)
         views, done = _nerf_views(root, images, split)
         missing = next((v for v in views if v.image is None), None)
         if missing is not None:

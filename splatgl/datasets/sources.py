@@ -59,6 +59,9 @@ def load_source(path: str | Path) -> tuple[list[View], float | None]:
         for name in _JSON_NAMES:
             if (path / name).is_file():
                 return _from_json(path / name)
+        half = colmap.incomplete_model(path)
+        if half is not None:
+            raise CameraError(half)
         raise CameraError(f"{path}: folder holds no camera source (looked for a COLMAP model in "
                           f"it or sparse/0, and for {', '.join(_JSON_NAMES)})")
     if path.suffix.lower() in (".bin", ".txt"):
