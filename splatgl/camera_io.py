@@ -21,7 +21,7 @@ import numpy as np
 
 from .camera import Camera, Projection, check_rigid_pose
 from .errors import CameraError
-from .json_fields import read_json
+from .json_fields import matrix, read_json
 from .lens import adapt_camera
 
 
@@ -36,23 +36,7 @@ def _number(path: Path, where: str, obj: dict, key: str) -> float:
 
 def _matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, ...]) -> np.ndarray:
     """Field ``key`` as a float64 array of ``shape``; the error says what is wrong with it."""
-    if key not in obj:
-        raise CameraError(f"{path}: {where}missing field '{key}'")
-    size = f"a {shape[0]}x{shape[1]} array" if len(shape) == 2 else f"{shape[0]} numbers"
-    of_numbers = f"{size} of numbers" if len(shape) == 2 else size
-    try:
-        arr = np.array(obj[key], dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise CameraError(f"{path}: {where}field '{key}' must be {of_numbers}") from None
-    if arr.shape != shape:
-        raise CameraError(f"{path}: {where}field '{key}' must be {size}, got shape {arr.shape}")
-    bad = np.argwhere(~np.isfinite(arr))
-    if len(bad):
-        idx = tuple(int(v) for v in bad[0])
-        value = "NaN" if np.isnan(arr[idx]) else "Inf"
-        at = f"row {idx[0]}, column {idx[1]}" if len(idx) == 2 else f"entry {idx[0]}"
-        raise CameraError(f"{path}: {where}field '{key}' holds {value} at {at}")
-    return arr
+    return matrix(path, where, obj, key, shape, flat=False)
 
 
 def _pose(path: Path, where: str, obj: dict) -> np.ndarray:
