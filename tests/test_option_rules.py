@@ -90,3 +90,22 @@ def test_select_refuses_out_of_range_slices_like_indices():
         select_indices("150", 150, "src")
     with pytest.raises(CameraError, match=r"start -11 out of range \(10 cameras\)"):
         select_indices("-11:", 10, "src")
+
+
+def test_orbit_path_takes_up_and_refuses_distance(tmp_path, capsys):
+    """--up and --distance with --path were dropped without a word: an orbit now turns about
+    --up (its frame 0 is the default camera's view, as documented), and --distance is refused."""
+    from splatgl.cli import build_parser
+    from splatgl.commands._common import camera_from_args
+    from splatgl.commands._render_path import path_cameras
+    from splatgl.formats import load_scene
+
+    scene = load_scene(DEMO)
+    argv = ["render", "--path", "orbit:3", "--up", "+z", "--width", "64", "--height", "48", "-o", "f/"]
+    cams, _ = path_cameras(build_parser().parse_args(argv), scene)
+    home = camera_from_args(build_parser().parse_args(["render", "--up", "+z", "--width", "64",
+                                                       "--height", "48", "-o", "x.png"]), scene)
+    np.testing.assert_allclose(cams[0].world_to_camera, home.world_to_camera, atol=1e-9)
+    refused(capsys, tmp_path, ["render", "--path", "orbit:2", "--distance", "2", "-o", tmp_path / "f/"],
+            "splatgl: error: --distance places the default camera; with --path it has no effect "
+            "(an orbit's radius: splatgl path orbit --radius)")

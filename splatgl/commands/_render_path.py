@@ -18,6 +18,7 @@ from ..paths import orbit
 from ..progress import default_progress
 from ..render import Renderer
 from ..scene import Scene
+from ..camera_up import resolve_up
 from ..lens import adapt_camera, with_projection
 from ..settings import RendererKind
 from ..stereo import StereoLayout, StereoRenderer
@@ -82,7 +83,9 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
             raise SplatglError(f"--path {spec}: the number of frames must be positive")
         w, h = default_size(args, projection)
         lens = projection in ("fisheye", "equirectangular")
-        cams = orbit(scene, frames, w, h, args.fov if args.fov is not None and not lens else 50.0)
+        up, _ = resolve_up(args.up, args.scene, None)   # as the default camera's (frame 0)
+        cams = orbit(scene, frames, w, h, args.fov if args.fov is not None and not lens else 50.0,
+                     up=tuple(float(v) for v in up))
         if projection:
             cams = [with_projection(c, projection, args.fov if lens else None) for c in cams]
         fps = None
@@ -92,6 +95,9 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
     if args.select:
         cams = [cams[i] for i in select_indices(args.select, len(cams), spec)]
     if not is_orbit:
+        if args.up is not None:
+            raise SplatglError(f"--up places the default camera and orbit paths; --path {spec} "
+                               "brings its own cameras")
         cams = [adapt_camera(c, args.width, args.height, projection, args.fov, spec) for c in cams]
     return cams, fps
 
@@ -99,6 +105,9 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
 def run_path(args: argparse.Namespace) -> int:
     if args.camera is not None:
         raise SplatglError("--camera and --path exclude each other (a path brings its cameras)")
+    if args.distance is not None:
+        raise SplatglError("--distance places the default camera; with --path it has no effect "
+                           "(an orbit's radius: splatgl path orbit --radius)")
     if args.depth_png is not None:
         raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
     target = FrameTarget.parse(args.output, args.format)
