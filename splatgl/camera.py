@@ -33,8 +33,11 @@ class Projection(enum.Enum):
 
 def _frozen_matrix(m: object) -> np.ndarray:
     arr = np.array(m, dtype=np.float64, copy=True)
-    if arr.shape != (4, 4) or not np.isfinite(arr).all():
-        raise CameraError(f"world_to_camera must be a finite 4x4 matrix, got shape {arr.shape}")
+    if arr.shape != (4, 4):
+        raise CameraError(f"world_to_camera must be a 4x4 matrix, got shape {arr.shape}")
+    bad = _first_bad(arr)
+    if bad:
+        raise CameraError(f"world_to_camera must be finite; it holds {bad}")
     if not np.allclose(arr[3], [0.0, 0.0, 0.0, 1.0]):
         raise CameraError(f"world_to_camera's last row must be (0, 0, 0, 1), got {arr[3].tolist()}")
     arr.flags.writeable = False

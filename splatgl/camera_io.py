@@ -21,7 +21,8 @@ import numpy as np
 
 from .camera import Camera, Projection, check_rigid_pose
 from .errors import CameraError
-from .json_fields import read_json
+from .json_fields import matrix, read_json
+from .lens import adapt_camera
 
 
 def _number(path: Path, where: str, obj: dict, key: str) -> float:
@@ -35,23 +36,7 @@ def _number(path: Path, where: str, obj: dict, key: str) -> float:
 
 def _matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, ...]) -> np.ndarray:
     """Field ``key`` as a float64 array of ``shape``; the error says what is wrong with it."""
-    if key not in obj:
-        raise CameraError(f"{path}: {where}missing field '{key}'")
-    size = f"a {shape[0]}x{shape[1]} array" if len(shape) == 2 else f"{shape[0]} numbers"
-    of_numbers = f"{size} of numbers" if len(shape) == 2 else size
-    try:
-        arr = np.array(obj[key], dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise CameraError(f"{path}: {where}field '{key}' must be {of_numbers}") from None
-    if arr.shape != shape:
-        raise CameraError(f"{path}: {where}field '{key}' must be {size}, got shape {arr.shape}")
-    bad = np.argwhere(~np.isfinite(arr))
-    if len(bad):
-        idx = tuple(int(v) for v in bad[0])
-        value = "NaN" if np.isnan(arr[idx]) else "Inf"
-        at = f"row {idx[0]}, column {idx[1]}" if len(idx) == 2 else f"entry {idx[0]}"
-        raise CameraError(f"{path}: {where}field '{key}' holds {value} at {at}")
-    return arr
+    return matrix(path, where, obj, key, shape, flat=False)
 
 
 def _pose(path: Path, where: str, obj: dict) -> np.ndarray:
@@ -143,12 +128,20 @@ def load_cameras(path: str | Path) -> list[Camera]:
     return [camera_from_json(obj, path)]
 
 
-def load_camera(path: str | Path, index: int = 0) -> Camera:
-    """Camera ``index`` of a camera file (index 0 for a single-camera JSON)."""
+def load_camera(path: str | Path, index: int = 0, *, width: int | None = None,
+                height: int | None = None, projection: Projection | str | None = None,
+                fov_degrees: float | None = None) -> Camera:
+    """Camera ``index`` of a camera file (index 0 for a single-camera JSON).
+
+    ``width``, ``height``, ``projection`` and ``fov_degrees`` adapt it as ``--camera`` with
+    ``--width``, ``--height``, ``--projection`` and ``--fov`` do (:func:`splatgl.lens.adapt_camera`):
+    the file's own intrinsics scale keeping its aspect; another projection or a field of view
+    keeps only its pose, at any size (an equirectangular panorama defaults to 2:1).
+    """
     cams = load_cameras(path)
     if not -len(cams) <= index < len(cams):
         raise CameraError(f"{path}: camera index {index} out of range (the file has {len(cams)} camera(s))")
-    return cams[index]
+    return adapt_camera(cams[index], width, height, projection, fov_degrees, str(path))
 
 
 def save_camera(path: str | Path, camera: Camera) -> None:

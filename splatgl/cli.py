@@ -63,6 +63,12 @@ def _parser_class():
         def error(self, message: str):
             raise BadArguments(f"{self.prog}: error: {message} (see {self.prog} --help)")
 
+        def parse_known_args(self, args=None, namespace=None):
+            if args is not None:   # a sub-command's words: the older bare --json spelling
+                from .commands._json_output import bare_json_first
+                args = bare_json_first(self, args)
+            return super().parse_known_args(args, namespace)
+
     return OneLineParser
 
 
@@ -92,7 +98,7 @@ def build_parser():
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP),
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)
-        p.set_defaults(_run=mod.run)
+        p.set_defaults(_run=mod.run, _parser=p)
     return parser
 
 
@@ -128,7 +134,9 @@ def main(argv: list[str] | None = None) -> int:
 
         parser = build_parser()
         try:
-            args = parser.parse_args(argv)
+            args, unknown = parser.parse_known_args(argv)
+            if unknown:   # named by the sub-command, whose --help lists what it takes
+                getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")
         except BadArguments as exc:
             print(exc, file=sys.stderr)
             return EXIT_BAD_INPUT

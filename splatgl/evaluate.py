@@ -31,7 +31,7 @@ import numpy as np
 from .datasets.views import View
 from .errors import SplatglError
 from .image_io import read_image
-from .metrics import psnr, ssim
+from .metrics import check_ssim_size, psnr, ssim
 from .render import Renderer
 from .scene import Scene
 from .settings import RenderSettings, RendererKind
@@ -131,6 +131,7 @@ def evaluate_views(renderer: Renderer, scene: Scene, views: Sequence[View],
     for view in views:
         if view.image is None:
             raise SplatglError(f"view {view.name!r} has no photograph to compare with")
+        check_ssim_size(view.camera.width, view.camera.height, f"{view.image}: evaluated at")
     renders = renderer.render_many(scene, [v.camera for v in views], settings, kind)
     for view, rgba in zip(views, renders):
         got = np.clip(rgba[..., :3], 0.0, 1.0)

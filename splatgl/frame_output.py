@@ -37,9 +37,16 @@ class FrameTarget:
     video: Path | None = None
 
     @classmethod
-    def parse(cls, out: str | Path, image_format: str = "png") -> "FrameTarget":
+    def parse(cls, out: str | Path, image_format: str | None = None) -> "FrameTarget":
+        """``out`` parsed; ``image_format`` (``--format``; default png) applies to a folder only
+        (a video or a pattern's suffix says what it holds), elsewhere it is refused."""
         text = str(out)
         suffix = Path(text).suffix.lower()
+        if image_format is not None and (suffix in VIDEO_SUFFIXES or "%" in text):
+            what = "a video" if suffix in VIDEO_SUFFIXES else "a pattern whose suffix names the image type"
+            raise SplatglError(f"--format {image_format}: -o {text} is {what}; --format picks the "
+                               "image type of frames written into a folder")
+        image_format = image_format or "png"
         if suffix in VIDEO_SUFFIXES:
             if "%" in text:
                 raise SplatglError(f"{text}: a video file name takes no printf pattern")

@@ -39,21 +39,29 @@ def number(path: Path, where: str, obj: dict, key: str, default: float | None = 
     return float(value)
 
 
-def matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, ...]) -> np.ndarray:
-    """``obj[key]`` as a finite float64 array of ``shape`` (a flat list of the same size is
-    reshaped row-major, as nerfstudio's camera paths store 4x4 matrices)."""
+def matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, ...],
+           flat: bool = True) -> np.ndarray:
+    """``obj[key]`` as a finite float64 array of ``shape``; with ``flat``, a flat list of the
+    same size is reshaped row-major (as nerfstudio's camera paths store 4x4 matrices).  The
+    error says what is wrong: not numbers, the shape, or which entry is NaN or Inf."""
     if key not in obj:
         raise CameraError(f"{path}: {where}missing field '{key}'")
+    size = f"a {shape[0]}x{shape[1]} array" if len(shape) == 2 else f"{shape[0]} numbers"
     try:
         arr = np.array(obj[key], dtype=np.float64)
-    except (TypeError, ValueError):
-        arr = None
-    if arr is not None and arr.shape != shape and arr.size == int(np.prod(shape)) and arr.ndim == 1:
+    except (TypeError, ValueError, OverflowError):
+        of_numbers = f"{size} of numbers" if len(shape) == 2 else size
+        raise CameraError(f"{path}: {where}field '{key}' must be {of_numbers}") from None
+    if flat and arr.shape != shape and arr.size == int(np.prod(shape)) and arr.ndim == 1:
         arr = arr.reshape(shape)
-    if arr is None or arr.shape != shape or not np.isfinite(arr).all():
-        got = "non-numeric values" if arr is None else f"shape {arr.shape}"
-        raise CameraError(f"{path}: {where}field '{key}' must be a finite "
-                          f"{'x'.join(map(str, shape))} array of numbers, got {got}")
+    if arr.shape != shape:
+        raise CameraError(f"{path}: {where}field '{key}' must be {size}, got shape {arr.shape}")
+    bad = np.argwhere(~np.isfinite(arr))
+    if len(bad):
+        idx = tuple(int(v) for v in bad[0])
+        value = "NaN" if np.isnan(arr[idx]) else "Inf"
+        at = f"row {idx[0]}, column {idx[1]}" if len(idx) == 2 else f"entry {idx[0]}"
+        raise CameraError(f"{path}: {where}field '{key}' holds {value} at {at}")
     return arr
 
 

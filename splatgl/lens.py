@@ -45,6 +45,7 @@ from .camera import Camera, Projection
 from .constants import (
     ALPHA_MIN, EQUIRECT_POLE_EPS, FISHEYE_SERIES_RHO, FISHEYE_THETA_CAP, FISHEYE_THETA_MARGIN,
 )
+from .errors import CameraError
 
 
 def fisheye_theta_d(theta: np.ndarray, k: tuple[float, float, float, float]) -> np.ndarray:
@@ -284,7 +285,6 @@ def require_support(camera: Camera, surfel: bool, renderer: str, equirect: bool 
     which the angle projections do not have; the tile renderer has no seam copies, so no
     equirectangular images (``equirect=False``).
     """
-    from .errors import CameraError
     if not camera.is_lens:
         return
     if surfel:
@@ -295,6 +295,17 @@ def require_support(camera: Camera, surfel: bool, renderer: str, equirect: bool 
                           "--renderer quad or reference")
 
 
+def check_fov_applies(projection: Projection | str, fov_degrees: float | None) -> None:
+    """Raise :class:`CameraError` for a field of view given to a projection without one:
+    equirectangular (always 360 x 180 degrees) or orthographic (pixels per world unit)."""
+    projection = Projection(projection)
+    if fov_degrees is not None and projection in (Projection.EQUIRECTANGULAR, Projection.ORTHOGRAPHIC):
+        what = ("an equirectangular panorama always spans 360 x 180 degrees"
+                if projection is Projection.EQUIRECTANGULAR else
+                "an orthographic camera has no field of view (its scale is pixels per world unit)")
+        raise CameraError(f"--fov {fov_degrees:g} does not apply: {what}")
+
+
 def with_projection(camera: Camera, projection: Projection | str, fov_degrees: float | None = None
                     ) -> Camera:
     """``camera``'s pose and image size with another projection (the CLI's ``--projection``).
@@ -302,8 +313,10 @@ def with_projection(camera: Camera, projection: Projection | str, fov_degrees: f
     Fisheye: ``fov_degrees`` (default 180) across the image circle of diameter
     ``min(W, H)``; equirectangular: the full panorama; perspective: ``fov_degrees`` vertical
     (default: unchanged for a perspective camera, else 50); orthographic: unchanged scale.
+    A field of view for a projection without one is refused (:func:`check_fov_applies`).
     """
     projection = Projection(projection)
+    check_fov_applies(projection, fov_degrees)
     w, h, pose = camera.width, camera.height, camera.world_to_camera
     if projection is camera.projection and fov_degrees is None:
         return camera
@@ -314,3 +327,57 @@ def with_projection(camera: Camera, projection: Projection | str, fov_degrees: f
     if projection is Projection.PERSPECTIVE:
         return Camera.from_fov(w, h, 50.0 if fov_degrees is None else fov_degrees, pose)
     return Camera(w, h, camera.fx, camera.fy, camera.cx, camera.cy, pose, projection)
+
+
+def replaces_intrinsics(camera: Camera, projection: Projection | str | None,
+                        fov_degrees: float | None) -> bool:
+    """Whether :func:`with_projection` builds new intrinsics for ``camera`` (keeping only its
+    pose): another fisheye, equirectangular or perspective model, or a field of view."""
+    target = camera.projection if projection is None else Projection(projection)
+    if target is Projection.ORTHOGRAPHIC:
+        return False
+    return target is not camera.projection or fov_degrees is not None
+
+
+def adapt_camera(camera: Camera, width: int | None = None, height: int | None = None,
+                 projection: Projection | str | None = None, fov_degrees: float | None = None,
+                 source: str = "the camera") -> Camera:
+    """A camera read from a file, at the asked image size and projection (``--camera`` with
+    ``--width``, ``--height``, ``--projection``, ``--fov``; :func:`splatgl.load_camera`).
+
+    - Its own intrinsics (no other projection, no field of view): ``width`` and/or ``height``
+      scale them; one of the two keeps the file's aspect, both must keep it.
+    - New intrinsics (:func:`replaces_intrinsics`: e.g. a fisheye or panorama from a pinhole
+      file): only the pose is the file's, and any ``width`` x ``height`` is allowed.  A
+      missing side follows the file's aspect, or 2:1 for an equirectangular panorama, whose
+      height defaults to the file's.
+
+    ``source`` (the file's name) appears in messages.
+
+    Raises:
+        CameraError: both sides given in another aspect than the file's own intrinsics; a field
+            of view the projection has none of (see :func:`with_projection`).
+    """
+    w, h = width, height
+    if not replaces_intrinsics(camera, projection, fov_degrees):
+        if w and h and w != round(camera.width * h / camera.height) \
+                and h != round(camera.height * w / camera.width):
+            raise CameraError(
+                f"--width {w} --height {h} would stretch {source}'s {camera.width}x{camera.height} "
+                f"view (aspect {camera.width / camera.height:.4g}, asked {w / h:.4g}); give only "
+                "one of them to scale keeping the aspect")
+        if w or h:
+            camera = camera.resized(w or max(1, round(camera.width * h / camera.height)),
+                                    h or max(1, round(camera.height * w / camera.width)))
+        if projection is None and fov_degrees is None:
+            return camera
+        return with_projection(camera, camera.projection if projection is None else projection,
+                               fov_degrees)
+    target = camera.projection if projection is None else Projection(projection)
+    if target is Projection.EQUIRECTANGULAR:
+        h = h or (max(1, round(w / 2)) if w else camera.height)
+        w = w or 2 * h
+    else:
+        w = w or (max(1, round(camera.width * h / camera.height)) if h else camera.width)
+        h = h or max(1, round(camera.height * w / camera.width))
+    return with_projection(camera.resized(w, h), target, fov_degrees)  # keeps only the pose

@@ -7,6 +7,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .errors import SplatglError
+
 #: Thresholds reported as "share of pixels off by more than": one and four 8-bit steps.
 OFF_THRESHOLDS = (1.0 / 255.0, 4.0 / 255.0)
 
@@ -36,20 +38,35 @@ def psnr(a: np.ndarray, b: np.ndarray, peak: float = 1.0) -> float:
     return math.inf if mse == 0.0 else 10.0 * math.log10(peak * peak / mse)
 
 
-def _gaussian_blur(img: np.ndarray, sigma: float = 1.5, radius: int = 5) -> np.ndarray:
+#: SSIM's Gaussian window is SSIM_WINDOW x SSIM_WINDOW pixels (Wang et al. 2004: 11, sigma 1.5).
+SSIM_WINDOW = 11
+SSIM_SIGMA = 1.5
+
+
+def check_ssim_size(width: int, height: int, what: str) -> None:
+    """Refuse an image smaller than SSIM's window (the 'valid' region would be empty)."""
+    if width < SSIM_WINDOW or height < SSIM_WINDOW:
+        raise SplatglError(f"{what} {width}x{height} is smaller than SSIM's {SSIM_WINDOW}x"
+                           f"{SSIM_WINDOW} window; SSIM needs at least {SSIM_WINDOW} pixels a side")
+
+
+def _gaussian_blur(img: np.ndarray, sigma: float = SSIM_SIGMA, radius: int = SSIM_WINDOW // 2) -> np.ndarray:
     """Separable Gaussian blur of (H, W) with an 11-tap window, 'valid' region only."""
     x = np.arange(-radius, radius + 1, dtype=np.float64)
     w = np.exp(-0.5 * (x / sigma) ** 2)
     w /= w.sum()
     h, wd = img.shape
-    if h <= 2 * radius or wd <= 2 * radius:
-        return np.full((1, 1), img.mean())
     rows = sum(w[k] * img[:, k:wd - 2 * radius + k] for k in range(2 * radius + 1))
     return sum(w[k] * rows[k:h - 2 * radius + k, :] for k in range(2 * radius + 1))
 
 
 def ssim(a: np.ndarray, b: np.ndarray, peak: float = 1.0) -> float:
-    """Mean SSIM of two (H, W, C) images (per channel, averaged)."""
+    """Mean SSIM of two (H, W, C) images (per channel, averaged) over the 'valid' region.
+
+    Raises:
+        SplatglError: an image smaller than the 11 x 11 window (:func:`check_ssim_size`).
+    """
+    check_ssim_size(a.shape[1], a.shape[0], "image")
     c1, c2 = (0.01 * peak) ** 2, (0.03 * peak) ** 2
     values = []
     for ch in range(a.shape[-1]):

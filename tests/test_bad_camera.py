@@ -109,3 +109,31 @@ def test_3dgs_position_is_named_as_in_the_file(tmp_path, position, message):
     with pytest.raises(CameraError) as info:
         load_cameras(path)
     assert str(info.value) == f"{path}: camera 0: {message}"
+
+
+@pytest.mark.parametrize("name, obj, where, field", [
+    ("transforms.json", lambda m: {"w": 10, "h": 10, "fl_x": 5.0, "frames": [{"transform_matrix": m}]},
+     "frame 0: ", "transform_matrix"),
+    ("camera_path.json", lambda m: {"camera_type": "perspective", "render_width": 8, "render_height": 8,
+                                    "camera_path": [{"camera_to_world": sum(m, []), "fov": 50}]},
+     "camera_path[0]: ", "camera_to_world"),
+])
+def test_a_non_finite_pose_entry_is_named_in_every_source(tmp_path, name, obj, where, field):
+    """A NaN in a transforms.json or camera_path.json pose said "got shape (4, 4)"."""
+    import splatgl
+    m = np.eye(4).tolist()
+    m[1][2] = math.inf
+    path = tmp_path / name
+    path.write_text(json.dumps(obj(m)))
+    with pytest.raises(CameraError) as info:
+        splatgl.load_cameras(path)
+    assert str(info.value) == f"{path}: {where}field '{field}' holds Inf at row 1, column 2"
+
+
+def test_api_camera_names_the_non_finite_entry():
+    from splatgl.camera import Camera
+    m = np.eye(4)
+    m[0, 3] = math.nan
+    with pytest.raises(CameraError, match=r"^world_to_camera must be finite; it holds NaN at row 0, "
+                                          r"column 3$"):
+        Camera(8, 8, 5.0, 5.0, 4.0, 4.0, m)

@@ -160,7 +160,8 @@ def test_bad_sources_fail_in_one_line(tmp_path):
     m.mkdir()
     (m / "cameras.txt").write_text("1 OPENCV 10 10 5 5 5 5 0.1 0 0 0\n")
     (m / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
-    assert "camera 1: COLMAP model OPENCV has lens distortion" in _err(m)
+    assert ("camera 1: COLMAP model OPENCV has nonzero lens distortion (0.1 0 0 0), which "
+            "splatgl does not render") in _err(m)
     (m / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5\n")
     assert "line 1: model PINHOLE takes 4 parameters, got 3" in _err(m)
     (m / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5 5\n")
@@ -184,11 +185,45 @@ def test_bad_sources_fail_in_one_line(tmp_path):
     assert "cameras.bin: truncated at byte 8" in _err(tmp_path / "model_b")
 
 
+@pytest.mark.parametrize("line, fx, fy", [
+    ("1 SIMPLE_RADIAL 10 8 7 5 4 0", 7, 7), ("1 RADIAL 10 8 7 5 4 0 0", 7, 7),
+    ("1 OPENCV 10 8 7 6 5 4 0 0 0 0", 7, 6), ("1 FULL_OPENCV 10 8 7 6 5 4" + " 0" * 8, 7, 6),
+])
+def test_colmap_models_with_zero_distortion_are_pinholes(tmp_path, line, fx, fy):
+    """SIMPLE_RADIAL and the other distortion models were refused as distorted even at k = 0."""
+    (tmp_path / "cameras.txt").write_text(line + "\n")
+    (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
+    cam = splatgl.load_cameras(tmp_path)[0]
+    assert (cam.projection.value, cam.width, cam.height, cam.fx, cam.fy) == ("perspective", 10, 8, fx, fy)
+    assert (cam.cx, cam.cy) == (5, 4) and cam.distortion == (0, 0, 0, 0)
+    (tmp_path / "cameras.txt").write_text(line[:-1] + "0.01\n")
+    with pytest.raises(CameraError, match=r"cameras.txt: camera 1: COLMAP model \w+ has nonzero lens "
+                                          r"distortion \([0 ]*0.01\), which splatgl does not render"):
+        splatgl.load_cameras(tmp_path)
+
+
+@pytest.mark.parametrize("where", ["", "sparse/0"])
+def test_half_a_colmap_model_names_what_is_missing(tmp_path, where):
+    """A COLMAP folder without images.txt said "no transforms.json" (eval) or "holds no camera
+    source"; now it names the model and the missing file."""
+    from splatgl.datasets.dataset import load_dataset
+    model = tmp_path / where
+    model.mkdir(parents=True, exist_ok=True)
+    (model / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5 5\n")
+    (model / "points3D.txt").write_text("")
+    line = f"{model}: COLMAP model with cameras.txt, points3D.txt but no images.txt"
+    assert _err(tmp_path) == line
+    with pytest.raises(CameraError) as info:
+        load_dataset(tmp_path)
+    assert str(info.value) == line
+
+
 def test_select_ranges():
-    assert select_indices("0:100:5", 12) == [0, 5, 10]
+    assert select_indices("0:12:5", 12) == [0, 5, 10]
     assert select_indices("1,3,-1", 12) == [1, 3, 11]
     assert select_indices("::4,2", 10) == [0, 4, 8, 2]
     for spec, msg in [("12", "index 12 out of range (12 cameras)"), ("a", "'a' is not an index"),
-                      ("0:5:0", "'0:5:0' is not an index"), ("5:2", "picks no camera of 12")]:
+                      ("0:5:0", "'0:5:0' is not an index"), ("5:2", "picks no camera of 12"),
+                      ("0:100:5", "'0:100:5': stop 100 out of range (12 cameras)")]:
         with pytest.raises(CameraError, match=msg.replace("(", r"\(").replace(")", r"\)")):
             select_indices(spec, 12)

@@ -20,6 +20,7 @@ from splatgl.commands._common import demo_scene_path
 from splatgl.datasets import colmap, nerf
 from splatgl.datasets.dataset import Split, load_dataset, split_views
 from splatgl.datasets.views import View
+from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
 from splatgl.image_io import read_image, write_image
 from splatgl.metrics import ssim
@@ -173,6 +174,50 @@ def test_missing_photograph_named(dataset, tmp_path, capsys):
     assert code == 2 and "a.png: photograph of COLMAP image 'a.png' not found" in err
 
 
+def test_photograph_of_another_aspect_is_refused(tmp_path, capsys):
+    """A 64x64 photograph for a 64x48 camera was stretched into without a word."""
+    views = [View("a.png", Camera.from_fov(W, H, 45.0, orbit([0, 0, 0], 5.0, 0.0, 0.0)))]
+    colmap.write_colmap(tmp_path / "sparse" / "0", views, binary=False)
+    (tmp_path / "images").mkdir()
+    write_image(tmp_path / "images" / "a.png", np.zeros((64, 64, 4), np.float32))
+    code, out, err = _run(capsys, "--dataset", tmp_path)
+    assert (code, out) == (2, "")
+    assert err == (f"splatgl: error: {tmp_path / 'images' / 'a.png'}: photograph 64x64 has another "
+                   "aspect than its camera's 64x48 (1 against 1.333); the render would be "
+                   "stretched to it\n")
+    write_image(tmp_path / "images" / "a.png", np.zeros((25, 33, 4), np.float32))  # 1/2, rounded
+    assert [(v.camera.width, v.camera.height) for v in load_dataset(tmp_path)] == [(33, 25)]
+
+
+def test_images_smaller_than_the_ssim_window_are_refused(tmp_path, capsys):
+    """SSIM of an image under 11x11 has no valid region: it returned a number all the same."""
+    a = np.zeros((10, 12, 3), np.float32)
+    with pytest.raises(SplatglError, match=r"^image 12x10 is smaller than SSIM's 11x11 window; "
+                                           r"SSIM needs at least 11 pixels a side$"):
+        ssim(a, a)
+    assert ssim(np.zeros((11, 11, 3)), np.zeros((11, 11, 3))) == 1.0
+    views = [View("a.png", Camera.from_fov(16, 8, 45.0, orbit([0, 0, 0], 5.0, 0.0, 0.0)))]
+    colmap.write_colmap(tmp_path / "sparse" / "0", views, binary=False)
+    (tmp_path / "images").mkdir()
+    write_image(tmp_path / "images" / "a.png", np.zeros((8, 16, 4), np.float32))
+    code, out, err = _run(capsys, "--dataset", tmp_path)
+    assert (code, err) == (2, f"splatgl: error: {tmp_path / 'images' / 'a.png'}: evaluated at 16x8 "
+                              "is smaller than SSIM's 11x11 window; SSIM needs at least 11 pixels "
+                              "a side\n")
+    rc = main(["compare", "--width", "10", "--height", "20"])
+    assert (rc, capsys.readouterr().err) == (2, "splatgl: error: --width/--height: image 10x20 is "
+                                                "smaller than SSIM's 11x11 window; SSIM needs at "
+                                                "least 11 pixels a side\n")
+
+
+def test_json_dash_prints_the_report_alone(dataset, capsys, tmp_path):
+    code, out, err = _run(capsys, "--dataset", dataset, "--select", "0:2", "--json", "-",
+                          "--csv", tmp_path / "s.csv")
+    assert code == 0, err
+    assert [v["name"] for v in json.loads(out)["views"]] == ["img_00.png", "img_01.png"]
+    assert f"wrote {tmp_path / 's.csv'}" in err
+
+
 def test_split_views_is_every_eighth():
     views = [View(str(i), Camera.from_fov(8, 8, 40.0)) for i in range(20)]
     assert [v.name for v in split_views(views, Split.TEST)] == ["0", "8", "16"]
@@ -202,8 +247,8 @@ def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path, m
 
 @pytest.mark.parametrize("reports, message", [
     (["--csv", "{t}/nodir/x.csv"], "--csv {t}/nodir/x.csv: folder {t}/nodir does not exist"),
-    (["--csv", "{t}/e.csv", "--json", "{t}/e.csv"],
-     "--json {t}/e.csv: the same file as --csv; give each output its own name"),
+    (["--csv", "{t}/e.json", "--json", "{t}/e.json"],
+     "--json {t}/e.json: the same file as --csv; give the report its own name"),
     (["--sheet", "{t}/w.bmp"],
      "--sheet {t}/w.bmp: unsupported image format ('.bmp'); use .png, .tif, .tiff or .exr"),
 ])

@@ -287,3 +287,72 @@ def test_stereo_and_projection_views(xvfb_display, demo, tmp_path):
         assert not np.array_equal(img[:, :half.width], img[:, half.width:2 * half.width])
     finally:
         v.close()
+
+
+def test_stereo_screenshot_is_the_pair_and_its_command_says_stereo(xvfb_display, demo, tmp_path, capsys):
+    """F12 in stereo wrote one eye and a command without --stereo; now the PNG is the pair the
+    window shows, and the printed command (with --stereo) writes the same file."""
+    import shlex
+
+    from splatgl.cli import main
+    from splatgl.errors import ContextError
+    from splatgl.image_io import read_image
+    from splatgl.render import default_camera
+    from splatgl.settings import RenderSettings
+    from splatgl.viewer.app import Viewer, ViewerOptions
+
+    path, scene = demo
+    options = ViewerOptions(visible=True, screenshot_dir=tmp_path, render_args=(str(path),),
+                            vsync=False, stereo=0.05)
+    try:
+        v = Viewer(scene, RenderSettings(), default_camera(scene, 96, 48), options=options)
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
+    try:
+        assert v.step(0.0)
+        png, js = v.screenshot()
+        shown = v.last.image
+    finally:
+        v.close()
+    command = capsys.readouterr().out.strip().splitlines()[-1].strip()
+    argv = shlex.split(command)
+    assert argv[:2] == ["splatgl", "render"] and argv[argv.index("--stereo") + 1] == "0.05"
+    got = read_image(png)
+    assert got.shape[:2] == shown.shape[:2] == (48, 96)
+    assert np.abs(got - np.clip(shown[..., :3], 0, 1)).max() <= 0.5 / 255 + 1e-6
+    again = tmp_path / "again.png"
+    argv[argv.index("-o") + 1] = str(again)
+    assert main(argv[1:]) == 0
+    np.testing.assert_array_equal(read_image(again), got)
+
+
+def test_equirectangular_view_refuses_the_tile_toggles(xvfb_display, demo, tmp_path):
+    """T, C and Tab need the tile renderer, which has no panoramas: the viewer used to exit with
+    code 2; now the key changes nothing and the status line says why."""
+    import glfw
+
+    from splatgl.errors import ContextError
+    from splatgl.render import default_camera
+    from splatgl.settings import RenderSettings, RendererKind
+    from splatgl.viewer.app import Viewer, ViewerOptions
+    from splatgl.viewer.frames import ViewMode
+
+    path, scene = demo
+    options = ViewerOptions(visible=True, screenshot_dir=tmp_path, vsync=False,
+                            projection="equirectangular")
+    try:
+        v = Viewer(scene, RenderSettings(), default_camera(scene, 64, 32), options=options)
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
+    try:
+        assert v.step(0.0)
+        views = []
+        for key in ("T", "T", "C", "C", "TAB", "TAB", "TAB"):
+            v.on_key(getattr(glfw, f"KEY_{key}"), glfw.PRESS, 0)
+            v.step(0.0)
+            assert v.kind is RendererKind.QUAD
+            views.append(v.view)
+        assert ViewMode.DIFFERENCE not in views and ViewMode.DEPTH in views
+        assert v.message == "Tab refused: the tile renderer cannot draw equirectangular images"
+    finally:
+        v.close()

@@ -11,7 +11,7 @@ from ..camera import Camera, Projection
 from ..camera_io import load_camera
 from ..errors import SplatglError
 from ..formats import load_scene
-from ..lens import with_projection
+from ..lens import check_fov_applies, with_projection
 from ..limits import MAX_IMAGE_SIDE, check_image_size
 from ..formats.metadata import antialias_tag
 from ..render import default_camera
@@ -88,21 +88,27 @@ def add_camera_arguments(p: argparse.ArgumentParser) -> None:
                    help="which camera of a cameras.json list, counting from 0 (default 0)")
     g.add_argument("--width", type=positive_int, default=None,
                    help=f"image width in pixels, at most {MAX_IMAGE_SIDE} and what the OpenGL "
-                        "driver allows (default 1280, or the camera file's; with a camera file the "
-                        "intrinsics are scaled, and --width alone keeps the file's aspect)")
+                        "driver allows (default 1280, 2 x --height for an equirectangular "
+                        "panorama, or the camera file's; with a camera file its intrinsics are "
+                        "scaled, and --width alone keeps the file's aspect)")
     g.add_argument("--height", type=positive_int, default=None,
                    help="image height in pixels (default 720; with a camera file, giving both "
-                        "--width and --height must keep its aspect)")
+                        "--width and --height must keep its aspect unless --projection or --fov "
+                        "replaces its intrinsics)")
     g.add_argument("--fov", type=positive_float, default=None,
-                   help="vertical field of view of the default camera, degrees (default 50)")
+                   help="vertical field of view, degrees (default 50; fisheye: see "
+                        "--projection); with --camera it replaces the file's intrinsics, keeping "
+                        "its pose. Not for orthographic or equirectangular cameras")
     g.add_argument("--orthographic", action="store_true",
-                   help="make the default camera orthographic, zoomed to frame the scene")
+                   help="make the default camera orthographic, zoomed to frame the scene "
+                        "(not with --camera: see --projection)")
     g.add_argument("--projection", choices=[m.value for m in Projection], default=None,
                    help="camera model: perspective (default), orthographic, fisheye "
                         "(equidistant; --fov is the image circle's field of view, default 180, up "
                         "to 360) or equirectangular (a full 360 x 180 degree panorama, usually "
-                        "--width 2 x --height).  With --camera, the file's pose and image size "
-                        "are kept")
+                        "--width 2 x --height, the default).  With --camera, the file's pose is "
+                        "kept and the size is --width x --height (default: the file's; a "
+                        "panorama 2:1 at the file's height)")
     g.add_argument("--stereo", type=positive_float, default=None, metavar="IPD",
                    help="render a stereo pair with this interpupillary distance (world units); "
                         "equirectangular cameras render omni-directional stereo")
@@ -110,7 +116,7 @@ def add_camera_arguments(p: argparse.ArgumentParser) -> None:
                    help="where the two eyes go: side-by-side (left | right, default), top-bottom "
                         "(left above right, the 360-video convention), or separate files "
                         "OUT_left.EXT and OUT_right.EXT")
-    g.add_argument("--distance", type=positive_float, default=1.0, metavar="SCALE",
+    g.add_argument("--distance", type=positive_float, default=None, metavar="SCALE",
                    help="default camera distance as a multiple of the framing distance "
                         "(default 1; 0.5 is twice as close)")
     g.add_argument("--up", choices=UP_CHOICES, default=None,
@@ -235,47 +241,71 @@ def check_size(args: argparse.Namespace, camera: Camera, kind: RendererKind | st
     check_image_size(camera.width, camera.height, size_origin(args), kind, ctx)
 
 
-def resize_keeping_aspect(cam: Camera, width: int | None, height: int | None, what: str) -> Camera:
-    """``cam`` at ``width`` and/or ``height`` (--width/--height): one of them scales keeping the
-    aspect; both must keep it (``what`` names the camera's file in the message)."""
-    w, h = width, height
-    if w and h:
-        # Consistent when either side follows from the other by the rounding we apply below.
-        if w != round(cam.width * h / cam.height) and h != round(cam.height * w / cam.width):
-            raise SplatglError(
-                f"--width {w} --height {h} would stretch {what}'s {cam.width}x{cam.height} "
-                f"view (aspect {cam.width / cam.height:.4g}, asked {w / h:.4g}); give only one of "
-                "them to scale keeping the aspect")
-    w = w or max(1, round(cam.width * h / cam.height))
-    h = h or max(1, round(cam.height * w / cam.width))
-    return cam.resized(w, h)
+def projection_from_args(args: argparse.Namespace) -> str | None:
+    """``--projection``, with ``--orthographic`` as its other spelling (never contradicting it)."""
+    projection = getattr(args, "projection", None)
+    if getattr(args, "orthographic", False):
+        if projection not in (None, Projection.ORTHOGRAPHIC.value):
+            raise SplatglError(f"--orthographic contradicts --projection {projection} "
+                               "(--orthographic is --projection orthographic); give one of them")
+        projection = Projection.ORTHOGRAPHIC.value
+    return projection
 
 
-def camera_from_args(args: argparse.Namespace, scene: Scene, settings: RenderSettings | None = None) -> Camera:
+def _file_camera(args: argparse.Namespace, projection: str | None) -> Camera:
+    """``--camera`` adapted by --width/--height/--projection/--fov (:func:`splatgl.lens.adapt_camera`)."""
+    if getattr(args, "orthographic", False):
+        raise SplatglError(f"--orthographic zooms the default camera to frame the scene; "
+                           f"{args.camera} brings its own camera (--projection orthographic keeps "
+                           "its fx, fy as pixels per world unit)")
+    if getattr(args, "distance", None) is not None:
+        raise SplatglError(f"--distance places the default camera; {args.camera} brings its own pose")
+    cam = load_camera(args.camera, args.camera_index or 0, width=args.width, height=args.height,
+                      projection=projection, fov_degrees=args.fov)
+    check_image_size(cam.width, cam.height, size_origin(args), RendererKind.REFERENCE)
+    return cam
+
+
+def default_size(args: argparse.Namespace, projection: str | None) -> tuple[int, int]:
+    """The default camera's image size (an equirectangular panorama 2:1), its options checked."""
+    if projection == Projection.EQUIRECTANGULAR.value:
+        height = args.height or (max(1, round(args.width / 2)) if args.width else 720)
+        width = args.width or 2 * height
+    else:
+        width, height = args.width or 1280, args.height or 720
+    check_image_size(width, height, size_origin(args), RendererKind.REFERENCE)
+    fov = args.fov
+    if projection == "fisheye" and fov is not None and not fov <= 360.0:
+        raise SplatglError(f"--fov of a fisheye must be in (0, 360] degrees, got {fov}")
+    if projection != "fisheye" and fov is not None and not fov < 180.0:
+        raise SplatglError(f"--fov must be in (0, 180) degrees, got {fov}")
+    if projection is not None:
+        check_fov_applies(projection, fov)
+    return width, height
+
+
+def camera_from_args(args: argparse.Namespace, scene: Scene | None,
+                     settings: RenderSettings | None = None) -> Camera | None:
+    """The camera the options describe; with ``scene`` None, only the checks that need no
+    scene (done before loading one), returning the file's camera or None."""
     if args.camera is None and args.camera_index is not None:
         raise SplatglError("--camera-index needs --camera (a cameras.json to pick from)")
-    projection = getattr(args, "projection", None)
+    projection = projection_from_args(args)
     if args.camera is not None:
-        cam = load_camera(args.camera, args.camera_index or 0)
-        if args.width or args.height:
-            cam = resize_keeping_aspect(cam, args.width, args.height, str(args.camera))
-        check_image_size(cam.width, cam.height, size_origin(args), RendererKind.REFERENCE)
-        return with_projection(cam, projection, args.fov) if projection else cam
-    width, height = args.width or 1280, args.height or 720
-    check_image_size(width, height, size_origin(args), RendererKind.REFERENCE)
-    if projection == "fisheye" and args.fov is not None and not args.fov <= 360.0:
-        raise SplatglError(f"--fov of a fisheye must be in (0, 360] degrees, got {args.fov}")
-    if projection != "fisheye" and args.fov is not None and not args.fov < 180.0:
-        raise SplatglError(f"--fov must be in (0, 180) degrees, got {args.fov}")
+        return _file_camera(args, projection)
+    width, height = default_size(args, projection)
+    if scene is None:
+        return None
     up, _ = resolve_up(getattr(args, "up", None), args.scene, args.camera)
+    distance = args.distance if args.distance is not None else 1.0
     cam = default_camera(scene, width, height,
                          args.fov if args.fov is not None and projection != "fisheye" else 50.0,
-                         args.distance, settings.model if settings is not None else None, up=up)
+                         distance, settings.model if settings is not None else None, up=up)
     if projection in ("fisheye", "equirectangular"):
         cam = with_projection(cam, projection, args.fov)
-    if getattr(args, "orthographic", False) or projection == "orthographic":
+    if projection == "orthographic":
         scale = settings.model.scale if settings is not None and settings.model else 1.0
-        radius = max(scene.robust_radius * scale, 1e-9) * args.distance
+        radius = max(scene.robust_radius * scale, 1e-9) * distance
         cam = Camera.orthographic(cam.width, cam.height, min(cam.width, cam.height) / (2.1 * radius),
                                   cam.world_to_camera)
     return cam
@@ -288,8 +318,7 @@ def inputs_from_args(args: argparse.Namespace) -> tuple[Scene, RenderSettings, C
     without waiting for a large scene to load).
     """
     settings = settings_from_args(args)
-    if args.camera is not None:
-        camera_from_args(args, None, settings)  # validate the file and the size early
+    camera_from_args(args, None, settings)  # the camera file and options checked early
     scene = load_scene_arg(args)
     return scene, settings, camera_from_args(args, scene, settings)
 

@@ -19,12 +19,14 @@ from ..paths import orbit
 from ..progress import default_progress
 from ..render import Renderer
 from ..scene import Scene
-from ..lens import with_projection
+from ..camera_up import resolve_up
+from ..lens import adapt_camera, with_projection
 from ..lod.command import LodFrames, lod_settings_from_args
 from ..lod.io import read_lod
 from ..settings import RendererKind
 from ..stereo import StereoLayout, StereoRenderer
-from ._common import demo_scene_path, load_scene_arg, resize_keeping_aspect, settings_from_args
+from ._common import (default_size, demo_scene_path, load_scene_arg, positive_float,
+                      projection_from_args, settings_from_args)
 from ._spz_axes import check_not_sharded
 
 DEFAULT_FPS = 30.0
@@ -46,22 +48,37 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                    help="skip frames whose files already exist (frames are written atomically, "
                         "so an existing file is complete); for a video with --workers or "
                         "--executor ray, the frames kept from a stopped run")
-    g.add_argument("--format", default="png", choices=("png", "tif", "exr"),
-                   help="image format when -o is a folder (default png)")
-    g.add_argument("--fps", type=float, default=None,
+    g.add_argument("--format", default=None, choices=("png", "tif", "exr"),
+                   help="image format when -o is a folder (default png; refused with a video or "
+                        "a pattern, whose suffix says it)")
+    g.add_argument("--fps", type=positive_float, default=None,
                    help="video frame rate (default: the path file's, else 30)")
-    add_executor_arguments(p, "contiguous chunks of the path (a video is encoded here once "
-                              "every frame exists; its frames wait in .NAME.mp4.frames/, kept for "
-                              "--resume if the run stops)",
-                           "Ray tasks of up to 32 frames")
+    executor = add_executor_arguments(p, "contiguous chunks of the path (a video is encoded here "
+                                         "once every frame exists; its frames wait in "
+                                         ".NAME.mp4.frames/, kept for --resume if the run stops)",
+                                      "Ray tasks of up to 32 frames")
+    # What only --path uses, with its defaults: given without --path, it is refused.
+    p.set_defaults(_path_only=[(a.option_strings[0], a.dest, a.default)
+                               for a in g._group_actions[1:] + executor._group_actions])
+
+
+def refuse_path_only_options(args: argparse.Namespace) -> None:
+    """One line naming the options that only --path uses, when given without it."""
+    given = [opt for opt, dest, default in getattr(args, "_path_only", ())
+             if getattr(args, dest) != default]
+    if given:
+        verb = "applies" if len(given) == 1 else "apply"
+        raise SplatglError(f"{', '.join(given)} {verb} to --path only (many frames); without "
+                           "--path, render draws one view")
 
 
 def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None, list[int]]:
-    """The cameras ``--path`` names (with ``--select`` and ``--width/--height`` applied, as
-    ``--camera`` applies them: one of the two keeps each camera's aspect, both must match
-    it), the source's frame rate (None if it has none) and each camera's index in the source
-    (its frame number)."""
+    """The cameras ``--path`` names (with ``--select``, ``--width/--height``, ``--projection``
+    and ``--fov`` applied as to a ``--camera`` file: :func:`splatgl.lens.adapt_camera`), the
+    source's frame rate (None if it has none) and each camera's index in the source (its frame
+    number)."""
     spec = args.path
+    projection = projection_from_args(args)
     is_orbit = spec == "orbit" or spec.startswith("orbit:")
     if is_orbit:
         try:
@@ -70,8 +87,13 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
             raise SplatglError(f"--path {spec}: expected orbit or orbit:FRAMES") from None
         if frames < 1:
             raise SplatglError(f"--path {spec}: the number of frames must be positive")
-        w, h = args.width or 1280, args.height or 720
-        cams = orbit(scene, frames, w, h, args.fov if args.fov is not None else 50.0)
+        w, h = default_size(args, projection)
+        lens = projection in ("fisheye", "equirectangular")
+        up, _ = resolve_up(args.up, args.scene, None)   # as the default camera's (frame 0)
+        cams = orbit(scene, frames, w, h, args.fov if args.fov is not None and not lens else 50.0,
+                     up=tuple(float(v) for v in up))
+        if projection:
+            cams = [with_projection(c, projection, args.fov if lens else None) for c in cams]
         fps = None
     else:
         views, fps = load_source(spec)
@@ -80,17 +102,21 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
     if args.select:
         numbers = select_indices(args.select, len(cams), spec)
     cams = [cams[i] for i in numbers]
-    if not is_orbit and (args.width or args.height):
-        cams = [resize_keeping_aspect(c, args.width, args.height, f"{spec} (camera {i})")
+    if not is_orbit:
+        if args.up is not None:
+            raise SplatglError(f"--up places the default camera and orbit paths; --path {spec} "
+                               "brings its own cameras")
+        cams = [adapt_camera(c, args.width, args.height, projection, args.fov, f"{spec} (camera {i})")
                 for i, c in zip(numbers, cams)]
-    if getattr(args, "projection", None):   # the path's poses and sizes through another model
-        cams = [with_projection(c, args.projection, args.fov) for c in cams]
     return cams, fps, numbers
 
 
 def run_path(args: argparse.Namespace) -> int:
     if args.camera is not None:
         raise SplatglError("--camera and --path exclude each other (a path brings its cameras)")
+    if args.distance is not None:
+        raise SplatglError("--distance places the default camera; with --path it has no effect "
+                           "(an orbit's radius: splatgl path orbit --radius)")
     if args.depth_png is not None:
         raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
     target = FrameTarget.parse(args.output, args.format)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import textwrap
 from pathlib import Path
@@ -23,12 +22,14 @@ from ..errors import SplatglError
 from ..executor import add_executor_arguments, executor_from_args, run_tasks, summary
 from ..gl.context import renderer_name
 from ..limits import check_image_size
+from ..metrics import check_ssim_size
 from ..output_files import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
 from ..render import Renderer
 from ..scene import Scene
 from ..settings import RenderSettings
 from ._common import demo_scene_path, non_negative_int, positive_int
+from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "bench"
 ORDER = 40
@@ -95,7 +96,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="write bench.csv, bench.json and bench.png there (created if missing; "
                         "existing files of those names are replaced)")
-    p.add_argument("--json", action="store_true", help="print the JSON instead of the table")
+    add_json_argument(p, "the rows and the machine (bench.json's content)")
     p.add_argument("--scale", action="store_true",
                    help="the scale benchmark instead: scenes of --sizes splats built from the "
                         "shared real files (and one SH3 size), load time, peak memory, GPU bytes "
@@ -169,6 +170,9 @@ def run(args: argparse.Namespace) -> int:
         mode = "--scale" if args.scale else "--lod"
         raise SplatglError(f"{mode} measures in one process (memory, load and frame times); "
                            "--workers and --executor ray shard the scene benchmark")
+    if (args.scale or args.lod) and args.json is not None:
+        mode = "--scale" if args.scale else "--lod"
+        raise SplatglError(f"--json: {mode} writes its JSON with --out DIR")
     if args.scale:
         from ..bench.scale_cli import run_scale_command
         return run_scale_command(args)
@@ -181,7 +185,9 @@ def run(args: argparse.Namespace) -> int:
     frames = args.frames or (4 if quick else 12)
     groups = _parse_groups(args.groups)
     check_image_size(width, height, "--width/--height: image", "quad")
+    check_ssim_size(width, height, "--width/--height: image")   # the error columns
     _check_out(args.out)
+    check_json_target(args, {"--out (bench.json)": args.out / "bench.json" if args.out else None})
     options = BenchOptions(width, height, frames, error_frames=tuple(sorted({frames // 3, 2 * frames // 3, frames - 1}))
                            if not quick else (frames - 1,), quick=quick, groups=groups)
     specs = [SceneSpec(p.name, p) for p in args.scenes]
@@ -226,8 +232,9 @@ def run(args: argparse.Namespace) -> int:
                              "rows": r.done.count} for spec, r in zip(specs, run.reports)]
     if args.out is not None:
         _write_out(args.out, rows, extra)
-    if args.json:
-        print(json.dumps({**extra, "rows": [r.as_dict() for r in rows]}))
+    report = {**extra, "rows": [r.as_dict() for r in rows]}
+    if json_to_stdout(args):
+        emit_json(args, report)
         return 0
     print(describe(machine))
     print(f"{width}x{height}, {frames} frames per row along an orbit")
@@ -247,4 +254,6 @@ def run(args: argparse.Namespace) -> int:
         print(summary(run, "rows"))
     if args.out is not None:
         print(f"wrote {args.out / 'bench.csv'}, bench.json, bench.png")
+    if args.json is not None:
+        emit_json(args, report)
     return 0

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -11,11 +10,14 @@ from ..pictures import heatmap, side_by_side
 from ..image_io import write_image
 from ..output_files import OutputFiles
 from ..progress import default_progress
-from ..metrics import depth_errors, image_errors
+from ..errors import SplatglError
+from ..metrics import check_ssim_size, depth_errors, image_errors
 from ..render import Renderer
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      check_convention, check_size, inputs_from_args, positive_float)
+                      check_convention, check_size, inputs_from_args, positive_float,
+                      size_origin)
+from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "compare"
 ORDER = 30
@@ -30,6 +32,7 @@ largest channel error exceeds 1/255 and 4/255.
 examples:
   splatgl compare scene.ply
   splatgl compare scene.ply --camera cameras.json --camera-index 2 --json
+  splatgl compare scene.ply --json figures.json
   splatgl compare scene.ply --side-by-side both.png --heatmap err.png --heatmap-scale 0.01"""
 
 
@@ -39,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the renderer under test (default quad)")
     p.add_argument("--against", choices=[k.value for k in RendererKind], default="reference",
                    help="the renderer taken as truth (default reference)")
-    p.add_argument("--json", action="store_true", help="print the figures as one JSON object")
+    add_json_argument(p, "the figures (one object)")
     p.add_argument("--side-by-side", type=Path, default=None, metavar="FILE",
                    help="write both renders next to each other (.png, .tif or .exr)")
     p.add_argument("--heatmap", type=Path, default=None, metavar="FILE",
@@ -54,7 +57,12 @@ def run(args: argparse.Namespace) -> int:
     kinds = (RendererKind(args.renderer), RendererKind(args.against))
     check_convention(args, *kinds)
     files = OutputFiles({"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
+    check_json_target(args, {"SCENE": args.scene, "--side-by-side": args.side_by_side,
+                             "--heatmap": args.heatmap})
+    if args.stereo is not None:
+        raise SplatglError("--stereo renders with splatgl render or view; compare measures one view")
     scene, settings, camera = inputs_from_args(args)
+    check_ssim_size(camera.width, camera.height, size_origin(args))
     progress = default_progress()
     outputs, seconds = [], []
     with Renderer() as renderer:
@@ -80,8 +88,8 @@ def run(args: argparse.Namespace) -> int:
         "width": camera.width, "height": camera.height, "renderer": names[0], "against": names[1],
         **errors.as_dict(), **depth, "seconds": dict(zip(names, seconds)),
     }
-    if args.json:
-        print(json.dumps(result))
+    if json_to_stdout(args):
+        emit_json(args, result)
         return 0
     psnr = "inf" if errors.psnr == float("inf") else f"{errors.psnr:.2f} dB"
     print(f"{result['scene']}: {scene.count} splats, {camera.width}x{camera.height}, "
@@ -97,4 +105,6 @@ def run(args: argparse.Namespace) -> int:
           f"the farthest expected depth {depth['depth_scale']:.4g}")
     print("  time       " + ", ".join(f"{n} {s * 1e3:.1f} ms" for n, s in zip(names, seconds))
           + " (colour and depth)")
+    if args.json is not None:
+        emit_json(args, result)
     return 0

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from ..convert import convert
 from ..errors import SplatglError
 from ._spz_axes import add_spz_axes_argument
+from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "convert"
 ORDER = 25
@@ -45,6 +45,7 @@ examples:
   splatgl convert scene.ply scene.spz --spz-version 2
   splatgl convert from-splat-transform-3.spz scene.ply --spz-axes rdf
   splatgl convert scene.ply scene.splat --json
+  splatgl convert scene.ply scene.spz --json report.json
   splatgl convert scene.ply small.ply --sh-degree 1 --force"""
 
 
@@ -64,7 +65,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_spz_axes_argument(p, "for .spz files that record none: rub (the SPZ specification; "
                              "default for versions 3-4) or rdf (PLY axes as is; splat-transform "
                              "3.x); for .spz output, the axes written (default rub for version 3)")
-    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    add_json_argument(p, "the result (one object)")
 
 
 def _row(label: str, stats: dict | None, unit: str, bound: float | None = None,
@@ -84,12 +85,20 @@ def run(args: argparse.Namespace) -> int:
         if not args.output.name.lower().endswith(".spz"):
             raise SplatglError(f"{args.output}: --spz-version applies to .spz output only")
         options["version"] = args.spz_version
+    check_json_target(args, {"IN": args.input, "OUT": args.output})
     result = convert(args.input, args.output, drop_invalid=args.drop_invalid,
                      sh_degree=args.sh_degree, force=args.force, spz_axes=args.spz_axes,
                      **options)
-    if args.json:
-        print(json.dumps(result.as_dict()))
+    if json_to_stdout(args):
+        emit_json(args, result.as_dict())
         return 0
+    _print_result(result)
+    if args.json is not None:
+        emit_json(args, result.as_dict())
+    return 0
+
+
+def _print_result(result) -> None:
     e = result.error
     print(f"wrote {result.output} ({result.output_format}, {result.output_bytes:,} bytes): "
           f"{result.count:,} splats, SH degree {result.sh_degree_out} "
@@ -100,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"SPZ axes of the {side}: {axes.describe()}")
     if e["bit_exact"]:
         print("round trip: bit-exact (every stored value identical)")
-        return 0
+        return
     b = e.get("bounds") or {}
     print("round-trip error, max / mean" + (" (bound):" if b else ":"))
     print(_row("position", e["position"], "world units", b.get("position")))
@@ -115,4 +124,3 @@ def run(args: argparse.Namespace) -> int:
         kept = "dropped" if result.sh_degree_out == 0 else f"degrees 1-{result.sh_degree_out}"
         print(_row("SH rest", e["sh_rest"], f"({kept})", b.get("sh_rest")) if e["sh_rest"] else
               f"  SH rest      {kept}")
-    return 0

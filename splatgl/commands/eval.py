@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from ..atomic import atomic_write_text
@@ -19,6 +20,7 @@ from ..settings import RendererKind
 from ._common import (add_scene_arguments, add_settings_arguments, demo_scene_path, load_scene_arg,
                       settings_from_args)
 from ._spz_axes import check_not_sharded
+from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "eval"
 ORDER = 25
@@ -37,6 +39,7 @@ same as scikit-image with gaussian_weights=True, use_sample_covariance=False).
 examples:
   splatgl eval point_cloud.ply --dataset garden --images images_4 --split test
   splatgl eval lego.ply --dataset nerf_synthetic/lego --split test --background 1,1,1 --json lego.json
+  splatgl eval scene.ply --dataset garden --json - | jq .mean        (the JSON alone on stdout)
   splatgl eval scene.ply --dataset garden --csv scores.csv --sheet worst.png --worst 4
   splatgl eval scene.ply --dataset garden --workers 2          (views split over 2 processes)
   splatgl eval scene.ply --dataset /shared/garden --executor ray --ray-address auto"""
@@ -59,7 +62,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="renderer (default quad)")
     o = p.add_argument_group("reports")
     o.add_argument("--csv", type=Path, default=None, metavar="FILE", help="write per-view scores and means as CSV")
-    o.add_argument("--json", type=Path, default=None, metavar="FILE", help="write per-view scores and means as JSON")
+    add_json_argument(o, "per-view scores and means")
     o.add_argument("--sheet", type=Path, default=None, metavar="FILE",
                    help="write a picture of the worst views: render | photograph | error heat map")
     o.add_argument("--worst", type=int, default=4, help="views on the sheet (default 4)")
@@ -77,9 +80,11 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(f"--max-width must be 0 or positive, got {args.max_width}")
     if args.sheet is not None:
         check_image_suffix(args.sheet, "--sheet")
+    check_json_target(args, {"SCENE": args.scene, "--csv": args.csv, "--sheet": args.sheet})
     # every report path checked before the views are scored (the same file twice, a missing
     # folder); the reports are then written all or none
-    outputs = OutputFiles({"--csv": args.csv, "--json": args.json, "--sheet": args.sheet})
+    json_file = None if json_to_stdout(args) else args.json
+    outputs = OutputFiles({"--csv": args.csv, "--json": json_file, "--sheet": args.sheet})
     views = load_dataset(args.dataset, args.images, args.split, args.max_width)
     if args.select:
         views = [views[i] for i in select_indices(args.select, len(views), str(args.dataset))]
@@ -99,20 +104,24 @@ def run(args: argparse.Namespace) -> int:
         with Renderer() as renderer:
             result, worst = evaluate(renderer, scene, views, settings, RendererKind(args.renderer),
                                      keep, default_progress())
-    print(result.table())
-    if run is not None:
-        print(summary(run, "views"))
+    text = sys.stderr if json_to_stdout(args) else sys.stdout   # stdout: the JSON alone
+    if not json_to_stdout(args):
+        print(result.table())
+        if run is not None:
+            print(summary(run, "views"))
     with outputs:
         if args.csv is not None:
             atomic_write_text(outputs.temp("--csv"), result.csv())
-        if args.json is not None:
+        if json_file is not None:
             atomic_write_text(outputs.temp("--json"), result.json())
         if args.sheet is not None:
             write_image(outputs.temp("--sheet"), worst_sheet(worst))
+    if json_to_stdout(args):
+        emit_json(args, result.json())
     if args.csv is not None:
-        print(f"wrote {args.csv}")
-    if args.json is not None:
-        print(f"wrote {args.json}")
+        print(f"wrote {args.csv}", file=text)
+    if json_file is not None:
+        print(f"wrote {json_file}")
     if args.sheet is not None:
-        print(f"wrote {args.sheet} ({len(worst)} worst views)")
+        print(f"wrote {args.sheet} ({len(worst)} worst views)", file=text)
     return 0

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 import warnings
 from pathlib import Path
 
 from ..formats import detect_format, load_scene
 from ..info import format_info, scene_info
 from ._spz_axes import add_spz_axes_argument
+from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "info"
 HELP = "print a scene's splat count, SH degree, bounds and value ranges"
@@ -25,7 +25,7 @@ ORDER = 20
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", type=Path, help="scene file (.ply, .splat, ...)")
-    parser.add_argument("--json", action="store_true", help="print the statistics as JSON")
+    add_json_argument(parser, "the statistics")
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop rows holding NaN/Inf or degenerate quaternions (with a "
                              "warning) instead of rejecting the file")
@@ -33,6 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_json_target(args, {"SCENE": args.scene})
     scene = load_scene(args.scene, drop_invalid=args.drop_invalid, spz_axes=args.spz_axes)
     info = {"format": detect_format(args.scene).NAME, **scene_info(scene)}
     if info["format"] == "spz":
@@ -40,8 +41,8 @@ def run(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():  # a conflict with the file was reported on loading
             warnings.simplefilter("ignore")
             info["spz_axes"] = read_axes(args.scene, args.spz_axes).as_dict()
-    if args.json:
-        print(json.dumps({"path": str(args.scene), **info}, indent=2))
-    else:
+    if not json_to_stdout(args):
         print(format_info(args.scene, scene, info))
+    if args.json is not None:
+        emit_json(args, {"path": str(args.scene), **info}, indent=2)
     return 0

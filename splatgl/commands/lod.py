@@ -51,11 +51,12 @@ def default_output(scene: Path) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     from ..lod.build import build_hierarchy
-    from ..lod.io import write_lod
+    from ..lod.io import check_lod_name, write_lod
 
     if not 2 <= args.branching <= 64:
         raise SplatglError(f"--branching must be 2-64, got {args.branching}")
     out = args.output or default_output(args.scene)
+    check_lod_name(out)
     check_output_path(out, "-o", overwrite=args.force)  # before the (long) build
     progress = StderrProgress() if enabled() else None
     scene = load_scene(args.scene, progress=progress)

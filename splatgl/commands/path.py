@@ -12,7 +12,7 @@ from ..datasets.views import View
 from ..errors import SplatglError
 from ..paths import ellipse, interpolate, orbit, path_json, spiral
 from ..paths.keyframes import write_path
-from ._common import add_scene_arguments, load_scene_arg, positive_int
+from ._common import add_scene_arguments, load_scene_arg, positive_float, positive_int
 
 NAME = "path"
 ORDER = 15
@@ -43,10 +43,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     def common(q: argparse.ArgumentParser) -> None:
         q.add_argument("-o", "--output", type=Path, required=True, help="path file to write (.json)")
-        q.add_argument("--frames", type=int, default=120, help="frames in the path (default 120)")
+        q.add_argument("--frames", type=positive_int, default=120, help="frames in the path (default 120)")
         q.add_argument("--as", dest="fmt", choices=FORMATS, default="splatgl",
                        help="file format (default splatgl)")
-        q.add_argument("--fps", type=float, default=30.0, help="frame rate stored in the file (default 30)")
+        q.add_argument("--fps", type=positive_float, default=30.0,
+                       help="frame rate stored in the file (default 30)")
+        q.add_argument("--force", action="store_true", help="replace the output if it exists")
 
     def cameras(q: argparse.ArgumentParser) -> None:
         q.add_argument("--cameras", required=True, metavar="SOURCE",
@@ -76,10 +78,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.frames < 1:
-        raise SplatglError(f"--frames must be positive, got {args.frames}")
     if args.output.suffix.lower() != ".json":
         raise SplatglError(f"{args.output}: path files are JSON; name the output *.json")
+    if args.output.exists() and not args.force:
+        raise SplatglError(f"{args.output}: exists; use --force to replace it")
     if args.generator == "orbit":
         scene = load_scene_arg(args)
         if not 0.0 < args.fov < 180.0:

@@ -17,7 +17,7 @@ from ..render import Renderer, render_reference_layers
 from ..settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args)
-from ._render_path import add_path_arguments, run_path
+from ._render_path import add_path_arguments, refuse_path_only_options, run_path
 from ..stereo import StereoLayout, combine, eye_cameras
 
 NAME = "render"
@@ -57,7 +57,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="level of detail (SCENE from 'splatgl lod'): draw the coarsest nodes whose "
                         "bounding sphere projects to at most PX pixels (e.g. 1)")
     p.add_argument("--lod-budget", type=int, default=None, metavar="N",
-                   help="level of detail: the finest cut of at most N nodes per view")
+                   help="level of detail: the finest cut of at most N nodes per view (with "
+                        "--lod-threshold, never finer than PX)")
     p.add_argument("--lod-blend", type=float, default=None, metavar="RATIO",
                    help="level of detail: nodes projecting to between PX and RATIO x PX pixels are "
                         "drawn as a blend of themselves and their children (opacity weights), so "
@@ -72,17 +73,20 @@ def run(args: argparse.Namespace) -> int:
     if args.path is not None:
         return run_path(args)
     args.output = Path(args.output)
+    refuse_path_only_options(args)
     kind = RendererKind(args.renderer)
     check_convention(args, kind)
     if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
         raise SplatglError(f"{args.depth_png}: --depth-png needs a .png or .tif file name")
     stereo = StereoLayout(args.stereo_layout) if args.stereo is not None else None
-    if stereo is StereoLayout.SEPARATE:
-        names = {f"-o ({eye} eye)": args.output.with_name(f"{args.output.stem}_{eye}{args.output.suffix}")
-                 for eye in ("left", "right")}
+    if stereo is StereoLayout.SEPARATE:   # each eye its own image (and depth preview)
+        names = {f"-o ({eye} eye)": _eye_name(args.output, eye) for eye in ("left", "right")}
+        depth_names = {f"--depth-png ({eye} eye)": _eye_name(args.depth_png, eye)
+                       for eye in ("left", "right")} if args.depth_png is not None else {}
     else:
         names = {"-o": args.output}
-    outputs = OutputFiles({**names, "--depth-png": args.depth_png})
+        depth_names = {"--depth-png": args.depth_png}
+    outputs = OutputFiles({**names, **depth_names})
     check_image_suffix(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     scene, settings, camera = inputs_from_args(args)
     want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
@@ -102,9 +106,13 @@ def run(args: argparse.Namespace) -> int:
         kind_text = kind.value
     if stereo is StereoLayout.SEPARATE:
         with outputs:
-            for key, eye in zip(names, eyes):
-                write_image(outputs.temp(key), eye.rgba, args.bit_depth,
-                            depth=eye.expected_depth() if want_depth else None)
+            for key, depth_key, eye in zip(names, depth_names or (None, None), eyes):
+                depth = eye.expected_depth() if want_depth else None
+                write_image(outputs.temp(key), eye.rgba, args.bit_depth, depth=depth)
+                if depth_key is not None:
+                    write_image(outputs.temp(depth_key), depth_preview(depth, eye.alpha))
+        for path in depth_names.values():
+            print(f"wrote {path} (expected depth)")
         for path in names.values():
             print(f"wrote {path} ({camera.width}x{camera.height}, {scene.count} splats, {kind_text})")
         _print_timings(args, gl_name, times)
@@ -121,6 +129,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {args.output} ({width}x{height}, {scene.count} splats, {kind_text})")
     _print_timings(args, gl_name, times)
     return 0
+
+
+def _eye_name(path: Path, eye: str) -> Path:
+    """``OUT_left.EXT`` / ``OUT_right.EXT``: one eye's file of --stereo-layout separate."""
+    return path.with_name(f"{path.stem}_{eye}{path.suffix}")
 
 
 def _print_timings(args: argparse.Namespace, gl_name: str, times) -> None:

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 from ..errors import SplatglError
 from ..stress import CASES, case_by_name
 from ..stress.run import RENDERERS, format_report, results_json, run_cases
+from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "stress"
 ORDER = 80
@@ -27,7 +27,8 @@ guards added to the renderers and what failed before each.  Exit status 1 when a
 examples:
   splatgl stress
   splatgl stress --case far_1e7 --case near_plane
-  splatgl stress --json --skip-slow"""
+  splatgl stress --json --skip-slow
+  splatgl stress --skip-slow --json stress.json"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run only this renderer (repeatable; default all)")
     p.add_argument("--skip-slow", action="store_true",
                    help="leave out the slow cases (the 8192 x 8192 image, ~40 s and ~10 GB)")
-    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    add_json_argument(p, "the report")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,18 +47,19 @@ def run(args: argparse.Namespace) -> int:
         cases = [case_by_name(n) for n in args.case] if args.case else list(CASES)
     except KeyError as exc:
         raise SplatglError(exc.args[0]) from None
+    check_json_target(args)
     if args.skip_slow:
         cases = [c for c in cases if not c.slow]
     renderers = tuple(args.renderer) if args.renderer else RENDERERS
 
     def progress(case) -> None:
-        if not args.json:
+        if not json_to_stdout(args):
             print(f"running {case.name} ...", file=sys.stderr, flush=True)
 
     results = run_cases(cases, renderers, progress)
-    if args.json:
-        print(json.dumps(results_json(results), indent=2))
-    else:
+    if not json_to_stdout(args):
         print(format_report(results))
+    if args.json is not None:
+        emit_json(args, results_json(results), indent=2)
     failed = any(r.status in ("fail", "error") for res in results for r in res.rows)
     return 1 if failed else 0

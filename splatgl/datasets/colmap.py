@@ -6,8 +6,10 @@ the pixel centre of the top-left pixel is (0.5, 0.5), splatgl's convention too. 
 models: the undistorted PINHOLE ``(fx, fy, cx, cy)`` and SIMPLE_PINHOLE ``(f, cx, cy)``, and
 the fisheye models splatgl renders exactly (:mod:`splatgl.lens`, ``theta_d = theta (1 + k1
 theta^2 + ...)``): OPENCV_FISHEYE ``(fx, fy, cx, cy, k1, k2, k3, k4)``, SIMPLE_RADIAL_FISHEYE
-``(f, cx, cy, k)`` and RADIAL_FISHEYE ``(f, cx, cy, k1, k2)``.  Any other model is rejected by
-name (undistort with ``colmap image_undistorter`` first, as 3DGS training does).
+``(f, cx, cy, k)`` and RADIAL_FISHEYE ``(f, cx, cy, k1, k2)``.  The pinhole models with
+distortion terms (SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV) are pinholes when every term is 0;
+with any term nonzero, and any other model, the camera is rejected by name (undistort with
+``colmap image_undistorter`` first, as 3DGS training does).
 """
 
 from __future__ import annotations
@@ -32,6 +34,9 @@ MODELS = {
 }
 _BY_NAME = {name: (mid, n) for mid, (name, n) in MODELS.items()}
 SUPPORTED = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV_FISHEYE", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE")
+#: Pinhole models with distortion terms -> how many leading parameters are focal lengths and
+#: principal point (3: f, cx, cy; 4: fx, fy, cx, cy); the rest are distortion, all 0 for a pinhole.
+PINHOLE_WITH_DISTORTION = {"SIMPLE_RADIAL": 3, "RADIAL": 3, "OPENCV": 4, "FULL_OPENCV": 4}
 
 
 @dataclass(frozen=True)
@@ -149,11 +154,20 @@ def _read_images_txt(path: Path) -> list[tuple[str, np.ndarray, np.ndarray, int]
 
 def _intrinsics(path: Path, cam_id: int, cam: _Intrinsics) -> dict:
     """Camera keyword arguments (fx, fy, cx, cy, and projection/distortion for fisheyes)."""
-    if cam.model not in SUPPORTED:
-        raise CameraError(f"{path}: camera {cam_id}: COLMAP model {cam.model} has lens distortion, "
-                          f"which splatgl does not render; undistort the images first "
-                          f"(supported: {', '.join(SUPPORTED)})")
     p = cam.params
+    if cam.model in PINHOLE_WITH_DISTORTION:
+        n = PINHOLE_WITH_DISTORTION[cam.model]
+        if any(p[n:]):
+            terms = " ".join(f"{v:g}" for v in p[n:])
+            raise CameraError(f"{path}: camera {cam_id}: COLMAP model {cam.model} has nonzero lens "
+                              f"distortion ({terms}), which splatgl does not render; undistort the "
+                              "images first (colmap image_undistorter)")
+        return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2]) if n == 3 else \
+            dict(fx=p[0], fy=p[1], cx=p[2], cy=p[3])
+    if cam.model not in SUPPORTED:
+        raise CameraError(f"{path}: camera {cam_id}: COLMAP model {cam.model} is not one splatgl "
+                          f"renders; undistort the images first (supported: {', '.join(SUPPORTED)}, "
+                          f"and {', '.join(PINHOLE_WITH_DISTORTION)} with zero distortion)")
     if cam.model == "SIMPLE_PINHOLE":
         return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2])
     if cam.model == "PINHOLE":
@@ -169,6 +183,19 @@ def is_colmap_model(path: Path) -> bool:
     """Whether ``path`` is a folder holding a COLMAP model (.bin or .txt)."""
     return path.is_dir() and any((path / f"cameras{e}").is_file() and (path / f"images{e}").is_file()
                                  for e in (".bin", ".txt"))
+
+
+def incomplete_model(root: Path) -> str | None:
+    """What is missing where ``root`` (or its ``sparse/0``, ``sparse``) holds half a COLMAP
+    model, e.g. ``"garden/sparse/0: COLMAP model with cameras.bin but no images.bin"``; else None."""
+    for cand in (root, root / "sparse" / "0", root / "sparse"):
+        for ext in (".bin", ".txt"):
+            have = [n for n in ("cameras", "images", "points3D") if (cand / f"{n}{ext}").is_file()]
+            missing = [n for n in ("cameras", "images") if n not in have]
+            if have and missing:
+                return (f"{cand}: COLMAP model with {', '.join(n + ext for n in have)} but no "
+                        f"{' or '.join(n + ext for n in missing)}")
+    return None
 
 
 def find_model(root: Path) -> Path | None:

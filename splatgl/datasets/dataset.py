@@ -46,9 +46,16 @@ def split_views(views: list[View], split: Split) -> list[View]:
 
 
 def _with_photo_size(view: View, max_width: int) -> View:
+    """``view`` with its camera at its photograph's size; a photograph of another aspect (by
+    more than a pixel's rounding) would stretch the render, so it is refused."""
     if view.image is None:
         return view
     w, h = nerf.image_size(view.image)
+    cw, ch = view.camera.width, view.camera.height
+    if abs(w * ch - h * cw) > max(cw, ch):   # |w - cw h / ch| > 1 and |h - ch w / cw| > 1
+        raise CameraError(f"{view.image}: photograph {w}x{h} has another aspect than its camera's "
+                          f"{cw}x{ch} ({w / h:.4g} against {cw / ch:.4g}); the render would be "
+                          "stretched to it")
     if max_width and w > max_width:
         w, h = max_width, round(h * max_width / w)
     cam = view.camera
@@ -105,6 +112,9 @@ def load_dataset(root: str | Path, images: str | None = None, split: Split | str
         if missing is not None:
             raise CameraError(f"{folder / missing.name}: photograph of COLMAP image {missing.name!r} not found")
     else:
+        half = colmap.incomplete_model(root)
+        if half is not None and not any(root.glob("transforms*.json")):
+            raise CameraError(half)
         views, done = _nerf_views(root, images, split)
         missing = next((v for v in views if v.image is None), None)
         if missing is not None:

@@ -59,6 +59,9 @@ def load_source(path: str | Path) -> tuple[list[View], float | None]:
         for name in _JSON_NAMES:
             if (path / name).is_file():
                 return _from_json(path / name)
+        half = colmap.incomplete_model(path)
+        if half is not None:
+            raise CameraError(half)
         raise CameraError(f"{path}: folder holds no camera source (looked for a COLMAP model in "
                           f"it or sparse/0, and for {', '.join(_JSON_NAMES)})")
     if path.suffix.lower() in (".bin", ".txt"):
@@ -87,7 +90,8 @@ def load_cameras(path: str | Path, select: str | None = None) -> list[Camera]:
 
 def select_indices(spec: str, count: int, what: str = "cameras") -> list[int]:
     """Indices picked by ``spec`` among ``count``: comma-separated ``i`` or ``start:stop[:step]``
-    items (Python slice rules, negative indices count from the end)."""
+    items (Python slice rules, negative indices count from the end).  An index, or a slice
+    bound, beyond the cameras is refused (a slice is never clamped to them silently)."""
     out: list[int] = []
     for item in spec.split(","):
         item = item.strip()
@@ -98,6 +102,10 @@ def select_indices(spec: str, count: int, what: str = "cameras") -> list[int]:
         if not 1 <= len(parts) <= 3 or (len(parts) == 3 and parts[2] == 0) or (len(parts) == 1 and parts[0] is None):
             raise CameraError(f"{what}: --select item {item!r} is not an index or start:stop:step")
         if len(parts) > 1:
+            for name, bound in zip(("start", "stop"), parts[:2]):
+                if bound is not None and not -count <= bound <= count:
+                    raise CameraError(f"{what}: --select {item!r}: {name} {bound} out of range "
+                                      f"({count} cameras)")
             out.extend(range(count)[slice(*parts)])
             continue
         i = parts[0]

@@ -17,12 +17,23 @@ from ..scene import Scene, activate
 from .build import LodTree, bounding_radii, level_offsets
 
 ELEMENT = "lod_node"
+#: A level-of-detail file's name ends so (any ``.ply`` is read, but not ``.compressed.ply``).
+SUFFIX = ".lod.ply"
 _COMMENT = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
+
+
+def check_lod_name(path: Path) -> None:
+    """Refuse an output name that says another format (``out.png`` would hold a PLY)."""
+    name = Path(path).name.lower()
+    if not name.endswith(".ply") or name.endswith(".compressed.ply"):
+        raise SceneFormatError(path, f"a level-of-detail file is an INRIA PLY; name it *{SUFFIX}")
 
 
 def write_lod(path: Path, tree: LodTree) -> None:
     """Write ``tree`` (atomically: a temp file, checked to be complete, then renamed; a failed
-    write raises one line naming ``path``)."""
+    write raises one line naming ``path``) to a ``*.ply`` name (:func:`check_lod_name`)."""
+    path = Path(path)
+    check_lod_name(path)
     n = tree.level_size(0)
     leaves = tree.nodes.subset(slice(0, n))
     inner = tree.nodes.subset(slice(n, None))

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..camera import Camera
 from ..errors import SplatglError
-from ..lens import with_projection
+from ..lens import require_support, with_projection
 from ..stereo import StereoLayout, StereoRenderer
 from ..gl.context import REQUIRED_VERSION, create_glfw_context, create_glfw_window
 from ..render import Renderer
@@ -176,7 +176,8 @@ class Viewer:
             back = key == glfw.KEY_PAGE_UP or (key == glfw.KEY_N and self._shift)
             self.step_camera(-1 if back else 1)
         elif key == glfw.KEY_T:
-            self.toggle_renderer()
+            if self.kind is RendererKind.TILE or self._tile_allowed("T"):
+                self.toggle_renderer()
         elif glfw.KEY_0 <= key <= glfw.KEY_3:
             self.set_settings(sh_degree=key - glfw.KEY_0)
         elif key == glfw.KEY_P:
@@ -186,9 +187,15 @@ class Viewer:
             self.view = ViewMode.COLOR if self.view is ViewMode.DEPTH else ViewMode.DEPTH
         elif key == glfw.KEY_TAB:
             modes = list(ViewMode)
-            self.view = modes[(modes.index(self.view) + 1) % len(modes)]
+            view = modes[(modes.index(self.view) + 1) % len(modes)]
+            if view is ViewMode.DIFFERENCE and not self._tile_allowed("Tab"):
+                view = modes[(modes.index(view) + 1) % len(modes)]   # skip it
+            self.view = view
         elif key == glfw.KEY_C:
-            self.view = ViewMode.COLOR if self.view is ViewMode.DIFFERENCE else ViewMode.DIFFERENCE
+            if self.view is ViewMode.DIFFERENCE:
+                self.view = ViewMode.COLOR
+            elif self._tile_allowed("C"):
+                self.view = ViewMode.DIFFERENCE
         elif key == glfw.KEY_F12 or (key == glfw.KEY_S and ctrl):
             self.screenshot()
         elif key == glfw.KEY_I:
@@ -249,6 +256,16 @@ class Viewer:
         self._exact = (self.state, cam)
         self.message = f"training camera {self.camera_index + 1}/{len(self.cameras)}"
 
+    def _tile_allowed(self, key: str) -> bool:
+        """Whether the tile renderer can draw the current view (T, and the difference view's
+        other side); if not, the status line says why and the key changes nothing."""
+        try:
+            require_support(self.camera(), False, RendererKind.TILE.value, equirect=False)
+        except SplatglError as exc:
+            self.message = f"{key} refused: {str(exc).split(';')[0]}"
+            return False
+        return True
+
     def toggle_renderer(self) -> None:
         self.kind = RendererKind.TILE if self.kind is RendererKind.QUAD else RendererKind.QUAD
 
@@ -288,11 +305,15 @@ class Viewer:
                            f"stereo, IPD {self.options.stereo:g}")
 
     def screenshot(self) -> tuple[Path, Path]:
-        """Write what ``splatgl render`` writes from the current camera, and that camera."""
+        """Write what ``splatgl render`` writes from the current camera, and that camera; in
+        stereo, both eyes side by side (``--stereo``) from the camera of one eye's half."""
         glfw.make_context_current(self.window)
-        png, js, command = save_screenshot(self.renderer, self.scene, self.camera(), self.settings,
+        camera = self.camera()
+        if self.options.stereo is not None:
+            camera = controls.fit_camera(camera, max(camera.width // 2, 1), camera.height)
+        png, js, command = save_screenshot(self.renderer, self.scene, camera, self.settings,
                                            self.kind, self.options.screenshot_dir,
-                                           self.options.render_args)
+                                           self.options.render_args, self.options.stereo)
         self.message = f"saved {png.name} + {js.name}"
         print(f"wrote {png} and {js}; reproduce with:\n  {command}", flush=True)
         self._need_present = True

@@ -12,6 +12,7 @@ from ..output_files import OutputFiles
 from ..render import Renderer
 from ..scene import Scene
 from ..settings import GpuStorage, RendererKind, RenderSettings
+from ..stereo import StereoLayout, StereoRenderer
 
 PREFIX = "splatgl-view-"
 
@@ -43,15 +44,20 @@ def settings_arguments(settings: RenderSettings, kind: RendererKind) -> list[str
 
 
 def save_screenshot(renderer: Renderer, scene: Scene, camera: Camera, settings: RenderSettings,
-                    kind: RendererKind, directory: Path, render_args=()) -> tuple[Path, Path, str]:
+                    kind: RendererKind, directory: Path, render_args=(),
+                    stereo: float | None = None) -> tuple[Path, Path, str]:
     """Write the 8-bit PNG of ``camera``'s view (the renderer call and :func:`write_image` of
-    ``splatgl render``) and the camera JSON; returns (png, json, reproducing command line)."""
+    ``splatgl render``) and the camera JSON; returns (png, json, reproducing command line).
+    With ``stereo`` (an IPD), the PNG holds both eyes of ``camera`` side by side, as
+    ``splatgl render --stereo IPD`` writes it."""
     png, js = next_paths(Path(directory))
+    if stereo is not None:
+        renderer = StereoRenderer(renderer, stereo, StereoLayout.SIDE_BY_SIDE)
     rgba = renderer.render(scene, camera, settings, kind)
     files = OutputFiles({"image": png, "camera": js}, overwrite=False)
     with files:  # both or neither
         save_camera(files.temp("camera"), camera)
         write_image(files.temp("image"), rgba)
     argv = ["splatgl", "render", *render_args, "--camera", str(js), *settings_arguments(settings, kind),
-            "-o", str(png)]
+            *(["--stereo", repr(float(stereo))] if stereo is not None else []), "-o", str(png)]
     return png, js, shlex.join(argv)
