@@ -99,7 +99,8 @@ class Convention(enum.Enum):
     """Which published rasterizer's rules the NumPy reference follows (``Compat`` there).
 
     INRIA: the 3DGS rasterizer (Kerbl et al. 2023), the default and DESIGN.md's reference.
-    GSPLAT: gsplat's per-axis opacity-aware extent (up to 3.33 sigma), alpha clamp 0.999.
+    GSPLAT: gsplat's per-axis opacity-aware extent (up to 3.33 sigma), alpha clamp 0.999, and
+    a fisheye's sort key and near test on view z (splatgl's own: the distance).
     """
 
     INRIA = "inria"

@@ -108,6 +108,36 @@ def test_fisheye_culls_by_angle_and_distance():
     assert lens.fisheye_theta_limit(Camera.fisheye(64, 64, 360)) == pytest.approx(math.pi - 1e-2)
 
 
+def _at(r, theta_degrees):
+    """Camera-space point at distance ``r``, ``theta_degrees`` right of the optical axis."""
+    t = math.radians(theta_degrees)
+    return [r * math.sin(t), 0.0, r * math.cos(t)]
+
+
+def test_gsplat_convention_sorts_and_culls_a_fisheye_by_view_z():
+    """Under --convention gsplat a fisheye follows gsplat's EWA fisheye (view z for the sort
+    and the near test); splatgl's own rule is the distance.  Red is nearer (R 2.0 at 60
+    degrees, z 1.0), green farther (R 2.05 at 61.5 degrees) but of smaller z (0.978): the
+    conventions draw opposite splats in front.  A splat 95 degrees off the axis (z < 0) is in a
+    200-degree fisheye's view, which gsplat culls."""
+    from conftest import scene_with_colors
+    from splatgl.reference import render_reference
+
+    scene = scene_with_colors([_at(2.0, 60), _at(2.05, 61.5)], [[1, 0, 0, 0]] * 2,
+                              [[0.1] * 3] * 2, [0.99] * 2, [[1, 0, 0], [0, 1, 0]])
+    cam = Camera.fisheye(64, 64, 180)
+    for compat, front in (("inria", 0), ("gsplat", 1)):
+        ref = render_reference(scene, cam, RenderSettings(), np.float64, compat)
+        u, v = ref.projected.mean2d.mean(0)
+        rgb = ref.color[int(v), int(u)]
+        assert rgb[front] > 0.8 and rgb[1 - front] < 0.2, (compat, rgb)
+    behind = scene_with_colors([_at(2.0, 95)], [[1, 0, 0, 0]], [[0.1] * 3], [0.99], [[1, 1, 1]])
+    wide = Camera.fisheye(64, 64, 200)
+    visible = [render_reference(behind, wide, RenderSettings(), np.float64, c).projected.visible[0]
+               for c in ("inria", "gsplat")]
+    assert visible == [True, False]
+
+
 def test_ods_eye_sees_each_point_along_a_tangent_ray():
     cam = Camera(**{**{f: getattr(Camera.equirectangular(360, 180), f)
                        for f in Camera.__dataclass_fields__}, "ods_eye": -0.1})

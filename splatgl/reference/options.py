@@ -7,7 +7,9 @@ gsplat's conventions instead, so that the reference can be matched against that 
   (likewise y), tiles ``[floor((u - r_x) / 16), ceil((u + r_x) / 16))``; splats with
   ``o < 1/255`` or entirely off screen are culled;
 * alpha clamp 0.999 (selectable through :attr:`ReferenceOptions.alpha_max`);
-* early stop when ``T (1 - alpha) <= 1e-4`` (3DGS: ``< 1e-4``).
+* early stop when ``T (1 - alpha) <= 1e-4`` (3DGS: ``< 1e-4``);
+* a fisheye is near-culled and sorted by view z, as gsplat's EWA fisheye does (splatgl's own
+  rule is the distance; :func:`splatgl.reference.stages.gsplat_fisheye`).
 
 Everything else (projection, low pass, SH colour, key layout, pixel centres at ``j + 0.5``) is
 shared.

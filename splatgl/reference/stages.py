@@ -21,7 +21,7 @@ import dataclasses
 from .. import lens
 from .. import project as pm
 from .. import surfel as sf
-from ..camera import Camera
+from ..camera import Camera, Projection
 from ..constants import ALPHA_MIN, TILE_SIZE
 from ..scene import Scene, SplatKind
 from ..settings import RenderSettings, resolve_near
@@ -35,7 +35,9 @@ class ProjectedSplats:
 
     Attributes (N rows; ``float`` means the render dtype, float32 or float64):
         visible: (N,) bool; False for splats culled (near plane, ``det <= 0``, empty rect, ...).
-        depth: (N,) float view-space z (world units).
+        depth: (N,) float sort key (world units): view-space z; for fisheye and
+            equirectangular cameras the distance ``|p|`` (:func:`splatgl.lens.view_depth`),
+            except a fisheye under GSPLAT, which keeps gsplat's view z (:func:`gsplat_fisheye`).
         mean2d: (N, 2) float image coordinates (u, v) in pixels, centre convention ``j + 0.5``.
         conic: (N, 3) float inverse 2D covariance (a, b, c), ``Q = [[a, b], [b, c]]``, 1/px^2.
         opacity: (N,) float opacity in [0, 1] (times the AA factor when antialiasing).
@@ -184,9 +186,10 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     """Reference stage 1: project every splat and decide which tiles it touches.
 
     Culling (a culled row gets ``visible = False``, radius 0 and an empty rectangle): view z at
-    or below the near plane (``settings.near`` or :func:`resolve_near`), non-finite values,
-    ``det(cov2d) <= 0``, an empty tile rectangle; under GSPLAT also ``o < 1/255``, zero radii
-    and an extent entirely off screen.
+    or below the near plane (``settings.near`` or :func:`resolve_near`; lens cameras: the
+    distance and a fisheye's angle limit, but view z for a fisheye under GSPLAT,
+    :func:`gsplat_fisheye`), non-finite values, ``det(cov2d) <= 0``, an empty tile rectangle;
+    under GSPLAT also ``o < 1/255``, zero radii and an extent entirely off screen.
 
     2DGS surfels go to :func:`project_surfels` (same culling idea, the surfel's own box).
 
@@ -215,7 +218,11 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     finite = (np.isfinite(pr.mean2d).all(1) & np.isfinite(pr.conic).all(1)
               & np.isfinite(pr.cov2d).all((1, 2)) & np.isfinite(pr.color).all(1)
               & np.isfinite(pr.opacity))
-    visible = lens.lens_visible(pr.p_cam, view, near) if view.is_lens else pr.depth > near
+    as_gsplat = gsplat_fisheye(view, options)
+    if as_gsplat:  # gsplat's sort key and near test: view z, as for a pinhole camera
+        pr = dataclasses.replace(pr, depth=pr.p_cam[:, 2])
+    lens_rules = view.is_lens and not as_gsplat
+    visible = lens.lens_visible(pr.p_cam, view, near) if lens_rules else pr.depth > near
     ok = visible & finite & (pr.det > 0)
     pr, ok = _wrap_copies(pr, ok, scene, view)
     mean2d = np.where(ok[:, None], pr.mean2d, dt.type(0.0)).astype(dt)
@@ -237,6 +244,19 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
         opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
         rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
         grid=grid, wrap_period=lens.wrap_period(camera))
+
+
+def gsplat_fisheye(camera: Camera, options: ReferenceOptions) -> bool:
+    """True where the reference follows gsplat's EWA fisheye rather than splatgl's lens rules.
+
+    gsplat treats a fisheye as it does a pinhole camera: it culls centres with view z below the
+    near plane and sorts by view z.  splatgl's own rule for a fisheye (any convention but
+    GSPLAT) is the distance ``|p|`` for both (:func:`splatgl.lens.view_depth`): it stays
+    positive and ordered behind the camera plane, where a fisheye of 180 degrees or more
+    still sees, and does not change as the camera turns about its centre.  The two orders
+    differ wherever overlapping splats swap between them (docs/camera-models.md measures it).
+    """
+    return options.compat is Compat.GSPLAT and camera.projection is Projection.FISHEYE
 
 
 def _wrap_copies(pr: pm.Projected, ok: np.ndarray, scene: Scene, view: Camera
