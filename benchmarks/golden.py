@@ -38,7 +38,7 @@ SHARED = ("ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply",
 
 CAMERAS = {
     "default": [],
-    "close": ["--distance", "0.3", "--fov", "70"],
+    "close": ["--distance", "0.3"],
     "turned": ["--transform", '{"rotate_deg": [20, 75, -10]}', "--distance", "1.3"],
 }
 MODELS = {
@@ -66,6 +66,7 @@ VARIANTS = {
     "sh-degree-1": ["--sh-degree", "1"],
     "background": ["--background", "0.2,0.4,0.9"],
     "near": ["--near", "0.05"],
+    "fov-70-close": ["--fov", "70", "--distance", "0.3"],
     "stereo": ["--stereo", "0.05"],
     "stereo-top-bottom": ["--stereo", "0.05", "--stereo-layout", "top-bottom"],
     "tile-gsplat": ["--renderer", "tile", "--convention", "gsplat"],
