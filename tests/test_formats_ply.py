@@ -165,6 +165,15 @@ def test_detection_is_by_content(tmp_path):
     assert not splat.sniff((tmp_path / "scene.bin").read_bytes())
 
 
+def test_a_missing_format_module_is_an_error():
+    """A format module that cannot be imported (a broken install) is the import error, not a
+    format silently left out of detection and writing."""
+    from splatgl.formats import _modules
+
+    with pytest.raises(ModuleNotFoundError, match="no_such_format"):
+        _modules(("ply", "no_such_format"))
+
+
 def test_real_donut_ply(shared_scenes):
     scene = load_scene(shared_scenes / "ply" / "donut_sh0.ply")
     assert scene.count == 45_624

@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import tile_and_reference, assert_stages_match_reference, save_failure_images
+from conftest import tile_and_reference, assert_stages_match_reference, save_failure_images, shared_file
 from splatgl.camera import Camera, orbit
+from splatgl.formats import load_scene
 from splatgl.reference import emit_keys, project, render_reference, sort
 from splatgl.render import Renderer, default_camera
 from splatgl.scene import Scene
@@ -199,14 +200,7 @@ def test_moving_camera_re_sorts(ctx, artifacts_dir):
 
 def test_donut_matches_reference(ctx, shared_scenes, artifacts_dir):
     """The real donut (45k splats, SH degree 0), default camera, 256 x 192."""
-    try:
-        from splatgl.formats import load_scene
-    except ImportError:
-        pytest.skip("no scene reader")
-    path = shared_scenes / "ply" / "donut_sh0.ply"
-    if not path.is_file():
-        pytest.skip(f"{path} not found")
-    scene = load_scene(path)
+    scene = load_scene(shared_file(shared_scenes, "ply/donut_sh0.ply"))
     camera = default_camera(scene, 256, 192)
     got, ref = render_pair(ctx, scene, camera, RenderSettings())
     assert ref.alpha.max() > 0.9
