@@ -128,7 +128,10 @@ def error_bounds(scene: Scene, version: int = DEFAULT_VERSION) -> dict:
     rest = None
     if scene.sh_degree > 0:
         s = qz.SPZ_SH_SCALE
-        rest = 0.5 / s + qz.clip_excess(scene.sh[:, 1:], -1.0, 127.0 / s) + 1e-6
+        stored = scene.sh[:, 1:]
+        if flips_by_default(version):  # the bytes hold the flipped signs: the range clips those
+            stored = stored * FLIP_YZ_SH_SIGNS[: stored.shape[1], None]
+        rest = 0.5 / s + qz.clip_excess(stored, -1.0, 127.0 / s) + 1e-6
     return {
         "position": position,
         "scale": qz.relative_scale(log_step) * (1 + 1e-6) + 1e-6,
