@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
+from helpers import REPO
 
 
 def shared_scenes_dir() -> Path:
@@ -55,26 +55,6 @@ def gl_renderer():
     assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
 
 
-def save_failure_images(directory: Path, name: str, got, expected) -> str:
-    """Dump got / expected / |difference| (x10) images; returns a note for assertion messages."""
-    import numpy as np
-
-    from splatgl.image_io import write_image
-
-    diff = np.abs(np.asarray(got, np.float32) - np.asarray(expected, np.float32))
-    paths = []
-    for tag, img in (("got", got), ("expected", expected), ("diff_x10", diff * 10)):
-        img = np.asarray(img, np.float32)
-        if img.ndim == 2:
-            img = np.repeat(img[..., None], 3, axis=-1)
-        if img.shape[-1] == 3:
-            img = np.concatenate([img, np.ones(img.shape[:2] + (1,), np.float32)], -1)
-        path = directory / f"{name}_{tag}.exr"
-        write_image(path, img)
-        paths.append(str(path))
-    return "images: " + ", ".join(paths)
-
-
 @pytest.fixture(scope="module")
 def ctx():
     """A bare headless context per module (for renderers built directly); checks that no GL
@@ -91,75 +71,3 @@ def ctx():
     error = context.error
     context.release()
     assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
-
-
-def scene_with_colors(means, quats, scales, opacities, rgb, kind=None):
-    """A scene from activated values whose SH degree-0 colour seen from anywhere is ``rgb``
-    (N, 3); ``kind`` defaults to 3DGS (pass SplatKind.SURFEL_2D with two scales)."""
-    import numpy as np
-
-    from splatgl.constants import SH_C0
-    from splatgl.scene import Scene, SplatKind
-
-    n = len(means)
-    sh = np.zeros((n, 1, 3))
-    sh[:, 0] = (np.asarray(rgb, float) - 0.5) / SH_C0
-    return Scene.from_activated(np.asarray(means, float), np.asarray(quats, float),
-                                np.asarray(scales, float), np.asarray(opacities, float), sh,
-                                kind or SplatKind.GAUSSIAN_3D)
-
-
-def assert_stages_match_reference(got, proj, min_keys: int = 0) -> None:
-    """The tile renderer's integer stages (``TileRenderer.debug_stages``) equal the NumPy
-    reference's for the same projection: tiles touched, rectangles, emitted and sorted keys and
-    values, and tile ranges, bit for bit."""
-    import numpy as np
-
-    from splatgl.reference import emit_keys, sort, tile_ranges
-
-    np.testing.assert_array_equal(got.tiles_touched, proj.tiles_touched)
-    np.testing.assert_array_equal(got.rect_min, proj.rect_min)
-    np.testing.assert_array_equal(got.rect_max, proj.rect_max)
-    keys, values = emit_keys(proj)
-    assert len(keys) > min_keys  # the scene really spans many tiles
-    np.testing.assert_array_equal(got.emitted_keys, keys)
-    np.testing.assert_array_equal(got.emitted_values, values)
-    keys, values = sort(keys, values)
-    np.testing.assert_array_equal(got.keys, keys)
-    np.testing.assert_array_equal(got.values, values)
-    np.testing.assert_array_equal(got.ranges, tile_ranges(keys, proj.n_tiles))
-
-
-def tile_and_reference(ctx, scene, camera, settings):
-    """(tile renderer's RenderOutput, float32 NumPy reference image) of one view; the tile
-    renderer is released afterwards."""
-    import numpy as np
-
-    from splatgl.reference import render_reference
-    from splatgl.tile import TileRenderer
-
-    renderer = TileRenderer(ctx, scene, settings)
-    try:
-        got = renderer.render_layers(camera)
-    finally:
-        renderer.release()
-    return got, render_reference(scene, camera, settings, np.float32)
-
-
-def shared_file(shared_scenes: Path, name: str) -> Path:
-    """``shared_scenes / name``, skipping the test with the reason when that file is absent."""
-    path = shared_scenes / name
-    if not path.is_file():
-        pytest.skip(f"{path} not present")
-    return path
-
-
-def summary_counts(out: str, unit: str) -> tuple[list[int], int]:
-    """Per-worker counts and the total of the summary that ``--workers`` / ``--executor ray``
-    print (``worker i (host, pid P): N unit in S s, R unit/s`` ... ``total: N unit in ...``)."""
-    lines = [line for line in out.splitlines() if line.startswith(("worker ", "total: "))]
-    assert lines and all(f" {unit} in " in line for line in lines), out
-    workers = [int(line.split("): ")[1].split()[0]) for line in lines if line.startswith("worker ")]
-    totals = [int(line.split()[1]) for line in lines if line.startswith("total: ")]
-    assert len(totals) == 1, out
-    return workers, totals[0]

@@ -23,7 +23,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import shared_file
+from helpers import shared_file
 from splatgl.cli import main
 from splatgl.formats import load_scene
 from splatgl.image_io import read_image

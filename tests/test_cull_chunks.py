@@ -190,7 +190,7 @@ def test_real_scene_orders_unchanged(shared_scenes, name):
     from splatgl.render import default_camera
     from splatgl.settings import RenderSettings, resolve_near
 
-    from conftest import shared_file
+    from helpers import shared_file
 
     scene = load_scene(shared_file(shared_scenes, name), progress=lambda *a: None)
     near = resolve_near(RenderSettings(), scene.robust_radius)

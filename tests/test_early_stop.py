@@ -248,7 +248,7 @@ def test_half_precision_target_is_unchanged(gl_renderer):
 def test_no_stop_error_against_reference_never_grows(gl_renderer, shared_scenes):
     """The accuracy claim on a real scene: per pixel, the stopped image is no farther from the
     reference than the unstopped one (up to float slack), so PSNR cannot drop."""
-    from conftest import shared_file
+    from helpers import shared_file
     from splatgl.formats import load_scene
     from splatgl.metrics import image_errors
     from splatgl.render import render_reference_rgba

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import summary_counts
+from helpers import summary_counts
 from splatgl.camera import Camera, orbit
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path

@@ -17,7 +17,7 @@ import pytest
 from splatgl.formats import gltf, load_scene, save_scene, sog
 
 from test_formats_fuzz import check_case, corruptions, truncations
-from test_convert import random_scene
+from helpers import random_scene
 
 #: Replacement values for JSON damage: wrong types, huge and negative numbers.
 ODD_VALUES = [None, "x", -1, 0, 1e308, 2 ** 40, [], {}, [1, "a"], True, [[1, 2], [3]], 3.5]

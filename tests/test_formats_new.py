@@ -18,7 +18,7 @@ from splatgl.formats import compressed_ply_write, load_scene, save_scene, sog, s
 from splatgl.formats import quantise as qz
 from splatgl.scene import Scene
 
-from test_convert import random_scene
+from helpers import random_scene
 
 SCHEMA_DIR = Path(__file__).parent / "data" / "gltf_schema"
 

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, shared_file
+from helpers import REPO, shared_file
 from splatgl.constants import SH_C0
 from splatgl.convert import ATTRIBUTES, conversion_error
 from splatgl.formats import compressed_ply, load_scene, save_scene, writer_for

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import shared_file
+from helpers import shared_file
 from splatgl import lens
 from splatgl import project as pm
 from splatgl.camera import Camera, Projection, look_at

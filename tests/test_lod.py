@@ -23,7 +23,7 @@ from splatgl.render import default_camera
 from splatgl.scene import Scene
 from splatgl.settings import RenderSettings
 
-from conftest import shared_file
+from helpers import shared_file
 
 
 def _scene(n: int, seed: int = 0, degree: int = 1) -> Scene:

@@ -23,7 +23,7 @@ from splatgl.render import default_camera
 from splatgl.scene import Scene
 from splatgl.settings import Preprocess, RenderSettings
 
-from conftest import shared_file
+from helpers import shared_file
 
 N = 3000
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from conftest import shared_file
+from helpers import shared_file
 from splatgl.camera import Camera, look_at
 from splatgl.datasets.sources import load_source
 from splatgl.errors import CameraError

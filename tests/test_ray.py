@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from splatgl.cli import main
-from conftest import summary_counts
+from helpers import summary_counts
 from splatgl.commands._common import demo_scene_path
 from test_eval import N_VIEWS, dataset  # noqa: F401 (the module's fixture: a synthetic dataset)
 from splatgl.executor import KILL_ONCE_ENV

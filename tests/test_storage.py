@@ -17,7 +17,7 @@ from splatgl.settings import GpuStorage, Preprocess, RendererKind, RenderSetting
 from splatgl.storage import (compact_bounds, decode_compact, encode_compact, gpu_bytes_per_splat,
                              scale_exponent)
 
-from conftest import shared_file
+from helpers import shared_file
 
 #: The shared real scenes of the image-cost test (all SH0; the fixture is SH3 and tiny).
 REAL = ("ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply",

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import summary_counts
+from helpers import summary_counts
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.image_io import read_image

@@ -1,0 +1,143 @@
+"""What many test modules share: the seeded random-scene factory, small scene builders, real
+scene lookup, image checks and output parsing.
+
+Test modules import these with ``from helpers import ...`` (pytest puts ``tests/`` on the path);
+``conftest.py`` holds only fixtures and hooks, since pytest advises against importing it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from splatgl.camera import orbit
+from splatgl.constants import SH_C0, sh_coeff_count
+from splatgl.scene import Scene, SplatKind
+
+REPO = Path(__file__).resolve().parent.parent
+
+#: Layouts for :func:`random_scene` (its keyword arguments).  ``IN_VIEW``: splats in front of an
+#: identity camera (looking down +z, z about 2 to 6), small (scales ~exp(-2.3)), mixed
+#: opacities; what the reference and tile renderer tests draw.
+IN_VIEW = dict(center=(0.0, 0.0, 4.0), spread=(1.0, 0.8, 0.7), log_scale=(-2.3, 0.6),
+               logit=(0.0, 2.0), sh_sd=0.4, wild_colors=0.0)
+#: Splats in a box z 2..8 in front of an identity camera with scales 0.01..0.3 (the tile tests'
+#: 128 x 96 view).
+IN_DEPTH = dict(center=(0.0, 0.0, 5.0), spread=(1.0, 0.75, 1.0), log_scale=(-2.9, 0.6),
+                logit=(0.0, 2.0), sh_sd=0.5, wild_colors=0.0)
+#: 2DGS surfels around the origin (sigma 0.6), scales ~exp(-2.6), mixed opacities (for orbit
+#: cameras).
+SURFELS = dict(kind=SplatKind.SURFEL_2D, center=(0.0, 0.0, 0.0), spread=0.6,
+               log_scale=(-2.6, 0.5), logit=(0.5, 1.5), sh_sd=0.4, wild_colors=0.0)
+#: A camera pose 3 units from the origin looking at ``SURFELS`` (azimuth 30, elevation 20).
+SURFELS_POSE = orbit([0.0, 0.0, 0.0], 3.0, 30.0, 20.0)
+
+
+def random_scene(n: int, seed: int = 0, degree: int = 0,
+                 kind: SplatKind = SplatKind.GAUSSIAN_3D, *, center=0.0, spread=2.0,
+                 log_scale: tuple[float, float] = (-4.0, 1.5),
+                 logit: tuple[float, float] = (0.0, 3.0), sh_sd: float = 0.3,
+                 wild_colors: float = 0.1) -> Scene:
+    """``n`` seeded splats of raw values as a trainer writes them (the one scene factory).
+
+    Means ``center + spread * N(0, 1)`` (``spread`` per axis or one number); unnormalised
+    quaternions ``N(0, 1)^4``; log scales and opacity logits normal with (mean, sd)
+    ``log_scale`` and ``logit``; SH coefficients ``N(0, sh_sd)`` up to ``degree``, and for the
+    first ``wild_colors`` fraction of rows a DC term ``N(0, 4)``, colours far outside 0-1.  The
+    defaults suit file round trips; the layouts above place splats for rendering.  ``kind``
+    SURFEL_2D gives two scales per splat.
+    """
+    rng = np.random.default_rng(seed)
+    means = np.asarray(center, np.float64) + np.asarray(spread, np.float64) * rng.standard_normal((n, 3))
+    quats = rng.standard_normal((n, 4))
+    nscale = 2 if kind is SplatKind.SURFEL_2D else 3
+    log_scales = rng.normal(*log_scale, (n, nscale))
+    logits = rng.normal(*logit, n)
+    sh = rng.normal(0.0, sh_sd, (n, sh_coeff_count(degree), 3))
+    wild = int(n * wild_colors)
+    if wild:
+        sh[:wild, 0] = rng.normal(0.0, 4.0, (wild, 3))
+    return Scene(means, quats, log_scales, logits, sh, kind)
+
+
+def scene_with_colors(means, quats, scales, opacities, rgb, kind=None) -> Scene:
+    """A scene from activated values whose SH degree-0 colour seen from anywhere is ``rgb``
+    (N, 3); ``kind`` defaults to 3DGS (pass SplatKind.SURFEL_2D with two scales)."""
+    n = len(means)
+    sh = np.zeros((n, 1, 3))
+    sh[:, 0] = (np.asarray(rgb, float) - 0.5) / SH_C0
+    return Scene.from_activated(np.asarray(means, float), np.asarray(quats, float),
+                                np.asarray(scales, float), np.asarray(opacities, float), sh,
+                                kind or SplatKind.GAUSSIAN_3D)
+
+
+def shared_file(shared_scenes: Path, name: str) -> Path:
+    """``shared_scenes / name``, skipping the test with the reason when that file is absent."""
+    path = shared_scenes / name
+    if not path.is_file():
+        pytest.skip(f"{path} not present")
+    return path
+
+
+def save_failure_images(directory: Path, name: str, got, expected) -> str:
+    """Dump got / expected / |difference| (x10) images; returns a note for assertion messages."""
+    from splatgl.image_io import write_image
+
+    diff = np.abs(np.asarray(got, np.float32) - np.asarray(expected, np.float32))
+    paths = []
+    for tag, img in (("got", got), ("expected", expected), ("diff_x10", diff * 10)):
+        img = np.asarray(img, np.float32)
+        if img.ndim == 2:
+            img = np.repeat(img[..., None], 3, axis=-1)
+        if img.shape[-1] == 3:
+            img = np.concatenate([img, np.ones(img.shape[:2] + (1,), np.float32)], -1)
+        path = directory / f"{name}_{tag}.exr"
+        write_image(path, img)
+        paths.append(str(path))
+    return "images: " + ", ".join(paths)
+
+
+def assert_stages_match_reference(got, proj, min_keys: int = 0) -> None:
+    """The tile renderer's integer stages (``TileRenderer.debug_stages``) equal the NumPy
+    reference's for the same projection: tiles touched, rectangles, emitted and sorted keys and
+    values, and tile ranges, bit for bit."""
+    from splatgl.reference import emit_keys, sort, tile_ranges
+
+    np.testing.assert_array_equal(got.tiles_touched, proj.tiles_touched)
+    np.testing.assert_array_equal(got.rect_min, proj.rect_min)
+    np.testing.assert_array_equal(got.rect_max, proj.rect_max)
+    keys, values = emit_keys(proj)
+    assert len(keys) > min_keys  # the scene really spans many tiles
+    np.testing.assert_array_equal(got.emitted_keys, keys)
+    np.testing.assert_array_equal(got.emitted_values, values)
+    keys, values = sort(keys, values)
+    np.testing.assert_array_equal(got.keys, keys)
+    np.testing.assert_array_equal(got.values, values)
+    np.testing.assert_array_equal(got.ranges, tile_ranges(keys, proj.n_tiles))
+
+
+def tile_and_reference(ctx, scene, camera, settings):
+    """(tile renderer's RenderOutput, float32 NumPy reference image) of one view; the tile
+    renderer is released afterwards."""
+    from splatgl.reference import render_reference
+    from splatgl.tile import TileRenderer
+
+    renderer = TileRenderer(ctx, scene, settings)
+    try:
+        got = renderer.render_layers(camera)
+    finally:
+        renderer.release()
+    return got, render_reference(scene, camera, settings, np.float32)
+
+
+def summary_counts(out: str, unit: str) -> tuple[list[int], int]:
+    """Per-worker counts and the total of the summary that ``--workers`` / ``--executor ray``
+    print (``worker i (host, pid P): N unit in S s, R unit/s`` ... ``total: N unit in ...``)."""
+    lines = [line for line in out.splitlines() if line.startswith(("worker ", "total: "))]
+    assert lines and all(f" {unit} in " in line for line in lines), out
+    workers = [int(line.split("): ")[1].split()[0]) for line in lines if line.startswith("worker ")]
+    totals = [int(line.split()[1]) for line in lines if line.startswith("total: ")]
+    assert len(totals) == 1, out
+    return workers, totals[0]
