@@ -7,7 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from helpers import REPO
+pytest.register_assert_rewrite("helpers")
+
+from helpers import REPO  # noqa: E402 (after the rewrite hook)
 
 
 def shared_scenes_dir() -> Path:

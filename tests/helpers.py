@@ -141,3 +141,84 @@ def summary_counts(out: str, unit: str) -> tuple[list[int], int]:
     totals = [int(line.split()[1]) for line in lines if line.startswith("total: ")]
     assert len(totals) == 1, out
     return workers, totals[0]
+
+
+# --- damaged files (tests/test_formats_fuzz*.py) ----------------------------------------------
+
+#: A load of a damaged file may hold at most this many bytes of Python / NumPy memory per byte
+#: of the file, plus MEMORY_SLACK, at its peak: a damaged header count must be refused, not
+#: allocated.  Undamaged files peak at 2.2-17.9 bytes per byte (compressed PLY and SPZ highest;
+#: the 69-byte minimal SPZ at 52 KB, inside the slack).  Memory, unlike time, does not change
+#: with the load on the machine.
+MEMORY_PER_BYTE = 32
+MEMORY_SLACK = 4 << 20
+
+
+def truncations(size: int, cases: int, rng) -> list[int]:
+    """Fixed lengths (empty, magic only, header-sized) and ``cases`` random ones, all < size."""
+    fixed = [0, 1, 4, 15, 16, 100, size // 2, size - 1]
+    return sorted({n for n in fixed if n < size} | set(rng.integers(0, size, cases).tolist()))
+
+
+def corruptions(data: bytes, cases: int, rng) -> list[bytes]:
+    """Copies of ``data`` with 1-8 random bytes replaced, in the first 256 bytes (headers) for
+    half of the cases and anywhere for the rest; plus one with a 0xff run over a header count."""
+    out = []
+    for case in range(cases):
+        buf = bytearray(data)
+        span = min(len(buf), 256) if case % 2 == 0 else len(buf)
+        for pos in rng.integers(0, span, rng.integers(1, 9)):
+            buf[pos] = int(rng.integers(0, 256))
+        out.append(bytes(buf))
+    for start in (8, 12):  # SPZ numPoints / ksplat counts / PLY header text
+        buf = bytearray(data)
+        buf[start:start + 4] = b"\xff\xff\xff\xff"
+        out.append(bytes(buf))
+    return out
+
+
+def assert_clean_line(message: str, what: str) -> None:
+    """One printable line of bounded length: no control characters, no NUL runs."""
+    from splatgl.formats._messages import MESSAGE_LIMIT
+
+    assert message.isprintable(), f"{what}: control characters in {message[:200]!r}"
+    assert len(message) <= MESSAGE_LIMIT, f"{what}: {len(message)}-character message"
+
+
+def check_case(read, path: Path, data: bytes, what: str, must_fail: bool = False):
+    """Load ``data`` as ``path``: a scene, or a SceneFormatError with one clean line; never
+    another exception, a NumPy warning or a peak of more than MEMORY_PER_BYTE bytes per byte
+    of ``data`` (plus MEMORY_SLACK).  Returns the scene, or the message."""
+    import tracemalloc
+    import warnings
+
+    from splatgl.errors import SceneFormatError
+
+    path.write_bytes(data)
+    result = None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        tracing = tracemalloc.is_tracing()
+        if tracing:
+            tracemalloc.reset_peak()
+        else:
+            tracemalloc.start()
+        base = tracemalloc.get_traced_memory()[0]
+        try:
+            result = read(path)
+        except SceneFormatError as exc:
+            result = str(exc)
+            assert_clean_line(result, what)
+        except Exception as exc:  # noqa: BLE001 - the point of the test
+            pytest.fail(f"{what}: {type(exc).__name__}: {exc}")
+        finally:
+            peak = tracemalloc.get_traced_memory()[1] - base
+            if not tracing:
+                tracemalloc.stop()
+    limit = MEMORY_PER_BYTE * len(data) + MEMORY_SLACK
+    assert peak <= limit, f"{what}: peak memory {peak} bytes > {limit} for a {len(data)}-byte file"
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], \
+        f"{what}: warnings {[str(w.message) for w in caught]}"
+    if must_fail:
+        assert isinstance(result, str), f"{what}: loaded without an error"
+    return result
