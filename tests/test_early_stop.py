@@ -40,7 +40,7 @@ def _settings(**change) -> RenderSettings:
 
 
 @given(st.integers(0, 5_000_000), st.floats(1e-4, 1.0), st.floats(0.5, 3.0), st.integers(1, 10_000))
-@hsettings(max_examples=200, deadline=None)
+@hsettings(max_examples=200)
 def test_batch_bounds_cover_the_order_in_bounded_increasing_batches(count, frac, growth, min_batch):
     b = es.batch_bounds(count, frac, growth, min_batch)
     assert b[0] == 0 and b[-1] == count

@@ -227,8 +227,7 @@ def test_splat_writer_drops_sh_with_warning_and_refuses_surfels(tmp_path):
         splat.write(tmp_path / "b.splat", random_scene(17, 15, kind=SplatKind.SURFEL_2D))
 
 
-@settings(max_examples=25, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(values=hnp.arrays(np.float32, (6, 14),
                          elements=st.floats(width=32, allow_nan=False, allow_infinity=False)))
 def test_any_finite_float32_round_trips_in_every_encoding(tmp_path, values):

@@ -17,7 +17,7 @@ from splatgl.settings import RenderSettings
 
 from helpers import IN_VIEW, random_scene
 
-FAST = hsettings(max_examples=25, deadline=None, derandomize=True)
+FAST = hsettings(max_examples=25)
 unit = st.floats(0.0, 1.0)
 
 
