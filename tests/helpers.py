@@ -222,3 +222,29 @@ def check_case(read, path: Path, data: bytes, what: str, must_fail: bool = False
     if must_fail:
         assert isinstance(result, str), f"{what}: loaded without an error"
     return result
+
+
+# --- signals mid-run ---------------------------------------------------------------------------
+
+
+def start_gated(argv: list[str], frames: int, processes: int = 1, **popen):
+    """Start ``python -m splatgl *argv`` with the frame gate (``frame_gate/sitecustomize.py``):
+    each rendering process (the command itself, or each of its ``processes`` workers) writes
+    ``frames`` frames and then waits.  Returns the process once all of them wait, so a signal
+    sent then always lands mid-run with exactly those frames on disk."""
+    import os
+    import subprocess
+    import sys
+
+    gate = str(Path(__file__).parent / "frame_gate")
+    env = dict(os.environ, SPLATGL_TEST_GATE=str(frames),
+               PYTHONPATH=os.pathsep.join(p for p in (gate, os.environ.get("PYTHONPATH")) if p))
+    proc = subprocess.Popen([sys.executable, "-m", "splatgl", *argv], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, **popen)
+    for _ in range(processes):
+        line = proc.stdout.readline()  # blocks until a process waits at the gate (or all exit)
+        if not line.startswith("gate "):
+            proc.kill()
+            _, err = proc.communicate()
+            pytest.fail(f"no process reached the frame gate: {line!r}; stderr: {err[-2000:]}")
+    return proc
