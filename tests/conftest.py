@@ -54,11 +54,10 @@ def artifacts_dir() -> Path:
 def gl_renderer():
     """A :class:`splatgl.render.Renderer` on a headless context, shared by a test module.
 
-    Skips the module where no OpenGL context can be made.  After the module, checks that no GL
-    error was left pending.
+    Skips the module where no OpenGL context can be made.  Every test using it is checked for
+    GL errors (:func:`gl_error_check`).
     """
     from splatgl.errors import ContextError
-    from splatgl.gl.context import make_current
     from splatgl.render import Renderer
 
     try:
@@ -66,25 +65,50 @@ def gl_renderer():
     except ContextError as exc:
         pytest.skip(f"no OpenGL context: {exc}")
     yield renderer
-    make_current(renderer.ctx)  # other tests may have made their own contexts current
-    error = renderer.ctx.error
     renderer.close()
-    assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
 
 
 @pytest.fixture(scope="module")
 def ctx():
-    """A bare headless context per module (for renderers built directly); checks that no GL
-    error is left pending."""
+    """A bare headless context per module (for renderers built directly); every test using it
+    is checked for GL errors (:func:`gl_error_check`)."""
     from splatgl.errors import ContextError
-    from splatgl.gl.context import create_headless_context, make_current
+    from splatgl.gl.context import create_headless_context
 
     try:
         context = create_headless_context()
     except ContextError as exc:
         pytest.skip(f"no OpenGL context: {exc}")
     yield context
-    make_current(context)
-    error = context.error
     context.release()
-    assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
+
+
+#: The fixtures whose OpenGL context several tests share.
+SHARED_GL_FIXTURES = ("gl_renderer", "ctx")
+
+
+def _gl_errors(context) -> list[str]:
+    """Every GL error pending on ``context`` (reading one clears it), oldest first."""
+    from splatgl.gl.context import make_current
+
+    make_current(context)  # other tests may have made their own contexts current
+    errors = []
+    while len(errors) < 8 and (error := context.error) != "GL_NO_ERROR":
+        errors.append(error)
+    return errors
+
+
+@pytest.fixture(autouse=True)
+def gl_error_check(request):
+    """Around every test that uses a shared context: no GL error pending before it (left by a
+    fixture) or after it, so an error fails the test that made it, not a later test or the
+    module's teardown (moderngl's own suite checks every test the same way)."""
+    names = [name for name in SHARED_GL_FIXTURES if name in request.fixturenames]
+    contexts = [getattr(value, "ctx", value) for value in map(request.getfixturevalue, names)]
+    for context in contexts:
+        if errors := _gl_errors(context):
+            pytest.fail(f"OpenGL errors pending before the test: {', '.join(errors)}")
+    yield
+    for context in contexts:
+        if errors := _gl_errors(context):
+            pytest.fail(f"OpenGL errors left by the test: {', '.join(errors)}")
