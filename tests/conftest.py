@@ -33,6 +33,13 @@ def shared_scenes_dir() -> Path:
     return Path(env) if env else REPO.parent / "shared" / "scenes"
 
 
+def pytest_collection_modifyitems(items) -> None:
+    """Mark ``shared`` every test that needs the real scenes (directly or through a fixture)."""
+    for item in items:
+        if "shared_scenes" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.shared)
+
+
 @pytest.fixture(scope="session")
 def shared_scenes() -> Path:
     """The real scenes folder; tests using it skip with a reason where it is absent."""

@@ -179,6 +179,7 @@ def test_split_views_is_every_eighth():
     assert len(split_views(views, Split.TRAIN)) == 17
 
 
+@pytest.mark.slow
 def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path, monkeypatch):
     """The views split over 2 processes: CSV, JSON and the worst-views sheet byte-identical to
     one process's; one progress line counts both workers' views; the summary's per-worker views

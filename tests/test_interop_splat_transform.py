@@ -49,6 +49,8 @@ from splatgl.formats import quantise as qz
 from splatgl.formats import sog as sog_format
 from splatgl.scene import Scene
 
+pytestmark = [pytest.mark.npm, pytest.mark.slow]
+
 _spec = importlib.util.spec_from_file_location(
     "splat_transform_files", REPO / "tests" / "data" / "splat_transform_files.py")
 stfiles = importlib.util.module_from_spec(_spec)

@@ -146,6 +146,7 @@ def _check(quad, ref):
 LENS_VIEWS = [("fisheye", 200, FISHEYE_K), ("fisheye", 180, (0, 0, 0, 0)), ("equirect", 0, None)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ply/donut_sh0.ply", "compressed_ply/guitar.compressed.ply"])
 @pytest.mark.parametrize("distance", [0.3, 1.0])
 @pytest.mark.parametrize("model,fov,k", LENS_VIEWS, ids=["fisheye_k", "fisheye", "equirect"])
@@ -164,6 +165,7 @@ def test_quad_and_tile_match_reference(gl_renderer, shared_scenes, name, distanc
         assert psnr(tile, ref) > 85.0
 
 
+@pytest.mark.slow
 def test_tile_dense_wide_view(gl_renderer, shared_scenes):
     """A 120-degree view from inside guitar: tile (3, 3) holds 55,360 splats.  Drawn in one
     pass it came out blank (llvmpipe ends an invocation's loops after 65535 iterations in all);

@@ -113,6 +113,7 @@ def test_no_band_is_the_plain_cut(tree):
     np.testing.assert_array_equal(_weight_per_leaf(tree, rows, None), 1.0)  # each leaf once
 
 
+@pytest.mark.slow
 @hsettings(max_examples=6)
 @given(threshold=st.floats(0.5, 6.0), band=st.floats(1.5, 3.0), start=st.floats(4.0, 12.0))
 def test_weights_change_continuously_along_a_fly_in(tree, threshold, band, start):
@@ -145,6 +146,7 @@ def biker(shared_scenes):
     return scene, build_hierarchy(scene)
 
 
+@pytest.mark.slow
 def test_prepass_weights_match_the_numpy_twin(ctx, biker):
     """The pre-pass's weighted opacities (OPACITY_WEIGHT) draw what the quad path draws for the
     cut as a plain scene with those opacities (blended_scene): measured 0.00016 max error (the
@@ -188,6 +190,7 @@ def test_band_needs_the_prepass_and_a_ratio(ctx, biker):
         LodSettings(band=0.5)
 
 
+@pytest.mark.slow
 def test_cli_lod_blend(tmp_path, shared_scenes):
     src = shared_file(shared_scenes, "ply/donut_sh0.ply")
     lod = tmp_path / "donut.lod.ply"

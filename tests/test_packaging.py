@@ -12,6 +12,8 @@ import pytest
 
 from helpers import REPO
 
+pytestmark = [pytest.mark.wheel, pytest.mark.slow]
+
 
 def test_wheel_install_renders(tmp_path):
     dist = tmp_path / "dist"

@@ -18,6 +18,8 @@ from splatgl.executor import KILL_ONCE_ENV
 
 ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'splatgl[ray]')")
 
+pytestmark = [pytest.mark.ray, pytest.mark.slow]
+
 ARGS = ["--path", "orbit:16", "--width", "96", "--height", "72"]
 
 

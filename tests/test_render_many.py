@@ -144,6 +144,7 @@ def test_interrupt_removes_the_video(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_ctrl_c_on_a_real_process(tmp_path):
     """SIGINT while frames are being written (the process holds at its third frame until the
     signal: helpers.start_gated): exit 130, the two whole frames only, no temporary files."""

@@ -191,6 +191,7 @@ def test_moving_camera_re_sorts(ctx, artifacts_dir):
         renderer.release()
 
 
+@pytest.mark.slow
 def test_donut_matches_reference(ctx, shared_scenes, artifacts_dir):
     """The real donut (45k splats, SH degree 0), default camera, 256 x 192."""
     scene = load_scene(shared_file(shared_scenes, "ply/donut_sh0.ply"))

@@ -18,6 +18,9 @@ from splatgl.executor import KILL_ONCE_ENV
 from splatgl.workers import chunks
 
 
+pytestmark = pytest.mark.slow  # each run spawns worker processes
+
+
 def test_chunks_are_contiguous_and_cover():
     assert chunks(10, 3) == [range(0, 3), range(3, 7), range(7, 10)]
     assert chunks(2, 4) == [range(0, 1), range(1, 2)]
