@@ -5,6 +5,7 @@ from fixtures.  Helpers that tests import live in ``helpers.py``."""
 from __future__ import annotations
 
 import os
+import signal
 from datetime import timedelta
 from pathlib import Path
 
@@ -31,6 +32,15 @@ def shared_scenes_dir() -> Path:
     """``$SPLATGL_SHARED_SCENES`` or ``../shared/scenes`` beside the repository."""
     env = os.environ.get("SPLATGL_SHARED_SCENES")
     return Path(env) if env else REPO.parent / "shared" / "scenes"
+
+
+def pytest_configure(config) -> None:
+    """A run started with SIGINT ignored (a background job of a non-interactive shell, nohup)
+    would hand that on to every process the tests start, and the Ctrl-C tests would wait for an
+    interrupt that never comes: give this process Python's usual handler, which its children
+    do not inherit."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(items) -> None:

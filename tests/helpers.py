@@ -23,8 +23,8 @@ REPO = Path(__file__).resolve().parent.parent
 #: opacities; what the reference and tile renderer tests draw.
 IN_VIEW = dict(center=(0.0, 0.0, 4.0), spread=(1.0, 0.8, 0.7), log_scale=(-2.3, 0.6),
                logit=(0.0, 2.0), sh_sd=0.4, wild_colors=0.0)
-#: Splats in a box z 2..8 in front of an identity camera with scales 0.01..0.3 (the tile tests'
-#: 128 x 96 view).
+#: Splats around z 5 (2..8 within 3 sigma) in front of an identity camera, scales about 0.01..0.3
+#: (the tile tests' 128 x 96 view).
 IN_DEPTH = dict(center=(0.0, 0.0, 5.0), spread=(1.0, 0.75, 1.0), log_scale=(-2.9, 0.6),
                 logit=(0.0, 2.0), sh_sd=0.5, wild_colors=0.0)
 #: 2DGS surfels around the origin (sigma 0.6), scales ~exp(-2.6), mixed opacities (for orbit
@@ -227,11 +227,12 @@ def check_case(read, path: Path, data: bytes, what: str, must_fail: bool = False
 # --- signals mid-run ---------------------------------------------------------------------------
 
 
-def start_gated(argv: list[str], frames: int, processes: int = 1, **popen):
+def start_gated(argv: list[str], frames: int, processes: int = 1):
     """Start ``python -m splatgl *argv`` with the frame gate (``frame_gate/sitecustomize.py``):
     each rendering process (the command itself, or each of its ``processes`` workers) writes
     ``frames`` frames and then waits.  Returns the process once all of them wait, so a signal
-    sent then always lands mid-run with exactly those frames on disk."""
+    sent then (:func:`signal_and_wait`) always lands mid-run with exactly those frames on disk.
+    The command runs in its own session, so that a failed test can kill all of it."""
     import os
     import subprocess
     import sys
@@ -240,11 +241,35 @@ def start_gated(argv: list[str], frames: int, processes: int = 1, **popen):
     env = dict(os.environ, SPLATGL_TEST_GATE=str(frames),
                PYTHONPATH=os.pathsep.join(p for p in (gate, os.environ.get("PYTHONPATH")) if p))
     proc = subprocess.Popen([sys.executable, "-m", "splatgl", *argv], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env, **popen)
+                            stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
     for _ in range(processes):
         line = proc.stdout.readline()  # blocks until a process waits at the gate (or all exit)
         if not line.startswith("gate "):
-            proc.kill()
-            _, err = proc.communicate()
+            _, err = _kill_session(proc)
             pytest.fail(f"no process reached the frame gate: {line!r}; stderr: {err[-2000:]}")
     return proc
+
+
+def signal_and_wait(proc, signum: int, hang_guard: float = 120.0) -> tuple[str, str]:
+    """Send ``signum`` to ``proc`` and return its (stdout, stderr) once it exits.  It should
+    exit at once; if it has not after ``hang_guard`` seconds (a hang, not slowness), kill its
+    whole session and fail."""
+    import subprocess
+
+    proc.send_signal(signum)
+    try:
+        return proc.communicate(timeout=hang_guard)
+    except subprocess.TimeoutExpired:
+        _, err = _kill_session(proc)
+        pytest.fail(f"still running {hang_guard:.0f} s after signal {signum}; stderr: {err[-2000:]}")
+
+
+def _kill_session(proc) -> tuple[str, str]:
+    import os
+    import signal
+
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)  # the command and any worker it started
+    except ProcessLookupError:  # not a session of its own
+        proc.kill()
+    return proc.communicate()

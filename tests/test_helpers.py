@@ -1,7 +1,12 @@
 """The shared test helpers themselves: the scene factory is seeded and places its layouts where
-the tests look, and the damaged-file check fails what it must."""
+the tests look, the damaged-file check fails what it must, and a process that outlives its
+signal is killed, not left behind."""
 
 from __future__ import annotations
+
+import signal
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -9,7 +14,7 @@ import pytest
 from splatgl.errors import SceneFormatError
 from splatgl.scene import SplatKind
 
-from helpers import IN_DEPTH, IN_VIEW, SURFELS, check_case, random_scene
+from helpers import IN_DEPTH, IN_VIEW, SURFELS, check_case, random_scene, signal_and_wait
 
 
 def test_random_scene_is_seeded():
@@ -53,3 +58,15 @@ def test_check_case_fails_other_exceptions_and_silent_loads(tmp_path):
     with pytest.raises(AssertionError, match="loaded without an error"):
         check_case(lambda path: random_scene(1), tmp_path / "a.bin", b"x", "silent", must_fail=True)
     assert check_case(refuse, tmp_path / "a.bin", b"x", "refused", must_fail=True).endswith("truncated")
+
+
+def test_signal_and_wait_kills_a_process_that_ignores_the_signal():
+    proc = subprocess.Popen([sys.executable, "-c", "import signal, sys, threading; "
+                             "signal.signal(signal.SIGTERM, signal.SIG_IGN); print('ready'); "
+                             "sys.stdout.flush(); threading.Event().wait()"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    assert proc.stdout.readline() == "ready\n"
+    with pytest.raises(pytest.fail.Exception, match="still running 1 s after signal 15"):
+        signal_and_wait(proc, signal.SIGTERM, hang_guard=1.0)
+    assert proc.returncode == -signal.SIGKILL  # killed, not left behind

@@ -14,6 +14,8 @@ import numpy as np
 
 from splatgl.progress import StderrProgress, format_seconds
 
+from helpers import signal_and_wait
+
 DEMO_ARGS = ["--width", "48", "--height", "32"]
 
 
@@ -38,11 +40,10 @@ def test_sigterm_during_convert_removes_the_partial_file(tmp_path, shared_scenes
         ply.write = stuck_write
         from splatgl.cli import main
         sys.exit(main(["convert", sys.argv[1], sys.argv[2]]))
-        """, str(shared_scenes / "fixtures" / "minimal.splat"), str(out))
+        """, str(shared_scenes / "fixtures" / "minimal.splat"), str(out), start_new_session=True)
     assert proc.stdout.readline() == "writing\n"
     assert [p.name for p in tmp_path.iterdir()] == ["out.ply.partial"]
-    proc.send_signal(signal.SIGTERM)
-    rest, err = proc.communicate(timeout=120)  # a hang guard: the signal ends the wait at once
+    rest, err = signal_and_wait(proc, signal.SIGTERM)
     assert (proc.returncode, rest, err) == (143, "", "splatgl: terminated\n")
     assert list(tmp_path.iterdir()) == []
 

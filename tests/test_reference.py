@@ -33,7 +33,6 @@ def scene_of(means, scale=0.05, opacity=0.8, color=(1.0, 0.5, 0.25)) -> Scene:
     return Scene.from_activated(means, quats, scales, opac, sh)
 
 
-
 def oracle(proj: ProjectedSplats, values, ranges, background, options=ReferenceOptions()):
     """Literal per-pixel transcription of 3DGS's renderCUDA (slow; small images only)."""
     h, w = proj.height, proj.width

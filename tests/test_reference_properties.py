@@ -21,7 +21,6 @@ FAST = hsettings(max_examples=25)
 unit = st.floats(0.0, 1.0)
 
 
-
 def splats_at(xyz, scale: float, opacity: float, colors) -> Scene:
     """Isotropic unrotated splats at camera-space ``xyz`` (identity pose) with DC colours."""
     xyz = np.asarray(xyz, np.float64)

@@ -20,7 +20,7 @@ from splatgl.formats import load_scene
 from splatgl.image_io import read_image
 from splatgl.paths import orbit
 
-from helpers import start_gated
+from helpers import signal_and_wait, start_gated
 
 SIZE = ["--width", "96", "--height", "64"]
 
@@ -151,8 +151,7 @@ def test_ctrl_c_on_a_real_process(tmp_path):
     out = tmp_path / "f"
     proc = start_gated(["render", str(demo_scene_path()), "--path", "orbit:400", "--width", "160",
                         "--height", "120", "-o", str(out)], frames=2)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)  # a hang guard: the run ends at once
+    _, err = signal_and_wait(proc, signal.SIGINT)
     assert proc.returncode == 130, err
     assert sorted(p.name for p in out.iterdir()) == ["00000.png", "00001.png"]
     for p in out.iterdir():

@@ -37,7 +37,6 @@ def surfels(means, quats, scales, opacities, rgb) -> Scene:
     return scene_with_colors(means, quats, scales, opacities, rgb, SplatKind.SURFEL_2D)
 
 
-
 def cameras():
     pose = look_at([0.4, -0.3, -0.6], [0.05, 0.02, 4.0])
     return [Camera(64, 48, 60.0, 55.0, 31.3, 22.8, pose),

@@ -29,7 +29,6 @@ TOL = 1e-5
 DEPTH_TOL_REL = 1e-5
 
 
-
 CAM = Camera.from_fov(128, 96, 60.0)
 
 

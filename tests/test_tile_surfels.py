@@ -46,7 +46,6 @@ MAX_FLIPS = 4
 FLIP_TOL = 0.02
 
 
-
 def surfels(means, quats, scales, opacities, rgb) -> Scene:
     return scene_with_colors(means, quats, scales, opacities, rgb, SplatKind.SURFEL_2D)
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import start_gated, summary_counts
+from helpers import signal_and_wait, start_gated, summary_counts
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.image_io import read_image
@@ -124,8 +124,7 @@ def test_sigterm_mid_video_leaves_no_video_and_resume_encodes(tmp_path):
     proc = start_gated([*ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2"],
                        frames=1, processes=2)
     frames = frame_folder(out)
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)  # a hang guard: the run ends at once
+    _, err = signal_and_wait(proc, signal.SIGTERM)
     assert proc.returncode == 143 and err.strip().endswith("splatgl: terminated"), err
     assert os.listdir(tmp_path) == [frames.name]
     assert sorted(p.name for p in frames.iterdir()) == ["00000.png", "00100.png"]  # no partials
