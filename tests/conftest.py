@@ -1,15 +1,32 @@
-"""Shared fixtures: where the real scenes are, and a headless OpenGL context."""
+"""Fixtures and hooks for the whole suite: the hypothesis profile, where the real scenes are,
+headless OpenGL contexts (checked for GL errors around every test), and the markers derived
+from fixtures.  Helpers that tests import live in ``helpers.py``."""
 
 from __future__ import annotations
 
 import contextlib
 import os
 import signal
+from datetime import timedelta
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
-REPO = Path(__file__).resolve().parent.parent
+pytest.register_assert_rewrite("helpers")
+
+from helpers import REPO  # noqa: E402 (after the rewrite hook)
+
+# Hypothesis: every run draws the same examples ("ci", the default): derandomised (examples
+# follow from each test's source), no example database (earlier failures do not change what
+# runs), and no timing health check.  The deadline only catches an example 100x slower than the
+# slowest one measured (0.33 s, a GPU LOD fly-in); tests set only max_examples.
+# HYPOTHESIS_PROFILE=explore draws new random examples each run, for looking for bugs.
+settings.register_profile("ci", derandomize=True, database=None, deadline=timedelta(seconds=30),
+                          suppress_health_check=[HealthCheck.too_slow], print_blob=True)
+settings.register_profile("explore", derandomize=False, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 def shared_scenes_dir() -> Path:
@@ -18,6 +35,22 @@ def shared_scenes_dir() -> Path:
     from splatgl.bench.real_scenes import shared_scenes_dir as lookup
 
     return lookup(REPO)
+
+
+def pytest_configure(config) -> None:
+    """A run started with SIGINT ignored (a background job of a non-interactive shell, nohup)
+    would hand that on to every process the tests start, and the Ctrl-C tests would wait for an
+    interrupt that never comes: give this process Python's usual handler, which its children
+    do not inherit."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def pytest_collection_modifyitems(items) -> None:
+    """Mark ``shared`` every test that needs the real scenes (directly or through a fixture)."""
+    for item in items:
+        if "shared_scenes" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.shared)
 
 
 @pytest.fixture(scope="session")
@@ -65,11 +98,10 @@ def artifacts_dir() -> Path:
 def gl_renderer():
     """A :class:`splatgl.render.Renderer` on a headless context, shared by a test module.
 
-    Skips the module where no OpenGL context can be made.  After the module, checks that no GL
-    error was left pending.
+    Skips the module where no OpenGL context can be made.  Every test using it is checked for
+    GL errors (:func:`gl_error_check`).
     """
     from splatgl.errors import ContextError
-    from splatgl.gl.context import make_current
     from splatgl.render import Renderer
 
     try:
@@ -77,117 +109,50 @@ def gl_renderer():
     except ContextError as exc:
         pytest.skip(f"no OpenGL context: {exc}")
     yield renderer
-    make_current(renderer.ctx)  # other tests may have made their own contexts current
-    error = renderer.ctx.error
     renderer.close()
-    assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
-
-
-def save_failure_images(directory: Path, name: str, got, expected) -> str:
-    """Dump got / expected / |difference| (x10) images; returns a note for assertion messages."""
-    import numpy as np
-
-    from splatgl.image_io import write_image
-
-    diff = np.abs(np.asarray(got, np.float32) - np.asarray(expected, np.float32))
-    paths = []
-    for tag, img in (("got", got), ("expected", expected), ("diff_x10", diff * 10)):
-        img = np.asarray(img, np.float32)
-        if img.ndim == 2:
-            img = np.repeat(img[..., None], 3, axis=-1)
-        if img.shape[-1] == 3:
-            img = np.concatenate([img, np.ones(img.shape[:2] + (1,), np.float32)], -1)
-        path = directory / f"{name}_{tag}.exr"
-        write_image(path, img)
-        paths.append(str(path))
-    return "images: " + ", ".join(paths)
 
 
 @pytest.fixture(scope="module")
 def ctx():
-    """A bare headless context per module (for renderers built directly); checks that no GL
-    error is left pending."""
+    """A bare headless context per module (for renderers built directly); every test using it
+    is checked for GL errors (:func:`gl_error_check`)."""
     from splatgl.errors import ContextError
-    from splatgl.gl.context import create_headless_context, make_current
+    from splatgl.gl.context import create_headless_context
 
     try:
         context = create_headless_context()
     except ContextError as exc:
         pytest.skip(f"no OpenGL context: {exc}")
     yield context
-    make_current(context)
-    error = context.error
     context.release()
-    assert error == "GL_NO_ERROR", f"OpenGL error left pending: {error}"
 
 
-def scene_with_colors(means, quats, scales, opacities, rgb, kind=None):
-    """A scene from activated values whose SH degree-0 colour seen from anywhere is ``rgb``
-    (N, 3); ``kind`` defaults to 3DGS (pass SplatKind.SURFEL_2D with two scales)."""
-    import numpy as np
-
-    from splatgl.constants import SH_C0
-    from splatgl.scene import Scene, SplatKind
-
-    n = len(means)
-    sh = np.zeros((n, 1, 3))
-    sh[:, 0] = (np.asarray(rgb, float) - 0.5) / SH_C0
-    return Scene.from_activated(np.asarray(means, float), np.asarray(quats, float),
-                                np.asarray(scales, float), np.asarray(opacities, float), sh,
-                                kind or SplatKind.GAUSSIAN_3D)
+#: The fixtures whose OpenGL context several tests share.
+SHARED_GL_FIXTURES = ("gl_renderer", "ctx")
 
 
-def assert_stages_match_reference(got, proj, min_keys: int = 0) -> None:
-    """The tile renderer's integer stages (``TileRenderer.debug_stages``) equal the NumPy
-    reference's for the same projection: tiles touched, rectangles, emitted and sorted keys and
-    values, and tile ranges, bit for bit."""
-    import numpy as np
+def _gl_errors(context) -> list[str]:
+    """Every GL error pending on ``context`` (reading one clears it), oldest first."""
+    from splatgl.gl.context import make_current
 
-    from splatgl.reference import emit_keys, sort, tile_ranges
-
-    np.testing.assert_array_equal(got.tiles_touched, proj.tiles_touched)
-    np.testing.assert_array_equal(got.rect_min, proj.rect_min)
-    np.testing.assert_array_equal(got.rect_max, proj.rect_max)
-    keys, values = emit_keys(proj)
-    assert len(keys) > min_keys  # the scene really spans many tiles
-    np.testing.assert_array_equal(got.emitted_keys, keys)
-    np.testing.assert_array_equal(got.emitted_values, values)
-    keys, values = sort(keys, values)
-    np.testing.assert_array_equal(got.keys, keys)
-    np.testing.assert_array_equal(got.values, values)
-    np.testing.assert_array_equal(got.ranges, tile_ranges(keys, proj.n_tiles))
+    make_current(context)  # other tests may have made their own contexts current
+    errors = []
+    while len(errors) < 8 and (error := context.error) != "GL_NO_ERROR":
+        errors.append(error)
+    return errors
 
 
-def tile_and_reference(ctx, scene, camera, settings):
-    """(tile renderer's RenderOutput, float32 NumPy reference image) of one view; the tile
-    renderer is released afterwards."""
-    import numpy as np
-
-    from splatgl.reference import render_reference
-    from splatgl.tile import TileRenderer
-
-    renderer = TileRenderer(ctx, scene, settings)
-    try:
-        got = renderer.render_layers(camera)
-    finally:
-        renderer.release()
-    return got, render_reference(scene, camera, settings, np.float32)
-
-
-def shared_file(shared_scenes: Path, name: str) -> Path:
-    """``shared_scenes / name``, skipping the test with the reason when that file is absent."""
-    path = shared_scenes / name
-    if not path.is_file():
-        pytest.skip(f"{path} not present")
-    return path
-
-
-def summary_counts(out: str, unit: str) -> tuple[list[int], int]:
-    """Per-worker counts and the total of the summary that ``--workers`` / ``--executor ray``
-    print (``worker i (host, pid P): N unit in S s, R unit/s`` ... ``total: N unit in ...``)."""
-    lines = [line for line in out.splitlines() if line.startswith(("worker ", "total: "))]
-    assert lines and all(f" {unit} in " in line for line in lines), out
-    workers = [int(line.split("): ")[1].split()[0]) for line in lines if line.startswith("worker ")]
-    totals = [int(line.split()[1]) for line in lines if line.startswith("total: ")]
-    assert len(totals) == 1, out
-    return workers, totals[0]
+@pytest.fixture(autouse=True)
+def gl_error_check(request):
+    """Around every test that uses a shared context: no GL error pending before it (left by a
+    fixture) or after it, so an error fails the test that made it, not a later test or the
+    module's teardown (moderngl's own suite checks every test the same way)."""
+    names = [name for name in SHARED_GL_FIXTURES if name in request.fixturenames]
+    contexts = [getattr(value, "ctx", value) for value in map(request.getfixturevalue, names)]
+    for context in contexts:
+        if errors := _gl_errors(context):
+            pytest.fail(f"OpenGL errors pending before the test: {', '.join(errors)}")
+    yield
+    for context in contexts:
+        if errors := _gl_errors(context):
+            pytest.fail(f"OpenGL errors left by the test: {', '.join(errors)}")

@@ -53,6 +53,7 @@ def test_ellipse_fragment_efficiency_is_pi_over_4(gl_renderer):
     assert k2 / s2 < kept / shaded and abs(k2 - kept) / kept < 0.02  # same kept, more shaded
 
 
+@pytest.mark.slow
 def test_bench_scene_rows_and_limit(gl_renderer):
     rng = np.random.default_rng(1)
     n = 300
@@ -116,6 +117,7 @@ def test_storage_rows_report_bytes_and_psnr_against_float32(gl_renderer):
     assert len(lines) == 4 and lines[3].split()[1:4] == ["storage=compact", "50.0", "2.00"]
 
 
+@pytest.mark.slow
 def test_bench_quick_cli_writes_table_csv_json_plot(tmp_path, capsys):
     assert main(["bench", "--quick", "--frames", "2", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import splatgl
-from conftest import scene_with_colors, shared_file
+from helpers import scene_with_colors, shared_file
 from splatgl.camera import Camera
 from splatgl.datasets import colmap, load_source, load_views, nerf, select_indices
 from splatgl.datasets.gs_cameras import gs_cameras_json

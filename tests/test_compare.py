@@ -23,7 +23,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import shared_file
+from helpers import shared_file
 from splatgl.cli import main
 from splatgl.formats import load_scene
 from splatgl.image_io import read_image
@@ -78,6 +78,7 @@ def test_quad_matches_reference_with_background_and_antialias(gl_renderer):
 REAL = ["ply/donut_sh0.ply", "compressed_ply/guitar.compressed.ply", "spz/biker_v4.spz"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", REAL)
 def test_quad_matches_reference_on_real_scenes(shared_scenes, gl_renderer, name):
     scene = load_scene(shared_file(shared_scenes, name))

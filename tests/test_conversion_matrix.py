@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import shared_file
+from helpers import shared_file
 from test_convert import REAL_FILES
 from splatgl.convert import ATTRIBUTES, conversion_error, error_bounds
 from splatgl.formats import load_scene, save_scene, writer_for

@@ -27,7 +27,7 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import shared_file
+from helpers import random_scene, shared_file
 from splatgl.cli import main
 from splatgl.constants import SH_C0
 from splatgl.convert import conversion_error, convert, rotation_angle_deg
@@ -56,18 +56,6 @@ REAL_FILES = [
 ]
 
 
-def random_scene(n: int = 500, degree: int = 3, seed: int = 0,
-                 kind: SplatKind = SplatKind.GAUSSIAN_3D) -> Scene:
-    """Scene with unnormalised quaternions, colours mostly inside 0-1 and some outside."""
-    rng = np.random.default_rng(seed)
-    k = (degree + 1) ** 2
-    nscale = 2 if kind is SplatKind.SURFEL_2D else 3
-    sh = rng.normal(0.0, 0.3, (n, k, 3))
-    sh[: n // 10, 0] = rng.normal(0.0, 4.0, (n // 10, 3))  # some colours far outside 0-1
-    return Scene(rng.normal(0, 2, (n, 3)), rng.normal(size=(n, 4)) * rng.uniform(0.5, 2, (n, 1)),
-                 rng.normal(-4, 1.5, (n, nscale)), rng.normal(0, 3, n), sh, kind)
-
-
 def same_values(a: Scene, b: Scene) -> None:
     for name in ("means", "quats", "log_scales", "opacity_logits", "sh"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
@@ -78,7 +66,7 @@ def same_values(a: Scene, b: Scene) -> None:
 
 
 def test_conversion_error_identical_is_zero_and_bit_exact():
-    s = random_scene(50)
+    s = random_scene(50, degree=3)
     e = conversion_error(s, s)
     assert e["bit_exact"] and e["count"] == 50 and e["sh_degree"] == [3, 3]
     for key in ("position", "scale", "opacity", "rotation", "color", "sh_rest"):
@@ -116,7 +104,7 @@ def test_conversion_error_units():
 @pytest.mark.parametrize("kind", list(SplatKind))
 def test_ply_to_ply_is_bit_exact(tmp_path, kind):
     src = tmp_path / "in.ply"
-    scene = random_scene(kind=kind)
+    scene = random_scene(500, degree=3, kind=kind)
     save_scene(src, scene)
     result = convert(src, tmp_path / "out.ply")
     assert result.error["bit_exact"]
@@ -214,14 +202,14 @@ def test_cli_missing_input_exits_2_and_writes_nothing(tmp_path, capsys):
 
 
 def test_cli_unsupported_output_exits_2(tmp_path, capsys):
-    save_scene(tmp_path / "in.ply", random_scene(10))
+    save_scene(tmp_path / "in.ply", random_scene(10, degree=3))
     code, _, err = run_cli(capsys, tmp_path / "in.ply", tmp_path / "out.ksplat")
     assert code == 2 and "cannot write this format" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.ply"]
 
 
 def test_cli_refuses_to_overwrite_without_force(tmp_path, capsys):
-    save_scene(tmp_path / "in.ply", random_scene(10))
+    save_scene(tmp_path / "in.ply", random_scene(10, degree=3))
     (tmp_path / "out.ply").write_bytes(b"keep me")
     code, _, err = run_cli(capsys, tmp_path / "in.ply", tmp_path / "out.ply")
     assert code == 2 and "already exists" in err and "--force" in err
@@ -232,7 +220,7 @@ def test_cli_refuses_to_overwrite_without_force(tmp_path, capsys):
 
 
 def test_cli_failed_write_leaves_nothing_half_written(tmp_path, capsys):
-    save_scene(tmp_path / "in.ply", random_scene(10, kind=SplatKind.SURFEL_2D))
+    save_scene(tmp_path / "in.ply", random_scene(10, degree=3, kind=SplatKind.SURFEL_2D))
     code, _, err = run_cli(capsys, tmp_path / "in.ply", tmp_path / "out.splat")
     assert code == 2 and "surfel" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.ply"]  # no out, no .partial

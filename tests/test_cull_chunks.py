@@ -9,7 +9,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import given, settings, strategies as st
 
 from splatgl import cull_chunks, cull_kernel, lens
 from splatgl.camera import Camera, look_at
@@ -91,7 +91,7 @@ def test_chunked_cull_keeps_what_the_float64_cull_keeps(cam_index, antialias, pa
         assert accept.any() and reject.any() and (~(accept | reject)).any()
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=25)
 @given(seed=st.integers(0, 10_000), eye=st.tuples(*[st.floats(-8, 8)] * 3),
        target=st.tuples(*[st.floats(-3, 3)] * 3), fov=st.floats(20, 120),
        cx=st.floats(-50, 350), near=st.floats(0.01, 2.0), scale=st.floats(0.3, 3.0))
@@ -190,7 +190,7 @@ def test_real_scene_orders_unchanged(shared_scenes, name):
     from splatgl.render import default_camera
     from splatgl.settings import RenderSettings, resolve_near
 
-    from conftest import shared_file
+    from helpers import shared_file
 
     scene = load_scene(shared_file(shared_scenes, name), progress=lambda *a: None)
     near = resolve_near(RenderSettings(), scene.robust_radius)

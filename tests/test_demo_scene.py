@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from conftest import REPO
+from helpers import REPO
 from splatgl.formats import load_scene
 from splatgl.project import sh_color
 

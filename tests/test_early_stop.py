@@ -40,7 +40,7 @@ def _settings(**change) -> RenderSettings:
 
 
 @given(st.integers(0, 5_000_000), st.floats(1e-4, 1.0), st.floats(0.5, 3.0), st.integers(1, 10_000))
-@hsettings(max_examples=200, deadline=None)
+@hsettings(max_examples=200)
 def test_batch_bounds_cover_the_order_in_bounded_increasing_batches(count, frac, growth, min_batch):
     b = es.batch_bounds(count, frac, growth, min_batch)
     assert b[0] == 0 and b[-1] == count
@@ -248,7 +248,7 @@ def test_half_precision_target_is_unchanged(gl_renderer):
 def test_no_stop_error_against_reference_never_grows(gl_renderer, shared_scenes):
     """The accuracy claim on a real scene: per pixel, the stopped image is no farther from the
     reference than the unstopped one (up to float slack), so PSNR cannot drop."""
-    from conftest import shared_file
+    from helpers import shared_file
     from splatgl.formats import load_scene
     from splatgl.metrics import image_errors
     from splatgl.render import render_reference_rgba

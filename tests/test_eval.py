@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import summary_counts
+from helpers import summary_counts
 from splatgl.camera import Camera, orbit
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
@@ -224,6 +224,7 @@ def test_split_views_is_every_eighth():
     assert len(split_views(views, Split.TRAIN)) == 17
 
 
+@pytest.mark.slow
 def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path, monkeypatch):
     """The views split over 2 processes: CSV, JSON and the worst-views sheet byte-identical to
     one process's; one progress line counts both workers' views; the summary's per-worker views

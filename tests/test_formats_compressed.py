@@ -56,16 +56,6 @@ def sigmoid(x) -> np.ndarray:
     return 1.0 / (1.0 + np.exp(-np.asarray(x, np.float64)))
 
 
-def load_v4(path: Path, **kw):
-    """Read an SPZ v4 file, skipping the test when no zstd decoder exists on this machine."""
-    try:
-        return spz.read_spz(path, **kw)
-    except SceneFormatError as exc:
-        if "no zstd decoder" in str(exc):
-            pytest.skip(str(exc))
-        raise
-
-
 def assert_sane(scene) -> None:
     """Unit-ish quaternions, finite values, colours and scales in plausible ranges."""
     norms = np.linalg.norm(scene.quats.astype(np.float64), axis=1)
@@ -105,7 +95,7 @@ def test_compressed_ply_matches_spz_of_the_same_scene(shared_scenes):
     """biker.compressed.ply and biker_v4.spz are one scene: rotation order (w, x, y, z), colour
     bounds, alpha and the SPZ v4 axis flip all have to be right for these to agree."""
     a = compressed_ply.read(shared_scenes / "compressed_ply/biker.compressed.ply")
-    b = load_v4(shared_scenes / "spz/biker_v4.spz")
+    b = spz.read(shared_scenes / "spz/biker_v4.spz")
     assert np.abs(a.means - b.means).max() < 2.0 ** -12 + 1e-4  # SPZ 12-bit step + 11-bit chunk
     dots = np.abs((a.rotations.astype(np.float64) * b.rotations).sum(axis=1))
     assert dots.min() > 0.999
@@ -165,7 +155,7 @@ def test_minimal_spz_variants_match_minimal_splat(shared_scenes, name):
     ref = read_splat_rows(shared_scenes / "fixtures/minimal.splat")
     path = shared_scenes / "fixtures" / name
     assert detect_format(path) is spz
-    scene = load_v4(path) if name.endswith("v4.spz") else spz.read(path)
+    scene = spz.read(path)
     assert scene.count == 4 and scene.sh_degree == 0
     step = 2.0 ** -8  # coarsest fixed point among the variants (v2: 8 fractional bits)
     assert np.abs(scene.means - ref["means"]).max() <= step
@@ -184,7 +174,7 @@ def test_minimal_spz_variants_match_minimal_splat(shared_scenes, name):
 
 
 def test_spz_biker_v4_loads(shared_scenes):
-    scene = load_v4(shared_scenes / "spz/biker_v4.spz")
+    scene = spz.read(shared_scenes / "spz/biker_v4.spz")
     assert (scene.count, scene.sh_degree) == (152_746, 0)
     assert_sane(scene)
 
@@ -234,16 +224,6 @@ def test_spz_truncated_and_huge_count(tmp_path):
     path.write_bytes(gzip.compress(body[:8] + struct.pack("<I", 0xFFFFFFFF) + body[12:]))
     with pytest.raises(SceneFormatError, match="truncated"):
         spz.read(path)
-
-
-def test_spz_v4_without_zstd_says_what_to_install(monkeypatch, shared_scenes):
-    import shutil
-    import sys
-    monkeypatch.setitem(sys.modules, "zstandard", None)
-    monkeypatch.setitem(sys.modules, "compression", None)
-    monkeypatch.setattr(shutil, "which", lambda name: None)
-    with pytest.raises(SceneFormatError, match="zstandard"):
-        spz.read(shared_scenes / "fixtures/minimal-v4.spz")
 
 
 # --- ksplat -----------------------------------------------------------------------------------

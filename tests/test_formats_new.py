@@ -18,7 +18,7 @@ from splatgl.formats import compressed_ply_write, load_scene, save_scene, sog, s
 from splatgl.formats import quantise as qz
 from splatgl.scene import Scene
 
-from test_convert import random_scene
+from helpers import random_scene
 
 SCHEMA_DIR = Path(__file__).parent / "data" / "gltf_schema"
 
@@ -68,6 +68,23 @@ def test_round_trip_within_bounds(tmp_path, name, degree):
             assert e[attr]["max"] <= bound, attr
     if name in ("a.sog", "meta.json") and degree:  # palette error: stated, far below the spread
         assert e["sh_rest"]["mean"] < 0.5 * np.abs(a.sh[:, 1:]).mean()
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_spz_sh_bound_covers_clipping_of_flipped_signs(tmp_path, version):
+    """SH bytes hold [-1, 127/128]; version 3 stores RUB, negating the odd coefficients first,
+    so -1.3 on one of them is clipped at +127/128 in the file: the bound must say 1.3 - 127/128,
+    not the 0.3 of an unflipped -1.3."""
+    scene = random_scene(4, degree=1)
+    sh = scene.sh.copy()
+    sh[:, 1:] = 0.0
+    sh[0, 1, 0] = -1.3  # coefficient 1 (y): negated by the flip
+    scene = Scene(scene.means, scene.quats, scene.log_scales, scene.opacity_logits, sh)
+    save_scene(tmp_path / "a.spz", scene, version=version)
+    e = conversion_error(scene, load_scene(tmp_path / "a.spz"))
+    bound = spz_write.error_bounds(scene, version)["sh_rest"]
+    assert e["sh_rest"]["max"] <= bound < e["sh_rest"]["max"] + 0.5 / qz.SPZ_SH_SCALE + 1e-5
+    assert e["sh_rest"]["max"] == pytest.approx(1.3 - 127 / 128 if version == 3 else 0.3, abs=1e-6)
 
 
 def test_sog_folder_has_its_textures_and_no_partials(tmp_path):

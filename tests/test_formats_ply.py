@@ -12,22 +12,9 @@ from splatgl.constants import SH_C0, sh_coeff_count
 from splatgl.formats import detect_format, load_scene, ply, splat
 from splatgl.scene import Scene, SplatKind
 
+from helpers import random_scene
+
 FIELDS = ("means", "quats", "log_scales", "opacity_logits", "sh")
-
-
-def random_scene(seed: int, n: int = 17, degree: int = 0,
-                 kind: SplatKind = SplatKind.GAUSSIAN_3D) -> Scene:
-    """A scene of raw values like a trainer's output (unnormalised quaternions, log scales)."""
-    rng = np.random.default_rng(seed)
-    nscale = 2 if kind is SplatKind.SURFEL_2D else 3
-    return Scene(
-        means=rng.normal(size=(n, 3)),
-        quats=rng.normal(size=(n, 4)) * rng.uniform(0.5, 2.5, size=(n, 1)),
-        log_scales=rng.normal(-4.0, 1.0, size=(n, nscale)),
-        opacity_logits=rng.normal(0.0, 3.0, size=n),
-        sh=rng.normal(0.0, 0.5, size=(n, sh_coeff_count(degree), 3)),
-        kind=kind,
-    )
 
 
 def assert_same_bits(a: Scene, b: Scene) -> None:
@@ -41,7 +28,7 @@ def assert_same_bits(a: Scene, b: Scene) -> None:
 
 @pytest.mark.parametrize("degree", [0, 1, 2, 3])
 def test_binary_le_be_and_ascii_load_identically_and_bit_exact(tmp_path, degree):
-    scene = random_scene(degree, degree=degree)
+    scene = random_scene(17, degree, degree=degree)
     loaded = []
     for label, kwargs in [("le", {}), ("be", {"byte_order": "big"}), ("ascii", {"ascii": True})]:
         path = tmp_path / f"{label}.ply"
@@ -57,7 +44,7 @@ def test_binary_le_be_and_ascii_load_identically_and_bit_exact(tmp_path, degree)
 
 def test_writer_uses_inria_property_order(tmp_path):
     path = tmp_path / "s.ply"
-    ply.write(path, random_scene(1, n=3, degree=1))
+    ply.write(path, random_scene(3, 1, degree=1))
     header = path.read_bytes().split(b"end_header")[0].decode()
     props = [line.split()[2] for line in header.splitlines() if line.startswith("property")]
     assert props == (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
@@ -72,7 +59,7 @@ def test_writer_uses_inria_property_order(tmp_path):
 def test_f_rest_is_channel_major(tmp_path, degree):
     """f_rest holds all red coefficients, then green, then blue; file order does not matter."""
     k1 = sh_coeff_count(degree) - 1
-    verts = ply.scene_to_vertices(random_scene(5, n=2, degree=degree))
+    verts = ply.scene_to_vertices(random_scene(2, 5, degree=degree))
     for i in range(3 * k1):
         verts[f"f_rest_{i}"] = 1000 + i
     names = list(verts.dtype.names)
@@ -92,7 +79,7 @@ def test_f_rest_is_channel_major(tmp_path, degree):
 
 @pytest.mark.parametrize("normals", [True, False])
 def test_with_and_without_normals(tmp_path, normals):
-    scene = random_scene(7)
+    scene = random_scene(17, 7)
     path = tmp_path / "n.ply"
     ply.write(path, scene, normals=normals)
     assert (b"property float nx" in path.read_bytes()[:400]) == normals
@@ -100,7 +87,7 @@ def test_with_and_without_normals(tmp_path, normals):
 
 
 def test_two_scales_make_a_2dgs_surfel_scene(tmp_path):
-    scene = random_scene(8, degree=1, kind=SplatKind.SURFEL_2D)
+    scene = random_scene(17, 8, degree=1, kind=SplatKind.SURFEL_2D)
     path = tmp_path / "surfels.ply"
     ply.write(path, scene)
     header = path.read_bytes()[:600]
@@ -113,7 +100,7 @@ def test_two_scales_make_a_2dgs_surfel_scene(tmp_path):
 
 def test_other_types_extra_properties_and_elements(tmp_path):
     """double/int properties are cast to float32; unknown properties and elements are skipped."""
-    scene = random_scene(9, n=5)
+    scene = random_scene(5, 9)
     verts = ply.scene_to_vertices(scene)
     dt = [(n, "<f8" if n in ("x", "opacity") else "<f4") for n in verts.dtype.names]
     dt += [("red", "u1"), ("segment", "<i2")]
@@ -131,7 +118,7 @@ def test_other_types_extra_properties_and_elements(tmp_path):
 
 
 def test_type_aliases_are_accepted(tmp_path):
-    scene = random_scene(10, n=4)
+    scene = random_scene(4, 10)
     path = tmp_path / "alias.ply"
     ply.write(path, scene)
     data = path.read_bytes().replace(b"property float ", b"property float32 ")
@@ -141,7 +128,7 @@ def test_type_aliases_are_accepted(tmp_path):
 
 
 def test_list_element_after_vertices_is_ignored(tmp_path):
-    scene = random_scene(11, n=4)
+    scene = random_scene(4, 11)
     path = tmp_path / "faces.ply"
     ply.write(path, scene)
     head, body = path.read_bytes().split(b"end_header\n")
@@ -152,7 +139,7 @@ def test_list_element_after_vertices_is_ignored(tmp_path):
 
 
 def test_detection_is_by_content(tmp_path):
-    scene = random_scene(12)
+    scene = random_scene(17, 12)
     path = tmp_path / "scene.bin"
     ply.write(path, scene)
     assert detect_format(path) is ply
@@ -163,6 +150,15 @@ def test_detection_is_by_content(tmp_path):
                          b"property uint packed_position\nend_header\n")
     assert not ply.sniff(b"\x00" * 64)
     assert not splat.sniff((tmp_path / "scene.bin").read_bytes())
+
+
+def test_a_missing_format_module_is_an_error():
+    """A format module that cannot be imported (a broken install) is the import error, not a
+    format silently left out of detection and writing."""
+    from splatgl.formats import _modules
+
+    with pytest.raises(ModuleNotFoundError, match="no_such_format"):
+        _modules(("ply", "no_such_format"))
 
 
 def test_real_donut_ply(shared_scenes):
@@ -202,7 +198,7 @@ def test_minimal_splat_fixture(shared_scenes):
 
 
 def test_splat_write_read_within_quantisation(tmp_path):
-    scene = random_scene(13, n=50)
+    scene = random_scene(50, 13)
     path = tmp_path / "s.splat"
     splat.write(path, scene)
     assert path.stat().st_size == 32 * 50
@@ -225,14 +221,13 @@ def test_splat_write_read_within_quantisation(tmp_path):
 
 def test_splat_writer_drops_sh_with_warning_and_refuses_surfels(tmp_path):
     with pytest.warns(UserWarning, match="SH degree 0 only"):
-        splat.write(tmp_path / "a.splat", random_scene(14, degree=2))
+        splat.write(tmp_path / "a.splat", random_scene(17, 14, degree=2))
     from splatgl.errors import SceneFormatError
     with pytest.raises(SceneFormatError, match="surfel"):
-        splat.write(tmp_path / "b.splat", random_scene(15, kind=SplatKind.SURFEL_2D))
+        splat.write(tmp_path / "b.splat", random_scene(17, 15, kind=SplatKind.SURFEL_2D))
 
 
-@settings(max_examples=25, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(values=hnp.arrays(np.float32, (6, 14),
                          elements=st.floats(width=32, allow_nan=False, allow_infinity=False)))
 def test_any_finite_float32_round_trips_in_every_encoding(tmp_path, values):

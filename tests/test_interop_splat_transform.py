@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, shared_file
+from helpers import REPO, shared_file
 from splatgl.constants import SH_C0
 from splatgl.convert import ATTRIBUTES, conversion_error
 from splatgl.formats import compressed_ply, load_scene, save_scene, spz_write, writer_for
@@ -63,6 +63,8 @@ from splatgl.formats import sog as sog_format
 from splatgl.metrics import psnr
 from splatgl.render import default_camera
 from splatgl.scene import Scene
+
+pytestmark = [pytest.mark.npm, pytest.mark.slow]
 
 _spec = importlib.util.spec_from_file_location(
     "splat_transform_files", REPO / "tests" / "data" / "splat_transform_files.py")

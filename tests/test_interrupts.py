@@ -9,11 +9,12 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 
 import numpy as np
 
 from splatgl.progress import StderrProgress, format_seconds
+
+from helpers import signal_and_wait
 
 DEMO_ARGS = ["--width", "48", "--height", "32"]
 
@@ -24,27 +25,26 @@ def run_python(code: str, *args: str, **popen) -> subprocess.Popen:
 
 
 def test_sigterm_during_convert_removes_the_partial_file(tmp_path, shared_scenes):
-    """The writer is slowed down (and announces itself) so the signal lands mid-write."""
+    """The writer announces itself and then waits for ever, so the signal lands mid-write and
+    only the signal can end the command."""
     out = tmp_path / "out.ply"
     proc = run_python("""
-        import sys, time
+        import sys, threading
         from splatgl.formats import ply
         real = ply.write
-        def slow_write(path, scene):
+        def stuck_write(path, scene):
             real(path, scene)           # the .partial file now exists, complete or not
             print("writing", flush=True)
-            time.sleep(60)
-        ply.write = slow_write
+            threading.Event().wait()    # until SIGTERM raises here
+            print("not interrupted", flush=True)
+        ply.write = stuck_write
         from splatgl.cli import main
         sys.exit(main(["convert", sys.argv[1], sys.argv[2]]))
-        """, str(shared_scenes / "fixtures" / "minimal.splat"), str(out))
+        """, str(shared_scenes / "fixtures" / "minimal.splat"), str(out), start_new_session=True)
     assert proc.stdout.readline() == "writing\n"
     assert [p.name for p in tmp_path.iterdir()] == ["out.ply.partial"]
-    t0 = time.monotonic()
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=30)
-    assert time.monotonic() - t0 < 5
-    assert (proc.returncode, err) == (143, "splatgl: terminated\n")
+    rest, err = signal_and_wait(proc, signal.SIGTERM)
+    assert (proc.returncode, rest, err) == (143, "", "splatgl: terminated\n")
     assert list(tmp_path.iterdir()) == []
 
 

@@ -23,6 +23,8 @@ import pytest
 from splatgl.formats import ply
 from splatgl.scene import VALIDATE_BLOCK, Scene
 
+pytestmark = pytest.mark.slow  # a 1M-splat file written, then loaded in a subprocess
+
 N = 1_000_000
 DEGREE = 3
 

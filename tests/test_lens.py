@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import shared_file
+from helpers import shared_file
 from splatgl import lens
 from splatgl import project as pm
 from splatgl.camera import Camera, Projection, look_at
@@ -120,7 +120,7 @@ def test_gsplat_convention_sorts_and_culls_a_fisheye_by_view_z():
     degrees, z 1.0), green farther (R 2.05 at 61.5 degrees) but of smaller z (0.978): the
     conventions draw opposite splats in front.  A splat 95 degrees off the axis (z < 0) is in a
     200-degree fisheye's view, which gsplat culls."""
-    from conftest import scene_with_colors
+    from helpers import scene_with_colors
     from splatgl.reference import render_reference
 
     scene = scene_with_colors([_at(2.0, 60), _at(2.05, 61.5)], [[1, 0, 0, 0]] * 2,
@@ -176,6 +176,7 @@ def _check(quad, ref):
 LENS_VIEWS = [("fisheye", 200, FISHEYE_K), ("fisheye", 180, (0, 0, 0, 0)), ("equirect", 0, None)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ply/donut_sh0.ply", "compressed_ply/guitar.compressed.ply"])
 @pytest.mark.parametrize("distance", [0.3, 1.0])
 @pytest.mark.parametrize("model,fov,k", LENS_VIEWS, ids=["fisheye_k", "fisheye", "equirect"])
@@ -194,6 +195,7 @@ def test_quad_and_tile_match_reference(gl_renderer, shared_scenes, name, distanc
         assert psnr(tile, ref) > 85.0
 
 
+@pytest.mark.slow
 def test_tile_dense_wide_view(gl_renderer, shared_scenes):
     """A 120-degree view from inside guitar: tile (3, 3) holds 55,360 splats.  Drawn in one
     pass it came out blank (llvmpipe ends an invocation's loops after 65535 iterations in all);

@@ -23,7 +23,7 @@ from splatgl.render import default_camera
 from splatgl.scene import Scene
 from splatgl.settings import RenderSettings
 
-from conftest import shared_file
+from helpers import shared_file
 
 
 def _scene(n: int, seed: int = 0, degree: int = 1) -> Scene:
@@ -128,6 +128,7 @@ def biker(shared_scenes):
     return scene, build_hierarchy(scene)
 
 
+@pytest.mark.slow
 def test_far_view_draws_fewer_nodes_at_40_db(ctx, biker):
     """A far view (4x the framing distance) at 1 px: a fraction of the splats, >= 40 dB
     against full detail (measured 44.1 dB with 45% of the drawn splats at 320x180)."""
@@ -145,6 +146,7 @@ def test_far_view_draws_fewer_nodes_at_40_db(ctx, biker):
         lod.release()
 
 
+@pytest.mark.slow
 def test_cli_builds_and_renders_a_cut(tmp_path, shared_scenes):
     src = shared_file(shared_scenes, "ply/donut_sh0.ply")
     out = tmp_path / "donut.lod.ply"
@@ -163,6 +165,7 @@ def test_cli_builds_and_renders_a_cut(tmp_path, shared_scenes):
                                    "with 'splatgl lod SCENE -o SCENE.lod.ply'")
 
 
+@pytest.mark.slow
 def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
     """Once a view's cut draws >= 0.75 nodes per leaf it stands for, that view and views no
     farther draw the leaves directly: the same image as full detail up to float32 rounding (the

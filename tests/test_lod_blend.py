@@ -23,7 +23,7 @@ from splatgl.render import default_camera
 from splatgl.scene import Scene
 from splatgl.settings import Preprocess, RenderSettings
 
-from conftest import shared_file
+from helpers import shared_file
 
 N = 3000
 
@@ -68,7 +68,7 @@ def test_expansion_is_a_clamped_ramp_across_the_band():
     np.testing.assert_array_equal(expansion(size, np.inf, 2.0), np.zeros(6))
 
 
-@hsettings(max_examples=25, deadline=None)
+@hsettings(max_examples=25)
 @given(threshold=st.floats(0.3, 12.0), band=st.floats(1.05, 4.0), distance=st.floats(3.0, 30.0))
 def test_weights_sum_to_one_along_every_path(tree, threshold, band, distance):
     """Every leaf is in view, so every root-to-leaf path carries total weight 1 (the weights
@@ -84,7 +84,7 @@ def test_weights_sum_to_one_along_every_path(tree, threshold, band, distance):
     assert leaves_covered(tree, rows, w) == pytest.approx(N, rel=1e-4)  # all leaves in view
 
 
-@hsettings(max_examples=30, deadline=None)
+@hsettings(max_examples=30)
 @given(threshold=st.floats(0.3, 12.0), band=st.floats(1.0, 3.0), distance=st.floats(3.0, 30.0),
        leaves_at=st.floats(0.3, 1.0))
 def test_early_exit_before_the_leaves_matches_the_whole_cut(tree, threshold, band, distance,
@@ -113,7 +113,8 @@ def test_no_band_is_the_plain_cut(tree):
     np.testing.assert_array_equal(_weight_per_leaf(tree, rows, None), 1.0)  # each leaf once
 
 
-@hsettings(max_examples=6, deadline=None)
+@pytest.mark.slow
+@hsettings(max_examples=6)
 @given(threshold=st.floats(0.5, 6.0), band=st.floats(1.5, 3.0), start=st.floats(4.0, 12.0))
 def test_weights_change_continuously_along_a_fly_in(tree, threshold, band, start):
     """Steps of 0.2% in camera distance change a projected size s = f r / (d - r) by at most
@@ -145,6 +146,7 @@ def biker(shared_scenes):
     return scene, build_hierarchy(scene)
 
 
+@pytest.mark.slow
 def test_prepass_weights_match_the_numpy_twin(ctx, biker):
     """The pre-pass's weighted opacities (OPACITY_WEIGHT) draw what the quad path draws for the
     cut as a plain scene with those opacities (blended_scene): measured 0.00016 max error (the
@@ -188,6 +190,7 @@ def test_band_needs_the_prepass_and_a_ratio(ctx, biker):
         LodSettings(band=0.5)
 
 
+@pytest.mark.slow
 def test_cli_lod_blend(tmp_path, shared_scenes):
     src = shared_file(shared_scenes, "ply/donut_sh0.ply")
     lod = tmp_path / "donut.lod.ply"
@@ -255,7 +258,7 @@ def test_cut_cull_compiled_or_numpy_same_order_and_weights(ctx, biker, sort):
             np.testing.assert_array_equal(a, b)
 
 
-@hsettings(max_examples=40, deadline=None)
+@hsettings(max_examples=40)
 @given(threshold=st.floats(0.3, 12.0), band=st.sampled_from([1.0, 1.5, 2.0, 3.0]),
        distance=st.floats(0.5, 30.0), fov=st.floats(30.0, 110.0),
        leaves_at=st.sampled_from([None, 0.5, 0.75, 1.0]), ortho=st.booleans())

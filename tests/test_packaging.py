@@ -10,7 +10,9 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
+from helpers import REPO
+
+pytestmark = [pytest.mark.wheel, pytest.mark.slow]
 
 
 def test_wheel_install_renders(tmp_path):

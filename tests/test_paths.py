@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from conftest import shared_file
+from helpers import shared_file
 from splatgl.camera import Camera, look_at
 from splatgl.datasets.sources import load_source
 from splatgl.errors import CameraError
@@ -53,7 +53,7 @@ def test_fov_is_linear_between_keys():
     np.testing.assert_allclose(f, [37.5, 45.0, 52.5])
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40)
 @given(st.integers(0, 10_000), st.floats(0.0, 4.0))
 def test_interpolated_rotations_are_proper(seed, t):
     c2w, fovs = _keys(4, seed)

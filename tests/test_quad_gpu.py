@@ -12,8 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from conftest import save_failure_images
-from conftest import scene_with_colors as make_scene
+from helpers import save_failure_images
+from helpers import scene_with_colors as make_scene
 from splatgl.blend import blend_front_to_back, splat_alpha
 from splatgl.camera import Camera, orbit
 from splatgl.constants import ALPHA_MIN, FAST_CORNER_SIGMAS

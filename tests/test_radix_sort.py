@@ -26,7 +26,7 @@ def _depths(n: int, seed: int, ties: bool) -> tuple[np.ndarray, np.ndarray]:
 
 
 @given(st.lists(st.floats(2.0 ** -10, 8192.0, width=32), min_size=0, max_size=300))
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60)
 def test_twin_equals_cpu_sort(values):
     z = np.array(values, np.float32)
     idx = np.arange(z.size, dtype=np.uint32) * 3

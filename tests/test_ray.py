@@ -11,12 +11,14 @@ import numpy as np
 import pytest
 
 from splatgl.cli import main
-from conftest import summary_counts
+from helpers import summary_counts
 from splatgl.commands._common import demo_scene_path
 from test_eval import N_VIEWS, dataset  # noqa: F401 (the module's fixture: a synthetic dataset)
 from splatgl.executor import KILL_ONCE_ENV
 
 ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'splatgl[ray]')")
+
+pytestmark = [pytest.mark.ray, pytest.mark.slow]
 
 ARGS = ["--path", "orbit:16", "--width", "96", "--height", "72"]
 

@@ -17,6 +17,8 @@ from splatgl.reference import (
 from splatgl.scene import Scene, SplatKind
 from splatgl.settings import RenderSettings
 
+from helpers import IN_VIEW, random_scene
+
 NEAR = RenderSettings(near=0.2)
 
 
@@ -29,15 +31,6 @@ def scene_of(means, scale=0.05, opacity=0.8, color=(1.0, 0.5, 0.25)) -> Scene:
     opac = np.broadcast_to(np.asarray(opacity, np.float64), (n,))
     sh = np.tile(((np.asarray(color) - 0.5) / SH_C0)[None, None, :], (n, 1, 1))
     return Scene.from_activated(means, quats, scales, opac, sh)
-
-
-def random_scene(n: int, seed: int, sh_degree: int = 1) -> Scene:
-    rng = np.random.default_rng(seed)
-    means = rng.normal(size=(n, 3)) * [1.0, 0.8, 0.7] + [0.0, 0.0, 4.0]
-    k = (sh_degree + 1) ** 2
-    return Scene.from_activated(means, rng.normal(size=(n, 4)),
-                                np.exp(rng.normal(-2.3, 0.6, size=(n, 3))),
-                                rng.uniform(0.02, 1.0, n), rng.normal(size=(n, k, 3)) * 0.4)
 
 
 def oracle(proj: ProjectedSplats, values, ranges, background, options=ReferenceOptions()):
@@ -172,7 +165,7 @@ def test_gsplat_rect_and_alpha_clamp():
 
 
 def test_gsplat_matches_oracle():
-    scene = random_scene(120, 3)
+    scene = random_scene(120, 3, degree=1, **IN_VIEW)
     cam = Camera(40, 35, 45.0, 45.0, 20.0, 17.0)
     opts = ReferenceOptions(Compat.GSPLAT)
     img = render_reference(scene, cam, NEAR, np.float64, opts)
@@ -225,7 +218,7 @@ def test_tile_ranges_hand_made():
 # ------------------------------------------------------------------------------------ rasterize
 @pytest.mark.parametrize("seed, dtype", [(0, np.float64), (1, np.float64), (2, np.float32)])
 def test_rasterize_matches_serial_oracle(seed, dtype):
-    scene = random_scene(150, seed)
+    scene = random_scene(150, seed, degree=1, **IN_VIEW)
     cam = Camera(45, 37, 50.0, 50.0, 23.0, 17.5)         # partial tiles on both edges
     bg = (0.2, 0.3, 0.4)
     img = render_reference(scene, cam, RenderSettings(background=bg, near=0.2), dtype)
@@ -239,7 +232,7 @@ def test_rasterize_matches_serial_oracle(seed, dtype):
 
 
 def test_rasterize_does_not_depend_on_vectorisation_knobs():
-    scene = random_scene(400, 5)
+    scene = random_scene(400, 5, degree=1, **IN_VIEW)
     cam = Camera(70, 50, 60.0, 60.0, 35.0, 25.0)
     img = render_reference(scene, cam, NEAR, np.float32)
     for chunk, batch, workers in [(1, 1, 1), (5, 3, 2), (1000, 100, 1)]:

@@ -15,16 +15,10 @@ from splatgl.reference import (
 from splatgl.scene import Scene
 from splatgl.settings import RenderSettings
 
-FAST = hsettings(max_examples=25, deadline=None, derandomize=True)
+from helpers import IN_VIEW, random_scene
+
+FAST = hsettings(max_examples=25)
 unit = st.floats(0.0, 1.0)
-
-
-def random_scene(n: int, seed: int) -> Scene:
-    rng = np.random.default_rng(seed)
-    means = rng.normal(size=(n, 3)) * [1.0, 0.8, 0.7] + [0.0, 0.0, 4.0]
-    return Scene.from_activated(means, rng.normal(size=(n, 4)),
-                                np.exp(rng.normal(-2.3, 0.6, size=(n, 3))),
-                                rng.uniform(0.02, 1.0, n), rng.normal(size=(n, 4, 3)) * 0.4)
 
 
 def splats_at(xyz, scale: float, opacity: float, colors) -> Scene:
@@ -88,7 +82,7 @@ def test_alpha_is_zero_or_in_cut_range(a, c, rho, o, dx, dy):
 @FAST
 @given(seed=st.integers(0, 10_000))
 def test_transmittance_never_increases_along_a_tile_list(seed):
-    scene = random_scene(200, seed)
+    scene = random_scene(200, seed, degree=1, **IN_VIEW)
     cam = Camera(48, 40, 45.0, 45.0, 24.0, 20.0)
     img = render_reference(scene, cam, RenderSettings(near=0.2), np.float64)
     final = img.transmittance
@@ -124,7 +118,7 @@ def test_single_isotropic_gaussian_matches_closed_form(s, z, o, du, dv, bg):
 @FAST
 @given(seed=st.integers(0, 10_000), perm_seed=st.integers(0, 10_000))
 def test_input_order_does_not_matter(seed, perm_seed):
-    scene = random_scene(150, seed)
+    scene = random_scene(150, seed, degree=1, **IN_VIEW)
     cam = Camera(50, 38, 45.0, 45.0, 25.0, 19.0)
     perm = np.random.default_rng(perm_seed).permutation(scene.count)
     settings = RenderSettings(background=(0.1, 0.2, 0.3), near=0.2)
@@ -138,7 +132,7 @@ def test_float32_and_float64_agree():
     cam = Camera(64, 48, 55.0, 55.0, 32.0, 24.0)
     settings = RenderSettings(background=(0.3, 0.3, 0.3), near=0.2)
     for seed in range(4):
-        scene = random_scene(300, seed)
+        scene = random_scene(300, seed, degree=1, **IN_VIEW)
         a = render_reference(scene, cam, settings, np.float32)
         b = render_reference(scene, cam, settings, np.float64)
         assert a.color.dtype == np.float32 and b.color.dtype == np.float64

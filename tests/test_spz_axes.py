@@ -17,7 +17,7 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import shared_file
+from helpers import shared_file
 from splatgl.cli import main
 from splatgl.convert import conversion_error
 from splatgl.errors import SceneFormatError, SplatglError

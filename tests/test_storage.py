@@ -17,7 +17,7 @@ from splatgl.settings import GpuStorage, Preprocess, RendererKind, RenderSetting
 from splatgl.storage import (compact_bounds, decode_compact, encode_compact, gpu_bytes_per_splat,
                              scale_exponent)
 
-from conftest import shared_file
+from helpers import shared_file
 
 #: The shared real scenes of the image-cost test (all SH0; the fixture is SH3 and tiny).
 REAL = ("ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply",
@@ -50,7 +50,7 @@ def test_bytes_per_splat():
     assert [gpu_bytes_per_splat(m, 3) for m in GpuStorage] == [64 + 45 * 4, 64 + 45 * 2, 32 + 45 * 2]
 
 
-@hsettings(max_examples=40, deadline=None)
+@hsettings(max_examples=40)
 @given(seed=st.integers(0, 2 ** 31), log_mid=st.floats(-12.0, 6.0), log_spread=st.floats(0.0, 8.0))
 def test_round_trip_stays_within_the_stated_bounds(seed, log_mid, log_spread):
     """Decoded values differ from the scene's activated ones by at most :func:`compact_bounds`;

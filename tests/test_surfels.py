@@ -17,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import scene_with_colors, save_failure_images
+from helpers import SURFELS, random_scene, save_failure_images, scene_with_colors
 from splatgl.camera import Camera, look_at, orbit
 from splatgl.constants import ALPHA_MIN, LOW_PASS, SURFEL_FILTER_INV_SQUARE
 from splatgl.formats import load_scene, save_scene
@@ -35,14 +35,6 @@ TOL32 = 2e-5
 
 def surfels(means, quats, scales, opacities, rgb) -> Scene:
     return scene_with_colors(means, quats, scales, opacities, rgb, SplatKind.SURFEL_2D)
-
-
-def random_surfels(n: int, seed: int, degree: int = 1) -> Scene:
-    rng = np.random.default_rng(seed)
-    k = (degree + 1) ** 2
-    return Scene(rng.normal(size=(n, 3)) * 0.6, rng.normal(size=(n, 4)),
-                 rng.normal(-2.6, 0.5, (n, 2)), rng.normal(0.5, 1.5, n),
-                 rng.normal(0, 0.4, (n, k, 3)), SplatKind.SURFEL_2D)
 
 
 def cameras():
@@ -68,7 +60,7 @@ def assert_close_images(got, expected, tol, name, artifacts_dir):
 @pytest.mark.parametrize("camera", cameras(), ids=["perspective", "orthographic"])
 def test_transform_maps_tangent_points_to_their_pixels(camera):
     """T (u, v, 1) = w (x, y, 1) for the projected world point; w = view z (perspective) or 1."""
-    sc = random_surfels(50, 1)
+    sc = random_scene(50, 1, degree=1, **SURFELS)
     means, quats, scales = (a.astype(np.float64) for a in (sc.means, sc.rotations, sc.scales))
     means = means + [0.0, 0.0, 4.0]
     rng = np.random.default_rng(2)
@@ -90,7 +82,7 @@ def test_transform_maps_tangent_points_to_their_pixels(camera):
 @pytest.mark.parametrize("camera", cameras(), ids=["perspective", "orthographic"])
 def test_intersection_matches_brute_force_ray_plane(camera):
     """(u, v) and the hit's view z from eq. 9-10 equal a direct ray-plane intersection."""
-    sc = random_surfels(200, 3)
+    sc = random_scene(200, 3, degree=1, **SURFELS)
     means = sc.means.astype(np.float64) + [0.0, 0.0, 4.0]
     quats, scales = sc.rotations.astype(np.float64), sc.scales.astype(np.float64)
     rng = np.random.default_rng(4)
@@ -126,7 +118,7 @@ def test_intersection_matches_brute_force_ray_plane(camera):
 @pytest.mark.parametrize("camera", cameras(), ids=["perspective", "orthographic"])
 def test_bounds_are_the_tight_box_of_the_k_ellipse(camera):
     """Dual-conic box = min/max of the projected k-ellipse (united with the low-pass disc)."""
-    sc = random_surfels(100, 5)
+    sc = random_scene(100, 5, degree=1, **SURFELS)
     means = sc.means.astype(np.float64) * 0.3 + [0.0, 0.0, 4.0]
     quats, scales = sc.rotations.astype(np.float64), sc.scales.astype(np.float64) * 3
     opac = sc.opacities.astype(np.float64)
@@ -199,7 +191,7 @@ def test_quad_matches_reference_on_random_scenes(gl_renderer, artifacts_dir, dis
     stops, T (1 - alpha) < 1e-4 with alpha <= 0.99 leaves T < 0.01, so the quad path's extra
     layers add at most 0.01 z_max to D (measured 4.6e-3 / 7.3e-3 / 6.7e-3 world units here).
     """
-    scene = random_surfels(3000, 7)
+    scene = random_scene(3000, 7, degree=1, **SURFELS)
     cam = Camera.from_fov(160, 120, 50.0, orbit([0, 0, 0], distance, 30.0, 20.0))
     ref = render_reference(scene, cam)
     got = gl_renderer.render_layers(scene, cam)
@@ -298,7 +290,7 @@ def test_tilted_surfel_depth_is_the_plane_depth(gl_renderer):
 
 
 def test_ply_round_trip_renders_the_same(gl_renderer, tmp_path):
-    scene = random_surfels(400, 12, degree=2)
+    scene = random_scene(400, 12, degree=2, **SURFELS)
     path = tmp_path / "surfels.ply"
     save_scene(path, scene)
     back = load_scene(path)

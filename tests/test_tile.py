@@ -14,8 +14,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import tile_and_reference, assert_stages_match_reference, save_failure_images
+from helpers import (IN_DEPTH, SURFELS, SURFELS_POSE, assert_stages_match_reference, random_scene,
+                     save_failure_images, shared_file, tile_and_reference)
 from splatgl.camera import Camera, orbit
+from splatgl.formats import load_scene
 from splatgl.reference import emit_keys, project, render_reference, sort
 from splatgl.render import Renderer, default_camera
 from splatgl.scene import Scene
@@ -25,16 +27,6 @@ from splatgl.tile import KeyLayout, TileRenderer
 
 TOL = 1e-5
 DEPTH_TOL_REL = 1e-5
-
-
-def random_scene(n: int, seed: int, sh_degree: int = 1) -> Scene:
-    """n splats in front of an identity camera (z 2..8), anisotropic, scales 0.01..0.3."""
-    rng = np.random.default_rng(seed)
-    means = rng.uniform([-2.0, -1.5, 2.0], [2.0, 1.5, 8.0], (n, 3))
-    k = (sh_degree + 1) ** 2
-    return Scene.from_activated(means, rng.normal(size=(n, 4)),
-                                np.exp(rng.uniform(np.log(0.01), np.log(0.3), (n, 3))),
-                                rng.uniform(0.02, 1.0, n), rng.normal(0.0, 0.5, (n, k, 3)))
 
 
 CAM = Camera.from_fov(128, 96, 60.0)
@@ -72,7 +64,7 @@ def test_key_layout_round_trip():
 
 # ------------------------------------------------------------------------------ GPU
 def test_integer_stages_match_reference(ctx):
-    scene, settings = random_scene(3000, seed=7), RenderSettings()
+    scene, settings = random_scene(3000, 7, degree=1, **IN_DEPTH), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
         got = renderer.debug_stages(CAM)
@@ -85,7 +77,7 @@ def test_integer_stages_match_reference(ctx):
 def test_unpacked_key_layout_matches_reference(ctx, monkeypatch, artifacts_dir):
     """The fallback for huge scenes (reference key layout, stable argsort with values)."""
     monkeypatch.setattr(tile_mod.KeyLayout, "choose", classmethod(lambda cls, n, t: cls(32, 0, False)))
-    scene, settings = random_scene(2000, seed=3), RenderSettings()
+    scene, settings = random_scene(2000, 3, degree=1, **IN_DEPTH), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
         got = renderer.debug_stages(CAM)
@@ -103,7 +95,7 @@ def test_emit_in_several_dispatches_matches_reference(ctx, monkeypatch):
     """Rectangles larger than TILE_EMIT_CHUNK tiles are emitted over several dispatches; the
     keys and their order stay the reference's."""
     monkeypatch.setattr(tile_mod, "TILE_EMIT_CHUNK", 3)
-    scene, settings = random_scene(2000, seed=3), RenderSettings()
+    scene, settings = random_scene(2000, 3, degree=1, **IN_DEPTH), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
         got = renderer.debug_stages(CAM)
@@ -119,10 +111,11 @@ def test_list_passes_equal_one_pass(ctx, monkeypatch, surfels):
     """Tiles whose lists are longer than TILE_LIST_CHUNK are blended in several passes, the
     pixel state (C, T, stopped, D) carried in the output buffers in float32: the same values
     one pass computes, so the images are identical, bit for bit (stopped pixels included)."""
-    from test_tile_surfels import PERSPECTIVE, random_surfels
-
-    scene = random_surfels(3000, 7) if surfels else random_scene(3000, seed=11)
-    cam = PERSPECTIVE if surfels else CAM
+    if surfels:
+        scene = random_scene(3000, 7, degree=1, **SURFELS)
+        cam = Camera.from_fov(128, 96, 60.0, SURFELS_POSE)
+    else:
+        scene, cam = random_scene(3000, 11, degree=1, **IN_DEPTH), CAM
     settings = RenderSettings(background=(0.2, 0.4, 0.9))
     renderer = TileRenderer(ctx, scene, settings)
     try:
@@ -147,7 +140,7 @@ def test_list_passes_equal_one_pass(ctx, monkeypatch, surfels):
     ("orthographic", RenderSettings(near=0.5), Camera.orthographic(128, 96, 24.0), 0),
 ])
 def test_image_matches_reference(ctx, artifacts_dir, name, settings, camera, sh_degree):
-    scene = random_scene(3000, seed=11, sh_degree=sh_degree)
+    scene = random_scene(3000, 11, degree=sh_degree, **IN_DEPTH)
     got, ref = render_pair(ctx, scene, camera, settings)
     assert got.rgba.shape == (camera.height, camera.width, 4) and got.rgba.dtype == np.float32
     assert ref.alpha.max() > 0.9  # the image is not empty
@@ -159,10 +152,10 @@ def test_image_matches_reference(ctx, artifacts_dir, name, settings, camera, sh_
 def test_empty_and_all_culled_scenes_give_background(ctx):
     bg = (0.25, 0.5, 0.75)
     expected = np.broadcast_to(np.array([*bg, 0.0], np.float32), (96, 128, 4))
-    behind = random_scene(500, seed=5)
+    behind = random_scene(500, 5, degree=1, **IN_DEPTH)
     behind = Scene(behind.means * np.float32([1, 1, -1]), behind.quats, behind.log_scales,
                    behind.opacity_logits, behind.sh)  # every splat behind the camera
-    empty = random_scene(1, seed=5).subset(np.zeros(1, bool))
+    empty = random_scene(1, 5, degree=1, **IN_DEPTH).subset(np.zeros(1, bool))
     for scene in (behind, empty):
         renderer = TileRenderer(ctx, scene, RenderSettings(background=bg))
         try:
@@ -174,7 +167,7 @@ def test_empty_and_all_culled_scenes_give_background(ctx):
 
 
 def test_renderer_dispatches_tile_kind(ctx):
-    scene = random_scene(300, seed=2)
+    scene = random_scene(300, 2, degree=1, **IN_DEPTH)
     with Renderer(ctx) as r:
         got = r.render(scene, CAM, RenderSettings(), RendererKind.TILE)
         times = r.renderer_for(scene, RenderSettings(), RendererKind.TILE).last_times
@@ -184,7 +177,7 @@ def test_renderer_dispatches_tile_kind(ctx):
 
 def test_moving_camera_re_sorts(ctx, artifacts_dir):
     """The same renderer must follow a new pose (no stale keys or order)."""
-    scene = random_scene(1500, seed=9)
+    scene = random_scene(1500, 9, degree=1, **IN_DEPTH)
     renderer = TileRenderer(ctx, scene, RenderSettings())
     try:
         for azimuth in (170.0, 200.0):
@@ -197,16 +190,10 @@ def test_moving_camera_re_sorts(ctx, artifacts_dir):
         renderer.release()
 
 
+@pytest.mark.slow
 def test_donut_matches_reference(ctx, shared_scenes, artifacts_dir):
     """The real donut (45k splats, SH degree 0), default camera, 256 x 192."""
-    try:
-        from splatgl.formats import load_scene
-    except ImportError:
-        pytest.skip("no scene reader")
-    path = shared_scenes / "ply" / "donut_sh0.ply"
-    if not path.is_file():
-        pytest.skip(f"{path} not found")
-    scene = load_scene(path)
+    scene = load_scene(shared_file(shared_scenes, "ply/donut_sh0.ply"))
     camera = default_camera(scene, 256, 192)
     got, ref = render_pair(ctx, scene, camera, RenderSettings())
     assert ref.alpha.max() > 0.9

@@ -29,7 +29,8 @@ import math
 import numpy as np
 import pytest
 
-from conftest import tile_and_reference, assert_stages_match_reference, scene_with_colors, save_failure_images
+from helpers import (SURFELS, SURFELS_POSE, assert_stages_match_reference, random_scene, save_failure_images,
+                     scene_with_colors, tile_and_reference)
 from splatgl.camera import Camera, orbit
 from splatgl.reference import emit_keys, project, render_reference, sort
 from splatgl.render import Renderer
@@ -45,21 +46,11 @@ MAX_FLIPS = 4
 FLIP_TOL = 0.02
 
 
-def random_surfels(n: int, seed: int, degree: int = 1) -> Scene:
-    """n surfels around the origin (sigma 0.6), scales ~exp(-2.6), mixed opacities (as
-    tests/test_surfels.py)."""
-    rng = np.random.default_rng(seed)
-    k = (degree + 1) ** 2
-    return Scene(rng.normal(size=(n, 3)) * 0.6, rng.normal(size=(n, 4)),
-                 rng.normal(-2.6, 0.5, (n, 2)), rng.normal(0.5, 1.5, n),
-                 rng.normal(0, 0.4, (n, k, 3)), SplatKind.SURFEL_2D)
-
-
 def surfels(means, quats, scales, opacities, rgb) -> Scene:
     return scene_with_colors(means, quats, scales, opacities, rgb, SplatKind.SURFEL_2D)
 
 
-POSE = orbit([0.0, 0.0, 0.0], 3.0, 30.0, 20.0)
+POSE = SURFELS_POSE
 PERSPECTIVE = Camera.from_fov(160, 120, 50.0, POSE)
 ORTHOGRAPHIC = Camera(160, 120, 40.0, 40.0, 80.0, 60.0, POSE, "orthographic")
 
@@ -88,7 +79,7 @@ def assert_matches_reference(got, ref, name, artifacts_dir):
 # ------------------------------------------------------------------------------ stages
 @pytest.mark.parametrize("camera", [PERSPECTIVE, ORTHOGRAPHIC], ids=["perspective", "orthographic"])
 def test_integer_stages_match_reference(ctx, camera):
-    scene, settings = random_surfels(3000, 7), RenderSettings()
+    scene, settings = random_scene(3000, 7, degree=1, **SURFELS), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
         got = renderer.debug_stages(camera)
@@ -102,7 +93,7 @@ def test_integer_stages_match_reference(ctx, camera):
 def test_unpacked_key_layout_matches_reference(ctx, monkeypatch, artifacts_dir):
     """The huge-scene fallback (reference key layout, stable argsort with values) for surfels."""
     monkeypatch.setattr(tile_mod.KeyLayout, "choose", classmethod(lambda cls, n, t: cls(32, 0, False)))
-    scene, settings = random_surfels(1500, 3), RenderSettings()
+    scene, settings = random_scene(1500, 3, degree=1, **SURFELS), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
         got = renderer.debug_stages(PERSPECTIVE)
@@ -121,7 +112,7 @@ def test_unpacked_key_layout_matches_reference(ctx, monkeypatch, artifacts_dir):
 def test_image_and_depth_match_reference_at_three_distances(ctx, artifacts_dir, distance):
     """Measured (160 x 120, 3000 surfels): max abs RGB 6.6e-7 / 8.2e-7 / 5.4e-7 at distance
     1.2 / 3 / 8 (the quad path: 3.3e-3 / 1.7e-3 / 5.6e-4, from the reference's early stop)."""
-    scene = random_surfels(3000, 7)
+    scene = random_scene(3000, 7, degree=1, **SURFELS)
     cam = Camera.from_fov(160, 120, 50.0, orbit([0, 0, 0], distance, 30.0, 20.0))
     got, ref = render_pair(ctx, scene, cam, RenderSettings())
     assert ref.alpha.mean() > 0.1
@@ -135,7 +126,7 @@ def test_image_and_depth_match_reference_at_three_distances(ctx, artifacts_dir, 
     ("sh_cap_white", RenderSettings(sh_degree=0, background=(1.0, 1.0, 1.0)), PERSPECTIVE, 2),
 ])
 def test_variants_match_reference(ctx, artifacts_dir, name, settings, camera, degree):
-    scene = random_surfels(2000, 11, degree)
+    scene = random_scene(2000, 11, degree=degree, **SURFELS)
     got, ref = render_pair(ctx, scene, camera, settings)
     assert got.rgba.shape == (camera.height, camera.width, 4) and got.rgba.dtype == np.float32
     assert ref.alpha.max() > 0.9
@@ -179,7 +170,7 @@ def test_grazing_surfel_through_the_near_plane(ctx, artifacts_dir):
 def test_empty_and_all_culled_scenes_give_background(ctx):
     bg = (0.25, 0.5, 0.75)
     expected = np.broadcast_to(np.array([*bg, 0.0], np.float32), (120, 160, 4))
-    scene = random_surfels(500, 5)
+    scene = random_scene(500, 5, degree=1, **SURFELS)
     behind = surfels(scene.means * np.float32([1, 1, 0]) - [0, 0, 50.0], scene.rotations,
                      scene.scales, scene.opacities, np.full((500, 3), 0.5))
     cam = Camera.from_fov(160, 120, 50.0)                 # identity pose: everything behind
@@ -196,7 +187,7 @@ def test_empty_and_all_culled_scenes_give_background(ctx):
 
 
 def test_renderer_dispatches_surfels_to_the_tile_kind(ctx):
-    scene = random_surfels(300, 2)
+    scene = random_scene(300, 2, degree=1, **SURFELS)
     with Renderer(ctx) as r:
         got = r.render_layers(scene, PERSPECTIVE, RenderSettings(), RendererKind.TILE)
         quad = r.render_layers(scene, PERSPECTIVE, RenderSettings(), RendererKind.QUAD)

@@ -40,6 +40,7 @@ def _churn(seed: int) -> None:
     del blocks
 
 
+@pytest.mark.slow
 def test_same_frames_same_video_bytes(tmp_path):
     """Fails without the AVX-512 cap on a CPU that has AVX-512 (measured: 3 of 10 encodes
     differed); passes trivially elsewhere, where x264 is left alone."""

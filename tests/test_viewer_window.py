@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.window
+
 W, H = 320, 240
 XVFB = "/usr/bin/Xvfb" if Path("/usr/bin/Xvfb").exists() else shutil.which("Xvfb")
 
@@ -34,30 +36,30 @@ def _die_with_parent() -> None:
         pass
 
 
-def _free_display() -> int:
-    for n in range(91, 300):
-        if not Path(f"/tmp/.X{n}-lock").exists() and not Path(f"/tmp/.X11-unix/X{n}").exists():
-            return n
-    raise RuntimeError("no free X display number")
-
-
 @pytest.fixture(scope="session")
 def xvfb_display():
-    """A private Xvfb server; DISPLAY points at it for the session, and it is killed after."""
+    """A private Xvfb server; DISPLAY points at it for the session, and it is killed after.
+
+    Xvfb picks a free display itself and writes its number to a pipe once it accepts clients
+    (``-displayfd``): no polling for its socket, no guessed display number that another test
+    run could take at the same moment.
+    """
     if XVFB is None:
         pytest.skip("Xvfb not installed (Debian package xvfb): cannot open windows headlessly")
-    n = _free_display()
+    read_fd, write_fd = os.pipe()
     # -noreset: without it the server resets when its last client leaves, and a viewer opened
     # right after another one closed can fail to connect during the reset.
-    proc = subprocess.Popen([XVFB, f":{n}", "-screen", "0", "1280x1024x24", "-nolisten", "tcp", "-noreset"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    proc = subprocess.Popen([XVFB, "-displayfd", str(write_fd), "-screen", "0", "1280x1024x24",
+                             "-nolisten", "tcp", "-noreset"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, pass_fds=(write_fd,),
                             preexec_fn=_die_with_parent)
-    deadline = time.monotonic() + 10.0
-    while not Path(f"/tmp/.X11-unix/X{n}").exists():
-        if proc.poll() is not None or time.monotonic() > deadline:
-            proc.kill()
-            pytest.skip(f"Xvfb :{n} did not start")
-        time.sleep(0.05)
+    os.close(write_fd)
+    with os.fdopen(read_fd) as ready:
+        number = ready.readline().strip()  # blocks until the server is up, or it exited
+    if not number.isdigit():
+        proc.kill()
+        pytest.skip(f"Xvfb did not start (exit status {proc.wait()})")
+    n = int(number)
     old = os.environ.get("DISPLAY")
     os.environ["DISPLAY"] = f":{n}"
     import glfw
@@ -177,9 +179,9 @@ def test_resize_to_zero_and_back(viewer):
     v.step()
     glfw.restore_window(v.window)
     glfw.set_window_size(v.window, 200, 150)
-    deadline = time.monotonic() + 5.0
-    while v.size != (200, 150) and time.monotonic() < deadline:
-        glfw.wait_events_timeout(0.05)
+    hang_guard = time.monotonic() + 120.0  # the server answers at once; this only ends a hang
+    while v.size != (200, 150) and time.monotonic() < hang_guard:
+        glfw.wait_events_timeout(1.0)  # returns as soon as the resize event arrives
     assert v.size == (200, 150)
     assert v.step()
     assert v.last.texture.size == (200, 150)

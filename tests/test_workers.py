@@ -4,21 +4,21 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import summary_counts
+from helpers import signal_and_wait, start_gated, summary_counts
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.image_io import read_image
 from splatgl.distributed.render import frame_folder
 from splatgl.executor import KILL_ONCE_ENV
 from splatgl.workers import chunks
+
+
+pytestmark = pytest.mark.slow  # each run spawns worker processes
 
 
 def test_chunks_are_contiguous_and_cover():
@@ -125,17 +125,14 @@ def test_sigterm_mid_video_leaves_no_video_and_resume_encodes(tmp_path):
     frames kept whole for --resume, no worker left running."""
     pytest.importorskip("av", reason="PyAV is not installed (pip install 'splatgl[video]')")
     out = tmp_path / "v.mp4"
-    argv = [sys.executable, "-m", "splatgl", *ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2"]
-    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    # Each worker writes the first frame of its chunk (0-99, 100-199), then holds until the
+    # signal (helpers.start_gated).
+    proc = start_gated([*ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2"],
+                       frames=1, processes=2)
     frames = frame_folder(out)
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and len(list(frames.glob("*.png"))) < 2:
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=60)
+    _, err = signal_and_wait(proc, signal.SIGTERM)
     assert proc.returncode == 143 and err.strip().endswith("splatgl: terminated"), err
     assert os.listdir(tmp_path) == [frames.name]
-    kept = sorted(frames.iterdir())
-    assert 2 <= len(kept) < 200 and all(p.name[0].isdigit() for p in kept)   # no partial files
+    assert sorted(p.name for p in frames.iterdir()) == ["00000.png", "00100.png"]  # no partials
     assert main([*ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2", "--resume"]) == 0
     assert len(_video(out)) == 200 and os.listdir(tmp_path) == ["v.mp4"]

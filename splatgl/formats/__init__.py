@@ -31,14 +31,9 @@ SNIFF_BYTES = 4096
 
 
 def _modules(names: tuple[str, ...] = _FORMAT_MODULES) -> list[ModuleType]:
-    mods = []
-    for name in names:
-        try:
-            mods.append(importlib.import_module(f"{__name__}.{name}"))
-        except ModuleNotFoundError as exc:  # a format not written yet
-            if exc.name != f"{__name__}.{name}":
-                raise
-    return mods
+    """The format modules ``names``; a missing one is an error (a broken install), never a
+    format silently left out of detection."""
+    return [importlib.import_module(f"{__name__}.{name}") for name in names]
 
 
 def detect_format(path: Path) -> ModuleType:

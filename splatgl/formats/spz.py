@@ -36,15 +36,14 @@ as the SPZ specification says and the stored axes for versions 1-2).
 
 from __future__ import annotations
 
-import shutil
+import math
 import struct
-import subprocess
-import threading
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import zstandard
 
 from ..errors import SceneFormatError
 from ..scene import Scene, SplatKind, activate
@@ -260,68 +259,20 @@ def _streams(path, data: bytes, header: Header, toc: int) -> list[bytes]:
 def zstd_decompress(path, blob: bytes, size: int, what: str) -> bytes:
     """Decompress one zstd frame that must inflate to exactly ``size`` bytes.
 
-    Uses the ``zstandard`` package when installed, else ``compression.zstd`` (Python 3.14+),
-    else the ``zstd`` command-line tool; with none of them, a :class:`SceneFormatError` says so.
     Never reads more than ``size + 1`` bytes of output (corrupted frames cannot exhaust memory).
     """
     if not blob.startswith(ZSTD_MAGIC):
         raise SceneFormatError(path, f"stream is not zstd (starts {blob[:4].hex()})", what)
     try:
-        out = _zstd_backend(path, blob, size + 1, what)
-    except SceneFormatError:
-        raise
-    except Exception as exc:  # each backend has its own error class
+        with zstandard.ZstdDecompressor().stream_reader(blob) as reader:
+            out = _read_upto(reader.read, size + 1)
+    except zstandard.ZstdError as exc:
         raise SceneFormatError(path, f"corrupt zstd stream: {exc}", what) from None
     if len(out) != size:
         raise SceneFormatError(path, f"zstd stream inflates to {len(out)}"
                                      f"{'+' if len(out) > size else ''} bytes, expected {size}",
                                what)
     return out
-
-
-def _zstd_backend(path, blob: bytes, limit: int, what: str) -> bytes:
-    try:
-        import zstandard
-    except ImportError:
-        pass
-    else:
-        with zstandard.ZstdDecompressor().stream_reader(blob) as reader:
-            return _read_upto(reader.read, limit)
-    try:
-        from compression import zstd  # Python 3.14+
-    except ImportError:
-        pass
-    else:
-        return zstd.ZstdDecompressor().decompress(blob, max_length=limit)
-    exe = shutil.which("zstd")
-    if exe is None:
-        raise SceneFormatError(path, "SPZ version 4 streams are zstd-compressed and no zstd "
-                                     "decoder is available: install the 'zstandard' package",
-                               what)
-    with subprocess.Popen([exe, "-d", "-c", "-q"], stdin=subprocess.PIPE,
-                          stdout=subprocess.PIPE, stderr=subprocess.DEVNULL) as proc:
-        feeder = threading.Thread(target=_feed, args=(proc.stdin, blob), daemon=True)
-        feeder.start()
-        out = _read_upto(proc.stdout.read, limit)
-        if len(out) >= limit:  # more output than allowed: stop it
-            proc.kill()
-        try:
-            code = proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            code = proc.wait()
-        feeder.join()
-    if len(out) < limit and code != 0:
-        raise SceneFormatError(path, f"corrupt zstd stream (zstd exit status {code})", what)
-    return out
-
-
-def _feed(pipe, blob: bytes) -> None:
-    try:
-        pipe.write(blob)
-        pipe.close()
-    except OSError:  # the reader stopped early
-        pass
 
 
 def _read_upto(read, limit: int) -> bytes:

@@ -124,8 +124,9 @@ def write(path, scene: Scene, version: int = DEFAULT_VERSION, antialiased: bool 
         fh.write(gzip.compress(body, GZIP_LEVEL, mtime=0))
 
 
-def error_bounds(scene: Scene, version: int = DEFAULT_VERSION) -> dict:
-    """Per-attribute round-trip error bounds (see :mod:`splatgl.formats.quantise`)."""
+def error_bounds(scene: Scene, version: int = DEFAULT_VERSION, axes: str | None = None) -> dict:
+    """Per-attribute round-trip error bounds of a file of ``version`` in ``axes`` (see
+    :mod:`splatgl.formats.quantise`)."""
     bits = fractional_bits(scene.means)
     position = math.sqrt(3.0) * 0.5 * 2.0 ** -bits + qz.position_slack(scene.means)
     dc_lo, dc_hi = -0.5 / qz.SPZ_COLOR_SCALE, 0.5 / qz.SPZ_COLOR_SCALE
@@ -140,7 +141,12 @@ def error_bounds(scene: Scene, version: int = DEFAULT_VERSION) -> dict:
     rest = None
     if scene.sh_degree > 0:
         s = qz.SPZ_SH_SCALE
-        rest = 0.5 / s + qz.clip_excess(scene.sh[:, 1:], -1.0, 127.0 / s) + 1e-6
+        stored = scene.sh[:, 1:]
+        signs = spz_axes.axis_signs(stored_axes(version, axes))
+        if stored.size and (signs != 1).any():
+            # the bytes hold the other axes' SH signs, and the byte range clips those
+            stored = stored * spz_axes.sh_signs(signs, stored.shape[1])[None, :, None]
+        rest = 0.5 / s + qz.clip_excess(stored, -1.0, 127.0 / s) + 1e-6
     return {
         "position": position,
         "scale": qz.relative_scale(log_step) * (1 + 1e-6) + 1e-6,

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,7 +22,6 @@ from splatgl.stress.run import watchdog
 CASE_HANG_S = 120.0
 #: Ceiling for the errors of known, unfixed failures (the worst measured is 0.335).
 KNOWN_FAILURE_LIMIT = 0.4
-REPO = Path(__file__).resolve().parents[2]
 
 
 def _check(result) -> None:
