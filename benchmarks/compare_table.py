@@ -17,8 +17,8 @@ from pathlib import Path
 from splatgl import RenderSettings, Renderer, RendererKind, default_camera, load_scene
 from splatgl.bench.runner import median_seconds
 from splatgl.errors import SplatglError
-from splatgl.metrics import image_errors
-from splatgl.render import render_reference_rgba
+from splatgl.evaluation.metrics import image_errors
+from splatgl.api import render_reference_rgba
 
 REPO = Path(__file__).resolve().parent.parent
 SCENES = ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply",

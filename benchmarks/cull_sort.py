@@ -20,16 +20,16 @@ import statistics
 
 import numpy as np
 
-from splatgl import cull_kernel
+from splatgl.order import kernels as cull_kernel
 from splatgl.bench.scale import scene_file
 from splatgl.bench.machine import CPU_ONLY, describe, machine_info
 from splatgl.bench.scale_cli import parse_sizes
-from splatgl.camera import orbit
+from splatgl.cameras.camera import orbit
 from splatgl.formats import load_scene
-from splatgl.lens import with_projection
-from splatgl.quad import QuadRenderer
-from splatgl.render import Renderer, default_camera
-from splatgl.settings import RenderSettings
+from splatgl.cameras.lens import with_projection
+from splatgl.renderers.quad import QuadRenderer
+from splatgl.api import Renderer, default_camera
+from splatgl.model.settings import RenderSettings
 
 VIEWS = ("pinhole", "pinhole-close", "fisheye", "equirect")
 

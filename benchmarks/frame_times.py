@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from splatgl import RenderSettings, Renderer, default_camera, load_scene
-from splatgl.camera import orbit
-from splatgl.scene import Scene
+from splatgl.cameras.camera import orbit
+from splatgl.model.scene import Scene
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -127,7 +127,7 @@ def worker(src: str, dst: str) -> None:
 
 def gsplat_render(python, scene, camera, near, background, tmp):
     """(RGBA, projection arrays) of gsplat's side for ``camera`` (through ``python``)."""
-    from splatgl import project as pm
+    from splatgl.twins import project as pm
 
     means, view = pm.anchored(scene.means, scene.anchor, camera, np.float64)
     colors = pm.sh_color(scene.sh.astype(np.float32), pm.view_dirs(means.astype(np.float32),
@@ -146,7 +146,7 @@ def gsplat_render(python, scene, camera, near, background, tmp):
 def reference(scene, camera, settings, compat, lens_rules=False, depth=None):
     """Reference RGBA; ``lens_rules``: splatgl's distance key and cull even under GSPLAT;
     ``depth``: replace the sort key of the visible rows by ``depth(p_cam)``."""
-    from splatgl import project as pm
+    from splatgl.twins import project as pm
     from splatgl.reference import stages
     from splatgl.reference.binning import emit_keys, sort, tile_ranges
     from splatgl.reference.options import ReferenceOptions
@@ -173,8 +173,8 @@ def per_pixel_orders(scene, camera, settings):
     """{"distance", "view z", "per pixel"}: the GSPLAT reference's footprints blended in each
     order (:func:`composite`); per pixel: ``t* = d^T P mu / d^T P d`` (the depth of greatest
     contribution along the pixel's unit ray d, P the camera-space precision)."""
-    from splatgl import project as pm
-    from splatgl.quaternion import quat_to_rotmat
+    from splatgl.twins import project as pm
+    from splatgl.model.quaternion import quat_to_rotmat
     from splatgl.reference import stages
     from splatgl.reference.options import ReferenceOptions
 
@@ -203,7 +203,7 @@ def per_pixel_orders(scene, camera, settings):
 
 def compare_view(python, scene, cam, settings, near, per_pixel: bool) -> None:
     """Print one camera's lines (see the module docstring)."""
-    from splatgl.metrics import image_errors, psnr
+    from splatgl.evaluation.metrics import image_errors, psnr
 
     def fmt(a, b):
         off = round(image_errors(a, b).off_1 * a.shape[0] * a.shape[1])
@@ -241,7 +241,7 @@ def compare_view(python, scene, cam, settings, near, per_pixel: bool) -> None:
 
 def main() -> None:
     from splatgl import Camera, RenderSettings, default_camera, load_scene
-    from splatgl.settings import resolve_near
+    from splatgl.model.settings import resolve_near
 
     repo = Path(__file__).resolve().parents[1]
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])

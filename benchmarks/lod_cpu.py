@@ -17,19 +17,19 @@ import json
 
 import numpy as np
 
-from splatgl import cull_kernel
+from splatgl.order import kernels as cull_kernel
 from splatgl.bench.lod_bench import cameras, lod_file
 from splatgl.bench.scale import scene_file
 from splatgl.bench.machine import CPU_ONLY, describe, machine_info
 from splatgl.bench.runner import median_seconds
 from splatgl.bench.scale_cli import parse_sizes
-from splatgl.cull import CullData
-from splatgl.cull_chunks import keys_order, rows_keys
+from splatgl.order.cull import CullData
+from splatgl.order.chunks import keys_order, rows_keys
 from splatgl.lod.cut import CutData, select_cut_weights
 from splatgl.lod.io import read_lod
 from splatgl.lod.render import SKIP_NODES_PER_LEAF
-from splatgl.project import anchored_camera
-from splatgl.settings import RenderSettings, resolve_near
+from splatgl.twins.project import anchored_camera
+from splatgl.model.settings import RenderSettings, resolve_near
 
 
 def _median_ms(fn, repeats: int):

@@ -75,7 +75,7 @@ def main() -> None:
     ap.add_argument("--height", type=int, default=720)
     args = ap.parse_args()
     sys.path.insert(0, str(REPO))
-    from splatgl.camera_io import save_camera
+    from splatgl.cameras.files import save_camera
     from splatgl.formats import load_scene
     from splatgl.gl.context import create_headless_context
     from splatgl.paths import orbit

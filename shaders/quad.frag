@@ -2,7 +2,7 @@
 //   alpha = min(0.99, o exp(power)), power = -0.5 (a dx^2 + c dy^2) - b dx dy,
 //   skipped (written as (0, 0, 0, 0), which the blend adds as exactly nothing) when power > 0
 //   or alpha < 1/255.  Output premultiplied (c alpha, alpha) for
-//   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).  Twin: splatgl/blend.py.
+//   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).  Twin: splatgl/twins/blend.py.
 // With DEPTH_OUTPUT, a second target gets (z alpha, 0, 0, alpha) under the same blend, so its
 // own alpha channel tracks the same transmittance and red accumulates D = sum z alpha T.
 #if defined(EARLY_STOP) && !defined(COUNT_RASTERISED)
@@ -53,7 +53,7 @@ void main() {
     // cost per rejected fragment, docs/early-stop.md).
     bool skip = power > 0.0 || alpha < ALPHA_MIN;
 #ifdef EQUIRECT
-    // Half a turn of longitude each side of the centre (splatgl/lens.py wrap_period): a splat
+    // Half a turn of longitude each side of the centre (splatgl/cameras/lens.py wrap_period): a splat
     // at a pole spans the image once, and a seam splat's two copies never meet.
     skip = skip || abs(gl_FragCoord.x - v_mean2d.x) > 0.5 * u_wrap_period;
 #endif

@@ -1,7 +1,7 @@
 // Quad path, compute pre-pass: the per-splat math of quad.vert done once per splat (not once
 // per corner), for the sorted visible splats, into `prepared` for quad_light.vert.
 // Layout per sorted slot k (4 vec4): (mean2d, axis1), (axis2, conic.ab), (conic.c, color),
-// (opacity, depth, visible, fragments in the viewport: camera.glsl visible_area).  Twin: splatgl/project.py, as for quad.vert; with
+// (opacity, depth, visible, fragments in the viewport: camera.glsl visible_area).  Twin: splatgl/twins/project.py, as for quad.vert; with
 // OPACITY_WEIGHT, the scene with those opacities scaled (splatgl/lod/render.py blended_scene).
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"

@@ -4,7 +4,7 @@
 // key orders by tile_id = y * tiles_x + x, then by the float bits of view z (lib/tile_common).
 // A dispatch writes the keys u_first .. u_first + TILE_EMIT_CHUNK - 1 of each splat (one loop over
 // the rectangle's row-major index): llvmpipe ends an invocation's loops after 65535 iterations
-// in all, which one splat covering a 4096 x 4096 image would reach, so splatgl/tile.py issues
+// in all, which one splat covering a 4096 x 4096 image would reach, so splatgl/renderers/tile.py issues
 // as many dispatches as the largest rectangle needs (one, below 32768 tiles).
 #include "lib/tile_common.glsl"
 

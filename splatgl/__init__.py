@@ -12,8 +12,6 @@ standard library and the command line can handle Ctrl-C during its own start-up.
 from __future__ import annotations
 
 import importlib
-import sys
-import types
 
 TYPE_CHECKING = False  # typing.TYPE_CHECKING without importing typing at start-up
 
@@ -21,15 +19,15 @@ __version__ = "0.1.0"
 
 #: Public name -> the submodule defining it.
 _EXPORTS = {
-    "Camera": "camera", "Projection": "camera", "look_at": "camera", "orbit": "camera",
-    "load_camera": "camera_io", "load_cameras": "datasets", "save_camera": "camera_io",
+    "Camera": "cameras.camera", "Projection": "cameras.camera", "look_at": "cameras.camera", "orbit": "cameras.camera",
+    "load_camera": "cameras.files", "load_cameras": "datasets", "save_camera": "cameras.files",
     "CameraError": "errors", "ContextError": "errors", "SceneFormatError": "errors",
     "ShaderError": "errors", "SplatglError": "errors",
     "load_scene": "formats", "save_scene": "formats",
-    "Renderer": "render", "default_camera": "render", "render": "render",
-    "Scene": "scene", "SplatKind": "scene",
-    "Precision": "settings", "QuadExtent": "settings", "RenderSettings": "settings",
-    "RendererKind": "settings",
+    "Renderer": "api", "default_camera": "api", "render": "api",
+    "Scene": "model.scene", "SplatKind": "model.scene",
+    "Precision": "model.settings", "QuadExtent": "model.settings", "RenderSettings": "model.settings",
+    "RendererKind": "model.settings",
 }
 
 __all__ = sorted(_EXPORTS)
@@ -48,29 +46,12 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_EXPORTS))
 
 
-class _Package(types.ModuleType):
-    """``splatgl.render`` names the function although a submodule has the same name: importing
-    the submodule sets the package attribute, which this property ignores."""
-
-    @property
-    def render(self):
-        from .render import render
-        return render
-
-    @render.setter
-    def render(self, value) -> None:
-        pass  # the import system storing the submodule: keep the function
-
-
-sys.modules[__name__].__class__ = _Package
-
-
 if TYPE_CHECKING:  # static analysers see the names directly
-    from .camera import Camera, Projection, look_at, orbit
-    from .camera_io import load_camera, save_camera
+    from .cameras.camera import Camera, Projection, look_at, orbit
+    from .cameras.files import load_camera, save_camera
     from .datasets import load_cameras
     from .errors import CameraError, ContextError, SceneFormatError, ShaderError, SplatglError
     from .formats import load_scene, save_scene
-    from .render import Renderer, default_camera, render
-    from .scene import Scene, SplatKind
-    from .settings import Precision, QuadExtent, RenderSettings, RendererKind
+    from .api import Renderer, default_camera, render
+    from .model.scene import Scene, SplatKind
+    from .model.settings import Precision, QuadExtent, RenderSettings, RendererKind

@@ -11,7 +11,7 @@ import math
 #: Tile edge in pixels (the reference bins splats into 16 x 16 tiles).
 TILE_SIZE = 16
 #: Default near-plane distance of the reference (view-space z <= this is culled).  splatgl's own
-#: default is scene-relative (see :func:`splatgl.settings.resolve_near`), never larger than this.
+#: default is scene-relative (see :func:`splatgl.model.settings.resolve_near`), never larger than this.
 REFERENCE_NEAR = 0.2
 #: ``x/z`` and ``y/z`` are clamped to +-JACOBIAN_CLAMP * tan(half fov) inside the Jacobian only.
 JACOBIAN_CLAMP = 1.3
@@ -23,7 +23,7 @@ AA_MIN_FACTOR = 2.5e-5
 EXTENT_DISCRIMINANT_FLOOR = 0.1
 #: ``det = a c - b^2`` of the 2D covariance is trusted where it exceeds this fraction of ``a c``
 #: (cancellation then costs at most ~eps / ratio, ~6e-6 relative in float32); below it the
-#: renderers use the cancellation-free form (:func:`splatgl.project.covariance_2d_det`).
+#: renderers use the cancellation-free form (:func:`splatgl.twins.project.covariance_2d_det`).
 DET_CANCEL_RATIO = 1e-2
 #: Extent of the reference in standard deviations (radius ``ceil(3 sqrt(lambda_max))``).
 EXTENT_SIGMAS = 3.0
@@ -59,7 +59,7 @@ SURFEL_FILTER_INV_SQUARE = 2.0
 #: matrix with det +1 by at most this much (largest entry of |R R^T - I|, and |det R - 1|).  Poses
 #: saved as float32 keep ~1e-7; 1e-4 also accepts JSON written with 5-6 significant digits.
 RIGID_POSE_TOLERANCE = 1e-4
-#: Fisheye cameras (:mod:`splatgl.lens`) keep splat centres up to this angle (radians, 10
+#: Fisheye cameras (:mod:`splatgl.cameras.lens`) keep splat centres up to this angle (radians, 10
 #: degrees) beyond the largest angle from the axis that reaches the image, so splats centred
 #: just outside the view still reach in, as the pinhole's rectangle test allows ...
 FISHEYE_THETA_MARGIN = math.radians(10.0)
@@ -103,7 +103,7 @@ RADIX_BITS = 4
 RADIX_GROUP = 256
 RADIX_ITEMS = 16
 
-#: Compact GPU storage (``--gpu-storage compact``, splatgl/storage.py, shaders/lib/dequantise.glsl):
+#: Compact GPU storage (``--gpu-storage compact``, splatgl/gl/storage.py, shaders/lib/dequantise.glsl):
 #: bits of each smallest-three quaternion component and of the linear opacity.  Two components
 #: and the 2-bit index fill one uint; the third shares a uint with the opacity.  15 bits, not
 #: 10: with 10 the rotation's rounding dominated the image error (81 dB against float32 on the

@@ -96,13 +96,13 @@ def artifacts_dir() -> Path:
 
 @pytest.fixture(scope="module")
 def gl_renderer():
-    """A :class:`splatgl.render.Renderer` on a headless context, shared by a test module.
+    """A :class:`splatgl.api.Renderer` on a headless context, shared by a test module.
 
     Skips the module where no OpenGL context can be made.  Every test using it is checked for
     GL errors (:func:`gl_error_check`).
     """
     from splatgl.errors import ContextError
-    from splatgl.render import Renderer
+    from splatgl.api import Renderer
 
     try:
         renderer = Renderer()

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from splatgl.camera import orbit
+from splatgl.cameras.camera import orbit
 from splatgl.constants import SH_C0, sh_coeff_count
-from splatgl.scene import Scene, SplatKind
+from splatgl.model.scene import Scene, SplatKind
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -83,7 +83,7 @@ def shared_file(shared_scenes: Path, name: str) -> Path:
 
 def save_failure_images(directory: Path, name: str, got, expected) -> str:
     """Dump got / expected / |difference| (x10) images; returns a note for assertion messages."""
-    from splatgl.image_io import write_image
+    from splatgl.output.images import write_image
 
     diff = np.abs(np.asarray(got, np.float32) - np.asarray(expected, np.float32))
     paths = []
@@ -122,7 +122,7 @@ def tile_and_reference(ctx, scene, camera, settings):
     """(tile renderer's RenderOutput, float32 NumPy reference image) of one view; the tile
     renderer is released afterwards."""
     from splatgl.reference import render_reference
-    from splatgl.tile import TileRenderer
+    from splatgl.renderers.tile import TileRenderer
 
     renderer = TileRenderer(ctx, scene, settings)
     try:

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from splatgl.camera import check_rigid_pose, look_at, rigid_pose_problem
-from splatgl.camera_io import load_camera, load_cameras
+from splatgl.cameras.camera import check_rigid_pose, look_at, rigid_pose_problem
+from splatgl.cameras.files import load_camera, load_cameras
 from splatgl.constants import RIGID_POSE_TOLERANCE
 from splatgl.errors import CameraError
 
@@ -131,7 +131,7 @@ def test_a_non_finite_pose_entry_is_named_in_every_source(tmp_path, name, obj, w
 
 
 def test_api_camera_names_the_non_finite_entry():
-    from splatgl.camera import Camera
+    from splatgl.cameras.camera import Camera
     m = np.eye(4)
     m[0, 3] = math.nan
     with pytest.raises(CameraError, match=r"^world_to_camera must be finite; it holds NaN at row 0, "

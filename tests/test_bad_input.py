@@ -10,7 +10,7 @@ import pytest
 from splatgl.cli import main
 from splatgl.errors import SceneFormatError
 from splatgl.formats import load_scene, ply, splat
-from splatgl.scene import Scene
+from splatgl.model.scene import Scene
 
 
 def good_vertices(n: int = 10, seed: int = 0) -> np.ndarray:

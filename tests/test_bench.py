@@ -13,10 +13,10 @@ from splatgl.bench.configs import RowKind, configurations
 from splatgl.bench.report import pareto_front
 from splatgl.bench.runner import BenchOptions, bench_scene
 from splatgl.cli import main
-from splatgl.image_io import read_image
-from splatgl.render import default_camera
-from splatgl.scene import Scene
-from splatgl.settings import QuadExtent, RenderSettings
+from splatgl.output.images import read_image
+from splatgl.api import default_camera
+from splatgl.model.scene import Scene
+from splatgl.model.settings import QuadExtent, RenderSettings
 
 
 def test_pareto_front():
@@ -107,7 +107,7 @@ def test_storage_rows_report_bytes_and_psnr_against_float32(gl_renderer):
     rows = bench_scene(gl_renderer, "syn", scene,
                        BenchOptions(64, 48, 2, error_frames=(1,), groups=frozenset({"storage"})))
     by = {r.config: r for r in rows}
-    # SH degree 1: 9 rest values per splat, float32 / float16 (splatgl/storage.py).
+    # SH degree 1: 9 rest values per splat, float32 / float16 (splatgl/gl/storage.py).
     assert [by[c].gpu_bytes_per_splat for c in ("default", "storage=half-sh", "storage=compact")] \
         == [64 + 36, 64 + 18, 32 + 18]
     assert by["default"].psnr_float32 is None

@@ -28,7 +28,7 @@ def test_machine_info_from_cpuinfo_text():
         "AMD EPYC 7B13", "avx2", "llvmpipe (LLVM 15.0.6, 256 bits)")
     assert info["cores"] >= 1
     assert machine_info("x", XEON)["simd"] == "avx512"
-    from splatgl import cull_kernel
+    from splatgl.order import kernels as cull_kernel
 
     cull = "compiled (numba)" if cull_kernel.installed() else "numpy"
     assert info["cull"] == cull

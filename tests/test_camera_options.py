@@ -1,6 +1,6 @@
 """A camera file with --width/--height/--projection/--fov (issue 25, item 4 and part of 8).
 
-The rule lives in :func:`splatgl.lens.adapt_camera` (reached from the API as
+The rule lives in :func:`splatgl.cameras.lens.adapt_camera` (reached from the API as
 ``splatgl.load_camera(path, width=..., projection=...)``): the file's own intrinsics scale
 keeping its aspect; another projection or a field of view keeps only its pose, at any size.
 """
@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 import splatgl
-from splatgl.camera import Projection, look_at
+from splatgl.cameras.camera import Projection, look_at
 from splatgl.cli import build_parser, main
 from splatgl.commands._common import camera_from_args
 from splatgl.errors import CameraError
-from splatgl.image_io import read_image
+from splatgl.output.images import read_image
 
 POSE = look_at([0.0, -0.5, -3.0], [0.0, 0.0, 0.0])
 

@@ -12,7 +12,7 @@ import pytest
 
 import splatgl
 from helpers import scene_with_colors, shared_file
-from splatgl.camera import Camera
+from splatgl.cameras.camera import Camera
 from splatgl.datasets import colmap, load_source, load_views, nerf, select_indices
 from splatgl.datasets.gs_cameras import gs_cameras_json
 from splatgl.datasets.nerfstudio_path import camera_path_json

@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 import pytest
 
-from splatgl.camera import look_at
+from splatgl.cameras.camera import look_at
 from splatgl.cli import main
 
 
@@ -216,7 +216,7 @@ def test_zero_sizes_and_closed_renderers_are_one_line_errors(tmp_path, capsys):
     from splatgl.commands._common import demo_scene_path
     from splatgl.errors import CameraError, SplatglError
     from splatgl.formats import load_scene
-    from splatgl.render import Renderer, default_camera
+    from splatgl.api import Renderer, default_camera
 
     expect_one_line(capsys, tmp_path, ["path", "orbit", "--width", "0", "-o", tmp_path / "p.json"],
                     "splatgl path orbit: error: argument --width: must be at least 1, got 0 "

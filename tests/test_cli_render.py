@@ -7,14 +7,14 @@ import json
 import numpy as np
 import pytest
 
-from splatgl.camera import Camera, orbit
-from splatgl.camera_io import load_camera, load_cameras, save_camera
+from splatgl.cameras.camera import Camera, orbit
+from splatgl.cameras.files import load_camera, load_cameras, save_camera
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.errors import CameraError
 from splatgl.formats import load_scene
-from splatgl.image_io import read_image
-from splatgl.render import Renderer, default_camera
+from splatgl.output.images import read_image
+from splatgl.api import Renderer, default_camera
 
 
 def test_demo_render_png_matches_api(tmp_path, capsys):

@@ -26,12 +26,12 @@ import pytest
 from helpers import shared_file
 from splatgl.cli import main
 from splatgl.formats import load_scene
-from splatgl.image_io import read_image
-from splatgl.metrics import image_errors, psnr, ssim
+from splatgl.output.images import read_image
+from splatgl.evaluation.metrics import image_errors, psnr, ssim
 from splatgl.reference import render_reference
-from splatgl.render import default_camera, render_reference_rgba
-from splatgl.scene import Scene
-from splatgl.settings import RenderSettings
+from splatgl.api import default_camera, render_reference_rgba
+from splatgl.model.scene import Scene
+from splatgl.model.settings import RenderSettings
 
 MIN_PSNR, MAX_ABS, MAX_ABS_ALPHA, MAX_OFF_1 = 60.0, 0.03, 0.04, 0.01
 

@@ -24,9 +24,9 @@ def test_egl_context_is_gl43():
 
 @pytest.mark.skipif(ctypes.util.find_library("OSMesa") is None, reason="libOSMesa not installed")
 def test_osmesa_fallback_renders_the_same(monkeypatch):
-    from splatgl.render import Renderer
-    from splatgl.scene import Scene
-    from splatgl.camera import Camera
+    from splatgl.api import Renderer
+    from splatgl.model.scene import Scene
+    from splatgl.cameras.camera import Camera
 
     scene = Scene.from_activated(np.array([[0.0, 0, 3]]), np.array([[1.0, 0, 0, 0]]),
                                  np.array([[0.2, 0.1, 0.1]]), np.array([0.8]), np.zeros((1, 1, 3)))

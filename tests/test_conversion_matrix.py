@@ -18,7 +18,7 @@ import pytest
 
 from helpers import shared_file
 from test_convert import REAL_FILES
-from splatgl.convert import ATTRIBUTES, conversion_error, error_bounds
+from splatgl.formats.convert import ATTRIBUTES, conversion_error, error_bounds
 from splatgl.formats import load_scene, save_scene, writer_for
 
 #: Largest subsample of a real scene used here.

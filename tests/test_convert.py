@@ -30,10 +30,10 @@ import pytest
 from helpers import random_scene, shared_file
 from splatgl.cli import main
 from splatgl.constants import SH_C0
-from splatgl.convert import conversion_error, convert, rotation_angle_deg
+from splatgl.formats.convert import conversion_error, convert, rotation_angle_deg
 from splatgl.errors import SplatglError
 from splatgl.formats import load_scene, save_scene
-from splatgl.scene import Scene, SplatKind
+from splatgl.model.scene import Scene, SplatKind
 
 SPLAT_ROTATION_BOUND_DEG = math.degrees(2.0 * math.asin(math.sqrt(1.75) / 128.0))
 SPLAT_OPACITY_BOUND = 0.5 / 255.0 + 1e-6

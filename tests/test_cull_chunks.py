@@ -1,4 +1,4 @@
-"""The chunked cull (:mod:`splatgl.cull_chunks`) and the fused lens cull (:mod:`splatgl.lens_cull`)
+"""The chunked cull (:mod:`splatgl.order.chunks`) and the fused lens cull (:mod:`splatgl.order.lens_cull`)
 keep exactly what the float64 cull and the old lens stages keep, with the same depth bits, so
 the sorted order (and so the image) is unchanged; on random scenes and cameras and on a real one.
 """
@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from splatgl import cull_chunks, cull_kernel, lens
-from splatgl.camera import Camera, look_at
-from splatgl.cull import CullData, cull
-from splatgl.cull_chunks import ChunkedCull, keys_order, keys_pairs
-from splatgl.lens_cull import lens_visible_keys
-from splatgl.project import anchored_camera, to_camera
-from splatgl.sort import depth_keys, depth_sort
+from splatgl.order import chunks as cull_chunks, kernels as cull_kernel
+from splatgl.cameras import lens
+from splatgl.cameras.camera import Camera, look_at
+from splatgl.order.cull import CullData, cull
+from splatgl.order.chunks import ChunkedCull, keys_order, keys_pairs
+from splatgl.order.lens_cull import lens_visible_keys
+from splatgl.twins.project import anchored_camera, to_camera
+from splatgl.order.sort import depth_keys, depth_sort
 
 FISHEYE_K = (0.05, -0.01, 0.002, -0.0003)
 
@@ -184,11 +185,11 @@ def test_real_scene_orders_unchanged(shared_scenes, name):
     """On real scenes, pinhole (framing and close), fisheye and equirect views: the quad path's
     new cull stages give exactly the order of the old stages (cull_visible + depth_sort, and
     lens_cull + lens_order + depth_sort), so the rendered images are identical."""
-    from splatgl.camera import orbit
-    from splatgl.cull import cull_visible
+    from splatgl.cameras.camera import orbit
+    from splatgl.order.cull import cull_visible
     from splatgl.formats import load_scene
-    from splatgl.render import default_camera
-    from splatgl.settings import RenderSettings, resolve_near
+    from splatgl.api import default_camera
+    from splatgl.model.settings import RenderSettings, resolve_near
 
     from helpers import shared_file
 
@@ -283,7 +284,7 @@ def test_compiled_cull_leaves_undecidable_peak_bounds_to_numpy(monkeypatch):
 def test_rows_keys_cull_a_subset_as_the_float64_cull_does(cam_index, compiled):
     """The cull of a LOD cut's rows (a sorted subset, culled in place): the keys of the rows
     the float64 cull keeps among them, with the row as the index, compiled or gathered."""
-    from splatgl.cull_chunks import rows_keys
+    from splatgl.order.chunks import rows_keys
 
     kern = None
     if compiled:

@@ -1,14 +1,14 @@
-"""The blocked float32 cull (:func:`splatgl.cull.cull_visible`) keeps exactly what the float64
-cull (:func:`splatgl.cull.cull`) keeps, with the same depths, on cameras that cut the scene."""
+"""The blocked float32 cull (:func:`splatgl.order.cull.cull_visible`) keeps exactly what the float64
+cull (:func:`splatgl.order.cull.cull`) keeps, with the same depths, on cameras that cut the scene."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from splatgl.camera import Camera, look_at
-from splatgl.cull import CULL_BLOCK, CullData, cull, cull_visible
-from splatgl.project import to_camera
+from splatgl.cameras.camera import Camera, look_at
+from splatgl.order.cull import CULL_BLOCK, CullData, cull, cull_visible
+from splatgl.twins.project import to_camera
 
 
 def _scene_arrays(n: int, seed: int):

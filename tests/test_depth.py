@@ -11,13 +11,13 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from splatgl.camera import Camera
+from splatgl.cameras.camera import Camera
 from splatgl.cli import main
 from splatgl.constants import SH_C0
-from splatgl.image_io import read_image
-from splatgl.render import default_camera, render_reference_layers
-from splatgl.scene import Scene
-from splatgl.settings import RendererKind, RenderSettings
+from splatgl.output.images import read_image
+from splatgl.api import default_camera, render_reference_layers
+from splatgl.model.scene import Scene
+from splatgl.model.settings import RendererKind, RenderSettings
 
 
 def _scene(n=800, seed=3):

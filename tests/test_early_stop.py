@@ -1,4 +1,4 @@
-"""Early termination in the quad path (splatgl/early_stop.py): schedule, GPU passes against
+"""Early termination in the quad path (splatgl/renderers/early_stop.py): schedule, GPU passes against
 their NumPy twins, the accuracy bound against no stop and the reference, the batch hook."""
 
 from __future__ import annotations
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings as hsettings, strategies as st
 
-import splatgl.quad as quad_module
-from splatgl import early_stop as es
+import splatgl.renderers.quad as quad_module
+from splatgl.renderers import early_stop as es
 from splatgl.constants import ALPHA_MAX, T_MIN
-from splatgl.quad import QuadRenderer
-from splatgl.render import default_camera
-from splatgl.scene import Scene, SplatKind
-from splatgl.settings import Precision, Preprocess, RenderSettings
+from splatgl.renderers.quad import QuadRenderer
+from splatgl.api import default_camera
+from splatgl.model.scene import Scene, SplatKind
+from splatgl.model.settings import Precision, Preprocess, RenderSettings
 from splatgl.stress.build import at_pixel, front_camera, splats
 
 #: Weight a pixel may receive beyond the reference's stop (docs/early-stop.md): the reference
@@ -250,8 +250,8 @@ def test_no_stop_error_against_reference_never_grows(gl_renderer, shared_scenes)
     reference than the unstopped one (up to float slack), so PSNR cannot drop."""
     from helpers import shared_file
     from splatgl.formats import load_scene
-    from splatgl.metrics import image_errors
-    from splatgl.render import render_reference_rgba
+    from splatgl.evaluation.metrics import image_errors
+    from splatgl.api import render_reference_rgba
 
     scene = load_scene(shared_file(shared_scenes, "ply/donut_sh0.ply"))
     cam = default_camera(scene, 160, 96)
@@ -328,8 +328,8 @@ def test_coverage_estimate_matches_its_twin_and_the_fragments(ctx, kind, preproc
     auto.render(cam)
     estimate = auto.last_fragments_estimate
     if kind is SplatKind.SURFEL_2D:   # the twin: the surfel boxes (clamped to the image)
-        from splatgl.project import to_camera
-        from splatgl.surfel import surfel_bounds, surfel_screen
+        from splatgl.twins.project import to_camera
+        from splatgl.twins.surfel import surfel_bounds, surfel_screen
 
         screen = surfel_screen(scene.means, scene.rotations, scene.scales, cam)
         boxes = surfel_bounds(screen, scene.opacities, cam, auto.near)
@@ -388,7 +388,7 @@ def test_auto_batches_only_views_of_large_quads_over_an_overdrawn_image(ctx, mon
 
 
 def test_settings_read_booleans_and_names_as_modes():
-    from splatgl.settings import EarlyStop
+    from splatgl.model.settings import EarlyStop
 
     assert RenderSettings().early_stop is EarlyStop.AUTO
     assert _settings(early_stop=True).early_stop is EarlyStop.ON

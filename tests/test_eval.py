@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from helpers import summary_counts
-from splatgl.camera import Camera, orbit
+from splatgl.cameras.camera import Camera, orbit
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.datasets import colmap, nerf
@@ -22,9 +22,9 @@ from splatgl.datasets.dataset import Split, load_dataset, split_views
 from splatgl.datasets.views import View
 from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
-from splatgl.image_io import read_image, write_image
-from splatgl.metrics import ssim
-from splatgl.settings import RenderSettings
+from splatgl.output.images import read_image, write_image
+from splatgl.evaluation.metrics import ssim
+from splatgl.model.settings import RenderSettings
 
 DELTA = 0.04
 EXPECTED_PSNR = -20.0 * math.log10(DELTA)  # 27.959 dB

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from splatgl.cli import main
-from splatgl.convert import conversion_error
+from splatgl.formats.convert import conversion_error
 from splatgl.formats import compressed_ply_write, load_scene, save_scene, sog, spz_write
 from splatgl.formats import quantise as qz
-from splatgl.scene import Scene
+from splatgl.model.scene import Scene
 
 from helpers import random_scene
 

@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 
 from splatgl.constants import SH_C0, sh_coeff_count
 from splatgl.formats import detect_format, load_scene, ply, splat
-from splatgl.scene import Scene, SplatKind
+from splatgl.model.scene import Scene, SplatKind
 
 from helpers import random_scene
 

@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatgl.camera import Camera
+from splatgl.cameras.camera import Camera
 from splatgl.constants import SH_C0
-from splatgl.scene import Scene
+from splatgl.model.scene import Scene
 
 BLOCK = 12  # pixels per side of the comparison blocks
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from splatgl.errors import SceneFormatError
-from splatgl.scene import SplatKind
+from splatgl.model.scene import SplatKind
 
 from helpers import IN_DEPTH, IN_VIEW, SURFELS, check_case, random_scene, signal_and_wait
 

@@ -56,13 +56,13 @@ import pytest
 
 from helpers import REPO, shared_file
 from splatgl.constants import SH_C0
-from splatgl.convert import ATTRIBUTES, conversion_error
+from splatgl.formats.convert import ATTRIBUTES, conversion_error
 from splatgl.formats import compressed_ply, load_scene, save_scene, spz_write, writer_for
 from splatgl.formats import quantise as qz
 from splatgl.formats import sog as sog_format
-from splatgl.metrics import psnr
-from splatgl.render import default_camera
-from splatgl.scene import Scene
+from splatgl.evaluation.metrics import psnr
+from splatgl.api import default_camera
+from splatgl.model.scene import Scene
 
 pytestmark = [pytest.mark.npm, pytest.mark.slow]
 

@@ -101,7 +101,7 @@ def test_reference_reports_every_batch_and_the_image_does_not_change():
     from splatgl.reference.binning import emit_keys, sort, tile_ranges
     from splatgl.reference.rasterize import rasterize
     from splatgl.reference.stages import project
-    from splatgl.settings import RenderSettings
+    from splatgl.model.settings import RenderSettings
 
     scene = load_scene(demo_scene_path())
     proj = project(scene, default_camera(scene, 96, 64), RenderSettings(), np.float32)
@@ -120,10 +120,11 @@ def test_reference_reports_every_batch_and_the_image_does_not_change():
 
 
 def test_tile_renderer_draws_in_bands_and_reports_them(gl_renderer, monkeypatch):
-    from splatgl import default_camera, tile
+    from splatgl import default_camera
+    from splatgl.renderers import tile
     from splatgl.commands._common import demo_scene_path
     from splatgl.formats import load_scene
-    from splatgl.settings import RendererKind, RenderSettings
+    from splatgl.model.settings import RendererKind, RenderSettings
 
     scene = load_scene(demo_scene_path())
     camera = default_camera(scene, 320, 240)  # 20 x 15 tiles

@@ -1,7 +1,7 @@
 """Loading a 1M-splat SH degree 3 PLY: bounded peak memory and monotone progress.
 
 The load runs in a fresh subprocess under tracemalloc (NumPy reports its buffers to it), so the
-peak counts every array the reader and :func:`splatgl.scene.activate` allocate.
+peak counts every array the reader and :func:`splatgl.model.scene.activate` allocate.
 
 Where the memory goes (per splat, SH degree 3, 236 bytes decoded = the Scene's five arrays):
 the chunked PLY reader fills the decoded arrays directly (236 B) plus one 64k-row buffer;
@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from splatgl.formats import ply
-from splatgl.scene import VALIDATE_BLOCK, Scene
+from splatgl.model.scene import VALIDATE_BLOCK, Scene
 
 pytestmark = pytest.mark.slow  # a 1M-splat file written, then loaded in a subprocess
 

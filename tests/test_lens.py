@@ -1,4 +1,4 @@
-"""Fisheye, equirectangular and stereo cameras (splatgl/lens.py, shaders/lib/lens.glsl).
+"""Fisheye, equirectangular and stereo cameras (splatgl/cameras/lens.py, shaders/lib/lens.glsl).
 
 Math in float64 against finite differences, gsplat's closed form and known pixels; GPU images
 against the reference with the thresholds of tests/test_compare.py (the lens models change only
@@ -16,18 +16,18 @@ import numpy as np
 import pytest
 
 from helpers import shared_file
-from splatgl import lens
-from splatgl import project as pm
-from splatgl.camera import Camera, Projection, look_at
-from splatgl.camera_io import camera_from_json
+from splatgl.cameras import lens
+from splatgl.twins import project as pm
+from splatgl.cameras.camera import Camera, Projection, look_at
+from splatgl.cameras.files import camera_from_json
 from splatgl.cli import main
 from splatgl.errors import CameraError
 from splatgl.formats import load_scene
-from splatgl.image_io import read_image
-from splatgl.metrics import image_errors, psnr
-from splatgl.render import default_camera, render_reference_rgba
-from splatgl.settings import RenderSettings
-from splatgl.stereo import eye_cameras
+from splatgl.output.images import read_image
+from splatgl.evaluation.metrics import image_errors, psnr
+from splatgl.api import default_camera, render_reference_rgba
+from splatgl.model.settings import RenderSettings
+from splatgl.renderers.stereo import eye_cameras
 
 from test_compare import MAX_OFF_1, MIN_PSNR
 
@@ -199,7 +199,7 @@ def test_quad_and_tile_match_reference(gl_renderer, shared_scenes, name, distanc
 def test_tile_dense_wide_view(gl_renderer, shared_scenes):
     """A 120-degree view from inside guitar: tile (3, 3) holds 55,360 splats.  Drawn in one
     pass it came out blank (llvmpipe ends an invocation's loops after 65535 iterations in all);
-    the tile renderer now splits long lists into passes (splatgl.tile.TILE_LIST_CHUNK)."""
+    the tile renderer now splits long lists into passes (splatgl.renderers.tile.TILE_LIST_CHUNK)."""
     scene = _scene(shared_scenes, "compressed_ply/guitar.compressed.ply")
     pose = default_camera(scene, 96, 96, distance_scale=0.3).world_to_camera
     cam = Camera.from_fov(96, 96, 120, pose)
@@ -337,7 +337,7 @@ def test_cli_renders_panorama_fisheye_and_stereo(tmp_path, shared_scenes, capsys
 def test_bench_times_the_projections(capsys):
     """`splatgl bench --groups projection`: the lens models against pinhole on the same poses."""
     from splatgl.bench.configs import configurations
-    from splatgl.settings import RenderSettings as RS
+    from splatgl.model.settings import RenderSettings as RS
     rows = [c for c in configurations(RS(), 0, groups={"projection"}) if c.group == "projection"]
     assert [c.projection for c in rows] == ["fisheye", "equirectangular"]
     assert main(["bench", "--quick", "--groups", "projection"]) == 0
@@ -367,9 +367,9 @@ def test_colmap_fisheye_models_load_and_project(tmp_path, line, k):
 def test_path_renders_projection_and_stereo_frames(tmp_path, shared_scenes, gl_renderer):
     """`render --path orbit:2 --projection equirectangular --stereo`: each frame is both eyes of
     that orbit camera as a panorama, exactly what the API renders for it."""
-    from splatgl.image_io import write_image
+    from splatgl.output.images import write_image
     from splatgl.paths import orbit
-    from splatgl.stereo import StereoLayout, StereoRenderer
+    from splatgl.renderers.stereo import StereoLayout, StereoRenderer
     scene_path = shared_file(shared_scenes, "ply/donut_sh0.ply")
     out = tmp_path / "f"
     assert main(["render", str(scene_path), "--path", "orbit:2", "--width", "64", "--height", "32",

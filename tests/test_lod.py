@@ -9,19 +9,19 @@ import sys
 import numpy as np
 import pytest
 
-from splatgl.camera import Camera, look_at
+from splatgl.cameras.camera import Camera, look_at
 from splatgl.formats import load_scene
 from splatgl.lod.build import build_hierarchy, level_offsets
-from splatgl.quaternion import rotmat_to_quat
+from splatgl.model.quaternion import rotmat_to_quat
 from splatgl.lod.cut import CutData, select_cut, select_cut_budget
 from splatgl.lod.io import read_lod, write_lod
 from splatgl.lod.render import LodRenderer, LodSettings
-from splatgl.metrics import image_errors
-from splatgl.project import covariance_3d, quat_to_rotmat
-from splatgl.quad import QuadRenderer
-from splatgl.render import default_camera
-from splatgl.scene import Scene
-from splatgl.settings import RenderSettings
+from splatgl.evaluation.metrics import image_errors
+from splatgl.twins.project import covariance_3d, quat_to_rotmat
+from splatgl.renderers.quad import QuadRenderer
+from splatgl.api import default_camera
+from splatgl.model.scene import Scene
+from splatgl.model.settings import RenderSettings
 
 from helpers import shared_file
 
@@ -236,9 +236,9 @@ def test_path_frames_are_the_one_view_lod_renders(demo_lod, tmp_path, capsys, cu
     """--lod-budget/--lod-threshold apply to every frame of a path (they were ignored: frames
     byte-identical to full detail), in one process and in --workers processes; frame k is the
     one-view LOD render of camera k (each view chooses its cut alone)."""
-    from splatgl.camera_io import save_camera
+    from splatgl.cameras.files import save_camera
     from splatgl.cli import main
-    from splatgl.image_io import read_image
+    from splatgl.output.images import read_image
     from splatgl.paths import orbit
 
     render = lambda *a: main(["render", str(demo_lod), *map(str, a)])

@@ -11,17 +11,17 @@ import numpy as np
 import pytest
 from hypothesis import given, settings as hsettings, strategies as st
 
-from splatgl.camera import Camera, look_at
+from splatgl.cameras.camera import Camera, look_at
 from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
 from splatgl.lod.build import build_hierarchy
 from splatgl.lod.cut import CutData, expansion, select_cut, select_cut_weights
 from splatgl.lod.render import LodRenderer, LodSettings, blended_scene, leaves_covered
-from splatgl.metrics import image_errors
-from splatgl.quad import QuadRenderer
-from splatgl.render import default_camera
-from splatgl.scene import Scene
-from splatgl.settings import Preprocess, RenderSettings
+from splatgl.evaluation.metrics import image_errors
+from splatgl.renderers.quad import QuadRenderer
+from splatgl.api import default_camera
+from splatgl.model.scene import Scene
+from splatgl.model.settings import Preprocess, RenderSettings
 
 from helpers import shared_file
 
@@ -233,8 +233,8 @@ def test_cut_cull_compiled_or_numpy_same_order_and_weights(ctx, biker, sort):
     """The cut's cull runs compiled (numba, in place over the cut's rows) or in NumPy (over
     the gathered rows): the same sorted rows and the same per-slot weights either way, for the
     exact sort and for a sort that takes depths (keys_pairs)."""
-    from splatgl import cull_kernel
-    from splatgl.settings import SortKey
+    from splatgl.order import kernels as cull_kernel
+    from splatgl.model.settings import SortKey
 
     if not cull_kernel.installed():
         pytest.skip("numba not installed (pip install '.[fast]')")
@@ -267,7 +267,7 @@ def test_compiled_cut_selects_what_numpy_selects(tree, threshold, band, distance
     """The compiled cut (numba; over the candidates only) gives the NumPy cut's rows and the
     same weight bits, or the same decision to draw the leaves, for cameras inside and outside
     the scene (frustum tests), perspective and orthographic, any band, and the root's cut."""
-    from splatgl import cull_kernel
+    from splatgl.order import kernels as cull_kernel
 
     if not cull_kernel.installed():
         pytest.skip("numba not installed (pip install '.[fast]')")

@@ -1,4 +1,4 @@
-"""Float64 checks of the projection math (splatgl/project.py) against the formulas themselves."""
+"""Float64 checks of the projection math (splatgl/twins/project.py) against the formulas themselves."""
 
 from __future__ import annotations
 
@@ -7,12 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from splatgl.camera import Camera, look_at, orbit
+from splatgl.cameras.camera import Camera, look_at, orbit
 from splatgl.constants import LOW_PASS, SH_C0, SH_C1
-from splatgl.project import (
-    antialias_factor, conic, covariance_2d, covariance_3d, ellipse_axes, jacobian, project_means,
-    quat_to_rotmat, reference_radius, sh_basis, sh_color, to_camera,
-)
+from splatgl.twins.project import (antialias_factor, conic, covariance_2d, covariance_3d,
+                                   ellipse_axes, jacobian, project_means, quat_to_rotmat,
+                                   reference_radius, sh_basis, sh_color, to_camera)
 
 RNG = np.random.default_rng(7)
 

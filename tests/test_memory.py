@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatgl.cull import CullData
+from splatgl.order.cull import CullData
 from splatgl.gl import scene_buffers
-from splatgl.scene import Scene
-from splatgl.settings import GpuStorage
-from splatgl.storage import COMPACT_WORDS, encode_compact, gpu_bytes_per_splat
+from splatgl.model.scene import Scene
+from splatgl.model.settings import GpuStorage
+from splatgl.gl.storage import COMPACT_WORDS, encode_compact, gpu_bytes_per_splat
 
 
 

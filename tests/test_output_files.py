@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from splatgl import limits
+from splatgl.gl import limits
 from splatgl.errors import SplatglError
-from splatgl.limits import image_size_problem
-from splatgl.output_files import OutputFiles
+from splatgl.gl.limits import image_size_problem
+from splatgl.output.files import OutputFiles
 
 
 def test_commit_renames_every_temporary(tmp_path):
@@ -78,10 +78,10 @@ def test_memory_is_checked_before_allocating(monkeypatch):
 
 def test_screenshot_writes_png_and_json_together_or_not_at_all(tmp_path, gl_renderer, monkeypatch):
     from splatgl import default_camera
-    from splatgl.camera_io import load_camera
+    from splatgl.cameras.files import load_camera
     from splatgl.commands._common import demo_scene_path
     from splatgl.formats import load_scene
-    from splatgl.settings import RendererKind, RenderSettings
+    from splatgl.model.settings import RendererKind, RenderSettings
     from splatgl.viewer import screenshot
 
     scene = load_scene(demo_scene_path())

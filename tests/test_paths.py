@@ -10,13 +10,13 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from helpers import shared_file
-from splatgl.camera import Camera, look_at
+from splatgl.cameras.camera import Camera, look_at
 from splatgl.datasets.sources import load_source
 from splatgl.errors import CameraError
 from splatgl.paths import ellipse, focus_point, interpolate, orbit, spiral
-from splatgl.quaternion import quat_to_rotmat, rotmat_to_quat
+from splatgl.model.quaternion import quat_to_rotmat, rotmat_to_quat
 from splatgl.paths.spline import sample_poses
-from splatgl.scene import Scene
+from splatgl.model.scene import Scene
 
 
 def _keys(n: int, seed: int = 0):
@@ -140,7 +140,7 @@ def test_orbit_circles_the_robust_centre():
     for c in cams:  # looks at the centre: it projects to the image centre
         p = c.world_to_camera @ [*centre, 1]
         assert (c.fx * p[0] / p[2] + c.cx, c.fy * p[1] / p[2] + c.cy) == pytest.approx((32, 24))
-    from splatgl.render import default_camera
+    from splatgl.api import default_camera
     np.testing.assert_allclose(orbit(scene, 4, 64, 48)[0].world_to_camera, default_camera(scene, 64, 48).world_to_camera, atol=1e-12)
 
 

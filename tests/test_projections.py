@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatgl.camera import Camera, orbit
+from splatgl.cameras.camera import Camera, orbit
 from splatgl.cli import main
 from splatgl.constants import SH_C0
-from splatgl.scene import Scene
-from splatgl.settings import RendererKind, RenderSettings
+from splatgl.model.scene import Scene
+from splatgl.model.settings import RendererKind, RenderSettings
 
 KINDS = [RendererKind.QUAD, RendererKind.TILE, RendererKind.REFERENCE]
 
@@ -90,8 +90,8 @@ def test_orthographic_camera_file_through_the_cli(tmp_path):
 def test_frustum_camera_file_and_orthographic_flag(tmp_path):
     import json
 
-    from splatgl.camera_io import load_camera
-    from splatgl.image_io import read_image
+    from splatgl.cameras.files import load_camera
+    from splatgl.output.images import read_image
 
     w2c = orbit([0, 0, 0], 6.0, 180.0, 20.0)
     frustum = {"width": 96, "height": 72, "world_to_camera": w2c.tolist(),

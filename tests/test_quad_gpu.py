@@ -14,15 +14,15 @@ import pytest
 
 from helpers import save_failure_images
 from helpers import scene_with_colors as make_scene
-from splatgl.blend import blend_front_to_back, splat_alpha
-from splatgl.camera import Camera, orbit
+from splatgl.twins.blend import blend_front_to_back, splat_alpha
+from splatgl.cameras.camera import Camera, orbit
 from splatgl.constants import ALPHA_MIN, FAST_CORNER_SIGMAS
-from splatgl.project import ellipse_axes, project
-from splatgl.quad import composite
-from splatgl.render import default_camera
-from splatgl.scene import Scene
-from splatgl.settings import Precision, QuadExtent, RenderSettings, resolve_near
-from splatgl.sort import depth_sort
+from splatgl.twins.project import ellipse_axes, project
+from splatgl.renderers.quad import composite
+from splatgl.api import default_camera
+from splatgl.model.scene import Scene
+from splatgl.model.settings import Precision, QuadExtent, RenderSettings, resolve_near
+from splatgl.order.sort import depth_sort
 
 TOL32 = 2e-5
 

@@ -8,12 +8,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from splatgl.camera import Camera, look_at
-from splatgl.gl.radix_sort import TILE_KEYS, RadixSorter, device_depth_sort, radix_passes, radix_sort_twin
-from splatgl.quad import QuadRenderer
-from splatgl.scene import Scene
-from splatgl.settings import RenderSettings, SortKey
-from splatgl.sort import depth_sort
+from splatgl.cameras.camera import Camera, look_at
+from splatgl.gl.radix_sort import (TILE_KEYS, RadixSorter, device_depth_sort, radix_passes,
+                                   radix_sort_twin)
+from splatgl.renderers.quad import QuadRenderer
+from splatgl.model.scene import Scene
+from splatgl.model.settings import RenderSettings, SortKey
+from splatgl.order.sort import depth_sort
 
 
 def _depths(n: int, seed: int, ties: bool) -> tuple[np.ndarray, np.ndarray]:

@@ -7,8 +7,8 @@ import pytest
 
 from splatgl.bench.real_scenes import build_real_scene, load_real_sources
 from splatgl.errors import SplatglError
-from splatgl.project import covariance_3d, quat_to_rotmat
-from splatgl.scene import Scene
+from splatgl.twins.project import covariance_3d, quat_to_rotmat
+from splatgl.model.scene import Scene
 
 
 def _source(n: int, seed: int, degree: int = 0) -> Scene:

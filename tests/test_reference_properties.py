@@ -7,13 +7,13 @@ import math
 import numpy as np
 from hypothesis import given, settings as hsettings, strategies as st
 
-from splatgl.camera import Camera
-from splatgl.constants import ALPHA_MAX, ALPHA_MIN, EXTENT_DISCRIMINANT_FLOOR, LOW_PASS, SH_C0, T_MIN
-from splatgl.reference import (
-    gaussian_alpha, gaussian_power, rasterize, render_reference, transmittance_trace,
-)
-from splatgl.scene import Scene
-from splatgl.settings import RenderSettings
+from splatgl.cameras.camera import Camera
+from splatgl.constants import (ALPHA_MAX, ALPHA_MIN, EXTENT_DISCRIMINANT_FLOOR, LOW_PASS, SH_C0,
+                               T_MIN)
+from splatgl.reference import (gaussian_alpha, gaussian_power, rasterize, render_reference,
+                               transmittance_trace)
+from splatgl.model.scene import Scene
+from splatgl.model.settings import RenderSettings
 
 from helpers import IN_VIEW, random_scene
 

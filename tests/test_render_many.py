@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 import splatgl
-from splatgl import batch
-from splatgl.camera_io import save_camera
+from splatgl.tasks import batch
+from splatgl.cameras.files import save_camera
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.formats import load_scene
-from splatgl.image_io import read_image
+from splatgl.output.images import read_image
 from splatgl.paths import orbit
 
 from helpers import signal_and_wait, start_gated
@@ -87,7 +87,7 @@ def test_a_path_rendered_in_parts_equals_the_whole(tmp_path, capsys):
 
 def test_video_output(tmp_path, capsys):
     av = pytest.importorskip("av")
-    from splatgl.video import read_video_frames
+    from splatgl.output.video import read_video_frames
 
     assert _render("--path", "orbit:5", *SIZE, "-o", tmp_path / "o.mp4", "--fps", "12") == 0
     assert _render("--path", "orbit:5", *SIZE, "-o", tmp_path / "png") == 0
@@ -154,7 +154,7 @@ def test_interrupt_leaves_complete_frames_only_and_resume_finishes(tmp_path, mon
 
 def test_interrupt_removes_the_video(tmp_path, monkeypatch):
     pytest.importorskip("av")
-    from splatgl import video
+    from splatgl.output import video
 
     real = video.VideoWriter.write
     calls = []
@@ -249,7 +249,7 @@ def test_stereo_paths_go_to_video_at_the_doubled_size(tmp_path, capsys, layout, 
     """Each video frame holds both eyes (it failed: "every video frame must be 96x64, got
     192x64")."""
     pytest.importorskip("av")
-    from splatgl.video import read_video_frames
+    from splatgl.output.video import read_video_frames
 
     stereo = ["--stereo", "0.05", "--stereo-layout", layout]
     assert _render("--path", "orbit:3", *SIZE, *stereo, "-o", tmp_path / "v.mp4") == 0

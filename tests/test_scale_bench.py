@@ -38,11 +38,11 @@ def test_measure_file_rows(tiny_file):
     assert row.gpu_bytes_per_splat == 64.0  # 4 vec4 at SH degree 0
     assert row.decoded_mb == pytest.approx(3000 * 14 * 4 / 1e6)
     assert row.gpu_sort_identical is True
-    assert row.compact_bytes_per_splat == 32.0  # two uvec4 (splatgl/storage.py)
+    assert row.compact_bytes_per_splat == 32.0  # two uvec4 (splatgl/gl/storage.py)
     assert 60.0 < row.compact_psnr < 200.0  # changed, within the stated cost (tests/test_storage.py)
     assert 0 < row.visible <= 3000 and row.tile_frame_ms > 0 and row.quad_frame_ms > 0
     assert set(row.stages_ms) == {"cull", "sort", "upload", "prepass", "draw", "readback"}
-    from splatgl import cull_kernel
+    from splatgl.order import kernels as cull_kernel
 
     assert row.cull_compiled is cull_kernel.installed()  # loaded before the timed frames
     assert "3,000" in table([row])

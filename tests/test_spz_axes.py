@@ -19,12 +19,12 @@ import pytest
 
 from helpers import shared_file
 from splatgl.cli import main
-from splatgl.convert import conversion_error
+from splatgl.formats.convert import conversion_error
 from splatgl.errors import SceneFormatError, SplatglError
 from splatgl.formats import load_scene, save_scene, spz, spz_axes, spz_write
-from splatgl.project import sh_basis
-from splatgl.quaternion import quat_to_rotmat
-from splatgl.scene import Scene
+from splatgl.twins.project import sh_basis
+from splatgl.model.quaternion import quat_to_rotmat
+from splatgl.model.scene import Scene
 
 SIGNS = [np.array(s, np.float64) for s in itertools.product((1.0, -1.0), repeat=3)]
 

@@ -9,13 +9,13 @@ from hypothesis import given, settings as hsettings, strategies as st
 
 from splatgl.cli import main
 from splatgl.constants import SH_C0
-from splatgl.image_io import read_image
-from splatgl.metrics import image_errors
-from splatgl.render import default_camera
-from splatgl.scene import Scene, SplatKind
-from splatgl.settings import GpuStorage, Preprocess, RendererKind, RenderSettings
-from splatgl.storage import (compact_bounds, decode_compact, encode_compact, gpu_bytes_per_splat,
-                             scale_exponent)
+from splatgl.output.images import read_image
+from splatgl.evaluation.metrics import image_errors
+from splatgl.api import default_camera
+from splatgl.model.scene import Scene, SplatKind
+from splatgl.model.settings import GpuStorage, Preprocess, RendererKind, RenderSettings
+from splatgl.gl.storage import (compact_bounds, decode_compact, encode_compact,
+                                gpu_bytes_per_splat, scale_exponent)
 
 from helpers import shared_file
 

@@ -18,17 +18,16 @@ import numpy as np
 import pytest
 
 from helpers import SURFELS, random_scene, save_failure_images, scene_with_colors
-from splatgl.camera import Camera, look_at, orbit
+from splatgl.cameras.camera import Camera, look_at, orbit
 from splatgl.constants import ALPHA_MIN, LOW_PASS, SURFEL_FILTER_INV_SQUARE
 from splatgl.formats import load_scene, save_scene
-from splatgl.metrics import image_errors
-from splatgl.project import project_means, quat_to_rotmat, to_camera
+from splatgl.evaluation.metrics import image_errors
+from splatgl.twins.project import project_means, quat_to_rotmat, to_camera
 from splatgl.reference import render_reference
-from splatgl.scene import Scene, SplatKind
-from splatgl.settings import RenderSettings, resolve_near
-from splatgl.surfel import (
-    intersect, sigma_count, surfel_alpha, surfel_bounds, surfel_screen, surfel_transform,
-)
+from splatgl.model.scene import Scene, SplatKind
+from splatgl.model.settings import RenderSettings, resolve_near
+from splatgl.twins.surfel import (intersect, sigma_count, surfel_alpha, surfel_bounds,
+                                  surfel_screen, surfel_transform)
 
 TOL32 = 2e-5
 
@@ -311,13 +310,13 @@ def test_quad_culls_behind_and_offscreen(gl_renderer):
 
 
 def test_surfels_take_their_vertex_stage_whatever_the_preprocess_setting(gl_renderer):
-    from splatgl.settings import Preprocess, RenderSettings as RS
+    from splatgl.model.settings import Preprocess, RenderSettings as RS
 
     rng = np.random.default_rng(31)
     n = 200
     scene = Scene(rng.normal(size=(n, 3)), rng.normal(size=(n, 4)), rng.normal(-2.5, 0.3, (n, 2)),
                   rng.normal(1.0, 1.0, n), rng.normal(0, 0.3, (n, 1, 3)), SplatKind.SURFEL_2D)
-    from splatgl.render import default_camera as dc
+    from splatgl.api import default_camera as dc
 
     cam = dc(scene, 64, 48)
     a = gl_renderer.render(scene, cam, RS())

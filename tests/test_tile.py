@@ -1,4 +1,4 @@
-"""The per-tile compute renderer (splatgl.tile) against the NumPy per-tile reference.
+"""The per-tile compute renderer (splatgl.renderers.tile) against the NumPy per-tile reference.
 
 Integer stages (tiles touched, tile rectangles, emitted and sorted keys, splat order, tile
 ranges) must be identical.  Images: float32 GPU against the float32 reference, 1e-5 absolute.
@@ -16,14 +16,14 @@ import pytest
 
 from helpers import (IN_DEPTH, SURFELS, SURFELS_POSE, assert_stages_match_reference, random_scene,
                      save_failure_images, shared_file, tile_and_reference)
-from splatgl.camera import Camera, orbit
+from splatgl.cameras.camera import Camera, orbit
 from splatgl.formats import load_scene
 from splatgl.reference import emit_keys, project, render_reference, sort
-from splatgl.render import Renderer, default_camera
-from splatgl.scene import Scene
-from splatgl.settings import RendererKind, RenderSettings
-from splatgl import tile as tile_mod
-from splatgl.tile import KeyLayout, TileRenderer
+from splatgl.api import Renderer, default_camera
+from splatgl.model.scene import Scene
+from splatgl.model.settings import RendererKind, RenderSettings
+from splatgl.renderers import tile as tile_mod
+from splatgl.renderers.tile import KeyLayout, TileRenderer
 
 TOL = 1e-5
 DEPTH_TOL_REL = 1e-5

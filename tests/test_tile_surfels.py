@@ -31,13 +31,13 @@ import pytest
 
 from helpers import (SURFELS, SURFELS_POSE, assert_stages_match_reference, random_scene, save_failure_images,
                      scene_with_colors, tile_and_reference)
-from splatgl.camera import Camera, orbit
+from splatgl.cameras.camera import Camera, orbit
 from splatgl.reference import emit_keys, project, render_reference, sort
-from splatgl.render import Renderer
-from splatgl.scene import Scene, SplatKind
-from splatgl.settings import RendererKind, RenderSettings
-from splatgl import tile as tile_mod
-from splatgl.tile import TileRenderer
+from splatgl.api import Renderer
+from splatgl.model.scene import Scene, SplatKind
+from splatgl.model.settings import RendererKind, RenderSettings
+from splatgl.renderers import tile as tile_mod
+from splatgl.renderers.tile import TileRenderer
 
 TOL = 1e-5
 DEPTH_TOL_REL = 2e-5

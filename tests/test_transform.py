@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatgl.camera import Camera, orbit
+from splatgl.cameras.camera import Camera, orbit
 from splatgl.cli import main
 from splatgl.errors import SplatglError
-from splatgl.project import sh_color, view_dirs
-from splatgl.render import default_camera
-from splatgl.scene import Scene
-from splatgl.settings import RendererKind, RenderSettings
-from splatgl.transform import ModelTransform, apply_model, parse_transform
+from splatgl.twins.project import sh_color, view_dirs
+from splatgl.api import default_camera
+from splatgl.model.scene import Scene
+from splatgl.model.settings import RendererKind, RenderSettings
+from splatgl.model.transform import ModelTransform, apply_model, parse_transform
 
 
 def _sh3_scene(n=300, seed=8):

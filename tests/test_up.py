@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from splatgl.camera import Camera, look_at
-from splatgl.camera_up import average_up, cameras_beside, resolve_up
+from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.up import average_up, cameras_beside, resolve_up
 from splatgl.cli import main
-from splatgl.image_io import read_image
+from splatgl.output.images import read_image
 
 
 def orbit_cameras(up, n=6, elevation=0.3):

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatgl.camera import orbit
-from splatgl.render import default_camera
-from splatgl.scene import Scene
-from splatgl.settings import Precision, Preprocess, QuadExtent, RenderSettings
-from splatgl.sort import bucket_sort, depth_sort
+from splatgl.cameras.camera import orbit
+from splatgl.api import default_camera
+from splatgl.model.scene import Scene
+from splatgl.model.settings import Precision, Preprocess, QuadExtent, RenderSettings
+from splatgl.order.sort import bucket_sort, depth_sort
 
 
 def _scene(n=2000, seed=21, degree=3):
@@ -44,7 +44,7 @@ def test_cull_off_draws_the_same_image(gl_renderer):
 
 def test_sh_degree_variants_equal_padding():
     """An SH0 scene and the same scene padded to SH3 with zeros render identically."""
-    from splatgl.render import Renderer
+    from splatgl.api import Renderer
 
     scene = _scene(degree=0)
     padded = scene.with_sh_degree(3)
@@ -71,7 +71,7 @@ def test_resort_interval_lags_then_catches_up(gl_renderer):
     scene = Scene.from_activated(np.array([[0, 0, -0.5], [0, 0, 0.5]]), np.tile([1.0, 0, 0, 0], (2, 1)),
                                  np.full((2, 3), 0.3), np.array([0.99, 0.99]),
                                  np.array([[[1.5, -1.7, -1.7]], [[-1.7, -1.7, 1.5]]]))  # red, blue
-    from splatgl.camera import Camera
+    from splatgl.cameras.camera import Camera
 
     front = Camera(32, 32, 40.0, 40.0, 16.0, 16.0, orbit([0, 0, 0], 4.0, 180.0, 0.0))
     back = front.with_pose(orbit([0, 0, 0], 4.0, 0.0, 0.0))

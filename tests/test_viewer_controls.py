@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from splatgl.camera import Camera, look_at
+from splatgl.cameras.camera import Camera, look_at
 from splatgl.viewer import controls
 from splatgl.viewer.controls import ViewState
 
@@ -131,7 +131,7 @@ def test_screenshot_command_line_reproduces_the_settings():
     """The command printed with a screenshot parses back to the very same settings."""
     from splatgl.cli import build_parser
     from splatgl.commands._common import settings_from_args
-    from splatgl.settings import RendererKind, RenderSettings
+    from splatgl.model.settings import RendererKind, RenderSettings
     from splatgl.viewer.screenshot import settings_arguments
 
     settings = RenderSettings(background=(0.1, 0.2, 0.3), precision="rgba16f", extent="fast",
@@ -146,7 +146,7 @@ def test_screenshot_command_line_reproduces_the_settings():
 def test_fit_camera_keeps_a_file_cameras_own_intrinsics():
     import numpy as np
 
-    from splatgl.camera import Camera, orbit
+    from splatgl.cameras.camera import Camera, orbit
     from splatgl.viewer.controls import fit_camera
 
     cam = Camera(200, 100, 180.0, 150.0, 93.0, 57.0, orbit([0, 0, 0], 3.0, 10.0, 5.0))

@@ -89,8 +89,8 @@ def demo():
 @pytest.fixture
 def viewer(xvfb_display, demo, tmp_path):
     from splatgl.errors import ContextError
-    from splatgl.render import default_camera
-    from splatgl.settings import RenderSettings
+    from splatgl.api import default_camera
+    from splatgl.model.settings import RenderSettings
     from splatgl.viewer.app import Viewer, ViewerOptions
 
     path, scene = demo
@@ -115,7 +115,7 @@ def _window_pixels(v) -> np.ndarray:
 def test_drag_key_screenshot_matches_headless_render(viewer, demo, tmp_path):
     import glfw
 
-    from splatgl.image_io import read_image
+    from splatgl.output.images import read_image
 
     v = viewer
     assert v.step() and v.frames_rendered == 1
@@ -190,7 +190,7 @@ def test_resize_to_zero_and_back(viewer):
 def test_views_keys_and_closing(viewer):
     import glfw
 
-    from splatgl.settings import Precision, RendererKind
+    from splatgl.model.settings import Precision, RendererKind
     from splatgl.viewer.frames import ViewMode
 
     v = viewer
@@ -219,9 +219,9 @@ def test_views_keys_and_closing(viewer):
 def test_training_cameras_step(xvfb_display, demo, tmp_path):
     import glfw
 
-    from splatgl.camera import orbit
-    from splatgl.camera_io import load_cameras
-    from splatgl.settings import RenderSettings
+    from splatgl.cameras.camera import orbit
+    from splatgl.cameras.files import load_cameras
+    from splatgl.model.settings import RenderSettings
     from splatgl.viewer.app import Viewer, ViewerOptions
 
     path, scene = demo
@@ -263,9 +263,9 @@ def test_stereo_and_projection_views(xvfb_display, demo, tmp_path):
     """``view --stereo``: both eyes side by side in the window, each the fitted half view, equal
     to the headless render of that eye; ``--projection`` shows the model flat."""
     from splatgl.errors import ContextError
-    from splatgl.render import default_camera
-    from splatgl.settings import RenderSettings
-    from splatgl.stereo import eye_cameras
+    from splatgl.api import default_camera
+    from splatgl.model.settings import RenderSettings
+    from splatgl.renderers.stereo import eye_cameras
     from splatgl.viewer import controls
     from splatgl.viewer.app import Viewer, ViewerOptions
 
@@ -298,9 +298,9 @@ def test_stereo_screenshot_is_the_pair_and_its_command_says_stereo(xvfb_display,
 
     from splatgl.cli import main
     from splatgl.errors import ContextError
-    from splatgl.image_io import read_image
-    from splatgl.render import default_camera
-    from splatgl.settings import RenderSettings
+    from splatgl.output.images import read_image
+    from splatgl.api import default_camera
+    from splatgl.model.settings import RenderSettings
     from splatgl.viewer.app import Viewer, ViewerOptions
 
     path, scene = demo
@@ -334,8 +334,8 @@ def test_equirectangular_view_refuses_the_tile_toggles(xvfb_display, demo, tmp_p
     import glfw
 
     from splatgl.errors import ContextError
-    from splatgl.render import default_camera
-    from splatgl.settings import RenderSettings, RendererKind
+    from splatgl.api import default_camera
+    from splatgl.model.settings import RenderSettings, RendererKind
     from splatgl.viewer.app import Viewer, ViewerOptions
     from splatgl.viewer.frames import ViewMode
 

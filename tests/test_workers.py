@@ -12,10 +12,10 @@ import pytest
 from helpers import signal_and_wait, start_gated, summary_counts
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
-from splatgl.image_io import read_image
-from splatgl.distributed.render import frame_folder
-from splatgl.executor import KILL_ONCE_ENV
-from splatgl.workers import chunks
+from splatgl.output.images import read_image
+from splatgl.tasks.render import frame_folder
+from splatgl.tasks.executor import KILL_ONCE_ENV
+from splatgl.tasks.local import chunks
 
 
 pytestmark = pytest.mark.slow  # each run spawns worker processes
@@ -51,7 +51,7 @@ ARGS = ["render", "--path", "orbit:6", "--width", "96", "--height", "64"]
 
 
 def _video(path: Path) -> list[np.ndarray]:
-    from splatgl.video import read_video_frames
+    from splatgl.output.video import read_video_frames
 
     return read_video_frames(path)
 
@@ -82,7 +82,7 @@ def test_two_workers_video_equals_the_single_process_video(one_process_video, tm
 def test_failed_assembly_keeps_frames_and_resume_finishes(one_process_video, tmp_path, capsys, monkeypatch):
     """No video (not even a partial one) when assembling fails; the frames stay, and --resume
     renders only the missing ones before encoding."""
-    from splatgl.distributed import render as sharded
+    from splatgl.tasks import render as sharded
     from splatgl.errors import SplatglError
 
     def fail(*args, **kwargs):

@@ -1,4 +1,4 @@
-// Decoding of the compact scene storage (splatgl/storage.py: layout, encoder and the NumPy twin
+// Decoding of the compact scene storage (splatgl/gl/storage.py: layout, encoder and the NumPy twin
 // decode_compact; --gpu-storage compact).  Needs COMPACT_QUAT_BITS, COMPACT_OPACITY_BITS and the
 // per-scene COMPACT_SCALE_UNIT (2^e, storage.scale_exponent) as defines.
 

@@ -1,5 +1,5 @@
 // Projections by angle: fisheye (OpenCV's model, equidistant when k = 0) and equirectangular.
-// Twin: splatgl/lens.py (same names; formulas and their derivation in its module doc).
+// Twin: splatgl/cameras/lens.py (same names; formulas and their derivation in its module doc).
 // Included by lib/project.glsl; compiled only when FISHEYE or EQUIRECT defines LENS.
 #ifdef LENS
 
@@ -38,7 +38,7 @@ vec4 fisheye_terms(vec3 p) {
 #endif
 
 #ifdef EQUIRECT
-// Omni-directional stereo (splatgl/lens.py eye_space): p relative to the eye on the circle of
+// Omni-directional stereo (splatgl/cameras/lens.py eye_space): p relative to the eye on the circle of
 // radius |u_ods_eye| whose tangent ray reaches it; phi = atan2(x, z) - asin(eye / D).
 vec3 eye_space(vec3 p) {
     if (u_ods_eye == 0.0) return p;

@@ -1,4 +1,4 @@
-// Per-splat projection math, DESIGN.md section 1.  Twin: splatgl/project.py (same names).
+// Per-splat projection math, DESIGN.md section 1.  Twin: splatgl/twins/project.py (same names).
 
 #if defined(FISHEYE) || defined(EQUIRECT)
 #define LENS 1
@@ -50,7 +50,7 @@ mat3 jacobian(vec3 p) {
 }
 
 // Whether a camera-space centre is drawn: view z beyond the near plane, before any divide;
-// fisheye and equirectangular (splatgl/lens.py lens_visible): distance beyond the near plane,
+// fisheye and equirectangular (splatgl/cameras/lens.py lens_visible): distance beyond the near plane,
 // and a fisheye's angle from the axis within u_theta_limit.
 bool in_view(vec3 p) {
 #if defined(LENS)

@@ -4,7 +4,7 @@
 //
 // float32 layout: splat_a[i] = (mean.xyz - anchor, opacity), splat_q[i] = unit quaternion
 // (w, x, y, z), splat_s[i] = (scale.xyz world units, 0), splat_dc[i] = (SH degree-0 RGB, 0).
-// COMPACT_STORAGE: splat_packed[2i], splat_packed[2i + 1] (splatgl/storage.py, lib/dequantise.glsl).
+// COMPACT_STORAGE: splat_packed[2i], splat_packed[2i + 1] (splatgl/gl/storage.py, lib/dequantise.glsl).
 // sh_rest holds SH_REST_COEFFS * 3 values per splat (coefficients 1.., coefficient-major with
 // RGB last, as in Scene.sh), float32 or (SH_HALF) float16, at the degree the program is
 // specialised for.

@@ -1,4 +1,4 @@
-// Per-view buffers of the tile renderer (splatgl/tile.py allocates and binds them; the binding
+// Per-view buffers of the tile renderer (splatgl/renderers/tile.py allocates and binds them; the binding
 // numbers come from generated #defines TILE_BINDING_*, so they are written in one place).
 // Twin arrays: splatgl/reference/stages.py ProjectedSplats and reference/binning.py.
 //
@@ -23,7 +23,7 @@ layout(std430, binding = TILE_BINDING_VALUES) buffer SortValues { uint sort_valu
 layout(std430, binding = TILE_BINDING_RANGES) buffer TileRanges { uvec2 tile_ranges[]; };
 #ifdef SURFEL
 // 2DGS surfels (SURFEL defined) reuse the buffers above with these meanings (twin:
-// reference/stages.py project_surfels, rows of splatgl/surfel.py SurfelScreen):
+// reference/stages.py project_surfels, rows of splatgl/twins/surfel.py SurfelScreen):
 //   proj_mean_depth[i] = (c_x, c_y, view z, opacity): projected centre c (the low-pass centre),
 //                        the centre's camera z (sort key; depth_row.z) and o.
 //   proj_conic_o[i]    = (T'_00, T'_01, T'_10, T'_11): centred rows T'_r = T_r - c_r T_2 of

@@ -12,7 +12,7 @@ against the reference off and on.
 
 from __future__ import annotations
 
-from ..settings import EarlyStop
+from ..model.settings import EarlyStop
 from .report import _fmt
 from .runner import BenchRow
 

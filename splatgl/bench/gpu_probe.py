@@ -68,7 +68,7 @@ def probe(commit: str | None = None) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..atomic import atomic_write_text
+    from ..output.atomic import atomic_write_text
     from ..errors import SplatglError
     from .machine import describe
 

@@ -12,12 +12,12 @@ import time
 import moderngl
 import numpy as np
 
-from ..camera import Camera
+from ..cameras.camera import Camera
 from ..gl.shaders import ProgramCache
-from ..output import RenderOutput
-from ..quad import QuadRenderer, QuadTimes, composite
-from ..scene import Scene
-from ..settings import Preprocess, RenderSettings
+from ..output.layers import RenderOutput
+from ..renderers.quad import QuadRenderer, QuadTimes, composite
+from ..model.scene import Scene
+from ..model.settings import Preprocess, RenderSettings
 
 
 class LimitRenderer:

@@ -79,8 +79,8 @@ def cameras(scene, width: int, height: int, frames: int, paths: str = "coarse",
     far-to-close fly-through in ``frames`` frames each; ``fine``: a fly-in and an orbit in
     small steps (FINE_STEP, FINE_DEGREES) from FINE_FAR x the framing distance; ``switch``: a
     fly-in in FINE_STEP steps whose middle frame is at the distance multiple ``switch_at``."""
-    from ..camera import orbit
-    from ..render import default_camera
+    from ..cameras.camera import orbit
+    from ..api import default_camera
 
     base = default_camera(scene, width, height)
     centre = 0.5 * (scene.robust_bounds[0] + scene.robust_bounds[1])
@@ -156,9 +156,9 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
     from ..gl.context import create_headless_context
     from ..lod.io import read_lod
     from ..lod.render import LodRenderer
-    from ..metrics import ssim
-    from ..quad import QuadRenderer
-    from ..settings import RenderSettings
+    from ..evaluation.metrics import ssim
+    from ..renderers.quad import QuadRenderer
+    from ..model.settings import RenderSettings
 
     tree = read_lod(lod_file(scene_path))
     n = tree.level_size(0)
@@ -306,8 +306,8 @@ def run_lod(sizes, width: int, height: int, frames: int, thresholds, budgets, ba
             paths: str = "coarse", out: Path | None = None, log=print) -> list[dict]:
     """Measure every size (scene and hierarchy built and cached on first use), print the table,
     and with ``out`` write lod.json and lod.png there (each atomically); the summary rows."""
-    from .. import cull_kernel
-    from ..output_files import OutputFiles
+    from ..order import kernels as cull_kernel
+    from ..output.files import OutputFiles
     from .scale import scene_file
 
     from .machine import describe, probe_machine

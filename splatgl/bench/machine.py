@@ -57,7 +57,7 @@ def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
         cores = os.cpu_count() or 1
-    from .. import cull_kernel
+    from ..order import kernels as cull_kernel
 
     return {"cpu": model or platform.processor() or platform.machine() or "?",
             "simd": simd_level(flags), "cores": cores,

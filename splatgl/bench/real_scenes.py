@@ -24,7 +24,7 @@ import numpy as np
 
 from ..constants import sh_coeff_count
 from ..errors import SplatglError
-from ..scene import Scene
+from ..model.scene import Scene
 
 #: The shared real files the copies are made from (paths under the shared scenes folder).
 REAL_SOURCES = ("ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply",

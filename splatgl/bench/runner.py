@@ -11,13 +11,13 @@ from typing import Callable
 
 import numpy as np
 
-from ..camera import Camera, orbit
-from ..lens import with_projection
-from ..metrics import image_errors, psnr
-from ..render import Renderer, default_camera, render_reference_rgba
-from ..scene import Scene
-from ..settings import GpuStorage, RendererKind, RenderSettings
-from ..sort import depth_sort
+from ..cameras.camera import Camera, orbit
+from ..cameras.lens import with_projection
+from ..evaluation.metrics import image_errors, psnr
+from ..api import Renderer, default_camera, render_reference_rgba
+from ..model.scene import Scene
+from ..model.settings import GpuStorage, RendererKind, RenderSettings
+from ..order.sort import depth_sort
 from .configs import BenchConfig, RowKind, configurations
 from .limit import LimitRenderer
 
@@ -159,7 +159,7 @@ class _Runner:
 def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptions,
                 base: RenderSettings = RenderSettings(), progress: Progress | None = None) -> list[BenchRow]:
     """All rows for one scene.  The reference images of the error frames are computed once."""
-    from .. import cull_kernel
+    from ..order import kernels as cull_kernel
 
     cull_kernel.kernel(wait=True)  # where installed, every timed row takes the compiled cull
     cameras = orbit_path(scene, options)

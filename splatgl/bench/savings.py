@@ -15,12 +15,12 @@ import time
 
 import numpy as np
 
-from ..camera import Camera
-from ..cull import cull
-from ..project import to_camera
-from ..render import Renderer
-from ..scene import Scene
-from ..settings import Preprocess, RenderSettings, resolve_near
+from ..cameras.camera import Camera
+from ..order.cull import cull
+from ..twins.project import to_camera
+from ..api import Renderer
+from ..model.scene import Scene
+from ..model.settings import Preprocess, RenderSettings, resolve_near
 from .runner import BenchOptions, BenchRow, orbit_path
 
 

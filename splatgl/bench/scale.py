@@ -132,22 +132,22 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
     """Load ``path`` and measure it (run this in a fresh process: peak RSS is per process)."""
     import numpy as np
 
-    from ..camera import orbit
-    from ..cull import CullData, cull_visible
+    from ..cameras.camera import orbit
+    from ..order.cull import CullData, cull_visible
     from ..formats import load_scene
     from ..gl.radix_sort import RadixSorter, device_depth_sort
-    from ..project import anchored_camera
-    from ..quad import QuadRenderer
-    from ..render import Renderer, default_camera
-    from ..settings import RenderSettings
-    from ..sort import depth_sort
-    from ..tile import TileRenderer
+    from ..twins.project import anchored_camera
+    from ..renderers.quad import QuadRenderer
+    from ..api import Renderer, default_camera
+    from ..model.settings import RenderSettings
+    from ..order.sort import depth_sort
+    from ..renderers.tile import TileRenderer
 
     from ..formats import _modules
 
     renderer = Renderer()  # the context first: its driver memory is not the scene's
     _modules()  # and every format module imported: their code is not the scene either
-    from .. import cull_kernel
+    from ..order import kernels as cull_kernel
     # the compiled cull (where numba is installed) loaded before anything is measured: its
     # import is not the scene's memory, and every timed frame takes the same cull path
     compiled = cull_kernel.kernel(wait=True) is not None
@@ -217,9 +217,9 @@ def _with_compact(renderer, scene, views, rows: list[ScaleRow]) -> list[ScaleRow
     last frame (``views``: (camera, image) per row), rendered by a second quad renderer."""
     from dataclasses import replace
 
-    from ..metrics import psnr
-    from ..quad import QuadRenderer
-    from ..settings import GpuStorage, RenderSettings
+    from ..evaluation.metrics import psnr
+    from ..renderers.quad import QuadRenderer
+    from ..model.settings import GpuStorage, RenderSettings
 
     quad = QuadRenderer(renderer.ctx, scene, RenderSettings(gpu_storage=GpuStorage.COMPACT),
                         renderer.programs)

@@ -1,4 +1,4 @@
-"""One benchmark scene as a task (:mod:`splatgl.executor`): ``splatgl bench`` over many scenes
+"""One benchmark scene as a task (:mod:`splatgl.tasks.executor`): ``splatgl bench`` over many scenes
 measures each scene's rows in its own worker (``--workers N`` or ``--executor ray``) and merges
 the rows, in scene order, into one table, bench.csv and bench.json.
 
@@ -15,8 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-from ..executor import Done, Files, TaskProgress
-from ..scene import Scene
+from ..tasks.executor import Done, Files, TaskProgress
+from ..model.scene import Scene
 from .runner import BenchOptions, BenchRow, Progress, bench_scene
 
 #: Steps a scene reports before its first progress call says how many it has (a guess: the
@@ -79,8 +79,8 @@ class BenchSceneTask:
         return f"scene {self.spec.name}"
 
     def run(self, files: Files, report: TaskProgress) -> Done:
-        from ..limits import check_image_size
-        from ..render import Renderer
+        from ..gl.limits import check_image_size
+        from ..api import Renderer
         from ..gl.context import renderer_name
         from .machine import machine_info
 

@@ -7,22 +7,22 @@ import math
 import sys
 from pathlib import Path
 
-from ..camera import Camera, Projection
-from ..camera_io import load_camera
+from ..cameras.camera import Camera, Projection
+from ..cameras.files import load_camera
 from ..errors import SplatglError
 from ..formats import load_scene
-from ..lens import check_fov_applies, with_projection
-from ..limits import MAX_IMAGE_SIDE, check_image_size
+from ..cameras.lens import check_fov_applies, with_projection
+from ..gl.limits import MAX_IMAGE_SIDE, check_image_size
 from ..formats.metadata import antialias_tag
-from ..render import default_camera
-from ..scene import Scene
+from ..api import default_camera
+from ..model.scene import Scene
 from ..constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
-from ..settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
-                        RendererKind, RenderSettings, SortKey)
-from ..stereo import StereoLayout
-from ..transform import parse_transform
+from ..model.settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
+                              RendererKind, RenderSettings, SortKey)
+from ..renderers.stereo import StereoLayout
+from ..model.transform import parse_transform
 from ._spz_axes import add_spz_axes_argument
-from ..camera_up import UP_CHOICES, resolve_up
+from ..cameras.up import UP_CHOICES, resolve_up
 
 
 def demo_scene_path() -> Path:
@@ -237,7 +237,7 @@ def size_origin(args: argparse.Namespace) -> str:
 
 
 def check_size(args: argparse.Namespace, camera: Camera, kind: RendererKind | str, ctx=None) -> None:
-    """The image size against this machine's limits (:mod:`splatgl.limits`), before allocating."""
+    """The image size against this machine's limits (:mod:`splatgl.gl.limits`), before allocating."""
     check_image_size(camera.width, camera.height, size_origin(args), kind, ctx)
 
 
@@ -253,7 +253,7 @@ def projection_from_args(args: argparse.Namespace) -> str | None:
 
 
 def _file_camera(args: argparse.Namespace, projection: str | None) -> Camera:
-    """``--camera`` adapted by --width/--height/--projection/--fov (:func:`splatgl.lens.adapt_camera`)."""
+    """``--camera`` adapted by --width/--height/--projection/--fov (:func:`splatgl.cameras.lens.adapt_camera`)."""
     if getattr(args, "orthographic", False):
         raise SplatglError(f"--orthographic zooms the default camera to frame the scene; "
                            f"{args.camera} brings its own camera (--projection orthographic keeps "

@@ -13,9 +13,9 @@ import json
 import os
 from pathlib import Path
 
-from ..atomic import atomic_write_text
+from ..output.atomic import atomic_write_text
 from ..errors import SplatglError
-from ..output_files import OutputFiles
+from ..output.files import OutputFiles
 
 #: The FILE that means standard output.
 STDOUT = "-"

@@ -1,30 +1,30 @@
 """``splatgl render --path SOURCE``: many frames in one process (options and the run).
 
 Kept apart from :mod:`splatgl.commands.render` so the single-view command stays small; the
-work itself is :func:`splatgl.batch.render_frames`.
+work itself is :func:`splatgl.tasks.batch.render_frames`.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from ..batch import render_frames
-from ..camera import Camera
+from ..tasks.batch import render_frames
+from ..cameras.camera import Camera
 from ..datasets import load_source, select_indices
 from ..errors import SplatglError
-from ..executor import add_executor_arguments, executor_from_args, summary
-from ..frame_output import FrameTarget
+from ..tasks.executor import add_executor_arguments, executor_from_args, summary
+from ..output.frames import FrameTarget
 from ..gl.context import NO_GL_RENDERER, renderer_name
 from ..paths import orbit
 from ..progress import default_progress
-from ..render import Renderer
-from ..scene import Scene
-from ..camera_up import resolve_up
-from ..lens import adapt_camera, with_projection
+from ..api import Renderer
+from ..model.scene import Scene
+from ..cameras.up import resolve_up
+from ..cameras.lens import adapt_camera, with_projection
 from ..lod.command import LodFrames, lod_settings_from_args
 from ..lod.io import read_lod
-from ..settings import RendererKind
-from ..stereo import StereoLayout, StereoRenderer
+from ..model.settings import RendererKind
+from ..renderers.stereo import StereoLayout, StereoRenderer
 from ._common import (default_size, demo_scene_path, load_scene_arg, positive_float,
                       projection_from_args, settings_from_args)
 from ._spz_axes import check_not_sharded
@@ -74,7 +74,7 @@ def refuse_path_only_options(args: argparse.Namespace) -> None:
 
 def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None, list[int]]:
     """The cameras ``--path`` names (with ``--select``, ``--width/--height``, ``--projection``
-    and ``--fov`` applied as to a ``--camera`` file: :func:`splatgl.lens.adapt_camera`), the
+    and ``--fov`` applied as to a ``--camera`` file: :func:`splatgl.cameras.lens.adapt_camera`), the
     source's frame rate (None if it has none) and each camera's index in the source (its frame
     number)."""
     spec = args.path
@@ -145,7 +145,7 @@ def run_path(args: argparse.Namespace) -> int:
     gl_name = "not known here (the frames were rendered by workers)"
     size = (cameras[0].width, cameras[0].height)
     if executor.sharded:
-        from ..distributed.render import render_sharded
+        from ..tasks.render import render_sharded
 
         result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
                                      cameras, settings, target, executor, kind, args.bit_depth,

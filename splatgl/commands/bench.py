@@ -19,15 +19,15 @@ from ..bench.machine import describe, machine_info
 from ..bench.runner import BenchOptions, sort_benchmark
 from ..bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
 from ..errors import SplatglError
-from ..executor import add_executor_arguments, executor_from_args, run_tasks, summary
+from ..tasks.executor import add_executor_arguments, executor_from_args, run_tasks, summary
 from ..gl.context import renderer_name
-from ..limits import check_image_size
-from ..metrics import check_ssim_size
-from ..output_files import OutputFiles
+from ..gl.limits import check_image_size
+from ..evaluation.metrics import check_ssim_size
+from ..output.files import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
-from ..render import Renderer
-from ..scene import Scene
-from ..settings import RenderSettings
+from ..api import Renderer
+from ..model.scene import Scene
+from ..model.settings import RenderSettings
 from ._common import demo_scene_path, non_negative_int, positive_int
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 

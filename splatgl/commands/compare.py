@@ -6,17 +6,16 @@ import argparse
 import time
 from pathlib import Path
 
-from ..pictures import heatmap, side_by_side
-from ..image_io import write_image
-from ..output_files import OutputFiles
+from ..output.pictures import heatmap, side_by_side
+from ..output.images import write_image
+from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..errors import SplatglError
-from ..metrics import check_ssim_size, depth_errors, image_errors
-from ..render import Renderer
-from ..settings import RendererKind
+from ..evaluation.metrics import check_ssim_size, depth_errors, image_errors
+from ..api import Renderer
+from ..model.settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      check_convention, check_size, inputs_from_args, positive_float,
-                      size_origin)
+                      check_convention, check_size, inputs_from_args, positive_float, size_origin)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "compare"

@@ -6,17 +6,17 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..atomic import atomic_write_text
+from ..output.atomic import atomic_write_text
 from ..datasets.dataset import MAX_WIDTH, Split, load_dataset
 from ..datasets.sources import select_indices
 from ..errors import SplatglError
-from ..executor import add_executor_arguments, executor_from_args, summary
-from ..evaluate import evaluate, worst_sheet
-from ..image_io import check_image_suffix, write_image
-from ..output_files import OutputFiles
+from ..tasks.executor import add_executor_arguments, executor_from_args, summary
+from ..evaluation.evaluate import evaluate, worst_sheet
+from ..output.images import check_image_suffix, write_image
+from ..output.files import OutputFiles
 from ..progress import default_progress
-from ..render import Renderer
-from ..settings import RendererKind
+from ..api import Renderer
+from ..model.settings import RendererKind
 from ._common import (add_scene_arguments, add_settings_arguments, demo_scene_path, load_scene_arg,
                       settings_from_args)
 from ._spz_axes import check_not_sharded
@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     keep = args.worst if args.sheet is not None else 0
     run = None
     if executor.sharded:   # the workers load the scene; this process only merges
-        from ..distributed.evaluate import evaluate_sharded
+        from ..tasks.evaluate import evaluate_sharded
 
         result, worst, run = evaluate_sharded(args.scene if args.scene is not None else demo_scene_path(),
                                               views, executor, settings, RendererKind(args.renderer),

@@ -8,9 +8,9 @@ from pathlib import Path
 
 from ..errors import SplatglError
 from ..formats import load_scene
-from ..output_files import check_output_path
+from ..output.files import check_output_path
 from ..progress import StderrProgress, enabled
-from ..scene import SplatKind
+from ..model.scene import SplatKind
 
 NAME = "lod"
 ORDER = 27

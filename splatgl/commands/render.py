@@ -8,17 +8,17 @@ from pathlib import Path
 
 from ..errors import SplatglError
 from ..gl.context import NO_GL_RENDERER, renderer_name
-from ..image_io import check_image_suffix, write_image
-from ..output import RenderOutput
-from ..output_files import OutputFiles
+from ..output.images import check_image_suffix, write_image
+from ..output.layers import RenderOutput
+from ..output.files import OutputFiles
 from ..progress import default_progress
-from ..pictures import depth_preview
-from ..render import Renderer, render_reference_layers
-from ..settings import RendererKind
+from ..output.pictures import depth_preview
+from ..api import Renderer, render_reference_layers
+from ..model.settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args)
 from ._render_path import add_path_arguments, refuse_path_only_options, run_path
-from ..stereo import StereoLayout, combine, eye_cameras
+from ..renderers.stereo import StereoLayout, combine, eye_cameras
 
 NAME = "render"
 ORDER = 10

@@ -6,10 +6,10 @@ import argparse
 import time
 from pathlib import Path
 
-from ..camera_io import load_cameras
-from ..camera_up import resolve_up
+from ..cameras.files import load_cameras
+from ..cameras.up import resolve_up
 from ..errors import SplatglError
-from ..settings import RendererKind
+from ..model.settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       camera_from_args, check_convention, demo_scene_path, load_scene_arg,
                       settings_from_args)

@@ -4,7 +4,7 @@ Axes: COLMAP stores world-to-camera poses in OpenCV axes (+x right, +y down, +z 
 unit quaternion ``(qw, qx, qy, qz)`` and translation ``t``: ``p_cam = R(q) p_world + t``;
 the pixel centre of the top-left pixel is (0.5, 0.5), splatgl's convention too.  Accepted
 models: the undistorted PINHOLE ``(fx, fy, cx, cy)`` and SIMPLE_PINHOLE ``(f, cx, cy)``, and
-the fisheye models splatgl renders exactly (:mod:`splatgl.lens`, ``theta_d = theta (1 + k1
+the fisheye models splatgl renders exactly (:mod:`splatgl.cameras.lens`, ``theta_d = theta (1 + k1
 theta^2 + ...)``): OPENCV_FISHEYE ``(fx, fy, cx, cy, k1, k2, k3, k4)``, SIMPLE_RADIAL_FISHEYE
 ``(f, cx, cy, k)`` and RADIAL_FISHEYE ``(f, cx, cy, k1, k2)``.  The pinhole models with
 distortion terms (SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV) are pinholes when every term is 0;
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera, Projection, check_rigid_pose
-from ..quaternion import quat_to_rotmat, rotmat_to_quat
+from ..cameras.camera import Camera, Projection, check_rigid_pose
+from ..model.quaternion import quat_to_rotmat, rotmat_to_quat
 from ..errors import CameraError
 from .views import View
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..camera_io import camera_from_3dgs
+from ..cameras.files import camera_from_3dgs
 from ..errors import CameraError
 from .views import View
 

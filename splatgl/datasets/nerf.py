@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera, check_rigid_pose
+from ..cameras.camera import Camera, check_rigid_pose
 from ..errors import CameraError
-from ..json_fields import entries, matrix, number, read_json
+from ..cameras.json_fields import entries, matrix, number, read_json
 from .views import View
 
 #: OpenGL camera axes -> OpenCV camera axes (flip y and z), applied on the right of c2w.

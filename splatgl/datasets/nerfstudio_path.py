@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera, check_rigid_pose
+from ..cameras.camera import Camera, check_rigid_pose
 from ..errors import CameraError
-from ..json_fields import entries, matrix, number
+from ..cameras.json_fields import entries, matrix, number
 from .nerf import GL_TO_CV
 from .views import View
 

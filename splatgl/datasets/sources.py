@@ -15,11 +15,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..camera import Camera
-from ..camera_io import camera_from_json
+from ..cameras.camera import Camera
+from ..cameras.files import camera_from_json
 from ..errors import CameraError
 from . import colmap, gs_cameras, nerf, nerfstudio_path
-from ..json_fields import read_json
+from ..cameras.json_fields import read_json
 from .views import View
 
 _JSON_NAMES = ("transforms.json", "cameras.json", "camera_path.json")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..camera import Camera
+from ..cameras.camera import Camera
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from types import ModuleType
 
 from ..errors import SceneFormatError
 from ..progress import default_progress
-from ..scene import Scene
+from ..model.scene import Scene
 from ._messages import reader_guard
 
 #: Format modules in detection order (most specific signature first).

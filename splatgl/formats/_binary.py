@@ -89,7 +89,7 @@ def unorm(value: np.ndarray, shift: int, bits: int) -> np.ndarray:
 def log_of(values: np.ndarray) -> np.ndarray:
     """float32 natural log of linear scales; exact zeros are floored to MIN_SCALE.
 
-    Negative scales give NaN, which :func:`~splatgl.scene.activate` rejects (or drops).
+    Negative scales give NaN, which :func:`~splatgl.model.scene.activate` rejects (or drops).
     """
     v = np.asarray(values, np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SceneFormatError
-from ..scene import Scene, SplatKind, sh_to_rest
+from ..model.scene import Scene, SplatKind, sh_to_rest
 from . import quantise as qz
 from .compressed_ply import CHUNK_SIZE
 from .ply import write_elements

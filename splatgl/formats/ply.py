@@ -6,7 +6,7 @@ The vertex element holds one splat per row with (at least) the properties
 
 plus optional ``nx ny nz`` (ignored), ``f_rest_*`` (0, 9, 24 or 45 of them, channel-major) and
 anything else (ignored).  Values are the raw training values (log-scales, opacity logits,
-unnormalised quaternions); :func:`splatgl.scene.activate` validates them.
+unnormalised quaternions); :func:`splatgl.model.scene.activate` validates them.
 
 Other elements may precede or follow the vertex element.  In binary files they are skipped by
 size, so they must hold fixed-size scalar properties only; an element with a list property
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneFormatError
-from ..scene import Scene, SplatKind, activate, sh_degree_from_rest_count, sh_to_rest
+from ..model.scene import Scene, SplatKind, activate, sh_degree_from_rest_count, sh_to_rest
 from ._memory import check_memory
 from ._messages import quote, reader_guard
 

@@ -1,7 +1,7 @@
 """Quantisation constants of every lossy writer, the shared encoders, and the error bounds they imply.
 
 One place for the numbers each writer quantises with (bits, steps, ranges) and for the bound on
-the round-trip error each choice implies, in the units of :func:`splatgl.convert.conversion_error`:
+the round-trip error each choice implies, in the units of :func:`splatgl.formats.convert.conversion_error`:
 
 - ``position``: world units (Euclidean distance),
 - ``scale``: relative error of the activated scale,

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..constants import SH_C0, sh_coeff_count
 from ..errors import SceneFormatError
-from ..scene import Scene, SplatKind, activate
+from ..model.scene import Scene, SplatKind, activate
 from . import _binary, kmeans, webp
 from . import quantise as qz
 from .written import write_together

@@ -16,7 +16,7 @@ import zlib
 from pathlib import Path
 from typing import Callable, TypeVar
 
-from ..atomic import disk_note, write_error
+from ..output.atomic import disk_note, write_error
 from ..errors import SplatglError
 
 T = TypeVar("T")

@@ -4,7 +4,7 @@ Each pass sorts by one RADIX_BITS-bit digit in three dispatches (shaders/radix_c
 radix_scan.comp, radix_scatter.comp; the layout is in shaders/lib/radix.glsl): per-tile digit
 counts, one exclusive scan over all (digit, tile) counts, and a stable scatter.  Every pass is
 stable, so the whole sort is: equal keys keep their input order.  Fed the cull's ascending
-indices with the float32 bits of their depths, it gives exactly :func:`splatgl.sort.depth_sort`'s
+indices with the float32 bits of their depths, it gives exactly :func:`splatgl.order.sort.depth_sort`'s
 order (ties by index), which the tests check bit for bit.
 
 Passes above the highest bit in which the smallest and largest key differ are skipped: every key
@@ -129,7 +129,7 @@ class RadixSorter:
 
 
 def device_depth_sort(sorter: RadixSorter, depth: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """:func:`splatgl.sort.depth_sort` on the device: indices (M,) uint32 front to back by
+    """:func:`splatgl.order.sort.depth_sort` on the device: indices (M,) uint32 front to back by
     ``depth`` (M,) (positive, so its float32 bits order like the values), ties in input order
     (the cull's ascending indices: ties by index, as the CPU sort)."""
     if depth.size and not (depth > 0).all():

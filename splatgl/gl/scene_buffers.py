@@ -8,9 +8,9 @@ import moderngl
 import numpy as np
 
 from ..constants import glsl_float
-from ..scene import Scene
-from ..settings import GpuStorage
-from ..storage import COMPACT_WORDS, encode_compact, scale_exponent
+from ..model.scene import Scene
+from ..model.settings import GpuStorage
+from .storage import COMPACT_WORDS, encode_compact, scale_exponent
 
 BINDING_A, BINDING_Q, BINDING_S, BINDING_DC, BINDING_SH = 0, 1, 2, 3, 4
 
@@ -34,7 +34,7 @@ class SceneBuffers:
 
     FLOAT32 and HALF_SH: ``a`` = (mean.xyz - scene.anchor, opacity), ``q`` = unit quaternion,
     ``s`` = (scale.xyz, 0) for 3DGS or (scale.xy, 0, 0) for surfels, ``dc`` = (SH DC RGB, 0).
-    COMPACT: ``packed`` = 8 uint32 per splat (:mod:`splatgl.storage`), ``a``/``q``/``s``/``dc``
+    COMPACT: ``packed`` = 8 uint32 per splat (:mod:`splatgl.gl.storage`), ``a``/``q``/``s``/``dc``
     None.  ``sh`` = coefficients 1..K-1 (K-1 x 3 per splat, float32, or float16 packed two per
     uint with HALF_SH and COMPACT; absent at degree 0).  Stored at the scene's own degree:
     nothing is padded to degree 3.  :meth:`defines` specialises the shaders for the layout.
@@ -53,10 +53,10 @@ class SceneBuffers:
         self.storage = storage = GpuStorage(storage)
         self.half_sh = half_sh = storage is not GpuStorage.FLOAT32
         compact = storage is GpuStorage.COMPACT
-        #: Per-scene power of two of the compact scales (splatgl.storage.scale_exponent).
+        #: Per-scene power of two of the compact scales (splatgl.gl.storage.scale_exponent).
         self.scale_exponent = scale_exponent(scene.log_scales) if compact else 0
         # Means relative to the scene's anchor (float32-safe far from the origin); the camera
-        # uniforms fold the anchor back in (splatgl.quad.set_camera_uniforms).
+        # uniforms fold the anchor back in (splatgl.renderers.quad.set_camera_uniforms).
         self.a = self.q = self.s = self.dc = self.packed = None
         if compact:
             self.packed = ctx.buffer(reserve=4 * COMPACT_WORDS * max(n, 1))

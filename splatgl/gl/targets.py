@@ -5,7 +5,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..settings import Precision
+from ..model.settings import Precision
 
 _DTYPES = {Precision.RGBA32F: "f4", Precision.RGBA16F: "f2", Precision.RGBA8: "f1"}
 
@@ -15,7 +15,7 @@ class ColorTarget:
 
     With ``depth``, a second RGBA32F attachment receives the depth layer (always float32:
     depth values are not in [0, 1] and need the range).  With ``stop_mask``, a depth buffer
-    (early termination's per-pixel stop mask, splatgl/early_stop.py) is attached to ``fbo``, and
+    (early termination's per-pixel stop mask, splatgl/renderers/early_stop.py) is attached to ``fbo``, and
     ``mask_fbo`` holds it alone, so the mark pass can sample ``texture`` while writing it.
     """
 

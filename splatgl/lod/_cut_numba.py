@@ -1,5 +1,5 @@
 """The level-of-detail cut's selection as one compiled pass (numba); imported only through
-:mod:`splatgl.cull_kernel`, which keeps numba optional.
+:mod:`splatgl.order.kernels`, which keeps numba optional.
 
 :func:`cut_pass` walks the tree top-down as :func:`splatgl.lod.cut.select_cut_weights` does, but
 over each level's candidates only, with no per-level NumPy calls: the same float32 operations

@@ -29,9 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import ALPHA_MAX, ALPHA_MIN
-from ..project import covariance_3d, quat_to_rotmat
-from ..quaternion import rotmat_to_quat
-from ..scene import Scene
+from ..twins.project import covariance_3d, quat_to_rotmat
+from ..model.quaternion import rotmat_to_quat
+from ..model.scene import Scene
 
 #: Default number of children per parent.
 BRANCHING = 4

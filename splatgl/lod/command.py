@@ -8,12 +8,12 @@ import argparse
 from types import SimpleNamespace
 from typing import Iterable, Iterator
 
-from ..camera import Camera
+from ..cameras.camera import Camera
 from ..errors import SplatglError
 from ..gl.context import create_headless_context, make_current, renderer_name
-from ..output import RenderOutput
-from ..settings import RenderSettings
-from ..transform import apply_model
+from ..output.layers import RenderOutput
+from ..model.settings import RenderSettings
+from ..model.transform import apply_model
 from .build import LodTree
 from .io import is_lod_file, read_lod
 from .render import LodRenderer, LodSettings
@@ -36,7 +36,7 @@ def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
 
 
 class LodFrames:
-    """Views of a LOD tree through the cut, with the interface :func:`splatgl.batch.render_frames`
+    """Views of a LOD tree through the cut, with the interface :func:`splatgl.tasks.batch.render_frames`
     renders with (``render_many``, ``renderer_for``); owns its context (use as a context manager).
 
     Every view chooses its cut alone: the renderer's memory of views close enough to draw the

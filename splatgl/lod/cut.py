@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Camera
-from ..project import anchored_camera
+from ..cameras.camera import Camera
+from ..twins.project import anchored_camera
 
 #: Default threshold: nodes whose sphere projects to at most this many pixels (radius) stand
 #: for their subtree.
@@ -168,7 +168,7 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     (the candidates outside the view count as drawn here, which only errs towards the leaves,
     whose image is full detail's).
 
-    ``kern``: :func:`splatgl.cull_kernel.for_view`'s kernels, whose ``cut_pass`` walks the same
+    ``kern``: :func:`splatgl.order.kernels.for_view`'s kernels, whose ``cut_pass`` walks the same
     levels compiled, over the candidates only (the same rows and weights); None: NumPy.
     """
     offsets, b = data.offsets, data.branching

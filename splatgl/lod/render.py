@@ -1,6 +1,6 @@
 """Rendering a level-of-detail cut through the quad path.
 
-:class:`LodRenderer` is a :class:`splatgl.quad.QuadRenderer` over every node of a
+:class:`LodRenderer` is a :class:`splatgl.renderers.quad.QuadRenderer` over every node of a
 :class:`splatgl.lod.build.LodTree` (leaves and merged parents, uploaded once); per view its
 cull stage first selects the cut (:mod:`splatgl.lod.cut`), then culls and sorts only the cut's
 nodes.  With a transition band the cut's nodes carry opacity weights: they go to the device
@@ -17,17 +17,17 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from .. import cull_kernel
+from ..order import kernels as cull_kernel
 from ..background import Background
-from ..camera import Camera
-from ..cull import CullData, cull_visible
-from ..cull_chunks import ChunkedCull, keys_order, keys_pairs, rows_keys
+from ..cameras.camera import Camera
+from ..order.cull import CullData, cull_visible
+from ..order.chunks import ChunkedCull, keys_order, keys_pairs, rows_keys
 from ..errors import SplatglError
 from ..gl.shaders import ProgramCache
-from ..project import anchored_camera
-from ..quad import BINDING_OPACITY_WEIGHT, QuadRenderer
-from ..scene import Scene
-from ..settings import RenderSettings, SortKey
+from ..twins.project import anchored_camera
+from ..renderers.quad import BINDING_OPACITY_WEIGHT, QuadRenderer
+from ..model.scene import Scene
+from ..model.settings import RenderSettings, SortKey
 from .build import LodTree
 from .cut import (DEFAULT_BAND, DEFAULT_THRESHOLD_PX, CutData, level_leaves, select_cut_budget,
                   select_cut_weights)
@@ -246,7 +246,7 @@ def threshold_cut(tree: LodTree, data: CutData, camera: Camera, lod: LodSettings
     nodes per leaf)``, rows and weights as :func:`select_cut_weights` gives them, or ``(None,
     None, 1.0)`` when the view should draw the leaves instead (its cut stands for at most
     ``1 / SKIP_NODES_PER_LEAF`` leaves a node).  ``kern``: the compiled kernels
-    (:func:`splatgl.cull_kernel.for_view`), or None for NumPy: the same cut."""
+    (:func:`splatgl.order.kernels.for_view`), or None for NumPy: the same cut."""
     ids, weights = select_cut_weights(data, camera, lod.threshold_px, lod.band,
                                       leaves_at=SKIP_NODES_PER_LEAF, kern=kern)
     if ids is None:

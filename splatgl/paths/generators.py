@@ -1,5 +1,5 @@
 """Camera path generators: orbit a scene, spiral or ellipse through training cameras, and
-interpolate between chosen cameras.  All return lists of :class:`~splatgl.camera.Camera`
+interpolate between chosen cameras.  All return lists of :class:`~splatgl.cameras.camera.Camera`
 (OpenCV axes, vertical fov in degrees where asked).
 """
 
@@ -9,10 +9,10 @@ import math
 
 import numpy as np
 
-from ..camera import Camera, look_at, orbit as orbit_pose
+from ..cameras.camera import Camera, look_at, orbit as orbit_pose
 from ..errors import CameraError
-from ..render import DEFAULT_ELEVATION, DEFAULT_FOV_Y, default_camera
-from ..scene import Scene
+from ..api import DEFAULT_ELEVATION, DEFAULT_FOV_Y, default_camera
+from ..model.scene import Scene
 
 
 def orbit(scene: Scene, frames: int = 120, width: int = 1280, height: int = 720,
@@ -20,7 +20,7 @@ def orbit(scene: Scene, frames: int = 120, width: int = 1280, height: int = 720,
           radius: float | None = None, up=(0.0, -1.0, 0.0)) -> list[Camera]:
     """``frames`` cameras on a circle around the scene's robust centre (the middle of its
     1st-99th percentile box), looking at it, ``elevation`` degrees above the plane normal to
-    ``up``.  ``radius`` defaults to :func:`splatgl.render.default_camera`'s framing distance;
+    ``up``.  ``radius`` defaults to :func:`splatgl.api.default_camera`'s framing distance;
     frame 0 is the default camera's view (azimuth 180), and the path turns a full circle
     without repeating frame 0 at the end."""
     if frames < 1:

@@ -35,9 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera, check_rigid_pose, look_at
+from ..cameras.camera import Camera, check_rigid_pose, look_at
 from ..errors import CameraError
-from ..json_fields import entries, matrix, number
+from ..cameras.json_fields import entries, matrix, number
 from .spline import sample_poses
 
 FORMAT_KEY = "splatgl_path"
@@ -201,6 +201,6 @@ def path_json(cameras: list[Camera], frames: int | None = None, loop: bool = Fal
 
 
 def write_path(path: Path, obj: dict) -> None:
-    from ..atomic import atomic_write_text
+    from ..output.atomic import atomic_write_text
 
     atomic_write_text(Path(path), json.dumps(obj, indent=1) + "\n")

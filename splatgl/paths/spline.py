@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..quaternion import (quat_conjugate, quat_exp, quat_log, quat_multiply, quat_to_rotmat,
-                          rotmat_to_quat)
+from ..model.quaternion import (quat_conjugate, quat_exp, quat_log, quat_multiply, quat_to_rotmat,
+                                rotmat_to_quat)
 
 
 def slerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:

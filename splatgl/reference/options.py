@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..constants import ALPHA_MAX, GSPLAT_ALPHA_MAX
-from ..settings import Convention
+from ..model.settings import Convention
 
 
 #: Which published rasterizer's conventions the reference follows: the settings' enum, so

@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Camera
-from ..scene import Scene
-from ..settings import RenderSettings
+from ..cameras.camera import Camera
+from ..model.scene import Scene
+from ..model.settings import RenderSettings
 from .binning import emit_keys, sort, tile_ranges
 from .options import Compat, ReferenceOptions, as_options
 from .rasterize import rasterize

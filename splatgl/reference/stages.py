@@ -1,7 +1,7 @@
 """Stage ``project`` of the reference: per-splat screen quantities, culling and tile rectangles.
 
 The twin of 3DGS's ``preprocessCUDA`` (and gsplat's projection + tile bounds under
-:attr:`Compat.GSPLAT`).  The math itself lives in :mod:`splatgl.project`; this module adds the
+:attr:`Compat.GSPLAT`).  The math itself lives in :mod:`splatgl.twins.project`; this module adds the
 reference's culling rules and its tile rectangles.
 
 Coordinates: ``mean2d`` is in splatgl's image coordinates (pixel (i, j) has its centre at
@@ -18,13 +18,13 @@ import numpy as np
 
 import dataclasses
 
-from .. import lens
-from .. import project as pm
-from .. import surfel as sf
-from ..camera import Camera, Projection
+from ..cameras import lens
+from ..twins import project as pm
+from ..twins import surfel as sf
+from ..cameras.camera import Camera, Projection
 from ..constants import ALPHA_MIN, TILE_SIZE
-from ..scene import Scene, SplatKind
-from ..settings import RenderSettings, resolve_near
+from ..model.scene import Scene, SplatKind
+from ..model.settings import RenderSettings, resolve_near
 from ..constants import GSPLAT_EXTENT_SIGMAS
 from .options import Compat, ReferenceOptions
 
@@ -36,7 +36,7 @@ class ProjectedSplats:
     Attributes (N rows; ``float`` means the render dtype, float32 or float64):
         visible: (N,) bool; False for splats culled (near plane, ``det <= 0``, empty rect, ...).
         depth: (N,) float sort key (world units): view-space z; for fisheye and
-            equirectangular cameras the distance ``|p|`` (:func:`splatgl.lens.view_depth`),
+            equirectangular cameras the distance ``|p|`` (:func:`splatgl.cameras.lens.view_depth`),
             except a fisheye under GSPLAT, which keeps gsplat's view z (:func:`gsplat_fisheye`).
         mean2d: (N, 2) float image coordinates (u, v) in pixels, centre convention ``j + 0.5``.
         conic: (N, 3) float inverse 2D covariance (a, b, c), ``Q = [[a, b], [b, c]]``, 1/px^2.
@@ -48,13 +48,13 @@ class ProjectedSplats:
             clamped to the grid; empty (min == max) for culled rows.
         width, height: image size in pixels.  grid: (tiles_x, tiles_y).
         surfel_rows, depth_rows: 2DGS surfels only (None for 3DGS): (N, 3, 3) centred
-            ``T' = A P H`` and (N, 3) view-z rows (:class:`splatgl.surfel.SurfelScreen`); then
+            ``T' = A P H`` and (N, 3) view-z rows (:class:`splatgl.twins.surfel.SurfelScreen`); then
             ``mean2d`` is the projected centre (the low-pass centre), ``conic`` is zero and
             ``radius`` holds the per-axis ``ceil`` of the box half extents.
         wrap_period: equirectangular cameras only: pixels per turn of longitude; every splat
             reaches at most half of it either side of its centre, and rows past the scene's
             count are the second copies of splats on the +-180 degree seam
-            (:func:`splatgl.lens.wrap_copies`).
+            (:func:`splatgl.cameras.lens.wrap_copies`).
     """
 
     visible: np.ndarray
@@ -251,7 +251,7 @@ def gsplat_fisheye(camera: Camera, options: ReferenceOptions) -> bool:
 
     gsplat treats a fisheye as it does a pinhole camera: it culls centres with view z below the
     near plane and sorts by view z.  splatgl's own rule for a fisheye (any convention but
-    GSPLAT) is the distance ``|p|`` for both (:func:`splatgl.lens.view_depth`): it stays
+    GSPLAT) is the distance ``|p|`` for both (:func:`splatgl.cameras.lens.view_depth`): it stays
     positive and ordered behind the camera plane, where a fisheye of 180 degrees or more
     still sees, and does not change as the camera turns about its centre.  The two orders
     differ wherever overlapping splats swap between them (docs/camera-models.md measures it).
@@ -262,7 +262,7 @@ def gsplat_fisheye(camera: Camera, options: ReferenceOptions) -> bool:
 def _wrap_copies(pr: pm.Projected, ok: np.ndarray, scene: Scene, view: Camera
                  ) -> tuple[pm.Projected, np.ndarray]:
     """Equirectangular cameras: append a second row, one turn of longitude away, for every
-    kept splat that may reach across the +-180 degree seam (:func:`splatgl.lens.wrap_copies`,
+    kept splat that may reach across the +-180 degree seam (:func:`splatgl.cameras.lens.wrap_copies`,
     the quad path's rule); other cameras unchanged."""
     if lens.wrap_period(view) is None:
         return pr, ok
@@ -304,13 +304,13 @@ def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
     """Stage 1 for 2DGS surfels: centred ``T``, low-pass centre, SH colour and tile rects.
 
     INRIA (the official rasterizer's setup): the low-pass centre is the projected centre, the
-    rectangle is :func:`box_rect` of the box of :func:`splatgl.surfel.surfel_bounds` (the quad
+    rectangle is :func:`box_rect` of the box of :func:`splatgl.twins.surfel.surfel_bounds` (the quad
     path draws that same box) and ``radius`` the per-axis ``ceil`` of its half extents.
     Culled: centre view z at or below the near plane, ``o <= 1/255``, non-finite values, an
     empty box or rectangle.
 
     GSPLAT (gsplat's ``fully_fused_projection_2dgs``): the low-pass centre is ``means2d``, the
-    centre of the image of the 1-sigma ellipse (:func:`splatgl.surfel.gsplat_screen`; the rows
+    centre of the image of the 1-sigma ellipse (:func:`splatgl.twins.surfel.gsplat_screen`; the rows
     are centred on it), ``radius = ceil(3.33 extent)`` per axis and the rectangle
     :func:`gsplat_rect`.  Culled: centre view z at or below the near plane, ``C*_22 = 0``,
     non-finite values, the box ``means2d +- radius`` off screen; no opacity cull.

@@ -1,6 +1,6 @@
 """Small builders for the stress scenes: splats from plain values, rotations, cameras.
 
-Everything here builds :class:`~splatgl.scene.Scene` directly (not through the loaders), so a
+Everything here builds :class:`~splatgl.model.scene.Scene` directly (not through the loaders), so a
 case can hold values the loaders would reject (zero quaternions, infinite logits).
 """
 
@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..camera import Camera, look_at
+from ..cameras.camera import Camera, look_at
 from ..constants import SH_C0
-from ..scene import Scene, SplatKind
+from ..model.scene import Scene, SplatKind
 
 #: Image size of most cases: small (fast on llvmpipe and in NumPy) but several 16 x 16 tiles.
 WIDTH, HEIGHT = 64, 48

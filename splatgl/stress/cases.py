@@ -14,10 +14,10 @@ from typing import Callable
 
 import numpy as np
 
-from ..camera import Camera, look_at
-from ..scene import Scene, SplatKind
-from ..settings import Precision, RenderSettings
-from ..quaternion import quat_axis_angle, quat_multiply
+from ..cameras.camera import Camera, look_at
+from ..model.scene import Scene, SplatKind
+from ..model.settings import Precision, RenderSettings
+from ..model.quaternion import quat_axis_angle, quat_multiply
 from .build import HEIGHT, WIDTH, at_pixel, front_camera, splats
 
 #: Why the default bounds are what they are (printed with the report).

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..reference import render_reference
-from ..settings import RendererKind
+from ..model.settings import RendererKind
 from .cases import CASES, StressCase
 
 #: The renderers under test, in table order.
@@ -139,7 +139,7 @@ def _row(renderer: str, case: StressCase, setup, gl, want_rgba, want_depth) -> R
 def run_case(case: StressCase, gl=None, renderers=RENDERERS) -> CaseResult:
     """Render ``case`` with each of ``renderers`` and the float64 reference; see the module doc.
 
-    ``gl``: a :class:`splatgl.render.Renderer` (one is made, and closed, when None and a GPU
+    ``gl``: a :class:`splatgl.api.Renderer` (one is made, and closed, when None and a GPU
     renderer is asked for).
     """
     setup = case.build()
@@ -155,7 +155,7 @@ def run_case(case: StressCase, gl=None, renderers=RENDERERS) -> CaseResult:
                            0.0, ref_seconds, "" if ref_finite else "non-finite truth")]
     own = None
     if gl is None and any(r != "reference32" for r in renderers):
-        from ..render import Renderer
+        from ..api import Renderer
         gl = own = Renderer()
     try:
         for renderer in renderers:

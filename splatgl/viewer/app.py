@@ -1,7 +1,7 @@
 """The viewer's window loop: a glfw window, input handling, pacing; rendering is splatgl's.
 
 :class:`Viewer` owns the window and its moderngl context and renders through the same
-:class:`~splatgl.render.Renderer` (quad or tile path) as ``splatgl render``.  It is drivable
+:class:`~splatgl.api.Renderer` (quad or tile path) as ``splatgl render``.  It is drivable
 from Python: the ``on_*`` methods are exactly what the glfw callbacks call, and :meth:`step`
 runs one loop iteration (render if anything changed, present, swap), so tests inject input
 and count frames without a person at the keyboard.
@@ -16,14 +16,14 @@ from pathlib import Path
 import glfw
 import numpy as np
 
-from ..camera import Camera
+from ..cameras.camera import Camera
 from ..errors import SplatglError
-from ..lens import require_support, with_projection
-from ..stereo import StereoLayout, StereoRenderer
+from ..cameras.lens import require_support, with_projection
+from ..renderers.stereo import StereoLayout, StereoRenderer
 from ..gl.context import REQUIRED_VERSION, create_glfw_context, create_glfw_window
-from ..render import Renderer
-from ..scene import Scene
-from ..settings import Precision, RendererKind, RenderSettings
+from ..api import Renderer
+from ..model.scene import Scene
+from ..model.settings import Precision, RendererKind, RenderSettings
 from . import controls
 from .frames import FrameResult, ViewMode, render_frame
 from .overlay import Overlay, Status, key_help, status_lines

@@ -2,9 +2,9 @@
 
 The view is a frozen :class:`ViewState`: the camera orbits ``target`` at ``distance`` with
 ``yaw`` (about the world ``up``) and ``pitch`` (towards ``up``) in degrees, exactly as
-:func:`splatgl.camera.orbit` places it, then rolls by ``roll`` degrees about its own viewing
+:func:`splatgl.cameras.camera.orbit` places it, then rolls by ``roll`` degrees about its own viewing
 axis.  Every function returns a new state; :func:`to_camera` turns one into a
-:class:`~splatgl.camera.Camera` for a window of a given size (square pixels, vertical field of
+:class:`~splatgl.cameras.camera.Camera` for a window of a given size (square pixels, vertical field of
 view ``fov_y``).  Pixel deltas are in window coordinates (x right, y down).
 """
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..camera import Camera, look_at, orbit
+from ..cameras.camera import Camera, look_at, orbit
 
 #: Pitch is kept inside (-PITCH_LIMIT, PITCH_LIMIT) degrees so ``look_at`` never degenerates.
 PITCH_LIMIT = 89.0

@@ -2,7 +2,7 @@
 
 Colour through the quad path draws straight into the quad renderer's own float target (no
 readback: the window samples that texture).  Everything else comes back as a NumPy image from
-the same :class:`~splatgl.render.Renderer` calls ``splatgl render`` makes: the tile path's
+the same :class:`~splatgl.api.Renderer` calls ``splatgl render`` makes: the tile path's
 colour, the colourised expected depth (what ``--depth-png`` writes) and the |quad - tile| heat
 map (what ``splatgl compare`` draws).
 """
@@ -16,12 +16,12 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from ..camera import Camera
-from ..pictures import depth_preview, heatmap
-from ..render import Renderer
-from ..scene import Scene
-from ..settings import RendererKind, RenderSettings
-from ..transform import apply_model
+from ..cameras.camera import Camera
+from ..output.pictures import depth_preview, heatmap
+from ..api import Renderer
+from ..model.scene import Scene
+from ..model.settings import RendererKind, RenderSettings
+from ..model.transform import apply_model
 
 #: Error that saturates the difference view's colour scale (8/255).
 DIFFERENCE_SCALE = 8.0 / 255.0

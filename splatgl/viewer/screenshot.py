@@ -5,14 +5,14 @@ from __future__ import annotations
 import shlex
 from pathlib import Path
 
-from ..camera import Camera
-from ..camera_io import save_camera
-from ..image_io import write_image
-from ..output_files import OutputFiles
-from ..render import Renderer
-from ..scene import Scene
-from ..settings import GpuStorage, RendererKind, RenderSettings
-from ..stereo import StereoLayout, StereoRenderer
+from ..cameras.camera import Camera
+from ..cameras.files import save_camera
+from ..output.images import write_image
+from ..output.files import OutputFiles
+from ..api import Renderer
+from ..model.scene import Scene
+from ..model.settings import GpuStorage, RendererKind, RenderSettings
+from ..renderers.stereo import StereoLayout, StereoRenderer
 
 PREFIX = "splatgl-view-"
 

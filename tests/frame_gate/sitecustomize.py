@@ -10,8 +10,8 @@ import os
 if os.environ.get("SPLATGL_TEST_GATE"):
     import threading
 
-    from splatgl import image_io
-    from splatgl.render import Renderer
+    from splatgl.output import images as image_io
+    from splatgl.api import Renderer
 
     _after = int(os.environ["SPLATGL_TEST_GATE"])
     _written = threading.Condition()
@@ -33,5 +33,5 @@ if os.environ.get("SPLATGL_TEST_GATE"):
                 threading.Event().wait()  # until SIGINT / SIGTERM raises here
             yield frame
 
-    image_io.write_image = write_image  # before splatgl.batch imports it
+    image_io.write_image = write_image  # before splatgl.tasks.batch imports it
     Renderer.render_many = render_many

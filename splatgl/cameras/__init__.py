@@ -1,0 +1,1 @@
+"""Camera models, the per-frame view, and camera files."""

@@ -1,0 +1,152 @@
+"""Camera files: splatgl's single-camera JSON and the cameras.json of 3DGS training output.
+
+(a) Single camera: ``{"width", "height", "fx", "fy", "cx", "cy", "world_to_camera": 4x4
+    row-major, optional "projection": "perspective" | "orthographic" | "fisheye" |
+    "equirectangular"}`` (orthographic fx, fy in pixels per world unit; fisheye fx, fy in pixels
+    per radian with optional "distortion": [k1, k2, k3, k4]; equirectangular may omit the
+    intrinsics for a full panorama, and may give "ods_eye" for one eye of a stereo pair), or with ``"frustum": {"left", "right", "top", "bottom", "near",
+    "far"}`` in place of the intrinsics.
+(b) 3DGS ``cameras.json``: a list of ``{"width", "height", "position", "rotation", "fx", "fy",
+    ...}`` where ``rotation`` is camera-to-world (3x3, rows as stored) and ``position`` the camera
+    centre; the principal point is the image centre.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera, Projection, check_rigid_pose
+from ..errors import CameraError
+from .json_fields import matrix, read_json
+from .lens import adapt_camera
+
+
+def _number(path: Path, where: str, obj: dict, key: str) -> float:
+    if key not in obj:
+        raise CameraError(f"{path}: {where}missing field '{key}'")
+    value = obj[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise CameraError(f"{path}: {where}field '{key}' must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _matrix(path: Path, where: str, obj: dict, key: str, shape: tuple[int, ...]) -> np.ndarray:
+    """Field ``key`` as a float64 array of ``shape``; the error says what is wrong with it."""
+    return matrix(path, where, obj, key, shape, flat=False)
+
+
+def _pose(path: Path, where: str, obj: dict) -> np.ndarray:
+    """The rigid ``world_to_camera`` of a single-camera object (4x4, checked)."""
+    w2c = _matrix(path, where, obj, "world_to_camera", (4, 4))
+    return check_rigid_pose(w2c, f"{path}: {where}field 'world_to_camera'")
+
+
+def _camera_from_frustum(obj: dict, path: Path) -> Camera:
+    frustum = obj["frustum"]
+    if not isinstance(frustum, dict):
+        raise CameraError(f"{path}: field 'frustum' must be an object with left, right, top, bottom, near")
+    where = "frustum: "
+    b = {k: _number(path, where, frustum, k) for k in ("left", "right", "top", "bottom", "near")}
+    far = _number(path, where, frustum, "far") if "far" in frustum else None
+    w, h = _number(path, "", obj, "width"), _number(path, "", obj, "height")
+    w2c = _pose(path, "", obj)
+    try:
+        return Camera.from_frustum(int(w), int(h), b["left"], b["right"], b["top"], b["bottom"],
+                                   b["near"], far, w2c)
+    except CameraError as exc:
+        raise CameraError(f"{path}: {exc}") from None
+
+
+def camera_from_json(obj: dict, path: Path = Path("<camera>")) -> Camera:
+    """A camera from the single-camera JSON object (form (a)).
+
+    Instead of ``fx, fy, cx, cy`` the object may give ``"frustum": {"left", "right", "top",
+    "bottom", "near", optional "far"}`` (OpenGL-style bounds at the near plane, y up), which
+    maps to exactly the same pixels as the equivalent intrinsics.
+    """
+    if not isinstance(obj, dict):
+        raise CameraError(f"{path}: expected a JSON object with width, height, fx, fy, cx, cy, world_to_camera")
+    if "frustum" in obj:
+        return _camera_from_frustum(obj, path)
+    proj = obj.get("projection", "perspective")
+    try:
+        projection = Projection(proj)
+    except ValueError:
+        names = ", ".join(f"'{m.value}'" for m in Projection)
+        raise CameraError(f"{path}: field 'projection' must be one of {names}, got {proj!r}") from None
+    keys = ("width", "height", "fx", "fy", "cx", "cy")
+    if projection is Projection.EQUIRECTANGULAR and not any(k in obj for k in keys[2:]):
+        w, h = _number(path, "", obj, "width"), _number(path, "", obj, "height")   # full panorama
+        vals = dict(zip(keys, (w, h, w / (2 * math.pi), h / math.pi, w / 2, h / 2)))
+    else:
+        vals = {k: _number(path, "", obj, k) for k in keys}
+    w2c = _pose(path, "", obj)
+    extra = {}
+    if "distortion" in obj:   # fisheye k1..k4
+        extra["distortion"] = _matrix(path, "", {"distortion": [obj["distortion"]]}, "distortion", (1, 4))[0]
+    if "ods_eye" in obj:
+        extra["ods_eye"] = _number(path, "", obj, "ods_eye")
+    try:
+        return Camera(int(vals["width"]) if vals["width"].is_integer() else vals["width"],
+                      int(vals["height"]) if vals["height"].is_integer() else vals["height"],
+                      vals["fx"], vals["fy"], vals["cx"], vals["cy"], w2c, projection, **extra)
+    except CameraError as exc:
+        raise CameraError(f"{path}: {exc}") from None
+
+
+def camera_from_3dgs(entry: dict, path: Path, index: int) -> Camera:
+    """A camera from one entry of a 3DGS cameras.json (form (b))."""
+    where = f"camera {index}: "
+    if not isinstance(entry, dict):
+        raise CameraError(f"{path}: {where}expected a JSON object")
+    w, h = _number(path, where, entry, "width"), _number(path, where, entry, "height")
+    fx, fy = _number(path, where, entry, "fx"), _number(path, where, entry, "fy")
+    c2w_rot = _matrix(path, where, entry, "rotation", (3, 3))
+    centre = _matrix(path, where, entry, "position", (3,))
+    check_rigid_pose(c2w_rot, f"{path}: {where}field 'rotation'")
+    w2c = np.eye(4)
+    w2c[:3, :3] = c2w_rot.T
+    w2c[:3, 3] = -c2w_rot.T @ centre
+    try:
+        return Camera(int(w), int(h), fx, fy, w / 2.0, h / 2.0, w2c)
+    except CameraError as exc:
+        raise CameraError(f"{path}: {where}{exc}") from None
+
+
+def load_cameras(path: str | Path) -> list[Camera]:
+    """Every camera in a file of either form (a list of one for form (a))."""
+    path = Path(path)
+    obj = read_json(path, "camera file")
+    if isinstance(obj, list):
+        if not obj:
+            raise CameraError(f"{path}: the camera list is empty")
+        return [camera_from_3dgs(entry, path, i) for i, entry in enumerate(obj)]
+    return [camera_from_json(obj, path)]
+
+
+def load_camera(path: str | Path, index: int = 0, *, width: int | None = None,
+                height: int | None = None, projection: Projection | str | None = None,
+                fov_degrees: float | None = None) -> Camera:
+    """Camera ``index`` of a camera file (index 0 for a single-camera JSON).
+
+    ``width``, ``height``, ``projection`` and ``fov_degrees`` adapt it as ``--camera`` with
+    ``--width``, ``--height``, ``--projection`` and ``--fov`` do (:func:`splatgl.cameras.lens.adapt_camera`):
+    the file's own intrinsics scale keeping its aspect; another projection or a field of view
+    keeps only its pose, at any size (an equirectangular panorama defaults to 2:1).
+    """
+    cams = load_cameras(path)
+    if not -len(cams) <= index < len(cams):
+        raise CameraError(f"{path}: camera index {index} out of range (the file has {len(cams)} camera(s))")
+    return adapt_camera(cams[index], width, height, projection, fov_degrees, str(path))
+
+
+def save_camera(path: str | Path, camera: Camera) -> None:
+    """Write the single-camera JSON form (a) of ``camera``, atomically (a failed write raises
+    one line naming ``path`` and leaves the old file, if any)."""
+    from ..output.atomic import atomic_write_text
+
+    atomic_write_text(path, json.dumps(camera.to_json(), indent=2) + "\n")

@@ -1,0 +1,1 @@
+"""Scores of renders against photographs or references: metrics and dataset evaluation."""

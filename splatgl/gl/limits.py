@@ -1,0 +1,96 @@
+"""How large an image this machine can render, checked before anything is allocated.
+
+Two limits apply, whatever gave the size (``--width``/``--height`` or a camera file):
+
+- the OpenGL context's own: a side may not exceed ``GL_MAX_RENDERBUFFER_SIZE``,
+  ``GL_MAX_TEXTURE_SIZE`` or ``GL_MAX_VIEWPORT_DIMS`` (quad path), and the tile renderer's
+  per-pixel colour buffer (16 bytes a pixel) must fit ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE``;
+- memory: the image buffers every renderer certainly allocates (:data:`MIN_BYTES_PER_PIXEL`)
+  must fit the memory the kernel reports as available.
+
+Without a context (the NumPy reference) only the memory check and :data:`MAX_IMAGE_SIDE` apply.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import SplatglError
+from ..model.settings import RendererKind
+
+#: Largest image side splatgl accepts before asking any context (the common GL 4.3 driver limit,
+#: llvmpipe's included); the context's real limits are checked as well.
+MAX_IMAGE_SIDE = 16384
+#: Bytes per pixel every renderer allocates at least for one view with depth: the float32
+#: colour target (16), the depth layer (16 on the GPU as an RGBA32F attachment, 4 read back) and
+#: the float32 RGBA copy handed back (16).  A lower bound: the check never refuses a size that
+#: would fit.
+MIN_BYTES_PER_PIXEL = 52
+#: The tile renderer's per-pixel RGBA32F output buffer, bytes per pixel (one SSBO).
+TILE_RGBA_BYTES = 16
+
+
+def available_memory() -> int | None:
+    """Bytes the kernel reports as available (``MemAvailable`` of /proc/meminfo), or None."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2**30:.1f} GiB"
+
+
+def image_size_problem(width: int, height: int, kind: RendererKind | str = RendererKind.QUAD,
+                       ctx=None) -> str | None:
+    """Why a ``width`` x ``height`` image cannot be rendered here, or None.
+
+    Args:
+        width, height: image size in pixels (positive integers).
+        kind: the renderer that will draw it.
+        ctx: the moderngl context it will draw with (None: the NumPy reference, or not known
+            yet; then only :data:`MAX_IMAGE_SIDE` and memory are checked).
+
+    Returns:
+        None, or a phrase such as ``"is larger than this OpenGL driver allows (16384 pixels a
+        side, GL_MAX_RENDERBUFFER_SIZE of llvmpipe ...)"``.
+    """
+    kind = RendererKind(kind)
+    side = max(width, height)
+    if ctx is not None and kind is not RendererKind.REFERENCE:
+        info = ctx.info
+        limits = [(int(info.get("GL_MAX_RENDERBUFFER_SIZE", MAX_IMAGE_SIDE)), "GL_MAX_RENDERBUFFER_SIZE"),
+                  (int(info.get("GL_MAX_TEXTURE_SIZE", MAX_IMAGE_SIDE)), "GL_MAX_TEXTURE_SIZE")]
+        dims = info.get("GL_MAX_VIEWPORT_DIMS")
+        if dims:
+            limits.append((int(min(dims)), "GL_MAX_VIEWPORT_DIMS"))
+        limit, name = min(limits)
+        if side > limit:
+            return (f"is larger than this OpenGL driver allows ({limit} pixels a side, {name} of "
+                    f"{info.get('GL_RENDERER', '?')})")
+        if kind is RendererKind.TILE:
+            block = int(info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 0) or 0)
+            if block and width * height * TILE_RGBA_BYTES > block:
+                return (f"has too many pixels for the tile renderer on this driver ({width * height:,}; "
+                        f"its colour buffer of {TILE_RGBA_BYTES} bytes a pixel may hold "
+                        f"{block // TILE_RGBA_BYTES:,}, GL_MAX_SHADER_STORAGE_BLOCK_SIZE)")
+    elif side > MAX_IMAGE_SIDE:
+        return f"is larger than splatgl renders ({MAX_IMAGE_SIDE} pixels a side)"
+    need = width * height * MIN_BYTES_PER_PIXEL
+    free = available_memory()
+    if free is not None and need > free:
+        return (f"needs at least {_gib(need)} of memory for its image buffers, "
+                f"{_gib(free)} available")
+    return None
+
+
+def check_image_size(width: int, height: int, what: str, kind: RendererKind | str = RendererKind.QUAD,
+                     ctx=None) -> None:
+    """Raise :class:`SplatglError` ``"{what} {width}x{height} {problem}"`` if the size won't do."""
+    problem = image_size_problem(width, height, kind, ctx)
+    if problem:
+        raise SplatglError(f"{what} {width}x{height} {problem}")

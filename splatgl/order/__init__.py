@@ -1,0 +1,1 @@
+"""The order stage: which splats a view can see (cull) and in which order they blend (sort), with optional compiled kernels."""

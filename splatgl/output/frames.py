@@ -1,0 +1,138 @@
+"""Where a batch of frames goes: a folder, a printf pattern, or a video file.
+
+- ``frames/`` (an existing folder, a name without a suffix, or one ending in ``/``): files
+  ``frames/00000.png``, ``00001.png``, ... (``image_format`` picks png, tif or exr);
+- ``frames/%05d.exr``: a printf pattern with one integer field (the frame index);
+- ``flythrough.mp4`` (``.mov``, ``.mkv``): an H.264 video (:mod:`splatgl.output.video`).
+
+Any other suffix (``f.avi``, ``f.gif``, ``f.jpg``) is refused, never taken for a folder.
+"""
+
+from __future__ import annotations
+
+import enum
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from ..errors import SplatglError
+from .images import IMAGE_SUFFIXES, inspect_image
+from .video import VIDEO_SUFFIXES
+
+DEFAULT_PATTERN = "%05d"
+
+
+class TargetKind(enum.Enum):
+    IMAGES = "images"
+    VIDEO = "video"
+
+
+@dataclass(frozen=True)
+class FrameTarget:
+    """A parsed output: ``pattern`` (a printf pattern of image paths) or a ``video`` path."""
+
+    kind: TargetKind
+    pattern: str | None = None
+    video: Path | None = None
+
+    @classmethod
+    def parse(cls, out: str | Path, image_format: str | None = None) -> "FrameTarget":
+        """``out`` parsed; ``image_format`` (``--format``; default png) applies to a folder only
+        (a video or a pattern's suffix says what it holds), elsewhere it is refused."""
+        text = str(out)
+        suffix = Path(text).suffix.lower()
+        if image_format is not None and (suffix in VIDEO_SUFFIXES or "%" in text):
+            what = "a video" if suffix in VIDEO_SUFFIXES else "a pattern whose suffix names the image type"
+            raise SplatglError(f"--format {image_format}: -o {text} is {what}; --format picks the "
+                               "image type of frames written into a folder")
+        image_format = image_format or "png"
+        if suffix in VIDEO_SUFFIXES:
+            if "%" in text:
+                raise SplatglError(f"{text}: a video file name takes no printf pattern")
+            return cls(TargetKind.VIDEO, video=Path(text))
+        if "%" in text:
+            if suffix not in IMAGE_SUFFIXES:
+                raise SplatglError(f"{text}: a frame pattern must end in {', '.join(IMAGE_SUFFIXES)}")
+            try:
+                a, b = text % 0, text % 1
+            except (TypeError, ValueError):
+                raise SplatglError(f"{text}: a frame pattern needs exactly one integer field such as %05d") from None
+            if a == b:
+                raise SplatglError(f"{text}: the pattern's field does not change with the frame index")
+            return cls(TargetKind.IMAGES, pattern=text)
+        folder = Path(text).is_dir() or text.endswith(("/", os.sep))
+        if suffix in IMAGE_SUFFIXES and not folder:
+            raise SplatglError(f"{text}: many frames need a folder or a pattern such as "
+                               f"{Path(text).with_name(Path(text).stem + '_%05d' + suffix)}")
+        if suffix and not folder:  # f.avi, f.gif, f.jpg: never a folder of PNGs named so
+            raise SplatglError(
+                f"{text}: unknown output type '{suffix}'; give a video ({', '.join(VIDEO_SUFFIXES)}), "
+                f"a frame pattern such as {Path(text).stem}_%05d.png ({', '.join(IMAGE_SUFFIXES)}) "
+                "or a folder (a name without a suffix, or ending in /)")
+        fmt = image_format.lower().lstrip(".")
+        if "." + fmt not in IMAGE_SUFFIXES:
+            raise SplatglError(f"--format must be one of png, tif, exr; got {image_format!r}")
+        return cls(TargetKind.IMAGES, pattern=str(Path(text) / f"{DEFAULT_PATTERN}.{fmt}"))
+
+    @property
+    def is_video(self) -> bool:
+        return self.kind is TargetKind.VIDEO
+
+    @property
+    def wants_depth(self) -> bool:
+        """EXR frames carry the depth channel, as ``splatgl render -o x.exr`` does."""
+        return not self.is_video and self.pattern.lower().endswith(".exr")
+
+    def frame_path(self, index: int) -> Path:
+        return Path(self.pattern % index)
+
+    def prepare(self) -> None:
+        """Create the folder the frames or the video go into; refuse one that is not writable
+        (before any frame renders)."""
+        parent = self.video.parent if self.is_video else self.frame_path(0).parent
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SplatglError(f"{parent}: cannot create the output folder ({exc.strerror})") from None
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise SplatglError(f"{parent}: the output folder is not writable")
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """Which frames a run renders: ``todo`` (indices into its cameras), how many complete
+    frames it keeps (``skipped``) and how many damaged ones it renders again (``damaged``)."""
+
+    todo: list[int]
+    skipped: int = 0
+    damaged: int = 0
+
+
+def plan_frames(target: FrameTarget, sizes: Sequence[tuple[int, int]], numbers: Sequence[int],
+                bit_depth: int = 8, resume: bool = False) -> FramePlan:
+    """The frames to render of cameras whose frames are ``sizes`` (width, height) numbered
+    ``numbers``.  Without ``resume`` (or into a video): all of them.  With ``resume`` a frame
+    file that exists is kept only when it is complete (:func:`splatgl.output.images.inspect_image`:
+    a file cut short by a full disk or a killed run is rendered again); a complete frame of
+    another size, channel count or bit depth stops the run before any work, in one line."""
+    if not resume or target.is_video:
+        return FramePlan(list(range(len(sizes))))
+    channels = 5 if target.wants_depth else 3
+    todo, damaged = [], 0
+    for k, ((width, height), number) in enumerate(zip(sizes, numbers)):
+        path = target.frame_path(number)
+        if not path.exists():
+            todo.append(k)
+            continue
+        info = inspect_image(path)
+        if isinstance(info, str):
+            todo.append(k)
+            damaged += 1
+            continue
+        mismatch = info.mismatch(width, height, channels, bit_depth)
+        if mismatch is not None:
+            raise SplatglError(f"{path}: {mismatch} as this run renders its frames; --resume only "
+                               "completes frames of the same kind (render into another folder, "
+                               "or without --resume to replace them)")
+    return FramePlan(todo, len(sizes) - len(todo), damaged)

@@ -1,0 +1,171 @@
+"""Image output through OpenImageIO: PNG and TIFF (8 or 16 bit, RGB), EXR (float RGBA).
+
+Every file is written to a temporary beside the target, checked (:func:`image_file_problem`:
+the header's size, channels and type, and the end of the data really there) and only then
+renamed: a failed or short write (a full disk) raises one line naming the target and leaves
+nothing behind.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from .atomic import disk_note, write_error
+from ..errors import SplatglError
+
+_INTEGER_FORMATS = {".png", ".tif", ".tiff"}
+_FLOAT_FORMATS = {".exr"}
+#: Every suffix :func:`write_image` writes, in the order messages list them.
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".exr")
+#: The last 12 bytes of every complete PNG file: the IEND chunk (length 0, type, CRC).
+_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+
+
+def check_image_suffix(path: str | Path, what: str = "") -> None:
+    """Refuse a file name :func:`write_image` cannot write (before any work); ``what`` (an
+    option name) starts the message."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in IMAGE_SUFFIXES:
+        got = f"'{ext}'" if ext else "no suffix"
+        raise SplatglError(f"{what + ' ' if what else ''}{path}: unsupported image format ({got}); "
+                           f"use {', '.join(IMAGE_SUFFIXES[:-1])} or {IMAGE_SUFFIXES[-1]}")
+
+
+@dataclass(frozen=True)
+class ImageFileInfo:
+    """What a complete image file holds: size, channels, bits per channel (None: float)."""
+
+    width: int
+    height: int
+    channels: int
+    bits: int | None
+
+    def mismatch(self, width: int | None = None, height: int | None = None,
+                 channels: int | None = None, bit_depth: int | None = None) -> str | None:
+        """How this file differs from what was asked (None: it does not)."""
+        if width is not None and height is not None and (self.width, self.height) != (width, height):
+            return f"it is {self.width}x{self.height}, not {width}x{height}"
+        if channels is not None and self.channels != channels:
+            return f"it has {self.channels} channels, not {channels}"
+        if bit_depth is not None and self.bits is not None and self.bits != bit_depth:
+            return f"it has {self.bits} bits per channel, not {bit_depth}"
+        return None
+
+
+def inspect_image(path: str | Path) -> ImageFileInfo | str:
+    """The header of a complete image file, or why the file is not one (a string).
+
+    Cheap enough to run on every frame: reads the header and the end of the data, not the
+    pixels (PNG: the file must end with its IEND chunk; TIFF/EXR: the last scanline must
+    decode), so a file cut short by a full disk or a killed writer is found.
+    """
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size == 0:
+            return "the file is empty"
+        if path.suffix.lower() == ".png":
+            with open(path, "rb") as fh:
+                fh.seek(max(size - len(_PNG_END), 0))
+                if fh.read() != _PNG_END:
+                    return f"the file is cut short ({size} bytes, no PNG end chunk)"
+    except OSError as exc:
+        return f"cannot read it ({exc.strerror})"
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return f"not a readable image ({' '.join(oiio.geterror().split())})"
+    try:
+        spec = inp.spec()
+        if path.suffix.lower() != ".png" and inp.read_scanline(spec.height - 1, 0, oiio.FLOAT) is None:
+            return f"the file is cut short ({size} bytes: {' '.join(inp.geterror().split())})"
+        bits = {"uint8": 8, "uint16": 16}.get(str(spec.format))
+        return ImageFileInfo(spec.width, spec.height, spec.nchannels, bits)
+    finally:
+        inp.close()
+
+
+def image_file_problem(path: str | Path, width: int | None = None, height: int | None = None,
+                       channels: int | None = None, bit_depth: int | None = None) -> str | None:
+    """Why ``path`` is not a complete image (:func:`inspect_image`) of the given size, channel
+    count and (PNG/TIFF) bits per channel, or None when it is one."""
+    info = inspect_image(path)
+    return info if isinstance(info, str) else info.mismatch(width, height, channels, bit_depth)
+
+
+def _clean(message: str, tmp: Path, target: Path) -> str:
+    """An OpenImageIO message on one line, naming ``target`` where it named the temporary."""
+    text = " ".join(message.split()) or "no reason given"
+    return text.replace(str(tmp), str(target)).replace(tmp.name, target.name)
+
+
+def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
+                depth: np.ndarray | None = None) -> None:
+    """Write an (H, W, 4) float32 image (row 0 at the top), atomically.
+
+    PNG/TIFF get RGB (the background already composited), clipped to [0, 1] and quantised once
+    to ``bit_depth`` (8 or 16).  EXR gets float32 R, G, B, A (A = accumulated alpha) and, when
+    ``depth`` (H, W) is given, a Z channel (the expected depth, 0 where nothing was drawn).
+    """
+    path = Path(path)
+    ext = path.suffix.lower()
+    check_image_suffix(path)
+    if bit_depth not in (8, 16):
+        raise SplatglError(f"bit depth must be 8 or 16, got {bit_depth}")
+    if ext in _FLOAT_FORMATS:
+        pixels, fmt = np.ascontiguousarray(rgba, np.float32), oiio.FLOAT
+        channels = ("R", "G", "B", "A")
+        if depth is not None:
+            pixels = np.ascontiguousarray(np.concatenate([pixels, depth[..., None]], -1), np.float32)
+            channels += ("Z",)
+    else:
+        scale = 255.0 if bit_depth == 8 else 65535.0
+        dtype = np.uint8 if bit_depth == 8 else np.uint16
+        q = np.clip(rgba[..., :3], 0.0, 1.0) * scale + 0.5
+        pixels = np.ascontiguousarray(q.astype(dtype))
+        fmt = oiio.UINT8 if bit_depth == 8 else oiio.UINT16
+        channels = ("R", "G", "B")
+    h, w = pixels.shape[:2]
+    spec = oiio.ImageSpec(w, h, len(channels), fmt)
+    spec.channelnames = channels
+    # Write beside the target, check, rename: a failed write never leaves a half-written file.
+    tmp = path.with_name(f".{path.stem}.partial{os.getpid()}{ext}")
+    out = oiio.ImageOutput.create(str(tmp))
+    if out is None:
+        raise SplatglError(f"{path}: OpenImageIO cannot write this format ({_clean(oiio.geterror(), tmp, path)})")
+    try:
+        try:
+            ok = out.open(str(tmp), spec) and out.write_image(pixels)
+            problem = None if ok else out.geterror()
+        finally:
+            closed = out.close()
+        if problem is None and not closed:
+            problem = out.geterror()
+        if problem is None:
+            problem = image_file_problem(tmp, w, h, len(channels), None if ext in _FLOAT_FORMATS else bit_depth)
+        if problem is not None:
+            raise SplatglError(f"{path}: cannot write: {_clean(problem, tmp, path).rstrip('.')}"
+                               f"{disk_note(path.parent)}")
+        try:
+            tmp.replace(path)
+        except OSError as exc:
+            raise write_error(path, exc) from None
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """(H, W, C) float32 pixels of an image file (integer formats scaled to [0, 1])."""
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise SplatglError(f"{path}: cannot read image ({oiio.geterror()})")
+    try:
+        return np.asarray(inp.read_image(oiio.FLOAT), np.float32)
+    finally:
+        inp.close()

@@ -1,0 +1,1 @@
+"""The render paths: the quad path, the tile renderer and stereo pairs."""
