@@ -24,9 +24,9 @@ from splatgl.order import kernels as cull_kernel
 from splatgl.bench.scale import scene_file
 from splatgl.bench.machine import CPU_ONLY, describe, machine_info
 from splatgl.bench.scale_cli import parse_sizes
-from splatgl.cameras.camera import orbit
+from splatgl.cameras.poses import orbit
 from splatgl.formats import load_scene
-from splatgl.cameras.lens import with_projection
+from splatgl.cameras.registry import retarget
 from splatgl.renderers.quad import QuadRenderer
 from splatgl.api import Renderer, default_camera
 from splatgl.model.settings import RenderSettings
@@ -42,9 +42,9 @@ def cameras(scene, view: str, frames: int, width: int, height: int):
     dist = float(np.linalg.norm(base.center - centre)) * (0.2 if view == "pinhole-close" else 1.0)
     cams = [base.with_pose(orbit(centre, dist, 2.0 * i, 20.0)) for i in range(frames + 1)]
     if view == "fisheye":
-        return [with_projection(c, "fisheye", 180.0) for c in cams]
+        return [retarget(c, "fisheye", 180.0) for c in cams]
     if view == "equirect":
-        return [with_projection(c, "equirectangular") for c in cams]
+        return [retarget(c, "equirectangular") for c in cams]
     return cams
 
 

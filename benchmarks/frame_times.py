@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from splatgl import RenderSettings, Renderer, default_camera, load_scene
-from splatgl.cameras.camera import orbit
+from splatgl.cameras.poses import orbit
 from splatgl.model.scene import Scene
 
 REPO = Path(__file__).resolve().parent.parent

@@ -28,7 +28,7 @@ from splatgl.order.chunks import keys_order, rows_keys
 from splatgl.lod.cut import CutData, select_cut_weights
 from splatgl.lod.io import read_lod
 from splatgl.lod.render import SKIP_NODES_PER_LEAF
-from splatgl.twins.project import anchored_camera
+from splatgl.cameras.view import anchored_camera
 from splatgl.model.settings import RenderSettings, resolve_near
 
 

@@ -1,6 +1,6 @@
 // Benchmark limit row, vertex stage: the quad path's own geometry (from quad_prepass.comp),
 // placed with no per-splat math and no fragment inputs: per-primitive cost only.
-#include "lib/camera.glsl"
+uniform vec2 u_viewport;  // (width, height) in pixels
 
 layout(std430, binding = 6) readonly buffer Prepared { vec4 prepared[]; };
 

@@ -53,7 +53,7 @@ void main() {
     // cost per rejected fragment, docs/early-stop.md).
     bool skip = power > 0.0 || alpha < ALPHA_MIN;
 #ifdef EQUIRECT
-    // Half a turn of longitude each side of the centre (splatgl/cameras/lens.py wrap_period): a splat
+    // Half a turn of longitude each side of the centre (splatgl/cameras/equirect.py seam_period): a splat
     // at a pole spans the image once, and a seam splat's two copies never meet.
     skip = skip || abs(gl_FragCoord.x - v_mean2d.x) > 0.5 * u_wrap_period;
 #endif

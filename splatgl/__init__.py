@@ -19,7 +19,9 @@ __version__ = "0.1.0"
 
 #: Public name -> the submodule defining it.
 _EXPORTS = {
-    "Camera": "cameras.camera", "Projection": "cameras.camera", "look_at": "cameras.camera", "orbit": "cameras.camera",
+    "Camera": "cameras.camera", "look_at": "cameras.poses", "orbit": "cameras.poses",
+    "Pinhole": "cameras.pinhole", "Orthographic": "cameras.orthographic", "Fisheye": "cameras.fisheye",
+    "Equirectangular": "cameras.equirect", "View": "cameras.view",
     "load_camera": "cameras.files", "load_cameras": "datasets", "save_camera": "cameras.files",
     "CameraError": "errors", "ContextError": "errors", "SceneFormatError": "errors",
     "ShaderError": "errors", "SplatglError": "errors",
@@ -47,7 +49,13 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # static analysers see the names directly
-    from .cameras.camera import Camera, Projection, look_at, orbit
+    from .cameras.camera import Camera
+    from .cameras.equirect import Equirectangular
+    from .cameras.fisheye import Fisheye
+    from .cameras.orthographic import Orthographic
+    from .cameras.pinhole import Pinhole
+    from .cameras.poses import look_at, orbit
+    from .cameras.view import View
     from .cameras.files import load_camera, save_camera
     from .datasets import load_cameras
     from .errors import CameraError, ContextError, SceneFormatError, ShaderError, SplatglError

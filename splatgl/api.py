@@ -15,7 +15,8 @@ from typing import Iterable, Iterator
 import moderngl
 import numpy as np
 
-from .cameras.camera import Camera, orbit
+from .cameras.camera import Camera
+from .cameras.poses import orbit
 from .errors import CameraError, SplatglError
 from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
@@ -24,7 +25,8 @@ from .output.layers import RenderOutput
 from .progress import ProgressCallback
 from .model.scene import Scene
 from .model.settings import RenderSettings, RendererKind
-from .model.transform import ModelTransform, apply_model
+from .cameras.view import apply_model
+from .model.transform import ModelTransform
 
 #: Default vertical field of view of :func:`default_camera`, degrees.
 DEFAULT_FOV_Y = 50.0

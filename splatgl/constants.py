@@ -59,7 +59,7 @@ SURFEL_FILTER_INV_SQUARE = 2.0
 #: matrix with det +1 by at most this much (largest entry of |R R^T - I|, and |det R - 1|).  Poses
 #: saved as float32 keep ~1e-7; 1e-4 also accepts JSON written with 5-6 significant digits.
 RIGID_POSE_TOLERANCE = 1e-4
-#: Fisheye cameras (:mod:`splatgl.cameras.lens`) keep splat centres up to this angle (radians, 10
+#: Fisheye cameras (:mod:`splatgl.cameras.fisheye`) keep splat centres up to this angle (radians, 10
 #: degrees) beyond the largest angle from the axis that reaches the image, so splats centred
 #: just outside the view still reach in, as the pinhole's rectangle test allows ...
 FISHEYE_THETA_MARGIN = math.radians(10.0)

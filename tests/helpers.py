@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import orbit
+from splatgl.cameras.poses import orbit
 from splatgl.constants import SH_C0, sh_coeff_count
 from splatgl.model.scene import Scene, SplatKind
 

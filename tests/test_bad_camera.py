@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import check_rigid_pose, look_at, rigid_pose_problem
+from splatgl.cameras.poses import check_rigid_pose, look_at, rigid_pose_problem
 from splatgl.cameras.files import load_camera, load_cameras
 from splatgl.constants import RIGID_POSE_TOLERANCE
 from splatgl.errors import CameraError

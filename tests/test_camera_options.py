@@ -1,6 +1,6 @@
 """A camera file with --width/--height/--projection/--fov (issue 25, item 4 and part of 8).
 
-The rule lives in :func:`splatgl.cameras.lens.adapt_camera` (reached from the API as
+The rule lives in :func:`splatgl.cameras.registry.adapt_camera` (reached from the API as
 ``splatgl.load_camera(path, width=..., projection=...)``): the file's own intrinsics scale
 keeping its aspect; another projection or a field of view keeps only its pose, at any size.
 """
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import splatgl
-from splatgl.cameras.camera import Projection, look_at
+from splatgl.cameras.poses import look_at
 from splatgl.cli import build_parser, main
 from splatgl.commands._common import camera_from_args
 from splatgl.errors import CameraError
@@ -42,7 +42,7 @@ def cam_file(tmp_path):
 ])
 def test_new_intrinsics_keep_only_the_pose_at_any_size(cam_file, kwargs, size, projection):
     cam = splatgl.load_camera(cam_file, **kwargs)
-    assert (cam.width, cam.height) == size and cam.projection is Projection(projection)
+    assert (cam.width, cam.height) == size and cam.projection == projection
     np.testing.assert_array_equal(cam.world_to_camera, POSE)
     if projection == "equirectangular":   # a full panorama whatever the size
         assert cam.fx == pytest.approx(size[0] / (2 * np.pi)) and cam.fy == pytest.approx(size[1] / np.pi)
@@ -82,7 +82,7 @@ def test_every_command_adapts_the_file_the_same_way(cam_file, command):
             "128", "--height", "48"] + (["-o", "x.png"] if command == "render" else [])
     args = build_parser().parse_args(argv)
     cam = camera_from_args(args, None)
-    assert (cam.width, cam.height, cam.projection) == (128, 48, Projection.EQUIRECTANGULAR)
+    assert (cam.width, cam.height, cam.projection) == (128, 48, "equirectangular")
 
 
 @pytest.mark.parametrize("extra, line", [

@@ -194,8 +194,8 @@ def test_colmap_models_with_zero_distortion_are_pinholes(tmp_path, line, fx, fy)
     (tmp_path / "cameras.txt").write_text(line + "\n")
     (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
     cam = splatgl.load_cameras(tmp_path)[0]
-    assert (cam.projection.value, cam.width, cam.height, cam.fx, cam.fy) == ("perspective", 10, 8, fx, fy)
-    assert (cam.cx, cam.cy) == (5, 4) and cam.distortion == (0, 0, 0, 0)
+    assert (cam.projection, cam.width, cam.height, cam.fx, cam.fy) == ("perspective", 10, 8, fx, fy)
+    assert (cam.cx, cam.cy) == (5, 4) and cam.projection == "perspective"
     (tmp_path / "cameras.txt").write_text(line[:-1] + "0.01\n")
     with pytest.raises(CameraError, match=r"cameras.txt: camera 1: COLMAP model \w+ has nonzero lens "
                                           r"distortion \([0 ]*0.01\), which splatgl does not render"):

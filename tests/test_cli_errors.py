@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import look_at
+from splatgl.cameras.poses import look_at
 from splatgl.cli import main
 
 

@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera, orbit
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import orbit
 from splatgl.cameras.files import load_camera, load_cameras, save_camera
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path

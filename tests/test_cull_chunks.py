@@ -12,12 +12,18 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from splatgl.order import chunks as cull_chunks, kernels as cull_kernel
-from splatgl.cameras import lens
-from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.equirect import WRAP_FLAG, Equirectangular
+from splatgl.cameras.fisheye import Fisheye, fisheye_theta_limit
+from splatgl.cameras.registry import retarget
+from splatgl.order.lens_cull import lens_cull, lens_order
+from splatgl.twins.project import splat_reach
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.order.cull import CullData, cull
 from splatgl.order.chunks import ChunkedCull, keys_order, keys_pairs
 from splatgl.order.lens_cull import lens_visible_keys
-from splatgl.twins.project import anchored_camera, to_camera
+from splatgl.cameras.view import anchored_camera
+from splatgl.twins.project import to_camera
 from splatgl.order.sort import depth_keys, depth_sort
 
 FISHEYE_K = (0.05, -0.01, 0.002, -0.0003)
@@ -124,7 +130,7 @@ def test_keys_order_and_pairs_feed_every_sort_as_before():
     rng = np.random.default_rng(5)
     idx = np.sort(rng.choice(5000, 1200, replace=False)).astype(np.uint32)
     z = rng.choice(np.float32([0.5, 1.0, 2.0, 3.5]), idx.size)  # many ties
-    copies = idx[::7] | lens.WRAP_FLAG
+    copies = idx[::7] | WRAP_FLAG
     keys = rng.permutation(np.concatenate([depth_keys(z, idx), depth_keys(z[::7], copies)]))
     all_z, all_idx = np.concatenate([z, z[::7]]), np.concatenate([idx, copies])
     np.testing.assert_array_equal(keys_order(keys), depth_sort(all_z, all_idx))
@@ -136,9 +142,9 @@ def test_keys_order_and_pairs_feed_every_sort_as_before():
 def _old_lens_keys(points, max_scale, opac, camera, near):
     """The lens stages as the quad path ran them before the fused cull (sorted keys)."""
     p_cam = to_camera(points, camera)
-    kept = np.flatnonzero(lens.lens_cull(p_cam, opac, camera, near))
-    reach = lens.splat_reach(max_scale[kept] * camera.scale, opac[kept])
-    depth, keep = lens.lens_order(p_cam, kept, reach, camera)
+    kept = np.flatnonzero(lens_cull(p_cam, opac, camera, near))
+    reach = splat_reach(max_scale[kept] * camera.scale, opac[kept])
+    depth, keep = lens_order(p_cam, kept, reach, camera)
     return np.sort(depth_keys(depth, keep)), keep
 
 
@@ -146,7 +152,7 @@ def _lens_cameras():
     pose = look_at(np.array([0.5, -0.3, -1.0]), np.array([0.0, 0.0, 2.0]))
     return [Camera.fisheye(96, 64, 200, pose, FISHEYE_K), Camera.fisheye(64, 64, 120, pose),
             Camera.equirectangular(128, 64, pose),
-            dataclasses.replace(Camera.equirectangular(128, 64, pose), ods_eye=-0.032)]
+            Camera.equirectangular(128, 64, pose).with_model(Equirectangular(-0.032))]
 
 
 @pytest.mark.parametrize("path", ["numpy", "compiled", "compiled-2-threads"])
@@ -158,10 +164,10 @@ def test_lens_cull_keeps_what_the_old_lens_stages_keep(cam_index, path, monkeypa
     monkeypatch.setattr(cull_chunks, "SPLIT_ROWS", 1 if path.endswith("threads") else 10 ** 9)
     points, max_scale, opac = _clustered(20_000, 17)
     camera = _lens_cameras()[cam_index]
-    if camera.projection is lens.Projection.FISHEYE:
+    if isinstance(camera.model, Fisheye):
         # splats on the angle limit's cone, inside and outside by float32 rounding: the band
         # where the exact arctan2 test decides
-        limit = lens.fisheye_theta_limit(camera)
+        limit = fisheye_theta_limit(camera)
         theta = limit + np.linspace(-3e-6, 3e-6, 600)
         phi = np.linspace(0, 2 * np.pi, 600)
         cone = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], 1) * 2.0
@@ -171,11 +177,11 @@ def test_lens_cull_keeps_what_the_old_lens_stages_keep(cam_index, path, monkeypa
     chunks.compiled = path != "numpy"
     want, keep = _old_lens_keys(points, max_scale, opac, camera, 0.05)
     got = np.sort(lens_visible_keys(chunks, camera, 0.05, camera.scale))
-    assert chunks.last_path == ("compiled" if path != "numpy" and not camera.ods_eye else "numpy")
+    assert chunks.last_path == ("compiled" if path != "numpy" and not getattr(camera.model, "ods_eye", 0.0) else "numpy")
     np.testing.assert_array_equal(got, want)
     assert 0 < want.size
-    if camera.projection is lens.Projection.EQUIRECTANGULAR:
-        assert (keep >= lens.WRAP_FLAG).any()  # seam copies were made and matched
+    if isinstance(camera.model, Equirectangular):
+        assert (keep >= WRAP_FLAG).any()  # seam copies were made and matched
     else:
         assert want.size < points.shape[0]
 
@@ -185,7 +191,7 @@ def test_real_scene_orders_unchanged(shared_scenes, name):
     """On real scenes, pinhole (framing and close), fisheye and equirect views: the quad path's
     new cull stages give exactly the order of the old stages (cull_visible + depth_sort, and
     lens_cull + lens_order + depth_sort), so the rendered images are identical."""
-    from splatgl.cameras.camera import orbit
+    from splatgl.cameras.poses import orbit
     from splatgl.order.cull import cull_visible
     from splatgl.formats import load_scene
     from splatgl.api import default_camera
@@ -209,11 +215,11 @@ def test_real_scene_orders_unchanged(shared_scenes, name):
             np.testing.assert_array_equal(keys_order(chunks.visible_keys(anchored, near)),
                                           depth_sort(z, idx))
         for projection in ("fisheye", "equirectangular"):
-            lcam = anchored_camera(lens.with_projection(cam, projection), scene.anchor)
+            lcam = anchored_camera(retarget(cam, projection), scene.anchor)
             p_cam = to_camera(scene.relative_means, lcam)
-            kept = np.flatnonzero(lens.lens_cull(p_cam, scene.opacities, lcam, near))
-            reach = lens.splat_reach(scene.scales[kept].max(axis=1), scene.opacities[kept])
-            depth, keep = lens.lens_order(p_cam, kept, reach, lcam)
+            kept = np.flatnonzero(lens_cull(p_cam, scene.opacities, lcam, near))
+            reach = splat_reach(scene.scales[kept].max(axis=1), scene.opacities[kept])
+            depth, keep = lens_order(p_cam, kept, reach, lcam)
             np.testing.assert_array_equal(keys_order(lens_visible_keys(chunks, lcam, near)),
                                           depth_sort(depth, keep))
 

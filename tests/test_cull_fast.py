@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.order.cull import CULL_BLOCK, CullData, cull, cull_visible
 from splatgl.twins.project import to_camera
 

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from helpers import summary_counts
-from splatgl.cameras.camera import Camera, orbit
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import orbit
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.datasets import colmap, nerf

@@ -1,4 +1,4 @@
-"""Fisheye, equirectangular and stereo cameras (splatgl/cameras/lens.py, shaders/lib/lens.glsl).
+"""Fisheye, equirectangular and stereo cameras (splatgl/cameras/fisheye.py, equirect.py; shaders/cameras/).
 
 Math in float64 against finite differences, gsplat's closed form and known pixels; GPU images
 against the reference with the thresholds of tests/test_compare.py (the lens models change only
@@ -16,9 +16,12 @@ import numpy as np
 import pytest
 
 from helpers import shared_file
-from splatgl.cameras import lens
+from splatgl.cameras.equirect import Equirectangular, eye_space
+from splatgl.cameras.fisheye import Fisheye, fisheye_theta_limit
+from splatgl.cameras.registry import retarget
 from splatgl.twins import project as pm
-from splatgl.cameras.camera import Camera, Projection, look_at
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.cameras.files import camera_from_json
 from splatgl.cli import main
 from splatgl.errors import CameraError
@@ -49,7 +52,7 @@ def _points(n=3000, seed=0):
 @pytest.mark.parametrize("camera", _cameras(), ids=["fisheye_k", "fisheye", "equirect"])
 def test_jacobian_matches_finite_differences(camera):
     p = _points()
-    if camera.projection is Projection.FISHEYE:   # the map folds at the antipode
+    if isinstance(camera.model, Fisheye):   # the map folds at the antipode
         p = p[np.arctan2(np.hypot(p[:, 0], p[:, 1]), p[:, 2]) < 2.8]
     j = pm.jacobian(p, camera)
     h = 1e-6
@@ -64,7 +67,7 @@ def test_fisheye_jacobian_equals_gsplat_closed_form():
     """gsplat's equidistant fisheye Jacobian, written with a = z / (R^2 rho^2), b = theta / rho^3:
     [[fx (x^2 a + y^2 b), fx x y (a - b), -fx x / R^2], [fy x y (a - b), fy (y^2 a + x^2 b),
     -fy y / R^2]]."""
-    cam = Camera(64, 48, 30.0, 28.0, 31.0, 23.0, np.eye(4), Projection.FISHEYE)
+    cam = Camera(64, 48, 30.0, 28.0, 31.0, 23.0, np.eye(4), Fisheye())
     p = _points()[4:]
     x, y, z = p.T
     rho2, r2 = x * x + y * y, (p * p).sum(1)
@@ -77,13 +80,13 @@ def test_fisheye_jacobian_equals_gsplat_closed_form():
 
 
 def test_known_points_land_on_known_pixels():
-    fe = Camera(100, 80, 20.0, 20.0, 50.0, 40.0, np.eye(4), Projection.FISHEYE)
+    fe = Camera(100, 80, 20.0, 20.0, 50.0, 40.0, np.eye(4), Fisheye())
     got = pm.project_means(np.array([[1.0, 0.0, 0.0], [0.0, -2.0, 0.0], [0.0, 0.0, 5.0],
                                      [0.0, 3.0, -3.0]]), fe)
     # 90 degrees right, 90 degrees up, on the axis, 135 degrees down-behind (r = f theta)
     np.testing.assert_allclose(got, [[50 + 20 * math.pi / 2, 40], [50, 40 - 20 * math.pi / 2],
                                      [50, 40], [50, 40 + 20 * 0.75 * math.pi]], atol=1e-9)
-    k = Camera(100, 80, 20.0, 20.0, 50.0, 40.0, np.eye(4), Projection.FISHEYE, FISHEYE_K)
+    k = Camera(100, 80, 20.0, 20.0, 50.0, 40.0, np.eye(4), Fisheye(FISHEYE_K))
     theta = math.pi / 2
     theta_d = theta * (1 + sum(c * theta ** (2 * i + 2) for i, c in enumerate(FISHEYE_K)))
     np.testing.assert_allclose(pm.project_means(np.array([[1.0, 0.0, 0.0]]), k),
@@ -98,14 +101,14 @@ def test_known_points_land_on_known_pixels():
 
 def test_fisheye_culls_by_angle_and_distance():
     cam = Camera.fisheye(64, 64, 180)
-    limit = lens.fisheye_theta_limit(cam)
+    limit = fisheye_theta_limit(cam)
     # the corner of a 180-degree circle inscribed in the square is at 90 sqrt(2) = 127 degrees
     assert limit == pytest.approx(math.radians(90 * math.sqrt(2) + 10), rel=1e-6)
     a = np.radians([0, 100, 136, 138])
     p = np.stack([np.sin(a), 0 * a, np.cos(a)], -1)
-    assert lens.lens_visible(p, cam, 0.1).tolist() == [True, True, True, False]
-    assert not lens.lens_visible(p * 0.05, cam, 0.1).any()          # nearer than the near plane
-    assert lens.fisheye_theta_limit(Camera.fisheye(64, 64, 360)) == pytest.approx(math.pi - 1e-2)
+    assert cam.model.visible(p, cam, 0.1).tolist() == [True, True, True, False]
+    assert not cam.model.visible(p * 0.05, cam, 0.1).any()          # nearer than the near plane
+    assert fisheye_theta_limit(Camera.fisheye(64, 64, 360)) == pytest.approx(math.pi - 1e-2)
 
 
 def _at(r, theta_degrees):
@@ -139,10 +142,9 @@ def test_gsplat_convention_sorts_and_culls_a_fisheye_by_view_z():
 
 
 def test_ods_eye_sees_each_point_along_a_tangent_ray():
-    cam = Camera(**{**{f: getattr(Camera.equirectangular(360, 180), f)
-                       for f in Camera.__dataclass_fields__}, "ods_eye": -0.1})
+    cam = Camera.equirectangular(360, 180).with_model(Equirectangular(-0.1))
     p = np.array([[0.0, 0.3, 2.0], [1.5, -0.2, -1.0]])
-    q = lens.eye_space(p, cam)
+    q = eye_space(p, cam)
     eye = p - q
     assert np.allclose(np.hypot(eye[:, 0], eye[:, 2]), 0.1) and np.allclose(eye[:, 1], 0)
     assert np.allclose((eye[:, [0, 2]] * q[:, [0, 2]]).sum(1), 0, atol=1e-12)   # tangent
@@ -150,7 +152,7 @@ def test_ods_eye_sees_each_point_along_a_tangent_ray():
     d = np.hypot(p[:, 0], p[:, 2])
     np.testing.assert_allclose(lon, np.arctan2(p[:, 0], p[:, 2]) + np.arcsin(0.1 / d))
     # a point straight ahead appears right of centre to the left eye, by asin(r / D)
-    u = pm.project_means(lens.eye_space(p[:1], cam), cam)[0, 0]
+    u = pm.project_means(eye_space(p[:1], cam), cam)[0, 0]
     assert u == pytest.approx(180 + 180 / math.pi * math.asin(0.1 / 2.0))
 
 
@@ -279,13 +281,13 @@ def test_equirect_matches_cube_faces(gl_renderer, shared_scenes):
 
 def test_unsupported_combinations_are_errors():
     with pytest.raises(CameraError, match="3DGS scenes only"):
-        lens.require_support(Camera.fisheye(8, 8, 180), True, "quad")
+        Camera.fisheye(8, 8, 180).model.check_support(True, "quad")
     with pytest.raises(CameraError, match="cannot draw equirectangular"):
-        lens.require_support(Camera.equirectangular(8, 4), False, "tile", equirect=False)
-    with pytest.raises(CameraError, match="fisheye cameras only"):
-        Camera(8, 8, 1.0, 1.0, 4.0, 4.0, np.eye(4), Projection.PERSPECTIVE, FISHEYE_K)
-    with pytest.raises(CameraError, match="equirectangular camera"):
-        Camera(8, 8, 1.0, 1.0, 4.0, 4.0, ods_eye=0.1)
+        Camera.equirectangular(8, 4).model.check_support(False, "tile")
+    with pytest.raises(CameraError, match="4 finite numbers"):
+        Fisheye((0.1, float("nan"), 0.0, 0.0))
+    with pytest.raises(CameraError, match="must be a CameraModel"):
+        Camera(8, 8, 1.0, 1.0, 4.0, 4.0, np.eye(4), "fisheye")
 
 
 def test_camera_json_round_trip():
@@ -310,7 +312,7 @@ def test_stereo_rig_offsets_the_eyes():
     np.testing.assert_allclose(left.center - cam.center, -0.032 * x_axis, atol=1e-12)
     np.testing.assert_allclose(right.center - cam.center, 0.032 * x_axis, atol=1e-12)
     ods = eye_cameras(Camera.equirectangular(32, 16), 0.064)
-    assert [c.ods_eye for c in ods] == [-0.032, 0.032]
+    assert [c.model.ods_eye for c in ods] == [-0.032, 0.032]
     with pytest.raises(CameraError, match="positive interpupillary"):
         eye_cameras(cam, -1.0)
 
@@ -357,7 +359,7 @@ def test_colmap_fisheye_models_load_and_project(tmp_path, line, k):
     (tmp_path / "cameras.txt").write_text(line + "\n")
     (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
     cam = load_colmap(tmp_path)[0].camera
-    assert cam.projection is Projection.FISHEYE and cam.distortion == pytest.approx(k)
+    assert isinstance(cam.model, Fisheye) and cam.model.k == pytest.approx(k)
     theta = math.pi / 2
     theta_d = theta * (1 + sum(c * theta ** (2 * i + 2) for i, c in enumerate(k)))
     u, v = pm.project_means(np.array([[1.0, 0.0, 0.0]]), cam)[0]
@@ -376,7 +378,7 @@ def test_path_renders_projection_and_stereo_frames(tmp_path, shared_scenes, gl_r
                  "--projection", "equirectangular", "--stereo", "0.02", "--stereo-layout",
                  "top-bottom", "-o", f"{out}/"]) == 0
     scene = load_scene(scene_path)
-    cams = [lens.with_projection(c, "equirectangular") for c in orbit(scene, 2, 64, 32)]
+    cams = [retarget(c, "equirectangular") for c in orbit(scene, 2, 64, 32)]
     stereo = StereoRenderer(gl_renderer, 0.02, StereoLayout.TOP_BOTTOM)
     for k, cam in enumerate(cams):
         want = stereo.render(scene, cam, RenderSettings(), "quad")

@@ -9,7 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.formats import load_scene
 from splatgl.lod.build import build_hierarchy, level_offsets
 from splatgl.model.quaternion import rotmat_to_quat

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings as hsettings, strategies as st
 
-from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
 from splatgl.lod.build import build_hierarchy

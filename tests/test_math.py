@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera, look_at, orbit
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at, orbit
 from splatgl.constants import LOW_PASS, SH_C0, SH_C1
 from splatgl.twins.project import (antialias_factor, conic, covariance_2d, covariance_3d,
                                    ellipse_axes, jacobian, project_means, quat_to_rotmat,

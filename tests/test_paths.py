@@ -10,7 +10,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from helpers import shared_file
-from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.datasets.sources import load_source
 from splatgl.errors import CameraError
 from splatgl.paths import ellipse, focus_point, interpolate, orbit, spiral

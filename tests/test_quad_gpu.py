@@ -15,7 +15,8 @@ import pytest
 from helpers import save_failure_images
 from helpers import scene_with_colors as make_scene
 from splatgl.twins.blend import blend_front_to_back, splat_alpha
-from splatgl.cameras.camera import Camera, orbit
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import orbit
 from splatgl.constants import ALPHA_MIN, FAST_CORNER_SIGMAS
 from splatgl.twins.project import ellipse_axes, project
 from splatgl.renderers.quad import composite

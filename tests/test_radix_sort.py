@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.gl.radix_sort import (TILE_KEYS, RadixSorter, device_depth_sort, radix_passes,
                                    radix_sort_twin)
 from splatgl.renderers.quad import QuadRenderer

@@ -62,14 +62,30 @@ def test_compile_error_reports_the_included_file_and_line(tmp_path, gl_renderer)
 def test_every_quad_variant_compiles_and_is_cached(gl_renderer):
     """All specialisations of the quad program (the tile shaders compile in test_tile.py)."""
     assert (shader_dir() / "quad.vert").is_file()
+    from splatgl.cameras.registry import MODELS
+
     cache = ProgramCache(gl_renderer.ctx)
+    pinhole = MODELS["perspective"]().defines()
+    variants = [{**pinhole, "EXTENT_SQUARE": 1}, {**pinhole, "ANTIALIAS": 1},
+                *(model().defines() for model in MODELS.values())]
     for degree in range(4):
-        for extra in ({}, {"EXTENT_SQUARE": 1}, {"ANTIALIAS": 1}, {"ORTHOGRAPHIC": 1}):
+        for extra in variants:
             defines = {"SH_DEGREE": degree, "SH_REST_COEFFS": 15, **extra}
             prog = cache.program("quad.vert", "quad.frag", defines)
             assert cache.program("quad.vert", "quad.frag", dict(defines)) is prog
-    assert len(cache._programs) == 16
+    assert len(cache._programs) == 4 * len(variants)
     cache.release()
+
+
+def test_include_paths_take_defines(tmp_path):
+    """``#include "cameras/{CAMERA_MODEL}.glsl"`` includes the piece the define names; without
+    the define the error names the file and line."""
+    root = _write(tmp_path, {"main.comp": '// top\n#include "pieces/{WHICH}.glsl"\n',
+                             "pieces/a.glsl": "float a_piece;\n", "pieces/b.glsl": "float b_piece;\n"})
+    assert "a_piece" in preprocess("main.comp", {"WHICH": "a"}, root=root).text
+    assert "b_piece" in preprocess("main.comp", {"WHICH": "b"}, root=root).text
+    with pytest.raises(ShaderError, match="main.comp:2: include path 'pieces/{WHICH}.glsl' needs the define WHICH"):
+        preprocess("main.comp", {}, root=root)
 
 
 def test_errors_in_both_stages_map_to_their_own_files(tmp_path, gl_renderer):
@@ -99,6 +115,9 @@ def test_splat_fragment_stages_never_discard(name):
     expanded source (includes and all) is checked, comments aside."""
     import re
 
-    for defines in ({}, {"EARLY_STOP": "1"}, {"EQUIRECT": "1", "DEPTH_OUTPUT": "1"}):
+    from splatgl.cameras.registry import MODELS
+
+    pinhole, equirect = MODELS["perspective"]().defines(), MODELS["equirectangular"]().defines()
+    for defines in (pinhole, {**pinhole, "EARLY_STOP": "1"}, {**equirect, "DEPTH_OUTPUT": "1"}):
         code = re.sub(r"//[^\n]*", "", preprocess(name, defines).text)
         assert not re.search(r"\bdiscard\b", code), f"{name} {defines}"

@@ -23,7 +23,8 @@ import math
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.constants import ALPHA_MIN, GSPLAT_ALPHA_MAX, ALPHA_MAX
 from splatgl.twins.project import project_means, quat_to_rotmat, to_camera
 from splatgl.reference import Compat, render_reference

@@ -18,7 +18,9 @@ import numpy as np
 import pytest
 
 from helpers import SURFELS, random_scene, save_failure_images, scene_with_colors
-from splatgl.cameras.camera import Camera, look_at, orbit
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.orthographic import Orthographic
+from splatgl.cameras.poses import look_at, orbit
 from splatgl.constants import ALPHA_MIN, LOW_PASS, SURFEL_FILTER_INV_SQUARE
 from splatgl.formats import load_scene, save_scene
 from splatgl.evaluation.metrics import image_errors
@@ -39,7 +41,7 @@ def surfels(means, quats, scales, opacities, rgb) -> Scene:
 def cameras():
     pose = look_at([0.4, -0.3, -0.6], [0.05, 0.02, 4.0])
     return [Camera(64, 48, 60.0, 55.0, 31.3, 22.8, pose),
-            Camera(64, 48, 25.0, 22.0, 30.0, 25.0, pose, "orthographic")]
+            Camera(64, 48, 25.0, 22.0, 30.0, 25.0, pose, Orthographic())]
 
 
 def world_points(means, quats, scales, u, v):
@@ -122,7 +124,7 @@ def test_bounds_are_the_tight_box_of_the_k_ellipse(camera):
     quats, scales = sc.rotations.astype(np.float64), sc.scales.astype(np.float64) * 3
     opac = sc.opacities.astype(np.float64)
     big = Camera(4000, 4000, camera.fx, camera.fy, 2000.0, 2000.0, camera.world_to_camera,
-                 camera.projection)   # no clamping to the image
+                 camera.model)   # no clamping to the image
     scr = surfel_screen(means, quats, scales, big)
     box = surfel_bounds(scr, opac, big, 0.01)
     k = sigma_count(opac)
@@ -210,11 +212,11 @@ def test_quad_matches_reference_orthographic_and_sparse(gl_renderer, artifacts_d
     scene = surfels(rng.normal(size=(n, 3)) * 0.5, rng.normal(size=(n, 4)),
                     rng.uniform(0.05, 0.3, (n, 2)), rng.uniform(0.1, 0.5, n), rng.uniform(0, 1, (n, 3)))
     for cam in (Camera(80, 60, 70.0, 70.0, 40.0, 30.0, orbit([0, 0, 0], 3.0, 10.0, 15.0)),
-                Camera(80, 60, 30.0, 30.0, 40.0, 30.0, orbit([0, 0, 0], 3.0, 10.0, 15.0), "orthographic")):
+                Camera(80, 60, 30.0, 30.0, 40.0, 30.0, orbit([0, 0, 0], 3.0, 10.0, 15.0), Orthographic())):
         ref = render_reference(scene, cam, dtype=np.float64)
         assert ref.transmittance.min() > 1e-3
         got = gl_renderer.render_layers(scene, cam)
-        assert_close_images(got.rgba, ref.rgba, TOL32, f"sparse_{cam.projection.value}", artifacts_dir)
+        assert_close_images(got.rgba, ref.rgba, TOL32, f"sparse_{cam.projection}", artifacts_dir)
         np.testing.assert_allclose(got.depth, ref.depth, atol=TOL32 * 4.0)
 
 

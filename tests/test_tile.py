@@ -16,7 +16,8 @@ import pytest
 
 from helpers import (IN_DEPTH, SURFELS, SURFELS_POSE, assert_stages_match_reference, random_scene,
                      save_failure_images, shared_file, tile_and_reference)
-from splatgl.cameras.camera import Camera, orbit
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import orbit
 from splatgl.formats import load_scene
 from splatgl.reference import emit_keys, project, render_reference, sort
 from splatgl.api import Renderer, default_camera

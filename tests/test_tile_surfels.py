@@ -31,7 +31,9 @@ import pytest
 
 from helpers import (SURFELS, SURFELS_POSE, assert_stages_match_reference, random_scene, save_failure_images,
                      scene_with_colors, tile_and_reference)
-from splatgl.cameras.camera import Camera, orbit
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.orthographic import Orthographic
+from splatgl.cameras.poses import orbit
 from splatgl.reference import emit_keys, project, render_reference, sort
 from splatgl.api import Renderer
 from splatgl.model.scene import Scene, SplatKind
@@ -52,7 +54,7 @@ def surfels(means, quats, scales, opacities, rgb) -> Scene:
 
 POSE = SURFELS_POSE
 PERSPECTIVE = Camera.from_fov(160, 120, 50.0, POSE)
-ORTHOGRAPHIC = Camera(160, 120, 40.0, 40.0, 80.0, 60.0, POSE, "orthographic")
+ORTHOGRAPHIC = Camera(160, 120, 40.0, 40.0, 80.0, 60.0, POSE, Orthographic())
 
 
 def render_pair(ctx, scene, camera, settings):

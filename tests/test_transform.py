@@ -5,14 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera, orbit
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import orbit
 from splatgl.cli import main
 from splatgl.errors import SplatglError
 from splatgl.twins.project import sh_color, view_dirs
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene
 from splatgl.model.settings import RendererKind, RenderSettings
-from splatgl.model.transform import ModelTransform, apply_model, parse_transform
+from splatgl.model.transform import ModelTransform, parse_transform
+from splatgl.cameras.view import apply_model
 
 
 def _sh3_scene(n=300, seed=8):

@@ -7,7 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.cameras.up import average_up, cameras_beside, resolve_up
 from splatgl.cli import main
 from splatgl.output.images import read_image

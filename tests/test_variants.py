@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import orbit
+from splatgl.cameras.poses import orbit
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene
 from splatgl.model.settings import Precision, Preprocess, QuadExtent, RenderSettings

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera, look_at
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
 from splatgl.viewer import controls
 from splatgl.viewer.controls import ViewState
 
@@ -146,7 +147,8 @@ def test_screenshot_command_line_reproduces_the_settings():
 def test_fit_camera_keeps_a_file_cameras_own_intrinsics():
     import numpy as np
 
-    from splatgl.cameras.camera import Camera, orbit
+    from splatgl.cameras.camera import Camera
+    from splatgl.cameras.poses import orbit
     from splatgl.viewer.controls import fit_camera
 
     cam = Camera(200, 100, 180.0, 150.0, 93.0, 57.0, orbit([0, 0, 0], 3.0, 10.0, 5.0))

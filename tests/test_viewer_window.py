@@ -219,7 +219,7 @@ def test_views_keys_and_closing(viewer):
 def test_training_cameras_step(xvfb_display, demo, tmp_path):
     import glfw
 
-    from splatgl.cameras.camera import orbit
+    from splatgl.cameras.poses import orbit
     from splatgl.cameras.files import load_cameras
     from splatgl.model.settings import RenderSettings
     from splatgl.viewer.app import Viewer, ViewerOptions
@@ -282,7 +282,7 @@ def test_stereo_and_projection_views(xvfb_display, demo, tmp_path):
         img = v.last.image
         assert img.shape[:2] == (v.size[1], v.size[0])
         cam = v.camera()
-        assert cam.projection.value == "fisheye"
+        assert cam.projection == "fisheye"
         half = controls.fit_camera(cam, cam.width // 2, cam.height)
         left = v.renderer.render(scene, eye_cameras(half, 0.05)[0], settings)
         np.testing.assert_array_equal(img[:, :half.width], left)

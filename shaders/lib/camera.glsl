@@ -1,4 +1,6 @@
-// Camera uniforms shared by every stage (splatgl/gl/uniforms.py sets them from a Camera).
+// Camera uniforms shared by every stage (splatgl.cameras.view.View.uniforms gives their values),
+// then the camera model's piece: cameras/<CAMERA_MODEL>.glsl (its own uniforms, project_mean,
+// jacobian, in_view, view_depth; splatgl/cameras/<model>.py is its twin).
 uniform mat3 u_view_rot;      // world-to-camera rotation R_cw (OpenCV axes)
 uniform vec3 u_view_trans;    // world-to-camera translation t_cw
 uniform vec3 u_cam_center;    // camera centre in the scene's own frame (for SH directions)
@@ -6,10 +8,6 @@ uniform vec4 u_intrinsics;    // (fx, fy, cx, cy) in pixels (orthographic: pixel
 uniform vec2 u_viewport;      // (width, height) in pixels
 uniform vec2 u_tan_fov;       // (tan(fov_x / 2), tan(fov_y / 2)) = (W / 2fx, H / 2fy)
 uniform float u_near;         // view z at or below this is culled
-uniform vec4 u_distortion;    // fisheye k1..k4 (FISHEYE only)
-uniform float u_theta_limit;  // fisheye: largest angle from the axis kept (radians)
-uniform float u_wrap_period;  // equirect: pixels per turn of longitude (2 pi fx)
-uniform float u_ods_eye;      // equirect ODS: signed eye offset on the eye circle (0: mono)
 
 // Fragments a quad of `area` pixels with bounding rectangle [lo, hi] puts in the viewport,
 // estimated as its area times the share of the rectangle inside (at most the viewport's area;
@@ -21,3 +19,5 @@ float visible_area(vec2 lo, vec2 hi, float area) {
     if (!(rect > 0.0) || !(area > 0.0)) return 0.0;
     return min(area * (inside.x * inside.y / rect), u_viewport.x * u_viewport.y);
 }
+
+#include "cameras/{CAMERA_MODEL}.glsl"

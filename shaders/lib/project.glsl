@@ -1,9 +1,6 @@
 // Per-splat projection math, DESIGN.md section 1.  Twin: splatgl/twins/project.py (same names).
-
-#if defined(FISHEYE) || defined(EQUIRECT)
-#define LENS 1
-#endif
-#include "lib/lens.glsl"
+// The camera model's project_mean, jacobian, in_view and view_depth come from its piece in
+// cameras/, included by lib/camera.glsl.
 
 // Unit quaternion (w, x, y, z) -> rotation matrix (column-major mat3: m[col][row]).
 mat3 quat_to_rotmat(vec4 q) {
@@ -18,59 +15,6 @@ mat3 quat_to_rotmat(vec4 q) {
 mat3 covariance_3d(mat3 rot, vec3 scale) {
     mat3 m = rot * mat3(scale.x, 0.0, 0.0, 0.0, scale.y, 0.0, 0.0, 0.0, scale.z);
     return m * transpose(m);
-}
-
-// Pixel position of a camera-space point: u = fx x/z + cx (orthographic: u = fx x + cx).
-vec2 project_mean(vec3 p) {
-#if defined(LENS)
-    return project_lens(p);
-#elif defined(ORTHOGRAPHIC)
-    return u_intrinsics.xy * p.xy + u_intrinsics.zw;
-#else
-    return u_intrinsics.xy * p.xy / p.z + u_intrinsics.zw;
-#endif
-}
-
-// EWA Jacobian (2x3, stored as the first two columns of a transposed mat3):
-// [[fx/z, 0, -fx x/z^2], [0, fy/z, -fy y/z^2]], x/z and y/z clamped to +-1.3 tan(half fov).
-// Returned as mat3 J3 with rows (J row 0, J row 1, 0) so that J3 * v = (J v, 0).
-mat3 jacobian(vec3 p) {
-#if defined(LENS)
-    return jacobian_lens(p);
-#elif defined(ORTHOGRAPHIC)
-    return transpose(mat3(u_intrinsics.x, 0.0, 0.0, 0.0, u_intrinsics.y, 0.0, 0.0, 0.0, 0.0));
-#else
-    vec2 lim = JACOBIAN_CLAMP * u_tan_fov;
-    vec2 t = clamp(p.xy / p.z, -lim, lim);
-    float fx = u_intrinsics.x, fy = u_intrinsics.y;
-    return transpose(mat3(fx / p.z, 0.0, -fx * t.x / p.z,
-                          0.0, fy / p.z, -fy * t.y / p.z,
-                          0.0, 0.0, 0.0));
-#endif
-}
-
-// Whether a camera-space centre is drawn: view z beyond the near plane, before any divide;
-// fisheye and equirectangular (splatgl/cameras/lens.py lens_visible): distance beyond the near plane,
-// and a fisheye's angle from the axis within u_theta_limit.
-bool in_view(vec3 p) {
-#if defined(LENS)
-    if (!(length(p) > u_near)) return false;
-#ifdef FISHEYE
-    if (!(atan(length(p.xy), p.z) <= u_theta_limit)) return false;
-#endif
-    return true;
-#else
-    return p.z > u_near;
-#endif
-}
-
-// Depth of a camera-space centre for the depth layer: view z, or distance for the lens models.
-float view_depth(vec3 p) {
-#if defined(LENS)
-    return length(p);
-#else
-    return p.z;
-#endif
 }
 
 // Sigma' = J W Sigma W^T J^T + LOW_PASS I, returned as (xx, xy, yy) in pixels^2.

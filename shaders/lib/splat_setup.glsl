@@ -34,7 +34,7 @@ void quad_axes(vec3 cov, float det, float opacity, out vec2 axis1, out vec2 axis
 }
 
 // Fills s for the splat of sorted entry idx (its index; with EQUIRECT the top bit marks the
-// second copy of a splat on the +-180 degree seam, splatgl/cameras/lens.py wrap_copies), its optical
+// second copy of a splat on the +-180 degree seam, splatgl/cameras/equirect.py wrap_copies), its optical
 // depth scaled by weight (1.0, or a level-of-detail blend weight in (0, 1]: opacity o drawn as
 // 1 - (1 - o)^weight, splatgl/lod/cut.py); false when the splat is culled (behind the near
 // plane, or a non-positive-definite 2D covariance).

@@ -28,7 +28,7 @@ class BenchConfig:
         kind: which renderer draws it.
         settings: the full settings (the default with one thing changed).
         projection: the camera model the row renders its path with (group ``projection``:
-            the orbit's poses and image size through :func:`splatgl.cameras.lens.with_projection`);
+            the orbit's poses and image size through :func:`splatgl.cameras.registry.retarget`);
             None keeps the path's pinhole cameras.
     """
 

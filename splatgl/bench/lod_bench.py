@@ -79,7 +79,7 @@ def cameras(scene, width: int, height: int, frames: int, paths: str = "coarse",
     far-to-close fly-through in ``frames`` frames each; ``fine``: a fly-in and an orbit in
     small steps (FINE_STEP, FINE_DEGREES) from FINE_FAR x the framing distance; ``switch``: a
     fly-in in FINE_STEP steps whose middle frame is at the distance multiple ``switch_at``."""
-    from ..cameras.camera import orbit
+    from ..cameras.poses import orbit
     from ..api import default_camera
 
     base = default_camera(scene, width, height)

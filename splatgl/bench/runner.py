@@ -11,8 +11,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..cameras.camera import Camera, orbit
-from ..cameras.lens import with_projection
+from ..cameras.camera import Camera
+from ..cameras.poses import orbit
+from ..cameras.registry import retarget
 from ..evaluation.metrics import image_errors, psnr
 from ..api import Renderer, default_camera, render_reference_rgba
 from ..model.scene import Scene
@@ -217,9 +218,9 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             runner.impl.gpu_timer = True
         # Projection rows time the same poses and image size through another camera model;
         # their accuracy against the reference is checked in tests/test_lens.py, not here.
-        path = ([with_projection(c, config.projection) for c in cameras]
+        path = ([retarget(c, config.projection) for c in cameras]
                 if config.projection else cameras)
-        runner.render(with_projection(warm, config.projection) if config.projection else warm)
+        runner.render(retarget(warm, config.projection) if config.projection else warm)
         runner.render(path[-1])
         times, stages, gpu, drawn, errs, occluded, f32_psnr, batched = [], [], [], [], [], [], [], []
         estimates = []

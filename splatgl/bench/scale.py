@@ -132,11 +132,11 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
     """Load ``path`` and measure it (run this in a fresh process: peak RSS is per process)."""
     import numpy as np
 
-    from ..cameras.camera import orbit
+    from ..cameras.poses import orbit
     from ..order.cull import CullData, cull_visible
     from ..formats import load_scene
     from ..gl.radix_sort import RadixSorter, device_depth_sort
-    from ..twins.project import anchored_camera
+    from ..cameras.view import anchored_camera
     from ..renderers.quad import QuadRenderer
     from ..api import Renderer, default_camera
     from ..model.settings import RenderSettings

@@ -19,10 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera, Projection, check_rigid_pose
+from .camera import Camera
+from .poses import check_rigid_pose
+from .registry import adapt_camera, model_class
 from ..errors import CameraError
 from .json_fields import matrix, read_json
-from .lens import adapt_camera
 
 
 def _number(path: Path, where: str, obj: dict, key: str) -> float:
@@ -72,28 +73,22 @@ def camera_from_json(obj: dict, path: Path = Path("<camera>")) -> Camera:
         raise CameraError(f"{path}: expected a JSON object with width, height, fx, fy, cx, cy, world_to_camera")
     if "frustum" in obj:
         return _camera_from_frustum(obj, path)
-    proj = obj.get("projection", "perspective")
     try:
-        projection = Projection(proj)
-    except ValueError:
-        names = ", ".join(f"'{m.value}'" for m in Projection)
-        raise CameraError(f"{path}: field 'projection' must be one of {names}, got {proj!r}") from None
+        cls = model_class(obj.get("projection", "perspective"), "field 'projection'")
+    except CameraError as exc:
+        raise CameraError(f"{path}: {exc}") from None
     keys = ("width", "height", "fx", "fy", "cx", "cy")
-    if projection is Projection.EQUIRECTANGULAR and not any(k in obj for k in keys[2:]):
-        w, h = _number(path, "", obj, "width"), _number(path, "", obj, "height")   # full panorama
-        vals = dict(zip(keys, (w, h, w / (2 * math.pi), h / math.pi, w / 2, h / 2)))
+    w2c = _pose(path, "", obj)
+    model = cls.from_json(obj, path)
+    if not any(k in obj for k in keys[2:]) and cls.intrinsics_optional:   # e.g. a full panorama
+        w, h = _number(path, "", obj, "width"), _number(path, "", obj, "height")
+        vals = dict(zip(keys, (w, h, *cls.intrinsics(w, h, None)[:4])))
     else:
         vals = {k: _number(path, "", obj, k) for k in keys}
-    w2c = _pose(path, "", obj)
-    extra = {}
-    if "distortion" in obj:   # fisheye k1..k4
-        extra["distortion"] = _matrix(path, "", {"distortion": [obj["distortion"]]}, "distortion", (1, 4))[0]
-    if "ods_eye" in obj:
-        extra["ods_eye"] = _number(path, "", obj, "ods_eye")
     try:
         return Camera(int(vals["width"]) if vals["width"].is_integer() else vals["width"],
                       int(vals["height"]) if vals["height"].is_integer() else vals["height"],
-                      vals["fx"], vals["fy"], vals["cx"], vals["cy"], w2c, projection, **extra)
+                      vals["fx"], vals["fy"], vals["cx"], vals["cy"], w2c, model)
     except CameraError as exc:
         raise CameraError(f"{path}: {exc}") from None
 
@@ -129,12 +124,12 @@ def load_cameras(path: str | Path) -> list[Camera]:
 
 
 def load_camera(path: str | Path, index: int = 0, *, width: int | None = None,
-                height: int | None = None, projection: Projection | str | None = None,
+                height: int | None = None, projection: str | None = None,
                 fov_degrees: float | None = None) -> Camera:
     """Camera ``index`` of a camera file (index 0 for a single-camera JSON).
 
     ``width``, ``height``, ``projection`` and ``fov_degrees`` adapt it as ``--camera`` with
-    ``--width``, ``--height``, ``--projection`` and ``--fov`` do (:func:`splatgl.cameras.lens.adapt_camera`):
+    ``--width``, ``--height``, ``--projection`` and ``--fov`` do (:func:`splatgl.cameras.registry.adapt_camera`):
     the file's own intrinsics scale keeping its aspect; another projection or a field of view
     keeps only its pose, at any size (an equirectangular panorama defaults to 2:1).
     """

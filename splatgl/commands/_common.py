@@ -7,11 +7,13 @@ import math
 import sys
 from pathlib import Path
 
-from ..cameras.camera import Camera, Projection
+from ..cameras.camera import Camera
+from ..cameras import registry
 from ..cameras.files import load_camera
 from ..errors import SplatglError
 from ..formats import load_scene
-from ..cameras.lens import check_fov_applies, with_projection
+from ..cameras.orthographic import Orthographic
+from ..cameras.registry import retarget
 from ..gl.limits import MAX_IMAGE_SIDE, check_image_size
 from ..formats.metadata import antialias_tag
 from ..api import default_camera
@@ -102,7 +104,7 @@ def add_camera_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--orthographic", action="store_true",
                    help="make the default camera orthographic, zoomed to frame the scene "
                         "(not with --camera: see --projection)")
-    g.add_argument("--projection", choices=[m.value for m in Projection], default=None,
+    g.add_argument("--projection", choices=registry.names(), default=None,
                    help="camera model: perspective (default), orthographic, fisheye "
                         "(equidistant; --fov is the image circle's field of view, default 180, up "
                         "to 360) or equirectangular (a full 360 x 180 degree panorama, usually "
@@ -245,15 +247,15 @@ def projection_from_args(args: argparse.Namespace) -> str | None:
     """``--projection``, with ``--orthographic`` as its other spelling (never contradicting it)."""
     projection = getattr(args, "projection", None)
     if getattr(args, "orthographic", False):
-        if projection not in (None, Projection.ORTHOGRAPHIC.value):
+        if projection not in (None, Orthographic.name):
             raise SplatglError(f"--orthographic contradicts --projection {projection} "
                                "(--orthographic is --projection orthographic); give one of them")
-        projection = Projection.ORTHOGRAPHIC.value
+        projection = Orthographic.name
     return projection
 
 
 def _file_camera(args: argparse.Namespace, projection: str | None) -> Camera:
-    """``--camera`` adapted by --width/--height/--projection/--fov (:func:`splatgl.cameras.lens.adapt_camera`)."""
+    """``--camera`` adapted by --width/--height/--projection/--fov (:func:`splatgl.cameras.registry.adapt_camera`)."""
     if getattr(args, "orthographic", False):
         raise SplatglError(f"--orthographic zooms the default camera to frame the scene; "
                            f"{args.camera} brings its own camera (--projection orthographic keeps "
@@ -267,20 +269,16 @@ def _file_camera(args: argparse.Namespace, projection: str | None) -> Camera:
 
 
 def default_size(args: argparse.Namespace, projection: str | None) -> tuple[int, int]:
-    """The default camera's image size (an equirectangular panorama 2:1), its options checked."""
-    if projection == Projection.EQUIRECTANGULAR.value:
-        height = args.height or (max(1, round(args.width / 2)) if args.width else 720)
-        width = args.width or 2 * height
+    """The default camera's image size (a model's own aspect where it has one: an
+    equirectangular panorama 2:1), its options checked."""
+    aspect = registry.model_class(projection).aspect if projection is not None else None
+    if aspect is not None:
+        height = args.height or (max(1, round(args.width / aspect)) if args.width else 720)
+        width = args.width or round(aspect * height)
     else:
         width, height = args.width or 1280, args.height or 720
     check_image_size(width, height, size_origin(args), RendererKind.REFERENCE)
-    fov = args.fov
-    if projection == "fisheye" and fov is not None and not fov <= 360.0:
-        raise SplatglError(f"--fov of a fisheye must be in (0, 360] degrees, got {fov}")
-    if projection != "fisheye" and fov is not None and not fov < 180.0:
-        raise SplatglError(f"--fov must be in (0, 180) degrees, got {fov}")
-    if projection is not None:
-        check_fov_applies(projection, fov)
+    registry.check_fov(projection, args.fov)
     return width, height
 
 
@@ -302,7 +300,7 @@ def camera_from_args(args: argparse.Namespace, scene: Scene | None,
                          args.fov if args.fov is not None and projection != "fisheye" else 50.0,
                          distance, settings.model if settings is not None else None, up=up)
     if projection in ("fisheye", "equirectangular"):
-        cam = with_projection(cam, projection, args.fov)
+        cam = retarget(cam, projection, args.fov)
     if projection == "orthographic":
         scale = settings.model.scale if settings is not None and settings.model else 1.0
         radius = max(scene.robust_radius * scale, 1e-9) * distance

@@ -20,7 +20,9 @@ from ..progress import default_progress
 from ..api import Renderer
 from ..model.scene import Scene
 from ..cameras.up import resolve_up
-from ..cameras.lens import adapt_camera, with_projection
+from ..cameras.orthographic import Orthographic
+from ..cameras.pinhole import Pinhole
+from ..cameras.registry import adapt_camera, retarget
 from ..lod.command import LodFrames, lod_settings_from_args
 from ..lod.io import read_lod
 from ..model.settings import RendererKind
@@ -74,7 +76,7 @@ def refuse_path_only_options(args: argparse.Namespace) -> None:
 
 def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], float | None, list[int]]:
     """The cameras ``--path`` names (with ``--select``, ``--width/--height``, ``--projection``
-    and ``--fov`` applied as to a ``--camera`` file: :func:`splatgl.cameras.lens.adapt_camera`), the
+    and ``--fov`` applied as to a ``--camera`` file: :func:`splatgl.cameras.registry.adapt_camera`), the
     source's frame rate (None if it has none) and each camera's index in the source (its frame
     number)."""
     spec = args.path
@@ -88,12 +90,12 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
         if frames < 1:
             raise SplatglError(f"--path {spec}: the number of frames must be positive")
         w, h = default_size(args, projection)
-        lens = projection in ("fisheye", "equirectangular")
+        lens = projection not in (None, Pinhole.name, Orthographic.name)  # its own --fov, if any
         up, _ = resolve_up(args.up, args.scene, None)   # as the default camera's (frame 0)
         cams = orbit(scene, frames, w, h, args.fov if args.fov is not None and not lens else 50.0,
                      up=tuple(float(v) for v in up))
         if projection:
-            cams = [with_projection(c, projection, args.fov if lens else None) for c in cams]
+            cams = [retarget(c, projection, args.fov if lens else None) for c in cams]
         fps = None
     else:
         views, fps = load_source(spec)

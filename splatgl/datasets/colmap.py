@@ -4,7 +4,7 @@ Axes: COLMAP stores world-to-camera poses in OpenCV axes (+x right, +y down, +z 
 unit quaternion ``(qw, qx, qy, qz)`` and translation ``t``: ``p_cam = R(q) p_world + t``;
 the pixel centre of the top-left pixel is (0.5, 0.5), splatgl's convention too.  Accepted
 models: the undistorted PINHOLE ``(fx, fy, cx, cy)`` and SIMPLE_PINHOLE ``(f, cx, cy)``, and
-the fisheye models splatgl renders exactly (:mod:`splatgl.cameras.lens`, ``theta_d = theta (1 + k1
+the fisheye models splatgl renders exactly (:mod:`splatgl.cameras.fisheye`, ``theta_d = theta (1 + k1
 theta^2 + ...)``): OPENCV_FISHEYE ``(fx, fy, cx, cy, k1, k2, k3, k4)``, SIMPLE_RADIAL_FISHEYE
 ``(f, cx, cy, k)`` and RADIAL_FISHEYE ``(f, cx, cy, k1, k2)``.  The pinhole models with
 distortion terms (SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV) are pinholes when every term is 0;
@@ -20,7 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cameras.camera import Camera, Projection, check_rigid_pose
+from ..cameras.camera import Camera
+from ..cameras.fisheye import Fisheye
+from ..cameras.poses import check_rigid_pose
 from ..model.quaternion import quat_to_rotmat, rotmat_to_quat
 from ..errors import CameraError
 from .views import View
@@ -153,7 +155,7 @@ def _read_images_txt(path: Path) -> list[tuple[str, np.ndarray, np.ndarray, int]
 
 
 def _intrinsics(path: Path, cam_id: int, cam: _Intrinsics) -> dict:
-    """Camera keyword arguments (fx, fy, cx, cy, and projection/distortion for fisheyes)."""
+    """Camera keyword arguments (fx, fy, cx, cy, and the model for fisheyes)."""
     p = cam.params
     if cam.model in PINHOLE_WITH_DISTORTION:
         n = PINHOLE_WITH_DISTORTION[cam.model]
@@ -172,11 +174,10 @@ def _intrinsics(path: Path, cam_id: int, cam: _Intrinsics) -> dict:
         return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2])
     if cam.model == "PINHOLE":
         return dict(fx=p[0], fy=p[1], cx=p[2], cy=p[3])
-    fisheye = {"projection": Projection.FISHEYE}
     if cam.model == "OPENCV_FISHEYE":
-        return dict(fx=p[0], fy=p[1], cx=p[2], cy=p[3], distortion=tuple(p[4:8]), **fisheye)
+        return dict(fx=p[0], fy=p[1], cx=p[2], cy=p[3], model=Fisheye(tuple(p[4:8])))
     k = (p[3], 0.0) if cam.model == "SIMPLE_RADIAL_FISHEYE" else (p[3], p[4])
-    return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2], distortion=(*k, 0.0, 0.0), **fisheye)
+    return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2], model=Fisheye((*k, 0.0, 0.0)))
 
 
 def is_colmap_model(path: Path) -> bool:

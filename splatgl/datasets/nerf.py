@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cameras.camera import Camera, check_rigid_pose
+from ..cameras.camera import Camera
+from ..cameras.poses import check_rigid_pose
 from ..errors import CameraError
 from ..cameras.json_fields import entries, matrix, number, read_json
 from .views import View

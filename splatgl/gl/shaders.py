@@ -1,7 +1,9 @@
 """Shader files: locating them, an ``#include`` preprocessor, and a program cache.
 
 Shaders live in the top-level ``shaders/`` folder (shipped in the wheel as ``splatgl/shaders``).
-A stage file may ``#include "lib/name.glsl"``; each file is included once per stage.  The
+A stage file may ``#include "lib/name.glsl"``; each file is included once per stage.  A ``{NAME}``
+in an include path is replaced by the value of the define ``NAME`` (``#include
+"cameras/{CAMERA_MODEL}.glsl"`` includes the camera model's piece).  The
 preprocessor emits ``#line`` directives that encode the file in the line number, so compiler messages are
 mapped back to ``file:line``.  Programs are specialised by generated ``#define`` lines (the reference
 constants of :mod:`splatgl.constants` plus per-variant switches) and cached by (names, defines).
@@ -20,6 +22,7 @@ from ..errors import ShaderError
 
 GLSL_VERSION = "#version 430 core"
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
+_PLACEHOLDER = re.compile(r"\{(\w+)\}")
 _MESA_MSG = re.compile(r"(\d+):(\d+)\((\d+)\)")
 _NVIDIA_MSG = re.compile(r"(\d+)\((\d+)\)")
 #: ``#line`` numbers are ``file_index * LINE_STRIDE + line`` (see :meth:`Source.describe`).
@@ -87,7 +90,7 @@ def preprocess(name: str, defines: dict[str, str] | None = None, root: Path | No
         for lineno, line in enumerate(path.read_text().splitlines(), start=1):
             m = _INCLUDE.match(line)
             if m:
-                expand(m.group(1), stack + (rel,), f"{rel}:{lineno}")
+                expand(_fill(m.group(1), all_defines, f"{rel}:{lineno}"), stack + (rel,), f"{rel}:{lineno}")
                 out.append(f"#line {number * LINE_STRIDE + lineno + 1}")
             elif line.lstrip().startswith("#version"):
                 out.append("")  # the version line is emitted once, above
@@ -96,6 +99,16 @@ def preprocess(name: str, defines: dict[str, str] | None = None, root: Path | No
 
     expand(name, (), "(top)")
     return Source("\n".join(out) + "\n", tuple(files))
+
+
+def _fill(path: str, defines: dict, where: str) -> str:
+    """``path`` with each ``{NAME}`` replaced by the define's value (a ShaderError at ``where``
+    when the define is missing)."""
+    def value(m: re.Match) -> str:
+        if m.group(1) not in defines:
+            raise ShaderError(f"{where}: include path '{path}' needs the define {m.group(1)}")
+        return str(defines[m.group(1)])
+    return _PLACEHOLDER.sub(value, path)
 
 
 def _describe_log(log: str, sources: dict[str, Source]) -> str:

@@ -13,7 +13,7 @@ from ..errors import SplatglError
 from ..gl.context import create_headless_context, make_current, renderer_name
 from ..output.layers import RenderOutput
 from ..model.settings import RenderSettings
-from ..model.transform import apply_model
+from ..cameras.view import apply_model
 from .build import LodTree
 from .io import is_lod_file, read_lod
 from .render import LodRenderer, LodSettings

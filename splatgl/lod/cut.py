@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cameras.camera import Camera
-from ..twins.project import anchored_camera
+from ..cameras.view import anchored_camera
 
 #: Default threshold: nodes whose sphere projects to at most this many pixels (radius) stand
 #: for their subtree.

@@ -24,7 +24,7 @@ from ..order.cull import CullData, cull_visible
 from ..order.chunks import ChunkedCull, keys_order, keys_pairs, rows_keys
 from ..errors import SplatglError
 from ..gl.shaders import ProgramCache
-from ..twins.project import anchored_camera
+from ..cameras.view import anchored_camera
 from ..renderers.quad import BINDING_OPACITY_WEIGHT, QuadRenderer
 from ..model.scene import Scene
 from ..model.settings import RenderSettings, SortKey

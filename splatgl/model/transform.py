@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cameras.camera import Camera
 from ..errors import SplatglError
 
 
@@ -80,13 +79,6 @@ class ModelTransform:
     def apply_points(self, points: np.ndarray) -> np.ndarray:
         """World positions (N, 3) of scene points (N, 3), float64."""
         return self.scale * np.asarray(points, np.float64) @ np.asarray(self.rotation).T + self.translation
-
-
-def apply_model(camera: Camera, model: ModelTransform | None) -> Camera:
-    """The camera seen from the scene's own frame: matrix ``world_to_camera @ model.matrix``."""
-    if model is None or model.is_identity:
-        return camera
-    return camera.with_pose(camera.world_to_camera @ model.matrix)
 
 
 def parse_transform(text: str) -> ModelTransform:

@@ -34,8 +34,8 @@ from ..cameras.camera import Camera
 from ..constants import JACOBIAN_CLAMP
 from .cull import (CULL_BLOCK, MARGIN_PX, CullData, cull_visible, peak_keeps, plane_constants,
                    view_axis)
-from ..twins.project import near_threshold
-from ..cameras.lens import WRAP_FLAG
+from ..cameras.view import near_threshold
+from ..cameras.equirect import WRAP_FLAG
 from ..lod.build import morton_order
 from .sort import depth_keys
 
@@ -340,7 +340,7 @@ def keys_pairs(keys: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
     """``(depth (K,) float32, indices (K,) uint32)`` of unsorted keys over a scene of ``count``
     splats, for the sorts that take depths and ascending indices (the device sort, the 16-bit
     bucket sort): the indices ascending, then the seam copies (index with
-    :data:`splatgl.cameras.lens.WRAP_FLAG`) ascending, as :func:`splatgl.cameras.lens.lens_order` lists them.
+    :data:`splatgl.cameras.equirect.WRAP_FLAG`) ascending, as :func:`splatgl.order.lens_cull.lens_order` lists them.
     O(count): scatters into scene order, no sort."""
     words = keys.view(np.uint32).reshape(-1, 2)
     copy = words[:, 0] >= WRAP_FLAG

@@ -1,30 +1,31 @@
 """Fused float32 cull of the lens cameras (fisheye, equirectangular): sort keys in one pass.
 
-The same decisions, in the same float32 arithmetic, as :func:`splatgl.cameras.lens.lens_cull` followed
-by :func:`splatgl.cameras.lens.lens_order` (distance beyond the near plane, a fisheye's angle limit,
+The same decisions, in the same float32 arithmetic, as :func:`lens_cull` followed
+by :func:`lens_order` (the float64 twins at the end of this module) (distance beyond the near plane, a fisheye's angle limit,
 opacity >= 1/255, equirectangular seam copies), run over blocks of
 :data:`~splatgl.order.cull.CULL_BLOCK` rows of the chunked cull data (:mod:`splatgl.order.chunks`,
 whose rows are already the drawable splats) into reused buffers, and written straight into
 uint64 sort keys ``(float_bits(distance) << 32) | index`` (seam copies with
-:data:`~splatgl.cameras.lens.WRAP_FLAG` in the index).
+:data:`~splatgl.cameras.equirect.WRAP_FLAG` in the index).
 
 Two tests are first made cheaply, with exact fallbacks where the cheap test cannot decide:
 
 - fisheye angle ``atan2(rho, z) <= theta_max`` is ``z >= cos(theta_max) |p|``; splats within
   :data:`ANGLE_BAND` (relative) of that cone take the float32 ``arctan2`` test as before;
 - equirectangular seam copies: a float32 bound of the reach, widened by :data:`ANGLE_BAND`,
-  picks the candidates; :func:`splatgl.cameras.lens.wrap_copies` (float64) decides on them.
+  picks the candidates; :func:`splatgl.cameras.equirect.wrap_copies` (float64) decides on them.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..cameras.camera import Camera, Projection
+from ..cameras.camera import Camera
+from ..cameras.equirect import SEAM_MARGIN_PX, WRAP_FLAG, eye_space, wrap_copies
+from ..constants import ALPHA_MIN
+from ..twins.project import splat_reach
 from .cull import CULL_BLOCK, view_axis
 from .chunks import ChunkedCull
-from ..cameras.lens import (SEAM_MARGIN_PX, WRAP_FLAG, eye_space, fisheye_theta_limit, splat_reach,
-                            wrap_copies)
 from .sort import depth_keys
 
 #: Relative width of the band around a cheap test's boundary where the exact test decides
@@ -38,23 +39,24 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
     copies, a view of ``chunks``' key buffer, which the next cull overwrites).
 
     ``camera`` anchored to ``chunks.data.xyz``'s origin; ``scale``: the model's uniform scale
-    (multiplies the world reach of the seam test).  Same keys as :func:`splatgl.cameras.lens.lens_cull`
-    + :func:`splatgl.cameras.lens.lens_order` give through :func:`splatgl.order.sort.depth_keys`.
+    (multiplies the world reach of the seam test).  Same keys as :func:`lens_cull`
+    + :func:`lens_order` give through :func:`splatgl.order.sort.depth_keys`.
     """
     data = chunks.data
     n = data.count
     rot = camera.rotation.astype(np.float32)
     t = camera.translation.astype(np.float32)
     near32 = np.float32(near)  # lens_visible compares float32 distances with the Python float
-    fisheye = camera.projection is Projection.FISHEYE
-    equirect = camera.projection is Projection.EQUIRECTANGULAR
+    limit = camera.model.angle_limit(camera)
+    fisheye = limit is not None
+    equirect = camera.model.seam_period(camera) is not None
+    ods_eye = getattr(camera.model, "ods_eye", 0.0)
     limit32 = cos_limit = np.float32(0.0)
     if fisheye:
-        limit = fisheye_theta_limit(camera)
         limit32, cos_limit = np.float32(limit), np.float32(np.cos(limit))
     chunks.views += 1
     chunks.last_path = "numpy"
-    kern = chunks._kernel() if not camera.ods_eye else None
+    kern = chunks._kernel() if not ods_eye else None
     if kern is not None:
         keys = _compiled_keys(kern, chunks, camera, near32, limit32, cos_limit, scale)
         if keys is not None:
@@ -70,7 +72,7 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
         xb, yb, zb, db, tb, kb, bb = x[:m], y[:m], z[:m], d[:m], tmp[:m], keep[:m], band[:m]
         for axis, row in enumerate((xb, yb, zb)):
             view_axis(data.xyz, start, stop, rot[axis], t[axis], row, tb)
-        if camera.ods_eye:
+        if ods_eye:
             p = eye_space(np.stack([xb, yb, zb], 1), camera)
             xb[:], yb[:], zb[:] = p[:, 0], p[:, 1], p[:, 2]
         np.multiply(xb, xb, out=db)  # einsum("ni,ni->n")'s sum, in its order
@@ -112,7 +114,7 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
 def _seam_copies(chunks: ChunkedCull, rows: np.ndarray, x, y, z, camera: Camera,
                  scale: float) -> np.ndarray:
     """(R,) bool: which of the kept splats ``rows`` (with camera-space ``x, y, z`` (R,)
-    float32) :func:`splatgl.cameras.lens.wrap_copies` duplicates (its float64 test, its reach)."""
+    float32) :func:`splatgl.cameras.equirect.wrap_copies` duplicates (its float64 test, its reach)."""
     data = chunks.data
     radius = splat_reach(data.max_scale[rows] * scale, data.opacities[rows])
     return wrap_copies(np.stack([x, y, z], 1), radius, camera)
@@ -133,7 +135,8 @@ def _compiled_keys(kern, chunks: ChunkedCull, camera: Camera, near32: np.float32
 
     data, keys = chunks.data, chunks.key_buffer()
     n = data.count
-    mode = {Projection.FISHEYE: 1, Projection.EQUIRECTANGULAR: 2}.get(camera.projection, 0)
+    mode = 1 if camera.model.angle_limit(camera) is not None else (
+        2 if camera.model.seam_period(camera) is not None else 0)
     args = (data.xyz[0], data.xyz[1], data.xyz[2], data.radius, chunks.index,
             camera.rotation.astype(np.float32), camera.translation.astype(np.float32), near32,
             mode, cos_limit, np.float32(ANGLE_BAND), np.float32(scale),
@@ -171,3 +174,30 @@ def _compiled_keys(kern, chunks: ChunkedCull, camera: Camera, near32: np.float32
             pick = _seam_copies(chunks, rows, p[:, 0], p[:, 1], p[:, 2], camera, scale)
             copies.append(depth_keys(p[pick, 3], chunks.index[rows[pick]] | WRAP_FLAG))
     return np.concatenate([keys[:out], *copies]) if copies else keys[:out]
+
+
+# ---------------------------------------------------------------------------- float64 twins
+def lens_cull(p_cam: np.ndarray, opacities: np.ndarray, camera: Camera, near: float) -> np.ndarray:
+    """(N,) bool keep mask of a lens camera: the model's ``visible`` and opacity >= 1/255.
+
+    (No screen test: a fisheye or panorama sees most of a scene; the rasterizer drops the rest.)
+    """
+    return camera.model.visible(eye_space(p_cam, camera), camera, near) & (opacities >= ALPHA_MIN)
+
+
+def lens_order(p_cam: np.ndarray, keep: np.ndarray, radius: np.ndarray, camera: Camera
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Sort inputs of a lens camera's kept splats: ``(depths (M,), indices (M,) uint32)``.
+
+    ``keep``: (K,) indices of the kept splats; ``radius``: (K,) their world reach.  Depth is
+    the distance; seam splats of an equirectangular camera appear twice, the copy with
+    :data:`~splatgl.cameras.equirect.WRAP_FLAG` set in its index and the same depth.
+    """
+    pk = eye_space(p_cam[keep], camera)
+    depth = camera.model.depth(pk).astype(np.float32)
+    idx = keep.astype(np.uint32)
+    dup = wrap_copies(pk, radius, camera)
+    if dup.any():
+        depth = np.concatenate([depth, depth[dup]])
+        idx = np.concatenate([idx, idx[dup] | WRAP_FLAG])
+    return depth, idx

@@ -9,7 +9,8 @@ import math
 
 import numpy as np
 
-from ..cameras.camera import Camera, look_at, orbit as orbit_pose
+from ..cameras.camera import Camera
+from ..cameras.poses import look_at, orbit as orbit_pose
 from ..errors import CameraError
 from ..api import DEFAULT_ELEVATION, DEFAULT_FOV_Y, default_camera
 from ..model.scene import Scene

@@ -35,7 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cameras.camera import Camera, check_rigid_pose, look_at
+from ..cameras.camera import Camera
+from ..cameras.poses import check_rigid_pose, look_at
 from ..errors import CameraError
 from ..cameras.json_fields import entries, matrix, number
 from .spline import sample_poses

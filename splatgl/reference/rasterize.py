@@ -109,7 +109,7 @@ def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) ->
     power = dt(-0.5) * (axx[:, :, None, :] + cyy[:, :, :, None]) - bx[:, :, None, :] * dy[:, :, :, None]
     n, k = dx.shape[:2]
     alpha = gaussian_alpha(power.reshape(n, k, TILE_PIXELS), g.opacity[:, :, None], alpha_max)
-    if g.wrap_period is not None:   # equirect: |dx| <= period / 2 (splatgl/cameras/lens.py)
+    if g.wrap_period is not None:   # equirect: |dx| <= period / 2 (splatgl/cameras/equirect.py)
         reach = np.abs(dx) <= dt(0.5 * g.wrap_period)                  # (n, K, 16) by column
         alpha = np.where(np.broadcast_to(reach[:, :, None, :], power.shape).reshape(n, k, TILE_PIXELS),
                          alpha, dt(0.0))

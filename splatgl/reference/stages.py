@@ -18,10 +18,12 @@ import numpy as np
 
 import dataclasses
 
-from ..cameras import lens
+from ..cameras.equirect import wrap_copies, wrap_shift
+from ..cameras.view import near_threshold
 from ..twins import project as pm
 from ..twins import surfel as sf
-from ..cameras.camera import Camera, Projection
+from ..cameras.camera import Camera
+from ..cameras.fisheye import Fisheye
 from ..constants import ALPHA_MIN, TILE_SIZE
 from ..model.scene import Scene, SplatKind
 from ..model.settings import RenderSettings, resolve_near
@@ -36,7 +38,7 @@ class ProjectedSplats:
     Attributes (N rows; ``float`` means the render dtype, float32 or float64):
         visible: (N,) bool; False for splats culled (near plane, ``det <= 0``, empty rect, ...).
         depth: (N,) float sort key (world units): view-space z; for fisheye and
-            equirectangular cameras the distance ``|p|`` (:func:`splatgl.cameras.lens.view_depth`),
+            equirectangular cameras the distance ``|p|`` (:meth:`~splatgl.cameras.model.CameraModel.depth`),
             except a fisheye under GSPLAT, which keeps gsplat's view z (:func:`gsplat_fisheye`).
         mean2d: (N, 2) float image coordinates (u, v) in pixels, centre convention ``j + 0.5``.
         conic: (N, 3) float inverse 2D covariance (a, b, c), ``Q = [[a, b], [b, c]]``, 1/px^2.
@@ -54,7 +56,7 @@ class ProjectedSplats:
         wrap_period: equirectangular cameras only: pixels per turn of longitude; every splat
             reaches at most half of it either side of its centre, and rows past the scene's
             count are the second copies of splats on the +-180 degree seam
-            (:func:`splatgl.cameras.lens.wrap_copies`).
+            (:func:`splatgl.cameras.equirect.wrap_copies`).
     """
 
     visible: np.ndarray
@@ -205,10 +207,10 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     dt = np.dtype(dtype)
     if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise ValueError(f"reference dtype must be float32 or float64, got {dt}")
-    lens.require_support(camera, scene.kind is SplatKind.SURFEL_2D, "reference")
+    camera.model.check_support(scene.kind is SplatKind.SURFEL_2D, "reference")
     if scene.kind is SplatKind.SURFEL_2D:
         return project_surfels(scene, camera, settings, dt, options)
-    near = pm.near_threshold(resolve_near(settings, scene.robust_radius), dt)
+    near = near_threshold(resolve_near(settings, scene.robust_radius), dt)
     grid = tile_grid(camera.width, camera.height)
     means, view = pm.anchored(scene.means, scene.anchor, camera, dt)  # relative: float32-safe
     with np.errstate(all="ignore"):
@@ -222,7 +224,7 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     if as_gsplat:  # gsplat's sort key and near test: view z, as for a pinhole camera
         pr = dataclasses.replace(pr, depth=pr.p_cam[:, 2])
     lens_rules = view.is_lens and not as_gsplat
-    visible = lens.lens_visible(pr.p_cam, view, near) if lens_rules else pr.depth > near
+    visible = view.model.visible(pr.p_cam, view, near) if lens_rules else pr.depth > near
     ok = visible & finite & (pr.det > 0)
     pr, ok = _wrap_copies(pr, ok, scene, view)
     mean2d = np.where(ok[:, None], pr.mean2d, dt.type(0.0)).astype(dt)
@@ -243,7 +245,7 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
         visible=ok, depth=clean(pr.depth), mean2d=clean(mean2d), conic=clean(pr.conic),
         opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
         rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
-        grid=grid, wrap_period=lens.wrap_period(camera))
+        grid=grid, wrap_period=camera.model.seam_period(camera))
 
 
 def gsplat_fisheye(camera: Camera, options: ReferenceOptions) -> bool:
@@ -251,27 +253,27 @@ def gsplat_fisheye(camera: Camera, options: ReferenceOptions) -> bool:
 
     gsplat treats a fisheye as it does a pinhole camera: it culls centres with view z below the
     near plane and sorts by view z.  splatgl's own rule for a fisheye (any convention but
-    GSPLAT) is the distance ``|p|`` for both (:func:`splatgl.cameras.lens.view_depth`): it stays
+    GSPLAT) is the distance ``|p|`` for both (:meth:`~splatgl.cameras.model.CameraModel.depth`): it stays
     positive and ordered behind the camera plane, where a fisheye of 180 degrees or more
     still sees, and does not change as the camera turns about its centre.  The two orders
     differ wherever overlapping splats swap between them (docs/camera-models.md measures it).
     """
-    return options.compat is Compat.GSPLAT and camera.projection is Projection.FISHEYE
+    return options.compat is Compat.GSPLAT and isinstance(camera.model, Fisheye)
 
 
 def _wrap_copies(pr: pm.Projected, ok: np.ndarray, scene: Scene, view: Camera
                  ) -> tuple[pm.Projected, np.ndarray]:
     """Equirectangular cameras: append a second row, one turn of longitude away, for every
-    kept splat that may reach across the +-180 degree seam (:func:`splatgl.cameras.lens.wrap_copies`,
+    kept splat that may reach across the +-180 degree seam (:func:`splatgl.cameras.equirect.wrap_copies`,
     the quad path's rule); other cameras unchanged."""
-    if lens.wrap_period(view) is None:
+    if view.model.seam_period(view) is None:
         return pr, ok
-    reach = lens.splat_reach(scene.scales.max(axis=1) * view.scale, scene.opacities)
-    dup = np.flatnonzero(ok & lens.wrap_copies(pr.p_cam, reach, view))
+    reach = pm.splat_reach(scene.scales.max(axis=1) * view.scale, scene.opacities)
+    dup = np.flatnonzero(ok & wrap_copies(pr.p_cam, reach, view))
     rows = np.concatenate([np.arange(ok.shape[0]), dup])
     taken = {f.name: getattr(pr, f.name)[rows] for f in dataclasses.fields(pr)}
     mean2d = taken["mean2d"].copy()
-    mean2d[ok.shape[0]:, 0] += lens.wrap_shift(mean2d[ok.shape[0]:, 0], view)
+    mean2d[ok.shape[0]:, 0] += wrap_shift(mean2d[ok.shape[0]:, 0], view)
     taken["mean2d"] = mean2d
     return pm.Projected(**taken), ok[rows]
 
@@ -318,7 +320,7 @@ def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
     """
     options = ReferenceOptions() if options is None else options
     dt = np.dtype(dtype)
-    near = pm.near_threshold(resolve_near(settings, scene.robust_radius), dt)
+    near = near_threshold(resolve_near(settings, scene.robust_radius), dt)
     grid = tile_grid(camera.width, camera.height)
     means, view = pm.anchored(scene.means, scene.anchor, camera, dt)  # relative: float32-safe
     opac = scene.opacities.astype(dt)

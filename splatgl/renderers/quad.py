@@ -31,8 +31,8 @@ from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..gl.targets import ColorTarget
 from ..output.layers import RenderOutput
-from ..cameras import lens
-from ..twins.project import anchored_camera, near_threshold, to_camera
+from ..cameras.view import anchored_camera, near_threshold
+from ..twins.project import to_camera
 from ..model.scene import Scene, SplatKind
 from ..model.settings import (EarlyStop, Preprocess, QuadExtent, RenderSettings, SortKey,
                               resolve_near)
@@ -117,7 +117,7 @@ def set_camera_uniforms(prog: moderngl.Program, camera: Camera, near: float,
         "u_viewport": (float(camera.width), float(camera.height)),
         "u_tan_fov": (tx, ty),
         "u_near": float(near_threshold(near, np.float32)),
-        **lens.lens_uniforms(camera),
+        **camera.model.uniforms(camera),
     }
     for name, value in values.items():
         if name in prog:
@@ -191,7 +191,7 @@ class QuadRenderer:
             defines["EXTENT_FAST"] = 1
         if self.settings.antialias:
             defines["ANTIALIAS"] = 1
-        defines.update(lens.projection_defines(camera))
+        defines.update(camera.model.defines())
         if depth:
             defines["DEPTH_OUTPUT"] = 1
         if self._count_fragments is not None:
@@ -228,7 +228,7 @@ class QuadRenderer:
         2DGS surfels use shaders/surfel.vert + surfel.frag (ray-splat intersection); the
         extent and antialiasing settings are 3DGS-only and do not change them.
         """
-        lens.require_support(camera, self.scene.kind is SplatKind.SURFEL_2D, "quad")
+        camera.model.check_support(self.scene.kind is SplatKind.SURFEL_2D, "quad")
         if self.scene.kind is SplatKind.SURFEL_2D:
             return self.programs.program("surfel.vert", "surfel.frag", self.defines(camera, depth))
         vertex = "quad_light.vert" if self.uses_prepass else "quad.vert"
@@ -241,7 +241,7 @@ class QuadRenderer:
         with ``resort_interval`` N > 1, only every N-th change re-sorts (sort lag).
         """
         key = (camera.world_to_camera.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy,
-               camera.width, camera.height, camera.projection, camera.distortion, camera.ods_eye)
+               camera.width, camera.height, camera.model)
         self._times_cull = self._times_sort = self._times_build = 0.0
         if key == self._order_key:
             return self._order
@@ -257,7 +257,7 @@ class QuadRenderer:
         t0 = time.perf_counter()
         anchored = anchored_camera(camera, self.scene.anchor)
         if camera.is_lens or self.settings.cull:
-            if camera.is_lens:   # distance keys; equirect seam splats twice (splatgl/cameras/lens.py)
+            if camera.is_lens:   # distance keys; equirect seam splats twice (splatgl/cameras/equirect.py)
                 keys = lens_visible_keys(self._chunks, anchored, self.near, camera.scale)
             else:
                 keys = self._chunks.visible_keys(anchored, self.near, self.settings.antialias,
@@ -357,7 +357,7 @@ class QuadRenderer:
         (``target`` from :meth:`target`).  ``on_batch(done, total)`` is called after each batch
         of sorted splats; an exception it raises abandons the frame (GL state restored).
         """
-        lens.require_support(camera, self.scene.kind is SplatKind.SURFEL_2D, "quad")
+        camera.model.check_support(self.scene.kind is SplatKind.SURFEL_2D, "quad")
         order = self.visible_order(camera)
         t0 = time.perf_counter()
         self._upload(order)

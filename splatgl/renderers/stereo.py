@@ -3,7 +3,7 @@
 A pinhole, orthographic or fisheye rig places the eyes ``ipd / 2`` either side of the camera
 centre along the camera's own x axis (parallel axes, no toe-in).  An equirectangular rig is
 omni-directional stereo (ODS): the eye offset rotates with the longitude, per splat
-(:func:`splatgl.cameras.lens.eye_space`), so every direction of the panorama has correct parallax near
+(:func:`splatgl.cameras.equirect.eye_space`), so every direction of the panorama has correct parallax near
 the horizon.  Left is the eye at camera -x (image left).
 """
 
@@ -13,7 +13,7 @@ import enum
 
 import numpy as np
 
-from ..cameras.camera import Camera, Projection
+from ..cameras.camera import Camera
 from ..errors import CameraError
 from ..output.layers import RenderOutput
 
@@ -29,19 +29,15 @@ def eye_cameras(camera: Camera, ipd: float) -> tuple[Camera, Camera]:
     if not (np.isfinite(ipd) and ipd > 0.0):
         raise CameraError(f"--stereo needs a positive interpupillary distance, got {ipd}")
     half = 0.5 * float(ipd)
-    if camera.projection is Projection.EQUIRECTANGULAR:
-        return (Camera(**{**_fields(camera), "ods_eye": -half}),
-                Camera(**{**_fields(camera), "ods_eye": half}))
+    own = camera.model.eye_pair(camera, half)   # a model's own rig (omni-directional stereo)
+    if own is not None:
+        return own
     eyes = []
     for offset in (half, -half):           # left eye at camera -x sees points shifted to +x
         shift = np.eye(4)
         shift[0, 3] = offset
         eyes.append(camera.with_pose(shift @ camera.world_to_camera))
     return eyes[0], eyes[1]
-
-
-def _fields(camera: Camera) -> dict:
-    return {name: getattr(camera, name) for name in camera.__dataclass_fields__}
 
 
 def combine(left: RenderOutput, right: RenderOutput, layout: StereoLayout) -> RenderOutput:

@@ -42,7 +42,6 @@ from ..gl.shaders import ProgramCache
 from .quad import set_camera_uniforms
 from ..output.layers import RenderOutput
 from ..model.scene import Scene, SplatKind
-from ..cameras import lens
 from ..model.settings import RenderSettings, resolve_near
 
 #: Storage-buffer bindings of shaders/lib/tile_common.glsl and tile_rasterize.comp (after the
@@ -238,8 +237,8 @@ class TileRenderer:
         d.update(self.scene_buffers.defines())
         if self.settings.antialias:
             d["ANTIALIAS"] = 1
-        lens.require_support(camera, self.surfel, "tile", equirect=False)
-        d.update(lens.projection_defines(camera))
+        camera.model.check_support(self.surfel, "tile")
+        d.update(camera.model.defines())
         return self.programs.compute("tile_project.comp", d)
 
     def _set(self, prog: moderngl.ComputeShader, **values) -> None:
@@ -323,8 +322,7 @@ class TileRenderer:
         self._bufs["OUT_DEPTH"].ensure(pixels * 4)
         self._bind_all()
         d = self._defines(layout)
-        if self.surfel and camera.is_orthographic:
-            d["ORTHOGRAPHIC"] = 1                 # T_2 = (0, 0, 1)
+        d.update(camera.model.defines())          # surfels: orthographic T_2 = (0, 0, 1)
         prog = self.programs.compute("tile_rasterize.comp", d)
         self._set(prog, u_grid=grid, u_size=(camera.width, camera.height),
                   u_background=self.settings.background, u_index_mask=layout.index_mask)

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..cameras.camera import Camera, look_at
+from ..cameras.camera import Camera
+from ..cameras.poses import look_at
 from ..constants import SH_C0
 from ..model.scene import Scene, SplatKind
 

@@ -14,7 +14,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..cameras.camera import Camera, look_at
+from ..cameras.camera import Camera
+from ..cameras.poses import look_at
 from ..model.scene import Scene, SplatKind
 from ..model.settings import Precision, RenderSettings
 from ..model.quaternion import quat_axis_angle, quat_multiply

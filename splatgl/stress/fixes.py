@@ -58,7 +58,7 @@ FIXES: tuple[Fix, ...] = (
         ("near_tiny, after the fixes above: quad 0.295 (a 6e10 px quad, NDC ~1e9, lost by "
          "llvmpipe's clipping)",)),
     Fix("longitude 0 at an exact pole (and for the ODS eye there): GLSL's atan(0, 0) is undefined",
-        "project_lens, eye_space (shaders/lib/lens.glsl)",
+        "project_mean, eye_space (shaders/cameras/fisheye.glsl, equirect.glsl)",
         ("equirect_poles: quad 0.342 (llvmpipe's atan(0, 0) moved a pole band's centre and "
          "with it the half-turn clip; NumPy's arctan2(0, 0) = 0)",)),
 )

@@ -10,11 +10,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..cameras import lens
 from ..cameras.camera import Camera
+from ..cameras.equirect import eye_space
+from ..cameras.view import anchored_camera
 from ..model.quaternion import quat_to_rotmat  # noqa: F401 (the projection's rotations; re-exported)
 from ..constants import (ALPHA_MIN, DET_CANCEL_RATIO, EXTENT_DISCRIMINANT_FLOOR, EXTENT_SIGMAS,
-                         JACOBIAN_CLAMP, LOW_PASS, AA_MIN_FACTOR, SH_C0, SH_C1, SH_C2, SH_C3,
+                         LOW_PASS, AA_MIN_FACTOR, SH_C0, SH_C1, SH_C2, SH_C3,
                          SH_OFFSET, sh_coeff_count)
 
 
@@ -39,19 +40,6 @@ def transform_points(points: np.ndarray, rot: np.ndarray, trans: np.ndarray) -> 
     return out
 
 
-def anchored_camera(camera: Camera, anchor: np.ndarray) -> Camera:
-    """``camera`` for points given relative to ``anchor`` (world, float64 (3,)).
-
-    Guard (stress cases far_1e5 .. far_1e7, ortho_huge_zoom): float32 ``R p + t`` on raw
-    coordinates 1e7 from the origin keeps about one unit of precision (the scene shredded,
-    max error 0.79).  Every renderer therefore works on ``p - anchor`` (small numbers) with the
-    anchor folded into the translation in float64: ``t' = R anchor + t``.
-    """
-    shift = np.eye(4)
-    shift[:3, 3] = np.asarray(anchor, np.float64)
-    return camera.with_pose(camera.world_to_camera @ shift)
-
-
 def anchored(means: np.ndarray, anchor: np.ndarray, camera: Camera, dtype
              ) -> tuple[np.ndarray, Camera]:
     """``(means - anchor`` in ``dtype`` (the subtraction in float64), the anchored camera``)``:
@@ -60,62 +48,22 @@ def anchored(means: np.ndarray, anchor: np.ndarray, camera: Camera, dtype
     return rel, anchored_camera(camera, anchor)
 
 
-def near_threshold(near: float, dtype) -> np.floating:
-    """The near plane as a ``dtype`` number that culls exactly the z values float64 culls.
-
-    Guard (stress case near_plane): ``float32(0.1)`` rounds up to 0.10000000149, so a splat whose
-    stored z is that very value was culled in float32 (z <= near) but kept in float64 (max error
-    0.41).  Rounding the plane down instead makes ``z > near`` agree in both precisions.
-    """
-    dt = np.dtype(dtype).type
-    value = dt(near)
-    if float(value) > near:
-        value = np.nextafter(value, dt(-np.inf))
-    return value
-
-
 def to_camera(means: np.ndarray, camera: Camera) -> np.ndarray:
     """(N, 3) world points -> (N, 3) camera-space points ``R_cw p + t_cw`` (OpenCV axes)."""
     return transform_points(means, camera.rotation, camera.translation)
 
 
 def project_means(p_cam: np.ndarray, camera: Camera) -> np.ndarray:
-    """(N, 3) camera-space points -> (N, 2) image coordinates (u, v) in pixels."""
-    if camera.is_lens:
-        return lens.project_lens(p_cam, camera)
-    fx, fy, cx, cy = (np.asarray(v, p_cam.dtype) for v in (camera.fx, camera.fy, camera.cx, camera.cy))
-    if camera.is_orthographic:
-        return np.stack([fx * p_cam[:, 0] + cx, fy * p_cam[:, 1] + cy], axis=-1)
-    return np.stack([fx * p_cam[:, 0] / p_cam[:, 2] + cx, fy * p_cam[:, 1] / p_cam[:, 2] + cy], -1)
+    """(N, 3) camera-space points -> (N, 2) image coordinates (u, v) in pixels (the camera
+    model's :meth:`~splatgl.cameras.model.CameraModel.project`)."""
+    return camera.model.project(p_cam, camera)
 
 
 def jacobian(p_cam: np.ndarray, camera: Camera) -> np.ndarray:
-    """(N, 2, 3) EWA Jacobian of the projection at ``p_cam``.
-
-    Perspective: ``[[fx/z, 0, -fx x/z^2], [0, fy/z, -fy y/z^2]]`` with ``x/z`` and ``y/z``
-    clamped to +-1.3 tan(half fov) (the mean itself is not moved).  Orthographic: constant
-    ``diag(fx, fy)``.  Fisheye and equirectangular: :func:`splatgl.cameras.lens.jacobian_lens`.
-    """
-    if camera.is_lens:
-        return lens.jacobian_lens(p_cam, camera)
-    dtype = p_cam.dtype
-    n = p_cam.shape[0]
-    j = np.zeros((n, 2, 3), dtype)
-    if camera.is_orthographic:
-        j[:, 0, 0] = camera.fx
-        j[:, 1, 1] = camera.fy
-        return j
-    tx, ty = camera.tan_half_fov
-    z = p_cam[:, 2]
-    limx, limy = dtype.type(JACOBIAN_CLAMP * tx), dtype.type(JACOBIAN_CLAMP * ty)
-    xz = np.clip(p_cam[:, 0] / z, -limx, limx)
-    yz = np.clip(p_cam[:, 1] / z, -limy, limy)
-    fx, fy = dtype.type(camera.fx), dtype.type(camera.fy)
-    j[:, 0, 0] = fx / z
-    j[:, 0, 2] = -fx * xz / z
-    j[:, 1, 1] = fy / z
-    j[:, 1, 2] = -fy * yz / z
-    return j
+    """(N, 2, 3) EWA Jacobian of the projection at ``p_cam`` (the camera model's
+    :meth:`~splatgl.cameras.model.CameraModel.jacobian`; the pinhole's clamps ``x/z`` and
+    ``y/z`` to +-1.3 tan(half fov), the mean itself is not moved)."""
+    return camera.model.jacobian(p_cam, camera)
 
 
 def covariance_2d(cov3d: np.ndarray, p_cam: np.ndarray, camera: Camera,
@@ -299,7 +247,7 @@ class Projected:
 
     Attributes:
         p_cam: (N, 3) camera-space centres.  depth: (N,) view z (fisheye and
-            equirectangular: distance from the camera, :func:`splatgl.cameras.lens.view_depth`).
+            equirectangular: distance from the camera, :meth:`~splatgl.cameras.model.CameraModel.depth`).
         mean2d: (N, 2) pixel coordinates.  cov2d: (N, 2, 2) dilated covariance (px^2).
         conic: (N, 3) inverse covariance (a, b, c).  det: (N,) det of cov2d.
         color: (N, 3) SH colour.  opacity: (N,) opacity (times the AA factor when enabled).
@@ -322,11 +270,19 @@ def project(means: np.ndarray, rotations: np.ndarray, scales: np.ndarray, opacit
 
     Arrays as in :class:`splatgl.model.scene.Scene` (activated), in the dtype wanted for the math.
     """
-    p_cam = lens.eye_space(to_camera(means, camera), camera)  # ODS: per-splat eye
+    p_cam = eye_space(to_camera(means, camera), camera)  # ODS: per-splat eye
     rot = quat_to_rotmat(rotations)
     cov2d = covariance_2d(covariance_3d(rot, scales), p_cam, camera)
     con, det = conic(cov2d, covariance_2d_det(cov2d, screen_factor(rot, scales, p_cam, camera)))
     opac = opacities * antialias_factor(cov2d) if antialias else opacities
     color = sh_color(sh, view_dirs(means, camera), sh_degree)
-    return Projected(p_cam, lens.view_depth(p_cam, camera), project_means(p_cam, camera), cov2d,
+    return Projected(p_cam, camera.model.depth(p_cam), project_means(p_cam, camera), cov2d,
                      con, det, color, opac)
+
+
+def splat_reach(max_scale: np.ndarray, opacities: np.ndarray) -> np.ndarray:
+    """(N,) world radius within which a splat can reach alpha 1/255: ``k max_scale`` with the
+    opacity-aware sigma count ``k = sqrt(2 ln(255 o))`` (at most ~3.33)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = np.sqrt(np.maximum(2.0 * np.log(np.maximum(opacities, 1e-30) / ALPHA_MIN), 0.0))
+    return (k * max_scale).astype(np.float64)

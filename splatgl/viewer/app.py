@@ -18,7 +18,7 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..errors import SplatglError
-from ..cameras.lens import require_support, with_projection
+from ..cameras.registry import retarget
 from ..renderers.stereo import StereoLayout, StereoRenderer
 from ..gl.context import REQUIRED_VERSION, create_glfw_context, create_glfw_window
 from ..api import Renderer
@@ -260,7 +260,7 @@ class Viewer:
         """Whether the tile renderer can draw the current view (T, and the difference view's
         other side); if not, the status line says why and the key changes nothing."""
         try:
-            require_support(self.camera(), False, RendererKind.TILE.value, equirect=False)
+            self.camera().model.check_support(False, RendererKind.TILE.value)
         except SplatglError as exc:
             self.message = f"{key} refused: {str(exc).split(';')[0]}"
             return False
@@ -285,7 +285,7 @@ class Viewer:
         else:
             cam = controls.to_camera(self.state, width, height)
         if self.options.projection is not None:   # fisheye or equirect, shown flat
-            cam = with_projection(cam, self.options.projection, self.options.fisheye_fov)
+            cam = retarget(cam, self.options.projection, self.options.fisheye_fov)
         return cam
 
     def _render(self, camera: Camera) -> FrameResult:

@@ -15,7 +15,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..cameras.camera import Camera, look_at, orbit
+from ..cameras.camera import Camera
+from ..cameras.poses import look_at, orbit
 
 #: Pitch is kept inside (-PITCH_LIMIT, PITCH_LIMIT) degrees so ``look_at`` never degenerates.
 PITCH_LIMIT = 89.0
@@ -99,7 +100,7 @@ def fit_camera(camera: Camera, width: int, height: int) -> Camera:
     s = height / camera.height
     return Camera(width, height, camera.fx * s, camera.fy * s,
                   camera.cx * s + 0.5 * (width - camera.width * s), camera.cy * s,
-                  camera.world_to_camera, camera.projection, camera.distortion, camera.ods_eye)
+                  camera.world_to_camera, camera.model)
 
 
 def from_camera(camera: Camera, distance: float, up=(0.0, -1.0, 0.0)) -> ViewState:

@@ -21,7 +21,7 @@ from ..output.pictures import depth_preview, heatmap
 from ..api import Renderer
 from ..model.scene import Scene
 from ..model.settings import RendererKind, RenderSettings
-from ..model.transform import apply_model
+from ..cameras.view import apply_model
 
 #: Error that saturates the difference view's colour scale (8/255).
 DIFFERENCE_SCALE = 8.0 / 255.0

@@ -1,0 +1,161 @@
+"""What a camera model is: one type that carries everything a projection changes.
+
+EWA splatting linearises the projection at each splat's centre, so a camera model changes only
+where a centre lands (:meth:`CameraModel.project`) and the 2x3 Jacobian of that map
+(:meth:`CameraModel.jacobian`); the 2D covariance, conic, extent and blending downstream are the
+same for every model.  Around those two a model also says:
+
+- which splats it can see (:meth:`~CameraModel.visible`, the float64 twin of the shader's
+  ``in_view``) and how the order stage culls for it (:attr:`~CameraModel.cull`, one of a few
+  strategies the order stage implements);
+- the depth that orders and layers its splats (:meth:`~CameraModel.depth`);
+- its shader piece (``shaders/cameras/<glsl>.glsl``: ``project_mean``, ``jacobian``,
+  ``in_view``, ``view_depth``), its ``#define`` switches and its uniform values;
+- what it cannot draw (:meth:`~CameraModel.check_support`);
+- how it is made from a field of view (:meth:`~CameraModel.intrinsics`, the CLI's ``--projection``)
+  and how its parameters read and write in camera files.
+
+A model is a frozen dataclass whose fields are its own parameters (a fisheye's k1..k4, a
+panorama's stereo eye offset); intrinsics (fx, fy, cx, cy) and the pose stay on
+:class:`~splatgl.cameras.camera.Camera`.  :mod:`splatgl.cameras.registry` lists the models by
+name.  Adding a model means one module here, one shader piece and one registry line.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from ..errors import CameraError
+
+if TYPE_CHECKING:
+    from .camera import Camera
+
+
+class CullKind(enum.Enum):
+    """The order stage's cull strategies (:mod:`splatgl.order`); a model picks one.
+
+    FRUSTUM: view z beyond the near plane and the splat's reach inside the four side planes
+        through the camera centre (the pinhole's pyramid), plus the peak-alpha bound.
+    BOX: parallel rays: view z beyond the near plane and the reach inside an axis-aligned box.
+    SPHERE: projections by angle, which see behind the camera plane: distance beyond the near
+        plane, a model's angle limit (:meth:`CameraModel.angle_limit`) and its seam copies
+        (:meth:`CameraModel.seam_period`); splats order by distance.
+    """
+
+    FRUSTUM = "frustum"
+    BOX = "box"
+    SPHERE = "sphere"
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Base of the camera models (see the module doc)."""
+
+    #: The model's name: the CLI's ``--projection`` value and the camera files' "projection".
+    name: ClassVar[str] = ""
+    #: Its shader piece, ``shaders/cameras/<glsl>.glsl``.
+    glsl: ClassVar[str] = ""
+    #: How the order stage culls for it.
+    cull: ClassVar[CullKind] = CullKind.FRUSTUM
+    #: Whether every pixel's ray has the same direction (orthographic): 2DGS surfels then
+    #: intersect parallel rays.
+    parallel_rays: ClassVar[bool] = False
+    #: Whether 2DGS surfels can be drawn (their ray-plane intersection needs a pinhole matrix).
+    draws_surfels: ClassVar[bool] = True
+    #: Whether the tile renderer can draw it.
+    draws_tiles: ClassVar[bool] = True
+    #: Why ``--fov`` does not apply to this model ("" where it does).
+    no_fov: ClassVar[str] = ""
+    #: Whether re-projecting a camera to this model keeps its intrinsics (orthographic: fx, fy
+    #: read as pixels per world unit); otherwise only the pose is kept and the model makes its own.
+    keeps_intrinsics: ClassVar[bool] = False
+    #: Width / height of an image of this model when only one side is given (None: the
+    #: camera's own aspect; a full panorama: 2).
+    aspect: ClassVar[float | None] = None
+    #: Whether a camera file may leave out fx, fy, cx, cy (the model's own intrinsics at the
+    #: file's size: a full panorama).
+    intrinsics_optional: ClassVar[bool] = False
+    #: A one-line description for ``--help``.
+    summary: ClassVar[str] = ""
+
+    # ------------------------------------------------------------------ float64/float32 twins
+    def project(self, p_cam: np.ndarray, camera: "Camera") -> np.ndarray:
+        """(N, 3) camera-space points -> (N, 2) image coordinates (u, v), in ``p_cam``'s dtype."""
+        raise NotImplementedError
+
+    def jacobian(self, p_cam: np.ndarray, camera: "Camera") -> np.ndarray:
+        """(N, 2, 3) Jacobian of :meth:`project` at ``p_cam`` (EWA's linearisation)."""
+        raise NotImplementedError
+
+    def depth(self, p_cam: np.ndarray) -> np.ndarray:
+        """(N,) the depth that sorts splats and fills the depth layer: view z by default."""
+        return p_cam[:, 2]
+
+    def visible(self, p_cam: np.ndarray, camera: "Camera", near) -> np.ndarray:
+        """(N,) bool: centres the model draws (the shader's ``in_view``): view z beyond ``near``."""
+        return p_cam[:, 2] > near
+
+    def angle_limit(self, camera: "Camera") -> float | None:
+        """SPHERE models: the largest angle from the optical axis kept (radians), or None."""
+        return None
+
+    def seam_period(self, camera: "Camera") -> float | None:
+        """SPHERE models whose image wraps around: pixels per full turn, else None."""
+        return None
+
+    def eye_pair(self, camera: "Camera", half_ipd: float) -> "tuple[Camera, Camera] | None":
+        """(left, right) eye cameras of a stereo rig where the model has its own rig, else
+        None (the rig then shifts the pose by -+``half_ipd`` along camera x)."""
+        return None
+
+    # ------------------------------------------------------------------ the GPU side
+    def defines(self) -> dict[str, object]:
+        """``#define`` switches of the shaders: the piece to include and the model's own."""
+        return {"CAMERA_MODEL": self.glsl}
+
+    def uniforms(self, camera: "Camera") -> dict[str, object]:
+        """Values of the model's own uniforms (declared in its shader piece)."""
+        return {}
+
+    # ------------------------------------------------------------------ use
+    def check_support(self, surfels: bool, renderer: str) -> None:
+        """Raise :class:`~splatgl.errors.CameraError` where ``renderer`` cannot draw this model
+        (or cannot draw it for a scene of 2DGS surfels)."""
+        if surfels and not self.draws_surfels:
+            raise CameraError(f"{self.name} cameras render 3DGS scenes only; this scene holds 2DGS "
+                              "surfels (use a perspective or orthographic camera)")
+        if renderer == "tile" and not self.draws_tiles:
+            raise CameraError(f"the tile renderer cannot draw {self.name} images; use --renderer "
+                              "quad or reference")
+
+    @classmethod
+    def intrinsics(cls, width: int, height: int, fov_degrees: float | None,
+                   like: "Camera | None" = None) -> tuple[float, float, float, float, "CameraModel"]:
+        """``(fx, fy, cx, cy, model)`` of a camera of this model at this size (the CLI's
+        ``--projection`` and ``--fov``; :meth:`splatgl.cameras.camera.Camera.of_model`).
+
+        ``fov_degrees`` None takes the model's default; ``like`` is the camera being
+        re-projected, for models that keep something of it (an orthographic camera keeps its
+        scale, a perspective one its intrinsics when no field of view is given).
+        """
+        raise NotImplementedError
+
+    @classmethod
+    def fov_range(cls) -> tuple[float, float, bool] | None:
+        """``(low, high, high_included)`` of ``--fov`` in degrees, or None where it does not apply."""
+        return None
+
+    # ------------------------------------------------------------------ files
+    def to_json(self) -> dict[str, object]:
+        """The model's own fields of the single-camera JSON (besides ``"projection"``)."""
+        return {}
+
+    @classmethod
+    def from_json(cls, obj: dict, path, where: str = "") -> "CameraModel":
+        """The model from a single-camera JSON object's own fields (errors name ``path`` and
+        ``where``, as :mod:`splatgl.cameras.json_fields` does)."""
+        return cls()

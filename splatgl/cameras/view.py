@@ -1,0 +1,157 @@
+"""The view: everything one frame needs from its camera, computed once and handed to every stage.
+
+Each stage (the order stage's cull and sort, the quad path's pre-pass and draw, the tile
+renderer, the NumPy reference, the level-of-detail cut) takes a :class:`View`, never the raw
+camera, so the camera is interpreted in one place:
+
+- the model transform folded into the camera (:func:`apply_model`: scene-to-camera);
+- the scene's anchor folded into the translation in float64 (:func:`anchored_camera`), since
+  every path projects ``means - anchor``;
+- the near plane (``settings.near`` or the scene-relative default) and its float32 and float64
+  thresholds (:func:`near_threshold`);
+- the model's shader ``#define`` switches and the values of every camera uniform.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .camera import Camera
+from .model import CameraModel
+
+if TYPE_CHECKING:
+    from ..model.scene import Scene
+    from ..model.settings import RenderSettings
+    from ..model.transform import ModelTransform
+
+
+def apply_model(camera: Camera, model: "ModelTransform | None") -> Camera:
+    """The camera seen from the scene's own frame: matrix ``world_to_camera @ model.matrix``."""
+    if model is None or model.is_identity:
+        return camera
+    return camera.with_pose(camera.world_to_camera @ model.matrix)
+
+
+def anchored_camera(camera: Camera, anchor: np.ndarray) -> Camera:
+    """``camera`` for points given relative to ``anchor`` (world, float64 (3,)).
+
+    Guard (stress cases far_1e5 .. far_1e7, ortho_huge_zoom): float32 ``R p + t`` on raw
+    coordinates 1e7 from the origin keeps about one unit of precision (the scene shredded,
+    max error 0.79).  Every renderer therefore works on ``p - anchor`` (small numbers) with the
+    anchor folded into the translation in float64: ``t' = R anchor + t``.
+    """
+    shift = np.eye(4)
+    shift[:3, 3] = np.asarray(anchor, np.float64)
+    return camera.with_pose(camera.world_to_camera @ shift)
+
+
+def near_threshold(near: float, dtype) -> np.floating:
+    """The near plane as a ``dtype`` number that culls exactly the z values float64 culls.
+
+    Guard (stress case near_plane): ``float32(0.1)`` rounds up to 0.10000000149, so a splat whose
+    stored z is that very value was culled in float32 (z <= near) but kept in float64 (max error
+    0.41).  Rounding the plane down instead makes ``z > near`` agree in both precisions.
+    """
+    dt = np.dtype(dtype).type
+    value = dt(near)
+    if float(value) > near:
+        value = np.nextafter(value, dt(-np.inf))
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class View:
+    """One frame's camera, interpreted once.
+
+    Attributes:
+        camera: the camera in the scene's own frame (the model transform folded in), not
+            anchored: what the CPU's float64 maths and the depth layer use.
+        near: the near plane distance (world units of the scene's frame).
+        anchor: (3,) float64 point subtracted from every mean before projecting (the scene's
+            :attr:`~splatgl.model.scene.Scene.anchor`; zeros for raw means).
+    """
+
+    camera: Camera
+    near: float
+    anchor: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @classmethod
+    def of(cls, camera: Camera, settings: "RenderSettings", scene: "Scene") -> "View":
+        """The view of ``camera`` (world frame) for ``scene`` under ``settings``: the model
+        transform, the scene-relative near plane and the scene's anchor."""
+        from ..model.settings import resolve_near
+
+        return cls(apply_model(camera, settings.model), resolve_near(settings, scene.robust_radius),
+                   np.asarray(scene.anchor, np.float64))
+
+    # ---------------------------------------------------------------- derived once per frame
+    @property
+    def model(self) -> CameraModel:
+        return self.camera.model
+
+    @property
+    def width(self) -> int:
+        return self.camera.width
+
+    @property
+    def height(self) -> int:
+        return self.camera.height
+
+    @cached_property
+    def anchored(self) -> Camera:
+        """The camera for anchored points (``p - anchor``): what the GPU and the order stage use."""
+        return anchored_camera(self.camera, self.anchor)
+
+    @cached_property
+    def scale(self) -> float:
+        """The uniform scale folded into the camera (a model transform's; 1 otherwise)."""
+        return self.camera.scale
+
+    @cached_property
+    def near32(self) -> np.float32:
+        """The near plane as float32, rounded so that it culls what float64 culls."""
+        return near_threshold(self.near, np.float32)
+
+    def near_in(self, dtype) -> np.floating:
+        """The near plane in ``dtype`` (:func:`near_threshold`)."""
+        return near_threshold(self.near, dtype)
+
+    @cached_property
+    def key(self) -> tuple:
+        """What decides the order of the splats: equal keys, equal order (the quad path reuses
+        the last order when the key repeats)."""
+        c = self.camera
+        return (c.world_to_camera.tobytes(), c.fx, c.fy, c.cx, c.cy, c.width, c.height, c.model,
+                self.near, self.anchor.tobytes())
+
+    @cached_property
+    def defines(self) -> dict[str, object]:
+        """The model's shader ``#define`` switches."""
+        return self.model.defines()
+
+    @cached_property
+    def uniforms(self) -> dict[str, object]:
+        """Values of every uniform of ``shaders/lib/camera.glsl`` and the model's piece, for
+        anchored means (float32 where the shader holds float32)."""
+        cam = self.anchored
+        tx, ty = cam.tan_half_fov
+        return {
+            "u_view_rot": tuple(cam.rotation.astype(np.float32).T.ravel()),  # column-major
+            "u_view_trans": tuple(cam.translation.astype(np.float32)),
+            "u_cam_center": tuple(cam.center.astype(np.float32)),
+            "u_intrinsics": (cam.fx, cam.fy, cam.cx, cam.cy),
+            "u_viewport": (float(cam.width), float(cam.height)),
+            "u_tan_fov": (tx, ty),
+            "u_near": float(self.near32),
+            **self.model.uniforms(cam),
+        }
+
+    def set_uniforms(self, prog) -> None:
+        """Write the uniforms ``prog`` (a moderngl program) uses."""
+        for name, value in self.uniforms.items():
+            if name in prog:
+                prog[name].value = value
