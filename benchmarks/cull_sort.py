@@ -1,6 +1,6 @@
 """Cull against sort on the scale benchmark's scenes (issue 18, item 3): per camera model.
 
-Runs only the quad path's order stage (``QuadRenderer.visible_order``: cull, key construction,
+Runs only the quad path's order stage (``QuadRenderer.order``: cull, key construction,
 sort; no draw) on an orbit of views, for a pinhole camera that frames the whole scene (almost
 every splat visible), a pinhole camera at 0.2x that distance (most of the scene outside the
 frustum), a 180-degree fisheye and an equirectangular panorama, and prints the median cull and
@@ -27,6 +27,7 @@ from splatgl.bench.scale_cli import parse_sizes
 from splatgl.cameras.poses import orbit
 from splatgl.formats import load_scene
 from splatgl.cameras.registry import retarget
+from splatgl.cameras.view import View
 from splatgl.renderers.quad import QuadRenderer
 from splatgl.api import Renderer, default_camera
 from splatgl.model.settings import RenderSettings
@@ -52,9 +53,9 @@ def _order_stage(quad, cams) -> tuple[float, float, int]:
     """Median cull and sort seconds over ``cams[1:]`` (the first view builds the cull data)."""
     cull, sort, kept = [], [], 0
     for i, cam in enumerate(cams):
-        order = quad.visible_order(cam)
+        order = quad.order(View.of(cam, quad.settings, quad.scene))
         if i:
-            c, s = quad.order_times
+            c, s = quad.rows.times.cull, quad.rows.times.sort
             cull.append(c)
             sort.append(s)
         kept = order.size

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from splatgl.cameras.view import View
 from splatgl import RenderSettings, Renderer, default_camera, load_scene
 from splatgl.cameras.poses import orbit
 from splatgl.model.scene import Scene
@@ -49,7 +50,7 @@ def measure(name: str, scene: Scene, width: int, height: int, frames: int) -> di
         for i in range(frames + 1):
             cam = base.with_pose(orbit(centre, distance, 180.0 + 3.0 * i, 20.0))
             t0 = time.perf_counter()
-            quad.render(cam)
+            quad.render(View.of(cam, quad.settings, scene))
             wall = time.perf_counter() - t0
             if i > 0:
                 t = quad.last_times

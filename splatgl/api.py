@@ -25,7 +25,7 @@ from .output.layers import RenderOutput
 from .progress import ProgressCallback
 from .model.scene import Scene
 from .model.settings import RenderSettings, RendererKind
-from .cameras.view import apply_model
+from .cameras.view import View
 from .model.transform import ModelTransform
 
 #: Default vertical field of view of :func:`default_camera`, degrees.
@@ -147,7 +147,7 @@ class Renderer:
         make_current(self.ctx)  # another context may have been made current since
         self._check_size(camera, kind)
         with _reporting(self._path(scene, settings, kind), progress) as path:
-            return path.render(apply_model(camera, settings.model))
+            return path.render(View.of(camera, settings, scene)).rgba
 
     def render_layers(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
                       kind: RendererKind = RendererKind.QUAD,
@@ -160,7 +160,7 @@ class Renderer:
         make_current(self.ctx)
         self._check_size(camera, kind)
         with _reporting(self._path(scene, settings, kind), progress) as path:
-            return path.render_layers(apply_model(camera, settings.model), depth=True)
+            return path.render(View.of(camera, settings, scene), depth=True)
 
     def render_many(self, scene: Scene, cameras: Iterable[Camera],
                     settings: RenderSettings = RenderSettings(),
@@ -221,7 +221,7 @@ def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettin
     """The NumPy per-tile reference's colour, alpha and depth (float32 math, no OpenGL)."""
     from .reference import render_reference
 
-    ref = render_reference(scene, apply_model(camera, settings.model), settings,
+    ref = render_reference(scene, camera, settings,
                            compat=settings.convention, progress=progress)
     rgba = np.concatenate([ref.color, ref.alpha[..., None]], axis=-1).astype(np.float32)
     return RenderOutput(rgba, np.asarray(ref.depth, np.float32))

@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 from splatgl.cameras.poses import orbit
+from splatgl.cameras.view import View
 from splatgl.constants import SH_C0, sh_coeff_count
 from splatgl.model.scene import Scene, SplatKind
+from splatgl.model.settings import RenderSettings
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -126,7 +128,7 @@ def tile_and_reference(ctx, scene, camera, settings):
 
     renderer = TileRenderer(ctx, scene, settings)
     try:
-        got = renderer.render_layers(camera)
+        got = renderer.render(View.of(camera, settings, scene), depth=True)
     finally:
         renderer.release()
     return got, render_reference(scene, camera, settings, np.float32)
@@ -273,3 +275,28 @@ def _kill_session(proc) -> tuple[str, str]:
     except ProcessLookupError:  # not a session of its own
         proc.kill()
     return proc.communicate()
+
+
+# ------------------------------------------------------------------ stages called directly
+def view_of(camera, scene, settings: RenderSettings | None = None) -> View:
+    """The :class:`View` of ``camera`` for ``scene`` under ``settings`` (default RenderSettings())."""
+    return View.of(camera, settings or RenderSettings(), scene)
+
+
+def project(scene, camera, settings: RenderSettings | None = None, dtype=np.float32, options=None):
+    """The reference's first stage for ``camera`` (:func:`splatgl.reference.stages.project`)."""
+    settings = settings or RenderSettings()
+    from splatgl.reference.stages import project as reference_project
+
+    return reference_project(scene, View.of(camera, settings, scene), settings, dtype, options)
+
+
+def view_for(renderer, camera) -> View:
+    """The view of ``camera`` built from ``renderer``'s own scene and settings."""
+    return View.of(camera, renderer.settings, renderer.scene)
+
+
+def draw(renderer, camera, depth: bool = False, **options):
+    """``renderer.render`` (a quad, tile or level-of-detail renderer) of ``camera``'s view
+    (:func:`view_for`): a RenderOutput.  ``options`` go to ``render`` (``on_batch``)."""
+    return renderer.render(view_for(renderer, camera), depth, **options)

@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings as hsettings, strategies as st
 
-import splatgl.renderers.quad as quad_module
+import splatgl.renderers.batches as batches_module
 from splatgl.renderers import early_stop as es
 from splatgl.constants import ALPHA_MAX, T_MIN
+from splatgl.bench.probes import count_fragments
 from splatgl.renderers.quad import QuadRenderer
+from helpers import draw, view_for
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene, SplatKind
 from splatgl.model.settings import Precision, Preprocess, RenderSettings
@@ -86,7 +88,7 @@ def _gpu_passes(ctx, alpha: np.ndarray):
     mask_fbo.depth_mask = True
     mask_fbo.clear(depth=1.0)
     programs = ProgramCache(ctx)
-    passes = es.EarlyStopPasses(ctx, programs)
+    passes = batches_module.EarlyStopPasses(ctx, programs)
     passes.prepare(1, [0, 1], w, h)
     ctx.enable(moderngl.DEPTH_TEST)
     ctx.depth_func = "<"
@@ -126,22 +128,22 @@ def test_occlusion_cull_matches_its_twin(ctx, monkeypatch, preprocess):
     scene = dense_scene()
     cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
     quad = QuadRenderer(ctx, scene, _settings(early_stop=True, preprocess=Preprocess.COMPUTE))
-    n = len(quad.visible_order(cam))
+    n = len(quad.order(view_for(quad, cam)))
     split = n // 3
-    monkeypatch.setattr(quad_module, "batch_bounds", lambda count, *_: [0, split, count])
+    monkeypatch.setattr(batches_module, "batch_bounds", lambda count, *_: [0, split, count])
     after_first = {}
 
     def hook(done, total):
         if done == split:
-            after_first["alpha"] = quad.target(cam).read()[..., 3]
+            after_first["alpha"] = quad.target(view_for(quad, cam)).read()[..., 3]
 
-    quad.render(cam, on_batch=hook)
+    draw(quad, cam, on_batch=hook).rgba
     alpha = after_first["alpha"]
     tiles = es.stop_tiles(alpha)
-    gpu_tiles = np.frombuffer(quad._stop.tiles.read(size=4 * tiles.size), np.uint32)
+    gpu_tiles = np.frombuffer(quad.batches.passes.tiles.read(size=4 * tiles.size), np.uint32)
     np.testing.assert_array_equal(gpu_tiles.reshape(tiles.shape), tiles)
     assert (tiles == es.TILE_STOPPED).mean() > 0.2, "the scene must stop some tiles for the test to mean anything"
-    prepared = np.frombuffer(quad._prepared.read(size=64 * n), np.float32).reshape(n, 4, 4)
+    prepared = np.frombuffer(quad.gpu.prepared.buf.read(size=64 * n), np.float32).reshape(n, 4, 4)
     mean, a1, a2 = prepared[:, 0, :2], prepared[:, 0, 2:], prepared[:, 1, :2]
     half = np.abs(a1) + np.abs(a2)
     visible = prepared[:, 3, 2] != 0
@@ -150,15 +152,15 @@ def test_occlusion_cull_matches_its_twin(ctx, monkeypatch, preprocess):
     second = es.occlusion_cull(lo[split:], hi[split:], tiles, cam.width, cam.height) & visible[split:]
     n_cmd_first = -(-split // es.SEGMENT)
     n_cmd = n_cmd_first + -(-(n - split) // es.SEGMENT)
-    stop = quad._stop
+    stop = quad.batches.passes
     assert stop.survivor_count(n_cmd) - stop.survivor_count(n_cmd_first) == int(second.sum())
     expected_culled = n - int(first.sum() + second.sum())
-    assert quad.last_occlusion_culled == expected_culled > 0.1 * n
+    assert quad.batches.occlusion_culled == expected_culled > 0.1 * n
     quad.release()
     if preprocess is Preprocess.VERTEX:  # the vertex path's cull computes the same rectangles
         quad = QuadRenderer(ctx, scene, _settings(early_stop=True, preprocess=preprocess))
-        quad.render(cam)
-        assert quad.last_occlusion_culled == expected_culled
+        draw(quad, cam).rgba
+        assert quad.batches.occlusion_culled == expected_culled
         quad.release()
 
 
@@ -171,13 +173,13 @@ def test_quads_over_too_many_tiles_skip_the_walk(ctx, monkeypatch):
     scene = dense_scene()
     cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
     base = QuadRenderer(ctx, scene, _settings(early_stop=True))
-    full = base.render(cam)
-    culled_full = base.last_occlusion_culled
+    full = draw(base, cam).rgba
+    culled_full = base.batches.occlusion_culled
     base.release()
     monkeypatch.setattr(constants, "OCCLUSION_MAX_TILES", 1)
     capped = QuadRenderer(ctx, scene, _settings(early_stop=True))
-    image = capped.render(cam)
-    culled = capped.last_occlusion_culled
+    image = draw(capped, cam).rgba
+    culled = capped.batches.occlusion_culled
     capped.release()
     assert 0 < culled < culled_full
     np.testing.assert_array_equal(image, full)
@@ -198,7 +200,7 @@ def _bound_check(on, off, name):
                                              (SplatKind.SURFEL_2D, Preprocess.VERTEX)])
 def test_on_stays_within_the_bound_of_off_and_culls(gl_renderer, monkeypatch, kind, preprocess):
     # A fine schedule (about 14 batches): many batch boundaries for the bound to hold across.
-    monkeypatch.setattr(quad_module, "batch_bounds", lambda count, *_: es.batch_bounds(count, 1 / 64, 1.35))
+    monkeypatch.setattr(batches_module, "batch_bounds", lambda count, *_: es.batch_bounds(count, 1 / 64, 1.35))
     scene = dense_scene(kind=kind)
     cam = front_camera(4.0, 50.0, 128, 96, target=(0.0, 0.0, 0.5))
     on_settings = _settings(early_stop=True, preprocess=preprocess, background=(0.2, 0.4, 0.9))
@@ -220,15 +222,16 @@ def test_rasterised_count_includes_the_fragments_early_tests_reject(ctx, monkeyp
     cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
     off = QuadRenderer(ctx, scene, _settings(early_stop=False))
     on = QuadRenderer(ctx, scene, _settings(early_stop=True))
-    n = len(on.visible_order(cam))
-    off_shaded, off_kept = off.count_fragments(cam)
-    assert off.count_fragments(cam, rasterised=True) == (off_shaded, off_kept)
-    monkeypatch.setattr(quad_module, "batch_bounds", lambda count, *_: [0, count])
-    assert on.count_fragments(cam) == on.count_fragments(cam, rasterised=True) == (off_shaded, off_kept)
-    monkeypatch.setattr(quad_module, "batch_bounds", lambda count, *_: [0, n // 3, count])
-    image = on.render(cam)
-    shaded, kept = on.count_fragments(cam)
-    rasterised, kept_late = on.count_fragments(cam, rasterised=True)
+    n = len(on.order(view_for(on, cam)))
+    off_shaded, off_kept = count_fragments(off, view_for(off, cam))
+    assert count_fragments(off, view_for(off, cam), rasterised=True) == (off_shaded, off_kept)
+    monkeypatch.setattr(batches_module, "batch_bounds", lambda count, *_: [0, count])
+    view = view_for(on, cam)
+    assert count_fragments(on, view) == count_fragments(on, view, rasterised=True) == (off_shaded, off_kept)
+    monkeypatch.setattr(batches_module, "batch_bounds", lambda count, *_: [0, n // 3, count])
+    image = draw(on, cam).rgba
+    shaded, kept = count_fragments(on, view_for(on, cam))
+    rasterised, kept_late = count_fragments(on, view_for(on, cam), rasterised=True)
     np.testing.assert_array_equal(on.target(cam).read(), image)  # the late-test variant's image
     assert shaded < 0.8 * rasterised and rasterised < off_shaded
     assert kept < kept_late <= off_kept  # the late variant also counts rejected kept fragments
@@ -269,9 +272,9 @@ def test_batch_hook_reports_progress_and_can_interrupt(gl_renderer, monkeypatch,
     settings = _settings(early_stop=early_stop)
     quad = gl_renderer.renderer_for(scene, settings)
     monkeypatch.setattr(es, "MAX_BATCH", 700)
-    monkeypatch.setattr(quad_module, "plain_bounds", lambda n: es.plain_bounds(n, 700))
+    monkeypatch.setattr(batches_module, "plain_bounds", lambda n: es.plain_bounds(n, 700))
     seen = []
-    expected = quad.render(cam, on_batch=lambda done, total: seen.append((done, total)))
+    expected = draw(quad, cam, on_batch=lambda done, total: seen.append((done, total))).rgba
     total = seen[-1][1]
     assert seen[-1][0] == total and len(seen) >= 2
     assert all(a[0] < b[0] for a, b in zip(seen, seen[1:]))
@@ -280,9 +283,9 @@ def test_batch_hook_reports_progress_and_can_interrupt(gl_renderer, monkeypatch,
         raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        quad.render(cam, on_batch=stop)
+        draw(quad, cam, on_batch=stop).rgba
     assert not quad.ctx.error.startswith("GL_INVALID")
-    np.testing.assert_array_equal(quad.render(cam), expected)
+    np.testing.assert_array_equal(draw(quad, cam).rgba, expected)
 
 
 def test_reference_counts_blended_fragments():
@@ -306,7 +309,7 @@ def test_renderer_progress_reaches_the_quad_draw(gl_renderer, monkeypatch):
     scene = dense_scene(3000)
     cam = front_camera(4.0, 50.0, 64, 48, target=(0.0, 0.0, 0.5))
     settings = _settings(early_stop=False)
-    monkeypatch.setattr(quad_module, "plain_bounds", lambda n: es.plain_bounds(n, 700))
+    monkeypatch.setattr(batches_module, "plain_bounds", lambda n: es.plain_bounds(n, 700))
     plain = gl_renderer.render(scene, cam, settings)
     heard = []
     img = gl_renderer.render(scene, cam, settings, progress=lambda d, t, what: heard.append((d, t, what)))
@@ -325,26 +328,26 @@ def test_coverage_estimate_matches_its_twin_and_the_fragments(ctx, kind, preproc
     scene = dense_scene(kind=kind)
     cam = front_camera(4.0, 50.0, 128, 96, target=(0.0, 0.0, 0.5))
     auto = QuadRenderer(ctx, scene, _settings(early_stop="auto", preprocess=preprocess))
-    auto.render(cam)
-    estimate = auto.last_fragments_estimate
+    draw(auto, cam).rgba
+    estimate = auto.batches.fragments_estimate
     if kind is SplatKind.SURFEL_2D:   # the twin: the surfel boxes (clamped to the image)
         from splatgl.twins.project import to_camera
         from splatgl.twins.surfel import surfel_bounds, surfel_screen
 
         screen = surfel_screen(scene.means, scene.rotations, scene.scales, cam)
-        boxes = surfel_bounds(screen, scene.opacities, cam, auto.near)
-        shown = boxes.visible & (to_camera(scene.means, cam)[:, 2] > auto.near)
+        boxes = surfel_bounds(screen, scene.opacities, cam, view_for(auto, cam).near)
+        shown = boxes.visible & (to_camera(scene.means, cam)[:, 2] > view_for(auto, cam).near)
         twin = float((4.0 * boxes.half[:, 0] * boxes.half[:, 1])[shown].sum())
         # GPU float32 boxes and sums against the float64 twin: 1e-3 relative (measured 4e-7).
         assert estimate == pytest.approx(twin, rel=1e-3) and estimate > 0
         auto.release()
         return
     plain = QuadRenderer(ctx, scene, _settings(early_stop=False, preprocess=preprocess))
-    off_shaded, _ = plain.count_fragments(cam)
+    off_shaded, _ = count_fragments(plain, view_for(plain, cam))
     assert estimate == pytest.approx(off_shaded, rel=0.03)
     if preprocess is Preprocess.COMPUTE:   # the twin, from the pre-pass's quads
-        n = plain.prepare_geometry(cam)
-        p = np.frombuffer(plain._prepared.read(size=64 * n), np.float32).reshape(n, 4, 4)
+        n = plain.prepare(view_for(plain, cam))[0]
+        p = np.frombuffer(plain.gpu.prepared.buf.read(size=64 * n), np.float32).reshape(n, 4, 4)
         visible = p[:, 3, 2] != 0
         mean, a1, a2 = p[visible, 0, :2], p[visible, 0, 2:], p[visible, 1, :2]
         half = np.abs(a1) + np.abs(a2)
@@ -362,25 +365,25 @@ def test_auto_batches_only_views_of_large_quads_over_an_overdrawn_image(ctx, mon
     images = {}
     for mode in ("on", "off"):
         r = QuadRenderer(ctx, scene, _settings(early_stop=mode))
-        images[mode] = r.render(cam)
-        assert r.last_batched is (mode == "on") and (r.last_fragments_estimate > 0) is (mode == "on")
+        images[mode] = draw(r, cam).rgba
+        assert r.batches.batched is (mode == "on") and (r.batches.fragments_estimate > 0) is (mode == "on")
         r.release()
     auto = QuadRenderer(ctx, scene, _settings(early_stop="auto"))
-    auto.render(cam)
-    estimate = auto.last_fragments_estimate
+    draw(auto, cam).rgba
+    estimate = auto.batches.fragments_estimate
     per_pixel, per_quad = estimate / (cam.width * cam.height), estimate / auto.last_times.drawn
     assert per_pixel > 2.0 and per_quad > 2.0, "the dense scene overdraws"
     for pixel_min, quad_min, batched in ((per_pixel * 1.01, 0.0, False), (0.0, per_quad * 1.01, False),
                                          (per_pixel * 0.99, per_quad * 0.99, True)):
-        monkeypatch.setattr(quad_module, "EARLY_STOP_MIN_OVERDRAW", pixel_min)
-        monkeypatch.setattr(quad_module, "EARLY_STOP_MIN_QUAD_FRAGMENTS", quad_min)
-        image = auto.render(cam)
-        assert auto.last_batched is batched and auto.last_times.batched is batched
+        monkeypatch.setattr(batches_module, "EARLY_STOP_MIN_OVERDRAW", pixel_min)
+        monkeypatch.setattr(batches_module, "EARLY_STOP_MIN_QUAD_FRAGMENTS", quad_min)
+        image = draw(auto, cam).rgba
+        assert auto.batches.batched is batched and auto.last_times.batched is batched
         assert auto.last_times.batches == (3 if batched else 1)
         np.testing.assert_array_equal(image, images["on" if batched else "off"])
     # Quads this large take the fine schedule (about 8 batches) once the bar is below them.
-    monkeypatch.setattr(quad_module, "EARLY_STOP_FINE_QUAD_FRAGMENTS", per_quad * 0.99)
-    image = auto.render(cam)
+    monkeypatch.setattr(batches_module, "EARLY_STOP_FINE_QUAD_FRAGMENTS", per_quad * 0.99)
+    image = draw(auto, cam).rgba
     drawn = auto.last_times.drawn
     assert auto.last_times.batches == len(es.batch_bounds(drawn, *es.FINE_SCHEDULE)) - 1 > 3
     _bound_check(image, images["off"], "fine schedule")

@@ -100,7 +100,7 @@ def test_reference_reports_every_batch_and_the_image_does_not_change():
     from splatgl.formats import load_scene
     from splatgl.reference.binning import emit_keys, sort, tile_ranges
     from splatgl.reference.rasterize import rasterize
-    from splatgl.reference.stages import project
+    from helpers import project
     from splatgl.model.settings import RenderSettings
 
     scene = load_scene(demo_scene_path())

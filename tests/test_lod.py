@@ -16,7 +16,9 @@ from splatgl.lod.build import build_hierarchy, level_offsets
 from splatgl.model.quaternion import rotmat_to_quat
 from splatgl.lod.cut import CutData, select_cut, select_cut_budget
 from splatgl.lod.io import read_lod, write_lod
-from splatgl.lod.render import LodRenderer, LodSettings
+from splatgl.lod.render import LodSettings
+from splatgl.lod.source import lod_renderer
+from helpers import draw
 from splatgl.evaluation.metrics import image_errors
 from splatgl.twins.project import covariance_3d, quat_to_rotmat
 from splatgl.renderers.quad import QuadRenderer
@@ -136,11 +138,11 @@ def test_far_view_draws_fewer_nodes_at_40_db(ctx, biker):
     scene, tree = biker
     camera = default_camera(scene, 320, 180, distance_scale=4.0)
     full = QuadRenderer(ctx, scene, RenderSettings())
-    lod = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
+    lod = lod_renderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
     try:
-        want = full.render(camera)
-        got = lod.render(camera)
-        assert lod.last_cut_nodes < 0.6 * full.last_times.drawn
+        want = draw(full, camera).rgba
+        got = draw(lod, camera).rgba
+        assert lod.rows.last_cut_nodes < 0.6 * full.last_times.drawn
         assert image_errors(got, want).psnr >= 40.0
     finally:
         full.release()
@@ -178,36 +180,36 @@ def test_close_views_skip_the_cut_and_match_full_detail(ctx, biker):
     scene, tree = biker
     close = default_camera(scene, 96, 64, distance_scale=0.8)
     closer = default_camera(scene, 96, 64, distance_scale=0.6)
-    lod = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
+    lod = lod_renderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
     full = QuadRenderer(ctx, scene, RenderSettings())
     try:
-        got = lod.render(close)
-        assert lod.last_cut_s > 0 and lod.skip_within is not None  # cut was mostly leaves
-        assert lod.last_cut_nodes == scene.count  # and this view already draws the leaves
-        assert image_errors(got, full.render(close)).psnr >= 80.0
+        got = draw(lod, close).rgba
+        assert lod.rows.last_cut_s > 0 and lod.rows.skip_within is not None  # cut was mostly leaves
+        assert lod.rows.last_cut_nodes == scene.count  # and this view already draws the leaves
+        assert image_errors(got, draw(full, close).rgba).psnr >= 80.0
         assert SKIP_NODES_PER_LEAF == 0.75
-        got = lod.render(closer)
-        assert lod.last_cut_s == 0.0 and lod.last_cut_nodes == scene.count
-        assert image_errors(got, full.render(closer)).psnr >= 80.0
+        got = draw(lod, closer).rgba
+        assert lod.rows.last_cut_s == 0.0 and lod.rows.last_cut_nodes == scene.count
+        assert image_errors(got, draw(full, closer).rgba).psnr >= 80.0
         far = default_camera(scene, 96, 64, distance_scale=8.0)
-        lod.render(far)
-        assert lod.last_cut_s > 0 and lod.last_cut_nodes < scene.count  # far views still cut
+        draw(lod, far).rgba
+        assert lod.rows.last_cut_s > 0 and lod.rows.last_cut_nodes < scene.count  # far views still cut
         # flying in from afar: a far view builds nothing; one near the switch starts building the
         # leaves' cull data in the background, and the switch finds it ready
-        fly = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
-        fly.render(default_camera(scene, 96, 64, distance_scale=30.0))
-        assert not fly.last_drew_leaves and fly._leaf_build is None
+        fly = lod_renderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0))
+        draw(fly, default_camera(scene, 96, 64, distance_scale=30.0)).rgba
+        assert not fly.rows.last_drew_leaves and fly.rows._leaf_build is None
         for d in (8.0, 4.0, 2.0, 1.5, 1.2, 1.0):
-            if fly._leaf_build is not None:
+            if fly.rows._leaf_build is not None:
                 break
-            fly.render(default_camera(scene, 96, 64, distance_scale=d))
-            assert not fly.last_drew_leaves
-        assert fly._leaf_build is not None
-        built = fly._leaf_build.result()
-        got = fly.render(close)
+            draw(fly, default_camera(scene, 96, 64, distance_scale=d)).rgba
+            assert not fly.rows.last_drew_leaves
+        assert fly.rows._leaf_build is not None
+        built = fly.rows._leaf_build.result()
+        got = draw(fly, close).rgba
         # the switching view used the background build (the same object), built nothing itself
-        assert fly.last_drew_leaves and fly._leaf_chunks is built
-        assert image_errors(got, full.render(close)).psnr >= 80.0
+        assert fly.rows.last_drew_leaves and fly.rows._leaf_chunks is built
+        assert image_errors(got, draw(full, close).rgba).psnr >= 80.0
         fly.release()
     finally:
         lod.release()

@@ -17,7 +17,9 @@ from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
 from splatgl.lod.build import build_hierarchy
 from splatgl.lod.cut import CutData, expansion, select_cut, select_cut_weights
-from splatgl.lod.render import LodRenderer, LodSettings, blended_scene, leaves_covered
+from splatgl.lod.render import LodSettings, blended_scene, leaves_covered
+from splatgl.lod.source import lod_renderer
+from helpers import draw, view_of
 from splatgl.evaluation.metrics import image_errors
 from splatgl.renderers.quad import QuadRenderer
 from splatgl.api import default_camera
@@ -156,21 +158,21 @@ def test_prepass_weights_match_the_numpy_twin(ctx, biker):
     plain cut at 1 px with 69k."""
     scene, tree = biker
     camera = default_camera(scene, 200, 112, distance_scale=2.5)
-    lod = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0, band=2.0))
-    plain = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0, band=1.0))
+    lod = lod_renderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0, band=2.0))
+    plain = lod_renderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0, band=1.0))
     full = QuadRenderer(ctx, scene, RenderSettings())
     try:
-        got = lod.render(camera)
-        assert lod.slot_weights is not None and (lod.slot_weights < 1).any()
-        rows, weights = select_cut_weights(lod.cut_data, camera, 1.0, 2.0)
+        got = draw(lod, camera).rgba
+        assert lod.rows.slot_weights is not None and (lod.rows.slot_weights < 1).any()
+        rows, weights = select_cut_weights(lod.rows.cut_data, camera, 1.0, 2.0)
         twin = QuadRenderer(ctx, blended_scene(tree, rows, weights), RenderSettings())
-        want = twin.render(camera)
+        want = draw(twin, camera).rgba
         twin.release()
         assert float(np.abs(got - want).max()) <= 2e-3
-        hard = plain.render(camera)
+        hard = draw(plain, camera).rgba
         assert float(np.abs(got - hard).max()) > 1e-2  # the weights do change the image
-        assert lod.last_cut_nodes > plain.last_cut_nodes
-        reference = full.render(camera)
+        assert lod.rows.last_cut_nodes > plain.rows.last_cut_nodes
+        reference = draw(full, camera).rgba
         psnr_blend = image_errors(got, reference).psnr
         psnr_hard = image_errors(hard, reference).psnr
         assert psnr_blend >= 37.5 and psnr_hard - 3.0 <= psnr_blend < psnr_hard
@@ -185,7 +187,7 @@ def test_band_needs_the_prepass_and_a_ratio(ctx, biker):
     with pytest.raises(SplatglError, match=r"^--lod-blend 2 weights opacities in the compute "
                                            r"pre-pass: use --preprocess compute \(the default\), "
                                            r"or --lod-blend 1$"):
-        LodRenderer(ctx, tree, RenderSettings(preprocess=Preprocess.VERTEX), LodSettings(band=2.0))
+        lod_renderer(ctx, tree, RenderSettings(preprocess=Preprocess.VERTEX), LodSettings(band=2.0))
     with pytest.raises(SplatglError, match=r"^--lod-blend must be a ratio of at least 1 \(1: no "
                                            r"blending\), got 0.5$"):
         LodSettings(band=0.5)
@@ -215,16 +217,16 @@ def test_cut_override_draws_an_earlier_views_cut(ctx, biker):
     scene, tree = biker
     far = default_camera(scene, 96, 64, distance_scale=4.0)
     near = default_camera(scene, 96, 64, distance_scale=3.0)
-    lod = LodRenderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0, band=2.0))
+    lod = lod_renderer(ctx, tree, RenderSettings(), LodSettings(threshold_px=1.0, band=2.0))
     try:
-        img = lod.render(far)
-        cut = lod.last_cut
-        lod.cut_override = cut
-        np.testing.assert_array_equal(lod.render(far), img)
-        frozen_nodes = lod.last_cut_nodes
-        lod.cut_override = None
-        lod.render(near)
-        assert lod.last_cut_nodes > frozen_nodes and lod.last_cut is not cut
+        img = draw(lod, far).rgba
+        cut = lod.rows.last_cut
+        lod.rows.cut_override = cut
+        np.testing.assert_array_equal(draw(lod, far).rgba, img)
+        frozen_nodes = lod.rows.last_cut_nodes
+        lod.rows.cut_override = None
+        draw(lod, near).rgba
+        assert lod.rows.last_cut_nodes > frozen_nodes and lod.rows.last_cut is not cut
     finally:
         lod.release()
 
@@ -245,12 +247,12 @@ def test_cut_cull_compiled_or_numpy_same_order_and_weights(ctx, biker, sort):
     got = {}
     for policy in ("off", "wait"):
         cull_kernel.set_policy(policy)
-        lod = LodRenderer(ctx, tree, settings, LodSettings(threshold_px=1.0, band=2.0))
+        lod = lod_renderer(ctx, tree, settings, LodSettings(threshold_px=1.0, band=2.0))
         try:
             for scale in (2.5, 3.5):  # two views: the second is where "auto" would switch
                 camera = default_camera(scene, 200, 112, distance_scale=scale)
-                got[policy, scale] = (lod.visible_order(camera).copy(), lod.slot_weights)
-                assert not lod.last_drew_leaves and lod.slot_weights is not None
+                got[policy, scale] = (lod.order(view_of(camera, tree.nodes, settings)).copy(), lod.rows.slot_weights)
+                assert not lod.rows.last_drew_leaves and lod.rows.slot_weights is not None
         finally:
             cull_kernel.set_policy("auto")
             lod.release()

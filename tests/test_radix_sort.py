@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from helpers import draw, view_for
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.gl.radix_sort import (TILE_KEYS, RadixSorter, device_depth_sort, radix_passes,
@@ -68,8 +69,8 @@ def test_quad_frame_with_device_sort_is_identical(ctx):
     for key in (SortKey.EXACT, SortKey.GPU):
         r = QuadRenderer(ctx, scene, RenderSettings(sort_key=key))
         try:
-            images.append(r.render(camera))
-            orders.append(r.visible_order(camera).copy())
+            images.append(draw(r, camera).rgba)
+            orders.append(r.order(view_for(r, camera)).copy())
         finally:
             r.release()
     np.testing.assert_array_equal(orders[1], orders[0])

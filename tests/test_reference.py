@@ -11,10 +11,11 @@ from splatgl.cameras.camera import Camera
 from splatgl.constants import ALPHA_MIN, LOW_PASS, SH_C0, T_MIN
 from splatgl.twins.project import antialias_factor
 from splatgl.reference import (Compat, ProjectedSplats, ReferenceOptions, depth_bits, emit_keys,
-                               gsplat_radius, project, rasterize, render_reference,
+                               gsplat_radius, rasterize, render_reference,
                                render_reference_rgba, sort, tile_ranges)
 from splatgl.model.scene import Scene, SplatKind
 from splatgl.model.settings import RenderSettings
+from helpers import project
 
 from helpers import IN_VIEW, random_scene
 

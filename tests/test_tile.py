@@ -19,7 +19,8 @@ from helpers import (IN_DEPTH, SURFELS, SURFELS_POSE, assert_stages_match_refere
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import orbit
 from splatgl.formats import load_scene
-from splatgl.reference import emit_keys, project, render_reference, sort
+from splatgl.reference import emit_keys, render_reference, sort
+from helpers import draw, project, view_for
 from splatgl.api import Renderer, default_camera
 from splatgl.model.scene import Scene
 from splatgl.model.settings import RendererKind, RenderSettings
@@ -68,7 +69,7 @@ def test_integer_stages_match_reference(ctx):
     scene, settings = random_scene(3000, 7, degree=1, **IN_DEPTH), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
-        got = renderer.debug_stages(CAM)
+        got = renderer.debug_stages(view_for(renderer, CAM))
     finally:
         renderer.release()
     proj = project(scene, CAM, settings, np.float32)
@@ -81,8 +82,8 @@ def test_unpacked_key_layout_matches_reference(ctx, monkeypatch, artifacts_dir):
     scene, settings = random_scene(2000, 3, degree=1, **IN_DEPTH), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
-        got = renderer.debug_stages(CAM)
-        image = renderer.render(CAM)
+        got = renderer.debug_stages(view_for(renderer, CAM))
+        image = draw(renderer, CAM).rgba
     finally:
         renderer.release()
     proj = project(scene, CAM, settings, np.float32)
@@ -99,7 +100,7 @@ def test_emit_in_several_dispatches_matches_reference(ctx, monkeypatch):
     scene, settings = random_scene(2000, 3, degree=1, **IN_DEPTH), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
-        got = renderer.debug_stages(CAM)
+        got = renderer.debug_stages(view_for(renderer, CAM))
     finally:
         renderer.release()
     assert got.tiles_touched.max() > 3 * 3                      # at least 4 dispatches
@@ -120,12 +121,12 @@ def test_list_passes_equal_one_pass(ctx, monkeypatch, surfels):
     settings = RenderSettings(background=(0.2, 0.4, 0.9))
     renderer = TileRenderer(ctx, scene, settings)
     try:
-        one = renderer.render_layers(cam)
-        ranges = renderer.debug_stages(cam).ranges
+        one = draw(renderer, cam, depth=True)
+        ranges = renderer.debug_stages(view_for(renderer, cam)).ranges
         longest = int((ranges[:, 1] - ranges[:, 0]).max())
         monkeypatch.setattr(tile_mod, "TILE_LIST_CHUNK", 100)  # up to ~10 passes
         renderer.programs = type(renderer.programs)(ctx)      # recompile with the new define
-        many = renderer.render_layers(cam)
+        many = draw(renderer, cam, depth=True)
     finally:
         renderer.release()
     assert longest > 400 and (one.rgba[..., 3] > 0.999).any()   # passes, and near-stopped pixels
@@ -160,7 +161,7 @@ def test_empty_and_all_culled_scenes_give_background(ctx):
     for scene in (behind, empty):
         renderer = TileRenderer(ctx, scene, RenderSettings(background=bg))
         try:
-            got = renderer.render(CAM)
+            got = draw(renderer, CAM).rgba
             assert renderer.last_times.n_keys == 0
         finally:
             renderer.release()
@@ -183,7 +184,7 @@ def test_moving_camera_re_sorts(ctx, artifacts_dir):
     try:
         for azimuth in (170.0, 200.0):
             cam = Camera.from_fov(96, 80, 60.0, orbit(np.array([0.0, 0.0, 5.0]), 6.0, azimuth, 10.0))
-            got = renderer.render(cam)
+            got = draw(renderer, cam).rgba
             assert got[..., 3].max() > 0.5
             assert_close(got, render_reference(scene, cam).rgba, TOL, f"tile_orbit_{azimuth:g}",
                          artifacts_dir)

@@ -34,7 +34,8 @@ from helpers import (SURFELS, SURFELS_POSE, assert_stages_match_reference, rando
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.orthographic import Orthographic
 from splatgl.cameras.poses import orbit
-from splatgl.reference import emit_keys, project, render_reference, sort
+from splatgl.reference import emit_keys, render_reference, sort
+from helpers import draw, project, view_for
 from splatgl.api import Renderer
 from splatgl.model.scene import Scene, SplatKind
 from splatgl.model.settings import RendererKind, RenderSettings
@@ -84,7 +85,7 @@ def test_integer_stages_match_reference(ctx, camera):
     scene, settings = random_scene(3000, 7, degree=1, **SURFELS), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
-        got = renderer.debug_stages(camera)
+        got = renderer.debug_stages(view_for(renderer, camera))
     finally:
         renderer.release()
     proj = project(scene, camera, settings, np.float32)
@@ -98,8 +99,8 @@ def test_unpacked_key_layout_matches_reference(ctx, monkeypatch, artifacts_dir):
     scene, settings = random_scene(1500, 3, degree=1, **SURFELS), RenderSettings()
     renderer = TileRenderer(ctx, scene, settings)
     try:
-        got = renderer.debug_stages(PERSPECTIVE)
-        image = renderer.render_layers(PERSPECTIVE)
+        got = renderer.debug_stages(view_for(renderer, PERSPECTIVE))
+        image = draw(renderer, PERSPECTIVE, depth=True)
     finally:
         renderer.release()
     keys, values = sort(*emit_keys(project(scene, PERSPECTIVE, settings, np.float32)))
@@ -159,8 +160,8 @@ def test_grazing_surfel_through_the_near_plane(ctx, artifacts_dir):
     settings = RenderSettings(near=0.1)
     renderer = TileRenderer(ctx, scene, settings)
     try:
-        stages = renderer.debug_stages(cam)
-        got = renderer.render_layers(cam)
+        stages = renderer.debug_stages(view_for(renderer, cam))
+        got = draw(renderer, cam, depth=True)
     finally:
         renderer.release()
     assert stages.tiles_touched[0] == 4 * 3                # every tile
@@ -180,7 +181,7 @@ def test_empty_and_all_culled_scenes_give_background(ctx):
     for s in (behind, empty):
         renderer = TileRenderer(ctx, s, RenderSettings(background=bg))
         try:
-            got = renderer.render_layers(cam)
+            got = draw(renderer, cam, depth=True)
             assert renderer.last_times.n_keys == 0
         finally:
             renderer.release()

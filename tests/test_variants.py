@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helpers import draw
 from splatgl.cameras.poses import orbit
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene
@@ -37,7 +38,7 @@ def test_cull_off_draws_the_same_image(gl_renderer):
     cam = default_camera(scene, 96, 72, distance_scale=0.4)  # many splats off-screen
     on = gl_renderer.renderer_for(scene, RenderSettings())
     off = gl_renderer.renderer_for(scene, RenderSettings(cull=False))
-    a, b = on.render(cam), off.render(cam)
+    a, b = draw(on, cam).rgba, draw(off, cam).rgba
     np.testing.assert_array_equal(a, b)
     assert on.last_times.drawn < off.last_times.drawn  # culling really removed splats
 
@@ -77,10 +78,10 @@ def test_resort_interval_lags_then_catches_up(gl_renderer):
     back = front.with_pose(orbit([0, 0, 0], 4.0, 0.0, 0.0))
     nearly = front.with_pose(orbit([0, 0, 0], 4.0, 0.5, 0.0))
     lazy = gl_renderer.renderer_for(scene, RenderSettings(resort_interval=3))
-    assert lazy.render(front)[16, 16, 0] > 0.8   # sorted: red in front
-    assert lazy.render(back)[16, 16, 0] > 0.8    # stale order: red still drawn first (wrong)
-    assert lazy.render(nearly)[16, 16, 0] > 0.8  # still stale
-    assert lazy.render(back)[16, 16, 2] > 0.8    # third change re-sorts: blue in front
+    assert draw(lazy, front).rgba[16, 16, 0] > 0.8   # sorted: red in front
+    assert draw(lazy, back).rgba[16, 16, 0] > 0.8    # stale order: red still drawn first (wrong)
+    assert draw(lazy, nearly).rgba[16, 16, 0] > 0.8  # still stale
+    assert draw(lazy, back).rgba[16, 16, 2] > 0.8    # third change re-sorts: blue in front
 
 
 @pytest.mark.parametrize("precision", list(Precision))

@@ -12,7 +12,7 @@ import time
 import moderngl
 import numpy as np
 
-from ..cameras.camera import Camera
+from ..cameras.view import View
 from ..gl.shaders import ProgramCache
 from ..output.layers import RenderOutput
 from ..renderers.quad import QuadRenderer, QuadTimes, composite
@@ -34,17 +34,17 @@ class LimitRenderer:
         self.settings = settings
         self.quad = QuadRenderer(ctx, scene, dataclasses.replace(settings, preprocess=Preprocess.COMPUTE),
                                  programs)
-        self.program = self.quad.programs.program("limit.vert", "limit.frag")
+        self.program = self.quad.programs.cache.program("limit.vert", "limit.frag")
         self.vao = ctx.vertex_array(self.program, [])
         self.last_times: QuadTimes | None = None
 
-    def render(self, camera: Camera) -> np.ndarray:
-        count = self.quad.prepare_geometry(camera)
-        target = self.quad.target(camera)
-        self.program["u_viewport"].value = (float(camera.width), float(camera.height))
+    def render(self, view: View) -> RenderOutput:
+        count, _ = self.quad.prepare(view)   # cull, sort, upload, pre-pass: untimed
+        target = self.quad.target(view)
+        self.program["u_viewport"].value = (float(view.width), float(view.height))
         t0 = time.perf_counter()
         target.fbo.use()
-        self.ctx.viewport = (0, 0, camera.width, camera.height)
+        self.ctx.viewport = (0, 0, view.width, view.height)
         target.fbo.clear(0.0, 0.0, 0.0, 0.0)
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = moderngl.ONE_MINUS_DST_ALPHA, moderngl.ONE
@@ -56,11 +56,7 @@ class LimitRenderer:
         rgba = target.read()
         t2 = time.perf_counter()
         self.last_times = QuadTimes(0.0, 0.0, 0.0, 0.0, t1 - t0, t2 - t1, count)
-        return composite(rgba, self.settings.background)
-
-    def render_layers(self, camera: Camera, depth: bool = True) -> RenderOutput:
-        rgba = self.render(camera)
-        return RenderOutput(rgba, np.zeros(rgba.shape[:2], np.float32))
+        return RenderOutput(composite(rgba, self.settings.background), np.zeros(rgba.shape[:2], np.float32))
 
     def release(self) -> None:
         self.vao.release()

@@ -155,7 +155,8 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
     from ..formats import load_scene
     from ..gl.context import create_headless_context
     from ..lod.io import read_lod
-    from ..lod.render import LodRenderer
+    from ..cameras.view import View
+    from ..lod.source import lod_renderer
     from ..evaluation.metrics import ssim
     from ..renderers.quad import QuadRenderer
     from ..model.settings import RenderSettings
@@ -176,28 +177,30 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
     full = QuadRenderer(ctx, leaves, settings)
     reference = {}
     for path, cams in paths.items():
-        full.render(cams[0][1])  # warm-up: programs, cull data
+        full.render(View.of(cams[0][1], settings, leaves))  # warm-up: programs, cull data
         imgs, ms = [], []
         for _, cam in cams:
-            imgs.append(full.render(cam)[..., :3].astype(np.float64))
+            imgs.append(full.render(View.of(cam, settings, leaves)).rgba[..., :3].astype(np.float64))
             ms.append(full.last_times.total * 1e3)
         reference[path] = (imgs, ms)
         log(f"lod bench {name} {path}: full detail {statistics.median(ms):.0f} ms median")
     full.release()
     rows = []
     for label, lod in configs:
-        r = LodRenderer(ctx, tree, settings, lod)
+        r = lod_renderer(ctx, tree, settings, lod)
+        cut_of = r.rows
+        view = lambda cam: View.of(cam, settings, tree.nodes)  # noqa: E731
         for path, cams in paths.items():
             imgs, ms = reference[path]
-            r.render(cams[0][1])
+            r.render(view(cams[0][1]))
             prev = prev_cut = None
             for k, (m, cam) in enumerate(cams):
-                img = r.render(cam)[..., :3].astype(np.float64)
-                t, cut = r.last_times, r.last_cut
+                img = r.render(view(cam)).rgba[..., :3].astype(np.float64)
+                t, cut = r.last_times, cut_of.last_cut
                 frame = dict(scene=name, path=path, config=label, frame=k, distance=m,
                              frame_ms=t.total * 1e3, full_ms=ms[k], drawn=t.drawn,
-                             cut_nodes=r.last_cut_nodes, cut_ms=r.last_cut_s * 1e3,
-                             leaves=r.last_drew_leaves,
+                             cut_nodes=cut_of.last_cut_nodes, cut_ms=cut_of.last_cut_s * 1e3,
+                             leaves=cut_of.last_drew_leaves,
                              psnr=_psnr(float(np.mean((img - imgs[k]) ** 2))),
                              ssim=ssim(img.astype(np.float32), imgs[k].astype(np.float32)),
                              popping_psnr=None)
@@ -208,9 +211,9 @@ def bench_lod(scene_path: Path, width: int, height: int, frames: int, thresholds
                                  pop_mean=float(d.mean()), full_change_max=float(np.abs(own).max()),
                                  full_change_mean=float(np.abs(own).mean()))
                     if cut_change:
-                        r.cut_override = prev_cut  # this camera, the previous frame's cut
-                        frozen = np.abs(img - r.render(cam)[..., :3].astype(np.float64))
-                        r.cut_override = None
+                        cut_of.cut_override = prev_cut  # this camera, the previous frame's cut
+                        frozen = np.abs(img - r.render(view(cam)).rgba[..., :3].astype(np.float64))
+                        cut_of.cut_override = None
                         frame.update(cut_change_max=float(frozen.max()),
                                      cut_change_mean=float(frozen.mean()))
                 prev, prev_cut = img, cut

@@ -14,6 +14,8 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..cameras.poses import orbit
 from ..cameras.registry import retarget
+from ..cameras.view import View
+from .probes import GpuTimer, count_fragments
 from ..evaluation.metrics import image_errors, psnr
 from ..api import Renderer, default_camera, render_reference_rgba
 from ..model.scene import Scene
@@ -147,10 +149,13 @@ class _Runner:
             self.impl = None
         self.scene = scene
 
+    def view(self, camera: Camera) -> View:
+        return View.of(camera, self.settings, self.scene)
+
     def render(self, camera: Camera) -> np.ndarray:
         if self.impl is None:
             return render_reference_rgba(self.scene, camera, self.settings)
-        return self.impl.render(camera)
+        return self.impl.render(self.view(camera)).rgba
 
     def release(self) -> None:
         if self.kind is RowKind.LIMIT:
@@ -214,8 +219,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             tick(config.name)
             continue
         runner = _Runner(renderer, scene, config)
-        if config.kind is RowKind.QUAD:
-            runner.impl.gpu_timer = True
+        timer = GpuTimer(runner.impl).attach() if config.kind is RowKind.QUAD else None
         # Projection rows time the same poses and image size through another camera model;
         # their accuracy against the reference is checked in tests/test_lens.py, not here.
         path = ([retarget(c, config.projection) for c in cameras]
@@ -234,8 +238,8 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             occluded.append(getattr(last, "occlusion_culled", None))
             batched.append(bool(getattr(last, "batched", False)))
             estimates.append(getattr(last, "fragments_estimate", 0))
-            if config.kind is RowKind.QUAD and runner.impl.last_gpu_draw_ns is not None:
-                gpu.append(runner.impl.last_gpu_draw_ns / 1e6)
+            if timer is not None and timer.last_ns is not None:
+                gpu.append(timer.last_ns / 1e6)
             if i in refs and config.kind is not RowKind.LIMIT and not config.projection:
                 errs.append(image_errors(img, refs[i]))
             if config.group == "storage" and i in f32_images:
@@ -243,11 +247,11 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
         shaded = kept = eff = rasterised = bytes_per_splat = None
         if config.kind is RowKind.QUAD:
             bytes_per_splat = runner.impl.buffers.nbytes / max(scene.count, 1)
-            runner.impl.gpu_timer = False
-            shaded, kept = runner.impl.count_fragments(path[0])
+            timer.release()
+            shaded, kept = count_fragments(runner.impl, runner.view(path[0]))
             eff = kept / shaded if shaded else None
-            if runner.impl.last_batched:  # the counting view ran early termination
-                rasterised = runner.impl.count_fragments(path[0], rasterised=True)[0]
+            if runner.impl.batches.batched:  # the counting view ran early termination
+                rasterised = count_fragments(runner.impl, runner.view(path[0]), rasterised=True)[0]
         runner.release()
         keys = stages[0].keys() if stages else []
         rows.append(BenchRow(

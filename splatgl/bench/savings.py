@@ -17,6 +17,7 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..order.cull import cull
+from ..cameras.view import View
 from ..twins.project import to_camera
 from ..api import Renderer
 from ..model.scene import Scene
@@ -27,11 +28,12 @@ from .runner import BenchOptions, BenchRow, orbit_path
 def _time(quad, cameras: list[Camera]) -> tuple[float, float, float, dict]:
     """(median, p10, p90) milliseconds of ``quad.render`` over ``cameras`` after one warm-up,
     and the median of each stage."""
-    quad.render(cameras[-1])
+    views = [View.of(cam, quad.settings, quad.scene) for cam in cameras]
+    quad.render(views[-1])
     times, stages = [], []
-    for cam in cameras:
+    for view in views:
         t0 = time.perf_counter()
-        quad.render(cam)
+        quad.render(view)
         times.append((time.perf_counter() - t0) * 1e3)
         stages.append({k: v * 1e3 for k, v in vars(quad.last_times).items() if isinstance(v, float)})
     med_stages = {k: statistics.median(s[k] for s in stages) for k in stages[0]}

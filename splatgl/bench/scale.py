@@ -136,7 +136,7 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
     from ..order.cull import CullData, cull_visible
     from ..formats import load_scene
     from ..gl.radix_sort import RadixSorter, device_depth_sort
-    from ..cameras.view import anchored_camera
+    from ..cameras.view import View
     from ..renderers.quad import QuadRenderer
     from ..api import Renderer, default_camera
     from ..model.settings import RenderSettings
@@ -168,7 +168,7 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
         cams = [base_cam.with_pose(orbit(centre, dist, 2.0 * i, 20.0)) for i in range(options.frames + 1)]
         times = []
         for cam in cams:
-            image = quad.render(cam)
+            image = quad.render(View.of(cam, settings, scene)).rgba
             times.append(quad.last_times)
         last_views.append((cams[-1], image))
         times = times[1:]  # the first frame compiles programs and builds the cull data
@@ -182,15 +182,15 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
             tt = []
             for cam in cams:
                 t1 = time.perf_counter()
-                tile.render(cam)
+                tile.render(View.of(cam, settings, scene))
                 tt.append(time.perf_counter() - t1)
             tile.release()
             tile_ms = 1e3 * _median(tt[1:])
         rss_peak = _peak_rss_mb() - base
         sort_gpu = identical = None
         if options.gpu_sort:  # after the memory figure: its own cull data is a second copy
-            keep, depth = cull_visible(CullData.from_scene(scene),
-                                       anchored_camera(cams[-1], scene.anchor), quad.near)
+            view = View.of(cams[-1], settings, scene)
+            keep, depth = cull_visible(CullData.from_scene(scene), view.anchored, view.near)
             sorter = RadixSorter(renderer.ctx, renderer.programs)
             runs = []
             for _ in range(3):
@@ -217,15 +217,16 @@ def _with_compact(renderer, scene, views, rows: list[ScaleRow]) -> list[ScaleRow
     last frame (``views``: (camera, image) per row), rendered by a second quad renderer."""
     from dataclasses import replace
 
+    from ..cameras.view import View
     from ..evaluation.metrics import psnr
     from ..renderers.quad import QuadRenderer
     from ..model.settings import GpuStorage, RenderSettings
 
-    quad = QuadRenderer(renderer.ctx, scene, RenderSettings(gpu_storage=GpuStorage.COMPACT),
-                        renderer.programs)
+    settings = RenderSettings(gpu_storage=GpuStorage.COMPACT)
+    quad = QuadRenderer(renderer.ctx, scene, settings, renderer.programs)
     out = []
     for row, (cam, image) in zip(rows, views):
-        value = psnr(quad.render(cam)[..., :3], image[..., :3])
+        value = psnr(quad.render(View.of(cam, settings, scene)).rgba[..., :3], image[..., :3])
         out.append(replace(row, compact_bytes_per_splat=quad.buffers.nbytes / scene.count,
                            compact_psnr=None if value == float("inf") else value))
     quad.release()

@@ -13,10 +13,12 @@ from ..errors import SplatglError
 from ..gl.context import create_headless_context, make_current, renderer_name
 from ..output.layers import RenderOutput
 from ..model.settings import RenderSettings
-from ..cameras.view import apply_model
+from ..cameras.view import View
 from .build import LodTree
 from .io import is_lod_file, read_lod
-from .render import LodRenderer, LodSettings
+from .render import LodSettings
+from ..renderers.quad import QuadRenderer
+from .source import lod_renderer
 from .cut import DEFAULT_BAND, DEFAULT_THRESHOLD_PX
 
 
@@ -40,24 +42,25 @@ class LodFrames:
     renders with (``render_many``, ``renderer_for``); owns its context (use as a context manager).
 
     Every view chooses its cut alone: the renderer's memory of views close enough to draw the
-    leaves (:attr:`LodRenderer.skip_within`, a speed-up for interactive paths) is cleared
+    leaves (:attr:`splatgl.lod.source.LodOrder.skip_within`, a speed-up for interactive paths) is cleared
     before each, so frame k of a path is the one-view render of camera k whatever came before
     it (another chunk in another worker, or nothing).
     """
 
     def __init__(self, tree: LodTree, settings: RenderSettings, lod: LodSettings):
         self.settings = settings
+        self.nodes = tree.nodes
         self.ctx = create_headless_context()
         try:
-            self.renderer = LodRenderer(self.ctx, tree, settings, lod)
+            self.renderer = lod_renderer(self.ctx, tree, settings, lod)
         except BaseException:
             self.ctx.release()
             raise
 
     def render_view(self, camera: Camera, depth: bool = False) -> RenderOutput:
         make_current(self.ctx)
-        self.renderer.skip_within = None
-        return self.renderer.render_layers(apply_model(camera, self.settings.model), depth=depth)
+        self.renderer.rows.skip_within = None
+        return self.renderer.render(View.of(camera, self.settings, self.nodes), depth)
 
     def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
                     depth: bool = False) -> Iterator:
@@ -67,7 +70,7 @@ class LodFrames:
             out = self.render_view(camera, depth)
             yield out if depth else out.rgba
 
-    def renderer_for(self, scene=None, settings=None, kind=None) -> LodRenderer:
+    def renderer_for(self, scene=None, settings=None, kind=None) -> QuadRenderer:
         return self.renderer
 
     def close(self) -> None:
@@ -93,8 +96,7 @@ def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camer
     with LodFrames(read_lod(args.scene), settings, lod) as frames:
         gl_name = renderer_name(frames.ctx)
         out = frames.render_view(camera, want_depth)
-        renderer = frames.renderer
-        times = SimpleNamespace(**vars(renderer.last_times), cut_nodes=renderer.last_cut_nodes,
-                                cut=renderer.last_cut_s,
-                                threshold=f"{renderer.last_threshold_px:.2f} px")
+        renderer, cut = frames.renderer, frames.renderer.rows
+        times = SimpleNamespace(**vars(renderer.last_times), cut_nodes=cut.last_cut_nodes,
+                                cut=cut.last_cut_s, threshold=f"{cut.last_threshold_px:.2f} px")
     return out, times, gl_name

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cameras.camera import Camera
+from ..cameras.view import View
 from ..model.scene import Scene
 from ..model.settings import RenderSettings
 from .binning import emit_keys, sort, tile_ranges
@@ -59,15 +60,18 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
 
     Args:
         scene: a 3DGS or 2DGS (surfel) scene.
-        camera: perspective or orthographic camera; the image is camera.height x camera.width.
-        settings: background, near plane, antialiasing, SH cap (default RenderSettings()).
+        camera: any camera model the reference draws; the image is camera.height x
+            camera.width.  The frame's :class:`~splatgl.cameras.view.View` is built from it,
+            the settings and the scene (model transform, near plane, anchor).
+        settings: background, near plane, antialiasing, SH cap, model transform (default
+            RenderSettings()).
         dtype: float32 (GPU-like) or float64.
         compat: a :class:`Compat` (INRIA default, GSPLAT) or a full :class:`ReferenceOptions`.
         progress: optional :data:`splatgl.progress.ProgressCallback`, told the tiles rasterized.
     """
     settings = RenderSettings() if settings is None else settings
     options = as_options(compat)
-    proj = project(scene, camera, settings, dtype, options)
+    proj = project(scene, View.of(camera, settings, scene), settings, dtype, options)
     keys, values = emit_keys(proj)
     keys, values = sort(keys, values)
     ranges = tile_ranges(keys, proj.n_tiles)

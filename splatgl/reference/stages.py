@@ -19,14 +19,14 @@ import numpy as np
 import dataclasses
 
 from ..cameras.equirect import wrap_copies, wrap_shift
-from ..cameras.view import near_threshold
+from ..cameras.view import View
 from ..twins import project as pm
 from ..twins import surfel as sf
 from ..cameras.camera import Camera
 from ..cameras.fisheye import Fisheye
 from ..constants import ALPHA_MIN, TILE_SIZE
 from ..model.scene import Scene, SplatKind
-from ..model.settings import RenderSettings, resolve_near
+from ..model.settings import RenderSettings
 from ..constants import GSPLAT_EXTENT_SIGMAS
 from .options import Compat, ReferenceOptions
 
@@ -182,23 +182,23 @@ def gsplat_radius(cov2d: np.ndarray, opacity: np.ndarray) -> np.ndarray:
     return np.nan_to_num(r, nan=0.0, posinf=0.0).astype(np.int64)
 
 
-def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None,
+def project(scene: Scene, view: View, settings: RenderSettings | None = None,
             dtype: np.dtype | type = np.float32,
             options: ReferenceOptions | None = None) -> ProjectedSplats:
     """Reference stage 1: project every splat and decide which tiles it touches.
 
     Culling (a culled row gets ``visible = False``, radius 0 and an empty rectangle): view z at
-    or below the near plane (``settings.near`` or :func:`resolve_near`; lens cameras: the
-    distance and a fisheye's angle limit, but view z for a fisheye under GSPLAT,
-    :func:`gsplat_fisheye`), non-finite values, ``det(cov2d) <= 0``, an empty tile rectangle;
-    under GSPLAT also ``o < 1/255``, zero radii and an extent entirely off screen.
+    or below the view's near plane (fisheye and panorama: the distance and a fisheye's angle
+    limit, but view z for a fisheye under GSPLAT, :func:`gsplat_fisheye`), non-finite values,
+    ``det(cov2d) <= 0``, an empty tile rectangle; under GSPLAT also ``o < 1/255``, zero radii
+    and an extent entirely off screen.
 
     2DGS surfels go to :func:`project_surfels` (same culling idea, the surfel's own box).
 
     Args:
         scene: a 3DGS or 2DGS scene.
-        camera: perspective or orthographic camera.
-        settings: near plane, antialiasing, SH degree cap (default RenderSettings()).
+        view: the frame's :class:`~splatgl.cameras.view.View` (its camera, near plane, anchor).
+        settings: antialiasing, SH degree cap (default RenderSettings()).
         dtype: float32 (mimics the GPU) or float64 (checks).
         options: convention (default INRIA).
     """
@@ -207,12 +207,13 @@ def project(scene: Scene, camera: Camera, settings: RenderSettings | None = None
     dt = np.dtype(dtype)
     if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise ValueError(f"reference dtype must be float32 or float64, got {dt}")
+    camera = view.camera
     camera.model.check_support(scene.kind is SplatKind.SURFEL_2D, "reference")
     if scene.kind is SplatKind.SURFEL_2D:
-        return project_surfels(scene, camera, settings, dt, options)
-    near = near_threshold(resolve_near(settings, scene.robust_radius), dt)
+        return project_surfels(scene, view, settings, dt, options)
+    near = view.near_in(dt)
     grid = tile_grid(camera.width, camera.height)
-    means, view = pm.anchored(scene.means, scene.anchor, camera, dt)  # relative: float32-safe
+    means, view = pm.anchored(scene.means, view.anchor, camera, dt)  # relative: float32-safe
     with np.errstate(all="ignore"):
         pr = pm.project(means, scene.rotations.astype(dt),
                         scene.scales.astype(dt), scene.opacities.astype(dt), scene.sh.astype(dt),
@@ -301,7 +302,7 @@ def _mask_culled(ok, rect_min, rect_max, radius, dt):
     return ok, rect_min, rect_max, radius, clean
 
 
-def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
+def project_surfels(scene: Scene, view: View, settings: RenderSettings,
                     dtype: np.dtype, options: ReferenceOptions | None = None) -> ProjectedSplats:
     """Stage 1 for 2DGS surfels: centred ``T``, low-pass centre, SH colour and tile rects.
 
@@ -320,9 +321,10 @@ def project_surfels(scene: Scene, camera: Camera, settings: RenderSettings,
     """
     options = ReferenceOptions() if options is None else options
     dt = np.dtype(dtype)
-    near = near_threshold(resolve_near(settings, scene.robust_radius), dt)
+    camera = view.camera
+    near = view.near_in(dt)
     grid = tile_grid(camera.width, camera.height)
-    means, view = pm.anchored(scene.means, scene.anchor, camera, dt)  # relative: float32-safe
+    means, view = pm.anchored(scene.means, view.anchor, camera, dt)  # relative: float32-safe
     opac = scene.opacities.astype(dt)
     with np.errstate(all="ignore"):
         scr = sf.surfel_screen(means, scene.rotations.astype(dt), scene.scales.astype(dt), view)

@@ -38,7 +38,6 @@ from __future__ import annotations
 import math
 from typing import Callable
 
-import moderngl
 import numpy as np
 
 from .. import constants
@@ -196,100 +195,3 @@ def coverage(lo: np.ndarray, hi: np.ndarray, area: np.ndarray, width: int, heigh
         each = np.minimum(area * share, float(width) * height)
     ok = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1) & (area > 0.0) & np.isfinite(each)
     return float(each[ok].sum())
-
-
-# ----------------------------------------------------------------------------- GPU passes
-class EarlyStopPasses:
-    """The GL objects and passes of early termination for one quad renderer.
-
-    Buffers grow as needed; :meth:`release` frees them.  The caller binds the scene, the order
-    (binding 5) and, for the pre-pass variant, the prepared buffer (binding 6) before
-    :meth:`cull`.
-    """
-
-    def __init__(self, ctx: moderngl.Context, programs):
-        self.ctx = ctx
-        self.programs = programs
-        self.tiles: moderngl.Buffer | None = None
-        self.survivors: moderngl.Buffer | None = None
-        self.commands: moderngl.Buffer | None = None
-        self.partial: moderngl.Buffer | None = None
-        self._mark_vao: moderngl.VertexArray | None = None
-
-    def _grow(self, name: str, size: int) -> moderngl.Buffer:
-        buf = getattr(self, name)
-        if buf is None or buf.size < size:
-            if buf is not None:
-                buf.release()
-            buf = self.ctx.buffer(reserve=max(size, 16))
-            setattr(self, name, buf)
-        return buf
-
-    def prepare(self, count: int, bounds: list[int], width: int, height: int) -> int:
-        """Size the buffers for ``count`` sorted splats in ``bounds``; returns the command count."""
-        n_cmd = sum(-(-(e - s) // SEGMENT) for s, e in zip(bounds[:-1], bounds[1:]))
-        gw, gh = -(-width // TILE_SIZE), -(-height // TILE_SIZE)
-        self._grow("tiles", 4 * gw * gh).bind_to_storage_buffer(BINDING_STOP_TILES)
-        self.tiles.clear()  # all open until the first mark
-        self._grow("survivors", 4 * count)
-        self._grow("commands", COMMAND_BYTES * n_cmd)
-        self.survivors.bind_to_storage_buffer(BINDING_SURVIVORS)
-        self.commands.bind_to_storage_buffer(BINDING_COMMANDS)
-        return n_cmd
-
-    def mark(self, accum: moderngl.Texture, mask_fbo: moderngl.Framebuffer) -> None:
-        """Write depth 0 into ``mask_fbo`` where ``accum``'s T < T_MIN (depth test LESS on)."""
-        prog = self.programs.program("stop_mark.vert", "stop_mark.frag")
-        if self._mark_vao is None or self._mark_vao.program is not prog:
-            self._mark_vao = self.ctx.vertex_array(prog, [])
-        accum.use(ACCUM_UNIT)
-        mask_fbo.use()
-        mask_fbo.depth_mask = True
-        self._mark_vao.render(moderngl.TRIANGLES, vertices=3)
-
-    def reduce_tiles(self, accum: moderngl.Texture, width: int, height: int) -> None:
-        """stop_tiles.comp: one stop word per tile into the tiles buffer (binding 8)."""
-        comp = self.programs.compute("stop_tiles.comp")
-        grid = (-(-width // TILE_SIZE), -(-height // TILE_SIZE))
-        comp["u_size"].value = (width, height)
-        comp["u_tiles"].value = grid
-        accum.use(ACCUM_UNIT)
-        comp.run(group_x=-(-grid[0] * grid[1] // TILES_GROUP))
-
-    def cull(self, comp: moderngl.ComputeShader, start: int, end: int, cmd_base: int,
-             width: int, height: int, check_tiles: bool) -> int:
-        """occlusion_cull.comp over slots [start, end); returns the commands written."""
-        groups = -(-(end - start) // SEGMENT)
-        comp["u_start"].value = start
-        comp["u_end"].value = end
-        comp["u_cmd_base"].value = cmd_base
-        comp["u_tiles"].value = (-(-width // TILE_SIZE), -(-height // TILE_SIZE))
-        comp["u_check_tiles"].value = check_tiles
-        comp.run(group_x=groups)
-        return groups
-
-    def coverage(self, comp: moderngl.ComputeShader, count: int) -> float:
-        """coverage.comp over the ``count`` sorted slots: the estimated fragments (the caller
-        binds the order, the prepared quads or the scene, and sets the camera uniforms)."""
-        invocations = max(COVERAGE_MIN_INVOCATIONS, -(-count // COVERAGE_SLOTS_PER_INVOCATION))
-        groups = -(-invocations // COVERAGE_GROUP)
-        partial = self._grow("partial", 4 * groups * COVERAGE_GROUP)
-        partial.bind_to_storage_buffer(BINDING_COVERAGE)
-        comp["u_count"].value = count
-        comp.run(group_x=groups)
-        self.ctx.memory_barrier()
-        sums = np.frombuffer(partial.read(size=4 * groups * COVERAGE_GROUP), np.float32)
-        return float(sums.sum(dtype=np.float64))
-
-    def survivor_count(self, n_cmd: int) -> int:
-        """Sum of the instance counts of the first ``n_cmd`` commands (after the frame)."""
-        if n_cmd == 0:
-            return 0
-        cmds = np.frombuffer(self.commands.read(size=n_cmd * COMMAND_BYTES), np.uint32)
-        return int(cmds.reshape(n_cmd, COMMAND_BYTES // 4)[:, 1].sum())
-
-    def release(self) -> None:
-        for obj in (self.tiles, self.survivors, self.commands, self.partial, self._mark_vao):
-            if obj is not None:
-                obj.release()
-        self.tiles = self.survivors = self.commands = self.partial = self._mark_vao = None

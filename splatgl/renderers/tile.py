@@ -23,174 +23,32 @@ Stages (DESIGN.md section 2; each GPU stage has one shader and a same-named NumP
 surfel branch).  Keys, sort and ranges are unchanged.
 
 The output is (H, W, 4) float32, RGB = ``C + T_final bg``, alpha = ``1 - T_final``, row 0 at the
-top; :meth:`TileRenderer.render_layers` adds the accumulated depth ``D = sum z alpha T``.
+top; :meth:`TileRenderer.render` adds the accumulated depth ``D = sum z alpha T``.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 
-from ..cameras.camera import Camera
-from ..constants import TILE_SIZE
+from ..cameras.view import View
 from ..errors import SplatglError
-from ..gl.scene_buffers import BINDING_SH, SceneBuffers
+from ..gl.buffers import GrowableBuffer
+from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
-from .quad import set_camera_uniforms
-from ..output.layers import RenderOutput
 from ..model.scene import Scene, SplatKind
-from ..model.settings import RenderSettings, resolve_near
-
-#: Storage-buffer bindings of shaders/lib/tile_common.glsl and tile_rasterize.comp (after the
-#: scene's 0..BINDING_SH); handed to GLSL as TILE_BINDING_* defines.
-BINDINGS = {name: BINDING_SH + 1 + i for i, name in enumerate(
-    ("MEAN_DEPTH", "CONIC_O", "COLOR", "RECT", "TOUCHED", "OFFSETS", "KEYS", "VALUES", "RANGES",
-     "OUT_RGBA", "OUT_DEPTH", "SURFEL"))}
-#: Invocations per work group of the per-splat stages (project, emit).
-SPLAT_GROUP = 256
-#: Largest number of work groups along one dispatch axis guaranteed by OpenGL.
-MAX_GROUPS = 65535
-#: Bits of a positive float32's pattern (sign bit clear).
-DEPTH_BITS = 31
-#: Tiles per rasterize dispatch, at most: the image is drawn in bands of whole tile rows, with a
-#: finish between bands, so a long frame reports progress and Ctrl-C stops it within one band.
-RASTER_BAND_TILES = 512
-#: Entries of a tile's sorted list one rasterize pass blends at most; longer lists take more
-#: passes (the pixel state carried in the output buffers).  llvmpipe ends all loops of an
-#: invocation after 65535 iterations in total (gallivm's LP_MAX_TGSI_LOOP_ITERATIONS), which a
-#: single pass over a 55k-splat tile exceeded, leaving the tile blank; a pass of 16384 entries
-#: runs about 2 x 16384 + 64 iterations (the blend loop, and the serial scan of invocation 0).
-TILE_LIST_CHUNK = 16384
-#: Keys of one splat's tile rectangle one emit dispatch writes at most (the same loop limit: a
-#: splat covering a 4096 x 4096 image has 65536 tiles); larger rectangles take more dispatches.
-TILE_EMIT_CHUNK = 32768
-
-
-def tile_grid(width: int, height: int) -> tuple[int, int]:
-    """(tiles_x, tiles_y) of 16 x 16 tiles covering a ``width`` x ``height`` image."""
-    return -(-width // TILE_SIZE), -(-height // TILE_SIZE)
-
-
-@dataclass(frozen=True)
-class KeyLayout:
-    """Bit layout of the uint64 sort keys: ``tile << tile_shift | depth_bits << depth_shift``.
-
-    Packed (``packed``): the splat index fills the low ``depth_shift`` bits, so sorting the keys
-    alone reproduces the reference's stable sort of ``(tile << 32) | depth_bits``.  Unpacked:
-    exactly the reference layout (``tile_shift`` 32, ``depth_shift`` 0) plus a value array.
-    """
-
-    tile_shift: int
-    depth_shift: int
-    packed: bool
-
-    @classmethod
-    def choose(cls, n_splats: int, n_tiles: int) -> "KeyLayout":
-        index_bits = max(1, (max(n_splats, 1) - 1).bit_length())
-        tile_bits = max(1, (max(n_tiles, 1) - 1).bit_length())
-        if index_bits + DEPTH_BITS + tile_bits <= 64:
-            return cls(index_bits + DEPTH_BITS, index_bits, True)
-        return cls(32, 0, False)
-
-    @property
-    def index_mask(self) -> int:
-        """Mask of the packed index bits (0 when unpacked)."""
-        return (1 << self.depth_shift) - 1 if self.packed else 0
-
-    def to_reference(self, keys: np.ndarray, values: np.ndarray | None = None
-                     ) -> tuple[np.ndarray, np.ndarray]:
-        """(M,) uint64 keys in this layout -> (reference keys (M,) uint64, indices (M,) int64)."""
-        if not self.packed:
-            return keys.copy(), values.astype(np.int64)
-        tile = keys >> np.uint64(self.tile_shift)
-        depth = (keys >> np.uint64(self.depth_shift)) & np.uint64((1 << DEPTH_BITS) - 1)
-        index = (keys & np.uint64(self.index_mask)).astype(np.int64)
-        return (tile << np.uint64(32)) | depth, index
-
-
-@dataclass(frozen=True)
-class TileTimes:
-    """Wall-clock seconds of each stage of one tile-renderer frame (GPU stages include a finish)."""
-
-    project: float
-    scan: float
-    emit: float
-    sort: float
-    ranges: float
-    rasterize: float
-    readback: float
-    n_keys: int
-
-    @property
-    def total(self) -> float:
-        return (self.project + self.scan + self.emit + self.sort + self.ranges + self.rasterize
-                + self.readback)
-
-
-@dataclass(frozen=True)
-class TileStages:
-    """The integer stages of one view, for comparison with :mod:`splatgl.reference`.
-
-    tiles_touched: (N,) int64.  rect_min, rect_max: (N, 2) int64 tile rectangles (x, y).
-    emitted_keys, emitted_values: (M,) uint64 reference-layout keys ``(tile << 32) | depth
-    bits`` and (M,) int64 splat indices in emission order.  keys, values: the same sorted.
-    ranges: (tiles, 2) int64 ``[start, end)``.
-    """
-
-    tiles_touched: np.ndarray
-    rect_min: np.ndarray
-    rect_max: np.ndarray
-    emitted_keys: np.ndarray
-    emitted_values: np.ndarray
-    keys: np.ndarray
-    values: np.ndarray
-    ranges: np.ndarray
-
-
-#: The tile renderer returns the shared layer type.
-TileImage = RenderOutput
-
-
-class _Buffer:
-    """A storage buffer that grows (never shrinks) to the size asked for; bytes, min 16."""
-
-    def __init__(self, ctx: moderngl.Context, binding: int):
-        self.ctx, self.binding, self.buf = ctx, binding, None
-
-    def ensure(self, nbytes: int) -> moderngl.Buffer:
-        nbytes = max(int(nbytes), 16)
-        if self.buf is None or self.buf.size < nbytes:
-            if self.buf is not None:
-                self.buf.release()
-            self.buf = self.ctx.buffer(reserve=nbytes + nbytes // 4)
-        return self.buf
-
-    def bind(self) -> None:
-        self.ensure(16).bind_to_storage_buffer(self.binding)
-
-    def read(self, nbytes: int, dtype) -> np.ndarray:
-        return np.frombuffer(self.buf.read(size=nbytes), dtype) if nbytes else np.zeros(0, dtype)
-
-    def release(self) -> None:
-        if self.buf is not None:
-            self.buf.release()
-        self.buf = None
-
-
-def _splat_groups(n: int) -> tuple[int, int]:
-    """(groups_x, groups_y) covering ``n`` splats with 256-invocation groups (lib/tile_common)."""
-    groups = max(1, -(-n // SPLAT_GROUP))
-    gy = -(-groups // MAX_GROUPS)
-    return -(-groups // gy), gy
+from ..model.settings import RenderSettings
+from ..output.layers import RenderOutput
+from .tile_keys import (BINDINGS, MAX_GROUPS, RASTER_BAND_TILES, SPLAT_GROUP, TILE_EMIT_CHUNK,
+                        TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, splat_groups, tile_grid)
 
 
 class TileRenderer:
     """Renders one scene with the per-tile compute path; reuse across views, then :meth:`release`.
 
-    Attributes: ``scene``, ``settings``, ``near`` (resolved near plane, world units),
+    Attributes: ``scene``, ``settings``,
     ``last_times`` (:class:`TileTimes` of the last frame, or None) and ``progress`` (a
     :data:`splatgl.progress.ProgressCallback` told the tiles rasterized after each band of the
     last stage, or None).
@@ -202,12 +60,11 @@ class TileRenderer:
         self.scene = scene
         self.settings = settings
         self.programs = programs or ProgramCache(ctx)
-        self.near = resolve_near(settings, scene.robust_radius)
         self.surfel = scene.kind is SplatKind.SURFEL_2D
         self.count = scene.count
         self.scene_buffers = SceneBuffers(ctx, scene, settings.gpu_storage) if self.count else None
         self._max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
-        self._bufs = {name: _Buffer(ctx, b) for name, b in BINDINGS.items()}
+        self._bufs = {name: GrowableBuffer(ctx, b, slack=0.25) for name, b in BINDINGS.items()}
         n = self.count
         for name, stride in (("MEAN_DEPTH", 16), ("CONIC_O", 16), ("COLOR", 16), ("RECT", 16),
                              ("TOUCHED", 4), ("OFFSETS", 4)):
@@ -229,7 +86,7 @@ class TileRenderer:
             d["SURFEL"] = 1
         return d
 
-    def _project_program(self, camera: Camera) -> moderngl.ComputeShader:
+    def _project_program(self, view: View) -> moderngl.ComputeShader:
         cap = self.settings.sh_degree
         d = self._defines()
         d["SH_DEGREE"] = self.scene.sh_degree if cap is None else min(cap, self.scene.sh_degree)
@@ -237,8 +94,8 @@ class TileRenderer:
         d.update(self.scene_buffers.defines())
         if self.settings.antialias:
             d["ANTIALIAS"] = 1
-        camera.model.check_support(self.surfel, "tile")
-        d.update(camera.model.defines())
+        view.model.check_support(self.surfel, "tile")
+        d.update(view.defines)
         return self.programs.compute("tile_project.comp", d)
 
     def _set(self, prog: moderngl.ComputeShader, **values) -> None:
@@ -253,11 +110,11 @@ class TileRenderer:
             b.bind()
 
     # -------------------------------------------------------------------------------- stages
-    def _project(self, camera: Camera, grid: tuple[int, int]) -> None:
-        prog = self._project_program(camera)
-        set_camera_uniforms(prog, camera, self.near, self.scene.anchor)
+    def _project(self, view: View, grid: tuple[int, int]) -> None:
+        prog = self._project_program(view)
+        view.set_uniforms(prog)
         self._set(prog, u_count=self.count, u_grid=grid)
-        prog.run(*_splat_groups(self.count))
+        prog.run(*splat_groups(self.count))
         self.ctx.memory_barrier()
 
     def _scan(self) -> tuple[np.ndarray, int]:
@@ -283,7 +140,7 @@ class TileRenderer:
                   u_depth_shift=layout.depth_shift)
         for first in range(0, int(counts.max(initial=0)), TILE_EMIT_CHUNK):
             self._set(prog, u_first=first)
-            prog.run(*_splat_groups(self.count))
+            prog.run(*splat_groups(self.count))
         self.ctx.memory_barrier()
 
     def _read_keys(self, layout: KeyLayout, total: int) -> tuple[np.ndarray, np.ndarray | None]:
@@ -313,18 +170,18 @@ class TileRenderer:
         self._bufs["RANGES"].ensure(n_tiles * 8).write(ranges.tobytes())
         return ranges
 
-    def _rasterize(self, camera: Camera, layout: KeyLayout, grid: tuple[int, int],
+    def _rasterize(self, view: View, layout: KeyLayout, grid: tuple[int, int],
                    ranges: np.ndarray) -> None:
         longest = int((ranges[:, 1] - ranges[:, 0]).max(initial=0))
         passes = max(1, -(-longest // TILE_LIST_CHUNK))
-        pixels = camera.width * camera.height
+        pixels = view.width * view.height
         self._bufs["OUT_RGBA"].ensure(pixels * 16)
         self._bufs["OUT_DEPTH"].ensure(pixels * 4)
         self._bind_all()
         d = self._defines(layout)
-        d.update(camera.model.defines())          # surfels: orthographic T_2 = (0, 0, 1)
+        d.update(view.defines)          # surfels: orthographic T_2 = (0, 0, 1)
         prog = self.programs.compute("tile_rasterize.comp", d)
-        self._set(prog, u_grid=grid, u_size=(camera.width, camera.height),
+        self._set(prog, u_grid=grid, u_size=(view.width, view.height),
                   u_background=self.settings.background, u_index_mask=layout.index_mask)
         band = max(1, RASTER_BAND_TILES // grid[0])  # tile rows per dispatch
         self._set(prog, u_passes=passes)
@@ -343,12 +200,12 @@ class TileRenderer:
         self.ctx.memory_barrier()
 
     # ----------------------------------------------------------------------------- frames
-    def _frame(self, camera: Camera, stages: bool = False):
+    def _frame(self, view: View, stages: bool = False):
         """Run every stage; returns (layout, counts, emitted keys/values or None, sorted keys)."""
-        grid = tile_grid(camera.width, camera.height)
+        grid = tile_grid(view.width, view.height)
         n_tiles = grid[0] * grid[1]
         if grid[0] > MAX_GROUPS or grid[1] > MAX_GROUPS:
-            raise SplatglError(f"image of {camera.width} x {camera.height} has too many tiles")
+            raise SplatglError(f"image of {view.width} x {view.height} has too many tiles")
         layout = KeyLayout.choose(self.count, n_tiles)
         clock = [time.perf_counter()]
 
@@ -359,7 +216,7 @@ class TileRenderer:
         counts, total, emitted, keys = np.zeros(0, np.uint32), 0, None, np.zeros(0, np.uint64)
         self._bind_all()
         if self.count:
-            self._project(camera, grid)
+            self._project(view, grid)
         lap()
         if self.count:
             counts, total = self._scan()
@@ -374,7 +231,7 @@ class TileRenderer:
         lap()
         ranges = self._ranges(layout, keys, n_tiles)
         lap()
-        self._rasterize(camera, layout, grid, ranges)
+        self._rasterize(view, layout, grid, ranges)
         lap()
         self._frame_clock = (clock, total)
         return layout, counts, emitted, keys
@@ -384,24 +241,21 @@ class TileRenderer:
         d = np.diff(clock)
         return TileTimes(*(float(v) for v in d), float(readback), int(total))
 
-    def render_layers(self, camera: Camera, depth: bool = True) -> TileImage:
-        """Colour and (when ``depth``) accumulated depth of one view; see :class:`TileImage`."""
-        self._frame(camera)
+    def render(self, view: View, depth: bool = False) -> RenderOutput:
+        """Colour, alpha and (when ``depth``) the accumulated depth of one view; RGB = C +
+        (1 - A) background, alpha = A; row 0 is the top."""
+        self._frame(view)
         t0 = time.perf_counter()
-        h, w = camera.height, camera.width
+        h, w = view.height, view.width
         rgba = self._bufs["OUT_RGBA"].read(h * w * 16, np.float32).reshape(h, w, 4)
         dep = (self._bufs["OUT_DEPTH"].read(h * w * 4, np.float32).reshape(h, w) if depth
                else np.zeros((0, 0), np.float32))
         self.last_times = self._times(time.perf_counter() - t0)
-        return TileImage(rgba.copy(), dep.copy())
+        return RenderOutput(rgba.copy(), dep.copy())
 
-    def render(self, camera: Camera) -> np.ndarray:
-        """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top."""
-        return self.render_layers(camera, depth=False).rgba
-
-    def debug_stages(self, camera: Camera) -> TileStages:
+    def debug_stages(self, view: View) -> TileStages:
         """Run one frame and return its integer stages in the reference's layout."""
-        layout, counts, emitted, keys = self._frame(camera, stages=True)
+        layout, counts, emitted, keys = self._frame(view, stages=True)
         rect = (self._bufs["RECT"].read(self.count * 16, np.uint32).reshape(-1, 4).astype(np.int64)
                 if self.count else np.zeros((0, 4), np.int64))
         if emitted is None:
@@ -410,7 +264,7 @@ class TileRenderer:
             e_keys, e_vals = layout.to_reference(*emitted)
         values = None if layout.packed else self._bufs["VALUES"].read(len(keys) * 4, np.uint32)
         s_keys, s_vals = layout.to_reference(keys, values)
-        grid = tile_grid(camera.width, camera.height)
+        grid = tile_grid(view.width, view.height)
         ranges = self._bufs["RANGES"].read(grid[0] * grid[1] * 8, np.uint32).reshape(-1, 2)
         return TileStages(counts.astype(np.int64), rect[:, :2], rect[:, 2:], e_keys, e_vals,
                           s_keys, s_vals, ranges.astype(np.int64))

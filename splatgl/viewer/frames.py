@@ -21,7 +21,7 @@ from ..output.pictures import depth_preview, heatmap
 from ..api import Renderer
 from ..model.scene import Scene
 from ..model.settings import RendererKind, RenderSettings
-from ..cameras.view import apply_model
+from ..cameras.view import View
 
 #: Error that saturates the difference view's colour scale (8/255).
 DIFFERENCE_SCALE = 8.0 / 255.0
@@ -68,12 +68,12 @@ def render_frame(renderer: Renderer, scene: Scene, camera: Camera, settings: Ren
     """Render ``camera``'s view (world frame; the model transform is applied here)."""
     if view is ViewMode.COLOR and kind is RendererKind.QUAD:
         quad = renderer.renderer_for(scene, settings, kind)
-        cam = apply_model(camera, settings.model)
+        frame = View.of(camera, settings, scene)
         t0 = time.perf_counter()
-        order = quad.visible_order(cam)  # cull + sort (draw() reuses it for this camera)
+        order = quad.order(frame)  # cull + sort (draw() reuses it for this view)
         t1 = time.perf_counter()
-        target = quad.target(cam)
-        quad.draw(cam, target)  # upload + draw, ends with a finish
+        target = quad.target(frame)
+        quad.draw(frame, target)  # upload + draw, ends with a finish
         t2 = time.perf_counter()
         return FrameResult(target.texture, None, True, t1 - t0, t2 - t1,
                            f"{len(order):,} visible / {scene.count:,}")

@@ -1,0 +1,117 @@
+"""The order stage as the quad path uses it: a source of sorted rows per view.
+
+A :class:`RowSource` turns a :class:`~splatgl.cameras.view.View` into the rows to draw, front to
+back (and, for a level-of-detail cut, an opacity weight per sorted slot).  :class:`SceneOrder`
+is the source of a plain scene: the chunked cull (:mod:`splatgl.order.chunks`, or the lens
+cameras' :mod:`splatgl.order.lens_cull`) and the sort the settings choose; the level-of-detail
+source is :class:`splatgl.lod.source.LodOrder`.  The quad path draws whatever a source gives.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable, Protocol
+
+import numpy as np
+
+from ..cameras.view import View
+from ..model.scene import Scene
+from ..model.settings import RenderSettings, SortKey
+from ..twins.project import to_camera
+from .chunks import ChunkedCull, keys_order, keys_pairs
+from .lens_cull import lens_visible_keys
+from .sort import bucket_sort, depth_sort
+
+#: ``sort(depth (M,) float32, rows (M,) uint32) -> rows front to back``: the sort stage.
+SortFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class OrderTimes:
+    """Seconds of one view's order stage: ``cull`` (writing the sort keys included), ``sort``,
+    and ``build`` (building the scene's chunked cull data, on the first culled view only)."""
+
+    cull: float = 0.0
+    sort: float = 0.0
+    build: float = 0.0
+
+
+class RowSource(Protocol):
+    """What the quad path draws from (see the module doc)."""
+
+    #: Rows of the scene the source indexes (the uploaded scene's count).
+    count: int
+    #: The last view's order stage times.
+    times: OrderTimes
+    #: The last view's opacity weight per sorted slot, (K,) float32, or None (all 1).
+    slot_weights: np.ndarray | None
+
+    def order(self, view: View) -> np.ndarray:
+        """(K,) uint32 rows of the scene, front to back."""
+        ...
+
+
+def cpu_sort(settings: RenderSettings) -> SortFn:
+    """The CPU sort the settings choose: exact 32-bit depth keys, or 16-bit buckets."""
+    return bucket_sort if settings.sort_key is SortKey.BUCKET16 else depth_sort
+
+
+class SceneOrder:
+    """The order stage of a plain scene (see the module doc).
+
+    The order is reused while the view's :attr:`~splatgl.cameras.view.View.key` repeats; with
+    ``settings.resort_interval`` N > 1 only every N-th change of view re-sorts (sort lag, for
+    the benchmark).  ``sort``: the sort stage for settings other than the exact CPU sort (the
+    device radix sort needs the GL context, which its owner holds).
+    """
+
+    def __init__(self, scene: Scene, settings: RenderSettings, sort: SortFn | None = None):
+        self.scene = scene
+        self.settings = settings
+        self.count = scene.count
+        self.sort = sort or cpu_sort(settings)
+        self.chunks: ChunkedCull | None = None   # built on the first culled view
+        self.times = OrderTimes()
+        self.slot_weights: np.ndarray | None = None
+        self._key: tuple | None = None
+        self._order = np.zeros(0, np.uint32)
+        self._stale = 0
+
+    def order(self, view: View) -> np.ndarray:
+        self.times = OrderTimes()
+        if view.key == self._key:
+            return self._order
+        if self._key is not None and self._stale + 1 < self.settings.resort_interval:
+            self._stale += 1
+            self._key = view.key
+            return self._order
+        self._stale = 0
+        lens = view.camera.is_lens
+        build = 0.0
+        if (lens or self.settings.cull) and self.chunks is None:
+            tb = time.perf_counter()
+            self.chunks = ChunkedCull.from_scene(self.scene)
+            build = time.perf_counter() - tb
+        t0 = time.perf_counter()
+        if lens or self.settings.cull:
+            if lens:   # distance keys; equirect seam splats twice (splatgl/cameras/equirect.py)
+                keys = lens_visible_keys(self.chunks, view.anchored, view.near, view.scale)
+            else:
+                keys = self.chunks.visible_keys(view.anchored, view.near, self.settings.antialias,
+                                                view.scale)
+            t1 = time.perf_counter()
+            if self.settings.sort_key is SortKey.EXACT:
+                order = keys_order(keys)
+            else:
+                order = self.sort(*keys_pairs(keys, self.scene.count))
+        else:
+            p_cam = to_camera(self.scene.relative_means, view.anchored)
+            keep = np.flatnonzero(p_cam[:, 2] > view.near).astype(np.uint32)  # keys need z > 0
+            depth = p_cam[keep, 2]
+            t1 = time.perf_counter()
+            order = self.sort(depth, keep)
+        t2 = time.perf_counter()
+        self.times = OrderTimes(t1 - t0, t2 - t1, build)
+        self._key, self._order = view.key, order
+        return order

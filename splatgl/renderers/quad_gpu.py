@@ -1,0 +1,120 @@
+"""The quad path's GL resources: per-view buffers, vertex arrays, the blend target.
+
+The scene's own storage buffers are uploaded once (:class:`~splatgl.gl.scene_buffers.
+SceneBuffers`); per view only the sorted rows (and a level-of-detail cut's per-slot opacity
+weights) are written, into buffers that grow as needed and are reused.
+"""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from ..gl.buffers import GrowableBuffer
+from ..gl.targets import ColorTarget
+from ..model.settings import Precision
+from .early_stop import COMMAND_BYTES
+
+#: Storage bindings of the compute pre-pass (after the scene's 0..4).
+BINDING_ORDER, BINDING_PREPARED = 5, 6
+#: Storage binding of the benchmark's fragment counters (shaders/quad.frag, COUNT_FRAGMENTS).
+BINDING_FRAGMENT_COUNTS = 7
+#: Storage binding of the pre-pass's per-slot opacity weights (OPACITY_WEIGHT; after early
+#: termination's 8..10): the level-of-detail blend, splatgl/lod/source.py.
+BINDING_OPACITY_WEIGHT = 11
+#: Bytes per splat of the pre-pass output (4 vec4, see shaders/quad_prepass.comp).
+PREPARED_BYTES = 64
+#: Work-group size of shaders/quad_prepass.comp.
+PREPASS_GROUP = 128
+
+
+class QuadResources:
+    """The per-view GL objects of one quad renderer (see the module doc).
+
+    ``uses_prepass``: whether the draw reads the pre-pass's prepared quads (instance k of a
+    range reads ``prepared[u_base + k]``) instead of the sorted indices.
+    """
+
+    def __init__(self, ctx: moderngl.Context, uses_prepass: bool):
+        self.ctx, self.uses_prepass = ctx, uses_prepass
+        self.index = GrowableBuffer(ctx, BINDING_ORDER, minimum=4)
+        self.weights = GrowableBuffer(ctx, BINDING_OPACITY_WEIGHT, minimum=4)
+        self.prepared = GrowableBuffer(ctx, BINDING_PREPARED)
+        self._target: ColorTarget | None = None
+        self._vaos: dict[tuple, moderngl.VertexArray] = {}
+        self._plain_command: moderngl.Buffer | None = None
+
+    def upload(self, order: np.ndarray, weights: np.ndarray | None) -> None:
+        """Write the sorted rows, and the cut's opacity weights (one float per slot) if any."""
+        self.index.upload(order.tobytes())
+        if self.index.grew:
+            self._release_vaos()  # they read the old buffer
+        if weights is not None:
+            self.weights.upload(weights.tobytes())
+
+    def run_prepass(self, comp: moderngl.ComputeShader, count: int, weighted: bool) -> None:
+        """Run ``comp`` (quad_prepass.comp, uniforms set) over the ``count`` sorted splats into
+        the prepared buffer."""
+        self.prepared.ensure(count * PREPARED_BYTES).bind_to_storage_buffer(BINDING_PREPARED)
+        if count == 0:
+            return
+        if weighted:
+            self.weights.bind()
+        comp["u_count"].value = count
+        self.index.bind()
+        comp.run(group_x=(count + PREPASS_GROUP - 1) // PREPASS_GROUP)
+        self.ctx.memory_barrier()
+
+    def target(self, width: int, height: int, precision: Precision, depth: bool,
+               stop_mask: bool) -> ColorTarget:
+        """The blend target of this size and kind (re-made when either changes)."""
+        t = self._target
+        if (t is None or t.size != (width, height) or t.precision is not precision
+                or t.has_depth != depth or t.has_stop_mask != stop_mask):
+            if t is not None:
+                t.release()
+            self._target = ColorTarget(self.ctx, width, height, precision, depth, stop_mask=stop_mask)
+        return self._target
+
+    def vertex_array(self, prog: moderngl.Program, source: moderngl.Buffer | None) -> moderngl.VertexArray:
+        """The VAO drawing ``prog`` with its per-instance attribute read from ``source``: the
+        sorted indices, the occlusion cull's survivors, or none (the pre-pass's instance k
+        reads prepared[u_base + k])."""
+        attribute = "splat_slot" if self.uses_prepass else "splat_index"
+        key = (prog.glo, None if source is None else source.glo)
+        vao = self._vaos.get(key)
+        if vao is None:
+            content = [] if source is None else [(source, "u4/i", attribute)]
+            vao = self._vaos[key] = self.ctx.vertex_array(prog, content)
+        return vao
+
+    def draw_range(self, prog: moderngl.Program, start: int, n: int) -> None:
+        """Draw sorted slots [start, start + n) without early termination."""
+        self.ctx.enable(moderngl.BLEND)
+        if self.uses_prepass:
+            prog["u_base"].value = start
+            self.vertex_array(prog, None).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+            return
+        vao = self.vertex_array(prog, self.index.buf)
+        if start == 0:
+            vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+            return
+        # A later range: the instanced attribute starts at baseInstance (an indirect command).
+        if self._plain_command is None:
+            self._plain_command = self.ctx.buffer(reserve=COMMAND_BYTES)
+        self._plain_command.write(np.array([4, n, 0, start, 0], np.uint32).tobytes())
+        vao.render_indirect(self._plain_command, moderngl.TRIANGLE_STRIP, count=1)
+
+    def _release_vaos(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+
+    def release(self) -> None:
+        self._release_vaos()
+        for buf in (self.index, self.weights, self.prepared):
+            buf.release()
+        for obj in (self._target, self._plain_command):
+            if obj is not None:
+                obj.release()
+        self._target = self._plain_command = None

@@ -1,0 +1,123 @@
+"""The tile renderer's keys and records: the tile grid, the sort keys' bit layout, stage times,
+and the integer stages compared with the NumPy reference (:mod:`splatgl.renderers.tile`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import TILE_SIZE
+from ..gl.scene_buffers import BINDING_SH
+
+#: Storage-buffer bindings of shaders/lib/tile_common.glsl and tile_rasterize.comp (after the
+#: scene's 0..BINDING_SH); handed to GLSL as TILE_BINDING_* defines.
+BINDINGS = {name: BINDING_SH + 1 + i for i, name in enumerate(
+    ("MEAN_DEPTH", "CONIC_O", "COLOR", "RECT", "TOUCHED", "OFFSETS", "KEYS", "VALUES", "RANGES",
+     "OUT_RGBA", "OUT_DEPTH", "SURFEL"))}
+#: Invocations per work group of the per-splat stages (project, emit).
+SPLAT_GROUP = 256
+#: Largest number of work groups along one dispatch axis guaranteed by OpenGL.
+MAX_GROUPS = 65535
+#: Bits of a positive float32's pattern (sign bit clear).
+DEPTH_BITS = 31
+#: Tiles per rasterize dispatch, at most: the image is drawn in bands of whole tile rows, with a
+#: finish between bands, so a long frame reports progress and Ctrl-C stops it within one band.
+RASTER_BAND_TILES = 512
+#: Entries of a tile's sorted list one rasterize pass blends at most; longer lists take more
+#: passes (the pixel state carried in the output buffers).  llvmpipe ends all loops of an
+#: invocation after 65535 iterations in total (gallivm's LP_MAX_TGSI_LOOP_ITERATIONS), which a
+#: single pass over a 55k-splat tile exceeded, leaving the tile blank; a pass of 16384 entries
+#: runs about 2 x 16384 + 64 iterations (the blend loop, and the serial scan of invocation 0).
+TILE_LIST_CHUNK = 16384
+#: Keys of one splat's tile rectangle one emit dispatch writes at most (the same loop limit: a
+#: splat covering a 4096 x 4096 image has 65536 tiles); larger rectangles take more dispatches.
+TILE_EMIT_CHUNK = 32768
+
+
+def tile_grid(width: int, height: int) -> tuple[int, int]:
+    """(tiles_x, tiles_y) of 16 x 16 tiles covering a ``width`` x ``height`` image."""
+    return -(-width // TILE_SIZE), -(-height // TILE_SIZE)
+
+
+@dataclass(frozen=True)
+class KeyLayout:
+    """Bit layout of the uint64 sort keys: ``tile << tile_shift | depth_bits << depth_shift``.
+
+    Packed (``packed``): the splat index fills the low ``depth_shift`` bits, so sorting the keys
+    alone reproduces the reference's stable sort of ``(tile << 32) | depth_bits``.  Unpacked:
+    exactly the reference layout (``tile_shift`` 32, ``depth_shift`` 0) plus a value array.
+    """
+
+    tile_shift: int
+    depth_shift: int
+    packed: bool
+
+    @classmethod
+    def choose(cls, n_splats: int, n_tiles: int) -> "KeyLayout":
+        index_bits = max(1, (max(n_splats, 1) - 1).bit_length())
+        tile_bits = max(1, (max(n_tiles, 1) - 1).bit_length())
+        if index_bits + DEPTH_BITS + tile_bits <= 64:
+            return cls(index_bits + DEPTH_BITS, index_bits, True)
+        return cls(32, 0, False)
+
+    @property
+    def index_mask(self) -> int:
+        """Mask of the packed index bits (0 when unpacked)."""
+        return (1 << self.depth_shift) - 1 if self.packed else 0
+
+    def to_reference(self, keys: np.ndarray, values: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """(M,) uint64 keys in this layout -> (reference keys (M,) uint64, indices (M,) int64)."""
+        if not self.packed:
+            return keys.copy(), values.astype(np.int64)
+        tile = keys >> np.uint64(self.tile_shift)
+        depth = (keys >> np.uint64(self.depth_shift)) & np.uint64((1 << DEPTH_BITS) - 1)
+        index = (keys & np.uint64(self.index_mask)).astype(np.int64)
+        return (tile << np.uint64(32)) | depth, index
+
+
+@dataclass(frozen=True)
+class TileTimes:
+    """Wall-clock seconds of each stage of one tile-renderer frame (GPU stages include a finish)."""
+
+    project: float
+    scan: float
+    emit: float
+    sort: float
+    ranges: float
+    rasterize: float
+    readback: float
+    n_keys: int
+
+    @property
+    def total(self) -> float:
+        return (self.project + self.scan + self.emit + self.sort + self.ranges + self.rasterize
+                + self.readback)
+
+
+@dataclass(frozen=True)
+class TileStages:
+    """The integer stages of one view, for comparison with :mod:`splatgl.reference`.
+
+    tiles_touched: (N,) int64.  rect_min, rect_max: (N, 2) int64 tile rectangles (x, y).
+    emitted_keys, emitted_values: (M,) uint64 reference-layout keys ``(tile << 32) | depth
+    bits`` and (M,) int64 splat indices in emission order.  keys, values: the same sorted.
+    ranges: (tiles, 2) int64 ``[start, end)``.
+    """
+
+    tiles_touched: np.ndarray
+    rect_min: np.ndarray
+    rect_max: np.ndarray
+    emitted_keys: np.ndarray
+    emitted_values: np.ndarray
+    keys: np.ndarray
+    values: np.ndarray
+    ranges: np.ndarray
+
+
+def splat_groups(n: int) -> tuple[int, int]:
+    """(groups_x, groups_y) covering ``n`` splats with 256-invocation groups (lib/tile_common)."""
+    groups = max(1, -(-n // SPLAT_GROUP))
+    gy = -(-groups // MAX_GROUPS)
+    return -(-groups // gy), gy
