@@ -21,7 +21,7 @@ from .errors import CameraError, SplatglError
 from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
 from .gl.limits import check_image_size
-from .output.layers import RenderOutput
+from .output.layers import Layer, RenderOutput, with_layers
 from .progress import ProgressCallback
 from .model.scene import Scene
 from .model.settings import RenderSettings, RendererKind
@@ -68,6 +68,9 @@ def default_camera(scene: Scene, width: int = 1280, height: int = 720,
     pose = orbit(centre, distance, 180.0, DEFAULT_ELEVATION, up)
     return Camera.from_fov(width, height, fov_y_degrees, pose)
 
+
+#: What :meth:`Renderer.render_layers` returns unless asked otherwise.
+DEPTH_LAYERS = with_layers(Layer.DEPTH)
 
 #: GPU renderers (each holding an uploaded copy of its scene) kept per :class:`Renderer`; the
 #: least recently used is released beyond this.
@@ -151,8 +154,10 @@ class Renderer:
 
     def render_layers(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
                       kind: RendererKind = RendererKind.QUAD,
-                      progress: ProgressCallback | None = None) -> RenderOutput:
-        """Colour, alpha and accumulated depth of one view (same pass, same weights)."""
+                      progress: ProgressCallback | None = None,
+                      layers: frozenset[Layer] = DEPTH_LAYERS) -> RenderOutput:
+        """The ``layers`` of one view (default colour, alpha and the accumulated depth; every
+        layer from the same pass, with the same weights; :mod:`splatgl.output.layers`)."""
         kind = RendererKind(kind)
         self._check_open()
         if kind is RendererKind.REFERENCE:
@@ -160,20 +165,23 @@ class Renderer:
         make_current(self.ctx)
         self._check_size(camera, kind)
         with _reporting(self._path(scene, settings, kind), progress) as path:
-            return path.render(View.of(camera, settings, scene), depth=True)
+            return path.render(View.of(camera, settings, scene), layers)
 
     def render_many(self, scene: Scene, cameras: Iterable[Camera],
                     settings: RenderSettings = RenderSettings(),
                     kind: RendererKind = RendererKind.QUAD,
-                    depth: bool = False) -> Iterator[np.ndarray | RenderOutput]:
+                    layers: frozenset[Layer] | None = None) -> Iterator[np.ndarray | RenderOutput]:
         """Render ``cameras`` one after another, yielding each frame as it is done.
 
         The scene is uploaded and the shaders compiled once (on the first frame); each frame is
-        exactly what :meth:`render` (or :meth:`render_layers` with ``depth``) returns for that
-        camera.  Yields (H, W, 4) float32 arrays, or :class:`RenderOutput` with ``depth``.
+        exactly what :meth:`render` (or :meth:`render_layers` with ``layers``) returns for that
+        camera.  Yields (H, W, 4) float32 arrays, or :class:`RenderOutput` with ``layers``.
         """
         for camera in cameras:
-            yield (self.render_layers if depth else self.render)(scene, camera, settings, kind)
+            if layers is None:
+                yield self.render(scene, camera, settings, kind)
+            else:
+                yield self.render_layers(scene, camera, settings, kind, layers=layers)
 
     def close(self) -> None:
         """Release every GPU object and the context (if this Renderer made it); closing twice
@@ -224,7 +232,7 @@ def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettin
     ref = render_reference(scene, camera, settings,
                            compat=settings.convention, progress=progress)
     rgba = np.concatenate([ref.color, ref.alpha[..., None]], axis=-1).astype(np.float32)
-    return RenderOutput(rgba, np.asarray(ref.depth, np.float32))
+    return RenderOutput(rgba, np.asarray(ref.depth, np.float32), DEPTH_LAYERS)
 
 
 def render(scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),

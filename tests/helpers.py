@@ -17,6 +17,7 @@ from splatgl.cameras.view import View
 from splatgl.constants import SH_C0, sh_coeff_count
 from splatgl.model.scene import Scene, SplatKind
 from splatgl.model.settings import RenderSettings
+from splatgl.output.layers import BASE, Layer, with_layers
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -128,7 +129,7 @@ def tile_and_reference(ctx, scene, camera, settings):
 
     renderer = TileRenderer(ctx, scene, settings)
     try:
-        got = renderer.render(View.of(camera, settings, scene), depth=True)
+        got = renderer.render(View.of(camera, settings, scene), with_layers(Layer.DEPTH))
     finally:
         renderer.release()
     return got, render_reference(scene, camera, settings, np.float32)
@@ -298,5 +299,7 @@ def view_for(renderer, camera) -> View:
 
 def draw(renderer, camera, depth: bool = False, **options):
     """``renderer.render`` (a quad, tile or level-of-detail renderer) of ``camera``'s view
-    (:func:`view_for`): a RenderOutput.  ``options`` go to ``render`` (``on_batch``)."""
-    return renderer.render(view_for(renderer, camera), depth, **options)
+    (:func:`view_for`), with the depth layer when ``depth``: a RenderOutput.  ``options`` go to
+    ``render`` (``on_batch``)."""
+    layers = with_layers(Layer.DEPTH) if depth else BASE
+    return renderer.render(view_for(renderer, camera), layers, **options)

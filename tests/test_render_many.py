@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import splatgl
+from splatgl.output.layers import Layer, with_layers
 from splatgl.tasks import batch
 from splatgl.cameras.files import save_camera
 from splatgl.cli import main
@@ -199,7 +200,7 @@ def test_render_many_api_equals_render(gl_renderer):
     many = list(gl_renderer.render_many(scene, cams))
     for cam, img in zip(cams, many):
         np.testing.assert_array_equal(img, gl_renderer.render(scene, cam))
-    layers = next(gl_renderer.render_many(scene, cams[:1], depth=True))
+    layers = next(gl_renderer.render_many(scene, cams[:1], layers=with_layers(Layer.DEPTH)))
     assert layers.depth.shape == (32, 48) and np.array_equal(layers.rgba, many[0])
 
 

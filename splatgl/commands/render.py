@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import SplatglError
 from ..gl.context import NO_GL_RENDERER, renderer_name
 from ..output.images import check_image_suffix, write_image
-from ..output.layers import RenderOutput
+from ..output.layers import BASE, Layer, RenderOutput, with_layers
 from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..output.pictures import depth_preview
@@ -90,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     check_image_suffix(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     scene, settings, camera = inputs_from_args(args)
     want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
+    layers = with_layers(Layer.DEPTH) if want_depth else BASE
     lod = any(v is not None for v in (args.lod_threshold, args.lod_budget, args.lod_blend))
     if lod and stereo is not None:
         raise SplatglError("--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be "
@@ -97,12 +98,12 @@ def run(args: argparse.Namespace) -> int:
     times = None
     if lod:
         from ..lod.command import render_lod
-        out, times, gl_name = render_lod(args, settings, camera, want_depth)
+        out, times, gl_name = render_lod(args, settings, camera, layers)
         eyes = [out]
         kind_text = f"{kind.value}, level of detail"
     else:
         cameras = list(eye_cameras(camera, args.stereo)) if stereo is not None else [camera]
-        eyes, times, gl_name = _render(args, scene, settings, cameras, kind, want_depth)
+        eyes, times, gl_name = _render(args, scene, settings, cameras, kind, layers)
         kind_text = kind.value
     if stereo is StereoLayout.SEPARATE:
         with outputs:
@@ -144,7 +145,7 @@ def _print_timings(args: argparse.Namespace, gl_name: str, times) -> None:
             print(f"timings: {format_timings(times)}")
 
 
-def _render(args, scene, settings, cameras, kind, want_depth):
+def _render(args, scene, settings, cameras, kind, layers):
     """(a RenderOutput per camera, the renderer's last_times or None, the GL renderer's name):
     one context for all."""
     progress = default_progress()
@@ -156,8 +157,8 @@ def _render(args, scene, settings, cameras, kind, want_depth):
             check_size(args, camera, kind, renderer.ctx if renderer is not None else None)
             if renderer is None:
                 outs.append(render_reference_layers(scene, camera, settings, progress))
-            elif want_depth:
-                outs.append(renderer.render_layers(scene, camera, settings, kind, progress))
+            elif layers != BASE:
+                outs.append(renderer.render_layers(scene, camera, settings, kind, progress, layers))
             else:
                 outs.append(RenderOutput(renderer.render(scene, camera, settings, kind, progress), None))
         if renderer is not None:

@@ -11,7 +11,7 @@ from typing import Iterable, Iterator
 from ..cameras.camera import Camera
 from ..errors import SplatglError
 from ..gl.context import create_headless_context, make_current, renderer_name
-from ..output.layers import RenderOutput
+from ..output.layers import BASE, Layer, RenderOutput
 from ..model.settings import RenderSettings
 from ..cameras.view import View
 from .build import LodTree
@@ -57,18 +57,18 @@ class LodFrames:
             self.ctx.release()
             raise
 
-    def render_view(self, camera: Camera, depth: bool = False) -> RenderOutput:
+    def render_view(self, camera: Camera, layers: frozenset[Layer] = BASE) -> RenderOutput:
         make_current(self.ctx)
         self.renderer.rows.skip_within = None
-        return self.renderer.render(View.of(camera, self.settings, self.nodes), depth)
+        return self.renderer.render(View.of(camera, self.settings, self.nodes), layers)
 
     def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
-                    depth: bool = False) -> Iterator:
+                    layers: frozenset[Layer] | None = None) -> Iterator:
         """Frames of ``cameras`` (``scene``, ``settings`` and ``kind`` are the tree's, given at
-        construction): (H, W, 4) arrays, or :class:`RenderOutput` with ``depth``."""
+        construction): (H, W, 4) arrays, or :class:`RenderOutput` with ``layers``."""
         for camera in cameras:
-            out = self.render_view(camera, depth)
-            yield out if depth else out.rgba
+            out = self.render_view(camera, BASE if layers is None else layers)
+            yield out.rgba if layers is None else out
 
     def renderer_for(self, scene=None, settings=None, kind=None) -> QuadRenderer:
         return self.renderer
@@ -88,14 +88,14 @@ class LodFrames:
 
 
 def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camera,
-               want_depth: bool) -> tuple[RenderOutput, SimpleNamespace, str]:
+               layers: frozenset[Layer]) -> tuple[RenderOutput, SimpleNamespace, str]:
     """Render ``args.scene`` (a .lod.ply) with the cut ``args`` asks for: (layers, times with
     ``cut_nodes`` and ``cut`` (seconds) beside the quad path's stage times, the GL renderer's
     name)."""
     lod = lod_settings_from_args(args)
     with LodFrames(read_lod(args.scene), settings, lod) as frames:
         gl_name = renderer_name(frames.ctx)
-        out = frames.render_view(camera, want_depth)
+        out = frames.render_view(camera, layers)
         renderer, cut = frames.renderer, frames.renderer.rows
         times = SimpleNamespace(**vars(renderer.last_times), cut_nodes=cut.last_cut_nodes,
                                 cut=cut.last_cut_s, threshold=f"{cut.last_threshold_px:.2f} px")

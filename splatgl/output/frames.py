@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Sequence
 
 from ..errors import SplatglError
+from .layers import Layer, with_layers
 from .images import IMAGE_SUFFIXES, inspect_image
 from .video import VIDEO_SUFFIXES
 
@@ -80,9 +81,12 @@ class FrameTarget:
         return self.kind is TargetKind.VIDEO
 
     @property
-    def wants_depth(self) -> bool:
-        """EXR frames carry the depth channel, as ``splatgl render -o x.exr`` does."""
-        return not self.is_video and self.pattern.lower().endswith(".exr")
+    def layers(self) -> frozenset[Layer] | None:
+        """The layers each frame needs beyond colour (None: colour alone): EXR frames carry the
+        depth channel, as ``splatgl render -o x.exr`` does."""
+        if not self.is_video and self.pattern.lower().endswith(".exr"):
+            return with_layers(Layer.DEPTH)
+        return None
 
     def frame_path(self, index: int) -> Path:
         return Path(self.pattern % index)
@@ -118,7 +122,7 @@ def plan_frames(target: FrameTarget, sizes: Sequence[tuple[int, int]], numbers: 
     another size, channel count or bit depth stops the run before any work, in one line."""
     if not resume or target.is_video:
         return FramePlan(list(range(len(sizes))))
-    channels = 5 if target.wants_depth else 3
+    channels = 5 if target.layers is not None else 3
     todo, damaged = [], 0
     for k, ((width, height), number) in enumerate(zip(sizes, numbers)):
         path = target.frame_path(number)

@@ -36,7 +36,7 @@ from ..gl.targets import ColorTarget
 from ..model.scene import Scene
 from ..model.settings import EarlyStop, RenderSettings, SortKey
 from ..order.stage import RowSource, SceneOrder, cpu_sort
-from ..output.layers import RenderOutput
+from ..output.layers import BASE, Layer, RenderOutput
 from .batches import Batches
 from .early_stop import BatchHook
 from .quad_gpu import QuadResources
@@ -128,21 +128,22 @@ class QuadRenderer:
             return device_depth_sort(self._sorter, depth, keep)
         return cpu_sort(self.settings)(depth, keep)
 
-    def target(self, view: View, depth: bool = False) -> ColorTarget:
-        return self.gpu.target(view.width, view.height, self.settings.precision, depth,
-                               self.settings.early_stop is not EarlyStop.OFF)
+    def target(self, view: View, layers: frozenset[Layer] = BASE) -> ColorTarget:
+        """The blend target for ``view`` with the attachments ``layers`` need."""
+        return self.gpu.target(view.width, view.height, self.settings.precision,
+                               Layer.DEPTH in layers, self.settings.early_stop is not EarlyStop.OFF)
 
     def order(self, view: View) -> np.ndarray:
         """The rows this view draws, front to back (the order stage of :attr:`rows`)."""
         view.model.check_support(self.programs.surfels, "quad")
         return self.rows.order(view)
 
-    def prepare(self, view: View, depth: bool = False) -> tuple[int, FrameSwitches]:
+    def prepare(self, view: View, layers: frozenset[Layer] = BASE) -> tuple[int, FrameSwitches]:
         """Order, upload and (with the pre-pass) prepare the quads of ``view``; returns the
         splats to draw and the frame's switches.  The scene and the order stay bound."""
         order = self.order(view)
         weights = self.rows.slot_weights
-        frame = FrameSwitches(depth=depth, weights=weights is not None,
+        frame = FrameSwitches(depth=Layer.DEPTH in layers, weights=weights is not None,
                               extra=tuple(self.frame_extra.items()))
         t0 = time.perf_counter()
         self.gpu.upload(order, weights)
@@ -157,15 +158,16 @@ class QuadRenderer:
         self._t_prepass = time.perf_counter() - t1
         return len(order), frame
 
-    def draw(self, view: View, target: ColorTarget, depth: bool = False,
+    def draw(self, view: View, target: ColorTarget, layers: frozenset[Layer] = BASE,
              on_batch: BatchHook | None = None) -> int:
         """Order, upload and draw into ``target`` (cleared to 0); returns the splats drawn.
 
-        With ``depth`` the program also writes the depth layer to the target's attachment 1
-        (``target`` from :meth:`target`).  ``on_batch(done, total)`` is called after each batch
-        of sorted splats; an exception it raises abandons the frame (GL state restored).
+        With :attr:`Layer.DEPTH` in ``layers`` the program also writes the depth layer to the
+        target's attachment 1 (``target`` from :meth:`target`).  ``on_batch(done, total)`` is
+        called after each batch of sorted splats; an exception it raises abandons the frame (GL
+        state restored).
         """
-        count, frame = self.prepare(view, depth)
+        count, frame = self.prepare(view, layers)
         tp = time.perf_counter()
         batched = self.batches.decide(view, count, frame)
         frame = FrameSwitches(frame.depth, batched, frame.weights, frame.extra)
@@ -197,17 +199,19 @@ class QuadRenderer:
         self._drawn = count
         return count
 
-    def render(self, view: View, depth: bool = False,
+    def render(self, view: View, layers: frozenset[Layer] = BASE,
                on_batch: BatchHook | None = None) -> RenderOutput:
-        """Colour, alpha and (with ``depth``) the accumulated depth layer, from the same pass;
-        ``on_batch`` as in :meth:`draw`; without one, :attr:`progress` hears each batch."""
+        """The ``layers`` of ``view`` (colour and alpha always; the accumulated depth from the
+        same pass, same weights); ``on_batch`` as in :meth:`draw`; without one,
+        :attr:`progress` hears each batch."""
         if on_batch is None and self.progress is not None:
             report = self.progress
             on_batch = lambda done, total: report(done, total, "quad: drawing splats")  # noqa: E731
-        target = self.target(view, depth)
-        self.draw(view, target, depth, on_batch)
+        target = self.target(view, layers)
+        self.draw(view, target, layers, on_batch)
         t0 = time.perf_counter()
         rgba = target.read()
+        depth = Layer.DEPTH in layers
         d = target.read_depth() if depth else np.zeros(rgba.shape[:2], np.float32)
         t1 = time.perf_counter()
         order, b = self.rows.times, self.batches
@@ -215,7 +219,7 @@ class QuadRenderer:
                                     self._t_draw, t1 - t0, self._drawn, b.occlusion_culled,
                                     order.build, self._t_coverage, b.fragments_estimate,
                                     b.batches, b.batched)
-        return RenderOutput(composite(rgba, self.settings.background), d)
+        return RenderOutput(composite(rgba, self.settings.background), d, layers)
 
     def release(self) -> None:
         self.batches.release()

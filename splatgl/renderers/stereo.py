@@ -46,7 +46,8 @@ def combine(left: RenderOutput, right: RenderOutput, layout: StereoLayout) -> Re
     depth = None
     if left.depth is not None and right.depth is not None:
         depth = np.concatenate([left.depth, right.depth], axis=axis)
-    return RenderOutput(np.concatenate([left.rgba, right.rgba], axis=axis), depth)
+    return RenderOutput(np.concatenate([left.rgba, right.rgba], axis=axis), depth,
+                        left.layers & right.layers)
 
 
 class StereoRenderer:
@@ -71,8 +72,9 @@ class StereoRenderer:
             return 2 * camera.width, camera.height
         return camera.width, 2 * camera.height
 
-    def render_layers(self, scene, camera, settings, kind, progress=None) -> RenderOutput:
-        left, right = (self._renderer.render_layers(scene, eye, settings, kind, progress)
+    def render_layers(self, scene, camera, settings, kind, progress=None, layers=None) -> RenderOutput:
+        left, right = (self._renderer.render_layers(scene, eye, settings, kind, progress,
+                                                    **({} if layers is None else {"layers": layers}))
                        for eye in eye_cameras(camera, self.ipd))
         return combine(left, right, self.layout)
 
@@ -81,7 +83,10 @@ class StereoRenderer:
                        for eye in eye_cameras(camera, self.ipd))
         return combine(left, right, self.layout).rgba
 
-    def render_many(self, scene, cameras, settings, kind, depth: bool = False):
+    def render_many(self, scene, cameras, settings, kind, layers=None):
         """Stereo frames of ``cameras``, one after another (as :meth:`Renderer.render_many`)."""
         for camera in cameras:
-            yield (self.render_layers if depth else self.render)(scene, camera, settings, kind)
+            if layers is None:
+                yield self.render(scene, camera, settings, kind)
+            else:
+                yield self.render_layers(scene, camera, settings, kind, layers=layers)

@@ -40,7 +40,7 @@ from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..model.scene import Scene, SplatKind
 from ..model.settings import RenderSettings
-from ..output.layers import RenderOutput
+from ..output.layers import BASE, Layer, RenderOutput
 from .tile_keys import (BINDINGS, MAX_GROUPS, RASTER_BAND_TILES, SPLAT_GROUP, TILE_EMIT_CHUNK,
                         TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, splat_groups, tile_grid)
 
@@ -241,9 +241,10 @@ class TileRenderer:
         d = np.diff(clock)
         return TileTimes(*(float(v) for v in d), float(readback), int(total))
 
-    def render(self, view: View, depth: bool = False) -> RenderOutput:
-        """Colour, alpha and (when ``depth``) the accumulated depth of one view; RGB = C +
-        (1 - A) background, alpha = A; row 0 is the top."""
+    def render(self, view: View, layers: frozenset[Layer] = BASE) -> RenderOutput:
+        """The ``layers`` of one view (colour and alpha always, the accumulated depth when
+        asked); RGB = C + (1 - A) background, alpha = A; row 0 is the top."""
+        depth = Layer.DEPTH in layers
         self._frame(view)
         t0 = time.perf_counter()
         h, w = view.height, view.width
@@ -251,7 +252,7 @@ class TileRenderer:
         dep = (self._bufs["OUT_DEPTH"].read(h * w * 4, np.float32).reshape(h, w) if depth
                else np.zeros((0, 0), np.float32))
         self.last_times = self._times(time.perf_counter() - t0)
-        return RenderOutput(rgba.copy(), dep.copy())
+        return RenderOutput(rgba.copy(), dep.copy(), layers)
 
     def debug_stages(self, view: View) -> TileStages:
         """Run one frame and return its integer stages in the reference's layout."""

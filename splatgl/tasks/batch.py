@@ -117,7 +117,7 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
     def save(k: int, out) -> None:
         if video is not None:
             video.write(out)
-        elif target.wants_depth:
+        elif target.layers is not None:
             write_image(target.frame_path(numbers[k]), out.rgba, bit_depth, depth=out.expected_depth())
         else:
             write_image(target.frame_path(numbers[k]), out, bit_depth)
@@ -128,7 +128,7 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
     writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="splatgl-writer")
     try:
         frames = renderer.render_many(scene, [cameras[k] for k in todo], settings, kind,
-                                      depth=target.wants_depth)
+                                      layers=target.layers)
         for n, (k, out) in enumerate(zip(todo, frames), 1):
             times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None) \
                 if kind is not RendererKind.REFERENCE else None
