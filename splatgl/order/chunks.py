@@ -39,6 +39,8 @@ from ..cameras.equirect import WRAP_FLAG
 from ..lod.build import morton_order
 from .sort import depth_keys
 
+cull_kernel.register(f"{__package__}._numba_cull")  # view_pass, rows_pass, lens_pass (numba)
+
 #: Splats per chunk (the fine level): boundary chunks hold few splats (the per-splat cull
 #: runs on those only); the chunk statistics cost 41 bytes per chunk, 0.64 B/splat.
 CHUNK = 64
