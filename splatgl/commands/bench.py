@@ -19,7 +19,8 @@ from ..bench.machine import describe, machine_info
 from ..bench.runner import BenchOptions, sort_benchmark
 from ..bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
 from ..errors import SplatglError
-from ..tasks.executor import add_executor_arguments, executor_from_args, run_tasks, summary
+from ..tasks.executor import run_tasks, summary
+from ._executor import add_executor_arguments, executor_from_args
 from ..gl.context import renderer_name
 from ..gl.limits import check_image_size
 from ..evaluation.metrics import check_ssim_size
