@@ -44,7 +44,7 @@ class SceneSpec:
             with files.local(self.path) as path:
                 return load_scene(path)
         if self.synthetic:
-            from ..commands.bench import synthetic_scene
+            from .synthetic import synthetic_scene
 
             return synthetic_scene(self.synthetic)
         from .real_scenes import build_real_scene, load_real_sources
