@@ -21,22 +21,10 @@ import numpy as np
 from splatgl.cameras.view import View
 from splatgl import RenderSettings, Renderer, default_camera, load_scene
 from splatgl.cameras.poses import orbit
+from splatgl.bench.synthetic import synthetic_scene
 from splatgl.model.scene import Scene
 
 REPO = Path(__file__).resolve().parent.parent
-
-
-def synthetic_scene(n: int, degree: int = 3, seed: int = 0) -> Scene:
-    """``n`` random splats in a 4-unit box, log-normal scales, SH of ``degree``."""
-    rng = np.random.default_rng(seed)
-    k = (degree + 1) ** 2
-    return Scene(
-        rng.uniform(-2, 2, (n, 3)),
-        rng.normal(size=(n, 4)),
-        rng.normal(-4.0, 0.6, (n, 3)),
-        rng.normal(0.0, 2.0, n),
-        rng.normal(0, 0.3, (n, k, 3)),
-    )
 
 
 def measure(name: str, scene: Scene, width: int, height: int, frames: int) -> dict[str, float]:

@@ -256,6 +256,50 @@ def test_compiled_cull_is_loaded_in_the_background_from_the_second_view(monkeypa
         cull_kernel.set_policy("fast")
 
 
+def test_kernel_loader_hands_out_the_registered_modules_all_or_none(monkeypatch):
+    """The loader imports no kernel module of its own: it hands out the ``KERNELS`` of the
+    modules registered with it, once all of them are loaded.  A module registered after the load
+    was requested gets a load of its own, and until that one is ready :func:`kernel` gives None
+    (the NumPy paths); nothing registered gives None too."""
+    import sys
+    import threading
+    import types
+
+    gate = threading.Event()
+
+    def fake(name, names, warm_up):
+        mod = types.ModuleType(name)
+        mod.KERNELS, mod.warm_up = names, warm_up
+        for k in names:
+            setattr(mod, k, f"{name}.{k}")
+        monkeypatch.setitem(sys.modules, name, mod)
+
+    fake("splatgl_test_kernels_a", ("a_pass", "a2_pass"), lambda: None)
+    fake("splatgl_test_kernels_b", ("b_pass",), gate.wait)
+    for name, value in (("_modules", []), ("_loads", {}), ("_requested", False), ("_merged", None)):
+        monkeypatch.setattr(cull_kernel, name, value)
+    monkeypatch.setattr(cull_kernel, "installed", lambda: True)
+    try:
+        assert cull_kernel.kernel(wait=True) is None  # nothing registered
+        cull_kernel.register("splatgl_test_kernels_a")
+        cull_kernel.register("splatgl_test_kernels_a")  # once only
+        assert cull_kernel._modules == ["splatgl_test_kernels_a"]
+        got = cull_kernel.kernel(wait=True)
+        assert vars(got) == {"a_pass": "splatgl_test_kernels_a.a_pass",
+                             "a2_pass": "splatgl_test_kernels_a.a2_pass"}
+        cull_kernel.register("splatgl_test_kernels_b")  # after the request: loads at once
+        assert cull_kernel._loads["splatgl_test_kernels_b"] is not cull_kernel._loads["splatgl_test_kernels_a"]
+        assert cull_kernel.kernel() is None  # b still compiling (held at the gate)
+        gate.set()
+        got = cull_kernel.kernel(wait=True)
+        assert vars(got) == {"a_pass": "splatgl_test_kernels_a.a_pass",
+                             "a2_pass": "splatgl_test_kernels_a.a2_pass",
+                             "b_pass": "splatgl_test_kernels_b.b_pass"}
+        assert cull_kernel.kernel() is got
+    finally:
+        gate.set()
+
+
 def test_compiled_cull_leaves_undecidable_peak_bounds_to_numpy(monkeypatch):
     """Faint splats centred on pixel centres have a peak bound equal to their float32 opacity,
     within 6e-8 of 1/255: too close for the compiled float64 bound to call (exp may differ from

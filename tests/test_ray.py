@@ -14,7 +14,7 @@ from splatgl.cli import main
 from helpers import summary_counts
 from splatgl.commands._common import demo_scene_path
 from test_eval import N_VIEWS, dataset  # noqa: F401 (the module's fixture: a synthetic dataset)
-from splatgl.tasks.executor import KILL_ONCE_ENV
+from splatgl.tasks.task import KILL_ONCE_ENV
 
 ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'splatgl[ray]')")
 

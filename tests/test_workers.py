@@ -14,7 +14,7 @@ from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.output.images import read_image
 from splatgl.tasks.render import frame_folder
-from splatgl.tasks.executor import KILL_ONCE_ENV
+from splatgl.tasks.task import KILL_ONCE_ENV
 from splatgl.tasks.local import chunks
 
 

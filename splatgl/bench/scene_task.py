@@ -1,4 +1,4 @@
-"""One benchmark scene as a task (:mod:`splatgl.tasks.executor`): ``splatgl bench`` over many scenes
+"""One benchmark scene as a task (:mod:`splatgl.tasks.task`): ``splatgl bench`` over many scenes
 measures each scene's rows in its own worker (``--workers N`` or ``--executor ray``) and merges
 the rows, in scene order, into one table, bench.csv and bench.json.
 
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-from ..tasks.executor import Done, Files, TaskProgress
+from ..tasks.task import Done, Files, TaskProgress
 from ..model.scene import Scene
 from .runner import BenchOptions, BenchRow, Progress, bench_scene
 
@@ -44,7 +44,7 @@ class SceneSpec:
             with files.local(self.path) as path:
                 return load_scene(path)
         if self.synthetic:
-            from ..commands.bench import synthetic_scene
+            from .synthetic import synthetic_scene
 
             return synthetic_scene(self.synthetic)
         from .real_scenes import build_real_scene, load_real_sources

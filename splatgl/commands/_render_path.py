@@ -12,7 +12,8 @@ from ..tasks.batch import render_frames
 from ..cameras.camera import Camera
 from ..datasets import load_source, select_indices
 from ..errors import SplatglError
-from ..tasks.executor import add_executor_arguments, executor_from_args, summary
+from ..tasks.executor import summary
+from ._executor import add_executor_arguments, executor_from_args
 from ..output.frames import FrameTarget
 from ..gl.context import NO_GL_RENDERER, renderer_name
 from ..paths import orbit

@@ -7,8 +7,6 @@ import shutil
 import textwrap
 from pathlib import Path
 
-import numpy as np
-
 from ..bench.early_stop_report import early_stop_table
 from ..bench.lod_bench import add_lod_arguments
 from ..bench.real_scenes import shared_scenes_dir, shared_scenes_help
@@ -19,14 +17,14 @@ from ..bench.machine import describe, machine_info
 from ..bench.runner import BenchOptions, sort_benchmark
 from ..bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
 from ..errors import SplatglError
-from ..tasks.executor import add_executor_arguments, executor_from_args, run_tasks, summary
+from ..tasks.executor import run_tasks, summary
+from ._executor import add_executor_arguments, executor_from_args
 from ..gl.context import renderer_name
 from ..gl.limits import check_image_size
 from ..evaluation.metrics import check_ssim_size
 from ..output.files import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
 from ..api import Renderer
-from ..model.scene import Scene
 from ..model.settings import RenderSettings
 from ._common import demo_scene_path, non_negative_int, positive_int
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
@@ -60,13 +58,6 @@ examples:
   splatgl bench a.ply b.ply c.ply --executor ray --ray-address auto   (one scene per Ray task)"""
 
 REAL = ["ply/donut_sh0.ply", "compressed_ply/biker.compressed.ply", "compressed_ply/guitar.compressed.ply"]
-
-
-def synthetic_scene(n: int = 150_000, degree: int = 3, seed: int = 0) -> Scene:
-    """``n`` random splats in a 4-unit box, log-normal scales, SH of ``degree``."""
-    rng = np.random.default_rng(seed)
-    return Scene(rng.uniform(-2, 2, (n, 3)), rng.normal(size=(n, 4)), rng.normal(-4.0, 0.6, (n, 3)),
-                 rng.normal(0.0, 2.0, n), rng.normal(0, 0.3, (n, (degree + 1) ** 2, 3)))
 
 
 def _group_names() -> tuple[str, ...]:

@@ -10,7 +10,8 @@ from ..output.atomic import atomic_write_text
 from ..datasets.dataset import MAX_WIDTH, Split, load_dataset
 from ..datasets.sources import select_indices
 from ..errors import SplatglError
-from ..tasks.executor import add_executor_arguments, executor_from_args, summary
+from ..tasks.executor import summary
+from ._executor import add_executor_arguments, executor_from_args
 from ..evaluation.evaluate import evaluate, worst_sheet
 from ..output.images import check_image_suffix, write_image
 from ..output.files import OutputFiles

@@ -23,6 +23,7 @@ import numpy as np
 from ..constants import SH_C0
 from ..errors import SceneFormatError
 from ..model.scene import Scene, SplatKind, sh_to_rest
+from ..model.spatial import morton_order_full_box
 from . import quantise as qz
 from .compressed_ply import CHUNK_SIZE
 from .ply import write_elements
@@ -71,7 +72,7 @@ def _pack_rotation(quats: np.ndarray) -> np.ndarray:
 
 def _ordered(scene: Scene) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Morton order and the per-row values the chunks bound (float64, in that order)."""
-    order = qz.morton_order(scene.means)
+    order = morton_order_full_box(scene.means)
     log_scales = np.clip(scene.log_scales[order].astype(np.float64), -qz.CPLY_SCALE_CLAMP,
                          qz.CPLY_SCALE_CLAMP)
     rgb = 0.5 + SH_C0 * scene.sh[order, 0].astype(np.float64)

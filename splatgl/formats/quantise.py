@@ -22,6 +22,9 @@ import math
 import numpy as np
 
 from ..constants import SH_C0
+# smallest-three quaternions are shared with the GPU layout (gl/storage): defined with the
+# quaternions, re-exported here for the writers (qz.smallest_three)
+from ..model.quaternion import half_step_rotation_deg, smallest_three  # noqa: F401
 
 #: Relative allowance for float32 rounding of decoded values (a few ulps of 2^-24).
 F32_SLACK = 4.0 * 2.0 ** -24
@@ -63,20 +66,6 @@ CPLY_QUAT_BITS = 10
 CPLY_SH_RANGE = 4.0
 
 
-def half_step_rotation_deg(component_error: float) -> float:
-    """Bound (degrees) on the rotation error of a smallest-three quaternion whose three stored
-    components are each off by at most ``component_error``.
-
-    The three stored components move by at most ``sqrt(3) e``; the largest component (at least
-    1/2) is recomputed as ``sqrt(1 - r^2)`` with ``r <= sqrt(3)/2``, whose slope ``r / L`` is at
-    most ``sqrt(3)``, so the unit quaternion moves by a chord of at most ``2 sqrt(3) e``.  Two
-    unit quaternions a chord ``c`` apart differ by a rotation of ``4 asin(c / 2)``.  A 5% margin
-    covers the first-order slope estimate.
-    """
-    chord = 1.05 * 2.0 * math.sqrt(3.0) * component_error
-    return math.degrees(4.0 * math.asin(min(1.0, chord / 2.0)))
-
-
 def xyz_rotation_deg(component_error: float) -> float:
     """Bound (degrees) for quaternions stored as (x, y, z) with ``w = sqrt(1 - |xyz|^2) >= 0``
     (SPZ versions 1-2): ``|dw| <= sqrt(2 |dxyz| + |dxyz|^2)``, unbounded in slope near ``w = 0``;
@@ -109,19 +98,6 @@ def position_slack(means: np.ndarray) -> float:
     """float32 rounding allowance of decoded positions (world units, Euclidean)."""
     m = np.abs(np.asarray(means, np.float64))
     return float(math.sqrt(3.0) * F32_SLACK * (m.max() if m.size else 0.0))
-
-
-def smallest_three(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit quaternions ``q`` (N, 4) in any component order -> ``(largest index (N,) intp,
-    the other three (N, 3) float64 in index order)``, sign-flipped so the largest is >= 0."""
-    q = np.asarray(q, np.float64)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    largest = np.argmax(np.abs(q), axis=1)
-    rows = np.arange(q.shape[0])
-    q = q * np.where(q[rows, largest] < 0.0, -1.0, 1.0)[:, None]
-    keep = np.ones_like(q, bool)
-    keep[rows, largest] = False
-    return largest, q[keep].reshape(-1, 3)
 
 
 def codebook_1d(values: np.ndarray, size: int = SOG_CODEBOOK_SIZE,
@@ -167,18 +143,3 @@ def codebook_bound(codebook: np.ndarray, values: np.ndarray) -> float:
     c = np.asarray(codebook, np.float64)
     half_gap = 0.5 * float(np.diff(c).max()) if c.size > 1 else 0.0
     return max(half_gap, clip_excess(values, c[0], c[-1])) * (1.0 + 1e-6)
-
-
-def morton_order(means: np.ndarray, bits: int = 10) -> np.ndarray:
-    """(N,) intp permutation sorting ``means`` (N, 3) along a Morton (Z-order) curve of
-    ``bits`` bits per axis over their bounding box.  Writers that chunk or texture the splats use
-    it so neighbours share bounds (tighter chunk quantisation, smaller WebP files)."""
-    m = np.asarray(means, np.float64)
-    lo, hi = m.min(axis=0), m.max(axis=0)
-    span = np.where(hi > lo, hi - lo, 1.0)
-    cells = np.clip(((m - lo) / span * ((1 << bits) - 1)).astype(np.int64), 0, (1 << bits) - 1)
-    code = np.zeros(m.shape[0], np.int64)
-    for bit in range(bits):
-        for axis in range(3):
-            code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + (2 - axis))
-    return np.argsort(code, kind="stable")

@@ -37,6 +37,7 @@ import numpy as np
 from ..constants import SH_C0, sh_coeff_count
 from ..errors import SceneFormatError
 from ..model.scene import Scene, SplatKind, activate
+from ..model.spatial import morton_order_full_box
 from . import _binary, kmeans, webp
 from . import quantise as qz
 from .written import write_together
@@ -373,7 +374,7 @@ def write(path, scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS) -> np.
     """Write ``scene`` as SOG v2: a zip bundle, or (for a name ending in ``.json``) meta.json
     with its textures beside it.  Returns the (N,) row order written (Morton order)."""
     path = Path(path)
-    order = qz.morton_order(scene.means)
+    order = morton_order_full_box(scene.means)
     textures, meta = encode(scene.subset(order), iterations, path)
     blobs = {name: webp.encode(rgba) for name, rgba in textures.items()}
     meta_bytes = json.dumps(meta).encode("utf-8")

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import COMPACT_OPACITY_BITS, COMPACT_QUAT_BITS, SH_C0, sh_coeff_count
-from ..formats.quantise import half_step_rotation_deg, smallest_three
+from ..model.quaternion import half_step_rotation_deg, smallest_three
 from ..model.settings import GpuStorage
 
 #: uint32 words per splat of the compact layout (two uvec4).

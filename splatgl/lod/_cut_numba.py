@@ -1,5 +1,5 @@
 """The level-of-detail cut's selection as one compiled pass (numba); imported only through
-:mod:`splatgl.order.kernels`, which keeps numba optional.
+:mod:`splatgl.order.kernels` (registered by :mod:`splatgl.lod.cut`), which keeps numba optional.
 
 :func:`cut_pass` walks the tree top-down as :func:`splatgl.lod.cut.select_cut_weights` does, but
 over each level's candidates only, with no per-level NumPy calls: the same float32 operations
@@ -16,6 +16,8 @@ import numba
 import numpy as np
 
 F32 = np.float32
+#: What :func:`splatgl.order.kernels.kernel` hands out from this module.
+KERNELS = ("cut_pass",)
 
 
 @numba.njit(inline="always", fastmath=False, error_model="numpy")

@@ -32,6 +32,7 @@ from ..constants import ALPHA_MAX, ALPHA_MIN
 from ..twins.project import covariance_3d, quat_to_rotmat
 from ..model.quaternion import rotmat_to_quat
 from ..model.scene import Scene
+from ..model.spatial import morton_order_clamped_box
 
 #: Default number of children per parent.
 BRANCHING = 4
@@ -64,26 +65,6 @@ class LodTree:
 
     def level_size(self, level: int) -> int:
         return int(self.offsets[level + 1] - self.offsets[level])
-
-
-def morton_order(points: np.ndarray) -> np.ndarray:
-    """(N,) int64 permutation putting (N, 3) points in Morton order over their 1-99% box
-    (outliers clamped to the box's faces); 21 bits per axis."""
-    lo = np.percentile(points, 1.0, axis=0)
-    hi = np.percentile(points, 99.0, axis=0)
-    span = np.where(hi > lo, hi - lo, 1.0)
-    q = np.clip((points - lo) / span, 0.0, 1.0)
-    q = (q * ((1 << 21) - 1)).astype(np.uint64)
-    code = np.zeros(points.shape[0], np.uint64)
-    for axis in range(3):
-        v = q[:, axis]
-        v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-        v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-        v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-        v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-        v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
-        code |= v << np.uint64(axis)
-    return np.argsort(code, kind="stable")
 
 
 def _extent(opacity: np.ndarray, max_scale: np.ndarray) -> np.ndarray:
@@ -121,7 +102,7 @@ def build_hierarchy(scene: Scene, branching: int = BRANCHING, progress=None) -> 
     """
     if branching < 2:
         raise ValueError(f"branching must be at least 2, got {branching}")
-    order = morton_order(scene.means.astype(np.float64))
+    order = morton_order_clamped_box(scene.means.astype(np.float64))
     leaves = scene.subset(order)
     n = leaves.count
     total_levels = 1 + int(np.ceil(np.log(max(n, 1)) / np.log(branching)))

@@ -25,6 +25,9 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..cameras.view import anchored_camera
+from ..order import kernels
+
+kernels.register(f"{__package__}._cut_numba")  # the compiled cut_pass (numba, where installed)
 
 #: Default threshold: nodes whose sphere projects to at most this many pixels (radius) stand
 #: for their subtree.

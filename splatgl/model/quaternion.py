@@ -4,10 +4,14 @@ exp.  Every function takes arrays whose last axis holds the four components (``(
 
 Used by the projection (splat rotations), the level-of-detail builder (parents' principal axes
 back to quaternions), the camera paths (squad interpolation), COLMAP and glTF readers, and the
-stress cases.
+stress cases.  The smallest-three encoding (and the rotation error its quantisation implies) is
+here too: the lossy writers (:mod:`splatgl.formats.quantise`) and the compact GPU layout
+(:mod:`splatgl.gl.storage`) share it.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -100,3 +104,30 @@ def quat_axis_angle(axis, degrees: float) -> np.ndarray:
     a = a / np.linalg.norm(a)
     h = np.radians(degrees) / 2.0
     return np.concatenate([[np.cos(h)], np.sin(h) * a])
+
+
+def half_step_rotation_deg(component_error: float) -> float:
+    """Bound (degrees) on the rotation error of a smallest-three quaternion whose three stored
+    components are each off by at most ``component_error``.
+
+    The three stored components move by at most ``sqrt(3) e``; the largest component (at least
+    1/2) is recomputed as ``sqrt(1 - r^2)`` with ``r <= sqrt(3)/2``, whose slope ``r / L`` is at
+    most ``sqrt(3)``, so the unit quaternion moves by a chord of at most ``2 sqrt(3) e``.  Two
+    unit quaternions a chord ``c`` apart differ by a rotation of ``4 asin(c / 2)``.  A 5% margin
+    covers the first-order slope estimate.
+    """
+    chord = 1.05 * 2.0 * math.sqrt(3.0) * component_error
+    return math.degrees(4.0 * math.asin(min(1.0, chord / 2.0)))
+
+
+def smallest_three(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit quaternions ``q`` (N, 4) in any component order -> ``(largest index (N,) intp,
+    the other three (N, 3) float64 in index order)``, sign-flipped so the largest is >= 0."""
+    q = np.asarray(q, np.float64)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    largest = np.argmax(np.abs(q), axis=1)
+    rows = np.arange(q.shape[0])
+    q = q * np.where(q[rows, largest] < 0.0, -1.0, 1.0)[:, None]
+    keep = np.ones_like(q, bool)
+    keep[rows, largest] = False
+    return largest, q[keep].reshape(-1, 3)

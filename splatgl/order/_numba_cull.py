@@ -1,5 +1,6 @@
 """The chunked cull's per-view work as one compiled pass (numba); imported only through
-:mod:`splatgl.order.kernels`, which keeps numba optional.
+:mod:`splatgl.order.kernels` (registered by :mod:`splatgl.order.chunks`), which keeps numba
+optional.
 
 Every float32 operation is the NumPy path's own, in the same order (:func:`splatgl.order.cull.view_axis`
 for the depths and camera-space coordinates, :func:`splatgl.order.cull.plane_constants`' tests), with
@@ -21,6 +22,8 @@ from ..constants import ALPHA_MIN, LOW_PASS
 #: same side as NumPy's (exp and the order of a few float64 operations may differ in the last
 #: bits): such rows go back to :func:`splatgl.order.cull.peak_keeps`.
 PEAK_UNSURE = 1e-6
+#: What :func:`splatgl.order.kernels.kernel` hands out from this module.
+KERNELS = ("view_pass", "rows_pass", "lens_pass")
 
 
 @numba.njit(inline="always", fastmath=False)

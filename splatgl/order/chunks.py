@@ -36,8 +36,10 @@ from .cull import (CULL_BLOCK, MARGIN_PX, CullData, cull_visible, peak_keeps, pl
                    view_axis)
 from ..cameras.view import near_threshold
 from ..cameras.equirect import WRAP_FLAG
-from ..lod.build import morton_order
+from ..model.spatial import morton_order_clamped_box
 from .sort import depth_keys
+
+cull_kernel.register(f"{__package__}._numba_cull")  # view_pass, rows_pass, lens_pass (numba)
 
 #: Splats per chunk (the fine level): boundary chunks hold few splats (the per-splat cull
 #: runs on those only); the chunk statistics cost 41 bytes per chunk, 0.64 B/splat.
@@ -144,7 +146,7 @@ class ChunkedCull:
         self.count = data.count
         self.group = group
         rows = np.flatnonzero(data.alive)
-        rows = rows[morton_order(data.xyz[:, rows].T)]
+        rows = rows[morton_order_clamped_box(data.xyz[:, rows].T)]
         faint = data.faint[rows]
         bright, dim = rows[~faint], rows[faint]  # faint splats chunked apart, after the others
         self.index = np.concatenate([bright, dim]).astype(np.uint32)

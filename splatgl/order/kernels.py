@@ -1,7 +1,10 @@
 """Optional compiled kernels (numba, the ``fast`` extra), loaded in the background so that
-nothing waits for them: the chunked cull of a pinhole view (``view_pass``), the cull of a lens
-camera's view (``lens_pass``), the cull of a LOD cut's rows in place (``rows_pass``) and the
-LOD cut's selection (``cut_pass``).
+nothing waits for them.  This module is the loader only: it knows no kernel.  A kernel module
+(``splatgl.order._numba_cull``: the chunked cull of a pinhole view ``view_pass``, a lens
+camera's ``lens_pass``, a LOD cut's rows in place ``rows_pass``; ``splatgl.lod._cut_numba``: the
+LOD cut's selection ``cut_pass``) is named to it with :func:`register` by the module that uses
+its kernels, so that the order stage never imports the layers above it; a kernel module
+provides ``KERNELS`` (the names it hands out) and ``warm_up()`` (compiles them).
 
 With NumPy these pay a few microseconds per call: a view from inside a scene splits into
 hundreds of runs of kept chunks plus a gathered per-row test of the boundary chunks, and a cut
@@ -17,6 +20,7 @@ changes no image.
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 import os
 from concurrent.futures import ThreadPoolExecutor
@@ -24,7 +28,13 @@ from types import SimpleNamespace
 
 from ..background import Background
 
-_loader: Background | None = None
+#: The registered kernel modules (dotted names), in registration order.
+_modules: list[str] = []
+#: Each requested module's load; one load covers the modules registered by the time it starts.
+_loads: dict[str, Background] = {}
+_requested = False
+#: The kernels of the last complete set of loads, with the loads they came from.
+_merged: tuple[tuple[Background, ...], SimpleNamespace] | None = None
 _helper: ThreadPoolExecutor | None = None
 #: How chunked culls that do not say otherwise (``ChunkedCull.compiled`` None) use the kernel:
 #: "auto" once loaded (from the second view on), "off" never, "wait" always (waiting for the
@@ -41,36 +51,65 @@ def installed() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
-def _load():
-    from . import _numba_cull as _cull_numba
-    from ..lod import _cut_numba
+def register(module: str) -> None:
+    """Name a kernel module (dotted name) for the background load: it is imported on the
+    loader's thread, its ``warm_up()`` run and its ``KERNELS`` handed out by :func:`kernel`.
+    Registering after the load was requested starts a load of the new module, and
+    :func:`kernel` gives None (the NumPy paths) until that one is ready too."""
+    if module in _modules:
+        return
+    _modules.append(module)
+    if _requested:
+        _start()
 
-    _cull_numba.warm_up()
-    _cut_numba.warm_up()
-    return SimpleNamespace(view_pass=_cull_numba.view_pass, rows_pass=_cull_numba.rows_pass,
-                           lens_pass=_cull_numba.lens_pass, cut_pass=_cut_numba.cut_pass)
+
+def _load(modules: tuple[str, ...]) -> dict[str, object]:
+    found: dict[str, object] = {}
+    for name in modules:
+        mod = importlib.import_module(name)
+        mod.warm_up()
+        found.update((k, getattr(mod, k)) for k in mod.KERNELS)
+    return found
+
+
+def _start() -> None:
+    pending = tuple(m for m in _modules if m not in _loads)
+    if pending:
+        load = Background(_load, pending, name="splatgl-cull-kernel")
+        _loads.update((m, load) for m in pending)
 
 
 def request() -> None:
-    """Start loading the kernel in the background (once per process; nothing without numba)."""
-    global _loader
-    if _loader is None and installed():
-        _loader = Background(_load, name="splatgl-cull-kernel")
+    """Start loading the registered kernels in the background (each module once per process;
+    nothing without numba)."""
+    global _requested
+    if installed():
+        _requested = True
+        _start()
 
 
 def kernel(wait: bool = False):
-    """The compiled kernels (``view_pass``, ``rows_pass`` and ``lens_pass`` of
-    :mod:`splatgl.order._numba_cull`, ``cut_pass`` of :mod:`splatgl.lod._cut_numba`) if they are
-    loaded (``wait``: after waiting for the load that :func:`request` started, starting it if
-    needed), else None; a failed load gives None."""
+    """The compiled kernels of every registered module (``view_pass``, ``rows_pass`` and
+    ``lens_pass`` of :mod:`splatgl.order._numba_cull`, ``cut_pass`` of
+    :mod:`splatgl.lod._cut_numba`, as attributes) if they are all loaded (``wait``: after
+    waiting for the loads that :func:`request` started, starting them if needed), else None; a
+    failed load, or no module registered, gives None."""
+    global _merged
     if wait:
         request()
-    if _loader is None or not (wait or _loader.done()):
+    if not _modules or any(m not in _loads for m in _modules):
         return None
+    loads = tuple(dict.fromkeys(_loads[m] for m in _modules))
+    if not wait and not all(load.done() for load in loads):
+        return None
+    if _merged is not None and _merged[0] == loads:
+        return _merged[1]
     try:
-        return _loader.result()
+        found = [load.result() for load in loads]
     except Exception:  # a broken numba install: the NumPy path serves
         return None
+    _merged = (loads, SimpleNamespace(**{k: v for part in found for k, v in part.items()}))
+    return _merged[1]
 
 
 def for_view(views: int, compiled: bool | None = None):
@@ -111,10 +150,11 @@ def helper() -> ThreadPoolExecutor | None:
 def _after_fork_in_child() -> None:
     """A forked child has none of its parent's threads: the helper thread is made anew on
     demand, and a load still under way in the parent is started again when requested."""
-    global _helper, _loader
+    global _helper
     _helper = None
-    if _loader is not None and not _loader.done():
-        _loader = None
+    for module, load in list(_loads.items()):
+        if not load.done():
+            del _loads[module]
 
 
 os.register_at_fork(after_in_child=_after_fork_in_child)

@@ -12,7 +12,7 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..cameras.poses import look_at, orbit as orbit_pose
 from ..errors import CameraError
-from ..api import DEFAULT_ELEVATION, DEFAULT_FOV_Y, default_camera
+from ..cameras.framing import DEFAULT_ELEVATION, DEFAULT_FOV_Y, default_camera
 from ..model.scene import Scene
 
 

@@ -16,8 +16,9 @@ from typing import Optional, Sequence
 
 from ..datasets.views import View
 from ..evaluation.evaluate import Evaluation, Pair, evaluate
-from .executor import Done, Executor, ExecutorKind, Files, RunResult, TaskProgress, run_tasks
+from .executor import Executor, ExecutorKind, RunResult, run_tasks
 from ..progress import ProgressCallback
+from .task import Done, Files, TaskProgress
 from ..model.settings import RenderSettings, RendererKind
 from .local import chunks
 from .ray import MAX_CHUNK_FRAMES

@@ -1,4 +1,4 @@
-"""``--workers N``: run tasks (:mod:`splatgl.tasks.executor`) in N local processes, each with its
+"""``--workers N``: run tasks (:mod:`splatgl.tasks.task`) in N local processes, each with its
 own headless context and its own copy of the scene.
 
 The processes are spawned (a fresh interpreter: no inherited GL state) and take tasks from one
@@ -19,7 +19,7 @@ import signal
 from typing import Optional, Sequence
 
 from ..errors import SplatglError
-from .executor import Files, ProgressSum, Task, TaskReport, die_once_for_test, run_here
+from .task import Files, ProgressSum, Task, TaskReport, die_once_for_test, run_here
 from ..progress import ProgressCallback
 
 #: Seconds the parent waits on the message queue before checking that the workers live.

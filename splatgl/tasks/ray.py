@@ -1,4 +1,4 @@
-"""``--executor ray``: tasks (:mod:`splatgl.tasks.executor`) as Ray tasks, one Ray task each.
+"""``--executor ray``: tasks (:mod:`splatgl.tasks.task`) as Ray tasks, one Ray task each.
 
 Each Ray task runs one splatgl task exactly as a ``--workers`` process does (its own scene
 load and headless context), so the output equals a single-process run's.  The files a task
@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Iterator, Optional, Sequence
 
 from ..errors import SplatglError
-from .executor import Files, ProgressSum, Task, TaskReport, die_once_for_test, run_here
+from .task import Files, ProgressSum, Task, TaskReport, die_once_for_test, run_here
 from ..progress import ProgressCallback
 
 #: How to get Ray, for the one-line error where it is missing.

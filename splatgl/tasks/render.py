@@ -1,5 +1,5 @@
 """A camera path's frames rendered by several processes or machines (``render --path`` with
-``--workers N`` or ``--executor ray``), as tasks of :mod:`splatgl.tasks.executor`.
+``--workers N`` or ``--executor ray``), as tasks of :mod:`splatgl.tasks.task`.
 
 Each :class:`RenderChunk` renders a contiguous run of the path with
 :func:`splatgl.tasks.batch.render_frames`, writing frames under their global numbers, so the files
@@ -23,8 +23,9 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 from .batch import BatchResult, FrameMeter
+from .task import Done, Files, TaskProgress
 from ..cameras.camera import Camera
-from .executor import Done, Executor, ExecutorKind, Files, RunResult, TaskProgress, run_tasks
+from .executor import Executor, ExecutorKind, RunResult, run_tasks
 from ..output.frames import FrameTarget, plan_frames
 from ..lod.render import LodSettings
 from ..progress import ProgressCallback
