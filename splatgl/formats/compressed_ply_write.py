@@ -25,7 +25,7 @@ from ..errors import SceneFormatError
 from ..model.scene import Scene, SplatKind, sh_to_rest
 from . import quantise as qz
 from .compressed_ply import CHUNK_SIZE
-from .ply import write_elements
+from .ply_write import write_elements
 
 NAME = "compressed_ply"
 EXTENSIONS = (".compressed.ply",)
