@@ -143,14 +143,11 @@ def _sources():
         yield path.relative_to(ROOT).as_posix(), path.read_text(encoding="utf-8")
 
 
-@pytest.mark.xfail(strict=False, reason="splits under way (issue 26): viewer/app.py, formats/ply.py, "
-                   "formats/gltf.py, formats/sog.py, order/chunks.py, bench/lod_bench.py")
 def test_no_module_over_400_lines():
     over = {name: n for name, text in _sources() if (n := len(text.splitlines())) > MAX_MODULE_LINES}
     assert not over, f"modules over {MAX_MODULE_LINES} lines: {over}"
 
 
-@pytest.mark.xfail(strict=False, reason="split under way (issue 26): viewer/app.py's Viewer")
 def test_no_class_over_250_lines():
     over = {}
     for name, text in _sources():

@@ -9,7 +9,7 @@ import pytest
 
 from splatgl.cli import main
 from splatgl.errors import SceneFormatError
-from splatgl.formats import load_scene, ply, splat
+from splatgl.formats import load_scene, ply, ply_write, splat
 from splatgl.model.scene import Scene
 
 
@@ -19,11 +19,11 @@ def good_vertices(n: int = 10, seed: int = 0) -> np.ndarray:
     scene = Scene(rng.normal(size=(n, 3)), rng.normal(size=(n, 4)) + 0.1,
                   rng.normal(-3, 1, size=(n, 3)), rng.normal(size=n),
                   rng.normal(size=(n, 1, 3)))
-    return ply.scene_to_vertices(scene)
+    return ply_write.scene_to_vertices(scene)
 
 
 def write_vertices(path, verts: np.ndarray, **kwargs):
-    ply.write_elements(path, [("vertex", verts)], **kwargs)
+    ply_write.write_elements(path, [("vertex", verts)], **kwargs)
     return path
 
 

@@ -227,7 +227,7 @@ def test_cli_failed_write_leaves_nothing_half_written(tmp_path, capsys):
 
 
 def test_cli_bad_input_values_need_drop_invalid(tmp_path, capsys):
-    from splatgl.formats.ply import scene_to_vertices, write_elements
+    from splatgl.formats.ply_write import scene_to_vertices, write_elements
 
     rows = scene_to_vertices(random_scene(10, degree=0))
     rows["x"][3] = np.nan

@@ -14,7 +14,7 @@ import pytest
 
 from splatgl.cli import main
 from splatgl.formats.convert import conversion_error
-from splatgl.formats import compressed_ply_write, load_scene, save_scene, sog, spz_write
+from splatgl.formats import compressed_ply_write, load_scene, save_scene, sog, sog_write, spz_write
 from splatgl.formats import quantise as qz
 from splatgl.model.scene import Scene
 
@@ -37,10 +37,10 @@ def test_quantisation_constants_and_bounds():
         math.sqrt(3) * 0.5 + qz.position_slack(one.means), rel=1e-9)
     # smallest-three: 8-bit SOG components -> 4 sqrt(3) e (5% margin) in radians
     e = 1 / (255 * math.sqrt(2))
-    assert sog.error_bounds(s)["rotation"] == pytest.approx(
+    assert sog_write.error_bounds(s)["rotation"] == pytest.approx(
         math.degrees(4 * math.asin(1.05 * math.sqrt(3) * e)), rel=1e-9)
-    assert sog.palette_size(64) == 64 and sog.palette_size(40_000) == 32768
-    assert sog.palette_size(10_000_000) == 65536
+    assert sog_write.palette_size(64) == 64 and sog_write.palette_size(40_000) == 32768
+    assert sog_write.palette_size(10_000_000) == 65536
 
 
 def test_codebook_bound_is_half_the_largest_gap():

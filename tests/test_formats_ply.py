@@ -9,7 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 from splatgl.constants import SH_C0, sh_coeff_count
-from splatgl.formats import detect_format, load_scene, ply, splat
+from splatgl.formats import detect_format, load_scene, ply, ply_write, splat
 from splatgl.model.scene import Scene, SplatKind
 
 from helpers import random_scene
@@ -32,7 +32,7 @@ def test_binary_le_be_and_ascii_load_identically_and_bit_exact(tmp_path, degree)
     loaded = []
     for label, kwargs in [("le", {}), ("be", {"byte_order": "big"}), ("ascii", {"ascii": True})]:
         path = tmp_path / f"{label}.ply"
-        ply.write(path, scene, **kwargs)
+        ply_write.write(path, scene, **kwargs)
         loaded.append(load_scene(path))
     head = (tmp_path / "be.ply").read_bytes()[:60]
     assert b"binary_big_endian" in head
@@ -44,7 +44,7 @@ def test_binary_le_be_and_ascii_load_identically_and_bit_exact(tmp_path, degree)
 
 def test_writer_uses_inria_property_order(tmp_path):
     path = tmp_path / "s.ply"
-    ply.write(path, random_scene(3, 1, degree=1))
+    ply_write.write(path, random_scene(3, 1, degree=1))
     header = path.read_bytes().split(b"end_header")[0].decode()
     props = [line.split()[2] for line in header.splitlines() if line.startswith("property")]
     assert props == (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
@@ -59,13 +59,13 @@ def test_writer_uses_inria_property_order(tmp_path):
 def test_f_rest_is_channel_major(tmp_path, degree):
     """f_rest holds all red coefficients, then green, then blue; file order does not matter."""
     k1 = sh_coeff_count(degree) - 1
-    verts = ply.scene_to_vertices(random_scene(2, 5, degree=degree))
+    verts = ply_write.scene_to_vertices(random_scene(2, 5, degree=degree))
     for i in range(3 * k1):
         verts[f"f_rest_{i}"] = 1000 + i
     names = list(verts.dtype.names)
     shuffled = names[::-1]  # properties in reverse order: the reader must go by name
     path = tmp_path / "rest.ply"
-    ply.write_elements(path, [("vertex", verts[shuffled])])
+    ply_write.write_elements(path, [("vertex", verts[shuffled])])
     scene = load_scene(path)
     assert scene.sh.shape == (2, k1 + 1, 3)
     # coefficient j (1-based after DC) of channel c is f_rest_{c * k1 + j - 1}
@@ -81,7 +81,7 @@ def test_f_rest_is_channel_major(tmp_path, degree):
 def test_with_and_without_normals(tmp_path, normals):
     scene = random_scene(17, 7)
     path = tmp_path / "n.ply"
-    ply.write(path, scene, normals=normals)
+    ply_write.write(path, scene, normals=normals)
     assert (b"property float nx" in path.read_bytes()[:400]) == normals
     assert_same_bits(load_scene(path), scene)
 
@@ -89,7 +89,7 @@ def test_with_and_without_normals(tmp_path, normals):
 def test_two_scales_make_a_2dgs_surfel_scene(tmp_path):
     scene = random_scene(17, 8, degree=1, kind=SplatKind.SURFEL_2D)
     path = tmp_path / "surfels.ply"
-    ply.write(path, scene)
+    ply_write.write(path, scene)
     header = path.read_bytes()[:600]
     assert b"scale_1" in header and b"scale_2" not in header
     got = load_scene(path)
@@ -101,7 +101,7 @@ def test_two_scales_make_a_2dgs_surfel_scene(tmp_path):
 def test_other_types_extra_properties_and_elements(tmp_path):
     """double/int properties are cast to float32; unknown properties and elements are skipped."""
     scene = random_scene(5, 9)
-    verts = ply.scene_to_vertices(scene)
+    verts = ply_write.scene_to_vertices(scene)
     dt = [(n, "<f8" if n in ("x", "opacity") else "<f4") for n in verts.dtype.names]
     dt += [("red", "u1"), ("segment", "<i2")]
     wide = np.zeros(len(verts), dt)
@@ -112,7 +112,7 @@ def test_other_types_extra_properties_and_elements(tmp_path):
     after = np.ones(2, [("id", "<i4")])
     for kwargs in [{}, {"byte_order": "big"}, {"ascii": True}]:
         path = tmp_path / "wide.ply"
-        ply.write_elements(path, [("camera", before), ("vertex", wide), ("extra", after)],
+        ply_write.write_elements(path, [("camera", before), ("vertex", wide), ("extra", after)],
                            comments=("made by a test",), **kwargs)
         assert_same_bits(load_scene(path), scene)
 
@@ -120,7 +120,7 @@ def test_other_types_extra_properties_and_elements(tmp_path):
 def test_type_aliases_are_accepted(tmp_path):
     scene = random_scene(4, 10)
     path = tmp_path / "alias.ply"
-    ply.write(path, scene)
+    ply_write.write(path, scene)
     data = path.read_bytes().replace(b"property float ", b"property float32 ")
     data = data.replace(b"comment", b"obj_info")
     path.write_bytes(data)
@@ -130,7 +130,7 @@ def test_type_aliases_are_accepted(tmp_path):
 def test_list_element_after_vertices_is_ignored(tmp_path):
     scene = random_scene(4, 11)
     path = tmp_path / "faces.ply"
-    ply.write(path, scene)
+    ply_write.write(path, scene)
     head, body = path.read_bytes().split(b"end_header\n")
     head += b"element face 1\nproperty list uchar int vertex_indices\n"
     face = bytes([3]) + np.arange(3, dtype="<i4").tobytes()
@@ -141,7 +141,7 @@ def test_list_element_after_vertices_is_ignored(tmp_path):
 def test_detection_is_by_content(tmp_path):
     scene = random_scene(17, 12)
     path = tmp_path / "scene.bin"
-    ply.write(path, scene)
+    ply_write.write(path, scene)
     assert detect_format(path) is ply
     assert_same_bits(load_scene(path), scene)
     assert ply.sniff(path.read_bytes()[:4096])
@@ -176,7 +176,7 @@ def test_real_donut_ply(shared_scenes):
 def test_real_donut_round_trips(shared_scenes, tmp_path):
     scene = load_scene(shared_scenes / "ply" / "donut_sh0.ply")
     path = tmp_path / "donut.ply"
-    ply.write(path, scene)
+    ply_write.write(path, scene)
     assert_same_bits(load_scene(path), scene)
 
 
@@ -237,5 +237,5 @@ def test_any_finite_float32_round_trips_in_every_encoding(tmp_path, values):
                   values[:, 4:7].reshape(6, 1, 3))
     for kwargs in [{}, {"byte_order": "big"}, {"ascii": True}]:
         path = tmp_path / "h.ply"
-        ply.write(path, scene, **kwargs)
+        ply_write.write(path, scene, **kwargs)
         assert_same_bits(load_scene(path), scene)

@@ -59,7 +59,7 @@ from splatgl.constants import SH_C0
 from splatgl.formats.convert import ATTRIBUTES, conversion_error
 from splatgl.formats import compressed_ply, load_scene, save_scene, spz_write, writer_for
 from splatgl.formats import quantise as qz
-from splatgl.formats import sog as sog_format
+from splatgl.formats import sog_write
 from splatgl.evaluation.metrics import psnr
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene
@@ -160,7 +160,7 @@ def paired(source, got, reordered: bool, tol: float):
 
 
 def sog_bounds(source, path: Path) -> dict:
-    mine = sog_format.error_bounds(source)
+    mine = sog_write.error_bounds(source)
     with zipfile.ZipFile(path) as zf:
         meta = json.loads(zf.read("meta.json"))
     scale_book = np.float32(meta["scales"]["codebook"])

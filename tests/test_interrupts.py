@@ -30,14 +30,14 @@ def test_sigterm_during_convert_removes_the_partial_file(tmp_path, shared_scenes
     out = tmp_path / "out.ply"
     proc = run_python("""
         import sys, threading
-        from splatgl.formats import ply
-        real = ply.write
+        from splatgl.formats import ply_write
+        real = ply_write.write
         def stuck_write(path, scene):
             real(path, scene)           # the .partial file now exists, complete or not
             print("writing", flush=True)
             threading.Event().wait()    # until SIGTERM raises here
             print("not interrupted", flush=True)
-        ply.write = stuck_write
+        ply_write.write = stuck_write
         from splatgl.cli import main
         sys.exit(main(["convert", sys.argv[1], sys.argv[2]]))
         """, str(shared_scenes / "fixtures" / "minimal.splat"), str(out), start_new_session=True)

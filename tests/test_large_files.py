@@ -20,7 +20,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from splatgl.formats import ply
+from splatgl.formats import ply, ply_write
 from splatgl.model.scene import VALIDATE_BLOCK, Scene
 
 pytestmark = pytest.mark.slow  # a 1M-splat file written, then loaded in a subprocess
@@ -52,7 +52,7 @@ def big_load(tmp_path_factory):
     scene = Scene(rng.normal(size=(N, 3)), rng.normal(size=(N, 4)), rng.normal(-4, 1, (N, 3)),
                   rng.normal(size=N), rng.normal(0, 0.3, (N, k, 3)))
     path = tmp_path_factory.mktemp("large") / "big_sh3.ply"
-    ply.write(path, scene)
+    ply_write.write(path, scene)
     del scene
     proc = subprocess.run([sys.executable, "-c", _CHILD, str(path)], capture_output=True,
                           text=True, timeout=120)

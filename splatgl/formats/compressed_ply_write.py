@@ -26,7 +26,7 @@ from ..model.scene import Scene, SplatKind, sh_to_rest
 from ..model.spatial import morton_order_full_box
 from . import quantise as qz
 from .compressed_ply import CHUNK_SIZE
-from .ply import write_elements
+from .ply_write import write_elements
 
 NAME = "compressed_ply"
 EXTENSIONS = (".compressed.ply",)

@@ -1,4 +1,5 @@
-"""glTF 2.0 (``.glb`` binary, ``.gltf`` JSON) with ``KHR_gaussian_splatting``: reader and writer.
+"""glTF 2.0 (``.glb`` binary, ``.gltf`` JSON) with ``KHR_gaussian_splatting``: reader (the writer
+is :mod:`splatgl.formats.gltf_write`).
 
 A splat primitive (``mode`` 0, POINTS) carries the extension object (``kernel``, ``colorSpace``,
 optional ``projection`` / ``sortingMethod``) and the attributes
@@ -21,7 +22,7 @@ z: ``(x, y, z) -> (-x, -y, z)``, the rotation composed with that turn (``q -> (0
 ``(w, x, y, z) -> (-z, -y, x, w)``) and the SH coefficients odd in ``(x, y)`` negated
 (:data:`Z180_SH_SIGNS`).  splat-transform and the PlayCanvas engine use the same turn between
 PLY and glTF (their quaternions match these bit for bit).  Turning twice gives ``-q``, the same
-rotation, so reading and writing share :func:`_turn`.
+rotation, so reading and writing (:mod:`.gltf_write`) share :func:`turn`.
 
 ``KHR_gaussian_splatting_compression_spz_2`` (reading only): the primitive's extension object
 holds ``extensions.KHR_gaussian_splatting_compression_spz_2.bufferView``, an SPZ blob whose
@@ -36,7 +37,6 @@ from __future__ import annotations
 import base64
 import json
 import math
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +46,6 @@ from ..errors import SceneFormatError
 from ..model.quaternion import quat_multiply, quat_to_rotmat, rotmat_to_quat
 from ..model.scene import Scene, SplatKind, activate
 from . import _binary, spz
-from . import quantise as qz
 
 NAME = "gltf"
 EXTENSIONS = (".glb", ".gltf")
@@ -62,9 +61,6 @@ Z180_SH_SIGNS = np.array([-1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1, 1, -1], 
 Z180_AXES = np.array([-1.0, -1.0, 1.0])
 Z180_QUAT_ORDER = [3, 2, 1, 0]
 Z180_QUAT_SIGNS = np.array([-1.0, -1.0, 1.0, 1.0])
-#: What the writer states in the extension object.
-EXTENSION_OBJECT = {"kernel": "ellipse", "colorSpace": "srgb_rec709_display",
-                    "projection": "perspective", "sortingMethod": "cameraDistance"}
 
 _COMPONENTS = {5120: "i1", 5121: "u1", 5122: "i2", 5123: "u2", 5125: "u4", 5126: "f4"}
 _TYPES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
@@ -76,8 +72,6 @@ def sniff(head: bytes) -> bool:
         return True
     return head.lstrip().startswith(b"{") and b'"asset"' in head and EXT.encode() in head
 
-
-# --- reading ------------------------------------------------------------------------------------
 
 class _Document:
     """A parsed glTF: the JSON object and its buffers (bytes)."""
@@ -234,7 +228,7 @@ def _primitive(doc: _Document, prim: dict, where: str) -> tuple[np.ndarray, ...]
         data, offset, length, _ = doc.view(spz_ext.get("bufferView"))
         means, quats, log_scales, logits, sh = spz.decode(doc.path, data[offset:offset + length],
                                                           axes="rub")
-        return _turn(np.asarray(means, np.float64), np.asarray(quats, np.float64),
+        return turn(np.asarray(means, np.float64), np.asarray(quats, np.float64),
                      log_scales, logits, sh)
     attrs = prim.get("attributes")
     if not isinstance(attrs, dict) or "POSITION" not in attrs:
@@ -278,7 +272,7 @@ def _primitive(doc: _Document, prim: dict, where: str) -> tuple[np.ndarray, ...]
     return means, quats, log_scales, _binary.logit(opacity[:, 0]), sh
 
 
-def _turn(means, quats, log_scales, logits, sh) -> tuple[np.ndarray, ...]:
+def turn(means, quats, log_scales, logits, sh) -> tuple[np.ndarray, ...]:
     """The 180-degree turn about z between glTF (LUF) and PLY (RDF) axes (its own inverse)."""
     out_sh = np.array(sh, np.float32, copy=True)
     out_sh[:, 1:] *= Z180_SH_SIGNS[: sh.shape[1] - 1, None]
@@ -336,81 +330,7 @@ def read(path: Path, drop_invalid: bool = False) -> Scene:
     degree = min(p[4].shape[1] for p in parts)
     cat = [np.concatenate([p[i] if i < 4 else p[4][:, :degree] for p in parts])
            for i in range(5)]
-    means, quats, log_scales, logits, sh = _turn(*cat)
+    means, quats, log_scales, logits, sh = turn(*cat)
     return activate(path, means, quats, np.asarray(log_scales, np.float32),
                     np.asarray(logits, np.float32), np.asarray(sh, np.float32),
                     SplatKind.GAUSSIAN_3D, drop_invalid)
-
-
-# --- writing ------------------------------------------------------------------------------------
-
-def document(scene: Scene, path=None) -> tuple[dict, bytes]:
-    """The glTF JSON object (buffer 0 without uri) and the binary buffer of ``scene``."""
-    if scene.kind is not SplatKind.GAUSSIAN_3D:
-        raise SceneFormatError(path, "KHR_gaussian_splatting stores 3D Gaussians only; cannot "
-                                     "write a 2DGS surfel scene (write .ply instead)", "scale")
-    means, quats, _, _, sh = _turn(scene.means.astype(np.float64),
-                                   scene.rotations.astype(np.float64), None, None, scene.sh)
-    columns = [("POSITION", means.astype(np.float32), "VEC3"),
-               (PREFIX + "ROTATION", quats[:, [1, 2, 3, 0]].astype(np.float32), "VEC4"),
-               (PREFIX + "SCALE", scene.scales, "VEC3"),
-               (PREFIX + "OPACITY", scene.opacities, "SCALAR")]
-    k = 0
-    for degree in range(scene.sh_degree + 1):
-        for n in range(2 * degree + 1):
-            columns.append((f"{PREFIX}SH_DEGREE_{degree}_COEF_{n}", sh[:, k], "VEC3"))
-            k += 1
-    blobs, views, accessors, attributes, offset = [], [], [], {}, 0
-    for i, (name, values, kind) in enumerate(columns):
-        blob = np.ascontiguousarray(values, "<f4").tobytes()
-        views.append({"buffer": 0, "byteOffset": offset, "byteLength": len(blob), "target": 34962})
-        acc = {"bufferView": i, "componentType": 5126, "count": scene.count, "type": kind}
-        if name == "POSITION":
-            acc["min"] = values.min(axis=0).tolist()
-            acc["max"] = values.max(axis=0).tolist()
-        accessors.append(acc)
-        attributes[name] = i
-        blobs.append(blob + b"\0" * (-len(blob) % 4))
-        offset += len(blobs[-1])
-    binary = b"".join(blobs)
-    gltf = {"asset": {"version": "2.0", "generator": "splatgl"},
-            "extensionsUsed": [EXT], "scene": 0, "scenes": [{"nodes": [0]}],
-            "nodes": [{"mesh": 0}],
-            "meshes": [{"primitives": [{"attributes": attributes, "mode": 0,
-                                        "extensions": {EXT: dict(EXTENSION_OBJECT)}}]}],
-            "buffers": [{"byteLength": len(binary)}], "bufferViews": views,
-            "accessors": accessors}
-    return gltf, binary
-
-
-def write(path, scene: Scene) -> None:
-    """Write ``scene`` as GLB, or as ``.gltf`` JSON with the buffer as a base64 data URI (chosen
-    by the name: a ``.gltf`` name, with a ``.partial`` suffix while being written)."""
-    path = Path(path)
-    gltf, binary = document(scene, path)
-    final = path.name[: -len(".partial")] if path.name.endswith(".partial") else path.name
-    if final.lower().endswith(".gltf"):
-        gltf["buffers"][0]["uri"] = ("data:application/octet-stream;base64,"
-                                     + base64.b64encode(binary).decode("ascii"))
-        path.write_text(json.dumps(gltf), encoding="utf-8")
-        return
-    text = json.dumps(gltf).encode("utf-8")
-    text += b" " * (-len(text) % 4)
-    total = 12 + 8 + len(text) + 8 + len(binary)
-    with open(path, "wb") as fh:
-        fh.write(struct.pack("<4sII", GLB_MAGIC, 2, total))
-        fh.write(struct.pack("<II", len(text), CHUNK_JSON) + text)
-        fh.write(struct.pack("<II", len(binary), CHUNK_BIN) + binary)
-
-
-def error_bounds(scene: Scene) -> dict:
-    """Round-trip bounds: float32 storage of linear scale, opacity and the unit quaternion."""
-    max_log = float(np.abs(scene.log_scales).max()) if scene.count else 0.0
-    return {
-        "position": qz.position_slack(scene.means),
-        "scale": 8.0 * 2.0 ** -24 * (1.0 + max_log),
-        "opacity": 1e-6,
-        "rotation": 1e-3,
-        "color": 1e-7,
-        "sh_rest": 1e-7 if scene.sh_degree > 0 else None,
-    }

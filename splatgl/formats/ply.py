@@ -1,4 +1,5 @@
-"""INRIA-style 3DGS / 2DGS PLY files (binary little/big endian and ASCII): reader and writer.
+"""INRIA-style 3DGS / 2DGS PLY files (binary little/big endian and ASCII): reader (the header is
+:mod:`.ply_header`, the writer :mod:`.ply_write`).
 
 The vertex element holds one splat per row with (at least) the properties
 
@@ -18,134 +19,21 @@ from __future__ import annotations
 
 import os
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneFormatError
-from ..model.scene import Scene, SplatKind, activate, sh_degree_from_rest_count, sh_to_rest
+from ..model.scene import Scene, SplatKind, activate, sh_degree_from_rest_count
 from ._memory import check_memory
 from ._messages import quote, reader_guard
+from .ply_header import SCALAR_TYPES, Element, Header, _error, parse_header
 
 NAME = "ply"
 EXTENSIONS = (".ply",)
 
-#: PLY scalar type names (both spellings) -> NumPy type codes without byte order.
-SCALAR_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}
-#: ``format`` keyword -> NumPy byte order (None for ASCII).
-FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None}
-#: A header longer than this is not a PLY header (guards against reading a huge text file).
-MAX_HEADER_BYTES = 1 << 20
-
 _REST_RE = re.compile(r"^f_rest_(\d+)$")
 #: Rows per read of a binary PLY (64 Ki rows: 16 MiB for 62 float properties).
 CHUNK_ROWS = 1 << 16
-
-
-@dataclass
-class Element:
-    """One ``element`` of the header: its name, row count and properties.
-
-    ``properties`` is a list of ``(name, numpy_code)``; ``has_list`` is set when any property is a
-    ``property list`` (variable size per row).
-    """
-
-    name: str
-    count: int
-    properties: list[tuple[str, str]] = field(default_factory=list)
-    has_list: bool = False
-
-    def dtype(self, order: str) -> np.dtype:
-        """Structured dtype of one row in byte ``order`` ('<' or '>'); fixed-size rows only."""
-        return np.dtype([(name, order + code) for name, code in self.properties])
-
-
-@dataclass
-class Header:
-    """A parsed PLY header: byte order (None for ASCII), elements, and where the body starts."""
-
-    order: str | None
-    elements: list[Element]
-    body_offset: int
-    lines: int  # number of header lines, so ASCII errors can give file line numbers
-
-
-def _error(path, message: str, field_name: str | None = None) -> SceneFormatError:
-    return SceneFormatError(path, message, field_name)
-
-
-def parse_header(path, fh) -> Header:
-    """Parse the header from the binary file object ``fh`` (positioned at 0).
-
-    Raises :class:`SceneFormatError` for a missing ``ply`` magic, missing ``end_header``,
-    unsupported format, unknown property types and malformed lines.
-    """
-    first = fh.readline(16)
-    if first.rstrip(b"\r\n") != b"ply":
-        raise _error(path, "not a PLY file (it does not start with a 'ply' line)")
-    order: str | None = None
-    have_format = False
-    elements: list[Element] = []
-    lineno = 1
-    while True:
-        raw = fh.readline(MAX_HEADER_BYTES)
-        lineno += 1
-        if not raw:
-            raise _error(path, "the header has no 'end_header' line (file ends inside the header)")
-        if fh.tell() > MAX_HEADER_BYTES:
-            raise _error(path, f"no 'end_header' within the first {MAX_HEADER_BYTES} bytes")
-        try:
-            line = raw.decode("ascii").strip()
-        except UnicodeDecodeError:
-            raise _error(path, f"header line {lineno} is not ASCII text (missing 'end_header'?)")
-        words = line.split()
-        if not words or words[0] in ("comment", "obj_info"):
-            continue
-        key = words[0]
-        if key == "end_header":
-            break
-        if key == "format":
-            if len(words) != 3 or words[1] not in FORMATS or words[2] != "1.0":
-                raise _error(path, f"unsupported format line {quote(line)} (expected "
-                                   "'format binary_little_endian|binary_big_endian|ascii 1.0')",
-                             "format")
-            order, have_format = FORMATS[words[1]], True
-        elif key == "element":
-            if len(words) != 3 or not words[2].isdigit():
-                raise _error(path, f"header line {lineno}: malformed element line {quote(line)}")
-            elements.append(Element(words[1], int(words[2])))
-        elif key == "property":
-            if not elements:
-                raise _error(path, f"header line {lineno}: property before any element")
-            elem = elements[-1]
-            if len(words) == 5 and words[1] == "list":
-                for t in words[2:4]:
-                    if t not in SCALAR_TYPES:
-                        raise _error(path, f"unknown property type {quote(t)} in list property",
-                                     words[4])
-                elem.has_list = True
-                elem.properties.append((words[4], "list"))
-            elif len(words) == 3:
-                if words[1] not in SCALAR_TYPES:
-                    raise _error(path, f"unknown property type {quote(words[1])} (expected one of "
-                                       f"{', '.join(sorted(set(SCALAR_TYPES)))})", words[2])
-                if any(words[2] == name for name, _ in elem.properties):
-                    raise _error(path, f"property declared twice in element {quote(elem.name)}",
-                                 words[2])
-                elem.properties.append((words[2], SCALAR_TYPES[words[1]]))
-            else:
-                raise _error(path, f"header line {lineno}: malformed property line {quote(line)}")
-        else:
-            raise _error(path, f"header line {lineno}: unexpected header line {quote(line)}")
-    if not have_format:
-        raise _error(path, "the header has no 'format' line", "format")
-    return Header(order, elements, fh.tell(), lineno)
 
 
 def sniff(head: bytes) -> bool:
@@ -397,66 +285,3 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
 def _check_not_empty(path, count: int) -> None:
     if count == 0:
         raise _error(path, "the scene has no splats (element vertex 0)", "vertex")
-
-
-def write_elements(path, elements: list[tuple[str, np.ndarray]], byte_order: str = "little",
-                   ascii: bool = False, comments: tuple[str, ...] = ()) -> None:
-    """Write any PLY: ``elements`` is a list of ``(name, structured array)`` with scalar fields.
-
-    ``byte_order`` is 'little' or 'big' (binary); ``ascii=True`` writes text with 9 significant
-    digits for floats, enough for float32 to read back bit-exact.
-    """
-    if byte_order not in ("little", "big"):
-        raise ValueError(f"byte_order must be 'little' or 'big', not {byte_order!r}")
-    fmt = "ascii" if ascii else f"binary_{byte_order}_endian"
-    codes = {v: k for k, v in SCALAR_TYPES.items() if k.isalpha() and not k[-1].isdigit()}
-    head = ["ply", f"format {fmt} 1.0", *(f"comment {c}" for c in comments)]
-    for name, arr in elements:
-        head.append(f"element {name} {len(arr)}")
-        for fname in arr.dtype.names:
-            head.append(f"property {codes[arr.dtype[fname].str[1:]]} {fname}")
-    head.append("end_header")
-    order = "<" if byte_order == "little" else ">"
-    with open(path, "wb") as fh:
-        fh.write(("\n".join(head) + "\n").encode("ascii"))
-        for _, arr in elements:
-            if ascii:
-                fmts = ["%.9g" if arr.dtype[n].kind == "f" else "%d" for n in arr.dtype.names]
-                cols = [arr[n] for n in arr.dtype.names]
-                for row in zip(*cols):
-                    fh.write((" ".join(f % v for f, v in zip(fmts, row)) + "\n").encode("ascii"))
-            else:
-                dt = np.dtype([(n, order + arr.dtype[n].str[1:]) for n in arr.dtype.names])
-                arr.astype(dt).tofile(fh)
-
-
-def scene_to_vertices(scene: Scene, normals: bool = True) -> np.ndarray:
-    """The INRIA vertex layout of ``scene``: a structured float32 array, one row per splat.
-
-    Fields: x y z [nx ny nz] f_dc_0..2 f_rest_* (channel-major) opacity scale_* rot_0..3.
-    """
-    dc, rest = sh_to_rest(scene.sh)
-    cols: list[tuple[str, np.ndarray]] = [(n, scene.means[:, i]) for i, n in enumerate("xyz")]
-    if normals:
-        zero = np.zeros(scene.count, np.float32)
-        cols += [("nx", zero), ("ny", zero), ("nz", zero)]
-    cols += [(f"f_dc_{i}", dc[:, i]) for i in range(3)]
-    cols += [(f"f_rest_{i}", rest[:, i]) for i in range(rest.shape[1])]
-    cols.append(("opacity", scene.opacity_logits))
-    cols += [(f"scale_{i}", scene.log_scales[:, i]) for i in range(scene.log_scales.shape[1])]
-    cols += [(f"rot_{i}", scene.quats[:, i]) for i in range(4)]
-    out = np.empty(scene.count, np.dtype([(n, "<f4") for n, _ in cols]))
-    for n, c in cols:
-        out[n] = c
-    return out
-
-
-def write(path, scene: Scene, *, byte_order: str = "little", ascii: bool = False,
-          normals: bool = True) -> None:
-    """Write ``scene`` as an INRIA-layout PLY (float32; binary little endian by default).
-
-    Reading the file back gives bit-identical arrays.  ``byte_order='big'`` and ``ascii=True``
-    exist mainly to exercise the reader; ``normals=False`` leaves out ``nx ny nz``.
-    """
-    write_elements(path, [("vertex", scene_to_vertices(scene, normals))], byte_order, ascii,
-                   comments=("written by splatgl",))

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneFormatError
-from ..formats import ply
+from ..formats import ply, ply_write
 from ..formats.written import write_checked
 from ..model.scene import Scene, activate
 from .build import LodTree, bounding_radii, level_offsets
@@ -37,9 +37,9 @@ def write_lod(path: Path, tree: LodTree) -> None:
     n = tree.level_size(0)
     leaves = tree.nodes.subset(slice(0, n))
     inner = tree.nodes.subset(slice(n, None))
-    write_checked(path, lambda tmp: ply.write_elements(
-        tmp, [("vertex", ply.scene_to_vertices(leaves, normals=False)),
-              (ELEMENT, ply.scene_to_vertices(inner, normals=False))],
+    write_checked(path, lambda tmp: ply_write.write_elements(
+        tmp, [("vertex", ply_write.scene_to_vertices(leaves, normals=False)),
+              (ELEMENT, ply_write.scene_to_vertices(inner, normals=False))],
         comments=("written by splatgl lod", f"lod branching {tree.branching}")))
 
 

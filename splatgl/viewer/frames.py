@@ -22,6 +22,8 @@ from ..api import Renderer
 from ..model.scene import Scene
 from ..model.settings import RendererKind, RenderSettings
 from ..cameras.view import View
+from ..renderers.stereo import StereoLayout, StereoRenderer
+from . import controls
 
 #: Error that saturates the difference view's colour scale (8/255).
 DIFFERENCE_SCALE = 8.0 / 255.0
@@ -91,3 +93,19 @@ def render_frame(renderer: Renderer, scene: Scene, camera: Camera, settings: Ren
     sort, draw, splats = _times(renderer, scene, settings, RendererKind.QUAD)
     return FrameResult(None, img, False, sort, draw, splats,
                        f"max |quad - tile| {worst * 255:.1f}/255")
+
+
+def render_stereo(renderer: Renderer, scene: Scene, camera: Camera, settings: RenderSettings,
+                  kind: RendererKind, ipd: float) -> FrameResult:
+    """Both eyes of ``camera`` side by side (interpupillary distance ``ipd``, world units),
+    each eye the view fitted to half of ``camera``'s width; an odd width keeps one column of
+    background on the right."""
+    half = controls.fit_camera(camera, max(camera.width // 2, 1), camera.height)
+    stereo = StereoRenderer(renderer, ipd, StereoLayout.SIDE_BY_SIDE)
+    t0 = time.perf_counter()
+    image = stereo.render(scene, half, settings, kind)
+    if image.shape[1] < camera.width:   # an odd width: one column of background
+        pad = np.zeros((image.shape[0], camera.width - image.shape[1], 4), np.float32)
+        pad[..., :3] = settings.background
+        image = np.concatenate([image, pad], axis=1)
+    return FrameResult(None, image, False, 0.0, time.perf_counter() - t0, f"stereo, IPD {ipd:g}")

@@ -1,0 +1,79 @@
+"""Writer of INRIA-style 3DGS / 2DGS PLY files (float32; binary little or big endian, or ASCII),
+read back bit-identical by :mod:`.ply`; :func:`write_elements` writes any PLY of scalar
+properties (the compressed PLY and the level-of-detail file use it too).
+
+The vertex layout is :func:`scene_to_vertices`: ``x y z [nx ny nz] f_dc_0..2 f_rest_*
+(channel-major) opacity scale_* rot_0..3``, the raw training values (log-scales, opacity
+logits, quaternions as stored).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.scene import Scene, sh_to_rest
+from .ply import EXTENSIONS, NAME  # noqa: F401 (the format registry reads them here too)
+from .ply_header import SCALAR_TYPES
+
+
+def write_elements(path, elements: list[tuple[str, np.ndarray]], byte_order: str = "little",
+                   ascii: bool = False, comments: tuple[str, ...] = ()) -> None:
+    """Write any PLY: ``elements`` is a list of ``(name, structured array)`` with scalar fields.
+
+    ``byte_order`` is 'little' or 'big' (binary); ``ascii=True`` writes text with 9 significant
+    digits for floats, enough for float32 to read back bit-exact.
+    """
+    if byte_order not in ("little", "big"):
+        raise ValueError(f"byte_order must be 'little' or 'big', not {byte_order!r}")
+    fmt = "ascii" if ascii else f"binary_{byte_order}_endian"
+    codes = {v: k for k, v in SCALAR_TYPES.items() if k.isalpha() and not k[-1].isdigit()}
+    head = ["ply", f"format {fmt} 1.0", *(f"comment {c}" for c in comments)]
+    for name, arr in elements:
+        head.append(f"element {name} {len(arr)}")
+        for fname in arr.dtype.names:
+            head.append(f"property {codes[arr.dtype[fname].str[1:]]} {fname}")
+    head.append("end_header")
+    order = "<" if byte_order == "little" else ">"
+    with open(path, "wb") as fh:
+        fh.write(("\n".join(head) + "\n").encode("ascii"))
+        for _, arr in elements:
+            if ascii:
+                fmts = ["%.9g" if arr.dtype[n].kind == "f" else "%d" for n in arr.dtype.names]
+                cols = [arr[n] for n in arr.dtype.names]
+                for row in zip(*cols):
+                    fh.write((" ".join(f % v for f, v in zip(fmts, row)) + "\n").encode("ascii"))
+            else:
+                dt = np.dtype([(n, order + arr.dtype[n].str[1:]) for n in arr.dtype.names])
+                arr.astype(dt).tofile(fh)
+
+
+def scene_to_vertices(scene: Scene, normals: bool = True) -> np.ndarray:
+    """The INRIA vertex layout of ``scene``: a structured float32 array, one row per splat.
+
+    Fields: x y z [nx ny nz] f_dc_0..2 f_rest_* (channel-major) opacity scale_* rot_0..3.
+    """
+    dc, rest = sh_to_rest(scene.sh)
+    cols: list[tuple[str, np.ndarray]] = [(n, scene.means[:, i]) for i, n in enumerate("xyz")]
+    if normals:
+        zero = np.zeros(scene.count, np.float32)
+        cols += [("nx", zero), ("ny", zero), ("nz", zero)]
+    cols += [(f"f_dc_{i}", dc[:, i]) for i in range(3)]
+    cols += [(f"f_rest_{i}", rest[:, i]) for i in range(rest.shape[1])]
+    cols.append(("opacity", scene.opacity_logits))
+    cols += [(f"scale_{i}", scene.log_scales[:, i]) for i in range(scene.log_scales.shape[1])]
+    cols += [(f"rot_{i}", scene.quats[:, i]) for i in range(4)]
+    out = np.empty(scene.count, np.dtype([(n, "<f4") for n, _ in cols]))
+    for n, c in cols:
+        out[n] = c
+    return out
+
+
+def write(path, scene: Scene, *, byte_order: str = "little", ascii: bool = False,
+          normals: bool = True) -> None:
+    """Write ``scene`` as an INRIA-layout PLY (float32; binary little endian by default).
+
+    Reading the file back gives bit-identical arrays.  ``byte_order='big'`` and ``ascii=True``
+    exist mainly to exercise the reader; ``normals=False`` leaves out ``nx ny nz``.
+    """
+    write_elements(path, [("vertex", scene_to_vertices(scene, normals))], byte_order, ascii,
+                   comments=("written by splatgl",))
