@@ -6,8 +6,8 @@
 // (no atomics, no barriers: both are slow on llvmpipe).  Twin: splatgl/renderers/early_stop.py coverage.
 #include "lib/splat_rect.glsl"
 
-layout(local_size_x = 64) in;
-layout(std430, binding = 12) writeonly buffer Partial { float partial[]; };
+layout(local_size_x = COVERAGE_GROUP) in;
+layout(std430, binding = BINDING_COVERAGE) writeonly buffer Partial { float partial[]; };
 uniform uint u_count;
 
 void main() {

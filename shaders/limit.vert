@@ -2,7 +2,7 @@
 // placed with no per-splat math and no fragment inputs: per-primitive cost only.
 uniform vec2 u_viewport;  // (width, height) in pixels
 
-layout(std430, binding = 6) readonly buffer Prepared { vec4 prepared[]; };
+layout(std430, binding = BINDING_PREPARED) readonly buffer Prepared { vec4 prepared[]; };
 
 void main() {
     uint k = uint(gl_InstanceID);

@@ -25,7 +25,7 @@ layout(location = 0) out vec4 out_color;
 #ifdef COUNT_FRAGMENTS
 // Benchmark variant: counts fragments shaded (with COUNT_RASTERISED: rasterised) and fragments
 // kept (alpha >= 1/255).
-layout(std430, binding = 7) buffer FragmentCounts { uint fragments_shaded; uint fragments_kept; };
+layout(std430, binding = BINDING_FRAGMENT_COUNTS) buffer FragmentCounts { uint fragments_shaded; uint fragments_kept; };
 #endif
 #ifdef DEPTH_OUTPUT
 layout(location = 1) out vec4 out_depth;

@@ -4,7 +4,7 @@
 #include "lib/camera.glsl"
 #include "lib/quad_emit.glsl"
 
-layout(std430, binding = 6) readonly buffer Prepared { vec4 prepared[]; };
+layout(std430, binding = BINDING_PREPARED) readonly buffer Prepared { vec4 prepared[]; };
 #ifdef SURVIVORS
 in uint splat_slot;           // survivors[baseInstance + instance] (occlusion_cull.comp)
 #else

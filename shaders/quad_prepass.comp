@@ -9,12 +9,12 @@
 #include "lib/sh.glsl"
 #include "lib/splat_setup.glsl"
 
-layout(local_size_x = 128) in;
-layout(std430, binding = 5) readonly buffer Order { uint order[]; };
-layout(std430, binding = 6) writeonly buffer Prepared { vec4 prepared[]; };
+layout(local_size_x = PREPASS_GROUP) in;
+layout(std430, binding = BINDING_ORDER) readonly buffer Order { uint order[]; };
+layout(std430, binding = BINDING_PREPARED) writeonly buffer Prepared { vec4 prepared[]; };
 #ifdef OPACITY_WEIGHT
 // Level-of-detail blend: a factor on each sorted slot's opacity (splatgl/lod/render.py).
-layout(std430, binding = 11) readonly buffer OpacityWeight { float opacity_weight[]; };
+layout(std430, binding = BINDING_OPACITY_WEIGHT) readonly buffer OpacityWeight { float opacity_weight[]; };
 #endif
 uniform uint u_count;
 

@@ -3,7 +3,7 @@
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;
-layout(std430, binding = 4) buffer Hist { uint hist[]; };
+layout(std430, binding = RADIX_BINDING_HIST) buffer Hist { uint hist[]; };
 
 shared uint s_part[RADIX_GROUP];
 

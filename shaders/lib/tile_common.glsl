@@ -1,5 +1,5 @@
-// Per-view buffers of the tile renderer (splatgl/renderers/tile.py allocates and binds them; the binding
-// numbers come from generated #defines TILE_BINDING_*, so they are written in one place).
+// Per-view buffers of the tile renderer (splatgl/renderers/tile.py allocates and binds them at
+// the TILE_BINDING_* points of splatgl/gl/bindings.py).
 // Twin arrays: splatgl/reference/stages.py ProjectedSplats and reference/binning.py.
 //
 // proj_mean_depth[i] = (u, v, view z, 0): image position in pixels (centre of pixel (i, j) at
