@@ -1,8 +1,10 @@
 // Quad path, compute pre-pass: the per-splat math of quad.vert done once per splat (not once
 // per corner), for the sorted visible splats, into `prepared` for quad_light.vert.
 // Layout per sorted slot k (4 vec4): (mean2d, axis1), (axis2, conic.ab), (conic.c, color),
-// (opacity, depth, visible, fragments in the viewport: camera.glsl visible_area).  Twin: splatgl/twins/project.py, as for quad.vert; with
-// OPACITY_WEIGHT, the scene with those opacities scaled (splatgl/lod/render.py blended_scene).
+// (opacity, depth, visible, fragments in the viewport: camera.glsl visible_area).  With
+// OPACITY_WEIGHT, the scene with those opacities scaled (a level-of-detail cut's blend).
+// Twin: splatgl/twins/project.py project(), ellipse_axes(), reference_radius();
+//   splatgl/lod/render.py blended_scene().
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"
 #include "lib/project.glsl"

@@ -1,4 +1,5 @@
 // Radix sort, pass step 1 of 3: each tile's count of each digit, into hist (digit-major).
+// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;

@@ -2,6 +2,7 @@
 // hist[d * u_tiles + tile] (the scanned tile offset) + the number of keys of digit d held by
 // earlier threads of the tile + the number of earlier keys of digit d in its own thread, so
 // equal digits keep their input order (the pass is stable, hence the whole LSD sort).
+// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;

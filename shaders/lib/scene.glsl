@@ -1,4 +1,5 @@
 // Scene storage, uploaded once per scene (splatgl/gl/scene_buffers.py writes these layouts).
+// Twin: none (storage layouts and accessors; the compact decoding's twin is in dequantise.glsl).
 // Shaders read a splat only through the accessors below, so every storage layout
 // (splatgl.settings.GpuStorage) serves every stage.
 //

@@ -6,6 +6,7 @@
 //   MODE_OPAQUE:        an image already composited: output its RGB.
 //   MODE_OVERLAY:       straight-alpha RGBA drawn with (SRC_ALPHA, ONE_MINUS_SRC_ALPHA).
 // The MODE_* values are defines from splatgl/viewer/present.py Mode.
+// Twin: splatgl/renderers/quad.py composite().
 
 layout(binding = PRESENT_UNIT) uniform sampler2D u_image;
 uniform vec3 u_background;
