@@ -7,7 +7,7 @@ gathered rows, compiled in place) and the sort of its keys, each the median of `
 runs, and whether both paths gave the same cut and keys.  Needs numba (the ``fast`` extra) for
 the compiled columns.  Run it alone on the machine (it times)::
 
-    python benchmarks/lod_cpu.py --sizes 3M,6M --json-lines docs/lod-cpu.jsonl
+    python benchmarks/lod_cpu.py --sizes 3M,6M --json-lines docs/results/lod-cpu.jsonl
 """
 
 from __future__ import annotations

@@ -3,11 +3,12 @@
 // k = invocation, invocation + stride, ..., the area of quad k times the share of its screen
 // rectangle inside the viewport (lib/camera.glsl visible_area; PREPARED: computed by the
 // pre-pass), and writes its float sum to partial[invocation]; the caller adds the partial sums
-// (no atomics, no barriers: both are slow on llvmpipe).  Twin: splatgl/renderers/early_stop.py coverage.
+// (no atomics, no barriers: both are slow on llvmpipe).
+// Twin: splatgl/renderers/early_stop.py coverage().
 #include "lib/splat_rect.glsl"
 
-layout(local_size_x = 64) in;
-layout(std430, binding = 12) writeonly buffer Partial { float partial[]; };
+layout(local_size_x = COVERAGE_GROUP) in;
+layout(std430, binding = BINDING_COVERAGE) writeonly buffer Partial { float partial[]; };
 uniform uint u_count;
 
 void main() {

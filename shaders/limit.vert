@@ -1,8 +1,9 @@
 // Benchmark limit row, vertex stage: the quad path's own geometry (from quad_prepass.comp),
 // placed with no per-splat math and no fragment inputs: per-primitive cost only.
+// Twin: none (a benchmark's cost floor: quad_prepass.comp's quads placed as they are).
 uniform vec2 u_viewport;  // (width, height) in pixels
 
-layout(std430, binding = 6) readonly buffer Prepared { vec4 prepared[]; };
+layout(std430, binding = BINDING_PREPARED) readonly buffer Prepared { vec4 prepared[]; };
 
 void main() {
     uint k = uint(gl_InstanceID);

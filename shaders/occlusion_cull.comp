@@ -10,24 +10,22 @@
 // survivors[baseInstance + instance]).  Variants: PREPARED (3DGS after quad_prepass.comp:
 // the survivor value is the slot, read back by quad_light.vert), SURFEL (2DGS, the value is the
 // splat index for surfel.vert), neither (3DGS vertex path, the splat index for quad.vert).
-// Twin: splatgl/renderers/early_stop.py occlusion_cull.
+// Twin: splatgl/renderers/early_stop.py occlusion_cull().
 #include "lib/splat_rect.glsl"
 
-#define GROUP 256
-#define PER_INVOCATION 4
-layout(local_size_x = GROUP) in;
-layout(std430, binding = 8) readonly buffer StopTiles { uint stopped[]; };
-layout(std430, binding = 9) writeonly buffer Survivors { uint survivors[]; };
+layout(local_size_x = OCCLUSION_GROUP) in;
+layout(std430, binding = BINDING_STOP_TILES) readonly buffer StopTiles { uint stopped[]; };
+layout(std430, binding = BINDING_SURVIVORS) writeonly buffer Survivors { uint survivors[]; };
 // DrawArraysIndirectCommand (count, instanceCount, first, baseInstance) in moderngl's 20-byte
 // stride (render_indirect passes stride 20 for arrays too): 5 uints per command.
-layout(std430, binding = 10) writeonly buffer Commands { uint commands[]; };
+layout(std430, binding = BINDING_COMMANDS) writeonly buffer Commands { uint commands[]; };
 uniform uint u_start;
 uniform uint u_end;
 uniform uint u_cmd_base;
 uniform ivec2 u_tiles;         // tile grid (columns, rows)
 uniform bool u_check_tiles;    // false on the first batch: nothing has stopped yet
 
-shared uint s_scan[GROUP];
+shared uint s_scan[OCCLUSION_GROUP];
 
 // Bits of tile `tile`'s stop word (stop_tiles.comp: bit 4 by + bx per block) that the block
 // range [blo, bhi] (global block coordinates) covers.
@@ -68,11 +66,11 @@ bool survives(uint k, out uint value) {
 
 void main() {
     uint l = gl_LocalInvocationID.x;
-    uint seg_base = u_start + gl_WorkGroupID.x * (GROUP * PER_INVOCATION);
-    uint first = seg_base + l * PER_INVOCATION;
-    uint values[PER_INVOCATION];
+    uint seg_base = u_start + gl_WorkGroupID.x * (OCCLUSION_GROUP * OCCLUSION_PER_INVOCATION);
+    uint first = seg_base + l * OCCLUSION_PER_INVOCATION;
+    uint values[OCCLUSION_PER_INVOCATION];
     uint count = 0u;
-    for (uint j = 0u; j < PER_INVOCATION; ++j) {
+    for (uint j = 0u; j < OCCLUSION_PER_INVOCATION; ++j) {
         uint k = first + j;
         uint v;
         if (k < u_end && survives(k, v)) values[count++] = v;
@@ -80,7 +78,7 @@ void main() {
     // Inclusive scan of the per-invocation counts (Hillis-Steele over the work group).
     s_scan[l] = count;
     barrier();
-    for (uint off = 1u; off < GROUP; off <<= 1) {
+    for (uint off = 1u; off < OCCLUSION_GROUP; off <<= 1) {
         uint add = l >= off ? s_scan[l - off] : 0u;
         barrier();
         s_scan[l] += add;
@@ -88,7 +86,7 @@ void main() {
     }
     uint at = seg_base + s_scan[l] - count;
     for (uint j = 0u; j < count; ++j) survivors[at + j] = values[j];
-    if (l == GROUP - 1u) {
+    if (l == OCCLUSION_GROUP - 1u) {
         uint c = 5u * (u_cmd_base + gl_WorkGroupID.x);
         commands[c] = 4u;
         commands[c + 1u] = s_scan[l];

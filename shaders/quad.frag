@@ -2,7 +2,8 @@
 //   alpha = min(0.99, o exp(power)), power = -0.5 (a dx^2 + c dy^2) - b dx dy,
 //   skipped (written as (0, 0, 0, 0), which the blend adds as exactly nothing) when power > 0
 //   or alpha < 1/255.  Output premultiplied (c alpha, alpha) for
-//   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).  Twin: splatgl/twins/blend.py.
+//   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).
+// Twin: splatgl/twins/blend.py splat_alpha(), blend_front_to_back().
 // With DEPTH_OUTPUT, a second target gets (z alpha, 0, 0, alpha) under the same blend, so its
 // own alpha channel tracks the same transmittance and red accumulates D = sum z alpha T.
 #if defined(EARLY_STOP) && !defined(COUNT_RASTERISED)
@@ -25,7 +26,7 @@ layout(location = 0) out vec4 out_color;
 #ifdef COUNT_FRAGMENTS
 // Benchmark variant: counts fragments shaded (with COUNT_RASTERISED: rasterised) and fragments
 // kept (alpha >= 1/255).
-layout(std430, binding = 7) buffer FragmentCounts { uint fragments_shaded; uint fragments_kept; };
+layout(std430, binding = BINDING_FRAGMENT_COUNTS) buffer FragmentCounts { uint fragments_shaded; uint fragments_kept; };
 #endif
 #ifdef DEPTH_OUTPUT
 layout(location = 1) out vec4 out_depth;

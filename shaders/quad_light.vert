@@ -1,10 +1,11 @@
 // Quad path, light vertex stage: instance k reads what quad_prepass.comp computed for the k-th
 // sorted splat and only places the corner.  Slot k is u_base + gl_InstanceID for a plain range
 // draw; with SURVIVORS (early termination) it comes from the occlusion cull's compacted list.
+// Twin: splatgl/twins/project.py project(), ellipse_axes().
 #include "lib/camera.glsl"
 #include "lib/quad_emit.glsl"
 
-layout(std430, binding = 6) readonly buffer Prepared { vec4 prepared[]; };
+layout(std430, binding = BINDING_PREPARED) readonly buffer Prepared { vec4 prepared[]; };
 #ifdef SURVIVORS
 in uint splat_slot;           // survivors[baseInstance + instance] (occlusion_cull.comp)
 #else

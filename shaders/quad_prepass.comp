@@ -1,20 +1,22 @@
 // Quad path, compute pre-pass: the per-splat math of quad.vert done once per splat (not once
 // per corner), for the sorted visible splats, into `prepared` for quad_light.vert.
 // Layout per sorted slot k (4 vec4): (mean2d, axis1), (axis2, conic.ab), (conic.c, color),
-// (opacity, depth, visible, fragments in the viewport: camera.glsl visible_area).  Twin: splatgl/twins/project.py, as for quad.vert; with
-// OPACITY_WEIGHT, the scene with those opacities scaled (splatgl/lod/render.py blended_scene).
+// (opacity, depth, visible, fragments in the viewport: camera.glsl visible_area).  With
+// OPACITY_WEIGHT, the scene with those opacities scaled (a level-of-detail cut's blend).
+// Twin: splatgl/twins/project.py project(), ellipse_axes(), reference_radius();
+//   splatgl/lod/render.py blended_scene().
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"
 #include "lib/project.glsl"
 #include "lib/sh.glsl"
 #include "lib/splat_setup.glsl"
 
-layout(local_size_x = 128) in;
-layout(std430, binding = 5) readonly buffer Order { uint order[]; };
-layout(std430, binding = 6) writeonly buffer Prepared { vec4 prepared[]; };
+layout(local_size_x = PREPASS_GROUP) in;
+layout(std430, binding = BINDING_ORDER) readonly buffer Order { uint order[]; };
+layout(std430, binding = BINDING_PREPARED) writeonly buffer Prepared { vec4 prepared[]; };
 #ifdef OPACITY_WEIGHT
 // Level-of-detail blend: a factor on each sorted slot's opacity (splatgl/lod/render.py).
-layout(std430, binding = 11) readonly buffer OpacityWeight { float opacity_weight[]; };
+layout(std430, binding = BINDING_OPACITY_WEIGHT) readonly buffer OpacityWeight { float opacity_weight[]; };
 #endif
 uniform uint u_count;
 

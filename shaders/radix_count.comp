@@ -1,9 +1,10 @@
 // Radix sort, pass step 1 of 3: each tile's count of each digit, into hist (digit-major).
+// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;
-layout(std430, binding = 0) readonly buffer KeysIn { uint keys_in[]; };
-layout(std430, binding = 4) writeonly buffer Hist { uint hist[]; };
+layout(std430, binding = RADIX_BINDING_KEYS_IN) readonly buffer KeysIn { uint keys_in[]; };
+layout(std430, binding = RADIX_BINDING_HIST) writeonly buffer Hist { uint hist[]; };
 
 shared uint s_count[RADIX];
 

@@ -1,9 +1,10 @@
 // Radix sort, pass step 2 of 3: exclusive prefix sum of hist in place (one work group).
 // After it, hist[d * u_tiles + tile] is where tile's first key of digit d goes.
+// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;
-layout(std430, binding = 4) buffer Hist { uint hist[]; };
+layout(std430, binding = RADIX_BINDING_HIST) buffer Hist { uint hist[]; };
 
 shared uint s_part[RADIX_GROUP];
 

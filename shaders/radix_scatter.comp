@@ -2,14 +2,15 @@
 // hist[d * u_tiles + tile] (the scanned tile offset) + the number of keys of digit d held by
 // earlier threads of the tile + the number of earlier keys of digit d in its own thread, so
 // equal digits keep their input order (the pass is stable, hence the whole LSD sort).
+// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;
-layout(std430, binding = 0) readonly buffer KeysIn { uint keys_in[]; };
-layout(std430, binding = 1) readonly buffer ValsIn { uint vals_in[]; };
-layout(std430, binding = 2) writeonly buffer KeysOut { uint keys_out[]; };
-layout(std430, binding = 3) writeonly buffer ValsOut { uint vals_out[]; };
-layout(std430, binding = 4) readonly buffer Hist { uint hist[]; };
+layout(std430, binding = RADIX_BINDING_KEYS_IN) readonly buffer KeysIn { uint keys_in[]; };
+layout(std430, binding = RADIX_BINDING_VALS_IN) readonly buffer ValsIn { uint vals_in[]; };
+layout(std430, binding = RADIX_BINDING_KEYS_OUT) writeonly buffer KeysOut { uint keys_out[]; };
+layout(std430, binding = RADIX_BINDING_VALS_OUT) writeonly buffer ValsOut { uint vals_out[]; };
+layout(std430, binding = RADIX_BINDING_HIST) readonly buffer Hist { uint hist[]; };
 
 shared uint s_scan[RADIX * uint(RADIX_GROUP)];  // [d * RADIX_GROUP + t], then its prefix
 shared uint s_part[RADIX_GROUP];

@@ -1,8 +1,9 @@
 // Early termination, mark pass (fragment stage): keeps (writes depth 0 at) the pixels whose
 // transmittance T = 1 - A has fallen below T_MIN, the reference's stop threshold (DESIGN.md 2).
 // The accumulation target is sampled, never attached: this pass renders into a depth-only
-// framebuffer.  Twin: splatgl/renderers/early_stop.py stop_mask.
-layout(binding = 0) uniform sampler2D u_accum;
+// framebuffer.
+// Twin: splatgl/renderers/early_stop.py stop_mask().
+layout(binding = ACCUM_UNIT) uniform sampler2D u_accum;
 
 void main() {
     float alpha = texelFetch(u_accum, ivec2(gl_FragCoord.xy), 0).a;

@@ -1,6 +1,6 @@
 // Tile renderer, stage 3 "emit_keys": one invocation per splat (3DGS duplicateWithKeys).
-// Twin: splatgl/reference/binning.py emit_keys().  Splat i writes one key per tile of its
-// rectangle, rows top to bottom and each row left to right, starting at tile_offsets[i]; the
+// Twin: splatgl/reference/binning.py emit_keys().
+// Splat i writes one key per tile of its rectangle, rows top to bottom and each row left to right, starting at tile_offsets[i]; the
 // key orders by tile_id = y * tiles_x + x, then by the float bits of view z (lib/tile_common).
 // A dispatch writes the keys u_first .. u_first + TILE_EMIT_CHUNK - 1 of each splat (one loop over
 // the rectangle's row-major index): llvmpipe ends an invocation's loops after 65535 iterations

@@ -1,5 +1,6 @@
 // Tile renderer, stage 1 "project": one invocation per splat (3DGS preprocessCUDA).
-// Twin: splatgl/reference/stages.py project() (math in splatgl/twins/project.py / lib/project.glsl).
+// Twin: splatgl/reference/stages.py project().
+// The math is lib/project.glsl's (its twin splatgl/twins/project.py).
 // Culls view z <= near (before the divide), det(Sigma') <= 0, non-finite results and empty
 // tile rectangles; writes the screen quantities, the tile rectangle and tiles_touched.
 #include "lib/camera.glsl"

@@ -1,5 +1,6 @@
 // Tile renderer, stage 6 "rasterize": one 16 x 16 work group per tile, one invocation per pixel
-// (3DGS renderCUDA).  Twin: splatgl/reference/rasterize.py rasterize().
+// (3DGS renderCUDA).
+// Twin: splatgl/reference/rasterize.py rasterize().
 // The tile's sorted splats are fetched into shared memory in batches of 256 (one per
 // invocation) and blended front to back (DESIGN.md 1-2):
 //   power = -0.5 (a dx^2 + c dy^2) - b dx dy,  d = pixel centre - mean2d

@@ -97,10 +97,9 @@ MAX_SH_DEGREE = 3
 
 
 #: GPU radix sort (shaders/radix_*.comp, splatgl/gl/radix_sort.py): bits per pass (16 digit
-#: values), threads per work group, keys per thread.  A group sorts one tile of
-#: RADIX_GROUP * RADIX_ITEMS = 4096 keys per pass; 8 passes cover 32-bit keys.
+#: values), keys per thread.  A group of RADIX_GROUP threads (splatgl/gl/bindings.py, 256)
+#: sorts one tile of RADIX_GROUP * RADIX_ITEMS = 4096 keys per pass; 8 passes cover 32-bit keys.
 RADIX_BITS = 4
-RADIX_GROUP = 256
 RADIX_ITEMS = 16
 
 #: Compact GPU storage (``--gpu-storage compact``, splatgl/gl/storage.py, shaders/lib/dequantise.glsl):
@@ -183,7 +182,6 @@ def glsl_defines() -> dict[str, str]:
         "SH_C0": glsl_float(SH_C0),
         "SH_C1": glsl_float(SH_C1),
         "RADIX_BITS": str(RADIX_BITS),
-        "RADIX_GROUP": str(RADIX_GROUP),
         "RADIX_ITEMS": str(RADIX_ITEMS),
         "COMPACT_QUAT_BITS": str(COMPACT_QUAT_BITS),
         "COMPACT_OPACITY_BITS": str(COMPACT_OPACITY_BITS),

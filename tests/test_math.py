@@ -10,9 +10,10 @@ import pytest
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at, orbit
 from splatgl.constants import LOW_PASS, SH_C0, SH_C1
-from splatgl.twins.project import (antialias_factor, conic, covariance_2d, covariance_3d,
-                                   ellipse_axes, jacobian, project_means, quat_to_rotmat,
-                                   reference_radius, sh_basis, sh_color, to_camera)
+from splatgl.twins.project import (antialias_factor, conic, covariance_2d, covariance_2d_det,
+                                   covariance_3d, discriminant, ellipse_axes, jacobian,
+                                   project_means, quat_to_rotmat, reference_radius, screen_factor,
+                                   sh_basis, sh_color, to_camera)
 
 RNG = np.random.default_rng(7)
 
@@ -70,6 +71,36 @@ def test_covariance_2d_and_conic_against_formula():
         inv = np.linalg.inv(got[i])
         np.testing.assert_allclose(con[i], [inv[0, 0], inv[0, 1], inv[1, 1]], rtol=1e-10)
         assert det[i] == pytest.approx(np.linalg.det(got[i]), rel=1e-10)
+
+
+def test_screen_factor_and_its_determinant():
+    """M = J W R S gives Sigma' = M M^T + 0.3 I; det(Sigma') from M's minors (Cauchy-Binet)
+    equals the plain determinant, and stays accurate in float32 where a c - b^2 cancels."""
+    cam = _camera()
+    rot = quat_to_rotmat(RNG.normal(size=(15, 4)))
+    scales = RNG.uniform(0.01, 0.3, (15, 3))
+    p = to_camera(RNG.normal(size=(15, 3)) * 0.5 + [0.1, 0.2, 0.3], cam)
+    m = screen_factor(rot, scales, p, cam)
+    cov = covariance_2d(covariance_3d(rot, scales), p, cam)
+    np.testing.assert_allclose(m @ np.swapaxes(m, -1, -2) + LOW_PASS * np.eye(2), cov, rtol=1e-12)
+    np.testing.assert_allclose(covariance_2d_det(cov, m), np.linalg.det(cov), rtol=1e-9)
+    # A needle 1e3 long and 1e-3 thin at 45 degrees in the image plane: float32 a c - b^2
+    # loses everything, the minors keep it.
+    c, s = math.cos(math.pi / 4), math.sin(math.pi / 4)
+    needle = np.array([[[1e3 * c, -1e-3 * s, 0.0], [1e3 * s, 1e-3 * c, 0.0]]])
+    want = np.linalg.det(needle[0] @ needle[0].T + LOW_PASS * np.eye(2))
+    m32 = needle.astype(np.float32)
+    cov32 = m32 @ np.swapaxes(m32, -1, -2) + np.float32(LOW_PASS) * np.eye(2, dtype=np.float32)
+    got = covariance_2d_det(cov32, m32)
+    assert got.dtype == np.float32 and got[0] == pytest.approx(want, rel=1e-4)
+
+
+def test_discriminant_is_mid_squared_minus_det_and_never_nan():
+    cov = np.array([[[9.0, 2.0], [2.0, 1.0]]])
+    assert discriminant(cov)[0] == pytest.approx(25.0 - 5.0, rel=1e-12)
+    huge = np.array([[[3e19, 1e19], [1e19, 1e19]]], np.float32)  # mid^2 overflows float32
+    got = discriminant(huge)[0]
+    assert np.isfinite(got) and got == pytest.approx(1e38 + 1e38, rel=1e-6)
 
 
 def test_dilation_is_in_true_pixel_units():

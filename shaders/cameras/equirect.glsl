@@ -1,6 +1,8 @@
 // Equirectangular camera model: a longitude/latitude panorama (EQUIRECT is defined too, for
-// the seam copies of lib/splat_setup.glsl and quad.frag).  Twin: splatgl/cameras/equirect.py
-// (same names; formulas in its module doc).
+// the seam copies of lib/splat_setup.glsl and quad.frag).  Formulas in
+// splatgl/cameras/equirect.py's module doc.
+// Twin: splatgl/cameras/equirect.py eye_space(), Equirectangular.project(),
+//   Equirectangular.jacobian(), Equirectangular.visible(), Equirectangular.depth().
 uniform float u_wrap_period;  // pixels per turn of longitude (2 pi fx)
 uniform float u_ods_eye;      // omni-directional stereo: signed eye offset on the eye circle (0: mono)
 

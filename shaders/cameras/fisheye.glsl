@@ -1,6 +1,8 @@
 // Fisheye camera model: OpenCV's model, equidistant when k = 0 (FISHEYE is defined too).
-// Twin: splatgl/cameras/fisheye.py (same names; formulas and their derivation in its module
-// doc).  fx, fy in pixels per radian.
+// Formulas and their derivation in splatgl/cameras/fisheye.py's module doc.  fx, fy in pixels
+// per radian.
+// Twin: splatgl/cameras/fisheye.py Fisheye.project(), Fisheye.jacobian(), Fisheye.visible(),
+//   Fisheye.depth().
 uniform vec4 u_distortion;    // k1..k4
 uniform float u_theta_limit;  // largest angle from the axis kept (radians)
 

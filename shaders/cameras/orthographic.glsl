@@ -1,5 +1,6 @@
-// Orthographic camera model (ORTHOGRAPHIC is defined too).  Twin: splatgl/cameras/
-// orthographic.py (same names).  fx, fy in pixels per world unit.
+// Orthographic camera model (ORTHOGRAPHIC is defined too).  fx, fy in pixels per world unit.
+// Twin: splatgl/cameras/orthographic.py Orthographic.project(), Orthographic.jacobian(),
+//   Orthographic.visible(), Orthographic.depth().
 
 // Pixel position of a camera-space point: u = fx x + cx.
 vec2 project_mean(vec3 p) {

@@ -1,6 +1,8 @@
-// Pinhole camera model.  Twin: splatgl/cameras/pinhole.py (same names).  Included by
-// lib/camera.glsl when CAMERA_MODEL is pinhole; every model's piece defines project_mean,
-// jacobian, in_view and view_depth.
+// Pinhole camera model.  Included by lib/camera.glsl when CAMERA_MODEL is pinhole; every
+// model's piece defines project_mean, jacobian, in_view and view_depth (the model's project,
+// jacobian, visible and depth).
+// Twin: splatgl/cameras/pinhole.py Pinhole.project(), Pinhole.jacobian(), Pinhole.visible(),
+//   Pinhole.depth().
 
 // Pixel position of a camera-space point: u = fx x/z + cx.
 vec2 project_mean(vec3 p) {

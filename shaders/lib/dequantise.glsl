@@ -1,6 +1,7 @@
 // Decoding of the compact scene storage (splatgl/gl/storage.py: layout, encoder and the NumPy twin
 // decode_compact; --gpu-storage compact).  Needs COMPACT_QUAT_BITS, COMPACT_OPACITY_BITS and the
 // per-scene COMPACT_SCALE_UNIT (2^e, storage.scale_exponent) as defines.
+// Twin: splatgl/gl/storage.py decode_compact().
 
 // Unit quaternion (w, x, y, z) from its smallest-three words: three COMPACT_QUAT_BITS unorms
 // mapping [-1/sqrt 2, 1/sqrt 2] (two in `word` bits 0.., the third in `word3` above the

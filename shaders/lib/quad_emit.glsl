@@ -1,6 +1,7 @@
 // Emits one corner of a splat's quad (triangle strip, gl_VertexID 0..3) and the fragment
 // inputs of quad.frag.  Shared by quad.vert (math per vertex) and quad_light.vert (math from
 // the compute pre-pass).
+// Twin: none (places a corner from splat_setup.glsl's axes, whose twin is ellipse_axes()).
 
 flat out vec2 v_mean2d;       // pixel centre of the splat
 flat out vec3 v_conic;        // (a, b, c) of Sigma'^-1

@@ -1,4 +1,5 @@
-// Shared by the radix sort passes (splatgl/gl/radix_sort.py; NumPy twin radix_sort_twin there).
+// Shared by the radix sort passes (splatgl/gl/radix_sort.py).
+// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
 // One work group of RADIX_GROUP threads owns a tile of RADIX_GROUP * RADIX_ITEMS keys; thread t
 // owns the RADIX_ITEMS consecutive keys from tile * TILE_KEYS + t * RADIX_ITEMS.  hist holds,
 // digit-major, each tile's count of each digit: hist[d * u_tiles + tile].

@@ -1,4 +1,5 @@
 // Scene storage, uploaded once per scene (splatgl/gl/scene_buffers.py writes these layouts).
+// Twin: none (storage layouts and accessors; the compact decoding's twin is in dequantise.glsl).
 // Shaders read a splat only through the accessors below, so every storage layout
 // (splatgl.settings.GpuStorage) serves every stage.
 //
@@ -10,7 +11,7 @@
 // specialised for.
 #ifdef COMPACT_STORAGE
 #include "lib/dequantise.glsl"
-layout(std430, binding = 0) readonly buffer SplatPacked { uvec4 splat_packed[]; };
+layout(std430, binding = BINDING_A) readonly buffer SplatPacked { uvec4 splat_packed[]; };
 
 vec4 splat_mean_opacity(uint i) {
     uvec4 w = splat_packed[2u * i];
@@ -30,10 +31,10 @@ vec3 splat_sh_dc(uint i) {
     return dc;
 }
 #else
-layout(std430, binding = 0) readonly buffer SplatA { vec4 splat_a[]; };
-layout(std430, binding = 1) readonly buffer SplatQ { vec4 splat_q[]; };
-layout(std430, binding = 2) readonly buffer SplatS { vec4 splat_s[]; };
-layout(std430, binding = 3) readonly buffer SplatDC { vec4 splat_dc[]; };
+layout(std430, binding = BINDING_A) readonly buffer SplatA { vec4 splat_a[]; };
+layout(std430, binding = BINDING_Q) readonly buffer SplatQ { vec4 splat_q[]; };
+layout(std430, binding = BINDING_S) readonly buffer SplatS { vec4 splat_s[]; };
+layout(std430, binding = BINDING_DC) readonly buffer SplatDC { vec4 splat_dc[]; };
 
 vec4 splat_mean_opacity(uint i) { return splat_a[i]; }
 vec4 splat_rotation(uint i) { return splat_q[i]; }
@@ -43,7 +44,7 @@ vec3 splat_sh_dc(uint i) { return splat_dc[i].rgb; }
 
 #if SH_DEGREE > 0 && defined(SH_HALF)
 // Half-float storage: two coefficients per uint (unpackHalf2x16: low half first).
-layout(std430, binding = 4) readonly buffer SplatSH { uint sh_rest_h[]; };
+layout(std430, binding = BINDING_SH) readonly buffer SplatSH { uint sh_rest_h[]; };
 #elif SH_DEGREE > 0
-layout(std430, binding = 4) readonly buffer SplatSH { float sh_rest[]; };
+layout(std430, binding = BINDING_SH) readonly buffer SplatSH { float sh_rest[]; };
 #endif

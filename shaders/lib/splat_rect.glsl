@@ -1,7 +1,8 @@
 // The screen rectangle of a sorted splat's quad, for the passes that reason about quads
 // without drawing them (occlusion_cull.comp, coverage.comp).  Variants: PREPARED (3DGS after
 // quad_prepass.comp, read from `prepared`), SURFEL (2DGS, the box of surfel.vert), neither (the
-// 3DGS vertex path, the setup of quad.vert).  Binds Order (5) and, with PREPARED, Prepared (6).
+// 3DGS vertex path, the setup of quad.vert).  Binds Order and, with PREPARED, Prepared.
+// Twin: splatgl/twins/project.py ellipse_axes(); splatgl/twins/surfel.py surfel_bounds().
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"
 #include "lib/project.glsl"
@@ -12,9 +13,9 @@
 #include "lib/splat_setup.glsl"
 #endif
 
-layout(std430, binding = 5) readonly buffer Order { uint order[]; };
+layout(std430, binding = BINDING_ORDER) readonly buffer Order { uint order[]; };
 #ifdef PREPARED
-layout(std430, binding = 6) readonly buffer Prepared { vec4 prepared[]; };
+layout(std430, binding = BINDING_PREPARED) readonly buffer Prepared { vec4 prepared[]; };
 #endif
 
 // Pixel rectangle [lo, hi] containing the splat's quad, the value a survivor stores, and the

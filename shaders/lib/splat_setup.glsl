@@ -1,5 +1,5 @@
 // Per-splat screen setup shared by the quad path's vertex shader and its compute pre-pass.
-// Twin: splatgl/twins/project.py project() + ellipse_axes / reference_radius.
+// Twin: splatgl/twins/project.py project(), ellipse_axes(), reference_radius().
 // Needs lib/camera.glsl, lib/scene.glsl, lib/project.glsl, lib/sh.glsl included before it.
 
 struct ScreenSplat {

@@ -1,5 +1,6 @@
 // 2DGS surfels (Huang et al. 2024, "2D Gaussian Splatting"), DESIGN.md section 1.
-// Twin: splatgl/twins/surfel.py (same names).  Needs lib/camera.glsl.
+// Twin: splatgl/twins/surfel.py surfel_screen(), sigma_count(), surfel_bounds(), surfel_alpha().
+// Each function has the name of its twin.  Needs lib/camera.glsl.
 //
 // T = P H maps tangent-plane (u, v, 1) to homogeneous pixels (paper eq. 5: H's columns are
 // (s_u t_u, 0), (s_v t_v, 0), (p, 1); P = K [R | t], orthographic P = [[fx R_0, fx t_0 + cx],

@@ -1,6 +1,8 @@
-// Per-view buffers of the tile renderer (splatgl/renderers/tile.py allocates and binds them; the binding
-// numbers come from generated #defines TILE_BINDING_*, so they are written in one place).
+// Per-view buffers of the tile renderer (splatgl/renderers/tile.py allocates and binds them at
+// the TILE_BINDING_* points of splatgl/gl/bindings.py).
 // Twin arrays: splatgl/reference/stages.py ProjectedSplats and reference/binning.py.
+// Twin: splatgl/reference/binning.py emit_keys(), depth_bits();
+//   splatgl/renderers/tile_keys.py KeyLayout.to_reference().
 //
 // proj_mean_depth[i] = (u, v, view z, 0): image position in pixels (centre of pixel (i, j) at
 //                      (j + 0.5, i + 0.5)) and camera-space depth in world units.

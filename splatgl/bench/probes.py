@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..cameras.view import View
+from ..gl.bindings import BINDING_FRAGMENT_COUNTS
 from ..renderers.quad import QuadRenderer
-from ..renderers.quad_gpu import BINDING_FRAGMENT_COUNTS
 
 
 def count_fragments(quad: QuadRenderer, view: View, rasterised: bool = False) -> tuple[int, int]:

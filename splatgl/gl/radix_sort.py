@@ -18,14 +18,14 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..constants import RADIX_BITS, RADIX_GROUP, RADIX_ITEMS
+from ..constants import RADIX_BITS, RADIX_ITEMS
+from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
+                       RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT, RADIX_GROUP)
 from .shaders import ProgramCache
 
 #: Keys one work group sorts per pass.
 TILE_KEYS = RADIX_GROUP * RADIX_ITEMS
 RADIX = 1 << RADIX_BITS
-#: Storage bindings (shaders/radix_*.comp).
-BINDING_KEYS_IN, BINDING_VALS_IN, BINDING_KEYS_OUT, BINDING_VALS_OUT, BINDING_HIST = range(5)
 
 
 def radix_passes(keys: np.ndarray) -> list[int]:
@@ -103,12 +103,12 @@ class RadixSorter:
                 if name in prog:
                     prog[name].value = value
         src, dst = (k_a, v_a), (k_b, v_b)
-        hist.bind_to_storage_buffer(BINDING_HIST)
+        hist.bind_to_storage_buffer(RADIX_BINDING_HIST)
         for shift in passes:
-            src[0].bind_to_storage_buffer(BINDING_KEYS_IN)
-            src[1].bind_to_storage_buffer(BINDING_VALS_IN)
-            dst[0].bind_to_storage_buffer(BINDING_KEYS_OUT)
-            dst[1].bind_to_storage_buffer(BINDING_VALS_OUT)
+            src[0].bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
+            src[1].bind_to_storage_buffer(RADIX_BINDING_VALS_IN)
+            dst[0].bind_to_storage_buffer(RADIX_BINDING_KEYS_OUT)
+            dst[1].bind_to_storage_buffer(RADIX_BINDING_VALS_OUT)
             for prog in (count_prog, scan_prog, scatter_prog):
                 if "u_shift" in prog:
                     prog["u_shift"].value = shift

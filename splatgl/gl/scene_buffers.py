@@ -10,9 +10,8 @@ import numpy as np
 from ..constants import glsl_float
 from ..model.scene import Scene
 from ..model.settings import GpuStorage
+from .bindings import BINDING_A, BINDING_DC, BINDING_Q, BINDING_S, BINDING_SH
 from .storage import COMPACT_WORDS, encode_compact, scale_exponent
-
-BINDING_A, BINDING_Q, BINDING_S, BINDING_DC, BINDING_SH = 0, 1, 2, 3, 4
 
 
 #: Rows per upload chunk: the only CPU-side copy of the GPU layout is one chunk's worth.

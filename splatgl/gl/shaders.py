@@ -6,7 +6,8 @@ in an include path is replaced by the value of the define ``NAME`` (``#include
 "cameras/{CAMERA_MODEL}.glsl"`` includes the camera model's piece).  The
 preprocessor emits ``#line`` directives that encode the file in the line number, so compiler messages are
 mapped back to ``file:line``.  Programs are specialised by generated ``#define`` lines (the reference
-constants of :mod:`splatgl.constants` plus per-variant switches) and cached by (names, defines).
+constants of :mod:`splatgl.constants`, the binding points and work-group sizes of
+:mod:`splatgl.gl.bindings`, plus per-variant switches) and cached by (names, defines).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 import moderngl
 
 from ..constants import glsl_defines
+from .bindings import glsl_defines as binding_defines
 from ..errors import ShaderError
 
 GLSL_VERSION = "#version 430 core"
@@ -65,14 +67,15 @@ class Source:
 def preprocess(name: str, defines: dict[str, str] | None = None, root: Path | None = None) -> Source:
     """Expand ``name`` (relative to the shader folder) into one GLSL string.
 
-    Adds the version line, the reference constants and ``defines`` as ``#define`` lines.
+    Adds the version line, the reference constants, the binding table
+    (:mod:`splatgl.gl.bindings`) and ``defines`` as ``#define`` lines.
     Raises :class:`ShaderError` naming ``file:line`` for a missing include or an include cycle.
     """
     root = root or shader_dir()
     files: list[str] = []
     included: set[str] = set()
     out: list[str] = [GLSL_VERSION]
-    all_defines = {**glsl_defines(), **(defines or {})}
+    all_defines = {**glsl_defines(), **binding_defines(), **(defines or {})}
     out += [f"#define {k} {v}".rstrip() for k, v in sorted(all_defines.items())]
 
     def expand(rel: str, stack: tuple[str, ...], where: str) -> None:

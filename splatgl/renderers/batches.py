@@ -15,20 +15,21 @@ import numpy as np
 
 from ..constants import (EARLY_STOP_FINE_QUAD_FRAGMENTS, EARLY_STOP_MIN_OVERDRAW,
                          EARLY_STOP_MIN_QUAD_FRAGMENTS, TILE_SIZE)
+from ..gl.bindings import (ACCUM_UNIT, BINDING_COMMANDS, BINDING_COVERAGE, BINDING_STOP_TILES,
+                           BINDING_SURVIVORS, COVERAGE_GROUP, STOP_TILES_GROUP)
 from ..gl.buffers import GrowableBuffer
 from ..model.settings import EarlyStop
-from .early_stop import (ACCUM_UNIT, BINDING_COMMANDS, BINDING_COVERAGE, BINDING_STOP_TILES,
-                         BINDING_SURVIVORS, COARSE_SCHEDULE, COMMAND_BYTES, COVERAGE_GROUP,
-                         COVERAGE_MIN_INVOCATIONS, COVERAGE_SLOTS_PER_INVOCATION, FINE_SCHEDULE,
-                         SEGMENT, TILES_GROUP, BatchHook, batch_bounds, plain_bounds)
+from .early_stop import (COARSE_SCHEDULE, COMMAND_BYTES, COVERAGE_MIN_INVOCATIONS,
+                         COVERAGE_SLOTS_PER_INVOCATION, FINE_SCHEDULE, SEGMENT, BatchHook,
+                         batch_bounds, plain_bounds)
 
 
 class EarlyStopPasses:
     """The GL objects and passes of early termination for one quad renderer.
 
     Buffers grow as needed; :meth:`release` frees them.  The caller binds the scene, the order
-    (binding 5) and, for the pre-pass variant, the prepared buffer (binding 6) before
-    :meth:`cull`.
+    (BINDING_ORDER) and, for the pre-pass variant, the prepared buffer (BINDING_PREPARED)
+    before :meth:`cull`.
     """
 
     def __init__(self, ctx: moderngl.Context, programs):
@@ -71,13 +72,13 @@ class EarlyStopPasses:
         self._mark_vao.render(moderngl.TRIANGLES, vertices=3)
 
     def reduce_tiles(self, accum: moderngl.Texture, width: int, height: int) -> None:
-        """stop_tiles.comp: one stop word per tile into the tiles buffer (binding 8)."""
+        """stop_tiles.comp: one stop word per tile into the tiles buffer (BINDING_STOP_TILES)."""
         comp = self.programs.compute("stop_tiles.comp")
         grid = (-(-width // TILE_SIZE), -(-height // TILE_SIZE))
         comp["u_size"].value = (width, height)
         comp["u_tiles"].value = grid
         accum.use(ACCUM_UNIT)
-        comp.run(group_x=-(-grid[0] * grid[1] // TILES_GROUP))
+        comp.run(group_x=-(-grid[0] * grid[1] // STOP_TILES_GROUP))
 
     def cull(self, comp: moderngl.ComputeShader, start: int, end: int, cmd_base: int,
              width: int, height: int, check_tiles: bool) -> int:

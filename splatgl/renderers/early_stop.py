@@ -15,7 +15,7 @@ get one plain draw.  Between batches:
    whose pixels are all marked.
 3. ``occlusion_cull`` (shaders/occlusion_cull.comp): the next batch's splats whose quad
    rectangle lies only on stopped blocks are dropped, the survivors compacted in order, one
-   draw command per 1024 slots, and the batch is drawn with one multi-draw-indirect.
+   draw command per SEGMENT slots, and the batch is drawn with one multi-draw-indirect.
 
 Accuracy (DESIGN.md section 2 and docs/early-stop.md).  A pixel is marked only after a batch
 ends with ``T < T_MIN``.  The reference adds splat k while ``T_k (1 - alpha_k) >= T_MIN``, so
@@ -42,26 +42,20 @@ import numpy as np
 
 from .. import constants
 from ..constants import STOP_BLOCK_SIZE, T_MIN, TILE_SIZE
+from ..gl.bindings import OCCLUSION_GROUP, OCCLUSION_PER_INVOCATION
 
-#: Slots per draw command of the occlusion cull (256 invocations x 4 slots, occlusion_cull.comp).
-SEGMENT = 1024
+#: Slots per draw command of the occlusion cull (one work group of occlusion_cull.comp).
+SEGMENT = OCCLUSION_GROUP * OCCLUSION_PER_INVOCATION
 #: Bytes per draw command: DrawArraysIndirectCommand (count, instanceCount, first, baseInstance)
 #: and one padding uint, since moderngl's render_indirect uses a 20-byte stride for arrays too.
 COMMAND_BYTES = 20
-#: Storage bindings (after the quad path's 0..7; 11 is the level-of-detail opacity weights).
-BINDING_STOP_TILES, BINDING_SURVIVORS, BINDING_COMMANDS, BINDING_COVERAGE = 8, 9, 10, 12
 #: A tile's stop word when all its blocks are stopped (16 blocks, shaders/stop_tiles.comp).
 TILE_STOPPED = (1 << (TILE_SIZE // STOP_BLOCK_SIZE) ** 2) - 1
-#: Work-group size of shaders/coverage.comp, and the fewest invocations it runs with (each sums
-#: every stride-th slot; llvmpipe ends an invocation's loops after 65535 iterations, so the
-#: invocations grow with the count beyond COVERAGE_SLOTS_PER_INVOCATION slots each).
-COVERAGE_GROUP = 64
+#: The fewest invocations shaders/coverage.comp runs with (each sums every stride-th slot;
+#: llvmpipe ends an invocation's loops after 65535 iterations, so the invocations grow with the
+#: count beyond COVERAGE_SLOTS_PER_INVOCATION slots each).
 COVERAGE_MIN_INVOCATIONS = 1024
 COVERAGE_SLOTS_PER_INVOCATION = 16384
-#: Tiles per work group of shaders/stop_tiles.comp.
-TILES_GROUP = 64
-#: Texture unit the mark and tile passes sample the accumulation target from.
-ACCUM_UNIT = 0
 
 #: Batch schedules (chosen by measurement, docs/early-stop.md), (first share, growth): the first
 #: batch holds that share of the sorted splats (at least MIN_BATCH), each next one GROWTH times

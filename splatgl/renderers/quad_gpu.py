@@ -10,22 +10,14 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from ..gl.bindings import BINDING_OPACITY_WEIGHT, BINDING_ORDER, BINDING_PREPARED, PREPASS_GROUP
 from ..gl.buffers import GrowableBuffer
 from ..gl.targets import ColorTarget
 from ..model.settings import Precision
 from .early_stop import COMMAND_BYTES
 
-#: Storage bindings of the compute pre-pass (after the scene's 0..4).
-BINDING_ORDER, BINDING_PREPARED = 5, 6
-#: Storage binding of the benchmark's fragment counters (shaders/quad.frag, COUNT_FRAGMENTS).
-BINDING_FRAGMENT_COUNTS = 7
-#: Storage binding of the pre-pass's per-slot opacity weights (OPACITY_WEIGHT; after early
-#: termination's 8..10): the level-of-detail blend, splatgl/lod/source.py.
-BINDING_OPACITY_WEIGHT = 11
 #: Bytes per splat of the pre-pass output (4 vec4, see shaders/quad_prepass.comp).
 PREPARED_BYTES = 64
-#: Work-group size of shaders/quad_prepass.comp.
-PREPASS_GROUP = 128
 
 
 class QuadResources:

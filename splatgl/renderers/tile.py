@@ -35,13 +35,14 @@ import numpy as np
 
 from ..cameras.view import View
 from ..errors import SplatglError
+from ..gl.bindings import TILE_BINDINGS
 from ..gl.buffers import GrowableBuffer
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..model.scene import Scene, SplatKind
 from ..model.settings import RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
-from .tile_keys import (BINDINGS, MAX_GROUPS, RASTER_BAND_TILES, SPLAT_GROUP, TILE_EMIT_CHUNK,
+from .tile_keys import (MAX_GROUPS, RASTER_BAND_TILES, TILE_EMIT_CHUNK,
                         TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, splat_groups, tile_grid)
 
 
@@ -64,7 +65,7 @@ class TileRenderer:
         self.count = scene.count
         self.scene_buffers = SceneBuffers(ctx, scene, settings.gpu_storage) if self.count else None
         self._max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
-        self._bufs = {name: GrowableBuffer(ctx, b, slack=0.25) for name, b in BINDINGS.items()}
+        self._bufs = {name: GrowableBuffer(ctx, b, slack=0.25) for name, b in TILE_BINDINGS.items()}
         n = self.count
         for name, stride in (("MEAN_DEPTH", 16), ("CONIC_O", 16), ("COLOR", 16), ("RECT", 16),
                              ("TOUCHED", 4), ("OFFSETS", 4)):
@@ -76,10 +77,7 @@ class TileRenderer:
 
     # ------------------------------------------------------------------------------ programs
     def _defines(self, layout: KeyLayout | None = None) -> dict[str, object]:
-        d: dict[str, object] = {f"TILE_BINDING_{k}": v for k, v in BINDINGS.items()}
-        d["SPLAT_GROUP"] = SPLAT_GROUP
-        d["TILE_LIST_CHUNK"] = TILE_LIST_CHUNK
-        d["TILE_EMIT_CHUNK"] = TILE_EMIT_CHUNK
+        d: dict[str, object] = {"TILE_LIST_CHUNK": TILE_LIST_CHUNK, "TILE_EMIT_CHUNK": TILE_EMIT_CHUNK}
         if layout is not None and layout.packed:
             d["KEY_PACKED"] = 1
         if self.surfel:

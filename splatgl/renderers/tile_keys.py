@@ -8,15 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import TILE_SIZE
-from ..gl.scene_buffers import BINDING_SH
+from ..gl.bindings import SPLAT_GROUP
 
-#: Storage-buffer bindings of shaders/lib/tile_common.glsl and tile_rasterize.comp (after the
-#: scene's 0..BINDING_SH); handed to GLSL as TILE_BINDING_* defines.
-BINDINGS = {name: BINDING_SH + 1 + i for i, name in enumerate(
-    ("MEAN_DEPTH", "CONIC_O", "COLOR", "RECT", "TOUCHED", "OFFSETS", "KEYS", "VALUES", "RANGES",
-     "OUT_RGBA", "OUT_DEPTH", "SURFEL"))}
-#: Invocations per work group of the per-splat stages (project, emit).
-SPLAT_GROUP = 256
 #: Largest number of work groups along one dispatch axis guaranteed by OpenGL.
 MAX_GROUPS = 65535
 #: Bits of a positive float32's pattern (sign bit clear).

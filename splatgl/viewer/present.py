@@ -13,11 +13,14 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from ..gl.bindings import PRESENT_UNIT
+from ..gl.shaders import preprocess
+
 _SHADERS = Path(__file__).resolve().parent / "shaders"
 
 
 class Mode(enum.IntEnum):
-    """How :class:`Presenter` treats a texture (``MODE_*`` in shaders/present.frag)."""
+    """How :class:`Presenter` treats a texture (``MODE_*`` defines of shaders/present.frag)."""
 
     PREMULTIPLIED = 0  # raw quad target (C, A): composite the background
     OPAQUE = 1         # already composited RGB
@@ -41,8 +44,10 @@ class Presenter:
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
-        self.program = ctx.program(vertex_shader=(_SHADERS / "present.vert").read_text(),
-                                   fragment_shader=(_SHADERS / "present.frag").read_text())
+        defines = {f"MODE_{mode.name}": str(int(mode)) for mode in Mode}
+        self.program = ctx.program(
+            vertex_shader=preprocess("present.vert", defines, root=_SHADERS).text,
+            fragment_shader=preprocess("present.frag", defines, root=_SHADERS).text)
         self.vao = ctx.vertex_array(self.program, [])
         self._uploads: dict[str, moderngl.Texture] = {}
 
@@ -65,7 +70,7 @@ class Presenter:
         # scale bar): linear filtering, which every texture format here supports.
         same = texture.size == tuple(viewport[2:])
         texture.filter = (moderngl.NEAREST, moderngl.NEAREST) if same else (moderngl.LINEAR, moderngl.LINEAR)
-        texture.use(0)
+        texture.use(PRESENT_UNIT)
         self.program["u_mode"].value = int(mode)
         if "u_background" in self.program:
             self.program["u_background"].value = tuple(float(v) for v in background)

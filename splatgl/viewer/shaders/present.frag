@@ -5,11 +5,10 @@
 //                       (DESIGN.md section 3), so the window's own alpha never matters.
 //   MODE_OPAQUE:        an image already composited: output its RGB.
 //   MODE_OVERLAY:       straight-alpha RGBA drawn with (SRC_ALPHA, ONE_MINUS_SRC_ALPHA).
-#define MODE_PREMULTIPLIED 0
-#define MODE_OPAQUE 1
-#define MODE_OVERLAY 2
+// The MODE_* values are defines from splatgl/viewer/present.py Mode.
+// Twin: splatgl/renderers/quad.py composite().
 
-layout(binding = 0) uniform sampler2D u_image;
+layout(binding = PRESENT_UNIT) uniform sampler2D u_image;
 uniform vec3 u_background;
 uniform int u_mode;
 

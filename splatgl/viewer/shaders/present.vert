@@ -1,6 +1,7 @@
 #version 430 core
 // A single triangle covering the viewport (no vertex buffer): uv runs 0..1 over the viewport,
 // uv.y = 0 at the bottom (GL window convention).
+// Twin: none (a full-screen triangle).
 out vec2 v_uv;
 
 void main() {
