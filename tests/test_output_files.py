@@ -157,3 +157,28 @@ def test_a_failed_write_in_the_block_names_the_target(tmp_path, full_disk):
         with files:
             raise SplatglError(f"{files.temp('--x')}: bad")
 
+
+def test_one_table_of_image_formats(tmp_path):
+    """Suffixes, --format choices, channels and the layers a frame renders all come from
+    output.image_formats: EXR holds the depth layer (Z), PNG and TIFF colour alone."""
+    from splatgl.cli import build_parser
+    from splatgl.output.frames import FrameTarget
+    from splatgl.output.image_formats import FORMAT_NAMES, IMAGE_SUFFIXES, image_format
+    from splatgl.output.layers import Layer, with_layers
+
+    assert FORMAT_NAMES == ("png", "tif", "exr")
+    assert IMAGE_SUFFIXES == (".png", ".tif", ".tiff", ".exr")
+    assert image_format("X.TIFF").name == "tif" and image_format("a.exr").is_float
+    exr, png = image_format("a.exr"), image_format("a.png")
+    assert exr.render_layers == with_layers(Layer.DEPTH) and png.render_layers == with_layers()
+    assert exr.channels(exr.render_layers) == ("R", "G", "B", "A", "Z")
+    assert exr.channels(with_layers()) == ("R", "G", "B", "A")
+    assert png.channels(png.render_layers) == ("R", "G", "B")
+    assert FrameTarget.parse(tmp_path / "f" / "%05d.exr").layers == with_layers(Layer.DEPTH)
+    assert FrameTarget.parse(tmp_path / "f", "exr").layers == with_layers(Layer.DEPTH)
+    assert FrameTarget.parse(tmp_path / "f", "tif").layers is None
+    assert FrameTarget.parse(tmp_path / "f", "tiff").frame_path(3).name == "00003.tiff"
+    render = build_parser()._subparsers._group_actions[0].choices["render"]
+    assert next(a for a in render._actions if a.dest == "format").choices == FORMAT_NAMES
+    with pytest.raises(SplatglError, match=r"^--format must be one of png, tif, exr; got 'bmp'$"):
+        FrameTarget.parse(tmp_path / "f", "bmp")
