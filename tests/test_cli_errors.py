@@ -145,6 +145,18 @@ def test_same_output_twice_and_directory_outputs(tmp_path, capsys):
                     f"splatgl: error: -o {missing}: folder {missing.parent} does not exist")
 
 
+def test_compare_refuses_an_image_name_before_rendering(tmp_path, capsys, monkeypatch):
+    """--side-by-side x.bmp failed only after both renders."""
+    from splatgl.commands import compare as compare_cmd
+
+    monkeypatch.setattr(compare_cmd, "Renderer", lambda: pytest.fail("rendered before the check"))
+    out = tmp_path / "x.bmp"
+    for option in ("--side-by-side", "--heatmap"):
+        expect_one_line(capsys, tmp_path, ["compare", option, out],
+                        f"splatgl: error: {option} {out}: unsupported image format ('.bmp'); "
+                        "use .png, .tif, .tiff or .exr")
+
+
 @pytest.mark.parametrize("command", ["render", "compare"])
 def test_a_failed_second_file_leaves_neither(tmp_path, capsys, monkeypatch, command):
     from splatgl.commands import compare as compare_cmd

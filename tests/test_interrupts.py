@@ -33,7 +33,7 @@ def test_sigterm_during_convert_removes_the_partial_file(tmp_path, shared_scenes
         from splatgl.formats import ply_write
         real = ply_write.write
         def stuck_write(path, scene):
-            real(path, scene)           # the .partial file now exists, complete or not
+            real(path, scene)           # the temporary now exists, complete or not
             print("writing", flush=True)
             threading.Event().wait()    # until SIGTERM raises here
             print("not interrupted", flush=True)
@@ -42,7 +42,7 @@ def test_sigterm_during_convert_removes_the_partial_file(tmp_path, shared_scenes
         sys.exit(main(["convert", sys.argv[1], sys.argv[2]]))
         """, str(shared_scenes / "fixtures" / "minimal.splat"), str(out), start_new_session=True)
     assert proc.stdout.readline() == "writing\n"
-    assert [p.name for p in tmp_path.iterdir()] == ["out.ply.partial"]
+    assert [p.name for p in tmp_path.iterdir()] == [f".out.partial{proc.pid}.ply"]  # temp_path
     rest, err = signal_and_wait(proc, signal.SIGTERM)
     assert (proc.returncode, rest, err) == (143, "", "splatgl: terminated\n")
     assert list(tmp_path.iterdir()) == []

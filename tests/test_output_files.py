@@ -3,12 +3,15 @@ test_cli_errors.py)."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from splatgl.gl import limits
 from splatgl.errors import SplatglError
 from splatgl.gl.limits import image_size_problem
 from splatgl.output.files import OutputFiles
+from splatgl.output.atomic import atomic_target, atomic_write_text, temp_path
 
 
 def test_commit_renames_every_temporary(tmp_path):
@@ -47,6 +50,48 @@ def test_existing_files_without_overwrite(tmp_path):
     with pytest.raises(SplatglError) as info:
         OutputFiles({"image": tmp_path / "a.png"}, overwrite=False)
     assert str(info.value) == f"image {tmp_path / 'a.png'}: exists (use --force to replace it)"
+
+
+def test_one_temporary_name_for_every_writer(tmp_path):
+    """Hidden, beside the target, the suffix kept (OpenImageIO, PyAV and matplotlib pick the
+    format by it), the process id in it; OutputFiles uses the same name."""
+    tmp = temp_path(tmp_path / "view.lod.ply")
+    assert tmp.parent == tmp_path and tmp.name.startswith(".view.lod.partial")
+    assert tmp.suffix == ".ply" and str(os.getpid()) in tmp.name
+    files = OutputFiles({"-o": tmp_path / "a.png"})
+    with files:
+        assert files.temp("-o") == temp_path(tmp_path / "a.png")
+        files.temp("-o").write_text("A")
+
+
+@pytest.mark.parametrize("failure", [KeyboardInterrupt, OSError, SplatglError])
+def test_atomic_target_leaves_the_old_file_on_any_failure(tmp_path, failure):
+    target = tmp_path / "a.json"
+    atomic_write_text(target, "old")
+    with pytest.raises(KeyboardInterrupt if failure is KeyboardInterrupt else SplatglError) as info:
+        with atomic_target(target) as tmp:
+            tmp.write_text("new")
+            raise failure(28, "No space left on device") if failure is OSError else failure()
+    if failure is OSError:  # one line naming the target, never the temporary
+        assert str(info.value).startswith(f"{target}: cannot write (No space left on device")
+    assert [p.name for p in tmp_path.iterdir()] == ["a.json"] and target.read_text() == "old"
+
+
+def test_atomic_target_names_the_target_in_errors_and_checks(tmp_path):
+    """A writer's error about the file it was handed (the temporary) names the user's file and
+    keeps its class; a failed check does so too, and nothing is published."""
+    from splatgl.errors import SceneFormatError
+
+    target = tmp_path / "a.glb"
+    with pytest.raises(SceneFormatError) as info:
+        with atomic_target(target) as tmp:
+            raise SceneFormatError(tmp, "bad", "scale")
+    assert str(info.value) == f"{target}: field 'scale': bad" and info.value.path == str(target)
+    with pytest.raises(SplatglError) as info:
+        with atomic_target(target, lambda tmp: f"{tmp.name} is short") as tmp:
+            tmp.write_text("x")
+    assert str(info.value).startswith(f"{target}: cannot write: a.glb is short")
+    assert list(tmp_path.iterdir()) == []
 
 
 class FakeContext:
@@ -111,3 +156,29 @@ def test_a_failed_write_in_the_block_names_the_target(tmp_path, full_disk):
     with pytest.raises(SplatglError, match=f"^{tmp_path / 'b.txt'}: bad$"):
         with files:
             raise SplatglError(f"{files.temp('--x')}: bad")
+
+
+def test_one_table_of_image_formats(tmp_path):
+    """Suffixes, --format choices, channels and the layers a frame renders all come from
+    output.image_formats: EXR holds the depth layer (Z), PNG and TIFF colour alone."""
+    from splatgl.cli import build_parser
+    from splatgl.output.frames import FrameTarget
+    from splatgl.output.image_formats import FORMAT_NAMES, IMAGE_SUFFIXES, image_format
+    from splatgl.output.layers import Layer, with_layers
+
+    assert FORMAT_NAMES == ("png", "tif", "exr")
+    assert IMAGE_SUFFIXES == (".png", ".tif", ".tiff", ".exr")
+    assert image_format("X.TIFF").name == "tif" and image_format("a.exr").is_float
+    exr, png = image_format("a.exr"), image_format("a.png")
+    assert exr.render_layers == with_layers(Layer.DEPTH) and png.render_layers == with_layers()
+    assert exr.channels(exr.render_layers) == ("R", "G", "B", "A", "Z")
+    assert exr.channels(with_layers()) == ("R", "G", "B", "A")
+    assert png.channels(png.render_layers) == ("R", "G", "B")
+    assert FrameTarget.parse(tmp_path / "f" / "%05d.exr").layers == with_layers(Layer.DEPTH)
+    assert FrameTarget.parse(tmp_path / "f", "exr").layers == with_layers(Layer.DEPTH)
+    assert FrameTarget.parse(tmp_path / "f", "tif").layers is None
+    assert FrameTarget.parse(tmp_path / "f", "tiff").frame_path(3).name == "00003.tiff"
+    render = build_parser()._subparsers._group_actions[0].choices["render"]
+    assert next(a for a in render._actions if a.dest == "format").choices == FORMAT_NAMES
+    with pytest.raises(SplatglError, match=r"^--format must be one of png, tif, exr; got 'bmp'$"):
+        FrameTarget.parse(tmp_path / "f", "bmp")

@@ -130,6 +130,21 @@ def test_scene_writers_fail_in_one_line_and_leave_nothing(tmp_path, full_disk, n
     assert "partial" not in str(info.value) and list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("name", ["a.glb", "a.gltf", "a.sog", "meta.json"])
+def test_a_writer_refusal_names_the_users_file(tmp_path, name):
+    """glTF and SOG refuse 2DGS scenes; the message named save_scene's temporary."""
+    from helpers import random_scene
+    from splatgl.errors import SceneFormatError
+    from splatgl.formats import save_scene
+    from splatgl.model.scene import SplatKind
+
+    with pytest.raises(SceneFormatError) as info:
+        save_scene(tmp_path / name, random_scene(5, kind=SplatKind.SURFEL_2D))
+    assert str(info.value).startswith(f"{tmp_path / name}: field 'scale': ") and \
+        "partial" not in str(info.value), info.value
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("name", ["a.ply", "a.compressed.ply", "a.spz", "a.sog", "a.glb"])
 def test_written_problem_finds_a_scene_file_cut_short(tmp_path, name):
     import warnings

@@ -106,14 +106,14 @@ def plot(path: Path, rows: list[BenchRow]) -> None:
 
 
 def save_figure(fig, path: Path) -> None:
-    """Write a matplotlib figure atomically (a ``.partial`` file renamed at the end) and close it;
-    every benchmark plot goes through here."""
+    """Write a matplotlib figure atomically (:func:`splatgl.output.atomic.atomic_target`) and
+    close it; every benchmark plot goes through here."""
     import matplotlib.pyplot as plt
 
-    tmp = path.with_name(path.stem + ".partial" + path.suffix)
+    from ..output.atomic import atomic_target
+
     try:
-        fig.savefig(tmp, dpi=110)
-        tmp.replace(path)
+        with atomic_target(path) as tmp:
+            fig.savefig(tmp, dpi=110)
     finally:
         plt.close(fig)
-        tmp.unlink(missing_ok=True)

@@ -15,6 +15,7 @@ from ..errors import SplatglError
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
 from ..output.frames import FrameTarget
+from ..output.image_formats import FORMAT_NAMES
 from ..gl.context import NO_GL_RENDERER, renderer_name
 from ..paths import orbit
 from ..progress import default_progress
@@ -51,7 +52,7 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                    help="skip frames whose files already exist (frames are written atomically, "
                         "so an existing file is complete); for a video with --workers or "
                         "--executor ray, the frames kept from a stopped run")
-    g.add_argument("--format", default=None, choices=("png", "tif", "exr"),
+    g.add_argument("--format", default=None, choices=FORMAT_NAMES,
                    help="image format when -o is a folder (default png; refused with a video or "
                         "a pattern, whose suffix says it)")
     g.add_argument("--fps", type=positive_float, default=None,

@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 from ..output.pictures import heatmap, side_by_side
+from ..output.image_formats import image_format, suffix_list
 from ..output.images import write_image
 from ..output.files import OutputFiles
 from ..progress import default_progress
@@ -43,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the renderer taken as truth (default reference)")
     add_json_argument(p, "the figures (one object)")
     p.add_argument("--side-by-side", type=Path, default=None, metavar="FILE",
-                   help="write both renders next to each other (.png, .tif or .exr)")
+                   help=f"write both renders next to each other ({suffix_list()})")
     p.add_argument("--heatmap", type=Path, default=None, metavar="FILE",
                    help="write a heat map of the per-pixel error with its colour scale")
     p.add_argument("--heatmap-scale", type=positive_float, default=4.0 / 255.0, metavar="ERR",
@@ -56,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
     kinds = (RendererKind(args.renderer), RendererKind(args.against))
     check_convention(args, *kinds)
     files = OutputFiles({"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
+    for option, path in files.targets.items():
+        image_format(path, option)  # before rendering (x.bmp, or no suffix at all)
     check_json_target(args, {"SCENE": args.scene, "--side-by-side": args.side_by_side,
                              "--heatmap": args.heatmap})
     if args.stereo is not None:

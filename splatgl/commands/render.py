@@ -8,8 +8,10 @@ from pathlib import Path
 
 from ..errors import SplatglError
 from ..gl.context import NO_GL_RENDERER, renderer_name
-from ..output.images import check_image_suffix, write_image
-from ..output.layers import BASE, Layer, RenderOutput, with_layers
+from ..output.image_formats import (BIT_DEPTHS, IMAGE_FORMATS, image_format, picture_format,
+                                    suffix_list)
+from ..output.images import write_image
+from ..output.layers import BASE, Layer, RenderOutput
 from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..output.pictures import depth_preview
@@ -42,9 +44,9 @@ examples:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
     p.add_argument("-o", "--output", required=True,  # text: with --path a trailing / matters
-                   help="output image (.png, .tif, .exr); with --path a folder, a pattern such as "
-                        "frames/%%05d.png, or a video (.mp4)")
-    p.add_argument("--bit-depth", type=int, choices=(8, 16), default=8,
+                   help=f"output image ({suffix_list(IMAGE_FORMATS, ', ')}); with --path a folder, a "
+                        "pattern such as frames/%%05d.png, or a video (.mp4)")
+    p.add_argument("--bit-depth", type=int, choices=BIT_DEPTHS, default=8,
                    help="bits per channel of PNG/TIFF output (default 8)")
     p.add_argument("--renderer", choices=[k.value for k in RendererKind], default="quad",
                    help="quad = the OpenGL quad path (default); tile = the per-tile compute-shader "
@@ -76,8 +78,8 @@ def run(args: argparse.Namespace) -> int:
     refuse_path_only_options(args)
     kind = RendererKind(args.renderer)
     check_convention(args, kind)
-    if args.depth_png is not None and args.depth_png.suffix.lower() not in (".png", ".tif", ".tiff"):
-        raise SplatglError(f"{args.depth_png}: --depth-png needs a .png or .tif file name")
+    if args.depth_png is not None:
+        picture_format(args.depth_png, "--depth-png")
     stereo = StereoLayout(args.stereo_layout) if args.stereo is not None else None
     if stereo is StereoLayout.SEPARATE:   # each eye its own image (and depth preview)
         names = {f"-o ({eye} eye)": _eye_name(args.output, eye) for eye in ("left", "right")}
@@ -87,10 +89,11 @@ def run(args: argparse.Namespace) -> int:
         names = {"-o": args.output}
         depth_names = {"--depth-png": args.depth_png}
     outputs = OutputFiles({**names, **depth_names})
-    check_image_suffix(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
+    fmt = image_format(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     scene, settings, camera = inputs_from_args(args)
-    want_depth = args.depth_png is not None or args.output.suffix.lower() == ".exr"
-    layers = with_layers(Layer.DEPTH) if want_depth else BASE
+    # what the file holds (EXR: the depth layer as Z), and the depth the preview needs
+    layers = fmt.render_layers | ({Layer.DEPTH} if args.depth_png is not None else set())
+    want_depth = Layer.DEPTH in layers
     lod = any(v is not None for v in (args.lod_threshold, args.lod_budget, args.lod_blend))
     if lod and stereo is not None:
         raise SplatglError("--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be "

@@ -5,7 +5,9 @@ Each format module provides ``NAME`` (str), ``EXTENSIONS`` (tuple of lower-case 
 ``read(path: Path, drop_invalid: bool) -> Scene`` (optionally also ``progress=None``,
 see :mod:`splatgl.progress`).  Writers (the modules in ``_WRITER_MODULES``) provide
 ``NAME``, ``EXTENSIONS`` and ``write(path, scene)``, which returns None or, for writers that
-reorder the splats, the (N,) row order written; lossy writers also provide
+reorder the splats, the (N,) row order written (``path`` is a temporary,
+:func:`splatgl.output.atomic.temp_path`; a writer whose output depends on the file's name, such
+as glTF's ``.gltf`` or SOG's folder form, takes the user's name as ``target=``); lossy writers also provide
 ``error_bounds(scene) -> dict`` (see :mod:`splatgl.formats.quantise`).
 """
 
@@ -109,4 +111,6 @@ def save_scene(path: str | Path, scene: Scene, **options):
     from .written import write_checked
 
     mod = writer_for(path)
+    if "target" in inspect.signature(mod.write).parameters:  # its output depends on the name
+        options = {**options, "target": Path(path)}
     return write_checked(path, lambda tmp: mod.write(tmp, scene, **options))

@@ -67,13 +67,13 @@ def document(scene: Scene, path=None) -> tuple[dict, bytes]:
     return gltf, binary
 
 
-def write(path, scene: Scene) -> None:
-    """Write ``scene`` as GLB, or as ``.gltf`` JSON with the buffer as a base64 data URI (chosen
-    by the name: a ``.gltf`` name, with a ``.partial`` suffix while being written)."""
+def write(path, scene: Scene, target=None) -> None:
+    """Write ``scene`` to ``path`` as GLB, or as ``.gltf`` JSON with the buffer as a base64 data
+    URI (chosen by the file's name ``target``, default ``path``: ``path`` may be a temporary)."""
     path = Path(path)
-    gltf, binary = document(scene, path)
-    final = path.name[: -len(".partial")] if path.name.endswith(".partial") else path.name
-    if final.lower().endswith(".gltf"):
+    target = Path(target) if target is not None else path
+    gltf, binary = document(scene, target)
+    if target.name.lower().endswith(".gltf"):
         gltf["buffers"][0]["uri"] = ("data:application/octet-stream;base64,"
                                      + base64.b64encode(binary).decode("ascii"))
         path.write_text(json.dumps(gltf), encoding="utf-8")

@@ -103,17 +103,18 @@ def encode(scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS, path=None
     return tex, meta
 
 
-def write(path, scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS) -> np.ndarray:
-    """Write ``scene`` as SOG v2: a zip bundle, or (for a name ending in ``.json``) meta.json
-    with its textures beside it.  Returns the (N,) row order written (Morton order)."""
+def write(path, scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS, target=None) -> np.ndarray:
+    """Write ``scene`` to ``path`` as SOG v2: a zip bundle, or (for a file name ``target``,
+    default ``path``, ending in ``.json``; ``path`` may be a temporary) meta.json with its
+    textures beside it.  Returns the (N,) row order written (Morton order)."""
     path = Path(path)
+    target = Path(target) if target is not None else path
     order = morton_order_full_box(scene.means)
-    textures, meta = encode(scene.subset(order), iterations, path)
+    textures, meta = encode(scene.subset(order), iterations, target)
     blobs = {name: webp.encode(rgba) for name, rgba in textures.items()}
     meta_bytes = json.dumps(meta).encode("utf-8")
-    final = path.name[: -len(".partial")] if path.name.endswith(".partial") else path.name
-    if final.lower().endswith(".json"):  # a folder: every texture, then meta.json
-        write_together({path.parent / name: blob for name, blob in blobs.items()},
+    if target.name.lower().endswith(".json"):  # a folder: every texture, then meta.json
+        write_together({target.parent / name: blob for name, blob in blobs.items()},
                        lambda: path.write_bytes(meta_bytes))
         return order
     with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as zf:  # WebP is compressed already

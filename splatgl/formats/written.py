@@ -9,14 +9,13 @@ reach its end.  Formats without such structure are checked for being non-empty.
 
 from __future__ import annotations
 
-import os
 import struct
 import zipfile
 import zlib
 from pathlib import Path
 from typing import Callable, TypeVar
 
-from ..output.atomic import disk_note, write_error
+from ..output.atomic import AtomicTarget, atomic_target, size_problem
 from ..errors import SplatglError
 
 T = TypeVar("T")
@@ -26,45 +25,34 @@ _CHUNK = 1 << 20
 
 
 def write_checked(path: str | Path, write: Callable[[Path], T]) -> T:
-    """``write(tmp)`` to a temporary beside ``path``, checked (:func:`written_problem`), then
-    renamed onto ``path``; returns what ``write`` returns.  A failed or short write raises one
-    line naming ``path`` (never the temporary) and leaves nothing behind."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".partial")
-    try:
+    """``write(tmp)`` to the temporary of ``path``, checked (:func:`written_problem`), then
+    renamed onto ``path`` (:func:`splatgl.output.atomic.atomic_target`); returns what ``write``
+    returns.  A failed or short write raises one line naming ``path`` (never the temporary)
+    and leaves nothing behind."""
+    with atomic_target(path, written_problem) as tmp:
         value = write(tmp)
-        problem = written_problem(tmp)
-        if problem is not None:
-            raise SplatglError(f"{path}: cannot write: {problem}{disk_note(path.parent)}")
-        tmp.replace(path)
-        return value
-    except OSError as exc:
-        raise write_error(path, exc) from None
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    return value
 
 
 def write_together(files: dict[Path, bytes], write_last: Callable[[], None]) -> None:
-    """Several files of one output, all or none: each of ``files`` (path -> bytes) to a
-    temporary beside it, checked to hold all its bytes, then ``write_last()`` (the file that
-    names them, such as SOG's meta.json, to the caller's own temporary); only then are they
-    renamed into place.  Any failure removes every temporary and leaves the folder as it was."""
-    temps = {path: path.with_name(f".{path.name}.partial{os.getpid()}") for path in files}
+    """Several files of one output, all or none: each of ``files`` (path -> bytes) to its
+    temporary (:class:`splatgl.output.atomic.AtomicTarget`), checked to hold all its bytes, then
+    ``write_last()`` (the file that names them, such as SOG's meta.json, to the caller's own
+    temporary); only then are they renamed into place.  Any failure removes every temporary and
+    leaves the folder as it was; an ``OSError`` is left to the caller, whose
+    :func:`write_checked` names the output the user gave."""
+    targets = [AtomicTarget(path, lambda tmp, n=len(data): size_problem(tmp, n))
+               for path, data in files.items()]
     try:
-        for path, data in files.items():
-            temps[path].write_bytes(data)
-            size = temps[path].stat().st_size
-            if size != len(data):
-                raise SplatglError(f"{path}: cannot write: {size} of {len(data)} bytes written"
-                                   f"{disk_note(path.parent)}")
+        for target, data in zip(targets, files.values()):
+            target.tmp.write_bytes(data)
+            target.verify()
         write_last()
-        for path, tmp in list(temps.items()):
-            os.replace(tmp, path)
-            del temps[path]
+        for target in targets:
+            target.publish()
     finally:
-        for tmp in temps.values():
-            tmp.unlink(missing_ok=True)
+        for target in targets:
+            target.discard()
 
 
 def written_problem(path: str | Path) -> str | None:

@@ -10,8 +10,9 @@ declares them up front, so bad paths fail before any work:
 ...     write_image(outputs.temp("-o"), rgba)
 ...     write_image(outputs.temp("--depth-png"), preview)
 
-Each file is written to a temporary beside its target (same folder, so the rename is atomic;
-same extension, so writers that pick the format by name still do).  Leaving the ``with`` block
+Each file is written to a temporary beside its target
+(:func:`splatgl.output.atomic.temp_path`: same folder, so the rename is atomic; same extension,
+so writers that pick the format by name still do).  Leaving the ``with`` block
 normally renames every temporary onto its target; an exception (a failed write, Ctrl-C,
 SIGTERM through :mod:`splatgl.cli`) removes them all, so no output is half-written and none is
 written alone.  If a rename itself fails midway (the disk vanished), the files renamed before
@@ -26,7 +27,7 @@ import errno
 import os
 from pathlib import Path
 
-from .atomic import write_error
+from .atomic import AtomicTarget, naming_targets, write_error
 from ..errors import SplatglError
 
 #: The errors of a write that found no room (disk full, quota, file size limit).
@@ -67,7 +68,7 @@ class OutputFiles:
 
     def __init__(self, targets: dict[str, Path | str | None], overwrite: bool = True):
         self.targets = {name: Path(p) for name, p in targets.items() if p is not None}
-        self._temps: dict[str, Path] = {}
+        self._files: dict[str, AtomicTarget] = {}
         seen: dict[Path, str] = {}
         for name, path in self.targets.items():
             key = Path(os.path.abspath(path))
@@ -79,27 +80,23 @@ class OutputFiles:
 
     def temp(self, name: str) -> Path:
         """The temporary to write option ``name``'s file to (inside the ``with`` block)."""
-        if name not in self._temps:
-            target = self.targets[name]
-            self._temps[name] = target.with_name(f".{target.stem}.partial{os.getpid()}{target.suffix}")
-        return self._temps[name]
+        if name not in self._files:
+            self._files[name] = AtomicTarget(self.targets[name])
+        return self._files[name].tmp
 
     def __enter__(self) -> "OutputFiles":
-        self._temps.clear()
+        self._files.clear()
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
             if exc_type is None:
-                for name, tmp in list(self._temps.items()):
-                    if not tmp.exists():
+                for name, file in self._files.items():
+                    if not file.tmp.exists():
                         raise SplatglError(f"{name} {self.targets[name]}: nothing was written")
-                for name, tmp in list(self._temps.items()):
-                    try:
-                        os.replace(tmp, self.targets[name])
-                    except OSError as err:
-                        raise write_error(self.targets[name], err) from None
-                    del self._temps[name]
+                for name, file in list(self._files.items()):
+                    file.publish()
+                    del self._files[name]
             elif issubclass(exc_type, (SplatglError, OSError)):
                 named = self._named(exc)
                 if named is not exc:
@@ -108,29 +105,19 @@ class OutputFiles:
             self.discard()
 
     def _named(self, exc: BaseException) -> BaseException:
-        """``exc`` naming the targets where it named their temporaries (an ``OSError`` on a
-        temporary becomes a one-line :class:`SplatglError`); else ``exc`` itself."""
-        if isinstance(exc, OSError) and self._temps:
-            for name, tmp in self._temps.items():
-                if exc.filename in (str(tmp), tmp):
-                    return write_error(self.targets[name], exc)
-            if exc.filename is None and exc.errno in _FULL:  # a write() fails without a name:
-                return write_error(self.targets[list(self._temps)[-1]], exc)  # the latest file
-        if not isinstance(exc, SplatglError):
-            return exc
-        text = str(exc)
-        for name, tmp in self._temps.items():
-            text = text.replace(str(tmp), str(self.targets[name])).replace(tmp.name, self.targets[name].name)
-        return exc if text == str(exc) else SplatglError(text)
+        """``exc`` naming the targets where it named their temporaries
+        (:func:`~splatgl.output.atomic.naming_targets`); a full disk's ``OSError`` without a file
+        name is laid to the latest file."""
+        temps = {file.tmp: file.path for file in self._files.values()}
+        if isinstance(exc, OSError) and exc.filename is None and exc.errno in _FULL and temps:
+            return write_error(list(temps.values())[-1], exc)  # a write() fails without a name
+        return naming_targets(exc, temps)
 
     def discard(self) -> None:
         """Remove every temporary not yet renamed."""
-        for tmp in self._temps.values():
-            try:
-                tmp.unlink()
-            except FileNotFoundError:
-                pass
-        self._temps.clear()
+        for file in self._files.values():
+            file.discard()
+        self._files.clear()
 
     @property
     def written(self) -> list[Path]:

@@ -17,8 +17,10 @@ from pathlib import Path
 from typing import Sequence
 
 from ..errors import SplatglError
-from .layers import Layer, with_layers
-from .images import IMAGE_SUFFIXES, inspect_image
+from .layers import BASE, Layer
+from .image_formats import (DEFAULT_FORMAT, FORMAT_NAMES, IMAGE_SUFFIXES, ImageFormat, find_format,
+                            format_named)
+from .images import inspect_image
 from .video import VIDEO_SUFFIXES
 
 DEFAULT_PATTERN = "%05d"
@@ -47,7 +49,7 @@ class FrameTarget:
             what = "a video" if suffix in VIDEO_SUFFIXES else "a pattern whose suffix names the image type"
             raise SplatglError(f"--format {image_format}: -o {text} is {what}; --format picks the "
                                "image type of frames written into a folder")
-        image_format = image_format or "png"
+        image_format = image_format or DEFAULT_FORMAT.name
         if suffix in VIDEO_SUFFIXES:
             if "%" in text:
                 raise SplatglError(f"{text}: a video file name takes no printf pattern")
@@ -71,22 +73,27 @@ class FrameTarget:
                 f"{text}: unknown output type '{suffix}'; give a video ({', '.join(VIDEO_SUFFIXES)}), "
                 f"a frame pattern such as {Path(text).stem}_%05d.png ({', '.join(IMAGE_SUFFIXES)}) "
                 "or a folder (a name without a suffix, or ending in /)")
-        fmt = image_format.lower().lstrip(".")
-        if "." + fmt not in IMAGE_SUFFIXES:
-            raise SplatglError(f"--format must be one of png, tif, exr; got {image_format!r}")
-        return cls(TargetKind.IMAGES, pattern=str(Path(text) / f"{DEFAULT_PATTERN}.{fmt}"))
+        if format_named(image_format) is None:
+            raise SplatglError(f"--format must be one of {', '.join(FORMAT_NAMES)}; got {image_format!r}")
+        suffix = "." + image_format.lower().lstrip(".")  # as given: tif or tiff
+        return cls(TargetKind.IMAGES, pattern=str(Path(text) / f"{DEFAULT_PATTERN}{suffix}"))
 
     @property
     def is_video(self) -> bool:
         return self.kind is TargetKind.VIDEO
 
     @property
+    def image_format(self) -> ImageFormat | None:
+        """The format of the frame files (None: a video)."""
+        return None if self.is_video else find_format(self.pattern)
+
+    @property
     def layers(self) -> frozenset[Layer] | None:
-        """The layers each frame needs beyond colour (None: colour alone): EXR frames carry the
-        depth channel, as ``splatgl render -o x.exr`` does."""
-        if not self.is_video and self.pattern.lower().endswith(".exr"):
-            return with_layers(Layer.DEPTH)
-        return None
+        """The layers each frame needs beyond colour and alpha (None: those alone): what the
+        frames' format holds (:attr:`~splatgl.output.image_formats.ImageFormat.render_layers`;
+        EXR frames carry the depth channel, as ``splatgl render -o x.exr`` does)."""
+        fmt = self.image_format
+        return fmt.render_layers if fmt is not None and fmt.render_layers != BASE else None
 
     def frame_path(self, index: int) -> Path:
         return Path(self.pattern % index)
@@ -122,7 +129,8 @@ def plan_frames(target: FrameTarget, sizes: Sequence[tuple[int, int]], numbers: 
     another size, channel count or bit depth stops the run before any work, in one line."""
     if not resume or target.is_video:
         return FramePlan(list(range(len(sizes))))
-    channels = 5 if target.layers is not None else 3
+    fmt = target.image_format
+    channels = len(fmt.channels(fmt.render_layers))
     todo, damaged = [], 0
     for k, ((width, height), number) in enumerate(zip(sizes, numbers)):
         path = target.frame_path(number)

@@ -1,40 +1,33 @@
-"""Image output through OpenImageIO: PNG and TIFF (8 or 16 bit, RGB), EXR (float RGBA).
+"""Image output through OpenImageIO, in the formats of :mod:`splatgl.output.image_formats`:
+PNG and TIFF (8 or 16 bit, RGB), EXR (float RGBA, and Z with the depth layer).
 
-Every file is written to a temporary beside the target, checked (:func:`image_file_problem`:
-the header's size, channels and type, and the end of the data really there) and only then
-renamed: a failed or short write (a full disk) raises one line naming the target and leaves
-nothing behind.
+Every file is written atomically (:func:`splatgl.output.atomic.atomic_target`): checked
+(:func:`image_file_problem`: the header's size, channels and type, and the end of the data
+really there) before it is renamed, so a failed or short write (a full disk) raises one line
+naming the target and leaves nothing behind.
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
 
-from .atomic import disk_note, write_error
+from .atomic import atomic_target, cannot_write
+from .image_formats import BIT_DEPTHS, image_format
+from .layers import Layer, with_layers
 from ..errors import SplatglError
 
-_INTEGER_FORMATS = {".png", ".tif", ".tiff"}
-_FLOAT_FORMATS = {".exr"}
-#: Every suffix :func:`write_image` writes, in the order messages list them.
-IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".exr")
 #: The last 12 bytes of every complete PNG file: the IEND chunk (length 0, type, CRC).
 _PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
 
 
 def check_image_suffix(path: str | Path, what: str = "") -> None:
     """Refuse a file name :func:`write_image` cannot write (before any work); ``what`` (an
-    option name) starts the message."""
-    path = Path(path)
-    ext = path.suffix.lower()
-    if ext not in IMAGE_SUFFIXES:
-        got = f"'{ext}'" if ext else "no suffix"
-        raise SplatglError(f"{what + ' ' if what else ''}{path}: unsupported image format ({got}); "
-                           f"use {', '.join(IMAGE_SUFFIXES[:-1])} or {IMAGE_SUFFIXES[-1]}")
+    option name) starts the message (:func:`splatgl.output.image_formats.image_format`)."""
+    image_format(path, what)
 
 
 @dataclass(frozen=True)
@@ -98,47 +91,46 @@ def image_file_problem(path: str | Path, width: int | None = None, height: int |
     return info if isinstance(info, str) else info.mismatch(width, height, channels, bit_depth)
 
 
-def _clean(message: str, tmp: Path, target: Path) -> str:
-    """An OpenImageIO message on one line, naming ``target`` where it named the temporary."""
-    text = " ".join(message.split()) or "no reason given"
-    return text.replace(str(tmp), str(target)).replace(tmp.name, target.name)
+def _clean(message: str) -> str:
+    """An OpenImageIO message on one line."""
+    return " ".join(message.split()) or "no reason given"
 
 
 def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
                 depth: np.ndarray | None = None) -> None:
     """Write an (H, W, 4) float32 image (row 0 at the top), atomically.
 
-    PNG/TIFF get RGB (the background already composited), clipped to [0, 1] and quantised once
-    to ``bit_depth`` (8 or 16).  EXR gets float32 R, G, B, A (A = accumulated alpha) and, when
+    What the file holds follows its format (:mod:`splatgl.output.image_formats`): PNG/TIFF get
+    RGB (the background already composited), clipped to [0, 1] and quantised once to
+    ``bit_depth`` (8 or 16).  EXR gets float32 R, G, B, A (A = accumulated alpha) and, when
     ``depth`` (H, W) is given, a Z channel (the expected depth, 0 where nothing was drawn).
     """
     path = Path(path)
-    ext = path.suffix.lower()
-    check_image_suffix(path)
-    if bit_depth not in (8, 16):
-        raise SplatglError(f"bit depth must be 8 or 16, got {bit_depth}")
-    if ext in _FLOAT_FORMATS:
-        pixels, fmt = np.ascontiguousarray(rgba, np.float32), oiio.FLOAT
-        channels = ("R", "G", "B", "A")
-        if depth is not None:
-            pixels = np.ascontiguousarray(np.concatenate([pixels, depth[..., None]], -1), np.float32)
-            channels += ("Z",)
+    fmt = image_format(path)
+    if bit_depth not in BIT_DEPTHS:
+        raise SplatglError(f"bit depth must be {' or '.join(map(str, BIT_DEPTHS))}, got {bit_depth}")
+    layers = with_layers(Layer.DEPTH) if depth is not None else with_layers()
+    channels = fmt.channels(layers)
+    if fmt.is_float:
+        planes = [rgba[..., :4]] + ([depth[..., None]] if "Z" in channels else [])
+        pixels, pixel_type = np.ascontiguousarray(np.concatenate(planes, -1), np.float32), oiio.FLOAT
     else:
         scale = 255.0 if bit_depth == 8 else 65535.0
         dtype = np.uint8 if bit_depth == 8 else np.uint16
         q = np.clip(rgba[..., :3], 0.0, 1.0) * scale + 0.5
         pixels = np.ascontiguousarray(q.astype(dtype))
-        fmt = oiio.UINT8 if bit_depth == 8 else oiio.UINT16
-        channels = ("R", "G", "B")
+        pixel_type = oiio.UINT8 if bit_depth == 8 else oiio.UINT16
     h, w = pixels.shape[:2]
-    spec = oiio.ImageSpec(w, h, len(channels), fmt)
+    spec = oiio.ImageSpec(w, h, len(channels), pixel_type)
     spec.channelnames = channels
-    # Write beside the target, check, rename: a failed write never leaves a half-written file.
-    tmp = path.with_name(f".{path.stem}.partial{os.getpid()}{ext}")
-    out = oiio.ImageOutput.create(str(tmp))
-    if out is None:
-        raise SplatglError(f"{path}: OpenImageIO cannot write this format ({_clean(oiio.geterror(), tmp, path)})")
-    try:
+
+    def complete(tmp: Path) -> str | None:
+        return image_file_problem(tmp, w, h, len(channels), None if fmt.is_float else bit_depth)
+
+    with atomic_target(path, complete) as tmp:
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None:
+            raise SplatglError(f"{path}: OpenImageIO cannot write this format ({_clean(oiio.geterror())})")
         try:
             ok = out.open(str(tmp), spec) and out.write_image(pixels)
             problem = None if ok else out.geterror()
@@ -146,18 +138,8 @@ def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
             closed = out.close()
         if problem is None and not closed:
             problem = out.geterror()
-        if problem is None:
-            problem = image_file_problem(tmp, w, h, len(channels), None if ext in _FLOAT_FORMATS else bit_depth)
         if problem is not None:
-            raise SplatglError(f"{path}: cannot write: {_clean(problem, tmp, path).rstrip('.')}"
-                               f"{disk_note(path.parent)}")
-        try:
-            tmp.replace(path)
-        except OSError as exc:
-            raise write_error(path, exc) from None
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+            raise cannot_write(path, _clean(problem).rstrip("."))
 
 
 def read_image(path: str | Path) -> np.ndarray:

@@ -9,13 +9,12 @@ either a complete, playable video or absent, and a failed write is one line nami
 
 from __future__ import annotations
 
-import os
 from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 
-from .atomic import disk_note, write_error
+from .atomic import AtomicTarget, write_error
 from ..errors import SplatglError
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
@@ -102,8 +101,9 @@ class VideoWriter:
         if not fps > 0:
             raise SplatglError(f"video frame rate must be positive, got {fps}")
         self.width, self.height = width, height
-        self.tmp = self.path.with_name(f".{self.path.stem}.partial{os.getpid()}{self.path.suffix}")
         self.frames = 0
+        self._file = AtomicTarget(self.path, lambda tmp: video_problem(tmp, self.frames))
+        self.tmp = self._file.tmp
         self._container = None
         try:
             self._container = av.open(str(self.tmp), mode="w")
@@ -141,10 +141,7 @@ class VideoWriter:
             for packet in self._stream.encode(None):
                 self._container.mux(packet)
             self._container.close()
-            problem = video_problem(self.tmp, self.frames)
-            if problem is not None:
-                raise SplatglError(f"{self.path}: cannot write: {problem}{disk_note(self.path.parent)}")
-            self.tmp.replace(self.path)
+            self._file.commit()
         except OSError as exc:
             self.abort()
             raise write_error(self.path, exc) from None
@@ -159,8 +156,7 @@ class VideoWriter:
                 self._container.close()
         except Exception:  # noqa: BLE001 - the file is deleted anyway
             pass
-        if self.tmp.exists():
-            self.tmp.unlink()
+        self._file.discard()
 
     def __enter__(self) -> "VideoWriter":
         return self
