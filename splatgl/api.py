@@ -15,46 +15,92 @@ from typing import Iterable, Iterator
 import moderngl
 import numpy as np
 
+from .cameras import registry
 from .cameras.camera import Camera
+from .cameras.orthographic import Orthographic
+from .cameras.pinhole import DEFAULT_FOV
 from .cameras.poses import orbit
+from .cameras.up import UP_AXES, resolve_up
 from .errors import CameraError, SplatglError
 from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
 from .gl.limits import check_image_size
 from .output.layers import Layer, RenderOutput, with_layers
 from .progress import ProgressCallback
-from .model.scene import Scene
+from .model.scene import Scene, SceneSource
 from .model.settings import RenderSettings, RendererKind
 from .cameras.view import View
 from .model.transform import ModelTransform
 
-#: Default vertical field of view of :func:`default_camera`, degrees.
-DEFAULT_FOV_Y = 50.0
+#: Default vertical field of view of :func:`default_camera`'s perspective camera, degrees.
+DEFAULT_FOV_Y = DEFAULT_FOV
 #: Elevation of the default view above the scene's "horizon", degrees.
 DEFAULT_ELEVATION = 20.0
+#: The orthographic default camera's image spans this many robust radii of the scene across
+#: its narrower side.
+ORTHOGRAPHIC_SPAN = 2.1
 
 
-def default_camera(scene: Scene, width: int = 1280, height: int = 720,
-                   fov_y_degrees: float = DEFAULT_FOV_Y, distance_scale: float = 1.0,
-                   model: ModelTransform | None = None, up=(0.0, -1.0, 0.0)) -> Camera:
-    """A perspective camera that frames ``scene``.
+def default_camera(scene: Scene, width: int | None = None, height: int | None = None,
+                   fov_degrees: float | None = None, distance_scale: float = 1.0,
+                   model: ModelTransform | None = None, up=None, *,
+                   projection: str | None = None) -> Camera:
+    """A camera that frames ``scene``: what ``splatgl render`` draws without ``--camera``.
 
     Frames the 1st-99th percentile box of the means (so a few stray splats far away do not
-    shrink the scene to a dot), from slightly above, with the world direction ``up`` (3,)
-    pointing up in the image (default world -y, the COLMAP convention; for a y axis up or down
-    it looks along world +z; :func:`splatgl.cameras.up.resolve_up` picks one for a scene), far
-    enough that the box's bounding sphere fits the narrower fov, times ``distance_scale``
-    (below 1 moves closer).  With a ``model`` transform the scene is framed where the transform
-    places it.  Raises :class:`~splatgl.errors.CameraError` for a size that is not a positive
-    integer, a field of view outside (0, 180) degrees or a distance scale that is not positive.
+    shrink the scene to a dot), from slightly above, far enough that the box's bounding sphere
+    fits the narrower field of view of a perspective camera, times ``distance_scale`` (below 1
+    moves closer).  With a ``model`` transform the scene is framed where the transform places
+    it.
+
+    - ``projection``: a camera model's name (:func:`splatgl.cameras.registry.names`; default
+      perspective).  Fisheye and equirectangular cameras take the perspective camera's pose;
+      an orthographic one is zoomed so that its narrower side spans
+      :data:`ORTHOGRAPHIC_SPAN` robust radii (times ``distance_scale``).
+    - ``width``, ``height``: the image size; a missing side is the model's default
+      (:func:`splatgl.cameras.registry.default_size`: 1280 x 720, a panorama 2:1).
+    - ``fov_degrees``: the model's field of view (perspective: vertical, default 50; fisheye:
+      the image circle's, default 180); refused for a model without one.
+    - ``up``: the world direction pointing up in the image: a 3-vector, an axis name ("+y",
+      "-y", "+z", "-z"), or None for the scene's own (:func:`splatgl.cameras.up.resolve_up`:
+      the average up of the training cameras in a ``cameras.json`` beside the scene's file,
+      else world -y, the COLMAP convention).  For a y axis up or down it looks along world +z.
+
+    Raises :class:`~splatgl.errors.CameraError` for an unknown projection, a size that is not a
+    positive integer, a field of view outside the model's range and a distance scale that is
+    not positive, with the messages ``splatgl render`` gives.
     """
+    cls = registry.model_class(projection or registry.names()[0])
     for name, value in (("width", width), ("height", height)):
-        if isinstance(value, bool) or int(value) != value or value < 1:
+        if value is not None and (isinstance(value, bool) or int(value) != value or value < 1):
             raise CameraError(f"camera {name} must be a positive integer, got {value!r}")
-    if not 0.0 < fov_y_degrees < 180.0:
-        raise CameraError(f"field of view must be in (0, 180) degrees, got {fov_y_degrees}")
+    width, height = registry.default_size(cls.name, width, height)
+    registry.check_fov(cls.name, fov_degrees)
     if not (math.isfinite(distance_scale) and distance_scale > 0.0):
         raise CameraError(f"distance scale must be a finite number > 0, got {distance_scale}")
+    pinhole = cls.name == registry.names()[0]
+    cam = _framing_camera(scene, width, height, fov_degrees if pinhole and fov_degrees is not None else DEFAULT_FOV_Y,
+                          distance_scale, model, _up_vector(scene, up))
+    if cls is Orthographic:  # parallel rays: the zoom frames the scene
+        scale = model.scale if model is not None else 1.0
+        radius = max(scene.robust_radius * scale, 1e-9) * distance_scale
+        return Camera.orthographic(width, height, min(width, height) / (ORTHOGRAPHIC_SPAN * radius),
+                                   cam.world_to_camera)
+    return cam if pinhole else registry.retarget(cam, cls.name, fov_degrees)
+
+
+def _up_vector(scene: Scene, up) -> np.ndarray:
+    """``up`` of :func:`default_camera` as a world vector."""
+    if up is None or isinstance(up, str):
+        if isinstance(up, str) and up not in UP_AXES:
+            raise CameraError(f"up must be one of {', '.join(UP_AXES)} or a 3-vector, got {up!r}")
+        return resolve_up(up, scene.source.path if scene.source is not None else None)[0]
+    return np.asarray(up, np.float64)
+
+
+def _framing_camera(scene: Scene, width: int, height: int, fov_y_degrees: float,
+                    distance_scale: float, model: ModelTransform | None, up) -> Camera:
+    """The perspective default camera (see :func:`default_camera`)."""
     lo, hi = scene.robust_bounds
     centre = 0.5 * (lo + hi)
     radius = max(scene.robust_radius, 1e-6)
@@ -67,6 +113,18 @@ def default_camera(scene: Scene, width: int = 1280, height: int = 720,
     distance = 1.05 * radius / math.sin(half) * distance_scale
     pose = orbit(centre, distance, 180.0, DEFAULT_ELEVATION, up)
     return Camera.from_fov(width, height, fov_y_degrees, pose)
+
+
+def default_settings(scene: Scene | SceneSource | None = None, **fields) -> RenderSettings:
+    """The settings ``splatgl render`` uses for ``scene`` (a loaded scene or its
+    :class:`~splatgl.model.scene.SceneSource`): ``RenderSettings(**fields)``, where
+    ``antialias``, unless given (None counts as not given), is on for a file tagged as trained
+    with antialiasing (mip-splatting's 2D filter: SPZ's antialiased flag, a PLY
+    ``SplatRenderMode: mip`` comment, ...; :func:`splatgl.formats.metadata.antialias_tag`)."""
+    source = scene.source if isinstance(scene, Scene) else scene
+    if fields.get("antialias") is None:
+        fields["antialias"] = source is not None and source.antialias_tag is not None
+    return RenderSettings(**fields)
 
 
 #: What :meth:`Renderer.render_layers` returns unless asked otherwise.
@@ -136,14 +194,19 @@ class Renderer:
         make_current(self.ctx)
         return self._path(scene, settings, kind)
 
-    def render(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
-               kind: RendererKind = RendererKind.QUAD, progress: ProgressCallback | None = None) -> np.ndarray:
+    def render(self, scene: Scene, camera: Camera | None = None,
+               settings: RenderSettings | None = None, kind: RendererKind = RendererKind.QUAD,
+               progress: ProgressCallback | None = None) -> np.ndarray:
         """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top.
 
+        ``camera`` None: :func:`default_camera`; ``settings`` None: :func:`default_settings`
+        (the scene file's tags decide antialiasing), as ``splatgl render`` without options.
         ``progress`` (:mod:`splatgl.progress`) hears from the renderers that report it (the
-        reference, the tile renderer) during the frame.
+        reference, the tile renderer) during the frame.  The quad and tile renderers refuse
+        ``convention`` gsplat (:func:`splatgl.model.settings.check_convention`).
         """
         kind = RendererKind(kind)
+        camera, settings = _inputs(scene, camera, settings)
         self._check_open()
         if kind is RendererKind.REFERENCE:
             return render_reference_rgba(scene, camera, settings, progress)
@@ -152,13 +215,16 @@ class Renderer:
         with _reporting(self._path(scene, settings, kind), progress) as path:
             return path.render(View.of(camera, settings, scene)).rgba
 
-    def render_layers(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
+    def render_layers(self, scene: Scene, camera: Camera | None = None,
+                      settings: RenderSettings | None = None,
                       kind: RendererKind = RendererKind.QUAD,
                       progress: ProgressCallback | None = None,
                       layers: frozenset[Layer] = DEPTH_LAYERS) -> RenderOutput:
         """The ``layers`` of one view (default colour, alpha and the accumulated depth; every
-        layer from the same pass, with the same weights; :mod:`splatgl.output.layers`)."""
+        layer from the same pass, with the same weights; :mod:`splatgl.output.layers`);
+        ``camera`` and ``settings`` as in :meth:`render`."""
         kind = RendererKind(kind)
+        camera, settings = _inputs(scene, camera, settings)
         self._check_open()
         if kind is RendererKind.REFERENCE:
             return render_reference_layers(scene, camera, settings, progress)
@@ -168,7 +234,7 @@ class Renderer:
             return path.render(View.of(camera, settings, scene), layers)
 
     def render_many(self, scene: Scene, cameras: Iterable[Camera],
-                    settings: RenderSettings = RenderSettings(),
+                    settings: RenderSettings | None = None,
                     kind: RendererKind = RendererKind.QUAD,
                     layers: frozenset[Layer] | None = None) -> Iterator[np.ndarray | RenderOutput]:
         """Render ``cameras`` one after another, yielding each frame as it is done.
@@ -176,7 +242,9 @@ class Renderer:
         The scene is uploaded and the shaders compiled once (on the first frame); each frame is
         exactly what :meth:`render` (or :meth:`render_layers` with ``layers``) returns for that
         camera.  Yields (H, W, 4) float32 arrays, or :class:`RenderOutput` with ``layers``.
+        ``settings`` None: :func:`default_settings`.
         """
+        settings = settings if settings is not None else default_settings(scene)
         for camera in cameras:
             if layers is None:
                 yield self.render(scene, camera, settings, kind)
@@ -235,9 +303,18 @@ def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettin
     return RenderOutput(rgba, np.asarray(ref.depth, np.float32), DEPTH_LAYERS)
 
 
-def render(scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
+def _inputs(scene: Scene, camera: Camera | None,
+            settings: RenderSettings | None) -> tuple[Camera, RenderSettings]:
+    """``camera`` and ``settings``, or the scene's defaults where None (``splatgl render``'s)."""
+    settings = settings if settings is not None else default_settings(scene)
+    return camera if camera is not None else default_camera(scene, model=settings.model), settings
+
+
+def render(scene: Scene, camera: Camera | None = None, settings: RenderSettings | None = None,
            kind: RendererKind = RendererKind.QUAD) -> np.ndarray:
-    """Render one view with a fresh context (use :class:`Renderer` for many views)."""
+    """Render one view with a fresh context (use :class:`Renderer` for many views); ``camera``
+    and ``settings`` as in :meth:`Renderer.render`."""
+    camera, settings = _inputs(scene, camera, settings)
     if RendererKind(kind) is RendererKind.REFERENCE:
         return render_reference_rgba(scene, camera, settings)
     with Renderer() as r:
