@@ -205,3 +205,38 @@ def test_render_without_camera_or_settings_draws_what_the_cli_draws(tmp_path, ca
     rgba = splatgl.render(splatgl.load_scene(DEMO))
     assert rgba.shape == (720, 1280, 4)
     np.testing.assert_allclose(read_image(out), np.clip(rgba[..., :3], 0, 1), atol=0.5 / 255 + 1e-6)
+
+
+# ------------------------------------------------------------------ level of detail
+
+
+def test_lod_renders_from_plain_values_as_the_cli_does(tmp_path, capsys):
+    """render_lod takes a tree, a camera, settings and LodSettings (it took the CLI's
+    argparse.Namespace); stereo and the gsplat convention are refused by the library too."""
+    from splatgl.lod.frames import LodFrames, render_lod
+    from splatgl.lod.io import read_lod
+    from splatgl.lod.render import LodSettings
+    from splatgl.renderers.stereo import StereoLayout, StereoRenderer
+
+    path = tmp_path / "demo.lod.ply"
+    assert main(["lod", str(DEMO), "-o", str(path)]) == 0
+    out = tmp_path / "one.png"
+    assert main(["render", str(path), "--lod-budget", "300", "--width", "64", "--height", "48",
+                 "-o", str(out)]) == 0
+    capsys.readouterr()
+    tree, scene = read_lod(path), splatgl.load_scene(path)
+    got, times, _ = render_lod(tree, splatgl.default_camera(scene, 64, 48),
+                               splatgl.default_settings(scene), LodSettings(budget=300))
+    assert 0 < times.cut_nodes <= 300
+    np.testing.assert_allclose(read_image(out), np.clip(got.rgba[..., :3], 0, 1), atol=0.5 / 255 + 1e-6)
+    line = cli_error(capsys, "render", path, "--lod-budget", 300, "--stereo", 0.1, "--path",
+                     "orbit:2", "-o", tmp_path / "f")
+    with LodFrames(tree, splatgl.RenderSettings(), LodSettings()) as frames:
+        with pytest.raises(SplatglError) as stereo:
+            StereoRenderer(frames, 0.1, StereoLayout.SIDE_BY_SIDE)
+    assert str(stereo.value) == line == LodFrames.stereo_refusal
+    with pytest.raises(SplatglError, match=r"^--convention gsplat applies to the NumPy reference "
+                                           r"only; the quad renderer follows the inria rules"):
+        LodFrames(tree, splatgl.RenderSettings(convention="gsplat"), LodSettings())
+    with pytest.raises(SplatglError, match=r"^--lod-budget must be at least 1, got 0"):
+        LodSettings(budget=0)
