@@ -240,3 +240,32 @@ def test_lod_renders_from_plain_values_as_the_cli_does(tmp_path, capsys):
         LodFrames(tree, splatgl.RenderSettings(convention="gsplat"), LodSettings())
     with pytest.raises(SplatglError, match=r"^--lod-budget must be at least 1, got 0"):
         LodSettings(budget=0)
+
+
+# ------------------------------------------------------------------ argparse lives in commands/
+
+
+def test_argparse_only_in_the_command_line_modules():
+    """Library modules take plain values; option parsing is splatgl/commands/ and cli.py
+    (lod/command.py, bench/lod_bench.py, bench/scale_cli.py, bench/gpu_probe.py and
+    bench/scale_report.py parsed or took argparse.Namespace).  tasks/executor.py's options
+    move to commands/ in a sibling change."""
+    import re
+    from pathlib import Path
+
+    root = Path(splatgl.__file__).parent
+    found = {p.relative_to(root).as_posix() for p in root.rglob("*.py")
+             if re.search(r"^\s*(import argparse|from argparse import)", p.read_text(), re.M)
+             and p.relative_to(root).parts[0] != "commands"}
+    assert found <= {"cli.py", "tasks/executor.py"}, found
+
+
+def test_bench_mode_options_are_refused_before_the_work(capsys):
+    """The --lod and --scale options (now parsed in commands/_bench_modes.py) still refuse bad
+    values in one line before measuring anything."""
+    assert cli_error(capsys, "bench", "--lod", "--lod-blend", "2,0.5") == (
+        "--lod-blend: bands are ratios of at least 1, got '2,0.5'")
+    assert cli_error(capsys, "bench", "--lod", "--lod-thresholds", "1,x") == (
+        "--lod-thresholds: expected comma-separated numbers, got '1,x'")
+    assert cli_error(capsys, "bench", "--scale", "--sizes", "1M,lots") == (
+        "--sizes: 'lots' is not a size (e.g. 0.1M, 300k, 6M)")
