@@ -18,7 +18,7 @@ import numpy as np
 from .cameras import registry
 from .cameras.camera import Camera
 from .cameras.orthographic import Orthographic
-from .cameras.pinhole import DEFAULT_FOV
+from .cameras.pinhole import DEFAULT_FOV, Pinhole
 from .cameras.poses import orbit
 from .cameras.up import UP_AXES, resolve_up
 from .errors import CameraError, SplatglError
@@ -78,9 +78,9 @@ def default_camera(scene: Scene, width: int | None = None, height: int | None = 
     registry.check_fov(cls.name, fov_degrees)
     if not (math.isfinite(distance_scale) and distance_scale > 0.0):
         raise CameraError(f"distance scale must be a finite number > 0, got {distance_scale}")
-    pinhole = cls.name == registry.names()[0]
-    cam = _framing_camera(scene, width, height, fov_degrees if pinhole and fov_degrees is not None else DEFAULT_FOV_Y,
-                          distance_scale, model, _up_vector(scene, up))
+    pinhole = cls is Pinhole
+    fov_y = fov_degrees if pinhole and fov_degrees is not None else DEFAULT_FOV_Y
+    cam = _framing_camera(scene, width, height, fov_y, distance_scale, model, _up_vector(scene, up))
     if cls is Orthographic:  # parallel rays: the zoom frames the scene
         scale = model.scale if model is not None else 1.0
         radius = max(scene.robust_radius * scale, 1e-9) * distance_scale
