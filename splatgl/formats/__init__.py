@@ -11,6 +11,7 @@ reorder the splats, the (N,) row order written; lossy writers also provide
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import inspect
 from pathlib import Path
@@ -85,10 +86,7 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
         options["axes"] = spz_axes
     if "progress" in inspect.signature(mod.read).parameters:
         options["progress"] = progress if progress is not None else default_progress()
-    scene = read(path, **options)
-    # set on the reader's new scene (shared with no one yet), keeping what it already computed
-    object.__setattr__(scene, "source", scene_source(path))
-    return scene
+    return dataclasses.replace(read(path, **options), source=scene_source(path))  # arrays shared
 
 
 def scene_source(path: str | Path) -> SceneSource:
