@@ -23,7 +23,7 @@ import numpy as np
 from splatgl.order import kernels as cull_kernel
 from splatgl.bench.scale import scene_file
 from splatgl.bench.machine import CPU_ONLY, describe, machine_info
-from splatgl.bench.scale_cli import parse_sizes
+from splatgl.bench.scale import parse_sizes
 from splatgl.cameras.poses import orbit
 from splatgl.formats import load_scene
 from splatgl.cameras.registry import retarget

@@ -142,7 +142,7 @@ else
 fi
 
 # ---------------------------------------------------------------- the renderer (stops on software)
-probe=("$py" -m splatgl.bench.gpu_probe --out "$out/machine.json" --commit "$commit")
+probe=("$py" -m splatgl.commands._bench_tools gpu-probe --out "$out/machine.json" --commit "$commit")
 [ "$allow_software" = 1 ] && probe+=(--allow-software)
 step renderer "$out/machine.txt" run "${probe[@]}" \
   || die "the GL renderer check failed (see $out/machine.txt); nothing else was run"
@@ -180,7 +180,7 @@ scale_all() {
   if [ "$quick" -eq 1 ]; then
     run "$py" -m splatgl bench --scale --sizes 0.02M --sh3-sizes none --width 64 --height 48 \
       --frames 2 --out "$s/a" || return 1
-    run "$py" -m splatgl.bench.scale_report "$s/a/scale.json" --out "$s" || return 1
+    run "$py" -m splatgl.commands._bench_tools scale-report "$s/a/scale.json" --out "$s" || return 1
     return 0
   fi
   run "$py" -m splatgl bench --scale --sizes 0.1M,0.3M --sh3-sizes none --out "$s/a" || rc=1
@@ -193,7 +193,7 @@ scale_all() {
     if [ "$dry" -eq 1 ] || [ -f "$s/$r/scale.json" ]; then parts+=("$s/$r/scale.json"); fi
   done
   if [ ${#parts[@]} -gt 0 ]; then
-    run "$py" -m splatgl.bench.scale_report "${parts[@]}" --out "$s" || rc=1
+    run "$py" -m splatgl.commands._bench_tools scale-report "${parts[@]}" --out "$s" || rc=1
   fi
   return "$rc"
 }

@@ -22,7 +22,7 @@ from splatgl.bench.lod_bench import cameras, lod_file
 from splatgl.bench.scale import scene_file
 from splatgl.bench.machine import CPU_ONLY, describe, machine_info
 from splatgl.bench.runner import median_seconds
-from splatgl.bench.scale_cli import parse_sizes
+from splatgl.bench.scale import parse_sizes
 from splatgl.order.cull import CullData
 from splatgl.order.chunks import keys_order, rows_keys
 from splatgl.lod.cut import CutData, select_cut_weights

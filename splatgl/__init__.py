@@ -1,7 +1,8 @@
 """splatgl: Gaussian-splat rendering through OpenGL's graphics pipeline.
 
 The public API: :func:`load_scene`, :class:`Scene`, :class:`Camera`, :class:`RenderSettings`,
-:func:`default_camera`, :func:`render` and :class:`Renderer` (``render_many`` for many views);
+:func:`default_camera`, :func:`default_settings` (what ``splatgl render`` uses without options),
+:func:`render` and :class:`Renderer` (``render_many`` for many views);
 :func:`load_cameras` reads every camera source (COLMAP, transforms.json, cameras.json, camera
 paths); :mod:`splatgl.paths` generates paths.
 
@@ -26,8 +27,8 @@ _EXPORTS = {
     "CameraError": "errors", "ContextError": "errors", "SceneFormatError": "errors",
     "ShaderError": "errors", "SplatglError": "errors",
     "load_scene": "formats", "save_scene": "formats",
-    "Renderer": "api", "default_camera": "api", "render": "api",
-    "Scene": "model.scene", "SplatKind": "model.scene",
+    "Renderer": "api", "default_camera": "api", "default_settings": "api", "render": "api",
+    "Scene": "model.scene", "SceneSource": "model.scene", "SplatKind": "model.scene",
     "Precision": "model.settings", "QuadExtent": "model.settings", "RenderSettings": "model.settings",
     "RendererKind": "model.settings",
 }
@@ -60,6 +61,6 @@ if TYPE_CHECKING:  # static analysers see the names directly
     from .datasets import load_cameras
     from .errors import CameraError, ContextError, SceneFormatError, ShaderError, SplatglError
     from .formats import load_scene, save_scene
-    from .api import Renderer, default_camera, render
-    from .model.scene import Scene, SplatKind
+    from .api import Renderer, default_camera, default_settings, render
+    from .model.scene import Scene, SceneSource, SplatKind
     from .model.settings import Precision, QuadExtent, RenderSettings, RendererKind

@@ -14,18 +14,31 @@ from typing import Iterable, Iterator
 import moderngl
 import numpy as np
 
+from .cameras import registry
 from .cameras.camera import Camera
 # the default camera is camera code (the path generators use it too); part of the API
-from .cameras.framing import DEFAULT_ELEVATION, DEFAULT_FOV_Y, default_camera  # noqa: F401
+from .cameras.framing import DEFAULT_ELEVATION, DEFAULT_FOV_Y, ORTHOGRAPHIC_SPAN, default_camera  # noqa: F401
 from .errors import SplatglError
 from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
 from .gl.limits import check_image_size
 from .output.layers import Layer, RenderOutput, with_layers
 from .progress import ProgressCallback
-from .model.scene import Scene
+from .model.scene import Scene, SceneSource
 from .model.settings import RenderSettings, RendererKind
 from .cameras.view import View
+
+def default_settings(scene: Scene | SceneSource | None = None, **fields) -> RenderSettings:
+    """The settings ``splatgl render`` uses for ``scene`` (a loaded scene or its
+    :class:`~splatgl.model.scene.SceneSource`): ``RenderSettings(**fields)``, where
+    ``antialias``, unless given (None counts as not given), is on for a file tagged as trained
+    with antialiasing (mip-splatting's 2D filter: SPZ's antialiased flag, a PLY
+    ``SplatRenderMode: mip`` comment, ...; :func:`splatgl.formats.metadata.antialias_tag`)."""
+    source = scene.source if isinstance(scene, Scene) else scene
+    if fields.get("antialias") is None:
+        fields["antialias"] = source is not None and source.antialias_tag is not None
+    return RenderSettings(**fields)
+
 
 #: What :meth:`Renderer.render_layers` returns unless asked otherwise.
 DEPTH_LAYERS = with_layers(Layer.DEPTH)
@@ -94,14 +107,19 @@ class Renderer:
         make_current(self.ctx)
         return self._path(scene, settings, kind)
 
-    def render(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
-               kind: RendererKind = RendererKind.QUAD, progress: ProgressCallback | None = None) -> np.ndarray:
+    def render(self, scene: Scene, camera: Camera | None = None,
+               settings: RenderSettings | None = None, kind: RendererKind = RendererKind.QUAD,
+               progress: ProgressCallback | None = None) -> np.ndarray:
         """(H, W, 4) float32: RGB = C + (1 - A) background, alpha = A; row 0 is the top.
 
+        ``camera`` None: :func:`default_camera`; ``settings`` None: :func:`default_settings`
+        (the scene file's tags decide antialiasing), as ``splatgl render`` without options.
         ``progress`` (:mod:`splatgl.progress`) hears from the renderers that report it (the
-        reference, the tile renderer) during the frame.
+        reference, the tile renderer) during the frame.  The quad and tile renderers refuse
+        ``convention`` gsplat (:func:`splatgl.model.settings.check_convention`).
         """
         kind = RendererKind(kind)
+        camera, settings = _inputs(scene, camera, settings)
         self._check_open()
         if kind is RendererKind.REFERENCE:
             return render_reference_rgba(scene, camera, settings, progress)
@@ -110,13 +128,16 @@ class Renderer:
         with _reporting(self._path(scene, settings, kind), progress) as path:
             return path.render(View.of(camera, settings, scene)).rgba
 
-    def render_layers(self, scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
+    def render_layers(self, scene: Scene, camera: Camera | None = None,
+                      settings: RenderSettings | None = None,
                       kind: RendererKind = RendererKind.QUAD,
                       progress: ProgressCallback | None = None,
                       layers: frozenset[Layer] = DEPTH_LAYERS) -> RenderOutput:
         """The ``layers`` of one view (default colour, alpha and the accumulated depth; every
-        layer from the same pass, with the same weights; :mod:`splatgl.output.layers`)."""
+        layer from the same pass, with the same weights; :mod:`splatgl.output.layers`);
+        ``camera`` and ``settings`` as in :meth:`render`."""
         kind = RendererKind(kind)
+        camera, settings = _inputs(scene, camera, settings)
         self._check_open()
         if kind is RendererKind.REFERENCE:
             return render_reference_layers(scene, camera, settings, progress)
@@ -126,7 +147,7 @@ class Renderer:
             return path.render(View.of(camera, settings, scene), layers)
 
     def render_many(self, scene: Scene, cameras: Iterable[Camera],
-                    settings: RenderSettings = RenderSettings(),
+                    settings: RenderSettings | None = None,
                     kind: RendererKind = RendererKind.QUAD,
                     layers: frozenset[Layer] | None = None) -> Iterator[np.ndarray | RenderOutput]:
         """Render ``cameras`` one after another, yielding each frame as it is done.
@@ -134,7 +155,9 @@ class Renderer:
         The scene is uploaded and the shaders compiled once (on the first frame); each frame is
         exactly what :meth:`render` (or :meth:`render_layers` with ``layers``) returns for that
         camera.  Yields (H, W, 4) float32 arrays, or :class:`RenderOutput` with ``layers``.
+        ``settings`` None: :func:`default_settings`.
         """
+        settings = settings if settings is not None else default_settings(scene)
         for camera in cameras:
             if layers is None:
                 yield self.render(scene, camera, settings, kind)
@@ -193,9 +216,18 @@ def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettin
     return RenderOutput(rgba, np.asarray(ref.depth, np.float32), DEPTH_LAYERS)
 
 
-def render(scene: Scene, camera: Camera, settings: RenderSettings = RenderSettings(),
+def _inputs(scene: Scene, camera: Camera | None,
+            settings: RenderSettings | None) -> tuple[Camera, RenderSettings]:
+    """``camera`` and ``settings``, or the scene's defaults where None (``splatgl render``'s)."""
+    settings = settings if settings is not None else default_settings(scene)
+    return camera if camera is not None else default_camera(scene, model=settings.model), settings
+
+
+def render(scene: Scene, camera: Camera | None = None, settings: RenderSettings | None = None,
            kind: RendererKind = RendererKind.QUAD) -> np.ndarray:
-    """Render one view with a fresh context (use :class:`Renderer` for many views)."""
+    """Render one view with a fresh context (use :class:`Renderer` for many views); ``camera``
+    and ``settings`` as in :meth:`Renderer.render`."""
+    camera, settings = _inputs(scene, camera, settings)
     if RendererKind(kind) is RendererKind.REFERENCE:
         return render_reference_rgba(scene, camera, settings)
     with Renderer() as r:

@@ -237,7 +237,7 @@ def test_zero_sizes_and_closed_renderers_are_one_line_errors(tmp_path, capsys):
     for size, field in (((0, 0), "width"), ((8, 0), "height"), ((8.5, 4), "width")):
         with pytest.raises(CameraError, match=f"^camera {field} must be a positive integer, got"):
             default_camera(scene, *size)
-    with pytest.raises(CameraError, match=r"^field of view must be in \(0, 180\) degrees, got 0"):
+    with pytest.raises(CameraError, match=r"^--fov must be in \(0, 180\) degrees, got 0"):  # the CLI's
         default_camera(scene, 8, 8, 0.0)
     camera = default_camera(scene, 16, 12)
     with Renderer() as renderer:

@@ -43,14 +43,14 @@ def test_dry_run_prints_every_step_and_writes_nothing(tmp_path):
     expected = [
         "+ nvidia-smi",
         f"+ {py} -m pip install '.[test,fast,bench]'",
-        f"+ {py} -m splatgl.bench.gpu_probe --out {out}/machine.json --commit",
+        f"+ {py} -m splatgl.commands._bench_tools gpu-probe --out {out}/machine.json --commit",
         f"+ {py} -m pytest -ra --junitxml={out}/pytest.xml",
         f"+ {py} -m splatgl bench --out {out}/bench",
         f"+ {py} -m splatgl bench --groups early-stop --out {out}/early-stop",
         f"+ {py} -m splatgl bench --scale --sizes 3M,6M --sh3-sizes none --out {out}/scale/c",
         f"+ {py} -m splatgl bench --scale --sizes none --sh3-sizes 6M --width 1280 --height 720 "
         f"--out {out}/scale/d",
-        f"+ {py} -m splatgl.bench.scale_report {out}/scale/a/scale.json {out}/scale/b/scale.json "
+        f"+ {py} -m splatgl.commands._bench_tools scale-report {out}/scale/a/scale.json {out}/scale/b/scale.json "
         f"{out}/scale/c/scale.json {out}/scale/d/scale.json --out {out}/scale",
     ]
     at = 0
@@ -133,7 +133,7 @@ def test_without_nvidia_smi_it_says_so(tmp_path):
 def test_gpu_probe_in_process(tmp_path, monkeypatch, capsys):
     """The probe on this machine's context: the JSON and the printed renderer agree; a bad
     SPLATGL_EGL_DEVICE is one line and exit 2 (no JSON)."""
-    from splatgl.bench import gpu_probe
+    from splatgl.commands._bench_tools import gpu_probe_main
     from splatgl.errors import ContextError
     from splatgl.gl.context import create_headless_context, renderer_name
 
@@ -146,14 +146,14 @@ def test_gpu_probe_in_process(tmp_path, monkeypatch, capsys):
     name, raw = renderer_name(ctx), ctx.info["GL_RENDERER"]
     ctx.release()
     out = tmp_path / "machine.json"
-    rc = gpu_probe.main(["--out", str(out), "--commit", "abc", "--allow-software"])
+    rc = gpu_probe_main(["--out", str(out), "--commit", "abc", "--allow-software"])
     assert rc == 0
     doc = json.loads(out.read_text())
     assert doc["machine"]["gl_renderer"] == name and doc["gl"]["renderer"] == raw
     assert doc["commit"] == "abc" and doc["gl"]["version_code"] >= 430
     assert f"GL renderer: {raw}\n" in capsys.readouterr().out
     monkeypatch.setenv("SPLATGL_EGL_DEVICE", "99")
-    assert gpu_probe.main(["--out", str(tmp_path / "bad.json")]) == 2
+    assert gpu_probe_main(["--out", str(tmp_path / "bad.json")]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "SPLATGL_EGL_DEVICE=99: no such EGL device" in err
     assert not (tmp_path / "bad.json").exists()

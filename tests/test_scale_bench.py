@@ -7,7 +7,7 @@ import pytest
 
 from splatgl.bench.lod_bench import bench_lod, summary
 from splatgl.bench.scale import ScaleOptions, measure_file, scene_file
-from splatgl.bench.scale_cli import parse_sizes
+from splatgl.bench.scale import parse_sizes
 from splatgl.bench.scale_report import loglog_slope, table
 from splatgl.errors import SplatglError
 

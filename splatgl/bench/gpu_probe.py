@@ -1,6 +1,7 @@
 """Which OpenGL device splatgl renders on, checked: the first step of ``benchmarks/gpu_check.sh``.
 
-``python -m splatgl.bench.gpu_probe --out machine.json`` makes a headless context the way every
+``python -m splatgl.commands._bench_tools gpu-probe --out machine.json`` (its options:
+:func:`splatgl.commands._bench_tools.gpu_probe_main`) makes a headless context the way every
 command does (:func:`splatgl.gl.context.create_headless_context`: a hardware EGL device first,
 ``$SPLATGL_EGL_DEVICE`` overriding), prints the machine line and the GL renderer, vendor and
 version, and writes them with the EGL device list and the EGL vendor files to ``--out``.  It
@@ -10,12 +11,8 @@ exits 1 with one line saying what to check when the renderer is a software raste
 
 from __future__ import annotations
 
-import argparse
 import glob
-import json
 import platform
-import sys
-from pathlib import Path
 
 #: Where glvnd looks for EGL vendor files (the NVIDIA driver's is ``10_nvidia.json``).
 EGL_VENDOR_DIRS = ("/usr/share/glvnd/egl_vendor.d", "/etc/glvnd/egl_vendor.d")
@@ -65,41 +62,3 @@ def probe(commit: str | None = None) -> dict:
                      "numpy": numpy.__version__, "moderngl": moderngl.__version__},
         "commit": commit,
     }
-
-
-def main(argv: list[str] | None = None) -> int:
-    from ..output.atomic import atomic_write_text
-    from ..errors import SplatglError
-    from .machine import describe
-
-    p = argparse.ArgumentParser(prog="python -m splatgl.bench.gpu_probe", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", type=Path, default=None, help="write the JSON there (machine.json)")
-    p.add_argument("--commit", default=None, help="the source revision, recorded as given")
-    p.add_argument("--allow-software", action="store_true",
-                   help="do not fail on a software renderer (trying the check without a GPU)")
-    args = p.parse_args(argv)
-    try:
-        doc = probe(args.commit)
-        if args.out is not None:
-            atomic_write_text(args.out, json.dumps(doc, indent=1) + "\n")
-    except SplatglError as exc:
-        print(f"gpu_probe: error: {exc}", file=sys.stderr)
-        return 2
-    gl = doc["gl"]
-    print(describe(doc["machine"]))
-    print(f"GL renderer: {gl['renderer']}")
-    print(f"GL vendor: {gl['vendor']}; GL version: {gl['version']}; "
-          f"{doc['egl_device_list']}")
-    for reason in gl["egl_skipped"]:
-        print(f"EGL device skipped: {reason}")
-    if gl["software"]:
-        what = "allowed (--allow-software)" if args.allow_software else "error"
-        print(f"gpu_probe: {what}: GL renderer '{gl['renderer']}' is a software rasteriser, "
-              f"not the GPU; {SOFTWARE_HINT}", file=sys.stderr)
-        return 0 if args.allow_software else 1
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

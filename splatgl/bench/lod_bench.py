@@ -17,14 +17,13 @@ makes, ``|L[k+1] - L'[k+1]|`` with ``L'[k+1]`` drawn at frame k+1's camera throu
 cut (its nodes and weights): ``D`` also holds how the LOD's approximation error moves with
 the view, this does not.
 
-Run: ``splatgl bench --lod --sizes 3M,6M --out DIR`` (or ``python -m splatgl.bench.lod_bench``):
-table, lod.json, lod.png (the Pareto plot of frame time against RMS error per path; the summary,
-table and plot are :mod:`splatgl.bench.lod_report`).
+Run: ``splatgl bench --lod --sizes 3M,6M --out DIR`` (its options:
+:mod:`splatgl.commands._bench_modes`): table, lod.json, lod.png (the Pareto plot of frame time
+against RMS error per path; the summary, table and plot are :mod:`splatgl.bench.lod_report`).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import statistics
@@ -257,65 +256,3 @@ def run_lod(sizes, width: int, height: int, frames: int, thresholds, budgets, ba
             plot(files.temp("lod.png"), rows)
         log(f"wrote {out / 'lod.json'}, lod.png")
     return summ
-
-
-def _numbers(text: str, flag: str) -> list[float]:
-    from ..errors import SplatglError
-
-    try:
-        values = [float(t) for t in text.split(",")]
-    except ValueError:
-        raise SplatglError(f"{flag}: expected comma-separated numbers, got {text!r}") from None
-    if not values or not all(math.isfinite(v) and v > 0 for v in values):
-        raise SplatglError(f"{flag}: every value must be a finite number > 0, got {text!r}")
-    return values
-
-
-def run_lod_command(args: argparse.Namespace) -> int:
-    """``splatgl bench --lod`` (and ``python -m splatgl.bench.lod_bench``)."""
-    from ..errors import SplatglError
-    from .scale_cli import parse_sizes
-
-    paths = args.lod_paths or "coarse"
-    if paths not in PATH_SETS:
-        raise SplatglError(f"--lod-paths: expected one of {', '.join(PATH_SETS)}, got {paths!r}")
-    bands = _numbers(args.lod_blend or "2,1", "--lod-blend")
-    if min(bands) < 1:
-        raise SplatglError(f"--lod-blend: bands are ratios of at least 1, got {args.lod_blend!r}")
-    run_lod(parse_sizes(args.sizes or "3M,6M", (), "--sizes"), args.width or 1280,
-            args.height or 720, args.frames or 5,
-            _numbers(args.lod_thresholds or "1,2", "--lod-thresholds"),
-            list(parse_sizes(args.lod_budgets or "1M,0.3M", (), "--lod-budgets")), bands, paths,
-            args.out, log=lambda m: print(m, flush=True))
-    return 0
-
-
-def add_lod_arguments(p: argparse.ArgumentParser) -> None:
-    """The --lod options (shared by ``splatgl bench`` and this module's own command line)."""
-    p.add_argument("--lod-thresholds", default=None, metavar="LIST",
-                   help="--lod pixel thresholds (default 1,2)")
-    p.add_argument("--lod-budgets", default=None, metavar="LIST",
-                   help="--lod splat budgets, at the first band (default 1M,0.3M; 'none')")
-    p.add_argument("--lod-blend", default=None, metavar="LIST",
-                   help="--lod transition bands, ratios (default 2,1: blended and hard cuts)")
-    p.add_argument("--lod-paths", default=None, choices=PATH_SETS,
-                   help="--lod camera paths: coarse (orbit and far-to-close fly-through, the "
-                        "default), fine (small steps, for popping between frames) or switch "
-                        "(small steps across the distance where the first threshold's cut "
-                        "gives way to the leaves: the popping of that switch)")
-
-
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m splatgl.bench.lod_bench", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--sizes", default=None, help="scene sizes (default 3M,6M)")
-    p.add_argument("--width", type=int, default=None, help="default 1280")
-    p.add_argument("--height", type=int, default=None, help="default 720")
-    p.add_argument("--frames", type=int, default=None, help="frames per path (default 5)")
-    p.add_argument("--out", type=Path, default=None)
-    add_lod_arguments(p)
-    return run_lod_command(p.parse_args(argv))
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

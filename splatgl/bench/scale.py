@@ -33,6 +33,29 @@ RESOLUTIONS = ((1280, 720), (1920, 1080))
 SEED = 0
 
 
+def parse_sizes(text: str | None, default: tuple[int, ...], flag: str) -> tuple[int, ...]:
+    """'0.1M,300k,6M' -> (100000, 300000, 6000000); None -> ``default``; 'none' -> ().
+    Errors name ``flag``, the option the text came from."""
+    from ..errors import SplatglError
+
+    if text is None:
+        return default
+    if text.strip().lower() == "none":
+        return ()
+    out = []
+    for word in text.split(","):
+        w = word.strip()
+        mult = {"k": 1_000, "m": 1_000_000}.get(w[-1:].lower(), 1)
+        try:
+            value = float(w[:-1] if mult > 1 else w) * mult
+        except ValueError:
+            raise SplatglError(f"{flag}: '{w}' is not a size (e.g. 0.1M, 300k, 6M)") from None
+        if value < 1:
+            raise SplatglError(f"{flag}: sizes must be at least 1 splat, got '{w}'")
+        out.append(int(round(value)))
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class ScaleOptions:
     """What the scale benchmark measures.

@@ -44,7 +44,7 @@ class Orthographic(CameraModel):
     @classmethod
     def intrinsics(cls, width, height, fov_degrees, like=None):
         """Keeps ``like``'s intrinsics as pixels per world unit; without one, 1 pixel per unit,
-        centred (the CLI frames the scene itself, :func:`splatgl.api.default_camera`)."""
+        centred (:func:`splatgl.api.default_camera` zooms it to frame a scene)."""
         if like is not None:
             return like.fx, like.fy, like.cx, like.cy, cls()
         return 1.0, 1.0, width / 2.0, height / 2.0, cls()

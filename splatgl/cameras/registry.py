@@ -23,6 +23,10 @@ MODELS: dict[str, type[CameraModel]] = {m.name: m for m in (
 )}
 
 
+#: Image size of a camera made without one (:func:`default_size`).
+DEFAULT_WIDTH, DEFAULT_HEIGHT = 1280, 720
+
+
 def names() -> list[str]:
     """The model names, default first (``--projection`` choices)."""
     return list(MODELS)
@@ -35,6 +39,21 @@ def model_class(name: str, what: str = "projection") -> type[CameraModel]:
     except (KeyError, TypeError):
         choices = ", ".join(f"'{n}'" for n in MODELS)
         raise CameraError(f"{what} must be one of {choices}, got {name!r}") from None
+
+
+def default_size(name: str | None, width: int | None = None,
+                 height: int | None = None) -> tuple[int, int]:
+    """The image size of a camera of the model called ``name`` (None: the default perspective
+    camera) made without one, or with only one side given: :data:`DEFAULT_WIDTH` x
+    :data:`DEFAULT_HEIGHT` and the sides given, or for a model with its own aspect (an
+    equirectangular panorama: 2:1) that aspect, at the default height when neither is given."""
+    aspect = model_class(name or names()[0]).aspect
+    if aspect is not None:
+        height = height or (max(1, round(width / aspect)) if width else DEFAULT_HEIGHT)
+        width = width or round(aspect * height)
+    else:
+        width, height = width or DEFAULT_WIDTH, height or DEFAULT_HEIGHT
+    return width, height
 
 
 def check_fov(name: str | None, fov_degrees: float | None) -> None:

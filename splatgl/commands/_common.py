@@ -11,16 +11,15 @@ from ..cameras.camera import Camera
 from ..cameras import registry
 from ..cameras.files import load_camera
 from ..errors import SplatglError
-from ..formats import load_scene
+from ..formats import load_scene, scene_source
 from ..cameras.orthographic import Orthographic
-from ..cameras.registry import retarget
 from ..gl.limits import MAX_IMAGE_SIDE, check_image_size
-from ..formats.metadata import antialias_tag
-from ..api import default_camera
+from ..api import default_camera, default_settings
 from ..model.scene import Scene
 from ..constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
 from ..model.settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
                               RendererKind, RenderSettings, SortKey)
+from ..model.settings import check_convention as library_check_convention
 from ..renderers.stereo import StereoLayout
 from ..model.transform import parse_transform
 from ._spz_axes import add_spz_axes_argument
@@ -191,16 +190,18 @@ def load_scene_arg(args: argparse.Namespace) -> Scene:
 
 
 def antialias_from_args(args: argparse.Namespace) -> bool:
-    """``--antialias`` / ``--no-antialias`` if given, else whether the scene file is tagged as
-    trained with antialiasing (saying so on stderr)."""
+    """``--antialias`` / ``--no-antialias`` if given, else the scene file's default
+    (:func:`splatgl.default_settings`: on where the file is tagged as trained with
+    antialiasing), saying so on stderr.  Read from the file's header, before loading it."""
     if args.antialias is not None:
         return args.antialias
     path = getattr(args, "scene", None)
-    tag = antialias_tag(path) if path is not None else None
-    if tag:
-        print(f"splatgl: {path}: {tag}: rendering with --antialias (--no-antialias turns it off)",
-              file=sys.stderr)
-    return tag is not None
+    source = scene_source(path) if path is not None else None
+    antialias = default_settings(source).antialias
+    if antialias:
+        print(f"splatgl: {path}: {source.antialias_tag}: rendering with --antialias "
+              "(--no-antialias turns it off)", file=sys.stderr)
+    return antialias
 
 
 def settings_from_args(args: argparse.Namespace) -> RenderSettings:
@@ -216,19 +217,9 @@ def settings_from_args(args: argparse.Namespace) -> RenderSettings:
 
 
 def check_convention(args: argparse.Namespace, *kinds: RendererKind | str) -> None:
-    """Refuse ``--convention gsplat`` unless one of ``kinds`` is the NumPy reference.
-
-    Only the reference implements the gsplat rules; the quad and tile renderers would silently
-    draw the inria ones.  In ``compare`` a reference on either side makes it meaningful (the
-    other renderer measured against the gsplat rules).
-    """
-    if Convention(args.convention) is Convention.INRIA:
-        return
-    if not any(RendererKind(k) is RendererKind.REFERENCE for k in kinds):
-        names = " and ".join(dict.fromkeys(RendererKind(k).value for k in kinds))
-        which = f"the {names} renderers follow" if " and " in names else f"the {names} renderer follows"
-        raise SplatglError(f"--convention {args.convention} applies to the NumPy reference only; "
-                           f"{which} the inria rules (use --renderer reference)")
+    """``--convention gsplat`` needs the NumPy reference among ``kinds``
+    (:func:`splatgl.model.settings.check_convention`), checked before any work."""
+    library_check_convention(args.convention, *kinds)
 
 
 def size_origin(args: argparse.Namespace) -> str:
@@ -255,7 +246,7 @@ def projection_from_args(args: argparse.Namespace) -> str | None:
 
 
 def _file_camera(args: argparse.Namespace, projection: str | None) -> Camera:
-    """``--camera`` adapted by --width/--height/--projection/--fov (:func:`splatgl.cameras.registry.adapt_camera`)."""
+    """``--camera`` adapted by --width/--height/--projection/--fov (:func:`splatgl.load_camera`)."""
     if getattr(args, "orthographic", False):
         raise SplatglError(f"--orthographic zooms the default camera to frame the scene; "
                            f"{args.camera} brings its own camera (--projection orthographic keeps "
@@ -269,14 +260,9 @@ def _file_camera(args: argparse.Namespace, projection: str | None) -> Camera:
 
 
 def default_size(args: argparse.Namespace, projection: str | None) -> tuple[int, int]:
-    """The default camera's image size (a model's own aspect where it has one: an
-    equirectangular panorama 2:1), its options checked."""
-    aspect = registry.model_class(projection).aspect if projection is not None else None
-    if aspect is not None:
-        height = args.height or (max(1, round(args.width / aspect)) if args.width else 720)
-        width = args.width or round(aspect * height)
-    else:
-        width, height = args.width or 1280, args.height or 720
+    """The default camera's image size (:func:`splatgl.cameras.registry.default_size`: a
+    panorama 2:1), checked with --fov before the scene is loaded."""
+    width, height = registry.default_size(projection, args.width, args.height)
     check_image_size(width, height, size_origin(args), RendererKind.REFERENCE)
     registry.check_fov(projection, args.fov)
     return width, height
@@ -284,8 +270,9 @@ def default_size(args: argparse.Namespace, projection: str | None) -> tuple[int,
 
 def camera_from_args(args: argparse.Namespace, scene: Scene | None,
                      settings: RenderSettings | None = None) -> Camera | None:
-    """The camera the options describe; with ``scene`` None, only the checks that need no
-    scene (done before loading one), returning the file's camera or None."""
+    """The camera the options describe (:func:`splatgl.load_camera` or
+    :func:`splatgl.default_camera`); with ``scene`` None, only the checks that need no scene
+    (done before loading one), returning the file's camera or None."""
     if args.camera is None and args.camera_index is not None:
         raise SplatglError("--camera-index needs --camera (a cameras.json to pick from)")
     projection = projection_from_args(args)
@@ -294,19 +281,11 @@ def camera_from_args(args: argparse.Namespace, scene: Scene | None,
     width, height = default_size(args, projection)
     if scene is None:
         return None
-    up, _ = resolve_up(getattr(args, "up", None), args.scene, args.camera)
-    distance = args.distance if args.distance is not None else 1.0
-    cam = default_camera(scene, width, height,
-                         args.fov if args.fov is not None and projection != "fisheye" else 50.0,
-                         distance, settings.model if settings is not None else None, up=up)
-    if projection in ("fisheye", "equirectangular"):
-        cam = retarget(cam, projection, args.fov)
-    if projection == "orthographic":
-        scale = settings.model.scale if settings is not None and settings.model else 1.0
-        radius = max(scene.robust_radius * scale, 1e-9) * distance
-        cam = Camera.orthographic(cam.width, cam.height, min(cam.width, cam.height) / (2.1 * radius),
-                                  cam.world_to_camera)
-    return cam
+    up, _ = resolve_up(getattr(args, "up", None), args.scene)  # the demo has no training cameras
+    return default_camera(scene, width, height, args.fov,
+                          args.distance if args.distance is not None else 1.0,
+                          settings.model if settings is not None else None, up,
+                          projection=projection)
 
 
 def inputs_from_args(args: argparse.Namespace) -> tuple[Scene, RenderSettings, Camera]:

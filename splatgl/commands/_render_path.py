@@ -25,8 +25,9 @@ from ..cameras.up import resolve_up
 from ..cameras.orthographic import Orthographic
 from ..cameras.pinhole import Pinhole
 from ..cameras.registry import adapt_camera, retarget
-from ..lod.command import LodFrames, lod_settings_from_args
-from ..lod.io import read_lod
+from ..lod.frames import LodFrames
+from ..lod.io import is_lod_file, read_lod
+from ..lod.render import LodSettings
 from ..model.settings import RendererKind
 from ..renderers.stereo import StereoLayout, StereoRenderer
 from ._common import (default_size, demo_scene_path, load_scene_arg, positive_float,
@@ -64,6 +65,24 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
     # What only --path uses, with its defaults: given without --path, it is refused.
     p.set_defaults(_path_only=[(a.option_strings[0], a.dest, a.default)
                                for a in g._group_actions[1:] + executor._group_actions])
+
+
+def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
+    """The cut ``--lod-threshold/--lod-budget/--lod-blend`` ask for (None: no option given; the
+    others :class:`~splatgl.lod.render.LodSettings`' defaults), checked before any work: the
+    quad renderer, a ``.lod.ply`` scene, valid values."""
+    given = {name: value for name, value in (("threshold_px", args.lod_threshold),
+                                             ("budget", args.lod_budget), ("band", args.lod_blend))
+             if value is not None}
+    if not given:
+        return None
+    if args.renderer != "quad":
+        raise SplatglError(f"--lod-threshold/--lod-budget render through the quad path, not "
+                           f"--renderer {args.renderer}")
+    if args.scene is None or not is_lod_file(args.scene):
+        raise SplatglError(f"{args.scene}: not a level-of-detail file; build one with "
+                           "'splatgl lod SCENE -o SCENE.lod.ply'")
+    return LodSettings(**given)
 
 
 def refuse_path_only_options(args: argparse.Namespace) -> None:
@@ -130,8 +149,7 @@ def run_path(args: argparse.Namespace) -> int:
         raise SplatglError("--stereo renders paths in one process (not with --workers or --executor ray)")
     lod = lod_settings_from_args(args)
     if lod is not None and args.stereo is not None:
-        raise SplatglError("--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be "
-                           "combined yet")
+        raise SplatglError(LodFrames.stereo_refusal)
     if args.resume and target.is_video and not executor.sharded:
         raise SplatglError(f"{args.output}: a video rendered in one process cannot be resumed; "
                            "render it with --workers N or --executor ray (their frames are kept "

@@ -8,7 +8,6 @@ import textwrap
 from pathlib import Path
 
 from ..bench.early_stop_report import early_stop_table
-from ..bench.lod_bench import add_lod_arguments
 from ..bench.real_scenes import shared_scenes_dir, shared_scenes_help
 from ..bench.storage_report import storage_table
 from ..bench.report import plot, table, write_csv, write_json
@@ -26,6 +25,7 @@ from ..output.files import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
 from ..api import Renderer
 from ..model.settings import RenderSettings
+from ._bench_modes import add_lod_arguments, run_lod_command, run_scale_command
 from ._common import demo_scene_path, non_negative_int, positive_int
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
@@ -165,10 +165,8 @@ def run(args: argparse.Namespace) -> int:
         mode = "--scale" if args.scale else "--lod"
         raise SplatglError(f"--json: {mode} writes its JSON with --out DIR")
     if args.scale:
-        from ..bench.scale_cli import run_scale_command
         return run_scale_command(args)
     if args.lod:
-        from ..bench.lod_bench import run_lod_command
         return run_lod_command(args)
     quick = args.quick
     width = args.width or (160 if quick else 1280)

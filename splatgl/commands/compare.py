@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from ..progress import default_progress
 from ..errors import SplatglError
 from ..evaluation.metrics import check_ssim_size, depth_errors, image_errors
 from ..api import Renderer
-from ..model.settings import RendererKind
+from ..model.settings import Convention, RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, inputs_from_args, positive_float, size_origin)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
@@ -71,10 +72,12 @@ def run(args: argparse.Namespace) -> int:
         for kind in kinds:
             check_size(args, camera, kind, renderer.ctx)
         for kind in kinds:
-            if kind is not RendererKind.REFERENCE:
-                renderer.render(scene, camera, settings, kind, progress)  # warm-up: compile, upload
+            side = settings
+            if kind is not RendererKind.REFERENCE:   # the GPU renderers draw the inria rules only
+                side = dataclasses.replace(settings, convention=Convention.INRIA)
+                renderer.render(scene, camera, side, kind, progress)  # warm-up: compile, upload
             t0 = time.perf_counter()
-            outputs.append(renderer.render_layers(scene, camera, settings, kind, progress))
+            outputs.append(renderer.render_layers(scene, camera, side, kind, progress))
             seconds.append(time.perf_counter() - t0)
     images = [o.rgba for o in outputs]
     errors = image_errors(images[0], images[1])

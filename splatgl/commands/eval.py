@@ -18,8 +18,8 @@ from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..api import Renderer
 from ..model.settings import RendererKind
-from ._common import (add_scene_arguments, add_settings_arguments, demo_scene_path, load_scene_arg,
-                      settings_from_args)
+from ._common import (add_scene_arguments, add_settings_arguments, check_convention, demo_scene_path,
+                      load_scene_arg, settings_from_args)
 from ._spz_axes import check_not_sharded
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(f"--worst must be at least 1, got {args.worst}")
     if args.max_width < 0:
         raise SplatglError(f"--max-width must be 0 or positive, got {args.max_width}")
+    check_convention(args, args.renderer)
     if args.sheet is not None:
         check_image_suffix(args.sheet, "--sheet")
     check_json_target(args, {"SCENE": args.scene, "--csv": args.csv, "--sheet": args.sheet})

@@ -16,10 +16,13 @@ from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..output.pictures import depth_preview
 from ..api import Renderer, render_reference_layers
+from ..lod.frames import LodFrames, render_lod
+from ..lod.io import read_lod
 from ..model.settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args)
-from ._render_path import add_path_arguments, refuse_path_only_options, run_path
+from ._render_path import (add_path_arguments, lod_settings_from_args, refuse_path_only_options,
+                           run_path)
 from ..renderers.stereo import StereoLayout, combine, eye_cameras
 
 NAME = "render"
@@ -96,12 +99,11 @@ def run(args: argparse.Namespace) -> int:
     want_depth = Layer.DEPTH in layers
     lod = any(v is not None for v in (args.lod_threshold, args.lod_budget, args.lod_blend))
     if lod and stereo is not None:
-        raise SplatglError("--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be "
-                           "combined yet")
+        raise SplatglError(LodFrames.stereo_refusal)
     times = None
     if lod:
-        from ..lod.command import render_lod
-        out, times, gl_name = render_lod(args, settings, camera, layers)
+        cut = lod_settings_from_args(args)  # its checks before reading the tree
+        out, times, gl_name = render_lod(read_lod(args.scene), camera, settings, cut, layers)
         eyes = [out]
         kind_text = f"{kind.value}, level of detail"
     else:

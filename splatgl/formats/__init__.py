@@ -13,6 +13,7 @@ as glTF's ``.gltf`` or SOG's folder form, takes the user's name as ``target=``);
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import inspect
 from pathlib import Path
@@ -20,7 +21,7 @@ from types import ModuleType
 
 from ..errors import SceneFormatError
 from ..progress import default_progress
-from ..model.scene import Scene
+from ..model.scene import Scene, SceneSource
 from ._messages import reader_guard
 
 #: Format modules in detection order (most specific signature first).
@@ -72,6 +73,9 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
     is None, a stderr meter is used if stderr is a terminal or ``SPLATGL_PROGRESS=1``.
     ``spz_axes`` ("rub" or "rdf"): the axes of an SPZ file that records none (see
     :mod:`splatgl.formats.spz_axes`); refused for other formats.
+
+    The scene's :attr:`~splatgl.model.scene.Scene.source` names the file and its tags
+    (:func:`scene_source`), which give the scene's default camera up and settings.
     """
     path = Path(path)
     mod = detect_format(path)
@@ -82,11 +86,18 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
             raise SceneFormatError(path, f"--spz-axes applies to SPZ files only (this is "
                                          f"{mod.NAME})")
         options["axes"] = spz_axes
-    if "progress" not in inspect.signature(mod.read).parameters:
-        return read(path, **options)
-    if progress is None:
-        progress = default_progress()
-    return read(path, progress=progress, **options)
+    if "progress" in inspect.signature(mod.read).parameters:
+        options["progress"] = progress if progress is not None else default_progress()
+    return dataclasses.replace(read(path, **options), source=scene_source(path))  # arrays shared
+
+
+def scene_source(path: str | Path) -> SceneSource:
+    """What ``path``'s header says about its scene (:class:`SceneSource`), read without loading
+    it: whether it is tagged as trained with antialiasing
+    (:func:`splatgl.formats.metadata.antialias_tag`)."""
+    from .metadata import antialias_tag
+
+    return SceneSource(Path(path), antialias_tag(path))
 
 
 def writer_for(path: str | Path) -> ModuleType:

@@ -9,7 +9,8 @@ from __future__ import annotations
 import enum
 import functools
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -28,6 +29,22 @@ class SplatKind(enum.Enum):
 
 
 @dataclass(frozen=True)
+class SceneSource:
+    """The file a scene was read from and what its header says about it
+    (:func:`splatgl.formats.scene_source`; :attr:`Scene.source`).
+
+    Attributes:
+        path: the file (as given to :func:`splatgl.load_scene`).
+        antialias_tag: a short description of the tag marking the scene as trained with
+            antialiasing (:func:`splatgl.formats.metadata.antialias_tag`), or None: such a
+            scene renders with ``antialias`` on by default (:func:`splatgl.default_settings`).
+    """
+
+    path: Path
+    antialias_tag: str | None = None
+
+
+@dataclass(frozen=True)
 class Scene:
     """N splats, stored as the file values; activated values are derived once, on first use.
 
@@ -40,6 +57,10 @@ class Scene:
         sh: (N, K, 3) SH coefficients, K = (degree + 1)^2, coefficient-major with RGB last;
             ``sh[:, 0]`` is the DC term (``f_dc``).
         kind: 3DGS Gaussians or 2DGS surfels.
+        source: the file the scene was read from and its tags (:class:`SceneSource`), set by
+            :func:`splatgl.load_scene`; None for a scene built in memory (a subset, a
+            transformed copy).  It gives the scene's defaults: its training cameras' up
+            (:func:`splatgl.default_camera`) and antialiasing (:func:`splatgl.default_settings`).
 
     Keeping the raw values makes a PLY written from a scene read back bit-identical.  The
     activations (exp scale, sigmoid opacity, normalised quaternion) live in the three cached
@@ -53,6 +74,7 @@ class Scene:
     opacity_logits: np.ndarray
     sh: np.ndarray
     kind: SplatKind = SplatKind.GAUSSIAN_3D
+    source: SceneSource | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         n = np.shape(self.means)[0]

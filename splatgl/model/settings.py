@@ -113,6 +113,24 @@ class RendererKind(enum.Enum):
     REFERENCE = "reference"
 
 
+def check_convention(convention: Convention | str, *kinds: RendererKind | str) -> None:
+    """Refuse ``convention`` gsplat unless one of ``kinds`` is the NumPy reference.
+
+    Only the reference implements the gsplat rules; the quad and tile renderers would silently
+    draw the inria ones.  Each GPU renderer checks its own kind (:class:`splatgl.Renderer`);
+    ``splatgl compare`` passes both of its sides, where a reference on either makes it
+    meaningful (the other renderer, drawing the inria rules, measured against the gsplat ones).
+    """
+    convention = Convention(convention)
+    if convention is Convention.INRIA:
+        return
+    if not any(RendererKind(k) is RendererKind.REFERENCE for k in kinds):
+        names = " and ".join(dict.fromkeys(RendererKind(k).value for k in kinds))
+        which = f"the {names} renderers follow" if " and " in names else f"the {names} renderer follows"
+        raise SplatglError(f"--convention {convention.value} applies to the NumPy reference only; "
+                           f"{which} the inria rules (use --renderer reference)")
+
+
 #: Auto near plane: this fraction of the scene's robust radius, never more than the reference's.
 AUTO_NEAR_FRACTION = 0.01
 

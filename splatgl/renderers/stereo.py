@@ -14,7 +14,7 @@ import enum
 import numpy as np
 
 from ..cameras.camera import Camera
-from ..errors import CameraError
+from ..errors import CameraError, SplatglError
 from ..output.layers import RenderOutput
 
 
@@ -59,6 +59,9 @@ class StereoRenderer:
         if StereoLayout(layout) is StereoLayout.SEPARATE:
             raise CameraError("--stereo-layout separate writes two files per view; for a path use "
                               "side-by-side or top-bottom")
+        refusal = getattr(renderer, "stereo_refusal", None)  # e.g. a level-of-detail tree's frames
+        if refusal:
+            raise SplatglError(refusal)
         eye_cameras(Camera.from_fov(2, 2, 60.0), ipd)  # checks the IPD once, up front
         self._renderer, self.ipd, self.layout = renderer, float(ipd), StereoLayout(layout)
 

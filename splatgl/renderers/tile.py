@@ -40,7 +40,7 @@ from ..gl.buffers import GrowableBuffer
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..model.scene import Scene, SplatKind
-from ..model.settings import RenderSettings
+from ..model.settings import RenderSettings, RendererKind, check_convention
 from ..output.layers import BASE, Layer, RenderOutput
 from .tile_keys import (MAX_GROUPS, RASTER_BAND_TILES, TILE_EMIT_CHUNK,
                         TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, splat_groups, tile_grid)
@@ -57,6 +57,7 @@ class TileRenderer:
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
                  programs: ProgramCache | None = None):
+        check_convention(settings.convention, RendererKind.TILE)  # it draws the inria rules only
         self.ctx = ctx
         self.scene = scene
         self.settings = settings

@@ -69,7 +69,7 @@ class RenderChunk:
         from ..api import Renderer
 
         if self.lod is not None:
-            from ..lod.command import LodFrames
+            from ..lod.frames import LodFrames
             from ..lod.io import read_lod
 
             with files.local(self.scene_path) as local:

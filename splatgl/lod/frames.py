@@ -1,40 +1,22 @@
-"""``splatgl render --lod-threshold/--lod-budget/--lod-blend``: views of a ``.lod.ply`` through
-the cut, one view or every frame of a ``--path`` (in this process, ``--workers`` processes or
-Ray tasks: each frame is the one-view render of its camera, bit for bit)."""
+"""Views of a level-of-detail tree (a ``.lod.ply`` from ``splatgl lod``) through the cut: one
+view (:func:`render_lod`) or the frames of a camera path (:class:`LodFrames`, in this process,
+worker processes or Ray tasks: each frame is the one-view render of its camera, bit for bit).
+``splatgl render --lod-threshold/--lod-budget/--lod-blend`` maps its options onto these."""
 
 from __future__ import annotations
 
-import argparse
 from types import SimpleNamespace
 from typing import Iterable, Iterator
 
 from ..cameras.camera import Camera
-from ..errors import SplatglError
 from ..gl.context import create_headless_context, make_current, renderer_name
 from ..output.layers import BASE, Layer, RenderOutput
 from ..model.settings import RenderSettings
 from ..cameras.view import View
 from .build import LodTree
-from .io import is_lod_file, read_lod
 from .render import LodSettings
 from ..renderers.quad import QuadRenderer
 from .source import lod_renderer
-from .cut import DEFAULT_BAND, DEFAULT_THRESHOLD_PX
-
-
-def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
-    """The cut ``--lod-threshold/--lod-budget/--lod-blend`` ask for (None: no option given),
-    checked before any work: the quad renderer, a ``.lod.ply`` scene, valid values."""
-    if all(getattr(args, name, None) is None for name in ("lod_threshold", "lod_budget", "lod_blend")):
-        return None
-    if args.renderer != "quad":
-        raise SplatglError(f"--lod-threshold/--lod-budget render through the quad path, not "
-                           f"--renderer {args.renderer}")
-    if args.scene is None or not is_lod_file(args.scene):
-        raise SplatglError(f"{args.scene}: not a level-of-detail file; build one with "
-                           "'splatgl lod SCENE -o SCENE.lod.ply'")
-    return LodSettings(args.lod_threshold if args.lod_threshold is not None else DEFAULT_THRESHOLD_PX,
-                       args.lod_budget, args.lod_blend if args.lod_blend is not None else DEFAULT_BAND)
 
 
 class LodFrames:
@@ -44,8 +26,12 @@ class LodFrames:
     Every view chooses its cut alone: the renderer's memory of views close enough to draw the
     leaves (:attr:`splatgl.lod.source.LodOrder.skip_within`, a speed-up for interactive paths) is cleared
     before each, so frame k of a path is the one-view render of camera k whatever came before
-    it (another chunk in another worker, or nothing).
+    it (another chunk in another worker, or nothing).  It draws through the quad path (whose
+    rules refuse ``convention`` gsplat) and not in stereo (:attr:`stereo_refusal`).
     """
+
+    #: Why :class:`splatgl.renderers.stereo.StereoRenderer` cannot wrap it (no per-eye views yet).
+    stereo_refusal = "--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be combined yet"
 
     def __init__(self, tree: LodTree, settings: RenderSettings, lod: LodSettings):
         self.settings = settings
@@ -87,13 +73,13 @@ class LodFrames:
         self.close()
 
 
-def render_lod(args: argparse.Namespace, settings: RenderSettings, camera: Camera,
-               layers: frozenset[Layer]) -> tuple[RenderOutput, SimpleNamespace, str]:
-    """Render ``args.scene`` (a .lod.ply) with the cut ``args`` asks for: (layers, times with
-    ``cut_nodes`` and ``cut`` (seconds) beside the quad path's stage times, the GL renderer's
-    name)."""
-    lod = lod_settings_from_args(args)
-    with LodFrames(read_lod(args.scene), settings, lod) as frames:
+def render_lod(tree: LodTree, camera: Camera, settings: RenderSettings = RenderSettings(),
+               lod: LodSettings = LodSettings(), layers: frozenset[Layer] = BASE
+               ) -> tuple[RenderOutput, SimpleNamespace, str]:
+    """One view of ``tree`` (:func:`splatgl.lod.io.read_lod`) through the cut ``lod`` chooses:
+    (the ``layers``, times with ``cut_nodes`` and ``cut`` (seconds) beside the quad path's
+    stage times, the GL renderer's name), on a context of its own."""
+    with LodFrames(tree, settings, lod) as frames:
         gl_name = renderer_name(frames.ctx)
         out = frames.render_view(camera, layers)
         renderer, cut = frames.renderer, frames.renderer.rows
