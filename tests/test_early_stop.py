@@ -272,7 +272,7 @@ def test_batch_hook_reports_progress_and_can_interrupt(gl_renderer, monkeypatch,
     settings = _settings(early_stop=early_stop)
     quad = gl_renderer.renderer_for(scene, settings)
     monkeypatch.setattr(es, "MAX_BATCH", 700)
-    monkeypatch.setattr(batches_module, "plain_bounds", lambda n: es.plain_bounds(n, 700))
+    monkeypatch.setattr(batches_module, "plain_bounds", lambda n, m=None: es.plain_bounds(n, 700))
     seen = []
     expected = draw(quad, cam, on_batch=lambda done, total: seen.append((done, total))).rgba
     total = seen[-1][1]
@@ -309,7 +309,7 @@ def test_renderer_progress_reaches_the_quad_draw(gl_renderer, monkeypatch):
     scene = dense_scene(3000)
     cam = front_camera(4.0, 50.0, 64, 48, target=(0.0, 0.0, 0.5))
     settings = _settings(early_stop=False)
-    monkeypatch.setattr(batches_module, "plain_bounds", lambda n: es.plain_bounds(n, 700))
+    monkeypatch.setattr(batches_module, "plain_bounds", lambda n, m=None: es.plain_bounds(n, 700))
     plain = gl_renderer.render(scene, cam, settings)
     heard = []
     img = gl_renderer.render(scene, cam, settings, progress=lambda d, t, what: heard.append((d, t, what)))

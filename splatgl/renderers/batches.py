@@ -20,8 +20,8 @@ from ..gl.bindings import (ACCUM_UNIT, BINDING_COMMANDS, BINDING_COVERAGE, BINDI
 from ..gl.buffers import GrowableBuffer
 from ..model.settings import EarlyStop
 from .early_stop import (COARSE_SCHEDULE, COMMAND_BYTES, COVERAGE_MIN_INVOCATIONS,
-                         COVERAGE_SLOTS_PER_INVOCATION, FINE_SCHEDULE, SEGMENT, BatchHook,
-                         batch_bounds, plain_bounds)
+                         COVERAGE_SLOTS_PER_INVOCATION, FINE_SCHEDULE, MAX_BATCH, SEGMENT,
+                         BatchHook, batch_bounds, plain_bounds)
 
 
 class EarlyStopPasses:
@@ -141,6 +141,9 @@ class Batches:
         self.batches = 1
         self.occlusion_culled = 0
         self._schedule = COARSE_SCHEDULE
+        #: Longest plain batch (splats): a smaller one lets ``on_batch`` run (and interrupt the
+        #: frame) sooner; the image is the same whatever the batches.
+        self.max_batch = MAX_BATCH
 
     def decide(self, view, count: int, frame) -> bool:
         """Whether this frame draws in early-termination batches, and their schedule.
@@ -173,7 +176,7 @@ class Batches:
         """Draw the ``count`` sorted splats into ``target`` (bound, cleared, blending set up)."""
         self.occlusion_culled = 0
         if not self.batched:
-            bounds = plain_bounds(count)
+            bounds = plain_bounds(count, self.max_batch)
             self.batches = len(bounds) - 1
             for start, end in zip(bounds[:-1], bounds[1:]):
                 self.res.draw_range(prog, start, end - start)
