@@ -70,6 +70,8 @@ RADIX_BINDING_HIST = 4
 ACCUM_UNIT = 0
 #: The viewer's present program samples its image here (splatgl/viewer/shaders/present.frag).
 PRESENT_UNIT = 0
+#: The draft upscaler samples the small frame here (shaders/upscale.frag).
+UPSCALE_UNIT = 0
 
 # --- Work-group sizes (local_size_x) and the dispatch shapes built on them.  tile_rasterize.comp
 # runs TILE_SIZE x TILE_SIZE groups (splatgl.constants.TILE_SIZE, one invocation per pixel).
@@ -100,6 +102,7 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "radix sort storage": tuple(name for name in globals() if name.startswith("RADIX_BINDING_")),
     "quad path textures": ("ACCUM_UNIT",),
     "viewer textures": ("PRESENT_UNIT",),
+    "upscale textures": ("UPSCALE_UNIT",),
 }
 #: The tile renderer's buffers by name (``TILE_BINDING_<name>``): tile.py allocates one each.
 TILE_BINDINGS: dict[str, int] = {name[len("TILE_BINDING_"):]: value

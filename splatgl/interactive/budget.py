@@ -1,0 +1,194 @@
+"""A frame-time budget: how much to draw per frame while the camera moves.
+
+Three levers make a frame cheaper: the render scale (a fraction of the window's pixels, then
+upscaled: fragments dominate views of large splats), a splat budget (a level-of-detail cut of
+at most that many nodes: llvmpipe's per-quad front end, about a microsecond a quad, dominates
+scenes over about 100k splats) and the SH degree.  A :class:`Level` is one choice of the three;
+:class:`FrameBudget` picks one per frame.
+
+How it picks: a linear cost model, ``t = fixed + per_splat * splats + per_pixel * pixels``,
+fitted to the frames drawn so far (recursive least squares that forgets old frames, so the
+model follows the view: the cost is stable across nearby frames, not across a whole flight),
+predicts each level's time; the best level whose prediction fits ``margin * budget`` is the
+target.  Hysteresis keeps it from flickering between levels:
+
+- a frame over ``budget * over`` (1.1) moves to the target at once (never a visibly slow frame
+  twice in a row);
+- a cheaper-than-needed frame moves up only after ``patience`` (3) frames in a row whose target
+  is higher (then to that target);
+- the target itself uses ``margin`` (0.85) of the budget, so a level that just fits is not
+  left and re-entered on noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import SplatglError
+
+#: Render scales tried, best first (fractions of the window's width and height).
+SCALES = (1.0, 0.85, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, 0.25)
+#: Splat budgets tried below the full scene (only where a level-of-detail tree exists).
+BUDGETS = (1_000_000, 600_000, 400_000, 250_000, 160_000, 100_000, 70_000, 50_000, 35_000,
+           25_000, 18_000, 12_000)
+#: The levels' quality score weighs a halved splat count like this many halvings of the scale
+#: (a coarser cut blurs fine detail; a lower scale blurs everything, but the upscale filter
+#: hides half of it).
+SPLAT_WEIGHT = 0.5
+
+
+@dataclass(frozen=True, order=True)
+class Level:
+    """One choice of the levers.
+
+    Attributes:
+        scale: fraction of the window's width and height drawn (then upscaled).
+        budget: at most this many splats (a level-of-detail cut), or None: the whole scene.
+        sh_degree: cap on the SH degree evaluated, or None: the scene's.
+    """
+
+    scale: float = 1.0
+    budget: int | None = None
+    sh_degree: int | None = None
+
+    @property
+    def exact(self) -> bool:
+        """Whether this level draws exactly what ``splatgl render`` draws."""
+        return self.scale == 1.0 and self.budget is None and self.sh_degree is None
+
+    def describe(self) -> str:
+        splats = "all splats" if self.budget is None else f"<= {self.budget:,} splats"
+        sh = "" if self.sh_degree is None else f", SH {self.sh_degree}"
+        return f"scale {self.scale:.2f}, {splats}{sh}"
+
+
+#: The level that draws exactly what ``splatgl render`` draws.
+EXACT = Level()
+
+
+def check_fps(fps: float | None) -> float | None:
+    """A frame-rate target as given (``--target-fps``): None (the default for the machine), 0 (no
+    budget: every frame exact) or a positive finite number; anything else is refused."""
+    if fps is None:
+        return None
+    fps = float(fps)
+    if not (0.0 <= fps < math.inf):
+        raise SplatglError(f"--target-fps must be 0 (no budget) or a positive number of frames "
+                           f"a second, got {fps:g}")
+    return fps
+
+
+def ladder(count: int, has_lod: bool, sh_degree: int) -> list[Level]:
+    """The levels for a scene of ``count`` splats, best first by quality score (see module doc).
+
+    Budgets apply only with a level-of-detail tree (``has_lod``) and only below ``count``; the
+    SH degree is capped at 0 on levels that also cut splats (view-dependent colour matters
+    least in a coarse preview)."""
+    budgets: list[int | None] = [None]
+    if has_lod:
+        budgets += [b for b in BUDGETS if b < count]
+    levels = []
+    for b in budgets:
+        for s in SCALES:
+            sh = 0 if (b is not None and sh_degree > 0) else None
+            levels.append(Level(s, b, sh))
+    return sorted(levels, key=lambda lv: -quality(lv, count))
+
+
+def quality(level: Level, count: int) -> float:
+    """A level's quality score (higher is better): log2 of the scale plus ``SPLAT_WEIGHT``
+    times log2 of the share of splats drawn."""
+    splats = count if level.budget is None else min(level.budget, count)
+    return math.log2(level.scale) + SPLAT_WEIGHT * math.log2(max(splats, 1) / max(count, 1))
+
+
+@dataclass
+class CostModel:
+    """``t = fixed + per_splat * splats + per_pixel * pixels`` (seconds), fitted by recursive
+    least squares with forgetting factor ``forget``; a prior that assumes llvmpipe-like costs
+    until frames come in."""
+
+    forget: float = 0.8
+    theta: np.ndarray = field(default_factory=lambda: np.array([0.01, 1e-6, 5e-8]))
+    cov: np.ndarray = field(default_factory=lambda: np.diag([1e-2, 1e-11, 1e-14]))
+
+    def predict(self, splats: float, pixels: float) -> float:
+        return float(self.theta @ np.array([1.0, splats, pixels]))
+
+    def update(self, splats: float, pixels: float, seconds: float) -> None:
+        x = np.array([1.0, splats, pixels])
+        px = self.cov @ x
+        gain = px / (self.forget + x @ px)
+        self.theta = self.theta + gain * (seconds - x @ self.theta)
+        self.theta = np.maximum(self.theta, 0.0)  # costs are never negative
+        self.cov = (self.cov - np.outer(gain, px)) / self.forget
+
+
+class FrameBudget:
+    """Picks a :class:`Level` per moving frame so frames land within ``budget`` seconds.
+
+    ``count``: the scene's splats; ``pixels``: the window's pixels at scale 1; ``has_lod``:
+    whether a level-of-detail tree can serve budgets.  Call :meth:`level` before a frame and
+    :meth:`report` after it with what it drew and how long it took.
+    """
+
+    def __init__(self, budget: float, count: int, pixels: int, sh_degree: int = 0,
+                 has_lod: bool = False, margin: float = 0.85, over: float = 1.1, patience: int = 3):
+        if not (math.isfinite(budget) and budget > 0.0):
+            raise SplatglError(f"frame-time budget must be a positive number of seconds, got {budget}")
+        self.budget, self.count, self.pixels = float(budget), int(count), int(pixels)
+        self.sh_degree = sh_degree
+        self.margin, self.over, self.patience = margin, over, patience
+        self.model = CostModel()
+        self.levels = ladder(self.count, has_lod, sh_degree)
+        self.index = 0          # the level in use (an index into :attr:`levels`)
+        self._ups = 0           # frames in a row whose target was higher than the level in use
+
+    def set_lod(self, has_lod: bool) -> None:
+        """A level-of-detail tree became available (or went away): new ladder, same quality."""
+        level = self.current
+        self.levels = ladder(self.count, has_lod, self.sh_degree)
+        q = quality(level, self.count)
+        self.index = min(range(len(self.levels)), key=lambda i: abs(quality(self.levels[i], self.count) - q))
+
+    def set_pixels(self, pixels: int) -> None:
+        self.pixels = int(pixels)
+
+    @property
+    def current(self) -> Level:
+        return self.levels[self.index]
+
+    def predict(self, level: Level) -> float:
+        splats = self.count if level.budget is None else min(level.budget, self.count)
+        return self.model.predict(splats, self.pixels * level.scale * level.scale)
+
+    def target(self) -> int:
+        """The best level whose predicted time fits ``margin * budget`` (the cheapest if none)."""
+        limit = self.margin * self.budget
+        for i, level in enumerate(self.levels):
+            if self.predict(level) <= limit:
+                return i
+        return len(self.levels) - 1
+
+    def level(self) -> Level:
+        """The level of the next moving frame."""
+        return self.current
+
+    def report(self, level: Level, splats: int, seconds: float) -> None:
+        """What the last frame drew (``splats``, at ``level``) and how long it took; moves the
+        level for the next frame (see the module doc for the hysteresis)."""
+        self.model.update(float(splats), self.pixels * level.scale * level.scale, float(seconds))
+        target = self.target()
+        if seconds > self.over * self.budget and target > self.index:
+            self.index, self._ups = target, 0          # too slow: down at once
+        elif target < self.index:
+            self._ups += 1
+            if self._ups >= self.patience:              # fast enough for a while: up
+                self.index, self._ups = target, 0
+        else:
+            self._ups = 0
+            if target > self.index:                     # predicted too slow: down
+                self.index = target

@@ -1,0 +1,137 @@
+"""Drawing one view at a :class:`~.budget.Level`: the render scale, a splat budget, an SH cap.
+
+Full-detail levels draw with the scene's own quad renderer (the one :class:`splatgl.api.Renderer`
+keeps for these settings, so the exact level is exactly ``splatgl render``'s image); budgeted
+levels draw a level-of-detail cut of at most the budget's nodes through a second quad renderer
+over the tree (:func:`splatgl.lod.source.lod_renderer`), with the SH degree capped.  A frame at
+a lower render scale is upscaled to the camera's size at once (:mod:`.upscale`), so its time is
+the whole cost of the frame.  The image stays on the GPU (premultiplied ``(C, A)``); the viewer
+samples it, a preview reads it back.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from ..api import Renderer
+from ..cameras.camera import Camera
+from ..cameras.view import View
+from ..lod.render import LodSettings
+from ..lod.source import lod_renderer
+from ..model.scene import Scene
+from ..model.settings import RenderSettings
+from ..renderers.early_stop import MAX_BATCH, BatchHook
+from ..renderers.quad import QuadRenderer, composite
+from .budget import Level
+from .lod_cache import LodProvider
+from .upscale import Upscaler
+
+#: NumPy types of the target textures' moderngl dtypes (the precisions of gl/targets.py).
+_READ_DTYPES = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
+
+#: A budgeted cut is never finer than this (pixels): the budget, not the threshold, decides.
+CUT_THRESHOLD_PX = 0.25
+
+
+def scaled(camera: Camera, scale: float) -> Camera:
+    """``camera`` at ``scale`` times its width and height (intrinsics scaled per axis)."""
+    if scale == 1.0:
+        return camera
+    return camera.resized(max(1, round(camera.width * scale)), max(1, round(camera.height * scale)))
+
+
+@dataclass
+class DraftFrame:
+    """One drawn view: ``texture`` holds it at the camera's size (premultiplied ``(C, A)``, row 0
+    at the top; valid until the next draw), ``level`` what was drawn, ``size`` the pixels drawn
+    (w, h: the camera's times the level's scale), ``splats`` how many, ``seconds`` how long the
+    draw took (order stage, draw and upscale, to a finish)."""
+
+    level: Level
+    texture: moderngl.Texture
+    size: tuple[int, int]
+    splats: int
+    seconds: float
+
+
+class LevelRenderer:
+    """Draws ``scene`` at any level on ``renderer``'s context (see the module doc)."""
+
+    def __init__(self, renderer: Renderer, scene: Scene, settings: RenderSettings,
+                 lod: LodProvider | None = None):
+        self.renderer, self.scene, self.settings, self.lod = renderer, scene, settings, lod
+        self._lod_quad: QuadRenderer | None = None
+        self._lod_sh: int | None = None
+        self._upscaler: Upscaler | None = None
+
+    @property
+    def has_lod(self) -> bool:
+        return self.lod is not None and self.lod.ready
+
+    def _quad(self, level: Level) -> QuadRenderer:
+        if level.budget is None and level.sh_degree is None:
+            return self.renderer.renderer_for(self.scene, self.settings)
+        if level.budget is None:   # full detail, SH capped: the API renderer keeps it
+            return self.renderer.renderer_for(self.scene,
+                                              dataclasses.replace(self.settings, sh_degree=level.sh_degree))
+        tree = self.lod.tree
+        if self._lod_quad is None or self._lod_sh != level.sh_degree:
+            self._release_lod()
+            settings = dataclasses.replace(self.settings, sh_degree=level.sh_degree)
+            self._lod_quad = lod_renderer(self.renderer.ctx, tree, settings,
+                                          LodSettings(CUT_THRESHOLD_PX, level.budget),
+                                          self.renderer.programs)
+            self._lod_sh = level.sh_degree
+        rows = self._lod_quad.rows
+        if rows.lod.budget != level.budget:
+            rows.lod = dataclasses.replace(rows.lod, budget=level.budget)
+        return self._lod_quad
+
+    def draw(self, camera: Camera, level: Level, on_batch: BatchHook | None = None,
+             max_batch: int = MAX_BATCH) -> DraftFrame:
+        """Draw ``camera`` (world frame, the window's size) at ``level``; ``on_batch(done,
+        total)`` runs between batches of at most ``max_batch`` splats and may raise to abandon
+        the frame (the image is the same whatever the batches)."""
+        quad = self._quad(level)
+        cam = scaled(camera, level.scale)
+        view = View.of(cam, quad.settings, quad.scene)
+        t0 = time.perf_counter()
+        target = quad.target(view)
+        quad.batches.max_batch = max_batch
+        try:
+            drawn = quad.draw(view, target, on_batch=on_batch)
+        finally:
+            quad.batches.max_batch = MAX_BATCH
+        texture = target.texture
+        if (cam.width, cam.height) != (camera.width, camera.height):
+            if self._upscaler is None:
+                self._upscaler = Upscaler(self.renderer.ctx)
+            texture = self._upscaler.run(texture, (camera.width, camera.height))
+            self.renderer.ctx.finish()
+        return DraftFrame(level, texture, (cam.width, cam.height), drawn, time.perf_counter() - t0)
+
+    def read(self, frame: DraftFrame) -> np.ndarray:
+        """(H, W, 4) float32 of ``frame`` at the camera's size with the background composited
+        (as ``render`` returns it)."""
+        w, h = frame.texture.size
+        raw = np.frombuffer(frame.texture.read(), dtype=_READ_DTYPES[frame.texture.dtype])
+        rgba = raw.reshape(h, w, 4).astype(np.float32)
+        if frame.texture.dtype == "f1":
+            rgba /= 255.0
+        return composite(rgba, self.settings.background)
+
+    def _release_lod(self) -> None:
+        if self._lod_quad is not None:
+            self._lod_quad.release()
+            self._lod_quad = None
+
+    def release(self) -> None:
+        self._release_lod()
+        if self._upscaler is not None:
+            self._upscaler.release()
+            self._upscaler = None

@@ -1,0 +1,133 @@
+"""An interactive view: budgeted frames while the camera moves, refined to exact when it rests.
+
+:class:`Session` is the window-free core of ``splatgl view`` (and of the interactive benchmark
+and ``render --path --preview``): the caller hands it the camera every loop iteration; a camera
+that differs from the last one is a moving frame, drawn at the :class:`~.budget.FrameBudget`'s
+level; the same camera again is rest, and each call then draws the next step of the refinement
+(:meth:`Session.plan`: full detail at the moving frame's scale where the exact frame would take
+long, then the exact frame, the same pixels as ``splatgl render``).  A refinement step draws in
+batches of about one budget's worth of splats and asks ``input_pending()`` between them: input
+abandons the step at once (:class:`Interrupted`), so the window answers within about one budgeted
+frame however long the exact frame takes.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+from ..api import Renderer
+from ..cameras.camera import Camera
+from ..model.scene import Scene
+from ..model.settings import RenderSettings
+from ..renderers.early_stop import MAX_BATCH
+from .budget import EXACT, FrameBudget, Level
+from .draft import DraftFrame, LevelRenderer
+from .lod_cache import LodProvider
+
+#: Smallest batch of a refinement step's draw (splats): below it the finish between batches
+#: costs more than the answer time it buys.
+MIN_REFINE_BATCH = 4096
+
+
+class Interrupted(Exception):
+    """Input arrived while a refinement step was drawing; the step was abandoned."""
+
+
+def _interrupt_on(input_pending: Callable[[], bool]):
+    """A batch hook that abandons the draw (:class:`Interrupted`) once ``input_pending()``."""
+    def hook(done: int, total: int) -> None:
+        if input_pending():
+            raise Interrupted
+    return hook
+
+
+def camera_key(camera: Camera) -> tuple:
+    return (camera.world_to_camera.tobytes(), camera.fx, camera.fy, camera.cx, camera.cy,
+            camera.width, camera.height, camera.model)
+
+
+class Session:
+    """Frames of one scene for one window (see the module doc).
+
+    ``budget``: seconds a moving frame may take; ``lod``: the level-of-detail provider (None: no
+    splat budgets).  After each :meth:`frame`: :attr:`shown` (the frame to present),
+    :attr:`status` ("moving", "refining" or "exact").
+    """
+
+    def __init__(self, renderer: Renderer, scene: Scene, settings: RenderSettings, budget: float,
+                 lod: LodProvider | None = None):
+        self.renderer, self.scene, self.settings = renderer, scene, settings
+        self.lod = lod
+        self.levels = LevelRenderer(renderer, scene, settings, lod)
+        self.budget = FrameBudget(budget, scene.count, 1280 * 720, scene.sh_degree, has_lod=False)
+        self.shown: DraftFrame | None = None
+        self.status = "exact"
+        self._key: tuple | None = None
+        self._moving_level: Level = EXACT
+        self._plan: list[Level] = []
+        self.refine_started: float | None = None
+
+    def _sync_lod(self) -> None:
+        if self.levels.has_lod and not self._lod_seen:
+            self.budget.set_lod(True)
+            self._lod_seen = True
+
+    _lod_seen = False
+
+    def plan(self, moving: Level) -> list[Level]:
+        """The refinement steps after a moving frame at ``moving``: full detail at its scale
+        first where the exact frame is predicted to take over two budgets, then exact."""
+        steps = []
+        if not moving.exact and self.budget.predict(EXACT) > 2.0 * self.budget.budget:
+            step = Level(moving.scale)
+            if step != moving and not step.exact:
+                steps.append(step)
+        steps.append(EXACT)
+        return steps
+
+    def _batch(self) -> int:
+        per_splat = self.budget.model.theta[1]
+        if per_splat <= 0.0:
+            return MAX_BATCH
+        return int(min(MAX_BATCH, max(MIN_REFINE_BATCH, self.budget.budget / per_splat)))
+
+    def frame(self, camera: Camera, input_pending: Callable[[], bool] | None = None) -> DraftFrame | None:
+        """Draw what ``camera`` calls for now (a moving frame or the next refinement step);
+        returns the new frame, or None when there is nothing new (exact already) or a
+        refinement step was interrupted (:attr:`shown` stays the last frame)."""
+        self._sync_lod()
+        self.budget.set_pixels(camera.width * camera.height)
+        key = camera_key(camera)
+        if key != self._key:
+            level = self.budget.level()
+            frame = self.levels.draw(camera, level)
+            self.budget.report(level, frame.splats, frame.seconds)
+            self._key, self.shown, self._moving_level = key, frame, level
+            self._plan = [] if level.exact else self.plan(level)
+            self.status = "exact" if level.exact else "moving"
+            self.refine_started = None
+            return frame
+        if not self._plan:
+            self.status = "exact"
+            return None
+        if self.refine_started is None:
+            self.refine_started = time.perf_counter()
+        level = self._plan[0]
+        hook = None if input_pending is None else _interrupt_on(input_pending)
+        try:
+            frame = self.levels.draw(camera, level, on_batch=hook, max_batch=self._batch())
+        except Interrupted:
+            self.status = "refining"
+            return None
+        self._plan.pop(0)
+        self.shown = frame
+        self.status = "refining" if self._plan else "exact"
+        return frame
+
+    @property
+    def exact(self) -> bool:
+        return self.status == "exact" and self.shown is not None and self.shown.level.exact
+
+    def release(self) -> None:
+        self.levels.release()
