@@ -21,13 +21,15 @@ import glfw
 from ..cameras.camera import Camera
 from ..cameras.registry import retarget
 from ..errors import SplatglError
-from ..model.scene import Scene
+from ..model.scene import Scene, SplatKind
 from ..model.settings import RendererKind, RenderSettings
 from . import controls, keys
+from .benchmark import orbit_benchmark
 from .display import Display
 from .frames import ViewMode
 from .navigation import Navigation, orbit_distance
 from .overlay import Status, key_help, status_lines
+from .pacing import Pacer, paced_frame
 from .screenshot import save_screenshot
 from .window import close_window, connect, open_window
 
@@ -52,6 +54,9 @@ class ViewerOptions:
             or equirectangular images are shown flat), ``fisheye_fov`` degrees for a fisheye.
         stereo: interpupillary distance (``--stereo``): the colour view shows both eyes side by
             side, each in half the window (depth and difference views stay one eye).
+        target_fps: the frame-time budget while the camera moves (``--target-fps``; None: 10 on
+            software GL, 60 on a GPU; 0: every frame exact), :mod:`.pacing`.
+        scene_path: the scene's file, where the level-of-detail tree for budgets is cached.
     """
 
     title: str = "splatgl view"
@@ -63,6 +68,8 @@ class ViewerOptions:
     projection: str | None = None
     fisheye_fov: float | None = None
     stereo: float | None = None
+    target_fps: float | None = None
+    scene_path: Path | None = None
 
 
 class Viewer:
@@ -91,6 +98,9 @@ class Viewer:
         self.need_present = True
         self._clock = time.perf_counter()
         o = self.options
+        self.pacer = Pacer(scene, o.target_fps, o.scene_path)
+        self._queued: list[tuple[int, int, int]] | None = None   # keys held back during a draw
+        self._events = 0                                         # input events seen so far
         self.window, self.ctx, self.context_api = open_window(camera.width, camera.height, o.title,
                                                               o.visible, o.vsync)
         self.display = Display(self.ctx)
@@ -109,11 +119,18 @@ class Viewer:
 
     # ---------------------------------------------------------------------------- input
     def on_key(self, key: int, action: int, mods: int) -> None:
-        """glfw key callback (what each key does: :func:`.keys.on_key`)."""
+        """glfw key callback (what each key does: :func:`.keys.on_key`).  During a draw (a
+        refinement step polls for input between its batches) keys are held back and act after
+        it: a screenshot or a settings change never runs in the middle of a frame."""
+        self._events += 1
+        if self._queued is not None:
+            self._queued.append((key, action, mods))
+            return
         keys.on_key(self, key, action, mods)
 
     def on_mouse_button(self, button: int, action: int, mods: int) -> None:
         """glfw mouse-button callback: left drag orbits, right or middle drag pans."""
+        self._events += 1
         self.nav.on_mouse_button(button, action)
 
     def on_cursor(self, x: float, y: float) -> None:
@@ -122,10 +139,12 @@ class Viewer:
 
     def on_scroll(self, dx: float, dy: float) -> None:
         """glfw scroll callback: zoom."""
+        self._events += 1
         self.nav.on_scroll(dy)
 
     def on_resize(self, width: int, height: int) -> None:
         """glfw framebuffer-size callback; 0 in either dimension (minimised) pauses rendering."""
+        self._events += 1
         self.size = (int(width), int(height))
         self.need_present = True
 
@@ -160,6 +179,7 @@ class Viewer:
         """Replace render settings; the GPU state of the old ones is released (one scene copy)."""
         new = replace(self.settings, **changes)
         if new != self.settings:
+            self.pacer.release_session()
             self.display.new_renderer()
             self.settings = new
 
@@ -180,7 +200,7 @@ class Viewer:
         png, js, command = save_screenshot(self.renderer, self.scene, camera, self.settings,
                                            self.kind, self.options.screenshot_dir,
                                            self.options.render_args, self.options.stereo)
-        self.message = f"saved {png.name} + {js.name}"
+        self.message = f"saved {png.name} + {js.name} (exact render)"
         print(f"wrote {png} and {js}; reproduce with:\n  {command}", flush=True)
         self.need_present = True
         return png, js
@@ -206,9 +226,10 @@ class Viewer:
         glfw.make_context_current(self.window)
         camera = self.camera()
         key = (self.state, self.size, self.settings, self.kind, self.view)
-        rendered = False
-        if key != self._rendered_key:
-            t0 = time.perf_counter()
+        t0 = time.perf_counter()
+        if self.paced:
+            rendered = paced_frame(self, camera, key)
+        elif key != self._rendered_key:
             try:
                 self.display.render(self.scene, camera, self.settings, self.kind, self.view,
                                     self.options.stereo)
@@ -216,9 +237,12 @@ class Viewer:
                 self.message = str(exc)
                 self.kind = RendererKind.TILE
                 return False
+            rendered = True
+        else:
+            rendered = False
+        if rendered:
             self._rendered_key = key
             self.frames_rendered += 1
-            rendered = True
             self.need_present = True
             self._frame_start = t0
         lines = status_lines(self._status(camera))
@@ -229,6 +253,14 @@ class Viewer:
             if rendered:
                 self.display.record_frame_time(time.perf_counter() - self._frame_start)
         return rendered
+
+    @property
+    def paced(self) -> bool:
+        """Whether this frame goes through the frame-time budget (:mod:`.pacing`): the colour
+        view of the quad path, one eye, with a budget set."""
+        return (self.view is ViewMode.COLOR and self.kind is RendererKind.QUAD
+                and self.options.stereo is None and self.scene.kind is SplatKind.GAUSSIAN_3D
+                and self.pacer.enabled(self.renderer))
 
     def present(self) -> None:
         """Draw the last frame (and the overlay) into the window and swap."""
@@ -249,38 +281,23 @@ class Viewer:
         """Loop until closed: poll while input is in progress, else sleep until an event."""
         print("keys:\n" + key_help(), flush=True)
         while not self.should_close():
-            if self.animating:
+            if self.animating or (self.paced and self.pacer.refining):
                 glfw.poll_events()
             else:
                 glfw.wait_events_timeout(1.0 / 4.0)
             self.step()
 
     def benchmark(self, frames: int) -> dict[str, float]:
-        """Render ``frames`` frames of a scripted orbit (yaw steps of 360 / (frames + 1) degrees,
-        so every frame is a new view), each presented and swapped; returns mean seconds per
-        frame and per stage, and fps."""
-        totals = {"frame": 0.0, "sort": 0.0, "draw": 0.0}
-        start = self.state
-        for i in range(1, frames + 1):
-            glfw.poll_events()
-            self.state = replace(start, yaw=start.yaw + 360.0 * i / (frames + 1))
-            t0 = time.perf_counter()
-            if not self.step(dt=0.0):
-                raise SplatglError("benchmark: the window cannot be drawn into (minimised?)")
-            self.ctx.finish()
-            totals["frame"] += time.perf_counter() - t0
-            totals["sort"] += self.last.sort
-            totals["draw"] += self.last.draw
-        out = {k: v / frames for k, v in totals.items()}
-        out["fps"] = 1.0 / out["frame"]
-        self.state = start
-        return out
+        """``--benchmark``: :func:`.benchmark.orbit_benchmark` (a method, so harnesses such as
+        the peer race can wrap it)."""
+        return orbit_benchmark(self, frames)
 
     # ---------------------------------------------------------------------------- teardown
     def close(self) -> None:
         """Release GPU objects, close the window and shut glfw down."""
         if getattr(self, "window", None):
             glfw.make_context_current(self.window)
+            self.pacer.release()
             self.display.release()
             self.ctx.release()
         close_window(getattr(self, "window", None))

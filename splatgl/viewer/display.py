@@ -50,6 +50,12 @@ class Display:
             self.last = render_stereo(self.renderer, scene, camera, settings, kind, stereo)
         return self.last
 
+    def show(self, frame: FrameResult) -> FrameResult:
+        """Keep ``frame`` (a budgeted frame, already at the camera's size: :mod:`.pacing`) as
+        :attr:`last`."""
+        self.last = frame
+        return frame
+
     def record_frame_time(self, seconds: float) -> None:
         """A whole frame's time (render and present), for the panel's mean."""
         self.frame_times = (self.frame_times + [seconds])[-FRAME_TIMES:]
@@ -90,9 +96,11 @@ class Display:
                                + ("  antialias" if s.antialias else ""),
                       size=(camera.width, camera.height), fov=fov_y,
                       view=view.value, camera=camera_text,
-                      message="  ".join(m for m in (last.note if last else "", message) if m))
+                      message="  ".join(m for m in (last.note if last else "", message) if m),
+                      quality=last.quality if last else "")
 
     def release(self) -> None:
         """Release the renderer's and presenter's GPU objects (not the context)."""
         self.renderer.close()
         self.presenter.release()
+

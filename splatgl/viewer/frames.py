@@ -42,7 +42,9 @@ class FrameResult:
     Exactly one of ``texture`` (the quad target: premultiplied ``(C, A)``, row 0 = top, owned
     by the renderer) and ``image`` ((H, W, 4) float32, background already composited) is set.
     ``sort`` and ``draw`` are seconds (see :class:`splatgl.viewer.overlay.Status`); ``splats``
-    describes how many splats took part; ``note`` is extra status (the difference's maximum).
+    describes how many splats took part; ``note`` is extra status (the difference's maximum);
+    ``quality`` says whether a budgeted frame is a draft or exact (:mod:`.pacing`).  A texture
+    smaller than the window is a draft at a lower render scale: the display upscales it.
     """
 
     texture: moderngl.Texture | None
@@ -52,6 +54,7 @@ class FrameResult:
     draw: float
     splats: str
     note: str = ""
+    quality: str = ""
 
 
 def _times(renderer: Renderer, scene: Scene, settings: RenderSettings,

@@ -98,6 +98,7 @@ class Status:
     view: str
     camera: str
     message: str = ""
+    quality: str = ""
 
 
 def status_lines(s: Status) -> list[str]:
@@ -107,6 +108,10 @@ def status_lines(s: Status) -> list[str]:
         f"(sort {s.sort * 1e3:.1f}, draw {s.draw * 1e3:.1f})",
         f"splats {s.splats}",
         f"{s.settings}",
+    ]
+    if s.quality:
+        lines.append(s.quality)
+    lines += [
         f"{s.size[0]}x{s.size[1]}  fov {s.fov:.1f}  view {s.view}  {s.camera}",
     ]
     if s.message:

@@ -1,0 +1,139 @@
+"""The viewer's frame-time budget: colour frames of the quad path through an interactive session.
+
+While the camera moves, each frame is drawn at the level the budget picks (render scale, splat
+budget, SH degree; :mod:`splatgl.interactive.budget`); when it rests, the session refines to the
+exact frame, one interruptible step per loop iteration (:mod:`splatgl.interactive.session`).
+Other views (depth, difference, the tile renderer, stereo) are drawn exactly, as before.
+
+The budget defaults to :data:`SOFTWARE_FPS` frames a second where the GL renderer is a software
+rasteriser (llvmpipe) and :data:`GPU_FPS` elsewhere; ``--target-fps 0`` turns it off.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import glfw
+
+from ..api import Renderer
+from ..cameras.camera import Camera
+from ..gl.context import renderer_name
+from ..gl.egl_devices import is_software_renderer
+from ..interactive.budget import check_fps
+from ..interactive.lod_cache import LodProvider
+from ..interactive.session import Session
+from ..model.scene import Scene
+from ..model.settings import RenderSettings
+from . import keys
+from .frames import FrameResult
+
+#: Frames a second the budget aims at on a software rasteriser, and on a GPU.
+SOFTWARE_FPS = 10.0
+GPU_FPS = 60.0
+
+
+def default_fps(renderer: Renderer) -> float:
+    """:data:`SOFTWARE_FPS` on a software GL renderer, else :data:`GPU_FPS`."""
+    return SOFTWARE_FPS if is_software_renderer(renderer_name(renderer.ctx)) else GPU_FPS
+
+
+class Pacer:
+    """The budgeted colour frames of one viewer (see the module doc).
+
+    ``fps``: frames a second to aim at while moving (None: :func:`default_fps`; 0: no budget,
+    every frame exact); ``scene_path``: the scene's file, for the level-of-detail cache.
+    """
+
+    def __init__(self, scene: Scene, fps: float | None, scene_path: Path | None = None):
+        self.scene, self.fps_asked, self.scene_path = scene, check_fps(fps), scene_path
+        self.lod: LodProvider | None = None
+        self.session: Session | None = None
+        self._owner: tuple | None = None
+
+    def fps(self, renderer: Renderer) -> float:
+        return default_fps(renderer) if self.fps_asked is None else self.fps_asked
+
+    def enabled(self, renderer: Renderer) -> bool:
+        return self.fps(renderer) > 0.0
+
+    def _session(self, renderer: Renderer, settings: RenderSettings) -> Session:
+        owner = (id(renderer), settings)
+        if self.session is None or self._owner != owner:
+            self.release_session()
+            if self.lod is None:
+                self.lod = LodProvider(self.scene, self.scene_path)
+            self.session = Session(renderer, self.scene, settings, 1.0 / self.fps(renderer), self.lod)
+            self._owner = owner
+        return self.session
+
+    def frame(self, renderer: Renderer, camera: Camera, settings: RenderSettings,
+              input_pending: Callable[[], bool] | None = None) -> FrameResult | None:
+        """The next frame for ``camera``: a moving frame, or the next refinement step at rest
+        (None: nothing new, or a refinement step interrupted by input)."""
+        session = self._session(renderer, settings)
+        drawn = session.frame(camera, input_pending)
+        if drawn is None:
+            return None
+        return FrameResult(drawn.texture, None, True, 0.0, drawn.seconds,
+                           f"{drawn.splats:,} drawn / {self.scene.count:,}",
+                           quality=self.describe())
+
+    @property
+    def refining(self) -> bool:
+        """Whether refinement steps are left (the loop should poll, not wait for events)."""
+        return self.session is not None and not self.session.exact and self.session.shown is not None
+
+    @property
+    def exact(self) -> bool:
+        return self.session is not None and self.session.exact
+
+    def describe(self) -> str:
+        """The status line: whether the frame shown is moving, refining or exact, and its level."""
+        s = self.session
+        if s is None or s.shown is None:
+            return ""
+        if s.exact:
+            return "exact (as splatgl render)"
+        state = "refining" if s.status != "moving" else "moving"
+        return f"{state}: {s.shown.level.describe()}"
+
+    def release_session(self) -> None:
+        if self.session is not None:
+            self.session.release()
+            self.session = None
+            self._owner = None
+
+    def release(self) -> None:
+        self.release_session()
+
+
+def paced_frame(viewer, camera: Camera, key: tuple) -> bool:
+    """In ``viewer`` (:class:`~.app.Viewer`), draw the budgeted frame (the view ``key`` changed)
+    or the next refinement step (at rest); returns whether a new frame was drawn.
+
+    A refinement step polls glfw between its batches: any input (a key, a button, the wheel, a
+    resize, a drag that moved the camera, a held key) abandons it.  Keys that arrive during the
+    draw are held back and act after it, so a screenshot or a settings change never runs in the
+    middle of a frame.
+    """
+    v = viewer
+    if key == v._rendered_key and not v.pacer.refining:
+        return False
+    start_events, start_state = v._events, (v.state, v.size)
+
+    def input_pending() -> bool:
+        glfw.poll_events()
+        return v._events != start_events or (v.state, v.size) != start_state or v.nav.animating
+
+    v._queued = []
+    try:
+        frame = v.pacer.frame(v.renderer, camera, v.settings, input_pending)
+    finally:
+        queued, v._queued = v._queued, None
+        for event in queued:
+            keys.on_key(v, *event)
+    if frame is None:
+        return False
+    v.display.show(frame)
+    return True
