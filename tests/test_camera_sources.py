@@ -160,8 +160,8 @@ def test_bad_sources_fail_in_one_line(tmp_path):
     m.mkdir()
     (m / "cameras.txt").write_text("1 OPENCV 10 10 5 5 5 5 0.1 0 0 0\n")
     (m / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
-    assert ("camera 1: COLMAP model OPENCV has nonzero lens distortion (0.1 0 0 0), which "
-            "splatgl does not render") in _err(m)
+    (m / "cameras.txt").write_text("1 FOV 10 10 5 5 5 5 0.1\n")
+    assert "camera 1: COLMAP model FOV is not one splatgl renders" in _err(m)
     (m / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5\n")
     assert "line 1: model PINHOLE takes 4 parameters, got 3" in _err(m)
     (m / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5 5\n")
@@ -169,7 +169,8 @@ def test_bad_sources_fail_in_one_line(tmp_path):
     assert "image 'a.png': camera id 7 is not in" in _err(m)
     (m / "images.txt").write_text("1 0 0 0 0 0 0 0 1 a.png\n\n")
     assert "pose must be finite with a non-zero quaternion" in _err(m)
-    t = {"w": 10, "h": 10, "fl_x": 5, "k1": 0.2, "frames": [{"transform_matrix": np.eye(4).tolist()}]}
+    t = {"w": 10, "h": 10, "fl_x": 5, "k1": 0.2, "camera_model": "PINHOLE",
+         "frames": [{"transform_matrix": np.eye(4).tolist()}]}
     (tmp_path / "t.json").write_text(json.dumps(t))
     assert "field 'k1' = 0.2: lens distortion is not supported" in _err(tmp_path / "t.json")
     t["k1"] = 0
@@ -189,17 +190,25 @@ def test_bad_sources_fail_in_one_line(tmp_path):
     ("1 SIMPLE_RADIAL 10 8 7 5 4 0", 7, 7), ("1 RADIAL 10 8 7 5 4 0 0", 7, 7),
     ("1 OPENCV 10 8 7 6 5 4 0 0 0 0", 7, 6), ("1 FULL_OPENCV 10 8 7 6 5 4" + " 0" * 8, 7, 6),
 ])
-def test_colmap_models_with_zero_distortion_are_pinholes(tmp_path, line, fx, fy):
-    """SIMPLE_RADIAL and the other distortion models were refused as distorted even at k = 0."""
+def test_colmap_models_with_zero_distortion_are_pinholes(tmp_path, line, fx, fy, monkeypatch):
+    """SIMPLE_RADIAL and the other distortion models were refused as distorted even at k = 0.
+    With distortion they are the opencv camera (tests/test_opencv_camera.py); without that
+    model registered, the pinhole's own reading of the names refuses it as before."""
+    from splatgl.cameras import registry
+    from splatgl.cameras.pinhole import Pinhole
+
     (tmp_path / "cameras.txt").write_text(line + "\n")
     (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
     cam = splatgl.load_cameras(tmp_path)[0]
     assert (cam.projection, cam.width, cam.height, cam.fx, cam.fy) == ("perspective", 10, 8, fx, fy)
     assert (cam.cx, cam.cy) == (5, 4) and cam.projection == "perspective"
     (tmp_path / "cameras.txt").write_text(line[:-1] + "0.01\n")
+    assert splatgl.load_cameras(tmp_path)[0].projection == "opencv"
+    monkeypatch.setitem(colmap.COLMAP, line.split()[1], Pinhole)
     with pytest.raises(CameraError, match=r"cameras.txt: camera 1: COLMAP model \w+ has nonzero lens "
                                           r"distortion \([0 ]*0.01\), which splatgl does not render"):
         splatgl.load_cameras(tmp_path)
+    assert registry.COLMAP is colmap.COLMAP
 
 
 @pytest.mark.parametrize("where", ["", "sparse/0"])
@@ -244,7 +253,8 @@ def test_file_names_belong_to_the_last_model_claiming_them(monkeypatch):
         colmap_names = ("SIMPLE_RADIAL", "FOV")
         transforms_names = ("OPENCV",)
 
-    assert registry.COLMAP["SIMPLE_RADIAL"] is Pinhole and "FOV" not in registry.COLMAP
+    assert "SIMPLE_RADIAL" in Pinhole.colmap_names and "FOV" not in registry.COLMAP
+    assert registry.COLMAP["SIMPLE_RADIAL"].name == "opencv"   # registered after the pinhole
     assert registry.COLMAP["OPENCV_FISHEYE"].name == "fisheye"
     monkeypatch.setitem(registry.MODELS, "taker", Taker)
     colmap_table, transforms_table = registry._claims("colmap_names"), registry._claims("transforms_names")

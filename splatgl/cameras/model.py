@@ -118,6 +118,13 @@ class CameraModel:
         """SPHERE models whose image wraps around: pixels per full turn, else None."""
         return None
 
+    def cull_frustum(self, camera: "Camera") -> "Camera | None":
+        """FRUSTUM models whose image is not a pinhole's (lens distortion): a pinhole camera
+        with ``camera``'s pose whose four side planes hold every ray the image sees.  The order
+        stage then culls against those planes without the peak-alpha bound (which holds for
+        pinhole images only).  None (the default): ``camera``'s own frustum, with the bound."""
+        return None
+
     def eye_pair(self, camera: "Camera", half_ipd: float) -> "tuple[Camera, Camera] | None":
         """(left, right) eye cameras of a stereo rig where the model has its own rig, else
         None (the rig then shifts the pose by -+``half_ipd`` along camera x)."""

@@ -15,6 +15,7 @@ from .camera import Camera
 from .equirect import Equirectangular
 from .fisheye import Fisheye
 from .model import CameraModel
+from .opencv import OpenCV
 from .orthographic import Orthographic
 from .pinhole import Pinhole
 
@@ -24,6 +25,7 @@ MODELS: dict[str, type[CameraModel]] = {m.name: m for m in (
     Orthographic,
     Fisheye,
     Equirectangular,
+    OpenCV,
 )}
 
 
