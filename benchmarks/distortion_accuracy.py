@@ -42,7 +42,6 @@ from splatgl.model.quaternion import quat_to_rotmat
 from splatgl.model.scene import Scene
 from splatgl.model.settings import RenderSettings
 from splatgl.constants import LOW_PASS
-from splatgl.order.cull import cull
 from splatgl.twins.project import covariance_3d, jacobian, sh_color, to_camera, view_dirs
 
 #: The distortions measured: (label, model).  Mild: a typical phone or DSLR calibration;
@@ -76,8 +75,9 @@ def raytrace(scene: Scene, camera: Camera, settings: RenderSettings = RenderSett
     cam = view.anchored
     means = scene.relative_means.astype(np.float64)
     p_cam = to_camera(means, cam)
-    keep = cull(p_cam, scene.scales.max(axis=1) * view.scale, scene.opacities, cam, view.near)
-    keep &= cam.model.visible(p_cam, cam, view.near)
+    # every splat the model draws (no screen cull: the pinhole's peak-alpha bound is the splat
+    # path's own, and this twin must not inherit it)
+    keep = cam.model.visible(p_cam, cam, view.near) & (scene.opacities >= ALPHA_MIN)
     idx = np.flatnonzero(keep)
     idx = idx[np.lexsort((idx, p_cam[idx, 2].astype(np.float32)))]   # the quad path's order
     w = cam.rotation
