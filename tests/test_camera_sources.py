@@ -160,8 +160,8 @@ def test_bad_sources_fail_in_one_line(tmp_path):
     m.mkdir()
     (m / "cameras.txt").write_text("1 OPENCV 10 10 5 5 5 5 0.1 0 0 0\n")
     (m / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
-    assert ("camera 1: COLMAP model OPENCV has nonzero lens distortion (0.1 0 0 0), which "
-            "splatgl does not render") in _err(m)
+    (m / "cameras.txt").write_text("1 FOV 10 10 5 5 5 5 0.1\n")
+    assert "camera 1: COLMAP model FOV is not one splatgl renders" in _err(m)
     (m / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5\n")
     assert "line 1: model PINHOLE takes 4 parameters, got 3" in _err(m)
     (m / "cameras.txt").write_text("1 PINHOLE 10 10 5 5 5 5\n")
@@ -169,7 +169,8 @@ def test_bad_sources_fail_in_one_line(tmp_path):
     assert "image 'a.png': camera id 7 is not in" in _err(m)
     (m / "images.txt").write_text("1 0 0 0 0 0 0 0 1 a.png\n\n")
     assert "pose must be finite with a non-zero quaternion" in _err(m)
-    t = {"w": 10, "h": 10, "fl_x": 5, "k1": 0.2, "frames": [{"transform_matrix": np.eye(4).tolist()}]}
+    t = {"w": 10, "h": 10, "fl_x": 5, "k1": 0.2, "camera_model": "PINHOLE",
+         "frames": [{"transform_matrix": np.eye(4).tolist()}]}
     (tmp_path / "t.json").write_text(json.dumps(t))
     assert "field 'k1' = 0.2: lens distortion is not supported" in _err(tmp_path / "t.json")
     t["k1"] = 0
@@ -189,17 +190,25 @@ def test_bad_sources_fail_in_one_line(tmp_path):
     ("1 SIMPLE_RADIAL 10 8 7 5 4 0", 7, 7), ("1 RADIAL 10 8 7 5 4 0 0", 7, 7),
     ("1 OPENCV 10 8 7 6 5 4 0 0 0 0", 7, 6), ("1 FULL_OPENCV 10 8 7 6 5 4" + " 0" * 8, 7, 6),
 ])
-def test_colmap_models_with_zero_distortion_are_pinholes(tmp_path, line, fx, fy):
-    """SIMPLE_RADIAL and the other distortion models were refused as distorted even at k = 0."""
+def test_colmap_models_with_zero_distortion_are_pinholes(tmp_path, line, fx, fy, monkeypatch):
+    """SIMPLE_RADIAL and the other distortion models were refused as distorted even at k = 0.
+    With distortion they are the opencv camera (tests/test_opencv_camera.py); without that
+    model registered, the pinhole's own reading of the names refuses it as before."""
+    from splatgl.cameras import registry
+    from splatgl.cameras.pinhole import Pinhole
+
     (tmp_path / "cameras.txt").write_text(line + "\n")
     (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
     cam = splatgl.load_cameras(tmp_path)[0]
     assert (cam.projection, cam.width, cam.height, cam.fx, cam.fy) == ("perspective", 10, 8, fx, fy)
     assert (cam.cx, cam.cy) == (5, 4) and cam.projection == "perspective"
     (tmp_path / "cameras.txt").write_text(line[:-1] + "0.01\n")
+    assert splatgl.load_cameras(tmp_path)[0].projection == "opencv"
+    monkeypatch.setitem(colmap.COLMAP, line.split()[1], Pinhole)
     with pytest.raises(CameraError, match=r"cameras.txt: camera 1: COLMAP model \w+ has nonzero lens "
                                           r"distortion \([0 ]*0.01\), which splatgl does not render"):
         splatgl.load_cameras(tmp_path)
+    assert registry.COLMAP is colmap.COLMAP
 
 
 @pytest.mark.parametrize("where", ["", "sparse/0"])
@@ -227,3 +236,82 @@ def test_select_ranges():
                       ("0:100:5", "'0:100:5': stop 100 out of range (12 cameras)")]:
         with pytest.raises(CameraError, match=msg.replace("(", r"\(").replace(")", r"\)")):
             select_indices(spec, 12)
+
+
+# ------------------------------------------------------------------ the camera models' file table
+def test_file_names_belong_to_the_last_model_claiming_them(monkeypatch):
+    """The registry's COLMAP and transforms.json tables come from the models' own name lists;
+    a model registered later takes a name over (how a new model replaces the pinhole's
+    zero-distortion reading of SIMPLE_RADIAL without touching pinhole.py)."""
+    from dataclasses import dataclass
+    from splatgl.cameras import registry
+    from splatgl.cameras.pinhole import Pinhole
+
+    @dataclass(frozen=True)
+    class Taker(Pinhole):
+        name = "taker"
+        colmap_names = ("SIMPLE_RADIAL", "FOV")
+        transforms_names = ("OPENCV",)
+
+    assert "SIMPLE_RADIAL" in Pinhole.colmap_names and "FOV" not in registry.COLMAP
+    assert registry.COLMAP["SIMPLE_RADIAL"].name == "opencv"   # registered after the pinhole
+    assert registry.COLMAP["OPENCV_FISHEYE"].name == "fisheye"
+    monkeypatch.setitem(registry.MODELS, "taker", Taker)
+    colmap_table, transforms_table = registry._claims("colmap_names"), registry._claims("transforms_names")
+    assert colmap_table["SIMPLE_RADIAL"] is Taker and colmap_table["FOV"] is Taker
+    assert colmap_table["PINHOLE"] is Pinhole and transforms_table["OPENCV"] is Taker
+    assert list(colmap_table)[:2] == ["SIMPLE_PINHOLE", "PINHOLE"]  # order of first claim
+
+
+def test_unknown_models_are_refused_naming_the_supported_ones(tmp_path):
+    (tmp_path / "cameras.txt").write_text("1 FOV 10 8 7 6 5 4 0.1\n")
+    (tmp_path / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
+    msg = _err(tmp_path)
+    assert "camera 1: COLMAP model FOV is not one splatgl renders; undistort the images first " \
+           "(supported: SIMPLE_PINHOLE, PINHOLE," in msg and "OPENCV_FISHEYE" in msg
+    t = {"w": 10, "h": 10, "fl_x": 5, "camera_model": "EQUIRECTANGULAR",
+         "frames": [{"transform_matrix": np.eye(4).tolist()}]}
+    (tmp_path / "t.json").write_text(json.dumps(t))
+    assert _err(tmp_path / "t.json").endswith(
+        "t.json: frame 0: camera_model 'EQUIRECTANGULAR' is not supported (supported: OPENCV, "
+        "PINHOLE, SIMPLE_PINHOLE, OPENCV_FISHEYE)")
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_colmap_writer_keeps_each_cameras_model(tmp_path, binary):
+    """write_colmap wrote every camera as PINHOLE, so a fisheye came back as a pinhole; each
+    model now writes its own COLMAP form."""
+    pose = np.eye(4)
+    pose[:3, 3] = (0.1, -0.2, 0.3)
+    views = [View("a.png", Camera(40, 30, 20, 22, 19.5, 15.25, pose)),
+             View("b.png", Camera.fisheye(40, 30, 190.0, pose, (0.05, -0.01, 0.002, -0.0003)))]
+    colmap.write_colmap(tmp_path, views, binary=binary)
+    got = colmap.load_colmap(tmp_path)
+    for g, w in zip(got, views):
+        assert g.camera.model == w.camera.model
+        _close(g.camera, w.camera, 1e-12)
+    line = (tmp_path / "cameras.txt").read_text().splitlines()[2] if not binary else ""
+    assert binary or line.startswith("2 OPENCV_FISHEYE 40 30 ")
+
+
+def test_writers_refuse_models_the_format_cannot_hold(tmp_path):
+    views = [View("a.png", Camera(40, 30, 20, 20, 20, 15)), View("b.png", Camera.equirectangular(40, 20))]
+    with pytest.raises(CameraError, match="^COLMAP has no camera model for equirectangular cameras$"):
+        colmap.write_colmap(tmp_path / "m", views)
+    assert not (tmp_path / "m").exists()  # refused before anything was written
+    with pytest.raises(CameraError, match="^transforms.json has no camera model for equirectangular"):
+        nerf.transforms_json(views)
+
+
+def test_transforms_json_keeps_a_fisheye(tmp_path):
+    """transforms.json's OPENCV_FISHEYE (nerfstudio's k1..k4 of theta_d) reads as splatgl's
+    fisheye; pinholes keep the file's plain OPENCV frames."""
+    views = [View("a.png", Camera(40, 30, 20, 22, 19.5, 15.25)),
+             View("b.png", Camera.fisheye(40, 30, 190.0, None, (0.05, -0.01, 0.002, -0.0003)))]
+    obj = nerf.transforms_json(views)
+    assert "camera_model" not in obj["frames"][0] and obj["frames"][1]["camera_model"] == "OPENCV_FISHEYE"
+    assert obj["frames"][1]["k4"] == -0.0003
+    (tmp_path / "transforms.json").write_text(json.dumps(obj))
+    for g, w in zip(load_views(tmp_path), views):
+        assert g.camera.model == w.camera.model
+        _close(g.camera, w.camera, 1e-12)

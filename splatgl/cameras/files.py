@@ -1,9 +1,10 @@
 """Camera files: splatgl's single-camera JSON and the cameras.json of 3DGS training output.
 
 (a) Single camera: ``{"width", "height", "fx", "fy", "cx", "cy", "world_to_camera": 4x4
-    row-major, optional "projection": "perspective" | "orthographic" | "fisheye" |
+    row-major, optional "projection": "perspective" | "orthographic" | "fisheye" | "opencv" |
     "equirectangular"}`` (orthographic fx, fy in pixels per world unit; fisheye fx, fy in pixels
-    per radian with optional "distortion": [k1, k2, k3, k4]; equirectangular may omit the
+    per radian with optional "distortion": [k1, k2, k3, k4]; opencv with optional "distortion":
+    OpenCV's distCoeffs, 4, 5 or 8 numbers; equirectangular may omit the
     intrinsics for a full panorama, and may give "ods_eye" for one eye of a stereo pair), or with ``"frustum": {"left", "right", "top", "bottom", "near",
     "far"}`` in place of the intrinsics.
 (b) 3DGS ``cameras.json``: a list of ``{"width", "height", "position", "rotation", "fx", "fy",

@@ -29,13 +29,15 @@ import numpy as np
 
 from ..constants import FISHEYE_SERIES_RHO, FISHEYE_THETA_CAP, FISHEYE_THETA_MARGIN
 from ..errors import CameraError
-from .model import CameraModel, CullKind
+from .model import CameraModel, CullKind, colmap_intrinsics
 
 if TYPE_CHECKING:
     from .camera import Camera
 
 #: Field of view across the image circle of a fisheye made without one (degrees).
 DEFAULT_FOV = 180.0
+#: COLMAP's fisheye models -> (focal count, number of k terms): ``[f | fx fy] cx cy k...``.
+COLMAP_MODELS = {"OPENCV_FISHEYE": (2, 4), "SIMPLE_RADIAL_FISHEYE": (1, 1), "RADIAL_FISHEYE": (1, 2)}
 
 
 def fisheye_theta_d(theta: np.ndarray, k: tuple[float, float, float, float]) -> np.ndarray:
@@ -112,6 +114,9 @@ class Fisheye(CameraModel):
     draws_surfels: ClassVar[bool] = False
     summary: ClassVar[str] = ("OpenCV's fisheye model, equidistant by default (--fov: the image "
                               "circle's field of view, default 180, up to 360)")
+    colmap_names: ClassVar[tuple[str, ...]] = tuple(COLMAP_MODELS)
+    transforms_names: ClassVar[tuple[str, ...]] = ("OPENCV_FISHEYE",)
+    transforms_fields: ClassVar[tuple[str, ...]] = ("k1", "k2", "k3", "k4")
 
     def __post_init__(self) -> None:
         k = tuple(float(v) for v in self.k)
@@ -187,3 +192,20 @@ class Fisheye(CameraModel):
         if "distortion" not in obj:
             return cls()
         return cls(tuple(matrix(path, where, {"distortion": obj["distortion"]}, "distortion", (4,))))
+
+    @classmethod
+    def from_colmap(cls, name, params):
+        focals, n_k = COLMAP_MODELS[name]
+        k = tuple(params[2 + focals:2 + focals + n_k])
+        return (*colmap_intrinsics(params, focals), cls(k + (0.0,) * (4 - n_k)))
+
+    def to_colmap(self, camera):
+        return "OPENCV_FISHEYE", (camera.fx, camera.fy, camera.cx, camera.cy, *self.k)
+
+    @classmethod
+    def from_transforms(cls, name, fields):
+        """nerfstudio's OPENCV_FISHEYE: ``k1..k4`` are this model's (absent: 0)."""
+        return cls(tuple(fields[k] or 0.0 for k in cls.transforms_fields))
+
+    def to_transforms(self):
+        return {"camera_model": "OPENCV_FISHEYE", **dict(zip(self.transforms_fields, self.k))}

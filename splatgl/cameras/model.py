@@ -13,7 +13,12 @@ same for every model.  Around those two a model also says:
   ``in_view``, ``view_depth``), its ``#define`` switches and its uniform values;
 - what it cannot draw (:meth:`~CameraModel.check_support`);
 - how it is made from a field of view (:meth:`~CameraModel.intrinsics`, the CLI's ``--projection``)
-  and how its parameters read and write in camera files.
+  and how its parameters read and write in camera files: splatgl's camera JSON
+  (:meth:`~CameraModel.to_json`), COLMAP's ``cameras.txt``/``.bin`` (:attr:`~CameraModel.colmap_names`,
+  :meth:`~CameraModel.from_colmap`, :meth:`~CameraModel.to_colmap`) and ``transforms.json``
+  (:attr:`~CameraModel.transforms_names`, :meth:`~CameraModel.from_transforms`,
+  :meth:`~CameraModel.to_transforms`).  The registry gives each COLMAP or transforms.json name
+  to the last registered model that claims it, so a later model can take a name over.
 
 A model is a frozen dataclass whose fields are its own parameters (a fisheye's k1..k4, a
 panorama's stereo eye offset); intrinsics (fx, fy, cx, cy) and the pose stay on
@@ -81,6 +86,12 @@ class CameraModel:
     intrinsics_optional: ClassVar[bool] = False
     #: A one-line description for ``--help``.
     summary: ClassVar[str] = ""
+    #: COLMAP camera model names (``cameras.txt``/``.bin``) that :meth:`from_colmap` reads.
+    colmap_names: ClassVar[tuple[str, ...]] = ()
+    #: ``transforms.json`` ``camera_model`` values that :meth:`from_transforms` reads.
+    transforms_names: ClassVar[tuple[str, ...]] = ()
+    #: The ``transforms.json`` number fields (besides the intrinsics) it reads, e.g. ``k1``.
+    transforms_fields: ClassVar[tuple[str, ...]] = ()
 
     # ------------------------------------------------------------------ float64/float32 twins
     def project(self, p_cam: np.ndarray, camera: "Camera") -> np.ndarray:
@@ -105,6 +116,13 @@ class CameraModel:
 
     def seam_period(self, camera: "Camera") -> float | None:
         """SPHERE models whose image wraps around: pixels per full turn, else None."""
+        return None
+
+    def cull_frustum(self, camera: "Camera") -> "Camera | None":
+        """FRUSTUM models whose image is not a pinhole's (lens distortion): a pinhole camera
+        with ``camera``'s pose whose four side planes hold every ray the image sees.  The order
+        stage then culls against those planes without the peak-alpha bound (which holds for
+        pinhole images only).  None (the default): ``camera``'s own frustum, with the bound."""
         return None
 
     def eye_pair(self, camera: "Camera", half_ipd: float) -> "tuple[Camera, Camera] | None":
@@ -159,3 +177,36 @@ class CameraModel:
         """The model from a single-camera JSON object's own fields (errors name ``path`` and
         ``where``, as :mod:`splatgl.cameras.json_fields` does)."""
         return cls()
+
+    @classmethod
+    def from_colmap(cls, name: str, params: tuple[float, ...]
+                    ) -> tuple[float, float, float, float, "CameraModel"]:
+        """``(fx, fy, cx, cy, model)`` of a COLMAP camera of model ``name`` (one of
+        :attr:`colmap_names`) with its parameters (their count already checked).  Raises
+        :class:`~splatgl.errors.CameraError` (the reader prefixes the file and camera) for
+        values this model refuses."""
+        raise NotImplementedError
+
+    def to_colmap(self, camera: "Camera") -> tuple[str, tuple[float, ...]]:
+        """``(COLMAP model name, parameters)`` of ``camera`` (of this model)."""
+        raise CameraError(f"COLMAP has no camera model for {self.name} cameras")
+
+    @classmethod
+    def from_transforms(cls, name: str, fields: dict[str, float | None]) -> "CameraModel":
+        """The model of a ``transforms.json`` frame whose ``camera_model`` is ``name`` (one of
+        :attr:`transforms_names`); ``fields`` maps each of :attr:`transforms_fields` to its value
+        (the frame's, else the file's) or None.  Raises CameraError (the reader prefixes the
+        file and frame) for values this model refuses."""
+        raise NotImplementedError
+
+    def to_transforms(self) -> dict[str, object]:
+        """The ``transforms.json`` fields of this model: ``camera_model`` and its own fields."""
+        raise CameraError(f"transforms.json has no camera model for {self.name} cameras")
+
+
+def colmap_intrinsics(params: tuple[float, ...], focals: int) -> tuple[float, float, float, float]:
+    """``(fx, fy, cx, cy)`` from the leading COLMAP parameters: ``f cx cy`` (``focals`` 1) or
+    ``fx fy cx cy`` (``focals`` 2)."""
+    if focals == 1:
+        return params[0], params[0], params[1], params[2]
+    return params[0], params[1], params[2], params[3]

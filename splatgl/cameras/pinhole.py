@@ -4,6 +4,11 @@ Shader piece: ``shaders/cameras/pinhole.glsl`` (same names).  EWA's Jacobian is
 ``[[fx/z, 0, -fx x/z^2], [0, fy/z, -fy y/z^2]]`` with ``x/z`` and ``y/z`` clamped to
 +-JACOBIAN_CLAMP tan(half fov) inside the Jacobian only (the reference's rule; the mean is not
 moved).
+
+Camera files: COLMAP's SIMPLE_PINHOLE ``(f, cx, cy)`` and PINHOLE ``(fx, fy, cx, cy)``, and the
+models with distortion terms (SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV) when every term is 0
+(nonzero terms are refused by name unless a later model claims those names);
+``transforms.json``'s OPENCV, PINHOLE and SIMPLE_PINHOLE without distortion fields.
 """
 
 from __future__ import annotations
@@ -16,13 +21,17 @@ import numpy as np
 
 from ..constants import JACOBIAN_CLAMP
 from ..errors import CameraError
-from .model import CameraModel, CullKind
+from .model import CameraModel, CullKind, colmap_intrinsics
 
 if TYPE_CHECKING:
     from .camera import Camera
 
 #: Vertical field of view of a perspective camera made without one (degrees).
 DEFAULT_FOV = 50.0
+#: COLMAP models read as pinholes -> their focal count (1: ``f cx cy``, 2: ``fx fy cx cy``);
+#: parameters after the principal point are distortion terms, which must all be 0.
+COLMAP_FOCALS = {"SIMPLE_PINHOLE": 1, "PINHOLE": 2, "SIMPLE_RADIAL": 1, "RADIAL": 1, "OPENCV": 2,
+                 "FULL_OPENCV": 2}
 
 
 @dataclass(frozen=True)
@@ -31,6 +40,9 @@ class Pinhole(CameraModel):
     glsl: ClassVar[str] = "pinhole"
     cull: ClassVar[CullKind] = CullKind.FRUSTUM
     summary: ClassVar[str] = "pinhole camera (--fov: vertical field of view, default 50)"
+    colmap_names: ClassVar[tuple[str, ...]] = tuple(COLMAP_FOCALS)
+    transforms_names: ClassVar[tuple[str, ...]] = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE")
+    transforms_fields: ClassVar[tuple[str, ...]] = ("k1", "k2", "k3", "k4", "p1", "p2")
 
     def project(self, p_cam: np.ndarray, camera: "Camera") -> np.ndarray:
         fx, fy, cx, cy = (np.asarray(v, p_cam.dtype) for v in (camera.fx, camera.fy, camera.cx, camera.cy))
@@ -66,3 +78,27 @@ class Pinhole(CameraModel):
     @classmethod
     def fov_range(cls):
         return (0.0, 180.0, False)
+
+    @classmethod
+    def from_colmap(cls, name, params):
+        focals = COLMAP_FOCALS[name]
+        terms = params[2 + focals:]
+        if any(terms):
+            raise CameraError(f"COLMAP model {name} has nonzero lens distortion "
+                              f"({' '.join(f'{v:g}' for v in terms)}), which splatgl does not "
+                              "render; undistort the images first (colmap image_undistorter)")
+        return (*colmap_intrinsics(params, focals), cls())
+
+    def to_colmap(self, camera):
+        return "PINHOLE", (camera.fx, camera.fy, camera.cx, camera.cy)
+
+    @classmethod
+    def from_transforms(cls, name, fields):
+        for key, value in fields.items():
+            if value:
+                raise CameraError(f"field '{key}' = {value}: lens distortion is not supported; "
+                                  "undistort the images first")
+        return cls()
+
+    def to_transforms(self):
+        return {"camera_model": "OPENCV"}

@@ -1,7 +1,11 @@
 """The camera models by name: the CLI's ``--projection`` choices, camera files' "projection"
-field, and re-projecting a camera to another model.
+field, the COLMAP and ``transforms.json`` camera model names each model reads, and
+re-projecting a camera to another model.
 
 One line per model in :data:`MODELS`; everything else about a model lives in its own module.
+A COLMAP or ``transforms.json`` name belongs to the last model in :data:`MODELS` that lists it
+(:attr:`~splatgl.cameras.model.CameraModel.colmap_names`, ``transforms_names``), so a model
+registered later takes a name over from an earlier one.
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ from .camera import Camera
 from .equirect import Equirectangular
 from .fisheye import Fisheye
 from .model import CameraModel
+from .opencv import OpenCV
 from .orthographic import Orthographic
 from .pinhole import Pinhole
 
@@ -20,11 +25,28 @@ MODELS: dict[str, type[CameraModel]] = {m.name: m for m in (
     Orthographic,
     Fisheye,
     Equirectangular,
+    OpenCV,
 )}
 
 
 #: Image size of a camera made without one (:func:`default_size`).
 DEFAULT_WIDTH, DEFAULT_HEIGHT = 1280, 720
+
+
+def _claims(attr: str) -> dict[str, type[CameraModel]]:
+    """Each name listed in the models' ``attr`` -> the last model listing it, in order of first
+    listing."""
+    table: dict[str, type[CameraModel]] = {}
+    for model in MODELS.values():
+        for name in getattr(model, attr):
+            table[name] = model
+    return table
+
+
+#: COLMAP camera model name -> the model that reads it.
+COLMAP = _claims("colmap_names")
+#: ``transforms.json`` ``camera_model`` value -> the model that reads it.
+TRANSFORMS = _claims("transforms_names")
 
 
 def names() -> list[str]:

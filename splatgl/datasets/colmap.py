@@ -2,14 +2,13 @@
 
 Axes: COLMAP stores world-to-camera poses in OpenCV axes (+x right, +y down, +z forward) as a
 unit quaternion ``(qw, qx, qy, qz)`` and translation ``t``: ``p_cam = R(q) p_world + t``;
-the pixel centre of the top-left pixel is (0.5, 0.5), splatgl's convention too.  Accepted
-models: the undistorted PINHOLE ``(fx, fy, cx, cy)`` and SIMPLE_PINHOLE ``(f, cx, cy)``, and
-the fisheye models splatgl renders exactly (:mod:`splatgl.cameras.fisheye`, ``theta_d = theta (1 + k1
-theta^2 + ...)``): OPENCV_FISHEYE ``(fx, fy, cx, cy, k1, k2, k3, k4)``, SIMPLE_RADIAL_FISHEYE
-``(f, cx, cy, k)`` and RADIAL_FISHEYE ``(f, cx, cy, k1, k2)``.  The pinhole models with
-distortion terms (SIMPLE_RADIAL, RADIAL, OPENCV, FULL_OPENCV) are pinholes when every term is 0;
-with any term nonzero, and any other model, the camera is rejected by name (undistort with
-``colmap image_undistorter`` first, as 3DGS training does).
+the pixel centre of the top-left pixel is (0.5, 0.5), splatgl's convention too.  Which camera
+models are read, and how, is the camera models' own table
+(:data:`splatgl.cameras.registry.COLMAP`: each model's ``colmap_names`` and ``from_colmap``;
+the pinhole's PINHOLE and SIMPLE_PINHOLE, the fisheye's OPENCV_FISHEYE, RADIAL_FISHEYE and
+SIMPLE_RADIAL_FISHEYE, ...).  Any other model is rejected by name (undistort with
+``colmap image_undistorter`` first, as 3DGS training does).  Writing uses each model's
+``to_colmap``.
 """
 
 from __future__ import annotations
@@ -21,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ..cameras.camera import Camera
-from ..cameras.fisheye import Fisheye
 from ..cameras.poses import check_rigid_pose
+from ..cameras.registry import COLMAP
 from ..model.quaternion import quat_to_rotmat, rotmat_to_quat
 from ..errors import CameraError
 from .views import View
@@ -35,10 +34,6 @@ MODELS = {
     11: ("RAD_TAN_THIN_PRISM_FISHEYE", 16),
 }
 _BY_NAME = {name: (mid, n) for mid, (name, n) in MODELS.items()}
-SUPPORTED = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV_FISHEYE", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE")
-#: Pinhole models with distortion terms -> how many leading parameters are focal lengths and
-#: principal point (3: f, cx, cy; 4: fx, fy, cx, cy); the rest are distortion, all 0 for a pinhole.
-PINHOLE_WITH_DISTORTION = {"SIMPLE_RADIAL": 3, "RADIAL": 3, "OPENCV": 4, "FULL_OPENCV": 4}
 
 
 @dataclass(frozen=True)
@@ -155,29 +150,16 @@ def _read_images_txt(path: Path) -> list[tuple[str, np.ndarray, np.ndarray, int]
 
 
 def _intrinsics(path: Path, cam_id: int, cam: _Intrinsics) -> dict:
-    """Camera keyword arguments (fx, fy, cx, cy, and the model for fisheyes)."""
-    p = cam.params
-    if cam.model in PINHOLE_WITH_DISTORTION:
-        n = PINHOLE_WITH_DISTORTION[cam.model]
-        if any(p[n:]):
-            terms = " ".join(f"{v:g}" for v in p[n:])
-            raise CameraError(f"{path}: camera {cam_id}: COLMAP model {cam.model} has nonzero lens "
-                              f"distortion ({terms}), which splatgl does not render; undistort the "
-                              "images first (colmap image_undistorter)")
-        return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2]) if n == 3 else \
-            dict(fx=p[0], fy=p[1], cx=p[2], cy=p[3])
-    if cam.model not in SUPPORTED:
+    """Camera keyword arguments (fx, fy, cx, cy, model) from the model that reads ``cam.model``."""
+    model = COLMAP.get(cam.model)
+    if model is None:
         raise CameraError(f"{path}: camera {cam_id}: COLMAP model {cam.model} is not one splatgl "
-                          f"renders; undistort the images first (supported: {', '.join(SUPPORTED)}, "
-                          f"and {', '.join(PINHOLE_WITH_DISTORTION)} with zero distortion)")
-    if cam.model == "SIMPLE_PINHOLE":
-        return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2])
-    if cam.model == "PINHOLE":
-        return dict(fx=p[0], fy=p[1], cx=p[2], cy=p[3])
-    if cam.model == "OPENCV_FISHEYE":
-        return dict(fx=p[0], fy=p[1], cx=p[2], cy=p[3], model=Fisheye(tuple(p[4:8])))
-    k = (p[3], 0.0) if cam.model == "SIMPLE_RADIAL_FISHEYE" else (p[3], p[4])
-    return dict(fx=p[0], fy=p[0], cx=p[1], cy=p[2], model=Fisheye((*k, 0.0, 0.0)))
+                          f"renders; undistort the images first (supported: {', '.join(COLMAP)})")
+    try:
+        fx, fy, cx, cy, instance = model.from_colmap(cam.model, tuple(cam.params))
+    except CameraError as exc:
+        raise CameraError(f"{path}: camera {cam_id}: {exc}") from None
+    return dict(fx=fx, fy=fy, cx=cx, cy=cy, model=instance)
 
 
 def is_colmap_model(path: Path) -> bool:
@@ -246,24 +228,31 @@ def load_colmap(model_dir: Path, images_dir: Path | None = None) -> list[View]:
 # ------------------------------------------------------------------------------ writers (tests,
 # and `splatgl path` users who want a model other tools read)
 def write_colmap(model_dir: Path, views: list[View], binary: bool = True) -> None:
-    """Write ``views`` as a COLMAP model (one PINHOLE camera per view, no 2D points)."""
+    """Write ``views`` as a COLMAP model (one camera per view, in its model's COLMAP form:
+    :meth:`~splatgl.cameras.model.CameraModel.to_colmap`; no 2D points).  A camera COLMAP has
+    no model for raises CameraError before anything is written."""
     model_dir = Path(model_dir)
+    poses = []
+    for v in views:
+        name, params = v.camera.model.to_colmap(v.camera)
+        if _BY_NAME[name][1] != len(params):
+            raise CameraError(f"COLMAP model {name} takes {_BY_NAME[name][1]} parameters, got {len(params)}")
+        poses.append((v.name, rotmat_to_quat(v.camera.rotation), v.camera.translation, v.camera,
+                      name, tuple(float(p) for p in params)))
     model_dir.mkdir(parents=True, exist_ok=True)
-    poses = [(v.name, rotmat_to_quat(v.camera.rotation), v.camera.translation, v.camera)
-             for v in views]
     if binary:
         cams = struct.pack("<Q", len(views))
         imgs = struct.pack("<Q", len(views))
-        for i, (name, q, t, c) in enumerate(poses, 1):
-            cams += struct.pack("<iiQQdddd", i, 1, c.width, c.height, c.fx, c.fy, c.cx, c.cy)
+        for i, (name, q, t, c, model, params) in enumerate(poses, 1):
+            cams += struct.pack(f"<iiQQ{len(params)}d", i, _BY_NAME[model][0], c.width, c.height, *params)
             imgs += struct.pack("<idddddddi", i, *q, *t, i) + name.encode() + b"\0" + struct.pack("<Q", 0)
         (model_dir / "cameras.bin").write_bytes(cams)
         (model_dir / "images.bin").write_bytes(imgs)
     else:
         cams = ["# Camera list: CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]"]
         imgs = ["# IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME", "# POINTS2D[] as (X, Y, POINT3D_ID)"]
-        for i, (name, q, t, c) in enumerate(poses, 1):
-            cams.append(f"{i} PINHOLE {c.width} {c.height} {c.fx!r} {c.fy!r} {c.cx!r} {c.cy!r}")
+        for i, (name, q, t, c, model, params) in enumerate(poses, 1):
+            cams.append(f"{i} {model} {c.width} {c.height} {' '.join(repr(p) for p in params)}")
             imgs.append(f"{i} {' '.join(repr(float(x)) for x in (*q, *t))} {i} {name}")
             imgs.append("")
         (model_dir / "cameras.txt").write_text("\n".join(cams) + "\n")

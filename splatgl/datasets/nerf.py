@@ -7,8 +7,11 @@ camera's y and z columns flip: ``c2w_cv = c2w_gl diag(1, -1, -1, 1)``,
 
 Intrinsics, per frame or at the top level (per-frame values win): ``fl_x``/``fl_y``/``cx``/``cy``
 with ``w``/``h``, or ``camera_angle_x`` (horizontal fov, radians; square pixels, principal point
-at the image centre) with the size from ``w``/``h`` or the image file.  ``camera_model`` other
-than ``OPENCV``/``PINHOLE`` with zero distortion is rejected by name.
+at the image centre) with the size from ``w``/``h`` or the image file.  ``camera_model`` (default
+``OPENCV``) names the camera model, whose own fields (``k1``, ``p1``, ...) the model reads: the
+camera models' table :data:`splatgl.cameras.registry.TRANSFORMS` (the pinhole's OPENCV,
+PINHOLE and SIMPLE_PINHOLE without distortion, the fisheye's OPENCV_FISHEYE, ...); any other
+``camera_model`` is rejected by name.  Writing uses each model's ``to_transforms``.
 """
 
 from __future__ import annotations
@@ -20,13 +23,13 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..cameras.poses import check_rigid_pose
+from ..cameras.registry import TRANSFORMS
 from ..errors import CameraError
 from ..cameras.json_fields import entries, matrix, number, read_json
 from .views import View
 
 #: OpenGL camera axes -> OpenCV camera axes (flip y and z), applied on the right of c2w.
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
-_DISTORTION = ("k1", "k2", "k3", "k4", "p1", "p2")
 _IMAGE_EXTS = ("", ".png", ".jpg", ".jpeg", ".JPG", ".PNG", ".exr")
 
 
@@ -65,15 +68,16 @@ def _intrinsics(path: Path, where: str, frame: dict, top: dict, image: Path | No
             return number(path, "", top, key)
         return None
 
-    model = frame.get("camera_model", top.get("camera_model", "OPENCV"))
-    if model not in ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE"):
-        raise CameraError(f"{path}: {where}camera_model {model!r} is not supported "
-                          "(splatgl renders pinhole cameras: OPENCV/PINHOLE without distortion)")
-    for key in _DISTORTION:
-        value = get(key)
-        if value:
-            raise CameraError(f"{path}: {where}field '{key}' = {value}: lens distortion is not "
-                              "supported; undistort the images first")
+    name = frame.get("camera_model", top.get("camera_model", "OPENCV"))
+    cls = TRANSFORMS.get(name) if isinstance(name, str) else None
+    if cls is None:
+        raise CameraError(f"{path}: {where}camera_model {name!r} is not supported "
+                          f"(supported: {', '.join(TRANSFORMS)})")
+    fields = {key: get(key) for key in cls.transforms_fields}
+    try:
+        model = cls.from_transforms(name, fields)
+    except CameraError as exc:
+        raise CameraError(f"{path}: {where}{exc}") from None
     w, h = get("w"), get("h")
     if w is None or h is None:
         if image is None:
@@ -92,7 +96,7 @@ def _intrinsics(path: Path, where: str, frame: dict, top: dict, image: Path | No
     fx = fx if fx is not None else fy
     fy = fy if fy is not None else fx
     cx, cy = get("cx"), get("cy")
-    return w, h, fx, fy, (w / 2.0 if cx is None else cx), (h / 2.0 if cy is None else cy)
+    return w, h, fx, fy, (w / 2.0 if cx is None else cx), (h / 2.0 if cy is None else cy), model
 
 
 def load_transforms(path: Path, obj: dict | None = None) -> list[View]:
@@ -111,10 +115,10 @@ def load_transforms(path: Path, obj: dict | None = None) -> list[View]:
         check_rigid_pose(c2w, f"{path}: {where}field 'transform_matrix'")
         name = str(frame.get("file_path", f"frame_{i:05d}"))
         image = find_image(path.parent, name)
-        w, h, fx, fy, cx, cy = _intrinsics(path, where, frame, obj, image)
+        w, h, fx, fy, cx, cy, model = _intrinsics(path, where, frame, obj, image)
         w2c = np.linalg.inv(c2w @ GL_TO_CV)
         try:
-            camera = Camera(int(round(w)), int(round(h)), fx, fy, cx, cy, w2c)
+            camera = Camera(int(round(w)), int(round(h)), fx, fy, cx, cy, w2c, model)
         except CameraError as exc:
             raise CameraError(f"{path}: {where}{exc}") from None
         views.append(View(name, camera, image))
@@ -122,10 +126,16 @@ def load_transforms(path: Path, obj: dict | None = None) -> list[View]:
 
 
 def transforms_json(views: list[View]) -> dict:
-    """The ``transforms.json`` object of ``views`` (per-frame fl_x/fl_y/cx/cy/w/h)."""
+    """The ``transforms.json`` object of ``views`` (per-frame fl_x/fl_y/cx/cy/w/h, and the
+    camera model's own fields where it is not the file's plain ``OPENCV``:
+    :meth:`~splatgl.cameras.model.CameraModel.to_transforms`, which raises CameraError for a
+    model transforms.json cannot hold)."""
     frames = []
     for v in views:
         c = v.camera
+        fields = c.model.to_transforms()
+        own = {} if fields == {"camera_model": "OPENCV"} else fields
         frames.append({"file_path": v.name, "transform_matrix": (np.linalg.inv(c.world_to_camera) @ GL_TO_CV).tolist(),
-                       "fl_x": c.fx, "fl_y": c.fy, "cx": c.cx, "cy": c.cy, "w": c.width, "h": c.height})
+                       "fl_x": c.fx, "fl_y": c.fy, "cx": c.cx, "cy": c.cy, "w": c.width, "h": c.height,
+                       **own})
     return {"camera_model": "OPENCV", "frames": frames}

@@ -88,6 +88,8 @@ class LodOrder:
         """
         t0 = time.perf_counter()
         camera = view.camera
+        frustum = view.model.cull_frustum(camera)   # lens distortion: the cut's frustum test
+        camera = camera if frustum is None else frustum
         dist = float(np.linalg.norm(camera.center - self._root))
         if self._cull_data is None:
             self._cull_data = CullData.from_scene(self.scene)
@@ -117,7 +119,7 @@ class LodOrder:
         if self._cut_keys is None or self._cut_keys.size < ids.size:
             self._cut_keys = np.empty(ids.size, np.uint64)
         keys = rows_keys(self._cull_data, ids, view.anchored, view.near, self.settings.antialias,
-                         view.scale, kern, self._cut_keys)
+                         view.scale, kern if frustum is None else None, self._cut_keys)
         t2 = time.perf_counter()
         order = self._sorted(keys)
         self.slot_weights = None
@@ -137,12 +139,12 @@ class LodOrder:
         """Cull and sort the leaves alone (full detail) for ``view``; stage times from ``t0``.
 
         Pinhole views use the leaves' chunked cull (built on first use, timed as ``build``),
-        as a plain scene's order does; lens views the per-splat cull of the leaves' rows (a
-        contiguous view of the cull data)."""
+        as a plain scene's order does; lens views and models with their own cull frustum (lens
+        distortion) the per-splat cull of the leaves' rows (a contiguous view of the cull data)."""
         n_leaves = self.tree.level_size(0)
         leaves = self._cull_data.subset(slice(0, n_leaves))
         build = 0.0
-        if view.camera.is_lens:
+        if view.camera.is_lens or view.model.cull_frustum(view.camera) is not None:
             keep, depth = cull_visible(leaves, view.anchored, view.near, self.settings.antialias,
                                        view.scale)
             t2 = time.perf_counter()

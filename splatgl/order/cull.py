@@ -69,7 +69,13 @@ def cull(p_cam: np.ndarray, max_scale: np.ndarray, opacities: np.ndarray, camera
         opacities: (N,) opacities; below 1/255 a splat can never be drawn.
         camera: the view.  near: view z at or below which splats are culled.
         antialias: whether the opacity compensation applies (tightens the peak bound).
+
+    A model with its own cull frustum (:meth:`~splatgl.cameras.model.CameraModel.cull_frustum`,
+    lens distortion) is culled against that frustum's planes without the peak bound.
     """
+    frustum = camera.model.cull_frustum(camera)
+    peak = frustum is None
+    camera = camera if peak else frustum
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         k = np.sqrt(np.maximum(2.0 * np.log(np.maximum(opacities, 1e-30) / ALPHA_MIN), 0.0))
     radius = (k * max_scale).astype(np.float64)
@@ -81,7 +87,7 @@ def cull(p_cam: np.ndarray, max_scale: np.ndarray, opacities: np.ndarray, camera
         u_lo, u_hi = -camera.cx / camera.fx, (camera.width - camera.cx) / camera.fx
         v_lo, v_hi = -camera.cy / camera.fy, (camera.height - camera.cy) / camera.fy
         keep &= (x >= u_lo - rx) & (x <= u_hi + rx) & (y >= v_lo - ry) & (y <= v_hi + ry)
-        return _peak_cull(keep, p_cam, max_scale, opacities, camera, antialias)
+        return _peak_cull(keep, p_cam, max_scale, opacities, camera, antialias) if peak else keep
     # Side planes through the camera centre: x / z = s for slopes s at the image edges.
     # The signed distance of a point from the plane x - s z = 0 is (x - s z) / sqrt(1 + s^2).
     for coord, f, c, size in ((x, camera.fx, camera.cx, camera.width),
@@ -90,7 +96,7 @@ def cull(p_cam: np.ndarray, max_scale: np.ndarray, opacities: np.ndarray, camera
         reach = radius + MARGIN_PX * np.maximum(z, 0.0) / f
         keep &= (coord - hi * z) / np.sqrt(1.0 + hi * hi) <= reach
         keep &= (lo * z - coord) / np.sqrt(1.0 + lo * lo) <= reach
-    return _peak_cull(keep, p_cam, max_scale, opacities, camera, antialias)
+    return _peak_cull(keep, p_cam, max_scale, opacities, camera, antialias) if peak else keep
 
 
 def _peak_cull(keep, p_cam, max_scale, opacities, camera, antialias) -> np.ndarray:
@@ -180,9 +186,15 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
     inside the image lies within 0.5 px per axis of a pixel centre, d^2 <= 0.5, and
     ``lambda >= LOW_PASS``, so ``o exp(-d^2 / (2 lambda)) >= 1/255`` whenever
     ``k^2 = 2 ln(255 o) >= 0.5 / LOW_PASS``).  With antialiasing every survivor takes it.
-    Orthographic cameras take :func:`cull` as is.
+    Orthographic cameras take :func:`cull` as is.  A model with its own cull frustum
+    (:meth:`~splatgl.cameras.model.CameraModel.cull_frustum`, lens distortion) is culled against
+    that frustum's planes without the peak bound.
     """
     n = data.count
+    peak = True
+    frustum = camera.model.cull_frustum(camera)
+    if frustum is not None:
+        camera, peak = frustum, False
     if camera.is_orthographic:
         p_cam = to_camera(data.xyz.T, camera)
         keep = np.flatnonzero(cull(p_cam, data.max_scale * scale, data.opacities, camera, near,
@@ -225,6 +237,7 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
             continue
         zk = zb[idx]
         check = idx if antialias else idx[~ib[idx] | data.faint[start + idx]]
+        check = check if peak else check[:0]
         if check.size:
             p = np.empty((check.size, 3), np.float32)
             for axis in range(2):

@@ -2,8 +2,9 @@
 
 A :class:`RowSource` turns a :class:`~splatgl.cameras.view.View` into the rows to draw, front to
 back (and, for a level-of-detail cut, an opacity weight per sorted slot).  :class:`SceneOrder`
-is the source of a plain scene: the chunked cull (:mod:`splatgl.order.chunks`, or the lens
-cameras' :mod:`splatgl.order.lens_cull`) and the sort the settings choose; the level-of-detail
+is the source of a plain scene: the chunked cull (:mod:`splatgl.order.chunks`, the lens
+cameras' :mod:`splatgl.order.lens_cull`, or for a model with its own cull frustum, lens
+distortion, :func:`splatgl.order.cull.cull_visible` on every row) and the sort the settings choose; the level-of-detail
 source is :class:`splatgl.lod.source.LodOrder`.  The quad path draws whatever a source gives.
 """
 
@@ -20,8 +21,9 @@ from ..model.scene import Scene
 from ..model.settings import RenderSettings, SortKey
 from ..twins.project import to_camera
 from .chunks import ChunkedCull, keys_order, keys_pairs
+from .cull import cull_visible
 from .lens_cull import lens_visible_keys
-from .sort import bucket_sort, depth_sort
+from .sort import bucket_sort, depth_keys, depth_sort
 
 #: ``sort(depth (M,) float32, rows (M,) uint32) -> rows front to back``: the sort stage.
 SortFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -97,6 +99,10 @@ class SceneOrder:
         if lens or self.settings.cull:
             if lens:   # distance keys; equirect seam splats twice (splatgl/cameras/equirect.py)
                 keys = lens_visible_keys(self.chunks, view.anchored, view.near, view.scale)
+            elif view.model.cull_frustum(view.anchored) is not None:  # its own frustum
+                idx, z = cull_visible(self.chunks.data, view.anchored, view.near,
+                                      self.settings.antialias, view.scale)
+                keys = depth_keys(z, self.chunks.index[idx])
             else:
                 keys = self.chunks.visible_keys(view.anchored, view.near, self.settings.antialias,
                                                 view.scale)

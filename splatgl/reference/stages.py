@@ -187,9 +187,10 @@ def project(scene: Scene, view: View, settings: RenderSettings | None = None,
             options: ReferenceOptions | None = None) -> ProjectedSplats:
     """Reference stage 1: project every splat and decide which tiles it touches.
 
-    Culling (a culled row gets ``visible = False``, radius 0 and an empty rectangle): view z at
-    or below the view's near plane (fisheye and panorama: the distance and a fisheye's angle
-    limit, but view z for a fisheye under GSPLAT, :func:`gsplat_fisheye`), non-finite values,
+    Culling (a culled row gets ``visible = False``, radius 0 and an empty rectangle): the
+    model's :meth:`~splatgl.cameras.model.CameraModel.visible` (view z at or below the view's
+    near plane; fisheye and panorama: the distance and a fisheye's angle limit, but view z for
+    a fisheye under GSPLAT, :func:`gsplat_fisheye`; lens distortion: also its fold radius), non-finite values,
     ``det(cov2d) <= 0``, an empty tile rectangle; under GSPLAT also ``o < 1/255``, zero radii
     and an extent entirely off screen.
 
@@ -224,8 +225,9 @@ def project(scene: Scene, view: View, settings: RenderSettings | None = None,
     as_gsplat = gsplat_fisheye(view, options)
     if as_gsplat:  # gsplat's sort key and near test: view z, as for a pinhole camera
         pr = dataclasses.replace(pr, depth=pr.p_cam[:, 2])
-    lens_rules = view.is_lens and not as_gsplat
-    visible = view.model.visible(pr.p_cam, view, near) if lens_rules else pr.depth > near
+    # the model's own rule (view z beyond near for a pinhole; a lens's distance and angle; a
+    # distorted camera's fold radius), or gsplat's view z
+    visible = pr.depth > near if as_gsplat else view.model.visible(pr.p_cam, view, near)
     ok = visible & finite & (pr.det > 0)
     pr, ok = _wrap_copies(pr, ok, scene, view)
     mean2d = np.where(ok[:, None], pr.mean2d, dt.type(0.0)).astype(dt)
