@@ -1,5 +1,7 @@
-// OpenCV camera model: a pinhole with OpenCV's radial-tangential lens distortion.  Twin:
-// splatgl/cameras/opencv.py (same names; formulas and their derivation in its module doc).
+// OpenCV camera model: a pinhole with OpenCV's radial-tangential lens distortion; formulas and
+// their derivation in splatgl/cameras/opencv.py's module doc.
+// Twin: splatgl/cameras/opencv.py radial(), OpenCV.project(), OpenCV.jacobian(),
+//   OpenCV.visible().
 uniform vec3 u_cv_num;         // k1, k2, k3: R's numerator 1 + k1 r^2 + k2 r^4 + k3 r^6
 uniform vec3 u_cv_den;         // k4, k5, k6: R's denominator 1 + k4 r^2 + k5 r^4 + k6 r^6
 uniform vec2 u_cv_tangential;  // p1, p2
