@@ -25,6 +25,8 @@ from ..cameras.up import resolve_up
 from ..cameras.orthographic import Orthographic
 from ..cameras.pinhole import Pinhole
 from ..cameras.registry import adapt_camera, retarget
+from ..interactive.budget import check_fps
+from ..interactive.preview import PreviewRenderer
 from ..lod.frames import LodFrames
 from ..lod.io import is_lod_file, read_lod
 from ..lod.render import LodSettings
@@ -58,6 +60,14 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                         "a pattern, whose suffix says it)")
     g.add_argument("--fps", type=positive_float, default=None,
                    help="video frame rate (default: the path file's, else 30)")
+    g.add_argument("--preview", action="store_true",
+                   help="a quick draft of the path: every frame drawn as the viewer draws a moving "
+                        "camera, within a frame-time budget (a lower render scale, a level-of-detail "
+                        "cut and SH degree as needed, upscaled to full size); the levels used are "
+                        "printed. For checking a path before the exact render")
+    g.add_argument("--target-fps", type=float, default=None, metavar="F",
+                   help="--preview's frame-time budget in frames a second (default: 10 on software "
+                        "OpenGL such as llvmpipe, 60 on a GPU)")
     executor = add_executor_arguments(p, "contiguous chunks of the path (a video is encoded here "
                                          "once every frame exists; its frames wait in "
                                          ".NAME.mp4.frames/, kept for --resume if the run stops)",
@@ -83,6 +93,25 @@ def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
         raise SplatglError(f"{args.scene}: not a level-of-detail file; build one with "
                            "'splatgl lod SCENE -o SCENE.lod.ply'")
     return LodSettings(**given)
+
+
+def check_preview(args: argparse.Namespace, target: FrameTarget, sharded: bool,
+                  lod: LodSettings | None) -> None:
+    """Refuse, before any work, what ``--preview`` cannot combine with (one line each)."""
+    check_fps(args.target_fps)
+    refusals = (
+        (args.renderer != "quad", f"--preview draws through the quad path, not --renderer {args.renderer}"),
+        (sharded, "--preview renders in one process (not with --workers or --executor ray)"),
+        (args.stereo is not None, "--preview and --stereo cannot be combined"),
+        (lod is not None, "--preview chooses its own level-of-detail cut; drop --lod-threshold/"
+                          "--lod-budget/--lod-blend"),
+        (args.resume, "--preview frames are drafts: --resume would mix them with exact frames"),
+        (target.layers is not None, "--preview writes colour frames only (no depth layers: use "
+                                    "a .png pattern, a folder or a video)"),
+    )
+    for refused, message in refusals:
+        if refused:
+            raise SplatglError(message)
 
 
 def refuse_path_only_options(args: argparse.Namespace) -> None:
@@ -154,6 +183,11 @@ def run_path(args: argparse.Namespace) -> int:
         raise SplatglError(f"{args.output}: a video rendered in one process cannot be resumed; "
                            "render it with --workers N or --executor ray (their frames are kept "
                            "until the video is assembled)")
+    if args.preview:
+        check_preview(args, target, executor.sharded, lod)
+    elif args.target_fps is not None:
+        raise SplatglError("--target-fps is the budget of --preview; without --preview every "
+                           "frame is exact")
     tree = read_lod(args.scene) if lod is not None else None
     # the scene frames the orbit and is counted in the summary: a LOD file's leaves
     scene = load_scene_arg(args) if tree is None else tree.nodes.subset(slice(0, tree.level_size(0)))
@@ -173,6 +207,13 @@ def run_path(args: argparse.Namespace) -> int:
                                      cameras, settings, target, executor, kind, args.bit_depth,
                                      args.resume, args.drop_invalid, fps, default_progress(), numbers,
                                      lod)
+    elif args.preview:
+        with PreviewRenderer(args.target_fps, args.scene if args.scene is not None
+                             else demo_scene_path()) as renderer:
+            gl_name = renderer_name(renderer.ctx)
+            result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
+                                   False, fps, default_progress(), numbers=numbers)
+        print(renderer.report())
     else:
         with Renderer() if tree is None else LodFrames(tree, settings, lod) as renderer:
             gl_name = renderer_name(renderer.ctx) if kind is not RendererKind.REFERENCE else NO_GL_RENDERER

@@ -12,12 +12,13 @@ model follows the view: the cost is stable across nearby frames, not across a wh
 predicts each level's time; the best level whose prediction fits ``margin * budget`` is the
 target.  Hysteresis keeps it from flickering between levels:
 
-- a frame over ``budget * over`` (1.1) moves to the target at once (never a visibly slow frame
-  twice in a row);
-- a cheaper-than-needed frame moves up only after ``patience`` (3) frames in a row whose target
-  is higher (then to that target);
-- the target itself uses ``margin`` (0.85) of the budget, so a level that just fits is not
-  left and re-entered on noise.
+- a frame over ``over`` (1.1) times the budget, or a level predicted over ``hold`` (0.95) of it,
+  moves down to the target at once (never a visibly slow frame twice in a row);
+- a level moves up only after ``patience`` (3) frames in a row whose target is higher (then to
+  that target);
+- the target must fit ``margin`` (0.85) of the budget, but the level in use is kept up to
+  ``hold`` (0.95): noise in the measured times moves predictions inside that dead band without
+  moving the level.
 """
 
 from __future__ import annotations
@@ -34,10 +35,18 @@ SCALES = (1.0, 0.85, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, 0.25)
 #: Splat budgets tried below the full scene (only where a level-of-detail tree exists).
 BUDGETS = (1_000_000, 600_000, 400_000, 250_000, 160_000, 100_000, 70_000, 50_000, 35_000,
            25_000, 18_000, 12_000)
-#: The levels' quality score weighs a halved splat count like this many halvings of the scale
-#: (a coarser cut blurs fine detail; a lower scale blurs everything, but the upscale filter
-#: hides half of it).
-SPLAT_WEIGHT = 0.5
+#: The quality model (:func:`predicted_psnr`), fitted to the PSNR of every level against the
+#: exact frame on donut, guitar and biker at 1280x720 (benchmarks/interactive_levels.py,
+#: docs/results/interactive-levels-psnr.json): a lower scale adds a squared error of
+#: ``SCALE_MSE * (1 / scale - 1) ** SCALE_POWER`` (0.5: about 36.5 dB), a cut keeping a share
+#: of the splats ``CUT_MSE * (1 / share - 1) ** CUT_POWER`` (a third: about 31 dB).  The two
+#: overlap (a cut's merged splats are blurred already, so a lower scale costs it little): the
+#: larger counts whole, the smaller by ``OVERLAP``.
+SCALE_MSE, SCALE_POWER = 2.2e-4, 1.47
+CUT_MSE, CUT_POWER = 5e-4, 0.6
+OVERLAP = 0.5
+#: The model's ceiling (dB): the exact level.
+EXACT_PSNR = 60.0
 
 
 @dataclass(frozen=True, order=True)
@@ -82,7 +91,7 @@ def check_fps(fps: float | None) -> float | None:
 
 
 def ladder(count: int, has_lod: bool, sh_degree: int) -> list[Level]:
-    """The levels for a scene of ``count`` splats, best first by quality score (see module doc).
+    """The levels for a scene of ``count`` splats, best first by :func:`predicted_psnr`.
 
     Budgets apply only with a level-of-detail tree (``has_lod``) and only below ``count``; the
     SH degree is capped at 0 on levels that also cut splats (view-dependent colour matters
@@ -95,14 +104,18 @@ def ladder(count: int, has_lod: bool, sh_degree: int) -> list[Level]:
         for s in SCALES:
             sh = 0 if (b is not None and sh_degree > 0) else None
             levels.append(Level(s, b, sh))
-    return sorted(levels, key=lambda lv: -quality(lv, count))
+    return sorted(levels, key=lambda lv: (-predicted_psnr(lv, count), -lv.scale))
 
 
-def quality(level: Level, count: int) -> float:
-    """A level's quality score (higher is better): log2 of the scale plus ``SPLAT_WEIGHT``
-    times log2 of the share of splats drawn."""
+def predicted_psnr(level: Level, count: int) -> float:
+    """The PSNR (dB) ``level`` is expected to reach against the exact frame of a scene of
+    ``count`` splats (the quality model above; :data:`EXACT_PSNR` for the exact level)."""
     splats = count if level.budget is None else min(level.budget, count)
-    return math.log2(level.scale) + SPLAT_WEIGHT * math.log2(max(splats, 1) / max(count, 1))
+    share = max(splats, 1) / max(count, 1)
+    by_scale = SCALE_MSE * (1.0 / level.scale - 1.0) ** SCALE_POWER
+    by_cut = CUT_MSE * (1.0 / share - 1.0) ** CUT_POWER
+    mse = max(by_scale, by_cut) + OVERLAP * min(by_scale, by_cut)
+    return EXACT_PSNR if mse <= 10.0 ** (-EXACT_PSNR / 10.0) else -10.0 * math.log10(mse)
 
 
 @dataclass
@@ -136,12 +149,13 @@ class FrameBudget:
     """
 
     def __init__(self, budget: float, count: int, pixels: int, sh_degree: int = 0,
-                 has_lod: bool = False, margin: float = 0.85, over: float = 1.1, patience: int = 3):
+                 has_lod: bool = False, margin: float = 0.85, hold: float = 0.95, over: float = 1.1,
+                 patience: int = 3):
         if not (math.isfinite(budget) and budget > 0.0):
             raise SplatglError(f"frame-time budget must be a positive number of seconds, got {budget}")
         self.budget, self.count, self.pixels = float(budget), int(count), int(pixels)
         self.sh_degree = sh_degree
-        self.margin, self.over, self.patience = margin, over, patience
+        self.margin, self.hold, self.over, self.patience = margin, hold, over, patience
         self.model = CostModel()
         self.levels = ladder(self.count, has_lod, sh_degree)
         self.index = 0          # the level in use (an index into :attr:`levels`)
@@ -151,8 +165,9 @@ class FrameBudget:
         """A level-of-detail tree became available (or went away): new ladder, same quality."""
         level = self.current
         self.levels = ladder(self.count, has_lod, self.sh_degree)
-        q = quality(level, self.count)
-        self.index = min(range(len(self.levels)), key=lambda i: abs(quality(self.levels[i], self.count) - q))
+        q = predicted_psnr(level, self.count)
+        self.index = min(range(len(self.levels)),
+                         key=lambda i: abs(predicted_psnr(self.levels[i], self.count) - q))
 
     def set_pixels(self, pixels: int) -> None:
         self.pixels = int(pixels)
@@ -182,13 +197,12 @@ class FrameBudget:
         level for the next frame (see the module doc for the hysteresis)."""
         self.model.update(float(splats), self.pixels * level.scale * level.scale, float(seconds))
         target = self.target()
-        if seconds > self.over * self.budget and target > self.index:
-            self.index, self._ups = target, 0          # too slow: down at once
+        slow = seconds > self.over * self.budget or self.predict(self.current) > self.hold * self.budget
+        if slow:
+            self.index, self._ups = max(target, self.index), 0   # too slow: down at once
         elif target < self.index:
             self._ups += 1
-            if self._ups >= self.patience:              # fast enough for a while: up
+            if self._ups >= self.patience:                      # fast enough for a while: up
                 self.index, self._ups = target, 0
         else:
             self._ups = 0
-            if target > self.index:                     # predicted too slow: down
-                self.index = target

@@ -87,6 +87,7 @@ class LevelRenderer:
                                           LodSettings(CUT_THRESHOLD_PX, level.budget),
                                           self.renderer.programs)
             self._lod_sh = level.sh_degree
+            self._lod_quad.rows.warm_start = True   # consecutive frames are near each other
         rows = self._lod_quad.rows
         if rows.lod.budget != level.budget:
             rows.lod = dataclasses.replace(rows.lod, budget=level.budget)

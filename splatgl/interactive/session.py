@@ -18,6 +18,8 @@ from typing import Callable
 
 from ..api import Renderer
 from ..cameras.camera import Camera
+from ..gl.context import renderer_name
+from ..gl.egl_devices import is_software_renderer
 from ..model.scene import Scene
 from ..model.settings import RenderSettings
 from ..renderers.early_stop import MAX_BATCH
@@ -25,9 +27,19 @@ from .budget import EXACT, FrameBudget, Level
 from .draft import DraftFrame, LevelRenderer
 from .lod_cache import LodProvider
 
+#: Frames a second the budget aims at by default on a software rasteriser, and on a GPU.
+SOFTWARE_FPS = 10.0
+GPU_FPS = 60.0
+
 #: Smallest batch of a refinement step's draw (splats): below it the finish between batches
 #: costs more than the answer time it buys.
 MIN_REFINE_BATCH = 4096
+
+
+def default_fps(renderer: Renderer) -> float:
+    """:data:`SOFTWARE_FPS` where ``renderer``'s GL renderer is a software rasteriser (llvmpipe),
+    else :data:`GPU_FPS`."""
+    return SOFTWARE_FPS if is_software_renderer(renderer_name(renderer.ctx)) else GPU_FPS
 
 
 class Interrupted(Exception):
@@ -100,14 +112,7 @@ class Session:
         self.budget.set_pixels(camera.width * camera.height)
         key = camera_key(camera)
         if key != self._key:
-            level = self.budget.level()
-            frame = self.levels.draw(camera, level)
-            self.budget.report(level, frame.splats, frame.seconds)
-            self._key, self.shown, self._moving_level = key, frame, level
-            self._plan = [] if level.exact else self.plan(level)
-            self.status = "exact" if level.exact else "moving"
-            self.refine_started = None
-            return frame
+            return self.moving(camera)
         if not self._plan:
             self.status = "exact"
             return None
@@ -123,6 +128,20 @@ class Session:
         self._plan.pop(0)
         self.shown = frame
         self.status = "refining" if self._plan else "exact"
+        return frame
+
+    def moving(self, camera: Camera) -> DraftFrame:
+        """Draw ``camera`` as a moving frame (at the budget's level) whatever the last camera
+        was; refinement starts over from it."""
+        self._sync_lod()
+        self.budget.set_pixels(camera.width * camera.height)
+        level = self.budget.level()
+        frame = self.levels.draw(camera, level)
+        self.budget.report(level, frame.splats, frame.seconds)
+        self._key, self.shown, self._moving_level = camera_key(camera), frame, level
+        self._plan = [] if level.exact else self.plan(level)
+        self.status = "exact" if level.exact else "moving"
+        self.refine_started = None
         return frame
 
     @property

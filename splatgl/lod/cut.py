@@ -39,6 +39,14 @@ DEFAULT_BAND = 2.0
 #: Budget search: at most this many cuts per view, stopping within this fraction of the budget.
 BUDGET_STEPS = 8
 BUDGET_TOLERANCE = 0.1
+#: Where no cut fitted within BUDGET_STEPS: at most this many more (doubling the threshold),
+#: then this many narrowing steps between the last cut too large and the first that fits.
+MAX_LATE_STEPS = 40
+LATE_BISECTIONS = 3
+#: The search from a nearby view's threshold (:func:`select_cut_budget_near`): at most this many
+#: cuts, stepping the threshold by at least this factor until the budget is bracketed.
+NEAR_STEPS = 6
+NEAR_FACTOR = 1.15
 
 
 @dataclass(frozen=True)
@@ -265,7 +273,42 @@ def select_cut_budget(data: CutData, camera: Camera, budget: int,
     ok = None
     lo, hi = threshold_px, None  # lo: known too many nodes (or the floor), hi: known to fit
     t = threshold_px
-    for _ in range(BUDGET_STEPS):
+    first_fit = None  # the step of the first cut that fitted
+    for step in range(BUDGET_STEPS + MAX_LATE_STEPS):
+        cut, w = select_cut_weights(data, camera, t, band, kern=kern)
+        if cut.size <= budget:
+            ok, hi = (cut, w, t), t
+            first_fit = step if first_fit is None else first_fit
+            if t <= threshold_px or cut.size >= (1.0 - BUDGET_TOLERANCE) * budget:
+                break
+        else:
+            lo = t
+        # Out of steps: stop.  Where no cut fitted yet (leaves larger than the threshold keep
+        # the count high, so it falls far slower than the threshold squared), keep doubling the
+        # threshold until one does, then narrow that last bracket LATE_BISECTIONS times.
+        if first_fit is not None and step >= max(BUDGET_STEPS, first_fit + LATE_BISECTIONS + 1) - 1:
+            break
+        if hi is None:
+            t = t * (2.0 if step + 1 >= BUDGET_STEPS else max(1.25, float(np.sqrt(cut.size / budget))))
+        else:
+            t = float(np.sqrt(lo * hi))
+    if ok is None:  # even the coarsest threshold tried was too fine: the root level's cut
+        ok = (*select_cut_weights(data, camera, float("inf"), band, kern=kern), float("inf"))
+    return ok
+
+
+def select_cut_budget_near(data: CutData, camera: Camera, budget: int, start: float,
+                           threshold_px: float = DEFAULT_THRESHOLD_PX, band: float = 1.0, kern=None,
+                           steps: int = NEAR_STEPS) -> tuple[np.ndarray, np.ndarray | None, float]:
+    """:func:`select_cut_budget` searched from ``start``, the threshold of a view nearby (the
+    last frame's): consecutive frames need about the same threshold, so two or three cuts
+    usually settle it where the search from the floor takes a dozen.  Steps by the ratio of the
+    count to the budget (at least NEAR_FACTOR) until bracketed, then halves the bracket on a log
+    scale; where ``steps`` cuts find none that fits, the search from the floor decides."""
+    ok = None
+    lo = hi = None
+    t = max(float(start), threshold_px) if np.isfinite(start) else threshold_px
+    for _ in range(steps):
         cut, w = select_cut_weights(data, camera, t, band, kern=kern)
         if cut.size <= budget:
             ok, hi = (cut, w, t), t
@@ -274,9 +317,11 @@ def select_cut_budget(data: CutData, camera: Camera, budget: int,
         else:
             lo = t
         if hi is None:
-            t = t * max(1.25, float(np.sqrt(cut.size / budget)))
+            t *= max(NEAR_FACTOR, cut.size / budget)
+        elif lo is None:
+            t = max(threshold_px, t / max(NEAR_FACTOR, float(np.sqrt(budget / max(cut.size, 1)))))
         else:
             t = float(np.sqrt(lo * hi))
-    if ok is None:  # even the last threshold was too fine: take the root level's cut
-        ok = (*select_cut_weights(data, camera, float("inf"), band, kern=kern), float("inf"))
+    if ok is None:
+        return select_cut_budget(data, camera, budget, threshold_px, band, kern)
     return ok

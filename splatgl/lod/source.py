@@ -29,7 +29,7 @@ from ..order.cull import CullData, cull_visible
 from ..order.stage import OrderTimes, SortFn, cpu_sort
 from ..renderers.quad import QuadRenderer
 from .build import LodTree
-from .cut import CutData, select_cut_budget
+from .cut import CutData, select_cut_budget, select_cut_budget_near
 from .render import PREFETCH_NODES_PER_LEAF, LodSettings, threshold_cut
 
 
@@ -58,6 +58,10 @@ class LodOrder:
         self.last_cut_nodes = 0
         self.last_cut_s = 0.0
         self.last_threshold_px = lod.threshold_px
+        #: Search a budget's cut from the last view's threshold (:func:`select_cut_budget_near`;
+        #: interactive views, where consecutive frames are near).  Off: every view searches from
+        #: the floor, so a path's frames do not depend on the frames before them.
+        self.warm_start = False
         self.last_drew_leaves = False
         self.skip_within: float | None = None
         self.last_cut: tuple[np.ndarray, np.ndarray | None] | None = None
@@ -101,6 +105,10 @@ class LodOrder:
             return self._leaves_order(view, t0)
         if override is not None:
             ids, weights = override
+        elif self.lod.budget is not None and self.warm_start and self._views > 1:
+            ids, weights, self.last_threshold_px = select_cut_budget_near(
+                self.cut_data, camera, self.lod.budget, self.last_threshold_px,
+                self.lod.threshold_px, self.lod.band, kern)
         elif self.lod.budget is not None:
             ids, weights, self.last_threshold_px = select_cut_budget(
                 self.cut_data, camera, self.lod.budget, self.lod.threshold_px, self.lod.band, kern)

@@ -5,8 +5,9 @@ budget, SH degree; :mod:`splatgl.interactive.budget`); when it rests, the sessio
 exact frame, one interruptible step per loop iteration (:mod:`splatgl.interactive.session`).
 Other views (depth, difference, the tile renderer, stereo) are drawn exactly, as before.
 
-The budget defaults to :data:`SOFTWARE_FPS` frames a second where the GL renderer is a software
-rasteriser (llvmpipe) and :data:`GPU_FPS` elsewhere; ``--target-fps 0`` turns it off.
+The budget defaults to 10 frames a second where the GL renderer is a software rasteriser
+(llvmpipe) and 60 elsewhere (:func:`splatgl.interactive.session.default_fps`); ``--target-fps
+0`` turns it off.
 """
 
 from __future__ import annotations
@@ -18,25 +19,13 @@ import glfw
 
 from ..api import Renderer
 from ..cameras.camera import Camera
-from ..gl.context import renderer_name
-from ..gl.egl_devices import is_software_renderer
 from ..interactive.budget import check_fps
 from ..interactive.lod_cache import LodProvider
-from ..interactive.session import Session
+from ..interactive.session import Session, default_fps
 from ..model.scene import Scene
 from ..model.settings import RenderSettings
 from . import keys
 from .frames import FrameResult
-
-#: Frames a second the budget aims at on a software rasteriser, and on a GPU.
-SOFTWARE_FPS = 10.0
-GPU_FPS = 60.0
-
-
-def default_fps(renderer: Renderer) -> float:
-    """:data:`SOFTWARE_FPS` on a software GL renderer, else :data:`GPU_FPS`."""
-    return SOFTWARE_FPS if is_software_renderer(renderer_name(renderer.ctx)) else GPU_FPS
-
 
 class Pacer:
     """The budgeted colour frames of one viewer (see the module doc).
