@@ -81,3 +81,51 @@ def run_scale_command(args: argparse.Namespace) -> int:
         plot(args.out / "scale.png", rows)
         print(f"wrote {args.out / 'scale.json'}, scale.png")
     return 0
+
+
+def add_interactive_arguments(p: argparse.ArgumentParser) -> None:
+    """The --interactive options of ``splatgl bench``."""
+    p.add_argument("--interactive", action="store_true",
+                   help="the interactive benchmark instead: a scripted 10 s camera flight (orbit, "
+                        "fly-in, rest) through the viewer's frame-time budget on each scene: "
+                        "frames a second while moving, PSNR of the moving frames against the exact "
+                        "render, time from rest to exact, input latency (see "
+                        "splatgl/bench/flight.py). Default scenes: the shared real files and a "
+                        "1M-splat scene built from them (--real-splats)")
+    p.add_argument("--target-fps", type=float, default=None, metavar="F",
+                   help="--interactive's frame-time budget (default: 10 on software OpenGL, 60 on "
+                        "a GPU, as splatgl view)")
+
+
+def run_interactive_command(args: argparse.Namespace, scenes: list) -> int:
+    """``splatgl bench --interactive`` over ``scenes`` (paths; the caller's defaults)."""
+    from ..api import Renderer
+    from ..bench.flight import fly
+    from ..bench.flight_report import plot, table, write_json
+    from ..bench.machine import describe, probe_machine
+    from ..formats import load_scene
+    from ..interactive.budget import check_fps
+    from ..interactive.session import default_fps
+
+    fps = check_fps(args.target_fps)
+    if fps == 0.0:
+        raise SplatglError("--interactive measures the frame-time budget: --target-fps must be positive")
+    machine = probe_machine()
+    print(describe(machine), flush=True)
+    results = []
+    with Renderer() as renderer:
+        fps = fps or default_fps(renderer)
+        for path in scenes:
+            print(f"loading {path} ...", flush=True)
+            scene = load_scene(path)
+            results.append(fly(renderer, scene, path.name.split(".")[0], args.width or 1280,
+                               args.height or 720, fps, log=lambda m: print(m, flush=True)))
+    print(f"interactive benchmark at a {1e3 / fps:.0f} ms budget; " + describe(machine))
+    print(table(results))
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        write_json(args.out / "interactive.json", results,
+                   {"cpu": machine["cpu"], "gl_renderer": machine["gl_renderer"], "machine": machine})
+        plot(args.out / "interactive.png", results)
+        print(f"wrote {args.out / 'interactive.json'}, interactive.png")
+    return 0

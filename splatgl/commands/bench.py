@@ -25,7 +25,8 @@ from ..output.files import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
 from ..api import Renderer
 from ..model.settings import RenderSettings
-from ._bench_modes import add_lod_arguments, run_lod_command, run_scale_command
+from ._bench_modes import (add_interactive_arguments, add_lod_arguments, run_interactive_command,
+                           run_lod_command, run_scale_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
@@ -112,6 +113,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                               "machine, i.e. Ray across machines)",
                            "one task per scene")
     add_lod_arguments(p)
+    add_interactive_arguments(p)
+
+
+#: The interactive benchmark's built scene when no scene files are given (--real-splats).
+INTERACTIVE_REAL_SPLATS = 1_000_000
+
+
+def _interactive_scenes(args: argparse.Namespace) -> list[Path]:
+    """``--interactive``'s scenes: the files given, else the shared real files and a scene of
+    ``--real-splats`` (default 1M) built from them (cached in the temp folder)."""
+    if args.scenes:
+        return list(args.scenes)
+    shared = shared_scenes_dir()
+    scenes = [shared / r for r in REAL if (shared / r).is_file()]
+    if not scenes:
+        raise SplatglError(f"--interactive: no scene files given and the shared real scenes are "
+                           f"not at {shared} (set SPLATGL_SHARED_SCENES)")
+    n = INTERACTIVE_REAL_SPLATS if args.real_splats is None else args.real_splats
+    if n:
+        from ..bench.scale import scene_file
+
+        print(f"building (or reusing) the {n:,}-splat scene ...", flush=True)
+        scenes.append(scene_file(n, 0))
+    return scenes
 
 
 def _parse_groups(text: str | None) -> frozenset[str] | None:
@@ -164,6 +189,8 @@ def run(args: argparse.Namespace) -> int:
     if (args.scale or args.lod) and args.json is not None:
         mode = "--scale" if args.scale else "--lod"
         raise SplatglError(f"--json: {mode} writes its JSON with --out DIR")
+    if args.interactive:
+        return run_interactive_command(args, _interactive_scenes(args))
     if args.scale:
         return run_scale_command(args)
     if args.lod:

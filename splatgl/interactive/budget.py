@@ -7,9 +7,9 @@ scenes over about 100k splats) and the SH degree.  A :class:`Level` is one choic
 :class:`FrameBudget` picks one per frame.
 
 How it picks: a linear cost model, ``t = fixed + per_splat * splats + per_pixel * pixels``,
-fitted to the frames drawn so far (recursive least squares that forgets old frames, so the
-model follows the view: the cost is stable across nearby frames, not across a whole flight),
-predicts each level's time; the best level whose prediction fits ``margin * budget`` is the
+tracked over the frames drawn so far (a Kalman filter whose costs drift, so the model follows
+the view: the cost is stable across nearby frames, not across a whole flight), predicts each
+level's time; the best level whose prediction fits ``margin * budget`` is the
 target.  Hysteresis keeps it from flickering between levels:
 
 - a frame over ``over`` (1.1) times the budget, or a level predicted over ``hold`` (0.95) of it,
@@ -18,7 +18,11 @@ target.  Hysteresis keeps it from flickering between levels:
   that target);
 - the target must fit ``margin`` (0.85) of the budget, but the level in use is kept up to
   ``hold`` (0.95): noise in the measured times moves predictions inside that dead band without
-  moving the level.
+  moving the level;
+- frames at one level teach the model little about the others, so where ``patience`` frames in
+  a row took under ``probe`` (0.6) of the budget and the model still sees nothing better, the
+  next frame probes one level up; a probe that comes out slow goes back at once and that level
+  is not probed again for PROBE_BACKOFF frames, doubling with each failure.
 """
 
 from __future__ import annotations
@@ -45,6 +49,8 @@ BUDGETS = (1_000_000, 600_000, 400_000, 250_000, 160_000, 100_000, 70_000, 50_00
 SCALE_MSE, SCALE_POWER = 2.2e-4, 1.47
 CUT_MSE, CUT_POWER = 5e-4, 0.6
 OVERLAP = 0.5
+#: Frames before a level whose probe was too slow is probed again (doubling per failure, capped).
+PROBE_BACKOFF, PROBE_BACKOFF_MAX = 8, 256
 #: The model's ceiling (dB): the exact level.
 EXACT_PSNR = 60.0
 
@@ -118,26 +124,47 @@ def predicted_psnr(level: Level, count: int) -> float:
     return EXACT_PSNR if mse <= 10.0 ** (-EXACT_PSNR / 10.0) else -10.0 * math.log10(mse)
 
 
+#: The cost model's units: splats in 100k, pixels in millions (so its three numbers are of one
+#: order, seconds per unit, and the least squares stay well conditioned).
+SPLAT_UNIT, PIXEL_UNIT = 1e5, 1e6
+
+
 @dataclass
 class CostModel:
-    """``t = fixed + per_splat * splats + per_pixel * pixels`` (seconds), fitted by recursive
-    least squares with forgetting factor ``forget``; a prior that assumes llvmpipe-like costs
-    until frames come in."""
+    """``t = fixed + per_splat * splats + per_pixel * pixels`` (seconds; ``theta`` per
+    :data:`SPLAT_UNIT` splats and :data:`PIXEL_UNIT` pixels), tracked by a Kalman filter from a
+    prior that assumes llvmpipe-like costs (10 ms, 0.1 s per 100k splats, 50 ms per megapixel).
 
-    forget: float = 0.8
-    theta: np.ndarray = field(default_factory=lambda: np.array([0.01, 1e-6, 5e-8]))
-    cov: np.ndarray = field(default_factory=lambda: np.diag([1e-2, 1e-11, 1e-14]))
+    Each frame is one measurement with ``noise`` seconds of error; between frames the costs may
+    drift by ``drift`` times the prior's widths (the view changes the cost per splat and per
+    pixel), so recent frames count most, and a direction frames never probe (frames at one
+    level see only one combination of the three) grows uncertain slowly and evenly instead of
+    blowing up as least squares with forgetting would.
+    """
+
+    noise: float = 0.005
+    drift: float = 0.15
+    theta: np.ndarray = field(default_factory=lambda: np.array([0.01, 0.1, 0.05]))
+    cov: np.ndarray = field(default_factory=lambda: np.diag([0.05, 0.1, 0.1]) ** 2)
+
+    def __post_init__(self) -> None:
+        self._q = np.diag(np.diag(self.cov)) * self.drift ** 2
+
+    @staticmethod
+    def features(splats: float, pixels: float) -> np.ndarray:
+        return np.array([1.0, splats / SPLAT_UNIT, pixels / PIXEL_UNIT])
 
     def predict(self, splats: float, pixels: float) -> float:
-        return float(self.theta @ np.array([1.0, splats, pixels]))
+        return max(float(self.theta @ self.features(splats, pixels)), 0.0)
 
     def update(self, splats: float, pixels: float, seconds: float) -> None:
-        x = np.array([1.0, splats, pixels])
-        px = self.cov @ x
-        gain = px / (self.forget + x @ px)
+        x = self.features(splats, pixels)
+        cov = self.cov + self._q                      # the costs drift between frames
+        px = cov @ x
+        gain = px / (self.noise ** 2 + x @ px)
         self.theta = self.theta + gain * (seconds - x @ self.theta)
-        self.theta = np.maximum(self.theta, 0.0)  # costs are never negative
-        self.cov = (self.cov - np.outer(gain, px)) / self.forget
+        cov = cov - np.outer(gain, px)
+        self.cov = 0.5 * (cov + cov.T)
 
 
 class FrameBudget:
@@ -150,12 +177,16 @@ class FrameBudget:
 
     def __init__(self, budget: float, count: int, pixels: int, sh_degree: int = 0,
                  has_lod: bool = False, margin: float = 0.85, hold: float = 0.95, over: float = 1.1,
-                 patience: int = 3):
+                 patience: int = 3, probe: float = 0.6):
         if not (math.isfinite(budget) and budget > 0.0):
             raise SplatglError(f"frame-time budget must be a positive number of seconds, got {budget}")
         self.budget, self.count, self.pixels = float(budget), int(count), int(pixels)
         self.sh_degree = sh_degree
         self.margin, self.hold, self.over, self.patience = margin, hold, over, patience
+        self.probe = probe
+        self._fast = 0          # frames in a row under ``probe`` times the budget
+        self._probe_wait: dict[int, int] = {}   # level index -> frames before probing it again
+        self._probing: int | None = None        # the level a probe moved to
         self.model = CostModel()
         self.levels = ladder(self.count, has_lod, sh_degree)
         self.index = 0          # the level in use (an index into :attr:`levels`)
@@ -197,12 +228,26 @@ class FrameBudget:
         level for the next frame (see the module doc for the hysteresis)."""
         self.model.update(float(splats), self.pixels * level.scale * level.scale, float(seconds))
         target = self.target()
+        probed, self._probing = self._probing, None
         slow = seconds > self.over * self.budget or self.predict(self.current) > self.hold * self.budget
+        self._fast = self._fast + 1 if seconds < self.probe * self.budget else 0
+        for i in list(self._probe_wait):
+            self._probe_wait[i] -= 1
+            if self._probe_wait[i] <= 0:
+                del self._probe_wait[i]
         if slow:
-            self.index, self._ups = max(target, self.index), 0   # too slow: down at once
+            if probed is not None:   # a failed probe: not again for a while (longer each time)
+                self._backoff = min(getattr(self, "_backoff", PROBE_BACKOFF) * 2, PROBE_BACKOFF_MAX)
+                self._probe_wait[probed] = self._backoff
+            self.index, self._ups = max(target, self.index + (probed is not None)), 0   # down at once
         elif target < self.index:
             self._ups += 1
             if self._ups >= self.patience:                      # fast enough for a while: up
                 self.index, self._ups = target, 0
         else:
             self._ups = 0
+            up = self.index - 1
+            if self._fast >= self.patience and up >= 0 and up not in self._probe_wait:
+                # Well under budget, yet the model sees nothing better: it may be wrong (it
+                # learnt from one level only).  Try one level up; a slow frame comes back.
+                self.index, self._probing, self._fast = up, up, 0
