@@ -9,11 +9,9 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,62 +19,6 @@ import pytest
 pytestmark = pytest.mark.window
 
 W, H = 320, 240
-XVFB = "/usr/bin/Xvfb" if Path("/usr/bin/Xvfb").exists() else shutil.which("Xvfb")
-
-
-def _die_with_parent() -> None:
-    """In the Xvfb child: get SIGTERM when the test process dies (even by a crash), so a
-    failed run leaves no server behind (Linux prctl PR_SET_PDEATHSIG)."""
-    try:
-        import ctypes
-        import signal
-
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM, 0, 0, 0)
-    except Exception:
-        pass
-
-
-@pytest.fixture(scope="session")
-def xvfb_display():
-    """A private Xvfb server; DISPLAY points at it for the session, and it is killed after.
-
-    Xvfb picks a free display itself and writes its number to a pipe once it accepts clients
-    (``-displayfd``): no polling for its socket, no guessed display number that another test
-    run could take at the same moment.
-    """
-    if XVFB is None:
-        pytest.skip("Xvfb not installed (Debian package xvfb): cannot open windows headlessly")
-    read_fd, write_fd = os.pipe()
-    # -noreset: without it the server resets when its last client leaves, and a viewer opened
-    # right after another one closed can fail to connect during the reset.
-    proc = subprocess.Popen([XVFB, "-displayfd", str(write_fd), "-screen", "0", "1280x1024x24",
-                             "-nolisten", "tcp", "-noreset"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, pass_fds=(write_fd,),
-                            preexec_fn=_die_with_parent)
-    os.close(write_fd)
-    with os.fdopen(read_fd) as ready:
-        number = ready.readline().strip()  # blocks until the server is up, or it exited
-    if not number.isdigit():
-        proc.kill()
-        pytest.skip(f"Xvfb did not start (exit status {proc.wait()})")
-    n = int(number)
-    old = os.environ.get("DISPLAY")
-    os.environ["DISPLAY"] = f":{n}"
-    import glfw
-
-    if not glfw.init():
-        proc.kill()
-        pytest.skip(f"glfw cannot initialise on Xvfb :{n}")
-    glfw.terminate()
-    yield f":{n}"
-    if old is None:
-        os.environ.pop("DISPLAY", None)
-    else:
-        os.environ["DISPLAY"] = old
-    proc.terminate()
-    proc.wait(timeout=10)
-
-
 @pytest.fixture(scope="module")
 def demo():
     from splatgl.commands._common import demo_scene_path

@@ -1,0 +1,99 @@
+"""The viewer's frame-time budget in a real glfw window under Xvfb (splatgl.viewer.pacing):
+drafts while the camera moves, the exact frame at rest (what ``splatgl render`` writes), keys
+held back while a refinement step draws, and no budget for ``--benchmark``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.window
+
+W, H = 320, 240
+
+
+@pytest.fixture(scope="module")
+def scene():
+    from helpers import IN_VIEW, random_scene
+
+    return random_scene(20_000, seed=5, degree=1, **IN_VIEW)
+
+
+def _viewer(scene, tmp_path, fps):
+    from splatgl.cameras.camera import Camera
+    from splatgl.errors import ContextError
+    from splatgl.model.settings import RenderSettings
+    from splatgl.viewer.app import Viewer, ViewerOptions
+
+    options = ViewerOptions(screenshot_dir=tmp_path, vsync=False, target_fps=fps)
+    try:
+        return Viewer(scene, RenderSettings(background=(0.1, 0.2, 0.3)),
+                      Camera.from_fov(W, H, 60.0, np.eye(4)), options=options)
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
+
+
+def _move(v, n: int = 4) -> None:
+    from dataclasses import replace
+
+    for i in range(n):
+        v.state = replace(v.state, yaw=v.state.yaw + 0.5)
+        assert v.step(dt=0.0)
+
+
+def _window(v) -> np.ndarray:
+    """The window's pixels (the status panel hidden first: press I)."""
+    v.ctx.screen.use()
+    raw = v.ctx.screen.read(components=3)
+    return np.frombuffer(raw, np.uint8).reshape(H, W, 3)[::-1].astype(np.int32)
+
+
+def test_moving_drafts_then_exact_at_rest(xvfb_display, scene, tmp_path):
+    # A budget of 0.2 ms: every frame is over it, so moving frames are drafts.
+    with _viewer(scene, tmp_path, 5000.0) as v:
+        assert v.paced
+        _move(v)
+        assert not v.pacer.session.shown.level.exact
+        assert v.last.quality.startswith("moving: scale")
+        steps = 0
+        while v.step(dt=0.0):
+            steps += 1
+            assert steps < 10
+        assert v.pacer.exact and v.last.quality.startswith("exact")
+        assert not v.step(dt=0.0)        # exact: nothing more to draw
+        v.overlay.visible = False
+        v.present()
+        want = np.clip(v.renderer.render(scene, v.camera(), v.settings)[..., :3], 0.0, 1.0)
+        assert np.abs(_window(v) - np.round(want * 255)).max() <= 1
+
+
+def test_keys_during_a_refinement_act_after_it(xvfb_display, scene, tmp_path, monkeypatch):
+    import glfw
+
+    from splatgl.output.images import read_image
+    from splatgl.viewer import pacing
+
+    with _viewer(scene, tmp_path, 5000.0) as v:
+        _move(v)
+        pressed = []
+
+        def poll():   # a person presses F12 while the refinement draws
+            if not pressed:
+                pressed.append(True)
+                v.on_key(glfw.KEY_F12, glfw.PRESS, 0)
+                assert not list(tmp_path.glob("*.png")), "the screenshot ran in the middle of a draw"
+
+        monkeypatch.setattr(pacing.glfw, "poll_events", poll)
+        assert not v.step(dt=0.0)        # the step was abandoned for the key
+        assert pressed and v.pacer.session.status == "refining"
+        shots = list(tmp_path.glob("*.png"))
+        assert len(shots) == 1           # the key acted once the draw was left
+        want = np.clip(v.renderer.render(scene, v.camera(), v.settings)[..., :3], 0.0, 1.0)
+        assert np.abs(read_image(shots[0]) - want).max() <= 0.5 / 255 + 1e-6
+
+
+def test_no_budget_draws_every_frame_exact(xvfb_display, scene, tmp_path):
+    with _viewer(scene, tmp_path, 0.0) as v:
+        assert not v.paced
+        _move(v, 2)
+        assert v.pacer.session is None and v.last.quality == ""
