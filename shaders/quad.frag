@@ -17,7 +17,9 @@ layout(early_fragment_tests) in;
 flat in vec2 v_mean2d;
 flat in vec3 v_conic;
 flat in vec4 v_color;
+#ifdef DEPTH_OUTPUT
 flat in float v_depth;
+#endif
 #ifdef EXTENT_FAST
 in vec2 v_unit;                // corner coordinate in sigmas
 #endif

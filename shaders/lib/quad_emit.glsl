@@ -1,12 +1,17 @@
 // Emits one corner of a splat's quad (triangle strip, gl_VertexID 0..3) and the fragment
-// inputs of quad.frag.  Shared by quad.vert (math per vertex) and quad_light.vert (math from
+// inputs of quad.frag.  With TRIANGLE_PER_SPLAT, one vertex of a single triangle instead
+// (gl_VertexID 0..2): the equilateral triangle circumscribing the ellipse in the axes' frame,
+// which holds every pixel the quad's inscribed ellipse holds (the ellipse and fast extents; the
+// square extent keeps its quad).  Shared by quad.vert (math per vertex) and quad_light.vert (math from
 // the compute pre-pass).
 // Twin: none (places a corner from splat_setup.glsl's axes, whose twin is ellipse_axes()).
 
 flat out vec2 v_mean2d;       // pixel centre of the splat
 flat out vec3 v_conic;        // (a, b, c) of Sigma'^-1
 flat out vec4 v_color;        // (SH colour, opacity)
+#ifdef DEPTH_OUTPUT
 flat out float v_depth;       // camera-space z of the centre, for the depth layer
+#endif
 #ifdef EXTENT_FAST
 out vec2 v_unit;              // corner coordinate in sigmas (identity conic)
 #endif
@@ -15,7 +20,13 @@ const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothi
 
 void emit_corner(vec2 mean2d, vec2 axis1, vec2 axis2, vec3 con, vec3 color, float opacity,
                  float depth) {
+#ifdef TRIANGLE_PER_SPLAT
+    // Vertices 2 from the centre at 90, 210 and 330 degrees: the unit circle is inscribed.
+    vec2 corner = gl_VertexID == 0 ? vec2(0.0, 2.0)
+                : vec2(gl_VertexID == 1 ? -1.7320508075688772 : 1.7320508075688772, -1.0);
+#else
     vec2 corner = vec2((gl_VertexID & 1) != 0 ? 1.0 : -1.0, (gl_VertexID & 2) != 0 ? 1.0 : -1.0);
+#endif
     // Guard (stress case near_tiny): a splat just past a 1e-8 near plane had quads 6e10 px wide
     // (NDC ~1e9), which llvmpipe's clipping lost (max error 0.30).  A half-axis longer than
     // reach = |mean - viewport centre| + |viewport| covers no more of the viewport (the
@@ -30,7 +41,9 @@ void emit_corner(vec2 mean2d, vec2 axis1, vec2 axis2, vec3 con, vec3 color, floa
     v_mean2d = mean2d;
     v_conic = con;
     v_color = vec4(color, opacity);
+#ifdef DEPTH_OUTPUT
     v_depth = depth;
+#endif
 #ifdef EXTENT_FAST
     v_unit = corner * shrink * FAST_CORNER_SIGMAS;
 #endif
