@@ -23,7 +23,7 @@ from ..gl.egl_devices import is_software_renderer
 from ..model.scene import Scene
 from ..model.settings import RenderSettings
 from ..renderers.early_stop import MAX_BATCH
-from .budget import EXACT, FrameBudget, Level
+from .budget import EXACT, SPLAT_UNIT, FrameBudget, Level
 from .draft import DraftFrame, LevelRenderer
 from .lod_cache import LodProvider
 
@@ -31,6 +31,9 @@ from .lod_cache import LodProvider
 SOFTWARE_FPS = 10.0
 GPU_FPS = 60.0
 
+#: A refinement step polls for input after each batch of about this share of the budget: the
+#: answer to input waits for at most that batch plus one moving frame.
+REFINE_BATCH_SHARE = 0.3
 #: Smallest batch of a refinement step's draw (splats): below it the finish between batches
 #: costs more than the answer time it buys.
 MIN_REFINE_BATCH = 4096
@@ -79,6 +82,7 @@ class Session:
         self._moving_level: Level = EXACT
         self._plan: list[Level] = []
         self.refine_started: float | None = None
+        self._full_per_splat: float | None = None   # seconds a splat of the last full-detail step
 
     def _sync_lod(self) -> None:
         if self.levels.has_lod and not self._lod_seen:
@@ -99,10 +103,13 @@ class Session:
         return steps
 
     def _batch(self) -> int:
-        per_splat = self.budget.model.theta[1]
+        """Splats per batch of a refinement step: about REFINE_BATCH_SHARE of a budget's worth,
+        at the last full-detail frame's cost per splat (else the cost model's)."""
+        per_splat = self._full_per_splat or self.budget.model.theta[1] / SPLAT_UNIT
         if per_splat <= 0.0:
             return MAX_BATCH
-        return int(min(MAX_BATCH, max(MIN_REFINE_BATCH, self.budget.budget / per_splat)))
+        return int(min(MAX_BATCH, max(MIN_REFINE_BATCH,
+                                      REFINE_BATCH_SHARE * self.budget.budget / per_splat)))
 
     def frame(self, camera: Camera, input_pending: Callable[[], bool] | None = None) -> DraftFrame | None:
         """Draw what ``camera`` calls for now (a moving frame or the next refinement step);
@@ -126,6 +133,8 @@ class Session:
             self.status = "refining"
             return None
         self._plan.pop(0)
+        if level.budget is None and frame.splats:
+            self._full_per_splat = frame.seconds / frame.splats
         self.shown = frame
         self.status = "refining" if self._plan else "exact"
         return frame
