@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 from pathlib import Path
 
 from ..edit import edit_files
@@ -69,7 +70,14 @@ class _Ordered(argparse.Action):
         namespace.operations = ops
 
 
+#: Option values that are numbers (lists) starting with a minus sign: "-1,0,2.5,1e-3".
+#: argparse takes only single negative numbers for values by default and would read
+#: ``--crop-box -1,-1,-1,1,1,1`` as an unknown option.
+NEGATIVE_NUMBERS = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,-?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)*$")
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    p._negative_number_matcher = NEGATIVE_NUMBERS  # the one argparse hook for it (see above)
     p.add_argument("inputs", nargs="+", type=Path, metavar="IN",
                    help="scene files (any supported format); several are merged in order")
     p.add_argument("-o", "--output", type=Path, default=None,
