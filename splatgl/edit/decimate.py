@@ -12,7 +12,8 @@ rounds instead of to fixed groups:
    |c_a - c_b|^2 / 0.1^2)`` with ``w`` = opacity x area, ``s`` the largest scale and ``c`` the
    DC colour (0-1): small, faint, overlapping, similar pairs are cheap; large opaque splats far
    apart or of different colours are dear;
-3. merge the cheapest pairs, at most half of them per round (so a round removes at most a
+3. while more than 4x the target remain, merge every pair (a uniform halving); from there on
+   merge the cheapest pairs, at most half of them per round (so a round removes at most a
    quarter of the splats and the next one re-pairs the merged splats with their new
    neighbours), and never more than the count still to remove; repeat until the target.
 
@@ -37,8 +38,12 @@ from ..twins.project import covariance_3d, quat_to_rotmat
 
 #: Pairs per block of the cost and merge computations (float64 temporaries of one block).
 BLOCK = 1 << 16
-#: The largest share of a round's pairs merged in that round.
+#: The largest share of a round's pairs merged in that round (the adaptive rounds).
 ROUND_SHARE = 0.5
+#: While more than this many times the target remain, every pair merges (uniform rounds):
+#: measured on the shared scenes, choosing cheap pairs pays for the last two halvings, while
+#: choosing them through many rounds merges the same regions over and over (docs/editing.md).
+UNIFORM_ABOVE = 4
 #: Colour difference (0-1 units) that costs as much as centres one combined scale apart.
 COLOUR_SCALE = 0.1
 
@@ -93,20 +98,22 @@ class Decimate:
                                "gives 3D Gaussians)")
         start, rnd = scene.count, 0
         while scene.count > target:
-            scene = _round(scene, scene.count - target, rnd % 2)
+            share = 1.0 if scene.count > UNIFORM_ABOVE * target else ROUND_SHARE
+            scene = _round(scene, scene.count - target, rnd % 2, share)
             rnd += 1
             if progress is not None:
                 progress(start - scene.count, start - target, "decimating")
         return scene
 
 
-def _round(scene: Scene, need: int, offset: int) -> Scene:
-    """One round: merge the cheapest Morton-neighbour pairs (at most ``need``)."""
+def _round(scene: Scene, need: int, offset: int, share: float) -> Scene:
+    """One round: merge the cheapest ``share`` of the Morton-neighbour pairs (at most
+    ``need``)."""
     order = morton_order_clamped_box(scene.means.astype(np.float64))
     npairs = (scene.count - offset) // 2
     a = order[offset:offset + 2 * npairs:2]
     b = order[offset + 1:offset + 2 * npairs:2]
-    limit = min(need, max(1, int(npairs * ROUND_SHARE)))
+    limit = min(need, max(1, int(npairs * share)))
     cost = np.concatenate([pair_cost(scene, a[s:s + BLOCK], b[s:s + BLOCK])
                            for s in range(0, npairs, BLOCK)])
     chosen = np.sort(np.argpartition(cost, limit - 1)[:limit]) if limit < npairs else np.arange(npairs)
