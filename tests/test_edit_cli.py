@@ -182,6 +182,7 @@ def test_overdraw_is_the_quad_paths_own_coverage_estimate(ctx):
 
 
 @pytest.mark.shared
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ply/donut_sh0.ply", "compressed_ply/guitar.compressed.ply",
                                   "spz/biker_v4.spz"])
 def test_every_operation_on_the_real_scenes(tmp_path, capsys, shared_scenes, name):
