@@ -111,6 +111,12 @@ def test_allow_empty_writes_a_scene_of_no_splats(tmp_path, capsys, scene_file):
                        "--allow-empty")
     assert code == 0 and "0 splats" in out
     assert b"element vertex 0\n" in out_path.read_bytes()
+    for ext in ("sog", "compressed.ply", "glb", "splat"):
+        line = one_line_error(capsys, scene_file, "-o", tmp_path / f"e.{ext}", "--crop-box",
+                              "5,5,5,6,6,6", "--allow-empty")
+        assert line.endswith("format cannot hold zero splats; nothing written (write .ply or "
+                             ".spz for an empty scene)")
+        assert not (tmp_path / f"e.{ext}").exists()
 
 
 def test_merge_with_transforms_through_the_cli(tmp_path, capsys):

@@ -19,6 +19,11 @@ from .pipeline import Step, apply_operations
 from .placement import MergeBuilder, merged_sh_degree, transform_scene
 
 
+#: Writers that can write a scene of zero splats (``--allow-empty``); the others' files need
+#: bounds, chunks or textures of at least one splat.
+EMPTY_FORMATS = ("ply", "spz")
+
+
 @dataclass(frozen=True)
 class EditReport:
     """What :func:`edit_files` did (or, with ``dry_run``, would do)."""
@@ -108,6 +113,9 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
             if culprit else ""
         raise SplatglError(f"edit: no splats left{by}; nothing written (use --allow-empty to "
                            "write an empty scene)")
+    if result.count == 0 and writer is not None and writer.NAME not in EMPTY_FORMATS:
+        raise SplatglError(f"{output}: the {writer.NAME} format cannot hold zero splats; nothing "
+                           f"written (write .ply or .spz for an empty scene)")
     size = None
     if not dry_run:
         try:
