@@ -185,6 +185,13 @@ def test_floaters_are_isolated_and_faint_and_the_threshold_is_reported():
     assert sorted(set(range(605)) - set(kept(s, every).tolist())) == [600, 601, 602, 603, 604]
 
 
+def test_floaters_leave_nan_centres_to_drop_invalid():
+    rng = np.random.default_rng(8)
+    xyz = np.r_[rng.normal(0, 0.1, (100, 3)), [[np.nan, 0, 0], [9, 9, 9]]]
+    found = RemoveFloaters(neighbours=4).find(xyz, np.full(102, 0.1))
+    assert found.mask.tolist() == [False] * 101 + [True]
+
+
 def test_floater_parameters_from_text_and_their_refusals():
     assert remove_floaters("") == RemoveFloaters()
     assert remove_floaters("k=4,sigma=2.5,opacity=1") == RemoveFloaters(4, 2.5, 1.0)

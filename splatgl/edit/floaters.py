@@ -58,6 +58,12 @@ class RemoveFloaters:
         """Which of the splats with centres ``means`` (M, 3) and ``opacity`` (M,) are floaters."""
         from scipy.spatial import cKDTree
 
+        finite = np.isfinite(means).all(axis=1)
+        if not finite.all():  # NaN centres (a scene built in memory): not floaters, not in the tree
+            found = self.find(means[finite], opacity[finite], progress)
+            mask = np.zeros(means.shape[0], bool)
+            mask[finite] = found.mask
+            return Floaters(self, mask, found.mean, found.sd, found.threshold)
         m = means.shape[0]
         if m <= self.neighbours:
             return Floaters(self, np.zeros(m, bool), 0.0, 0.0, math.inf)
@@ -69,8 +75,7 @@ class RemoveFloaters:
             if progress is not None:
                 progress(min(start + BLOCK, m), m, "finding floaters")
         del tree
-        finite = np.isfinite(dist)
-        mean, sd = float(dist[finite].mean()), float(dist[finite].std())
+        mean, sd = float(dist.mean()), float(dist.std())
         threshold = mean + self.sigma * sd
         return Floaters(self, (dist > threshold) & (opacity < self.opacity), mean, sd, threshold)
 
