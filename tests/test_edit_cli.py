@@ -166,6 +166,16 @@ def test_info_stats_prints_what_filters_see(tmp_path, capsys, scene_file):
     assert stats["overdraw"]["per_pixel"] == pytest.approx(overdraw(s)["per_pixel"])
 
 
+def test_info_stats_of_surfels_has_two_scales(tmp_path, capsys):
+    from helpers import SURFELS
+
+    save_scene(tmp_path / "s.ply", random_scene(300, **SURFELS))
+    assert main(["info", str(tmp_path / "s.ply"), "--stats", "--json"]) == 0
+    stats = json.loads(capsys.readouterr().out)
+    assert "scale_1" in stats["attributes"] and "scale_2" not in stats["attributes"]
+    assert stats["overdraw"]["per_pixel"] > 0
+
+
 def test_overdraw_is_the_quad_paths_own_coverage_estimate(ctx):
     """info --stats's fragments equal what --early-stop auto's coverage pass estimates on the
     GPU for the same default view (float32 sums on the GPU: 1e-3 relative)."""

@@ -97,6 +97,8 @@ class Decimate:
             raise SplatglError("--decimate: 2DGS surfels cannot be merged (moment matching "
                                "gives 3D Gaussians)")
         start, rnd = scene.count, 0
+        if progress is not None:
+            progress(0, start - target, "decimating")  # done == 0 starts the meter's clock
         while scene.count > target:
             share = 1.0 if scene.count > UNIFORM_ABOVE * target else ROUND_SHARE
             scene = _round(scene, scene.count - target, rnd % 2, share)

@@ -69,6 +69,8 @@ class RemoveFloaters:
             return Floaters(self, np.zeros(m, bool), 0.0, 0.0, math.inf)
         tree = cKDTree(np.asarray(means, np.float64), balanced_tree=False, compact_nodes=False)
         dist = np.empty(m)
+        if progress is not None:
+            progress(0, m, "finding floaters")  # done == 0 starts the meter's clock
         for start in range(0, m, BLOCK):
             d, _ = tree.query(means[start:start + BLOCK], k=self.neighbours + 1, workers=-1)
             dist[start:start + BLOCK] = d[:, 1:].mean(axis=1)  # column 0: the splat itself
