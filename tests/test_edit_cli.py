@@ -216,3 +216,36 @@ def test_every_operation_on_the_real_scenes(tmp_path, capsys, shared_scenes, nam
               for line in out.splitlines() if "->" in line]
     assert counts == sorted(counts, reverse=True) and 0 < counts[-1] < s.count
     assert load_scene(out_path).count == counts[-1]
+
+
+# ------------------------------------------------------------------ Ctrl-C
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_an_operation_is_one_line_and_leaves_no_file(tmp_path, scene_file):
+    """SIGINT while floaters are sought (the operation waits until the signal arrives): exit
+    130, one line, no output and no temporary."""
+    import signal
+    import subprocess
+    import sys
+    import textwrap
+
+    from helpers import signal_and_wait
+
+    code = textwrap.dedent("""
+        import sys, threading
+        from splatgl.edit import floaters
+        def stuck(self, means, opacity, progress=None):
+            print("seeking", flush=True)
+            threading.Event().wait()    # until SIGINT raises here
+        floaters.RemoveFloaters.find = stuck
+        from splatgl.cli import main
+        sys.exit(main(["edit", sys.argv[1], "-o", sys.argv[2], "--remove-floaters"]))
+        """)
+    proc = subprocess.Popen([sys.executable, "-c", code, str(scene_file), str(tmp_path / "o.ply")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    assert proc.stdout.readline() == "seeking\n"
+    rest, err = signal_and_wait(proc, signal.SIGINT)
+    assert (proc.returncode, rest, err) == (130, "", "splatgl: interrupted\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.ply"]
