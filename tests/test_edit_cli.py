@@ -14,7 +14,6 @@ from splatgl.cli import main
 from splatgl.edit import (CropSphere, Decimate, Filter, RemoveFloaters, ShDegree, edit_files,
                           merge_scenes)
 from splatgl.edit.statistics import attribute_statistics, overdraw
-from splatgl.errors import SplatglError
 from splatgl.formats import load_scene, save_scene
 from splatgl.model.scene import Scene
 from splatgl.model.transform import ModelTransform
