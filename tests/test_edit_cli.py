@@ -78,6 +78,7 @@ def test_dry_run_prints_the_removals_and_writes_nothing(tmp_path, capsys, scene_
     (["--transform", "{}", "--transform", "{}", "--sh-degree", "1"],
      "--transform given 2 time(s) for 1 input(s)"),
     (["--crop-sphere", "0,0,0,100", "-o", "x.xyz"], "cannot write this format"),
+    (["--sh-degree", "0", "--spz-axes", "rdf"], "--spz-axes applies to .spz inputs only"),
 ])
 def test_bad_options_are_one_line_before_reading(tmp_path, capsys, argv, message, monkeypatch,
                                                  scene_file):

@@ -94,8 +94,9 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
         writer = writer_for(output)
         if not dry_run:
             check_output_path(output, overwrite=force)
-    for path in inputs:
-        detect_format(path)  # a missing or unknown input: before reading the others
+    formats = [detect_format(path).NAME for path in inputs]  # missing or unknown: before reading
+    if spz_axes is not None and "spz" not in formats:
+        raise SplatglError("--spz-axes applies to .spz inputs only")
     progress = progress if progress is not None else default_progress()
     scene, counts, steps = _read(inputs, transforms, drop_invalid, progress, spz_axes)
     edited = apply_operations(scene, operations, progress)
