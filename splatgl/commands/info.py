@@ -18,7 +18,10 @@ DESCRIPTION = (
     "row, and print its statistics: count, kind, SH degree, bounds (full and 1-99 percentile),\n"
     "opacity, scale and anisotropy ranges; for SPZ, which axes the file stores and how that was\n"
     "decided (its SPZ_ADOBE_coordinate_system extension, else --spz-axes, else the version's\n"
-    "default).  Bad input exits with status 2 and one line naming the file and the field."
+    "default).  With --stats, also each attribute `splatgl edit --filter` sees (min, 1st and\n"
+    "99th percentiles, median, max, with units) and the estimated overdraw of the default view\n"
+    "(fragments per pixel), to choose filter thresholds before editing.  Bad input exits with\n"
+    "status 2 and one line naming the file and the field."
 )
 ORDER = 20
 
@@ -29,6 +32,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop rows holding NaN/Inf or degenerate quaternions (with a "
                              "warning) instead of rejecting the file")
+    parser.add_argument("--stats", action="store_true",
+                        help="also per-attribute statistics (min, 1st percentile, median, 99th "
+                             "percentile, max of what `splatgl edit --filter` sees) and the "
+                             "estimated overdraw of the default view (fragments per pixel)")
     add_spz_axes_argument(parser)
 
 
@@ -41,8 +48,15 @@ def run(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():  # a conflict with the file was reported on loading
             warnings.simplefilter("ignore")
             info["spz_axes"] = read_axes(args.scene, args.spz_axes).as_dict()
+    text = format_info(args.scene, scene, info)
+    if args.stats:
+        from ..edit.statistics import attribute_statistics, format_statistics, overdraw
+
+        info["attributes"] = attribute_statistics(scene)
+        info["overdraw"] = overdraw(scene)
+        text += "\n" + format_statistics(info["attributes"], info["overdraw"])
     if not json_to_stdout(args):
-        print(format_info(args.scene, scene, info))
+        print(text)
     if args.json is not None:
         emit_json(args, {"path": str(args.scene), **info}, indent=2)
     return 0

@@ -15,6 +15,9 @@ from ..model.scene import Scene, sh_to_rest
 from .ply import EXTENSIONS, NAME  # noqa: F401 (the format registry reads them here too)
 from .ply_header import SCALAR_TYPES
 
+#: Rows per block of a binary write (one block's records exist at a time).
+WRITE_BLOCK = 1 << 18
+
 
 def write_elements(path, elements: list[tuple[str, np.ndarray]], byte_order: str = "little",
                    ascii: bool = False, comments: tuple[str, ...] = ()) -> None:
@@ -23,19 +26,10 @@ def write_elements(path, elements: list[tuple[str, np.ndarray]], byte_order: str
     ``byte_order`` is 'little' or 'big' (binary); ``ascii=True`` writes text with 9 significant
     digits for floats, enough for float32 to read back bit-exact.
     """
-    if byte_order not in ("little", "big"):
-        raise ValueError(f"byte_order must be 'little' or 'big', not {byte_order!r}")
-    fmt = "ascii" if ascii else f"binary_{byte_order}_endian"
-    codes = {v: k for k, v in SCALAR_TYPES.items() if k.isalpha() and not k[-1].isdigit()}
-    head = ["ply", f"format {fmt} 1.0", *(f"comment {c}" for c in comments)]
-    for name, arr in elements:
-        head.append(f"element {name} {len(arr)}")
-        for fname in arr.dtype.names:
-            head.append(f"property {codes[arr.dtype[fname].str[1:]]} {fname}")
-    head.append("end_header")
     order = "<" if byte_order == "little" else ">"
     with open(path, "wb") as fh:
-        fh.write(("\n".join(head) + "\n").encode("ascii"))
+        fh.write(_header([(name, len(arr), arr.dtype) for name, arr in elements], byte_order,
+                         ascii, comments))
         for _, arr in elements:
             if ascii:
                 fmts = ["%.9g" if arr.dtype[n].kind == "f" else "%d" for n in arr.dtype.names]
@@ -43,8 +37,28 @@ def write_elements(path, elements: list[tuple[str, np.ndarray]], byte_order: str
                 for row in zip(*cols):
                     fh.write((" ".join(f % v for f, v in zip(fmts, row)) + "\n").encode("ascii"))
             else:
-                dt = np.dtype([(n, order + arr.dtype[n].str[1:]) for n in arr.dtype.names])
-                arr.astype(dt).tofile(fh)
+                _ordered(arr, order).tofile(fh)
+
+
+def _ordered(arr: np.ndarray, order: str) -> np.ndarray:
+    """``arr`` with every field in byte ``order`` ("<" or ">"); no copy when it already is."""
+    dt = np.dtype([(n, order + arr.dtype[n].str[1:]) for n in arr.dtype.names])
+    return arr.astype(dt, copy=False)
+
+
+def _header(elements, byte_order: str, ascii: bool, comments) -> bytes:
+    """The PLY header of ``elements`` ``[(name, count, structured dtype)]``."""
+    if byte_order not in ("little", "big"):
+        raise ValueError(f"byte_order must be 'little' or 'big', not {byte_order!r}")
+    fmt = "ascii" if ascii else f"binary_{byte_order}_endian"
+    codes = {v: k for k, v in SCALAR_TYPES.items() if k.isalpha() and not k[-1].isdigit()}
+    head = ["ply", f"format {fmt} 1.0", *(f"comment {c}" for c in comments)]
+    for name, count, dtype in elements:
+        head.append(f"element {name} {count}")
+        for fname in dtype.names:
+            head.append(f"property {codes[dtype[fname].str[1:]]} {fname}")
+    head.append("end_header")
+    return ("\n".join(head) + "\n").encode("ascii")
 
 
 def scene_to_vertices(scene: Scene, normals: bool = True) -> np.ndarray:
@@ -75,5 +89,16 @@ def write(path, scene: Scene, *, byte_order: str = "little", ascii: bool = False
     Reading the file back gives bit-identical arrays.  ``byte_order='big'`` and ``ascii=True``
     exist mainly to exercise the reader; ``normals=False`` leaves out ``nx ny nz``.
     """
-    write_elements(path, [("vertex", scene_to_vertices(scene, normals))], byte_order, ascii,
-                   comments=("written by splatgl",))
+    comments = ("written by splatgl",)
+    if ascii:
+        write_elements(path, [("vertex", scene_to_vertices(scene, normals))], byte_order, ascii,
+                       comments=comments)
+        return
+    # Binary: the rows in blocks, so a large scene is never held twice more as file records.
+    dtype = scene_to_vertices(scene.subset(slice(0, 0)), normals).dtype
+    order = "<" if byte_order == "little" else ">"
+    with open(path, "wb") as fh:
+        fh.write(_header([("vertex", scene.count, dtype)], byte_order, False, comments))
+        for start in range(0, scene.count, WRITE_BLOCK):
+            block = scene.subset(slice(start, start + WRITE_BLOCK))
+            _ordered(scene_to_vertices(block, normals), order).tofile(fh)

@@ -67,6 +67,11 @@ class LodTree:
         return int(self.offsets[level + 1] - self.offsets[level])
 
 
+def area_proxy(scales: np.ndarray) -> np.ndarray:
+    """(M,) the ellipsoid's surface-area proxy ``s1 s2 + s1 s3 + s2 s3`` of (M, 3) scales."""
+    return scales[:, 0] * scales[:, 1] + scales[:, 0] * scales[:, 2] + scales[:, 1] * scales[:, 2]
+
+
 def _extent(opacity: np.ndarray, max_scale: np.ndarray) -> np.ndarray:
     """``k(o) * max_scale``: the radius within which alpha can reach 1/255 (as in the cull)."""
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -74,8 +79,12 @@ def _extent(opacity: np.ndarray, max_scale: np.ndarray) -> np.ndarray:
     return k * max_scale
 
 
-def _merge(mu, cov, opac, area, sh, branching):
-    """One level up: groups of ``branching`` consecutive rows -> parents (float64 arrays)."""
+def merge_groups(mu, cov, opac, area, sh, branching):
+    """One level up: groups of ``branching`` consecutive rows -> parents, by the moment matching
+    above (float64 arrays: means (M, 3), covariances (M, 3, 3), opacities (M,), areas (M,), SH
+    (M, K, 3)).  Returns ``(means, covariances, opacities, areas, sh, scales, quats, owner)`` of
+    the parents (``owner``: (M,) parent of each row).  The hierarchy's levels and
+    :mod:`splatgl.edit.decimate` (pairs of neighbours) both merge through it."""
     n = mu.shape[0]
     starts = np.arange(0, n, branching)
     w = opac * area
@@ -90,7 +99,7 @@ def _merge(mu, cov, opac, area, sh, branching):
     evals, evecs = np.linalg.eigh(p_cov)
     scales = np.sqrt(np.maximum(evals, 1e-30))
     evecs[np.linalg.det(evecs) < 0, :, 0] *= -1.0  # a proper rotation
-    p_area = scales[:, 0] * scales[:, 1] + scales[:, 0] * scales[:, 2] + scales[:, 1] * scales[:, 2]
+    p_area = area_proxy(scales)
     p_opac = np.minimum(np.add.reduceat(opac * area, starts) / np.maximum(p_area, 1e-300), ALPHA_MAX)
     return p_mu, p_cov, p_opac, p_area, p_sh, scales, rotmat_to_quat(evecs), owner
 
@@ -109,7 +118,7 @@ def build_hierarchy(scene: Scene, branching: int = BRANCHING, progress=None) -> 
     mu = leaves.means.astype(np.float64)
     opac = leaves.opacities.astype(np.float64)
     scales = leaves.scales.astype(np.float64)
-    area = scales[:, 0] * scales[:, 1] + scales[:, 0] * scales[:, 2] + scales[:, 1] * scales[:, 2]
+    area = area_proxy(scales)
     sh = leaves.sh.astype(np.float64)
     cov = np.empty((n, 3, 3))
     for s in range(0, n, BLOCK):
@@ -117,7 +126,7 @@ def build_hierarchy(scene: Scene, branching: int = BRANCHING, progress=None) -> 
                                          scales[s:s + BLOCK])
     levels = []  # (means, quats, scales, opacity, sh) of each internal level
     while mu.shape[0] > 1:
-        p_mu, p_cov, p_opac, p_area, p_sh, p_scales, p_quat, owner = _merge(mu, cov, opac, area, sh,
+        p_mu, p_cov, p_opac, p_area, p_sh, p_scales, p_quat, owner = merge_groups(mu, cov, opac, area, sh,
                                                                             branching)
         levels.append((p_mu, p_quat, p_scales, p_opac, p_sh))
         mu, cov, opac, area, sh = p_mu, p_cov, p_opac, p_area, p_sh

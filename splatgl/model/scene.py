@@ -21,6 +21,15 @@ from ..errors import SceneFormatError
 MIN_QUAT_NORM = 1e-12
 
 
+class InvalidRowsDropped(UserWarning):
+    """The warning :func:`activate` gives when ``drop_invalid`` removed rows: ``dropped`` of
+    ``total`` rows of the file ``path`` (what ``splatgl edit --drop-invalid`` counts)."""
+
+    def __init__(self, path, dropped: int, total: int):
+        super().__init__(f"{path}: dropped {dropped} invalid row(s) of {total}")
+        self.path, self.dropped, self.total = path, dropped, total
+
+
 class SplatKind(enum.Enum):
     """What each primitive is: a 3D Gaussian (3 scales) or a 2DGS surfel (2 scales)."""
 
@@ -370,7 +379,7 @@ def activate(
                 "have a zero or degenerate quaternion", drop_invalid, dropped)
     if dropped.any():
         keep = ~dropped
-        warnings.warn(f"{path}: dropped {int(dropped.sum())} invalid row(s) of {n}", stacklevel=2)
+        warnings.warn(InvalidRowsDropped(path, int(dropped.sum()), n), stacklevel=2)
         if not keep.any():
             raise SceneFormatError(path, f"all {n} rows are invalid; nothing left to render")
         means, quats, log_scales = means[keep], quats[keep], log_scales[keep]

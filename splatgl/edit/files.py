@@ -1,0 +1,162 @@
+"""``splatgl edit``'s work on files: read the inputs (each placed by its transform, merged in
+order), apply the operations, refuse an empty result, write the output atomically."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import SplatglError
+from ..formats import detect_format, load_scene, save_scene, writer_for
+from ..formats.convert import MAX_SH_DEGREE_OF_FORMAT
+from ..model.scene import InvalidRowsDropped
+from ..model.transform import ModelTransform
+from ..output.files import check_output_path
+from ..progress import default_progress
+from .pipeline import Step, apply_operations
+from .placement import MergeBuilder, merged_sh_degree, transform_scene
+
+
+#: Writers that can write a scene of zero splats (``--allow-empty``); the others' files need
+#: bounds, chunks or textures of at least one splat.
+EMPTY_FORMATS = ("ply", "spz")
+
+
+@dataclass(frozen=True)
+class EditReport:
+    """What :func:`edit_files` did (or, with ``dry_run``, would do)."""
+
+    inputs: tuple[Path, ...]
+    input_counts: tuple[int, ...]
+    output: Path | None
+    steps: tuple[Step, ...]
+    count: int
+    sh_degree: int
+    dry_run: bool
+    seconds: float
+    output_bytes: int | None = None
+    notes: tuple[str, ...] = field(default=())
+
+    def as_dict(self) -> dict:
+        return {"inputs": [{"path": str(p), "splats": n} for p, n in
+                           zip(self.inputs, self.input_counts)],
+                "output": None if self.output is None else str(self.output),
+                "dry_run": self.dry_run, "steps": [s.as_dict() for s in self.steps],
+                "splats": self.count, "sh_degree": self.sh_degree,
+                "output_bytes": self.output_bytes, "seconds": self.seconds,
+                "notes": list(self.notes)}
+
+
+def _check_transforms(inputs, transforms):
+    if transforms is None:
+        return [None] * len(inputs)
+    transforms = list(transforms)
+    if len(transforms) != len(inputs):
+        raise SplatglError(f"--transform given {len(transforms)} time(s) for {len(inputs)} "
+                           "input(s): give one per input, in input order ('{}' for none)")
+    for t in transforms:
+        if t is not None and not isinstance(t, ModelTransform):
+            raise SplatglError(f"--transform: expected a ModelTransform, got {t!r}")
+    return transforms
+
+
+def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_invalid=False,
+               allow_empty=False, force=False, dry_run=False, progress=None, spz_axes=None,
+               **writer_options) -> EditReport:
+    """Read ``inputs`` (scene files), merge them, apply ``operations``, write ``output``.
+
+    Args:
+        inputs: one or more scene files; several are merged in order
+            (:func:`splatgl.edit.merge_scenes`'s SH rule), each placed by its transform.
+        output: the file to write (format from its extension); None only with ``dry_run``.
+        operations: edit operations (:mod:`splatgl.edit`), applied in order to the merged scene.
+        transforms: one :class:`ModelTransform` (or None) per input.
+        drop_invalid: drop rows with NaN/Inf or zero quaternions while reading (counted as the
+            first step), instead of refusing such files.
+        allow_empty: write a scene of zero splats instead of refusing it.
+        force: replace an existing output.  dry_run: do everything but write.
+    Everything that can be checked before reading is checked first (output format and folder,
+    an existing output, the number of transforms); the output appears only when complete.
+    """
+    t0 = time.perf_counter()
+    inputs = [Path(p) for p in ([inputs] if isinstance(inputs, (str, Path)) else inputs)]
+    if not inputs:
+        raise SplatglError("edit: give at least one input scene")
+    transforms = _check_transforms(inputs, transforms)
+    operations = list(operations)
+    writer = None
+    if output is None and not dry_run:
+        raise SplatglError("edit: give an output file (-o OUT), or --dry-run")
+    if output is not None:
+        output = Path(output)
+        writer = writer_for(output)
+        if not dry_run:
+            check_output_path(output, overwrite=force)
+    formats = [detect_format(path).NAME for path in inputs]  # missing or unknown: before reading
+    if spz_axes is not None and "spz" not in formats:
+        raise SplatglError("--spz-axes applies to .spz inputs only")
+    progress = progress if progress is not None else default_progress()
+    scene, counts, steps = _read(inputs, transforms, drop_invalid, progress, spz_axes)
+    edited = apply_operations(scene, operations, progress)
+    del scene
+    result, notes = edited.scene, []
+    limit = MAX_SH_DEGREE_OF_FORMAT.get(writer.NAME, 3) if writer is not None else 3
+    if result.sh_degree > limit:
+        notes.append(f"the {writer.NAME} format stores SH degree {limit} only: degrees "
+                     f"{limit + 1}..{result.sh_degree} dropped")
+        result = result.with_sh_degree(limit)
+    steps += list(edited.steps)
+    if result.count == 0 and not allow_empty:
+        culprit = next((s for s in steps if s.before and not s.after), None)
+        by = f" ({culprit.name} [{culprit.parameters}] removed the last {culprit.before:,})" \
+            if culprit else ""
+        raise SplatglError(f"edit: no splats left{by}; nothing written (use --allow-empty to "
+                           "write an empty scene)")
+    if result.count == 0 and writer is not None and writer.NAME not in EMPTY_FORMATS:
+        raise SplatglError(f"{output}: the {writer.NAME} format cannot hold zero splats; nothing "
+                           f"written (write .ply or .spz for an empty scene)")
+    size = None
+    if not dry_run:
+        try:
+            save_scene(output, result, **writer_options)
+        except OSError as exc:
+            raise SplatglError(f"{output}: cannot write: {exc.strerror or exc}") from None
+        size = getattr(writer, "stored_bytes", lambda p: p.stat().st_size)(output)
+    return EditReport(tuple(inputs), tuple(counts), output, tuple(steps), result.count,
+                      result.sh_degree, dry_run, time.perf_counter() - t0, size, tuple(notes))
+
+
+def _read(inputs, transforms, drop_invalid, progress, spz_axes):
+    """The merged, placed scene of ``inputs``, their counts, and the drop-invalid step."""
+    scenes, counts, dropped, total = [], [], 0, 0
+    for path, transform in zip(inputs, transforms):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", InvalidRowsDropped)
+            axes = spz_axes if detect_format(path).NAME == "spz" else None
+            scene = load_scene(path, drop_invalid=drop_invalid, progress=progress, spz_axes=axes)
+        here = 0
+        for w in caught:
+            if isinstance(w.message, InvalidRowsDropped):
+                here += w.message.dropped
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        dropped += here
+        counts.append(scene.count + here)
+        total += counts[-1]
+        scenes.append(transform_scene(scene, transform))
+        del scene
+    steps = [Step("drop-invalid", "NaN/Inf values or zero quaternions, on reading", total,
+                  total - dropped)] if drop_invalid else []
+    kinds = {s.kind for s in scenes}
+    if len(kinds) > 1:
+        raise SplatglError(f"edit: cannot merge 3DGS Gaussians with 2DGS surfels "
+                           f"({', '.join(f'{p}: {s.kind.value}' for p, s in zip(inputs, scenes))})")
+    if len(scenes) == 1:
+        return scenes[0], counts, steps
+    builder = MergeBuilder(sum(s.count for s in scenes),
+                           merged_sh_degree([s.sh_degree for s in scenes]), scenes[0].kind)
+    while scenes:  # each input is released once copied
+        builder.add(scenes.pop(0))
+    return builder.scene(), counts, steps
