@@ -4,7 +4,7 @@ Every render returns colour and alpha; further layers are asked for as data, a s
 :class:`Layer` (``layers=with_layers(Layer.DEPTH)``), which each renderer reads: the quad path
 then adds the target and shader outputs a layer needs, the tile renderer and the reference their
 buffers.  A new layer is one member here, its output in each renderer, and its channels in the
-image table (:mod:`splatgl.output.images`).
+image table (:data:`splatgl.output.image_formats.LAYER_CHANNELS`).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Putting images on the window: one fullscreen-triangle program (shaders/present.*).
+"""Putting images on the window: one fullscreen-triangle program (splatgl/viewer/shaders/present.*).
 
 The splats are never drawn into the window's framebuffer (it may lack alpha, DESIGN.md
 section 4); they are drawn into the quad path's own float target, or come back as NumPy images
@@ -20,7 +20,7 @@ _SHADERS = Path(__file__).resolve().parent / "shaders"
 
 
 class Mode(enum.IntEnum):
-    """How :class:`Presenter` treats a texture (``MODE_*`` defines of shaders/present.frag)."""
+    """How :class:`Presenter` treats a texture (``MODE_*`` defines of splatgl/viewer/shaders/present.frag)."""
 
     PREMULTIPLIED = 0  # raw quad target (C, A): composite the background
     OPAQUE = 1         # already composited RGB
