@@ -37,14 +37,15 @@ def _axis(src: int, dst: int) -> tuple[np.ndarray, np.ndarray]:
 
 def upscale(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """``image`` ((h, w, C) premultiplied, row 0 = top) resampled to ``size`` = (W, H) by the
-    filter of shaders/upscale.frag; float64, clipped like the shader (last channel = alpha)."""
+    filter of shaders/upscale.frag (along x, then along y); float64, clipped like the shader
+    (last channel = alpha)."""
     img = np.asarray(image, np.float64)
     h, w = img.shape[:2]
     width, height = size
     ix, wx = _axis(w, width)
     iy, wy = _axis(h, height)
-    rows = np.einsum("yk,ykxc->yxc", wy, img[iy])           # (H, w, C)
-    out = np.einsum("xk,yxkc->yxc", wx, rows[:, ix])         # (H, W, C)
+    rows = np.einsum("xk,yxkc->yxc", wx, img[:, ix])         # (h, W, C): along x
+    out = np.einsum("yk,ykxc->yxc", wy, rows[iy])            # (H, W, C): along y
     out[..., :-1] = np.maximum(out[..., :-1], 0.0)
     out[..., -1] = np.clip(out[..., -1], 0.0, 1.0)
     return out
@@ -52,44 +53,60 @@ def upscale(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 
 class Upscaler:
     """Runs shaders/upscale.frag on ``ctx``: :meth:`run` fills a float texture of the target
-    size (premultiplied, row 0 = top) from a smaller one, kept for the next frame of that size.
-    It leaves its own framebuffer bound: the caller binds where it draws next."""
+    size (premultiplied, row 0 = top) from a smaller one in two passes (along x into a
+    (target width, source height) texture, then along y), both kept for the next frame of
+    those sizes.  It leaves its own framebuffer bound: the caller binds where it draws next."""
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
         self.program = ctx.program(vertex_shader=preprocess("fullscreen.vert").text,
                                    fragment_shader=preprocess("upscale.frag").text)
         self.vao = ctx.vertex_array(self.program, [])
+        self._targets: dict[str, tuple[moderngl.Texture, moderngl.Framebuffer]] = {}
         self.texture: moderngl.Texture | None = None
-        self.fbo: moderngl.Framebuffer | None = None
+
+    def _target(self, role: str, size: tuple[int, int]) -> tuple[moderngl.Texture, moderngl.Framebuffer]:
+        kept = self._targets.get(role)
+        if kept is None or kept[0].size != tuple(size):
+            if kept is not None:
+                self._release(role)
+            texture = self.ctx.texture(tuple(size), 4, dtype="f4")
+            kept = self._targets[role] = (texture, self.ctx.framebuffer(color_attachments=[texture]))
+        return kept
+
+    def _pass(self, source: moderngl.Texture, fbo: moderngl.Framebuffer, axis: int, ratio: float) -> None:
+        source.use(UPSCALE_UNIT)
+        self.program["u_axis"].value = axis
+        self.program["u_ratio"].value = ratio
+        fbo.use()
+        self.ctx.viewport = (0, 0, *fbo.size)
+        self.vao.render(moderngl.TRIANGLES, vertices=3)
 
     def run(self, source: moderngl.Texture, size: tuple[int, int]) -> moderngl.Texture:
         """``source`` upscaled to ``size`` (w, h); the returned texture is reused next call."""
-        if self.texture is None or self.texture.size != tuple(size):
-            self._release_target()
-            self.texture = self.ctx.texture(tuple(size), 4, dtype="f4")
-            self.fbo = self.ctx.framebuffer(color_attachments=[self.texture])
-        source.use(UPSCALE_UNIT)
-        self.program["u_ratio"].value = (source.size[0] / size[0], source.size[1] / size[1])
-        self.fbo.use()
-        self.ctx.viewport = (0, 0, *size)
+        (sw, sh), (w, h) = source.size, size
         self.ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-        self.vao.render(moderngl.TRIANGLES, vertices=3)
-        return self.texture
+        rows, rows_fbo = self._target("rows", (w, sh))
+        self._pass(source, rows_fbo, 0, sw / w)
+        out, out_fbo = self._target("out", (w, h))
+        self._pass(rows, out_fbo, 1, sh / h)
+        self.texture = out
+        return out
 
     def read(self) -> np.ndarray:
         """(H, W, 4) float32 of the last :meth:`run`."""
-        w, h = self.texture.size
-        return np.frombuffer(self.fbo.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4).copy()
+        texture, fbo = self._targets["out"]
+        w, h = texture.size
+        return np.frombuffer(fbo.read(components=4, dtype="f4"), np.float32).reshape(h, w, 4).copy()
 
-    def _release_target(self) -> None:
-        if self.fbo is not None:
-            self.ctx.detect_framebuffer(0).use()
-            self.fbo.release()
-            self.texture.release()
-            self.fbo = self.texture = None
+    def _release(self, role: str) -> None:
+        texture, fbo = self._targets.pop(role)
+        self.ctx.detect_framebuffer(0).use()
+        fbo.release()
+        texture.release()
 
     def release(self) -> None:
-        self._release_target()
+        for role in list(self._targets):
+            self._release(role)
         self.vao.release()
         self.program.release()
