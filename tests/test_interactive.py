@@ -238,4 +238,4 @@ def test_lod_cache_is_reused_and_a_damaged_entry_rebuilt(tmp_path, monkeypatch, 
     assert again.level_size(0) == scene.count
     entry.write_bytes(entry.read_bytes()[:100])                 # damaged: rebuilt, not an error
     assert LodProvider(scene, path, min_splats=1_000).wait().level_size(0) == scene.count
-    assert LodProvider(scene, path).wait() is None              # small scenes get no tree
+    assert LodProvider(scene, path, min_splats=scene.count + 1).wait() is None  # too small: none

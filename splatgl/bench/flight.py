@@ -40,7 +40,6 @@ from ..model.settings import RenderSettings
 #: The flight's phases (seconds): orbit until ORBIT_END, fly in until MOVE_END, then rest.
 ORBIT_END = 5.0
 MOVE_END = 8.0
-FLIGHT_SECONDS = 10.0
 #: Orbit speed (degrees a second) and the fly-in's start and end distances (framing distances).
 ORBIT_DEG_S = 36.0
 FLY_FROM, FLY_TO = 2.0, 1.0 / 3.0
@@ -106,9 +105,11 @@ class FlightResult:
 
 
 class Flight:
-    """The scripted camera of :func:`flight_camera` for one scene and image size."""
+    """The scripted camera for one scene and image size (see the module doc); ``speed`` > 1
+    flies the same path that many times faster (tests)."""
 
-    def __init__(self, scene: Scene, width: int, height: int):
+    def __init__(self, scene: Scene, width: int, height: int, speed: float = 1.0):
+        self.speed = float(speed)
         self.base = default_camera(scene, width, height)
         lo, hi = scene.robust_bounds
         self.centre = 0.5 * (lo + hi)
@@ -116,9 +117,14 @@ class Flight:
         path = scene.source.path if scene.source is not None else None
         self.up = resolve_up(None, path)[0]
 
+    @property
+    def move_end(self) -> float:
+        """Seconds of movement (then rest)."""
+        return MOVE_END / self.speed
+
     def camera(self, t: float) -> Camera:
-        """The camera ``t`` seconds into the flight (after :data:`MOVE_END`: at rest)."""
-        t = min(t, MOVE_END)
+        """The camera ``t`` seconds into the flight (after :attr:`move_end`: at rest)."""
+        t = min(t * self.speed, MOVE_END)
         if t <= ORBIT_END:
             azimuth, distance = 180.0 + ORBIT_DEG_S * t, self.distance
         else:
@@ -134,10 +140,11 @@ def _level_of(frame: FlightFrame) -> Level:
 
 def fly(renderer: Renderer, scene: Scene, name: str, width: int = 1280, height: int = 720,
         target_fps: float = 10.0, settings: RenderSettings | None = None,
-        psnr_every: int = 1, log=print) -> FlightResult:
-    """Fly over ``scene`` (see the module doc); ``psnr_every``: score every n-th moving frame."""
+        psnr_every: int = 1, log=print, speed: float = 1.0) -> FlightResult:
+    """Fly over ``scene`` (see the module doc); ``psnr_every``: score every n-th moving frame;
+    ``speed``: fly the path that many times faster (tests)."""
     settings = settings or RenderSettings()
-    flight = Flight(scene, width, height)
+    flight = Flight(scene, width, height, speed)
     t0 = time.perf_counter()
     lod = LodProvider(scene, scene.source.path if scene.source is not None else None)
     lod.wait()
@@ -149,8 +156,9 @@ def fly(renderer: Renderer, scene: Scene, name: str, width: int = 1280, height: 
         _rest(session, flight, result)
         _latency(session, flight, result)
         _score(session, flight, result, psnr_every)
-        exact = session.levels.read(session.levels.draw(flight.camera(FLIGHT_SECONDS), Level()))
-        want = renderer.render(scene, flight.camera(FLIGHT_SECONDS), settings)
+        rest = flight.camera(flight.move_end)
+        exact = session.levels.read(session.levels.draw(rest, Level()))
+        want = renderer.render(scene, rest, settings)
         result.exact_matches_render = bool(np.array_equal(exact, want))
     finally:
         session.release()
@@ -173,7 +181,7 @@ def _warm_up(session: Session, flight: Flight) -> None:
 
 def _moving(session: Session, flight: Flight, result: FlightResult) -> None:
     start = time.perf_counter()
-    while (t := time.perf_counter() - start) < MOVE_END:
+    while (t := time.perf_counter() - start) < flight.move_end:
         frame = session.frame(flight.camera(t))
         lv = frame.level
         result.frames.append(FlightFrame(t, frame.seconds, lv.scale, lv.budget, lv.sh_degree,
@@ -181,7 +189,7 @@ def _moving(session: Session, flight: Flight, result: FlightResult) -> None:
 
 
 def _rest(session: Session, flight: Flight, result: FlightResult) -> None:
-    cam = flight.camera(MOVE_END)
+    cam = flight.camera(flight.move_end)
     start = time.perf_counter()
     while not session.exact:
         frame = session.frame(cam)
@@ -196,7 +204,8 @@ def _latency(session: Session, flight: Flight, result: FlightResult) -> None:
     """Input at a random moment of a refinement: seconds until the new camera's frame is done."""
     rng = np.random.default_rng(0)
     for k in range(LATENCY_SAMPLES):
-        cam = flight.camera(MOVE_END - 0.05 * (k + 1))
+        t = flight.move_end - 0.05 * (k + 1) / flight.speed
+        cam = flight.camera(t)
         session.frame(cam)                       # a moving frame: refinement starts over
         expected = max(result.exact_seconds, 0.05)
         arrival = time.perf_counter() + rng.uniform(0.0, expected)
@@ -205,7 +214,7 @@ def _latency(session: Session, flight: Flight, result: FlightResult) -> None:
             session.frame(cam, pending)
         while time.perf_counter() < arrival:     # refinement ended first: wait for the input
             time.sleep(0.001)
-        session.frame(flight.camera(MOVE_END - 0.05 * (k + 1) - 0.02))   # the input's frame
+        session.frame(flight.camera(t - 0.02 / flight.speed))   # the input's frame
         result.latencies.append(time.perf_counter() - arrival)
 
 

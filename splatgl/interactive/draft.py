@@ -103,6 +103,8 @@ class LevelRenderer:
         cam = scaled(camera, level.scale)
         view = View.of(cam, quad.settings, quad.scene)
         t0 = time.perf_counter()
+        if on_batch is not None:   # the order stage (cull and sort, on the CPU) comes first:
+            on_batch(0, len(quad.order(view)))   # a chance to abandon the frame after it
         target = quad.target(view)
         batches, mode = quad.batches, quad.batches.mode
         batches.max_batch = max_batch

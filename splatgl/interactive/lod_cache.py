@@ -1,7 +1,8 @@
 """The level-of-detail tree a budgeted frame draws from, built in the background on first use.
 
-Scenes of at least :data:`LOD_MIN_SPLATS` splats get one: below that the per-quad cost is small
-enough that the render scale alone keeps frames within the budget (measured: docs/interactive.md).
+Scenes of at least :data:`LOD_MIN_SPLATS` splats get one: llvmpipe's front end costs about a
+microsecond a splat whatever the pixels (donut's 45k splats still took over 100 ms a frame at an
+eighth of 1280x720), so the render scale alone cannot keep such a scene within a 100 ms budget.
 The tree is built on a daemon thread (:class:`splatgl.background.Background`), so the first
 frames draw full detail at a lower scale meanwhile, and is kept in a cache folder
 (``$SPLATGL_CACHE``, else ``~/.cache/splatgl``) as ``lod/<key>.lod.ply``, the key naming the
@@ -21,7 +22,7 @@ from ..lod.io import read_lod, write_lod
 from ..model.scene import Scene, SplatKind
 
 #: Scenes with at least this many splats get a level-of-detail tree for budgeted frames.
-LOD_MIN_SPLATS = 80_000
+LOD_MIN_SPLATS = 20_000
 #: Environment variable naming the cache folder.
 CACHE_ENV = "SPLATGL_CACHE"
 

@@ -1,0 +1,83 @@
+"""``render --path --preview`` and ``bench --interactive`` end to end: the CLI, its refusals, and
+the flight benchmark's figures on a fast, short flight."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from splatgl.cli import main
+from splatgl.output.images import read_image
+
+
+def _run(capsys, *argv) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_preview_writes_draft_frames_and_says_so(tmp_path, capsys):
+    out = tmp_path / "frames"
+    code, text, err = _run(capsys, "render", "--path", "orbit:3", "--preview", "--target-fps", "5000",
+                           "--width", "160", "--height", "120", "-o", str(out))
+    assert code == 0, err
+    files = sorted(out.glob("*.png"))
+    assert [f.name for f in files] == ["00000.png", "00001.png", "00002.png"]
+    assert read_image(files[0]).shape == (120, 160, 3)          # upscaled to the path's size
+    assert "draft frames, not the exact render" in text and "of 3 frames" in text
+    assert "scale" in text                                       # a budget this tight draws drafts
+    exact = tmp_path / "exact"
+    assert _run(capsys, "render", "--path", "orbit:3", "--width", "160", "--height", "120",
+                "-o", str(exact))[0] == 0
+    assert not np.array_equal(read_image(files[1]), read_image(exact / "00001.png"))
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--resume"], "--resume would mix them"),
+    (["--workers", "2"], "one process"),
+    (["--renderer", "tile"], "quad path"),
+    (["--target-fps", "0"], "must be positive"),
+    (["--stereo", "0.06"], "--stereo cannot be combined"),
+])
+def test_preview_refusals(tmp_path, capsys, extra, message):
+    code, _, err = _run(capsys, "render", "--path", "orbit:2", "--preview", *extra,
+                        "-o", str(tmp_path / "f"))
+    assert code == 2 and message in err and err.count("\n") == 1
+    assert not (tmp_path / "f").exists()
+
+
+def test_preview_refuses_depth_layers_and_target_fps_needs_preview(tmp_path, capsys):
+    code, _, err = _run(capsys, "render", "--path", "orbit:2", "--preview",
+                        "-o", str(tmp_path / "f" / "%05d.exr"))
+    assert code == 2 and "colour frames only" in err
+    code, _, err = _run(capsys, "render", "--path", "orbit:2", "--target-fps", "5",
+                        "-o", str(tmp_path / "g"))
+    assert code == 2 and "budget of --preview" in err
+
+
+def test_bench_interactive_refuses_no_budget(capsys):
+    code, _, err = _run(capsys, "bench", "--interactive", "--target-fps", "0")
+    assert code == 2 and "must be positive" in err
+
+
+def test_flight_figures_on_a_fast_flight(gl_renderer, tmp_path):
+    from splatgl.bench.flight import fly
+    from splatgl.bench.flight_report import plot, table, write_json
+    from splatgl.commands._common import demo_scene_path
+    from splatgl.formats import load_scene
+
+    scene = load_scene(demo_scene_path())
+    result = fly(gl_renderer, scene, "demo", 160, 120, 50.0, speed=20.0, log=lambda m: None)
+    s = result.summary()
+    assert s["frames"] >= 3 and s["fps_median"] > 0
+    assert result.exact_matches_render                        # the rest frame is render's
+    assert s["rest_to_exact"] >= 0 and len(result.latencies) == 8
+    assert all(f.psnr is not None for f in result.frames)
+    assert "demo" in table([result])
+    write_json(tmp_path / "i.json", [result], {"machine": "test"})
+    doc = json.loads((tmp_path / "i.json").read_text())
+    assert doc["summary"][0]["frames"] == s["frames"]
+    plot(tmp_path / "i.png", [result])
+    assert (tmp_path / "i.png").stat().st_size > 1000
