@@ -8,6 +8,7 @@
 #include "lib/project.glsl"
 #include "lib/sh.glsl"
 #include "lib/tile_common.glsl"
+#include "lib/normal.glsl"
 #ifdef SURFEL
 #include "lib/surfel.glsl"
 #endif
@@ -63,6 +64,9 @@ void main() {
     proj_conic_o[i] = vec4(t0.xy, t1.xy);
     proj_color[i] = vec4(color, 0.0);
     proj_surfel[i] = vec4(a_u.z, a_v.z, 0.0, 0.0);
+#ifdef NORMAL_OUTPUT
+    proj_normal[i] = vec4(surfel_normal(rot, p), 0.0);
+#endif
     proj_rect[i] = uvec4(rmin, rmax);
     tiles_touched[i] = (rmax.x - rmin.x) * (rmax.y - rmin.y);
 }
@@ -109,5 +113,8 @@ void main() {
     proj_color[i] = vec4(color, 0.0);
     proj_rect[i] = uvec4(rmin, rmax);
     tiles_touched[i] = touched;
+#ifdef NORMAL_OUTPUT
+    proj_normal[i] = vec4(splat_normal(rot, scale, p), 0.0);
+#endif
 }
 #endif

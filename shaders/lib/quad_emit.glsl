@@ -10,6 +10,12 @@ flat out float v_depth;       // camera-space z of the centre, for the depth lay
 #ifdef EXTENT_FAST
 out vec2 v_unit;              // corner coordinate in sigmas (identity conic)
 #endif
+#ifdef NORMAL_OUTPUT
+flat out vec3 v_normal;       // camera-space unit normal, for the normal layer
+#endif
+#ifdef ORDERED_PASS
+flat out uint v_index;        // the splat's scene row, for the top-contributor layer
+#endif
 
 const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothing rasterised
 

@@ -21,10 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import TILE_SIZE
-
-#: Transmittance above which a blended splat is still before the median (2DGS's rule).
-MEDIAN_T = 0.5
+from ..constants import MEDIAN_T, TILE_SIZE
 
 
 @dataclass(frozen=True)
