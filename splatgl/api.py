@@ -23,7 +23,7 @@ from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
 from .gl.limits import check_image_size
 from .output.layers import Layer, RenderOutput, with_layers
-from .output.under import DepthKind, UnderImage, UnderLayer
+from .output.under import UnderImage
 from .progress import ProgressCallback
 from .model.scene import Scene, SceneSource
 from .model.settings import RenderSettings, RendererKind
@@ -144,13 +144,13 @@ class Renderer:
         camera, settings = _inputs(scene, camera, settings)
         self._check_open()
         layers = frozenset(layers)
-        geometry = under_layer(under, camera) if under is not None else None
+        view = View.of(camera, settings, scene)
+        geometry = view.geometry(under) if under is not None else None  # checked before work
         if kind is RendererKind.REFERENCE:
             return render_reference_layers(scene, camera, settings, progress, layers, under)
         make_current(self.ctx)
         self._check_size(camera, kind)
         with _reporting(self._path(scene, settings, kind), progress) as path:
-            view = View.of(camera, settings, scene)
             if geometry is None:
                 return path.render(view, layers)
             return path.render(view, layers, under=geometry)
@@ -222,18 +222,10 @@ def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettin
     math, no OpenGL), composited into ``under`` if given (:meth:`Renderer.render_layers`)."""
     from .reference import render_reference
 
-    geometry = under_layer(under, camera) if under is not None else None
+    geometry = View.of(camera, settings, scene).geometry(under) if under is not None else None
     ref = render_reference(scene, camera, settings, compat=settings.convention,
                            progress=progress, layers=frozenset(layers), under=geometry)
     return ref.output(frozenset(layers))
-
-
-def under_layer(under: UnderImage, camera: Camera) -> UnderLayer:
-    """``under`` as the renderers take it: its size checked against ``camera``'s and its depth
-    in the camera model's own metric (:meth:`~splatgl.cameras.model.CameraModel.pixel_depth`)."""
-    under.check_size(camera.width, camera.height)
-    depth = camera.model.pixel_depth(under.depth, under.kind is DepthKind.DISTANCE, camera)
-    return UnderLayer(under.rgb, under.alpha, depth)
 
 
 def _inputs(scene: Scene, camera: Camera | None,

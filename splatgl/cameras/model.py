@@ -95,6 +95,12 @@ class CameraModel:
         """(N,) the depth that sorts splats and fills the depth layer: view z by default."""
         return p_cam[:, 2]
 
+    @property
+    def depth_is_distance(self) -> bool:
+        """Whether :meth:`depth` (the sort key, the depth layers) is the distance from the
+        camera (the SPHERE models: fisheye, panorama) rather than view-space z."""
+        return self.cull is CullKind.SPHERE
+
     def pixel_depth(self, depth: np.ndarray, along_ray: bool, camera: "Camera") -> np.ndarray:
         """(H, W) depths of what this camera's pixels see, given as view-space z (``along_ray``
         False) or as the distance along each pixel's ray (True), in this model's own depth
@@ -106,7 +112,7 @@ class CameraModel:
         cameras order splats by distance, and a view-space z is refused (it does not name one
         point of a ray that turns behind the camera)."""
         d = np.where(np.isfinite(depth), np.asarray(depth, np.float64), np.inf)
-        if self.cull is CullKind.SPHERE:
+        if self.depth_is_distance:
             if not along_ray:
                 raise CameraError(f"{self.name} cameras sort splats by distance; give the geometry's "
                                   "depth as distance along the ray, not view-space z")

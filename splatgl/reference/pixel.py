@@ -89,11 +89,11 @@ class PixelListing:
         return "\n".join(lines)
 
 
-def check_pixel(x: int, y: int, camera: Camera, what: str = "--at") -> None:
-    """Refuse, in one line, a pixel outside ``camera``'s image."""
-    if not (0 <= x < camera.width and 0 <= y < camera.height):
-        raise SplatglError(f"{what} {x},{y}: outside the {camera.width}x{camera.height} image "
-                           f"(columns 0..{camera.width - 1}, rows 0..{camera.height - 1})")
+def check_pixel(x: int, y: int, width: int, height: int, what: str = "--at") -> None:
+    """Refuse, in one line, a pixel outside a ``width`` x ``height`` image."""
+    if not (0 <= x < width and 0 <= y < height):
+        raise SplatglError(f"{what} {x},{y}: outside the {width}x{height} image "
+                           f"(columns 0..{width - 1}, rows 0..{height - 1})")
 
 
 def pixel_splats(scene: Scene, camera: Camera, x: int, y: int,
@@ -102,7 +102,7 @@ def pixel_splats(scene: Scene, camera: Camera, x: int, y: int,
                  under: UnderLayer | None = None, dtype=np.float32) -> PixelListing:
     """The splats that blend into pixel (``x``, ``y``) of ``camera``'s image (module doc)."""
     settings = RenderSettings() if settings is None else settings
-    check_pixel(x, y, camera)
+    check_pixel(x, y, camera.width, camera.height)
     options = as_options(compat)
     proj = project(scene, View.of(camera, settings, scene), settings, dtype, options)
     tx, ty = x // TILE_SIZE, y // TILE_SIZE
