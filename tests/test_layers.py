@@ -24,7 +24,6 @@ from splatgl.api import default_camera, render_reference_layers
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.registry import retarget
 from splatgl.errors import SplatglError
-from splatgl.model.scene import SplatKind
 from splatgl.model.settings import RendererKind, RenderSettings
 from splatgl.output.layers import (BASE, Layer, NormalSpace, concat_outputs, parse_layer_names,
                                    unit_normals, with_layers)
@@ -118,8 +117,9 @@ def _listing_layers(scene, camera, x, y):
 
 @pytest.mark.parametrize("surfels", [False, True])
 def test_reference_ordered_layers_match_the_pixel_listings(surfels):
-    """Every pixel of a small view: the rasterizer's vectorised layers equal what the listing's
-    front-to-back loop says (2DGS's median rule, the first largest weight, the count)."""
+    """Every pixel of a small view: the rasterizer's vectorised layers (BatchLayers.add) equal
+    what the listing's front-to-back loop says (2DGS's median rule, the first largest weight,
+    the count)."""
     if surfels:
         scene = random_scene(300, seed=3, **SURFELS)
         camera = Camera.from_fov(24, 16, 30.0, SURFELS_POSE)

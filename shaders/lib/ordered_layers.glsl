@@ -10,7 +10,7 @@
 //   top = the first splat with the largest w = alpha T;  count += 1;  T *= 1 - alpha.
 // ordered_f = (T, median z, top weight, 0), cleared to (1, 0, 0, 0);
 // ordered_u = (count, top index + 1, stopped, 0), cleared to 0.
-// Twin: splatgl/reference/layers.py BatchLayers.add(); splatgl/reference/rasterize.py _blend_chunk().
+// Twin: splatgl/reference/layers.py BatchLayers.add().
 // Include it first in the fragment stage (the #extension line precedes every other token).
 #extension GL_EXT_shader_framebuffer_fetch : require
 

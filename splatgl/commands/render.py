@@ -92,23 +92,24 @@ def run(args: argparse.Namespace) -> int:
     check_convention(args, kind)
     if args.depth_png is not None:
         picture_format(args.depth_png, "--depth-png")
-    fmt = image_format(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     plan = layer_files(args, None)           # --layers checked before any work
     stereo = StereoLayout(args.stereo_layout) if args.stereo is not None else None
     if stereo is not None and args.under is not None:
         raise SplatglError("--under composites one camera's view into its geometry; not with --stereo")
     eyes_out = ({"left": _eye_name(args.output, "left"), "right": _eye_name(args.output, "right")}
                 if stereo is StereoLayout.SEPARATE else {"": args.output})
-    keys: dict[Path, str] = {}             # every file written -> its OutputFiles name
+    targets: dict[str, Path] = {}          # every file written, by its OutputFiles name
     for eye, path in eyes_out.items():
         what = f"-o ({eye} eye)" if eye else "-o"
-        keys[path] = what
-        keys.update({picture_path(path, layer): f"{what} ({layer.value})" for layer in plan.pictures(path)})
+        targets[what] = path
+        targets.update({f"{what} ({layer.value})": picture_path(path, layer) for layer in plan.pictures(path)})
     depth_names = ({eye: _eye_name(args.depth_png, eye) for eye in eyes_out} if stereo is StereoLayout.SEPARATE
                    else {"": args.depth_png}) if args.depth_png is not None else {}
-    keys.update({path: f"--depth-png ({eye} eye)" if eye else "--depth-png"
-                 for eye, path in depth_names.items()})
-    outputs = OutputFiles({name: path for path, name in keys.items()})
+    targets.update({f"--depth-png ({eye} eye)" if eye else "--depth-png": path
+                    for eye, path in depth_names.items()})
+    outputs = OutputFiles(targets)         # refuses one file named twice
+    keys = {path: name for name, path in targets.items()}
+    fmt = image_format(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     under = under_from_args(args)
     scene, settings, camera = inputs_from_args(args)
     files = layer_files(args, camera)
@@ -132,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
         eyes = [combine(eyes[0], eyes[1], stereo) if stereo is not None else eyes[0]]
     with outputs:
         for eye, out in zip(eyes_out, eyes):
-            write_layers(eyes_out[eye], out, files, args.bit_depth, lambda p: outputs.temp(keys[p]))
+            write_layers(eyes_out[eye], out, files, args.bit_depth, lambda p: outputs.temp(keys[p]),
+                         write_image)
             if eye in depth_names:
                 write_image(outputs.temp(keys[depth_names[eye]]),
                             depth_preview(out.expected_depth(), out.alpha))

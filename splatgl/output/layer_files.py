@@ -56,7 +56,8 @@ class LayerFiles:
 
     def pictures(self, path: str | Path) -> tuple[Layer, ...]:
         """The layers written as pictures beside an integer image at ``path`` (none for EXR)."""
-        if find_format(path).is_float:
+        fmt = find_format(path)
+        if fmt is None or fmt.is_float:
             return ()
         return tuple(layer for layer in self.named if layer is not Layer.COLOUR)
 
@@ -121,9 +122,10 @@ def layer_picture(out: RenderOutput, layer: Layer, files: LayerFiles) -> np.ndar
 
 
 def write_layers(path: str | Path, out: RenderOutput, files: LayerFiles, bit_depth: int = 8,
-                 temp=lambda p: p) -> None:
+                 temp=lambda p: p, write=write_image) -> None:
     """Write ``out`` to ``path`` (and its pictures), each through ``temp(final path)`` (the
-    name to write to: an :class:`~splatgl.output.files.OutputFiles` temporary, or the path)."""
+    name to write to: an :class:`~splatgl.output.files.OutputFiles` temporary, or the path)
+    with ``write`` (:func:`~splatgl.output.images.write_image`'s signature)."""
     fmt = find_format(path)
     layers = files.render_layers(path)
     if fmt.is_float:
@@ -132,9 +134,9 @@ def write_layers(path: str | Path, out: RenderOutput, files: LayerFiles, bit_dep
         attributes = {DEPTH_ATTRIBUTE: files.depth_kind.value}
         if Layer.NORMAL in layers:
             attributes[NORMAL_ATTRIBUTE] = files.normal_space.value
-        write_image(temp(Path(path)), out.rgba, bit_depth, depth=depth, extra=extra,
-                    attributes=attributes)
+        write(temp(Path(path)), out.rgba, bit_depth, depth=depth, extra=extra,
+              attributes=attributes)
         return
-    write_image(temp(Path(path)), out.rgba, bit_depth)
+    write(temp(Path(path)), out.rgba, bit_depth)
     for layer in files.pictures(path):
-        write_image(temp(picture_path(path, layer)), layer_picture(out, layer, files))
+        write(temp(picture_path(path, layer)), layer_picture(out, layer, files))

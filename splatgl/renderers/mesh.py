@@ -7,7 +7,8 @@ the camera's intrinsics exactly as the splats are mapped (pixel centres at ``j +
 the top); the depth buffer removes hidden surfaces and a float target keeps the interpolated
 view z, which is exact at a pixel centre (z is linear on a triangle, and the interpolation is
 perspective-correct): :func:`splatgl.twins.mesh.ray_depth` is its closed form.  Shading is a
-headlight: ``colour (AMBIENT + (1 - AMBIENT) |n . d|)``, ``d`` the direction to the face's centre.
+headlight along the view axis: ``colour (AMBIENT + (1 - AMBIENT) |n_z|)`` (camera space), so the
+two triangles of a flat quad shade alike.
 """
 
 from __future__ import annotations
@@ -55,12 +56,7 @@ def shaded_corners(mesh: Mesh, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
     tri = mesh.triangles() @ camera.rotation.T + camera.translation      # float64
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    if camera.model.parallel_rays:
-        d = np.broadcast_to(np.array([0.0, 0.0, 1.0]), normal.shape)
-    else:
-        d = tri.mean(axis=1)
-        d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
-    light = AMBIENT + (1.0 - AMBIENT) * np.abs((normal * d).sum(1))
+    light = AMBIENT + (1.0 - AMBIENT) * np.abs(normal[:, 2])   # n . (0, 0, 1): the view axis
     colors = np.repeat(mesh.colors * light[:, None], 3, axis=0)
     return tri.reshape(-1, 3).astype(np.float32), colors.astype(np.float32)
 
