@@ -30,6 +30,7 @@ flat in vec3 v_normal;
 #endif
 #ifdef ORDERED_PASS
 flat in uint v_index;
+flat in uvec4 v_rect;         // the reference's tile rectangle [min, max), tiles
 #endif
 #ifdef EXTENT_FAST
 in vec2 v_unit;                // corner coordinate in sigmas
@@ -83,6 +84,9 @@ void main() {
     skip = skip || v_depth >= texelFetch(u_under, ivec2(gl_FragCoord.xy), 0).r;
 #endif
 #ifdef ORDERED_PASS
+    // The reference blends a splat only on the tiles of its rectangle (lib/tile_rect.glsl).
+    uvec2 tile = uvec2(gl_FragCoord.xy) / uint(TILE_SIZE);
+    skip = skip || any(lessThan(tile, v_rect.xy)) || any(greaterThanEqual(tile, v_rect.zw));
     ordered_layers(skip, alpha, v_depth, v_index);
 #else
 #ifdef COUNT_FRAGMENTS

@@ -7,6 +7,7 @@
 #include "lib/sh.glsl"
 #include "lib/normal.glsl"
 #include "lib/splat_setup.glsl"
+#include "lib/tile_rect.glsl"
 #include "lib/quad_emit.glsl"
 
 in uint splat_index;          // from the per-view sorted index buffer (divisor 1)
@@ -20,5 +21,6 @@ void main() {
 #endif
 #ifdef ORDERED_PASS
     v_index = splat_index & 0x7fffffffu;   // a seam copy (EQUIRECT) names its original
+    v_rect = inria_tile_rect(s.mean2d, s.radius, ceil(u_viewport / float(TILE_SIZE)));
 #endif
 }

@@ -4,6 +4,7 @@
 // Twin: splatgl/twins/project.py project(), ellipse_axes().
 #include "lib/camera.glsl"
 #include "lib/quad_emit.glsl"
+#include "lib/tile_rect.glsl"
 
 layout(std430, binding = BINDING_PREPARED) readonly buffer Prepared { vec4 prepared[]; };
 #ifdef NORMAL_OUTPUT
@@ -11,6 +12,7 @@ layout(std430, binding = BINDING_PREPARED_NORMAL) readonly buffer PreparedNormal
 #endif
 #ifdef ORDERED_PASS
 layout(std430, binding = BINDING_ORDER) readonly buffer Order { uint order[]; };
+layout(std430, binding = BINDING_PREPARED_RADIUS) readonly buffer PreparedRadius { float prepared_radius[]; };
 #endif
 #ifdef SURVIVORS
 in uint splat_slot;           // survivors[baseInstance + instance] (occlusion_cull.comp)
@@ -33,5 +35,6 @@ void main() {
 #endif
 #ifdef ORDERED_PASS
     v_index = order[k] & 0x7fffffffu;      // a seam copy (EQUIRECT) names its original
+    v_rect = inria_tile_rect(a.xy, prepared_radius[k], ceil(u_viewport / float(TILE_SIZE)));
 #endif
 }

@@ -3,7 +3,8 @@
 // equation computes.  The pass draws the same sorted quads again into two targets that the
 // fragment stage reads and writes itself through GL_EXT_shader_framebuffer_fetch, whose reads
 // are coherent and in primitive order: every pixel sees its splats front to back, exactly as
-// the reference's loop does, and applies the reference's rules (DESIGN.md 2):
+// the reference's loop does, and applies the reference's rules (DESIGN.md 2; a 3DGS fragment
+// outside the reference's tile rectangle, lib/tile_rect.glsl, counts as skipped):
 //   skipped (alpha < 1/255, or behind the geometry) and after the stop: nothing;
 //   stop, without counting the splat, once T (1 - alpha) < 1e-4;
 //   median z = the splat's z while T > MEDIAN_T (T before it);

@@ -15,6 +15,7 @@ flat out vec3 v_normal;       // camera-space unit normal, for the normal layer
 #endif
 #ifdef ORDERED_PASS
 flat out uint v_index;        // the splat's scene row, for the top-contributor layer
+flat out uvec4 v_rect;        // the reference's tile rectangle (lib/tile_rect.glsl)
 #endif
 
 const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothing rasterised

@@ -14,6 +14,9 @@ struct ScreenSplat {
 #ifdef NORMAL_OUTPUT
     vec3 normal;    // camera-space unit normal, towards the camera (lib/normal.glsl)
 #endif
+#ifdef ORDERED_RECT
+    float radius;   // the reference's radius ceil(3 sqrt(lambda_max)), for its tile rectangle
+#endif
 };
 
 // Quad half-axes by extent mode (DESIGN.md 2, splatgl.settings.QuadExtent):
@@ -70,6 +73,9 @@ bool setup_splat(uint idx, float weight, out ScreenSplat s) {
     s.depth = view_depth(p);
 #ifdef NORMAL_OUTPUT
     s.normal = splat_normal(rot, scale, p);
+#endif
+#ifdef ORDERED_RECT
+    s.radius = reference_radius(cov);
 #endif
     s.color = sh_color(i, splat_sh_dc(i), normalize(a.xyz - u_cam_center));
     return true;

@@ -44,6 +44,9 @@ BINDING_COVERAGE = 12
 #: The normal layer's per-slot camera-space normals: quad_prepass.comp (NORMAL_OUTPUT) writes,
 #: quad_light.vert reads.
 BINDING_PREPARED_NORMAL = 13
+#: The ordered pass's per-slot reference radius: quad_prepass.comp (ORDERED_RECT) writes,
+#: quad_light.vert (ORDERED_PASS) reads.
+BINDING_PREPARED_RADIUS = 14
 
 # --- The tile renderer's per-view buffers (renderers/tile.py; shaders/lib/tile_common.glsl,
 # tile_project.comp, tile_emit.comp, tile_rasterize.comp), after the scene's.
@@ -110,7 +113,7 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "quad path storage": _SCENE + (
         "BINDING_ORDER", "BINDING_PREPARED", "BINDING_FRAGMENT_COUNTS", "BINDING_STOP_TILES",
         "BINDING_SURVIVORS", "BINDING_COMMANDS", "BINDING_OPACITY_WEIGHT", "BINDING_COVERAGE",
-        "BINDING_PREPARED_NORMAL"),
+        "BINDING_PREPARED_NORMAL", "BINDING_PREPARED_RADIUS"),
     "tile renderer storage": _SCENE + tuple(
         name for name in globals() if name.startswith("TILE_BINDING_")),
     "radix sort storage": tuple(name for name in globals() if name.startswith("RADIX_BINDING_")),

@@ -139,7 +139,8 @@ class QuadRenderer:
         weights = self.rows.slot_weights
         frame = FrameSwitches(depth=Layer.DEPTH in layers, weights=weights is not None,
                               extra=tuple(self.frame_extra.items()),
-                              normal=normal_location(layers), under=under)
+                              normal=normal_location(layers), under=under,
+                              ordered_rect=bool(layers & ORDERED) and not self.programs.surfels)
         t0 = time.perf_counter()
         self.gpu.upload(order, weights)
         self._t_upload = time.perf_counter() - t0
@@ -148,7 +149,8 @@ class QuadRenderer:
         if self.uses_prepass:
             comp = self.programs.prepass(view, frame)
             view.set_uniforms(comp)
-            self.gpu.run_prepass(comp, len(order), frame.weights, bool(frame.normal))
+            self.gpu.run_prepass(comp, len(order), frame.weights, bool(frame.normal),
+                                 frame.ordered_rect)
             self.ctx.finish()
         self._t_prepass = time.perf_counter() - t1
         return len(order), frame

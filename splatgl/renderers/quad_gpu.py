@@ -11,7 +11,8 @@ import moderngl
 import numpy as np
 
 from ..gl.bindings import (BINDING_OPACITY_WEIGHT, BINDING_ORDER, BINDING_PREPARED,
-                           BINDING_PREPARED_NORMAL, PREPASS_GROUP, UNDER_UNIT)
+                           BINDING_PREPARED_NORMAL, BINDING_PREPARED_RADIUS, PREPASS_GROUP,
+                           UNDER_UNIT)
 from ..gl.buffers import GrowableBuffer
 from ..gl.targets import ColorTarget, OrderedTarget
 from ..model.settings import Precision
@@ -34,6 +35,7 @@ class QuadResources:
         self.weights = GrowableBuffer(ctx, BINDING_OPACITY_WEIGHT, minimum=4)
         self.prepared = GrowableBuffer(ctx, BINDING_PREPARED)
         self.prepared_normal = GrowableBuffer(ctx, BINDING_PREPARED_NORMAL)
+        self.prepared_radius = GrowableBuffer(ctx, BINDING_PREPARED_RADIUS)
         self._target: ColorTarget | None = None
         self._ordered: OrderedTarget | None = None
         self._under: moderngl.Texture | None = None
@@ -49,12 +51,15 @@ class QuadResources:
             self.weights.upload(weights.tobytes())
 
     def run_prepass(self, comp: moderngl.ComputeShader, count: int, weighted: bool,
-                    normals: bool = False) -> None:
+                    normals: bool = False, radii: bool = False) -> None:
         """Run ``comp`` (quad_prepass.comp, uniforms set) over the ``count`` sorted splats into
-        the prepared buffer (and with ``normals`` the normal layer's buffer)."""
+        the prepared buffer (with ``normals`` the normal layer's buffer, with ``radii`` the
+        ordered pass's)."""
         self.prepared.ensure(count * PREPARED_BYTES).bind_to_storage_buffer(BINDING_PREPARED)
         if normals:
             self.prepared_normal.ensure(count * 16).bind_to_storage_buffer(BINDING_PREPARED_NORMAL)
+        if radii:
+            self.prepared_radius.ensure(count * 4).bind_to_storage_buffer(BINDING_PREPARED_RADIUS)
         if count == 0:
             return
         if weighted:
@@ -136,7 +141,8 @@ class QuadResources:
 
     def release(self) -> None:
         self._release_vaos()
-        for buf in (self.index, self.weights, self.prepared, self.prepared_normal):
+        for buf in (self.index, self.weights, self.prepared, self.prepared_normal,
+                    self.prepared_radius):
             buf.release()
         for obj in (self._target, self._ordered, self._plain_command, self._under):
             if obj is not None:

@@ -6,7 +6,9 @@
 - median depth, count, top contributor: an ordered pass (:func:`draw_ordered`) that draws the
   same sorted quads again into two targets its fragment stage reads and writes through
   ``GL_EXT_shader_framebuffer_fetch`` (shaders/lib/ordered_layers.glsl), reproducing the
-  reference's loop per pixel, early stop included; only when one of them is asked for;
+  reference's loop per pixel, early stop included, on the reference's tile rectangles
+  (shaders/lib/tile_rect.glsl: the quad's faint fragments beyond them do not count); only when
+  one of them is asked for;
 - geometry under the splats (UNDER): the draws test each fragment against the geometry's depth
   texture; the colour is composited over the geometry on the CPU
   (:func:`splatgl.output.under.composite_under`).

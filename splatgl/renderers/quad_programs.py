@@ -32,8 +32,9 @@ class FrameSwitches:
     (EARLY_STOP, and SURVIVORS after the pre-pass).  weights: per-slot opacity weights of a
     level-of-detail cut (OPACITY_WEIGHT).  extra: further switches (a benchmark probe's
     COUNT_FRAGMENTS).  normal: the normal layer's attachment (NORMAL_OUTPUT = its location;
-    0: none).  ordered: the ordered pass's program (ORDERED_PASS).  under: test fragments
-    against the geometry's depth (UNDER).
+    0: none).  ordered: the ordered pass's program (ORDERED_PASS).  ordered_rect: the frame
+    has an ordered pass, so its quads keep the reference's radius (ORDERED_RECT).  under:
+    test fragments against the geometry's depth (UNDER).
     """
 
     depth: bool = False
@@ -42,6 +43,7 @@ class FrameSwitches:
     extra: tuple[tuple[str, object], ...] = ()
     normal: int = 0
     ordered: bool = False
+    ordered_rect: bool = False
     under: bool = False
 
 
@@ -75,6 +77,8 @@ class QuadPrograms:
             defines["NORMAL_OUTPUT"] = frame.normal    # the prepass writes normals in either pass
         if frame.ordered:
             defines["ORDERED_PASS"] = 1
+        if frame.ordered_rect:
+            defines["ORDERED_RECT"] = 1
         if frame.under:
             defines["UNDER"] = 1
         defines.update(frame.extra)
