@@ -10,7 +10,8 @@ composited into that render by the quad path, the tile renderer and the referenc
 
 1. mesh depth against ray casting (splatgl.twins.mesh.ray_depth): coverage and relative error;
 2. a plane at the median view z of the splats, a closed form: the composite must equal the
-   splats in front of the plane drawn over the plane's colour (same near plane);
+   splats in front of the plane drawn over the plane's colour (the splats behind it made
+   transparent, so anchor and near plane stay the same);
 3. the box composite of quad and tile against the reference's.
 
 No timings (the machine is shared).
@@ -29,6 +30,7 @@ from splatgl import RenderSettings, Renderer, RendererKind, default_camera, load
 from splatgl.api import render_reference_layers
 from splatgl.bench.machine import describe, probe_machine
 from splatgl.cameras.view import View
+from splatgl.model.scene import Scene
 from splatgl.evaluation.metrics import image_errors
 from splatgl.output.images import write_image
 from splatgl.output.layers import Layer, with_layers
@@ -56,8 +58,15 @@ def shapes(scene, camera):
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     bottom = float(((corners - centre) @ down).max())   # the scene's lowest point on screen
     floor = meshes.plane(centre + bottom * down, 0.9 * span * right, 0.9 * span * forward,
-                         (0.35, 0.4, 0.5))
+                         (0.6, 0.65, 0.75))
     return box + floor
+
+
+def hide(scene, rows):
+    """``scene`` with ``rows`` made fully transparent (opacity logit -40: alpha below 1/255
+    everywhere, so never blended), everything else (its anchor, its near plane) kept."""
+    logits = np.where(rows, -40.0, scene.opacity_logits)
+    return Scene(scene.means, scene.quats, scene.log_scales, logits, scene.sh, scene.kind)
 
 
 def errors_row(name, got, ref) -> str:
@@ -109,8 +118,8 @@ def main(argv=None) -> int:
         h, w = args.height, args.width
         plane = UnderImage(np.full((h, w, 3), colour, np.float32), np.ones((h, w), np.float32),
                            np.full((h, w), z0, np.float32), DepthKind.Z, Path("plane"))
-        front = scene.subset(np.flatnonzero(zs < z0))
-        subset_settings = RenderSettings(background=tuple(colour), near=view.near)
+        front = hide(scene, zs >= z0)        # the same scene (anchor, near plane) without them
+        subset_settings = RenderSettings(background=tuple(colour))
         lines += [f"Plane at view z {z0:.4g} (the splats' median) against the splats in front of it "
                   "over the plane's colour:", "",
                   "| renderer | PSNR dB | max abs | > 1/255 % |", "|---|---:|---:|---:|"]

@@ -77,6 +77,23 @@ def markdown(r: dict) -> str:
             f"{r['top_id_off'] * 100:.3f} |")
 
 
+def write_picture(path: Path, out) -> None:
+    """The colour and every layer's picture (as ``--layers`` writes them) side by side."""
+    from splatgl.output.images import write_image
+    from splatgl.output.layer_files import LayerFiles, layer_picture
+
+    files = LayerFiles(tuple(Layer))
+    pictures = [out.rgba] + [layer_picture(out, layer, files)
+                             for layer in (Layer.DEPTH, Layer.MEDIAN_DEPTH, Layer.NORMAL,
+                                           Layer.COUNT, Layer.TOP_ID)]
+    h = max(p.shape[0] for p in pictures)
+    row = [np.pad(np.clip(p[..., :3], 0, 1), ((0, h - p.shape[0]), (0, 6), (0, 0)), constant_values=1.0)
+           for p in pictures]
+    img = np.concatenate(row, axis=1)
+    write_image(path, np.concatenate([img, np.ones(img.shape[:2] + (1,), np.float32)], -1))
+    print(f"wrote {path}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("scenes", nargs="*", type=Path)
@@ -85,6 +102,8 @@ def main(argv=None) -> int:
     ap.add_argument("--models", default=",".join(MODELS))
     ap.add_argument("--no-surfels", action="store_true")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--picture", type=Path, default=None,
+                    help="also write the first scene's perspective layers as one picture (quad)")
     args = ap.parse_args(argv)
     shared = Path(__import__("os").environ.get("SPLATGL_SHARED_SCENES", REPO.parent / "shared" / "scenes"))
     paths = args.scenes or [shared / s for s in SCENES]
@@ -117,6 +136,8 @@ def main(argv=None) -> int:
                     got = renderer.render_layers(scene, camera, settings, kind, layers=ALL)
                     rows.append(row(name, scene, model, kind, got, ref))
                     print(markdown(rows[-1]), flush=True)
+                    if args.picture is not None and len(rows) == 1:
+                        write_picture(args.picture, got)
     if args.json is not None:
         args.json.write_text(json.dumps({"size": [args.width, args.height], "machine": machine,
                                          "rows": rows}, indent=1) + "\n")
