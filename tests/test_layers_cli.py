@@ -99,3 +99,15 @@ def test_layer_options_refused_in_one_line(tmp_path, capsys, monkeypatch, args, 
     code = main(["render"] + args + ARGS)
     err = capsys.readouterr().err
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_top_id_into_exr_is_refused_past_float32_integers():
+    from splatgl.errors import SplatglError
+    from splatgl.output.layer_files import EXACT_FLOAT_IDS, LayerFiles, check_exact_ids
+
+    files = LayerFiles((Layer.TOP_ID,))
+    check_exact_ids(files, "v.exr", EXACT_FLOAT_IDS)          # 2^24: still exact
+    check_exact_ids(files, "v.png", EXACT_FLOAT_IDS + 1)      # a picture: no ids in the file
+    with pytest.raises(SplatglError, match="v.exr: the EXR id channel is float32, exact up to "
+                                           "16,777,216 splats, and this scene has 16,777,217"):
+        check_exact_ids(files, "v.exr", EXACT_FLOAT_IDS + 1)

@@ -110,3 +110,13 @@ def test_cli_refusals_are_one_line(capsys, args, message):
     code = main(["pixel", "--width", "40", "--height", "30"] + args)
     err = capsys.readouterr().err
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_viewer_click_maps_window_points_to_image_pixels():
+    """Ctrl+click (splatgl/viewer/pick.py): window points to framebuffer pixels, HiDPI too."""
+    from splatgl.viewer.pick import window_pixel
+
+    assert window_pixel(10.2, 5.9, (320, 240), (320, 240)) == (10, 5)
+    assert window_pixel(10.2, 5.9, (320, 240), (640, 480)) == (20, 11)   # 2x backing scale
+    assert window_pixel(320.0, 5.0, (320, 240), (320, 240)) is None
+    assert window_pixel(-0.5, 5.0, (320, 240), (320, 240)) is None

@@ -14,6 +14,7 @@ from ..datasets import load_source, select_indices
 from ..errors import SplatglError
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
+from ..output.layer_files import check_exact_ids
 from ._layers import check_under_options, layer_files, named_layers
 from ..output.frames import FrameTarget
 from ..output.image_formats import FORMAT_NAMES
@@ -164,6 +165,8 @@ def run_path(args: argparse.Namespace) -> int:
     # the scene frames the orbit and is counted in the summary: a LOD file's leaves
     scene = load_scene_arg(args) if tree is None else tree.nodes.subset(slice(0, tree.level_size(0)))
     settings = settings_from_args(args)
+    if not target.is_video:
+        check_exact_ids(target.files(), target.frame_path(0), scene.count)
     cameras, source_fps, numbers = path_cameras(args, scene)
     fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)
     if not fps > 0:

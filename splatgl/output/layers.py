@@ -25,7 +25,6 @@ surfel's is the depth of the ray's hit per pixel; weights ``w_k = alpha_k T_k`` 
 
 from __future__ import annotations
 
-import dataclasses
 import enum
 from dataclasses import dataclass
 
@@ -161,10 +160,6 @@ class RenderOutput:
         out.update({name: getattr(self, name) for name in PLANES.values()
                     if getattr(self, name) is not None})
         return out
-
-    def with_planes(self, **planes: np.ndarray) -> "RenderOutput":
-        """A copy with the given arrays replaced (``dataclasses.replace``)."""
-        return dataclasses.replace(self, **planes)
 
 
 def unit_normals(normal: np.ndarray, alpha: np.ndarray,

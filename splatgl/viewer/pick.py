@@ -3,8 +3,11 @@ reference (:func:`splatgl.reference.pixel.pixel_splats`, what ``splatgl pixel`` 
 
 from __future__ import annotations
 
+import math
+
 import glfw
 
+from ..errors import SplatglError
 from ..reference.pixel import PixelListing, pixel_splats
 
 #: Splats printed per click (the status line names the top one).
@@ -16,8 +19,8 @@ def window_pixel(x: float, y: float, window: tuple[int, int], size: tuple[int, i
     """The image pixel (column, row) under window point (``x``, ``y``) of a window of
     ``window`` points showing an image of ``size`` pixels (HiDPI: more pixels than points), or
     None outside it."""
-    col = int(x * size[0] / max(window[0], 1))
-    row = int(y * size[1] / max(window[1], 1))
+    col = math.floor(x * size[0] / max(window[0], 1))
+    row = math.floor(y * size[1] / max(window[1], 1))
     return (col, row) if 0 <= col < size[0] and 0 <= row < size[1] else None
 
 
@@ -32,7 +35,12 @@ def list_pixel(viewer, x: float, y: float) -> PixelListing | None:
     pixel = window_pixel(x, y, glfw.get_window_size(viewer.window), (camera.width, camera.height))
     if pixel is None:
         return None
-    listing = pixel_splats(viewer.scene, camera, *pixel, viewer.settings, viewer.settings.convention)
+    try:
+        listing = pixel_splats(viewer.scene, camera, *pixel, viewer.settings,
+                               viewer.settings.convention)
+    except SplatglError as exc:          # a camera the reference cannot draw for this scene
+        viewer.message = f"pixel listing: {exc}"
+        return None
     print(listing.table(PRINTED), flush=True)
     top = max(listing.splats, key=lambda s: s.weight, default=None)
     viewer.message = (f"pixel {pixel}: {len(listing.splats)} splats, alpha {listing.alpha:.3f}"
