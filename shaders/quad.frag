@@ -5,7 +5,14 @@
 //   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).
 // Twin: splatgl/twins/blend.py splat_alpha(), blend_front_to_back().
 // With DEPTH_OUTPUT, a second target gets (z alpha, 0, 0, alpha) under the same blend, so its
-// own alpha channel tracks the same transmittance and red accumulates D = sum z alpha T.
+// own alpha channel tracks the same transmittance and red accumulates D = sum z alpha T; with
+// NORMAL_OUTPUT the target at location NORMAL_OUTPUT gets (n alpha, alpha): N = sum n alpha T.
+// With UNDER, a fragment at or behind the geometry's depth (u_under, in the splats' depth
+// metric; splatgl/output/under.py) is skipped like one below 1/255.
+// ORDERED_PASS: the median depth, count and top contributor instead (lib/ordered_layers.glsl).
+#ifdef ORDERED_PASS
+#include "lib/ordered_layers.glsl"
+#endif
 #if defined(EARLY_STOP) && !defined(COUNT_RASTERISED)
 // Early termination: depth/stencil tests before shading, so fragments on pixels the mark pass
 // stopped are never shaded.  The shader must not `discard` (llvmpipe then shades every fragment
@@ -17,14 +24,21 @@ layout(early_fragment_tests) in;
 flat in vec2 v_mean2d;
 flat in vec3 v_conic;
 flat in vec4 v_color;
-#ifdef DEPTH_OUTPUT
 flat in float v_depth;
+#ifdef NORMAL_OUTPUT
+flat in vec3 v_normal;
+#endif
+#ifdef ORDERED_PASS
+flat in uint v_index;
+flat in uvec4 v_rect;         // the reference's tile rectangle [min, max), tiles
 #endif
 #ifdef EXTENT_FAST
 in vec2 v_unit;                // corner coordinate in sigmas
 #endif
 
+#ifndef ORDERED_PASS
 layout(location = 0) out vec4 out_color;
+#endif
 #ifdef COUNT_FRAGMENTS
 // Benchmark variant: counts fragments shaded (with COUNT_RASTERISED: rasterised) and fragments
 // kept (alpha >= 1/255).
@@ -32,6 +46,12 @@ layout(std430, binding = BINDING_FRAGMENT_COUNTS) buffer FragmentCounts { uint f
 #endif
 #ifdef DEPTH_OUTPUT
 layout(location = 1) out vec4 out_depth;
+#endif
+#ifdef NORMAL_OUTPUT
+layout(location = NORMAL_OUTPUT) out vec4 out_normal;
+#endif
+#ifdef UNDER
+layout(binding = UNDER_UNIT) uniform sampler2D u_under;  // geometry depth, +inf: none
 #endif
 #ifdef EQUIRECT
 uniform float u_wrap_period;  // pixels per turn of longitude: each copy reaches half a turn
@@ -60,11 +80,24 @@ void main() {
     // at a pole spans the image once, and a seam splat's two copies never meet.
     skip = skip || abs(gl_FragCoord.x - v_mean2d.x) > 0.5 * u_wrap_period;
 #endif
+#ifdef UNDER
+    skip = skip || v_depth >= texelFetch(u_under, ivec2(gl_FragCoord.xy), 0).r;
+#endif
+#ifdef ORDERED_PASS
+    // The reference blends a splat only on the tiles of its rectangle (lib/tile_rect.glsl).
+    uvec2 tile = uvec2(gl_FragCoord.xy) / uint(TILE_SIZE);
+    skip = skip || any(lessThan(tile, v_rect.xy)) || any(greaterThanEqual(tile, v_rect.zw));
+    ordered_layers(skip, alpha, v_depth, v_index);
+#else
 #ifdef COUNT_FRAGMENTS
     if (!skip) atomicAdd(fragments_kept, 1u);
 #endif
     out_color = skip ? vec4(0.0) : vec4(v_color.rgb * alpha, alpha);
 #ifdef DEPTH_OUTPUT
     out_depth = skip ? vec4(0.0) : vec4(v_depth * alpha, 0.0, 0.0, alpha);
+#endif
+#ifdef NORMAL_OUTPUT
+    out_normal = skip ? vec4(0.0) : vec4(v_normal * alpha, alpha);
+#endif
 #endif
 }

@@ -9,11 +9,20 @@
 #include "lib/scene.glsl"
 #include "lib/project.glsl"
 #include "lib/sh.glsl"
+#include "lib/normal.glsl"
 #include "lib/splat_setup.glsl"
 
 layout(local_size_x = PREPASS_GROUP) in;
 layout(std430, binding = BINDING_ORDER) readonly buffer Order { uint order[]; };
 layout(std430, binding = BINDING_PREPARED) writeonly buffer Prepared { vec4 prepared[]; };
+#ifdef NORMAL_OUTPUT
+// The normal layer: slot k's camera-space normal (lib/normal.glsl), for quad_light.vert.
+layout(std430, binding = BINDING_PREPARED_NORMAL) writeonly buffer PreparedNormal { vec4 prepared_normal[]; };
+#endif
+#ifdef ORDERED_RECT
+// The ordered pass: slot k's reference radius, for its tile rectangle (lib/tile_rect.glsl).
+layout(std430, binding = BINDING_PREPARED_RADIUS) writeonly buffer PreparedRadius { float prepared_radius[]; };
+#endif
 #ifdef OPACITY_WEIGHT
 // Level-of-detail blend: a factor on each sorted slot's opacity (splatgl/lod/render.py).
 layout(std430, binding = BINDING_OPACITY_WEIGHT) readonly buffer OpacityWeight { float opacity_weight[]; };
@@ -40,4 +49,10 @@ void main() {
     prepared[4u * k] = vec4(s.mean2d, s.axis1);
     prepared[4u * k + 1u] = vec4(s.axis2, s.conic.xy);
     prepared[4u * k + 2u] = vec4(s.conic.z, s.color);
+#ifdef NORMAL_OUTPUT
+    prepared_normal[k] = vec4(s.normal, 0.0);
+#endif
+#ifdef ORDERED_RECT
+    prepared_radius[k] = s.radius;
+#endif
 }

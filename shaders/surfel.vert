@@ -7,6 +7,7 @@
 #include "lib/project.glsl"
 #include "lib/sh.glsl"
 #include "lib/surfel.glsl"
+#include "lib/normal.glsl"
 
 in uint splat_index;          // from the per-view sorted index buffer (divisor 1)
 
@@ -16,6 +17,12 @@ flat out vec3 v_t1;           // centred T'_1 = T_1 - c_y T_2 (third entry 0)
 flat out vec3 v_t2;           // T_2
 flat out vec3 v_depth_row;    // view z of (u, v, 1): (a_u.z, a_v.z, p.z)
 flat out vec4 v_color;        // (SH colour, opacity)
+#ifdef NORMAL_OUTPUT
+flat out vec3 v_normal;       // camera-space unit normal, towards the camera
+#endif
+#ifdef ORDERED_PASS
+flat out uint v_index;        // the surfel's scene row
+#endif
 
 const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothing rasterised
 
@@ -45,4 +52,10 @@ void main() {
     v_depth_row = vec3(a_u.z, a_v.z, p.z);
     vec3 dir = normalize(a.xyz - u_cam_center);
     v_color = vec4(sh_color(i, splat_sh_dc(i), dir), a.w);
+#ifdef NORMAL_OUTPUT
+    v_normal = surfel_normal(rot, p);
+#endif
+#ifdef ORDERED_PASS
+    v_index = i;
+#endif
 }

@@ -8,6 +8,8 @@
 #include "lib/project.glsl"
 #include "lib/sh.glsl"
 #include "lib/tile_common.glsl"
+#include "lib/normal.glsl"
+#include "lib/tile_rect.glsl"
 #ifdef SURFEL
 #include "lib/surfel.glsl"
 #endif
@@ -63,6 +65,9 @@ void main() {
     proj_conic_o[i] = vec4(t0.xy, t1.xy);
     proj_color[i] = vec4(color, 0.0);
     proj_surfel[i] = vec4(a_u.z, a_v.z, 0.0, 0.0);
+#ifdef NORMAL_OUTPUT
+    proj_normal[i] = vec4(surfel_normal(rot, p), 0.0);
+#endif
     proj_rect[i] = uvec4(rmin, rmax);
     tiles_touched[i] = (rmax.x - rmin.x) * (rmax.y - rmin.y);
 }
@@ -94,14 +99,9 @@ void main() {
     vec3 color = sh_color(i, splat_sh_dc(i), normalize(a.xyz - u_cam_center));
     if (!finite2(mean2d) || !finite3(cov) || !finite3(con) || !finite3(color)
         || isnan(opacity) || isinf(opacity)) return;
-    // Radius ceil(3 sqrt(lambda_max)); 3DGS getRect on p = mean2d - 0.5 (pixel-index
-    // coordinates): min = clamp(int((p - r) / 16), 0, grid), max = clamp(int((p + r + 15) / 16),
-    // 0, grid), truncation toward zero (clamped as floats so huge values cannot overflow int).
-    float r = reference_radius(cov);
-    vec2 pp = mean2d - 0.5;
-    vec2 grid = vec2(u_grid);
-    uvec2 rmin = uvec2(clamp(trunc((pp - r) / float(TILE_SIZE)), vec2(0.0), grid));
-    uvec2 rmax = uvec2(clamp(trunc((pp + r + float(TILE_SIZE - 1)) / float(TILE_SIZE)), vec2(0.0), grid));
+    // Radius ceil(3 sqrt(lambda_max)); 3DGS getRect (lib/tile_rect.glsl).
+    uvec4 rect = inria_tile_rect(mean2d, reference_radius(cov), vec2(u_grid));
+    uvec2 rmin = rect.xy, rmax = rect.zw;
     uint touched = (rmax.x - rmin.x) * (rmax.y - rmin.y);
     if (touched == 0u) return;
     proj_mean_depth[i] = vec4(mean2d, view_depth(p), 0.0);
@@ -109,5 +109,8 @@ void main() {
     proj_color[i] = vec4(color, 0.0);
     proj_rect[i] = uvec4(rmin, rmax);
     tiles_touched[i] = touched;
+#ifdef NORMAL_OUTPUT
+    proj_normal[i] = vec4(splat_normal(rot, scale, p), 0.0);
+#endif
 }
 #endif

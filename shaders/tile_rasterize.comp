@@ -22,6 +22,13 @@
 //   rho = min(u^2 + v^2, F |d|^2) (low pass, eq. 11, F = SURFEL_FILTER_INV_SQUARE),
 //   alpha = min(0.99, o exp(-rho / 2)), skipped below 1/255; same early stop; D sums the
 //   view z of the hit (depth_row . (u, v, 1)) where rho_3d <= rho_2d, else the centre's z.
+// Further layers (splatgl/output/layers.py; twin: splatgl/reference/layers.py BatchLayers),
+// each behind its own switch and carried between passes like C and D:
+//   NORMAL_OUTPUT: N = sum n w with the splat's camera-space normal (proj_normal);
+//   ORDERED_OUTPUT: median z = the z of the last splat blended while T > MEDIAN_T (T before
+//     it), top = the first splat of the largest w = alpha T (its index + 1; 0: none), count;
+//   UNDER: a splat whose z is at or behind the pixel's geometry depth (under_depth, the
+//     splats' metric, +inf: none) is skipped like one below 1/255.
 #include "lib/tile_common.glsl"
 #ifdef SURFEL
 #include "lib/camera.glsl"
@@ -46,6 +53,19 @@ uniform uint u_index_mask;   // low bits of a packed key holding the splat index
 uniform uint u_tile_row0;    // first tile row of this dispatch (the image is drawn in bands)
 uniform uint u_pass;         // this pass (0-based) over the tiles' lists ...
 uniform uint u_passes;       // ... of this many, each over TILE_LIST_CHUNK entries per tile
+#ifdef NORMAL_OUTPUT
+layout(std430, binding = TILE_BINDING_OUT_NORMAL) buffer OutNormal { vec4 out_normal[]; };
+shared vec4 s_normal[TILE_PIXELS];     // (n, 0) of the kept splats
+#endif
+#ifdef ORDERED_OUTPUT
+// (median z, top weight) and (count, top index + 1) per pixel.
+layout(std430, binding = TILE_BINDING_OUT_ORDERED_F) buffer OutOrderedF { vec2 out_ordered_f[]; };
+layout(std430, binding = TILE_BINDING_OUT_ORDERED_U) buffer OutOrderedU { uvec2 out_ordered_u[]; };
+shared uint s_index[TILE_PIXELS];      // splat index of the kept splats
+#endif
+#ifdef UNDER
+layout(std430, binding = TILE_BINDING_UNDER) readonly buffer UnderDepth { float under_depth[]; };
+#endif
 
 shared vec4 s_mean_cut[TILE_PIXELS];   // (u, v, power cut-off, view z) of the kept splats
 shared vec4 s_conic_o[TILE_PIXELS];    // (a, b, c, opacity)
@@ -78,12 +98,29 @@ void main() {
     float T = 1.0;
     vec3 C = vec3(0.0);
     float D = 0.0;
+#ifdef NORMAL_OUTPUT
+    vec3 N = vec3(0.0);
+#endif
+#ifdef ORDERED_OUTPUT
+    vec2 median_top = vec2(0.0);                 // (median z, top weight)
+    uvec2 count_top = uvec2(0u);                 // (count, top index + 1)
+#endif
+#ifdef UNDER
+    float geometry = inside ? under_depth[o] : 0.0;
+#endif
     if (u_pass > 0u && inside) {                 // resume the previous pass's state
         vec4 state = out_rgba[o];
         C = state.rgb;
         T = abs(state.w);
         done = state.w < 0.0;
         D = out_depth[o];
+#ifdef NORMAL_OUTPUT
+        N = out_normal[o].xyz;
+#endif
+#ifdef ORDERED_OUTPUT
+        median_top = out_ordered_f[o];
+        count_top = out_ordered_u[o];
+#endif
     }
     for (uint base = range.x; base < range.y; base += TILE_PIXELS) {
         memoryBarrierShared();
@@ -96,11 +133,23 @@ void main() {
 #ifdef SURFEL
         vec2 duv = vec2(0.0);
 #endif
+#ifdef NORMAL_OUTPUT
+        vec4 nrm = vec4(0.0);
+#endif
+#ifdef ORDERED_OUTPUT
+        uint sidx = 0u;
+#endif
         if (k < range.y) {
 #ifdef KEY_PACKED
             uint idx = sort_keys[k].x & u_index_mask;
 #else
             uint idx = sort_values[k];
+#endif
+#ifdef NORMAL_OUTPUT
+            nrm = proj_normal[idx];
+#endif
+#ifdef ORDERED_OUTPUT
+            sidx = idx;
 #endif
 #ifdef SURFEL
             keep = true;
@@ -146,6 +195,12 @@ void main() {
 #ifdef SURFEL
             s_depth_uv[slot] = duv;
 #endif
+#ifdef NORMAL_OUTPUT
+            s_normal[slot] = nrm;
+#endif
+#ifdef ORDERED_OUTPUT
+            s_index[slot] = sidx;
+#endif
         }
         memoryBarrierShared();
         barrier();
@@ -173,11 +228,25 @@ void main() {
             float alpha = min(ALPHA_MAX, q.w * exp(power));
             if (alpha < ALPHA_MIN) continue;
 #endif
+#ifdef UNDER
+            if (z >= geometry) continue;          // behind the geometry: not blended
+#endif
             float test_t = T * (1.0 - alpha);
             if (test_t < T_MIN) { done = true; break; }
             float w = alpha * T;                  // alpha_k T_k
             C += s_color[j].rgb * w;
             D += z * w;
+#ifdef NORMAL_OUTPUT
+            N += s_normal[j].xyz * w;
+#endif
+#ifdef ORDERED_OUTPUT
+            if (T > MEDIAN_T) median_top.x = z;   // T before this splat
+            if (w > median_top.y) {               // the first of equal weights stays
+                median_top.y = w;
+                count_top.y = s_index[j] + 1u;
+            }
+            count_top.x += 1u;
+#endif
             T = test_t;
         }
     }
@@ -185,5 +254,12 @@ void main() {
         bool last = u_pass + 1u == u_passes;
         out_rgba[o] = last ? vec4(C + T * u_background, 1.0 - T) : vec4(C, done ? -T : T);
         out_depth[o] = D;
+#ifdef NORMAL_OUTPUT
+        out_normal[o] = vec4(N, 0.0);
+#endif
+#ifdef ORDERED_OUTPUT
+        out_ordered_f[o] = median_top;
+        out_ordered_u[o] = count_top;
+#endif
     }
 }

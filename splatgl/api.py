@@ -23,6 +23,7 @@ from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
 from .gl.limits import check_image_size
 from .output.layers import Layer, RenderOutput, with_layers
+from .output.under import UnderImage
 from .progress import ProgressCallback
 from .model.scene import Scene, SceneSource
 from .model.settings import RenderSettings, RendererKind
@@ -132,19 +133,27 @@ class Renderer:
                       settings: RenderSettings | None = None,
                       kind: RendererKind = RendererKind.QUAD,
                       progress: ProgressCallback | None = None,
-                      layers: frozenset[Layer] = DEPTH_LAYERS) -> RenderOutput:
+                      layers: frozenset[Layer] = DEPTH_LAYERS,
+                      under: UnderImage | None = None) -> RenderOutput:
         """The ``layers`` of one view (default colour, alpha and the accumulated depth; every
-        layer from the same pass, with the same weights; :mod:`splatgl.output.layers`);
-        ``camera`` and ``settings`` as in :meth:`render`."""
+        layer with the colour's weights, :mod:`splatgl.output.layers`); ``camera`` and
+        ``settings`` as in :meth:`render`.  ``under``: geometry rendered from the same camera
+        (:func:`splatgl.output.under.read_under`) to composite the splats into: splats at or
+        behind it are dropped, the rest composited over its colour."""
         kind = RendererKind(kind)
         camera, settings = _inputs(scene, camera, settings)
         self._check_open()
+        layers = frozenset(layers)
+        view = View.of(camera, settings, scene)
+        geometry = view.geometry(under) if under is not None else None  # checked before work
         if kind is RendererKind.REFERENCE:
-            return render_reference_layers(scene, camera, settings, progress)
+            return render_reference_layers(scene, camera, settings, progress, layers, under)
         make_current(self.ctx)
         self._check_size(camera, kind)
         with _reporting(self._path(scene, settings, kind), progress) as path:
-            return path.render(View.of(camera, settings, scene), layers)
+            if geometry is None:
+                return path.render(view, layers)
+            return path.render(view, layers, under=geometry)
 
     def render_many(self, scene: Scene, cameras: Iterable[Camera],
                     settings: RenderSettings | None = None,
@@ -206,14 +215,17 @@ def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings
 
 
 def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettings,
-                            progress: ProgressCallback | None = None) -> RenderOutput:
-    """The NumPy per-tile reference's colour, alpha and depth (float32 math, no OpenGL)."""
+                            progress: ProgressCallback | None = None,
+                            layers: frozenset[Layer] = DEPTH_LAYERS,
+                            under: UnderImage | None = None) -> RenderOutput:
+    """The NumPy per-tile reference's ``layers`` (colour, alpha and depth always; float32
+    math, no OpenGL), composited into ``under`` if given (:meth:`Renderer.render_layers`)."""
     from .reference import render_reference
 
-    ref = render_reference(scene, camera, settings,
-                           compat=settings.convention, progress=progress)
-    rgba = np.concatenate([ref.color, ref.alpha[..., None]], axis=-1).astype(np.float32)
-    return RenderOutput(rgba, np.asarray(ref.depth, np.float32), DEPTH_LAYERS)
+    geometry = View.of(camera, settings, scene).geometry(under) if under is not None else None
+    ref = render_reference(scene, camera, settings, compat=settings.convention,
+                           progress=progress, layers=frozenset(layers), under=geometry)
+    return ref.output(frozenset(layers))
 
 
 def _inputs(scene: Scene, camera: Camera | None,

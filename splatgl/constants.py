@@ -33,6 +33,9 @@ ALPHA_MAX = 0.99
 ALPHA_MIN = 1.0 / 255.0
 #: Front-to-back blending stops when the transmittance would fall below this.
 T_MIN = 1e-4
+#: The median-depth layer takes the depth of the last splat blended while the transmittance
+#: before it is above this (2DGS's and gsplat's median: where the accumulated alpha crosses 0.5).
+MEDIAN_T = 0.5
 #: Fixed quad half-size, in standard deviations, of the fast approximation (``--extent fast``):
 #: 2 sqrt(2), the corner distance web viewers use (their corner coordinate 2 times sqrt(2) sigma).
 FAST_CORNER_SIGMAS = 2.0 * math.sqrt(2.0)
@@ -174,6 +177,7 @@ def glsl_defines() -> dict[str, str]:
         "ALPHA_MAX": glsl_float(ALPHA_MAX),
         "ALPHA_MIN": glsl_float(ALPHA_MIN),
         "T_MIN": glsl_float(T_MIN),
+        "MEDIAN_T": glsl_float(MEDIAN_T),
         "SH_OFFSET": glsl_float(SH_OFFSET),
         "SURFEL_FILTER_INV_SQUARE": glsl_float(SURFEL_FILTER_INV_SQUARE),
         "FAST_CORNER_SIGMAS": glsl_float(FAST_CORNER_SIGMAS),

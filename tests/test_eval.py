@@ -276,3 +276,35 @@ def test_reports_are_written_all_or_none(dataset, tmp_path, capsys, monkeypatch)
     code, _, err = _run(capsys, "--dataset", dataset, "--csv", tmp_path / "e.csv", "--json", tmp_path / "e.json")
     assert code == 2 and err.startswith(f"splatgl: error: {tmp_path / 'e.json'}: cannot write (No space"), err
     assert list(tmp_path.iterdir()) == []  # not the CSV alone
+
+
+def test_renders_carry_the_layers_of_every_view(dataset, capsys, tmp_path, gl_renderer):
+    """--renders DIR --format exr --layers ...: one EXR per view with those channels, whose
+    colour is the render scored (the scores are unchanged)."""
+    import OpenImageIO as oiio
+    from splatgl.output.images import read_image
+
+    out = tmp_path / "renders"
+    code, text, err = _run(capsys, "--dataset", dataset, "--renders", out, "--format", "exr",
+                           "--layers", "depth,normal,count,top-id", "--json", tmp_path / "s.json")
+    assert code == 0, err
+    report = json.loads((tmp_path / "s.json").read_text())
+    assert report["mean"]["psnr"] == pytest.approx(EXPECTED_PSNR, abs=0.01)
+    files = sorted(p.name for p in out.iterdir())
+    assert files == [f"img_{i:02d}.exr" for i in range(N_VIEWS)]
+    spec = oiio.ImageInput.open(str(out / "img_00.exr")).spec()
+    assert set(spec.channelnames) == {"R", "G", "B", "A", "Z", "N.X", "N.Y", "N.Z", "count", "id"}
+    assert f"wrote {N_VIEWS} renders to {out}" in text
+    views = load_dataset(dataset, None, "all", 1600)
+    settings = RenderSettings(background=(0.5, 0.5, 0.5))
+    expected = gl_renderer.render(load_scene(demo_scene_path()), views[0].camera, settings)
+    px = read_image(out / "img_00.exr")
+    names = list(spec.channelnames)
+    got = px[..., [names.index(c) for c in "RGBA"]]
+    np.testing.assert_array_equal(got, expected)
+    # pictures beside PNG renders; options that describe renders need --renders
+    code, _, err = _run(capsys, "--dataset", dataset, "--renders", tmp_path / "p", "--layers", "count")
+    assert code == 0, err
+    assert (tmp_path / "p" / "img_00_count.png").is_file()
+    code, _, err = _run(capsys, "--dataset", dataset, "--layers", "count")
+    assert code == 2 and "--layers describe the renders eval writes; give --renders DIR" in err

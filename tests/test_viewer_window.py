@@ -300,3 +300,28 @@ def test_equirectangular_view_refuses_the_tile_toggles(xvfb_display, demo, tmp_p
         assert v.message == "Tab refused: the tile renderer cannot draw equirectangular images"
     finally:
         v.close()
+
+
+def test_ctrl_click_lists_the_pixel_from_the_reference(viewer, demo, capsys):
+    """Ctrl+left click prints the pixel's splats (splatgl pixel's listing) and names the top
+    one on the status line; it does not start an orbit drag."""
+    import glfw
+
+    from splatgl.reference.pixel import pixel_splats
+
+    v = viewer
+    v.step()
+    state = v.state
+    v.on_cursor(W / 2, H / 2)
+    v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, glfw.MOD_CONTROL)
+    v.on_cursor(W / 2 + 40, H / 2)                        # no drag follows the click
+    v.on_mouse_button(glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, glfw.MOD_CONTROL)
+    assert v.state == state
+    listing = v.last_pixel
+    expected = pixel_splats(demo[1], v.camera(), W // 2, H // 2, v.settings)
+    assert listing is not None and (listing.x, listing.y) == (W // 2, H // 2)
+    assert [s.index for s in listing.splats] == [s.index for s in expected.splats] != []
+    out = capsys.readouterr().out
+    assert f"pixel ({W // 2}, {H // 2}):" in out and "weights sum" in out
+    top = max(listing.splats, key=lambda s: s.weight)
+    assert f"top splat {top.index}" in v.message

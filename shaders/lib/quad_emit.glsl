@@ -9,11 +9,16 @@
 flat out vec2 v_mean2d;       // pixel centre of the splat
 flat out vec3 v_conic;        // (a, b, c) of Sigma'^-1
 flat out vec4 v_color;        // (SH colour, opacity)
-#ifdef DEPTH_OUTPUT
 flat out float v_depth;       // camera-space z of the centre, for the depth layer
-#endif
 #ifdef EXTENT_FAST
 out vec2 v_unit;              // corner coordinate in sigmas (identity conic)
+#endif
+#ifdef NORMAL_OUTPUT
+flat out vec3 v_normal;       // camera-space unit normal, for the normal layer
+#endif
+#ifdef ORDERED_PASS
+flat out uint v_index;        // the splat's scene row, for the top-contributor layer
+flat out uvec4 v_rect;        // the reference's tile rectangle (lib/tile_rect.glsl)
 #endif
 
 const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothing rasterised
@@ -70,9 +75,7 @@ void emit_corner(vec2 mean2d, vec2 axis1, vec2 axis2, vec3 con, vec3 color, floa
     v_mean2d = mean2d;
     v_conic = con;
     v_color = vec4(color, opacity);
-#ifdef DEPTH_OUTPUT
     v_depth = depth;
-#endif
 #ifdef EXTENT_FAST
     v_unit = corner * shrink * FAST_CORNER_SIGMAS;
 #endif

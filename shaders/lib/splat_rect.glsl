@@ -10,6 +10,7 @@
 #include "lib/surfel.glsl"
 #elif !defined(PREPARED)
 #include "lib/sh.glsl"
+#include "lib/normal.glsl"
 #include "lib/splat_setup.glsl"
 #endif
 

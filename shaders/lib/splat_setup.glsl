@@ -1,6 +1,7 @@
 // Per-splat screen setup shared by the quad path's vertex shader and its compute pre-pass.
 // Twin: splatgl/twins/project.py project(), ellipse_axes(), reference_radius().
-// Needs lib/camera.glsl, lib/scene.glsl, lib/project.glsl, lib/sh.glsl included before it.
+// Needs lib/camera.glsl, lib/scene.glsl, lib/project.glsl, lib/sh.glsl (and lib/normal.glsl)
+// included before it.
 
 struct ScreenSplat {
     vec2 mean2d;    // pixel position of the centre
@@ -10,6 +11,12 @@ struct ScreenSplat {
     vec3 color;     // SH colour
     float opacity;  // opacity (times the AA factor with ANTIALIAS)
     float depth;    // camera-space z of the centre
+#ifdef NORMAL_OUTPUT
+    vec3 normal;    // camera-space unit normal, towards the camera (lib/normal.glsl)
+#endif
+#ifdef ORDERED_RECT
+    float radius;   // the reference's radius ceil(3 sqrt(lambda_max)), for its tile rectangle
+#endif
 };
 
 // Quad half-axes by extent mode (DESIGN.md 2, splatgl.settings.QuadExtent):
@@ -64,6 +71,12 @@ bool setup_splat(uint idx, float weight, out ScreenSplat s) {
 #endif
     quad_axes(cov, det, s.opacity, s.axis1, s.axis2);
     s.depth = view_depth(p);
+#ifdef NORMAL_OUTPUT
+    s.normal = splat_normal(rot, scale, p);
+#endif
+#ifdef ORDERED_RECT
+    s.radius = reference_radius(cov);
+#endif
     s.color = sh_color(i, splat_sh_dc(i), normalize(a.xyz - u_cam_center));
     return true;
 }

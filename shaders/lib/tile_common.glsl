@@ -36,6 +36,10 @@ layout(std430, binding = TILE_BINDING_RANGES) buffer TileRanges { uvec2 tile_ran
 //                        orthographic T_2 = (0, 0, 1).
 layout(std430, binding = TILE_BINDING_SURFEL) buffer ProjSurfel { vec4 proj_surfel[]; };
 #endif
+#ifdef NORMAL_OUTPUT
+// proj_normal[i] = (n, 0): the normal layer's camera-space unit normal (lib/normal.glsl).
+layout(std430, binding = TILE_BINDING_NORMAL) buffer ProjNormal { vec4 proj_normal[]; };
+#endif
 
 // Key layout (DESIGN.md section 2: tile id major, float bits of view z minor, compared as one
 // unsigned 64-bit integer).  splatgl packs it as

@@ -106,6 +106,36 @@ class CameraModel:
         """(N,) the depth that sorts splats and fills the depth layer: view z by default."""
         return p_cam[:, 2]
 
+    @property
+    def depth_is_distance(self) -> bool:
+        """Whether :meth:`depth` (the sort key, the depth layers) is the distance from the
+        camera (the SPHERE models: fisheye, panorama) rather than view-space z."""
+        return self.cull is CullKind.SPHERE
+
+    def pixel_depth(self, depth: np.ndarray, along_ray: bool, camera: "Camera") -> np.ndarray:
+        """(H, W) depths of what this camera's pixels see, given as view-space z (``along_ray``
+        False) or as the distance along each pixel's ray (True), in this model's own depth
+        metric (:meth:`depth`; geometry composited under splats, :mod:`splatgl.output.under`).
+        Non-finite values (no geometry) stay +inf.
+
+        Perspective: ``z = distance / |((u - cx) / fx, (v - cy) / fy, 1)|`` at the pixel centre;
+        orthographic: rays start on the camera plane, so both are z; fisheye and panorama
+        cameras order splats by distance, and a view-space z is refused (it does not name one
+        point of a ray that turns behind the camera)."""
+        d = np.where(np.isfinite(depth), np.asarray(depth, np.float64), np.inf)
+        if self.depth_is_distance:
+            if not along_ray:
+                raise CameraError(f"{self.name} cameras sort splats by distance; give the geometry's "
+                                  "depth as distance along the ray, not view-space z")
+            return d.astype(np.float32)
+        if self.parallel_rays or not along_ray:
+            return d.astype(np.float32)
+        h, w = d.shape
+        x = (np.arange(w) + 0.5 - camera.cx) / camera.fx
+        y = (np.arange(h) + 0.5 - camera.cy) / camera.fy
+        length = np.sqrt(x[None, :] ** 2 + y[:, None] ** 2 + 1.0)
+        return (d / length).astype(np.float32)
+
     def visible(self, p_cam: np.ndarray, camera: "Camera", near) -> np.ndarray:
         """(N,) bool: centres the model draws (the shader's ``in_view``): view z beyond ``near``."""
         return p_cam[:, 2] > near

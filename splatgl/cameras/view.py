@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..output.under import DepthKind, UnderImage, UnderLayer
 from .camera import Camera
 from .model import CameraModel
 
@@ -149,6 +150,15 @@ class View:
             "u_near": float(self.near32),
             **self.model.uniforms(cam),
         }
+
+    def geometry(self, under: UnderImage) -> UnderLayer:
+        """``under`` (geometry rendered from this view's camera) as the renderers take it: its
+        size checked, its depth in the camera model's own metric
+        (:meth:`~splatgl.cameras.model.CameraModel.pixel_depth`)."""
+        under.check_size(self.width, self.height)
+        along_ray = under.kind is DepthKind.DISTANCE
+        return UnderLayer(under.rgb, under.alpha,
+                          self.model.pixel_depth(under.depth, along_ray, self.camera))
 
     def set_uniforms(self, prog) -> None:
         """Write the uniforms ``prog`` (a moderngl program) uses."""

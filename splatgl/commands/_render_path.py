@@ -14,6 +14,8 @@ from ..datasets import load_source, select_indices
 from ..errors import SplatglError
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
+from ..output.layer_files import check_exact_ids
+from ._layers import check_under_options, layer_files, named_layers
 from ..output.frames import FrameTarget
 from ..output.image_formats import FORMAT_NAMES
 from ..gl.context import NO_GL_RENDERER, renderer_name
@@ -171,7 +173,12 @@ def run_path(args: argparse.Namespace) -> int:
                            "(an orbit's radius: splatgl path orbit --radius)")
     if args.depth_png is not None:
         raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
-    target = FrameTarget.parse(args.output, args.format)
+    if args.under is not None:
+        raise SplatglError("--under composites one view into a render of its geometry; not with --path")
+    target = FrameTarget.parse(args.output, args.format).with_layers(named_layers(args),
+                                                                     args.normal_space)
+    layer_files(args, None)     # --normal-space world needs the normal layer
+    check_under_options(args)
     executor = executor_from_args(args)
     check_not_sharded(args, executor.sharded)
     if args.stereo is not None and executor.sharded:
@@ -192,6 +199,8 @@ def run_path(args: argparse.Namespace) -> int:
     # the scene frames the orbit and is counted in the summary: a LOD file's leaves
     scene = load_scene_arg(args) if tree is None else tree.nodes.subset(slice(0, tree.level_size(0)))
     settings = settings_from_args(args)
+    if not target.is_video:
+        check_exact_ids(target.files(), target.frame_path(0), scene.count)
     cameras, source_fps, numbers = path_cameras(args, scene)
     fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)
     if not fps > 0:

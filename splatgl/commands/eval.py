@@ -12,7 +12,9 @@ from ..datasets.sources import select_indices
 from ..errors import SplatglError
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
-from ..evaluation.evaluate import evaluate, worst_sheet
+from ..evaluation.evaluate import RenderFiles, evaluate, worst_sheet
+from ..output.frames import FrameTarget
+from ..output.image_formats import FORMAT_NAMES
 from ..output.images import check_image_suffix, write_image
 from ..output.files import OutputFiles
 from ..progress import default_progress
@@ -20,6 +22,7 @@ from ..api import Renderer
 from ..model.settings import RendererKind
 from ._common import (add_scene_arguments, add_settings_arguments, check_convention, demo_scene_path,
                       load_scene_arg, settings_from_args)
+from ._layers import add_layer_arguments, layer_files, named_layers
 from ._spz_axes import check_not_sharded
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
@@ -43,6 +46,7 @@ examples:
   splatgl eval scene.ply --dataset garden --json - | jq .mean        (the JSON alone on stdout)
   splatgl eval scene.ply --dataset garden --csv scores.csv --sheet worst.png --worst 4
   splatgl eval scene.ply --dataset garden --workers 2          (views split over 2 processes)
+  splatgl eval scene.ply --dataset garden --renders out --format exr --layers depth,normal
   splatgl eval scene.ply --dataset /shared/garden --executor ray --ray-address auto"""
 
 
@@ -67,6 +71,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o.add_argument("--sheet", type=Path, default=None, metavar="FILE",
                    help="write a picture of the worst views: render | photograph | error heat map")
     o.add_argument("--worst", type=int, default=4, help="views on the sheet (default 4)")
+    o.add_argument("--renders", type=Path, default=None, metavar="DIR",
+                   help="also write each view's render to DIR/<photograph name>.<format>, with the "
+                        "--layers asked for (an .exr per view, or a .png and a picture per layer)")
+    o.add_argument("--format", default=None, choices=FORMAT_NAMES,
+                   help="image format of --renders (default png)")
+    add_layer_arguments(p, under=False)
     add_settings_arguments(p)
     add_executor_arguments(p, "contiguous chunks of the views (the scores merge into the same "
                               "table, CSV and JSON as one process's)",
@@ -83,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     if args.sheet is not None:
         check_image_suffix(args.sheet, "--sheet")
     check_json_target(args, {"SCENE": args.scene, "--csv": args.csv, "--sheet": args.sheet})
+    renders = _render_files(args)
     # every report path checked before the views are scored (the same file twice, a missing
     # folder); the reports are then written all or none
     json_file = None if json_to_stdout(args) else args.json
@@ -90,6 +101,9 @@ def run(args: argparse.Namespace) -> int:
     views = load_dataset(args.dataset, args.images, args.split, args.max_width)
     if args.select:
         views = [views[i] for i in select_indices(args.select, len(views), str(args.dataset))]
+    if renders is not None:
+        renders.check(views)
+        renders.frames.prepare()
     executor = executor_from_args(args)
     check_not_sharded(args, executor.sharded)
     settings = settings_from_args(args)
@@ -100,12 +114,12 @@ def run(args: argparse.Namespace) -> int:
 
         result, worst, run = evaluate_sharded(args.scene if args.scene is not None else demo_scene_path(),
                                               views, executor, settings, RendererKind(args.renderer),
-                                              keep, args.drop_invalid, default_progress())
+                                              keep, args.drop_invalid, default_progress(), renders)
     else:
         scene = load_scene_arg(args)
         with Renderer() as renderer:
             result, worst = evaluate(renderer, scene, views, settings, RendererKind(args.renderer),
-                                     keep, default_progress())
+                                     keep, default_progress(), renders)
     text = sys.stderr if json_to_stdout(args) else sys.stdout   # stdout: the JSON alone
     if not json_to_stdout(args):
         print(result.table())
@@ -126,4 +140,23 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {json_file}")
     if args.sheet is not None:
         print(f"wrote {args.sheet} ({len(worst)} worst views)", file=text)
+    if renders is not None:
+        print(f"wrote {len(views)} renders to {renders.folder}", file=text)
     return 0
+
+
+def _render_files(args: argparse.Namespace) -> RenderFiles | None:
+    """Where ``--renders`` writes (checked before any work); --layers/--format need it."""
+    if args.renders is None:
+        given = [o for o, v in (("--layers", args.layers), ("--format", args.format)) if v is not None]
+        if args.normal_space != "camera":
+            given.append("--normal-space")
+        if given:
+            raise SplatglError(f"{', '.join(given)} describe the renders eval writes; give --renders DIR")
+        return None
+    if args.renders.exists() and not args.renders.is_dir():
+        raise SplatglError(f"--renders {args.renders}: exists and is not a folder")
+    layer_files(args, None)   # --layers and --normal-space checked
+    frames = FrameTarget.parse(f"{args.renders}/", args.format).with_layers(
+        named_layers(args), args.normal_space)
+    return RenderFiles(args.renders, frames)

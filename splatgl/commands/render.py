@@ -11,6 +11,7 @@ from ..gl.context import NO_GL_RENDERER, renderer_name
 from ..output.image_formats import (BIT_DEPTHS, IMAGE_FORMATS, image_format, picture_format,
                                     suffix_list)
 from ..output.images import write_image
+from ..output.layer_files import check_exact_ids, picture_path, write_layers
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.files import OutputFiles
 from ..progress import default_progress
@@ -21,6 +22,7 @@ from ..lod.io import read_lod
 from ..model.settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args)
+from ._layers import add_layer_arguments, layer_files, under_from_args
 from ._render_path import (add_path_arguments, lod_settings_from_args, refuse_path_only_options,
                            run_path)
 from ..renderers.stereo import StereoLayout, combine, eye_cameras
@@ -32,14 +34,20 @@ DESCRIPTION = """Render one view of a Gaussian-splat scene headlessly (EGL, or O
 
 The output format follows the extension: .png and .tif/.tiff get RGB with the background
 composited (8-bit, or 16-bit with --bit-depth 16); .exr gets float R, G, B, A and Z, where Z
-is the expected depth D / A (camera-space z, world units; 0 where nothing was drawn) and
-D = sum z alpha T is accumulated with the colour's weights in the same pass.
+is the expected depth D / A (camera-space z, world units; a fisheye's or panorama's distance;
+0 where nothing was drawn) and D = sum z alpha T is accumulated with the colour's weights in
+the same pass.  --layers asks for more: the median depth, normals, the number of splats per
+pixel and the index of the splat with the largest weight (docs/layers.md); --under composites
+the splats into a render of opaque geometry by depth.
 
 examples:
   splatgl render -o demo.png
   splatgl render scene.ply --camera cameras.json --camera-index 3 -o view.exr
   splatgl render scene.ply --width 1920 --height 1080 --background 1,1,1 -o white.png
   splatgl render scene.ply -o view.png --depth-png depth.png
+  splatgl render scene.ply -o view.exr --layers colour,alpha,depth,median-depth,normal,count,top-id
+  splatgl render scene.ply -o view.png --layers normal,count      (view_normal.png, view_count.png)
+  splatgl render scene.ply --camera cam.json --under mesh.exr -o composite.png
   splatgl render scene.ply --path orbit:120 -o orbit.mp4
   splatgl render scene.ply --path dataset/sparse/0 --select 0:100:5 -o frames/%05d.png"""
 
@@ -71,6 +79,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default 2)")
     add_camera_arguments(p)
     add_settings_arguments(p)
+    add_layer_arguments(p)
     add_path_arguments(p)
 
 
@@ -83,56 +92,61 @@ def run(args: argparse.Namespace) -> int:
     check_convention(args, kind)
     if args.depth_png is not None:
         picture_format(args.depth_png, "--depth-png")
+    plan = layer_files(args, None)           # --layers checked before any work
     stereo = StereoLayout(args.stereo_layout) if args.stereo is not None else None
-    if stereo is StereoLayout.SEPARATE:   # each eye its own image (and depth preview)
-        names = {f"-o ({eye} eye)": _eye_name(args.output, eye) for eye in ("left", "right")}
-        depth_names = {f"--depth-png ({eye} eye)": _eye_name(args.depth_png, eye)
-                       for eye in ("left", "right")} if args.depth_png is not None else {}
-    else:
-        names = {"-o": args.output}
-        depth_names = {"--depth-png": args.depth_png}
-    outputs = OutputFiles({**names, **depth_names})
+    if stereo is not None and args.under is not None:
+        raise SplatglError("--under composites one camera's view into its geometry; not with --stereo")
+    eyes_out = ({"left": _eye_name(args.output, "left"), "right": _eye_name(args.output, "right")}
+                if stereo is StereoLayout.SEPARATE else {"": args.output})
+    targets: dict[str, Path] = {}          # every file written, by its OutputFiles name
+    for eye, path in eyes_out.items():
+        what = f"-o ({eye} eye)" if eye else "-o"
+        targets[what] = path
+        targets.update({f"{what} ({layer.value})": picture_path(path, layer) for layer in plan.pictures(path)})
+    depth_names = ({eye: _eye_name(args.depth_png, eye) for eye in eyes_out} if stereo is StereoLayout.SEPARATE
+                   else {"": args.depth_png}) if args.depth_png is not None else {}
+    targets.update({f"--depth-png ({eye} eye)" if eye else "--depth-png": path
+                    for eye, path in depth_names.items()})
+    outputs = OutputFiles(targets)         # refuses one file named twice
+    keys = {path: name for name, path in targets.items()}
     fmt = image_format(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
+    under = under_from_args(args)
     scene, settings, camera = inputs_from_args(args)
+    files = layer_files(args, camera)
+    check_exact_ids(files, args.output, scene.count)
     # what the file holds (EXR: the depth layer as Z), and the depth the preview needs
-    layers = fmt.render_layers | ({Layer.DEPTH} if args.depth_png is not None else set())
-    want_depth = Layer.DEPTH in layers
+    layers = files.render_layers(args.output) | ({Layer.DEPTH} if args.depth_png is not None else set())
     lod = any(v is not None for v in (args.lod_threshold, args.lod_budget, args.lod_blend))
     if lod and stereo is not None:
         raise SplatglError(LodFrames.stereo_refusal)
     times = None
     if lod:
         cut = lod_settings_from_args(args)  # its checks before reading the tree
-        out, times, gl_name = render_lod(read_lod(args.scene), camera, settings, cut, layers)
+        out, times, gl_name = render_lod(read_lod(args.scene), camera, settings, cut, layers, under)
         eyes = [out]
         kind_text = f"{kind.value}, level of detail"
     else:
         cameras = list(eye_cameras(camera, args.stereo)) if stereo is not None else [camera]
-        eyes, times, gl_name = _render(args, scene, settings, cameras, kind, layers)
+        eyes, times, gl_name = _render(args, scene, settings, cameras, kind, layers, under)
         kind_text = kind.value
-    if stereo is StereoLayout.SEPARATE:
-        with outputs:
-            for key, depth_key, eye in zip(names, depth_names or (None, None), eyes):
-                depth = eye.expected_depth() if want_depth else None
-                write_image(outputs.temp(key), eye.rgba, args.bit_depth, depth=depth)
-                if depth_key is not None:
-                    write_image(outputs.temp(depth_key), depth_preview(depth, eye.alpha))
-        for path in depth_names.values():
-            print(f"wrote {path} (expected depth)")
-        for path in names.values():
-            print(f"wrote {path} ({camera.width}x{camera.height}, {scene.count} splats, {kind_text})")
-        _print_timings(args, gl_name, times)
-        return 0
-    out = combine(eyes[0], eyes[1], stereo) if stereo is not None else eyes[0]
-    depth = out.expected_depth() if want_depth else None
+    if stereo is not StereoLayout.SEPARATE:
+        eyes = [combine(eyes[0], eyes[1], stereo) if stereo is not None else eyes[0]]
     with outputs:
-        write_image(outputs.temp("-o"), out.rgba, args.bit_depth, depth=depth)
-        if args.depth_png is not None:
-            write_image(outputs.temp("--depth-png"), depth_preview(depth, out.alpha))
-    if args.depth_png is not None:
-        print(f"wrote {args.depth_png} (expected depth)")
-    height, width = out.rgba.shape[:2]
-    print(f"wrote {args.output} ({width}x{height}, {scene.count} splats, {kind_text})")
+        for eye, out in zip(eyes_out, eyes):
+            write_layers(eyes_out[eye], out, files, args.bit_depth, lambda p: outputs.temp(keys[p]),
+                         write_image)
+            if eye in depth_names:
+                write_image(outputs.temp(keys[depth_names[eye]]),
+                            depth_preview(out.expected_depth(), out.alpha))
+    for path in depth_names.values():
+        print(f"wrote {path} (expected depth)")
+    for eye, path in eyes_out.items():
+        height, width = eyes[0].rgba.shape[:2]
+        shown = [layer.value for layer in files.render_layers(path) if fmt.is_float] if plan.named else []
+        extra = f", layers {', '.join(sorted(shown))}" if shown else ""
+        print(f"wrote {path} ({width}x{height}, {scene.count} splats, {kind_text}{extra})")
+        for layer in plan.pictures(path):
+            print(f"wrote {picture_path(path, layer)} ({layer.value})")
     _print_timings(args, gl_name, times)
     return 0
 
@@ -150,9 +164,9 @@ def _print_timings(args: argparse.Namespace, gl_name: str, times) -> None:
             print(f"timings: {format_timings(times)}")
 
 
-def _render(args, scene, settings, cameras, kind, layers):
+def _render(args, scene, settings, cameras, kind, layers, under=None):
     """(a RenderOutput per camera, the renderer's last_times or None, the GL renderer's name):
-    one context for all."""
+    one context for all; ``under``: geometry to composite into."""
     progress = default_progress()
     times = None
     gl_name = NO_GL_RENDERER
@@ -161,9 +175,10 @@ def _render(args, scene, settings, cameras, kind, layers):
         for camera in cameras:
             check_size(args, camera, kind, renderer.ctx if renderer is not None else None)
             if renderer is None:
-                outs.append(render_reference_layers(scene, camera, settings, progress))
-            elif layers != BASE:
-                outs.append(renderer.render_layers(scene, camera, settings, kind, progress, layers))
+                outs.append(render_reference_layers(scene, camera, settings, progress, layers, under))
+            elif layers != BASE or under is not None:
+                outs.append(renderer.render_layers(scene, camera, settings, kind, progress, layers,
+                                                   under))
             else:
                 outs.append(RenderOutput(renderer.render(scene, camera, settings, kind, progress), None))
         if renderer is not None:

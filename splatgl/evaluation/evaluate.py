@@ -30,7 +30,10 @@ import numpy as np
 
 from ..datasets.views import View
 from ..errors import SplatglError
+from ..output.frames import FrameTarget
 from ..output.images import read_image
+from ..output.layer_files import write_layers
+from ..output.layers import RenderOutput
 from .metrics import check_ssim_size, psnr, ssim
 from ..api import Renderer
 from ..model.scene import Scene
@@ -124,16 +127,52 @@ class Pair:
     photo: np.ndarray
 
 
+@dataclass(frozen=True)
+class RenderFiles:
+    """Where ``eval --renders`` writes each view's render: ``folder/<photograph stem><suffix>``
+    with the layers ``frames`` names (a :class:`~splatgl.output.frames.FrameTarget` of the
+    folder: its format, ``--layers`` and normal space)."""
+
+    folder: Path
+    frames: FrameTarget
+
+    def path(self, view: View) -> Path:
+        return self.folder / (Path(view.name).stem + Path(self.frames.pattern).suffix)
+
+    def check(self, views: Sequence[View]) -> None:
+        """Refuse two views that would write one file (before any work)."""
+        seen: dict[Path, str] = {}
+        for view in views:
+            path = self.path(view)
+            if path in seen:
+                raise SplatglError(f"--renders {self.folder}: views {seen[path]!r} and {view.name!r} "
+                                   f"would both write {path.name}")
+            seen[path] = view.name
+
+    def write(self, view: View, out: RenderOutput) -> None:
+        write_layers(self.path(view), out, self.frames.files(view.camera))
+
+
 def evaluate_views(renderer: Renderer, scene: Scene, views: Sequence[View],
                    settings: RenderSettings = RenderSettings(),
-                   kind: RendererKind = RendererKind.QUAD) -> Iterator[Pair]:
-    """Render each view and score it against its photograph, yielding as it goes."""
+                   kind: RendererKind = RendererKind.QUAD,
+                   renders: RenderFiles | None = None) -> Iterator[Pair]:
+    """Render each view and score it against its photograph, yielding as it goes (and with
+    ``renders``, write each view's layers)."""
     for view in views:
         if view.image is None:
             raise SplatglError(f"view {view.name!r} has no photograph to compare with")
         check_ssim_size(view.camera.width, view.camera.height, f"{view.image}: evaluated at")
-    renders = renderer.render_many(scene, [v.camera for v in views], settings, kind)
-    for view, rgba in zip(views, renders):
+    if renders is not None:
+        renders.check(views)
+        renders.frames.prepare()
+    layers = renders.frames.layers if renders is not None else None
+    outs = renderer.render_many(scene, [v.camera for v in views], settings, kind,
+                                layers=layers)
+    for view, out in zip(views, outs):
+        if renders is not None:
+            renders.write(view, out if layers is not None else RenderOutput(out, None))
+        rgba = out.rgba if layers is not None else out
         got = np.clip(rgba[..., :3], 0.0, 1.0)
         photo = load_photo(view.image, view.camera.width, view.camera.height, settings.background)
         yield Pair(ViewScore(view.name, psnr(got, photo), ssim(got, photo)), got, photo)
@@ -142,10 +181,12 @@ def evaluate_views(renderer: Renderer, scene: Scene, views: Sequence[View],
 def evaluate(renderer: Renderer, scene: Scene, views: Sequence[View],
              settings: RenderSettings = RenderSettings(), kind: RendererKind = RendererKind.QUAD,
              keep_worst: int = 0,
-             progress: Optional[Callable[[int, int, str], None]] = None) -> tuple[Evaluation, list[Pair]]:
-    """Score every view; also return the ``keep_worst`` lowest-PSNR pairs (for a sheet)."""
+             progress: Optional[Callable[[int, int, str], None]] = None,
+             renders: RenderFiles | None = None) -> tuple[Evaluation, list[Pair]]:
+    """Score every view; also return the ``keep_worst`` lowest-PSNR pairs (for a sheet); with
+    ``renders``, write each view's render and layers (:class:`RenderFiles`)."""
     scores, kept = [], []
-    for n, pair in enumerate(evaluate_views(renderer, scene, views, settings, kind), 1):
+    for n, pair in enumerate(evaluate_views(renderer, scene, views, settings, kind, renders), 1):
         scores.append(pair.score)
         if keep_worst:
             kept = sorted(kept + [pair], key=lambda p: p.score.psnr)[:keep_worst]

@@ -109,3 +109,39 @@ def depth_errors(got, expected) -> dict[str, float]:
         "depth_scale": scale,
         "depth_max_rel": float(d.max() / scale) if scale > 0 else 0.0,
     }
+
+
+def layer_errors(got, expected, solid_alpha: float = 0.5) -> dict[str, float]:
+    """How the further layers of two :class:`splatgl.output.layers.RenderOutput` differ
+    (those both hold; docs/layers.md reports them against the reference).
+
+    normal: the angle between the unit normals where both alphas are at least
+    ``solid_alpha`` (degrees: median, 99th percentile, max) and the largest difference of the
+    accumulated normals; median depth: the share of pixels blended by either whose median
+    differs by more than 1e-4 relative, and the largest relative difference there; count: the
+    share that differs and the largest difference; top-id: the share of pixels blended by
+    either whose top contributor differs.
+    """
+    out: dict[str, float] = {}
+    blended = (np.asarray(expected.alpha) > 0) | (np.asarray(got.alpha) > 0)
+    if got.normal is not None and expected.normal is not None:
+        solid = (got.alpha >= solid_alpha) & (expected.alpha >= solid_alpha)
+        cos = (got.unit_normals() * expected.unit_normals()).sum(-1)[solid]
+        angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))) if cos.size else np.zeros(1)
+        out.update(normal_deg_median=float(np.median(angle)),
+                   normal_deg_p99=float(np.percentile(angle, 99)), normal_deg_max=float(angle.max()),
+                   normal_max_abs=float(np.abs(got.normal.astype(np.float64) - expected.normal).max()))
+    if got.median_depth is not None and expected.median_depth is not None:
+        g, e = got.median_depth.astype(np.float64), expected.median_depth.astype(np.float64)
+        rel = np.abs(g - e) / np.maximum(np.abs(e), 1e-30)
+        off = blended & (rel > 1e-4)
+        out.update(median_off=float(off.sum() / max(blended.sum(), 1)),
+                   median_max_rel=float(rel[blended].max()) if blended.any() else 0.0)
+    if got.count is not None and expected.count is not None:
+        d = np.abs(got.count.astype(np.int64) - expected.count.astype(np.int64))
+        out.update(count_off=float((d > 0)[blended].mean()) if blended.any() else 0.0,
+                   count_max_diff=float(d.max()))
+    if got.top_id is not None and expected.top_id is not None:
+        off = got.top_id != expected.top_id
+        out.update(top_id_off=float(off[blended].mean()) if blended.any() else 0.0)
+    return out

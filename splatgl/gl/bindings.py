@@ -41,6 +41,12 @@ BINDING_COMMANDS = 10
 #: A level-of-detail cut's per-slot opacity weights: quad_prepass.comp (OPACITY_WEIGHT).
 BINDING_OPACITY_WEIGHT = 11
 BINDING_COVERAGE = 12
+#: The normal layer's per-slot camera-space normals: quad_prepass.comp (NORMAL_OUTPUT) writes,
+#: quad_light.vert reads.
+BINDING_PREPARED_NORMAL = 13
+#: The ordered pass's per-slot reference radius: quad_prepass.comp (ORDERED_RECT) writes,
+#: quad_light.vert (ORDERED_PASS) reads.
+BINDING_PREPARED_RADIUS = 14
 
 # --- The tile renderer's per-view buffers (renderers/tile.py; shaders/lib/tile_common.glsl,
 # tile_project.comp, tile_emit.comp, tile_rasterize.comp), after the scene's.
@@ -56,6 +62,15 @@ TILE_BINDING_RANGES = 13
 TILE_BINDING_OUT_RGBA = 14
 TILE_BINDING_OUT_DEPTH = 15
 TILE_BINDING_SURFEL = 16
+#: The further layers (splatgl/output/layers.py): per-splat camera-space normals (NORMAL_OUTPUT,
+#: tile_project.comp writes), per-pixel accumulated normals, the ordered layers' state
+#: (ORDERED_OUTPUT: (median z, top weight) and (count, top index + 1)) and the geometry depth
+#: splats are tested against (UNDER).
+TILE_BINDING_NORMAL = 17
+TILE_BINDING_OUT_NORMAL = 18
+TILE_BINDING_OUT_ORDERED_F = 19
+TILE_BINDING_OUT_ORDERED_U = 20
+TILE_BINDING_UNDER = 21
 
 # --- The device radix sort (gl/radix_sort.py; shaders/radix_count.comp, radix_scan.comp,
 # radix_scatter.comp).
@@ -68,6 +83,9 @@ RADIX_BINDING_HIST = 4
 # --- Texture units.
 #: Early termination samples the accumulation target here: stop_mark.frag, stop_tiles.comp.
 ACCUM_UNIT = 0
+#: The geometry depth the quad path's fragments are tested against (quad.frag, surfel.frag
+#: with UNDER).
+UNDER_UNIT = 1
 #: The viewer's present program samples its image here (splatgl/viewer/shaders/present.frag).
 PRESENT_UNIT = 0
 #: The draft upscaler samples the small frame here (shaders/upscale.frag).
@@ -96,11 +114,12 @@ _SCENE = ("BINDING_A", "BINDING_Q", "BINDING_S", "BINDING_DC", "BINDING_SH")
 FAMILIES: dict[str, tuple[str, ...]] = {
     "quad path storage": _SCENE + (
         "BINDING_ORDER", "BINDING_PREPARED", "BINDING_FRAGMENT_COUNTS", "BINDING_STOP_TILES",
-        "BINDING_SURVIVORS", "BINDING_COMMANDS", "BINDING_OPACITY_WEIGHT", "BINDING_COVERAGE"),
+        "BINDING_SURVIVORS", "BINDING_COMMANDS", "BINDING_OPACITY_WEIGHT", "BINDING_COVERAGE",
+        "BINDING_PREPARED_NORMAL", "BINDING_PREPARED_RADIUS"),
     "tile renderer storage": _SCENE + tuple(
         name for name in globals() if name.startswith("TILE_BINDING_")),
     "radix sort storage": tuple(name for name in globals() if name.startswith("RADIX_BINDING_")),
-    "quad path textures": ("ACCUM_UNIT",),
+    "quad path textures": ("ACCUM_UNIT", "UNDER_UNIT"),
     "viewer textures": ("PRESENT_UNIT",),
     "upscale textures": ("UPSCALE_UNIT",),
 }

@@ -14,22 +14,28 @@ class ColorTarget:
     """An RGBA framebuffer of the given precision; row 0 of the readback is framebuffer row 0.
 
     With ``depth``, a second RGBA32F attachment receives the depth layer (always float32:
-    depth values are not in [0, 1] and need the range).  With ``stop_mask``, a depth buffer
+    depth values are not in [0, 1] and need the range); with ``normal``, a further RGBA32F
+    attachment the normal layer (at :attr:`normal_location`: 2 after a depth attachment, else 1).  With ``stop_mask``, a depth buffer
     (early termination's per-pixel stop mask, splatgl/renderers/early_stop.py) is attached to ``fbo``, and
     ``mask_fbo`` holds it alone, so the mark pass can sample ``texture`` while writing it.
     """
 
     def __init__(self, ctx: moderngl.Context, width: int, height: int, precision: Precision,
-                 depth: bool = False, stop_mask: bool = False):
+                 depth: bool = False, stop_mask: bool = False, normal: bool = False):
         self.size = (width, height)
         self.precision = precision
         self.texture = ctx.texture((width, height), 4, dtype=_DTYPES[precision])
         self.depth_texture = ctx.texture((width, height), 4, dtype="f4") if depth else None
+        self.normal_texture = ctx.texture((width, height), 4, dtype="f4") if normal else None
         attachments = [self.texture] + ([self.depth_texture] if depth else [])
+        #: The attachment (and fragment output location) of the normal layer (0: none).
+        self.normal_location = len(attachments) if normal else 0
+        attachments += [self.normal_texture] if normal else []
         self.stop_depth = ctx.depth_renderbuffer((width, height)) if stop_mask else None
         self.fbo = ctx.framebuffer(color_attachments=attachments, depth_attachment=self.stop_depth)
         self.mask_fbo = ctx.framebuffer(depth_attachment=self.stop_depth) if stop_mask else None
         self.has_depth = depth
+        self.has_normal = normal
         self.has_stop_mask = stop_mask
 
     def read_depth(self) -> np.ndarray:
@@ -37,6 +43,12 @@ class ColorTarget:
         w, h = self.size
         raw = self.fbo.read(components=4, dtype="f4", attachment=1)
         return np.frombuffer(raw, np.float32).reshape(h, w, 4)[..., 0].copy()
+
+    def read_normal(self) -> np.ndarray:
+        """(H, W, 3) float32 accumulated normal (rgb of the normal attachment)."""
+        w, h = self.size
+        raw = self.fbo.read(components=4, dtype="f4", attachment=self.normal_location)
+        return np.frombuffer(raw, np.float32).reshape(h, w, 4)[..., :3].copy()
 
     def read(self) -> np.ndarray:
         """(H, W, 4) float32 contents."""
@@ -56,5 +68,39 @@ class ColorTarget:
             self.mask_fbo.release()
             self.stop_depth.release()
         self.texture.release()
-        if self.depth_texture is not None:
-            self.depth_texture.release()
+        for texture in (self.depth_texture, self.normal_texture):
+            if texture is not None:
+                texture.release()
+
+
+class OrderedTarget:
+    """The quad path's ordered pass targets (shaders/lib/ordered_layers.glsl): ``state``
+    RGBA32F (T, median z, top weight, 0) and ``ids`` RGBA32UI (count, top index + 1, stopped,
+    0), read and written by the fragment stage itself (framebuffer fetch)."""
+
+    def __init__(self, ctx: moderngl.Context, width: int, height: int):
+        self.size = (width, height)
+        self.state = ctx.texture((width, height), 4, dtype="f4")
+        self.ids = ctx.texture((width, height), 4, dtype="u4")
+        self.fbo = ctx.framebuffer(color_attachments=[self.state, self.ids])
+        self.state_fbo = ctx.framebuffer(color_attachments=[self.state])
+        self._zeros = bytes(width * height * 16)
+
+    def clear(self) -> None:
+        """T = 1 and everything else 0 (an integer attachment cannot be cleared by glClear)."""
+        self.state_fbo.clear(1.0, 0.0, 0.0, 0.0)
+        self.ids.write(self._zeros)
+
+    def read(self) -> tuple[np.ndarray, np.ndarray]:
+        """(H, W, 4) float32 state and (H, W, 4) uint32 ids."""
+        w, h = self.size
+        f = np.frombuffer(self.fbo.read(components=4, dtype="f4", attachment=0), np.float32)
+        u = np.frombuffer(self.fbo.read(components=4, dtype="u4", attachment=1), np.uint32)
+        return f.reshape(h, w, 4).copy(), u.reshape(h, w, 4).copy()
+
+    def release(self) -> None:
+        self.fbo.ctx.detect_framebuffer(0).use()
+        self.fbo.release()
+        self.state_fbo.release()
+        self.state.release()
+        self.ids.release()

@@ -11,6 +11,7 @@ from typing import Iterable, Iterator
 from ..cameras.camera import Camera
 from ..gl.context import create_headless_context, make_current, renderer_name
 from ..output.layers import BASE, Layer, RenderOutput
+from ..output.under import UnderImage
 from ..model.settings import RenderSettings
 from ..cameras.view import View
 from .build import LodTree
@@ -43,10 +44,16 @@ class LodFrames:
             self.ctx.release()
             raise
 
-    def render_view(self, camera: Camera, layers: frozenset[Layer] = BASE) -> RenderOutput:
+    def render_view(self, camera: Camera, layers: frozenset[Layer] = BASE,
+                    under: UnderImage | None = None) -> RenderOutput:
+        """One view's ``layers`` (composited into ``under`` if given; the top contributor is
+        a node of the tree)."""
         make_current(self.ctx)
         self.renderer.rows.skip_within = None
-        return self.renderer.render(View.of(camera, self.settings, self.nodes), layers)
+        view = View.of(camera, self.settings, self.nodes)
+        if under is None:
+            return self.renderer.render(view, layers)
+        return self.renderer.render(view, layers, under=view.geometry(under))
 
     def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
                     layers: frozenset[Layer] | None = None) -> Iterator:
@@ -74,14 +81,14 @@ class LodFrames:
 
 
 def render_lod(tree: LodTree, camera: Camera, settings: RenderSettings = RenderSettings(),
-               lod: LodSettings = LodSettings(), layers: frozenset[Layer] = BASE
-               ) -> tuple[RenderOutput, SimpleNamespace, str]:
+               lod: LodSettings = LodSettings(), layers: frozenset[Layer] = BASE,
+               under: UnderImage | None = None) -> tuple[RenderOutput, SimpleNamespace, str]:
     """One view of ``tree`` (:func:`splatgl.lod.io.read_lod`) through the cut ``lod`` chooses:
     (the ``layers``, times with ``cut_nodes`` and ``cut`` (seconds) beside the quad path's
     stage times, the GL renderer's name), on a context of its own."""
     with LodFrames(tree, settings, lod) as frames:
         gl_name = renderer_name(frames.ctx)
-        out = frames.render_view(camera, layers)
+        out = frames.render_view(camera, layers, under)
         renderer, cut = frames.renderer, frames.renderer.rows
         times = SimpleNamespace(**vars(renderer.last_times), cut_nodes=cut.last_cut_nodes,
                                 cut=cut.last_cut_s, threshold=f"{cut.last_threshold_px:.2f} px")

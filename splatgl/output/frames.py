@@ -10,6 +10,7 @@ Any other suffix (``f.avi``, ``f.gif``, ``f.jpg``) is refused, never taken for a
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import os
 from dataclasses import dataclass
@@ -17,10 +18,12 @@ from pathlib import Path
 from typing import Sequence
 
 from ..errors import SplatglError
-from .layers import BASE, Layer
+from .layers import BASE, Layer, NormalSpace
 from .image_formats import (DEFAULT_FORMAT, FORMAT_NAMES, IMAGE_SUFFIXES, ImageFormat, find_format,
                             format_named)
 from .images import inspect_image
+from .layer_files import LayerFiles
+from .under import DepthKind
 from .video import VIDEO_SUFFIXES
 
 DEFAULT_PATTERN = "%05d"
@@ -33,11 +36,36 @@ class TargetKind(enum.Enum):
 
 @dataclass(frozen=True)
 class FrameTarget:
-    """A parsed output: ``pattern`` (a printf pattern of image paths) or a ``video`` path."""
+    """A parsed output: ``pattern`` (a printf pattern of image paths) or a ``video`` path, and
+    the layers each frame holds (``named``, ``--layers``; empty: the format's own, and
+    ``normal_space``; :meth:`with_layers`)."""
 
     kind: TargetKind
     pattern: str | None = None
     video: Path | None = None
+    named: tuple[Layer, ...] = ()
+    normal_space: NormalSpace = NormalSpace.CAMERA
+
+    def with_layers(self, named: tuple[Layer, ...],
+                    normal_space: NormalSpace = NormalSpace.CAMERA) -> "FrameTarget":
+        """This target with ``--layers``; a video, which holds colour alone, refuses others."""
+        if self.is_video and set(named) - {Layer.COLOUR}:
+            raise SplatglError(f"{self.video}: a video holds the colour alone; write frames "
+                               "(-o frames/%05d.exr, or .png for a picture per layer) for --layers")
+        return dataclasses.replace(self, named=tuple(named), normal_space=NormalSpace(normal_space))
+
+    def files(self, camera=None) -> LayerFiles:
+        """How a frame of ``camera`` (a :class:`~splatgl.cameras.camera.Camera`: its pose for
+        world normals, its model's depth metric) writes its layers."""
+        world = self.normal_space is NormalSpace.WORLD and camera is not None
+        lens = camera is not None and camera.model.depth_is_distance
+        return LayerFiles(self.named, self.normal_space,
+                          camera.world_to_camera if world else None,
+                          DepthKind.DISTANCE if lens else DepthKind.Z)
+
+    def frame_paths(self, index: int) -> list[Path]:
+        """Every file of frame ``index``: the image and its layer pictures."""
+        return self.files().paths(self.frame_path(index))
 
     @classmethod
     def parse(cls, out: str | Path, image_format: str | None = None) -> "FrameTarget":
@@ -89,11 +117,15 @@ class FrameTarget:
 
     @property
     def layers(self) -> frozenset[Layer] | None:
-        """The layers each frame needs beyond colour and alpha (None: those alone): what the
-        frames' format holds (:attr:`~splatgl.output.image_formats.ImageFormat.render_layers`;
-        EXR frames carry the depth channel, as ``splatgl render -o x.exr`` does)."""
+        """The layers each frame needs beyond colour and alpha (None: those alone): the ones
+        named, else what the frames' format holds
+        (:attr:`~splatgl.output.image_formats.ImageFormat.render_layers`; EXR frames carry the
+        depth channel, as ``splatgl render -o x.exr`` does)."""
         fmt = self.image_format
-        return fmt.render_layers if fmt is not None and fmt.render_layers != BASE else None
+        if fmt is None:
+            return None
+        layers = self.files().render_layers(self.frame_path(0))
+        return layers if layers != BASE else None
 
     def frame_path(self, index: int) -> Path:
         return Path(self.pattern % index)
@@ -130,15 +162,16 @@ def plan_frames(target: FrameTarget, sizes: Sequence[tuple[int, int]], numbers: 
     if not resume or target.is_video:
         return FramePlan(list(range(len(sizes))))
     fmt = target.image_format
-    channels = len(fmt.channels(fmt.render_layers))
+    channels = len(fmt.channels(target.layers or BASE))
     todo, damaged = [], 0
     for k, ((width, height), number) in enumerate(zip(sizes, numbers)):
         path = target.frame_path(number)
-        if not path.exists():
+        paths = target.frame_paths(number)
+        if not all(p.exists() for p in paths):
             todo.append(k)
             continue
         info = inspect_image(path)
-        if isinstance(info, str):
+        if isinstance(info, str) or any(isinstance(inspect_image(p), str) for p in paths[1:]):
             todo.append(k)
             damaged += 1
             continue

@@ -2,9 +2,11 @@
 reads: a new format is one row here (and its writer in :mod:`splatgl.output.images`).
 
 Each format says what a file of it holds: integer formats (PNG, TIFF) the colour with the
-background composited, quantised to 8 or 16 bits; float formats (EXR) float32 colour, alpha and
-the expected depth (channel Z).  A render into a file asks for the layers its format holds
-(:attr:`ImageFormat.render_layers`): so ``-o x.exr`` renders the depth layer, ``-o x.png`` not.
+background composited, quantised to 8 or 16 bits; float formats (EXR) float32 colour, alpha, the
+expected depth (channel Z) and every further layer asked for (:data:`LAYER_CHANNELS`).  A render
+into a file asks for the layers its format holds by default (:attr:`ImageFormat.render_layers`):
+so ``-o x.exr`` renders the depth layer, ``-o x.png`` not; ``--layers`` asks for others
+(:mod:`splatgl.output.layer_files` writes them: EXR channels, or a picture per layer).
 """
 
 from __future__ import annotations
@@ -18,11 +20,17 @@ from .layers import BASE, Layer
 #: Bits per channel an integer format can be written with (``--bit-depth``).
 BIT_DEPTHS = (8, 16)
 
-#: The channels each layer adds to a file, in file order.
+#: The channels each layer adds to a file, in file order (EXR's ``layer.channel`` names for the
+#: layers beyond colour, alpha and depth).  Z is the expected depth ``D / A`` and N the unit
+#: normal; ``count`` and ``id`` are float32 (exact to 2^24).
 LAYER_CHANNELS: dict[Layer, tuple[str, ...]] = {
     Layer.COLOUR: ("R", "G", "B"),
     Layer.ALPHA: ("A",),
     Layer.DEPTH: ("Z",),
+    Layer.MEDIAN_DEPTH: ("median.Z",),
+    Layer.NORMAL: ("N.X", "N.Y", "N.Z"),
+    Layer.COUNT: ("count",),
+    Layer.TOP_ID: ("id",),
 }
 
 
@@ -48,8 +56,9 @@ class ImageFormat:
 
     @property
     def render_layers(self) -> frozenset[Layer]:
-        """The layers a render into this format asks for (every render has :data:`BASE`)."""
-        return BASE | self.layers
+        """The layers a render into this format asks for unless told (every render has
+        :data:`BASE`; a float format: the depth besides)."""
+        return BASE | (self.layers & DEFAULT_FLOAT_LAYERS)
 
     def channels(self, layers: frozenset[Layer] | set[Layer]) -> tuple[str, ...]:
         """The channel names of a file of this format written from ``layers`` (those of them it
@@ -63,8 +72,10 @@ class ImageFormat:
 IMAGE_FORMATS: tuple[ImageFormat, ...] = (
     ImageFormat("png", (".png",), False, frozenset({Layer.COLOUR})),
     ImageFormat("tif", (".tif", ".tiff"), False, frozenset({Layer.COLOUR})),
-    ImageFormat("exr", (".exr",), True, frozenset({Layer.COLOUR, Layer.ALPHA, Layer.DEPTH})),
+    ImageFormat("exr", (".exr",), True, frozenset(Layer)),
 )
+#: The layers an EXR render holds unless ``--layers`` says otherwise.
+DEFAULT_FLOAT_LAYERS = frozenset({Layer.COLOUR, Layer.ALPHA, Layer.DEPTH})
 #: The format of frames written into a folder unless ``--format`` says otherwise.
 DEFAULT_FORMAT = IMAGE_FORMATS[0]
 #: Every suffix of :data:`IMAGE_FORMATS`.

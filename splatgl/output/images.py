@@ -97,13 +97,18 @@ def _clean(message: str) -> str:
 
 
 def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
-                depth: np.ndarray | None = None) -> None:
+                depth: np.ndarray | None = None,
+                extra: dict[str, np.ndarray] | None = None,
+                attributes: dict[str, str] | None = None) -> None:
     """Write an (H, W, 4) float32 image (row 0 at the top), atomically.
 
     What the file holds follows its format (:mod:`splatgl.output.image_formats`): PNG/TIFF get
     RGB (the background already composited), clipped to [0, 1] and quantised once to
-    ``bit_depth`` (8 or 16).  EXR gets float32 R, G, B, A (A = accumulated alpha) and, when
-    ``depth`` (H, W) is given, a Z channel (the expected depth, 0 where nothing was drawn).
+    ``bit_depth`` (8 or 16).  EXR gets float32 R, G, B, A (A = accumulated alpha), when
+    ``depth`` (H, W) is given a Z channel (the expected depth, 0 where nothing was drawn), and
+    the (H, W) planes of ``extra`` as float32 channels of those names, in that order (the
+    further layers, :func:`splatgl.output.layer_files.exr_channels`); ``attributes`` become
+    string attributes of an EXR header (what the channels mean: ``splatgl:depth``).
     """
     path = Path(path)
     fmt = image_format(path)
@@ -113,6 +118,9 @@ def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
     channels = fmt.channels(layers)
     if fmt.is_float:
         planes = [rgba[..., :4]] + ([depth[..., None]] if "Z" in channels else [])
+        extra = extra or {}
+        planes += [np.asarray(plane)[..., None] for plane in extra.values()]
+        channels = channels + tuple(extra)
         pixels, pixel_type = np.ascontiguousarray(np.concatenate(planes, -1), np.float32), oiio.FLOAT
     else:
         scale = 255.0 if bit_depth == 8 else 65535.0
@@ -123,6 +131,9 @@ def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
     h, w = pixels.shape[:2]
     spec = oiio.ImageSpec(w, h, len(channels), pixel_type)
     spec.channelnames = channels
+    if fmt.is_float:
+        for name, value in (attributes or {}).items():
+            spec.attribute(name, str(value))
 
     def complete(tmp: Path) -> str | None:
         return image_file_problem(tmp, w, h, len(channels), None if fmt.is_float else bit_depth)

@@ -60,6 +60,48 @@ def depth_preview(expected_depth: np.ndarray, alpha: np.ndarray, min_alpha: floa
     return _with_scale_bar(img.astype(np.float32), f"z {lo:.4g}", f"z {hi:.4g}")
 
 
+def _caption(img: np.ndarray, text: str) -> np.ndarray:
+    """Append a caption bar with ``text`` under an (H, W, 3) image -> RGBA."""
+    w = img.shape[1]
+    bar = np.zeros((20, w, 3), np.float32)
+    if w >= 60:
+        bar = _label(bar, 2, 15, text[: max(1, (w - 4) // 7)])
+    out = np.concatenate([img, bar], axis=0)
+    return np.concatenate([out, np.ones(out.shape[:2] + (1,), np.float32)], -1)
+
+
+def value_preview(values: np.ndarray, mask: np.ndarray, name: str, integer: bool = False,
+                  top: float | None = None) -> np.ndarray:
+    """(H + bar, W, 4) ``values`` from 0 to ``top`` (default their largest where ``mask``)
+    through :func:`colormap`, black outside ``mask``, with the range on a scale bar labelled
+    ``name``."""
+    if top is None:
+        top = float(values[mask].max()) if mask.any() else 1.0
+    top = top if top > 0 else 1.0
+    img = colormap(values / top) * mask[..., None]
+    high = f"{name} {int(top)}" if integer else f"{name} {top:.4g}"
+    return _with_scale_bar(img.astype(np.float32), f"{name} 0", high)
+
+
+def normal_preview(unit_normals: np.ndarray, mask: np.ndarray, space: str) -> np.ndarray:
+    """(H + bar, W, 4) unit normals as colours ``(n + 1) / 2`` (black outside ``mask``), with
+    the mapping and the ``space`` on a caption bar."""
+    img = (0.5 * (unit_normals + 1.0)) * mask[..., None]
+    return _caption(img.astype(np.float32), f"normal, {space}: (n+1)/2")
+
+
+def id_preview(ids: np.ndarray) -> np.ndarray:
+    """(H + bar, W, 4) a colour per splat index (a hash; black where ``ids < 0``), with the
+    number of distinct indices on a caption bar."""
+    x = ids.astype(np.uint64) * np.uint64(2654435761) & np.uint64(0xFFFFFF)
+    rgb = np.stack([(x >> np.uint64(16)) & np.uint64(255), (x >> np.uint64(8)) & np.uint64(255),
+                    x & np.uint64(255)], -1).astype(np.float32) / 255.0
+    img = 0.25 + 0.75 * rgb
+    img = np.where((ids >= 0)[..., None], img, 0.0)
+    n = int(np.unique(ids[ids >= 0]).size)
+    return _caption(img.astype(np.float32), f"top-id: {n} splats")
+
+
 def side_by_side(left: np.ndarray, right: np.ndarray, names: tuple[str, str]) -> np.ndarray:
     """(H, 2W + 4, 4) image of two renders with their names written on them."""
     h = left.shape[0]

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..twins import surfel as sf
 from ..constants import ALPHA_MIN, T_MIN, TILE_SIZE
+from .layers import BatchLayers, RasterLayers
 from .options import Compat, ReferenceOptions
 from .stages import ProjectedSplats
 
@@ -50,6 +51,8 @@ class Raster:
     tile's list of the last splat blended (0: none), as 3DGS's ``n_contrib``.
     n_blended: (H, W) int32, how many splats the pixel blended (alpha >= 1/255, before the
     stop): the "reference fragments", the fill work a renderer that stops exactly must do.
+    layers: the further layers a :class:`~splatgl.reference.layers.RasterLayers` asked for,
+    as (H, W, ...) images by name (``normal``, ``median_depth``, ``top_id``, ``top_weight``).
     """
 
     color: np.ndarray
@@ -58,6 +61,7 @@ class Raster:
     transmittance: np.ndarray
     n_contrib: np.ndarray
     n_blended: np.ndarray | None = None
+    layers: dict[str, np.ndarray] | None = None
 
 
 def gaussian_power(conic: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
@@ -87,6 +91,7 @@ class _Tiles:
         self.color = proj.color[sidx]        # (n, K, 3)
         self.depth = proj.depth[sidx]        # (n, K)
         self.valid = valid                   # (n, K)
+        self.sidx = sidx                     # (n, K) projected rows
         self.wrap_period = proj.wrap_period  # equirect: reach half a turn each side
         if proj.is_surfel:
             self.rows = proj.surfel_rows[sidx]       # (n, K, 3, 3)
@@ -154,9 +159,10 @@ def _blend_chunk(t_prev: np.ndarray, alpha: np.ndarray, inclusive_stop: bool
 
 
 def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
-                  tiles: np.ndarray, options: ReferenceOptions, chunk: int):
+                  tiles: np.ndarray, options: ReferenceOptions, chunk: int,
+                  extra: BatchLayers | None = None):
     """Blend the tiles ``tiles`` (b,) completely; returns (T, C, D, n_contrib, n_blended) per
-    tile pixel."""
+    tile pixel (and fills ``extra``, the further layers of these tiles)."""
     dt = proj.dtype.type
     b = tiles.shape[0]
     out_t = np.ones((b, TILE_PIXELS), proj.dtype)
@@ -172,6 +178,8 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
     py = ((tiles // gw)[:, None] * TILE_SIZE + lanes).astype(proj.dtype)
     t, c, d, nc, nb = out_t[rows], out_c[rows], out_d[rows], out_n[rows], out_b[rows]
     done = np.zeros((rows.size, TILE_PIXELS), bool)
+    if extra is not None:
+        extra.start(rows)
     amax, inclusive = options.resolved_alpha_max, options.stop_inclusive
     ks = np.arange(chunk)
     offset = 0
@@ -183,6 +191,9 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
         else:
             alpha = _chunk_alpha(g, px[rows], py[rows], amax)
         alpha = np.where(done[:, None, :], dt(0.0), alpha)
+        if extra is not None:                               # geometry in front: not blended
+            z_splat = z_pix if proj.is_surfel else g.depth[:, :, None]
+            alpha = extra.depth_test(alpha, z_splat)
         w, kept, t_seq = _blend_chunk(t, alpha, inclusive)
         wt = w.transpose(0, 2, 1)                           # (n, 256, K)
         c += np.matmul(wt, g.color)
@@ -190,6 +201,8 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
             d += (w * np.where(w > 0, z_pix, dt(0.0))).sum(axis=1)
         else:
             d += np.matmul(wt, g.depth[:, :, None])[:, :, 0]
+        if extra is not None:
+            extra.add(g.sidx, w, t_seq, z_splat)
         t = np.take_along_axis(t_seq, kept[:, None, :], axis=1)[:, 0]
         done |= kept < chunk
         blended = w > 0
@@ -203,6 +216,8 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
             out_t[rows[stop]], out_c[rows[stop]] = t[stop], c[stop]
             out_d[rows[stop]], out_n[rows[stop]] = d[stop], nc[stop]
             out_b[rows[stop]] = nb[stop]
+            if extra is not None:
+                extra.retire(stop, go)
             rows, t, c, d, nc, nb, done = rows[go], t[go], c[go], d[go], nc[go], nb[go], done[go]
     return out_t, out_c, out_d, out_n, out_b
 
@@ -218,7 +233,8 @@ def _untile(per_tile: np.ndarray, grid: tuple[int, int], height: int, width: int
 def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarray,
               background=(0.0, 0.0, 0.0), options: ReferenceOptions | None = None,
               chunk: int = DEFAULT_CHUNK, tiles_per_batch: int = DEFAULT_TILES_PER_BATCH,
-              workers: int | None = None, progress=None) -> Raster:
+              workers: int | None = None, progress=None,
+              layers: RasterLayers | None = None) -> Raster:
     """Blend every tile's sorted splat list into the image (the reference's last stage).
 
     Args:
@@ -232,6 +248,8 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
         progress: optional ``progress(tiles_done, busy_tiles, what)``
             (:mod:`splatgl.progress`), called as each batch of tiles finishes.  Ctrl-C lands
             between batches: batches not yet started are cancelled.
+        layers: the further layers to compute and the geometry to test against
+            (:mod:`splatgl.reference.layers`), or None.
     """
     options = ReferenceOptions() if options is None else options
     if chunk < 1 or tiles_per_batch < 1:
@@ -248,9 +266,12 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
     nc = np.zeros((n_tiles, TILE_PIXELS), np.int32)
     nb = np.zeros((n_tiles, TILE_PIXELS), np.int32)
     values = np.asarray(sorted_values, np.int64)
+    under = layers.tiled_under(proj.grid) if layers is not None else None
 
     def run(tiles: np.ndarray):
-        return tiles, _raster_batch(proj, values, ranges, tiles, options, chunk)
+        extra = (layers.batch(len(tiles), proj.dtype, under[tiles] if under is not None else None)
+                 if layers is not None else None)
+        return tiles, _raster_batch(proj, values, ranges, tiles, options, chunk, extra), extra
 
     results, done = [], 0
 
@@ -272,15 +293,27 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
         else:
             for b in batches:
                 finished(run(b))
-    for tiles, (bt, bc, bd, bn, bb) in results:
+    for tiles, (bt, bc, bd, bn, bb), _ in results:
         t[tiles], c[tiles], d[tiles], nc[tiles], nb[tiles] = bt, bc, bd, bn, bb
     bg = np.asarray(background, proj.dtype)
     h, w = proj.height, proj.width
     t_img = _untile(t, proj.grid, h, w)
     color = _untile(c, proj.grid, h, w) + t_img[..., None] * bg
+    extra = _gather_layers(layers, results, n_tiles, proj) if layers is not None else None
     return Raster(color=color, alpha=proj.dtype.type(1.0) - t_img,
                   depth=_untile(d, proj.grid, h, w), transmittance=t_img,
-                  n_contrib=_untile(nc, proj.grid, h, w), n_blended=_untile(nb, proj.grid, h, w))
+                  n_contrib=_untile(nc, proj.grid, h, w), n_blended=_untile(nb, proj.grid, h, w),
+                  layers=extra)
+
+
+def _gather_layers(layers: RasterLayers, results, n_tiles: int, proj: ProjectedSplats
+                   ) -> dict[str, np.ndarray]:
+    """The batches' further layers as (H, W, ...) images (empty tiles at their start values)."""
+    empty = layers.batch(n_tiles, proj.dtype, None).out
+    for tiles, _, extra in results:
+        for name, a in extra.out.items():
+            empty[name][tiles] = a
+    return {name: _untile(a, proj.grid, proj.height, proj.width) for name, a in empty.items()}
 
 
 def transmittance_trace(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarray,

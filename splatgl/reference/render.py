@@ -7,10 +7,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cameras.camera import Camera
+from ..cameras.equirect import eye_space
 from ..cameras.view import View
-from ..model.scene import Scene
+from ..model.scene import Scene, SplatKind
 from ..model.settings import RenderSettings
+from ..output.layers import BASE, Layer, RenderOutput
+from ..output.under import UnderLayer, composite_depth, composite_under
+from ..twins import project as pm
+from ..twins.normals import splat_normals
 from .binning import emit_keys, sort, tile_ranges
+from .layers import RasterLayers
 from .options import Compat, ReferenceOptions, as_options
 from .rasterize import rasterize
 from .stages import ProjectedSplats, project
@@ -21,10 +27,12 @@ class ReferenceImage:
     """A reference render (H rows, row 0 at the top; float = the render dtype).
 
     Attributes:
-        color: (H, W, 3) float, composited with the background: ``C + T_final bg``.
-        alpha: (H, W) float ``1 - T_final``.
+        color: (H, W, 3) float, composited with the background: ``C + T_final bg`` (with
+            geometry under the splats: :func:`splatgl.output.under.composite_under`).
+        alpha: (H, W) float ``1 - T_final`` (with geometry under the splats, the composite's
+            ``1 - T_final (1 - U_a)``).
         depth: (H, W) float accumulated ``D = sum z alpha T`` (view z, world units; not
-            divided by alpha).
+            divided by alpha; with geometry, :func:`splatgl.output.under.composite_depth`).
         transmittance: (H, W) float ``T_final``.
         n_contrib: (H, W) int32 1-based position of the last blended splat in the pixel's tile
             list (0: none).
@@ -32,7 +40,11 @@ class ReferenceImage:
         sorted_values: (M,) int64 splat index per sorted key.  ranges: (tiles, 2) int64.
         options: the convention used.
         n_blended: (H, W) int32 splats blended per pixel (alpha >= 1/255, before the stop);
-            its sum is the "reference fragments" the benchmark compares fill work with.
+            its sum is the "reference fragments" the benchmark compares fill work with, and it
+            is the count layer.
+        layers: the further layers asked for (:mod:`splatgl.reference.layers`): ``normal``
+            (H, W, 3) accumulated camera-space normal, ``median_depth`` (H, W), ``top_id``
+            (H, W) int64 and ``top_weight`` (H, W); None when none was asked for.
     """
 
     color: np.ndarray
@@ -45,17 +57,45 @@ class ReferenceImage:
     ranges: np.ndarray
     options: ReferenceOptions
     n_blended: np.ndarray | None = None
+    layers: dict[str, np.ndarray] | None = None
 
     @property
     def rgba(self) -> np.ndarray:
         """(H, W, 4) float32: composited colour and alpha."""
         return np.concatenate([self.color, self.alpha[..., None]], -1).astype(np.float32)
 
+    def output(self, layers: frozenset[Layer]) -> RenderOutput:
+        """The ``layers`` of this render as the GPU renderers return them (float32; the depth
+        always, which the reference computes anyway)."""
+        extra = self.layers or {}
+        planes: dict[str, np.ndarray] = {}
+        if Layer.NORMAL in layers:
+            planes["normal"] = extra["normal"].astype(np.float32)
+        if Layer.MEDIAN_DEPTH in layers:
+            planes["median_depth"] = extra["median_depth"].astype(np.float32)
+        if Layer.COUNT in layers:
+            planes["count"] = self.n_blended.astype(np.uint32)
+        if Layer.TOP_ID in layers:
+            planes["top_id"] = extra["top_id"]
+        return RenderOutput(self.rgba, np.asarray(self.depth, np.float32),
+                            frozenset(layers) | {Layer.DEPTH}, **planes)
+
+
+def row_normals(scene: Scene, view: View, proj: ProjectedSplats) -> np.ndarray:
+    """(rows, 3) unit camera-space normals of ``proj``'s rows, in its dtype
+    (:func:`splatgl.twins.normals.splat_normals` at the centres the projection used)."""
+    means, camera = pm.anchored(scene.means, view.anchor, view.camera, proj.dtype)
+    p_cam = eye_space(pm.to_camera(means, camera), camera)
+    normals = splat_normals(scene.rotations, scene.scales, p_cam, camera.rotation,
+                            camera.model.parallel_rays, scene.kind is SplatKind.SURFEL_2D)
+    return normals if proj.source is None else normals[proj.source]
+
 
 def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | None = None,
                      dtype: np.dtype | type = np.float32,
                      compat: Compat | ReferenceOptions | str = Compat.INRIA,
-                     progress=None) -> ReferenceImage:
+                     progress=None, layers: frozenset[Layer] = BASE,
+                     under: UnderLayer | None = None) -> ReferenceImage:
     """Render ``scene`` with the NumPy per-tile reference rasterizer.
 
     Args:
@@ -68,18 +108,35 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
         dtype: float32 (GPU-like) or float64.
         compat: a :class:`Compat` (INRIA default, GSPLAT) or a full :class:`ReferenceOptions`.
         progress: optional :data:`splatgl.progress.ProgressCallback`, told the tiles rasterized.
+        layers: the layers wanted; colour, alpha, depth and the count are always computed,
+            the normal, median depth and top contributor only when asked for.
+        under: geometry to composite into (:mod:`splatgl.output.under`): splats at or behind
+            its depth are dropped, and the rest composited over its colour.
     """
     settings = RenderSettings() if settings is None else settings
     options = as_options(compat)
-    proj = project(scene, View.of(camera, settings, scene), settings, dtype, options)
+    view = View.of(camera, settings, scene)
+    proj = project(scene, view, settings, dtype, options)
     keys, values = emit_keys(proj)
     keys, values = sort(keys, values)
     ranges = tile_ranges(keys, proj.n_tiles)
-    raster = rasterize(proj, values, ranges, settings.background, options, progress=progress)
-    return ReferenceImage(color=raster.color, alpha=raster.alpha, depth=raster.depth,
+    extra = None
+    if under is not None or layers & {Layer.NORMAL, Layer.MEDIAN_DEPTH, Layer.TOP_ID}:
+        extra = RasterLayers(
+            normals=row_normals(scene, view, proj) if Layer.NORMAL in layers else None,
+            median=Layer.MEDIAN_DEPTH in layers, top=Layer.TOP_ID in layers, source=proj.source,
+            under_depth=None if under is None else under.depth.astype(proj.dtype))
+    background = settings.background if under is None else (0.0, 0.0, 0.0)
+    raster = rasterize(proj, values, ranges, background, options, progress=progress, layers=extra)
+    color, alpha, depth = raster.color, raster.alpha, raster.depth
+    if under is not None:
+        rgba = composite_under(color, alpha, under, settings.background)
+        depth = composite_depth(depth, alpha, under).astype(proj.dtype)
+        color, alpha = rgba[..., :3].astype(proj.dtype), rgba[..., 3].astype(proj.dtype)
+    return ReferenceImage(color=color, alpha=alpha, depth=depth,
                           transmittance=raster.transmittance, n_contrib=raster.n_contrib,
                           projected=proj, sorted_values=values, ranges=ranges, options=options,
-                          n_blended=raster.n_blended)
+                          n_blended=raster.n_blended, layers=raster.layers or None)
 
 
 def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings | None = None,

@@ -57,6 +57,8 @@ class ProjectedSplats:
             reaches at most half of it either side of its centre, and rows past the scene's
             count are the second copies of splats on the +-180 degree seam
             (:func:`splatgl.cameras.equirect.wrap_copies`).
+        source: (rows,) int64 scene row of each row (the seam copies name their originals),
+            or None where the rows are the scene's own.
     """
 
     visible: np.ndarray
@@ -74,6 +76,7 @@ class ProjectedSplats:
     surfel_rows: np.ndarray | None = None
     depth_rows: np.ndarray | None = None
     wrap_period: float | None = None
+    source: np.ndarray | None = None
 
     @property
     def is_surfel(self) -> bool:
@@ -229,7 +232,7 @@ def project(scene: Scene, view: View, settings: RenderSettings | None = None,
     # distorted camera's fold radius), or gsplat's view z
     visible = pr.depth > near if as_gsplat else view.model.visible(pr.p_cam, view, near)
     ok = visible & finite & (pr.det > 0)
-    pr, ok = _wrap_copies(pr, ok, scene, view)
+    pr, ok, source = _wrap_copies(pr, ok, scene, view)
     mean2d = np.where(ok[:, None], pr.mean2d, dt.type(0.0)).astype(dt)
     cov2d = np.where(ok[:, None, None], pr.cov2d, dt.type(1.0)).astype(dt)
 
@@ -248,7 +251,7 @@ def project(scene: Scene, view: View, settings: RenderSettings | None = None,
         visible=ok, depth=clean(pr.depth), mean2d=clean(mean2d), conic=clean(pr.conic),
         opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
         rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
-        grid=grid, wrap_period=camera.model.seam_period(camera))
+        grid=grid, wrap_period=camera.model.seam_period(camera), source=source)
 
 
 def gsplat_fisheye(camera: Camera, options: ReferenceOptions) -> bool:
@@ -265,12 +268,12 @@ def gsplat_fisheye(camera: Camera, options: ReferenceOptions) -> bool:
 
 
 def _wrap_copies(pr: pm.Projected, ok: np.ndarray, scene: Scene, view: Camera
-                 ) -> tuple[pm.Projected, np.ndarray]:
+                 ) -> tuple[pm.Projected, np.ndarray, np.ndarray | None]:
     """Equirectangular cameras: append a second row, one turn of longitude away, for every
     kept splat that may reach across the +-180 degree seam (:func:`splatgl.cameras.equirect.wrap_copies`,
-    the quad path's rule); other cameras unchanged."""
+    the quad path's rule), and the scene row of every row; other cameras unchanged (None)."""
     if view.model.seam_period(view) is None:
-        return pr, ok
+        return pr, ok, None
     reach = pm.splat_reach(scene.scales.max(axis=1) * view.scale, scene.opacities)
     dup = np.flatnonzero(ok & wrap_copies(pr.p_cam, reach, view))
     rows = np.concatenate([np.arange(ok.shape[0]), dup])
@@ -278,7 +281,7 @@ def _wrap_copies(pr: pm.Projected, ok: np.ndarray, scene: Scene, view: Camera
     mean2d = taken["mean2d"].copy()
     mean2d[ok.shape[0]:, 0] += wrap_shift(mean2d[ok.shape[0]:, 0], view)
     taken["mean2d"] = mean2d
-    return pm.Projected(**taken), ok[rows]
+    return pm.Projected(**taken), ok[rows], rows
 
 
 def gsplat_on_screen(mean2d: np.ndarray, radius: np.ndarray, camera: Camera, dt) -> np.ndarray:

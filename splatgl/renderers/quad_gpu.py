@@ -10,9 +10,11 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..gl.bindings import BINDING_OPACITY_WEIGHT, BINDING_ORDER, BINDING_PREPARED, PREPASS_GROUP
+from ..gl.bindings import (BINDING_OPACITY_WEIGHT, BINDING_ORDER, BINDING_PREPARED,
+                           BINDING_PREPARED_NORMAL, BINDING_PREPARED_RADIUS, PREPASS_GROUP,
+                           UNDER_UNIT)
 from ..gl.buffers import GrowableBuffer
-from ..gl.targets import ColorTarget
+from ..gl.targets import ColorTarget, OrderedTarget
 from ..model.settings import Precision
 from .early_stop import COMMAND_BYTES
 
@@ -32,7 +34,11 @@ class QuadResources:
         self.index = GrowableBuffer(ctx, BINDING_ORDER, minimum=4)
         self.weights = GrowableBuffer(ctx, BINDING_OPACITY_WEIGHT, minimum=4)
         self.prepared = GrowableBuffer(ctx, BINDING_PREPARED)
+        self.prepared_normal = GrowableBuffer(ctx, BINDING_PREPARED_NORMAL)
+        self.prepared_radius = GrowableBuffer(ctx, BINDING_PREPARED_RADIUS)
         self._target: ColorTarget | None = None
+        self._ordered: OrderedTarget | None = None
+        self._under: moderngl.Texture | None = None
         self._vaos: dict[tuple, moderngl.VertexArray] = {}
         self._plain_command: moderngl.Buffer | None = None
 
@@ -44,10 +50,16 @@ class QuadResources:
         if weights is not None:
             self.weights.upload(weights.tobytes())
 
-    def run_prepass(self, comp: moderngl.ComputeShader, count: int, weighted: bool) -> None:
+    def run_prepass(self, comp: moderngl.ComputeShader, count: int, weighted: bool,
+                    normals: bool = False, radii: bool = False) -> None:
         """Run ``comp`` (quad_prepass.comp, uniforms set) over the ``count`` sorted splats into
-        the prepared buffer."""
+        the prepared buffer (with ``normals`` the normal layer's buffer, with ``radii`` the
+        ordered pass's)."""
         self.prepared.ensure(count * PREPARED_BYTES).bind_to_storage_buffer(BINDING_PREPARED)
+        if normals:
+            self.prepared_normal.ensure(count * 16).bind_to_storage_buffer(BINDING_PREPARED_NORMAL)
+        if radii:
+            self.prepared_radius.ensure(count * 4).bind_to_storage_buffer(BINDING_PREPARED_RADIUS)
         if count == 0:
             return
         if weighted:
@@ -58,15 +70,36 @@ class QuadResources:
         self.ctx.memory_barrier()
 
     def target(self, width: int, height: int, precision: Precision, depth: bool,
-               stop_mask: bool) -> ColorTarget:
+               stop_mask: bool, normal: bool = False) -> ColorTarget:
         """The blend target of this size and kind (re-made when either changes)."""
         t = self._target
         if (t is None or t.size != (width, height) or t.precision is not precision
-                or t.has_depth != depth or t.has_stop_mask != stop_mask):
+                or t.has_depth != depth or t.has_stop_mask != stop_mask or t.has_normal != normal):
             if t is not None:
                 t.release()
-            self._target = ColorTarget(self.ctx, width, height, precision, depth, stop_mask=stop_mask)
+            self._target = ColorTarget(self.ctx, width, height, precision, depth,
+                                       stop_mask=stop_mask, normal=normal)
         return self._target
+
+    def ordered_target(self, width: int, height: int) -> OrderedTarget:
+        """The ordered pass's targets of this size (re-made when it changes)."""
+        if self._ordered is None or self._ordered.size != (width, height):
+            if self._ordered is not None:
+                self._ordered.release()
+            self._ordered = OrderedTarget(self.ctx, width, height)
+        return self._ordered
+
+    def bind_under(self, depth: np.ndarray) -> None:
+        """Upload the geometry depth (H, W) float32 (row 0 at the top, like the target) and bind
+        it at UNDER_UNIT for the draw's fragment test."""
+        h, w = depth.shape
+        if self._under is None or self._under.size != (w, h):
+            if self._under is not None:
+                self._under.release()
+            self._under = self.ctx.texture((w, h), 1, dtype="f4")
+            self._under.filter = moderngl.NEAREST, moderngl.NEAREST
+        self._under.write(np.ascontiguousarray(depth, np.float32).tobytes())
+        self._under.use(UNDER_UNIT)
 
     def vertex_array(self, prog: moderngl.Program, source: moderngl.Buffer | None) -> moderngl.VertexArray:
         """The VAO drawing ``prog`` with its per-instance attribute read from ``source``: the
@@ -80,9 +113,13 @@ class QuadResources:
             vao = self._vaos[key] = self.ctx.vertex_array(prog, content)
         return vao
 
-    def draw_range(self, prog: moderngl.Program, start: int, n: int) -> None:
-        """Draw sorted slots [start, start + n) without early termination."""
-        self.ctx.enable(moderngl.BLEND)
+    def draw_range(self, prog: moderngl.Program, start: int, n: int, blend: bool = True) -> None:
+        """Draw sorted slots [start, start + n) without early termination (``blend`` False: the
+        ordered pass, whose fragment stage writes its targets itself)."""
+        if blend:
+            self.ctx.enable(moderngl.BLEND)
+        else:
+            self.ctx.disable(moderngl.BLEND)
         if self.uses_prepass:
             prog["u_base"].value = start
             self.vertex_array(prog, None).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
@@ -104,9 +141,10 @@ class QuadResources:
 
     def release(self) -> None:
         self._release_vaos()
-        for buf in (self.index, self.weights, self.prepared):
+        for buf in (self.index, self.weights, self.prepared, self.prepared_normal,
+                    self.prepared_radius):
             buf.release()
-        for obj in (self._target, self._plain_command):
+        for obj in (self._target, self._ordered, self._plain_command, self._under):
             if obj is not None:
                 obj.release()
-        self._target = self._plain_command = None
+        self._target = self._ordered = self._plain_command = self._under = None

@@ -20,7 +20,8 @@ from ..model.scene import Scene, SplatKind
 from ..model.settings import Preprocess, QuadExtent, RenderSettings
 
 #: Switches that only the draw programs read (the compute passes leave them out).
-DRAW_ONLY = ("EARLY_STOP", "SURVIVORS", "COUNT_FRAGMENTS", "COUNT_RASTERISED")
+DRAW_ONLY = ("EARLY_STOP", "SURVIVORS", "COUNT_FRAGMENTS", "COUNT_RASTERISED", "ORDERED_PASS",
+             "UNDER")
 
 
 @dataclass(frozen=True)
@@ -30,13 +31,20 @@ class FrameSwitches:
     depth: write the depth layer (DEPTH_OUTPUT).  batched: early termination's batches
     (EARLY_STOP, and SURVIVORS after the pre-pass).  weights: per-slot opacity weights of a
     level-of-detail cut (OPACITY_WEIGHT).  extra: further switches (a benchmark probe's
-    COUNT_FRAGMENTS).
+    COUNT_FRAGMENTS).  normal: the normal layer's attachment (NORMAL_OUTPUT = its location;
+    0: none).  ordered: the ordered pass's program (ORDERED_PASS).  ordered_rect: the frame
+    has an ordered pass, so its quads keep the reference's radius (ORDERED_RECT).  under:
+    test fragments against the geometry's depth (UNDER).
     """
 
     depth: bool = False
     batched: bool = False
     weights: bool = False
     extra: tuple[tuple[str, object], ...] = ()
+    normal: int = 0
+    ordered: bool = False
+    ordered_rect: bool = False
+    under: bool = False
 
 
 class QuadPrograms:
@@ -65,6 +73,14 @@ class QuadPrograms:
         defines.update(view.defines)
         if frame.depth:
             defines["DEPTH_OUTPUT"] = 1
+        if frame.normal:
+            defines["NORMAL_OUTPUT"] = frame.normal    # the prepass writes normals in either pass
+        if frame.ordered:
+            defines["ORDERED_PASS"] = 1
+        if frame.ordered_rect:
+            defines["ORDERED_RECT"] = 1
+        if frame.under:
+            defines["UNDER"] = 1
         defines.update(frame.extra)
         defines.update(self.buffers.defines())
         if frame.batched:

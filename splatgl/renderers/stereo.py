@@ -15,7 +15,7 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..errors import CameraError, SplatglError
-from ..output.layers import RenderOutput
+from ..output.layers import RenderOutput, concat_outputs
 
 
 class StereoLayout(enum.Enum):
@@ -41,13 +41,8 @@ def eye_cameras(camera: Camera, ipd: float) -> tuple[Camera, Camera]:
 
 
 def combine(left: RenderOutput, right: RenderOutput, layout: StereoLayout) -> RenderOutput:
-    """One frame holding both eyes (side by side or top-bottom); depth likewise."""
-    axis = 1 if StereoLayout(layout) is StereoLayout.SIDE_BY_SIDE else 0
-    depth = None
-    if left.depth is not None and right.depth is not None:
-        depth = np.concatenate([left.depth, right.depth], axis=axis)
-    return RenderOutput(np.concatenate([left.rgba, right.rgba], axis=axis), depth,
-                        left.layers & right.layers)
+    """One frame holding both eyes (side by side or top-bottom); every layer likewise."""
+    return concat_outputs(left, right, 1 if StereoLayout(layout) is StereoLayout.SIDE_BY_SIDE else 0)
 
 
 class StereoRenderer:

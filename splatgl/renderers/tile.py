@@ -42,6 +42,8 @@ from ..gl.shaders import ProgramCache
 from ..model.scene import Scene, SplatKind
 from ..model.settings import RenderSettings, RendererKind, check_convention
 from ..output.layers import BASE, Layer, RenderOutput
+from ..output.under import UnderLayer
+from .tile_layers import layer_output, layer_switches, size_layer_buffers
 from .tile_keys import (MAX_GROUPS, RASTER_BAND_TILES, TILE_EMIT_CHUNK,
                         TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, splat_groups, tile_grid)
 
@@ -75,10 +77,12 @@ class TileRenderer:
             self._bufs["SURFEL"].ensure(n * 16)
         self.last_times: TileTimes | None = None
         self.progress = None
+        self._switches: dict[str, object] = {}   # the frame's layer switches (tile_layers.py)
 
     # ------------------------------------------------------------------------------ programs
     def _defines(self, layout: KeyLayout | None = None) -> dict[str, object]:
         d: dict[str, object] = {"TILE_LIST_CHUNK": TILE_LIST_CHUNK, "TILE_EMIT_CHUNK": TILE_EMIT_CHUNK}
+        d.update(self._switches)
         if layout is not None and layout.packed:
             d["KEY_PACKED"] = 1
         if self.surfel:
@@ -180,8 +184,9 @@ class TileRenderer:
         d = self._defines(layout)
         d.update(view.defines)          # surfels: orthographic T_2 = (0, 0, 1)
         prog = self.programs.compute("tile_rasterize.comp", d)
+        background = (0.0, 0.0, 0.0) if "UNDER" in self._switches else self.settings.background
         self._set(prog, u_grid=grid, u_size=(view.width, view.height),
-                  u_background=self.settings.background, u_index_mask=layout.index_mask)
+                  u_background=background, u_index_mask=layout.index_mask)
         band = max(1, RASTER_BAND_TILES // grid[0])  # tile rows per dispatch
         self._set(prog, u_passes=passes)
         for row0 in range(0, grid[1], band):
@@ -240,18 +245,28 @@ class TileRenderer:
         d = np.diff(clock)
         return TileTimes(*(float(v) for v in d), float(readback), int(total))
 
-    def render(self, view: View, layers: frozenset[Layer] = BASE) -> RenderOutput:
-        """The ``layers`` of one view (colour and alpha always, the accumulated depth when
-        asked); RGB = C + (1 - A) background, alpha = A; row 0 is the top."""
-        depth = Layer.DEPTH in layers
-        self._frame(view)
+    def render(self, view: View, layers: frozenset[Layer] = BASE,
+               under: UnderLayer | None = None) -> RenderOutput:
+        """The ``layers`` of one view (colour and alpha always, the others when asked:
+        :mod:`splatgl.renderers.tile_layers`); RGB = C + (1 - A) background, alpha = A (with
+        ``under``, composited over the geometry); row 0 is the top."""
+        layers = frozenset(layers)
+        self._switches = layer_switches(layers, under)
+        try:
+            size_layer_buffers(self._bufs, self._switches, self.count, view.width * view.height,
+                               under)
+            self._frame(view)
+        finally:
+            switches, self._switches = self._switches, {}
         t0 = time.perf_counter()
         h, w = view.height, view.width
         rgba = self._bufs["OUT_RGBA"].read(h * w * 16, np.float32).reshape(h, w, 4)
-        dep = (self._bufs["OUT_DEPTH"].read(h * w * 4, np.float32).reshape(h, w) if depth
-               else np.zeros((0, 0), np.float32))
+        dep = (self._bufs["OUT_DEPTH"].read(h * w * 4, np.float32).reshape(h, w)
+               if Layer.DEPTH in layers else None)
+        out = layer_output(self._bufs, rgba, dep, layers, under if switches else None,
+                           self.settings.background)
         self.last_times = self._times(time.perf_counter() - t0)
-        return RenderOutput(rgba.copy(), dep.copy(), layers)
+        return out
 
     def debug_stages(self, view: View) -> TileStages:
         """Run one frame and return its integer stages in the reference's layout."""

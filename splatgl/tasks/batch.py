@@ -17,6 +17,7 @@ from typing import Callable, Optional, Sequence
 from ..cameras.camera import Camera
 from ..output.frames import FrameTarget, plan_frames
 from ..output.images import write_image
+from ..output.layer_files import write_layers
 from ..progress import ProgressCallback
 from ..api import Renderer
 from ..model.scene import Scene
@@ -118,7 +119,7 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
         if video is not None:
             video.write(out)
         elif target.layers is not None:
-            write_image(target.frame_path(numbers[k]), out.rgba, bit_depth, depth=out.expected_depth())
+            write_layers(target.frame_path(numbers[k]), out, target.files(cameras[k]), bit_depth)
         else:
             write_image(target.frame_path(numbers[k]), out, bit_depth)
 

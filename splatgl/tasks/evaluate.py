@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 from ..datasets.views import View
-from ..evaluation.evaluate import Evaluation, Pair, evaluate
+from ..evaluation.evaluate import Evaluation, Pair, RenderFiles, evaluate
 from .executor import Executor, ExecutorKind, RunResult, run_tasks
 from ..progress import ProgressCallback
 from .task import Done, Files, TaskProgress
@@ -35,6 +35,7 @@ class EvalChunk:
     settings: RenderSettings
     kind: RendererKind
     keep_worst: int
+    renders: Optional[RenderFiles] = None
 
     @property
     def units(self) -> int:
@@ -52,14 +53,16 @@ class EvalChunk:
         scene = files.load_scene(self.scene_path, self.drop_invalid)
         with Renderer() as renderer:
             result, worst = evaluate(renderer, scene, self.views, self.settings, self.kind,
-                                     self.keep_worst, lambda done, total, what: report(done, total))
+                                     self.keep_worst, lambda done, total, what: report(done, total),
+                                     self.renders)
         return Done((result.scores, worst), len(self.views))
 
 
 def evaluate_sharded(scene_path: Path, views: Sequence[View], executor: Executor,
                      settings: RenderSettings = RenderSettings(), kind: RendererKind = RendererKind.QUAD,
                      keep_worst: int = 0, drop_invalid: bool = False,
-                     progress: Optional[ProgressCallback] = None
+                     progress: Optional[ProgressCallback] = None,
+                     renders: Optional[RenderFiles] = None
                      ) -> tuple[Evaluation, list[Pair], RunResult]:
     """What :func:`splatgl.evaluation.evaluate.evaluate` returns, computed on ``executor`` (local workers:
     one contiguous chunk each; Ray: chunks of at most :data:`MAX_CHUNK_FRAMES` views), and the
@@ -67,7 +70,7 @@ def evaluate_sharded(scene_path: Path, views: Sequence[View], executor: Executor
     n_tasks = (executor.workers if executor.kind is ExecutorKind.LOCAL
                else math.ceil(len(views) / MAX_CHUNK_FRAMES))
     tasks = [EvalChunk(Path(scene_path), drop_invalid, tuple(views[i] for i in part), part.start,
-                       settings, RendererKind(kind), keep_worst)
+                       settings, RendererKind(kind), keep_worst, renders)
              for part in chunks(len(views), n_tasks)]
     run = run_tasks(tasks, executor, "views", progress)
     scores = tuple(s for chunk_scores, _ in run.values for s in chunk_scores)

@@ -23,7 +23,7 @@ from ..cameras.registry import retarget
 from ..errors import SplatglError
 from ..model.scene import Scene, SplatKind
 from ..model.settings import RendererKind, RenderSettings
-from . import controls, keys
+from . import controls, keys, pick
 from .benchmark import orbit_benchmark
 from .display import Display
 from .frames import ViewMode
@@ -97,9 +97,11 @@ class Viewer:
         self._rendered_key: tuple | None = None
         self.need_present = True
         self._clock = time.perf_counter()
+        self._cursor = (0.0, 0.0)
+        self.last_pixel = None   # the last Ctrl+click listing
         o = self.options
         self.pacer = Pacer(scene, o.target_fps, o.scene_path)
-        self._queued: list[tuple[int, int, int]] | None = None   # keys held back during a draw
+        self._queued: list | None = None   # input that acts after the draw in progress (callables)
         self._events = 0                                         # input events seen so far
         self.window, self.ctx, self.context_api = open_window(camera.width, camera.height, o.title,
                                                               o.visible, o.vsync)
@@ -124,18 +126,35 @@ class Viewer:
         it: a screenshot or a settings change never runs in the middle of a frame."""
         self._events += 1
         if self._queued is not None:
-            self._queued.append((key, action, mods))
+            self._queued.append(lambda: keys.on_key(self, key, action, mods))
             return
         keys.on_key(self, key, action, mods)
 
     def on_mouse_button(self, button: int, action: int, mods: int) -> None:
-        """glfw mouse-button callback: left drag orbits, right or middle drag pans."""
+        """glfw mouse-button callback: left drag orbits, right or middle drag pans; a left
+        click with Ctrl lists the pixel under the cursor (:meth:`list_pixel`; during a draw,
+        after it)."""
         self._events += 1
+        if button == glfw.MOUSE_BUTTON_LEFT and mods & glfw.MOD_CONTROL:
+            if action == glfw.PRESS:
+                cursor = self._cursor
+                if self._queued is not None:
+                    self._queued.append(lambda: self.list_pixel(*cursor))
+                else:
+                    self.list_pixel(*cursor)
+            return
         self.nav.on_mouse_button(button, action)
 
     def on_cursor(self, x: float, y: float) -> None:
         """glfw cursor-position callback (window coordinates, y down)."""
+        self._cursor = (x, y)
         self.nav.on_cursor(x, y, lambda: glfw.get_window_size(self.window)[1] or self.size[1])
+
+    def list_pixel(self, x: float, y: float):
+        """List the splats of the pixel under window point (``x``, ``y``) (window coordinates,
+        y down): :func:`.pick.list_pixel`."""
+        self.last_pixel = pick.list_pixel(self, x, y)
+        return self.last_pixel
 
     def on_scroll(self, dx: float, dy: float) -> None:
         """glfw scroll callback: zoom."""

@@ -23,6 +23,7 @@ PANEL_ALPHA = 0.6
 #: The key list, printed at start and shown with H.
 KEYS = (
     ("left drag", "orbit around the target"),
+    ("Ctrl+click", "list the pixel's splats front to back (printed; splatgl pixel)"),
     ("right/middle drag", "pan"),
     ("wheel", "zoom (distance)"),
     ("W A S D / arrows", "fly forward, left, back, right"),

@@ -24,7 +24,6 @@ from ..interactive.lod_cache import LodProvider
 from ..interactive.session import Session, default_fps
 from ..model.scene import Scene
 from ..model.settings import RenderSettings
-from . import keys
 from .frames import FrameResult
 
 class Pacer:
@@ -120,8 +119,8 @@ def paced_frame(viewer, camera: Camera, key: tuple) -> bool:
         frame = v.pacer.frame(v.renderer, camera, v.settings, input_pending)
     finally:
         queued, v._queued = v._queued, None
-        for event in queued:
-            keys.on_key(v, *event)
+        for act in queued:
+            act()
     if frame is None:
         return False
     v.display.show(frame)

@@ -1,0 +1,163 @@
+"""Geometry to composite splats into (``--under FILE.exr``): a render of opaque geometry made
+from the same camera, read from an EXR file, and the compositing rule.
+
+The file holds colour (R, G, B; premultiplied by A where it has an A channel, else opaque) and
+a depth channel (Z by default): the geometry's view-space z, or its distance along each pixel's
+ray, as the file's ``splatgl:depth`` attribute (``z`` or ``distance``) or the caller says.  A
+pixel without geometry has a depth that is not a finite positive number (0, inf or NaN, as
+renderers write for their background).
+
+The renderers drop every splat fragment at or behind the geometry (its depth, in the same
+metric, against the pixel's: :class:`UnderLayer` ``depth``) and composite what remains over the
+geometry's colour with the splats' transmittance (:func:`composite_under`)::
+
+    rgb = C + T (U_rgb + (1 - U_a) background),   alpha = 1 - T (1 - U_a)
+
+so the geometry shows exactly where and as much as the splats in front of it let through.
+The accumulated depth adds the geometry's with the same weight (:func:`composite_depth`); the
+other layers (median depth, normal, count, top contributor) are the splats' in front of it.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from ..errors import SplatglError
+
+#: The EXR header attribute that says what the depth channel holds.
+DEPTH_ATTRIBUTE = "splatgl:depth"
+
+
+class DepthKind(enum.Enum):
+    """What a geometry depth channel holds (world units): view-space z, or the distance from
+    the camera along each pixel's ray."""
+
+    Z = "z"
+    DISTANCE = "distance"
+
+
+@dataclass(frozen=True)
+class UnderImage:
+    """Geometry read from a file (:func:`read_under`), row 0 at the top.
+
+    Attributes: ``rgb`` (H, W, 3) float32 premultiplied colour; ``alpha`` (H, W) float32 (1
+    where the file has no A); ``depth`` (H, W) float32 in ``kind``, +inf where there is no
+    geometry; ``path`` the file.
+    """
+
+    rgb: np.ndarray
+    alpha: np.ndarray
+    depth: np.ndarray
+    kind: DepthKind
+    path: Path
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height)."""
+        return self.depth.shape[1], self.depth.shape[0]
+
+    def check_size(self, width: int, height: int) -> None:
+        """Refuse (one line) an image of another size than the view's."""
+        if self.size != (width, height):
+            raise SplatglError(f"--under {self.path}: the geometry is {self.size[0]}x{self.size[1]}, "
+                               f"the view {width}x{height}; render both from the same camera")
+
+
+@dataclass(frozen=True)
+class UnderLayer:
+    """Geometry as the renderers take it: ``rgb`` (H, W, 3) premultiplied and ``alpha``
+    (H, W) as in :class:`UnderImage`, ``depth`` (H, W) float32 in the view's own depth metric
+    (:meth:`splatgl.cameras.model.CameraModel.pixel_depth`; +inf where there is no geometry)."""
+
+    rgb: np.ndarray
+    alpha: np.ndarray
+    depth: np.ndarray
+
+
+def composite_under(premultiplied: np.ndarray, alpha: np.ndarray, under: UnderLayer,
+                    background) -> np.ndarray:
+    """(H, W, 4) float32: splats ``premultiplied`` (H, W, 3) ``C`` with accumulated ``alpha``
+    (H, W) ``A = 1 - T`` over the geometry (module doc)."""
+    t = (1.0 - np.asarray(alpha, np.float32))[..., None]
+    u_a = under.alpha[..., None]
+    bg = np.asarray(background, np.float32)
+    rgb = premultiplied + t * (under.rgb + (1.0 - u_a) * bg)
+    a = 1.0 - t * (1.0 - u_a)
+    return np.concatenate([rgb, a], -1).astype(np.float32)
+
+
+def composite_depth(depth: np.ndarray, alpha: np.ndarray, under: UnderLayer) -> np.ndarray:
+    """(H, W) float32 accumulated depth of the composite: the splats' ``D`` plus the geometry's
+    depth with its weight ``T U_a`` where it has one (so ``D / A`` of the composite's alpha is
+    its expected depth)."""
+    t = 1.0 - np.asarray(alpha, np.float32)
+    has = np.isfinite(under.depth)
+    return (depth + np.where(has, t * under.alpha * np.where(has, under.depth, 0.0), 0.0)
+            ).astype(np.float32)
+
+
+def _channel(names: list[str], wanted: str) -> int | None:
+    return names.index(wanted) if wanted in names else None
+
+
+def read_under(path: str | Path, kind: DepthKind | str | None = None,
+               channel: str = "Z") -> UnderImage:
+    """Read the geometry in ``path`` (an EXR with R, G, B, optionally A, and ``channel``).
+
+    ``kind`` says what the depth channel holds; None takes the file's ``splatgl:depth``
+    attribute.  Refused in one line naming the file: not an EXR, a missing channel, no
+    statement of the depth kind (or one contradicting ``kind``), no geometry pixel at all.
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".exr":
+        raise SplatglError(f"--under {path}: give an EXR file (colour and a depth channel)")
+    if not path.is_file():
+        raise SplatglError(f"--under {path}: no such file")
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise SplatglError(f"--under {path}: not a readable image ({' '.join(oiio.geterror().split())})")
+    try:
+        spec = inp.spec()
+        names = list(spec.channelnames)
+        stated = spec.getattribute(DEPTH_ATTRIBUTE)
+        pixels = inp.read_image(oiio.FLOAT)
+    finally:
+        inp.close()
+    if pixels is None:
+        raise SplatglError(f"--under {path}: the file's pixels cannot be read")
+    pixels = np.asarray(pixels, np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    missing = [c for c in ("R", "G", "B", channel) if c not in names]
+    if missing:
+        raise SplatglError(f"--under {path}: no channel {', '.join(missing)} (the file has "
+                           f"{', '.join(names)})")
+    kind = _depth_kind(path, kind, stated)
+    rgb = pixels[..., [names.index(c) for c in ("R", "G", "B")]]
+    a = _channel(names, "A")
+    alpha = pixels[..., a] if a is not None else np.ones(pixels.shape[:2], np.float32)
+    depth = pixels[..., names.index(channel)]
+    depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.inf).astype(np.float32)
+    if not np.isfinite(depth).any():
+        raise SplatglError(f"--under {path}: channel {channel} holds no geometry (no finite "
+                           "positive depth)")
+    return UnderImage(np.ascontiguousarray(rgb), np.ascontiguousarray(alpha), depth, kind, path)
+
+
+def _depth_kind(path: Path, kind, stated) -> DepthKind:
+    """The depth kind given or stated in the file; both must agree, one must say it."""
+    choices = " or ".join(k.value for k in DepthKind)
+    if stated is not None and str(stated) not in {k.value for k in DepthKind}:
+        raise SplatglError(f"--under {path}: attribute {DEPTH_ATTRIBUTE} is {stated!r}, not {choices}")
+    stated = DepthKind(str(stated)) if stated is not None else None
+    given = DepthKind(kind) if kind is not None else None
+    if given is not None and stated is not None and given is not stated:
+        raise SplatglError(f"--under {path}: the file says its depth is {stated.value} "
+                           f"({DEPTH_ATTRIBUTE}), --under-depth says {given.value}")
+    if given is None and stated is None:
+        raise SplatglError(f"--under {path}: the file does not say whether its depth is view-space "
+                           f"z or distance along the ray; give --under-depth {choices}")
+    return given or stated
