@@ -24,7 +24,7 @@ from splatgl.model.settings import RenderSettings
 from splatgl.output.images import read_image, write_image
 
 from test_compare import MIN_PSNR
-from test_viewer_window import _window_pixels, xvfb_display  # noqa: F401,F811  (the private Xvfb)
+from test_viewer_window import _window_pixels  # (the Xvfb fixture comes from conftest)
 
 W, H = 96, 72
 

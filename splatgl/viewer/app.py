@@ -23,14 +23,14 @@ from ..cameras.registry import retarget
 from ..errors import SplatglError
 from ..model.scene import Scene, SplatKind
 from ..model.settings import RendererKind, RenderSettings
-from . import controls, keys, pick
+from . import keys, pick
 from .benchmark import orbit_benchmark
 from .display import Display
 from .frames import ViewMode
 from .navigation import Navigation, orbit_distance
 from .overlay import Status, key_help, status_lines
 from .pacing import Pacer, paced_frame
-from .screenshot import save_screenshot
+from .screenshot import take_screenshot
 from .window import close_window, connect, open_window
 
 #: Longest time step a held key acts over (a stalled frame must not fling the camera away).
@@ -210,19 +210,8 @@ class Viewer:
         return cam
 
     def screenshot(self) -> tuple[Path, Path]:
-        """Write what ``splatgl render`` writes from the current camera, and that camera; in
-        stereo, both eyes side by side (``--stereo``) from the camera of one eye's half."""
-        glfw.make_context_current(self.window)
-        camera = self.camera()
-        if self.options.stereo is not None:
-            camera = controls.fit_camera(camera, max(camera.width // 2, 1), camera.height)
-        png, js, command = save_screenshot(self.renderer, self.scene, camera, self.settings,
-                                           self.kind, self.options.screenshot_dir,
-                                           self.options.render_args, self.options.stereo)
-        self.message = f"saved {png.name} + {js.name} (exact render)"
-        print(f"wrote {png} and {js}; reproduce with:\n  {command}", flush=True)
-        self.need_present = True
-        return png, js
+        """F12: :func:`.screenshot.take_screenshot` (the exact render, never the draft)."""
+        return take_screenshot(self)
 
     # ---------------------------------------------------------------------------- loop
     @property

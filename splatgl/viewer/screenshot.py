@@ -61,3 +61,26 @@ def save_screenshot(renderer: Renderer, scene: Scene, camera: Camera, settings: 
     argv = ["splatgl", "render", *render_args, "--camera", str(js), *settings_arguments(settings, kind),
             *(["--stereo", repr(float(stereo))] if stereo is not None else []), "-o", str(png)]
     return png, js, shlex.join(argv)
+
+
+def take_screenshot(viewer) -> tuple[Path, Path]:
+    """In ``viewer`` (:class:`~.app.Viewer`): write what ``splatgl render`` writes from the
+    current camera, and that camera (:func:`save_screenshot`: the exact render, whatever draft the
+    window shows); in stereo, both eyes side by side (``--stereo``) from the camera of one eye's
+    half.  Says so on the status line and prints the command that reproduces it."""
+    import glfw
+
+    from . import controls
+
+    v = viewer
+    glfw.make_context_current(v.window)
+    camera = v.camera()
+    if v.options.stereo is not None:
+        camera = controls.fit_camera(camera, max(camera.width // 2, 1), camera.height)
+    png, js, command = save_screenshot(v.renderer, v.scene, camera, v.settings, v.kind,
+                                       v.options.screenshot_dir, v.options.render_args,
+                                       v.options.stereo)
+    v.message = f"saved {png.name} + {js.name} (exact render)"
+    print(f"wrote {png} and {js}; reproduce with:\n  {command}", flush=True)
+    v.need_present = True
+    return png, js
