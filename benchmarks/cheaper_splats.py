@@ -30,7 +30,7 @@ from splatgl.model.settings import RenderSettings
 from splatgl.renderers import quad_gpu
 from splatgl.renderers.quad import composite
 
-VARIANTS = ("quad", "triangle", "flat6", "flat3")
+VARIANTS = ("quad", "triangle")
 
 
 _plain_draw = quad_gpu.QuadResources.draw_range
@@ -43,43 +43,14 @@ def _triangle_draw(self, prog, start: int, n: int) -> None:
     self.vertex_array(prog, None).render(moderngl.TRIANGLES, vertices=3, instances=n)
 
 
-def _point_draw(self, prog, start: int, n: int) -> None:
-    """QuadResources.draw_range with one point sprite per instance."""
-    self.ctx.enable(moderngl.BLEND | moderngl.PROGRAM_POINT_SIZE)
-    prog["u_base"].value = start
-    self.vertex_array(prog, None).render(moderngl.POINTS, vertices=1, instances=n)
-
-
-def _flat_draw(vertices: int):
-    def draw(self, prog, start: int, n: int) -> None:
-        """QuadResources.draw_range without instancing: ``vertices`` per splat in one draw."""
-        self.ctx.enable(moderngl.BLEND)
-        prog["u_base"].value = start
-        self.vertex_array(prog, None).render(moderngl.TRIANGLES, vertices=vertices * n)
-    return draw
-
-
 def set_variant(quad, name: str) -> None:
     """Switch ``quad`` (a QuadRenderer on the compute pre-pass, early termination off) to
     drawing ``name`` (one of VARIANTS): the TRIANGLE_PER_SPLAT define and 3-vertex draws."""
     quad.frame_extra.pop("TRIANGLE_PER_SPLAT", None)
-    quad.frame_extra.pop("POINT_PER_SPLAT", None)
-    quad.frame_extra.pop("TRIANGLE_MAX_PX", None)
-    quad.frame_extra.pop("FLAT_VERTICES", None)
     quad_gpu.QuadResources.draw_range = _plain_draw
     if name == "triangle":
         quad.frame_extra["TRIANGLE_PER_SPLAT"] = 1
         quad_gpu.QuadResources.draw_range = _triangle_draw
-    elif name.startswith("flat"):
-        quad.frame_extra["FLAT_VERTICES"] = int(name[4:])
-        if name == "flat3":
-            quad.frame_extra["TRIANGLE_PER_SPLAT"] = 1
-        quad_gpu.QuadResources.draw_range = _flat_draw(int(name[4:]))
-    elif name.startswith("hybrid"):
-        quad.frame_extra["TRIANGLE_MAX_PX"] = int(name[len("hybrid"):])
-    elif name == "point":
-        quad.frame_extra["POINT_PER_SPLAT"] = 1
-        quad_gpu.QuadResources.draw_range = _point_draw
 
 
 def time_draw(quad, view: View, repeats: int) -> tuple[list[float], np.ndarray]:

@@ -23,8 +23,6 @@ uniform uint u_base;          // first slot of this draw (batched draws)
 void main() {
 #ifdef SURVIVORS
     uint k = splat_slot;
-#elif defined(FLAT_VERTICES)
-    uint k = u_base + uint(gl_VertexID / FLAT_VERTICES);
 #else
     uint k = u_base + uint(gl_InstanceID);
 #endif

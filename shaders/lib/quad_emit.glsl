@@ -1,8 +1,9 @@
 // Emits one corner of a splat's quad (triangle strip, gl_VertexID 0..3) and the fragment
-// inputs of quad.frag.  With TRIANGLE_PER_SPLAT, one vertex of a single triangle instead
-// (gl_VertexID 0..2): the equilateral triangle circumscribing the ellipse in the axes' frame,
-// which holds every pixel the quad's inscribed ellipse holds (the ellipse and fast extents; the
-// square extent keeps its quad).  Shared by quad.vert (math per vertex) and quad_light.vert (math from
+// inputs of quad.frag.  With TRIANGLE_PER_SPLAT (benchmarks/cheaper_splats.py only), one vertex
+// of a single triangle instead (gl_VertexID 0..2): the equilateral triangle circumscribing the
+// ellipse in the axes' frame, which holds every pixel the quad's inscribed ellipse holds (the
+// ellipse and fast extents).  Measured on llvmpipe: 0.86-0.91x the quad's draw on far views of
+// biker and guitar, 1.08-1.21x on donut (a third more fragments): not kept (docs/interactive.md).  Shared by quad.vert (math per vertex) and quad_light.vert (math from
 // the compute pre-pass).
 // Twin: none (places a corner from splat_setup.glsl's axes, whose twin is ellipse_axes()).
 
@@ -23,36 +24,15 @@ flat out uvec4 v_rect;        // the reference's tile rectangle (lib/tile_rect.g
 
 const vec4 CULLED = vec4(0.0, 0.0, 2.0, 1.0);  // outside the clip volume: nothing rasterised
 
-// The corner this vertex places: gl_VertexID of an instanced strip (0..3) or triangle (0..2);
-// FLAT_VERTICES draws (no instancing) number their vertices 0..FLAT_VERTICES-1 per splat, six
-// being the strip's two triangles (0, 1, 2) and (2, 1, 3).
-#if FLAT_VERTICES == 6
-const int FLAT_CORNER[6] = int[6](0, 1, 2, 2, 1, 3);
-#define CORNER_ID FLAT_CORNER[gl_VertexID % 6]
-#elif FLAT_VERTICES == 3
-#define CORNER_ID (gl_VertexID % 3)
-#else
-#define CORNER_ID gl_VertexID
-#endif
 
 void emit_corner(vec2 mean2d, vec2 axis1, vec2 axis2, vec3 con, vec3 color, float opacity,
                  float depth) {
-#if defined(TRIANGLE_PER_SPLAT)
+#ifdef TRIANGLE_PER_SPLAT
     // Vertices 2 from the centre at 90, 210 and 330 degrees: the unit circle is inscribed.
-    vec2 corner = CORNER_ID == 0 ? vec2(0.0, 2.0)
-                : vec2(CORNER_ID == 1 ? -1.7320508075688772 : 1.7320508075688772, -1.0);
-#elif defined(TRIANGLE_MAX_PX)
-    // Experiment: splats up to TRIANGLE_MAX_PX pixels (longer half-axis) as that triangle, the
-    // strip's 4th vertex repeating the 3rd (a degenerate second triangle); larger ones as quads.
-    vec2 corner;
-    if (max(length(axis1), length(axis2)) <= float(TRIANGLE_MAX_PX)) {
-        int v = min(gl_VertexID, 2);
-        corner = v == 0 ? vec2(0.0, 2.0) : vec2(v == 1 ? -1.7320508075688772 : 1.7320508075688772, -1.0);
-    } else {
-        corner = vec2((gl_VertexID & 1) != 0 ? 1.0 : -1.0, (gl_VertexID & 2) != 0 ? 1.0 : -1.0);
-    }
+    vec2 corner = gl_VertexID == 0 ? vec2(0.0, 2.0)
+                : vec2(gl_VertexID == 1 ? -1.7320508075688772 : 1.7320508075688772, -1.0);
 #else
-    vec2 corner = vec2((CORNER_ID & 1) != 0 ? 1.0 : -1.0, (CORNER_ID & 2) != 0 ? 1.0 : -1.0);
+    vec2 corner = vec2((gl_VertexID & 1) != 0 ? 1.0 : -1.0, (gl_VertexID & 2) != 0 ? 1.0 : -1.0);
 #endif
     // Guard (stress case near_tiny): a splat just past a 1e-8 near plane had quads 6e10 px wide
     // (NDC ~1e9), which llvmpipe's clipping lost (max error 0.30).  A half-axis longer than
@@ -62,13 +42,6 @@ void emit_corner(vec2 mean2d, vec2 axis1, vec2 axis2, vec3 con, vec3 color, floa
     vec2 shrink = vec2(min(1.0, reach / max(length(axis1), 1e-30)),
                        min(1.0, reach / max(length(axis2), 1e-30)));
     vec2 pixel = mean2d + corner.x * shrink.x * axis1 + corner.y * shrink.y * axis2;
-#ifdef POINT_PER_SPLAT
-    // Experiment: one point sprite covering the ellipse's bounding square (at most the
-    // implementation's largest point size).
-    vec2 half_box = sqrt(axis1 * axis1 + axis2 * axis2);
-    gl_PointSize = 2.0 * max(half_box.x, half_box.y) + 2.0;
-    pixel = mean2d;
-#endif
     // Image coordinates map to NDC without a y flip: framebuffer row 0 holds image row 0 (the
     // top), so a plain readback is already top-down and gl_FragCoord.xy = (j + 0.5, i + 0.5).
     gl_Position = vec4(pixel / u_viewport * 2.0 - 1.0, 0.0, 1.0);
