@@ -34,7 +34,8 @@ def emit_keys(proj: ProjectedSplats) -> tuple[np.ndarray, np.ndarray]:
     x = proj.rect_min[idx, 0] + local % np.maximum(wide, 1)
     y = proj.rect_min[idx, 1] + local // np.maximum(wide, 1)
     tile = (y * proj.grid[0] + x).astype(np.uint64)
-    keys = (tile << np.uint64(32)) | depth_bits(proj.depth)[idx]
+    low = depth_bits(proj.depth) if proj.key_bits is None else proj.key_bits  # emulated keys
+    keys = (tile << np.uint64(32)) | low[idx]
     return keys, idx
 
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..twins import surfel as sf
 from ..constants import ALPHA_MIN, T_MIN, TILE_SIZE
+from . import emulation
 from .options import Compat, ReferenceOptions
 from .stages import ProjectedSplats
 
@@ -67,12 +68,14 @@ def gaussian_power(conic: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndar
     return half * (a * dx * dx + c * dy * dy) - b * dx * dy
 
 
-def gaussian_alpha(power: np.ndarray, opacity: np.ndarray, alpha_max: float) -> np.ndarray:
-    """``min(alpha_max, o exp(power))``, 0 where ``power > 0`` or the result is below 1/255."""
+def gaussian_alpha(power: np.ndarray, opacity: np.ndarray, alpha_max: float,
+                   alpha_min: float = ALPHA_MIN) -> np.ndarray:
+    """``min(alpha_max, o exp(power))``, 0 where ``power > 0`` or the result is below
+    ``alpha_min`` (1/255; the ``min_alpha`` emulation knob changes it)."""
     dt = np.result_type(power, opacity).type
     with np.errstate(over="ignore"):
         alpha = np.minimum(dt(alpha_max), opacity * np.exp(power))
-    return np.where((power <= 0) & (alpha >= dt(ALPHA_MIN)), alpha, dt(0.0))
+    return np.where((power <= 0) & (alpha >= dt(alpha_min)), alpha, dt(0.0))
 
 
 class _Tiles:
@@ -91,9 +94,13 @@ class _Tiles:
         if proj.is_surfel:
             self.rows = proj.surfel_rows[sidx]       # (n, K, 3, 3)
             self.depth_rows = proj.depth_rows[sidx]  # (n, K, 3)
+        # Emulation (reference/emulation.py): an extent knob's per-pixel clip.
+        self.clip_q = None if proj.clip_q is None else proj.clip_q[sidx]           # (n, K)
+        self.clip_rows = None if proj.clip_rows is None else proj.clip_rows[sidx]  # (n, K, 2, 2)
 
 
-def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) -> np.ndarray:
+def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float,
+                 alpha_min: float = ALPHA_MIN) -> np.ndarray:
     """(n, K, 256) alpha of K splats on the 256 pixels of n tiles (0 where skipped).
 
     ``px``, ``py``: (n, 16) pixel-centre coordinates of each tile's columns and rows.  The
@@ -108,7 +115,11 @@ def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) ->
     bx = g.conic[:, :, 1, None] * dx
     power = dt(-0.5) * (axx[:, :, None, :] + cyy[:, :, :, None]) - bx[:, :, None, :] * dy[:, :, :, None]
     n, k = dx.shape[:2]
-    alpha = gaussian_alpha(power.reshape(n, k, TILE_PIXELS), g.opacity[:, :, None], alpha_max)
+    if g.clip_q is not None or g.clip_rows is not None:   # an extent emulation knob
+        keep = emulation.clip_mask(power, dx, dy, g.clip_q, g.clip_rows)
+        power = np.where(keep, power, dt(-np.inf))
+    alpha = gaussian_alpha(power.reshape(n, k, TILE_PIXELS), g.opacity[:, :, None], alpha_max,
+                           alpha_min)
     if g.wrap_period is not None:   # equirect: |dx| <= period / 2 (splatgl/cameras/equirect.py)
         reach = np.abs(dx) <= dt(0.5 * g.wrap_period)                  # (n, K, 16) by column
         alpha = np.where(np.broadcast_to(reach[:, :, None, :], power.shape).reshape(n, k, TILE_PIXELS),
@@ -117,7 +128,8 @@ def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) ->
 
 
 def _surfel_chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float,
-                        convention: Compat = Compat.INRIA) -> tuple[np.ndarray, np.ndarray]:
+                        convention: Compat = Compat.INRIA, alpha_min: float = ALPHA_MIN
+                        ) -> tuple[np.ndarray, np.ndarray]:
     """2DGS: (n, K, 256) alpha (0 where skipped) and (n, K, 256) view z of the hit.
 
     :func:`splatgl.twins.surfel.surfel_alpha` on the tile's pixel centres, as (n, K, 16 rows,
@@ -131,6 +143,8 @@ def _surfel_chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: fl
     n, k = g.opacity.shape
     alpha = np.broadcast_to(alpha, (n, k, TILE_SIZE, TILE_SIZE)).reshape(n, k, TILE_PIXELS)
     z = np.broadcast_to(z, (n, k, TILE_SIZE, TILE_SIZE)).reshape(n, k, TILE_PIXELS)
+    if alpha_min > ALPHA_MIN:                     # the min_alpha emulation knob
+        alpha = np.where(alpha >= dt(alpha_min), alpha, dt(0.0))
     return np.where(g.valid[:, :, None], alpha, dt(0.0)), z
 
 
@@ -179,9 +193,10 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
         pos = start[rows, None] + offset + ks
         g = _Tiles(proj, values, pos, pos < end[rows, None])
         if proj.is_surfel:
-            alpha, z_pix = _surfel_chunk_alpha(g, px[rows], py[rows], amax, options.compat)
+            alpha, z_pix = _surfel_chunk_alpha(g, px[rows], py[rows], amax, options.compat,
+                                               options.alpha_min)
         else:
-            alpha = _chunk_alpha(g, px[rows], py[rows], amax)
+            alpha = _chunk_alpha(g, px[rows], py[rows], amax, options.alpha_min)
         alpha = np.where(done[:, None, :], dt(0.0), alpha)
         w, kept, t_seq = _blend_chunk(t, alpha, inclusive)
         wt = w.transpose(0, 2, 1)                           # (n, 256, K)
@@ -218,7 +233,7 @@ def _untile(per_tile: np.ndarray, grid: tuple[int, int], height: int, width: int
 def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarray,
               background=(0.0, 0.0, 0.0), options: ReferenceOptions | None = None,
               chunk: int = DEFAULT_CHUNK, tiles_per_batch: int = DEFAULT_TILES_PER_BATCH,
-              workers: int | None = None, progress=None) -> Raster:
+              workers: int | None = None, progress=None, batch=None) -> Raster:
     """Blend every tile's sorted splat list into the image (the reference's last stage).
 
     Args:
@@ -232,6 +247,8 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
         progress: optional ``progress(tiles_done, busy_tiles, what)``
             (:mod:`splatgl.progress`), called as each batch of tiles finishes.  Ctrl-C lands
             between batches: batches not yet started are cancelled.
+        batch: what blends one batch of tiles (default the global order's; the per-pixel
+            order passes its own, :mod:`splatgl.reference.per_pixel`).
     """
     options = ReferenceOptions() if options is None else options
     if chunk < 1 or tiles_per_batch < 1:
@@ -249,8 +266,10 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
     nb = np.zeros((n_tiles, TILE_PIXELS), np.int32)
     values = np.asarray(sorted_values, np.int64)
 
+    blend = _raster_batch if batch is None else batch
+
     def run(tiles: np.ndarray):
-        return tiles, _raster_batch(proj, values, ranges, tiles, options, chunk)
+        return tiles, blend(proj, values, ranges, tiles, options, chunk)
 
     results, done = [], 0
 
@@ -305,9 +324,10 @@ def transmittance_trace(proj: ProjectedSplats, sorted_values: np.ndarray, ranges
     g = _Tiles(proj, np.asarray(sorted_values, np.int64), pos, pos < end)
     with np.errstate(under="ignore"):
         if proj.is_surfel:
-            alpha, _ = _surfel_chunk_alpha(g, px, py, options.resolved_alpha_max, options.compat)
+            alpha, _ = _surfel_chunk_alpha(g, px, py, options.resolved_alpha_max, options.compat,
+                                           options.alpha_min)
         else:
-            alpha = _chunk_alpha(g, px, py, options.resolved_alpha_max)
+            alpha = _chunk_alpha(g, px, py, options.resolved_alpha_max, options.alpha_min)
         _, kept, t_seq = _blend_chunk(t, alpha, options.stop_inclusive)
     final = np.take_along_axis(t_seq, kept[:, None, :], axis=1)
     ks = np.arange(length + 1)[None, :, None]

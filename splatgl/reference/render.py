@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -9,9 +10,10 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..cameras.view import View
 from ..model.scene import Scene
-from ..model.settings import RenderSettings
+from ..model.settings import Order, RenderSettings
 from .binning import emit_keys, sort, tile_ranges
 from .options import Compat, ReferenceOptions, as_options
+from .per_pixel import rasterize_per_pixel
 from .rasterize import rasterize
 from .stages import ProjectedSplats, project
 
@@ -63,23 +65,38 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
         camera: any camera model the reference draws; the image is camera.height x
             camera.width.  The frame's :class:`~splatgl.cameras.view.View` is built from it,
             the settings and the scene (model transform, near plane, anchor).
-        settings: background, near plane, antialiasing, SH cap, model transform (default
-            RenderSettings()).
+        settings: background, near plane, antialiasing, SH cap, model transform, emulation
+            knobs and order (default RenderSettings()).
         dtype: float32 (GPU-like) or float64.
         compat: a :class:`Compat` (INRIA default, GSPLAT) or a full :class:`ReferenceOptions`.
         progress: optional :data:`splatgl.progress.ProgressCallback`, told the tiles rasterized.
     """
     settings = RenderSettings() if settings is None else settings
-    options = as_options(compat)
+    options = with_settings(as_options(compat), settings)
     proj = project(scene, View.of(camera, settings, scene), settings, dtype, options)
     keys, values = emit_keys(proj)
     keys, values = sort(keys, values)
     ranges = tile_ranges(keys, proj.n_tiles)
-    raster = rasterize(proj, values, ranges, settings.background, options, progress=progress)
+    if options.order is Order.PER_PIXEL:
+        raster = rasterize_per_pixel(proj, values, ranges, camera, settings.background, options,
+                                     progress=progress)
+    else:
+        raster = rasterize(proj, values, ranges, settings.background, options, progress=progress)
     return ReferenceImage(color=raster.color, alpha=raster.alpha, depth=raster.depth,
                           transmittance=raster.transmittance, n_contrib=raster.n_contrib,
                           projected=proj, sorted_values=values, ranges=ranges, options=options,
                           n_blended=raster.n_blended)
+
+
+def with_settings(options: ReferenceOptions, settings: RenderSettings) -> ReferenceOptions:
+    """``options`` with the reference's parts of ``settings`` (:class:`RenderSettings`): its
+    emulation knobs (unless ``options`` brings its own) and its order."""
+    changes = {}
+    if not settings.emulation.is_default and options.emulation.is_default:
+        changes["emulation"] = settings.emulation
+    if settings.order is Order.PER_PIXEL:
+        changes["order"] = Order.PER_PIXEL
+    return dataclasses.replace(options, **changes) if changes else options
 
 
 def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings | None = None,
