@@ -22,10 +22,19 @@
 //   rho = min(u^2 + v^2, F |d|^2) (low pass, eq. 11, F = SURFEL_FILTER_INV_SQUARE),
 //   alpha = min(0.99, o exp(-rho / 2)), skipped below 1/255; same early stop; D sums the
 //   view z of the hit (depth_row . (u, v, 1)) where rho_3d <= rho_2d, else the centre's z.
+// PER_PIXEL (the per-pixel order, twin: splatgl/reference/per_pixel.py window_order and
+// _raster_batch with a window): a pixel holds back up to ORDER_WINDOW contributions sorted by
+// the depth of each splat's peak along its ray (lib/peak_depth.glsl; surfels: the hit's view z);
+// each new one joins them and, when that makes ORDER_WINDOW + 1, the nearest is blended (ties:
+// the earlier in the list).  The rest are blended in order at the end of each pass.  D sums
+// that depth.
 #include "lib/tile_common.glsl"
 #ifdef SURFEL
 #include "lib/camera.glsl"
 #include "lib/surfel.glsl"
+#endif
+#if defined(PER_PIXEL) && !defined(SURFEL)
+#include "lib/peak_depth.glsl"
 #endif
 
 layout(local_size_x = TILE_SIZE, local_size_y = TILE_SIZE) in;
@@ -46,6 +55,11 @@ uniform uint u_index_mask;   // low bits of a packed key holding the splat index
 uniform uint u_tile_row0;    // first tile row of this dispatch (the image is drawn in bands)
 uniform uint u_pass;         // this pass (0-based) over the tiles' lists ...
 uniform uint u_passes;       // ... of this many, each over TILE_LIST_CHUNK entries per tile
+#if defined(PER_PIXEL) && !defined(SURFEL)
+uniform vec4 u_rays;         // (cx, cy, fx, fy): ray coordinates a = (x - cx, y - cy) / (fx, fy)
+shared vec4 s_peak0[TILE_PIXELS];      // peak_depth coefficients (s_color.w holds the third)
+shared vec4 s_peak1[TILE_PIXELS];
+#endif
 
 shared vec4 s_mean_cut[TILE_PIXELS];   // (u, v, power cut-off, view z) of the kept splats
 shared vec4 s_conic_o[TILE_PIXELS];    // (a, b, c, opacity)
@@ -58,6 +72,52 @@ shared uint s_slot[TILE_PIXELS];       // keep flag, then (after the scan) the k
 shared uint s_alive[TILE_PIXELS];      // 1 while the invocation's pixel still blends
 shared uint s_kept;                    // splats kept in this batch
 shared uint s_alive_count;             // invocations still blending
+
+#ifdef PER_PIXEL
+// This invocation's window: w_n entries sorted by depth w_t, colour and alpha in w_c.
+float w_t[ORDER_WINDOW];
+vec4 w_c[ORDER_WINDOW];
+int w_n = 0;
+
+// Front-to-back blend of one contribution with the early stop (as the global order's loop).
+void blend_one(float z, vec4 c, inout vec3 C, inout float D, inout float T, inout bool done) {
+    float test_t = T * (1.0 - c.a);
+    if (test_t < T_MIN) { done = true; return; }
+    float w = c.a * T;                    // alpha_k T_k
+    C += c.rgb * w;
+    D += z * w;
+    T = test_t;
+}
+
+// Insert into the sorted window (w_n < ORDER_WINDOW), after entries of equal depth.  Loops of
+// constant trip count, so the compiler unrolls them (llvmpipe counts loop iterations).
+void window_insert(float z, vec4 c) {
+    bool placed = false;
+    for (int i = ORDER_WINDOW - 1; i >= 0; --i) {
+        if (placed || i > w_n) continue;
+        int prev = max(i - 1, 0);
+        if (i == 0 || w_t[prev] <= z) { w_t[i] = z; w_c[i] = c; placed = true; }
+        else { w_t[i] = w_t[prev]; w_c[i] = w_c[prev]; }
+    }
+    w_n += 1;
+}
+
+void window_push(float z, vec4 c, inout vec3 C, inout float D, inout float T, inout bool done) {
+    if (w_n < ORDER_WINDOW) { window_insert(z, c); return; }
+    if (z < w_t[0]) { blend_one(z, c, C, D, T, done); return; }
+    blend_one(w_t[0], w_c[0], C, D, T, done);
+    for (int i = 0; i < ORDER_WINDOW - 1; ++i) { w_t[i] = w_t[i + 1]; w_c[i] = w_c[i + 1]; }
+    w_n -= 1;
+    window_insert(z, c);
+}
+
+void window_flush(inout vec3 C, inout float D, inout float T, inout bool done) {
+    for (int i = 0; i < ORDER_WINDOW; ++i) {
+        if (i < w_n && !done) blend_one(w_t[i], w_c[i], C, D, T, done);
+    }
+    w_n = 0;
+}
+#endif
 
 void main() {
     uvec2 group = gl_WorkGroupID.xy + uvec2(0u, u_tile_row0);   // this tile's (x, y) in the grid
@@ -96,6 +156,9 @@ void main() {
 #ifdef SURFEL
         vec2 duv = vec2(0.0);
 #endif
+#if defined(PER_PIXEL) && !defined(SURFEL)
+        vec4 pk0 = vec4(0.0), pk1 = vec4(0.0);
+#endif
         if (k < range.y) {
 #ifdef KEY_PACKED
             uint idx = sort_keys[k].x & u_index_mask;
@@ -115,6 +178,13 @@ void main() {
             keep = conic_min_over_box(qo.xyz, md.xy, box_lo, box_hi) <= q_cut;
             mc = vec4(md.xy, -0.5 * q_cut, md.z);
             if (keep) s_color[rank] = proj_color[idx];
+#ifdef PER_PIXEL
+            if (keep) {
+                pk0 = proj_peak[3u * idx];
+                pk1 = proj_peak[3u * idx + 1u];
+                s_color[rank].w = proj_peak[3u * idx + 2u].x;
+            }
+#endif
 #endif
         }
         s_slot[rank] = keep ? 1u : 0u;
@@ -135,16 +205,20 @@ void main() {
         memoryBarrierShared();
         barrier();
         if (s_alive_count == 0u) break;           // the same value in every invocation
-        vec3 color = s_color[rank].rgb;
+        vec4 color = s_color[rank];               // (rgb, 0; PER_PIXEL: the third peak value)
         memoryBarrierShared();
         barrier();                                // colours read before slots are overwritten
         if (keep) {
             uint slot = s_slot[rank];
             s_mean_cut[slot] = mc;
             s_conic_o[slot] = qo;
-            s_color[slot] = vec4(color, 0.0);
+            s_color[slot] = color;
 #ifdef SURFEL
             s_depth_uv[slot] = duv;
+#endif
+#if defined(PER_PIXEL) && !defined(SURFEL)
+            s_peak0[slot] = pk0;
+            s_peak1[slot] = pk1;
 #endif
         }
         memoryBarrierShared();
@@ -173,6 +247,13 @@ void main() {
             float alpha = min(ALPHA_MAX, q.w * exp(power));
             if (alpha < ALPHA_MIN) continue;
 #endif
+#ifdef PER_PIXEL
+#ifndef SURFEL
+            z = peak_depth(s_peak0[j], s_peak1[j], s_color[j].w, (centre - u_rays.xy) / u_rays.zw);
+#endif
+            window_push(z, vec4(s_color[j].rgb, alpha), C, D, T, done);
+            continue;
+#endif
             float test_t = T * (1.0 - alpha);
             if (test_t < T_MIN) { done = true; break; }
             float w = alpha * T;                  // alpha_k T_k
@@ -181,6 +262,9 @@ void main() {
             T = test_t;
         }
     }
+#ifdef PER_PIXEL
+    window_flush(C, D, T, done);                 // the window restarts with every pass
+#endif
     if (inside) {
         bool last = u_pass + 1u == u_passes;
         out_rgba[o] = last ? vec4(C + T * u_background, 1.0 - T) : vec4(C, done ? -T : T);

@@ -56,6 +56,8 @@ TILE_BINDING_RANGES = 13
 TILE_BINDING_OUT_RGBA = 14
 TILE_BINDING_OUT_DEPTH = 15
 TILE_BINDING_SURFEL = 16
+#: The per-pixel order's peak-depth coefficients (tile_project.comp writes, tile_rasterize.comp reads).
+TILE_BINDING_PEAK = 17
 
 # --- The device radix sort (gl/radix_sort.py; shaders/radix_count.comp, radix_scan.comp,
 # radix_scatter.comp).
