@@ -57,8 +57,8 @@ uniform uint u_pass;         // this pass (0-based) over the tiles' lists ...
 uniform uint u_passes;       // ... of this many, each over TILE_LIST_CHUNK entries per tile
 #if defined(PER_PIXEL) && !defined(SURFEL)
 uniform vec4 u_rays;         // (cx, cy, fx, fy): ray coordinates a = (x - cx, y - cy) / (fx, fy)
-shared vec4 s_peak0[TILE_PIXELS];      // peak_depth coefficients (s_color.w holds the third)
-shared vec4 s_peak1[TILE_PIXELS];
+shared vec4 s_peak0[TILE_PIXELS];      // peak_depth coefficients (s_color.w holds Q2_yy,
+shared vec4 s_peak1[TILE_PIXELS];      // s_mean_cut.w, the 3DGS view z, is not read: r_z)
 #endif
 
 shared vec4 s_mean_cut[TILE_PIXELS];   // (u, v, power cut-off, view z) of the kept splats
@@ -90,14 +90,17 @@ void blend_one(float z, vec4 c, inout vec3 C, inout float D, inout float T, inou
 }
 
 // Insert into the sorted window (w_n < ORDER_WINDOW), after entries of equal depth.  Loops of
-// constant trip count, so the compiler unrolls them (llvmpipe counts loop iterations).
+// constant trip count without early exits and constant indices only, so the compiler unrolls
+// them into selects (llvmpipe's per-lane dynamic array indexing is slow, and it counts loop
+// iterations).
 void window_insert(float z, vec4 c) {
-    bool placed = false;
-    for (int i = ORDER_WINDOW - 1; i >= 0; --i) {
-        if (placed || i > w_n) continue;
-        int prev = max(i - 1, 0);
-        if (i == 0 || w_t[prev] <= z) { w_t[i] = z; w_c[i] = c; placed = true; }
-        else { w_t[i] = w_t[prev]; w_c[i] = w_c[prev]; }
+    int p = 0;                            // entries at or before z: the new entry's slot
+    for (int i = 0; i < ORDER_WINDOW; ++i) p += (i < w_n && w_t[i] <= z) ? 1 : 0;
+    for (int i = ORDER_WINDOW - 1; i > 0; --i) {
+        if (i > p && i <= w_n) { w_t[i] = w_t[i - 1]; w_c[i] = w_c[i - 1]; }
+    }
+    for (int i = 0; i < ORDER_WINDOW; ++i) {
+        if (i == p) { w_t[i] = z; w_c[i] = c; }
     }
     w_n += 1;
 }
@@ -182,7 +185,9 @@ void main() {
             if (keep) {
                 pk0 = proj_peak[3u * idx];
                 pk1 = proj_peak[3u * idx + 1u];
-                s_color[rank].w = proj_peak[3u * idx + 2u].x;
+                vec4 pk2 = proj_peak[3u * idx + 2u];
+                s_color[rank].w = pk2.x;
+                mc.w = pk2.y;                     // r_z (z is the peak depth in this mode)
             }
 #endif
 #endif
@@ -249,7 +254,7 @@ void main() {
 #endif
 #ifdef PER_PIXEL
 #ifndef SURFEL
-            z = peak_depth(s_peak0[j], s_peak1[j], s_color[j].w, (centre - u_rays.xy) / u_rays.zw);
+            z = peak_depth(s_peak0[j], s_peak1[j], vec2(s_color[j].w, m.w), (centre - u_rays.xy) / u_rays.zw);
 #endif
             window_push(z, vec4(s_color[j].rgb, alpha), C, D, T, done);
             continue;

@@ -27,7 +27,8 @@ PER_PIXEL = RenderSettings(near=0.2, order=Order.PER_PIXEL)
 def brute_force(scene: Scene, cam: Camera, ref) -> np.ndarray:
     """Colour of every pixel by a plain loop: the pixel's splats (those binned to its tile, as
     the reference bins them) sorted by the depth of their Gaussian's peak along its ray,
-    computed from the inverted 3D covariance, blended front to back with the early stop."""
+    computed from the inverted 3D covariance (clamped to 3 sigma of its view depth), blended
+    front to back with the early stop."""
     proj = ref.projected
     r_cw, t_cw = cam.rotation, cam.translation
     rot = quat_to_rotmat(scene.rotations.astype(np.float64))
@@ -51,8 +52,10 @@ def brute_force(scene: Scene, cam: Camera, ref) -> np.ndarray:
                     continue
                 mu = r_cw @ scene.means[k].astype(np.float64) + t_cw
                 m = r_cw @ rot[k]
-                q = np.linalg.inv(m @ np.diag(scene.scales[k].astype(np.float64) ** 2) @ m.T)
-                t = d @ q @ mu / (d @ q @ d)
+                cov = m @ np.diag(scene.scales[k].astype(np.float64) ** 2) @ m.T
+                q = np.linalg.inv(cov)
+                r_z = 3.0 * np.sqrt(cov[2, 2])               # t* clamped to the splat's depth range
+                t = np.clip(d @ q @ mu / (d @ q @ d), mu[2] - r_z, mu[2] + r_z)
                 items.append((t, depth_rank[k], alpha, proj.color[k]))
             big_t = 1.0
             for _, _, alpha, color in sorted(items, key=lambda e: e[:2]):
@@ -161,3 +164,33 @@ def test_tile_renderer_per_pixel_orthographic_and_surfels(ctx):
     cam = Camera.from_fov(48, 48, 60.0, look_at([0.3, 0.2, -3.0], [0, 0, 0]))
     got, twin = tile_per_pixel(ctx, surfels, cam, 4)
     assert np.abs(got.rgba[..., :3] - twin.color).max() < 1e-4
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_peak_coefficients_and_peak_depth_against_the_formula(ortho):
+    """peak_depth(peak_coefficients(...)) is argmax_t of the 3D Gaussian along each pixel's ray
+    (clamped to mu_z +- 3 sqrt(Sigma_zz)), in float64."""
+    from splatgl.reference.peak import peak_coefficients, peak_depth
+
+    rng = np.random.default_rng(3)
+    n = 50
+    pose = look_at([0.2, 0.1, -3.0], [0, 0, 0])
+    cam = (Camera.orthographic(40, 30, 12.0, pose) if ortho else Camera.from_fov(40, 30, 60.0, pose))
+    means = rng.normal(0, 0.5, (n, 3))
+    quats = rng.normal(size=(n, 4))
+    scales = np.exp(rng.uniform(-4, 0, (n, 3)))
+    p_cam = means @ cam.rotation.T + cam.translation
+    peak = peak_coefficients(p_cam, quats, scales, cam, np.ones(n, bool), np.float64)
+    u, v = rng.uniform(0, 40, n), rng.uniform(0, 30, n)
+    ax, ay = (u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy
+    got = peak_depth(peak, ax, ay, ortho)
+    rot = quat_to_rotmat(quats / np.linalg.norm(quats, axis=1, keepdims=True))
+    for k in range(n):
+        m = cam.rotation @ rot[k]
+        cov = m @ np.diag(scales[k] ** 2) @ m.T
+        q = np.linalg.inv(cov)
+        origin, d = (np.array([ax[k], ay[k], 0.0]), np.array([0.0, 0, 1])) if ortho else \
+            (np.zeros(3), np.array([ax[k], ay[k], 1.0]))
+        t = d @ q @ (p_cam[k] - origin) / (d @ q @ d)
+        r_z = 3 * np.sqrt(cov[2, 2])
+        assert got[k] == pytest.approx(np.clip(t, p_cam[k, 2] - r_z, p_cam[k, 2] + r_z), rel=1e-8, abs=1e-9)

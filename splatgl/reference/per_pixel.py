@@ -14,7 +14,9 @@ with ``A = m^T Q m``, ``B = (Q m)_xy``, ``Q2`` the xy block of Q: well condition
 splat, and ``t* = mu_z`` on the centre's ray.  Orthographic (o = (a, 0), d = (0, 0, 1),
 ``a = (x - cx) / fx`` ...): ``t* = mu_z + B . delta`` with ``delta = a - mu_xy`` and
 ``B = -(Q_zx, Q_zy) / Q_zz``.  Q is scaled by the smallest squared scale (``t*`` does not change),
-so flat splats keep finite coefficients.  2DGS surfels sort by the view z of the ray's hit, which
+so flat splats keep finite coefficients.  ``t*`` is clamped to the splat's 3-sigma range of view
+depth, ``mu_z +- 3 sqrt(Sigma_zz)`` (:data:`splatgl.reference.peak.PEAK_CLAMP_SIGMAS`): along a ray
+nearly parallel to a needle or a flat splat the unclamped peak lies far outside it.  2DGS surfels sort by the view z of the ray's hit, which
 the surfel branch already computes.  The depth layer accumulates the same per-pixel depth.
 
 Order.  Exact (the reference): all contributions of a pixel (alpha >= 1/255) sorted by
@@ -61,7 +63,7 @@ def _contributions(proj: ProjectedSplats, values: np.ndarray, start: int, end: i
                                            options.compat, options.alpha_min)
         else:
             alpha = _chunk_alpha(g, px[None], py[None], options.resolved_alpha_max, options.alpha_min)
-            pk = proj.peak[values[pos]][0]                          # (K, 9)
+            pk = proj.peak[values[pos]][0]                          # (K, 10)
             t = peak_depth(pk[:, None, None, :], ax[:, None, :], ay[0][None, :, None], rays.parallel)
             t = t.reshape(1, -1, TILE_PIXELS)
         k, pix = np.nonzero(alpha[0] > 0)

@@ -65,8 +65,8 @@ class ProjectedSplats:
         clip_q, clip_rows: an ``extent`` knob's per-pixel clip
             (:class:`splatgl.reference.emulation.Support`), or None.
         peak: (N, 9) float coefficients of the depth at which each splat peaks along a pixel's
-            ray, for the per-pixel order (:func:`splatgl.reference.per_pixel.peak_coefficients`),
-            or None.
+            ray, for the per-pixel order (:func:`splatgl.reference.peak.peak_coefficients`),
+            or None; rays: the camera's pixel rays with it (:class:`splatgl.reference.peak.Rays`).
     """
 
     visible: np.ndarray
@@ -88,6 +88,7 @@ class ProjectedSplats:
     clip_q: np.ndarray | None = None
     clip_rows: np.ndarray | None = None
     peak: np.ndarray | None = None
+    rays: "pp.Rays | None" = None
 
     @property
     def is_surfel(self) -> bool:
@@ -274,7 +275,8 @@ def project(scene: Scene, view: View, settings: RenderSettings | None = None,
         clip_q=None if clip is None or clip.clip_q is None else clean(clip.clip_q),
         clip_rows=None if clip is None or clip.clip_rows is None else clean(clip.clip_rows),
         peak=(pp.peak_coefficients(pr.p_cam, scene.rotations, scales, view, ok, dt)
-              if options.order is Order.PER_PIXEL else None))
+              if options.order is Order.PER_PIXEL else None),
+        rays=pp.Rays.of(camera) if options.order is Order.PER_PIXEL else None)
 
 
 def gsplat_fisheye(camera: Camera, options: ReferenceOptions) -> bool:

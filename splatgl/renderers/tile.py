@@ -141,15 +141,19 @@ class TileRenderer:
             self._bufs["OFFSETS"].buf.write((ends - counts).astype(np.uint32).tobytes())
         return counts, total
 
-    def _emit(self, layout: KeyLayout, grid: tuple[int, int], total: int,
+    def _emit(self, view: View, layout: KeyLayout, grid: tuple[int, int], total: int,
               counts: np.ndarray) -> None:
         self._bufs["KEYS"].ensure(total * 8)
         if not layout.packed:
             self._bufs["VALUES"].ensure(total * 4)
         self._bind_all()
-        prog = self.programs.compute("tile_emit.comp", self._defines(layout))
+        d = self._defines(layout)
+        d.update(view.defines)              # the per-pixel order's keys: ORTHOGRAPHIC rays
+        prog = self.programs.compute("tile_emit.comp", d)
         self._set(prog, u_count=self.count, u_grid=grid, u_tile_shift=layout.tile_shift,
                   u_depth_shift=layout.depth_shift)
+        cam = view.camera
+        self._set(prog, u_rays=(cam.cx, cam.cy, cam.fx, cam.fy))
         for first in range(0, int(counts.max(initial=0)), TILE_EMIT_CHUNK):
             self._set(prog, u_first=first)
             prog.run(*splat_groups(self.count))
@@ -238,7 +242,7 @@ class TileRenderer:
             counts, total = self._scan()
         lap()
         if total:
-            self._emit(layout, grid, total, counts)
+            self._emit(view, layout, grid, total, counts)
             if stages:
                 emitted = self._read_keys(layout, total)
         lap()
