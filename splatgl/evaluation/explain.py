@@ -144,16 +144,18 @@ class Explanation:
             out.append(f"    + {label:<20} {_db(value):>9}  {gain:+7.2f} dB")
         labels = " ".join(label for label, _ in self.steps)
         out.append(f"  best explanation: {labels} ({_db(self.base_psnr)} -> {_db(self.final_psnr)}; "
-                   f"reproduce: --emulate " + " --emulate ".join(
-                       lbl for lbl, _ in self.steps if not lbl.startswith(("order=", "convention=")))
-                   + _whole_rules(self.steps) + ")")
+                   f"reproduce: {reproduce(label for label, _ in self.steps)})")
         return out
 
 
-def _whole_rules(steps) -> str:
-    extra = [f" --{lbl.split('=')[0]} {lbl.split('=')[1]}" for lbl, _ in steps
-             if lbl.startswith(("order=", "convention="))]
-    return "".join(extra)
+def reproduce(labels) -> str:
+    """The options that put the reference in the state of these labels: ``--emulate K=V`` for
+    knobs, ``--order per-pixel`` and ``--convention gsplat`` for the whole rules."""
+    parts = []
+    for label in labels:
+        name, value = label.split("=", 1)
+        parts.append(f"--{name} {value}" if name in ("order", "convention") else f"--emulate {label}")
+    return " ".join(parts)
 
 
 def _db(value: float) -> str:
