@@ -23,30 +23,18 @@ import numpy as np
 
 DEFAULT_SCENE, DEFAULT_UP = "ply/donut_sh0.ply", "+z"
 WIDTH, HEIGHT = 400, 225
-#: Camera distance (multiple of the framing distance), elevation and yaw per frame (degrees).
-DISTANCE, ELEVATION, YAW_STEP, FRAMES = 0.35, 15.0, 3.0, 8
+#: Camera distance (multiple of the framing distance) and yaw per frame (degrees) of the turn
+#: (splatgl.bench.popping.camera_paths, elevation 15 degrees).
+DISTANCE, YAW_STEP, FRAMES = 0.35, 3.0, 8
 #: Crop margin around the popped pixels, and the enlargement.
 MARGIN, ZOOM = 24, 2
 
 
 def turning_cameras(scene, path: Path, up: str | None):
-    from splatgl.api import default_camera
-    from splatgl.cameras.poses import orbit
-    from splatgl.cameras.up import resolve_up
+    from splatgl.bench.popping import camera_paths
 
-    up_vec, _ = resolve_up(up, path)
-    base = default_camera(scene, WIDTH, HEIGHT, up=up_vec)
-    centre = 0.5 * (scene.robust_bounds[0] + scene.robust_bounds[1])
-    dist = float(np.linalg.norm(base.center - centre))
-    cam0 = base.with_pose(orbit(centre, dist * DISTANCE, 0.0, ELEVATION, up=up_vec))
-    out = []
-    for i in range(FRAMES):
-        a = np.radians(YAW_STEP * (i - FRAMES / 2))
-        yaw = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-        w2c = np.array(cam0.world_to_camera, float)
-        w2c[:3, :3], w2c[:3, 3] = yaw @ w2c[:3, :3], yaw @ w2c[:3, 3]   # turn about its centre
-        out.append(cam0.with_pose(w2c))
-    return out
+    return camera_paths(scene, path, up, WIDTH, HEIGHT, FRAMES, ("turn",),
+                        (DISTANCE, YAW_STEP))["turn"]
 
 
 def main() -> None:

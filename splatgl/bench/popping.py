@@ -1,9 +1,13 @@
 """``splatgl bench --popping``: popping along camera paths, the global order against the per-pixel
 order, on the quad path, the tile renderer and the reference (docs/fidelity.md).
 
-For each scene, two paths of small steps, as an animation takes them: ``orbit`` (ORBIT_DEGREES a
-frame around the scene's robust centre at the framing distance) and ``fly`` (towards the centre
-from FLY_FROM to FLY_TO times the framing distance, turning FLY_DEGREES a frame).  Each
+For each scene, three paths of small steps, as an animation takes them: ``orbit`` (ORBIT_DEGREES
+a frame around the scene's robust centre at the framing distance), ``fly`` (towards the centre
+from FLY_FROM to FLY_TO times the framing distance, turning FLY_DEGREES a frame) and ``turn`` (a
+camera at TURN_DISTANCE times the framing distance turning in place, TURN_DEGREES of yaw a frame
+about its own centre: nothing moves in the world and nothing is disoccluded, so a renderer whose
+pixels depend only on their rays draws the same world-fixed picture; the global order, sorting
+by view z, reorders overlapping splats as the view direction swings).  Each
 configuration renders every frame with colour, alpha and depth; the popping metric
 (:mod:`splatgl.evaluation.popping`) scores each consecutive pair.  A row: the per-pair
 distribution (median, 90th percentile and largest score and popped share), the median frame
@@ -31,6 +35,7 @@ from ..model.settings import Order, RendererKind, RenderSettings
 #: distance) and turn per frame.
 ORBIT_DEGREES = 0.5
 FLY_FROM, FLY_TO, FLY_DEGREES = 1.2, 0.6, 0.2
+TURN_DISTANCE, TURN_DEGREES, TURN_ELEVATION = 0.5, 2.0, 15.0
 #: Configurations: name -> (renderer, order).
 CONFIGS = {
     "quad": (RendererKind.QUAD, Order.GLOBAL),
@@ -53,20 +58,32 @@ class PoppingOptions:
     window: int = 8
     configs: tuple[str, ...] = tuple(CONFIGS)
     metric: str | None = None
-    paths: tuple[str, ...] = ("orbit", "fly")
+    paths: tuple[str, ...] = ("orbit", "fly", "turn")
+
+
+def turned(camera, degrees: float):
+    """``camera`` turned in place: yaw of ``degrees`` about its own centre (its y axis)."""
+    a = np.radians(degrees)
+    yaw = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    w2c = np.array(camera.world_to_camera, float)
+    w2c[:3, :3], w2c[:3, 3] = yaw @ w2c[:3, :3], yaw @ w2c[:3, 3]
+    return camera.with_pose(w2c)
 
 
 def camera_paths(scene, path: Path | None, up: str | None, width: int, height: int, frames: int,
-                 names=("orbit", "fly")) -> dict[str, list]:
-    """{name: [Camera]}: the orbit and the fly-through (module doc)."""
+                 names=("orbit", "fly", "turn"), turn=(TURN_DISTANCE, TURN_DEGREES)) -> dict[str, list]:
+    """{name: [Camera]}: the orbit, the fly-through and the turn (module doc); ``turn`` =
+    (distance multiple, degrees a frame)."""
     up_vec, _ = resolve_up(up, path)
     base = default_camera(scene, width, height, up=up_vec)
     centre = 0.5 * (scene.robust_bounds[0] + scene.robust_bounds[1])
     dist = float(np.linalg.norm(base.center - centre))
-    at = lambda m, deg: base.with_pose(orbit(centre, dist * m, deg, 20.0, up=up_vec))  # noqa: E731
+    at = lambda m, deg, elev=20.0: base.with_pose(orbit(centre, dist * m, deg, elev, up=up_vec))  # noqa: E731
     span = max(frames - 1, 1)
     out = {"orbit": [at(1.0, ORBIT_DEGREES * i) for i in range(frames)],
-           "fly": [at(FLY_FROM * (FLY_TO / FLY_FROM) ** (i / span), FLY_DEGREES * i) for i in range(frames)]}
+           "fly": [at(FLY_FROM * (FLY_TO / FLY_FROM) ** (i / span), FLY_DEGREES * i) for i in range(frames)],
+           "turn": [turned(at(turn[0], 0.0, TURN_ELEVATION), turn[1] * (i - frames // 2))
+                    for i in range(frames)]}
     return {k: v for k, v in out.items() if k in names}
 
 
