@@ -52,7 +52,16 @@ def test_a_changed_square_pops_by_its_area():
     pair, err = score_pair(a, Frame(rgb, b.depth, b.alpha, b.camera), 1, "own")
     kept = round(pair.kept * W * H)
     assert pair.popped == pytest.approx(100 / kept, abs=1e-12)
+    assert pair.coherent == pytest.approx(64 / kept, abs=1e-12)      # the square's 8x8 inside
     assert (err[20:30, 40:50] > POP_THRESHOLD["own"]).all()
+
+
+def test_speckle_is_popped_but_not_coherent():
+    a, b = plane_frame(*A), plane_frame(*B)
+    rgb = b.rgb.copy()
+    rgb[10:50:4, 10:80:4] = [0.9, 0.1, 0.1]             # isolated pixels, 4 apart
+    pair, _ = score_pair(a, Frame(rgb, b.depth, b.alpha, b.camera), 1, "own")
+    assert pair.popped > 0.02 and pair.coherent == 0.0
 
 
 def test_disocclusions_are_masked_not_counted():
@@ -80,3 +89,25 @@ def test_distribution():
     a, b, c = plane_frame(*A), plane_frame(*B), plane_frame(*A)
     d = distribution(popping([a, b, c], "own"))
     assert d["pairs"] == 2 and d["popped_max"] == 0.0 and d["score_p90"] < 2e-3
+
+
+def test_bench_popping_cli(tmp_path, capsys):
+    from splatgl.cli import main
+    from splatgl.commands._common import demo_scene_path
+
+    out = tmp_path / "pop"
+    assert main(["bench", "--popping", str(demo_scene_path()), "--width", "48", "--height", "32",
+                 "--frames", "3", "--popping-configs", "tile,tile per-pixel",
+                 "--popping-metric", "own", "--out", str(out)]) == 0
+    import json
+    report = json.loads((out / "popping.json").read_text())
+    rows = report["rows"]
+    assert {(r["path"], r["config"]) for r in rows} == {
+        (p, c) for p in ("orbit", "fly", "turn") for c in ("tile", "tile per-pixel")}
+    assert all(r["pairs"] == 2 and r["metric"] == "own" for r in rows)
+    assert all("still_psnr_vs_global" in r for r in rows if r["config"] == "tile per-pixel")
+    assert "coh. max" in capsys.readouterr().out
+    assert main(["bench", "--popping", "--popping-configs", "tile,fast"]) == 2
+    assert "--popping-configs: unknown fast" in capsys.readouterr().err
+    assert main(["bench", "--popping", "--scale"]) == 2
+    assert "--popping runs alone" in capsys.readouterr().err

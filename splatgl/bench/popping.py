@@ -10,7 +10,8 @@ pixels depend only on their rays draws the same world-fixed picture; the global 
 by view z, reorders overlapping splats as the view direction swings).  Each
 configuration renders every frame with colour, alpha and depth; the popping metric
 (:mod:`splatgl.evaluation.popping`) scores each consecutive pair.  A row: the per-pair
-distribution (median, 90th percentile and largest score and popped share), the median frame
+distribution (median, 90th percentile and largest score and popped share, the largest coherent
+share), the median frame
 time, and for a per-pixel order the PSNR of its first frame against the same renderer's global
 order (what the order changes in a still image).
 """
@@ -123,20 +124,21 @@ def measure_scene(renderer: Renderer, name: str, scene, path: Path | None, up: s
                 row["still_psnr_vs_global"] = psnr(frames[0].rgb, firsts[(kind, Order.GLOBAL)])
             rows.append(row)
             log(f"  {name} {pname} {config}: popped median {row['popped_median'] * 100:.3f}% "
-                f"p90 {row['popped_p90'] * 100:.3f}%, score median {row['score_median']:.4f}, "
-                f"{row['ms_per_frame']:.0f} ms/frame")
+                f"p90 {row['popped_p90'] * 100:.3f}%, coherent max {row['coherent_max'] * 100:.3f}%, "
+                f"score median {row['score_median']:.4f}, {row['ms_per_frame']:.0f} ms/frame")
     return rows
 
 
 def table(rows: list[dict]) -> str:
     """The rows as a text table."""
     head = (f"{'scene':<24} {'path':<6} {'config':<20} {'popped med':>10} {'p90':>8} {'max':>8} "
-            f"{'score med':>9} {'p90':>7} {'ms/frame':>9} {'still dB':>8}")
+            f"{'coh. max':>8} {'score med':>9} {'p90':>7} {'ms/frame':>9} {'still dB':>8}")
     out = [head, "-" * len(head)]
     for r in rows:
         still = r.get("still_psnr_vs_global")
         out.append(f"{r['scene'][:24]:<24} {r['path']:<6} {r['config']:<20} "
                    f"{r['popped_median'] * 100:>9.3f}% {r['popped_p90'] * 100:>7.3f}% "
-                   f"{r['popped_max'] * 100:>7.3f}% {r['score_median']:>9.4f} {r['score_p90']:>7.4f} "
+                   f"{r['popped_max'] * 100:>7.3f}% {r['coherent_max'] * 100:>7.3f}% "
+                   f"{r['score_median']:>9.4f} {r['score_p90']:>7.4f} "
                    f"{r['ms_per_frame']:>9.0f} {('' if still is None else f'{still:.1f}'):>8}")
     return "\n".join(out)

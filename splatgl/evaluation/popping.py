@@ -19,7 +19,10 @@ filters do not carry their difference into kept pixels):
   splat popping in front of another makes.
 
 Per frame pair: ``score`` = mean error over the kept pixels, ``popped`` = share of the kept pixels
-whose error exceeds the metric's POP_THRESHOLD, ``kept`` = share of the image scored.  A
+whose error exceeds the metric's POP_THRESHOLD, ``coherent`` = share of the kept pixels popped
+together with their 8 neighbours (a region at least 3x3 pixels changed: what a splat jumping in
+front of another does, while pixel-scale flicker, speckle from resampling or from orders that
+differ pixel by pixel, does not count), ``kept`` = share of the image scored.  A
 perspective or orthographic camera; the depth must be the expected depth of the same render.
 """
 
@@ -77,6 +80,7 @@ class PairScore:
     score: float
     popped: float
     kept: float
+    coherent: float = 0.0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -177,8 +181,21 @@ def score_pair(prev: Frame, cur: Frame, index: int, metric: str) -> tuple[PairSc
     err = np.where(kept, error_map(cur.rgb.astype(np.float64), warped, metric), 0.0)
     n = int(kept.sum())
     score = float(err[kept].mean()) if n else 0.0
-    popped = float((err[kept] > POP_THRESHOLD[metric]).mean()) if n else 0.0
-    return PairScore(index, score, popped, n / kept.size), err
+    hot = kept & (err > POP_THRESHOLD[metric])
+    popped = float(hot.sum() / n) if n else 0.0
+    coherent = float((_eroded(hot) & kept).sum() / n) if n else 0.0
+    return PairScore(index, score, popped, n / kept.size, coherent), err
+
+
+def _eroded(mask: np.ndarray) -> np.ndarray:
+    """Pixels of ``mask`` whose 8 neighbours are in it too (a 3x3 erosion; borders out)."""
+    h, w = mask.shape
+    pad = np.pad(mask, 1, constant_values=False)
+    out = np.ones((h, w), bool)
+    for dy in range(3):
+        for dx in range(3):
+            out &= pad[dy:dy + h, dx:dx + w]
+    return out
 
 
 def popping(frames: list[Frame], metric: str | None = None) -> list[PairScore]:
@@ -193,9 +210,11 @@ def distribution(scores: list[PairScore]) -> dict[str, float]:
         return {}
     s = np.array([p.score for p in scores])
     q = np.array([p.popped for p in scores])
+    c = np.array([p.coherent for p in scores])
     return {"score_median": float(np.median(s)), "score_p90": float(np.percentile(s, 90)),
             "score_max": float(s.max()), "popped_median": float(np.median(q)),
             "popped_p90": float(np.percentile(q, 90)), "popped_max": float(q.max()),
+            "coherent_median": float(np.median(c)), "coherent_max": float(c.max()),
             "kept_mean": float(np.mean([p.kept for p in scores])), "pairs": len(scores)}
 
 
