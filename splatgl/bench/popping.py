@@ -30,7 +30,7 @@ from ..cameras.poses import orbit
 from ..cameras.up import resolve_up
 from ..evaluation.metrics import psnr
 from ..evaluation.popping import Frame, default_metric, distribution, popping
-from ..model.settings import Order, RendererKind, RenderSettings
+from ..model.settings import DEFAULT_ORDER_WINDOW, Order, RendererKind, RenderSettings
 
 #: Orbit step (degrees per frame) and the fly-through's distances (multiples of the framing
 #: distance) and turn per frame.
@@ -56,7 +56,7 @@ class PoppingOptions:
     width: int = 640
     height: int = 360
     frames: int = 16
-    window: int = 8
+    window: int = DEFAULT_ORDER_WINDOW
     configs: tuple[str, ...] = tuple(CONFIGS)
     metric: str | None = None
     paths: tuple[str, ...] = ("orbit", "fly", "turn")

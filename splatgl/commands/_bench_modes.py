@@ -73,7 +73,7 @@ def add_popping_arguments(p: argparse.ArgumentParser) -> None:
                         "default where installed) or own (the fallback: a neighbourhood-min colour "
                         "difference, splatgl/evaluation/popping.py)")
     p.add_argument("--popping-window", type=int, default=None, metavar="N",
-                   help="--popping: the tile renderer's per-pixel window (default 8)")
+                   help="--popping: the tile renderer's per-pixel window (default: --order-window's)")
 
 
 def run_popping_command(args: argparse.Namespace) -> int:
@@ -89,7 +89,7 @@ def run_popping_command(args: argparse.Namespace) -> int:
     from ..evaluation.popping import default_metric
     from ..formats import load_scene
     from ..gl.context import renderer_name
-    from ..model.settings import MAX_ORDER_WINDOW
+    from ..model.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW
     from ..output.atomic import atomic_write_text
 
     configs = tuple(c.strip() for c in (args.popping_configs or ",".join(CONFIGS)).split(",") if c.strip())
@@ -97,7 +97,7 @@ def run_popping_command(args: argparse.Namespace) -> int:
     if unknown or not configs:
         raise SplatglError(f"--popping-configs: unknown {', '.join(unknown) or repr(args.popping_configs)}; "
                            f"valid: {', '.join(CONFIGS)}")
-    window = args.popping_window or 8
+    window = args.popping_window or DEFAULT_ORDER_WINDOW
     if not 1 <= window <= MAX_ORDER_WINDOW:
         raise SplatglError(f"--popping-window must be 1..{MAX_ORDER_WINDOW}, got {window}")
     options = PoppingOptions(args.width or 640, args.height or 360, args.frames or 16, window, configs,
