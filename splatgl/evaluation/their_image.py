@@ -173,18 +173,19 @@ def _db(value: float) -> str:
 
 def _check_turned(path: Path, rgb: np.ndarray, ref: np.ndarray, as_is: float, flip: bool,
                   mirror: bool) -> None:
-    """Refuse an image that scores much better upside down or mirrored."""
+    """Refuse an image that scores much better upside down or mirrored (or, turned as asked,
+    much better turned back)."""
     for axis, what, option, done in ((0, "upside down (its row 0 is the bottom; splatgl's is the top)",
                                       "--flip-y", flip),
                                      (1, "mirrored left to right", "--mirror-x", mirror)):
         turned = psnr(np.flip(rgb, axis), ref)
-        if turned >= TURNED_MIN_PSNR and turned >= as_is + TURNED_MARGIN_DB:
-            again = " again" if done else ""
-            raise SplatglError(f"--image {path}: looks {what}: {_db(turned)} against the reference "
-                               f"turned{again}, {_db(as_is)} as it is; pass {option} to score it turned"
-                               if not done else
-                               f"--image {path}: scores {_db(turned)} turned back, {_db(as_is)} with "
-                               f"{option}; leave {option} out")
+        if turned < TURNED_MIN_PSNR or turned < as_is + TURNED_MARGIN_DB:
+            continue
+        if done:
+            raise SplatglError(f"--image {path}: scores {_db(turned)} turned back, {_db(as_is)} "
+                               f"with {option}; leave {option} out")
+        raise SplatglError(f"--image {path}: looks {what}: {_db(turned)} against the reference "
+                           f"turned, {_db(as_is)} as it is; pass {option} to score it turned")
 
 
 def _check_background(path: Path, rgb: np.ndarray, ref_alpha: np.ndarray, bg: np.ndarray) -> None:
