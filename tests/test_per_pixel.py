@@ -194,3 +194,22 @@ def test_peak_coefficients_and_peak_depth_against_the_formula(ortho):
         t = d @ q @ (p_cam[k] - origin) / (d @ q @ d)
         r_z = 3 * np.sqrt(cov[2, 2])
         assert got[k] == pytest.approx(np.clip(t, p_cam[k, 2] - r_z, p_cam[k, 2] + r_z), rel=1e-8, abs=1e-9)
+
+
+def test_cli_order_per_pixel(tmp_path, capsys):
+    from splatgl.cli import main
+
+    size = ["--width", "48", "--height", "32"]
+    assert main(["render", "--renderer", "tile", "--order", "per-pixel", "--order-window", "4",
+                 "-o", str(tmp_path / "t.png")] + size) == 0
+    assert main(["render", "--renderer", "reference", "--order", "per-pixel",
+                 "--emulate", "sort=bucket16", "-o", str(tmp_path / "r.png")] + size) == 0
+    capsys.readouterr()
+    assert main(["render", "--order", "per-pixel", "-o", str(tmp_path / "q.png")] + size) == 2
+    assert "--order per-pixel is drawn by the tile renderer and the NumPy reference" in capsys.readouterr().err
+    assert main(["render", "--emulate", "extent=fixed", "-o", str(tmp_path / "q.png")] + size) == 2
+    assert "--emulate extent=fixed applies to the NumPy reference only" in capsys.readouterr().err
+    assert main(["render", "--renderer", "tile", "--order", "per-pixel", "--order-window", "33",
+                 "-o", str(tmp_path / "q.png")] + size) == 2
+    assert "must be 1..32, got 33" in capsys.readouterr().err
+    assert not (tmp_path / "q.png").exists()

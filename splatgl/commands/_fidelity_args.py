@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..model.emulation import KNOBS, parse_emulation
+from ..model.emulation import parse_emulation
 from ..model.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW, Order
 
 EMULATE_HELP = ("follow another viewer's approximation in the NumPy reference (repeatable): "
@@ -45,6 +45,3 @@ def fidelity_fields(args: argparse.Namespace) -> dict:
     return {"emulation": parse_emulation(getattr(args, "emulate", None)),
             "order": Order(getattr(args, "order", None) or Order.GLOBAL.value),
             "order_window": getattr(args, "order_window", None) or DEFAULT_ORDER_WINDOW}
-
-
-__all__ = ["KNOBS", "add_fidelity_arguments", "fidelity_fields"]
