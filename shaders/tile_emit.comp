@@ -6,7 +6,16 @@
 // the rectangle's row-major index): llvmpipe ends an invocation's loops after 65535 iterations
 // in all, which one splat covering a 4096 x 4096 image would reach, so splatgl/renderers/tile.py issues
 // as many dispatches as the largest rectangle needs (one, below 32768 tiles).
+// PER_PIXEL (3DGS): the key's depth is the splat's peak depth along the ray through its centre
+// clamped into the box of the tile's pixel centres (lib/peak_depth.glsl; twin
+// splatgl/reference/peak.py tile_key_bits), clamped below at MIN_KEY_DEPTH, so that each
+// pixel's window has little order left to fix.
 #include "lib/tile_common.glsl"
+#if defined(PER_PIXEL) && !defined(SURFEL)
+#include "lib/peak_depth.glsl"
+uniform vec4 u_rays;    // (cx, cy, fx, fy)
+const float MIN_KEY_DEPTH = 1.0e-30;
+#endif
 
 layout(local_size_x = SPLAT_GROUP) in;
 
@@ -26,6 +35,13 @@ void main() {
     uint last = min(touched, u_first + uint(TILE_EMIT_CHUNK));
     for (uint j = u_first; j < last; ++j) {
         uint y = rect.y + j / width, x = rect.x + j % width;
+#if defined(PER_PIXEL) && !defined(SURFEL)
+        vec2 lo = vec2(uvec2(x, y) * uint(TILE_SIZE)) + 0.5;
+        vec2 at = min(max(proj_mean_depth[i].xy, lo), lo + float(TILE_SIZE - 1));
+        float t = peak_depth(proj_peak[3u * i], proj_peak[3u * i + 1u], proj_peak[3u * i + 2u].xy,
+                             (at - u_rays.xy) / u_rays.zw);
+        depth_bits = floatBitsToUint(max(t, MIN_KEY_DEPTH));
+#endif
         sort_keys[base + j] = tile_key(y * u_grid.x + x, depth_bits, i);
 #ifndef KEY_PACKED
         sort_values[base + j] = i;

@@ -13,6 +13,9 @@
 #ifdef SURFEL
 #include "lib/surfel.glsl"
 #endif
+#ifdef PER_PIXEL
+#include "lib/peak_depth.glsl"
+#endif
 
 layout(local_size_x = SPLAT_GROUP) in;
 
@@ -105,6 +108,10 @@ void main() {
     uint touched = (rmax.x - rmin.x) * (rmax.y - rmin.y);
     if (touched == 0u) return;
     proj_mean_depth[i] = vec4(mean2d, view_depth(p), 0.0);
+#ifdef PER_PIXEL
+    peak_coefficients(u_view_rot, rot, scale, p, proj_peak[3u * i], proj_peak[3u * i + 1u],
+                      proj_peak[3u * i + 2u]);
+#endif
     proj_conic_o[i] = vec4(con, opacity);
     proj_color[i] = vec4(color, 0.0);
     proj_rect[i] = uvec4(rmin, rmax);

@@ -29,10 +29,19 @@
 //     it), top = the first splat of the largest w = alpha T (its index + 1; 0: none), count;
 //   UNDER: a splat whose z is at or behind the pixel's geometry depth (under_depth, the
 //     splats' metric, +inf: none) is skipped like one below 1/255.
+// PER_PIXEL (the per-pixel order, twin: splatgl/reference/per_pixel.py window_order and
+// _raster_batch with a window): a pixel holds back up to ORDER_WINDOW contributions sorted by
+// the depth of each splat's peak along its ray (lib/peak_depth.glsl; surfels: the hit's view z);
+// each new one joins them and, when that makes ORDER_WINDOW + 1, the nearest is blended (ties:
+// the earlier in the list).  The rest are blended in order at the end of each pass.  D sums
+// that depth.
 #include "lib/tile_common.glsl"
 #ifdef SURFEL
 #include "lib/camera.glsl"
 #include "lib/surfel.glsl"
+#endif
+#if defined(PER_PIXEL) && !defined(SURFEL)
+#include "lib/peak_depth.glsl"
 #endif
 
 layout(local_size_x = TILE_SIZE, local_size_y = TILE_SIZE) in;
@@ -66,6 +75,11 @@ shared uint s_index[TILE_PIXELS];      // splat index of the kept splats
 #ifdef UNDER
 layout(std430, binding = TILE_BINDING_UNDER) readonly buffer UnderDepth { float under_depth[]; };
 #endif
+#if defined(PER_PIXEL) && !defined(SURFEL)
+uniform vec4 u_rays;         // (cx, cy, fx, fy): ray coordinates a = (x - cx, y - cy) / (fx, fy)
+shared vec4 s_peak0[TILE_PIXELS];      // peak_depth coefficients (s_color.w holds Q2_yy,
+shared vec4 s_peak1[TILE_PIXELS];      // s_mean_cut.w, the 3DGS view z, is not read: r_z)
+#endif
 
 shared vec4 s_mean_cut[TILE_PIXELS];   // (u, v, power cut-off, view z) of the kept splats
 shared vec4 s_conic_o[TILE_PIXELS];    // (a, b, c, opacity)
@@ -78,6 +92,55 @@ shared uint s_slot[TILE_PIXELS];       // keep flag, then (after the scan) the k
 shared uint s_alive[TILE_PIXELS];      // 1 while the invocation's pixel still blends
 shared uint s_kept;                    // splats kept in this batch
 shared uint s_alive_count;             // invocations still blending
+
+#ifdef PER_PIXEL
+// This invocation's window: w_n entries sorted by depth w_t, colour and alpha in w_c.
+float w_t[ORDER_WINDOW];
+vec4 w_c[ORDER_WINDOW];
+int w_n = 0;
+
+// Front-to-back blend of one contribution with the early stop (as the global order's loop).
+void blend_one(float z, vec4 c, inout vec3 C, inout float D, inout float T, inout bool done) {
+    float test_t = T * (1.0 - c.a);
+    if (test_t < T_MIN) { done = true; return; }
+    float w = c.a * T;                    // alpha_k T_k
+    C += c.rgb * w;
+    D += z * w;
+    T = test_t;
+}
+
+// Insert into the sorted window (w_n < ORDER_WINDOW), after entries of equal depth.  Loops of
+// constant trip count without early exits and constant indices only, so the compiler unrolls
+// them into selects (llvmpipe's per-lane dynamic array indexing is slow, and it counts loop
+// iterations).
+void window_insert(float z, vec4 c) {
+    int p = 0;                            // entries at or before z: the new entry's slot
+    for (int i = 0; i < ORDER_WINDOW; ++i) p += (i < w_n && w_t[i] <= z) ? 1 : 0;
+    for (int i = ORDER_WINDOW - 1; i > 0; --i) {
+        if (i > p && i <= w_n) { w_t[i] = w_t[i - 1]; w_c[i] = w_c[i - 1]; }
+    }
+    for (int i = 0; i < ORDER_WINDOW; ++i) {
+        if (i == p) { w_t[i] = z; w_c[i] = c; }
+    }
+    w_n += 1;
+}
+
+void window_push(float z, vec4 c, inout vec3 C, inout float D, inout float T, inout bool done) {
+    if (w_n < ORDER_WINDOW) { window_insert(z, c); return; }
+    if (z < w_t[0]) { blend_one(z, c, C, D, T, done); return; }
+    blend_one(w_t[0], w_c[0], C, D, T, done);
+    for (int i = 0; i < ORDER_WINDOW - 1; ++i) { w_t[i] = w_t[i + 1]; w_c[i] = w_c[i + 1]; }
+    w_n -= 1;
+    window_insert(z, c);
+}
+
+void window_flush(inout vec3 C, inout float D, inout float T, inout bool done) {
+    for (int i = 0; i < ORDER_WINDOW; ++i) {
+        if (i < w_n && !done) blend_one(w_t[i], w_c[i], C, D, T, done);
+    }
+    w_n = 0;
+}
+#endif
 
 void main() {
     uvec2 group = gl_WorkGroupID.xy + uvec2(0u, u_tile_row0);   // this tile's (x, y) in the grid
@@ -139,6 +202,9 @@ void main() {
 #ifdef ORDERED_OUTPUT
         uint sidx = 0u;
 #endif
+#if defined(PER_PIXEL) && !defined(SURFEL)
+        vec4 pk0 = vec4(0.0), pk1 = vec4(0.0);
+#endif
         if (k < range.y) {
 #ifdef KEY_PACKED
             uint idx = sort_keys[k].x & u_index_mask;
@@ -164,6 +230,15 @@ void main() {
             keep = conic_min_over_box(qo.xyz, md.xy, box_lo, box_hi) <= q_cut;
             mc = vec4(md.xy, -0.5 * q_cut, md.z);
             if (keep) s_color[rank] = proj_color[idx];
+#ifdef PER_PIXEL
+            if (keep) {
+                pk0 = proj_peak[3u * idx];
+                pk1 = proj_peak[3u * idx + 1u];
+                vec4 pk2 = proj_peak[3u * idx + 2u];
+                s_color[rank].w = pk2.x;
+                mc.w = pk2.y;                     // r_z (z is the peak depth in this mode)
+            }
+#endif
 #endif
         }
         s_slot[rank] = keep ? 1u : 0u;
@@ -184,14 +259,14 @@ void main() {
         memoryBarrierShared();
         barrier();
         if (s_alive_count == 0u) break;           // the same value in every invocation
-        vec3 color = s_color[rank].rgb;
+        vec4 color = s_color[rank];               // (rgb, 0; PER_PIXEL: the third peak value)
         memoryBarrierShared();
         barrier();                                // colours read before slots are overwritten
         if (keep) {
             uint slot = s_slot[rank];
             s_mean_cut[slot] = mc;
             s_conic_o[slot] = qo;
-            s_color[slot] = vec4(color, 0.0);
+            s_color[slot] = color;
 #ifdef SURFEL
             s_depth_uv[slot] = duv;
 #endif
@@ -200,6 +275,10 @@ void main() {
 #endif
 #ifdef ORDERED_OUTPUT
             s_index[slot] = sidx;
+#endif
+#if defined(PER_PIXEL) && !defined(SURFEL)
+            s_peak0[slot] = pk0;
+            s_peak1[slot] = pk1;
 #endif
         }
         memoryBarrierShared();
@@ -231,6 +310,13 @@ void main() {
 #ifdef UNDER
             if (z >= geometry) continue;          // behind the geometry: not blended
 #endif
+#ifdef PER_PIXEL
+#ifndef SURFEL
+            z = peak_depth(s_peak0[j], s_peak1[j], vec2(s_color[j].w, m.w), (centre - u_rays.xy) / u_rays.zw);
+#endif
+            window_push(z, vec4(s_color[j].rgb, alpha), C, D, T, done);
+            continue;
+#endif
             float test_t = T * (1.0 - alpha);
             if (test_t < T_MIN) { done = true; break; }
             float w = alpha * T;                  // alpha_k T_k
@@ -250,6 +336,9 @@ void main() {
             T = test_t;
         }
     }
+#ifdef PER_PIXEL
+    window_flush(C, D, T, done);                 // the window restarts with every pass
+#endif
     if (inside) {
         bool last = u_pass + 1u == u_passes;
         out_rgba[o] = last ? vec4(C + T * u_background, 1.0 - T) : vec4(C, done ? -T : T);

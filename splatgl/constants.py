@@ -39,6 +39,9 @@ MEDIAN_T = 0.5
 #: Fixed quad half-size, in standard deviations, of the fast approximation (``--extent fast``):
 #: 2 sqrt(2), the corner distance web viewers use (their corner coordinate 2 times sqrt(2) sigma).
 FAST_CORNER_SIGMAS = 2.0 * math.sqrt(2.0)
+#: The per-pixel order (``--order per-pixel``) clamps the depth of a splat's peak along a ray to
+#: this many standard deviations of its view depth about its centre (splatgl/reference/peak.py).
+PEAK_CLAMP_SIGMAS = 3.0
 #: The other published convention (gsplat), for ``Compat.GSPLAT``: per-axis opacity-aware extent
 #: of at most this many standard deviations, and its alpha clamp.
 GSPLAT_EXTENT_SIGMAS = 3.33
@@ -181,6 +184,7 @@ def glsl_defines() -> dict[str, str]:
         "SH_OFFSET": glsl_float(SH_OFFSET),
         "SURFEL_FILTER_INV_SQUARE": glsl_float(SURFEL_FILTER_INV_SQUARE),
         "FAST_CORNER_SIGMAS": glsl_float(FAST_CORNER_SIGMAS),
+        "PEAK_CLAMP_SIGMAS": glsl_float(PEAK_CLAMP_SIGMAS),
         "FISHEYE_SERIES_RHO": glsl_float(FISHEYE_SERIES_RHO),
         "EQUIRECT_POLE_EPS": glsl_float(EQUIRECT_POLE_EPS),
         "SH_C0": glsl_float(SH_C0),

@@ -54,6 +54,88 @@ def run_lod_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_popping_arguments(p: argparse.ArgumentParser) -> None:
+    """The --popping options of ``splatgl bench``."""
+    from ..bench.popping import CONFIGS
+    from ..evaluation.popping import METRICS
+
+    p.add_argument("--popping", action="store_true",
+                   help="the popping benchmark instead: an orbit and a fly-through in small steps "
+                        "of each scene (default: the shared real scenes), every pair of frames "
+                        "warped and scored for popping, the global order against the per-pixel "
+                        "order on the quad path, tile renderer and reference (default 640x360, 16 "
+                        "frames a path; see splatgl/bench/popping.py and docs/fidelity.md)")
+    p.add_argument("--popping-configs", default=None, metavar="LIST",
+                   help="--popping configurations, comma-separated: " + ", ".join(CONFIGS)
+                        + " (default all)")
+    p.add_argument("--popping-metric", choices=METRICS, default=None,
+                   help="--popping error metric: flip (NVIDIA FLIP, the 'fidelity' extra; the "
+                        "default where installed) or own (the fallback: a neighbourhood-min colour "
+                        "difference, splatgl/evaluation/popping.py)")
+    p.add_argument("--popping-window", type=int, default=None, metavar="N",
+                   help="--popping: the tile renderer's per-pixel window (default: --order-window's)")
+
+
+def run_popping_command(args: argparse.Namespace) -> int:
+    """``splatgl bench --popping``."""
+    import json
+    from dataclasses import asdict
+    from pathlib import Path
+
+    from ..api import Renderer
+    from ..bench.machine import describe, machine_info
+    from ..bench.popping import CONFIGS, SCENES, PoppingOptions, measure_scene, table
+    from ..bench.real_scenes import shared_scenes_dir, shared_scenes_help
+    from ..evaluation.popping import default_metric
+    from ..formats import load_scene
+    from ..gl.context import renderer_name
+    from ..model.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW
+    from ..output.atomic import atomic_write_text
+
+    configs = tuple(c.strip() for c in (args.popping_configs or ",".join(CONFIGS)).split(",") if c.strip())
+    unknown = [c for c in configs if c not in CONFIGS]
+    if unknown or not configs:
+        raise SplatglError(f"--popping-configs: unknown {', '.join(unknown) or repr(args.popping_configs)}; "
+                           f"valid: {', '.join(CONFIGS)}")
+    window = args.popping_window or DEFAULT_ORDER_WINDOW
+    if not 1 <= window <= MAX_ORDER_WINDOW:
+        raise SplatglError(f"--popping-window must be 1..{MAX_ORDER_WINDOW}, got {window}")
+    options = PoppingOptions(args.width or 640, args.height or 360, args.frames or 16, window, configs,
+                             args.popping_metric or default_metric())
+    if options.metric == "flip":
+        from ..evaluation.popping import flip_available
+        if not flip_available():
+            raise SplatglError("--popping-metric flip needs flip-evaluator (pip install "
+                               "'splatgl[fidelity]'); without it the metric is 'own'")
+    if args.scenes:
+        scenes = [(Path(p), None) for p in args.scenes]
+    else:
+        shared = shared_scenes_dir()
+        scenes = [(shared / rel, up) for rel, up in SCENES if (shared / rel).is_file()]
+        if not scenes:
+            raise SplatglError(f"--popping: no scenes given and none found in {shared_scenes_help()}")
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        raise SplatglError(f"--out {args.out}: is a file; --out names a folder for popping.json")
+    rows = []
+    with Renderer() as renderer:
+        machine = machine_info(renderer_name(renderer.ctx))
+        print(describe(machine), flush=True)
+        print(f"popping: {options.width}x{options.height}, {options.frames} frames a path, metric "
+              f"{options.metric}, per-pixel window {window} (tile)", flush=True)
+        for path, up in scenes:
+            scene = load_scene(path)
+            rows += measure_scene(renderer, path.name, scene, path, up, options,
+                                  log=lambda m: print(m, flush=True))
+    print(table(rows))
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        target = args.out / "popping.json"
+        atomic_write_text(target, json.dumps({"machine": machine, "options": asdict(options),
+                                              "rows": rows}, indent=1))
+        print(f"wrote {target}")
+    return 0
+
+
 def run_scale_command(args: argparse.Namespace) -> int:
     """``splatgl bench --scale``."""
     from ..bench.machine import describe, probe_machine

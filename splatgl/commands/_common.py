@@ -20,6 +20,8 @@ from ..constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
 from ..model.settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
                               RendererKind, RenderSettings, SortKey)
 from ..model.settings import check_convention as library_check_convention
+from ..model.settings import check_fidelity
+from ._fidelity_args import add_fidelity_arguments, fidelity_fields
 from ..renderers.stereo import StereoLayout
 from ..model.transform import parse_transform
 from ._spz_axes import add_spz_axes_argument
@@ -181,6 +183,7 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                         '\'{"rotate_deg": [0, 90, 0], "translate": [0, 0, 1], "scale": 2}\' '
                         "(rotations about x, then y, then z; or \"rotation\": 3x3). SH is "
                         "evaluated in the scene's own frame")
+    add_fidelity_arguments(g)
 
 
 def load_scene_arg(args: argparse.Namespace) -> Scene:
@@ -213,13 +216,16 @@ def settings_from_args(args: argparse.Namespace) -> RenderSettings:
                           near=args.near, antialias=antialias_from_args(args),
                           sh_degree=args.sh_degree,
                           model=model, sort_key=args.sort, gpu_storage=args.gpu_storage,
-                          convention=args.convention, **optional)
+                          convention=args.convention, **optional, **fidelity_fields(args))
 
 
 def check_convention(args: argparse.Namespace, *kinds: RendererKind | str) -> None:
-    """``--convention gsplat`` needs the NumPy reference among ``kinds``
-    (:func:`splatgl.model.settings.check_convention`), checked before any work."""
+    """``--convention gsplat`` and ``--emulate`` need the NumPy reference among ``kinds``,
+    ``--order per-pixel`` the reference or the tile renderer
+    (:func:`splatgl.model.settings.check_convention`, :func:`~splatgl.model.settings.check_fidelity`),
+    checked before any work."""
     library_check_convention(args.convention, *kinds)
+    check_fidelity(RenderSettings(**fidelity_fields(args)), *kinds)
 
 
 def size_origin(args: argparse.Namespace) -> str:

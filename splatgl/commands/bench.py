@@ -25,8 +25,9 @@ from ..output.files import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
 from ..api import Renderer
 from ..model.settings import RenderSettings
-from ._bench_modes import (add_interactive_arguments, add_lod_arguments, run_interactive_command,
-                           run_lod_command, run_scale_command)
+from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_popping_arguments,
+                           run_interactive_command, run_lod_command, run_popping_command,
+                           run_scale_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
@@ -113,6 +114,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                               "machine, i.e. Ray across machines)",
                            "one task per scene")
     add_lod_arguments(p)
+    add_popping_arguments(p)
     add_interactive_arguments(p)
 
 
@@ -182,6 +184,11 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
+    if args.popping:
+        if args.scale or args.lod or executor.sharded or args.json is not None:
+            raise SplatglError("--popping runs alone in one process (not with --scale, --lod, "
+                               "--workers, --executor ray or --json; --out DIR writes popping.json)")
+        return run_popping_command(args)
     if (args.scale or args.lod) and executor.sharded:
         mode = "--scale" if args.scale else "--lod"
         raise SplatglError(f"{mode} measures in one process (memory, load and frame times); "

@@ -1,11 +1,15 @@
-"""``splatgl compare``: an approximate renderer against the per-tile reference, same camera."""
+"""``splatgl compare``: a renderer, or an image made by any other program, against the per-tile
+reference from the same camera; ``--explain`` says which approximation accounts for the difference."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 from ..output.pictures import heatmap, side_by_side
 from ..output.image_formats import image_format, suffix_list
@@ -13,27 +17,43 @@ from ..output.images import write_image
 from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..errors import SplatglError
+from ..evaluation.explain import candidates, explain
 from ..evaluation.metrics import check_ssim_size, depth_errors, image_errors
+from ..evaluation.their_image import ALPHA_CONVENTIONS, match_to_reference, read_their_image
 from ..api import Renderer
-from ..model.settings import Convention, RendererKind
+from ..model.emulation import Emulation
+from ..model.settings import Convention, Order, RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, inputs_from_args, positive_float, size_origin)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "compare"
 ORDER = 30
-HELP = "compare the quad path (or tile renderer) with the per-tile reference"
-DESCRIPTION = """Render one view with two renderers and print how far apart they are.
+HELP = "compare the quad path, the tile renderer or any image with the per-tile reference"
+DESCRIPTION = """Render one view with two renderers, or read an image another program made from
+the same camera, and print how far apart they are.
 
 By default the quad path (global depth sort, instanced quads) is compared with the NumPy
 per-tile reference rasterizer (3DGS rules).  Metrics are on RGB with the background
 composited: PSNR (peak 1), SSIM, mean and max absolute error, and the share of pixels whose
 largest channel error exceeds 1/255 and 4/255.
 
+--image THEIRS scores a PNG, EXR, WebP, JPEG or TIFF (8/16-bit or float) against the reference
+instead.  Its size must be the camera's (an image a few pixels off, transposed or upside down is
+refused with a message that says so; --flip-y/--mirror-x turn it), an alpha channel is read as
+premultiplied, straight or already composited (--alpha; auto takes the closest and says so),
+and without one the image must show --background where the reference is empty.
+
+--explain re-renders the reference with each approximation real viewers make (--emulate's
+knobs, the per-pixel order, gsplat's rules) and reports which, alone and combined, bring it
+closest to the image, with the dB each accounts for (docs/fidelity.md).
+
 examples:
   splatgl compare scene.ply
   splatgl compare scene.ply --camera cameras.json --camera-index 2 --json
-  splatgl compare scene.ply --json figures.json
+  splatgl compare scene.ply --camera cam.json --image theirs.png --explain
+  splatgl compare scene.ply --extent fast --explain        (the quad path's fast extent)
+  splatgl compare scene.ply --emulate sort=bucket16 --sort bucket16
   splatgl compare scene.ply --side-by-side both.png --heatmap err.png --heatmap-scale 0.01"""
 
 
@@ -43,6 +63,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the renderer under test (default quad)")
     p.add_argument("--against", choices=[k.value for k in RendererKind], default="reference",
                    help="the renderer taken as truth (default reference)")
+    g = p.add_argument_group("another program's image")
+    g.add_argument("--image", type=Path, default=None, metavar="FILE",
+                   help="score this image (made from the same camera) instead of --renderer")
+    g.add_argument("--alpha", choices=ALPHA_CONVENTIONS, default="auto",
+                   help="how --image's alpha channel is read: straight (colour not multiplied "
+                        "by alpha), premultiplied, composited (the background already in the "
+                        "colour), or auto: the closest to the reference, reported (default)")
+    g.add_argument("--flip-y", action="store_true", help="score --image turned upside down")
+    g.add_argument("--mirror-x", action="store_true", help="score --image mirrored left to right")
+    p.add_argument("--explain", action="store_true",
+                   help="report which of the approximations real viewers make (the --emulate "
+                        "knobs, the per-pixel order, gsplat's rules), alone and combined, bring "
+                        "the reference closest to the image under test, with the dB each accounts "
+                        "for (one reference render per knob; needs --against reference)")
     add_json_argument(p, "the figures (one object)")
     p.add_argument("--side-by-side", type=Path, default=None, metavar="FILE",
                    help=f"write both renders next to each other ({suffix_list()})")
@@ -54,62 +88,132 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_settings_arguments(p)
 
 
-def run(args: argparse.Namespace) -> int:
-    kinds = (RendererKind(args.renderer), RendererKind(args.against))
+def _check_options(args: argparse.Namespace) -> tuple[RendererKind, ...]:
+    """Everything checkable before loading or rendering; returns the kinds that render."""
+    against = RendererKind(args.against)
+    kinds = (against,) if args.image is not None else (RendererKind(args.renderer), against)
     check_convention(args, *kinds)
+    if args.order == Order.PER_PIXEL.value and RendererKind.QUAD in kinds:
+        raise SplatglError("--order per-pixel: the quad path has none (docs/fidelity.md); compare "
+                           "--renderer tile or reference with the reference")
+    if args.explain and against is not RendererKind.REFERENCE:
+        raise SplatglError("--explain re-renders the NumPy reference: it needs --against reference")
+    if args.image is None and (args.flip_y or args.mirror_x or args.alpha != "auto"):
+        raise SplatglError("--flip-y, --mirror-x and --alpha apply to --image")
     files = OutputFiles({"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
     for option, path in files.targets.items():
         image_format(path, option)  # before rendering (x.bmp, or no suffix at all)
     check_json_target(args, {"SCENE": args.scene, "--side-by-side": args.side_by_side,
-                             "--heatmap": args.heatmap})
+                             "--heatmap": args.heatmap, "--image": args.image})
     if args.stereo is not None:
         raise SplatglError("--stereo renders with splatgl render or view; compare measures one view")
+    return kinds
+
+
+def _side(settings, kind: RendererKind):
+    """The settings a side renders with: the GPU renderers draw the inria rules without
+    emulation (the knobs are the reference's)."""
+    if kind is RendererKind.REFERENCE:
+        return settings
+    return dataclasses.replace(settings, convention=Convention.INRIA, emulation=Emulation())
+
+
+def run(args: argparse.Namespace) -> int:
+    kinds = _check_options(args)
+    files = OutputFiles({"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
     scene, settings, camera = inputs_from_args(args)
     check_ssim_size(camera.width, camera.height, size_origin(args))
+    theirs = read_their_image(args.image, camera.width, camera.height) if args.image else None
     progress = default_progress()
     outputs, seconds = [], []
     with Renderer() as renderer:
         for kind in kinds:
             check_size(args, camera, kind, renderer.ctx)
         for kind in kinds:
-            side = settings
-            if kind is not RendererKind.REFERENCE:   # the GPU renderers draw the inria rules only
-                side = dataclasses.replace(settings, convention=Convention.INRIA)
+            side = _side(settings, kind)
+            if kind is not RendererKind.REFERENCE:
                 renderer.render(scene, camera, side, kind, progress)  # warm-up: compile, upload
             t0 = time.perf_counter()
             outputs.append(renderer.render_layers(scene, camera, side, kind, progress))
             seconds.append(time.perf_counter() - t0)
-    images = [o.rgba for o in outputs]
-    errors = image_errors(images[0], images[1])
-    depth = depth_errors(outputs[0], outputs[1])
+    truth = outputs[-1]
     names = tuple(k.value for k in kinds)
+    notes: tuple[str, ...] = ()
+    result_extra: dict = {}
+    if theirs is not None:
+        matched = match_to_reference(theirs, truth.rgba[..., :3], truth.alpha, settings.background,
+                                     args.alpha, args.flip_y, args.mirror_x)
+        got = np.concatenate([matched.rgb, truth.alpha[..., None]], -1)  # alpha: see below
+        names = (args.image.name, names[0])
+        notes = matched.notes
+        result_extra = {"image": str(args.image), "alpha_convention": matched.convention,
+                        "flipped_y": matched.flipped, "mirrored_x": matched.mirrored}
+        if matched.alpha is not None:
+            result_extra["image_alpha_max_abs"] = float(np.abs(matched.alpha - truth.alpha).max())
+        depth = {}
+    else:
+        got = outputs[0].rgba
+        depth = depth_errors(outputs[0], truth)
+    errors = image_errors(got, truth.rgba)
+    explanation = None
+    if args.explain:
+        explanation = _explain(scene, camera, settings, got[..., :3])
     with files:
         if args.side_by_side is not None:
-            write_image(files.temp("--side-by-side"), side_by_side(images[0], images[1], names))
+            write_image(files.temp("--side-by-side"), side_by_side(got, truth.rgba, names))
         if args.heatmap is not None:
-            write_image(files.temp("--heatmap"), heatmap(images[0], images[1], args.heatmap_scale))
+            write_image(files.temp("--heatmap"), heatmap(got, truth.rgba, args.heatmap_scale))
     result = {
         "scene": str(args.scene) if args.scene else "demo", "splats": scene.count,
-        "width": camera.width, "height": camera.height, "renderer": names[0], "against": names[1],
-        **errors.as_dict(), **depth, "seconds": dict(zip(names, seconds)),
+        "width": camera.width, "height": camera.height, "renderer": names[0], "against": names[-1],
+        **result_extra, **errors.as_dict(), **depth,
+        "seconds": dict(zip(names[-len(seconds):], seconds)),
+        "emulate": settings.emulation.label(), "order": settings.order.value,
     }
+    if explanation is not None:
+        result["explain"] = explanation.as_dict()
     if json_to_stdout(args):
         emit_json(args, result)
         return 0
+    _print_report(result, errors, depth, names, seconds, notes, scene.count, camera)
+    if explanation is not None:
+        print("\n".join(explanation.lines()))
+    if args.json is not None:
+        emit_json(args, result)
+    return 0
+
+
+def _explain(scene, camera, settings, target: np.ndarray):
+    """Rank the reference's knobs against ``target`` (the image under test, (H, W, 3))."""
+    from ..reference import render_reference
+
+    progress = default_progress()
+
+    def render(s):
+        return render_reference(scene, camera, s, np.float32, compat=s.convention).color
+
+    return explain(render, target, settings, candidates(scene, camera, settings), progress)
+
+
+def _print_report(result, errors, depth, names, seconds, notes, count, camera) -> None:
     psnr = "inf" if errors.psnr == float("inf") else f"{errors.psnr:.2f} dB"
-    print(f"{result['scene']}: {scene.count} splats, {camera.width}x{camera.height}, "
-          f"{names[0]} against {names[1]}")
+    against = names[-1] if result["emulate"] == "reference" else f"{names[-1]} ({result['emulate']})"
+    print(f"{result['scene']}: {count} splats, {camera.width}x{camera.height}, "
+          f"{names[0]} against {against}")
+    for note in notes:
+        print(f"  {note}")
     print(f"  PSNR       {psnr}")
     print(f"  SSIM       {errors.ssim:.6f}")
     print(f"  mean |err| {errors.mean_abs:.3e}")
     print(f"  max |err|  {errors.max_abs:.3e}")
     print(f"  > 1/255    {errors.off_1 * 100:.3f} % of pixels")
     print(f"  > 4/255    {errors.off_4 * 100:.3f} % of pixels")
-    print(f"  alpha      max |err| {depth['alpha_max_abs']:.3e}")
-    print(f"  depth D    max |err| {depth['depth_max_abs']:.3e} = {depth['depth_max_rel'] * 100:.3f} % of "
-          f"the farthest expected depth {depth['depth_scale']:.4g}")
-    print("  time       " + ", ".join(f"{n} {s * 1e3:.1f} ms" for n, s in zip(names, seconds))
+    if "image_alpha_max_abs" in result:
+        print(f"  alpha      max |err| {result['image_alpha_max_abs']:.3e} (the image's alpha channel)")
+    if depth:
+        print(f"  alpha      max |err| {depth['alpha_max_abs']:.3e}")
+        print(f"  depth D    max |err| {depth['depth_max_abs']:.3e} = {depth['depth_max_rel'] * 100:.3f} % of "
+              f"the farthest expected depth {depth['depth_scale']:.4g}")
+    print("  time       " + ", ".join(f"{n} {s * 1e3:.1f} ms" for n, s in zip(names[-len(seconds):], seconds))
           + " (colour and depth)")
-    if args.json is not None:
-        emit_json(args, result)
-    return 0
+    sys.stdout.flush()

@@ -71,6 +71,8 @@ TILE_BINDING_OUT_NORMAL = 18
 TILE_BINDING_OUT_ORDERED_F = 19
 TILE_BINDING_OUT_ORDERED_U = 20
 TILE_BINDING_UNDER = 21
+#: The per-pixel order's peak-depth coefficients (tile_project.comp writes, tile_rasterize.comp reads).
+TILE_BINDING_PEAK = 22
 
 # --- The device radix sort (gl/radix_sort.py; shaders/radix_count.comp, radix_scan.comp,
 # radix_scatter.comp).

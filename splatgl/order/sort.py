@@ -52,8 +52,16 @@ def bucket_sort(depth: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """
     if depth.size == 0:
         return indices.astype(np.uint32)
+    return indices[np.argsort(bucket_keys(depth), kind="stable")].astype(np.uint32)
+
+
+def bucket_keys(depth: np.ndarray) -> np.ndarray:
+    """(M,) uint16 buckets of (M,) depths: ``floor((z - z_min) (65535 / (z_max - z_min)))``,
+    computed in float64 (all 0 when the depths are equal).  The quad path's ``--sort
+    bucket16`` and the reference's ``sort=bucket16`` emulation both use it."""
+    if depth.size == 0:
+        return np.zeros(0, np.uint16)
     z = depth.astype(np.float64)
     lo, hi = z.min(), z.max()
     scale = (BUCKETS_16 - 1) / (hi - lo) if hi > lo else 0.0
-    keys = np.minimum((z - lo) * scale, BUCKETS_16 - 1).astype(np.uint16)
-    return indices[np.argsort(keys, kind="stable")].astype(np.uint32)
+    return np.minimum((z - lo) * scale, BUCKETS_16 - 1).astype(np.uint16)

@@ -2,7 +2,8 @@
 radix sort and identifyTileRanges).
 
 Key layout (DESIGN.md section 2): ``key = (tile_id << 32) | float32_bits(view z)`` as uint64 with
-``tile_id = y * tiles_x + x``.  View z is positive after near culling, so its IEEE bits order like
+``tile_id = y * tiles_x + x`` (the per-pixel order: the depth of the splat's peak along the ray
+where it is nearest to the tile, :func:`splatgl.reference.peak.tile_key_bits`).  View z is positive after near culling, so its IEEE bits order like
 the depths.  Keys are emitted splat by splat in index order (within a splat, tile rows top to
 bottom, each left to right) and sorted stably, so equal keys keep splat-index order.
 """
@@ -11,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..constants import TILE_SIZE
+from .peak import tile_key_bits
 from .stages import ProjectedSplats
 
 
@@ -34,7 +37,11 @@ def emit_keys(proj: ProjectedSplats) -> tuple[np.ndarray, np.ndarray]:
     x = proj.rect_min[idx, 0] + local % np.maximum(wide, 1)
     y = proj.rect_min[idx, 1] + local // np.maximum(wide, 1)
     tile = (y * proj.grid[0] + x).astype(np.uint64)
-    keys = (tile << np.uint64(32)) | depth_bits(proj.depth)[idx]
+    if proj.peak is not None and proj.rays is not None:    # per-pixel order: depth at the tile
+        low = tile_key_bits(proj.peak[idx], proj.mean2d[idx], x, y, proj.rays, TILE_SIZE)
+    else:
+        low = (depth_bits(proj.depth) if proj.key_bits is None else proj.key_bits)[idx]  # emulated
+    keys = (tile << np.uint64(32)) | low
     return keys, idx
 
 

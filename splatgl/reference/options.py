@@ -20,7 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..constants import ALPHA_MAX, GSPLAT_ALPHA_MAX
-from ..model.settings import Convention
+from ..model.emulation import Emulation
+from ..model.settings import Convention, Order
 
 
 #: Which published rasterizer's conventions the reference follows: the settings' enum, so
@@ -34,15 +35,27 @@ class ReferenceOptions:
 
     Attributes:
         compat: the convention followed (see the module docstring).
-        alpha_max: upper clamp of each splat's alpha; ``None`` takes the convention's own
-            (0.99 for INRIA, 0.999 for GSPLAT).
+        alpha_max: upper clamp of each splat's alpha; ``None`` takes the emulation's
+            ``alpha_max`` knob if set, else the convention's own (0.99 for INRIA, 0.999 for GSPLAT).
+        emulation: the approximations of other viewers followed (:mod:`splatgl.model.emulation`;
+            applied by :mod:`splatgl.reference.emulation`).
+        order: global (3DGS) or per pixel (:mod:`splatgl.reference.per_pixel`).
+        window: with the per-pixel order, None sorts each pixel's list exactly; an integer is
+            the tile renderer's bounded re-sort (its twin: each pixel holds back that many
+            splats, :func:`splatgl.reference.per_pixel.window_order`).
     """
 
     compat: Compat = Compat.INRIA
     alpha_max: float | None = None
+    emulation: Emulation = Emulation()
+    order: Order = Order.GLOBAL
+    window: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "compat", Compat(self.compat))
+        object.__setattr__(self, "order", Order(self.order))
+        if self.window is not None and int(self.window) < 1:
+            raise ValueError(f"window must be at least 1, got {self.window}")
         if self.alpha_max is not None and not 0.0 < float(self.alpha_max) <= 1.0:
             raise ValueError(f"alpha_max must be in (0, 1], got {self.alpha_max}")
 
@@ -51,7 +64,14 @@ class ReferenceOptions:
         """The alpha clamp in effect."""
         if self.alpha_max is not None:
             return float(self.alpha_max)
+        if self.emulation.alpha_max is not None:
+            return float(self.emulation.alpha_max)
         return GSPLAT_ALPHA_MAX if self.compat is Compat.GSPLAT else ALPHA_MAX
+
+    @property
+    def alpha_min(self) -> float:
+        """Fragments with a smaller alpha are skipped (1/255 unless emulated)."""
+        return float(self.emulation.min_alpha)
 
     @property
     def stop_inclusive(self) -> bool:

@@ -30,6 +30,7 @@ import numpy as np
 from ..twins import surfel as sf
 from ..constants import ALPHA_MIN, T_MIN, TILE_SIZE
 from .layers import BatchLayers, RasterLayers
+from . import emulation
 from .options import Compat, ReferenceOptions
 from .stages import ProjectedSplats
 
@@ -71,12 +72,14 @@ def gaussian_power(conic: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndar
     return half * (a * dx * dx + c * dy * dy) - b * dx * dy
 
 
-def gaussian_alpha(power: np.ndarray, opacity: np.ndarray, alpha_max: float) -> np.ndarray:
-    """``min(alpha_max, o exp(power))``, 0 where ``power > 0`` or the result is below 1/255."""
+def gaussian_alpha(power: np.ndarray, opacity: np.ndarray, alpha_max: float,
+                   alpha_min: float = ALPHA_MIN) -> np.ndarray:
+    """``min(alpha_max, o exp(power))``, 0 where ``power > 0`` or the result is below
+    ``alpha_min`` (1/255; the ``min_alpha`` emulation knob changes it)."""
     dt = np.result_type(power, opacity).type
     with np.errstate(over="ignore"):
         alpha = np.minimum(dt(alpha_max), opacity * np.exp(power))
-    return np.where((power <= 0) & (alpha >= dt(ALPHA_MIN)), alpha, dt(0.0))
+    return np.where((power <= 0) & (alpha >= dt(alpha_min)), alpha, dt(0.0))
 
 
 class _Tiles:
@@ -96,9 +99,13 @@ class _Tiles:
         if proj.is_surfel:
             self.rows = proj.surfel_rows[sidx]       # (n, K, 3, 3)
             self.depth_rows = proj.depth_rows[sidx]  # (n, K, 3)
+        # Emulation (reference/emulation.py): an extent knob's per-pixel clip.
+        self.clip_q = None if proj.clip_q is None else proj.clip_q[sidx]           # (n, K)
+        self.clip_rows = None if proj.clip_rows is None else proj.clip_rows[sidx]  # (n, K, 2, 2)
 
 
-def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) -> np.ndarray:
+def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float,
+                 alpha_min: float = ALPHA_MIN) -> np.ndarray:
     """(n, K, 256) alpha of K splats on the 256 pixels of n tiles (0 where skipped).
 
     ``px``, ``py``: (n, 16) pixel-centre coordinates of each tile's columns and rows.  The
@@ -113,7 +120,11 @@ def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) ->
     bx = g.conic[:, :, 1, None] * dx
     power = dt(-0.5) * (axx[:, :, None, :] + cyy[:, :, :, None]) - bx[:, :, None, :] * dy[:, :, :, None]
     n, k = dx.shape[:2]
-    alpha = gaussian_alpha(power.reshape(n, k, TILE_PIXELS), g.opacity[:, :, None], alpha_max)
+    if g.clip_q is not None or g.clip_rows is not None:   # an extent emulation knob
+        keep = emulation.clip_mask(power, dx, dy, g.clip_q, g.clip_rows)
+        power = np.where(keep, power, dt(-np.inf))
+    alpha = gaussian_alpha(power.reshape(n, k, TILE_PIXELS), g.opacity[:, :, None], alpha_max,
+                           alpha_min)
     if g.wrap_period is not None:   # equirect: |dx| <= period / 2 (splatgl/cameras/equirect.py)
         reach = np.abs(dx) <= dt(0.5 * g.wrap_period)                  # (n, K, 16) by column
         alpha = np.where(np.broadcast_to(reach[:, :, None, :], power.shape).reshape(n, k, TILE_PIXELS),
@@ -122,7 +133,8 @@ def _chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float) ->
 
 
 def _surfel_chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: float,
-                        convention: Compat = Compat.INRIA) -> tuple[np.ndarray, np.ndarray]:
+                        convention: Compat = Compat.INRIA, alpha_min: float = ALPHA_MIN
+                        ) -> tuple[np.ndarray, np.ndarray]:
     """2DGS: (n, K, 256) alpha (0 where skipped) and (n, K, 256) view z of the hit.
 
     :func:`splatgl.twins.surfel.surfel_alpha` on the tile's pixel centres, as (n, K, 16 rows,
@@ -136,6 +148,8 @@ def _surfel_chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: fl
     n, k = g.opacity.shape
     alpha = np.broadcast_to(alpha, (n, k, TILE_SIZE, TILE_SIZE)).reshape(n, k, TILE_PIXELS)
     z = np.broadcast_to(z, (n, k, TILE_SIZE, TILE_SIZE)).reshape(n, k, TILE_PIXELS)
+    if alpha_min > ALPHA_MIN:                     # the min_alpha emulation knob
+        alpha = np.where(alpha >= dt(alpha_min), alpha, dt(0.0))
     return np.where(g.valid[:, :, None], alpha, dt(0.0)), z
 
 
@@ -187,9 +201,10 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
         pos = start[rows, None] + offset + ks
         g = _Tiles(proj, values, pos, pos < end[rows, None])
         if proj.is_surfel:
-            alpha, z_pix = _surfel_chunk_alpha(g, px[rows], py[rows], amax, options.compat)
+            alpha, z_pix = _surfel_chunk_alpha(g, px[rows], py[rows], amax, options.compat,
+                                               options.alpha_min)
         else:
-            alpha = _chunk_alpha(g, px[rows], py[rows], amax)
+            alpha = _chunk_alpha(g, px[rows], py[rows], amax, options.alpha_min)
         alpha = np.where(done[:, None, :], dt(0.0), alpha)
         if extra is not None:                               # geometry in front: not blended
             z_splat = z_pix if proj.is_surfel else g.depth[:, :, None]
@@ -234,7 +249,7 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
               background=(0.0, 0.0, 0.0), options: ReferenceOptions | None = None,
               chunk: int = DEFAULT_CHUNK, tiles_per_batch: int = DEFAULT_TILES_PER_BATCH,
               workers: int | None = None, progress=None,
-              layers: RasterLayers | None = None) -> Raster:
+              layers: RasterLayers | None = None, batch=None) -> Raster:
     """Blend every tile's sorted splat list into the image (the reference's last stage).
 
     Args:
@@ -250,6 +265,8 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
             between batches: batches not yet started are cancelled.
         layers: the further layers to compute and the geometry to test against
             (:mod:`splatgl.reference.layers`), or None.
+        batch: what blends one batch of tiles (default the global order's; the per-pixel
+            order passes its own, :mod:`splatgl.reference.per_pixel`).
     """
     options = ReferenceOptions() if options is None else options
     if chunk < 1 or tiles_per_batch < 1:
@@ -268,10 +285,13 @@ def rasterize(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarr
     values = np.asarray(sorted_values, np.int64)
     under = layers.tiled_under(proj.grid) if layers is not None else None
 
+
     def run(tiles: np.ndarray):
         extra = (layers.batch(len(tiles), proj.dtype, under[tiles] if under is not None else None)
                  if layers is not None else None)
-        return tiles, _raster_batch(proj, values, ranges, tiles, options, chunk, extra), extra
+        if batch is None:
+            return tiles, _raster_batch(proj, values, ranges, tiles, options, chunk, extra), extra
+        return tiles, batch(proj, values, ranges, tiles, options, chunk), extra
 
     results, done = [], 0
 
@@ -338,9 +358,10 @@ def transmittance_trace(proj: ProjectedSplats, sorted_values: np.ndarray, ranges
     g = _Tiles(proj, np.asarray(sorted_values, np.int64), pos, pos < end)
     with np.errstate(under="ignore"):
         if proj.is_surfel:
-            alpha, _ = _surfel_chunk_alpha(g, px, py, options.resolved_alpha_max, options.compat)
+            alpha, _ = _surfel_chunk_alpha(g, px, py, options.resolved_alpha_max, options.compat,
+                                           options.alpha_min)
         else:
-            alpha = _chunk_alpha(g, px, py, options.resolved_alpha_max)
+            alpha = _chunk_alpha(g, px, py, options.resolved_alpha_max, options.alpha_min)
         _, kept, t_seq = _blend_chunk(t, alpha, options.stop_inclusive)
     final = np.take_along_axis(t_seq, kept[:, None, :], axis=1)
     ks = np.arange(length + 1)[None, :, None]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -9,8 +10,9 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..cameras.equirect import eye_space
 from ..cameras.view import View
+from ..errors import SplatglError
 from ..model.scene import Scene, SplatKind
-from ..model.settings import RenderSettings
+from ..model.settings import Order, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer, composite_depth, composite_under
 from ..twins import project as pm
@@ -18,6 +20,7 @@ from ..twins.normals import splat_normals
 from .binning import emit_keys, sort, tile_ranges
 from .layers import RasterLayers
 from .options import Compat, ReferenceOptions, as_options
+from .per_pixel import rasterize_per_pixel
 from .rasterize import rasterize
 from .stages import ProjectedSplats, project
 
@@ -103,8 +106,8 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
         camera: any camera model the reference draws; the image is camera.height x
             camera.width.  The frame's :class:`~splatgl.cameras.view.View` is built from it,
             the settings and the scene (model transform, near plane, anchor).
-        settings: background, near plane, antialiasing, SH cap, model transform (default
-            RenderSettings()).
+        settings: background, near plane, antialiasing, SH cap, model transform, emulation
+            knobs and order (default RenderSettings()).
         dtype: float32 (GPU-like) or float64.
         compat: a :class:`Compat` (INRIA default, GSPLAT) or a full :class:`ReferenceOptions`.
         progress: optional :data:`splatgl.progress.ProgressCallback`, told the tiles rasterized.
@@ -114,7 +117,7 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
             its depth are dropped, and the rest composited over its colour.
     """
     settings = RenderSettings() if settings is None else settings
-    options = as_options(compat)
+    options = with_settings(as_options(compat), settings)
     view = View.of(camera, settings, scene)
     proj = project(scene, view, settings, dtype, options)
     keys, values = emit_keys(proj)
@@ -127,7 +130,16 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
             median=Layer.MEDIAN_DEPTH in layers, top=Layer.TOP_ID in layers, source=proj.source,
             under_depth=None if under is None else under.depth.astype(proj.dtype))
     background = settings.background if under is None else (0.0, 0.0, 0.0)
-    raster = rasterize(proj, values, ranges, background, options, progress=progress, layers=extra)
+    if options.order is Order.PER_PIXEL:
+        if extra is not None:
+            raise SplatglError("--order per-pixel draws colour, alpha and depth only: it cannot "
+                               "be combined with --under or the normal, median-depth, count and "
+                               "top-id layers yet")
+        raster = rasterize_per_pixel(proj, values, ranges, camera, background, options,
+                                     progress=progress)
+    else:
+        raster = rasterize(proj, values, ranges, background, options, progress=progress,
+                           layers=extra)
     color, alpha, depth = raster.color, raster.alpha, raster.depth
     if under is not None:
         rgba = composite_under(color, alpha, under, settings.background)
@@ -137,6 +149,17 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
                           transmittance=raster.transmittance, n_contrib=raster.n_contrib,
                           projected=proj, sorted_values=values, ranges=ranges, options=options,
                           n_blended=raster.n_blended, layers=raster.layers or None)
+
+
+def with_settings(options: ReferenceOptions, settings: RenderSettings) -> ReferenceOptions:
+    """``options`` with the reference's parts of ``settings`` (:class:`RenderSettings`): its
+    emulation knobs (unless ``options`` brings its own) and its order."""
+    changes = {}
+    if not settings.emulation.is_default and options.emulation.is_default:
+        changes["emulation"] = settings.emulation
+    if settings.order is Order.PER_PIXEL:
+        changes["order"] = Order.PER_PIXEL
+    return dataclasses.replace(options, **changes) if changes else options
 
 
 def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings | None = None,

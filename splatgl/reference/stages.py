@@ -28,6 +28,9 @@ from ..constants import ALPHA_MIN, TILE_SIZE
 from ..model.scene import Scene, SplatKind
 from ..model.settings import RenderSettings
 from ..constants import GSPLAT_EXTENT_SIGMAS
+from ..model.settings import Order
+from . import emulation as em_rules
+from . import peak as pp
 from .options import Compat, ReferenceOptions
 
 
@@ -59,6 +62,13 @@ class ProjectedSplats:
             (:func:`splatgl.cameras.equirect.wrap_copies`).
         source: (rows,) int64 scene row of each row (the seam copies name their originals),
             or None where the rows are the scene's own.
+        key_bits: (N,) uint64 low 32 bits of the sort keys when an emulation knob changes them
+            (:func:`splatgl.reference.emulation.key_bits`); None: the float32 bits of ``depth``.
+        clip_q, clip_rows: an ``extent`` knob's per-pixel clip
+            (:class:`splatgl.reference.emulation.Support`), or None.
+        peak: (N, 9) float coefficients of the depth at which each splat peaks along a pixel's
+            ray, for the per-pixel order (:func:`splatgl.reference.peak.peak_coefficients`),
+            or None; rays: the camera's pixel rays with it (:class:`splatgl.reference.peak.Rays`).
     """
 
     visible: np.ndarray
@@ -77,6 +87,11 @@ class ProjectedSplats:
     depth_rows: np.ndarray | None = None
     wrap_period: float | None = None
     source: np.ndarray | None = None
+    key_bits: np.ndarray | None = None
+    clip_q: np.ndarray | None = None
+    clip_rows: np.ndarray | None = None
+    peak: np.ndarray | None = None
+    rays: "pp.Rays | None" = None
 
     @property
     def is_surfel(self) -> bool:
@@ -217,11 +232,14 @@ def project(scene: Scene, view: View, settings: RenderSettings | None = None,
         return project_surfels(scene, view, settings, dt, options)
     near = view.near_in(dt)
     grid = tile_grid(camera.width, camera.height)
-    means, view = pm.anchored(scene.means, view.anchor, camera, dt)  # relative: float32-safe
+    em = options.emulation
+    settings = em_rules.projection_settings(settings, em)
+    world_means, scales = em_rules.scene_arrays(scene.means, scene.scales, em)
+    means, view = pm.anchored(world_means, view.anchor, camera, dt)  # relative: float32-safe
     with np.errstate(all="ignore"):
         pr = pm.project(means, scene.rotations.astype(dt),
-                        scene.scales.astype(dt), scene.opacities.astype(dt), scene.sh.astype(dt),
-                        view, settings.antialias, settings.sh_degree)
+                        scales.astype(dt), scene.opacities.astype(dt), scene.sh.astype(dt),
+                        view, settings.antialias, settings.sh_degree, em.low_pass)
     finite = (np.isfinite(pr.mean2d).all(1) & np.isfinite(pr.conic).all(1)
               & np.isfinite(pr.cov2d).all((1, 2)) & np.isfinite(pr.color).all(1)
               & np.isfinite(pr.opacity))
@@ -236,7 +254,12 @@ def project(scene: Scene, view: View, settings: RenderSettings | None = None,
     mean2d = np.where(ok[:, None], pr.mean2d, dt.type(0.0)).astype(dt)
     cov2d = np.where(ok[:, None, None], pr.cov2d, dt.type(1.0)).astype(dt)
 
-    if options.compat is Compat.INRIA:
+    clip = None
+    if em.extent != "tiles":
+        clip = em_rules.support(em.extent, cov2d, pr.opacity.astype(dt), options.alpha_min)
+        radius = np.where(ok[:, None], np.ceil(clip.half), 0)
+        rect_min, rect_max = box_rect(mean2d, clip.half.astype(dt), grid)
+    elif options.compat is Compat.INRIA:
         r = np.where(ok, pm.reference_radius(cov2d), 0)
         radius = np.stack([r, r], -1)
         rect_min, rect_max = inria_rect(mean2d, r, grid)
@@ -247,11 +270,18 @@ def project(scene: Scene, view: View, settings: RenderSettings | None = None,
         rect_min, rect_max = gsplat_rect(mean2d, radius, grid)
     ok, rect_min, rect_max, radius, clean = _mask_culled(ok, rect_min, rect_max, radius, dt)
 
+    bits = em_rules.key_bits(em, pr.depth, pr.p_cam, ok)
     return ProjectedSplats(
         visible=ok, depth=clean(pr.depth), mean2d=clean(mean2d), conic=clean(pr.conic),
         opacity=clean(pr.opacity), color=clean(pr.color), radius=radius.astype(np.int64),
         rect_min=rect_min, rect_max=rect_max, width=camera.width, height=camera.height,
-        grid=grid, wrap_period=camera.model.seam_period(camera), source=source)
+        grid=grid, wrap_period=camera.model.seam_period(camera), source=source,
+        key_bits=None if bits is None else np.where(ok, bits, np.uint64(0)),
+        clip_q=None if clip is None or clip.clip_q is None else clean(clip.clip_q),
+        clip_rows=None if clip is None or clip.clip_rows is None else clean(clip.clip_rows),
+        peak=(pp.peak_coefficients(pr.p_cam, scene.rotations, scales, view, ok, dt)
+              if options.order is Order.PER_PIXEL else None),
+        rays=pp.Rays.of(camera) if options.order is Order.PER_PIXEL else None)
 
 
 def gsplat_fisheye(camera: Camera, options: ReferenceOptions) -> bool:
@@ -329,10 +359,13 @@ def project_surfels(scene: Scene, view: View, settings: RenderSettings,
     camera = view.camera
     near = view.near_in(dt)
     grid = tile_grid(camera.width, camera.height)
-    means, view = pm.anchored(scene.means, view.anchor, camera, dt)  # relative: float32-safe
+    em = options.emulation          # extent, low_pass, compensation do not apply to surfels
+    settings = em_rules.projection_settings(settings, em)
+    world_means, scales = em_rules.scene_arrays(scene.means, scene.scales, em)
+    means, view = pm.anchored(world_means, view.anchor, camera, dt)  # relative: float32-safe
     opac = scene.opacities.astype(dt)
     with np.errstate(all="ignore"):
-        scr = sf.surfel_screen(means, scene.rotations.astype(dt), scene.scales.astype(dt), view)
+        scr = sf.surfel_screen(means, scene.rotations.astype(dt), scales.astype(dt), view)
         color = pm.sh_color(scene.sh.astype(dt), pm.view_dirs(means, view), settings.sh_degree)
     ok = ((scr.view_z > dt.type(near)) & np.isfinite(color).all(1)
           & np.isfinite(scr.depth_row).all(1))
@@ -355,7 +388,9 @@ def project_surfels(scene: Scene, view: View, settings: RenderSettings,
         center, rows = scr.center, scr.rows
     ok, rect_min, rect_max, radius, clean = _mask_culled(ok, rect_min, rect_max, radius, dt)
 
+    bits = em_rules.key_bits(em, scr.view_z, pm.to_camera(means, view), ok)
     return ProjectedSplats(
+        key_bits=None if bits is None else np.where(ok, bits, np.uint64(0)),
         visible=ok, depth=clean(scr.view_z), mean2d=clean(center),
         conic=np.zeros((scene.count, 3), dt), opacity=clean(opac), color=clean(color),
         radius=radius, rect_min=rect_min, rect_max=rect_max, width=camera.width,

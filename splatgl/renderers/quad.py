@@ -35,7 +35,8 @@ from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..gl.targets import ColorTarget
 from ..model.scene import Scene
-from ..model.settings import EarlyStop, RenderSettings, RendererKind, SortKey, check_convention
+from ..model.settings import (EarlyStop, RenderSettings, RendererKind, SortKey, check_convention,
+                              check_fidelity)
 from ..order.stage import RowSource, SceneOrder, cpu_sort
 from ..output.layers import BASE, ORDERED, Layer, RenderOutput
 from ..output.under import UnderLayer
@@ -90,6 +91,7 @@ class QuadRenderer:
     def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
                  programs: ProgramCache | None = None, rows: RowSource | None = None):
         check_convention(settings.convention, RendererKind.QUAD)  # it draws the inria rules only
+        check_fidelity(settings, RendererKind.QUAD)   # no emulation knobs, no per-pixel order
         self.ctx = ctx
         self.scene = scene
         self.settings = settings

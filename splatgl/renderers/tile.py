@@ -17,6 +17,11 @@ Stages (DESIGN.md section 2; each GPU stage has one shader and a same-named NumP
    binary search per tile, microseconds), uploaded.
 6. ``rasterize`` (shaders/tile_rasterize.comp): one 16 x 16 work group per tile, front to back.
 
+With ``RenderSettings.order`` PER_PIXEL (``--order per-pixel``), ``project`` also writes each
+splat's peak-depth coefficients (shaders/lib/peak_depth.glsl) and ``rasterize`` re-sorts each
+pixel's contributions within a window of ``order_window`` splats (the twin:
+:func:`splatgl.reference.per_pixel.window_order`).
+
 2DGS surfel scenes run the same stages with the ``SURFEL`` define: ``project`` builds the centred
 ``T = P H`` rows and the surfel's screen box (lib/surfel.glsl) and bins it with the reference's
 ``box_rect``; ``rasterize`` intersects each pixel's ray with the surfel plane (the reference's
@@ -40,7 +45,8 @@ from ..gl.buffers import GrowableBuffer
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..model.scene import Scene, SplatKind
-from ..model.settings import RenderSettings, RendererKind, check_convention
+from ..model.settings import Order, RenderSettings, RendererKind, check_convention, check_fidelity
+from ..reference.peak import check_camera
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from .tile_layers import layer_output, layer_switches, size_layer_buffers
@@ -60,6 +66,8 @@ class TileRenderer:
     def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
                  programs: ProgramCache | None = None):
         check_convention(settings.convention, RendererKind.TILE)  # it draws the inria rules only
+        check_fidelity(settings, RendererKind.TILE)               # no emulation knobs
+        self.per_pixel = settings.order is Order.PER_PIXEL
         self.ctx = ctx
         self.scene = scene
         self.settings = settings
@@ -75,6 +83,8 @@ class TileRenderer:
             self._bufs[name].ensure(n * stride)
         if self.surfel:
             self._bufs["SURFEL"].ensure(n * 16)
+        if self.per_pixel and not self.surfel:
+            self._bufs["PEAK"].ensure(n * 48)
         self.last_times: TileTimes | None = None
         self.progress = None
         self._switches: dict[str, object] = {}   # the frame's layer switches (tile_layers.py)
@@ -87,6 +97,9 @@ class TileRenderer:
             d["KEY_PACKED"] = 1
         if self.surfel:
             d["SURFEL"] = 1
+        if self.per_pixel:              # per-pixel order, a window of order_window splats
+            d["PER_PIXEL"] = 1
+            d["ORDER_WINDOW"] = self.settings.order_window
         return d
 
     def _project_program(self, view: View) -> moderngl.ComputeShader:
@@ -132,15 +145,19 @@ class TileRenderer:
             self._bufs["OFFSETS"].buf.write((ends - counts).astype(np.uint32).tobytes())
         return counts, total
 
-    def _emit(self, layout: KeyLayout, grid: tuple[int, int], total: int,
+    def _emit(self, view: View, layout: KeyLayout, grid: tuple[int, int], total: int,
               counts: np.ndarray) -> None:
         self._bufs["KEYS"].ensure(total * 8)
         if not layout.packed:
             self._bufs["VALUES"].ensure(total * 4)
         self._bind_all()
-        prog = self.programs.compute("tile_emit.comp", self._defines(layout))
+        d = self._defines(layout)
+        d.update(view.defines)              # the per-pixel order's keys: ORTHOGRAPHIC rays
+        prog = self.programs.compute("tile_emit.comp", d)
         self._set(prog, u_count=self.count, u_grid=grid, u_tile_shift=layout.tile_shift,
                   u_depth_shift=layout.depth_shift)
+        cam = view.camera
+        self._set(prog, u_rays=(cam.cx, cam.cy, cam.fx, cam.fy))
         for first in range(0, int(counts.max(initial=0)), TILE_EMIT_CHUNK):
             self._set(prog, u_first=first)
             prog.run(*splat_groups(self.count))
@@ -187,6 +204,8 @@ class TileRenderer:
         background = (0.0, 0.0, 0.0) if "UNDER" in self._switches else self.settings.background
         self._set(prog, u_grid=grid, u_size=(view.width, view.height),
                   u_background=background, u_index_mask=layout.index_mask)
+        cam = view.camera
+        self._set(prog, u_rays=(cam.cx, cam.cy, cam.fx, cam.fy))   # the per-pixel order's rays
         band = max(1, RASTER_BAND_TILES // grid[0])  # tile rows per dispatch
         self._set(prog, u_passes=passes)
         for row0 in range(0, grid[1], band):
@@ -208,6 +227,8 @@ class TileRenderer:
         """Run every stage; returns (layout, counts, emitted keys/values or None, sorted keys)."""
         grid = tile_grid(view.width, view.height)
         n_tiles = grid[0] * grid[1]
+        if self.per_pixel:
+            check_camera(view.camera)
         if grid[0] > MAX_GROUPS or grid[1] > MAX_GROUPS:
             raise SplatglError(f"image of {view.width} x {view.height} has too many tiles")
         layout = KeyLayout.choose(self.count, n_tiles)
@@ -226,7 +247,7 @@ class TileRenderer:
             counts, total = self._scan()
         lap()
         if total:
-            self._emit(layout, grid, total, counts)
+            self._emit(view, layout, grid, total, counts)
             if stages:
                 emitted = self._read_keys(layout, total)
         lap()
@@ -252,6 +273,10 @@ class TileRenderer:
         ``under``, composited over the geometry); row 0 is the top."""
         layers = frozenset(layers)
         self._switches = layer_switches(layers, under)
+        if self.per_pixel and self._switches:
+            raise SplatglError("--order per-pixel draws colour, alpha and depth only: it cannot "
+                               "be combined with --under or the normal, median-depth, count and "
+                               "top-id layers yet")
         try:
             size_layer_buffers(self._bufs, self._switches, self.count, view.width * view.height,
                                under)

@@ -265,16 +265,19 @@ class Projected:
 
 def project(means: np.ndarray, rotations: np.ndarray, scales: np.ndarray, opacities: np.ndarray,
             sh: np.ndarray, camera: Camera, antialias: bool = False,
-            sh_degree: int | None = None) -> Projected:
+            sh_degree: int | None = None, low_pass: float = LOW_PASS) -> Projected:
     """Project 3DGS splats to the screen (no culling): the twin of the vertex stage's math.
 
     Arrays as in :class:`splatgl.model.scene.Scene` (activated), in the dtype wanted for the math.
+    ``low_pass``: the dilation in px^2 (the GPU paths' LOW_PASS; the reference's ``low_pass``
+    emulation knob changes it, :mod:`splatgl.model.emulation`).
     """
     p_cam = eye_space(to_camera(means, camera), camera)  # ODS: per-splat eye
     rot = quat_to_rotmat(rotations)
-    cov2d = covariance_2d(covariance_3d(rot, scales), p_cam, camera)
-    con, det = conic(cov2d, covariance_2d_det(cov2d, screen_factor(rot, scales, p_cam, camera)))
-    opac = opacities * antialias_factor(cov2d) if antialias else opacities
+    cov2d = covariance_2d(covariance_3d(rot, scales), p_cam, camera, low_pass)
+    con, det = conic(cov2d, covariance_2d_det(cov2d, screen_factor(rot, scales, p_cam, camera),
+                                              low_pass))
+    opac = opacities * antialias_factor(cov2d, low_pass) if antialias else opacities
     color = sh_color(sh, view_dirs(means, camera), sh_degree)
     return Projected(p_cam, camera.model.depth(p_cam), project_means(p_cam, camera), cov2d,
                      con, det, color, opac)
