@@ -54,6 +54,20 @@ from .tile_keys import (MAX_GROUPS, RASTER_BAND_TILES, TILE_EMIT_CHUNK,
                         TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, splat_groups, tile_grid)
 
 
+def _splat_buffers(ctx: moderngl.Context, n: int, surfel: bool, per_pixel: bool
+                   ) -> dict[str, GrowableBuffer]:
+    """The per-view buffers by name (:data:`TILE_BINDINGS`), the per-splat ones sized for ``n``."""
+    bufs = {name: GrowableBuffer(ctx, b, slack=0.25) for name, b in TILE_BINDINGS.items()}
+    for name, stride in (("MEAN_DEPTH", 16), ("CONIC_O", 16), ("COLOR", 16), ("RECT", 16),
+                         ("TOUCHED", 4), ("OFFSETS", 4)):
+        bufs[name].ensure(n * stride)
+    if surfel:
+        bufs["SURFEL"].ensure(n * 16)
+    if per_pixel and not surfel:
+        bufs["PEAK"].ensure(n * 48)   # the peak depth's coefficients
+    return bufs
+
+
 class TileRenderer:
     """Renders one scene with the per-tile compute path; reuse across views, then :meth:`release`.
 
@@ -76,15 +90,7 @@ class TileRenderer:
         self.count = scene.count
         self.scene_buffers = SceneBuffers(ctx, scene, settings.gpu_storage) if self.count else None
         self._max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
-        self._bufs = {name: GrowableBuffer(ctx, b, slack=0.25) for name, b in TILE_BINDINGS.items()}
-        n = self.count
-        for name, stride in (("MEAN_DEPTH", 16), ("CONIC_O", 16), ("COLOR", 16), ("RECT", 16),
-                             ("TOUCHED", 4), ("OFFSETS", 4)):
-            self._bufs[name].ensure(n * stride)
-        if self.surfel:
-            self._bufs["SURFEL"].ensure(n * 16)
-        if self.per_pixel and not self.surfel:
-            self._bufs["PEAK"].ensure(n * 48)
+        self._bufs = _splat_buffers(ctx, self.count, self.surfel, self.per_pixel)
         self.last_times: TileTimes | None = None
         self.progress = None
         self._switches: dict[str, object] = {}   # the frame's layer switches (tile_layers.py)
@@ -272,11 +278,7 @@ class TileRenderer:
         :mod:`splatgl.renderers.tile_layers`); RGB = C + (1 - A) background, alpha = A (with
         ``under``, composited over the geometry); row 0 is the top."""
         layers = frozenset(layers)
-        self._switches = layer_switches(layers, under)
-        if self.per_pixel and self._switches:
-            raise SplatglError("--order per-pixel draws colour, alpha and depth only: it cannot "
-                               "be combined with --under or the normal, median-depth, count and "
-                               "top-id layers yet")
+        self._switches = layer_switches(layers, under, self.per_pixel)
         try:
             size_layer_buffers(self._bufs, self._switches, self.count, view.width * view.height,
                                under)

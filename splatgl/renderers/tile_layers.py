@@ -13,12 +13,15 @@ from __future__ import annotations
 import numpy as np
 
 from ..gl.buffers import GrowableBuffer
+from ..errors import SplatglError
 from ..output.layers import ORDERED, Layer, RenderOutput
 from ..output.under import UnderLayer, composite_depth, composite_under
 
 
-def layer_switches(layers: frozenset[Layer], under: UnderLayer | None) -> dict[str, object]:
-    """The ``#define`` switches of the project and rasterize stages for ``layers``."""
+def layer_switches(layers: frozenset[Layer], under: UnderLayer | None,
+                   per_pixel: bool = False) -> dict[str, object]:
+    """The ``#define`` switches of the project and rasterize stages for ``layers``; refused
+    (one line) with the per-pixel order, which draws colour, alpha and depth only."""
     d: dict[str, object] = {}
     if Layer.NORMAL in layers:
         d["NORMAL_OUTPUT"] = 1
@@ -26,6 +29,10 @@ def layer_switches(layers: frozenset[Layer], under: UnderLayer | None) -> dict[s
         d["ORDERED_OUTPUT"] = 1
     if under is not None:
         d["UNDER"] = 1
+    if d and per_pixel:
+        raise SplatglError("--order per-pixel draws colour, alpha and depth only: it cannot be "
+                           "combined with --under or the normal, median-depth, count and top-id "
+                           "layers yet")
     return d
 
 
