@@ -75,6 +75,10 @@ class FlightResult:
     exact_seconds: float = 0.0
     latencies: list[float] = field(default_factory=list)
     exact_matches_render: bool = False
+    #: The budget's correction to the model's cut error after the calibrations at rest, and
+    #: those calibrations ("level: PSNR").
+    cut_factor: float = 1.0
+    calibrations: list[str] = field(default_factory=list)
 
     def fps(self) -> np.ndarray:
         return 1.0 / np.array([f.seconds for f in self.frames]) if self.frames else np.zeros(0)
@@ -94,6 +98,7 @@ class FlightResult:
             "latency_median": float(np.median(self.latencies)) if self.latencies else None,
             "latency_max": float(max(self.latencies)) if self.latencies else None,
             "lod_seconds": self.lod_seconds, "exact_matches_render": self.exact_matches_render,
+            "cut_factor": self.cut_factor,
         }
 
     def to_dict(self) -> dict:
@@ -155,6 +160,8 @@ def fly(renderer: Renderer, scene: Scene, name: str, width: int = 1280, height: 
         _moving(session, flight, result)
         _rest(session, flight, result)
         _latency(session, flight, result)
+        result.cut_factor = session.budget.cut_factor
+        result.calibrations = [f"{lv.describe()}: {p:.1f} dB" for lv, p in session.calibrations]
         _score(session, flight, result, psnr_every)
         rest = flight.camera(flight.move_end)
         exact = session.levels.read(session.levels.draw(rest, Level()))
@@ -170,13 +177,17 @@ def fly(renderer: Renderer, scene: Scene, name: str, width: int = 1280, height: 
 
 
 def _warm_up(session: Session, flight: Flight) -> None:
-    """Compile the programs of every kind of level once (not part of the flight), and let the
-    cost model see a few frames of the start view."""
+    """What happens before a person moves the camera: the programs of every kind of level are
+    compiled (not part of the flight), and the view rests at the start camera until exact, as
+    a window opens (which also calibrates the cuts' quality for this scene)."""
     cam = flight.camera(0.0)
     for level in {session.budget.levels[0], session.budget.levels[-1], Level(0.5)}:
         session.levels.draw(cam, level)
     for i in range(3):
         session.frame(flight.camera(0.01 * (i + 1)))
+    rest = flight.camera(0.03)
+    while session.pending:
+        session.frame(rest)
 
 
 def _moving(session: Session, flight: Flight, result: FlightResult) -> None:

@@ -12,12 +12,12 @@ the view: the cost is stable across nearby frames, not across a whole flight), p
 level's time; the best level whose prediction fits ``margin * budget`` is the
 target.  Hysteresis keeps it from flickering between levels:
 
-- a frame over ``over`` (1.1) times the budget, or a level predicted over ``hold`` (0.95) of it,
+- a frame over ``over`` (1.15) times the budget, or a level predicted over ``hold`` (1.0) of it,
   moves down to the target at once (never a visibly slow frame twice in a row);
 - a level moves up only after ``patience`` (3) frames in a row whose target is higher (then to
   that target);
-- the target must fit ``margin`` (0.85) of the budget, but the level in use is kept up to
-  ``hold`` (0.95): noise in the measured times moves predictions inside that dead band without
+- the target must fit ``margin`` (0.9) of the budget, but the level in use is kept up to
+  ``hold`` (1.0): noise in the measured times moves predictions inside that dead band without
   moving the level;
 - frames at one level teach the model little about the others, so where ``patience`` frames in
   a row took under ``probe`` (0.6) of the budget and the model still sees nothing better, the
@@ -49,6 +49,9 @@ BUDGETS = (1_000_000, 600_000, 400_000, 250_000, 160_000, 100_000, 70_000, 50_00
 SCALE_MSE, SCALE_POWER = 2.2e-4, 1.47
 CUT_MSE, CUT_POWER = 5e-4, 0.6
 OVERLAP = 0.5
+#: The scene's correction to the cut's error (:func:`cut_factor_for`): the fitted model is off by
+#: +7 dB on donut's cuts and -2 dB on guitar's (merged splats matter more or less per scene).
+CUT_FACTOR_RANGE = (0.25, 20.0)
 #: Frames before a level whose probe was too slow is probed again (doubling per failure, capped).
 PROBE_BACKOFF, PROBE_BACKOFF_MAX = 8, 256
 #: The model's ceiling (dB): the exact level.
@@ -96,8 +99,9 @@ def check_fps(fps: float | None) -> float | None:
     return fps
 
 
-def ladder(count: int, has_lod: bool, sh_degree: int) -> list[Level]:
-    """The levels for a scene of ``count`` splats, best first by :func:`predicted_psnr`.
+def ladder(count: int, has_lod: bool, sh_degree: int, cut_factor: float = 1.0) -> list[Level]:
+    """The levels for a scene of ``count`` splats, best first by :func:`predicted_psnr` (with
+    the scene's ``cut_factor``).
 
     Budgets apply only with a level-of-detail tree (``has_lod``) and only below ``count``; the
     SH degree is capped at 0 on levels that also cut splats (view-dependent colour matters
@@ -110,18 +114,40 @@ def ladder(count: int, has_lod: bool, sh_degree: int) -> list[Level]:
         for s in SCALES:
             sh = 0 if (b is not None and sh_degree > 0) else None
             levels.append(Level(s, b, sh))
-    return sorted(levels, key=lambda lv: (-predicted_psnr(lv, count), -lv.scale))
+    return sorted(levels, key=lambda lv: (-predicted_psnr(lv, count, cut_factor), -lv.scale))
 
 
-def predicted_psnr(level: Level, count: int) -> float:
-    """The PSNR (dB) ``level`` is expected to reach against the exact frame of a scene of
-    ``count`` splats (the quality model above; :data:`EXACT_PSNR` for the exact level)."""
+def _errors(level: Level, count: int) -> tuple[float, float]:
+    """The model's squared errors of ``level``'s scale and of its cut (before the overlap)."""
     splats = count if level.budget is None else min(level.budget, count)
     share = max(splats, 1) / max(count, 1)
-    by_scale = SCALE_MSE * (1.0 / level.scale - 1.0) ** SCALE_POWER
-    by_cut = CUT_MSE * (1.0 / share - 1.0) ** CUT_POWER
+    return (SCALE_MSE * (1.0 / level.scale - 1.0) ** SCALE_POWER,
+            CUT_MSE * (1.0 / share - 1.0) ** CUT_POWER)
+
+
+def predicted_psnr(level: Level, count: int, cut_factor: float = 1.0) -> float:
+    """The PSNR (dB) ``level`` is expected to reach against the exact frame of a scene of
+    ``count`` splats (the quality model above, its cut's error times the scene's
+    ``cut_factor``; :data:`EXACT_PSNR` for the exact level)."""
+    by_scale, by_cut = _errors(level, count)
+    by_cut *= cut_factor
     mse = max(by_scale, by_cut) + OVERLAP * min(by_scale, by_cut)
     return EXACT_PSNR if mse <= 10.0 ** (-EXACT_PSNR / 10.0) else -10.0 * math.log10(mse)
+
+
+def cut_factor_for(level: Level, count: int, measured_psnr: float) -> float | None:
+    """The ``cut_factor`` that makes :func:`predicted_psnr` of ``level`` (a cut) equal
+    ``measured_psnr``, clamped to CUT_FACTOR_RANGE; None where the level has no cut or the
+    measurement says nothing about the cut (its error no larger than the scale's)."""
+    by_scale, by_cut = _errors(level, count)
+    if level.budget is None or by_cut <= 0.0 or not math.isfinite(measured_psnr):
+        return None
+    mse = 10.0 ** (-measured_psnr / 10.0)
+    cut = mse - OVERLAP * by_scale          # the cut's part, where it dominates
+    if cut <= by_scale:
+        return None
+    lo, hi = CUT_FACTOR_RANGE
+    return float(min(hi, max(lo, cut / by_cut)))
 
 
 #: The cost model's units: splats in 100k, pixels in millions (so its three numbers are of one
@@ -176,7 +202,7 @@ class FrameBudget:
     """
 
     def __init__(self, budget: float, count: int, pixels: int, sh_degree: int = 0,
-                 has_lod: bool = False, margin: float = 0.85, hold: float = 0.95, over: float = 1.1,
+                 has_lod: bool = False, margin: float = 0.9, hold: float = 1.0, over: float = 1.15,
                  patience: int = 3, probe: float = 0.6):
         if not (math.isfinite(budget) and budget > 0.0):
             raise SplatglError(f"frame-time budget must be a positive number of seconds, got {budget}")
@@ -188,17 +214,39 @@ class FrameBudget:
         self._probe_wait: dict[int, int] = {}   # level index -> frames before probing it again
         self._probing: int | None = None        # the level a probe moved to
         self.model = CostModel()
+        self.has_lod, self.cut_factor = has_lod, 1.0
         self.levels = ladder(self.count, has_lod, sh_degree)
         self.index = 0          # the level in use (an index into :attr:`levels`)
         self._ups = 0           # frames in a row whose target was higher than the level in use
 
     def set_lod(self, has_lod: bool) -> None:
         """A level-of-detail tree became available (or went away): new ladder, same quality."""
-        level = self.current
-        self.levels = ladder(self.count, has_lod, self.sh_degree)
-        q = predicted_psnr(level, self.count)
+        self.has_lod = has_lod
+        self._rebuild()
+
+    def calibrate(self, level: Level, measured_psnr: float) -> bool:
+        """``level`` (a cut) measured ``measured_psnr`` against the exact frame of the same
+        view: correct the model's cut error for this scene (:func:`cut_factor_for`) and re-rank
+        the levels (the one in use keeps its predicted quality).  Returns whether it changed."""
+        factor = cut_factor_for(level, self.count, measured_psnr)
+        if factor is None or abs(math.log(factor / self.cut_factor)) < 0.05:
+            return False
+        self.cut_factor = factor
+        self._rebuild()
+        return True
+
+    def _rebuild(self) -> None:
+        level, f = self.current, self.cut_factor
+        q = predicted_psnr(level, self.count, f)
+        self.levels = ladder(self.count, self.has_lod, self.sh_degree, f)
         self.index = min(range(len(self.levels)),
-                         key=lambda i: abs(predicted_psnr(self.levels[i], self.count) - q))
+                         key=lambda i: abs(predicted_psnr(self.levels[i], self.count, f) - q))
+        self._probe_wait.clear()
+
+    def observe(self, level: Level, splats: int, seconds: float) -> None:
+        """A frame's cost that is not a moving frame (a refinement step): the cost model
+        learns from it; the level does not move."""
+        self.model.update(float(splats), self.pixels * level.scale * level.scale, float(seconds))
 
     def set_pixels(self, pixels: int) -> None:
         self.pixels = int(pixels)

@@ -13,8 +13,11 @@ frame however long the exact frame takes.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Callable
+
+import numpy as np
 
 from ..api import Renderer
 from ..cameras.camera import Camera
@@ -33,7 +36,7 @@ GPU_FPS = 60.0
 
 #: A refinement step polls for input after each batch of about this share of the budget: the
 #: answer to input waits for at most that batch plus one moving frame.
-REFINE_BATCH_SHARE = 0.3
+REFINE_BATCH_SHARE = 0.15
 #: Smallest batch of a refinement step's draw (splats): below it the finish between batches
 #: costs more than the answer time it buys.
 MIN_REFINE_BATCH = 4096
@@ -83,6 +86,9 @@ class Session:
         self._plan: list[Level] = []
         self.refine_started: float | None = None
         self._full_per_splat: float | None = None   # seconds a splat of the last full-detail step
+        self._calibration: Level | None = None      # the cut to measure at rest, after exact
+        #: (level, PSNR against the exact frame) of each calibration so far.
+        self.calibrations: list[tuple[Level, float]] = []
 
     def _sync_lod(self) -> None:
         if self.levels.has_lod and not self._lod_seen:
@@ -120,13 +126,15 @@ class Session:
         key = camera_key(camera)
         if key != self._key:
             return self.moving(camera)
+        hook = None if input_pending is None else _interrupt_on(input_pending)
         if not self._plan:
+            if self._calibration is not None:
+                self._calibrate(camera, hook)
             self.status = "exact"
             return None
         if self.refine_started is None:
             self.refine_started = time.perf_counter()
         level = self._plan[0]
-        hook = None if input_pending is None else _interrupt_on(input_pending)
         try:
             frame = self.levels.draw(camera, level, on_batch=hook, max_batch=self._batch())
         except Interrupted:
@@ -135,6 +143,9 @@ class Session:
         self._plan.pop(0)
         if level.budget is None and frame.splats:
             self._full_per_splat = frame.seconds / frame.splats
+        if level.exact:
+            self.budget.observe(level, frame.splats, frame.seconds)
+            self._calibration = self._calibration_level()
         self.shown = frame
         self.status = "refining" if self._plan else "exact"
         return frame
@@ -149,9 +160,41 @@ class Session:
         self.budget.report(level, frame.splats, frame.seconds)
         self._key, self.shown, self._moving_level = camera_key(camera), frame, level
         self._plan = [] if level.exact else self.plan(level)
+        self._calibration = None                  # it was for the camera at rest
         self.status = "exact" if level.exact else "moving"
         self.refine_started = None
         return frame
+
+    def _calibration_level(self) -> Level | None:
+        """The cut to measure against the exact frame just drawn: the last moving frame's level,
+        else the one the budget would move at (None without a cut)."""
+        if not self.levels.has_lod:
+            return None
+        for level in (self._moving_level, self.budget.levels[self.budget.target()]):
+            if level.budget is not None:
+                return level
+        return None
+
+    def _calibrate(self, camera: Camera, hook) -> None:
+        """At rest, after the exact frame: draw the calibration cut for the same camera and
+        tell the budget its PSNR (:meth:`~.budget.FrameBudget.calibrate`), so the levels are
+        ranked by what cuts cost in this scene.  Input abandons it like a refinement step."""
+        level, self._calibration = self._calibration, None
+        exact = self.levels.read(self.shown)   # still the exact frame (a cut draws elsewhere)
+        try:
+            draft = self.levels.draw(camera, level, on_batch=hook, max_batch=self._batch())
+        except Interrupted:
+            return
+        got = self.levels.read(draft)
+        mse = float(np.mean((got[..., :3].astype(np.float64) - exact[..., :3]) ** 2))
+        measured = math.inf if mse == 0.0 else -10.0 * math.log10(mse)
+        self.calibrations.append((level, measured))
+        self.budget.calibrate(level, measured)
+
+    @property
+    def pending(self) -> bool:
+        """Whether calls at rest still have work: refinement steps, or the calibration."""
+        return bool(self._plan) or self._calibration is not None
 
     @property
     def exact(self) -> bool:

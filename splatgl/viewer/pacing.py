@@ -70,7 +70,8 @@ class Pacer:
     @property
     def refining(self) -> bool:
         """Whether refinement steps are left (the loop should poll, not wait for events)."""
-        return self.session is not None and not self.session.exact and self.session.shown is not None
+        return self.session is not None and self.session.shown is not None and (
+            not self.session.exact or self.session.pending)
 
     @property
     def exact(self) -> bool:
