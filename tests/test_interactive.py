@@ -126,6 +126,21 @@ def test_failed_probes_back_off():
     assert (gaps[1:] >= gaps[:-1]).all() if len(gaps) > 1 else True
 
 
+def test_calibration_ranks_cuts_by_what_they_cost_in_this_scene():
+    from splatgl.interactive.budget import cut_factor_for
+
+    level = Level(0.5, 25_000)
+    predicted = predicted_psnr(level, 100_000)
+    assert cut_factor_for(level, 100_000, predicted) == pytest.approx(1.0, rel=1e-6)
+    assert cut_factor_for(level, 100_000, predicted - 6.0) > 3.0     # worse than the model
+    assert cut_factor_for(Level(0.5), 100_000, 20.0) is None          # no cut: nothing to learn
+    budget = FrameBudget(0.1, 100_000, 1280 * 720, 0, has_lod=True)
+    rank = budget.levels.index(level)
+    assert budget.calibrate(level, predicted - 6.0)
+    assert budget.levels.index(level) > rank                          # cuts ranked lower now
+    assert predicted_psnr(level, 100_000, budget.cut_factor) == pytest.approx(predicted - 6.0, abs=0.5)
+
+
 @pytest.mark.parametrize("bad", [-1.0, math.inf, math.nan])
 def test_target_fps_is_checked(bad):
     with pytest.raises(SplatglError, match="--target-fps"):
