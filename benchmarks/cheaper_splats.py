@@ -8,6 +8,10 @@ compared (PSNR of the triangle's against the quad's; the image must not change).
 on the machine (it times)::
 
     python benchmarks/cheaper_splats.py SCENE... --repeats 9 --json docs/results/cheaper-splats.json
+
+``--drafts`` times the viewer's draft levels instead (``LevelRenderer.draw``: order stage, draw
+and upscale, to a finish), with and without one triangle per splat, on the same views: the
+drafts' PSNR against the exact frame shows what the triangle costs in quality there.
 """
 
 from __future__ import annotations
@@ -16,8 +20,8 @@ import argparse
 import json
 import statistics
 import time
+from pathlib import Path
 
-import moderngl
 import numpy as np
 
 from splatgl.api import Renderer
@@ -27,30 +31,17 @@ from splatgl.cameras.view import View
 from splatgl.evaluation.metrics import psnr
 from splatgl.formats import load_scene
 from splatgl.model.settings import RenderSettings
-from splatgl.renderers import quad_gpu
+from splatgl.interactive.budget import Level
+from splatgl.interactive.draft import LevelRenderer
+from splatgl.interactive.lod_cache import LodProvider
 from splatgl.renderers.quad import composite
 
 VARIANTS = ("quad", "triangle")
 
 
-_plain_draw = quad_gpu.QuadResources.draw_range
-
-
-def _triangle_draw(self, prog, start: int, n: int) -> None:
-    """QuadResources.draw_range with one triangle (3 vertices) per instance."""
-    self.ctx.enable(moderngl.BLEND)
-    prog["u_base"].value = start
-    self.vertex_array(prog, None).render(moderngl.TRIANGLES, vertices=3, instances=n)
-
-
 def set_variant(quad, name: str) -> None:
-    """Switch ``quad`` (a QuadRenderer on the compute pre-pass, early termination off) to
-    drawing ``name`` (one of VARIANTS): the TRIANGLE_PER_SPLAT define and 3-vertex draws."""
-    quad.frame_extra.pop("TRIANGLE_PER_SPLAT", None)
-    quad_gpu.QuadResources.draw_range = _plain_draw
-    if name == "triangle":
-        quad.frame_extra["TRIANGLE_PER_SPLAT"] = 1
-        quad_gpu.QuadResources.draw_range = _triangle_draw
+    """Switch ``quad`` (early termination off) to drawing ``name`` (one of VARIANTS)."""
+    quad.use_triangles(name == "triangle")
 
 
 def time_draw(quad, view: View, repeats: int) -> tuple[list[float], np.ndarray]:
@@ -64,17 +55,62 @@ def time_draw(quad, view: View, repeats: int) -> tuple[list[float], np.ndarray]:
     return times, target.read()
 
 
+#: The draft levels timed by --drafts (the flight's usual picks on these scenes).
+DRAFT_LEVELS = (Level(0.5, None, 0), Level(0.35, None, 0), Level(0.7, 50_000, 0),
+                Level(0.5, 100_000, 0))
+
+
+def time_drafts(renderer, path: str, repeats: int) -> list[dict]:
+    """Rows of --drafts for the scene at ``path`` (module doc)."""
+    scene = load_scene(path)
+    settings = RenderSettings()
+    lod = LodProvider(scene, Path(path))
+    lod.wait()
+    drafts = {name: LevelRenderer(renderer, scene, settings, lod, name == "triangle")
+              for name in VARIANTS}
+    flight = Flight(scene, 1280, 720)
+    rows = []
+    for t in (0.0, 6.5, 8.0):
+        camera = flight.camera(t)
+        exact = renderer.render(scene, camera, settings)
+        for level in DRAFT_LEVELS:
+            if level.budget is not None and (not lod.ready or level.budget >= scene.count):
+                continue
+            times = {name: [] for name in VARIANTS}
+            images = {}
+            for _ in range(repeats):
+                for name in VARIANTS:
+                    frame = drafts[name].draw(camera, level)
+                    times[name].append(frame.seconds)
+                    images[name] = drafts[name].read(frame)
+            base = statistics.median(times["quad"])
+            tri = statistics.median(times["triangle"])
+            row = dict(scene=path.split("/")[-1], t=t, level=level.describe(),
+                       quad_ms=base * 1e3, triangle_ms=tri * 1e3, triangle_ratio=tri / base,
+                       quad_psnr=psnr(images["quad"][..., :3], exact[..., :3]),
+                       triangle_psnr=psnr(images["triangle"][..., :3], exact[..., :3]))
+            rows.append(row)
+            print(row, flush=True)
+    for d in drafts.values():
+        d.release()
+    return rows
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("scenes", nargs="+")
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--json", default=None)
+    p.add_argument("--drafts", action="store_true", help="time the viewer's draft levels")
     args = p.parse_args()
     machine = probe_machine()
     print(describe(machine), flush=True)
     rows = []
     with Renderer() as renderer:
         for path in args.scenes:
+            if args.drafts:
+                rows += time_drafts(renderer, path, args.repeats)
+                continue
             scene = load_scene(path)
             settings = RenderSettings(early_stop=False)
             quad = renderer.renderer_for(scene, settings)

@@ -28,9 +28,10 @@ layout(std430, binding = BINDING_PREPARED_RADIUS) writeonly buffer PreparedRadiu
 layout(std430, binding = BINDING_OPACITY_WEIGHT) readonly buffer OpacityWeight { float opacity_weight[]; };
 #endif
 uniform uint u_count;
+uniform uint u_first;   // slot of invocation 0 (a long pre-pass runs in chunks, polled between)
 
 void main() {
-    uint k = gl_GlobalInvocationID.x;
+    uint k = u_first + gl_GlobalInvocationID.x;
     if (k >= u_count) return;
     ScreenSplat s;
 #ifdef OPACITY_WEIGHT

@@ -1,10 +1,12 @@
 // Emits one corner of a splat's quad (triangle strip, gl_VertexID 0..3) and the fragment
-// inputs of quad.frag.  With TRIANGLE_PER_SPLAT (benchmarks/cheaper_splats.py only), one vertex
-// of a single triangle instead (gl_VertexID 0..2): the equilateral triangle circumscribing the
-// ellipse in the axes' frame, which holds every pixel the quad's inscribed ellipse holds (the
-// ellipse and fast extents).  Measured on llvmpipe: 0.86-0.91x the quad's draw on far views of
-// biker and guitar, 1.08-1.21x on donut (a third more fragments): not kept (docs/interactive.md).  Shared by quad.vert (math per vertex) and quad_light.vert (math from
-// the compute pre-pass).
+// inputs of quad.frag.  With TRIANGLE_PER_SPLAT (QuadRenderer.use_triangles: the
+// viewer's drafts), one vertex of a single triangle instead (gl_VertexID 0..2): the equilateral
+// triangle circumscribing the ellipse in the axes' frame, which holds every pixel the quad's
+// inscribed ellipse holds (the ellipse extent only: the fast extent shades the quad's
+// corners).  Measured on llvmpipe:
+// 0.84-0.91x the quad's draw on far views of biker and guitar, 1.04-1.17x on donut (a third
+// more fragments): the exact frame keeps the quad (docs/interactive.md).  Shared by
+// quad.vert (math per vertex) and quad_light.vert (math from the compute pre-pass).
 // Twin: none (places a corner from splat_setup.glsl's axes, whose twin is ellipse_axes()).
 
 flat out vec2 v_mean2d;       // pixel centre of the splat

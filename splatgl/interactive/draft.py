@@ -37,6 +37,11 @@ _READ_DTYPES = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
 #: A budgeted cut is never finer than this (pixels): the budget, not the threshold, decides.
 CUT_THRESHOLD_PX = 0.25
 
+#: Drafts draw one triangle per splat instead of a quad (QuadRenderer.use_triangles): three
+#: vertices instead of four where llvmpipe's per-primitive front end dominates, at a third more
+#: fragments (measured: benchmarks/cheaper_splats.py, docs/interactive.md).
+DRAFT_TRIANGLES = True
+
 
 def scaled(camera: Camera, scale: float) -> Camera:
     """``camera`` at ``scale`` times its width and height (intrinsics scaled per axis)."""
@@ -63,8 +68,9 @@ class LevelRenderer:
     """Draws ``scene`` at any level on ``renderer``'s context (see the module doc)."""
 
     def __init__(self, renderer: Renderer, scene: Scene, settings: RenderSettings,
-                 lod: LodProvider | None = None):
+                 lod: LodProvider | None = None, triangles: bool = DRAFT_TRIANGLES):
         self.renderer, self.scene, self.settings, self.lod = renderer, scene, settings, lod
+        self.triangles = triangles   # drafts (not the exact level) draw one triangle a splat
         self._lod_quad: QuadRenderer | None = None
         self._lod_sh: int | None = None
         self._upscaler: Upscaler | None = None
@@ -112,10 +118,12 @@ class LevelRenderer:
             # Early termination's decision costs a coverage pass (8 ms at 1280x720 on llvmpipe)
             # and gained nothing there: drafts draw plainly.
             batches.mode = EarlyStop.OFF
+            quad.use_triangles(self.triangles)
         try:
             drawn = quad.draw(view, target, on_batch=on_batch)
         finally:
             batches.max_batch, batches.mode = MAX_BATCH, mode
+            quad.use_triangles(False)
         texture = target.texture
         if (cam.width, cam.height) != (camera.width, camera.height):
             if self._upscaler is None:

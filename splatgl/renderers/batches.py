@@ -209,7 +209,16 @@ class Batches:
             target.fbo.use()
             target.fbo.depth_mask = False
             ctx.enable(moderngl.BLEND)
-            vao.render_indirect(stop.commands, moderngl.TRIANGLE_STRIP, count=groups, first=first)
+            # The batch's commands (one per SEGMENT slots) drawn max_batch slots at a time, in
+            # order: the same primitives in the same order as one draw, so the same image, and
+            # on_batch can abandon a long batch (the early-stop decisions stay per batch).
+            step = max(1, self.max_batch // SEGMENT)
+            for sub in range(0, groups, step):
+                n = min(step, groups - sub)
+                vao.render_indirect(stop.commands, moderngl.TRIANGLE_STRIP, count=n, first=first + sub)
+                if on_batch is not None and sub + n < groups:
+                    ctx.finish()
+                    on_batch(min(end, start + (sub + n) * SEGMENT), count)
             first += groups
             if on_batch is not None:
                 ctx.finish()

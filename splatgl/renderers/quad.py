@@ -35,8 +35,8 @@ from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..gl.targets import ColorTarget
 from ..model.scene import Scene
-from ..model.settings import (EarlyStop, RenderSettings, RendererKind, SortKey, check_convention,
-                              check_fidelity)
+from ..model.settings import (EarlyStop, QuadExtent, RenderSettings, RendererKind, SortKey,
+                              check_convention, check_fidelity)
 from ..order.stage import RowSource, SceneOrder, cpu_sort
 from ..output.layers import BASE, ORDERED, Layer, RenderOutput
 from ..output.under import UnderLayer
@@ -127,16 +127,33 @@ class QuadRenderer:
                                Layer.DEPTH in layers, self.settings.early_stop is not EarlyStop.OFF,
                                Layer.NORMAL in layers)
 
+    def use_triangles(self, on: bool) -> None:
+        """From the next frame, draw one triangle per splat (``on``) or the 4-vertex quad (the
+        default).  The triangle circumscribes the splat's ellipse (shaders/lib/quad_emit.glsl):
+        a third more fragments for three vertices instead of four, which pays where llvmpipe's
+        per-primitive front end dominates (small splats, drafts at a lower scale).  Its image is
+        the quad's up to rounding (108-130 dB on the shared scenes), so the exact frame keeps the
+        quad.  Frames drawn with triangles are never batched by early termination (its indirect
+        commands draw strips).  Only the ellipse extent draws triangles: the square and fast
+        extents shade their quads' corners beyond the ellipse, which the triangle cuts off."""
+        on = on and self.settings.extent is QuadExtent.ELLIPSE
+        self.gpu.triangles = on
+        if on:
+            self.frame_extra["TRIANGLE_PER_SPLAT"] = 1
+        else:
+            self.frame_extra.pop("TRIANGLE_PER_SPLAT", None)
+
     def order(self, view: View) -> np.ndarray:
         """The rows this view draws, front to back (the order stage of :attr:`rows`)."""
         view.model.check_support(self.programs.surfels, "quad")
         return self.rows.order(view)
 
-    def prepare(self, view: View, layers: frozenset[Layer] = BASE,
-                under: bool = False) -> tuple[int, FrameSwitches]:
+    def prepare(self, view: View, layers: frozenset[Layer] = BASE, under: bool = False,
+                on_batch: BatchHook | None = None) -> tuple[int, FrameSwitches]:
         """Order, upload and (with the pre-pass) prepare the quads of ``view``; returns the
         splats to draw and the frame's switches (``under``: a geometry depth test).  The scene
-        and the order stay bound."""
+        and the order stay bound.  ``on_batch(0, count)`` is called between chunks of the
+        pre-pass as between batches of the draw (:meth:`draw`), so input can abandon it."""
         order = self.order(view)
         weights = self.rows.slot_weights
         frame = FrameSwitches(depth=Layer.DEPTH in layers, weights=weights is not None,
@@ -151,8 +168,9 @@ class QuadRenderer:
         if self.uses_prepass:
             comp = self.programs.prepass(view, frame)
             view.set_uniforms(comp)
+            between = None if on_batch is None else lambda: on_batch(0, len(order))  # noqa: E731
             self.gpu.run_prepass(comp, len(order), frame.weights, bool(frame.normal),
-                                 frame.ordered_rect)
+                                 frame.ordered_rect, self.batches.max_batch, between)
             self.ctx.finish()
         self._t_prepass = time.perf_counter() - t1
         return len(order), frame
@@ -167,11 +185,14 @@ class QuadRenderer:
         ``on_batch(done, total)`` is called after each batch of sorted splats; an exception it
         raises abandons the frame (GL state restored).  :attr:`last_frame` keeps the switches.
         """
-        count, frame = self.prepare(view, layers, under is not None)
+        count, frame = self.prepare(view, layers, under is not None, on_batch)
         if under is not None:
             self.gpu.bind_under(under.depth)
         tp = time.perf_counter()
-        batched = self.batches.decide(view, count, frame)
+        if self.gpu.triangles:   # plain draws only (see use_triangles)
+            batched = self.batches.batched = False
+        else:
+            batched = self.batches.decide(view, count, frame)
         frame = dataclasses.replace(frame, batched=batched)
         self.last_frame = frame
         tc = time.perf_counter()

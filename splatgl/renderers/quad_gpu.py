@@ -7,6 +7,8 @@ weights) are written, into buffers that grow as needed and are reused.
 
 from __future__ import annotations
 
+from typing import Callable
+
 import moderngl
 import numpy as np
 
@@ -26,11 +28,14 @@ class QuadResources:
     """The per-view GL objects of one quad renderer (see the module doc).
 
     ``uses_prepass``: whether the draw reads the pre-pass's prepared quads (instance k of a
-    range reads ``prepared[u_base + k]``) instead of the sorted indices.
+    range reads ``prepared[u_base + k]``) instead of the sorted indices.  ``triangles``: plain
+    draws emit one triangle per splat (3 vertices, the TRIANGLE_PER_SPLAT shader switch set by
+    :meth:`~splatgl.renderers.quad.QuadRenderer.use_triangles`) instead of a 4-vertex strip.
     """
 
     def __init__(self, ctx: moderngl.Context, uses_prepass: bool):
         self.ctx, self.uses_prepass = ctx, uses_prepass
+        self.triangles = False
         self.index = GrowableBuffer(ctx, BINDING_ORDER, minimum=4)
         self.weights = GrowableBuffer(ctx, BINDING_OPACITY_WEIGHT, minimum=4)
         self.prepared = GrowableBuffer(ctx, BINDING_PREPARED)
@@ -51,10 +56,13 @@ class QuadResources:
             self.weights.upload(weights.tobytes())
 
     def run_prepass(self, comp: moderngl.ComputeShader, count: int, weighted: bool,
-                    normals: bool = False, radii: bool = False) -> None:
+                    normals: bool = False, radii: bool = False, chunk: int | None = None,
+                    between: Callable[[], None] | None = None) -> None:
         """Run ``comp`` (quad_prepass.comp, uniforms set) over the ``count`` sorted splats into
         the prepared buffer (with ``normals`` the normal layer's buffer, with ``radii`` the
-        ordered pass's)."""
+        ordered pass's).  With ``between``, the pass runs in chunks of ``chunk`` slots and
+        ``between()`` is called after each but the last, to a finish (it may raise to abandon
+        the frame: a million splats' pre-pass takes about half a second on llvmpipe)."""
         self.prepared.ensure(count * PREPARED_BYTES).bind_to_storage_buffer(BINDING_PREPARED)
         if normals:
             self.prepared_normal.ensure(count * 16).bind_to_storage_buffer(BINDING_PREPARED_NORMAL)
@@ -66,7 +74,13 @@ class QuadResources:
             self.weights.bind()
         comp["u_count"].value = count
         self.index.bind()
-        comp.run(group_x=(count + PREPASS_GROUP - 1) // PREPASS_GROUP)
+        step = count if between is None or not chunk else max(PREPASS_GROUP, int(chunk))
+        for first in range(0, count, step):
+            comp["u_first"].value = first
+            comp.run(group_x=(min(step, count - first) + PREPASS_GROUP - 1) // PREPASS_GROUP)
+            if between is not None and first + step < count:
+                self.ctx.finish()
+                between()
         self.ctx.memory_barrier()
 
     def target(self, width: int, height: int, precision: Precision, depth: bool,
@@ -120,19 +134,21 @@ class QuadResources:
             self.ctx.enable(moderngl.BLEND)
         else:
             self.ctx.disable(moderngl.BLEND)
+        mode, vertices = ((moderngl.TRIANGLES, 3) if self.triangles
+                          else (moderngl.TRIANGLE_STRIP, 4))
         if self.uses_prepass:
             prog["u_base"].value = start
-            self.vertex_array(prog, None).render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+            self.vertex_array(prog, None).render(mode, vertices=vertices, instances=n)
             return
         vao = self.vertex_array(prog, self.index.buf)
         if start == 0:
-            vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+            vao.render(mode, vertices=vertices, instances=n)
             return
         # A later range: the instanced attribute starts at baseInstance (an indirect command).
         if self._plain_command is None:
             self._plain_command = self.ctx.buffer(reserve=COMMAND_BYTES)
-        self._plain_command.write(np.array([4, n, 0, start, 0], np.uint32).tobytes())
-        vao.render_indirect(self._plain_command, moderngl.TRIANGLE_STRIP, count=1)
+        self._plain_command.write(np.array([vertices, n, 0, start, 0], np.uint32).tobytes())
+        vao.render_indirect(self._plain_command, mode, count=1)
 
     def _release_vaos(self) -> None:
         for vao in self._vaos.values():
