@@ -4,6 +4,7 @@ interrupted refinement."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -236,6 +237,33 @@ def test_input_abandons_a_refinement_step(gl_renderer, scene):
         while session.frame(_camera(0.03)) is not None:
             pass
         assert session.exact
+    finally:
+        session.release()
+
+
+def test_rest_keeps_the_primitive_faster_on_average(gl_renderer, scene):
+    session = Session(gl_renderer, scene, RenderSettings(), 0.1, None)
+    levels, real_draw = session.levels, session.levels.draw
+    cost = {True: 0.02, False: 0.01}    # seconds of a draft with triangles / with quads
+    drawn = []
+
+    def draw(camera, level, on_batch=None, max_batch=None):
+        frame = real_draw(camera, level, on_batch, max_batch)
+        drawn.append(levels.triangles)
+        return dataclasses.replace(frame, seconds=cost[levels.triangles])
+
+    levels.draw = draw
+    level = Level(0.5, None, 0)
+    try:
+        assert levels.triangles                  # the default: one triangle a splat
+        session._choose_primitive(_camera(), level, None)
+        assert drawn == [False, True]            # the other one first, the current one warm
+        assert not levels.triangles and session.primitive_log == [pytest.approx(math.log(2))]
+        cost[True] = 0.005                       # triangles 2x faster now: the mean decides
+        session._choose_primitive(_camera(), level, None)
+        assert not levels.triangles              # log 2 - log 2 = 0: not faster on average
+        session._choose_primitive(_camera(), level, None)
+        assert levels.triangles
     finally:
         session.release()
 
