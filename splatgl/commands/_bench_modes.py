@@ -179,6 +179,17 @@ def add_interactive_arguments(p: argparse.ArgumentParser) -> None:
                         "a GPU, as splatgl view)")
 
 
+def check_interactive_options(args: argparse.Namespace) -> float | None:
+    """``--interactive``'s frame rate (None: the renderer's default), checked before any scene
+    is looked for."""
+    from ..interactive.budget import check_fps
+
+    fps = check_fps(args.target_fps)
+    if fps == 0.0:
+        raise SplatglError("--interactive measures the frame-time budget: --target-fps must be positive")
+    return fps
+
+
 def run_interactive_command(args: argparse.Namespace, scenes: list) -> int:
     """``splatgl bench --interactive`` over ``scenes`` (paths; the caller's defaults)."""
     from ..api import Renderer
@@ -186,12 +197,9 @@ def run_interactive_command(args: argparse.Namespace, scenes: list) -> int:
     from ..bench.flight_report import plot, table, write_json
     from ..bench.machine import describe, probe_machine
     from ..formats import load_scene
-    from ..interactive.budget import check_fps
     from ..interactive.session import default_fps
 
-    fps = check_fps(args.target_fps)
-    if fps == 0.0:
-        raise SplatglError("--interactive measures the frame-time budget: --target-fps must be positive")
+    fps = check_interactive_options(args)
     machine = probe_machine()
     print(describe(machine), flush=True)
     results = []

@@ -26,8 +26,8 @@ from ..progress import StderrProgress, default_progress, enabled
 from ..api import Renderer
 from ..model.settings import RenderSettings
 from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_popping_arguments,
-                           run_interactive_command, run_lod_command, run_popping_command,
-                           run_scale_command)
+                           check_interactive_options, run_interactive_command, run_lod_command,
+                           run_popping_command, run_scale_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
@@ -197,6 +197,7 @@ def run(args: argparse.Namespace) -> int:
         mode = "--scale" if args.scale else "--lod"
         raise SplatglError(f"--json: {mode} writes its JSON with --out DIR")
     if args.interactive:
+        check_interactive_options(args)          # before looking for the scenes
         return run_interactive_command(args, _interactive_scenes(args))
     if args.scale:
         return run_scale_command(args)
