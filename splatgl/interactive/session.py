@@ -6,9 +6,10 @@ that differs from the last one is a moving frame, drawn at the :class:`~.budget.
 level; the same camera again is rest, and each call then draws the next step of the refinement
 (:meth:`Session.plan`: full detail at the moving frame's scale where the exact frame would take
 long, then the exact frame, the same pixels as ``splatgl render``).  A refinement step draws in
-batches of about one budget's worth of splats and asks ``input_pending()`` between them: input
-abandons the step at once (:class:`Interrupted`), so the window answers within about one budgeted
-frame however long the exact frame takes.
+batches of about a twentieth of a budget's worth of splats and asks ``input_pending()`` between
+them (and between chunks of the pre-pass): input abandons the step at once
+(:class:`Interrupted`), so the window answers within about one budgeted frame however long the
+exact frame takes.
 """
 
 from __future__ import annotations
@@ -35,11 +36,14 @@ SOFTWARE_FPS = 10.0
 GPU_FPS = 60.0
 
 #: A refinement step polls for input after each batch of about this share of the budget: the
-#: answer to input waits for at most that batch plus one moving frame.
-REFINE_BATCH_SHARE = 0.15
-#: Smallest batch of a refinement step's draw (splats): below it the finish between batches
-#: costs more than the answer time it buys.
-MIN_REFINE_BATCH = 4096
+#: answer to input waits for at most that batch plus one moving frame.  The share is of the
+#: frame's mean cost per splat, and on close views the front splats cost several times the
+#: mean: at 0.15, donut's batches ran up to 90 ms (latency up to 174 ms); at 0.05 up to 30 ms
+#: (latency up to 131 ms), for 1.25x the exact frame's time on donut and none on the 1M scene.
+REFINE_BATCH_SHARE = 0.05
+#: Smallest batch of a refinement step's draw (splats): one draw command of the early-stop
+#: path (early_stop.SEGMENT); below it the finish between batches costs more than it buys.
+MIN_REFINE_BATCH = 1024
 
 
 def default_fps(renderer: Renderer) -> float:
