@@ -25,14 +25,14 @@ transforms.  How the definitions differ (docs/editing.md), each asserted here:
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import subprocess
 
 import numpy as np
 import pytest
 
-from helpers import REPO, shared_file
+from helpers import shared_file
+from splat_transform_fixtures import exe, stfiles, version  # noqa: F401 (fixtures)
 from splatgl.edit import CropBox, CropSphere, Filter, apply_operations, merge_scenes, transform_scene
 from splatgl.formats import load_scene, save_scene
 from splatgl.model.scene import Scene
@@ -40,28 +40,10 @@ from splatgl.model.transform import ModelTransform
 
 pytestmark = [pytest.mark.npm, pytest.mark.slow]
 
-_spec = importlib.util.spec_from_file_location(
-    "splat_transform_files", REPO / "tests" / "data" / "splat_transform_files.py")
-stfiles = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(stfiles)
-
 
 #: Whether each version's -N keeps a row whose quaternion is all zeros (2.x checks finiteness
 #: only; 3.x also drops zero quaternions, as splatgl does).
 KEEPS_ZERO_QUATERNIONS = {"2.7.1": True, "3.7.0": False}
-
-
-@pytest.fixture(scope="module", params=stfiles.VERSIONS)
-def version(request):
-    why = stfiles.missing(request.param)
-    if why:
-        pytest.skip(why)
-    return request.param
-
-
-@pytest.fixture(scope="module")
-def exe(version):
-    return stfiles.executable(version)
 
 
 def st(exe: str, *args) -> None:

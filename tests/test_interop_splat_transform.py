@@ -44,7 +44,6 @@ Skips with the reason when node / splat-transform is not installed (see the scri
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import subprocess
@@ -55,6 +54,7 @@ import numpy as np
 import pytest
 
 from helpers import REPO, shared_file
+from splat_transform_fixtures import exe, stfiles, version  # noqa: F401 (fixtures)
 from splatgl.constants import SH_C0
 from splatgl.formats.convert import ATTRIBUTES, conversion_error
 from splatgl.formats import compressed_ply, load_scene, save_scene, spz_write, writer_for
@@ -66,14 +66,6 @@ from splatgl.model.scene import Scene
 
 pytestmark = [pytest.mark.npm, pytest.mark.slow]
 
-_spec = importlib.util.spec_from_file_location(
-    "splat_transform_files", REPO / "tests" / "data" / "splat_transform_files.py")
-stfiles = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(stfiles)
-
-
-pytestmark = pytest.mark.npm
-
 #: The axes each version writes SPZ in (versions 3 and 4 alike; no field in its files says).
 WRITES = {"2.7.1": "rub", "3.7.0": "rdf"}
 #: Whether each version reads an SPZ file's stored bytes as RDF whatever the file says (3.x:
@@ -84,19 +76,6 @@ READS_STORED = {"2.7.1": False, "3.7.0": True}
 LIBRARY_READS_GZIP_RECORDS = {"2.7.1": True, "3.7.0": False}
 #: The shared scene the SPZ axes and render checks use (64 splats, SH degree 3).
 SMALL = "fixtures/test64_sh3.compressed.ply"
-
-
-@pytest.fixture(scope="module", params=stfiles.VERSIONS)
-def version(request):
-    why = stfiles.missing(request.param)
-    if why:
-        pytest.skip(why)
-    return request.param
-
-
-@pytest.fixture(scope="module")
-def exe(version):
-    return stfiles.executable(version)
 
 
 @pytest.fixture(scope="module")
