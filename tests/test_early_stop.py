@@ -18,7 +18,7 @@ from splatgl.renderers.quad import QuadRenderer
 from helpers import draw, view_for
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene, SplatKind
-from splatgl.model.settings import Precision, Preprocess, RenderSettings
+from splatgl.model.settings import EarlyStop, Precision, Preprocess, RenderSettings
 from splatgl.stress.build import at_pixel, front_camera, splats
 
 #: Weight a pixel may receive beyond the reference's stop (docs/early-stop.md): the reference
@@ -399,3 +399,44 @@ def test_settings_read_booleans_and_names_as_modes():
     assert _settings(early_stop="off").early_stop is EarlyStop.OFF
     with pytest.raises(ValueError):
         _settings(early_stop="sometimes")
+
+
+
+@pytest.mark.parametrize("preprocess", [Preprocess.COMPUTE, Preprocess.VERTEX])
+def test_survivors_buffer_growing_between_frames_rebuilds_its_vertex_array(ctx, monkeypatch, preprocess):
+    """A plain frame of every splat (the order buffer grows), a batched frame of few, then a
+    batched frame of many: only the survivors buffer grows (released and made anew).  The
+    driver may hand the new buffer the old one's GL name (NVIDIA does; llvmpipe does not), and
+    the frame must not draw through the cached vertex array of the released buffer: NVIDIA's
+    driver crashed in render_indirect there.  The name's reuse is forced by renaming the cached
+    entry; the image must equal a fresh renderer's."""
+    scene = dense_scene()
+    near = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
+    aside = front_camera(4.0, 50.0, 96, 64, target=(5.0, 0.0, 0.5))   # the scene at the edge
+    quad = QuadRenderer(ctx, scene, _settings(early_stop=True, preprocess=preprocess))
+    fresh = QuadRenderer(ctx, scene, _settings(early_stop=True, preprocess=preprocess))
+    try:
+        assert 0 < len(quad.order(view_for(quad, aside))) < len(quad.order(view_for(quad, near))) // 2
+        monkeypatch.setattr(quad.batches, "mode", EarlyStop.OFF)
+        draw(quad, near).rgba                                      # the order buffer at its largest
+        monkeypatch.setattr(quad.batches, "mode", EarlyStop.ON)
+        draw(quad, aside).rgba                                     # survivors: few
+        small = quad.batches.passes.survivors
+        vaos = quad.gpu._vaos
+        real_grow = quad.batches.passes._grow
+
+        def grow_reusing_the_name(name, size):       # as a driver that reuses names would
+            old = getattr(quad.batches.passes, name)
+            buf = real_grow(name, size)
+            if name == "survivors" and buf is not old:
+                for key in [k for k in vaos if k[1] == old.glo]:
+                    vaos[(key[0], buf.glo)] = vaos.pop(key)
+            return buf
+
+        monkeypatch.setattr(quad.batches.passes, "_grow", grow_reusing_the_name)
+        got = draw(quad, near).rgba
+        assert quad.batches.passes.survivors is not small       # it grew
+        np.testing.assert_array_equal(got, draw(fresh, near).rgba)
+    finally:
+        quad.release()
+        fresh.release()

@@ -44,7 +44,7 @@ class QuadResources:
         self._target: ColorTarget | None = None
         self._ordered: OrderedTarget | None = None
         self._under: moderngl.Texture | None = None
-        self._vaos: dict[tuple, moderngl.VertexArray] = {}
+        self._vaos: dict[tuple, tuple[moderngl.VertexArray, moderngl.Program, object]] = {}
         self._plain_command: moderngl.Buffer | None = None
 
     def upload(self, order: np.ndarray, weights: np.ndarray | None) -> None:
@@ -121,11 +121,17 @@ class QuadResources:
         reads prepared[u_base + k])."""
         attribute = "splat_slot" if self.uses_prepass else "splat_index"
         key = (prog.glo, None if source is None else source.glo)
-        vao = self._vaos.get(key)
-        if vao is None:
+        cached = self._vaos.get(key)
+        # GL names are reused: a buffer that grew (released, made anew) can come back under its
+        # old name, and a vertex array of the released buffer must not draw it (NVIDIA's driver
+        # crashed in render_indirect).  So the objects themselves are kept and compared.
+        if cached is not None and (cached[1] is not prog or cached[2] is not source):
+            cached[0].release()
+            cached = None
+        if cached is None:
             content = [] if source is None else [(source, "u4/i", attribute)]
-            vao = self._vaos[key] = self.ctx.vertex_array(prog, content)
-        return vao
+            cached = self._vaos[key] = (self.ctx.vertex_array(prog, content), prog, source)
+        return cached[0]
 
     def draw_range(self, prog: moderngl.Program, start: int, n: int, blend: bool = True) -> None:
         """Draw sorted slots [start, start + n) without early termination (``blend`` False: the
@@ -151,7 +157,7 @@ class QuadResources:
         vao.render_indirect(self._plain_command, mode, count=1)
 
     def _release_vaos(self) -> None:
-        for vao in self._vaos.values():
+        for vao, _, _ in self._vaos.values():
             vao.release()
         self._vaos.clear()
 
