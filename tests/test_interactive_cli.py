@@ -63,7 +63,7 @@ def test_bench_interactive_refuses_no_budget(capsys):
 
 
 def test_flight_figures_on_a_fast_flight(gl_renderer, tmp_path):
-    from splatgl.bench.flight import fly
+    from splatgl.bench.flight import MAX_SCORED, fly
     from splatgl.bench.flight_report import plot, table, write_json
     from splatgl.commands._common import demo_scene_path
     from splatgl.formats import load_scene
@@ -74,7 +74,9 @@ def test_flight_figures_on_a_fast_flight(gl_renderer, tmp_path):
     assert s["frames"] >= 3 and s["fps_median"] > 0
     assert result.exact_matches_render                        # the rest frame is render's
     assert s["rest_to_exact"] >= 0 and len(result.latencies) == 8
-    assert all(f.psnr is not None for f in result.frames)
+    scored = [f for f in result.frames if f.psnr is not None]   # evenly spread, at most MAX_SCORED
+    assert len(scored) == min(len(result.frames), MAX_SCORED) or len(result.frames) > MAX_SCORED
+    assert len(scored) >= min(len(result.frames), MAX_SCORED // 2) and result.frames[0].psnr is not None
     assert "demo" in table([result])
     write_json(tmp_path / "i.json", [result], {"machine": "test"})
     doc = json.loads((tmp_path / "i.json").read_text())
