@@ -17,7 +17,8 @@ from hypothesis import HealthCheck, settings
 
 pytest.register_assert_rewrite("helpers")
 
-from helpers import REPO  # noqa: E402 (after the rewrite hook)
+import helpers  # noqa: E402 (after the rewrite hook)
+from helpers import REPO  # noqa: E402
 
 # Hypothesis: every run draws the same examples ("ci", the default): derandomised (examples
 # follow from each test's source), no example database (earlier failures do not change what
@@ -110,6 +111,7 @@ def gl_renderer():
         renderer = Renderer()
     except ContextError as exc:
         pytest.skip(f"no OpenGL context: {exc}")
+    helpers.note_context(renderer.ctx)
     yield renderer
     renderer.close()
 
@@ -125,6 +127,7 @@ def ctx():
         context = create_headless_context()
     except ContextError as exc:
         pytest.skip(f"no OpenGL context: {exc}")
+    helpers.note_context(context)
     yield context
     context.release()
 

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from helpers import summary_counts
+from helpers import needs_framebuffer_fetch, summary_counts
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import orbit
 from splatgl.cli import main
@@ -281,6 +281,7 @@ def test_reports_are_written_all_or_none(dataset, tmp_path, capsys, monkeypatch)
 def test_renders_carry_the_layers_of_every_view(dataset, capsys, tmp_path, gl_renderer):
     """--renders DIR --format exr --layers ...: one EXR per view with those channels, whose
     colour is the render scored (the scores are unchanged)."""
+    needs_framebuffer_fetch(gl_renderer.ctx)
     import OpenImageIO as oiio
     from splatgl.output.images import read_image
 

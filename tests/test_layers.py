@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helpers import IN_DEPTH, SURFELS, SURFELS_POSE, random_scene, scene_with_colors
+from helpers import IN_DEPTH, needs_framebuffer_fetch, SURFELS, SURFELS_POSE, random_scene, scene_with_colors
 from splatgl.api import default_camera, render_reference_layers
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.registry import retarget
@@ -177,6 +177,7 @@ def _compare(got, ref, normal_atol, ordered_share):
 
 @pytest.mark.parametrize("model", ["perspective", "orthographic", "fisheye", "equirect"])
 def test_quad_and_tile_layers_match_the_reference(gl_renderer, model):
+    needs_framebuffer_fetch(gl_renderer.ctx)
     scene = random_scene(600, seed=8, spread=1.0, log_scale=(-3.0, 0.5), logit=(0.5, 1.5))
     camera = _cameras(scene)[model]
     ref = render_reference_layers(scene, camera, RenderSettings(), layers=ALL)
@@ -192,6 +193,7 @@ def test_quad_and_tile_layers_match_the_reference(gl_renderer, model):
 
 @pytest.mark.parametrize("preprocess", ["vertex", "compute"])
 def test_quad_layers_with_either_preprocess_and_early_stop(gl_renderer, preprocess):
+    needs_framebuffer_fetch(gl_renderer.ctx)
     scene = random_scene(600, seed=9, spread=1.0, log_scale=(-2.5, 0.5), logit=(1.0, 1.5))
     camera = default_camera(scene, 64, 48)
     ref = render_reference_layers(scene, camera, RenderSettings(), layers=ALL)
@@ -202,6 +204,7 @@ def test_quad_layers_with_either_preprocess_and_early_stop(gl_renderer, preproce
 
 
 def test_surfel_layers_quad_and_tile(gl_renderer):
+    needs_framebuffer_fetch(gl_renderer.ctx)
     scene = random_scene(400, seed=4, **SURFELS)
     camera = Camera.from_fov(64, 48, 50.0, SURFELS_POSE)
     ref = render_reference_layers(scene, camera, RenderSettings(), layers=ALL)
@@ -238,6 +241,7 @@ def test_ordered_pass_keeps_to_the_reference_tile_rectangle(gl_renderer):
     """The ordered pass drops fragments outside the reference's tile rectangle (3DGS getRect,
     reference/stages.py inria_rect, shaders/lib/tile_rect.glsl), so a pinhole view's counts
     equal the reference's although the quad draws faint fragments beyond it."""
+    needs_framebuffer_fetch(gl_renderer.ctx)
     from splatgl.reference.stages import inria_rect
 
     lo, hi = inria_rect(np.array([[100.5, 40.5]], np.float32), np.array([20]), (10, 10))

@@ -11,6 +11,7 @@ from splatgl.api import default_camera
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.formats import load_scene
+from helpers import needs_framebuffer_fetch
 from splatgl.model.settings import RenderSettings
 from splatgl.output.images import read_image
 from splatgl.output.layers import Layer, with_layers
@@ -28,6 +29,7 @@ def _channels(path):
 
 
 def test_exr_holds_a_named_channel_per_layer(tmp_path, gl_renderer):
+    needs_framebuffer_fetch(gl_renderer.ctx)
     out = tmp_path / "v.exr"
     assert main(["render", "-o", str(out), "--layers", ALL, "--normal-space", "world"] + ARGS) == 0
     ch, spec = _channels(out)
@@ -69,7 +71,8 @@ def test_png_gets_a_picture_per_layer_with_its_scale(tmp_path, capsys):
     assert not (tmp_path / "v_colour.png").exists()
 
 
-def test_every_frame_of_a_path_carries_the_layers(tmp_path, capsys):
+def test_every_frame_of_a_path_carries_the_layers(tmp_path, capsys, gl_renderer):
+    needs_framebuffer_fetch(gl_renderer.ctx)
     assert main(["render", "--path", "orbit:2", "-o", str(tmp_path / "f/%03d.exr"),
                  "--layers", "depth,count"] + ARGS) == 0
     for k in range(2):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -56,7 +57,7 @@ def test_compile_error_reports_the_included_file_and_line(tmp_path, gl_renderer)
         text = src.describe(str(exc))
     else:
         pytest.fail("the broken shader compiled")
-    assert "lib/bad.glsl:2(" in text and "undefined_thing" in text
+    assert re.search(r"lib/bad\.glsl:2\b", text) and "undefined_thing" in text  # Mesa "f:2(3)", NVIDIA "f:2 :"
 
 
 def test_every_quad_variant_compiles_and_is_cached(gl_renderer):
@@ -102,7 +103,7 @@ def test_errors_in_both_stages_map_to_their_own_files(tmp_path, gl_renderer):
         text = _describe_log(str(exc), sources)
     else:
         pytest.fail("the broken program compiled")
-    assert "v.vert:2(" in text and "undefined_v" in text
+    assert re.search(r"v\.vert:2\b", text) and "undefined_v" in text
     if "undefined_f" in text:  # Mesa stops after the first failing stage
         assert "f.frag:4(" in text
 

@@ -15,7 +15,8 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from helpers import IN_DEPTH, random_scene, scene_with_colors
+import helpers
+from helpers import GPU_DEPTH_RTOL, IN_DEPTH, random_scene, scene_with_colors
 from splatgl.api import render_reference_layers
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
@@ -118,7 +119,7 @@ def test_mesh_renderer_depth_is_the_ray_casting_closed_form(ctx):
         np.testing.assert_array_equal(np.isfinite(img.depth), face >= 0)
         hit = face >= 0
         assert hit.mean() > 0.2
-        np.testing.assert_allclose(img.depth[hit], z[hit], rtol=2e-6)
+        np.testing.assert_allclose(img.depth[hit], z[hit], rtol=GPU_DEPTH_RTOL if helpers.GPU_GL else 2e-6)
     with pytest.raises(CameraError, match="perspective and orthographic cameras only, not fisheye"):
         MeshRenderer(ctx).render(shape, Camera.fisheye(32, 32, 180.0))
 
