@@ -34,8 +34,11 @@ import numpy as np
 
 from ..errors import SplatglError
 
-#: Render scales tried, best first (fractions of the window's width and height).
-SCALES = (1.0, 0.85, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, 0.25)
+#: Render scales tried, best first (fractions of the window's width and height).  The two below
+#: 0.25 are for fill-bound views on slow machines: on a 2-core AVX2 llvmpipe donut's close rest
+#: view took 220 ms at 0.25 even with a 12k cut (a cut's merged splats cover as many pixels),
+#: and the frame after an input was that slow (latency 180-200 ms, 95-125 with them).
+SCALES = (1.0, 0.85, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, 0.25, 0.2, 0.15)
 #: Splat budgets tried below the full scene (only where a level-of-detail tree exists).
 BUDGETS = (1_000_000, 600_000, 400_000, 250_000, 160_000, 100_000, 70_000, 50_000, 35_000,
            25_000, 18_000, 12_000)
