@@ -94,6 +94,28 @@ def test_a_slow_frame_moves_down_at_once_and_up_only_after_patience():
     assert budget.index < down
 
 
+def test_motion_after_a_rest_starts_at_the_level_the_model_predicts_to_fit():
+    """At rest only refinement frames teach the model (observe), and the level in use does not
+    move.  Motion then starts afresh: down to the predicted fit, and the count of frames that
+    want a better level from 0 (left over from before the rest, it let the level jump up after
+    two frames: 1.0-1.3 s frames on 1M splats).  A resume never moves the level up."""
+    budget = FrameBudget(0.1, 600_000, 1280 * 720, 0, has_lod=True)
+    assert budget.index == 0 and budget.current.exact
+    pixels = budget.pixels
+    for level in (Level(), Level(0.5, 50_000), Level(0.25, 12_000), Level(1.0, 100_000)):
+        splats = level.budget or 600_000
+        for _ in range(4):
+            budget.observe(level, splats, _cost(level, 600_000, pixels))
+    assert budget.index == 0                       # observing does not move the level
+    budget._ups = budget.patience - 1              # wanted up before the rest
+    budget.resume()
+    assert budget.index == budget.target() > 0 and budget._ups == 0
+    assert _cost(budget.current, 600_000, pixels) <= 1.2 * budget.budget
+    lower = budget.index = len(budget.levels) - 1  # the cheapest level in use: resume keeps it
+    budget.resume()
+    assert budget.index == lower
+
+
 def test_a_one_off_slow_frame_is_recovered_from():
     """A hiccup (another program, a collection) drops the level; fast frames bring it back up
     even though frames at one level teach the model little (the probes)."""

@@ -274,6 +274,14 @@ class FrameBudget:
         """The level of the next moving frame."""
         return self.current
 
+    def resume(self) -> None:
+        """Motion starts after a rest: start afresh.  Go down to the level the model predicts to
+        fit where the one in use is better (the model has learnt the rest's frames too), and
+        count the frames that want a better level from 0: the count left from before the rest
+        let the level jump up after two frames to an over-predicted full-detail level (1.0-1.3 s
+        on 1M splats on an AVX2 llvmpipe)."""
+        self.index, self._ups = max(self.index, self.target()), 0
+
     def report(self, level: Level, splats: int, seconds: float) -> None:
         """What the last frame drew (``splats``, at ``level``) and how long it took; moves the
         level for the next frame (see the module doc for the hysteresis)."""

@@ -161,6 +161,8 @@ class Session:
         was; refinement starts over from it."""
         self._sync_lod()
         self.budget.set_pixels(camera.width * camera.height)
+        if self.status != "moving":
+            self.budget.resume()
         level = self.budget.level()
         frame = self.levels.draw(camera, level)
         self.budget.report(level, frame.splats, frame.seconds)
