@@ -241,6 +241,39 @@ def test_session_refines_to_exactly_the_render(gl_renderer, scene):
         session.release()
 
 
+def test_rest_calibrates_the_cut_at_a_scale_where_the_cut_dominates(gl_renderer, scene):
+    """Moving at the lowest scale, the cut is measured at CALIBRATION_SCALE (at 0.15 the
+    upscale's error hides the cut's and the budget learnt nothing), the primitives are timed at
+    the moving level itself, and the budget's cut factor follows the measurement."""
+    from splatgl.interactive.budget import cut_factor_for
+    from splatgl.interactive.session import CALIBRATION_SCALE
+
+    lod = LodProvider(scene, None, min_splats=1_000)
+    assert lod.wait() is not None
+    session = Session(gl_renderer, scene, RenderSettings(), 1e-4, lod)   # every frame too slow
+    levels, real_draw, drawn = session.levels, session.levels.draw, []
+
+    def draw(camera, level, **kw):
+        drawn.append(level)
+        return real_draw(camera, level, **kw)
+
+    levels.draw = draw
+    try:
+        for i in range(6):
+            moving = session.frame(_camera(0.01 * i))
+        assert moving.level.budget is not None and moving.level.scale < CALIBRATION_SCALE
+        drawn.clear()
+        while session.pending:
+            session.frame(_camera(0.05))
+        (measured_at, measured), = session.calibrations
+        assert measured_at == dataclasses.replace(moving.level, scale=CALIBRATION_SCALE)
+        assert measured_at in drawn and drawn[-2:] == [moving.level, moving.level]
+        want = cut_factor_for(measured_at, scene.count, measured)
+        assert session.budget.cut_factor == pytest.approx(want if want is not None else 1.0)
+    finally:
+        session.release()
+
+
 def test_input_abandons_a_refinement_step(gl_renderer, scene):
     settings = RenderSettings()
     session = Session(gl_renderer, scene, settings, 1e-4, None)

@@ -14,6 +14,7 @@ exact frame takes.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Callable
@@ -44,6 +45,14 @@ REFINE_BATCH_SHARE = 0.05
 #: Smallest batch of a refinement step's draw (splats): one draw command of the early-stop
 #: path (early_stop.SEGMENT); below it the finish between batches costs more than it buys.
 MIN_REFINE_BATCH = 1024
+#: The calibration cut is drawn at this render scale, where the quality model's scale error is
+#: nil, so the PSNR measured is the cut's alone.  Measured at the moving frame's scale it said
+#: nothing where that scale was low: on an AVX2 llvmpipe donut moved at 0.15, whose upscale
+#: alone loses more than its 12k cut (the model: 25.5 dB against 30), so the cut factor stayed
+#: 1 and the flight kept cuts that lose 2.6 times the model's error.  At 0.5 guitar's cut
+#: (37.9 dB) still hid under the model's scale error.  The draw is one more at rest, after the
+#: exact frame, interrupted by input like a refinement step.
+CALIBRATION_SCALE = 1.0
 
 
 def default_fps(renderer: Renderer) -> float:
@@ -184,28 +193,35 @@ class Session:
         return None
 
     def _calibrate(self, camera: Camera, hook) -> None:
-        """At rest, after the exact frame: draw the calibration cut for the same camera and
-        tell the budget its PSNR (:meth:`~.budget.FrameBudget.calibrate`), so the levels are
-        ranked by what cuts cost in this scene.  Input abandons it like a refinement step."""
+        """At rest, after the exact frame: draw the calibration cut for the same camera (at
+        :data:`CALIBRATION_SCALE`, so the cut's error is what is measured) and tell the
+        budget its PSNR (:meth:`~.budget.FrameBudget.calibrate`), so the levels are ranked by
+        what cuts cost in this scene.  Input abandons it like a refinement step."""
         level, self._calibration = self._calibration, None
+        measured_at = dataclasses.replace(level, scale=CALIBRATION_SCALE)
         exact = self.levels.read(self.shown)   # still the exact frame (a cut draws elsewhere)
         try:
-            draft = self.levels.draw(camera, level, on_batch=hook, max_batch=self._batch())
+            draft = self.levels.draw(camera, measured_at, on_batch=hook, max_batch=self._batch())
         except Interrupted:
             return
         got = self.levels.read(draft)
         mse = float(np.mean((got[..., :3].astype(np.float64) - exact[..., :3]) ** 2))
         measured = math.inf if mse == 0.0 else -10.0 * math.log10(mse)
-        self.calibrations.append((level, measured))
-        self.budget.calibrate(level, measured)
+        self.calibrations.append((measured_at, measured))
+        self.budget.calibrate(measured_at, measured)
+        if measured_at != level:        # the primitives are timed at the moving frame's level,
+            try:                        # after a draw of it (neither pays for a cold order)
+                self.levels.draw(camera, level, on_batch=hook, max_batch=self._batch())
+            except Interrupted:
+                return
         self._choose_primitive(camera, level, hook)
 
     def _choose_primitive(self, camera: Camera, level: Level, hook) -> None:
-        """Time ``level`` (the calibration's, just drawn) once more with each primitive for the
-        camera at rest, and keep for drafts the one faster on average over the rests so far.
-        One triangle a splat saves a vertex at a third more fragments: it pays where llvmpipe's
-        per-splat front end dominates (biker, guitar: 0.79-0.95x), not on fill-bound close
-        views (donut: up to 1.16x).  Both are timed after a draw of the same view, so neither
+        """Time ``level`` (the moving frame's level, just drawn) once more with each primitive
+        for the camera at rest, and keep for drafts the one faster on average over the rests so
+        far.  One triangle a splat saves a vertex at a third more fragments: it pays where
+        llvmpipe's per-splat front end dominates (biker, guitar: 0.79-0.95x), not on fill-bound
+        close views (donut: up to 1.16x).  Both are timed after a draw of the same view, so neither
         pays for a cold cache; input abandons the timing like a refinement step."""
         levels, current = self.levels, self.levels.triangles
         seconds = {}
