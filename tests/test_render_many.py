@@ -127,6 +127,20 @@ def test_bad_path_arguments_one_line(tmp_path, capsys, argv, message):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("size, message", [
+    (("95", "64"), "needs an even width and height, got 95x64"),
+    (("96", "64"), "video output needs PyAV: pip install 'splatgl[video]'"),
+])
+def test_without_pyav_a_wrong_video_size_is_named_before_the_install_hint(tmp_path, capsys,
+                                                                          monkeypatch, size, message):
+    monkeypatch.setitem(__import__("sys").modules, "av", None)     # import av fails
+    argv = ["--path", "orbit:2", "-o", f"{tmp_path}/x.mp4", "--width", size[0], "--height", size[1]]
+    assert _render(*argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_interrupt_leaves_complete_frames_only_and_resume_finishes(tmp_path, monkeypatch, capsys):
     real = batch.FrameMeter.__call__
     calls = []

@@ -55,3 +55,17 @@ def test_same_frames_same_video_bytes(tmp_path):
         digests.add(hashlib.sha256(path.read_bytes()).hexdigest())
         _churn(k)
     assert len(digests) == 1, f"{len(digests)} different videos from the same frames"
+
+
+def test_writer_checks_its_arguments_before_it_needs_pyav(tmp_path, monkeypatch):
+    """Without PyAV the writer still names a wrong suffix or size (they are wrong with it too);
+    only valid arguments get the install hint.  Nothing is written."""
+    from splatgl.errors import SplatglError
+
+    monkeypatch.setitem(__import__("sys").modules, "av", None)     # import av fails
+    for args, message in [((tmp_path / "v.avi", 96, 64), "video output must end in"),
+                          ((tmp_path / "v.mp4", 95, 64), "needs an even width and height, got 95x64"),
+                          ((tmp_path / "v.mp4", 96, 64), "video output needs PyAV")]:
+        with pytest.raises(SplatglError, match=message):
+            video.VideoWriter(*args)
+    assert list(tmp_path.iterdir()) == []

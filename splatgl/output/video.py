@@ -93,13 +93,13 @@ class VideoWriter:
 
     def __init__(self, path: str | Path, width: int, height: int, fps: float = 30.0,
                  crf: int = DEFAULT_CRF):
-        av = _import_av()
         self.path = Path(path)
         if self.path.suffix.lower() not in VIDEO_SUFFIXES:
             raise SplatglError(f"{self.path}: video output must end in {', '.join(VIDEO_SUFFIXES)}")
         check_video_size(self.path, width, height)
         if not fps > 0:
             raise SplatglError(f"video frame rate must be positive, got {fps}")
+        av = _import_av()       # after the checks: their errors hold with PyAV too
         self.width, self.height = width, height
         self.frames = 0
         self._file = AtomicTarget(self.path, lambda tmp: video_problem(tmp, self.frames))

@@ -109,8 +109,10 @@ def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: Render
     if target.is_video:
         from ..output.video import _import_av, check_video_size
 
-        _import_av()  # the install hint and the size check before any frame renders
+        # The size check and the install hint before any frame renders (the size first: a
+        # wrong size is wrong with PyAV too)
         check_video_size(target.video, cameras[0].width, cameras[0].height)
+        _import_av()
         target.prepare()
         frames = FrameTarget.parse(f"{frame_folder(target.video)}/", "png")  # a folder
         bit_depth = 8  # what the video holds; quantised as VideoWriter quantises
