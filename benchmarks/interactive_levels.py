@@ -5,9 +5,18 @@ rest view: :class:`splatgl.bench.flight.Flight`) at 1280x720: the PSNR against t
 of every render scale in ``SCALES`` times every splat budget (a level-of-detail cut, with the SH
 degree capped at 0, as the budget's levels draw).  The quality model of
 :func:`splatgl.interactive.budget.predicted_psnr` was fitted to this output
-(docs/results/interactive-levels-psnr.json).  No timing: it may run beside other work::
+(docs/results/interactive-levels-psnr.json).  Without ``--repeats`` there is no timing, and it
+may run beside other work::
 
     python benchmarks/interactive_levels.py SCENE... --out docs/results/interactive-levels-psnr.json
+
+``--repeats N`` also times each level: the median of N draws at cameras a millisecond of flight
+apart (each a moving frame: the order stage runs again), as the session draws it (order stage,
+draw, upscale).  ``--times`` and ``--scales`` pick other views and scales, for example the
+fill-bound donut views of docs/interactive.md::
+
+    python benchmarks/interactive_levels.py donut_sh0.ply --repeats 4 --times 4.5,6.8,7.5 \
+        --scales 0.5,0.4,0.35,0.3,0.25,0.2,0.15 --out donut-levels.json
 """
 
 from __future__ import annotations
@@ -15,6 +24,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+
+import numpy as np
 
 from splatgl.api import Renderer
 from splatgl.bench.flight import Flight
@@ -34,7 +45,15 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("scenes", nargs="+")
     p.add_argument("--out", required=True)
+    p.add_argument("--repeats", type=int, default=0,
+                   help="also time each level: the median of this many draws (default: no timing)")
+    p.add_argument("--times", default=",".join(map(str, TIMES)),
+                   help="seconds into the flight of the views (comma-separated)")
+    p.add_argument("--scales", default=",".join(map(str, SCALES)),
+                   help="render scales (comma-separated)")
     args = p.parse_args()
+    times = [float(t) for t in args.times.split(",")]
+    scales = [float(x) for x in args.scales.split(",")]
     renderer, rows = Renderer(), []
     for path in args.scenes:
         scene = load_scene(path)
@@ -42,19 +61,23 @@ def main() -> None:
         lod = LodProvider(scene, scene.source.path, min_splats=1)
         lod.wait()
         levels = LevelRenderer(renderer, scene, RenderSettings(), lod)
-        for t in TIMES:
+        for t in times:
             cam = flight.camera(t)
             exact = levels.read(levels.draw(cam, Level()))
             for budget in BUDGETS:
                 if budget is not None and budget >= scene.count:
                     continue
-                for scale in SCALES:
+                for scale in scales:
                     sh = 0 if budget is not None and scene.sh_degree else None
-                    frame = levels.draw(cam, Level(scale, budget, sh))
+                    level = Level(scale, budget, sh)
+                    seconds = [levels.draw(flight.camera(t + 0.001 * k), level).seconds
+                               for k in range(args.repeats)]
+                    frame = levels.draw(cam, level)
                     value = psnr(levels.read(frame)[..., :3], exact[..., :3])
                     rows.append(dict(scene=path.split("/")[-1], t=t, count=scene.count, scale=scale,
                                      budget=budget, sh=sh, splats=frame.splats,
-                                     psnr=None if math.isinf(value) else value))
+                                     psnr=None if math.isinf(value) else value,
+                                     seconds=float(np.median(seconds)) if seconds else None))
                     print(rows[-1], flush=True)
         levels.release()
     with open(args.out, "w") as f:
