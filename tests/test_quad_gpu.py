@@ -7,6 +7,7 @@ float32 rounding, gives relative errors ~1e-6, and blending a few layers adds a 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -18,22 +19,24 @@ from helpers import scene_with_colors as make_scene
 from splatgl.twins.blend import blend_front_to_back, splat_alpha
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import orbit
-from splatgl.constants import ALPHA_MIN, FAST_CORNER_SIGMAS
+from splatgl.cameras.view import View, draft_low_pass
+from splatgl.constants import ALPHA_MIN, FAST_CORNER_SIGMAS, LOW_PASS
 from splatgl.twins.project import ellipse_axes, project
 from splatgl.renderers.quad import composite
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene
-from splatgl.model.settings import Precision, QuadExtent, RenderSettings, resolve_near
+from splatgl.model.settings import Precision, Preprocess, QuadExtent, RenderSettings, resolve_near
 from splatgl.order.sort import depth_sort
 
 TOL32 = 2e-5
 
 
-def twin_image(scene: Scene, camera: Camera, background=(0.0, 0.0, 0.0)) -> np.ndarray:
+def twin_image(scene: Scene, camera: Camera, background=(0.0, 0.0, 0.0), antialias: bool = False,
+               low_pass: float = LOW_PASS) -> np.ndarray:
     """Float64 NumPy twin of the whole quad path for a small scene: (H, W, 4)."""
     pr = project(scene.means.astype(np.float64), scene.rotations.astype(np.float64),
                  scene.scales.astype(np.float64), scene.opacities.astype(np.float64),
-                 scene.sh.astype(np.float64), camera)
+                 scene.sh.astype(np.float64), camera, antialias=antialias, low_pass=low_pass)
     order = depth_sort(pr.depth.astype(np.float32), np.arange(scene.count, dtype=np.uint32))
     alpha = splat_alpha(pr.mean2d[order], pr.conic[order], pr.opacity[order], camera.width, camera.height)
     rgba = blend_front_to_back(alpha, pr.color[order])
@@ -94,6 +97,34 @@ def test_random_scene_matches_twin_in_both_extents(gl_renderer, artifacts_dir):
     for extent in (QuadExtent.ELLIPSE, QuadExtent.SQUARE):
         got = gl_renderer.render(scene, cam, RenderSettings(extent=extent))
         assert_images_close(got, expected, TOL32, f"random_{extent.value}", artifacts_dir)
+
+
+@pytest.mark.parametrize("antialias, preprocess", [(False, Preprocess.COMPUTE),
+                                                    (True, Preprocess.COMPUTE),
+                                                    (False, Preprocess.VERTEX)])
+def test_a_views_own_low_pass_matches_the_twin(gl_renderer, artifacts_dir, antialias, preprocess):
+    """A View's low_pass (a draft's dilation, draft_low_pass) replaces LOW_PASS in the 2D
+    covariance, its determinant and the antialiasing factor, in the pre-pass and the draw: the
+    image is the twin's with that low pass, and differs from the default one."""
+    rng = np.random.default_rng(12)
+    n = 40
+    means = rng.normal(size=(n, 3)) * [0.6, 0.5, 0.4] + [0, 0, 4]
+    scene = make_scene(means, rng.normal(size=(n, 4)), rng.uniform(0.005, 0.1, (n, 3)),
+                       rng.uniform(0.05, 0.35, n), rng.uniform(0, 1, (n, 3)))
+    full = Camera(160, 120, 140.0, 140.0, 80.0, 60.0)
+    cam = full.resized(80, 60)                         # a draft at scale 0.5
+    low_pass = draft_low_pass(full, cam)
+    assert low_pass == pytest.approx(LOW_PASS * 0.25) and draft_low_pass(full, full) is None
+    settings = RenderSettings(antialias=antialias, preprocess=preprocess)
+    quad = gl_renderer.renderer_for(scene, settings)
+    view = View.of(cam, settings, scene)
+    got = quad.render(dataclasses.replace(view, low_pass=low_pass)).rgba
+    expected = twin_image(scene, cam, antialias=antialias, low_pass=low_pass)
+    assert_images_close(got, expected, TOL32, f"view_low_pass_aa{int(antialias)}_{preprocess.value}", artifacts_dir)
+    default = quad.render(view).rgba                   # the same renderer, LOW_PASS again
+    assert_images_close(default, twin_image(scene, cam, antialias=antialias), TOL32,
+                        f"view_default_low_pass_aa{int(antialias)}_{preprocess.value}", artifacts_dir)
+    assert np.abs(got - default).max() > 0.05          # the small splats really are smaller
 
 
 def test_fast_extent_is_the_gaussian_cut_at_a_fixed_rectangle(gl_renderer, artifacts_dir):

@@ -21,11 +21,21 @@ mat3 covariance_3d(mat3 rot, vec3 scale) {
     return m * transpose(m);
 }
 
-// Sigma' = J W Sigma W^T J^T + LOW_PASS I, returned as (xx, xy, yy) in pixels^2.
+// The screen-space dilation (px^2): LOW_PASS, or with VIEW_LOW_PASS the view's own
+// (splatgl.cameras.view.View.low_pass: a draft drawn at a fraction s of its window's pixels
+// dilates by LOW_PASS s^2, the full-size frame's 0.3 px^2 in its own larger pixels).
+#ifdef VIEW_LOW_PASS
+uniform float u_low_pass;
+#define SPLAT_LOW_PASS u_low_pass
+#else
+#define SPLAT_LOW_PASS LOW_PASS
+#endif
+
+// Sigma' = J W Sigma W^T J^T + SPLAT_LOW_PASS I, returned as (xx, xy, yy) in pixels^2.
 vec3 covariance_2d(mat3 cov3d, vec3 p) {
     mat3 t = jacobian(p) * u_view_rot;
     mat3 c = t * cov3d * transpose(t);
-    return vec3(c[0][0] + LOW_PASS, c[1][0], c[1][1] + LOW_PASS);
+    return vec3(c[0][0] + SPLAT_LOW_PASS, c[1][0], c[1][1] + SPLAT_LOW_PASS);
 }
 
 // M = J W R S (rows 0 and 1 of the returned matrix; row 2 is zero): Sigma' = M M^T + LOW_PASS I.
@@ -44,7 +54,8 @@ float covariance_2d_det(vec3 cov, mat3 m) {
     vec3 r0 = vec3(m[0][0], m[1][0], m[2][0]);
     vec3 r1 = vec3(m[0][1], m[1][1], m[2][1]);
     vec3 minors = cross(r0, r1);
-    return dot(minors, minors) + LOW_PASS * (dot(r0, r0) + dot(r1, r1)) + LOW_PASS * LOW_PASS;
+    return dot(minors, minors) + SPLAT_LOW_PASS * (dot(r0, r0) + dot(r1, r1))
+           + SPLAT_LOW_PASS * SPLAT_LOW_PASS;
 }
 
 // Q = Sigma'^-1 as (a, b, c) from the adjugate and det (covariance_2d_det); det <= 0 is the
@@ -67,7 +78,7 @@ float discriminant(vec3 cov) {
 // sqrt(max(2.5e-5, det(Sigma') / det(Sigma' + 0.3 I))) for the dilated covariance cov.
 float antialias_factor(vec3 cov) {
     float det_dilated = cov.x * cov.z - cov.y * cov.y;
-    float det = (cov.x - LOW_PASS) * (cov.z - LOW_PASS) - cov.y * cov.y;
+    float det = (cov.x - SPLAT_LOW_PASS) * (cov.z - SPLAT_LOW_PASS) - cov.y * cov.y;
     return sqrt(max(AA_MIN_FACTOR, det / det_dilated));
 }
 

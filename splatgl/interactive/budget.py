@@ -34,22 +34,27 @@ import numpy as np
 
 from ..errors import SplatglError
 
-#: Render scales tried, best first (fractions of the window's width and height).  The two below
+#: Render scales tried, best first (fractions of the window's width and height).  The ones below
 #: 0.25 are for fill-bound views on slow machines: on a 2-core AVX2 llvmpipe donut's close rest
 #: view took 220 ms at 0.25 even with a 12k cut (a cut's merged splats cover as many pixels),
-#: and the frame after an input was that slow (latency 180-200 ms, 95-125 with them).
-SCALES = (1.0, 0.85, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, 0.25, 0.2, 0.15)
+#: and the frame after an input was that slow (latency 180-200 ms, 95-125 with 0.2 and 0.15).
+#: Since drafts keep the full-size footprints (draft_low_pass), all splats at 0.1-0.12 beat any
+#: cut there: 24.4-26.0 dB in 83-90 ms, against 18.5 dB for a 12k cut at 0.15 in 75 ms
+#: (benchmarks/interactive_levels.py at the flight's 7.5 s view).
+SCALES = (1.0, 0.85, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, 0.25, 0.2, 0.15, 0.12, 0.1)
 #: Splat budgets tried below the full scene (only where a level-of-detail tree exists).
 BUDGETS = (1_000_000, 600_000, 400_000, 250_000, 160_000, 100_000, 70_000, 50_000, 35_000,
            25_000, 18_000, 12_000)
 #: The quality model (:func:`predicted_psnr`), fitted to the PSNR of every level against the
 #: exact frame on donut, guitar and biker at 1280x720 (benchmarks/interactive_levels.py,
 #: docs/results/interactive-levels-psnr.json): a lower scale adds a squared error of
-#: ``SCALE_MSE * (1 / scale - 1) ** SCALE_POWER`` (0.5: about 36.5 dB), a cut keeping a share
-#: of the splats ``CUT_MSE * (1 / share - 1) ** CUT_POWER`` (a third: about 31 dB).  The two
-#: overlap (a cut's merged splats are blurred already, so a lower scale costs it little): the
-#: larger counts whole, the smaller by ``OVERLAP``.
-SCALE_MSE, SCALE_POWER = 2.2e-4, 1.47
+#: ``SCALE_MSE * (1 / scale - 1) ** SCALE_POWER`` (0.5: about 44.4 dB, 0.3: 38.6), a cut keeping
+#: a share of the splats ``CUT_MSE * (1 / share - 1) ** CUT_POWER`` (a third: about 31 dB).  The
+#: two overlap (a cut's merged splats are blurred already, so a lower scale costs it little):
+#: the larger counts whole, the smaller by ``OVERLAP``.  Median error over the grid: 2.8 dB.
+#: (Before drafts drew with the full-size footprints, :func:`~splatgl.cameras.view.draft_low_pass`,
+#: the scale's error was 2.2e-4 and 1.47: 36.5 dB at 0.5.)
+SCALE_MSE, SCALE_POWER = 3.6e-5, 1.59
 CUT_MSE, CUT_POWER = 5e-4, 0.6
 OVERLAP = 0.5
 #: The scene's correction to the cut's error (:func:`cut_factor_for`): the fitted model is off by

@@ -4,8 +4,9 @@ Full-detail levels draw with the scene's own quad renderer (the one :class:`spla
 keeps for these settings, so the exact level is exactly ``splatgl render``'s image); budgeted
 levels draw a level-of-detail cut of at most the budget's nodes through a second quad renderer
 over the tree (:func:`splatgl.lod.source.lod_renderer`), with the SH degree capped.  A frame at
-a lower render scale is upscaled to the camera's size at once (:mod:`.upscale`), so its time is
-the whole cost of the frame.  The image stays on the GPU (premultiplied ``(C, A)``); the viewer
+a lower render scale is drawn with the full-size frame's splat footprints (the screen-space
+dilation scaled with the pixels: :func:`~splatgl.cameras.view.draft_low_pass`) and upscaled to
+the camera's size at once (:mod:`.upscale`), so its time is the whole cost of the frame.  The image stays on the GPU (premultiplied ``(C, A)``); the viewer
 samples it, a preview reads it back.
 """
 
@@ -20,7 +21,7 @@ import numpy as np
 
 from ..api import Renderer
 from ..cameras.camera import Camera
-from ..cameras.view import View
+from ..cameras.view import View, draft_low_pass
 from ..lod.render import LodSettings
 from ..lod.source import lod_renderer
 from ..model.scene import Scene
@@ -107,7 +108,8 @@ class LevelRenderer:
         the frame (the image is the same whatever the batches)."""
         quad = self._quad(level)
         cam = scaled(camera, level.scale)
-        view = View.of(cam, quad.settings, quad.scene)
+        view = dataclasses.replace(View.of(cam, quad.settings, quad.scene),
+                                   low_pass=draft_low_pass(camera, cam))
         t0 = time.perf_counter()
         if on_batch is not None:   # the order stage (cull and sort, on the CPU) comes first:
             on_batch(0, len(quad.order(view)))   # a chance to abandon the frame after it

@@ -47,11 +47,11 @@ REFINE_BATCH_SHARE = 0.05
 MIN_REFINE_BATCH = 1024
 #: The calibration cut is drawn at this render scale, where the quality model's scale error is
 #: nil, so the PSNR measured is the cut's alone.  Measured at the moving frame's scale it said
-#: nothing where that scale was low: on an AVX2 llvmpipe donut moved at 0.15, whose upscale
-#: alone loses more than its 12k cut (the model: 25.5 dB against 30), so the cut factor stayed
-#: 1 and the flight kept cuts that lose 2.6 times the model's error.  At 0.5 guitar's cut
-#: (37.9 dB) still hid under the model's scale error.  The draw is one more at rest, after the
-#: exact frame, interrupted by input like a refinement step.
+#: nothing where that scale was low: on an AVX2 llvmpipe donut moved at 0.15, where the model
+#: put the scale's error above its 12k cut's, so the cut factor stayed 1 and the flight kept
+#: cuts that lose 2.6 times the model's error.  At 0.5 guitar's cut (37.9 dB) still hid under
+#: the scale's error.  The draw is one more at rest, after the exact frame, interrupted by input
+#: like a refinement step.
 CALIBRATION_SCALE = 1.0
 
 
