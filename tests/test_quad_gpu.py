@@ -84,14 +84,18 @@ def test_thin_ellipse_orientation(gl_renderer, artifacts_dir, angle_deg):
     assert major == pytest.approx(angle_deg, abs=0.5)
 
 
-def test_random_scene_matches_twin_in_both_extents(gl_renderer, artifacts_dir):
-    rng = np.random.default_rng(11)
-    n = 40
+def _random_splats(seed: int, scales: tuple[float, float], n: int = 40) -> Scene:
+    """``n`` splats around z = 4 with scales in ``scales`` and opacity at most 0.35."""
+    rng = np.random.default_rng(seed)
     means = rng.normal(size=(n, 3)) * [0.6, 0.5, 0.4] + [0, 0, 4]
+    return make_scene(means, rng.normal(size=(n, 4)), rng.uniform(*scales, (n, 3)),
+                      rng.uniform(0.05, 0.35, n), rng.uniform(0, 1, (n, 3)))
+
+
+def test_random_scene_matches_twin_in_both_extents(gl_renderer, artifacts_dir):
     # Opacity <= 0.35 keeps every alpha >= 1/255 pixel inside both the ellipse and the
     # 3-sigma square quads, so the two extents must give the same image as the dense twin.
-    scene = make_scene(means, rng.normal(size=(n, 4)), rng.uniform(0.02, 0.25, (n, 3)),
-                       rng.uniform(0.05, 0.35, n), rng.uniform(0, 1, (n, 3)))
+    scene = _random_splats(11, (0.02, 0.25))
     cam = Camera(80, 60, 70.0, 70.0, 40.0, 30.0)
     expected = twin_image(scene, cam)
     for extent in (QuadExtent.ELLIPSE, QuadExtent.SQUARE):
@@ -106,11 +110,7 @@ def test_a_views_own_low_pass_matches_the_twin(gl_renderer, artifacts_dir, antia
     """A View's low_pass (a draft's dilation, draft_low_pass) replaces LOW_PASS in the 2D
     covariance, its determinant and the antialiasing factor, in the pre-pass and the draw: the
     image is the twin's with that low pass, and differs from the default one."""
-    rng = np.random.default_rng(12)
-    n = 40
-    means = rng.normal(size=(n, 3)) * [0.6, 0.5, 0.4] + [0, 0, 4]
-    scene = make_scene(means, rng.normal(size=(n, 4)), rng.uniform(0.005, 0.1, (n, 3)),
-                       rng.uniform(0.05, 0.35, n), rng.uniform(0, 1, (n, 3)))
+    scene = _random_splats(12, (0.005, 0.1))
     full = Camera(160, 120, 140.0, 140.0, 80.0, 60.0)
     cam = full.resized(80, 60)                         # a draft at scale 0.5
     low_pass = draft_low_pass(full, cam)
@@ -120,10 +120,11 @@ def test_a_views_own_low_pass_matches_the_twin(gl_renderer, artifacts_dir, antia
     view = View.of(cam, settings, scene)
     got = quad.render(dataclasses.replace(view, low_pass=low_pass)).rgba
     expected = twin_image(scene, cam, antialias=antialias, low_pass=low_pass)
-    assert_images_close(got, expected, TOL32, f"view_low_pass_aa{int(antialias)}_{preprocess.value}", artifacts_dir)
+    name = f"aa{int(antialias)}_{preprocess.value}"
+    assert_images_close(got, expected, TOL32, f"view_low_pass_{name}", artifacts_dir)
     default = quad.render(view).rgba                   # the same renderer, LOW_PASS again
     assert_images_close(default, twin_image(scene, cam, antialias=antialias), TOL32,
-                        f"view_default_low_pass_aa{int(antialias)}_{preprocess.value}", artifacts_dir)
+                        f"view_default_low_pass_{name}", artifacts_dir)
     assert np.abs(got - default).max() > 0.05          # the small splats really are smaller
 
 
