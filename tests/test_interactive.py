@@ -116,6 +116,19 @@ def test_motion_after_a_rest_starts_at_the_level_the_model_predicts_to_fit():
     assert budget.index == lower
 
 
+def test_a_tree_arriving_late_brings_the_level_back_within_the_budget():
+    """The viewer's session starts before its level-of-detail tree is ready: without cuts every
+    level of a 150k-splat scene is over the budget, so the level sinks to the ladder's bottom.
+    Once the tree arrives, cuts ranked above that bottom fit: the level must reach one."""
+    budget = FrameBudget(0.1, 150_000, 1280 * 720, 0, has_lod=False)
+    levels = _run(budget, 10, per_splat=1e-6)
+    assert levels[-1] == budget.levels[-1] and levels[-1].budget is None   # all over budget
+    budget.set_lod(True)
+    levels = _run(budget, 10, per_splat=1e-6)
+    assert levels[-1].budget is not None
+    assert _cost(levels[-1], 150_000, 1280 * 720, per_splat=1e-6) <= budget.budget
+
+
 def test_a_one_off_slow_frame_is_recovered_from():
     """A hiccup (another program, a collection) drops the level; fast frames bring it back up
     even though frames at one level teach the model little (the probes)."""

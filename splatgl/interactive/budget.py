@@ -305,7 +305,13 @@ class FrameBudget:
             if probed is not None:   # a failed probe: not again for a while (longer each time)
                 self._backoff = min(getattr(self, "_backoff", PROBE_BACKOFF) * 2, PROBE_BACKOFF_MAX)
                 self._probe_wait[probed] = self._backoff
-            self.index, self._ups = max(target, self.index + (probed is not None)), 0   # down at once
+            down = max(target, self.index + (probed is not None))          # down at once
+            # ... or to a better level the model finds cheaper: levels are ranked by quality,
+            # not cost, and a level-of-detail tree arriving late (the viewer's) adds cuts that
+            # are both.  Without this the viewer stayed at the no-tree ladder's bottom (biker:
+            # scale 0.1, all splats, 150-250 ms a frame) while 50k-splat cuts fitted.
+            cheaper = self.predict(self.levels[target]) < self.predict(self.current)
+            self.index, self._ups = (target if cheaper else down), 0
         elif target < self.index:
             self._ups += 1
             if self._ups >= self.patience:                      # fast enough for a while: up
