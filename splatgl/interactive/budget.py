@@ -306,12 +306,14 @@ class FrameBudget:
                 self._backoff = min(getattr(self, "_backoff", PROBE_BACKOFF) * 2, PROBE_BACKOFF_MAX)
                 self._probe_wait[probed] = self._backoff
             down = max(target, self.index + (probed is not None))          # down at once
-            # ... or to a better level the model finds cheaper: levels are ranked by quality,
-            # not cost, and a level-of-detail tree arriving late (the viewer's) adds cuts that
-            # are both.  Without this the viewer stayed at the no-tree ladder's bottom (biker:
-            # scale 0.1, all splats, 150-250 ms a frame) while 50k-splat cuts fitted.
-            cheaper = self.predict(self.levels[target]) < self.predict(self.current)
-            self.index, self._ups = (target if cheaper else down), 0
+            # ... or, where the level in use is predicted far over the budget, to a better level
+            # the model finds cheaper: levels are ranked by quality, not cost, and a
+            # level-of-detail tree arriving late (the viewer's) adds cuts that are both.
+            # Without this the viewer stayed at the no-tree ladder's bottom (biker: scale 0.1,
+            # all splats, 150-250 ms a frame) while 50k-splat cuts fitted.
+            current = self.predict(self.current)
+            stuck = current > self.over * self.budget and self.predict(self.levels[target]) < current
+            self.index, self._ups = (target if stuck else down), 0
         elif target < self.index:
             self._ups += 1
             if self._ups >= self.patience:                      # fast enough for a while: up
