@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import re
 import signal
+import sys
 
 import numpy as np
 import pytest
@@ -133,7 +134,7 @@ def test_bad_path_arguments_one_line(tmp_path, capsys, argv, message):
 ])
 def test_without_pyav_a_wrong_video_size_is_named_before_the_install_hint(tmp_path, capsys,
                                                                           monkeypatch, size, message):
-    monkeypatch.setitem(__import__("sys").modules, "av", None)     # import av fails
+    monkeypatch.setitem(sys.modules, "av", None)     # import av fails
     argv = ["--path", "orbit:2", "-o", f"{tmp_path}/x.mp4", "--width", size[0], "--height", size[1]]
     assert _render(*argv) == 2
     err = capsys.readouterr().err

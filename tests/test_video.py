@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import sys
 
 import numpy as np
 import pytest
@@ -62,7 +63,7 @@ def test_writer_checks_its_arguments_before_it_needs_pyav(tmp_path, monkeypatch)
     only valid arguments get the install hint.  Nothing is written."""
     from splatgl.errors import SplatglError
 
-    monkeypatch.setitem(__import__("sys").modules, "av", None)     # import av fails
+    monkeypatch.setitem(sys.modules, "av", None)     # import av fails
     for args, message in [((tmp_path / "v.avi", 96, 64), "video output must end in"),
                           ((tmp_path / "v.mp4", 95, 64), "needs an even width and height, got 95x64"),
                           ((tmp_path / "v.mp4", 96, 64), "video output needs PyAV")]:
