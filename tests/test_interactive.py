@@ -177,6 +177,19 @@ def test_calibration_ranks_cuts_by_what_they_cost_in_this_scene():
     assert predicted_psnr(level, 100_000, budget.cut_factor) == pytest.approx(predicted - 6.0, abs=0.5)
 
 
+def test_a_smaller_budget_moves_the_level_down_and_settles_under_it():
+    budget = FrameBudget(0.1, 50_000, 1280 * 720)
+    _run(budget, 40)
+    before = budget.predict(budget.current)
+    budget.set_budget(0.06)
+    levels = _run(budget, 40)
+    assert budget.predict(budget.current) < before
+    assert all(_cost(lv, budget.count, budget.pixels) <= 0.06 * budget.hold for lv in levels[-20:])
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(SplatglError, match="budget"):
+            budget.set_budget(bad)
+
+
 @pytest.mark.parametrize("bad", [-1.0, math.inf, math.nan])
 def test_target_fps_is_checked(bad):
     with pytest.raises(SplatglError, match="--target-fps"):
@@ -250,6 +263,27 @@ def test_session_refines_to_exactly_the_render(gl_renderer, scene):
         want = gl_renderer.render(scene, _camera(0.05), settings)
         assert np.array_equal(got, want)
         assert session.frame(_camera(0.05)) is None  # exact: nothing more to draw
+    finally:
+        session.release()
+
+
+def test_the_windows_overhead_comes_off_the_draws_budget(gl_renderer, scene):
+    """The draw's budget is the period less the median overhead of the last frames (one slow
+    swap does not move it), never under MIN_DRAW_SHARE of the period."""
+    from splatgl.interactive.session import MIN_DRAW_SHARE, OVERHEAD_FRAMES
+
+    session = Session(gl_renderer, scene, RenderSettings(), 0.1)
+    try:
+        for _ in range(OVERHEAD_FRAMES):
+            session.note_overhead(0.02)
+        assert session.budget.budget == pytest.approx(0.08)
+        session.note_overhead(0.5)                       # one slow present
+        session.note_overhead(math.nan)                  # ignored
+        assert session.budget.budget == pytest.approx(0.08)
+        for _ in range(OVERHEAD_FRAMES):
+            session.note_overhead(0.09)
+        assert session.budget.budget == pytest.approx(MIN_DRAW_SHARE * 0.1)
+        assert session.period == 0.1
     finally:
         session.release()
 

@@ -261,6 +261,13 @@ class FrameBudget:
     def set_pixels(self, pixels: int) -> None:
         self.pixels = int(pixels)
 
+    def set_budget(self, budget: float) -> None:
+        """Seconds a moving frame's draw may take from now on (the viewer's frame period less
+        what its window costs besides the draw: :meth:`~.session.Session.note_overhead`)."""
+        if not (math.isfinite(budget) and budget > 0.0):
+            raise SplatglError(f"frame-time budget must be a positive number of seconds, got {budget}")
+        self.budget = float(budget)
+
     @property
     def current(self) -> Level:
         return self.levels[self.index]

@@ -53,6 +53,15 @@ MIN_REFINE_BATCH = 1024
 #: the scale's error.  The draw is one more at rest, after the exact frame, interrupted by input
 #: like a refinement step.
 CALIBRATION_SCALE = 1.0
+#: A window spends time on each frame besides the draw (the viewer on an AVX2 llvmpipe: 7 ms to
+#: present the frame, 5 ms to swap, about 5 ms more in its loop), so a draw that fills the whole
+#: period misses the frame rate (donut at 10 fps: 7.9 fps in the window).  The draw's budget is
+#: the period less the median of the last OVERHEAD_FRAMES moving frames' overhead
+#: (:meth:`Session.note_overhead`): a median, so one slow swap does not move the levels.
+OVERHEAD_FRAMES = 9
+#: ... but never below this share of the period: an overhead that large is the window's problem,
+#: and a draw squeezed further would only show worse frames at no better rate.
+MIN_DRAW_SHARE = 0.5
 
 
 def default_fps(renderer: Renderer) -> float:
@@ -81,9 +90,10 @@ def camera_key(camera: Camera) -> tuple:
 class Session:
     """Frames of one scene for one window (see the module doc).
 
-    ``budget``: seconds a moving frame may take; ``lod``: the level-of-detail provider (None: no
-    splat budgets).  After each :meth:`frame`: :attr:`shown` (the frame to present),
-    :attr:`status` ("moving", "refining" or "exact").
+    ``budget``: seconds a moving frame may take (the frame period; the draw's share of it
+    follows :meth:`note_overhead`); ``lod``: the level-of-detail provider (None: no splat
+    budgets).  After each :meth:`frame`: :attr:`shown` (the frame to present), :attr:`status`
+    ("moving", "refining" or "exact").
     """
 
     def __init__(self, renderer: Renderer, scene: Scene, settings: RenderSettings, budget: float,
@@ -92,6 +102,10 @@ class Session:
         self.lod = lod
         self.levels = LevelRenderer(renderer, scene, settings, lod)
         self.budget = FrameBudget(budget, scene.count, 1280 * 720, scene.sh_degree, has_lod=False)
+        self.period = self.budget.budget
+        self._overheads: list[float] = []
+        #: Whether the last frame drawn was a moving frame (not a refinement step).
+        self.moved = False
         self.shown: DraftFrame | None = None
         self.status = "exact"
         self._key: tuple | None = None
@@ -156,6 +170,7 @@ class Session:
             self.status = "refining"
             return None
         self._plan.pop(0)
+        self.moved = False
         if level.budget is None and frame.splats:
             self._full_per_splat = frame.seconds / frame.splats
         if level.exact:
@@ -176,11 +191,23 @@ class Session:
         frame = self.levels.draw(camera, level)
         self.budget.report(level, frame.splats, frame.seconds)
         self._key, self.shown, self._moving_level = camera_key(camera), frame, level
+        self.moved = True
         self._plan = [] if level.exact else self.plan(level)
         self._calibration = None                  # it was for the camera at rest
         self.status = "exact" if level.exact else "moving"
         self.refine_started = None
         return frame
+
+    def note_overhead(self, seconds: float) -> None:
+        """The caller spent ``seconds`` on the last moving frame besides its draw (the viewer:
+        presenting it, swapping, its loop).  The draw's budget becomes the frame period less
+        the median of the last :data:`OVERHEAD_FRAMES` of these, and at least
+        :data:`MIN_DRAW_SHARE` of the period, so whole frames land within the period."""
+        if not (math.isfinite(seconds) and seconds >= 0.0):
+            return
+        self._overheads = (self._overheads + [float(seconds)])[-OVERHEAD_FRAMES:]
+        overhead = float(np.median(self._overheads))
+        self.budget.set_budget(max(MIN_DRAW_SHARE * self.period, self.period - overhead))
 
     def _calibration_level(self) -> Level | None:
         """The cut to measure against the exact frame just drawn: the last moving frame's level,

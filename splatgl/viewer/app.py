@@ -259,7 +259,10 @@ class Viewer:
         if self.need_present:
             self.present()
             if rendered:
-                self.display.record_frame_time(time.perf_counter() - self._frame_start)
+                seconds = time.perf_counter() - self._frame_start
+                self.display.record_frame_time(seconds)
+                if self.paced:     # the window's share of a moving frame comes off the draw's
+                    self.pacer.note_frame(seconds, self.last.draw)
         return rendered
 
     @property

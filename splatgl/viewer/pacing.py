@@ -67,6 +67,13 @@ class Pacer:
                            f"{drawn.splats:,} drawn / {self.scene.count:,}",
                            quality=self.describe())
 
+    def note_frame(self, seconds: float, drawn: float) -> None:
+        """The window's whole last frame took ``seconds``, its draw ``drawn`` of them: where it
+        was a moving frame, the rest (present, swap, the loop) comes off the draw's budget
+        (:meth:`~splatgl.interactive.session.Session.note_overhead`)."""
+        if self.session is not None and self.session.moved:
+            self.session.note_overhead(seconds - drawn)
+
     @property
     def refining(self) -> bool:
         """Whether refinement steps are left (the loop should poll, not wait for events)."""
