@@ -97,3 +97,36 @@ def test_no_budget_draws_every_frame_exact(xvfb_display, scene, tmp_path):
         assert not v.paced
         _move(v, 2)
         assert v.pacer.session is None and v.last.quality == ""
+
+
+def test_a_slow_present_comes_off_the_draws_budget(xvfb_display, scene, tmp_path, monkeypatch):
+    """Moving frames of a window whose present takes 30 ms: the draw's budget drops by at least
+    that, so whole frames (draw and present) aim at the period; refinement steps at rest do
+    not count."""
+    import time
+
+    with _viewer(scene, tmp_path, 10.0) as v:
+        draw = v.display.draw
+
+        def slow_draw(*args):
+            draw(*args)
+            time.sleep(0.03)
+
+        monkeypatch.setattr(v.display, "draw", slow_draw)
+        _move(v, 5)
+        session = v.pacer.session
+        assert session.period == pytest.approx(0.1)
+        assert session.budget.budget <= 0.1 - 0.03
+        noted = list(session._overheads)
+        assert len(noted) == 5 and min(noted) >= 0.03
+        while v.step(dt=0.0):            # rest: refinement steps, not moving frames
+            pass
+        assert session._overheads == noted
+
+
+def test_the_benchmark_reports_the_frames_median_and_10th_percentile(xvfb_display, scene, tmp_path):
+    with _viewer(scene, tmp_path, 10.0) as v:
+        v.step()
+        r = v.benchmark(6)
+        assert 0.0 < r["fps_p10"] <= r["fps_median"]
+        assert r["fps"] == pytest.approx(1.0 / r["frame"])

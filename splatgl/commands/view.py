@@ -116,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
             r = viewer.benchmark(args.benchmark)
             print(f"benchmark: {args.benchmark} frames at {viewer.size[0]}x{viewer.size[1]}, "
                   f"{viewer.kind.value}: {r['fps']:.2f} fps, frame {r['frame'] * 1e3:.1f} ms "
-                  f"(sort {r['sort'] * 1e3:.1f} ms, draw {r['draw'] * 1e3:.1f} ms)", flush=True)
+                  f"(sort {r['sort'] * 1e3:.1f} ms, draw {r['draw'] * 1e3:.1f} ms); per frame: "
+                  f"median {r['fps_median']:.2f} fps, 10th percentile {r['fps_p10']:.2f}", flush=True)
             return 0
         viewer.run()
     return 0
