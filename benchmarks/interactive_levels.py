@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from splatgl.api import Renderer
-from splatgl.bench.flight import Flight
+from splatgl.bench.flight import MOVE_END, Flight
 from splatgl.evaluation.metrics import psnr
 from splatgl.formats import load_scene
 from splatgl.interactive.budget import Level
@@ -41,6 +41,20 @@ BUDGETS = (None, 100_000, 50_000, 25_000, 12_000, 6_000)
 TIMES = (0.0, 6.5, 8.0)
 
 
+def _numbers(low: float, high: float, what: str):
+    """An argparse type: comma-separated numbers in [low, high], or a one-line error naming them."""
+    def parse(text: str) -> list[float]:
+        try:
+            values = [float(v) for v in text.split(",")]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what} must be comma-separated numbers, got {text!r}")
+        bad = [v for v in values if not low <= v <= high]
+        if bad:
+            raise argparse.ArgumentTypeError(f"{what} must lie in [{low:g}, {high:g}], got {bad[0]:g}")
+        return values
+    return parse
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("scenes", nargs="+")
@@ -48,12 +62,14 @@ def main() -> None:
     p.add_argument("--repeats", type=int, default=0,
                    help="also time each level: the median of this many draws (default: no timing)")
     p.add_argument("--times", default=",".join(map(str, TIMES)),
-                   help="seconds into the flight of the views (comma-separated)")
-    p.add_argument("--scales", default=",".join(map(str, SCALES)),
-                   help="render scales (comma-separated)")
+                   type=_numbers(0.0, MOVE_END, "--times"),
+                   help=f"seconds into the flight of the views (comma-separated, 0-{MOVE_END:g})")
+    p.add_argument("--scales", default=",".join(map(str, SCALES)), type=_numbers(0.01, 1.0, "--scales"),
+                   help="render scales (comma-separated, 0.01-1)")
     args = p.parse_args()
-    times = [float(t) for t in args.times.split(",")]
-    scales = [float(x) for x in args.scales.split(",")]
+    if args.repeats < 0:
+        p.error(f"--repeats must be 0 or more, got {args.repeats}")
+    times, scales = args.times, args.scales
     renderer, rows = Renderer(), []
     for path in args.scenes:
         scene = load_scene(path)
