@@ -116,6 +116,27 @@ def test_motion_after_a_rest_starts_at_the_level_the_model_predicts_to_fit():
     assert budget.index == lower
 
 
+def test_motion_after_a_rest_keeps_a_level_measured_within_the_budget():
+    """The rest's exact frame teaches the model a cost far from the moving levels (donut: a
+    linear fit to it put them all over budget, and motion restarted at the ladder's bottom).
+    The last moving frame measured the level in use within budget: motion resumes there.  A
+    level whose last frame was slow still goes down to the model's fit."""
+    budget = FrameBudget(0.1, 300_000, 1280 * 720, 0, has_lod=True)
+    levels = _run(budget, 30)
+    kept = budget.index
+    assert _cost(levels[-1], 300_000, budget.pixels) <= budget.hold * budget.budget
+    budget.observe(EXACT, 300_000, 1.0)            # a slow exact frame at rest
+    assert budget.target() > kept                  # the model now wants a worse level
+    budget._ups = 2
+    budget.resume()
+    assert budget.index == kept and budget._ups == 0
+    level = budget.level()
+    budget.report(level, level.budget or 300_000, 0.3)     # a slow moving frame ...
+    budget.index = kept
+    budget.resume()                                # ... is not trusted: down to the fit
+    assert budget.index == max(kept, budget.target())
+
+
 def test_a_tree_arriving_late_brings_the_level_back_within_the_budget():
     """The viewer's session starts before its level-of-detail tree is ready: without cuts every
     level of a 150k-splat scene is over the budget, so the level sinks to the ladder's bottom.

@@ -228,6 +228,7 @@ class FrameBudget:
         self.levels = ladder(self.count, has_lod, sh_degree)
         self.index = 0          # the level in use (an index into :attr:`levels`)
         self._ups = 0           # frames in a row whose target was higher than the level in use
+        self._last: tuple[Level, float] | None = None   # the last moving frame's level and seconds
 
     def set_lod(self, has_lod: bool) -> None:
         """A level-of-detail tree became available (or went away): new ladder, same quality."""
@@ -289,17 +290,28 @@ class FrameBudget:
         return self.current
 
     def resume(self) -> None:
-        """Motion starts after a rest: start afresh.  Go down to the level the model predicts to
-        fit where the one in use is better (the model has learnt the rest's frames too), and
-        count the frames that want a better level from 0: the count left from before the rest
-        let the level jump up after two frames to an over-predicted full-detail level (1.0-1.3 s
-        on 1M splats on an AVX2 llvmpipe)."""
-        self.index, self._ups = max(self.index, self.target()), 0
+        """Motion starts after a rest: start afresh.  Count the frames that want a better level
+        from 0: the count left from before the rest let the level jump up after two frames to
+        an over-predicted full-detail level (1.0-1.3 s on 1M splats on an AVX2 llvmpipe).
+
+        Keep the level in use where the last moving frame drew it within ``hold`` budgets: that
+        measurement is better evidence than the model, which has learnt the rest's exact frame
+        too.  A linear fit to one frame at full detail (donut: 0.3-0.45 s, with the refinement's
+        batches) overshot the moving levels' costs, and motion restarted at the ladder's bottom
+        (scale 0.1, 12,000 splats, 26 dB) for the three frames patience takes to climb back.
+        Otherwise (no moving frame yet, or it was slow) go down to the level the model predicts
+        to fit where the one in use is better."""
+        last = self._last
+        measured = last is not None and last[0] == self.current and last[1] <= self.hold * self.budget
+        if not measured:
+            self.index = max(self.index, self.target())
+        self._ups = 0
 
     def report(self, level: Level, splats: int, seconds: float) -> None:
         """What the last frame drew (``splats``, at ``level``) and how long it took; moves the
         level for the next frame (see the module doc for the hysteresis)."""
         self.model.update(float(splats), self.pixels * level.scale * level.scale, float(seconds))
+        self._last = (level, float(seconds))
         target = self.target()
         probed, self._probing = self._probing, None
         slow = seconds > self.over * self.budget or self.predict(self.current) > self.hold * self.budget
