@@ -36,7 +36,6 @@ as the SPZ specification says and the stored axes for versions 1-2).
 
 from __future__ import annotations
 
-import math
 import struct
 import zlib
 from dataclasses import dataclass
