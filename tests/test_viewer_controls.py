@@ -158,3 +158,43 @@ def test_fit_camera_keeps_a_file_cameras_own_intrinsics():
     wide = fit_camera(cam, 500, 200)  # twice as tall, wider aspect: frame centred
     assert (wide.fx, wide.fy, wide.cy) == (360.0, 300.0, 114.0)
     assert wide.cx == 93.0 * 2 + 0.5 * (500 - 400)
+
+
+def _panel_by_render_text(lines: list[str], size: int) -> np.ndarray:
+    """The status panel drawn the direct way: render_text onto the panel, line by line."""
+    import OpenImageIO as oiio
+
+    from splatgl.viewer import overlay as o
+
+    cells = [line.split("\t", 1) for line in lines]
+    col2 = max((o._text_width(c[0], size) + 3 * o.PADDING for c in cells if len(c) == 2), default=0)
+    w = max(o._text_width(c[0], size) if len(c) == 1 else col2 + o._text_width(c[1], size)
+            for c in cells) + 2 * o.PADDING
+    h = o.LINE_HEIGHT * len(lines) + 2 * o.PADDING
+    buf = oiio.ImageBuf(oiio.ImageSpec(w, h, 4, oiio.FLOAT))
+    oiio.ImageBufAlgo.fill(buf, (0.0, 0.0, 0.0, o.PANEL_ALPHA))
+    for i, cell in enumerate(cells):
+        for x, text in zip((o.PADDING, o.PADDING + col2), cell):
+            if text.strip():
+                oiio.ImageBufAlgo.render_text(buf, x, o.PADDING + o.LINE_HEIGHT * i + size - 2, text,
+                                              size, "", (1.0, 1.0, 1.0, 1.0))
+    return np.asarray(buf.get_pixels(oiio.FLOAT), np.float32).reshape(h, w, 4)
+
+
+def test_status_panel_reuses_rendered_text_and_draws_what_render_text_draws(monkeypatch):
+    """Each piece of text is rendered once and laid over the panel; the panel equals drawing
+    every line with render_text directly (overhanging glyphs, two columns, the key list)."""
+    import OpenImageIO as oiio
+
+    from splatgl.viewer import overlay as o
+
+    lines = ["quad  10.2 fps  frame 98.1 ms", "splats 23,456 drawn / 90,854", "gjpqy []{}|",
+             "", "keys:"] + o.key_help("\t").splitlines()
+    assert np.array_equal(o.text_image(lines), _panel_by_render_text(lines, o.FONT_SIZE))
+    calls = []
+    render_text = oiio.ImageBufAlgo.render_text
+    monkeypatch.setattr(oiio.ImageBufAlgo, "render_text", lambda *a: calls.append(a) or render_text(*a))
+    lines[0] = "quad  11.3 fps  frame 88.5 ms"          # the next refresh: one line changed
+    panel = o.text_image(lines)
+    assert [c[3] for c in calls] == [lines[0]]          # only the changed line is rendered
+    assert np.array_equal(panel, _panel_by_render_text(lines, o.FONT_SIZE))
