@@ -295,6 +295,9 @@ def test_the_windows_overhead_comes_off_the_draws_budget(gl_renderer, scene):
 
     session = Session(gl_renderer, scene, RenderSettings(), 0.1)
     try:
+        session.note_overhead(0.06)                      # a first frame's one-off costs ...
+        session.note_overhead(0.05)
+        assert session.budget.budget == 0.1             # ... are not the window's own yet
         for _ in range(OVERHEAD_FRAMES):
             session.note_overhead(0.02)
         assert session.budget.budget == pytest.approx(0.08)

@@ -59,6 +59,10 @@ CALIBRATION_SCALE = 1.0
 #: the period less the median of the last OVERHEAD_FRAMES moving frames' overhead
 #: (:meth:`Session.note_overhead`): a median, so one slow swap does not move the levels.
 OVERHEAD_FRAMES = 9
+#: ... once at least this many have been measured: a window's first frames carry one-off costs
+#: (the present program's compile, the status panel's font), and a median of one or two would
+#: take them for the window's own cost.
+OVERHEAD_MIN_FRAMES = 3
 #: ... but never below this share of the period: an overhead that large is the window's problem,
 #: and a draw squeezed further would only show worse frames at no better rate.
 MIN_DRAW_SHARE = 0.5
@@ -201,11 +205,14 @@ class Session:
     def note_overhead(self, seconds: float) -> None:
         """The caller spent ``seconds`` on the last moving frame besides its draw (the viewer:
         presenting it, swapping, its loop).  The draw's budget becomes the frame period less
-        the median of the last :data:`OVERHEAD_FRAMES` of these, and at least
+        the median of the last :data:`OVERHEAD_FRAMES` of these (from the
+        :data:`OVERHEAD_MIN_FRAMES`-th on), and at least
         :data:`MIN_DRAW_SHARE` of the period, so whole frames land within the period."""
         if not (math.isfinite(seconds) and seconds >= 0.0):
             return
         self._overheads = (self._overheads + [float(seconds)])[-OVERHEAD_FRAMES:]
+        if len(self._overheads) < OVERHEAD_MIN_FRAMES:
+            return
         overhead = float(np.median(self._overheads))
         self.budget.set_budget(max(MIN_DRAW_SHARE * self.period, self.period - overhead))
 
