@@ -19,13 +19,13 @@ def scene():
     return random_scene(20_000, seed=5, degree=1, **IN_VIEW)
 
 
-def _viewer(scene, tmp_path, fps):
+def _viewer(scene, tmp_path, fps, vsync=False):
     from splatgl.cameras.camera import Camera
     from splatgl.errors import ContextError
     from splatgl.model.settings import RenderSettings
     from splatgl.viewer.app import Viewer, ViewerOptions
 
-    options = ViewerOptions(screenshot_dir=tmp_path, vsync=False, target_fps=fps)
+    options = ViewerOptions(screenshot_dir=tmp_path, vsync=vsync, target_fps=fps)
     try:
         return Viewer(scene, RenderSettings(background=(0.1, 0.2, 0.3)),
                       Camera.from_fov(W, H, 60.0, np.eye(4)), options=options)
@@ -130,3 +130,36 @@ def test_the_benchmark_reports_the_frames_median_and_10th_percentile(xvfb_displa
         r = v.benchmark(6)
         assert 0.0 < r["fps_p10"] <= r["fps_median"]
         assert r["fps"] == pytest.approx(1.0 / r["frame"])
+
+
+def test_a_swap_that_waits_for_the_display_does_not_shrink_the_draws_budget(xvfb_display, scene,
+                                                                           tmp_path, monkeypatch):
+    """With vsync a swap waits for the display's refresh: idle time, not the window's cost, so
+    the draw keeps its budget (a 60 fps budget would otherwise shrink to what leaves the wait).
+    A swap that works (a software copy, in the drawing thread) still counts, and without vsync
+    the whole swap does."""
+    import time
+
+    from splatgl.viewer import app
+
+    def busy(seconds):
+        end = time.perf_counter() + seconds
+        while time.perf_counter() < end:
+            pass
+
+    swap = app.glfw.swap_buffers
+    monkeypatch.setattr(app.glfw, "swap_buffers", lambda w: (swap(w), time.sleep(0.04)))
+    with _viewer(scene, tmp_path, 10.0, vsync=True) as v:
+        _move(v, 1)
+        v.pacer.lod.wait()               # the tree's background build competes for the CPU
+        _move(v, 9)
+        session = v.pacer.session
+        assert np.median(session._overheads) < 0.03
+        assert session.budget.budget > 0.1 - 0.03
+        monkeypatch.setattr(app.glfw, "swap_buffers", lambda w: (swap(w), busy(0.04)))
+        _move(v, 9)
+        assert session.budget.budget <= 0.1 - 0.03
+    monkeypatch.setattr(app.glfw, "swap_buffers", lambda w: (swap(w), time.sleep(0.04)))
+    with _viewer(scene, tmp_path, 10.0, vsync=False) as v:
+        _move(v, 5)
+        assert v.pacer.session.budget.budget <= 0.1 - 0.03

@@ -94,6 +94,7 @@ class Viewer:
         self.message = ""
         self.frames_rendered = 0
         self.presents = 0
+        self.swap_idle = 0.0     # seconds the last swap waited without work (vsync), see present()
         self._rendered_key: tuple | None = None
         self.need_present = True
         self._clock = time.perf_counter()
@@ -262,7 +263,7 @@ class Viewer:
                 seconds = time.perf_counter() - self._frame_start
                 self.display.record_frame_time(seconds)
                 if self.paced:     # the window's share of a moving frame comes off the draw's
-                    self.pacer.note_frame(seconds, self.last.draw)
+                    self.pacer.note_frame(seconds - self.swap_idle, self.last.draw)
         return rendered
 
     @property
@@ -276,7 +277,14 @@ class Viewer:
     def present(self) -> None:
         """Draw the last frame (and the overlay) into the window and swap."""
         self.display.draw(self.size, self.settings.background)
+        # With vsync a swap's wall time is partly waiting for the display's refresh: idle, not
+        # the window's cost to the frame budget (a 60 fps budget would shrink the draw to what
+        # leaves the wait).  This thread's CPU time is the work it did (a software swap copies
+        # the image here); the process's would count the background level-of-detail build.
+        wall, cpu = time.perf_counter(), time.thread_time()
         glfw.swap_buffers(self.window)
+        if self.options.vsync:
+            self.swap_idle = max(0.0, (time.perf_counter() - wall) - (time.thread_time() - cpu))
         self.presents += 1
         self.need_present = False
 
