@@ -31,7 +31,7 @@ from .navigation import Navigation, orbit_distance
 from .overlay import Status, key_help, status_lines
 from .pacing import Pacer, paced_frame
 from .screenshot import take_screenshot
-from .window import close_window, connect, open_window
+from .window import close_window, connect, open_window, swap
 
 #: Longest time step a held key acts over (a stalled frame must not fling the camera away).
 _MAX_DT = 0.1
@@ -277,14 +277,7 @@ class Viewer:
     def present(self) -> None:
         """Draw the last frame (and the overlay) into the window and swap."""
         self.display.draw(self.size, self.settings.background)
-        # With vsync a swap's wall time is partly waiting for the display's refresh: idle, not
-        # the window's cost to the frame budget (a 60 fps budget would shrink the draw to what
-        # leaves the wait).  This thread's CPU time is the work it did (a software swap copies
-        # the image here); the process's would count the background level-of-detail build.
-        wall, cpu = time.perf_counter(), time.thread_time()
-        glfw.swap_buffers(self.window)
-        if self.options.vsync:
-            self.swap_idle = max(0.0, (time.perf_counter() - wall) - (time.thread_time() - cpu))
+        self.swap_idle = swap(self.window, self.options.vsync)   # vsync's wait: not a cost
         self.presents += 1
         self.need_present = False
 

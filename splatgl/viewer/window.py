@@ -1,7 +1,9 @@
 """The viewer's glfw window: opening it with an OpenGL 4.3+ context, wiring its callbacks to
-the viewer's ``on_*`` handlers, closing it."""
+the viewer's ``on_*`` handlers, swapping, closing it."""
 
 from __future__ import annotations
+
+import time
 
 import glfw
 import moderngl
@@ -44,6 +46,20 @@ def connect(window, handler) -> None:
     glfw.set_framebuffer_size_callback(window, lambda _w, fw, fh: handler.on_resize(fw, fh))
     glfw.set_window_refresh_callback(window, lambda _w: handler.on_refresh())
     glfw.set_window_focus_callback(window, lambda _w, focused: handler.on_focus(bool(focused)))
+
+
+def swap(window, vsync: bool) -> float:
+    """Swap ``window``'s buffers; returns the seconds the swap waited without working.
+
+    With vsync a swap's wall time is partly waiting for the display's refresh: idle, not the
+    window's cost to a frame budget (a 60 fps budget would shrink the draw to what leaves the
+    wait).  This thread's CPU time is the work it did (a software swap copies the image here);
+    the process's would count the background level-of-detail build.  Without vsync: 0."""
+    wall, cpu = time.perf_counter(), time.thread_time()
+    glfw.swap_buffers(window)
+    if not vsync:
+        return 0.0
+    return max(0.0, (time.perf_counter() - wall) - (time.thread_time() - cpu))
 
 
 def close_window(window) -> None:
