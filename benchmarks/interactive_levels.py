@@ -26,6 +26,7 @@ import json
 import math
 
 import numpy as np
+from _script import run
 
 from splatgl.api import Renderer
 from splatgl.bench.flight import MOVE_END, Flight
@@ -35,6 +36,7 @@ from splatgl.interactive.budget import Level
 from splatgl.interactive.draft import LevelRenderer
 from splatgl.interactive.lod_cache import LodProvider
 from splatgl.model.settings import RenderSettings
+from splatgl.output.atomic import atomic_write_text
 
 SCALES = (1.0, 0.7, 0.5, 0.35, 0.25)
 BUDGETS = (None, 100_000, 50_000, 25_000, 12_000, 6_000)
@@ -96,9 +98,8 @@ def main() -> None:
                                      seconds=float(np.median(seconds)) if seconds else None))
                     print(rows[-1], flush=True)
         levels.release()
-    with open(args.out, "w") as f:
-        json.dump(rows, f)
+    atomic_write_text(args.out, json.dumps(rows))   # whole or not at all
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

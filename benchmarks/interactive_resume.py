@@ -16,6 +16,7 @@ import argparse
 import math
 
 import numpy as np
+from _script import run
 
 from splatgl.api import Renderer, default_settings
 from splatgl.bench.flight import Flight
@@ -74,4 +75,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

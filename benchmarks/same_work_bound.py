@@ -1,6 +1,7 @@
 """A lower bound on an exact frame's time on llvmpipe: its CPU work spread perfectly over the cores.
 
-For each scene, at 1280x720 along a small orbit (medians of ``--frames``), two renderers:
+For each scene, at 1280x720 along the start of the interactive flight's orbit (medians of
+``--frames``), two renderers:
 
 - ``quad``: the quad path's exact frame (cull, sort, upload, pre-pass and draw; no readback);
 - ``limit``: the same quads with trivial shaders (``splatgl/bench/limit.py``: the draw only),
@@ -18,38 +19,35 @@ that bound allows.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import subprocess
 import sys
 
 import numpy as np
+from _script import run
 
 WIDTH, HEIGHT = 1280, 720
+#: Seconds of the flight's orbit between timed frames (1.8 degrees).
+ORBIT_STEP = 0.05
 
 
 def _time(scene_path: str, kind: str, frames: int) -> float:
     """Median seconds of ``kind`` ("quad" or "limit") frames, in this process."""
     import splatgl
+    from splatgl.bench.flight import Flight
     from splatgl.bench.limit import LimitRenderer
-    from splatgl.cameras.camera import Camera
     from splatgl.cameras.view import View
     from splatgl.gl.context import create_headless_context
     from splatgl.renderers.quad import QuadRenderer
 
     scene = splatgl.load_scene(scene_path)
     settings = splatgl.default_settings(scene)
-    base = splatgl.default_camera(scene, WIDTH, HEIGHT)
+    flight = Flight(scene, WIDTH, HEIGHT)
     ctx = create_headless_context()
     renderer = (LimitRenderer if kind == "limit" else QuadRenderer)(ctx, scene, settings)
 
-    def view(i: int) -> View:
-        a = math.radians(2.0 * i)
-        turn = np.array([[math.cos(a), 0, math.sin(a), 0], [0, 1, 0, 0],
-                         [-math.sin(a), 0, math.cos(a), 0], [0, 0, 0, 1.0]])
-        camera = Camera(WIDTH, HEIGHT, base.fx, base.fy, base.cx, base.cy,
-                        base.world_to_camera @ turn, base.model)
-        return View.of(camera, settings, scene)
+    def view(i: int) -> View:                   # the flight's orbit: every frame a new view
+        return View.of(flight.camera(ORBIT_STEP * i), settings, scene)
 
     renderer.render(view(0))          # compile and upload, untimed
     seconds = []
@@ -69,7 +67,8 @@ def _child(scene: str, kind: str, frames: int, one_thread: bool) -> float:
     out = subprocess.run([sys.executable, __file__, scene, "--frames", str(frames), "--kind", kind],
                          env=env, capture_output=True, text=True)
     if out.returncode != 0:
-        raise SystemExit(f"same_work_bound: {kind} on {scene} failed: {out.stderr.strip()[-300:]}")
+        last = out.stderr.strip().splitlines()[-1] if out.stderr.strip() else f"exit {out.returncode}"
+        raise SystemExit(f"same_work_bound.py: {kind} on {scene} failed: {last}")
     return float(out.stdout.strip().splitlines()[-1])
 
 
@@ -83,6 +82,9 @@ def main() -> None:
     args = p.parse_args()
     if args.frames < 1:
         p.error(f"--frames must be at least 1, got {args.frames}")
+    missing = [s for s in args.scenes if not os.path.isfile(s)]
+    if missing:
+        p.error(f"no such scene file: {missing[0]}")
     if args.kind is not None:                     # a child: one renderer, print its median
         print(_time(args.scenes[0], args.kind, args.frames), flush=True)
         return
@@ -101,4 +103,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

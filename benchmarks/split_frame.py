@@ -4,7 +4,8 @@ llvmpipe runs its vertex processing and triangle setup in the thread that draws,
 rasterisation in its own threads, so one idea for same-work speed on a 2-core machine is to
 split the frame between two processes (left and right halves, each its own context) and let
 both front ends run at once.  This script measures whether that can pay at all, with
-``Renderer.render`` (the exact frame, readback included) along a small orbit at 1280x720:
+``Renderer.render`` (the exact frame, readback included) along the start of the interactive
+flight's orbit (:class:`splatgl.bench.flight.Flight`) at 1280x720:
 
 - ``full``: one process draws whole frames;
 - ``halves``: two processes draw the left and right halves at the same time (the camera's
@@ -21,34 +22,35 @@ the machine's cores busy and splitting it cannot pay.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import subprocess
 import sys
 import time
 
 import numpy as np
+from _script import run
 
 WIDTH, HEIGHT = 1280, 720
+#: Seconds of the flight's orbit between timed frames (1.8 degrees).
+ORBIT_STEP = 0.05
 
 
 def _frames(scene_path: str, part: str, frames: int) -> float:
     """Median seconds of ``frames`` exact frames of ``part`` ("full", "left" or "right")."""
+    import dataclasses
+
     import splatgl
-    from splatgl.cameras.camera import Camera
+    from splatgl.bench.flight import Flight
 
     scene = splatgl.load_scene(scene_path)
-    base = splatgl.default_camera(scene, WIDTH, HEIGHT)
+    flight = Flight(scene, WIDTH, HEIGHT)
 
-    def camera(i: int) -> Camera:
-        a = math.radians(2.0 * i)           # a small orbit: every frame is a new view
-        turn = np.array([[math.cos(a), 0, math.sin(a), 0], [0, 1, 0, 0],
-                         [-math.sin(a), 0, math.cos(a), 0], [0, 0, 0, 1.0]])
-        pose = base.world_to_camera @ turn
+    def camera(i: int):
+        full = flight.camera(ORBIT_STEP * i)   # the flight's orbit: every frame a new view
         if part == "full":
-            return Camera(WIDTH, HEIGHT, base.fx, base.fy, base.cx, base.cy, pose, base.model)
+            return full
         shift = 0 if part == "left" else WIDTH // 2
-        return Camera(WIDTH // 2, HEIGHT, base.fx, base.fy, base.cx - shift, base.cy, pose, base.model)
+        return dataclasses.replace(full, width=WIDTH // 2, cx=full.cx - shift)
 
     with splatgl.Renderer() as renderer:
         renderer.render(scene, camera(0))   # compile and upload, untimed
@@ -62,13 +64,14 @@ def _frames(scene_path: str, part: str, frames: int) -> float:
 
 def _spawn(scene: str, part: str, frames: int, env: dict | None = None) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, __file__, scene, "--frames", str(frames), "--part", part],
-                            stdout=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
 
 
 def _result(proc: subprocess.Popen) -> float:
-    out, _ = proc.communicate()
+    out, err = proc.communicate()
     if proc.returncode != 0:
-        raise SystemExit(f"split_frame: a child process failed (exit {proc.returncode})")
+        last = err.strip().splitlines()[-1] if err.strip() else f"exit {proc.returncode}"
+        raise SystemExit(f"split_frame.py: a timing process failed: {last}")
     return float(out.strip().splitlines()[-1])
 
 
@@ -80,6 +83,8 @@ def main() -> None:
     args = p.parse_args()
     if args.frames < 1:
         p.error(f"--frames must be at least 1, got {args.frames}")
+    if not os.path.isfile(args.scene):
+        p.error(f"no such scene file: {args.scene}")
     if args.part is not None:                # a child: time one part, print its median
         print(_frames(args.scene, args.part, args.frames), flush=True)
         return
@@ -96,4 +101,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)
