@@ -90,6 +90,9 @@ class Renderer:
             elif kind is RendererKind.TILE:
                 from .renderers.tile import TileRenderer
                 path = TileRenderer(self.ctx, scene, settings, self.programs)
+            elif kind is RendererKind.CPU:
+                from .renderers.cpu import CpuRenderer
+                path = CpuRenderer(scene, settings)
             else:
                 raise ValueError(f"{kind} has no GPU path")
         self._paths[key] = path  # most recently used last

@@ -61,7 +61,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="bits per channel of PNG/TIFF output (default 8)")
     p.add_argument("--renderer", choices=[k.value for k in RendererKind], default="quad",
                    help="quad = the OpenGL quad path (default); tile = the per-tile compute-shader "
-                        "renderer; reference = the NumPy per-tile reference (slow)")
+                        "renderer; reference = the NumPy per-tile reference (slow); cpu = the "
+                        "reference's algorithm compiled for the CPU, no OpenGL (needs the fast "
+                        "extra; 3DGS colour, alpha and depth; faster than the quad path on "
+                        "software OpenGL)")
     p.add_argument("--depth-png", type=Path, default=None, metavar="FILE",
                    help="also write a colourised preview of the expected depth with a scale bar")
     p.add_argument("--timings", action="store_true",

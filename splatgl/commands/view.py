@@ -38,8 +38,11 @@ MAX_WINDOW = (1600, 1000)
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("--renderer", choices=[RendererKind.QUAD.value, RendererKind.TILE.value],
-                   default="quad", help="start with the quad path (default) or the tile renderer")
+    p.add_argument("--renderer", choices=[RendererKind.QUAD.value, RendererKind.TILE.value,
+                                          RendererKind.CPU.value],
+                   default="quad", help="start with the quad path (default), the tile renderer or "
+                                        "the CPU renderer (the fast extra: every frame exact, "
+                                        "no drafts; without a GPU often the faster exact frame)")
     p.add_argument("--screenshot-dir", type=Path, default=Path("."), metavar="DIR",
                    help="where F12 writes splatgl-view-NNNN.png/.json (default: here)")
     p.add_argument("--benchmark", type=int, default=None, metavar="FRAMES",
@@ -91,6 +94,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"loaded {scene.count:,} splats (SH degree {scene.sh_degree}) in "
           f"{time.perf_counter() - t0:.2f} s", flush=True)
     settings = settings_from_args(args)
+    if args.renderer == RendererKind.CPU.value:   # refused here, before a window opens
+        from ..renderers.cpu import check_available, check_scene
+        check_available()
+        check_scene(scene, settings)
     camera = camera_from_args(args, scene, settings)
     cameras = load_cameras(args.camera) if args.camera is not None else []
     if args.camera is not None and not (args.width or args.height):

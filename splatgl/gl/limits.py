@@ -61,7 +61,7 @@ def image_size_problem(width: int, height: int, kind: RendererKind | str = Rende
     """
     kind = RendererKind(kind)
     side = max(width, height)
-    if ctx is not None and kind is not RendererKind.REFERENCE:
+    if ctx is not None and kind not in (RendererKind.REFERENCE, RendererKind.CPU):
         info = ctx.info
         limits = [(int(info.get("GL_MAX_RENDERBUFFER_SIZE", MAX_IMAGE_SIDE)), "GL_MAX_RENDERBUFFER_SIZE"),
                   (int(info.get("GL_MAX_TEXTURE_SIZE", MAX_IMAGE_SIDE)), "GL_MAX_TEXTURE_SIZE")]

@@ -139,6 +139,9 @@ class RendererKind(enum.Enum):
     QUAD = "quad"
     TILE = "tile"
     REFERENCE = "reference"
+    #: The reference's per-tile algorithm compiled for the CPU (numba), no OpenGL:
+    #: :mod:`splatgl.renderers.cpu`.
+    CPU = "cpu"
 
 
 def check_convention(convention: Convention | str, *kinds: RendererKind | str) -> None:

@@ -65,6 +65,9 @@ def _times(renderer: Renderer, scene: Scene, settings: RenderSettings,
         return 0.0, 0.0, ""
     if kind is RendererKind.TILE:
         return t.sort, t.rasterize, f"{t.n_keys:,} tile keys, {scene.count:,} splats"
+    if kind is RendererKind.CPU:
+        return (t.project + t.sort, t.bin + t.rasterize,
+                f"{t.n_keys:,} tile entries, {scene.count:,} splats")
     return t.cull + t.sort, t.upload + t.draw, f"{scene.count:,} splats"
 
 

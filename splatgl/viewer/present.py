@@ -60,7 +60,7 @@ class Presenter:
                 tex.release()
             tex = self.ctx.texture((w, h), 4, dtype="f4")
             self._uploads[role] = tex
-        tex.write(np.ascontiguousarray(image, np.float32).tobytes())
+        tex.write(np.ascontiguousarray(image, np.float32))
         return tex
 
     def draw(self, texture: moderngl.Texture, mode: Mode, viewport: tuple[int, int, int, int],

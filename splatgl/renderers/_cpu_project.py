@@ -1,0 +1,257 @@
+"""The CPU renderer's compiled stage 1 (numba, the ``fast`` extra); imported only by
+:mod:`splatgl.renderers.cpu`, which keeps numba optional.
+
+- :func:`project_pinhole`: the reference's stage 1 for a pinhole camera (INRIA rules) per splat,
+  in parallel: the same float32 formulas as :mod:`splatgl.twins.project` (camera space, the
+  clamped EWA Jacobian, the dilated covariance with the cancellation guard on its determinant,
+  the conic, antialiasing, ``ceil(3 sqrt(lambda_max))`` and 3DGS's ``getRect``, the SH colour).
+  The order of a few float32 operations differs from NumPy's, so its numbers agree with the
+  twin to a few ulps, not bit for bit (tests/test_cpu_renderer.py).
+- :func:`boxes_of`: the same boxes for rows the reference's NumPy stage 1 projected (every
+  other camera model).
+
+Each splat also gets its pixel box: the bounding box of the ellipse where ``o exp(-q/2) >=
+1/255`` (the only pixels where the reference blends it) plus :data:`BOX_MARGIN`, and its tile
+rectangle is cut to the tiles of that box.  :mod:`._cpu_raster` evaluates only the box.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..constants import (AA_MIN_FACTOR, DET_CANCEL_RATIO, EXTENT_DISCRIMINANT_FLOOR,
+                         EXTENT_SIGMAS, SH_C0, SH_C1, SH_C2, SH_C3, SH_OFFSET, TILE_SIZE)
+
+#: Largest radius kept (pixels), :data:`splatgl.twins.project.MAX_RADIUS`.
+MAX_RADIUS = float(2 ** 52)
+#: Pixels added on every side of a splat's box: the box is computed in float64 from the
+#: float32 conic, and the exp below differs from the reference's in the last bits, so a pixel
+#: the reference blends at exactly 1/255 stays inside.
+BOX_MARGIN = 1.0
+
+_F = np.float32
+
+
+@numba.njit(inline="always", fastmath=False)
+def _floor(x):
+    """``floor(x)`` as a float, for x clamped to +-1e15 first (every use clamps the result to
+    the tile grid, far inside that; the clamp keeps the integer conversion defined)."""
+    return float(math.floor(min(max(x, -1e15), 1e15)))
+
+
+@numba.njit(inline="always", fastmath=False)
+def _ceil(x):
+    """``ceil(x)`` as a float, x clamped as in :func:`_floor`."""
+    return float(math.ceil(min(max(x, -1e15), 1e15)))
+
+
+@numba.njit(inline="always", fastmath=False)
+def _trunc(x):
+    """C's float-to-integer truncation (3DGS's ``(int)``) as a float, x clamped as in :func:`_floor`."""
+    return _floor(x) if x >= 0 else -_floor(-x)
+
+
+@numba.njit(inline="always", fastmath=False)
+def _sh_color(sh, i, k, x, y, z):
+    """``max(sum h_lm Y_lm(d) + 0.5, 0)`` of splat ``i``'s first ``k`` coefficients at the unit
+    direction (x, y, z) (:func:`splatgl.twins.project.sh_basis`'s trig-free form), as 3 floats."""
+    r = _F(SH_C0) * sh[i, 0, 0]
+    g = _F(SH_C0) * sh[i, 0, 1]
+    b = _F(SH_C0) * sh[i, 0, 2]
+    if k > 1:
+        for j, y_lm in ((1, -_F(SH_C1) * y), (2, _F(SH_C1) * z), (3, -_F(SH_C1) * x)):
+            r += y_lm * sh[i, j, 0]
+            g += y_lm * sh[i, j, 1]
+            b += y_lm * sh[i, j, 2]
+    if k > 4:
+        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
+        for j, y_lm in ((4, _F(SH_C2[0]) * xy), (5, _F(SH_C2[1]) * yz),
+                        (6, _F(SH_C2[2]) * (_F(2) * zz - xx - yy)), (7, _F(SH_C2[3]) * xz),
+                        (8, _F(SH_C2[4]) * (xx - yy))):
+            r += y_lm * sh[i, j, 0]
+            g += y_lm * sh[i, j, 1]
+            b += y_lm * sh[i, j, 2]
+        if k > 9:
+            for j, y_lm in ((9, _F(SH_C3[0]) * y * (_F(3) * xx - yy)),
+                            (10, _F(SH_C3[1]) * xy * z),
+                            (11, _F(SH_C3[2]) * y * (_F(4) * zz - xx - yy)),
+                            (12, _F(SH_C3[3]) * z * (_F(2) * zz - _F(3) * xx - _F(3) * yy)),
+                            (13, _F(SH_C3[4]) * x * (_F(4) * zz - xx - yy)),
+                            (14, _F(SH_C3[5]) * z * (xx - yy)),
+                            (15, _F(SH_C3[6]) * x * (xx - _F(3) * yy))):
+                r += y_lm * sh[i, j, 0]
+                g += y_lm * sh[i, j, 1]
+                b += y_lm * sh[i, j, 2]
+    return (max(r + _F(SH_OFFSET), _F(0.0)), max(g + _F(SH_OFFSET), _F(0.0)),
+            max(b + _F(SH_OFFSET), _F(0.0)))
+
+
+@numba.njit(parallel=True, fastmath=False, cache=True)
+def project_pinhole(rel, rs, opacity, sh, k, cam, center, grid_x, grid_y, antialias,
+                    mean2d, conic, opac_out, reach, color, depth, box, rect):
+    """Project every splat for a pinhole camera; culled rows get an empty ``rect``.
+
+    Inputs (float32 unless said): ``rel`` (N, 3) means minus the view's anchor; ``rs`` (N, 3, 3)
+    ``R S`` (rotation times scales, per column); ``opacity`` (N,); ``sh`` (N, K, 3), ``k`` the
+    coefficients used; ``cam`` (20,) float64: the anchored world-to-camera rotation (9,
+    row-major), translation (3), fx, fy, cx, cy, the Jacobian's x/z and y/z limits, the near
+    plane and the low pass; ``center`` (3,) the anchored camera centre; the tile grid; whether
+    to antialias.  Outputs (N rows each): ``mean2d`` (2), ``conic`` (3), ``opac_out``,
+    ``reach`` (``2 ln(255 o)``, the conic value where alpha falls to 1/255), ``color`` (3),
+    ``depth`` (view z), ``box`` (4) int32 pixel box ``[x0, x1) x [y0, y1)`` and
+    ``rect`` (4) int32 tile rectangle ``[tx0, tx1) x [ty0, ty1)``: the reference's ``getRect``
+    of its radius, shrunk to the tiles the box touches.
+    """
+    w = cam[:9].astype(np.float32)
+    t = cam[9:12].astype(np.float32)
+    fx, fy, cx, cy = _F(cam[12]), _F(cam[13]), _F(cam[14]), _F(cam[15])
+    limx, limy, near, lp = _F(cam[16]), _F(cam[17]), _F(cam[18]), _F(cam[19])
+    for i in numba.prange(rel.shape[0]):
+        rect[i, 0] = 0
+        rect[i, 1] = 0
+        rect[i, 2] = 0
+        rect[i, 3] = 0
+        x0, y0, z0 = rel[i, 0], rel[i, 1], rel[i, 2]
+        x = ((x0 * w[0] + y0 * w[1]) + z0 * w[2]) + t[0]
+        y = ((x0 * w[3] + y0 * w[4]) + z0 * w[5]) + t[1]
+        z = ((x0 * w[6] + y0 * w[7]) + z0 * w[8]) + t[2]
+        depth[i] = z
+        if not z > near:
+            continue
+        u = fx * x / z + cx
+        v = fy * y / z + cy
+        # EWA Jacobian (x/z and y/z clamped inside it only), times the view rotation: T = J W
+        xz = min(max(x / z, -limx), limx)
+        yz = min(max(y / z, -limy), limy)
+        j00 = fx / z
+        j02 = -fx * xz / z
+        j11 = fy / z
+        j12 = -fy * yz / z
+        t0 = (j00 * w[0], j00 * w[1], j00 * w[2])
+        t1 = (j11 * w[3] + j12 * w[6], j11 * w[4] + j12 * w[7], j11 * w[5] + j12 * w[8])
+        t0 = (t0[0] + j02 * w[6], t0[1] + j02 * w[7], t0[2] + j02 * w[8])
+        # M = T R S (2x3); the screen covariance is M M^T + low_pass I
+        m0 = (t0[0] * rs[i, 0, 0] + t0[1] * rs[i, 1, 0] + t0[2] * rs[i, 2, 0],
+              t0[0] * rs[i, 0, 1] + t0[1] * rs[i, 1, 1] + t0[2] * rs[i, 2, 1],
+              t0[0] * rs[i, 0, 2] + t0[1] * rs[i, 1, 2] + t0[2] * rs[i, 2, 2])
+        m1 = (t1[0] * rs[i, 0, 0] + t1[1] * rs[i, 1, 0] + t1[2] * rs[i, 2, 0],
+              t1[0] * rs[i, 0, 1] + t1[1] * rs[i, 1, 1] + t1[2] * rs[i, 2, 1],
+              t1[0] * rs[i, 0, 2] + t1[1] * rs[i, 1, 2] + t1[2] * rs[i, 2, 2])
+        a = m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2] + lp
+        b = m0[0] * m1[0] + m0[1] * m1[1] + m0[2] * m1[2]
+        c_ = m1[0] * m1[0] + m1[1] * m1[1] + m1[2] * m1[2] + lp
+        plain = a * c_ - b * b
+        if plain > _F(DET_CANCEL_RATIO) * (a * c_):
+            det = plain
+        else:   # Cauchy-Binet: the sum of M's squared 2x2 minors, never cancelled to <= 0
+            cx_ = m0[1] * m1[2] - m0[2] * m1[1]
+            cy_ = m0[2] * m1[0] - m0[0] * m1[2]
+            cz_ = m0[0] * m1[1] - m0[1] * m1[0]
+            trace = (m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2]) + (
+                m1[0] * m1[0] + m1[1] * m1[1] + m1[2] * m1[2])
+            det = (cx_ * cx_ + cy_ * cy_ + cz_ * cz_) + lp * trace + lp * lp
+        if not det > 0:
+            continue
+        inv = _F(1.0) / det
+        qa, qb, qc = c_ * inv, -b * inv, a * inv
+        o = opacity[i]
+        if antialias:
+            undilated = (a - lp) * (c_ - lp) - b * b
+            ratio = undilated / plain if plain > 0 else _F(0.0)
+            o = o * math.sqrt(max(_F(AA_MIN_FACTOR), ratio))
+        # the reference's radius and tile rectangle (3DGS getRect, p = mean2d - 0.5)
+        mid = _F(0.5) * (a + c_)
+        disc = mid * mid - plain
+        if not math.isfinite(disc):
+            half = _F(0.5) * (a - c_)
+            disc = half * half + b * b
+        lam = mid + math.sqrt(max(_F(EXTENT_DISCRIMINANT_FLOOR), disc))
+        r = _F(EXTENT_SIGMAS) * math.sqrt(max(lam, _F(0.0)))
+        r = float(math.ceil(min(r, MAX_RADIUS))) if math.isfinite(r) else MAX_RADIUS
+        # direction for the SH colour: the splat from the camera centre
+        dx, dy, dz = x0 - center[0], y0 - center[1], z0 - center[2]
+        n = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if n > 0:
+            dx, dy, dz = dx / n, dy / n, dz / n
+        cr, cg, cb = _sh_color(sh, i, k, dx, dy, dz)
+        if not (math.isfinite(u) and math.isfinite(v) and math.isfinite(qa) and math.isfinite(qb)
+                and math.isfinite(qc) and math.isfinite(o) and math.isfinite(cr)
+                and math.isfinite(cg) and math.isfinite(cb)):
+            continue
+        rf = _F(r)
+        px, py = u - _F(0.5), v - _F(0.5)
+        tx0 = min(max(_trunc((px - rf) / _F(TILE_SIZE)), 0.0), grid_x)
+        ty0 = min(max(_trunc((py - rf) / _F(TILE_SIZE)), 0.0), grid_y)
+        tx1 = min(max(_trunc((px + rf + _F(TILE_SIZE - 1)) / _F(TILE_SIZE)), 0.0), grid_x)
+        ty1 = min(max(_trunc((py + rf + _F(TILE_SIZE - 1)) / _F(TILE_SIZE)), 0.0), grid_y)
+        # the pixel box where o exp(-q/2) can reach 1/255, from the conic in float64
+        if float(o) * 255.0 <= 1.0:
+            continue
+        q2 = 2.0 * math.log(float(o) * 255.0)
+        qdet = float(qa) * float(qc) - float(qb) * float(qb)
+        if qdet > 0 and math.isfinite(qdet):
+            hx = math.sqrt(q2 * float(qc) / qdet) + BOX_MARGIN
+            hy = math.sqrt(q2 * float(qa) / qdet) + BOX_MARGIN
+            bx0 = max(_ceil(float(u) - 0.5 - hx), -1.0)
+            bx1 = min(_floor(float(u) - 0.5 + hx) + 1.0, grid_x * TILE_SIZE + 1.0)
+            by0 = max(_ceil(float(v) - 0.5 - hy), -1.0)
+            by1 = min(_floor(float(v) - 0.5 + hy) + 1.0, grid_y * TILE_SIZE + 1.0)
+            tx0 = max(tx0, _floor(bx0 / TILE_SIZE))
+            ty0 = max(ty0, _floor(by0 / TILE_SIZE))
+            tx1 = min(tx1, _floor((bx1 - 1.0) / TILE_SIZE) + 1.0)
+            ty1 = min(ty1, _floor((by1 - 1.0) / TILE_SIZE) + 1.0)
+        else:       # no usable box: the whole rectangle
+            bx0, by0 = tx0 * TILE_SIZE, ty0 * TILE_SIZE
+            bx1, by1 = tx1 * TILE_SIZE, ty1 * TILE_SIZE
+        if not (tx1 > tx0 and ty1 > ty0):
+            continue
+        mean2d[i, 0], mean2d[i, 1] = u, v
+        conic[i, 0], conic[i, 1], conic[i, 2] = qa, qb, qc
+        opac_out[i] = o
+        reach[i] = q2
+        color[i, 0], color[i, 1], color[i, 2] = cr, cg, cb
+        box[i, 0], box[i, 1], box[i, 2], box[i, 3] = int(bx0), int(bx1), int(by0), int(by1)
+        rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = int(tx0), int(tx1), int(ty0), int(ty1)
+
+
+@numba.njit(parallel=True, fastmath=False, cache=True)
+def boxes_of(mean2d, conic, opacity, rect_min, rect_max, visible, reach, box, rect):
+    """Pixel boxes and shrunk tile rectangles (as :func:`project_pinhole` makes them) for rows
+    projected elsewhere (the reference's stage 1, any camera model): ``rect`` is the reference's
+    rectangle cut to the tiles of the box, ``reach`` as there; rows not ``visible`` get an
+    empty rectangle."""
+    for i in numba.prange(mean2d.shape[0]):
+        rect[i, 0] = 0
+        rect[i, 1] = 0
+        rect[i, 2] = 0
+        rect[i, 3] = 0
+        o = float(opacity[i])
+        if not visible[i] or o * 255.0 <= 1.0:
+            continue
+        tx0, ty0 = float(rect_min[i, 0]), float(rect_min[i, 1])
+        tx1, ty1 = float(rect_max[i, 0]), float(rect_max[i, 1])
+        qa, qb, qc = float(conic[i, 0]), float(conic[i, 1]), float(conic[i, 2])
+        qdet = qa * qc - qb * qb
+        u, v = float(mean2d[i, 0]), float(mean2d[i, 1])
+        q2 = 2.0 * math.log(o * 255.0)
+        if qdet > 0 and math.isfinite(qdet):
+            hx = math.sqrt(q2 * qc / qdet) + BOX_MARGIN
+            hy = math.sqrt(q2 * qa / qdet) + BOX_MARGIN
+            bx0 = max(_ceil(u - 0.5 - hx), -1.0)
+            bx1 = min(_floor(u - 0.5 + hx) + 1.0, tx1 * TILE_SIZE + 1.0)
+            by0 = max(_ceil(v - 0.5 - hy), -1.0)
+            by1 = min(_floor(v - 0.5 + hy) + 1.0, ty1 * TILE_SIZE + 1.0)
+            tx0 = max(tx0, _floor(bx0 / TILE_SIZE))
+            ty0 = max(ty0, _floor(by0 / TILE_SIZE))
+            tx1 = min(tx1, _floor((bx1 - 1.0) / TILE_SIZE) + 1.0)
+            ty1 = min(ty1, _floor((by1 - 1.0) / TILE_SIZE) + 1.0)
+        else:
+            bx0, by0, bx1, by1 = tx0 * TILE_SIZE, ty0 * TILE_SIZE, tx1 * TILE_SIZE, ty1 * TILE_SIZE
+        if not (tx1 > tx0 and ty1 > ty0):
+            continue
+        reach[i] = q2
+        box[i, 0], box[i, 1], box[i, 2], box[i, 3] = int(bx0), int(bx1), int(by0), int(by1)
+        rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = int(tx0), int(tx1), int(ty0), int(ty1)
