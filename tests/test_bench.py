@@ -27,14 +27,17 @@ def test_pareto_front():
 
 
 def test_configurations_cover_every_question():
-    rows = configurations(RenderSettings(), scene_sh_degree=3)
+    rows = configurations(RenderSettings(), scene_sh_degree=3, cpu=True)
     groups = {r.group for r in rows}
     assert groups == {"default", "precision", "extent", "sort", "sh", "storage", "resort", "preprocess", "cull",
                       "early-stop", "projection", "renderer", "limit"}
     assert [r.name for r in rows if r.group == "early-stop"] == ["early-stop=on", "early-stop=off"]
     assert {r.name for r in rows if r.group == "sh"} == {"sh<=0", "sh<=1", "sh<=2"}
     assert [r.name for r in rows if r.group == "storage"] == ["storage=half-sh", "storage=compact"]
-    assert [r.kind for r in rows if r.group == "renderer"] == [RowKind.TILE, RowKind.REFERENCE]
+    assert [r.kind for r in rows if r.group == "renderer"] == [RowKind.TILE, RowKind.CPU,
+                                                               RowKind.REFERENCE]
+    no_cpu = configurations(RenderSettings(), 3, cpu=False)
+    assert [r.kind for r in no_cpu if r.group == "renderer"] == [RowKind.TILE, RowKind.REFERENCE]
     quick = configurations(RenderSettings(), 0, quick=True)
     assert len(quick) < len(rows) and {r.group for r in quick} >= {"default", "limit", "extent"}
 

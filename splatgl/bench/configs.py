@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import importlib.util
 from dataclasses import dataclass
 
 from ..model.settings import (EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
@@ -14,6 +15,7 @@ class RowKind(enum.Enum):
     QUAD = "quad"
     TILE = "tile"
     REFERENCE = "reference"
+    CPU = "cpu"
     LIMIT = "limit"
 
 
@@ -40,9 +42,10 @@ class BenchConfig:
 
 
 def configurations(base: RenderSettings, scene_sh_degree: int, quick: bool = False,
-                   groups: set[str] | None = None) -> list[BenchConfig]:
+                   groups: set[str] | None = None, cpu: bool | None = None) -> list[BenchConfig]:
     """The rows for one scene: the default, each knob changed alone, the other renderers and
-    the limit row.  ``quick`` keeps one row per group; ``groups`` filters by group name."""
+    the limit row.  ``quick`` keeps one row per group; ``groups`` filters by group name;
+    ``cpu``: a row for the CPU renderer (None: where numba, its extra, is installed)."""
 
     def q(name: str, group: str, **change) -> BenchConfig:
         return BenchConfig(name, group, RowKind.QUAD, dataclasses.replace(base, **change))
@@ -64,6 +67,8 @@ def configurations(base: RenderSettings, scene_sh_degree: int, quick: bool = Fal
     rows += [BenchConfig(f"projection={p}", "projection", RowKind.QUAD, base, p)
              for p in ("fisheye", "equirectangular")]
     rows.append(BenchConfig("tile", "renderer", RowKind.TILE, base))
+    if cpu if cpu is not None else importlib.util.find_spec("numba") is not None:
+        rows.append(BenchConfig("cpu", "renderer", RowKind.CPU, base))
     rows.append(BenchConfig("reference", "renderer", RowKind.REFERENCE, base))
     rows.append(BenchConfig("limit", "limit", RowKind.LIMIT, base))
     if quick:

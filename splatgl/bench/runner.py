@@ -18,7 +18,7 @@ from ..cameras.view import View
 from .probes import GpuTimer, count_fragments
 from ..evaluation.metrics import image_errors, psnr
 from ..api import Renderer, default_camera, render_reference_rgba
-from ..model.scene import Scene
+from ..model.scene import Scene, SplatKind
 from ..model.settings import GpuStorage, RendererKind, RenderSettings
 from ..order.sort import depth_sort
 from .configs import BenchConfig, RowKind, configurations
@@ -143,7 +143,7 @@ class _Runner:
         self.settings = config.settings
         if config.kind is RowKind.LIMIT:
             self.impl = LimitRenderer(renderer.ctx, scene, config.settings, renderer.programs)
-        elif config.kind in (RowKind.QUAD, RowKind.TILE):
+        elif config.kind in (RowKind.QUAD, RowKind.TILE, RowKind.CPU):
             self.impl = renderer.renderer_for(scene, config.settings, RendererKind(config.kind.value))
         else:
             self.impl = None
@@ -171,7 +171,8 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
     cameras = orbit_path(scene, options)
     warm = orbit_path(scene, BenchOptions(options.width, options.height, 1, options.orbit_step), start=-3)[0]
     err_frames = [i for i in options.error_frames if i < len(cameras)] or [len(cameras) - 1]
-    configs = configurations(base, scene.sh_degree, options.quick, options.groups)
+    configs = configurations(base, scene.sh_degree, options.quick, options.groups,
+                             cpu=None if scene.kind is SplatKind.GAUSSIAN_3D else False)
     total = len(err_frames) + len(configs) + any(c.group == "early-stop" for c in configs)
     step = 0
 
