@@ -19,7 +19,7 @@ from .cameras.camera import Camera
 # the default camera is camera code (the path generators use it too); part of the API
 from .cameras.framing import DEFAULT_ELEVATION, DEFAULT_FOV_Y, ORTHOGRAPHIC_SPAN, default_camera  # noqa: F401
 from .errors import SplatglError
-from .gl.context import create_headless_context, make_current
+from .gl.context import NO_GL_RENDERER, create_headless_context, make_current, renderer_name
 from .gl.shaders import ProgramCache
 from .gl.limits import check_image_size
 from .output.layers import Layer, RenderOutput, with_layers
@@ -229,6 +229,19 @@ def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettin
     ref = render_reference(scene, camera, settings, compat=settings.convention,
                            progress=progress, layers=frozenset(layers), under=geometry)
     return ref.output(frozenset(layers))
+
+
+def gl_renderer_name(kind: RendererKind | str, ctx: moderngl.Context | None) -> str:
+    """What drew a frame of ``kind``, as ``--timings`` prints it: the OpenGL renderer's name
+    (``ctx``'s), or what stands in for it where no OpenGL draws (the NumPy reference, the CPU
+    renderer)."""
+    kind = RendererKind(kind)
+    if kind is RendererKind.REFERENCE or ctx is None:
+        return NO_GL_RENDERER
+    if kind is RendererKind.CPU:
+        from .renderers.cpu import describe
+        return describe()
+    return renderer_name(ctx)
 
 
 def _inputs(scene: Scene, camera: Camera | None,

@@ -54,6 +54,16 @@ def test_splatgl_renderers_pass(kit, tmp_path, kind):
     assert [s.status for s in scores] == ["pass"] * len(scores), scores
 
 
+def test_cpu_renderer_passes_what_it_draws(kit, tmp_path):
+    """The CPU renderer draws every 3DGS case (perspective, orthographic, fisheye) and skips
+    the surfel case with its one-line reason."""
+    pytest.importorskip("numba", reason="the CPU renderer needs numba (the fast extra)")
+    skipped = render_kit(kit, tmp_path, "cpu")
+    assert len(skipped) == 1 and skipped[0].startswith("stress_surfels_edge_on: "), skipped
+    scores = [s for s in score_kit(kit, tmp_path) if s.status != "missing"]
+    assert len(scores) == 5 and all(s.status == "pass" for s in scores), scores
+
+
 def test_a_y_flipped_renderer_fails_as_upside_down(kit, tmp_path):
     render_kit(kit, tmp_path / "q", "quad")
     (tmp_path / "f").mkdir()

@@ -18,10 +18,10 @@ from ..output.layer_files import check_exact_ids
 from ._layers import check_under_options, layer_files, named_layers
 from ..output.frames import FrameTarget
 from ..output.image_formats import FORMAT_NAMES
-from ..gl.context import NO_GL_RENDERER, renderer_name
+from ..gl.context import renderer_name
 from ..paths import orbit
 from ..progress import default_progress
-from ..api import Renderer
+from ..api import Renderer, gl_renderer_name
 from ..model.scene import Scene
 from ..cameras.up import resolve_up
 from ..cameras.orthographic import Orthographic
@@ -225,7 +225,7 @@ def run_path(args: argparse.Namespace) -> int:
         print(renderer.report())
     else:
         with Renderer() if tree is None else LodFrames(tree, settings, lod) as renderer:
-            gl_name = renderer_name(renderer.ctx) if kind is not RendererKind.REFERENCE else NO_GL_RENDERER
+            gl_name = gl_renderer_name(kind, renderer.ctx)
             if args.stereo is not None:    # each frame holds both eyes
                 renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
                 size = renderer.frame_size(cameras[0])

@@ -7,7 +7,7 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from ..errors import SplatglError
-from ..gl.context import NO_GL_RENDERER, renderer_name
+from ..gl.context import NO_GL_RENDERER
 from ..output.image_formats import (BIT_DEPTHS, IMAGE_FORMATS, image_format, picture_format,
                                     suffix_list)
 from ..output.images import write_image
@@ -16,7 +16,7 @@ from ..output.layers import BASE, Layer, RenderOutput
 from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..output.pictures import depth_preview
-from ..api import Renderer, render_reference_layers
+from ..api import Renderer, gl_renderer_name, render_reference_layers
 from ..lod.frames import LodFrames, render_lod
 from ..lod.io import read_lod
 from ..model.settings import RendererKind
@@ -186,5 +186,5 @@ def _render(args, scene, settings, cameras, kind, layers, under=None):
                 outs.append(RenderOutput(renderer.render(scene, camera, settings, kind, progress), None))
         if renderer is not None:
             times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
-            gl_name = renderer_name(renderer.ctx)
+            gl_name = gl_renderer_name(kind, renderer.ctx)
     return outs, times, gl_name

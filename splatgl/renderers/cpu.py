@@ -223,6 +223,11 @@ def depth_order(depth: np.ndarray, rect: np.ndarray) -> np.ndarray:
     return (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
 
 
+def describe() -> str:
+    """What ``--timings`` prints as the GL renderer of a CPU-rendered frame."""
+    return f"none (the CPU renderer: numba, {_threads()} threads)"
+
+
 def _threads() -> int:
     import numba
 
