@@ -109,7 +109,7 @@ class Renderer:
         """
         self._check_open()
         make_current(self.ctx)
-        return self._path(scene, settings, kind)
+        return self._path(scene, settings, RendererKind(kind))
 
     def render(self, scene: Scene, camera: Camera | None = None,
                settings: RenderSettings | None = None, kind: RendererKind = RendererKind.QUAD,

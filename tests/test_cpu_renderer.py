@@ -95,6 +95,7 @@ def test_api_and_renderer_cache_draw_the_same_pixels():
         np.testing.assert_array_equal(r.render(scene, CAM, settings, RendererKind.CPU), direct)
         np.testing.assert_array_equal(r.render(scene, CAM, settings, "cpu"), direct)
         assert isinstance(r.renderer_for(scene, settings, RendererKind.CPU).last_times, cpu.CpuTimes)
+        assert r.renderer_for(scene, settings, "cpu") is r.renderer_for(scene, settings, RendererKind.CPU)
     np.testing.assert_array_equal(render(scene, CAM, settings, "cpu"), direct)
 
 
