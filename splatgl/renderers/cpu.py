@@ -90,7 +90,9 @@ def check_scene(scene: Scene, settings: RenderSettings) -> None:
 def tile_order(n_tiles: int, threads: int) -> np.ndarray:
     """Tile ids in the order the compiled loop hands them out: its threads take contiguous
     runs, so the ids are interleaved (thread c gets c, c + n, c + 2n, ...), which spreads busy
-    and empty parts of the image over all of them."""
+    and empty parts of the image over all of them.  Measured against the plain order (blend
+    stage, 8 views of the flight's orbit twice, 2 cores): the plain order took 0.98x as long
+    on donut, 1.09x on biker and 1.27x on guitar, a small object in the middle of the view."""
     threads = max(1, threads)
     return np.concatenate([np.arange(c, n_tiles, threads, dtype=np.int64) for c in range(threads)])
 
