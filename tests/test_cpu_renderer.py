@@ -99,6 +99,37 @@ def test_api_and_renderer_cache_draw_the_same_pixels():
     np.testing.assert_array_equal(render(scene, CAM, settings, "cpu"), direct)
 
 
+def test_a_frame_cut_into_pieces_is_the_same_frame(monkeypatch):
+    """``draw`` with ``on_batch``: projection and packing in parts, the blend in bands, a
+    check before each piece; the pixels are those of one piece, and a check that raises
+    abandons the frame."""
+    scene = random_scene(5000, 6, degree=1, **IN_DEPTH)
+    settings = RenderSettings()
+    r = cpu.CpuRenderer(scene, settings)
+    view = view_of(CAM, scene, settings)
+    whole, whole_depth = r.draw(view, with_depth=True)
+    monkeypatch.setattr(cpu, "PART_SPLATS", 1000)
+    calls = []
+    pieces, pieces_depth = r.draw(view, True, lambda done, total: calls.append((done, total)), 4)
+    np.testing.assert_array_equal(pieces, whole)
+    np.testing.assert_array_equal(pieces_depth, whole_depth)
+    n_tiles = tile_grid(CAM.width, CAM.height)
+    n_tiles = n_tiles[0] * n_tiles[1]
+    drawn = r.last_times.drawn
+    # projection parts, after it, after the sort, between packing parts, before each band
+    assert len(calls) == 4 + 1 + 1 + (drawn - 1) // 1000 + 4
+    assert [d for d, _ in calls[-4:]] == sorted(d for d, _ in calls[-4:]) and calls[-1][0] < n_tiles
+    assert {t for _, t in calls} == {n_tiles}
+
+    class Stop(Exception):
+        pass
+
+    def stop(done, total):
+        raise Stop
+    with pytest.raises(Stop):
+        r.draw(view, False, stop, 4)
+
+
 # ------------------------------------------------------------------------------ stages
 def test_tile_lists_are_the_reference_keys_less_splats_that_cannot_blend():
     scene = random_scene(2500, 4, degree=0, **IN_DEPTH)

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from helpers import IN_VIEW, random_scene
 from splatgl.cameras.camera import Camera
+from splatgl.cameras.view import View
 from splatgl.errors import SplatglError
 from splatgl.interactive.budget import EXACT, FrameBudget, Level, check_fps, ladder, predicted_psnr
 from splatgl.interactive.lod_cache import LodProvider, cache_file
@@ -363,6 +364,63 @@ def test_input_abandons_a_refinement_step(gl_renderer, scene):
         while session.frame(_camera(0.03)) is not None:
             pass
         assert session.exact
+    finally:
+        session.release()
+
+
+def test_cpu_exact_session_refines_to_exactly_the_cpu_render(gl_renderer, scene):
+    """With exact_kind CPU, moving frames are the quad path's drafts; at rest the session goes
+    straight to the CPU renderer's exact frame, whose pixels are ``render(kind="cpu")``'s, and
+    the budget's model never sees its cost (it prices quad frames)."""
+    pytest.importorskip("numba", reason="the CPU renderer needs numba (the fast extra)")
+    settings = RenderSettings(background=(0.1, 0.2, 0.3))
+    session = Session(gl_renderer, scene, settings, 1e-4, None, exact_kind="cpu")
+    observed = []
+    real_observe = session.budget.observe
+    session.budget.observe = lambda *a: (observed.append(a), real_observe(*a))
+    try:
+        for i in range(4):
+            moving = session.frame(_camera(0.01 * i))
+        assert not moving.level.exact and session.status == "moving"
+        assert session.plan(moving.level) == [EXACT]
+        steps = []                                       # the camera rests where it was
+        while (frame := session.frame(_camera(0.03))) is not None:
+            steps.append(frame.level)
+        assert steps == [EXACT] and session.exact and not observed
+        got = session.levels.read(session.shown)
+        want = gl_renderer.render(scene, _camera(0.03), settings, "cpu")
+        assert np.array_equal(got, want)
+        quad = gl_renderer.render(scene, _camera(0.03), settings)
+        assert not np.array_equal(got, quad)           # the CPU renderer's, not the quad's
+        assert session.frame(_camera(0.03)) is None
+    finally:
+        session.release()
+
+
+def test_cpu_exact_is_drawn_in_bands_that_input_abandons(gl_renderer, scene):
+    pytest.importorskip("numba", reason="the CPU renderer needs numba (the fast extra)")
+    from splatgl.interactive.draft import CPU_BANDS
+
+    session = Session(gl_renderer, scene, RenderSettings(), 1e-4, None, exact_kind="cpu")
+    try:
+        for i in range(4):                               # the last camera is 0.03
+            moving = session.frame(_camera(0.01 * i))
+        calls = []
+
+        def pending():
+            calls.append(1)
+            return len(calls) > 3              # input arrives during the third band
+        assert session.frame(_camera(0.03), pending) is None
+        assert session.status == "refining" and session.shown is moving and len(calls) == 4
+        calls.clear()
+        frame = session.frame(_camera(0.03), lambda: calls.append(1) or False)
+        assert frame is not None and frame.level.exact and session.exact
+        # one check after the projection, one after the sort, one before each band of tile rows
+        assert len(calls) == 2 + min(CPU_BANDS, 240 // 16)
+        banded = session.levels.read(frame)
+        cpu = gl_renderer.renderer_for(scene, RenderSettings(), "cpu")
+        whole = cpu.render(View.of(_camera(0.03), RenderSettings(), scene)).rgba
+        assert np.array_equal(banded, whole)            # the bands change no pixel
     finally:
         session.release()
 

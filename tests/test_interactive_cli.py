@@ -83,3 +83,24 @@ def test_flight_figures_on_a_fast_flight(gl_renderer, tmp_path):
     assert doc["summary"][0]["frames"] == s["frames"]
     plot(tmp_path / "i.png", [result])
     assert (tmp_path / "i.png").stat().st_size > 1000
+
+
+def test_flight_with_the_cpu_renderers_exact_frame(gl_renderer):
+    """``bench --interactive --exact cpu``: the rest ends at the CPU renderer's frame (render's
+    with kind cpu), and the moving frames are scored against it."""
+    pytest.importorskip("numba", reason="the CPU renderer needs numba (the fast extra)")
+    from splatgl.bench.flight import fly
+    from splatgl.commands._common import demo_scene_path
+    from splatgl.formats import load_scene
+    from splatgl.interactive.budget import EXACT
+
+    scene = load_scene(demo_scene_path())
+    result = fly(gl_renderer, scene, "demo", 160, 120, 50.0, speed=20.0, log=lambda m: None,
+                 exact_kind="cpu")
+    assert result.exact_matches_render and result.refine_steps[-1] == EXACT.describe()
+    assert any(f.psnr is not None for f in result.frames)
+
+
+def test_bench_exact_needs_interactive(capsys):
+    code, _, err = _run(capsys, "bench", "--exact", "cpu")
+    assert code == 2 and "add --interactive" in err

@@ -19,7 +19,7 @@ def scene():
     return random_scene(20_000, seed=5, degree=1, **IN_VIEW)
 
 
-def _viewer(scene, tmp_path, fps, vsync=False):
+def _viewer(scene, tmp_path, fps, vsync=False, kind="quad"):
     from splatgl.cameras.camera import Camera
     from splatgl.errors import ContextError
     from splatgl.model.settings import RenderSettings
@@ -28,7 +28,7 @@ def _viewer(scene, tmp_path, fps, vsync=False):
     options = ViewerOptions(screenshot_dir=tmp_path, vsync=vsync, target_fps=fps)
     try:
         return Viewer(scene, RenderSettings(background=(0.1, 0.2, 0.3)),
-                      Camera.from_fov(W, H, 60.0, np.eye(4)), options=options)
+                      Camera.from_fov(W, H, 60.0, np.eye(4)), kind=kind, options=options)
     except ContextError as exc:
         pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
 
@@ -48,9 +48,14 @@ def _window(v) -> np.ndarray:
     return np.frombuffer(raw, np.uint8).reshape(H, W, 3)[::-1].astype(np.int32)
 
 
-def test_moving_drafts_then_exact_at_rest(xvfb_display, scene, tmp_path):
+@pytest.mark.parametrize("kind", ["quad", "cpu"])
+def test_moving_drafts_then_exact_at_rest(xvfb_display, scene, tmp_path, kind):
+    """With --renderer cpu the drafts are the quad path's too, and the rest ends at the CPU
+    renderer's exact frame (what ``splatgl render --renderer cpu`` writes)."""
+    if kind == "cpu":
+        pytest.importorskip("numba", reason="the CPU renderer needs numba (the fast extra)")
     # A budget of 0.2 ms: every frame is over it, so moving frames are drafts.
-    with _viewer(scene, tmp_path, 5000.0) as v:
+    with _viewer(scene, tmp_path, 5000.0, kind=kind) as v:
         assert v.paced
         _move(v)
         assert not v.pacer.session.shown.level.exact
@@ -63,8 +68,10 @@ def test_moving_drafts_then_exact_at_rest(xvfb_display, scene, tmp_path):
         assert not v.step(dt=0.0)        # exact: nothing more to draw
         v.overlay.visible = False
         v.present()
-        want = np.clip(v.renderer.render(scene, v.camera(), v.settings)[..., :3], 0.0, 1.0)
+        want = np.clip(v.renderer.render(scene, v.camera(), v.settings, kind)[..., :3], 0.0, 1.0)
         assert np.abs(_window(v) - np.round(want * 255)).max() <= 1
+        got = v.pacer.session.levels.read(v.pacer.session.shown)
+        assert np.array_equal(got, v.renderer.render(scene, v.camera(), v.settings, kind))
 
 
 def test_keys_during_a_refinement_act_after_it(xvfb_display, scene, tmp_path, monkeypatch):

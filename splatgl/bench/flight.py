@@ -32,10 +32,11 @@ from ..cameras.poses import orbit
 from ..cameras.up import resolve_up
 from ..evaluation.metrics import psnr
 from ..interactive.budget import Level
+from ..interactive.draft import DraftFrame
 from ..interactive.lod_cache import LodProvider
 from ..interactive.session import Session
 from ..model.scene import Scene
-from ..model.settings import RenderSettings
+from ..model.settings import RendererKind, RenderSettings
 
 #: The flight's phases (seconds): orbit until ORBIT_END, fly in until MOVE_END, then rest.
 ORBIT_END = 5.0
@@ -148,17 +149,21 @@ def _level_of(frame: FlightFrame) -> Level:
 
 def fly(renderer: Renderer, scene: Scene, name: str, width: int = 1280, height: int = 720,
         target_fps: float = 10.0, settings: RenderSettings | None = None,
-        psnr_every: int = 1, log=print, speed: float = 1.0) -> FlightResult:
+        psnr_every: int = 1, log=print, speed: float = 1.0,
+        exact_kind: RendererKind | str = RendererKind.QUAD) -> FlightResult:
     """Fly over ``scene`` (see the module doc); ``psnr_every``: score every n-th moving frame
     (more apart where the flight has over :data:`MAX_SCORED`);
-    ``speed``: fly the path that many times faster (tests)."""
+    ``speed``: fly the path that many times faster (tests); ``exact_kind``: the renderer of
+    the exact frame at rest (the CPU renderer: as ``splatgl view --renderer cpu``), which is
+    also what the moving frames are scored against."""
+    exact_kind = RendererKind(exact_kind)
     settings = settings or RenderSettings()
     flight = Flight(scene, width, height, speed)
     t0 = time.perf_counter()
     lod = LodProvider(scene, scene.source.path if scene.source is not None else None)
     lod.wait()
     result = FlightResult(name, scene.count, (width, height), target_fps, time.perf_counter() - t0)
-    session = Session(renderer, scene, settings, 1.0 / target_fps, lod)
+    session = Session(renderer, scene, settings, 1.0 / target_fps, lod, exact_kind=exact_kind)
     try:
         _warm_up(session, flight)
         _moving(session, flight, result)
@@ -168,8 +173,8 @@ def fly(renderer: Renderer, scene: Scene, name: str, width: int = 1280, height: 
         result.calibrations = [f"{lv.describe()}: {p:.1f} dB" for lv, p in session.calibrations]
         _score(session, flight, result, psnr_every)
         rest = flight.camera(flight.move_end)
-        exact = session.levels.read(session.levels.draw(rest, Level()))
-        want = renderer.render(scene, rest, settings)
+        exact = session.levels.read(_exact(session, rest))
+        want = renderer.render(scene, rest, settings, exact_kind)
         result.exact_matches_render = bool(np.array_equal(exact, want))
     finally:
         session.release()
@@ -241,6 +246,13 @@ def _score(session: Session, flight: Flight, result: FlightResult, every: int) -
             continue
         level = _level_of(f)
         cam = flight.camera(f.t)
-        exact = levels.read(levels.draw(cam, Level()))
-        got = exact if level.exact else levels.read(levels.draw(cam, level))
+        exact = levels.read(_exact(session, cam))
+        got = levels.read(levels.draw(cam, level)) if not level.exact or session.cpu_exact else exact
         f.psnr = float(psnr(got[..., :3], exact[..., :3]))
+
+
+def _exact(session: Session, camera: Camera) -> DraftFrame:
+    """The session's exact frame of ``camera``: the CPU renderer's or the quad path's."""
+    if session.cpu_exact:
+        return session.levels.draw_cpu(camera)
+    return session.levels.draw(camera, Level())

@@ -177,6 +177,10 @@ def add_interactive_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--target-fps", type=float, default=None, metavar="F",
                    help="--interactive's frame-time budget (default: 10 on software OpenGL, 60 on "
                         "a GPU, as splatgl view)")
+    p.add_argument("--exact", choices=("quad", "cpu"), default="quad",
+                   help="--interactive: the renderer of the exact frame at rest, which the moving "
+                        "frames are scored against (cpu: the CPU renderer after quad drafts, as "
+                        "splatgl view --renderer cpu; needs the fast extra; default quad)")
 
 
 def check_interactive_options(args: argparse.Namespace) -> float | None:
@@ -200,6 +204,9 @@ def run_interactive_command(args: argparse.Namespace, scenes: list) -> int:
     from ..interactive.session import default_fps
 
     fps = check_interactive_options(args)
+    if args.exact == "cpu":
+        from ..renderers.cpu import check_available
+        check_available()
     machine = probe_machine()
     print(describe(machine), flush=True)
     results = []
@@ -209,8 +216,10 @@ def run_interactive_command(args: argparse.Namespace, scenes: list) -> int:
             print(f"loading {path} ...", flush=True)
             scene = load_scene(path)
             results.append(fly(renderer, scene, path.name.split(".")[0], args.width or 1280,
-                               args.height or 720, fps, log=lambda m: print(m, flush=True)))
-    print(f"interactive benchmark at a {1e3 / fps:.0f} ms budget; " + describe(machine))
+                               args.height or 720, fps, log=lambda m: print(m, flush=True),
+                               exact_kind=args.exact))
+    print(f"interactive benchmark at a {1e3 / fps:.0f} ms budget, exact frames by the "
+          f"{args.exact} renderer; " + describe(machine))
     print(table(results))
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)

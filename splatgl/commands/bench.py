@@ -196,6 +196,9 @@ def run(args: argparse.Namespace) -> int:
     if (args.scale or args.lod) and args.json is not None:
         mode = "--scale" if args.scale else "--lod"
         raise SplatglError(f"--json: {mode} writes its JSON with --out DIR")
+    if args.exact != "quad" and not args.interactive:
+        raise SplatglError("--exact chooses the exact frame of --interactive's flight; add "
+                           "--interactive (the scene benchmark has a cpu row of its own)")
     if args.interactive:
         check_interactive_options(args)          # before looking for the scenes
         return run_interactive_command(args, _interactive_scenes(args))

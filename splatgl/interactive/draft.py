@@ -25,10 +25,10 @@ from ..cameras.view import View, draft_low_pass
 from ..lod.render import LodSettings
 from ..lod.source import lod_renderer
 from ..model.scene import Scene
-from ..model.settings import EarlyStop, RenderSettings
+from ..model.settings import EarlyStop, RendererKind, RenderSettings
 from ..renderers.early_stop import MAX_BATCH, BatchHook
 from ..renderers.quad import QuadRenderer, composite
-from .budget import Level
+from .budget import EXACT, Level
 from .lod_cache import LodProvider
 from .upscale import Upscaler
 
@@ -37,6 +37,10 @@ _READ_DTYPES = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
 
 #: A budgeted cut is never finer than this (pixels): the budget, not the threshold, decides.
 CUT_THRESHOLD_PX = 0.25
+
+#: Bands of tile rows the CPU renderer's exact frame is blended in, input checked before each:
+#: the 1M-splat scene's blend (about 0.45 s here) then yields every 20 ms or so.
+CPU_BANDS = 24
 
 #: Drafts draw one triangle per splat instead of a quad (QuadRenderer.use_triangles): three
 #: vertices instead of four where llvmpipe's per-primitive front end dominates, at a third more
@@ -75,6 +79,7 @@ class LevelRenderer:
         self._lod_quad: QuadRenderer | None = None
         self._lod_sh: int | None = None
         self._upscaler: Upscaler | None = None
+        self._cpu_texture: moderngl.Texture | None = None   # draw_cpu's frame
 
     @property
     def has_lod(self) -> bool:
@@ -134,6 +139,24 @@ class LevelRenderer:
             self.renderer.ctx.finish()
         return DraftFrame(level, texture, (cam.width, cam.height), drawn, time.perf_counter() - t0)
 
+    def draw_cpu(self, camera: Camera, on_batch: BatchHook | None = None) -> DraftFrame:
+        """The exact frame of ``camera`` drawn by the CPU renderer (the one the API renderer
+        keeps for these settings, so it is ``splatgl render --renderer cpu``'s image), in
+        :data:`CPU_BANDS` bands with ``on_batch`` before each; held in a float texture
+        (premultiplied ``(C, A)``) like the quad path's frames."""
+        cpu = self.renderer.renderer_for(self.scene, self.settings, RendererKind.CPU)
+        view = View.of(camera, self.settings, self.scene)
+        t0 = time.perf_counter()
+        rgba, _ = cpu.draw(view, on_batch=on_batch, bands=CPU_BANDS if on_batch else 1)
+        size = (camera.width, camera.height)
+        if self._cpu_texture is None or self._cpu_texture.size != size:
+            if self._cpu_texture is not None:
+                self._cpu_texture.release()
+            self._cpu_texture = self.renderer.ctx.texture(size, 4, dtype="f4")
+        self._cpu_texture.write(rgba)
+        return DraftFrame(EXACT, self._cpu_texture, size, cpu.last_times.drawn,
+                          time.perf_counter() - t0)
+
     def read(self, frame: DraftFrame) -> np.ndarray:
         """(H, W, 4) float32 of ``frame`` at the camera's size with the background composited
         (as ``render`` returns it)."""
@@ -151,6 +174,9 @@ class LevelRenderer:
 
     def release(self) -> None:
         self._release_lod()
+        if self._cpu_texture is not None:
+            self._cpu_texture.release()
+            self._cpu_texture = None
         if self._upscaler is not None:
             self._upscaler.release()
             self._upscaler = None

@@ -26,7 +26,7 @@ from ..cameras.camera import Camera
 from ..gl.context import renderer_name
 from ..gl.egl_devices import is_software_renderer
 from ..model.scene import Scene
-from ..model.settings import RenderSettings
+from ..model.settings import RendererKind, RenderSettings
 from ..renderers.early_stop import MAX_BATCH
 from .budget import EXACT, SPLAT_UNIT, FrameBudget, Level
 from .draft import DraftFrame, LevelRenderer
@@ -96,13 +96,19 @@ class Session:
 
     ``budget``: seconds a moving frame may take (the frame period; the draw's share of it
     follows :meth:`note_overhead`); ``lod``: the level-of-detail provider (None: no splat
-    budgets).  After each :meth:`frame`: :attr:`shown` (the frame to present), :attr:`status`
-    ("moving", "refining" or "exact").
+    budgets); ``exact_kind``: the renderer of the exact frame at rest, the quad path or the CPU
+    renderer (``RendererKind.CPU``: moving frames are the quad path's drafts as ever, and the
+    rest refines straight to the CPU renderer's exact frame, drawn in bands that input
+    interrupts; its cost stays out of the budget's model, which prices quad frames).  After
+    each :meth:`frame`: :attr:`shown` (the frame to present), :attr:`status` ("moving",
+    "refining" or "exact").
     """
 
     def __init__(self, renderer: Renderer, scene: Scene, settings: RenderSettings, budget: float,
-                 lod: LodProvider | None = None):
+                 lod: LodProvider | None = None,
+                 exact_kind: RendererKind | str = RendererKind.QUAD):
         self.renderer, self.scene, self.settings = renderer, scene, settings
+        self.cpu_exact = RendererKind(exact_kind) is RendererKind.CPU
         self.lod = lod
         self.levels = LevelRenderer(renderer, scene, settings, lod)
         self.budget = FrameBudget(budget, scene.count, 1280 * 720, scene.sh_degree, has_lod=False)
@@ -134,6 +140,8 @@ class Session:
         """The refinement steps after a moving frame at ``moving``: full detail at its scale
         first where the exact frame is predicted to take over two budgets, then exact."""
         steps = []
+        if self.cpu_exact:          # a few budgets at most, and interruptible: no middle step
+            return [EXACT]
         if not moving.exact and self.budget.predict(EXACT) > 2.0 * self.budget.budget:
             step = Level(moving.scale)
             if step != moving and not step.exact:
@@ -168,17 +176,20 @@ class Session:
         if self.refine_started is None:
             self.refine_started = time.perf_counter()
         level = self._plan[0]
+        on_cpu = level.exact and self.cpu_exact
         try:
-            frame = self.levels.draw(camera, level, on_batch=hook, max_batch=self._batch())
+            frame = (self.levels.draw_cpu(camera, on_batch=hook) if on_cpu else
+                     self.levels.draw(camera, level, on_batch=hook, max_batch=self._batch()))
         except Interrupted:
             self.status = "refining"
             return None
         self._plan.pop(0)
         self.moved = False
-        if level.budget is None and frame.splats:
+        if level.budget is None and frame.splats and not on_cpu:
             self._full_per_splat = frame.seconds / frame.splats
         if level.exact:
-            self.budget.observe(level, frame.splats, frame.seconds)
+            if not on_cpu:
+                self.budget.observe(level, frame.splats, frame.seconds)
             self._calibration = self._calibration_level()
         self.shown = frame
         self.status = "refining" if self._plan else "exact"
@@ -196,9 +207,10 @@ class Session:
         self.budget.report(level, frame.splats, frame.seconds)
         self._key, self.shown, self._moving_level = camera_key(camera), frame, level
         self.moved = True
-        self._plan = [] if level.exact else self.plan(level)
+        final = level.exact and not self.cpu_exact   # the CPU renderer's exact frame is its own
+        self._plan = [] if final else self.plan(level)
         self._calibration = None                  # it was for the camera at rest
-        self.status = "exact" if level.exact else "moving"
+        self.status = "exact" if final else "moving"
         self.refine_started = None
         return frame
 

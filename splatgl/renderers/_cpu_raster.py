@@ -61,10 +61,10 @@ REC_SIZE = 16
 
 
 @numba.njit(parallel=True, fastmath=False, cache=True)
-def pack(order, mean2d, conic, opacity, reach, color, depth, box):
-    """(len(order), REC_SIZE) float32: each drawn splat's record, in ``order`` (front to back),
-    so that the rasterizer reads one cache line per splat, in increasing address."""
-    out = np.zeros((order.shape[0], REC_SIZE), np.float32)
+def pack(order, mean2d, conic, opacity, reach, color, depth, box, out):
+    """Fill ``out`` ((len(order), REC_SIZE) float32) with each drawn splat's record, in
+    ``order`` (front to back), so that the rasterizer reads one cache line per splat, in
+    increasing address.  Slices of ``order`` and ``out`` pack a part."""
     for k in numba.prange(order.shape[0]):
         i = order[k]
         out[k, REC_MX] = mean2d[i, 0]
@@ -80,7 +80,6 @@ def pack(order, mean2d, conic, opacity, reach, color, depth, box):
         out[k, REC_Z] = depth[i]
         for c in range(4):
             out[k, REC_BOX + c] = box[i, c]
-    return out
 
 
 @numba.njit(parallel=True, fastmath=False, cache=True)

@@ -37,6 +37,7 @@ from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from ..reference.options import ReferenceOptions
 from ..reference.stages import project, tile_grid
+from .quad_layers import composite
 
 #: The layers this renderer draws.
 LAYERS = frozenset(BASE | {Layer.DEPTH})
@@ -51,6 +52,7 @@ class CpuTimes:
     bin: float
     rasterize: float
     n_keys: int
+    drawn: int = 0          # splats drawn (a tile rectangle on screen)
 
     @property
     def total(self) -> float:
@@ -75,7 +77,8 @@ def _kernels() -> SimpleNamespace:
     raster_mod = importlib.import_module("splatgl.renderers._cpu_raster")
     return SimpleNamespace(project_pinhole=project_mod.project_pinhole,
                            boxes_of=project_mod.boxes_of, pack=raster_mod.pack,
-                           bin_tiles=raster_mod.bin_tiles, rasterize=raster_mod.rasterize)
+                           bin_tiles=raster_mod.bin_tiles, rasterize=raster_mod.rasterize,
+                           REC_SIZE=raster_mod.REC_SIZE)
 
 
 def check_scene(scene: Scene, settings: RenderSettings) -> None:
@@ -119,7 +122,7 @@ class CpuRenderer:
         degree = scene.sh_degree if settings.sh_degree is None else min(settings.sh_degree,
                                                                         scene.sh_degree)
         self._coeffs = sh_coeff_count(degree)
-        self._tiles: dict[tuple[int, int], np.ndarray] = {}
+        self._tiles: dict[tuple, list[np.ndarray]] = {}     # the bands of each grid
 
     def _relative_means(self, anchor: np.ndarray) -> np.ndarray:
         """``means - anchor`` in float32 (the subtraction in float64), kept per anchor."""
@@ -129,8 +132,9 @@ class CpuRenderer:
             self._anchor = key, np.ascontiguousarray(rel, np.float32)
         return self._anchor[1]
 
-    def _project_pinhole(self, view: View):
-        """Stage 1 compiled: (mean2d, conic, opacity, reach, colour, depth, box, rect)."""
+    def _project_pinhole(self, view: View, checkpoint=None):
+        """Stage 1 compiled: (mean2d, conic, opacity, reach, colour, depth, box, rect); with
+        ``checkpoint``, in parts of :data:`PART_SPLATS` splats, ``checkpoint()`` before each."""
         n = self.scene.count
         cam = anchored_camera(view.camera, view.anchor)
         tx, ty = cam.tan_half_fov
@@ -145,10 +149,11 @@ class CpuRenderer:
         out = (np.zeros((n, 2), f32), np.zeros((n, 3), f32), np.zeros(n, f32), np.zeros(n, f32),
                np.zeros((n, 3), f32), np.zeros(n, f32), np.zeros((n, 4), np.int32),
                np.zeros((n, 4), np.int32))
-        self.k.project_pinhole(self._relative_means(view.anchor), self._rs, self._opacity,
-                               self._sh, self._coeffs, params,
-                               np.asarray(cam.center, np.float32), float(grid[0]),
-                               float(grid[1]), bool(self.settings.antialias), *out)
+        rel, center = self._relative_means(view.anchor), np.asarray(cam.center, np.float32)
+        for a, b in _parts(n, checkpoint):
+            self.k.project_pinhole(rel[a:b], self._rs[a:b], self._opacity[a:b], self._sh[a:b],
+                                   self._coeffs, params, center, float(grid[0]), float(grid[1]),
+                                   bool(self.settings.antialias), *(o[a:b] for o in out))
         return out
 
     def _project_any(self, view: View):
@@ -169,7 +174,7 @@ class CpuRenderer:
     def render(self, view: View, layers: frozenset[Layer] = BASE,
                under: UnderLayer | None = None) -> RenderOutput:
         """The ``layers`` of one view (colour and alpha; depth when asked): RGB = C + (1 - A)
-        background, alpha = A; row 0 is the top."""
+        background, alpha = A, as the quad path composites it; row 0 is the top."""
         layers = frozenset(layers)
         if under is not None:
             raise SplatglError("--renderer cpu cannot composite into --under geometry yet "
@@ -178,35 +183,73 @@ class CpuRenderer:
             names = ", ".join(sorted(layer.value for layer in layers - LAYERS))
             raise SplatglError(f"--renderer cpu draws colour, alpha and depth only, not {names} "
                                "(use --renderer quad)")
+        rgba, depth = self.draw(view, Layer.DEPTH in layers)
+        if any(self.settings.background):
+            rgba = composite(rgba, self.settings.background)
+        return RenderOutput(rgba, depth, layers | BASE)
+
+    def draw(self, view: View, with_depth: bool = False, on_batch=None,
+             bands: int = 1) -> tuple[np.ndarray, np.ndarray | None]:
+        """``(premultiplied (H, W, 4) float32 (C, A), depth (H, W) or None)`` of one view, no
+        background.  With ``on_batch``, the work is cut into pieces of a few tens of
+        milliseconds (here, at 1M splats): projection and packing in parts of
+        :data:`PART_SPLATS` splats, the sort and the binning whole, and the blend in ``bands``
+        bands of tile rows; ``on_batch(done, total)`` (tiles blended) is called before each
+        piece and may raise to abandon the frame (:mod:`splatgl.interactive.session` does, on
+        input).  The image is the same however the work is cut."""
         w, h = view.width, view.height
-        bg = np.asarray(self.settings.background, np.float32)
         rgba = np.empty((h, w, 4), np.float32)
-        depth = np.empty((h, w) if Layer.DEPTH in layers else (1, 1), np.float32)
-        t0 = time.perf_counter()
-        if self.scene.count == 0:
-            rgba[...] = np.append(bg, 0.0)
-            depth[...] = 0.0
-            self.last_times = CpuTimes(0.0, 0.0, 0.0, time.perf_counter() - t0, 0)
-            return RenderOutput(rgba, depth if Layer.DEPTH in layers else None, layers | BASE)
-        fast = type(view.camera.model) is Pinhole
-        mean2d, conic, opacity, reach, color, z, box, rect = (
-            self._project_pinhole(view) if fast else self._project_any(view))
-        t1 = time.perf_counter()
-        order = depth_order(z, rect)
-        t2 = time.perf_counter()
+        depth = np.empty((h, w) if with_depth else (1, 1), np.float32)
         grid = tile_grid(w, h)
         n_tiles = grid[0] * grid[1]
+        t0 = time.perf_counter()
+        if self.scene.count == 0:
+            rgba[...] = 0.0
+            depth[...] = 0.0
+            self.last_times = CpuTimes(0.0, 0.0, 0.0, time.perf_counter() - t0, 0, 0)
+            return rgba, depth if with_depth else None
+        done = 0
+
+        def checkpoint() -> None:
+            if on_batch is not None:
+                on_batch(done, n_tiles)
+
+        fast = type(view.camera.model) is Pinhole
+        mean2d, conic, opacity, reach, color, z, box, rect = (
+            self._project_pinhole(view, checkpoint) if fast else self._project_any(view))
+        t1 = time.perf_counter()
+        checkpoint()
+        order = depth_order(z, rect)
+        t2 = time.perf_counter()
+        checkpoint()
         starts, rows = self.k.bin_tiles(order, rect, grid[0], n_tiles, 4 * _threads())
-        rec = self.k.pack(order, mean2d, conic, opacity, reach, color, z, box)
+        rec = np.empty((order.shape[0], self.k.REC_SIZE), np.float32)
+        for a, b in _parts(order.shape[0], checkpoint):
+            self.k.pack(order[a:b], mean2d, conic, opacity, reach, color, z, box, rec[a:b])
         t3 = time.perf_counter()
-        tiles = self._tiles.get(grid)
-        if tiles is None:
-            tiles = self._tiles[grid] = tile_order(n_tiles, _threads())
-        want_depth = Layer.DEPTH in layers
-        self.k.rasterize(starts, rows, tiles, rec, grid[0], bg, rgba, depth, want_depth)
+        zero = np.zeros(3, np.float32)
+        for tiles in self._bands(grid, bands):
+            checkpoint()
+            self.k.rasterize(starts, rows, tiles, rec, grid[0], zero, rgba, depth, with_depth)
+            done += tiles.shape[0]
         t4 = time.perf_counter()
-        self.last_times = CpuTimes(t1 - t0, t2 - t1, t3 - t2, t4 - t3, int(rows.shape[0]))
-        return RenderOutput(rgba, depth if Layer.DEPTH in layers else None, layers | BASE)
+        self.last_times = CpuTimes(t1 - t0, t2 - t1, t3 - t2, t4 - t3, int(rows.shape[0]),
+                                   int(order.shape[0]))
+        return rgba, depth if with_depth else None
+
+    def _bands(self, grid: tuple[int, int], bands: int) -> list[np.ndarray]:
+        """The tile ids of each band of whole tile rows, each interleaved for the threads
+        (:func:`tile_order`); one band: the whole grid."""
+        key = (grid, max(1, min(bands, grid[1])))
+        cached = self._tiles.get(key)
+        if cached is None:
+            threads, n = _threads(), key[1]
+            cached = []
+            for b in range(n):
+                first, last = grid[1] * b // n * grid[0], grid[1] * (b + 1) // n * grid[0]
+                cached.append(first + tile_order(last - first, threads))
+            self._tiles[key] = cached
+        return cached
 
     def release(self) -> None:
         """Nothing to free (numpy arrays only)."""
@@ -228,6 +271,21 @@ def depth_order(depth: np.ndarray, rect: np.ndarray) -> np.ndarray:
 def describe() -> str:
     """What ``--timings`` prints as the GL renderer of a CPU-rendered frame."""
     return f"none (the CPU renderer: numba, {_threads()} threads)"
+
+
+#: Splats per part of the projection and the packing when a frame is drawn in pieces
+#: (:meth:`CpuRenderer.draw` with ``on_batch``): about 20 ms each here.
+PART_SPLATS = 250_000
+def _parts(n: int, checkpoint):
+    """Yield ``[a, b)`` ranges covering ``n`` rows: one without ``checkpoint``, else parts of
+    :data:`PART_SPLATS`, calling ``checkpoint()`` before each but the first."""
+    if checkpoint is None or n <= PART_SPLATS:
+        yield 0, n
+        return
+    for i, a in enumerate(range(0, n, PART_SPLATS)):
+        if i:
+            checkpoint()
+        yield a, min(a + PART_SPLATS, n)
 
 
 def _threads() -> int:

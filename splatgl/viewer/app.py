@@ -269,8 +269,9 @@ class Viewer:
     @property
     def paced(self) -> bool:
         """Whether this frame goes through the frame-time budget (:mod:`.pacing`): the colour
-        view of the quad path, one eye, with a budget set."""
-        return (self.view is ViewMode.COLOR and self.kind is RendererKind.QUAD
+        view of the quad path or the CPU renderer (quad drafts, its exact frame at rest), one
+        eye, with a budget set."""
+        return (self.view is ViewMode.COLOR and self.kind in (RendererKind.QUAD, RendererKind.CPU)
                 and self.options.stereo is None and self.scene.kind is SplatKind.GAUSSIAN_3D
                 and self.pacer.enabled(self.renderer))
 

@@ -1,4 +1,6 @@
-"""The viewer's frame-time budget: colour frames of the quad path through an interactive session.
+"""The viewer's frame-time budget: colour frames of the quad path through an interactive session
+(with ``--renderer cpu``: the quad path's drafts while moving, the CPU renderer's exact frame
+at rest).
 
 While the camera moves, each frame is drawn at the level the budget picks (render scale, splat
 budget, SH degree; :mod:`splatgl.interactive.budget`); when it rests, the session refines to the
@@ -23,7 +25,7 @@ from ..interactive.budget import check_fps
 from ..interactive.lod_cache import LodProvider
 from ..interactive.session import Session, default_fps
 from ..model.scene import Scene
-from ..model.settings import RenderSettings
+from ..model.settings import RendererKind, RenderSettings
 from .frames import FrameResult
 
 class Pacer:
@@ -45,21 +47,25 @@ class Pacer:
     def enabled(self, renderer: Renderer) -> bool:
         return self.fps(renderer) > 0.0
 
-    def _session(self, renderer: Renderer, settings: RenderSettings) -> Session:
-        owner = (id(renderer), settings)
+    def _session(self, renderer: Renderer, settings: RenderSettings,
+                 kind: RendererKind = RendererKind.QUAD) -> Session:
+        owner = (id(renderer), settings, kind)
         if self.session is None or self._owner != owner:
             self.release_session()
             if self.lod is None:
                 self.lod = LodProvider(self.scene, self.scene_path)
-            self.session = Session(renderer, self.scene, settings, 1.0 / self.fps(renderer), self.lod)
+            self.session = Session(renderer, self.scene, settings, 1.0 / self.fps(renderer), self.lod,
+                                   exact_kind=kind)
             self._owner = owner
         return self.session
 
     def frame(self, renderer: Renderer, camera: Camera, settings: RenderSettings,
-              input_pending: Callable[[], bool] | None = None) -> FrameResult | None:
+              input_pending: Callable[[], bool] | None = None,
+              kind: RendererKind = RendererKind.QUAD) -> FrameResult | None:
         """The next frame for ``camera``: a moving frame, or the next refinement step at rest
-        (None: nothing new, or a refinement step interrupted by input)."""
-        session = self._session(renderer, settings)
+        (None: nothing new, or a refinement step interrupted by input).  ``kind``: the
+        renderer of the exact frame (the quad path, or the CPU renderer after quad drafts)."""
+        session = self._session(renderer, settings, kind)
         drawn = session.frame(camera, input_pending)
         if drawn is None:
             return None
@@ -124,7 +130,7 @@ def paced_frame(viewer, camera: Camera, key: tuple) -> bool:
 
     v._queued = []
     try:
-        frame = v.pacer.frame(v.renderer, camera, v.settings, input_pending)
+        frame = v.pacer.frame(v.renderer, camera, v.settings, input_pending, v.kind)
     finally:
         queued, v._queued = v._queued, None
         for act in queued:
