@@ -370,8 +370,9 @@ def test_input_abandons_a_refinement_step(gl_renderer, scene):
 
 def test_cpu_exact_session_refines_to_exactly_the_cpu_render(gl_renderer, scene):
     """With exact_kind CPU, moving frames are the quad path's drafts; at rest the session goes
-    straight to the CPU renderer's exact frame, whose pixels are ``render(kind="cpu")``'s, and
-    the budget's model never sees its cost (it prices quad frames)."""
+    straight to the CPU renderer's exact frame, whose pixels are ``render(kind="cpu")``'s.  The
+    budget's model never sees the CPU frame's cost (it prices quad frames); it learns the quad
+    path's exact frame, drawn unseen at rest afterwards, as when the quad path draws it."""
     pytest.importorskip("numba", reason="the CPU renderer needs numba (the fast extra)")
     settings = RenderSettings(background=(0.1, 0.2, 0.3))
     session = Session(gl_renderer, scene, settings, 1e-4, None, exact_kind="cpu")
@@ -386,7 +387,8 @@ def test_cpu_exact_session_refines_to_exactly_the_cpu_render(gl_renderer, scene)
         steps = []                                       # the camera rests where it was
         while (frame := session.frame(_camera(0.03))) is not None:
             steps.append(frame.level)
-        assert steps == [EXACT] and session.exact and not observed
+        assert steps == [EXACT] and session.exact and not session.pending
+        assert [level for level, _, _ in observed] == [EXACT] and observed[0][1] > 0.9 * scene.count
         got = session.levels.read(session.shown)
         want = gl_renderer.render(scene, _camera(0.03), settings, "cpu")
         assert np.array_equal(got, want)

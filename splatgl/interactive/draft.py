@@ -39,8 +39,9 @@ _READ_DTYPES = {"f4": np.float32, "f2": np.float16, "f1": np.uint8}
 CUT_THRESHOLD_PX = 0.25
 
 #: Bands of tile rows the CPU renderer's exact frame is blended in, input checked before each:
-#: the 1M-splat scene's blend (about 0.45 s here) then yields every 20 ms or so.
-CPU_BANDS = 24
+#: one per tile row at 720 rows (the 1M-splat scene's blend, about 0.45 s here, then yields
+#: every 10 ms or so).
+CPU_BANDS = 45
 
 #: Drafts draw one triangle per splat instead of a quad (QuadRenderer.use_triangles): three
 #: vertices instead of four where llvmpipe's per-primitive front end dominates, at a third more

@@ -124,6 +124,7 @@ class Session:
         self.refine_started: float | None = None
         self._full_per_splat: float | None = None   # seconds a splat of the last full-detail step
         self._calibration: Level | None = None      # the cut to measure at rest, after exact
+        self._quad_cost = False     # at rest after the CPU frame: time the quad path's exact one
         #: (level, PSNR against the exact frame) of each calibration so far.
         self.calibrations: list[tuple[Level, float]] = []
         #: log(triangle seconds / quad seconds) of the calibration level at each rest so far.
@@ -169,7 +170,9 @@ class Session:
             return self.moving(camera)
         hook = None if input_pending is None else _interrupt_on(input_pending)
         if not self._plan:
-            if self._calibration is not None:
+            if self._quad_cost:
+                self._observe_quad_exact(camera, hook)
+            elif self._calibration is not None:
                 self._calibrate(camera, hook)
             self.status = "exact"
             return None
@@ -190,6 +193,7 @@ class Session:
         if level.exact:
             if not on_cpu:
                 self.budget.observe(level, frame.splats, frame.seconds)
+            self._quad_cost = on_cpu
             self._calibration = self._calibration_level()
         self.shown = frame
         self.status = "refining" if self._plan else "exact"
@@ -210,6 +214,7 @@ class Session:
         final = level.exact and not self.cpu_exact   # the CPU renderer's exact frame is its own
         self._plan = [] if final else self.plan(level)
         self._calibration = None                  # it was for the camera at rest
+        self._quad_cost = False
         self.status = "exact" if final else "moving"
         self.refine_started = None
         return frame
@@ -283,10 +288,27 @@ class Session:
         self.primitive_log.append(math.log(seconds[True] / seconds[False]))
         levels.triangles = sum(self.primitive_log) < 0.0
 
+    def _observe_quad_exact(self, camera: Camera, hook) -> None:
+        """At rest, after the CPU renderer's exact frame is shown: draw the quad path's exact
+        frame unseen, so that the budget's model (which prices quad frames) and the refinement
+        batches (sized by the last full-detail quad frame's cost per splat) learn from it as
+        they do when the quad path draws the exact frame.  Without it the model saw drafts
+        only, and the batches were sized from its estimate (the 1M scene's input latency
+        reached 171 ms).  Input abandons it like a refinement step."""
+        try:
+            frame = self.levels.draw(camera, EXACT, on_batch=hook, max_batch=self._batch())
+        except Interrupted:
+            return
+        self._quad_cost = False
+        self.budget.observe(EXACT, frame.splats, frame.seconds)
+        if frame.splats:
+            self._full_per_splat = frame.seconds / frame.splats
+
     @property
     def pending(self) -> bool:
-        """Whether calls at rest still have work: refinement steps, or the calibration."""
-        return bool(self._plan) or self._calibration is not None
+        """Whether calls at rest still have work: refinement steps, the quad path's exact cost
+        (after the CPU renderer's frame), or the calibration."""
+        return bool(self._plan) or self._quad_cost or self._calibration is not None
 
     @property
     def exact(self) -> bool:

@@ -274,8 +274,8 @@ def describe() -> str:
 
 
 #: Splats per part of the projection and the packing when a frame is drawn in pieces
-#: (:meth:`CpuRenderer.draw` with ``on_batch``): about 20 ms each here.
-PART_SPLATS = 250_000
+#: (:meth:`CpuRenderer.draw` with ``on_batch``): about 10 ms each here.
+PART_SPLATS = 125_000
 def _parts(n: int, checkpoint):
     """Yield ``[a, b)`` ranges covering ``n`` rows: one without ``checkpoint``, else parts of
     :data:`PART_SPLATS`, calling ``checkpoint()`` before each but the first."""
