@@ -23,6 +23,7 @@ from splatgl.cameras.fisheye import Fisheye
 from splatgl.constants import ALPHA_MIN, TILE_SIZE
 from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
+from splatgl.model.scene import Scene
 from splatgl.model.settings import Convention, RendererKind, RenderSettings
 from splatgl.output.layers import BASE, Layer, with_layers
 from splatgl.reference import emit_keys, render_reference, sort
@@ -85,6 +86,23 @@ def test_empty_scene_and_no_visible_splat_give_the_background():
         out = cpu.CpuRenderer(scene, settings).render(view_of(CAM, scene, settings))
         np.testing.assert_array_equal(out.rgba[..., :3], np.broadcast_to((0.1, 0.2, 0.3), out.rgba[..., :3].shape).astype(np.float32))
         assert not out.rgba[..., 3].any()
+
+
+def test_non_finite_splats_are_culled_as_the_reference_culls_them():
+    """NaN and infinite means, scales, colours and opacities, and a huge scale: no NaN in the
+    image, and the reference's image (which culls non-finite rows) at the usual tolerance."""
+    s = random_scene(2000, 3, degree=1, **IN_DEPTH)
+    means, scales, sh, opacity = s.means.copy(), s.scales.copy(), s.sh.copy(), s.opacities.copy()
+    means[0] = np.nan
+    means[1, 2] = np.inf
+    scales[2] = np.nan
+    scales[3] = 1e30
+    sh[4] = np.nan
+    opacity[5] = np.nan
+    bad = Scene.from_activated(means, s.rotations, scales, opacity, sh)
+    out, ref = cpu_and_reference(bad, CAM)
+    assert np.isfinite(out.rgba).all()
+    assert_close(out.rgba, ref.rgba)
 
 
 def test_api_and_renderer_cache_draw_the_same_pixels():

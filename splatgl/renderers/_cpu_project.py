@@ -55,6 +55,28 @@ def _trunc(x):
 
 
 @numba.njit(inline="always", fastmath=False)
+def _cut_to_box(u, v, qa, qb, qc, q2, tx0, tx1, ty0, ty1, x_end, y_end):
+    """The pixel box ``[bx0, bx1) x [by0, by1)`` of the ellipse ``q <= q2`` of the conic
+    (qa, qb, qc) around (u, v), in float64, :data:`BOX_MARGIN` wider on every side, its ends
+    clamped to -1 and ``x_end``, ``y_end`` (integers as floats stay exact), and the tile
+    rectangle ``[tx0, tx1) x [ty0, ty1)`` cut to the box's tiles.  A conic without a usable
+    determinant keeps the whole rectangle as its box."""
+    qdet = qa * qc - qb * qb
+    if not (qdet > 0 and math.isfinite(qdet)):
+        return (tx0 * TILE_SIZE, tx1 * TILE_SIZE, ty0 * TILE_SIZE, ty1 * TILE_SIZE,
+                tx0, tx1, ty0, ty1)
+    hx = math.sqrt(q2 * qc / qdet) + BOX_MARGIN
+    hy = math.sqrt(q2 * qa / qdet) + BOX_MARGIN
+    bx0 = max(_ceil(u - 0.5 - hx), -1.0)
+    bx1 = min(_floor(u - 0.5 + hx) + 1.0, x_end)
+    by0 = max(_ceil(v - 0.5 - hy), -1.0)
+    by1 = min(_floor(v - 0.5 + hy) + 1.0, y_end)
+    return (bx0, bx1, by0, by1, max(tx0, _floor(bx0 / TILE_SIZE)),
+            min(tx1, _floor((bx1 - 1.0) / TILE_SIZE) + 1.0), max(ty0, _floor(by0 / TILE_SIZE)),
+            min(ty1, _floor((by1 - 1.0) / TILE_SIZE) + 1.0))
+
+
+@numba.njit(inline="always", fastmath=False)
 def _sh_color(sh, i, k, x, y, z):
     """``max(sum h_lm Y_lm(d) + 0.5, 0)`` of splat ``i``'s first ``k`` coefficients at the unit
     direction (x, y, z) (:func:`splatgl.twins.project.sh_basis`'s trig-free form), as 3 floats."""
@@ -187,25 +209,12 @@ def project_pinhole(rel, rs, opacity, sh, k, cam, center, grid_x, grid_y, antial
         ty0 = min(max(_trunc((py - rf) / _F(TILE_SIZE)), 0.0), grid_y)
         tx1 = min(max(_trunc((px + rf + _F(TILE_SIZE - 1)) / _F(TILE_SIZE)), 0.0), grid_x)
         ty1 = min(max(_trunc((py + rf + _F(TILE_SIZE - 1)) / _F(TILE_SIZE)), 0.0), grid_y)
-        # the pixel box where o exp(-q/2) can reach 1/255, from the conic in float64
         if float(o) * 255.0 <= 1.0:
             continue
         q2 = 2.0 * math.log(float(o) * 255.0)
-        qdet = float(qa) * float(qc) - float(qb) * float(qb)
-        if qdet > 0 and math.isfinite(qdet):
-            hx = math.sqrt(q2 * float(qc) / qdet) + BOX_MARGIN
-            hy = math.sqrt(q2 * float(qa) / qdet) + BOX_MARGIN
-            bx0 = max(_ceil(float(u) - 0.5 - hx), -1.0)
-            bx1 = min(_floor(float(u) - 0.5 + hx) + 1.0, grid_x * TILE_SIZE + 1.0)
-            by0 = max(_ceil(float(v) - 0.5 - hy), -1.0)
-            by1 = min(_floor(float(v) - 0.5 + hy) + 1.0, grid_y * TILE_SIZE + 1.0)
-            tx0 = max(tx0, _floor(bx0 / TILE_SIZE))
-            ty0 = max(ty0, _floor(by0 / TILE_SIZE))
-            tx1 = min(tx1, _floor((bx1 - 1.0) / TILE_SIZE) + 1.0)
-            ty1 = min(ty1, _floor((by1 - 1.0) / TILE_SIZE) + 1.0)
-        else:       # no usable box: the whole rectangle
-            bx0, by0 = tx0 * TILE_SIZE, ty0 * TILE_SIZE
-            bx1, by1 = tx1 * TILE_SIZE, ty1 * TILE_SIZE
+        bx0, bx1, by0, by1, tx0, tx1, ty0, ty1 = _cut_to_box(
+            float(u), float(v), float(qa), float(qb), float(qc), q2, tx0, tx1, ty0, ty1,
+            grid_x * TILE_SIZE + 1.0, grid_y * TILE_SIZE + 1.0)
         if not (tx1 > tx0 and ty1 > ty0):
             continue
         mean2d[i, 0], mean2d[i, 1] = u, v
@@ -233,23 +242,11 @@ def boxes_of(mean2d, conic, opacity, rect_min, rect_max, visible, reach, box, re
             continue
         tx0, ty0 = float(rect_min[i, 0]), float(rect_min[i, 1])
         tx1, ty1 = float(rect_max[i, 0]), float(rect_max[i, 1])
-        qa, qb, qc = float(conic[i, 0]), float(conic[i, 1]), float(conic[i, 2])
-        qdet = qa * qc - qb * qb
-        u, v = float(mean2d[i, 0]), float(mean2d[i, 1])
         q2 = 2.0 * math.log(o * 255.0)
-        if qdet > 0 and math.isfinite(qdet):
-            hx = math.sqrt(q2 * qc / qdet) + BOX_MARGIN
-            hy = math.sqrt(q2 * qa / qdet) + BOX_MARGIN
-            bx0 = max(_ceil(u - 0.5 - hx), -1.0)
-            bx1 = min(_floor(u - 0.5 + hx) + 1.0, tx1 * TILE_SIZE + 1.0)
-            by0 = max(_ceil(v - 0.5 - hy), -1.0)
-            by1 = min(_floor(v - 0.5 + hy) + 1.0, ty1 * TILE_SIZE + 1.0)
-            tx0 = max(tx0, _floor(bx0 / TILE_SIZE))
-            ty0 = max(ty0, _floor(by0 / TILE_SIZE))
-            tx1 = min(tx1, _floor((bx1 - 1.0) / TILE_SIZE) + 1.0)
-            ty1 = min(ty1, _floor((by1 - 1.0) / TILE_SIZE) + 1.0)
-        else:
-            bx0, by0, bx1, by1 = tx0 * TILE_SIZE, ty0 * TILE_SIZE, tx1 * TILE_SIZE, ty1 * TILE_SIZE
+        bx0, bx1, by0, by1, tx0, tx1, ty0, ty1 = _cut_to_box(
+            float(mean2d[i, 0]), float(mean2d[i, 1]), float(conic[i, 0]), float(conic[i, 1]),
+            float(conic[i, 2]), q2, tx0, tx1, ty0, ty1, tx1 * TILE_SIZE + 1.0,
+            ty1 * TILE_SIZE + 1.0)
         if not (tx1 > tx0 and ty1 > ty0):
             continue
         reach[i] = q2

@@ -152,9 +152,10 @@ def _blend_row(acc_r, acc_g, acc_b, acc_z, trans, lo, n, first, last, dx0, qa, c
 
 
 @numba.njit(parallel=True, fastmath={"contract"}, cache=True, boundscheck=False)
-def rasterize(starts, rows, tiles, rec, grid_x, background, rgba, depth_out, with_depth):
-    """Blend every tile's list front to back into ``rgba`` (H, W, 4) (``C + T bg``, ``1 - T``)
-    and ``depth_out`` (H, W) (``sum z alpha T``).  ``tiles``: the tile ids in the order the
+def rasterize(starts, rows, tiles, rec, grid_x, rgba, depth_out, with_depth):
+    """Blend every tile's list front to back into ``rgba`` (H, W, 4) (premultiplied: ``C`` and
+    ``1 - T``; the caller composites a background) and, ``with_depth``, ``depth_out`` (H, W)
+    (``sum z alpha T``).  ``tiles``: the tile ids in the order the
     threads share them (interleaved, so that each thread gets near and far, full and empty
     tiles alike).  ``rec``: :func:`pack`'s records; each row of a splat's box is cut to the
     span where the conic's ``q <= reach`` (``2 ln(255 o)``, where alpha falls to 1/255; plus
@@ -218,9 +219,9 @@ def rasterize(starts, rows, tiles, rec, grid_x, background, rgba, depth_out, wit
             x = x0 + p % tile
             if y < height and x < width:
                 tf = abs(trans[p])
-                rgba[y, x, 0] = acc_r[p] + tf * background[0]
-                rgba[y, x, 1] = acc_g[p] + tf * background[1]
-                rgba[y, x, 2] = acc_b[p] + tf * background[2]
+                rgba[y, x, 0] = acc_r[p]
+                rgba[y, x, 1] = acc_g[p]
+                rgba[y, x, 2] = acc_b[p]
                 rgba[y, x, 3] = _F(1.0) - tf
                 if with_depth:
                     depth_out[y, x] = acc_z[p]

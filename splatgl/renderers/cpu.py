@@ -227,10 +227,9 @@ class CpuRenderer:
         for a, b in _parts(order.shape[0], checkpoint):
             self.k.pack(order[a:b], mean2d, conic, opacity, reach, color, z, box, rec[a:b])
         t3 = time.perf_counter()
-        zero = np.zeros(3, np.float32)
         for tiles in self._bands(grid, bands):
             checkpoint()
-            self.k.rasterize(starts, rows, tiles, rec, grid[0], zero, rgba, depth, with_depth)
+            self.k.rasterize(starts, rows, tiles, rec, grid[0], rgba, depth, with_depth)
             done += tiles.shape[0]
         t4 = time.perf_counter()
         self.last_times = CpuTimes(t1 - t0, t2 - t1, t3 - t2, t4 - t3, int(rows.shape[0]),
