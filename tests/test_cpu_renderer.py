@@ -212,7 +212,7 @@ def test_exp_is_accurate_over_the_powers_that_blend():
 
 
 def test_depth_order_is_nearest_first_with_ties_in_row_order():
-    depth = np.array([3.0, 1.0, 3.0, -2.0, 0.5, 1.0, 7.0], np.float32)
+    depth = np.array([3.0, 1.0, 3.0, 0.2, 0.5, 1.0, 7.0], np.float32)
     rect = np.ones((7, 4), np.int32)
     rect[:, 0] = 0
     rect[6, 1] = 0                     # an empty rectangle: not drawn

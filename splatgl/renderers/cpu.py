@@ -35,6 +35,7 @@ from ..model.scene import Scene, SplatKind
 from ..model.settings import RendererKind, RenderSettings, check_convention, check_fidelity
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
+from ..order.sort import depth_sort
 from ..reference.options import ReferenceOptions
 from ..reference.stages import project, tile_grid
 from .quad_layers import composite
@@ -256,15 +257,12 @@ class CpuRenderer:
 
 def depth_order(depth: np.ndarray, rect: np.ndarray) -> np.ndarray:
     """(M,) int64 rows with a tile rectangle, nearest first; equal depths in row order (the
-    reference's stable key sort).  One sort of unique 64-bit keys, the depth's float32 bits
-    made to order as unsigned integers above the row: 5-9x faster here than NumPy's stable
-    argsort of the floats."""
+    reference's stable key sort).  The quad path's sort (:func:`splatgl.order.sort.depth_sort`:
+    one sort of unique 64-bit keys, the depth's float32 bits above the row), 5-9x faster here
+    than NumPy's stable argsort of the floats.  Drawn rows lie beyond the (positive) near
+    plane, so their depths are positive, as that sort needs."""
     kept = np.flatnonzero(rect[:, 1] > rect[:, 0])
-    bits = np.ascontiguousarray(depth[kept], np.float32).view(np.uint32)
-    bits = np.where(bits >> np.uint32(31), ~bits, bits | np.uint32(0x80000000))
-    keys = (bits.astype(np.uint64) << np.uint64(32)) | kept.astype(np.uint64)
-    keys.sort()
-    return (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
+    return depth_sort(depth[kept], kept.astype(np.uint32)).astype(np.int64)
 
 
 def describe() -> str:
