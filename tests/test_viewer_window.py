@@ -149,7 +149,10 @@ def test_views_keys_and_closing(viewer):
     v.on_key(glfw.KEY_C, glfw.PRESS, 0)
     v.on_key(glfw.KEY_T, glfw.PRESS, 0)
     assert v.kind is RendererKind.TILE and v.step() and "tile keys" in v.last.splats
+    v.on_key(glfw.KEY_T, glfw.PRESS, 0)              # T steps quad -> tile -> cpu -> quad
+    assert v.kind is RendererKind.CPU and v.step() and "tile entries" in v.last.splats
     v.on_key(glfw.KEY_T, glfw.PRESS, 0)
+    assert v.kind is RendererKind.QUAD
     v.on_key(glfw.KEY_P, glfw.PRESS, 0)
     assert v.settings.precision is Precision.RGBA16F and v.step()
     v.on_key(glfw.KEY_1, glfw.PRESS, 0)
@@ -274,9 +277,25 @@ def test_stereo_screenshot_is_the_pair_and_its_command_says_stereo(xvfb_display,
     np.testing.assert_array_equal(read_image(again), got)
 
 
+def test_t_skips_the_cpu_renderer_without_numba(viewer, monkeypatch):
+    import glfw
+
+    from splatgl.model.settings import RendererKind
+    from splatgl.renderers import cpu
+
+    v = viewer
+    monkeypatch.setattr(cpu, "installed", lambda: False)
+    v.on_key(glfw.KEY_T, glfw.PRESS, 0)
+    assert v.kind is RendererKind.TILE and v.step()
+    v.on_key(glfw.KEY_T, glfw.PRESS, 0)
+    assert v.kind is RendererKind.QUAD
+    assert v.message == "T skipped cpu: --renderer cpu needs numba: pip install 'splatgl[fast]'"
+
+
 def test_equirectangular_view_refuses_the_tile_toggles(xvfb_display, demo, tmp_path):
     """T, C and Tab need the tile renderer, which has no panoramas: the viewer used to exit with
-    code 2; now the key changes nothing and the status line says why."""
+    code 2; now C and Tab change nothing, T goes on to the CPU renderer, and the status line
+    says why."""
     import glfw
 
     from splatgl.errors import ContextError
@@ -295,7 +314,13 @@ def test_equirectangular_view_refuses_the_tile_toggles(xvfb_display, demo, tmp_p
     try:
         assert v.step(0.0)
         views = []
-        for key in ("T", "T", "C", "C", "TAB", "TAB", "TAB"):
+        v.on_key(glfw.KEY_T, glfw.PRESS, 0)     # T skips the tile renderer: quad -> cpu
+        assert v.kind is RendererKind.CPU and v.step(0.0)
+        assert v.message == ("T skipped tile: the tile renderer cannot draw equirectangular "
+                             "images")
+        v.on_key(glfw.KEY_T, glfw.PRESS, 0)
+        assert v.kind is RendererKind.QUAD
+        for key in ("C", "C", "TAB", "TAB", "TAB"):
             v.on_key(getattr(glfw, f"KEY_{key}"), glfw.PRESS, 0)
             v.step(0.0)
             assert v.kind is RendererKind.QUAD

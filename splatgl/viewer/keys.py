@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import glfw
 
-from ..model.settings import Precision, RendererKind
+from ..model.settings import Precision
 from . import controls
 from .frames import ViewMode
 from .overlay import key_help
@@ -45,8 +45,7 @@ def on_key(v, key: int, action: int, mods: int) -> None:
         back = key == glfw.KEY_PAGE_UP or (key == glfw.KEY_N and v.nav.shift)
         v.step_camera(-1 if back else 1)
     elif key == glfw.KEY_T:
-        if v.kind is RendererKind.TILE or v.tile_allowed("T"):
-            v.toggle_renderer()
+        v.toggle_renderer()
     elif glfw.KEY_0 <= key <= glfw.KEY_3:
         v.set_settings(sh_degree=key - glfw.KEY_0)
     elif key == glfw.KEY_P:

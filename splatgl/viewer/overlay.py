@@ -35,7 +35,7 @@ KEYS = (
     ("[ ] or - +", "narrower / wider field of view"),
     ("R", "reset to the start view"),
     ("N / Shift+N, PgDn / PgUp", "next / previous training camera"),
-    ("T", "toggle renderer quad / tile"),
+    ("T", "next renderer: quad / tile / cpu"),
     ("0 1 2 3", "cap the SH degree"),
     ("P", "cycle blend precision rgba32f / rgba16f / rgba8"),
     ("Ctrl+D (or Tab)", "depth view (Tab cycles colour / depth / difference)"),
