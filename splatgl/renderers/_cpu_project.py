@@ -7,8 +7,9 @@
   the conic, antialiasing, ``ceil(3 sqrt(lambda_max))`` and 3DGS's ``getRect``, the SH colour).
   The order of a few float32 operations differs from NumPy's, so its numbers agree with the
   twin to a few ulps, not bit for bit (tests/test_cpu_renderer.py).
-- :func:`boxes_of`: the same boxes for rows the reference's NumPy stage 1 projected (every
-  other camera model).
+- :func:`project_model`: the same for any other camera model, from the points, Jacobians and
+  culling its NumPy methods computed (:meth:`splatgl.renderers.cpu.CpuRenderer._project_model`).
+  Both share :func:`_finish`, everything after the Jacobian.
 
 Each splat also gets its pixel box: the bounding box of the ellipse where ``o exp(-q/2) >=
 1/255`` (the only pixels where the reference blends it) plus :data:`BOX_MARGIN`, and its tile
@@ -111,6 +112,86 @@ def _sh_color(sh, i, k, x, y, z):
             max(b + _F(SH_OFFSET), _F(0.0)))
 
 
+@numba.njit(inline="always", fastmath=False)
+def _finish(i, x0, y0, z0, u, v, t0, t1, rs, opacity, sh, k, center, lp, antialias, grid_x,
+            grid_y, mean2d, conic, opac_out, reach, color, box, rect):
+    """Row ``i`` of stage 1 from its pixel position (u, v) and ``T = J W`` (rows ``t0``, ``t1``:
+    the model's EWA Jacobian times the view rotation), for every camera model: the dilated
+    covariance ``M M^T + lp I`` with ``M = T R S``, the guarded determinant, the conic,
+    antialiasing, the reference's radius and rectangle, the SH colour seen from ``center``
+    (``x0, y0, z0`` is the anchored mean) and the pixel box.  A culled row keeps its empty
+    ``rect``."""
+    # M = T R S (2x3); the screen covariance is M M^T + low_pass I
+    m0 = (t0[0] * rs[i, 0, 0] + t0[1] * rs[i, 1, 0] + t0[2] * rs[i, 2, 0],
+          t0[0] * rs[i, 0, 1] + t0[1] * rs[i, 1, 1] + t0[2] * rs[i, 2, 1],
+          t0[0] * rs[i, 0, 2] + t0[1] * rs[i, 1, 2] + t0[2] * rs[i, 2, 2])
+    m1 = (t1[0] * rs[i, 0, 0] + t1[1] * rs[i, 1, 0] + t1[2] * rs[i, 2, 0],
+          t1[0] * rs[i, 0, 1] + t1[1] * rs[i, 1, 1] + t1[2] * rs[i, 2, 1],
+          t1[0] * rs[i, 0, 2] + t1[1] * rs[i, 1, 2] + t1[2] * rs[i, 2, 2])
+    a = m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2] + lp
+    b = m0[0] * m1[0] + m0[1] * m1[1] + m0[2] * m1[2]
+    c_ = m1[0] * m1[0] + m1[1] * m1[1] + m1[2] * m1[2] + lp
+    plain = a * c_ - b * b
+    if plain > _F(DET_CANCEL_RATIO) * (a * c_):
+        det = plain
+    else:   # Cauchy-Binet: the sum of M's squared 2x2 minors, never cancelled to <= 0
+        cx_ = m0[1] * m1[2] - m0[2] * m1[1]
+        cy_ = m0[2] * m1[0] - m0[0] * m1[2]
+        cz_ = m0[0] * m1[1] - m0[1] * m1[0]
+        trace = (m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2]) + (
+            m1[0] * m1[0] + m1[1] * m1[1] + m1[2] * m1[2])
+        det = (cx_ * cx_ + cy_ * cy_ + cz_ * cz_) + lp * trace + lp * lp
+    if not det > 0:
+        return
+    inv = _F(1.0) / det
+    qa, qb, qc = c_ * inv, -b * inv, a * inv
+    o = opacity[i]
+    if antialias:
+        undilated = (a - lp) * (c_ - lp) - b * b
+        ratio = undilated / plain if plain > 0 else _F(0.0)
+        o = o * math.sqrt(max(_F(AA_MIN_FACTOR), ratio))
+    # the reference's radius and tile rectangle (3DGS getRect, p = mean2d - 0.5)
+    mid = _F(0.5) * (a + c_)
+    disc = mid * mid - plain
+    if not math.isfinite(disc):
+        half = _F(0.5) * (a - c_)
+        disc = half * half + b * b
+    lam = mid + math.sqrt(max(_F(EXTENT_DISCRIMINANT_FLOOR), disc))
+    r = _F(EXTENT_SIGMAS) * math.sqrt(max(lam, _F(0.0)))
+    r = float(math.ceil(min(r, MAX_RADIUS))) if math.isfinite(r) else MAX_RADIUS
+    # direction for the SH colour: the splat from the camera centre
+    dx, dy, dz = x0 - center[0], y0 - center[1], z0 - center[2]
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if n > 0:
+        dx, dy, dz = dx / n, dy / n, dz / n
+    cr, cg, cb = _sh_color(sh, i, k, dx, dy, dz)
+    if not (math.isfinite(u) and math.isfinite(v) and math.isfinite(qa) and math.isfinite(qb)
+            and math.isfinite(qc) and math.isfinite(o) and math.isfinite(cr)
+            and math.isfinite(cg) and math.isfinite(cb)):
+        return
+    rf = _F(r)
+    px, py = u - _F(0.5), v - _F(0.5)
+    tx0 = min(max(_trunc((px - rf) / _F(TILE_SIZE)), 0.0), grid_x)
+    ty0 = min(max(_trunc((py - rf) / _F(TILE_SIZE)), 0.0), grid_y)
+    tx1 = min(max(_trunc((px + rf + _F(TILE_SIZE - 1)) / _F(TILE_SIZE)), 0.0), grid_x)
+    ty1 = min(max(_trunc((py + rf + _F(TILE_SIZE - 1)) / _F(TILE_SIZE)), 0.0), grid_y)
+    if float(o) * 255.0 <= 1.0:
+        return
+    q2 = 2.0 * math.log(float(o) * 255.0)
+    bx0, bx1, by0, by1, tx0, tx1, ty0, ty1 = _cut_to_box(
+        float(u), float(v), float(qa), float(qb), float(qc), q2, tx0, tx1, ty0, ty1,
+        grid_x * TILE_SIZE + 1.0, grid_y * TILE_SIZE + 1.0)
+    if not (tx1 > tx0 and ty1 > ty0):
+        return
+    mean2d[i, 0], mean2d[i, 1] = u, v
+    conic[i, 0], conic[i, 1], conic[i, 2] = qa, qb, qc
+    opac_out[i] = o
+    reach[i] = q2
+    color[i, 0], color[i, 1], color[i, 2] = cr, cg, cb
+    box[i, 0], box[i, 1], box[i, 2], box[i, 3] = int(bx0), int(bx1), int(by0), int(by1)
+    rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = int(tx0), int(tx1), int(ty0), int(ty1)
+
+
 @numba.njit(parallel=True, fastmath=False, cache=True)
 def project_pinhole(rel, rs, opacity, sh, k, cam, center, grid_x, grid_y, antialias,
                     mean2d, conic, opac_out, reach, color, depth, box, rect):
@@ -155,100 +236,33 @@ def project_pinhole(rel, rs, opacity, sh, k, cam, center, grid_x, grid_y, antial
         t0 = (j00 * w[0], j00 * w[1], j00 * w[2])
         t1 = (j11 * w[3] + j12 * w[6], j11 * w[4] + j12 * w[7], j11 * w[5] + j12 * w[8])
         t0 = (t0[0] + j02 * w[6], t0[1] + j02 * w[7], t0[2] + j02 * w[8])
-        # M = T R S (2x3); the screen covariance is M M^T + low_pass I
-        m0 = (t0[0] * rs[i, 0, 0] + t0[1] * rs[i, 1, 0] + t0[2] * rs[i, 2, 0],
-              t0[0] * rs[i, 0, 1] + t0[1] * rs[i, 1, 1] + t0[2] * rs[i, 2, 1],
-              t0[0] * rs[i, 0, 2] + t0[1] * rs[i, 1, 2] + t0[2] * rs[i, 2, 2])
-        m1 = (t1[0] * rs[i, 0, 0] + t1[1] * rs[i, 1, 0] + t1[2] * rs[i, 2, 0],
-              t1[0] * rs[i, 0, 1] + t1[1] * rs[i, 1, 1] + t1[2] * rs[i, 2, 1],
-              t1[0] * rs[i, 0, 2] + t1[1] * rs[i, 1, 2] + t1[2] * rs[i, 2, 2])
-        a = m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2] + lp
-        b = m0[0] * m1[0] + m0[1] * m1[1] + m0[2] * m1[2]
-        c_ = m1[0] * m1[0] + m1[1] * m1[1] + m1[2] * m1[2] + lp
-        plain = a * c_ - b * b
-        if plain > _F(DET_CANCEL_RATIO) * (a * c_):
-            det = plain
-        else:   # Cauchy-Binet: the sum of M's squared 2x2 minors, never cancelled to <= 0
-            cx_ = m0[1] * m1[2] - m0[2] * m1[1]
-            cy_ = m0[2] * m1[0] - m0[0] * m1[2]
-            cz_ = m0[0] * m1[1] - m0[1] * m1[0]
-            trace = (m0[0] * m0[0] + m0[1] * m0[1] + m0[2] * m0[2]) + (
-                m1[0] * m1[0] + m1[1] * m1[1] + m1[2] * m1[2])
-            det = (cx_ * cx_ + cy_ * cy_ + cz_ * cz_) + lp * trace + lp * lp
-        if not det > 0:
-            continue
-        inv = _F(1.0) / det
-        qa, qb, qc = c_ * inv, -b * inv, a * inv
-        o = opacity[i]
-        if antialias:
-            undilated = (a - lp) * (c_ - lp) - b * b
-            ratio = undilated / plain if plain > 0 else _F(0.0)
-            o = o * math.sqrt(max(_F(AA_MIN_FACTOR), ratio))
-        # the reference's radius and tile rectangle (3DGS getRect, p = mean2d - 0.5)
-        mid = _F(0.5) * (a + c_)
-        disc = mid * mid - plain
-        if not math.isfinite(disc):
-            half = _F(0.5) * (a - c_)
-            disc = half * half + b * b
-        lam = mid + math.sqrt(max(_F(EXTENT_DISCRIMINANT_FLOOR), disc))
-        r = _F(EXTENT_SIGMAS) * math.sqrt(max(lam, _F(0.0)))
-        r = float(math.ceil(min(r, MAX_RADIUS))) if math.isfinite(r) else MAX_RADIUS
-        # direction for the SH colour: the splat from the camera centre
-        dx, dy, dz = x0 - center[0], y0 - center[1], z0 - center[2]
-        n = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if n > 0:
-            dx, dy, dz = dx / n, dy / n, dz / n
-        cr, cg, cb = _sh_color(sh, i, k, dx, dy, dz)
-        if not (math.isfinite(u) and math.isfinite(v) and math.isfinite(qa) and math.isfinite(qb)
-                and math.isfinite(qc) and math.isfinite(o) and math.isfinite(cr)
-                and math.isfinite(cg) and math.isfinite(cb)):
-            continue
-        rf = _F(r)
-        px, py = u - _F(0.5), v - _F(0.5)
-        tx0 = min(max(_trunc((px - rf) / _F(TILE_SIZE)), 0.0), grid_x)
-        ty0 = min(max(_trunc((py - rf) / _F(TILE_SIZE)), 0.0), grid_y)
-        tx1 = min(max(_trunc((px + rf + _F(TILE_SIZE - 1)) / _F(TILE_SIZE)), 0.0), grid_x)
-        ty1 = min(max(_trunc((py + rf + _F(TILE_SIZE - 1)) / _F(TILE_SIZE)), 0.0), grid_y)
-        if float(o) * 255.0 <= 1.0:
-            continue
-        q2 = 2.0 * math.log(float(o) * 255.0)
-        bx0, bx1, by0, by1, tx0, tx1, ty0, ty1 = _cut_to_box(
-            float(u), float(v), float(qa), float(qb), float(qc), q2, tx0, tx1, ty0, ty1,
-            grid_x * TILE_SIZE + 1.0, grid_y * TILE_SIZE + 1.0)
-        if not (tx1 > tx0 and ty1 > ty0):
-            continue
-        mean2d[i, 0], mean2d[i, 1] = u, v
-        conic[i, 0], conic[i, 1], conic[i, 2] = qa, qb, qc
-        opac_out[i] = o
-        reach[i] = q2
-        color[i, 0], color[i, 1], color[i, 2] = cr, cg, cb
-        box[i, 0], box[i, 1], box[i, 2], box[i, 3] = int(bx0), int(bx1), int(by0), int(by1)
-        rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = int(tx0), int(tx1), int(ty0), int(ty1)
+        _finish(i, x0, y0, z0, u, v, t0, t1, rs, opacity, sh, k, center, lp, antialias,
+                grid_x, grid_y, mean2d, conic, opac_out, reach, color, box, rect)
 
 
 @numba.njit(parallel=True, fastmath=False, cache=True)
-def boxes_of(mean2d, conic, opacity, rect_min, rect_max, visible, reach, box, rect):
-    """Pixel boxes and shrunk tile rectangles (as :func:`project_pinhole` makes them) for rows
-    projected elsewhere (the reference's stage 1, any camera model): ``rect`` is the reference's
-    rectangle cut to the tiles of the box, ``reach`` as there; rows not ``visible`` get an
-    empty rectangle."""
-    for i in numba.prange(mean2d.shape[0]):
+def project_model(rel, rs, opacity, sh, k, cam, center, grid_x, grid_y, antialias, uv, jac,
+                  visible, mean2d, conic, opac_out, reach, color, box, rect):
+    """:func:`project_pinhole` for any camera model without a seam, from what the model's
+    NumPy methods computed: ``uv`` (N, 2) pixel positions, ``jac`` (N, 2, 3) EWA Jacobians
+    and ``visible`` (N,) its culling rule.  ``cam`` (10,) float64: the anchored world-to-camera
+    rotation (9, row-major) and the low pass; the rest as there (the depth is the model's,
+    filled by the caller)."""
+    w = cam[:9].astype(np.float32)
+    lp = _F(cam[9])
+    for i in numba.prange(rel.shape[0]):
         rect[i, 0] = 0
         rect[i, 1] = 0
         rect[i, 2] = 0
         rect[i, 3] = 0
-        o = float(opacity[i])
-        if not visible[i] or o * 255.0 <= 1.0:
+        if not visible[i]:
             continue
-        tx0, ty0 = float(rect_min[i, 0]), float(rect_min[i, 1])
-        tx1, ty1 = float(rect_max[i, 0]), float(rect_max[i, 1])
-        q2 = 2.0 * math.log(o * 255.0)
-        bx0, bx1, by0, by1, tx0, tx1, ty0, ty1 = _cut_to_box(
-            float(mean2d[i, 0]), float(mean2d[i, 1]), float(conic[i, 0]), float(conic[i, 1]),
-            float(conic[i, 2]), q2, tx0, tx1, ty0, ty1, tx1 * TILE_SIZE + 1.0,
-            ty1 * TILE_SIZE + 1.0)
-        if not (tx1 > tx0 and ty1 > ty0):
-            continue
-        reach[i] = q2
-        box[i, 0], box[i, 1], box[i, 2], box[i, 3] = int(bx0), int(bx1), int(by0), int(by1)
-        rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = int(tx0), int(tx1), int(ty0), int(ty1)
+        t0 = ((jac[i, 0, 0] * w[0] + jac[i, 0, 1] * w[3]) + jac[i, 0, 2] * w[6],
+              (jac[i, 0, 0] * w[1] + jac[i, 0, 1] * w[4]) + jac[i, 0, 2] * w[7],
+              (jac[i, 0, 0] * w[2] + jac[i, 0, 1] * w[5]) + jac[i, 0, 2] * w[8])
+        t1 = ((jac[i, 1, 0] * w[0] + jac[i, 1, 1] * w[3]) + jac[i, 1, 2] * w[6],
+              (jac[i, 1, 0] * w[1] + jac[i, 1, 1] * w[4]) + jac[i, 1, 2] * w[7],
+              (jac[i, 1, 0] * w[2] + jac[i, 1, 1] * w[5]) + jac[i, 1, 2] * w[8])
+        _finish(i, rel[i, 0], rel[i, 1], rel[i, 2], uv[i, 0], uv[i, 1], t0, t1, rs, opacity, sh,
+                k, center, lp, antialias, grid_x, grid_y, mean2d, conic, opac_out, reach, color,
+                box, rect)

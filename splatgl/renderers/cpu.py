@@ -26,6 +26,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..cameras.equirect import eye_space, wrap_copies, wrap_shift
 from ..cameras.pinhole import Pinhole
 from ..cameras.view import View, anchored_camera
 from ..constants import JACOBIAN_CLAMP, LOW_PASS, sh_coeff_count
@@ -36,8 +37,8 @@ from ..model.settings import RendererKind, RenderSettings, check_convention, che
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from ..order.sort import depth_sort
-from ..reference.options import ReferenceOptions
-from ..reference.stages import project, tile_grid
+from ..reference.stages import tile_grid
+from ..twins.project import splat_reach, to_camera
 from .quad_layers import composite
 
 #: The layers this renderer draws.
@@ -77,8 +78,9 @@ def _kernels() -> SimpleNamespace:
     project_mod = importlib.import_module("splatgl.renderers._cpu_project")
     raster_mod = importlib.import_module("splatgl.renderers._cpu_raster")
     return SimpleNamespace(project_pinhole=project_mod.project_pinhole,
-                           boxes_of=project_mod.boxes_of, pack=raster_mod.pack,
+                           pack=raster_mod.pack,
                            bin_tiles=raster_mod.bin_tiles, rasterize=raster_mod.rasterize,
+                           project_model=project_mod.project_model,
                            REC_SIZE=raster_mod.REC_SIZE)
 
 
@@ -115,6 +117,7 @@ class CpuRenderer:
         self.scene, self.settings = scene, settings
         self.last_times: CpuTimes | None = None
         self._anchor: tuple[bytes, np.ndarray] | None = None   # (anchor bytes, means - anchor)
+        self._reach: tuple[float, np.ndarray] | None = None     # (scale, world reach): panoramas
         f32 = np.float32
         rot = quat_to_rotmat(scene.rotations.astype(f32))
         self._rs = np.ascontiguousarray(rot * scene.scales.astype(f32)[:, None, :], f32)
@@ -147,10 +150,7 @@ class CpuRenderer:
              float(view.near_in(np.float32)),
              LOW_PASS if view.low_pass is None else view.low_pass]])
         grid = tile_grid(cam.width, cam.height)
-        f32 = np.float32
-        out = (np.zeros((n, 2), f32), np.zeros((n, 3), f32), np.zeros(n, f32), np.zeros(n, f32),
-               np.zeros((n, 3), f32), np.zeros(n, f32), np.zeros((n, 4), np.int32),
-               np.zeros((n, 4), np.int32))
+        out = _stage1_outputs(n)
         rel, center = self._relative_means(view.anchor), np.asarray(cam.center, np.float32)
         for a, b in _parts(n, checkpoint):
             self.k.project_pinhole(rel[a:b], self._rs[a:b], self._opacity[a:b], self._sh[a:b],
@@ -158,20 +158,54 @@ class CpuRenderer:
                                    bool(self.settings.antialias), *(o[a:b] for o in out))
         return out
 
-    def _project_any(self, view: View):
-        """Stage 1 for any camera model: the reference's NumPy projection, then the boxes."""
-        settings = self.settings
-        if view.low_pass is not None:
-            raise SplatglError("--renderer cpu applies a draft's own low pass to pinhole "
-                               "cameras only")
-        proj = project(self.scene, view, settings, np.float32, ReferenceOptions())
-        rows = proj.count
-        box, rect = np.zeros((rows, 4), np.int32), np.zeros((rows, 4), np.int32)
-        reach = np.zeros(rows, np.float32)
-        self.k.boxes_of(proj.mean2d, proj.conic, proj.opacity, proj.rect_min, proj.rect_max,
-                        proj.visible, reach, box, rect)
-        return (proj.mean2d, proj.conic, proj.opacity, reach, proj.color,
-                np.ascontiguousarray(proj.depth, np.float32), box, rect)
+    def _project_model(self, view: View, checkpoint=None):
+        """Stage 1 for every other camera model (fisheye, OpenCV distortion, orthographic,
+        equirectangular): the model's own NumPy methods give each part's camera-space points,
+        pixel positions, Jacobians, culling and depths, as in the reference's stage 1; the rest
+        is :func:`~._cpu_project.project_model`, compiled.  A panorama then gets the
+        reference's second rows for splats that may reach across its seam, and every box is
+        cut to half a turn around its splat (:func:`_clip_to_half_turn`).  Parts and
+        ``checkpoint`` as in :meth:`_project_pinhole`."""
+        n, f32 = self.scene.count, np.float32
+        cam = anchored_camera(view.camera, view.anchor)
+        model, near = cam.model, view.near_in(f32)
+        period = model.seam_period(cam)
+        params = np.concatenate([np.asarray(cam.rotation, np.float64).ravel(),
+                                 [LOW_PASS if view.low_pass is None else view.low_pass]])
+        grid = tile_grid(cam.width, cam.height)
+        rel, center = self._relative_means(view.anchor), np.asarray(cam.center, f32)
+        uv, jac = np.empty((n, 2), f32), np.empty((n, 2, 3), f32)
+        visible, p_cam = np.empty(n, np.bool_), np.empty((n, 3), f32)
+        out = _stage1_outputs(n)
+
+        def run(rows, first, u, v):  # the compiled rest for scene rows ``rows`` into out[first:]
+            end = first + len(rows) if isinstance(rows, np.ndarray) else rows.stop
+            self.k.project_model(rel[rows], self._rs[rows], self._opacity[rows], self._sh[rows],
+                                 self._coeffs, params, center, float(grid[0]), float(grid[1]),
+                                 bool(self.settings.antialias), u, jac[rows], v,
+                                 *(o[first:end] for i, o in enumerate(out) if i != 5))
+
+        for a, b in _parts(n, checkpoint):
+            with np.errstate(all="ignore"):
+                p_cam[a:b] = eye_space(to_camera(rel[a:b], cam), cam)
+                uv[a:b] = model.project(p_cam[a:b], cam)
+                jac[a:b] = model.jacobian(p_cam[a:b], cam)
+                visible[a:b] = model.visible(p_cam[a:b], cam, near)
+                out[5][a:b] = model.depth(p_cam[a:b])
+            run(slice(a, b), a, uv[a:b], visible[a:b])
+        if period is None:
+            return out
+        # the reference's wrapped copies, appended in row order after every splat
+        if self._reach is None or self._reach[0] != cam.scale:
+            self._reach = cam.scale, splat_reach(self.scene.scales.max(axis=1) * cam.scale,
+                                                 self.scene.opacities)
+        dup = np.flatnonzero(visible & wrap_copies(p_cam, self._reach[1], cam))
+        out = tuple(np.concatenate([o, o[dup]]) for o in out)   # depth and shapes for the copies
+        shifted = uv[dup].copy()
+        shifted[:, 0] += wrap_shift(shifted[:, 0], cam)
+        run(dup, n, shifted, np.ones(len(dup), np.bool_))
+        _clip_to_half_turn(out[6], out[0], period)
+        return out
 
     def render(self, view: View, layers: frozenset[Layer] = BASE,
                under: UnderLayer | None = None) -> RenderOutput:
@@ -216,9 +250,12 @@ class CpuRenderer:
             if on_batch is not None:
                 on_batch(done, n_tiles)
 
-        fast = type(view.camera.model) is Pinhole
-        mean2d, conic, opacity, reach, color, z, box, rect = (
-            self._project_pinhole(view, checkpoint) if fast else self._project_any(view))
+        model = view.camera.model
+        if type(model) is Pinhole:
+            stage1 = self._project_pinhole(view, checkpoint)
+        else:
+            stage1 = self._project_model(view, checkpoint)
+        mean2d, conic, opacity, reach, color, z, box, rect = stage1
         t1 = time.perf_counter()
         checkpoint()
         order = depth_order(z, rect)
@@ -272,6 +309,36 @@ def depth_order(depth: np.ndarray, rect: np.ndarray) -> np.ndarray:
     plane, so their depths are positive, as that sort needs."""
     kept = np.flatnonzero(rect[:, 1] > rect[:, 0])
     return depth_sort(depth[kept], kept.astype(np.uint32)).astype(np.int64)
+
+
+def _clip_to_half_turn(box: np.ndarray, mean2d: np.ndarray, period: float) -> None:
+    """Cut each pixel box's columns to those whose centre lies within half a turn of the
+    splat, ``|x + 0.5 - u| <= period / 2`` in float32, as the reference clips a panorama's
+    splats (a splat near the camera or a pole can be wider than the whole image; its wrapped
+    copy covers the other side).  In place."""
+    f32 = np.float32
+    half, u = f32(0.5 * period), mean2d[:, 0].astype(f32)
+    span = 4.0 * float(half) + 4.0                      # keeps the integers small and exact
+
+    def inside(j: np.ndarray) -> np.ndarray:
+        return np.abs((j + 0.5).astype(f32) - u) <= half
+
+    centre = np.clip(u.astype(np.float64) - 0.5, -span, span)
+    lo = np.ceil(centre - float(half)).astype(np.int64)
+    hi = np.floor(centre + float(half)).astype(np.int64)      # last column, inclusive
+    lo = np.where(inside(lo - 1), lo - 1, np.where(inside(lo), lo, lo + 1))
+    hi = np.where(inside(hi + 1), hi + 1, np.where(inside(hi), hi, hi - 1))
+    box[:, 0] = np.maximum(box[:, 0], lo)
+    box[:, 1] = np.minimum(box[:, 1], hi + 1)
+
+
+def _stage1_outputs(n: int) -> tuple[np.ndarray, ...]:
+    """Zeroed stage-1 outputs for ``n`` rows: mean2d (2), conic (3), opacity, reach, colour
+    (3), depth (float32), box (4) and tile rectangle (4) (int32)."""
+    f32 = np.float32
+    return (np.zeros((n, 2), f32), np.zeros((n, 3), f32), np.zeros(n, f32), np.zeros(n, f32),
+            np.zeros((n, 3), f32), np.zeros(n, f32), np.zeros((n, 4), np.int32),
+            np.zeros((n, 4), np.int32))
 
 
 def describe() -> str:
