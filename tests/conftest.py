@@ -65,6 +65,17 @@ def shared_scenes() -> Path:
     return path
 
 
+@pytest.fixture(scope="session")
+def compiled_kernels():
+    """The compiled cull and cut kernels (:mod:`splatgl.order.kernels`) loaded, or None without
+    numba.  A fresh checkout compiles them (10-40 s on a slow machine): a Hypothesis test asks
+    for this fixture so that the compile happens outside its examples, whose 30 s deadline
+    would otherwise time it (and report the test as flaky when the rerun is fast)."""
+    from splatgl.order import kernels
+
+    return kernels.kernel(wait=True) if kernels.installed() else None
+
+
 @pytest.fixture
 def full_disk():
     """``with full_disk(n):`` every file this process writes stops growing at ``n`` bytes, as on a

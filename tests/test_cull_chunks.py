@@ -102,7 +102,7 @@ def test_chunked_cull_keeps_what_the_float64_cull_keeps(cam_index, antialias, pa
 @given(seed=st.integers(0, 10_000), eye=st.tuples(*[st.floats(-8, 8)] * 3),
        target=st.tuples(*[st.floats(-3, 3)] * 3), fov=st.floats(20, 120),
        cx=st.floats(-50, 350), near=st.floats(0.01, 2.0), scale=st.floats(0.3, 3.0))
-def test_chunked_cull_property(seed, eye, target, fov, cx, near, scale):
+def test_chunked_cull_property(compiled_kernels, seed, eye, target, fov, cx, near, scale):
     """Any pose, field of view, principal point, near plane and model scale: the same splats,
     the same depth bits as the float64 cull (ties and ordering then follow)."""
     eye, target = np.array(eye), np.array(target)

@@ -244,7 +244,7 @@ def test_two_workers_give_the_single_process_report(dataset, capsys, tmp_path, m
     assert files[2] == files[1] and table == one_table
     assert err.count(f"100.0% ({N_VIEWS} / {N_VIEWS})") == 1 and "views/s, ETA" in err, err
     workers, total = summary_counts(out, "views")
-    assert len(workers) == 2 and sum(workers) == total == N_VIEWS
+    assert 1 <= len(workers) <= 2 and sum(workers) == total == N_VIEWS   # one may take both
 
 
 @pytest.mark.parametrize("reports, message", [

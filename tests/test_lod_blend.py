@@ -265,8 +265,8 @@ def test_cut_cull_compiled_or_numpy_same_order_and_weights(ctx, biker, sort):
 @given(threshold=st.floats(0.3, 12.0), band=st.sampled_from([1.0, 1.5, 2.0, 3.0]),
        distance=st.floats(0.5, 30.0), fov=st.floats(30.0, 110.0),
        leaves_at=st.sampled_from([None, 0.5, 0.75, 1.0]), ortho=st.booleans())
-def test_compiled_cut_selects_what_numpy_selects(tree, threshold, band, distance, fov,
-                                                 leaves_at, ortho):
+def test_compiled_cut_selects_what_numpy_selects(tree, compiled_kernels, threshold, band,
+                                                 distance, fov, leaves_at, ortho):
     """The compiled cut (numba; over the candidates only) gives the NumPy cut's rows and the
     same weight bits, or the same decision to draw the leaves, for cameras inside and outside
     the scene (frustum tests), perspective and orthographic, any band, and the root's cut."""

@@ -149,20 +149,22 @@ def test_a_swap_that_waits_for_the_display_does_not_shrink_the_draws_budget(xvfb
 
     from splatgl.viewer import app
 
-    def busy(seconds):
-        end = time.perf_counter() + seconds
-        while time.perf_counter() < end:
+    def busy(seconds):   # this thread's CPU time, what the swap counts as work: on a busy
+        end = time.thread_time() + seconds     # machine a wall-clock spin got less of it
+        while time.thread_time() < end:
             pass
 
     swap = app.glfw.swap_buffers
-    monkeypatch.setattr(app.glfw, "swap_buffers", lambda w: (swap(w), time.sleep(0.04)))
+    # a 70 ms wait: counted as work it would leave at most 30 ms; the rest of a frame (present,
+    # status panel, a busy machine's delays) has 40 ms of room below the bound
+    monkeypatch.setattr(app.glfw, "swap_buffers", lambda w: (swap(w), time.sleep(0.07)))
     with _viewer(scene, tmp_path, 10.0, vsync=True) as v:
         _move(v, 1)
         v.pacer.lod.wait()               # the tree's background build competes for the CPU
         _move(v, 9)
         session = v.pacer.session
-        assert np.median(session._overheads) < 0.03
-        assert session.budget.budget > 0.1 - 0.03
+        assert np.median(session._overheads) < 0.04
+        assert session.budget.budget > 0.1 - 0.04
         monkeypatch.setattr(app.glfw, "swap_buffers", lambda w: (swap(w), busy(0.04)))
         _move(v, 9)
         assert session.budget.budget <= 0.1 - 0.03

@@ -76,7 +76,9 @@ def test_two_workers_video_equals_the_single_process_video(one_process_video, tm
     assert len(two) == 6 and all(np.array_equal(a, b) for a, b in zip(one, two))
     assert os.listdir(tmp_path) == ["two.mp4"]          # the frame folder is gone
     workers, total = summary_counts(text, "frames")
-    assert workers == [3, 3] and total == 6
+    # two chunks of 3 on one shared queue: each worker usually takes one, but a worker slow to
+    # start can find both taken (the summary then lists one worker with 6)
+    assert 1 <= len(workers) <= 2 and sum(workers) == total == 6 and all(w % 3 == 0 for w in workers)
 
 
 def test_failed_assembly_keeps_frames_and_resume_finishes(one_process_video, tmp_path, capsys, monkeypatch):
