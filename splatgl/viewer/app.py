@@ -20,7 +20,6 @@ import glfw
 
 from ..cameras.camera import Camera
 from ..cameras.registry import retarget
-from ..errors import SplatglError
 from ..model.scene import Scene, SplatKind
 from ..model.settings import RendererKind, RenderSettings
 from . import keys, pick
@@ -35,8 +34,6 @@ from .window import close_window, connect, open_window, swap
 
 #: Longest time step a held key acts over (a stalled frame must not fling the camera away).
 _MAX_DT = 0.1
-#: The renderers T steps through, in order.
-_CYCLE = (RendererKind.QUAD, RendererKind.TILE, RendererKind.CPU)
 
 
 @dataclass
@@ -183,43 +180,6 @@ class Viewer:
     def step_camera(self, delta: int) -> None:
         """Jump to the next (``delta`` 1) or previous training camera."""
         self.message = self.nav.step_camera(delta)
-
-    def refusal(self, kind: RendererKind) -> str | None:
-        """Why ``kind`` cannot draw the current view (the first clause of its error), or None:
-        the tile renderer has no panoramas; the CPU renderer needs numba and 3DGS splats."""
-        try:
-            if kind is RendererKind.TILE:
-                self.camera().model.check_support(False, kind.value)
-            elif kind is RendererKind.CPU:
-                from ..renderers.cpu import check_available, check_scene
-                check_available()
-                check_scene(self.scene, self.settings)
-        except SplatglError as exc:
-            return str(exc).split(";")[0].split(" (use ")[0]
-        return None
-
-    def tile_allowed(self, key: str) -> bool:
-        """Whether the tile renderer can draw the current view (the difference view's other
-        side); if not, the status line says why and the key changes nothing."""
-        why = self.refusal(RendererKind.TILE)
-        if why is not None:
-            self.message = f"{key} refused: {why}"
-        return why is None
-
-    def toggle_renderer(self) -> None:
-        """T: the next of quad, tile and cpu that can draw this view.  One that cannot is
-        skipped and the status line says why; if none can, nothing changes."""
-        start = _CYCLE.index(self.kind) if self.kind in _CYCLE else 0
-        skipped = []
-        for step in range(1, len(_CYCLE)):
-            kind = _CYCLE[(start + step) % len(_CYCLE)]
-            why = self.refusal(kind)
-            if why is None:
-                self.kind = kind
-                self.message = f"T skipped {'; '.join(skipped)}" if skipped else self.message
-                return
-            skipped.append(f"{kind.value}: {why}")
-        self.message = f"T refused: {'; '.join(skipped)}"
 
     def set_settings(self, **changes) -> None:
         """Replace render settings; the GPU state of the old ones is released (one scene copy)."""

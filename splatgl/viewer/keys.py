@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import glfw
 
-from ..model.settings import Precision
+from ..errors import SplatglError
+from ..model.settings import Precision, RendererKind
 from . import controls
 from .frames import ViewMode
 from .overlay import key_help
@@ -45,7 +46,7 @@ def on_key(v, key: int, action: int, mods: int) -> None:
         back = key == glfw.KEY_PAGE_UP or (key == glfw.KEY_N and v.nav.shift)
         v.step_camera(-1 if back else 1)
     elif key == glfw.KEY_T:
-        v.toggle_renderer()
+        next_renderer(v)
     elif glfw.KEY_0 <= key <= glfw.KEY_3:
         v.set_settings(sh_degree=key - glfw.KEY_0)
     elif key == glfw.KEY_P:
@@ -56,13 +57,13 @@ def on_key(v, key: int, action: int, mods: int) -> None:
     elif key == glfw.KEY_TAB:
         modes = list(ViewMode)
         view = modes[(modes.index(v.view) + 1) % len(modes)]
-        if view is ViewMode.DIFFERENCE and not v.tile_allowed("Tab"):
+        if view is ViewMode.DIFFERENCE and not tile_allowed(v, "Tab"):
             view = modes[(modes.index(view) + 1) % len(modes)]   # skip it
         v.view = view
     elif key == glfw.KEY_C:
         if v.view is ViewMode.DIFFERENCE:
             v.view = ViewMode.COLOR
-        elif v.tile_allowed("C"):
+        elif tile_allowed(v, "C"):
             v.view = ViewMode.DIFFERENCE
     elif key == glfw.KEY_F12 or (key == glfw.KEY_S and ctrl):
         v.screenshot()
@@ -73,3 +74,47 @@ def on_key(v, key: int, action: int, mods: int) -> None:
         if v.overlay.show_keys:
             print("keys:\n" + key_help(), flush=True)
     v.need_present = True
+
+
+#: The renderers T steps through, in order.
+_CYCLE = (RendererKind.QUAD, RendererKind.TILE, RendererKind.CPU)
+
+
+def refusal(v, kind: RendererKind) -> str | None:
+    """Why ``kind`` cannot draw viewer ``v``'s current view (the first clause of its error),
+    or None: the tile renderer has no panoramas; the CPU renderer needs numba and 3DGS splats."""
+    try:
+        if kind is RendererKind.TILE:
+            v.camera().model.check_support(False, kind.value)
+        elif kind is RendererKind.CPU:
+            from ..renderers.cpu import check_available, check_scene
+            check_available()
+            check_scene(v.scene, v.settings)
+    except SplatglError as exc:
+        return str(exc).split(";")[0].split(" (use ")[0]
+    return None
+
+
+def tile_allowed(v, key: str) -> bool:
+    """Whether the tile renderer can draw the current view (the difference view's other
+    side); if not, the status line says why and the key changes nothing."""
+    why = refusal(v, RendererKind.TILE)
+    if why is not None:
+        v.message = f"{key} refused: {why}"
+    return why is None
+
+
+def next_renderer(v) -> None:
+    """T: the next of quad, tile and cpu that can draw this view.  One that cannot is
+    skipped and the status line says why; if none can, nothing changes."""
+    start = _CYCLE.index(v.kind) if v.kind in _CYCLE else 0
+    skipped = []
+    for step in range(1, len(_CYCLE)):
+        kind = _CYCLE[(start + step) % len(_CYCLE)]
+        why = refusal(v, kind)
+        if why is None:
+            v.kind = kind
+            v.message = f"T skipped {'; '.join(skipped)}" if skipped else v.message
+            return
+        skipped.append(f"{kind.value}: {why}")
+    v.message = f"T refused: {'; '.join(skipped)}"
