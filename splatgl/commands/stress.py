@@ -7,7 +7,7 @@ import sys
 
 from ..errors import SplatglError
 from ..stress import CASES, case_by_name
-from ..stress.run import RENDERERS, format_report, results_json, run_cases
+from ..stress.run import RENDERERS, default_renderers, format_report, results_json, run_cases
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 
 NAME = "stress"
@@ -16,8 +16,8 @@ HELP = "run scenes built to break renderers and report NaN/Inf, error and time"
 DESCRIPTION = """Render each stress case (extreme scales and anisotropy, degenerate quaternions,
 splats at and behind the near plane, scenes far from the origin, extreme fields of view and
 zooms, extreme opacities, 10,000 coincident splats, 1 x 1 and 8192 x 8192 images, edge-on
-surfels) with the quad path, the tile renderer and the float32 NumPy reference, and compare
-each with the float64 reference.
+surfels) with the quad path, the tile renderer, the CPU renderer (where the fast extra is
+installed) and the float32 NumPy reference, and compare each with the float64 reference.
 
 The table gives, per case and renderer: whether every output value is finite, the max
 absolute RGBA error, the case's bound, pass/fail and seconds.  The "fixes" section lists the
@@ -36,7 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="run only this case (repeatable); names: "
                         + ", ".join(c.name for c in CASES))
     p.add_argument("--renderer", action="append", choices=RENDERERS, default=None,
-                   help="run only this renderer (repeatable; default all)")
+                   help="run only this renderer (repeatable; default all, cpu where numba is "
+                        "installed)")
     p.add_argument("--skip-slow", action="store_true",
                    help="leave out the slow cases (the 8192 x 8192 image, ~40 s and ~10 GB)")
     add_json_argument(p, "the report")
@@ -50,7 +51,10 @@ def run(args: argparse.Namespace) -> int:
     check_json_target(args)
     if args.skip_slow:
         cases = [c for c in cases if not c.slow]
-    renderers = tuple(args.renderer) if args.renderer else RENDERERS
+    renderers = tuple(args.renderer) if args.renderer else default_renderers()
+    if "cpu" in renderers:
+        from ..renderers.cpu import check_available
+        check_available()
 
     def progress(case) -> None:
         if not json_to_stdout(args):

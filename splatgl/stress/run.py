@@ -1,7 +1,8 @@
 """Run stress cases through every renderer and report finiteness, error and time.
 
 Per case: the float64 NumPy reference renders the expected image (``reference64``); the quad
-path, the tile renderer and the float32 reference render the case.  Each renderer's row says
+path, the tile renderer, the CPU renderer (where numba is installed) and the float32 reference
+render the case.  Each renderer's row says
 whether every output (RGBA and the accumulated depth) is finite, its max-abs RGBA error against
 the float64 image, the case's bound for it, and the seconds it took.  A row passes when it is
 finite, within its bound and under the time limit; a renderer that refuses a case it does not
@@ -26,8 +27,9 @@ from ..reference import render_reference
 from ..model.settings import RendererKind
 from .cases import CASES, StressCase
 
-#: The renderers under test, in table order.
-RENDERERS = ("quad", "tile", "reference32")
+#: The renderers under test, in table order (``cpu`` needs the ``fast`` extra:
+#: :func:`default_renderers`).
+RENDERERS = ("quad", "tile", "cpu", "reference32")
 #: A render slower than this (seconds) fails the case ("no hang", short of a real hang).
 TIME_LIMIT_S = 60.0
 #: A case still running after this many seconds is a hang: the watchdog exits the process.
@@ -87,7 +89,7 @@ def _layers(renderer: str, setup, gl):
         ref = render_reference(setup.scene, setup.camera, setup.settings, np.float32)
         rgba = np.concatenate([ref.color, ref.alpha[..., None]], -1)
         return rgba, ref.depth
-    kind = RendererKind.QUAD if renderer == "quad" else RendererKind.TILE
+    kind = RendererKind(renderer)
     out = gl.render_layers(setup.scene, setup.camera, setup.settings, kind)
     return out.rgba, out.depth
 
@@ -136,12 +138,20 @@ def _row(renderer: str, case: StressCase, setup, gl, want_rgba, want_depth) -> R
                           "; ".join(problems))
 
 
-def run_case(case: StressCase, gl=None, renderers=RENDERERS) -> CaseResult:
+def default_renderers() -> tuple[str, ...]:
+    """:data:`RENDERERS` less ``cpu`` where numba is not installed."""
+    from ..renderers.cpu import installed
+
+    return tuple(r for r in RENDERERS if r != "cpu" or installed())
+
+
+def run_case(case: StressCase, gl=None, renderers=None) -> CaseResult:
     """Render ``case`` with each of ``renderers`` and the float64 reference; see the module doc.
 
     ``gl``: a :class:`splatgl.api.Renderer` (one is made, and closed, when None and a GPU
-    renderer is asked for).
+    renderer is asked for).  ``renderers``: default :func:`default_renderers`.
     """
+    renderers = default_renderers() if renderers is None else renderers
     setup = case.build()
     truth = setup.expected_scene if setup.expected_scene is not None else setup.scene
     t0 = time.perf_counter()
@@ -166,7 +176,7 @@ def run_case(case: StressCase, gl=None, renderers=RENDERERS) -> CaseResult:
     return CaseResult(case.name, case.what, tuple(rows))
 
 
-def run_cases(cases=CASES, renderers=RENDERERS, progress=None) -> list[CaseResult]:
+def run_cases(cases=CASES, renderers=None, progress=None) -> list[CaseResult]:
     """Run ``cases`` in order, each under the hang watchdog, each with a fresh GL renderer."""
     results = []
     for case in cases:

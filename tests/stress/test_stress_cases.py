@@ -1,7 +1,7 @@
 """Numerical stress cases (splatgl.stress): every renderer finite, within its bound, no hang.
 
-Each case renders with the quad path, the tile renderer and the float32 reference and is
-compared with the float64 reference; the bounds and their derivation live with the cases
+Each case renders with the quad path, the tile renderer, the CPU renderer (with numba) and the
+float32 reference and is compared with the float64 reference; the bounds and their derivation live with the cases
 (splatgl/stress/cases.py).  A watchdog exits the run if a case hangs.  The 8192 x 8192 case
 (~40 s, ~10 GB) runs only with SPLATGL_STRESS_SLOW=1.
 """
@@ -87,8 +87,21 @@ def test_cli_json(capsys):
     assert main(["stress", "--case", "near_plane", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     rows = data["cases"][0]["rows"]
-    assert [r["renderer"] for r in rows] == ["reference64", "quad", "tile", "reference32"]
+    assert [r["renderer"] for r in rows] == ["reference64", "quad", "tile", "cpu", "reference32"]
     assert all(r["finite"] for r in rows) and data["fixes"]
+
+
+def test_without_numba_the_cpu_row_is_left_out_and_asking_for_it_names_the_extra(capsys,
+                                                                                 monkeypatch):
+    from splatgl.renderers import cpu
+
+    monkeypatch.setattr(cpu, "installed", lambda: False)
+    assert main(["stress", "--case", "image_1x1", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["cases"][0]["rows"]
+    assert [r["renderer"] for r in rows] == ["reference64", "quad", "tile", "reference32"]
+    assert main(["stress", "--case", "image_1x1", "--renderer", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert "pip install 'splatgl[fast]'" in err and len(err.strip().splitlines()) == 1, err
 
 
 def test_cli_unknown_case(capsys):
