@@ -399,6 +399,31 @@ def test_cpu_exact_session_refines_to_exactly_the_cpu_render(gl_renderer, scene)
         session.release()
 
 
+@pytest.mark.parametrize("projection", ["fisheye", "equirectangular"])
+def test_cpu_exact_session_on_other_camera_models(gl_renderer, scene, projection):
+    """A fisheye or a panorama in the window with --renderer cpu: quad drafts, then the CPU
+    renderer's exact frame (its projection in parts, the panorama's seam copies after them),
+    which is render(kind="cpu")'s image."""
+    pytest.importorskip("numba", reason="the CPU renderer needs numba (the fast extra)")
+    from splatgl.cameras.registry import retarget
+
+    def camera(shift):
+        return retarget(_camera(shift), projection)
+
+    session = Session(gl_renderer, scene, RenderSettings(), 1e-4, None, exact_kind="cpu")
+    try:
+        for i in range(3):
+            session.frame(camera(0.01 * i))
+        while session.frame(camera(0.02)) is not None:
+            pass
+        assert session.exact
+        want = gl_renderer.render(scene, camera(0.02), RenderSettings(), "cpu")
+        assert np.array_equal(session.levels.read(session.shown), want)
+        assert float(want[..., 3].max()) > 0.5
+    finally:
+        session.release()
+
+
 def test_cpu_exact_is_drawn_in_bands_that_input_abandons(gl_renderer, scene):
     pytest.importorskip("numba", reason="the CPU renderer needs numba (the fast extra)")
     from splatgl.interactive.draft import CPU_BANDS
