@@ -178,12 +178,11 @@ class CpuRenderer:
         visible, p_cam = np.empty(n, np.bool_), np.empty((n, 3), f32)
         out = _stage1_outputs(n)
 
-        def run(rows, first, u, v):  # the compiled rest for scene rows ``rows`` into out[first:]
-            end = first + len(rows) if isinstance(rows, np.ndarray) else rows.stop
+        def finish(rows, into: slice, u, ok):   # the compiled rest: scene rows -> out[into]
             self.k.project_model(rel[rows], self._rs[rows], self._opacity[rows], self._sh[rows],
                                  self._coeffs, params, center, float(grid[0]), float(grid[1]),
-                                 bool(self.settings.antialias), u, jac[rows], v,
-                                 *(o[first:end] for i, o in enumerate(out) if i != 5))
+                                 bool(self.settings.antialias), u, jac[rows], ok,
+                                 *(o[into] for i, o in enumerate(out) if i != 5))
 
         for a, b in _parts(n, checkpoint):
             with np.errstate(all="ignore"):
@@ -192,7 +191,7 @@ class CpuRenderer:
                 jac[a:b] = model.jacobian(p_cam[a:b], cam)
                 visible[a:b] = model.visible(p_cam[a:b], cam, near)
                 out[5][a:b] = model.depth(p_cam[a:b])
-            run(slice(a, b), a, uv[a:b], visible[a:b])
+            finish(slice(a, b), slice(a, b), uv[a:b], visible[a:b])
         if period is None:
             return out
         # the reference's wrapped copies, appended in row order after every splat
@@ -201,9 +200,9 @@ class CpuRenderer:
                                                  self.scene.opacities)
         dup = np.flatnonzero(visible & wrap_copies(p_cam, self._reach[1], cam))
         out = tuple(np.concatenate([o, o[dup]]) for o in out)   # depth and shapes for the copies
-        shifted = uv[dup].copy()
+        shifted = uv[dup]
         shifted[:, 0] += wrap_shift(shifted[:, 0], cam)
-        run(dup, n, shifted, np.ones(len(dup), np.bool_))
+        finish(dup, slice(n, None), shifted, np.ones(len(dup), np.bool_))
         _clip_to_half_turn(out[6], out[0], period)
         return out
 
