@@ -13,6 +13,7 @@ reach alpha 1/255 anywhere in the tile.
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -99,10 +100,11 @@ def test_other_camera_models_match_reference(name, monkeypatch):
     scene = random_scene(2000, 3, degree=1, **dict(IN_VIEW, center=(0.0, 0.0, 1.5),
                                                    spread=(2.0, 1.5, 2.0), log_scale=(-3.0, 0.5)))
     camera = _model_camera(name)
+    from splatgl.renderers._cpu_stage1 import Stage1
+
     used = []
-    real = cpu.CpuRenderer._project_model
-    monkeypatch.setattr(cpu.CpuRenderer, "_project_model",
-                        lambda self, *a: used.append(1) or real(self, *a))
+    real = Stage1.model
+    monkeypatch.setattr(Stage1, "model", lambda self, *a: used.append(1) or real(self, *a))
     out, ref = cpu_and_reference(scene, camera, layers=with_layers(Layer.DEPTH))
     assert used == [1]
     assert_close(out.rgba, ref.rgba)
@@ -198,7 +200,7 @@ def test_tile_lists_are_the_reference_keys_less_splats_that_cannot_blend():
     settings = RenderSettings()
     r = cpu.CpuRenderer(scene, settings)
     view = view_of(CAM, scene, settings)
-    mean2d, conic, opacity, reach, color, z, box, rect = r._project_pinhole(view)
+    mean2d, conic, opacity, reach, color, z, box, rect = r.stage1.pinhole(view, [(0, scene.count)])
     order = cpu.depth_order(z, rect)
     grid = tile_grid(CAM.width, CAM.height)
     starts, rows = kernels.bin_tiles(order, rect, grid[0], grid[0] * grid[1], 3)
@@ -230,7 +232,7 @@ def test_box_and_row_spans_hold_every_pixel_the_reference_blends():
     scene = random_scene(n, 9, **dict(IN_DEPTH, log_scale=(-2.5, 1.2)))
     settings = RenderSettings()
     r = cpu.CpuRenderer(scene, settings)
-    mean2d, conic, opacity, reach, color, z, box, rect = r._project_pinhole(view_of(CAM, scene, settings))
+    mean2d, conic, opacity, reach, color, z, box, rect = r.stage1.pinhole(view_of(CAM, scene, settings), [(0, scene.count)])
     kept = np.flatnonzero(rect[:, 1] > rect[:, 0])
     assert kept.size > 100
     for i in rng.choice(kept, 100, replace=False):
@@ -288,6 +290,51 @@ def test_without_numba_it_says_which_extra(monkeypatch):
     monkeypatch.setattr(cpu, "installed", lambda: False)
     with pytest.raises(SplatglError, match=r"pip install 'splatgl\[fast\]'"):
         cpu.CpuRenderer(random_scene(10, 1), RenderSettings())
+
+
+_SIGNATURES = """
+import json
+from splatgl.renderers import cpu
+from splatgl.api import Renderer, default_camera
+from splatgl.cameras.registry import retarget
+from splatgl.commands._common import demo_scene_path
+from splatgl.formats import load_scene
+from splatgl.model.settings import RenderSettings
+from splatgl.output.layers import Layer, with_layers
+
+calls = []
+cpu.prepare(lambda done, total, what: calls.append((done, total)))
+names = ("project_pinhole", "project_model", "pack", "bin_tiles", "rasterize")
+signatures = lambda: {n: sorted(map(str, getattr(cpu._LOADED, n).signatures)) for n in names}
+ready = signatures()
+scene, r = load_scene(demo_scene_path()), Renderer()
+camera = default_camera(scene, 120, 90)
+for settings in (RenderSettings(), RenderSettings(antialias=True, sh_degree=1, background=(0.2, 0.3, 0.4))):
+    for projection in (None, "fisheye", "equirectangular", "orthographic", "opencv"):
+        c = camera if projection is None else retarget(camera, projection)
+        r.render_layers(scene, c, settings, "cpu", layers=with_layers(Layer.DEPTH))
+print(json.dumps({"calls": calls, "ready": ready, "after": signatures()}))
+"""
+
+
+@pytest.mark.slow
+def test_prepare_readies_every_kernel_signature_a_frame_calls():
+    """prepare() (which the first renderer calls, and view before its window opens) leaves
+    nothing for a frame to compile: numba compiles a signature per argument layout and
+    read-only flag, about 25 s for the first on a fresh install, and a frame that met one
+    unprepared stalled that long (the seam copies' writeable rows did).  A fresh process, so
+    that what earlier tests compiled does not count; every camera model, depth, settings."""
+    import json
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-c", _SIGNATURES], capture_output=True, text=True,
+                         timeout=600, env=dict(os.environ, SPLATGL_PROGRESS="0"))
+    assert run.returncode == 0, run.stderr[-3000:]
+    got = json.loads(run.stdout.strip().splitlines()[-1])
+    assert got["ready"] == got["after"]
+    assert all(len(v) == 1 for v in got["ready"].values()), got["ready"]
+    assert got["calls"] == [[0, 2], [1, 2], [2, 2]]
 
 
 # ------------------------------------------------------------------------------ real scenes

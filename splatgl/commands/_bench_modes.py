@@ -204,9 +204,9 @@ def run_interactive_command(args: argparse.Namespace, scenes: list) -> int:
     from ..interactive.session import default_fps
 
     fps = check_interactive_options(args)
-    if args.exact == "cpu":
-        from ..renderers.cpu import check_available
-        check_available()
+    if args.exact == "cpu":   # compiled (first use) or loaded now, not in a flight's first rest
+        from ..renderers.cpu import prepare
+        prepare()
     machine = probe_machine()
     print(describe(machine), flush=True)
     results = []

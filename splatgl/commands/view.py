@@ -97,9 +97,9 @@ def run(args: argparse.Namespace) -> int:
           f"{time.perf_counter() - t0:.2f} s", flush=True)
     settings = settings_from_args(args)
     if args.renderer == RendererKind.CPU.value:   # refused here, before a window opens
-        from ..renderers.cpu import check_available, check_scene
-        check_available()
+        from ..renderers.cpu import check_scene, prepare
         check_scene(scene, settings)
+        prepare()     # compiled on first use (half a minute), not in the window's first rest
     camera = camera_from_args(args, scene, settings)
     cameras = load_cameras(args.camera) if args.camera is not None else []
     if args.camera is not None and not (args.width or args.height):

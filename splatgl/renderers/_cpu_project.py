@@ -8,7 +8,7 @@
   The order of a few float32 operations differs from NumPy's, so its numbers agree with the
   twin to a few ulps, not bit for bit (tests/test_cpu_renderer.py).
 - :func:`project_model`: the same for any other camera model, from the points, Jacobians and
-  culling its NumPy methods computed (:meth:`splatgl.renderers.cpu.CpuRenderer._project_model`).
+  culling its NumPy methods computed (:meth:`splatgl.renderers._cpu_stage1.Stage1.model`).
   Both share :func:`_finish`, everything after the Jacobian.
 
 Each splat also gets its pixel box: the bounding box of the ellipse where ``o exp(-q/2) >=

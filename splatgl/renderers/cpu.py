@@ -26,19 +26,17 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..cameras.equirect import eye_space, wrap_copies, wrap_shift
 from ..cameras.pinhole import Pinhole
-from ..cameras.view import View, anchored_camera
-from ..constants import JACOBIAN_CLAMP, LOW_PASS, sh_coeff_count
+from ..cameras.view import View
 from ..errors import SplatglError
-from ..model.quaternion import quat_to_rotmat
 from ..model.scene import Scene, SplatKind
 from ..model.settings import RendererKind, RenderSettings, check_convention, check_fidelity
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
+from ..progress import ProgressCallback, default_progress
 from ..order.sort import depth_sort
 from ..reference.stages import tile_grid
-from ..twins.project import splat_reach, to_camera
+from ._cpu_stage1 import Stage1
 from .quad_layers import composite
 
 #: The layers this renderer draws.
@@ -72,16 +70,56 @@ def check_available() -> None:
         raise SplatglError("--renderer cpu needs numba: pip install 'splatgl[fast]'")
 
 
-def _kernels() -> SimpleNamespace:
-    """The compiled stages (:mod:`._cpu_project`, :mod:`._cpu_raster`)."""
+#: The compiled stages, once loaded (:func:`prepare`).
+_LOADED: SimpleNamespace | None = None
+
+
+def prepare(progress: ProgressCallback | None = None) -> None:
+    """Load the compiled kernels now, once per process: numba compiles them on the first use
+    after an install (about 25 s on the 2-core AVX2 machine; nothing was drawn or said
+    meanwhile) and loads them from its cache afterwards (about 0.5 s).  A tiny scene is drawn
+    through a pinhole and a fisheye camera, so that every kernel signature a frame calls is
+    ready, and ``progress`` (default: the stderr meter on a terminal,
+    :func:`splatgl.progress.default_progress`) hears of it.  Commands call it before work that
+    should not stall, such as opening a window; the first renderer calls it otherwise."""
+    _kernels(progress)
+
+
+def _kernels(progress: ProgressCallback | None = None) -> SimpleNamespace:
+    """The compiled stages (:mod:`._cpu_project`, :mod:`._cpu_raster`), ready (:func:`prepare`)."""
+    global _LOADED
     check_available()
-    project_mod = importlib.import_module("splatgl.renderers._cpu_project")
-    raster_mod = importlib.import_module("splatgl.renderers._cpu_raster")
-    return SimpleNamespace(project_pinhole=project_mod.project_pinhole,
-                           pack=raster_mod.pack,
-                           bin_tiles=raster_mod.bin_tiles, rasterize=raster_mod.rasterize,
-                           project_model=project_mod.project_model,
-                           REC_SIZE=raster_mod.REC_SIZE)
+    if _LOADED is None:
+        project_mod = importlib.import_module("splatgl.renderers._cpu_project")
+        raster_mod = importlib.import_module("splatgl.renderers._cpu_raster")
+        _LOADED = SimpleNamespace(project_pinhole=project_mod.project_pinhole,
+                                  project_model=project_mod.project_model,
+                                  pack=raster_mod.pack, bin_tiles=raster_mod.bin_tiles,
+                                  rasterize=raster_mod.rasterize, REC_SIZE=raster_mod.REC_SIZE)
+        _warm_up(default_progress() if progress is None else progress)
+    return _LOADED
+
+
+def _warm_up(progress: ProgressCallback | None) -> None:
+    """Draw 16 splats through a 32 x 32 pinhole camera, then a fisheye (every kernel, with the
+    argument types a real frame passes: compiled or loaded from numba's cache now)."""
+    from ..cameras.camera import Camera
+    from ..cameras.fisheye import Fisheye
+
+    what = "preparing the CPU renderer (compiled on first use: about half a minute)"
+    rng = np.random.default_rng(0)
+    means = rng.normal(0.0, 0.3, (16, 3)) + [0.0, 0.0, 3.0]
+    scene = Scene(means, rng.normal(size=(16, 4)), rng.normal(-2.5, 0.3, (16, 3)),
+                  rng.normal(1.0, 1.0, 16), rng.normal(0.0, 0.3, (16, 4, 3)))
+    settings = RenderSettings()
+    renderer = CpuRenderer(scene, settings)
+    cameras = (Camera.from_fov(32, 32, 60.0), Camera.of_model(Fisheye, 32, 32, 180.0))
+    for i, camera in enumerate(cameras):
+        if progress is not None:
+            progress(i, len(cameras), what)
+        renderer.draw(View.of(camera, settings, scene), with_depth=True)
+    if progress is not None:
+        progress(len(cameras), len(cameras), what)
 
 
 def check_scene(scene: Scene, settings: RenderSettings) -> None:
@@ -116,95 +154,9 @@ class CpuRenderer:
         self.k = _kernels()
         self.scene, self.settings = scene, settings
         self.last_times: CpuTimes | None = None
-        self._anchor: tuple[bytes, np.ndarray] | None = None   # (anchor bytes, means - anchor)
-        self._reach: tuple[float, np.ndarray] | None = None     # (scale, world reach): panoramas
-        f32 = np.float32
-        rot = quat_to_rotmat(scene.rotations.astype(f32))
-        self._rs = np.ascontiguousarray(rot * scene.scales.astype(f32)[:, None, :], f32)
-        self._opacity = np.ascontiguousarray(scene.opacities, f32)
-        self._sh = np.ascontiguousarray(scene.sh, f32)
-        degree = scene.sh_degree if settings.sh_degree is None else min(settings.sh_degree,
-                                                                        scene.sh_degree)
-        self._coeffs = sh_coeff_count(degree)
+        self.stage1 = Stage1(scene, settings, self.k)
         self._tiles: dict[tuple, list[np.ndarray]] = {}     # the bands of each grid
         self._rec = np.empty((0, self.k.REC_SIZE), np.float32)   # the splat records, reused
-
-    def _relative_means(self, anchor: np.ndarray) -> np.ndarray:
-        """``means - anchor`` in float32 (the subtraction in float64), kept per anchor."""
-        key = np.asarray(anchor, np.float64).tobytes()
-        if self._anchor is None or self._anchor[0] != key:
-            rel = np.asarray(self.scene.means, np.float64) - np.asarray(anchor, np.float64)
-            self._anchor = key, np.ascontiguousarray(rel, np.float32)
-        return self._anchor[1]
-
-    def _project_pinhole(self, view: View, checkpoint=None):
-        """Stage 1 compiled: (mean2d, conic, opacity, reach, colour, depth, box, rect); with
-        ``checkpoint``, in parts of :data:`PART_SPLATS` splats, ``checkpoint()`` before each."""
-        n = self.scene.count
-        cam = anchored_camera(view.camera, view.anchor)
-        tx, ty = cam.tan_half_fov
-        params = np.concatenate([
-            np.asarray(cam.rotation, np.float64).ravel(), np.asarray(cam.translation, np.float64),
-            [cam.fx, cam.fy, cam.cx, cam.cy,
-             float(np.float32(JACOBIAN_CLAMP * tx)), float(np.float32(JACOBIAN_CLAMP * ty)),
-             float(view.near_in(np.float32)),
-             LOW_PASS if view.low_pass is None else view.low_pass]])
-        grid = tile_grid(cam.width, cam.height)
-        out = _stage1_outputs(n)
-        rel, center = self._relative_means(view.anchor), np.asarray(cam.center, np.float32)
-        for a, b in _parts(n, checkpoint):
-            self.k.project_pinhole(rel[a:b], self._rs[a:b], self._opacity[a:b], self._sh[a:b],
-                                   self._coeffs, params, center, float(grid[0]), float(grid[1]),
-                                   bool(self.settings.antialias), *(o[a:b] for o in out))
-        return out
-
-    def _project_model(self, view: View, checkpoint=None):
-        """Stage 1 for every other camera model (fisheye, OpenCV distortion, orthographic,
-        equirectangular): the model's own NumPy methods give each part's camera-space points,
-        pixel positions, Jacobians, culling and depths, as in the reference's stage 1; the rest
-        is :func:`~._cpu_project.project_model`, compiled.  A panorama then gets the
-        reference's second rows for splats that may reach across its seam, and every box is
-        cut to half a turn around its splat (:func:`_clip_to_half_turn`).  Parts and
-        ``checkpoint`` as in :meth:`_project_pinhole`."""
-        n, f32 = self.scene.count, np.float32
-        cam = anchored_camera(view.camera, view.anchor)
-        model, near = cam.model, view.near_in(f32)
-        period = model.seam_period(cam)
-        params = np.concatenate([np.asarray(cam.rotation, np.float64).ravel(),
-                                 [LOW_PASS if view.low_pass is None else view.low_pass]])
-        grid = tile_grid(cam.width, cam.height)
-        rel, center = self._relative_means(view.anchor), np.asarray(cam.center, f32)
-        uv, jac = np.empty((n, 2), f32), np.empty((n, 2, 3), f32)
-        visible, p_cam = np.empty(n, np.bool_), np.empty((n, 3), f32)
-        out = _stage1_outputs(n)
-
-        def finish(rows, into: slice, u, ok):   # the compiled rest: scene rows -> out[into]
-            self.k.project_model(rel[rows], self._rs[rows], self._opacity[rows], self._sh[rows],
-                                 self._coeffs, params, center, float(grid[0]), float(grid[1]),
-                                 bool(self.settings.antialias), u, jac[rows], ok,
-                                 *(o[into] for i, o in enumerate(out) if i != 5))
-
-        for a, b in _parts(n, checkpoint):
-            with np.errstate(all="ignore"):
-                p_cam[a:b] = eye_space(to_camera(rel[a:b], cam), cam)
-                uv[a:b] = model.project(p_cam[a:b], cam)
-                jac[a:b] = model.jacobian(p_cam[a:b], cam)
-                visible[a:b] = model.visible(p_cam[a:b], cam, near)
-                out[5][a:b] = model.depth(p_cam[a:b])
-            finish(slice(a, b), slice(a, b), uv[a:b], visible[a:b])
-        if period is None:
-            return out
-        # the reference's wrapped copies, appended in row order after every splat
-        if self._reach is None or self._reach[0] != cam.scale:
-            self._reach = cam.scale, splat_reach(self.scene.scales.max(axis=1) * cam.scale,
-                                                 self.scene.opacities)
-        dup = np.flatnonzero(visible & wrap_copies(p_cam, self._reach[1], cam))
-        out = tuple(np.concatenate([o, o[dup]]) for o in out)   # depth and shapes for the copies
-        shifted = uv[dup]
-        shifted[:, 0] += wrap_shift(shifted[:, 0], cam)
-        finish(dup, slice(n, None), shifted, np.ones(len(dup), np.bool_))
-        _clip_to_half_turn(out[6], out[0], period)
-        return out
 
     def render(self, view: View, layers: frozenset[Layer] = BASE,
                under: UnderLayer | None = None) -> RenderOutput:
@@ -249,12 +201,10 @@ class CpuRenderer:
             if on_batch is not None:
                 on_batch(done, n_tiles)
 
-        model = view.camera.model
-        if type(model) is Pinhole:
-            stage1 = self._project_pinhole(view, checkpoint)
-        else:
-            stage1 = self._project_model(view, checkpoint)
-        mean2d, conic, opacity, reach, color, z, box, rect = stage1
+        parts = _parts(self.scene.count, checkpoint)
+        mean2d, conic, opacity, reach, color, z, box, rect = (
+            self.stage1.pinhole(view, parts) if type(view.camera.model) is Pinhole
+            else self.stage1.model(view, parts))
         t1 = time.perf_counter()
         checkpoint()
         order = depth_order(z, rect)
@@ -308,36 +258,6 @@ def depth_order(depth: np.ndarray, rect: np.ndarray) -> np.ndarray:
     plane, so their depths are positive, as that sort needs."""
     kept = np.flatnonzero(rect[:, 1] > rect[:, 0])
     return depth_sort(depth[kept], kept.astype(np.uint32)).astype(np.int64)
-
-
-def _clip_to_half_turn(box: np.ndarray, mean2d: np.ndarray, period: float) -> None:
-    """Cut each pixel box's columns to those whose centre lies within half a turn of the
-    splat, ``|x + 0.5 - u| <= period / 2`` in float32, as the reference clips a panorama's
-    splats (a splat near the camera or a pole can be wider than the whole image; its wrapped
-    copy covers the other side).  In place."""
-    f32 = np.float32
-    half, u = f32(0.5 * period), mean2d[:, 0].astype(f32)
-    span = 4.0 * float(half) + 4.0                      # keeps the integers small and exact
-
-    def inside(j: np.ndarray) -> np.ndarray:
-        return np.abs((j + 0.5).astype(f32) - u) <= half
-
-    centre = np.clip(u.astype(np.float64) - 0.5, -span, span)
-    lo = np.ceil(centre - float(half)).astype(np.int64)
-    hi = np.floor(centre + float(half)).astype(np.int64)      # last column, inclusive
-    lo = np.where(inside(lo - 1), lo - 1, np.where(inside(lo), lo, lo + 1))
-    hi = np.where(inside(hi + 1), hi + 1, np.where(inside(hi), hi, hi - 1))
-    box[:, 0] = np.maximum(box[:, 0], lo)
-    box[:, 1] = np.minimum(box[:, 1], hi + 1)
-
-
-def _stage1_outputs(n: int) -> tuple[np.ndarray, ...]:
-    """Zeroed stage-1 outputs for ``n`` rows: mean2d (2), conic (3), opacity, reach, colour
-    (3), depth (float32), box (4) and tile rectangle (4) (int32)."""
-    f32 = np.float32
-    return (np.zeros((n, 2), f32), np.zeros((n, 3), f32), np.zeros(n, f32), np.zeros(n, f32),
-            np.zeros((n, 3), f32), np.zeros(n, f32), np.zeros((n, 4), np.int32),
-            np.zeros((n, 4), np.int32))
 
 
 def describe() -> str:
