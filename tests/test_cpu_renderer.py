@@ -371,3 +371,21 @@ def test_cli_render_writes_the_cpu_image(tmp_path):
     want = render_reference(loaded, default_camera(loaded, 96, 64), RenderSettings(), np.float32).rgba
     assert got.shape[:2] == (64, 96)
     assert float(np.abs(got[..., :3] - np.clip(want[..., :3], 0, 1)).max()) < 2.0 / 65535
+
+
+def test_a_path_interrupted_while_the_kernels_compile_leaves_no_folder(tmp_path, monkeypatch):
+    """render --path --renderer cpu prepares the kernels (half a minute on first use) before
+    the output folder exists: Ctrl-C then leaves nothing (the folder used to be left, empty)."""
+    from splatgl.cli import main
+
+    calls = []
+
+    def interrupted(progress=None):
+        calls.append(1)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cpu, "prepare", interrupted)
+    argv = ["render", "--renderer", "cpu", "--path", "orbit:3", "--width", "64", "--height", "48",
+            "-o", str(tmp_path / "f")]
+    assert main(argv) == 130 and calls == [1]
+    assert list(tmp_path.iterdir()) == []

@@ -206,6 +206,12 @@ def run_path(args: argparse.Namespace) -> int:
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
     kind = RendererKind(args.renderer)
+    if kind is RendererKind.CPU and not executor.sharded:
+        # refusals first, then the kernels (compiled on first use, half a minute), all before
+        # the output folder exists: a Ctrl-C during the compile leaves nothing behind
+        from ..renderers.cpu import check_scene, prepare
+        check_scene(scene, settings)
+        prepare()
     run = None
     gl_name = "not known here (the frames were rendered by workers)"
     size = (cameras[0].width, cameras[0].height)
