@@ -27,7 +27,7 @@ def test_commit_renames_every_temporary(tmp_path):
 @pytest.mark.parametrize("failure", [KeyboardInterrupt, OSError])
 def test_failure_or_interrupt_leaves_nothing(tmp_path, failure):
     (tmp_path / "a.png").write_text("old")
-    files = OutputFiles({"-o": tmp_path / "a.png", "--x": tmp_path / "b.json"})
+    files = OutputFiles({"-o": tmp_path / "a.png", "--x": tmp_path / "b.json"}, overwrite=True)
     with pytest.raises(failure):
         with files:
             files.temp("-o").write_text("new")
@@ -182,3 +182,81 @@ def test_one_table_of_image_formats(tmp_path):
     assert next(a for a in render._actions if a.dest == "format").choices == FORMAT_NAMES
     with pytest.raises(SplatglError, match=r"^--format must be one of png, tif, exr; got 'bmp'$"):
         FrameTarget.parse(tmp_path / "f", "bmp")
+
+
+# ------------------------------------------------------------------ outputs against inputs
+@pytest.mark.parametrize("overwrite", [False, True])
+def test_an_output_that_is_an_input_is_refused_even_with_overwrite(tmp_path, overwrite):
+    cam = tmp_path / "cam.json"
+    cam.write_text("{}")
+    with pytest.raises(SplatglError) as info:
+        OutputFiles({"--json": cam}, overwrite, inputs={"SCENE": None, "--camera": cam})
+    assert str(info.value) == f"--json {cam}: the same file as --camera; give the output its own name"
+    assert cam.read_text() == "{}"
+
+
+def test_the_same_file_through_a_symbolic_or_hard_link(tmp_path):
+    image = tmp_path / "qq.png"
+    image.write_bytes(b"png")
+    link, hard = tmp_path / "link.png", tmp_path / "hard.png"
+    link.symlink_to(image)
+    os.link(image, hard)
+    (tmp_path / "sub").symlink_to(tmp_path, target_is_directory=True)
+    for out in (link, hard, tmp_path / "sub" / "qq.png"):
+        with pytest.raises(SplatglError) as info:
+            OutputFiles({"--heatmap": out}, overwrite=True, inputs={"--image": image})
+        assert str(info.value) == (f"--heatmap {out}: the same file as --image {image}; give the "
+                                   "output its own name")
+    with pytest.raises(SplatglError, match="the same file as --heatmap; give each output"):
+        OutputFiles({"--heatmap": image, "-o": link}, overwrite=True)
+    assert image.read_bytes() == b"png"
+
+
+def test_a_folder_input_gives_its_files(tmp_path):
+    photos = [tmp_path / "images" / f"{i}.png" for i in range(3)]
+    photos[0].parent.mkdir()
+    for p in photos:
+        p.write_bytes(b"photo")
+    with pytest.raises(SplatglError, match=r"--renders .*1.png: the same file as --dataset"):
+        OutputFiles({"--renders": photos[1]}, overwrite=True, inputs={"--dataset": photos})
+    OutputFiles({"--renders": tmp_path / "images" / "9.png"}, inputs={"--dataset": photos})
+
+
+def test_check_output_path_refuses_inputs_and_existing_files(tmp_path):
+    from splatgl.output.files import check_output_path
+
+    scene = tmp_path / "s.ply"
+    scene.write_bytes(b"ply")
+    with pytest.raises(SplatglError, match="the same file as IN; give the output its own name"):
+        check_output_path(scene, "OUT", overwrite=True, inputs={"IN": scene})
+    with pytest.raises(SplatglError, match="exists \\(use --force to replace it\\)"):
+        check_output_path(scene, "OUT")
+    check_output_path(scene, "OUT", overwrite=True, inputs={"IN": tmp_path / "other.ply"})
+
+
+def test_a_link_is_written_through_to_its_target(tmp_path):
+    """``-o link.ply --force`` replaced the link with a plain file; the target kept the old one."""
+    target = tmp_path / "real" / "scene.ply"
+    target.parent.mkdir()
+    target.write_text("old")
+    link = tmp_path / "link.ply"
+    link.symlink_to(target)
+    atomic_write_text(link, "new")
+    assert link.is_symlink() and target.read_text() == "new"
+    files = OutputFiles({"-o": link}, overwrite=True)
+    with files:
+        assert files.temp("-o").parent == target.parent
+        files.temp("-o").write_text("newer")
+    assert link.is_symlink() and target.read_text() == "newer"
+    assert sorted(p.name for p in target.parent.iterdir()) == ["scene.ply"]
+
+
+def test_a_failed_write_on_a_pseudo_file_system_is_not_a_full_disk():
+    """``-o /proc/x.ply`` was reported as a full disk."""
+    import errno
+
+    from splatgl.output.atomic import disk_note, write_error
+
+    assert disk_note("/proc") == ""
+    message = str(write_error("/proc/x.ply", OSError(errno.ENOENT, "No such file or directory")))
+    assert message == "/proc/x.ply: cannot write (No such file or directory)"

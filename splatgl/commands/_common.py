@@ -73,6 +73,18 @@ positive_float = _argument_type(float, lambda v: math.isfinite(v) and v > 0.0, "
                                 "a finite number > 0")
 
 
+#: The one help text of ``--force`` (every command that writes files has it).
+FORCE_HELP = ("replace output files that exist (never a file the command reads: that is "
+              "refused)")
+
+
+def add_force_argument(p: argparse.ArgumentParser, help: str = FORCE_HELP) -> None:
+    """``--force``: replace existing outputs (``args.force``; see
+    :class:`splatgl.output.files.OutputFiles`, which refuses an output that is an input either
+    way).  ``help`` may name what it replaces where that is more than files (a folder)."""
+    p.add_argument("--force", action="store_true", help=help)
+
+
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", nargs="?", type=Path, default=None,
                    help="scene file (.ply, .splat, ...); default: the bundled demo scene")

@@ -14,6 +14,7 @@ files together; :class:`AtomicTarget` serves writers that span calls (the video 
 
 from __future__ import annotations
 
+import errno
 import os
 import shutil
 from pathlib import Path
@@ -40,10 +41,11 @@ def disk_note(folder: str | Path) -> str:
     """``"; the disk is full"`` where ``folder``'s file system has (almost) no space left, else
     ``""``: what a short write most often means, said where it is so."""
     try:
-        free = shutil.disk_usage(folder).free
+        usage = shutil.disk_usage(folder)
     except OSError:
         return ""
-    return "; the disk is full" if free < FULL_DISK_BYTES else ""
+    # a pseudo file system (/proc, /sys) has no blocks at all: it is not "full"
+    return "; the disk is full" if 0 < usage.total and usage.free < FULL_DISK_BYTES else ""
 
 
 def write_error(path: str | Path, exc: OSError) -> SplatglError:
@@ -51,7 +53,9 @@ def write_error(path: str | Path, exc: OSError) -> SplatglError:
     the system's reason (numpy's short writes give none: "written in part") and the disk note."""
     path = Path(path)
     reason = exc.strerror or "the data was written only in part"
-    return SplatglError(f"{path}: cannot write ({reason}){disk_note(path.parent)}")
+    # the disk is named only where the error could mean it (no room, or a short write)
+    full = exc.errno is None or exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+    return SplatglError(f"{path}: cannot write ({reason}){disk_note(path.parent) if full else ''}")
 
 
 def cannot_write(path: str | Path, problem: str) -> SplatglError:
@@ -98,7 +102,10 @@ class AtomicTarget:
 
     def __init__(self, path: str | Path, check: Check | None = None):
         self.path = Path(path)
-        self.tmp = temp_path(self.path)
+        #: The file replaced: :attr:`path`, or where it leads when it is a symbolic link (a
+        #: link is written through, never replaced by a plain file).
+        self.dest = Path(os.path.realpath(self.path)) if self.path.is_symlink() else self.path
+        self.tmp = temp_path(self.dest)
         self.check = check
 
     def verify(self) -> None:
@@ -108,9 +115,9 @@ class AtomicTarget:
             raise cannot_write(self.path, problem)
 
     def publish(self) -> None:
-        """Rename the temporary onto the target."""
+        """Rename the temporary onto the target (a link's target, :attr:`dest`)."""
         try:
-            os.replace(self.tmp, self.path)
+            os.replace(self.tmp, self.dest)
         except OSError as exc:
             raise write_error(self.path, exc) from None
 

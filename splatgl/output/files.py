@@ -19,6 +19,22 @@ written alone.  If a rename itself fails midway (the disk vanished), the files r
 it stay complete; none is ever partial.  A failed write inside the block (a
 :class:`~splatgl.errors.SplatglError` or an ``OSError``) comes out as one line naming the
 target file, never the temporary.
+
+Every command checks its outputs against the files it *reads* too, before any work, with the
+same two rules on every command (``inputs``: option name -> path, or several paths for a
+folder input such as a dataset's photographs):
+
+>>> OutputFiles({"--json": Path("cam.json")}, inputs={"--camera": Path("cam.json")})
+SplatglError: --json cam.json: the same file as --camera; give the output its own name
+>>> OutputFiles({"--json": Path("old.json")})          # old.json exists; no overwrite=True
+SplatglError: --json old.json: exists (use --force to replace it)
+
+"The same file" is the same absolute path, the same file through a symbolic link (of the file
+or of a folder above it) or a hard link (:func:`same_file`); it is refused even with
+``overwrite``.  An existing output is replaced only with ``overwrite=True``, which commands
+set from their ``--force`` (:func:`splatgl.commands._common.add_force_argument`).  An output
+that is a symbolic link is written through to the link's target (the temporary beside the
+target, renamed onto it), so the link stays a link.
 """
 
 from __future__ import annotations
@@ -26,6 +42,7 @@ from __future__ import annotations
 import errno
 import os
 from pathlib import Path
+from typing import Iterable, Mapping, Union
 
 from .atomic import AtomicTarget, naming_targets, write_error
 from ..errors import SplatglError
@@ -34,20 +51,64 @@ from ..errors import SplatglError
 _FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
-def check_output_path(path: str | Path, name: str = "", overwrite: bool = True) -> None:
-    """Refuse, in one line naming option ``name`` (if any) and ``path``, an output path that
-    cannot be written: an existing directory, a folder that does not exist or is not
-    writable, an existing file without ``overwrite``.  What every command checks before its
-    work."""
+PathLike = Union[str, Path]
+#: A command's inputs: option name (for messages) -> a path, several paths (a folder input such
+#: as a dataset's photographs), or None (an option not given).
+Inputs = Mapping[str, Union[PathLike, Iterable[PathLike], None]]
+
+
+def same_file(a: PathLike, b: PathLike) -> bool:
+    """Whether paths ``a`` and ``b`` name one file: the same absolute path, the same file
+    through symbolic links (the file's or a folder's above it), or hard links to one file."""
+    if os.path.abspath(a) == os.path.abspath(b) or os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):  # one does not exist (yet), or cannot be examined
+        return False
+
+
+def _input_paths(inputs: Inputs | None) -> list[tuple[str, Path]]:
+    """``inputs`` flattened to (option name, path) pairs, options not given left out."""
+    pairs = []
+    for name, value in (inputs or {}).items():
+        if value is None:
+            continue
+        for path in [value] if isinstance(value, (str, Path)) else value:
+            pairs.append((name, Path(path)))
+    return pairs
+
+
+def check_not_an_input(path: PathLike, name: str, inputs: Inputs | None) -> None:
+    """Refuse output ``path`` (option ``name``) where it is the same file (:func:`same_file`)
+    as one of the command's ``inputs``, in one line naming both options."""
     path = Path(path)
     where = f"{name} {path}" if name else str(path)
+    for option, source in _input_paths(inputs):
+        if same_file(path, source):
+            shown = option if os.path.abspath(source) == os.path.abspath(path) else f"{option} {source}"
+            raise SplatglError(f"{where}: the same file as {shown}; give the output its own name")
+
+
+def check_output_path(path: PathLike, name: str = "", overwrite: bool = False,
+                      inputs: Inputs | None = None) -> None:
+    """Refuse, in one line naming option ``name`` (if any) and ``path``, an output path that
+    cannot be written: one of the command's ``inputs`` (see :func:`check_not_an_input`; even
+    with ``overwrite``), an existing directory, a folder that does not exist or is not
+    writable, an existing file without ``overwrite``.  What every command checks before its
+    work.  A symbolic link is checked where it leads (the file written is its target)."""
+    path = Path(path)
+    where = f"{name} {path}" if name else str(path)
+    check_not_an_input(path, name, inputs)
     if path.is_dir():
         raise SplatglError(f"{where}: is a directory; give a file name")
-    parent = Path(os.path.abspath(path)).parent
+    link = path.is_symlink()  # written through: its target's folder is the one written
+    parent = Path(os.path.realpath(path) if link else os.path.abspath(path)).parent
+    shown = parent if link else path.parent
     if not parent.is_dir():
-        raise SplatglError(f"{where}: folder {path.parent} does not exist")
+        raise SplatglError(f"{where}: folder {shown} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise SplatglError(f"{where}: folder {path.parent} is not writable")
+        raise SplatglError(f"{where}: folder {shown} is not writable")
     if path.exists() and not overwrite:
         raise SplatglError(f"{where}: exists (use --force to replace it)")
 
@@ -58,25 +119,29 @@ class OutputFiles:
     Args:
         targets: option name (used in messages, and as the key of :meth:`temp`) -> path; a
             ``None`` path (an option not given) is skipped.
-        overwrite: whether an existing file may be replaced (directories never are).
+        overwrite: whether an existing file may be replaced (a command's ``--force``;
+            directories never are).
+        inputs: the files the command reads (option name -> path or paths, see
+            :data:`Inputs`): no target may be one of them, ``overwrite`` or not.
 
     Raises:
-        SplatglError: one line naming the option and path: the same file named twice, a path
-            that is an existing directory, a folder that does not exist, an existing file
-            without ``overwrite``.
+        SplatglError: one line naming the option and path: the same file named twice, the same
+            file as an input, a path that is an existing directory, a folder that does not
+            exist, an existing file without ``overwrite``.
     """
 
-    def __init__(self, targets: dict[str, Path | str | None], overwrite: bool = True):
+    def __init__(self, targets: dict[str, Path | str | None], overwrite: bool = False,
+                 inputs: Inputs | None = None):
         self.targets = {name: Path(p) for name, p in targets.items() if p is not None}
         self._files: dict[str, AtomicTarget] = {}
-        seen: dict[Path, str] = {}
+        seen: list[tuple[Path, str]] = []
         for name, path in self.targets.items():
-            key = Path(os.path.abspath(path))
-            if key in seen:
-                raise SplatglError(f"{name} {path}: the same file as {seen[key]}; give each "
-                                   "output its own name")
-            seen[key] = name
-            check_output_path(path, name, overwrite)
+            for other, other_name in seen:
+                if same_file(path, other):
+                    raise SplatglError(f"{name} {path}: the same file as {other_name}; give each "
+                                       "output its own name")
+            seen.append((path, name))
+            check_output_path(path, name, overwrite, inputs)
 
     def temp(self, name: str) -> Path:
         """The temporary to write option ``name``'s file to (inside the ``with`` block)."""
