@@ -120,3 +120,88 @@ def test_viewer_click_maps_window_points_to_image_pixels():
     assert window_pixel(10.2, 5.9, (320, 240), (640, 480)) == (20, 11)   # 2x backing scale
     assert window_pixel(320.0, 5.0, (320, 240), (320, 240)) is None
     assert window_pixel(-0.5, 5.0, (320, 240), (320, 240)) is None
+
+
+def _listed_and_drawn(scene, camera, settings, compat="inria"):
+    """(pixel listing, reference image) pairs over a grid of pixels."""
+    ref = render_reference(scene, camera, settings, compat=compat)
+    step = 3
+    for y in range(1, camera.height, step):
+        for x in range(1, camera.width, step):
+            yield pixel_splats(scene, camera, x, y, settings, compat), ref, x, y
+
+
+@pytest.mark.parametrize("fields", [
+    dict(order="per-pixel"),
+    dict(emulation=("sort=bucket16", "low_pass=1")),
+    dict(emulation=("extent=fixed", "min_alpha=0.05")),
+    dict(emulation=("extent=fixed-quad", "alpha_max=0.9", "low_pass=0.1")),
+    dict(emulation=("depth=distance", "half=on", "sh=0")),
+    dict(order="per-pixel", emulation=("extent=opacity", "min_alpha=0.02")),
+])
+def test_the_listing_explains_the_image_the_options_draw(fields):
+    """Issue 38 item 6: with --order per-pixel or --emulate the listing follows the same rules
+    as the image (it listed the global order's contributions, 0.14 against a drawn 0.63)."""
+    from splatgl.model.emulation import parse_emulation
+    fields = dict(fields)
+    settings = RenderSettings(background=(0.2, 0.3, 0.4),
+                              emulation=parse_emulation(fields.pop("emulation", None)), **fields)
+    scene, camera = random_scene(400, seed=9, **IN_DEPTH), Camera(40, 30, 36.0, 36.0, 20.0, 15.0)
+    plain = render_reference(scene, camera, RenderSettings(background=(0.2, 0.3, 0.4)))
+    differs = checked = 0
+    for listing, ref, x, y in _listed_and_drawn(scene, camera, settings):
+        np.testing.assert_allclose(listing.color, ref.color[y, x], atol=3e-6)
+        assert listing.alpha == pytest.approx(float(ref.alpha[y, x]), abs=2e-6)
+        assert listing.weight_sum == pytest.approx(float(ref.alpha[y, x]), abs=2e-6)
+        assert len(listing.splats) == ref.n_blended[y, x]
+        differs += bool(np.abs(ref.color[y, x] - plain.color[y, x]).max() > 1e-3)
+        checked += bool(listing.splats)
+    assert checked > 40 and differs > 5       # the options change the image: the test bites
+
+
+def test_the_per_pixel_listing_is_sorted_by_each_splats_peak():
+    scene, camera = random_scene(400, seed=9, **IN_DEPTH), Camera(40, 30, 36.0, 36.0, 20.0, 15.0)
+    listing = pixel_splats(scene, camera, 20, 15, RenderSettings(order="per-pixel"))
+    depths = [s.depth for s in listing.splats]
+    assert len(depths) > 3 and depths == sorted(depths)
+
+
+def test_the_tile_renderers_window_is_explained_too():
+    """A ReferenceOptions window (the tile renderer's twin) reorders the listing as it does
+    the image."""
+    from splatgl.reference.options import ReferenceOptions
+    scene, camera = random_scene(400, seed=9, **IN_DEPTH), Camera(40, 30, 36.0, 36.0, 20.0, 15.0)
+    options = ReferenceOptions(order="per-pixel", window=2)
+    for listing, ref, x, y in _listed_and_drawn(scene, camera, RenderSettings(), options):
+        np.testing.assert_allclose(listing.color, ref.color[y, x], atol=3e-6)
+        assert len(listing.splats) == ref.n_blended[y, x]
+
+
+def test_cli_per_pixel_and_emulate_match_the_reference_render(tmp_path, capsys):
+    """``pixel`` with --order per-pixel / --emulate gives the colour ``render --renderer
+    reference`` draws with the same options."""
+    from splatgl.api import default_camera
+    from splatgl.model.emulation import parse_emulation
+    scene = random_scene(300, seed=2, **IN_DEPTH)
+    path = tmp_path / "s.ply"
+    save_scene(path, scene)
+    camera = default_camera(scene, 40, 30)
+    for extra, fields in [(["--order", "per-pixel"], dict(order="per-pixel")),
+                          (["--emulate", "sort=bucket16", "--emulate", "extent=fixed"],
+                           dict(emulation=parse_emulation(["sort=bucket16", "extent=fixed"])))]:
+        ref = render_reference(scene, camera, RenderSettings(background=(0.2, 0.3, 0.4), **fields))
+        for x, y in [(20, 15), (14, 11), (25, 18)]:
+            code = main(["pixel", str(path), "--at", f"{x},{y}", "--width", "40", "--height", "30",
+                         "--background", "0.2,0.3,0.4", "--json", "-"] + extra)
+            got = json.loads(capsys.readouterr().out)
+            assert code == 0
+            np.testing.assert_allclose(got["color"], ref.color[y, x], atol=3e-6)
+            assert got["alpha"] == pytest.approx(float(ref.alpha[y, x]), abs=2e-6)
+
+
+def test_per_pixel_with_geometry_is_refused_as_render_refuses_it():
+    from splatgl.output.under import UnderLayer
+    scene, camera = random_scene(50, seed=9, **IN_DEPTH), Camera(40, 30, 36.0, 36.0, 20.0, 15.0)
+    under = object.__new__(UnderLayer)
+    with pytest.raises(SplatglError, match="--order per-pixel draws colour, alpha and depth only"):
+        pixel_splats(scene, camera, 5, 5, RenderSettings(order="per-pixel"), under=under)

@@ -18,10 +18,13 @@ HELP = "list the splats that blend into one pixel, front to back (from the refer
 DESCRIPTION = """List the splats that blend into pixel X,Y (column, row from the top-left, from 0)
 of a view, front to back, as the NumPy per-tile reference blends them: each splat's index in the
 scene (its row, counted from 0 after --drop-invalid), its depth (view z; a fisheye's or
-panorama's distance; a 2DGS surfel's hit), its alpha at the pixel centre, its weight alpha T
-and the transmittance T after it.  The weights sum to the pixel's alpha, and the listed colours
-with their weights make its colour: it is how to find the index of a floater (the splat with
-the largest weight, the top-id layer of splatgl render --layers) to delete it.
+panorama's distance; a 2DGS surfel's hit; with --order per-pixel the depth of its peak along
+the pixel's ray), its alpha at the pixel centre, its weight alpha T and the transmittance T
+after it.  The weights sum to the pixel's alpha, and the listed colours with their weights make
+its colour: the pixel splatgl render --renderer reference draws with the same options
+(--order per-pixel and --emulate included: the listing follows their order and rules).  It is
+how to find the index of a floater (the splat with the largest weight, the top-id layer of
+splatgl render --layers) to delete it.
 
 examples:
   splatgl pixel scene.ply --camera cam.json --at 640,360

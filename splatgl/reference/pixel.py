@@ -2,10 +2,15 @@
 (``splatgl pixel``, the viewer's Ctrl+click).
 
 The pixel's tile list is the one :func:`~splatgl.reference.rasterize.rasterize` blends (the
-splats whose tile rectangle holds the pixel's tile, by the float32 bits of their depth, then by
+splats whose tile rectangle holds the pixel's tile, by the low 32 bits of their keys, then by
 row, as the stable key sort orders them), built for that tile alone; every splat of it is
 evaluated at the pixel centre with the rasterizer's own functions and blended in order, so each
 weight ``alpha T`` is the one the full render adds and the weights sum to the pixel's alpha.
+
+The listing follows the rules the settings give the reference, as
+:func:`~splatgl.reference.render.render_reference` does: the emulation knobs (their keys,
+extents, alpha limits) and the per-pixel order (each pixel's contributions sorted by the depth
+of their peak along its ray, :mod:`splatgl.reference.per_pixel`; the depth listed is that peak's).
 """
 
 from __future__ import annotations
@@ -19,12 +24,15 @@ from ..cameras.view import View
 from ..constants import TILE_SIZE
 from ..errors import SplatglError
 from ..model.scene import Scene
-from ..model.settings import RenderSettings
+from ..model.settings import Order, RenderSettings
 from ..output.under import UnderLayer
 from .binning import depth_bits
 from .options import Compat, ReferenceOptions, as_options
+from .peak import Rays, tile_key_bits
+from .per_pixel import _contributions, exact_order, window_order
 from .rasterize import _blend_chunk, _chunk_alpha, _surfel_chunk_alpha, _Tiles
-from .stages import project
+from .render import PER_PIXEL_LAYERS_REFUSED, with_settings
+from .stages import ProjectedSplats, project
 
 
 @dataclass(frozen=True)
@@ -100,50 +108,89 @@ def pixel_splats(scene: Scene, camera: Camera, x: int, y: int,
                  settings: RenderSettings | None = None,
                  compat: Compat | ReferenceOptions | str = Compat.INRIA,
                  under: UnderLayer | None = None, dtype=np.float32) -> PixelListing:
-    """The splats that blend into pixel (``x``, ``y``) of ``camera``'s image (module doc)."""
+    """The splats that blend into pixel (``x``, ``y``) of ``camera``'s image (module doc): the
+    pixel of ``render_reference(scene, camera, settings, dtype, compat, under=under)``."""
     settings = RenderSettings() if settings is None else settings
     check_pixel(x, y, camera.width, camera.height)
-    options = as_options(compat)
+    options = with_settings(as_options(compat), settings)
+    if under is not None and options.order is Order.PER_PIXEL:
+        raise SplatglError(PER_PIXEL_LAYERS_REFUSED)
     proj = project(scene, View.of(camera, settings, scene), settings, dtype, options)
     tx, ty = x // TILE_SIZE, y // TILE_SIZE
-    holds = (proj.visible & (proj.rect_min[:, 0] <= tx) & (tx < proj.rect_max[:, 0])
-             & (proj.rect_min[:, 1] <= ty) & (ty < proj.rect_max[:, 1]))
-    rows = np.flatnonzero(holds)
-    rows = rows[np.lexsort((rows, depth_bits(proj.depth[rows])))]   # the tile's key order
-    dt = proj.dtype.type
-    lane = (y % TILE_SIZE) * TILE_SIZE + x % TILE_SIZE
+    rows = _tile_list(proj, tx, ty)
     bg = np.asarray(settings.background, np.float64)
     if rows.size == 0:
         return PixelListing(x, y, (), tuple(float(v) for v in bg), 0.0, 0, None)
+    dt = proj.dtype.type
     lanes = np.arange(TILE_SIZE, dtype=np.float64) + 0.5
-    px = (tx * TILE_SIZE + lanes).astype(proj.dtype)[None]
-    py = (ty * TILE_SIZE + lanes).astype(proj.dtype)[None]
-    pos = np.arange(rows.size)[None]
-    g = _Tiles(proj, rows, pos, pos < rows.size)
+    px = (tx * TILE_SIZE + lanes).astype(proj.dtype)
+    py = (ty * TILE_SIZE + lanes).astype(proj.dtype)
+    lane = (y % TILE_SIZE) * TILE_SIZE + x % TILE_SIZE
     with np.errstate(under="ignore"):
-        if proj.is_surfel:
-            alpha, z = _surfel_chunk_alpha(g, px, py, options.resolved_alpha_max, options.compat)
-            z = z[0, :, lane]
+        if options.order is Order.PER_PIXEL:
+            seq, alpha, z = _per_pixel_sequence(proj, rows, px, py, lane, Rays.of(camera), options)
         else:
-            alpha = _chunk_alpha(g, px, py, options.resolved_alpha_max)
-            z = g.depth[0]
-        alpha = alpha[:, :, lane:lane + 1]                             # (1, L, 1)
+            seq, alpha, z = _global_sequence(proj, rows, px, py, lane, options)
         hidden = 0
         if under is not None:
-            behind = (z >= under.depth[y, x]) & (alpha[0, :, 0] > 0)
+            behind = (z >= under.depth[y, x]) & (alpha > 0)
             hidden = int(behind.sum())
-            alpha = np.where(behind[None, :, None], dt(0.0), alpha)
-        w, kept, t_seq = _blend_chunk(np.ones((1, 1), proj.dtype), alpha, options.stop_inclusive)
+            alpha = np.where(behind, dt(0.0), alpha)
+        w, kept, t_seq = _blend_chunk(np.ones((1, 1), proj.dtype), alpha[None, :, None],
+                                      options.stop_inclusive)
     w, t_seq, kept = w[0, :, 0], t_seq[0, :, 0], int(kept[0, 0])
     source = proj.source if proj.source is not None else np.arange(proj.count)
-    splats = tuple(PixelSplat(int(source[rows[k]]), float(z[k]), float(alpha[0, k, 0]),
+    splats = tuple(PixelSplat(int(source[seq[k]]), float(z[k]), float(alpha[k]),
                               float(w[k]), float(t_seq[k + 1]),
-                              tuple(float(c) for c in proj.color[rows[k]]))
+                              tuple(float(c) for c in proj.color[seq[k]]))
                    for k in range(kept) if w[k] > 0)
     t_final = float(t_seq[kept])
-    stopped = int(source[rows[kept]]) if kept < rows.size else None
+    stopped = int(source[seq[kept]]) if kept < seq.size else None
     color = sum((np.asarray(s.color) * s.weight for s in splats), np.zeros(3)) + t_final * bg
     if under is not None:
         color = color - t_final * bg + t_final * (under.rgb[y, x] + (1.0 - under.alpha[y, x]) * bg)
     return PixelListing(x, y, splats, tuple(float(c) for c in color), 1.0 - t_final, int(rows.size),
                         stopped, hidden)
+
+
+def _tile_list(proj: ProjectedSplats, tx: int, ty: int) -> np.ndarray:
+    """The projected rows of tile (``tx``, ``ty``)'s list in the order the stable key sort gives
+    them (:func:`splatgl.reference.binning.emit_keys`, for this tile alone)."""
+    holds = (proj.visible & (proj.rect_min[:, 0] <= tx) & (tx < proj.rect_max[:, 0])
+             & (proj.rect_min[:, 1] <= ty) & (ty < proj.rect_max[:, 1]))
+    rows = np.flatnonzero(holds)
+    if proj.peak is not None and proj.rays is not None:     # per-pixel order: depth at the tile
+        n = rows.size
+        low = tile_key_bits(proj.peak[rows], proj.mean2d[rows], np.full(n, tx, np.int64),
+                            np.full(n, ty, np.int64), proj.rays, TILE_SIZE)
+    else:
+        low = (depth_bits(proj.depth) if proj.key_bits is None else proj.key_bits)[rows]
+    return rows[np.lexsort((rows, low))]
+
+
+def _global_sequence(proj: ProjectedSplats, rows: np.ndarray, px: np.ndarray, py: np.ndarray,
+                     lane: int, options: ReferenceOptions):
+    """The global order: the tile's list as it is, with each splat's alpha and depth at the
+    pixel; ``(rows (L,), alpha (L,), depth (L,))``."""
+    pos = np.arange(rows.size)[None]
+    g = _Tiles(proj, rows, pos, pos < rows.size)
+    if proj.is_surfel:
+        alpha, z = _surfel_chunk_alpha(g, px[None], py[None], options.resolved_alpha_max,
+                                       options.compat, options.alpha_min)
+        z = z[0, :, lane]
+    else:
+        alpha = _chunk_alpha(g, px[None], py[None], options.resolved_alpha_max, options.alpha_min)
+        z = g.depth[0]
+    return rows, alpha[0, :, lane], z
+
+
+def _per_pixel_sequence(proj: ProjectedSplats, rows: np.ndarray, px: np.ndarray, py: np.ndarray,
+                        lane: int, rays: Rays, options: ReferenceOptions):
+    """The per-pixel order: the pixel's contributions sorted as
+    :func:`splatgl.reference.per_pixel.rasterize_per_pixel` sorts them (exactly, or by the tile
+    renderer's window), with the depth of each splat's peak along the ray."""
+    pix, pos, t, alpha, _ = _contributions(proj, rows, 0, rows.size, px, py, rays, options)
+    idx = (exact_order(pix, pos, t) if options.window is None
+           else window_order(pix, pos, t, options.window))
+    idx = idx[pix[idx] == lane]
+    return rows[pos[idx]], alpha[idx], t[idx]

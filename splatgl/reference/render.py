@@ -25,6 +25,12 @@ from .rasterize import rasterize
 from .stages import ProjectedSplats, project
 
 
+#: Why the per-pixel order refuses geometry and the further layers (render and pixel alike).
+PER_PIXEL_LAYERS_REFUSED = ("--order per-pixel draws colour, alpha and depth only: it cannot be "
+                            "combined with --under or the normal, median-depth, count and top-id "
+                            "layers yet")
+
+
 @dataclass(frozen=True)
 class ReferenceImage:
     """A reference render (H rows, row 0 at the top; float = the render dtype).
@@ -132,9 +138,7 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
     background = settings.background if under is None else (0.0, 0.0, 0.0)
     if options.order is Order.PER_PIXEL:
         if extra is not None:
-            raise SplatglError("--order per-pixel draws colour, alpha and depth only: it cannot "
-                               "be combined with --under or the normal, median-depth, count and "
-                               "top-id layers yet")
+            raise SplatglError(PER_PIXEL_LAYERS_REFUSED)
         raster = rasterize_per_pixel(proj, values, ranges, camera, background, options,
                                      progress=progress)
     else:
