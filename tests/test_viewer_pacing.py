@@ -172,3 +172,33 @@ def test_a_swap_that_waits_for_the_display_does_not_shrink_the_draws_budget(xvfb
     with _viewer(scene, tmp_path, 10.0, vsync=False) as v:
         _move(v, 5)
         assert v.pacer.session.budget.budget <= 0.1 - 0.03
+
+
+def test_leaving_the_depth_or_difference_view_redraws_the_colour_view_at_once(xvfb_display, scene,
+                                                                             tmp_path):
+    """Ctrl+D, C or Tab back to the colour view under a budget: the window shows the colour
+    render again (it kept the depth map or heat map until the camera moved)."""
+    import glfw
+
+    from splatgl.viewer.frames import ViewMode
+
+    with _viewer(scene, tmp_path, 5000.0) as v:
+        v.on_key(glfw.KEY_I, glfw.PRESS, 0)          # panel hidden: the picture alone
+        _move(v, 1)
+        while v.step(dt=0.0):
+            pass
+        want = np.round(np.clip(v.renderer.render(scene, v.camera(), v.settings)[..., :3],
+                                0.0, 1.0) * 255)
+        for there, back in (((glfw.KEY_D, glfw.MOD_CONTROL),) * 2,
+                            ((glfw.KEY_C, 0),) * 2,
+                            ((glfw.KEY_TAB, 0), (glfw.KEY_TAB, 0))):
+            v.on_key(there[0], glfw.PRESS, there[1])
+            assert v.view is not ViewMode.COLOR and v.step(dt=0.0)
+            v.on_key(back[0], glfw.PRESS, back[1])
+            if v.view is not ViewMode.COLOR:          # Tab: depth -> difference -> colour
+                assert v.step(dt=0.0)
+                v.on_key(back[0], glfw.PRESS, back[1])
+            assert v.view is ViewMode.COLOR and v.step(dt=0.0)
+            while v.step(dt=0.0):
+                pass
+            assert np.abs(_window(v) - want).max() <= 1

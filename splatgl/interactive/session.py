@@ -219,6 +219,11 @@ class Session:
         self.refine_started = None
         return frame
 
+    def redraw(self) -> None:
+        """Draw the next frame anew whatever the camera (the window showed something else in
+        between: another view, another renderer): a moving frame, then refinement."""
+        self._key = None
+
     def note_overhead(self, seconds: float) -> None:
         """The caller spent ``seconds`` on the last moving frame besides its draw (the viewer:
         presenting it, swapping, its loop).  The draw's budget becomes the frame period less

@@ -40,6 +40,7 @@ class Pacer:
         self.lod: LodProvider | None = None
         self.session: Session | None = None
         self._owner: tuple | None = None
+        self.shown: FrameResult | None = None   # the last frame handed to the window
 
     def fps(self, renderer: Renderer) -> float:
         return default_fps(renderer) if self.fps_asked is None else self.fps_asked
@@ -69,9 +70,16 @@ class Pacer:
         drawn = session.frame(camera, input_pending)
         if drawn is None:
             return None
-        return FrameResult(drawn.texture, None, True, 0.0, drawn.seconds,
+        self.shown = FrameResult(drawn.texture, None, True, 0.0, drawn.seconds,
                            f"{drawn.splats:,} drawn / {self.scene.count:,}",
                            quality=self.describe())
+        return self.shown
+
+    def redraw(self) -> None:
+        """The window showed another frame since (another view or renderer): the next
+        :meth:`frame` draws anew, even for the same camera."""
+        if self.session is not None:
+            self.session.redraw()
 
     def note_frame(self, seconds: float, drawn: float) -> None:
         """The window's whole last frame took ``seconds``, its draw ``drawn`` of them: where it
@@ -122,6 +130,8 @@ def paced_frame(viewer, camera: Camera, key: tuple) -> bool:
     v = viewer
     if key == v._rendered_key and not v.pacer.refining:
         return False
+    if v.last is None or v.last is not v.pacer.shown:   # what is shown changed (view, renderer)
+        v.pacer.redraw()
     start_events, start_state = v._events, (v.state, v.size)
 
     def input_pending() -> bool:
