@@ -225,3 +225,29 @@ def test_cli_render_under_a_mesh(ctx, tmp_path, capsys):
     assert main(["render", "--path", "orbit:2", "--under", str(tmp_path / "box.exr"),
                  "-o", str(tmp_path / "f/")]) == 2
     assert "not with --path" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("bad, shown", [(np.nan, "nan"), (-2.0, "-2"), (-np.inf, "-inf")])
+def test_nan_or_negative_geometry_depth_is_refused(tmp_path, bad, shown):
+    """0 and +inf are background (what renderers write where nothing is); NaN and negative
+    depths are no depth at all: refused in one line with the count and the first pixel."""
+    depth = np.full((6, 8), 3.0, np.float32)
+    depth[0, 0], depth[0, 1] = 0.0, np.inf          # background: fine
+    depth[2, 5] = depth[4, 1] = bad
+    path = tmp_path / "g.exr"
+    write_image(path, np.ones((6, 8, 4), np.float32), depth=depth, attributes={"splatgl:depth": "z"})
+    with pytest.raises(SplatglError) as err:
+        read_under(path)
+    assert str(err.value) == (f"--under {path}: channel Z is NaN or negative (a depth is positive; "
+                              f"0 or inf where there is no geometry) at 2 pixels (the first at "
+                              f"x=5, y=2: {shown})")
+    depth[2, 5] = depth[4, 1] = 3.0
+    write_image(path, np.ones((6, 8, 4), np.float32), depth=depth, attributes={"splatgl:depth": "z"})
+    under = read_under(path)
+    assert np.isinf(under.depth[0, :2]).all() and (under.depth[1:] == 3.0).all()
+    rgba = np.ones((6, 8, 4), np.float32)
+    rgba[3, 2, 1] = np.inf
+    write_image(path, rgba, depth=depth, attributes={"splatgl:depth": "z"})
+    with pytest.raises(SplatglError, match=r"channel R/G/B/A is not finite at 1 pixel \(the first "
+                                           r"at x=2, y=3: 1, inf, 1, 1\)"):
+        read_under(path)

@@ -4,8 +4,9 @@ from the same camera, read from an EXR file, and the compositing rule.
 The file holds colour (R, G, B; premultiplied by A where it has an A channel, else opaque) and
 a depth channel (Z by default): the geometry's view-space z, or its distance along each pixel's
 ray, as the file's ``splatgl:depth`` attribute (``z`` or ``distance``) or the caller says.  A
-pixel without geometry has a depth that is not a finite positive number (0, inf or NaN, as
-renderers write for their background).
+pixel without geometry has a depth of 0 or +inf (as renderers write for their background); a
+NaN or negative depth, or colour that is not finite, is refused in one line (the count and the
+first such pixel).
 
 The renderers drop every splat fragment at or behind the geometry (its depth, in the same
 metric, against the pixel's: :class:`UnderLayer` ``depth``) and composite what remains over the
@@ -140,11 +141,31 @@ def read_under(path: str | Path, kind: DepthKind | str | None = None,
     a = _channel(names, "A")
     alpha = pixels[..., a] if a is not None else np.ones(pixels.shape[:2], np.float32)
     depth = pixels[..., names.index(channel)]
-    depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.inf).astype(np.float32)
+    _check_values(path, names, pixels, channel)
+    depth = np.where(depth > 0, depth, np.inf).astype(np.float32)   # 0 and +inf: background
     if not np.isfinite(depth).any():
         raise SplatglError(f"--under {path}: channel {channel} holds no geometry (no finite "
                            "positive depth)")
     return UnderImage(np.ascontiguousarray(rgb), np.ascontiguousarray(alpha), depth, kind, path)
+
+
+def _check_values(path: Path, names: list[str], pixels: np.ndarray, channel: str) -> None:
+    """Refuse (one line: the count and the first pixel) a depth that is NaN or negative
+    (-inf included): 0 and +inf mean no geometry, any other depth must be positive; and
+    colour or alpha that is not finite."""
+    depth = pixels[..., names.index(channel)]
+    bad = np.isnan(depth) | (depth < 0)
+    what = "NaN or negative (a depth is positive; 0 or inf where there is no geometry)"
+    if not bad.any():
+        plane = [c for c in ("R", "G", "B", "A") if c in names]
+        values = pixels[..., [names.index(c) for c in plane]]
+        bad = ~np.isfinite(values).all(-1)
+        channel, depth, what = "/".join(plane), values, "not finite"
+    if bad.any():
+        y, x = (int(v) for v in np.argwhere(bad)[0])
+        raise SplatglError(f"--under {path}: channel {channel} is {what} at {int(bad.sum())} "
+                           f"pixel{'s' if bad.sum() != 1 else ''} (the first at x={x}, y={y}: "
+                           f"{', '.join(f'{v:g}' for v in np.atleast_1d(depth[y, x]))})")
 
 
 def _depth_kind(path: Path, kind, stated) -> DepthKind:
