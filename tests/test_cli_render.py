@@ -103,3 +103,26 @@ def test_help_texts_explain(capsys):
     text = capsys.readouterr().out
     for word in ("--camera-index", "--precision", "--background", "examples"):
         assert word in text
+
+
+@pytest.mark.parametrize("suffix", ["png", "exr"])
+def test_background_beyond_float32_is_refused_without_numpy_warnings(tmp_path, capsys, suffix):
+    """A background float32 cannot hold overflowed to inf while compositing (NumPy overflow
+    and invalid-value warnings, NaN pixels where A = 1): refused in one line, no file."""
+    import warnings
+
+    from splatgl.errors import SplatglError
+    from splatgl.model.settings import RenderSettings
+
+    out = tmp_path / f"x.{suffix}"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["render", "--width", "16", "--height", "12", "--background", "1e308,0,0",
+                     "-o", str(out)]) == 2
+    assert capsys.readouterr().err == ("splatgl: error: --background 1e+308,0,0: each of R,G,B "
+                                       "must be a number from 0 to 3.403e+38 (what a float32 "
+                                       "image holds)\n")
+    assert not out.exists()
+    with pytest.raises(SplatglError, match="each of R,G,B"):
+        RenderSettings(background=(0.0, float("nan"), 0.0))
+    assert RenderSettings(background=(3e38, 0, 1)).background == (3e38, 0.0, 1.0)

@@ -182,6 +182,11 @@ def check_fidelity(settings: "RenderSettings", *kinds: RendererKind | str) -> No
 AUTO_NEAR_FRACTION = 0.01
 
 
+#: The largest background component: float32's largest finite value (the images are float32;
+#: a larger one overflowed to inf while compositing, and inf times a zero transmittance is NaN).
+MAX_BACKGROUND = 3.4028234663852886e38
+
+
 @dataclass(frozen=True)
 class RenderSettings:
     """What to render and how; the same object drives every renderer.
@@ -240,6 +245,9 @@ class RenderSettings:
         bg = tuple(float(v) for v in self.background)
         if len(bg) != 3:
             raise SplatglError(f"background must have 3 components, got {len(bg)}")
+        if not all(0.0 <= v <= MAX_BACKGROUND for v in bg):   # NaN fails too
+            raise SplatglError(f"--background {','.join(f'{v:g}' for v in bg)}: each of R,G,B must "
+                               f"be a number from 0 to {MAX_BACKGROUND:.4g} (what a float32 image holds)")
         object.__setattr__(self, "background", bg)
         object.__setattr__(self, "precision", Precision(self.precision))
         object.__setattr__(self, "extent", QuadExtent(self.extent))
