@@ -70,11 +70,12 @@ class Renderer:
             raise SplatglError("this Renderer is closed (its context was released): render "
                                "inside its 'with' block, or create a new Renderer")
 
-    def _check_size(self, camera: Camera, kind: RendererKind) -> None:
+    def _check_size(self, camera: Camera, kind: RendererKind, settings: RenderSettings) -> None:
         """Refuse an image the context or the memory cannot hold, before allocating it."""
-        key = (camera.width, camera.height, kind)
+        key = (camera.width, camera.height, kind, settings.precision)
         if key not in self._sizes_ok:
-            check_image_size(camera.width, camera.height, "image", kind, self.ctx)
+            check_image_size(camera.width, camera.height, "image", kind, self.ctx,
+                             settings.precision)
             self._sizes_ok.add(key)
 
     def _path(self, scene: Scene, settings: RenderSettings, kind: RendererKind):
@@ -128,7 +129,7 @@ class Renderer:
         if kind is RendererKind.REFERENCE:
             return render_reference_rgba(scene, camera, settings, progress)
         make_current(self.ctx)  # another context may have been made current since
-        self._check_size(camera, kind)
+        self._check_size(camera, kind, settings)
         with _reporting(self._path(scene, settings, kind), progress) as path:
             return path.render(View.of(camera, settings, scene)).rgba
 
@@ -152,7 +153,7 @@ class Renderer:
         if kind is RendererKind.REFERENCE:
             return render_reference_layers(scene, camera, settings, progress, layers, under)
         make_current(self.ctx)
-        self._check_size(camera, kind)
+        self._check_size(camera, kind, settings)
         with _reporting(self._path(scene, settings, kind), progress) as path:
             if geometry is None:
                 return path.render(view, layers)

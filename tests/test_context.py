@@ -61,3 +61,86 @@ def test_error_lists_every_backend(monkeypatch):
 def test_unknown_backend_named():
     with pytest.raises(ContextError, match="unknown OpenGL backend 'vulkan'"):
         context.create_headless_context("vulkan")
+
+
+# ------------------------------------------------------------------ image sizes the driver refuses
+class RefusingContext:
+    """A context whose driver refuses every texture with GL_OUT_OF_MEMORY (as llvmpipe does
+    beyond about 1.5 GiB, whatever its GL_MAX_* limits say)."""
+
+    info = {"GL_RENDERER": "fake GL", "GL_MAX_RENDERBUFFER_SIZE": 16384,
+            "GL_MAX_TEXTURE_SIZE": 16384, "GL_MAX_VIEWPORT_DIMS": (16384, 16384)}
+
+    def __init__(self):
+        self.tried, self._error = [], "GL_NO_ERROR"
+
+    @property
+    def error(self):
+        error, self._error = self._error, "GL_NO_ERROR"
+        return error
+
+    def texture(self, size, components, dtype):
+        self.tried.append((size, dtype))
+        self._error = "GL_OUT_OF_MEMORY"
+        return type("Texture", (), {"release": lambda self: None})()
+
+
+def test_a_colour_target_the_driver_refuses_is_named_before_any_work(monkeypatch):
+    from splatgl.gl import limits
+
+    monkeypatch.setattr(limits, "available_memory", lambda: None)
+    ctx = RefusingContext()
+    assert limits.image_size_problem(4096, 4096, "quad", ctx) is None  # 256 MiB: not tried
+    assert ctx.tried == []
+    assert limits.image_size_problem(8192, 8192, "quad", ctx, "rgba8") is None
+    assert limits.image_size_problem(16384, 8192, "quad", ctx) == (
+        "is larger than this OpenGL driver allocates (its RGBA32F colour target of 2.0 GiB was "
+        "refused with GL_OUT_OF_MEMORY by fake GL)")
+    assert limits.image_size_problem(16384, 8192, "quad", ctx, "rgba16f") == (
+        "is larger than this OpenGL driver allocates (its RGBA16F colour target of 1.0 GiB was "
+        "refused with GL_OUT_OF_MEMORY by fake GL)")
+    assert ctx.tried == [((16384, 8192), "f4"), ((16384, 8192), "f2")]
+
+
+def _llvmpipe(gl_renderer):
+    name = gl_renderer.ctx.info.get("GL_RENDERER", "")
+    if not name.startswith("llvmpipe"):
+        pytest.skip(f"{name} may allocate a 2 GiB target (llvmpipe refuses it)")
+    return name
+
+
+def test_render_16384x8192_on_llvmpipe_is_one_line(gl_renderer, tmp_path, capsys):
+    """Issue 38: a framebuffer-incomplete traceback; every side is within GL_MAX_* limits, but
+    llvmpipe refuses the 2 GiB RGBA32F target (refused before allocating: cheap)."""
+    from splatgl.cli import main
+
+    name = _llvmpipe(gl_renderer)
+    rc = main(["render", "--width", "16384", "--height", "8192", "-o", str(tmp_path / "x.png")])
+    out, err = capsys.readouterr()
+    assert (rc, out) == (2, "")
+    assert err == ("splatgl: error: --width/--height: image 16384x8192 is larger than this OpenGL "
+                   "driver allocates (its RGBA32F colour target of 2.0 GiB was refused with "
+                   f"GL_OUT_OF_MEMORY by {name})\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_incomplete_framebuffer_is_one_line(gl_renderer, monkeypatch):
+    """Whatever the check before the work misses, the driver's refusal at allocation is one line."""
+    from splatgl.cameras.camera import Camera
+    from splatgl.errors import SplatglError
+    from splatgl.gl import limits
+    from splatgl.model.scene import Scene
+    from splatgl.model.settings import RenderSettings
+
+    name = _llvmpipe(gl_renderer)
+    monkeypatch.setattr(limits, "PROBE_BYTES", float("inf"))
+    scene = Scene.from_activated(np.array([[0.0, 0, 3]]), np.array([[1.0, 0, 0, 0]]),
+                                 np.array([[0.2, 0.1, 0.1]]), np.array([0.8]), np.zeros((1, 1, 3)))
+    camera = Camera(16384, 8192, 9000.0, 9000.0, 8192.0, 4096.0)
+    with pytest.raises(SplatglError) as info:
+        gl_renderer.render(scene, camera, RenderSettings(early_stop="off"))
+    assert str(info.value) == (
+        f"image 16384x8192: this OpenGL driver ({name}) could not allocate its render targets "
+        "(the framebuffer is not complete (INCOMPLETE_ATTACHMENT), GL_OUT_OF_MEMORY); render a "
+        "smaller image")
+    assert gl_renderer.ctx.error == "GL_NO_ERROR"  # the driver's error is not left for others

@@ -249,7 +249,8 @@ def size_origin(args: argparse.Namespace) -> str:
 
 def check_size(args: argparse.Namespace, camera: Camera, kind: RendererKind | str, ctx=None) -> None:
     """The image size against this machine's limits (:mod:`splatgl.gl.limits`), before allocating."""
-    check_image_size(camera.width, camera.height, size_origin(args), kind, ctx)
+    check_image_size(camera.width, camera.height, size_origin(args), kind, ctx,
+                     getattr(args, "precision", None) or "rgba32f")
 
 
 def projection_from_args(args: argparse.Namespace) -> str | None:

@@ -5,6 +5,11 @@ Two limits apply, whatever gave the size (``--width``/``--height`` or a camera f
 - the OpenGL context's own: a side may not exceed ``GL_MAX_RENDERBUFFER_SIZE``,
   ``GL_MAX_TEXTURE_SIZE`` or ``GL_MAX_VIEWPORT_DIMS`` (quad path), and the tile renderer's
   per-pixel colour buffer (16 bytes a pixel) must fit ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE``;
+- the driver's allocation: no GL constant tells how large a texture the driver will allocate
+  (llvmpipe refuses an RGBA32F texture of 16384x8192, 2 GiB, with GL_OUT_OF_MEMORY although
+  every side is within its limits), so a quad-path colour target above :data:`PROBE_BYTES` is
+  created once, empty, and released before any work (:func:`target_refused`); a framebuffer
+  that still comes out incomplete is a one-line error too (:mod:`splatgl.gl.targets`);
 - memory: the image buffers every renderer certainly allocates (:data:`MIN_BYTES_PER_PIXEL`)
   must fit the memory the kernel reports as available.
 
@@ -16,7 +21,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import SplatglError
-from ..model.settings import RendererKind
+from ..model.settings import Precision, RendererKind
 
 #: Largest image side splatgl accepts before asking any context (the common GL 4.3 driver limit,
 #: llvmpipe's included); the context's real limits are checked as well.
@@ -28,6 +33,13 @@ MAX_IMAGE_SIDE = 16384
 MIN_BYTES_PER_PIXEL = 52
 #: The tile renderer's per-pixel RGBA32F output buffer, bytes per pixel (one SSBO).
 TILE_RGBA_BYTES = 16
+#: A quad-path colour target larger than this is tried on the context before any work (smaller
+#: ones are within what every driver allocates; the try costs nothing on llvmpipe, which refuses
+#: before allocating).
+PROBE_BYTES = 256 << 20
+#: The texel of each colour target precision: (moderngl dtype, bytes a pixel, GL name).
+_TEXELS = {Precision.RGBA32F: ("f4", 16, "RGBA32F"), Precision.RGBA16F: ("f2", 8, "RGBA16F"),
+           Precision.RGBA8: ("f1", 4, "RGBA8")}
 
 
 def available_memory() -> int | None:
@@ -45,8 +57,29 @@ def _gib(n: float) -> str:
     return f"{n / 2**30:.1f} GiB"
 
 
+def target_refused(ctx, width: int, height: int,
+                   precision: Precision | str = Precision.RGBA32F) -> str | None:
+    """Why ``ctx`` will not allocate a ``width`` x ``height`` colour target of ``precision``
+    (tried once, empty, and released), or None; targets up to :data:`PROBE_BYTES` are not tried.
+    A GL error pending before the try is cleared first (it is not this size's doing)."""
+    dtype, texel, name = _TEXELS[Precision(precision)]
+    nbytes = width * height * texel
+    if nbytes <= PROBE_BYTES:
+        return None
+    ctx.error  # noqa: B018  (reading clears a pending error)
+    texture = ctx.texture((width, height), 4, dtype=dtype)
+    try:
+        error = ctx.error
+    finally:
+        texture.release()
+    if error == "GL_NO_ERROR":
+        return None
+    return (f"is larger than this OpenGL driver allocates (its {name} colour target of "
+            f"{_gib(nbytes)} was refused with {error} by {ctx.info.get('GL_RENDERER', '?')})")
+
+
 def image_size_problem(width: int, height: int, kind: RendererKind | str = RendererKind.QUAD,
-                       ctx=None) -> str | None:
+                       ctx=None, precision: Precision | str = Precision.RGBA32F) -> str | None:
     """Why a ``width`` x ``height`` image cannot be rendered here, or None.
 
     Args:
@@ -54,6 +87,7 @@ def image_size_problem(width: int, height: int, kind: RendererKind | str = Rende
         kind: the renderer that will draw it.
         ctx: the moderngl context it will draw with (None: the NumPy reference, or not known
             yet; then only :data:`MAX_IMAGE_SIDE` and memory are checked).
+        precision: the quad path's colour target (:func:`target_refused`).
 
     Returns:
         None, or a phrase such as ``"is larger than this OpenGL driver allows (16384 pixels a
@@ -78,6 +112,10 @@ def image_size_problem(width: int, height: int, kind: RendererKind | str = Rende
                 return (f"has too many pixels for the tile renderer on this driver ({width * height:,}; "
                         f"its colour buffer of {TILE_RGBA_BYTES} bytes a pixel may hold "
                         f"{block // TILE_RGBA_BYTES:,}, GL_MAX_SHADER_STORAGE_BLOCK_SIZE)")
+        elif kind is RendererKind.QUAD:
+            refused = target_refused(ctx, width, height, precision)
+            if refused:
+                return refused
     elif side > MAX_IMAGE_SIDE:
         return f"is larger than splatgl renders ({MAX_IMAGE_SIDE} pixels a side)"
     need = width * height * MIN_BYTES_PER_PIXEL
@@ -89,8 +127,8 @@ def image_size_problem(width: int, height: int, kind: RendererKind | str = Rende
 
 
 def check_image_size(width: int, height: int, what: str, kind: RendererKind | str = RendererKind.QUAD,
-                     ctx=None) -> None:
+                     ctx=None, precision: Precision | str = Precision.RGBA32F) -> None:
     """Raise :class:`SplatglError` ``"{what} {width}x{height} {problem}"`` if the size won't do."""
-    problem = image_size_problem(width, height, kind, ctx)
+    problem = image_size_problem(width, height, kind, ctx, precision)
     if problem:
         raise SplatglError(f"{what} {width}x{height} {problem}")

@@ -5,9 +5,28 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from ..errors import SplatglError
 from ..model.settings import Precision
 
 _DTYPES = {Precision.RGBA32F: "f4", Precision.RGBA16F: "f2", Precision.RGBA8: "f1"}
+
+
+def _framebuffer(ctx: moderngl.Context, size: tuple[int, int], parts: list, **attachments):
+    """``ctx.framebuffer(**attachments)``; a framebuffer the driver leaves incomplete (an
+    attachment it would not allocate: llvmpipe refuses textures over about 1.5 GiB) is a
+    one-line :class:`SplatglError` naming the image size, and ``parts`` are released."""
+    try:
+        return ctx.framebuffer(**attachments)
+    except moderngl.Error as exc:
+        error = ctx.error  # the allocation's GL_OUT_OF_MEMORY, cleared for the next check
+        for part in parts:
+            if part is not None:
+                part.release()
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise SplatglError(
+            f"image {size[0]}x{size[1]}: this OpenGL driver ({ctx.info.get('GL_RENDERER', '?')}) "
+            f"could not allocate its render targets ({reason}, {error}); render a smaller "
+            "image") from None
 
 
 class ColorTarget:
@@ -32,7 +51,8 @@ class ColorTarget:
         self.normal_location = len(attachments) if normal else 0
         attachments += [self.normal_texture] if normal else []
         self.stop_depth = ctx.depth_renderbuffer((width, height)) if stop_mask else None
-        self.fbo = ctx.framebuffer(color_attachments=attachments, depth_attachment=self.stop_depth)
+        self.fbo = _framebuffer(ctx, self.size, attachments + [self.stop_depth],
+                                color_attachments=attachments, depth_attachment=self.stop_depth)
         self.mask_fbo = ctx.framebuffer(depth_attachment=self.stop_depth) if stop_mask else None
         self.has_depth = depth
         self.has_normal = normal
@@ -82,7 +102,8 @@ class OrderedTarget:
         self.size = (width, height)
         self.state = ctx.texture((width, height), 4, dtype="f4")
         self.ids = ctx.texture((width, height), 4, dtype="u4")
-        self.fbo = ctx.framebuffer(color_attachments=[self.state, self.ids])
+        self.fbo = _framebuffer(ctx, self.size, [self.state, self.ids],
+                                color_attachments=[self.state, self.ids])
         self.state_fbo = ctx.framebuffer(color_attachments=[self.state])
         self._zeros = bytes(width * height * 16)
 
