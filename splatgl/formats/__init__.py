@@ -7,7 +7,9 @@ see :mod:`splatgl.progress`).  Writers (the modules in ``_WRITER_MODULES``) prov
 ``NAME``, ``EXTENSIONS`` and ``write(path, scene)``, which returns None or, for writers that
 reorder the splats, the (N,) row order written (``path`` is a temporary,
 :func:`splatgl.output.atomic.temp_path`; a writer whose output depends on the file's name, such
-as glTF's ``.gltf`` or SOG's folder form, takes the user's name as ``target=``); lossy writers also provide
+as glTF's ``.gltf`` or SOG's folder form, takes the user's name as ``target=``; one whose
+``writes_folder(target)`` holds publishes its several files itself, as a whole, and is handed
+the target); lossy writers also provide
 ``error_bounds(scene) -> dict`` (see :mod:`splatgl.formats.quantise`).
 """
 
@@ -124,4 +126,6 @@ def save_scene(path: str | Path, scene: Scene, **options):
     mod = writer_for(path)
     if "target" in inspect.signature(mod.write).parameters:  # its output depends on the name
         options = {**options, "target": Path(path)}
+    if getattr(mod, "writes_folder", lambda p: False)(path):  # several files, published whole
+        return mod.write(path, scene, **options)
     return write_checked(path, lambda tmp: mod.write(tmp, scene, **options))

@@ -22,10 +22,9 @@ from ..constants import SH_C0
 from ..model.spatial import morton_order_full_box
 from ..errors import SceneFormatError
 from ..model.scene import Scene, SplatKind
-from . import kmeans, webp
+from . import kmeans, sog_folder, webp
 from . import quantise as qz
 from .sog import EXTENSIONS, NAME  # noqa: F401 (the format registry reads them here too)
-from .written import write_together
 
 GENERATOR = "splatgl"
 #: The version 2 files of each attribute, as meta.json names them.
@@ -103,20 +102,28 @@ def encode(scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS, path=None
     return tex, meta
 
 
+def writes_folder(target) -> bool:
+    """Whether ``target`` names the folder form (meta.json and its textures), which
+    :func:`write` publishes itself, as a whole (:mod:`splatgl.formats.sog_folder`), rather than
+    into one temporary."""
+    return Path(target).name.lower().endswith(".json")
+
+
 def write(path, scene: Scene, iterations: int = qz.SOG_KMEANS_ITERATIONS, target=None) -> np.ndarray:
-    """Write ``scene`` to ``path`` as SOG v2: a zip bundle, or (for a file name ``target``,
-    default ``path``, ending in ``.json``; ``path`` may be a temporary) meta.json with its
-    textures beside it.  Returns the (N,) row order written (Morton order)."""
+    """Write ``scene`` to ``path`` as SOG v2: a zip bundle (``path`` may be a temporary), or
+    (for a file name ``target``, default ``path``, ending in ``.json``) meta.json with its
+    textures beside it, replacing an older scene there as a whole
+    (:func:`splatgl.formats.sog_folder.publish`; ``path`` is then not written).  Returns the
+    (N,) row order written (Morton order)."""
     path = Path(path)
     target = Path(target) if target is not None else path
     order = morton_order_full_box(scene.means)
     textures, meta = encode(scene.subset(order), iterations, target)
     blobs = {name: webp.encode(rgba) for name, rgba in textures.items()}
-    meta_bytes = json.dumps(meta).encode("utf-8")
-    if target.name.lower().endswith(".json"):  # a folder: every texture, then meta.json
-        write_together({target.parent / name: blob for name, blob in blobs.items()},
-                       lambda: path.write_bytes(meta_bytes))
+    if writes_folder(target):
+        sog_folder.publish(target, blobs, meta)
         return order
+    meta_bytes = json.dumps(meta).encode("utf-8")
     with zipfile.ZipFile(path, "w", zipfile.ZIP_STORED) as zf:  # WebP is compressed already
         for name, blob in blobs.items():
             zf.writestr(name, blob)

@@ -15,7 +15,7 @@ import zlib
 from pathlib import Path
 from typing import Callable, TypeVar
 
-from ..output.atomic import AtomicTarget, atomic_target, size_problem
+from ..output.atomic import atomic_target
 from ..errors import SplatglError
 
 T = TypeVar("T")
@@ -32,27 +32,6 @@ def write_checked(path: str | Path, write: Callable[[Path], T]) -> T:
     with atomic_target(path, written_problem) as tmp:
         value = write(tmp)
     return value
-
-
-def write_together(files: dict[Path, bytes], write_last: Callable[[], None]) -> None:
-    """Several files of one output, all or none: each of ``files`` (path -> bytes) to its
-    temporary (:class:`splatgl.output.atomic.AtomicTarget`), checked to hold all its bytes, then
-    ``write_last()`` (the file that names them, such as SOG's meta.json, to the caller's own
-    temporary); only then are they renamed into place.  Any failure removes every temporary and
-    leaves the folder as it was; an ``OSError`` is left to the caller, whose
-    :func:`write_checked` names the output the user gave."""
-    targets = [AtomicTarget(path, lambda tmp, n=len(data): size_problem(tmp, n))
-               for path, data in files.items()]
-    try:
-        for target, data in zip(targets, files.values()):
-            target.tmp.write_bytes(data)
-            target.verify()
-        write_last()
-        for target in targets:
-            target.publish()
-    finally:
-        for target in targets:
-            target.discard()
 
 
 def written_problem(path: str | Path) -> str | None:
