@@ -137,3 +137,17 @@ def test_api_camera_names_the_non_finite_entry():
     with pytest.raises(CameraError, match=r"^world_to_camera must be finite; it holds NaN at row 0, "
                                           r"column 3$"):
         Camera(8, 8, 5.0, 5.0, 4.0, 4.0, m)
+
+
+def test_a_repeated_key_is_one_line_naming_file_and_key(tmp_path, capsys):
+    """Issue 38: a camera file giving "fx" twice rendered with the last, without a word."""
+    from splatgl.cli import main
+
+    path = single(tmp_path, POSE)
+    path.write_text(path.read_text().replace('"fx": 50.0', '"fx": 50.0, "fx": 500.0'))
+    rc = main(["render", "--camera", str(path), "-o", str(tmp_path / "x.png")])
+    out, err = capsys.readouterr()
+    assert (rc, out) == (2, "")
+    assert err == (f"splatgl: error: {path}: key 'fx' given twice in one object (JSON keeps only "
+                   "the last)\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cam.json"]

@@ -315,3 +315,22 @@ def test_transforms_json_keeps_a_fisheye(tmp_path):
     for g, w in zip(load_views(tmp_path), views):
         assert g.camera.model == w.camera.model
         _close(g.camera, w.camera, 1e-12)
+
+
+# ------------------------------------------------------------------ repeated keys
+def _repeat_first_key(path) -> str:
+    """Give the first object of the JSON file at ``path`` its first key twice (the later one
+    wins in Python's json); return the key."""
+    text = path.read_text()
+    at = text.index("{") + 1
+    key = text[at:].split('"')[1]  # json.dumps writes {"key": ...
+    path.write_text(f'{text[:at]}"{key}": 0, {text[at:]}')
+    return key
+
+
+@pytest.mark.parametrize("fmt", ["transforms", "3dgs", "nerfstudio", "splatgl"])
+def test_a_repeated_key_is_refused_naming_file_and_key(fmt, tmp_path):
+    """Issue 38: JSON keeps the last of a repeated key without a word."""
+    source, _, _ = _hand_written(fmt, tmp_path)
+    key = _repeat_first_key(source)
+    assert _err(source) == f"{source}: key '{key}' given twice in one object (JSON keeps only the last)"

@@ -268,3 +268,30 @@ def test_antialias_tags_turn_on_antialias(tmp_path, capsys):
     assert antialias_from_args(ns(plain)) is False and antialias_from_args(ns(None)) is False
     assert capsys.readouterr().err == ""
     assert load_scene(ply).count == 30  # the comment does not disturb reading
+
+
+def test_a_repeated_json_key_in_gltf_or_sog_is_refused(tmp_path):
+    """Issue 38: JSON keeps the last of a repeated key without a word (here the scene's own)."""
+    import zipfile
+
+    from helpers import random_scene
+    from splatgl.errors import SceneFormatError
+
+    gltf, sog = tmp_path / "a.gltf", tmp_path / "a.sog"
+    save_scene(gltf, random_scene(3))
+    gltf.write_text(gltf.read_text().replace('{"asset": ', '{"scene": 0, "asset": ', 1))
+    with pytest.raises(SceneFormatError) as info:
+        load_scene(gltf)
+    assert str(info.value) == (f"{gltf}: glTF JSON is not valid: key 'scene' given twice in one "
+                               "object (JSON keeps only the last)")
+    save_scene(sog, random_scene(3))
+    with zipfile.ZipFile(sog) as z:
+        files = {name: z.read(name) for name in z.namelist()}
+    files["meta.json"] = files["meta.json"].replace(b"{", b'{"count": 1, ', 1)
+    with zipfile.ZipFile(sog, "w") as z:
+        for name, data in files.items():
+            z.writestr(name, data)
+    with pytest.raises(SceneFormatError) as info:
+        load_scene(sog)
+    assert str(info.value) == (f"{sog}: meta.json is not valid JSON: key 'count' given twice in "
+                               "one object (JSON keeps only the last)")

@@ -10,12 +10,20 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CameraError
+from ..model.json_text import DuplicateKeyError, unique_keys
 
 
 def read_json(path: Path, what: str = "file") -> object:
-    """The parsed JSON of ``path``; a one-line CameraError naming it (as ``what``) otherwise."""
+    """The parsed JSON of ``path``; a one-line CameraError naming it (as ``what``) otherwise,
+    also for a key repeated in one object (:func:`splatgl.model.json_text.unique_keys`: JSON
+    would keep the last without a word).  Every user JSON file splatgl reads for cameras
+    (camera files, cameras.json, datasets' transforms.json, camera paths) comes through here."""
     try:
-        return json.loads(Path(path).read_text())
+        return json.loads(Path(path).read_text(), object_pairs_hook=unique_keys)
+    except DuplicateKeyError as exc:
+        raise CameraError(f"{path}: {exc}") from None
+    except RecursionError:
+        raise CameraError(f"{path}: not valid JSON (nested too deeply)") from None
     except FileNotFoundError:
         raise CameraError(f"{path}: no such {what}") from None
     except (OSError, UnicodeDecodeError) as exc:

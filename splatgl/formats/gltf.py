@@ -43,6 +43,7 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SceneFormatError
+from ..model.json_text import unique_keys
 from ..model.quaternion import quat_multiply, quat_to_rotmat, rotmat_to_quat
 from ..model.scene import Scene, SplatKind, activate
 from . import _binary, spz
@@ -99,7 +100,7 @@ class _Document:
         else:
             text = data
         try:
-            self.json = json.loads(text.decode("utf-8"))
+            self.json = json.loads(text.decode("utf-8"), object_pairs_hook=unique_keys)
         except (UnicodeDecodeError, ValueError, RecursionError) as exc:
             raise SceneFormatError(path, f"glTF JSON is not valid: {exc}") from None
         if not isinstance(self.json, dict):

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..constants import sh_coeff_count
 from ..errors import SceneFormatError
+from ..model.json_text import unique_keys
 from ..model.scene import Scene, SplatKind, activate
 from . import _binary, webp
 from . import quantise as qz
@@ -87,7 +88,7 @@ class _Files:
     def meta(self) -> dict:
         blob = self.get("meta.json") if self.zip is not None else _binary.read_bytes(self.path)
         try:
-            meta = json.loads(blob.decode("utf-8"))
+            meta = json.loads(blob.decode("utf-8"), object_pairs_hook=unique_keys)
         except (UnicodeDecodeError, ValueError, RecursionError) as exc:
             raise SceneFormatError(self.path, f"meta.json is not valid JSON: {exc}") from None
         if not isinstance(meta, dict):
