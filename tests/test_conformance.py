@@ -52,6 +52,7 @@ def test_splatgl_renderers_pass(kit, tmp_path, kind):
     assert skipped == []
     scores = score_kit(kit, tmp_path)
     assert [s.status for s in scores] == ["pass"] * len(scores), scores
+    assert main(["conformance", "score", str(kit), "--images", str(tmp_path), "--no-explain"]) == 0
 
 
 def test_cpu_renderer_passes_what_it_draws(kit, tmp_path):
@@ -73,6 +74,8 @@ def test_a_y_flipped_renderer_fails_as_upside_down(kit, tmp_path):
     assert scores["depth_range"].status == "fail"
     assert scores["depth_range"].explanation.startswith("looks upside down")
     assert scores["demo_perspective"].explanation.startswith("looks upside down")
+    # a failed case fails the run (exit 1), so CI can gate on it
+    assert main(["conformance", "score", str(kit), "--images", str(tmp_path / "f"), "--no-explain"]) == 1
 
 
 def test_a_16_bit_sorted_renderer_fails_explained_by_sort_bucket16(kit, tmp_path):
@@ -91,7 +94,7 @@ def test_cli_score_json_missing_and_bad_kit(kit, tmp_path, capsys):
     (tmp_path / "none").mkdir()
     out = tmp_path / "s.json"
     assert main(["conformance", "score", str(kit), "--images", str(tmp_path / "none"),
-                 "--json", str(out)]) == 0
+                 "--json", str(out)]) == 1                  # missing images fail the run
     report = json.loads(out.read_text())
     assert report["passed"] == 0 and {c["status"] for c in report["cases"]} == {"missing"}
     capsys.readouterr()

@@ -248,7 +248,8 @@ def run_lod(sizes, width: int, height: int, frames: int, thresholds, budgets, ba
     log(table(summ))
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        files = OutputFiles({name: out / name for name in ("lod.json", "lod.png")})
+        # checked by the command before measuring: an existing file here means --force
+        files = OutputFiles({name: out / name for name in ("lod.json", "lod.png")}, overwrite=True)
         with files:
             files.temp("lod.json").write_text(json.dumps(
                 {"machine": machine, "summary": summ, "frames": [asdict(r) for r in rows]},

@@ -9,6 +9,7 @@ import math
 from ..bench.lod_bench import PATH_SETS
 from ..bench.scale import SH3_SIZES, SIZES, parse_sizes
 from ..errors import SplatglError
+from ._outputs import check_out_folder
 
 
 def add_lod_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,6 +45,7 @@ def run_lod_command(args: argparse.Namespace) -> int:
     if paths not in PATH_SETS:
         raise SplatglError(f"--lod-paths: expected one of {', '.join(PATH_SETS)}, got {paths!r}")
     bands = _numbers(args.lod_blend or "2,1", "--lod-blend")
+    check_out_folder(args, ("lod.json", "lod.png"))   # before any measuring
     if min(bands) < 1:
         raise SplatglError(f"--lod-blend: bands are ratios of at least 1, got {args.lod_blend!r}")
     run_lod(parse_sizes(args.sizes or "3M,6M", (), "--sizes"), args.width or 1280,
@@ -114,8 +116,7 @@ def run_popping_command(args: argparse.Namespace) -> int:
         scenes = [(shared / rel, up) for rel, up in SCENES if (shared / rel).is_file()]
         if not scenes:
             raise SplatglError(f"--popping: no scenes given and none found in {shared_scenes_help()}")
-    if args.out is not None and args.out.exists() and not args.out.is_dir():
-        raise SplatglError(f"--out {args.out}: is a file; --out names a folder for popping.json")
+    check_out_folder(args, ("popping.json",))   # before any measuring
     rows = []
     with Renderer() as renderer:
         machine = machine_info(renderer_name(renderer.ctx))
@@ -143,6 +144,7 @@ def run_scale_command(args: argparse.Namespace) -> int:
     from ..bench.scale_report import plot, table, write_json
 
     sizes = parse_sizes(args.sizes, SIZES, "--sizes")
+    check_out_folder(args, ("scale.json", "scale.png"))   # before any measuring
     sh3 = parse_sizes(args.sh3_sizes, SH3_SIZES, "--sh3-sizes")
     resolutions = ((args.width, args.height),) if args.width and args.height else ScaleOptions.resolutions
     frames = args.frames or ScaleOptions.frames
@@ -204,6 +206,7 @@ def run_interactive_command(args: argparse.Namespace, scenes: list) -> int:
     from ..interactive.session import default_fps
 
     fps = check_interactive_options(args)
+    check_out_folder(args, ("interactive.json", "interactive.png"))   # before any flight
     if args.exact == "cpu":   # compiled (first use) or loaded now, not in a flight's first rest
         from ..renderers.cpu import prepare
         prepare()

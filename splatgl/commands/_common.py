@@ -25,6 +25,7 @@ from ._fidelity_args import add_fidelity_arguments, fidelity_fields
 from ..renderers.stereo import StereoLayout
 from ..model.transform import parse_transform
 from ._spz_axes import add_spz_axes_argument
+from ._outputs import add_force_argument  # noqa: F401  (re-exported: one --force)
 from ..cameras.up import UP_CHOICES, resolve_up
 
 
@@ -71,18 +72,6 @@ non_negative_int = _argument_type(int, lambda v: v >= 0, "a whole number", "0 or
 #: A finite number > 0 (not nan, not inf).
 positive_float = _argument_type(float, lambda v: math.isfinite(v) and v > 0.0, "a number",
                                 "a finite number > 0")
-
-
-#: The one help text of ``--force`` (every command that writes files has it).
-FORCE_HELP = ("replace output files that exist (never a file the command reads: that is "
-              "refused)")
-
-
-def add_force_argument(p: argparse.ArgumentParser, help: str = FORCE_HELP) -> None:
-    """``--force``: replace existing outputs (``args.force``; see
-    :class:`splatgl.output.files.OutputFiles`, which refuses an output that is an input either
-    way).  ``help`` may name what it replaces where that is more than files (a folder)."""
-    p.add_argument("--force", action="store_true", help=help)
 
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:

@@ -15,7 +15,8 @@ from pathlib import Path
 
 from ..output.atomic import atomic_write_text
 from ..errors import SplatglError
-from ..output.files import OutputFiles
+from ..output.files import Inputs, same_file
+from ._outputs import output_files
 
 #: The FILE that means standard output.
 STDOUT = "-"
@@ -51,9 +52,12 @@ def json_to_stdout(args: argparse.Namespace) -> bool:
     return getattr(args, "json", None) == STDOUT
 
 
-def check_json_target(args: argparse.Namespace, files: dict[str, Path | None] | None = None) -> None:
-    """Refuse a --json FILE that cannot be written or would overwrite a scene, before work;
-    ``files`` (option name -> path) are the command's other files, which it must not be."""
+def check_json_target(args: argparse.Namespace, files: dict[str, Path | None] | None = None,
+                      inputs: Inputs | None = None) -> None:
+    """Refuse a --json FILE that cannot be written or would overwrite a scene, before work:
+    ``files`` (option name -> path) are the command's other outputs, which it must not be;
+    no file the command reads may be it either (:func:`~._outputs.input_files` of ``args``
+    plus ``inputs``), and an existing FILE is replaced only with ``--force``."""
     value = getattr(args, "json", None)
     if value is None or value == STDOUT:
         return
@@ -67,10 +71,10 @@ def check_json_target(args: argparse.Namespace, files: dict[str, Path | None] | 
                 raise SplatglError(f"{OPTION} {value}: is a scene (SOG meta.json), not a report; "
                                    "put the scene before --json")
     for name, other in (files or {}).items():
-        if other is not None and os.path.abspath(other) == os.path.abspath(path):
+        if other is not None and same_file(other, path):
             raise SplatglError(f"{OPTION} {value}: the same file as {name}; give the report its "
                                "own name")
-    OutputFiles({OPTION: path})
+    output_files(args, {OPTION: path}, inputs)
 
 
 def emit_json(args: argparse.Namespace, obj: object, indent: int | None = None) -> None:

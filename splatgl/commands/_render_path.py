@@ -7,6 +7,7 @@ work itself is :func:`splatgl.tasks.batch.render_frames`.
 from __future__ import annotations
 
 import argparse
+import sys
 
 from ..tasks.batch import render_frames
 from ..cameras.camera import Camera
@@ -15,6 +16,7 @@ from ..errors import SplatglError
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
 from ..output.layer_files import check_exact_ids
+from ..output.layers import BASE
 from ._layers import check_under_options, layer_files, named_layers
 from ..output.frames import FrameTarget
 from ..output.image_formats import FORMAT_NAMES
@@ -39,6 +41,7 @@ from ._common import (default_size, demo_scene_path, load_scene_arg, positive_fl
 from ._spz_axes import check_not_sharded
 
 DEFAULT_FPS = 30.0
+from ._outputs import check_outputs
 DEFAULT_ORBIT_FRAMES = 120
 
 
@@ -112,6 +115,14 @@ def check_preview(args: argparse.Namespace, target: FrameTarget, sharded: bool,
                                     "a .png pattern, a folder or a video)"),
     )
     for refused, message in refusals:
+    undrawn = sorted(layer.value for layer in (target.layers or BASE) - BASE)
+    if undrawn and target.named:
+        raise SplatglError(f"--preview draws colour and alpha only, not --layers {', '.join(undrawn)} "
+                           "(render the path without --preview for them)")
+    if undrawn:      # an .exr pattern's own layers: its Z channel
+        raise SplatglError(f"{args.output}: EXR frames carry Z (the depth layer), which --preview "
+                           "does not draw; give --layers colour,alpha for EXR drafts without Z, or "
+                           "use a .png pattern, a folder or a video")
         if refused:
             raise SplatglError(message)
 
@@ -173,6 +184,14 @@ def run_path(args: argparse.Namespace) -> int:
                            "(an orbit's radius: splatgl path orbit --radius)")
     if args.depth_png is not None:
         raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
+def check_frame_outputs(args: argparse.Namespace, target: FrameTarget, numbers) -> None:
+    """Every file the frames (and their layer pictures) or the video go to, before any frame
+    renders: none is a file this command reads, and one that exists is replaced only with
+    --force (--resume keeps complete frames and renders damaged ones again: no overwrite)."""
+    paths = [target.video] if target.is_video else [p for n in numbers for p in target.frame_paths(n)]
+    check_outputs(args, paths, "-o", keep=args.resume)
+
+
     if args.under is not None:
         raise SplatglError("--under composites one view into a render of its geometry; not with --path")
     target = FrameTarget.parse(args.output, args.format).with_layers(named_layers(args),
@@ -211,17 +230,24 @@ def run_path(args: argparse.Namespace) -> int:
         # the output folder exists: a Ctrl-C during the compile leaves nothing behind
         from ..renderers.cpu import check_scene, prepare
         check_scene(scene, settings)
+    check_frame_outputs(args, target, numbers)
         prepare()
     run = None
     gl_name = "not known here (the frames were rendered by workers)"
     size = (cameras[0].width, cameras[0].height)
     if executor.sharded:
-        from ..tasks.render import render_sharded
+        from ..tasks.render import render_sharded, stopped_video_note
 
-        result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
-                                     cameras, settings, target, executor, kind, args.bit_depth,
-                                     args.resume, args.drop_invalid, fps, default_progress(), numbers,
-                                     lod)
+        try:
+            result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
+                                         cameras, settings, target, executor, kind, args.bit_depth,
+                                         args.resume, args.drop_invalid, fps, default_progress(),
+                                         numbers, lod)
+        except KeyboardInterrupt:     # Ctrl-C or SIGTERM: say what the workers left, if anything
+            note = stopped_video_note(target.video) if target.is_video else None
+            if note is not None:
+                print(f"splatgl: {note}", file=sys.stderr)
+            raise
     elif args.preview:
         with PreviewRenderer(args.target_fps, args.scene if args.scene is not None
                              else demo_scene_path()) as renderer:

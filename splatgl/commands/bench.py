@@ -30,6 +30,7 @@ from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_pop
                            run_popping_command, run_scale_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
+from ._outputs import add_force_argument, check_out_folder
 
 NAME = "bench"
 ORDER = 40
@@ -88,7 +89,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "no scene files, else none)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="write bench.csv, bench.json and bench.png there (created if missing; "
-                        "existing files of those names are replaced)")
+                        "existing files of those names are replaced only with --force); "
+                        "--popping, --interactive, --scale and --lod write their own JSON and "
+                        "picture there")
+    add_force_argument(p)
     add_json_argument(p, "the rows and the machine (bench.json's content)")
     p.add_argument("--scale", action="store_true",
                    help="the scale benchmark instead: scenes of --sizes splats built from the "
@@ -153,17 +157,8 @@ def _parse_groups(text: str | None) -> frozenset[str] | None:
     return groups
 
 
-def _check_out(out: Path | None) -> None:
-    """``--out`` must name a folder that exists or can be made: checked before measuring."""
-    if out is None:
-        return
-    if out.exists() and not out.is_dir():
-        raise SplatglError(f"--out {out}: is a file; --out names a folder for bench.csv, "
-                           "bench.json and bench.png")
-    if not out.exists() and not out.absolute().parent.is_dir():
-        raise SplatglError(f"--out {out}: folder {out.parent} does not exist")
-    if out.is_dir():  # the files themselves: not directories, writable folder
-        OutputFiles({name: out / name for name in ("bench.csv", "bench.json", "bench.png")})
+#: The files ``bench --out DIR`` writes.
+BENCH_FILES = ("bench.csv", "bench.json", "bench.png")
 
 
 def _write_out(out: Path, rows: list, extra: dict) -> None:
@@ -171,7 +166,8 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
     made = not out.exists()
     out.mkdir(exist_ok=True)
     try:
-        files = OutputFiles({name: out / name for name in ("bench.csv", "bench.json", "bench.png")})
+        # checked before measuring (check_out_folder): an existing file here means --force
+        files = OutputFiles({name: out / name for name in BENCH_FILES}, overwrite=True)
         with files:
             write_csv(files.temp("bench.csv"), rows)
             write_json(files.temp("bench.json"), rows, extra)
@@ -213,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
     groups = _parse_groups(args.groups)
     check_image_size(width, height, "--width/--height: image", "quad")
     check_ssim_size(width, height, "--width/--height: image")   # the error columns
-    _check_out(args.out)
+    check_out_folder(args, BENCH_FILES)
     check_json_target(args, {"--out (bench.json)": args.out / "bench.json" if args.out else None})
     options = BenchOptions(width, height, frames, error_frames=tuple(sorted({frames // 3, 2 * frames // 3, frames - 1}))
                            if not quick else (frames - 1,), quick=quick, groups=groups)

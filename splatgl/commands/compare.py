@@ -14,7 +14,6 @@ import numpy as np
 from ..output.pictures import heatmap, side_by_side
 from ..output.image_formats import image_format, suffix_list
 from ..output.images import write_image
-from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..errors import SplatglError
 from ..evaluation.explain import candidates, explain
@@ -26,6 +25,7 @@ from ..model.settings import Convention, Order, RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, inputs_from_args, positive_float, size_origin)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
+from ._outputs import add_force_argument, output_files
 
 NAME = "compare"
 ORDER = 30
@@ -85,6 +85,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--heatmap-scale", type=positive_float, default=4.0 / 255.0, metavar="ERR",
                    help="error shown at the top of the heat map's scale (default 4/255)")
     add_camera_arguments(p)
+    add_force_argument(p)
     add_settings_arguments(p)
 
 
@@ -100,11 +101,10 @@ def _check_options(args: argparse.Namespace) -> tuple[RendererKind, ...]:
         raise SplatglError("--explain re-renders the NumPy reference: it needs --against reference")
     if args.image is None and (args.flip_y or args.mirror_x or args.alpha != "auto"):
         raise SplatglError("--flip-y, --mirror-x and --alpha apply to --image")
-    files = OutputFiles({"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
+    files = _files(args)  # not SCENE, --camera, --image...; an existing file only with --force
     for option, path in files.targets.items():
         image_format(path, option)  # before rendering (x.bmp, or no suffix at all)
-    check_json_target(args, {"SCENE": args.scene, "--side-by-side": args.side_by_side,
-                             "--heatmap": args.heatmap, "--image": args.image})
+    check_json_target(args, {"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
     if args.stereo is not None:
         raise SplatglError("--stereo renders with splatgl render or view; compare measures one view")
     return kinds
@@ -115,12 +115,17 @@ def _side(settings, kind: RendererKind):
     emulation (the knobs are the reference's)."""
     if kind is RendererKind.REFERENCE:
         return settings
+def _files(args: argparse.Namespace):
+    """The pictures compare writes (checked against its inputs and --force)."""
+    return output_files(args, {"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
+
+
     return dataclasses.replace(settings, convention=Convention.INRIA, emulation=Emulation())
 
 
 def run(args: argparse.Namespace) -> int:
     kinds = _check_options(args)
-    files = OutputFiles({"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
+    files = _files(args)
     scene, settings, camera = inputs_from_args(args)
     check_ssim_size(camera.width, camera.height, size_origin(args))
     theirs = read_their_image(args.image, camera.width, camera.height) if args.image else None

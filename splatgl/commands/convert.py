@@ -9,6 +9,7 @@ from ..formats.convert import convert
 from ..errors import SplatglError
 from ._spz_axes import add_spz_axes_argument
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
+from ._outputs import add_force_argument
 
 NAME = "convert"
 ORDER = 25
@@ -58,7 +59,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "counts them) instead of rejecting the input")
     p.add_argument("--sh-degree", type=int, default=None, choices=range(4), metavar="N",
                    help="write SH bands up to degree N only (0-3; default: all the input has)")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    add_force_argument(p)
     p.add_argument("--spz-version", type=int, choices=(2, 3), default=None, metavar="V",
                    help="SPZ version to write for .spz output: 3 (default; smallest-three "
                         "rotations, RUB axes) or 2 (3-byte rotations)")
@@ -85,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.output.name.lower().endswith(".spz"):
             raise SplatglError(f"{args.output}: --spz-version applies to .spz output only")
         options["version"] = args.spz_version
-    check_json_target(args, {"IN": args.input, "OUT": args.output})
+    check_json_target(args, {"OUT": args.output})  # nor IN; an existing file only with --force
     result = convert(args.input, args.output, drop_invalid=args.drop_invalid,
                      sh_degree=args.sh_degree, force=args.force, spz_axes=args.spz_axes,
                      **options)

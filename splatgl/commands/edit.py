@@ -13,6 +13,7 @@ from ..errors import SplatglError
 from ..model.transform import parse_transform
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._spz_axes import add_spz_axes_argument
+from ._outputs import add_force_argument, check_output
 
 NAME = "edit"
 ORDER = 26
@@ -104,7 +105,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write a scene of zero splats instead of refusing it")
     p.add_argument("--dry-run", action="store_true",
                    help="print what each operation would remove; write nothing")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    add_force_argument(p)
     add_spz_axes_argument(p)
     add_json_argument(p, "the report (inputs, one entry per operation, the result)")
 
@@ -124,7 +125,9 @@ def operations_from(pairs) -> list:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_json_target(args, {"OUT": args.output})
+    check_json_target(args, {"OUT": args.output})  # nor IN or --transform; existing: --force
+    if not args.dry_run:
+        check_output(args, args.output, "-o")  # nor a --transform file it reads
     ops = operations_from(args.operations)
     transforms = None if args.transform is None else [parse_transform(t) for t in args.transform]
     if not ops and len(args.inputs) == 1 and not args.drop_invalid:

@@ -16,7 +16,6 @@ from ..evaluation.evaluate import RenderFiles, evaluate, worst_sheet
 from ..output.frames import FrameTarget
 from ..output.image_formats import FORMAT_NAMES
 from ..output.images import check_image_suffix, write_image
-from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..api import Renderer
 from ..model.settings import RendererKind
@@ -25,6 +24,7 @@ from ._common import (add_scene_arguments, add_settings_arguments, check_convent
 from ._layers import add_layer_arguments, layer_files, named_layers
 from ._spz_axes import check_not_sharded
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
+from ._outputs import add_force_argument, check_outputs, output_files
 
 NAME = "eval"
 ORDER = 25
@@ -76,6 +76,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "--layers asked for (an .exr per view, or a .png and a picture per layer)")
     o.add_argument("--format", default=None, choices=FORMAT_NAMES,
                    help="image format of --renders (default png)")
+    add_force_argument(o)
     add_layer_arguments(p, under=False)
     add_settings_arguments(p)
     add_executor_arguments(p, "contiguous chunks of the views (the scores merge into the same "
@@ -92,17 +93,23 @@ def run(args: argparse.Namespace) -> int:
     check_convention(args, args.renderer)
     if args.sheet is not None:
         check_image_suffix(args.sheet, "--sheet")
-    check_json_target(args, {"SCENE": args.scene, "--csv": args.csv, "--sheet": args.sheet})
+    check_json_target(args, {"--csv": args.csv, "--sheet": args.sheet})
     renders = _render_files(args)
     # every report path checked before the views are scored (the same file twice, a missing
-    # folder); the reports are then written all or none
+    # folder, an input, an existing file without --force); the reports are then written all
+    # or none
     json_file = None if json_to_stdout(args) else args.json
-    outputs = OutputFiles({"--csv": args.csv, "--json": json_file, "--sheet": args.sheet})
+    reports = {"--csv": args.csv, "--json": json_file, "--sheet": args.sheet}
+    output_files(args, reports)
     views = load_dataset(args.dataset, args.images, args.split, args.max_width)
     if args.select:
         views = [views[i] for i in select_indices(args.select, len(views), str(args.dataset))]
+    photographs = {"--dataset": [v.image for v in views if v.image is not None]}
+    outputs = output_files(args, reports, photographs)   # nor a photograph
     if renders is not None:
         renders.check(views)
+        check_outputs(args, [p for v in views for p in renders.frames.files(v.camera).paths(renders.path(v))],
+                      "--renders", photographs)
         renders.frames.prepare()
     executor = executor_from_args(args)
     check_not_sharded(args, executor.sharded)

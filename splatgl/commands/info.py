@@ -10,6 +10,7 @@ from ..formats import detect_format, load_scene
 from ..model.stats import format_info, scene_info
 from ._spz_axes import add_spz_axes_argument
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
+from ._outputs import add_force_argument
 
 NAME = "info"
 HELP = "print a scene's splat count, SH degree, bounds and value ranges"
@@ -29,6 +30,7 @@ ORDER = 20
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", type=Path, help="scene file (.ply, .splat, ...)")
     add_json_argument(parser, "the statistics")
+    add_force_argument(parser)
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop rows holding NaN/Inf or degenerate quaternions (with a "
                              "warning) instead of rejecting the file")
@@ -40,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_json_target(args, {"SCENE": args.scene})
+    check_json_target(args)  # not SCENE, and an existing file only with --force
     scene = load_scene(args.scene, drop_invalid=args.drop_invalid, spz_axes=args.spz_axes)
     info = {"format": detect_format(args.scene).NAME, **scene_info(scene)}
     if info["format"] == "spz":

@@ -13,6 +13,7 @@ from ..errors import SplatglError
 from ..paths import ellipse, interpolate, orbit, path_json, spiral
 from ..paths.keyframes import write_path
 from ._common import add_scene_arguments, load_scene_arg, positive_float, positive_int
+from ._outputs import add_force_argument, check_output
 
 NAME = "path"
 ORDER = 15
@@ -48,7 +49,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                        help="file format (default splatgl)")
         q.add_argument("--fps", type=positive_float, default=30.0,
                        help="frame rate stored in the file (default 30)")
-        q.add_argument("--force", action="store_true", help="replace the output if it exists")
+        add_force_argument(q)
 
     def cameras(q: argparse.ArgumentParser) -> None:
         q.add_argument("--cameras", required=True, metavar="SOURCE",
@@ -80,8 +81,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.output.suffix.lower() != ".json":
         raise SplatglError(f"{args.output}: path files are JSON; name the output *.json")
-    if args.output.exists() and not args.force:
-        raise SplatglError(f"{args.output}: exists; use --force to replace it")
+    check_output(args, args.output, "-o")  # not a file it reads; an existing one with --force
     if args.generator == "orbit":
         scene = load_scene_arg(args)
         if not 0.0 < args.fov < 180.0:

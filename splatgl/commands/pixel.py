@@ -11,6 +11,7 @@ from ._common import (add_camera_arguments, add_scene_arguments, add_settings_ar
                       settings_from_args)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._layers import under_from_args
+from ._outputs import add_force_argument
 
 NAME = "pixel"
 ORDER = 17
@@ -50,6 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_json_argument(p, "the listing")
     g = p.add_argument_group("geometry")
     g.add_argument("--under", default=None, metavar="FILE.exr",
+    add_force_argument(p)
                    help="leave out the splats at or behind this geometry's depth (as render --under)")
     g.add_argument("--under-depth", choices=("z", "distance"), default=None,
                    help="what --under's depth holds (default: the file's splatgl:depth)")
@@ -63,7 +65,9 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(f"--limit must be 0 or more, got {args.limit}")
     if args.stereo is not None:
         raise SplatglError("--stereo: pixel lists one camera's pixel; give the eye's camera")
-    check_json_target(args, {"SCENE": args.scene})
+    check_json_target(args)  # not SCENE, --camera, --transform, --under; existing: --force
+    check_convention(args, RendererKind.REFERENCE,
+                     advice="pixel explains the NumPy reference's image; leave {option} out")
     settings = settings_from_args(args)
     camera = camera_from_args(args, None, settings)   # the camera file checked early
     size = ((camera.width, camera.height) if camera is not None

@@ -13,7 +13,6 @@ from ..output.image_formats import (BIT_DEPTHS, IMAGE_FORMATS, image_format, pic
 from ..output.images import write_image
 from ..output.layer_files import check_exact_ids, picture_path, write_layers
 from ..output.layers import BASE, Layer, RenderOutput
-from ..output.files import OutputFiles
 from ..progress import default_progress
 from ..output.pictures import depth_preview
 from ..api import Renderer, gl_renderer_name, render_reference_layers
@@ -23,6 +22,7 @@ from ..model.settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args)
 from ._layers import add_layer_arguments, layer_files, under_from_args
+from ._outputs import add_force_argument, output_files
 from ._render_path import (add_path_arguments, lod_settings_from_args, refuse_path_only_options,
                            run_path)
 from ..renderers.stereo import StereoLayout, combine, eye_cameras
@@ -67,6 +67,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "software OpenGL)")
     p.add_argument("--depth-png", type=Path, default=None, metavar="FILE",
                    help="also write a colourised preview of the expected depth with a scale bar")
+    add_force_argument(p)
     p.add_argument("--timings", action="store_true",
                    help="print the frame's stage times (ms) and counts (splats drawn, keys sorted)")
     p.add_argument("--lod-threshold", type=float, default=None, metavar="PX",
@@ -110,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
                    else {"": args.depth_png}) if args.depth_png is not None else {}
     targets.update({f"--depth-png ({eye} eye)" if eye else "--depth-png": path
                     for eye, path in depth_names.items()})
-    outputs = OutputFiles(targets)         # refuses one file named twice
+    outputs = output_files(args, targets)  # refuses one file named twice, an input, an
+    #                                        existing file without --force
     keys = {path: name for name, path in targets.items()}
     fmt = image_format(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     under = under_from_args(args)

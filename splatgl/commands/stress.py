@@ -9,6 +9,7 @@ from ..errors import SplatglError
 from ..stress import CASES, case_by_name
 from ..stress.run import RENDERERS, default_renderers, format_report, results_json, run_cases
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
+from ._outputs import add_force_argument
 
 NAME = "stress"
 ORDER = 80
@@ -41,6 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--skip-slow", action="store_true",
                    help="leave out the slow cases (the 8192 x 8192 image, ~40 s and ~10 GB)")
     add_json_argument(p, "the report")
+    add_force_argument(p)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -122,6 +122,13 @@ def real_cases(root: Path | None = None) -> list[Case]:
     return out
 
 
+def missing_real(root: Path | None = None) -> list[str]:
+    """The real scenes (paths relative to the shared folder) not found there: their cases are
+    left out of the kit, which ``export`` says."""
+    root = shared_scenes_dir() if root is None else root
+    return [rel for rel, _ in REAL if not (root / rel).is_file()]
+
+
 def all_cases(demo: Scene, real: bool = True, stress: bool = True) -> list[Case]:
     """Every case of the kit (real scenes only where the shared folder has them)."""
     out = [depth_range_case()] + demo_cases(demo)

@@ -11,12 +11,14 @@ Layout::
     DIR/cases/NAME/reference.png   8-bit RGB of the same
 
 The folder is written under a temporary name beside DIR and renamed when complete, so an
-interrupted export leaves nothing behind.
+interrupted export leaves nothing behind; ``--force`` replaces only an older kit or a file, and
+only then (:mod:`splatgl.conformance.kit_folder`).
 """
 
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -26,9 +28,12 @@ from ..constants import ALPHA_MAX, ALPHA_MIN, LOW_PASS, T_MIN, TILE_SIZE
 from ..errors import SplatglError
 from ..formats import save_scene
 from ..cameras.files import save_camera
+from ..output.atomic import atomic_write_text, temp_path, write_error
 from ..output.images import write_image
 from ..reference import render_reference
 from .cases import Case
+from .index import GENERATOR, PLAIN_NAME, PLAIN_NAME_RULE
+from .kit_folder import check_export_target, replace_with
 
 #: Version of the kit's layout and rules (index.json "version").
 KIT_VERSION = 1
@@ -84,40 +89,62 @@ def case_entry(case: Case) -> dict:
             "tags": list(case.tags)}
 
 
+def _named_for_user(exc: BaseException, tmp: Path, out: Path) -> BaseException:
+    """``exc`` naming the user's ``out`` where it named the temporary folder ``tmp`` (a failed
+    write: one line, :func:`~splatgl.output.atomic.write_error`)."""
+    if isinstance(exc, OSError):
+        name = str(exc.filename or "")
+        if name.startswith(str(tmp)):
+            return write_error(out / os.path.relpath(name, tmp), exc)
+        return write_error(out, exc) if exc.filename is None else exc
+    if isinstance(exc, SplatglError) and str(tmp) in str(exc):
+        exc.args = (str(exc).replace(str(tmp), str(out)),)
+        if str(getattr(exc, "path", "")).startswith(str(tmp)):
+            exc.path = str(exc.path).replace(str(tmp), str(out))
+    return exc
+
+
+def _write_kit(tmp: Path, cases: list[Case], progress) -> dict:
+    entries = []
+    for k, case in enumerate(cases):
+        folder = tmp / "cases" / case.name
+        folder.mkdir(parents=True)
+        save_scene(folder / "scene.ply", case.scene)
+        save_camera(folder / "camera.json", case.camera)
+        ref = render_reference(case.scene, case.camera, case.settings, np.float32)
+        rgba = ref.rgba
+        a = ref.alpha
+        z = np.where(a >= 1e-3, ref.depth / np.where(a >= 1e-3, a, 1.0), 0.0).astype(np.float32)
+        write_image(folder / "reference.exr", rgba, depth=z)
+        write_image(folder / "reference.png", rgba)
+        entries.append(case_entry(case))
+        if progress is not None:
+            progress(k + 1, len(cases), "conformance: reference images")
+    index = {"version": KIT_VERSION, "generator": GENERATOR, "conventions": CONVENTIONS,
+             "cases": entries}
+    atomic_write_text(tmp / "index.json", json.dumps(index, indent=1) + "\n")
+    atomic_write_text(tmp / "README.md", _readme(cases))
+    return index
+
+
 def export_kit(out: str | Path, cases: list[Case], force: bool = False, progress=None) -> dict:
     """Write the kit into ``out`` (module doc); returns the index.  ``out`` must not exist
-    unless ``force`` (then it is replaced once the new kit is complete)."""
+    unless ``force``, and then only a kit or a file is replaced, once the new kit is complete
+    (:mod:`splatgl.conformance.kit_folder`)."""
     out = Path(out)
-    if out.exists() and not force:
-        raise SplatglError(f"{out}: exists; pass --force to replace it")
-    if not out.absolute().parent.is_dir():
-        raise SplatglError(f"{out}: folder {out.parent} does not exist")
-    tmp = out.with_name(f".{out.name}.partial")
-    shutil.rmtree(tmp, ignore_errors=True)
+    check_export_target(out, force)
+    for case in cases:
+        if not PLAIN_NAME.fullmatch(case.name):
+            raise SplatglError(f"case {case.name!r}: not a plain name ({PLAIN_NAME_RULE})")
+    tmp = Path(os.path.abspath(temp_path(out)))
     try:
-        entries = []
-        for k, case in enumerate(cases):
-            folder = tmp / "cases" / case.name
-            folder.mkdir(parents=True)
-            save_scene(folder / "scene.ply", case.scene)
-            save_camera(folder / "camera.json", case.camera)
-            ref = render_reference(case.scene, case.camera, case.settings, np.float32)
-            rgba = ref.rgba
-            a = ref.alpha
-            z = np.where(a >= 1e-3, ref.depth / np.where(a >= 1e-3, a, 1.0), 0.0).astype(np.float32)
-            write_image(folder / "reference.exr", rgba, depth=z)
-            write_image(folder / "reference.png", rgba)
-            entries.append(case_entry(case))
-            if progress is not None:
-                progress(k + 1, len(cases), "conformance: reference images")
-        index = {"version": KIT_VERSION, "generator": "splatgl conformance export",
-                 "conventions": CONVENTIONS, "cases": entries}
-        (tmp / "index.json").write_text(json.dumps(index, indent=1) + "\n")
-        (tmp / "README.md").write_text(_readme(cases))
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.rename(out)
-    except BaseException:
+        tmp.mkdir()
+        index = _write_kit(tmp, cases, progress)
+        replace_with(tmp, out, force)
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
+        named = _named_for_user(exc, tmp, out)
+        if named is not exc:
+            raise named from None
         raise
     return index

@@ -13,7 +13,7 @@ size) is its own explanation.
 
 from __future__ import annotations
 
-import json
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -28,6 +28,7 @@ from ..formats import load_scene
 from ..model.settings import RenderSettings
 from ..output.images import read_image
 from ..reference import render_reference
+from .index import kit_files, load_index
 
 #: Suffixes of the images ``score`` looks for, in this order.
 IMAGE_SUFFIXES = (".png", ".exr", ".webp", ".jpg", ".jpeg", ".tif", ".tiff")
@@ -49,22 +50,6 @@ class CaseScore:
         if d["psnr"] == float("inf"):
             d["psnr"] = None
         return d
-
-
-def load_index(kit: str | Path) -> dict:
-    kit = Path(kit)
-    path = kit / "index.json"
-    if not path.is_file():
-        raise SplatglError(f"{kit}: not a conformance kit (no index.json; splatgl conformance "
-                           "export writes one)")
-    try:
-        index = json.loads(path.read_text())
-        cases = index["cases"]
-        if not isinstance(cases, list):
-            raise TypeError
-    except (ValueError, KeyError, TypeError):
-        raise SplatglError(f"{path}: not a conformance index (field 'cases' missing or not a list)") from None
-    return index
 
 
 def case_inputs(kit: Path, entry: dict):
@@ -92,12 +77,34 @@ def _explain_failure(kit: Path, entry: dict, got: np.ndarray) -> str:
     return f"{found.best} (+{gain:.1f} dB)"
 
 
+#: How far below the reference's lowest value (0, or a negative background) an image may go
+#: (float noise) before it counts as holding negative colours.
+BELOW_ZERO_TOLERANCE = 1.0 / 255.0
+
+
+def _below_zero(rgb: np.ndarray, ref_rgb: np.ndarray) -> str:
+    """Why an image is not scored: colours below 0 (below the reference's lowest value, with
+    :data:`BELOW_ZERO_TOLERANCE`; the image's own values, under any alpha), which no renderer
+    following the conventions writes (colour = max(..., 0)) and which PSNR and the share of
+    pixels off would each weigh their own way; "" when there are none."""
+    floor = min(0.0, float(ref_rgb.min())) - BELOW_ZERO_TOLERANCE
+    low = rgb.min(axis=-1) < floor
+    if not low.any():
+        return ""
+    return (f"colours below 0 at {low.mean() * 100:.3g}% of the pixels (down to {float(rgb.min()):.4g}); "
+            "the conventions clamp colour at 0 (max(..., 0)): not scored")
+
+
 def score_case(kit: Path, images: Path, entry: dict, explain_failures: bool = True) -> CaseScore:
     name = entry["name"]
     path = find_image(images, name)
     if path is None:
         return CaseScore(name, "missing", explanation=f"no {name}.png/.exr/... in {images}")
-    ref = read_image(kit / entry["reference_exr"])
+    ref_path = kit / entry["reference_exr"]
+    ref = read_image(ref_path)
+    if ref.shape[:2] != (entry["height"], entry["width"]) or ref.shape[2] < 4:
+        raise SplatglError(f"{ref_path}: {ref.shape[1]}x{ref.shape[0]} with {ref.shape[2]} channels, "
+                           f"not the case's {entry['width']}x{entry['height']} RGBA (a damaged kit)")
     ref_rgb, ref_alpha = ref[..., :3], ref[..., 3]
     try:
         img = read_their_image(path, entry["width"], entry["height"])
@@ -105,6 +112,9 @@ def score_case(kit: Path, images: Path, entry: dict, explain_failures: bool = Tr
     except SplatglError as exc:
         why = str(exc).split(": ", 1)[-1]          # the check that failed, without the file name
         return CaseScore(name, "fail", explanation=why.split("; pass --")[0])
+    below = _below_zero(img.rgb, ref_rgb)
+    if below:
+        return CaseScore(name, "fail", explanation=below)
     errors = image_errors(matched.rgb, ref_rgb)
     tol = entry["tolerance"]
     ok = errors.psnr >= tol["min_psnr"] and errors.off_4 <= tol["max_off_4"]
@@ -141,18 +151,52 @@ def table(scores: list[CaseScore]) -> str:
     return "\n".join(rows)
 
 
+def check_render_output(kit: str | Path, out: str | Path, index: dict, suffix: str = ".exr",
+                        overwrite: bool = False) -> None:
+    """Refuse, before any work and in one line naming ``-o``, a folder ``out`` that
+    :func:`render_kit` cannot fill: a file, the kit's own folder, a folder that cannot be made
+    or written, an image that would be one of the kit's files (through a link too), or an image
+    that exists without ``overwrite``."""
+    from ..output.files import check_not_an_input, check_output_path, same_file
+
+    kit, out = Path(kit), Path(out)
+    if suffix not in (".exr", ".png"):
+        raise SplatglError(f"--format {suffix.lstrip('.')}: must be exr or png")
+    if same_file(out, kit):
+        raise SplatglError(f"-o {out}: is the kit's folder {kit}; give the images a folder of their own")
+    if out.exists() and not out.is_dir():
+        raise SplatglError(f"-o {out}: is a file; give a folder for the images")
+    probe = Path(os.path.abspath(out))
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise SplatglError(f"-o {out}: {probe} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise SplatglError(f"-o {out}: folder {probe} is not writable")
+    inputs = {"the kit's file": kit_files(kit, index)}
+    for entry in index["cases"]:
+        target = out / f"{entry['name']}{suffix}"
+        if out.is_dir():
+            check_output_path(target, "-o", overwrite, inputs)
+        else:
+            check_not_an_input(target, "-o", inputs)
+
+
 def render_kit(kit: str | Path, out: str | Path, kind: str = "quad", suffix: str = ".exr",
-               progress=None) -> list[str]:
+               progress=None, overwrite: bool = False) -> list[str]:
     """Render every case with splatgl's ``kind`` renderer into ``out/NAME<suffix>``; returns
-    the cases skipped, with why (a renderer that cannot draw a case's camera or splats)."""
+    the cases skipped, with why (a renderer that cannot draw a case's camera or splats).
+    ``out`` is checked first (:func:`check_render_output`; an existing image is replaced only
+    with ``overwrite``)."""
     from ..api import Renderer
     from ..output.images import write_image
 
     kit, out = Path(kit), Path(out)
     index = load_index(kit)
-    out.mkdir(parents=True, exist_ok=True)
+    check_render_output(kit, out, index, suffix, overwrite)
     skipped = []
     with Renderer() as renderer:
+        out.mkdir(parents=True, exist_ok=True)
         for k, entry in enumerate(index["cases"]):
             try:
                 scene, camera, settings = case_inputs(kit, entry)

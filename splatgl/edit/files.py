@@ -93,7 +93,7 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
         output = Path(output)
         writer = writer_for(output)
         if not dry_run:
-            check_output_path(output, overwrite=force)
+            check_output_path(output, overwrite=force, inputs={"IN": inputs})
     formats = [detect_format(path).NAME for path in inputs]  # missing or unknown: before reading
     if spz_axes is not None and "spz" not in formats:
         raise SplatglError("--spz-axes applies to .spz inputs only")

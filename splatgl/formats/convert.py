@@ -174,9 +174,8 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
     """
     source, output = Path(source), Path(output)
     writer = writer_for(output)  # unsupported extension: fail before reading anything
-    if output.exists() and not force:
-        raise SplatglError(f"{output}: already exists (use --force to replace it)")
-    check_output_path(output)  # a missing or read-only folder: before reading anything
+    # IN itself, a missing or read-only folder, an existing OUT without force: before reading
+    check_output_path(output, overwrite=force, inputs={"IN": source})
     if sh_degree is not None and not 0 <= sh_degree <= 3:
         raise SplatglError(f"--sh-degree must be 0-3, got {sh_degree}")
     t0 = time.perf_counter()
