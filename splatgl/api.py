@@ -26,7 +26,7 @@ from .output.layers import Layer, RenderOutput, with_layers
 from .output.under import UnderImage
 from .progress import ProgressCallback
 from .model.scene import Scene, SceneSource
-from .model.settings import RenderSettings, RendererKind
+from .model.settings import RenderSettings, RendererKind, check_convention, check_honoured
 from .cameras.view import View
 
 def default_settings(scene: Scene | SceneSource | None = None, **fields) -> RenderSettings:
@@ -255,8 +255,13 @@ def _inputs(scene: Scene, camera: Camera | None,
 def render(scene: Scene, camera: Camera | None = None, settings: RenderSettings | None = None,
            kind: RendererKind = RendererKind.QUAD) -> np.ndarray:
     """Render one view with a fresh context (use :class:`Renderer` for many views); ``camera``
-    and ``settings`` as in :meth:`Renderer.render`."""
+    and ``settings`` as in :meth:`Renderer.render`.  As ``splatgl render``, a setting ``kind``
+    does not draw is refused (:func:`splatgl.model.settings.check_honoured`); a
+    :class:`Renderer` draws one ``settings`` with every kind (the viewer's Tab), each reading
+    its own part."""
     camera, settings = _inputs(scene, camera, settings)
+    check_convention(settings.convention, kind)
+    check_honoured(settings, kind)
     if RendererKind(kind) is RendererKind.REFERENCE:
         return render_reference_rgba(scene, camera, settings)
     with Renderer() as r:

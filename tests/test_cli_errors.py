@@ -110,7 +110,7 @@ def test_other_aspect_is_refused_and_one_side_keeps_the_aspect(tmp_path, capsys)
     rc, stdout, _ = run_cli(capsys, "render", "--camera", path, "--width", "32", "-o", out)
     assert rc == 0 and "32x24" in stdout
     rc, stdout, _ = run_cli(capsys, "render", "--camera", path, "--width", "32", "--height", "24",
-                            "-o", out)
+                            "-o", out, "--force")
     assert rc == 0 and "32x24" in stdout
 
 
@@ -121,7 +121,7 @@ def test_timings_show_counts_as_counts(tmp_path, capsys):
     assert "drawn 1,604, occlusion_culled 0, cull_build " in line
     assert "drawn 1604" not in line and " ms, drawn" in line
     rc, out, _ = run_cli(capsys, "render", "-o", tmp_path / "x.png", "--width", "48", "--height",
-                         "32", "--timings", "--renderer", "tile")
+                         "32", "--timings", "--renderer", "tile", "--force")
     line = next(t for t in out.splitlines() if t.startswith("timings:"))
     n_keys = line.split("n_keys ")[1].split(" ")[0].rstrip(",")
     assert n_keys.replace(",", "").isdigit() and "ms" not in n_keys

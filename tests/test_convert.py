@@ -212,7 +212,7 @@ def test_cli_refuses_to_overwrite_without_force(tmp_path, capsys):
     save_scene(tmp_path / "in.ply", random_scene(10, degree=3))
     (tmp_path / "out.ply").write_bytes(b"keep me")
     code, _, err = run_cli(capsys, tmp_path / "in.ply", tmp_path / "out.ply")
-    assert code == 2 and "already exists" in err and "--force" in err
+    assert code == 2 and "exists (use --force to replace it)" in err and "--force" in err
     assert (tmp_path / "out.ply").read_bytes() == b"keep me"
     code, _, _ = run_cli(capsys, tmp_path / "in.ply", tmp_path / "out.ply", "--force")
     assert code == 0

@@ -69,7 +69,7 @@ def test_path_command_refuses_zero_fps_and_keeps_files_without_force(tmp_path, c
             "(see splatgl render --help)")
     out.write_text("{}")
     refused(capsys, tmp_path, ["path", "orbit", DEMO, "--frames", "2", "-o", out],
-            f"splatgl: error: {out}: exists; use --force to replace it")
+            f"splatgl: error: -o {out}: exists (use --force to replace it)")
     assert main(["path", "orbit", DEMO, "--frames", "2", "-o", str(out), "--force"]) == 0
     assert json.loads(out.read_text())["frames"] == 2
 
@@ -109,3 +109,98 @@ def test_orbit_path_takes_up_and_refuses_distance(tmp_path, capsys):
     refused(capsys, tmp_path, ["render", "--path", "orbit:2", "--distance", "2", "-o", tmp_path / "f/"],
             "splatgl: error: --distance places the default camera; with --path it has no effect "
             "(an orbit's radius: splatgl path orbit --radius)")
+
+
+# Issue 38: options only some renderers read were accepted and ignored by the others (the
+# quad path's --extent, --sort, --precision ... on the cpu and reference renderers) while
+# --emulate was refused there; one table (model/settings.py HONOURED_BY) now rules them all.
+@pytest.mark.parametrize("renderer, option, value, drawn_by, use", [
+    ("cpu", "--extent", "square", "quad renderer", "quad"),
+    ("reference", "--extent", "fast", "quad renderer", "quad"),
+    ("cpu", "--sort", "bucket16", "quad renderer", "quad"),
+    ("reference", "--precision", "rgba8", "quad renderer", "quad"),
+    ("tile", "--precision", "rgba16f", "quad renderer", "quad"),
+    ("cpu", "--preprocess", "vertex", "quad renderer", "quad"),
+    ("tile", "--early-stop", "on", "quad renderer", "quad"),
+    ("reference", "--gpu-storage", "compact", "quad and tile renderers", "quad or tile"),
+    ("cpu", "--gpu-storage", "half-sh", "quad and tile renderers", "quad or tile"),
+])
+def test_an_option_the_renderer_ignores_is_refused(tmp_path, capsys, renderer, option, value,
+                                                   drawn_by, use):
+    refused(capsys, tmp_path, ["render", DEMO, "-o", tmp_path / "x.png", "--renderer", renderer,
+                               option, value],
+            f"splatgl: error: {option} {value} applies to the {drawn_by} only, not the "
+            f"{renderer} renderer, which would ignore it (use --renderer {use}, or leave "
+            f"{option} out)")
+
+
+def test_the_options_defaults_are_accepted_by_every_renderer():
+    from splatgl.cli import build_parser
+    from splatgl.commands._common import check_convention
+    for renderer in ("quad", "tile", "reference", "cpu"):
+        args = build_parser().parse_args(
+            ["render", "-o", "x.png", "--renderer", renderer, "--extent", "ellipse", "--sort",
+             "exact", "--precision", "rgba32f", "--preprocess", "compute", "--early-stop",
+             "auto", "--gpu-storage", "float32", "--order", "global", "--order-window", "32"])
+        check_convention(args, renderer)
+
+
+def test_a_path_refuses_them_too(tmp_path, capsys):
+    refused(capsys, tmp_path, ["render", DEMO, "--path", "orbit:2", "-o", tmp_path / "f/",
+                               "--renderer", "cpu", "--sort", "bucket16"],
+            "splatgl: error: --sort bucket16 applies to the quad renderer only, not the cpu "
+            "renderer, which would ignore it (use --renderer quad, or leave --sort out)")
+
+
+def test_the_per_pixel_order_on_the_cpu_renderer_names_it(tmp_path, capsys):
+    """It was refused as "not the quad path" for the cpu renderer."""
+    refused(capsys, tmp_path, ["render", DEMO, "-o", tmp_path / "x.png", "--renderer", "cpu",
+                               "--order", "per-pixel"],
+            "splatgl: error: --order per-pixel is drawn by the tile renderer and the NumPy "
+            "reference, not the cpu renderer (use --renderer tile or reference)")
+
+
+@pytest.mark.parametrize("renderer", ["tile", "reference"])
+def test_order_window_without_the_per_pixel_order(tmp_path, capsys, renderer):
+    refused(capsys, tmp_path, ["render", DEMO, "-o", tmp_path / "x.png", "--renderer", renderer,
+                               "--order-window", "8"],
+            "splatgl: error: --order-window 8 applies to --order per-pixel only; the global "
+            "order has no window (add --order per-pixel)")
+
+
+def test_order_window_on_the_reference_which_sorts_exactly(tmp_path, capsys):
+    refused(capsys, tmp_path, ["render", DEMO, "-o", tmp_path / "x.png", "--renderer",
+                               "reference", "--order", "per-pixel", "--order-window", "8"],
+            "splatgl: error: --order-window 8 applies to the tile renderer only, not the "
+            "reference renderer, which would ignore it (use --renderer tile, or leave "
+            "--order-window out)")
+
+
+def test_compare_image_refuses_a_renderer_under_test(tmp_path, capsys):
+    image = tmp_path / "theirs.png"
+    image.write_bytes(b"not read")
+    refused(capsys, tmp_path, ["compare", DEMO, "--image", image, "--renderer", "tile"],
+            "splatgl: error: --renderer tile: with --image the image is under test, not a "
+            "renderer (--against picks what it is measured against)")
+    refused(capsys, tmp_path, ["compare", DEMO, "--image", image, "--extent", "square"],
+            "splatgl: error: --extent square applies to the quad renderer only, not the "
+            "reference renderer, which would ignore it (use --renderer quad, or leave "
+            "--extent out)")
+
+
+def test_pixel_refuses_what_the_reference_ignores(tmp_path, capsys):
+    refused(capsys, tmp_path, ["pixel", DEMO, "--at", "1,1", "--width", "8", "--height", "8",
+                               "--sort", "bucket16"],
+            "splatgl: error: --sort bucket16 applies to the quad renderer only, not the "
+            "reference renderer, which would ignore it (pixel explains the NumPy reference's "
+            "image; leave --sort out)")
+
+
+def test_the_api_refuses_them_as_the_cli_does():
+    from splatgl import render
+    from splatgl.errors import SplatglError
+    from splatgl.formats import load_scene
+    from splatgl.model.settings import RenderSettings
+    with pytest.raises(SplatglError, match=r"^--extent square applies to the quad renderer only, "
+                                           r"not the reference renderer"):
+        render(load_scene(DEMO), None, RenderSettings(extent="square"), "reference")

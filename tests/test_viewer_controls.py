@@ -138,9 +138,18 @@ def test_screenshot_command_line_reproduces_the_settings():
     settings = RenderSettings(background=(0.1, 0.2, 0.3), precision="rgba16f", extent="fast",
                               near=0.05, antialias=True, sh_degree=1, preprocess="vertex",
                               sort_key="bucket16", gpu_storage="compact")
-    argv = ["render", "-o", "x.png", *settings_arguments(settings, RendererKind.TILE)]
+    argv = ["render", "-o", "x.png", *settings_arguments(settings, RendererKind.QUAD)]
     args = build_parser().parse_args(argv)
     assert settings_from_args(args) == settings
+    assert args.renderer == "quad"
+    # the tile renderer's command carries only what it reads (the CLI refuses the rest)
+    from splatgl.commands._common import check_convention
+    argv = ["render", "-o", "x.png", *settings_arguments(settings, RendererKind.TILE)]
+    args = build_parser().parse_args(argv)
+    check_convention(args, RendererKind.TILE)
+    assert settings_from_args(args) == RenderSettings(background=(0.1, 0.2, 0.3), near=0.05,
+                                                      antialias=True, sh_degree=1,
+                                                      gpu_storage="compact")
     assert args.renderer == "tile"
 
 

@@ -11,8 +11,8 @@ from ..model.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW, Order
 EMULATE_HELP = ("follow another viewer's approximation in the NumPy reference (repeatable): "
                 "sort=exact|bucket16, extent=tiles|fixed|fixed-quad|square|opacity, "
                 "min_alpha=A, low_pass=PX2, compensation=on|off, sh=0-3, half=on|off, "
-                "alpha_max=A, depth=auto|z|distance (docs/fidelity.md); the quad and tile "
-                "renderers refuse it")
+                "alpha_max=A, depth=auto|z|distance (docs/fidelity.md); the quad, tile and "
+                "cpu renderers refuse it")
 
 
 def add_fidelity_arguments(g: argparse._ArgumentGroup) -> None:
@@ -25,7 +25,9 @@ def add_fidelity_arguments(g: argparse._ArgumentGroup) -> None:
                         "perspective and orthographic cameras; docs/fidelity.md)")
     g.add_argument("--order-window", type=_window, default=DEFAULT_ORDER_WINDOW, metavar="N",
                    help=f"with --order per-pixel, splats the tile renderer holds back per pixel "
-                        f"(1-{MAX_ORDER_WINDOW}, default {DEFAULT_ORDER_WINDOW})")
+                        f"(1-{MAX_ORDER_WINDOW}, default {DEFAULT_ORDER_WINDOW}; another value is "
+                        f"refused without --order per-pixel and by the other renderers, the "
+                        f"reference sorting exactly)")
     g.add_argument("--emulate", action="append", default=None, metavar="KNOB=VALUE",
                    help=EMULATE_HELP)
 

@@ -36,12 +36,12 @@ from ..lod.io import is_lod_file, read_lod
 from ..lod.render import LodSettings
 from ..model.settings import RendererKind
 from ..renderers.stereo import StereoLayout, StereoRenderer
-from ._common import (default_size, demo_scene_path, load_scene_arg, positive_float,
-                      projection_from_args, settings_from_args)
+from ._common import (check_convention, default_size, demo_scene_path, load_scene_arg,
+                      positive_float, projection_from_args, settings_from_args)
 from ._spz_axes import check_not_sharded
+from ._outputs import check_outputs
 
 DEFAULT_FPS = 30.0
-from ._outputs import check_outputs
 DEFAULT_ORBIT_FRAMES = 120
 
 
@@ -111,10 +111,10 @@ def check_preview(args: argparse.Namespace, target: FrameTarget, sharded: bool,
         (lod is not None, "--preview chooses its own level-of-detail cut; drop --lod-threshold/"
                           "--lod-budget/--lod-blend"),
         (args.resume, "--preview frames are drafts: --resume would mix them with exact frames"),
-        (target.layers is not None, "--preview writes colour frames only (no depth layers: use "
-                                    "a .png pattern, a folder or a video)"),
     )
     for refused, message in refusals:
+        if refused:
+            raise SplatglError(message)
     undrawn = sorted(layer.value for layer in (target.layers or BASE) - BASE)
     if undrawn and target.named:
         raise SplatglError(f"--preview draws colour and alpha only, not --layers {', '.join(undrawn)} "
@@ -123,8 +123,6 @@ def check_preview(args: argparse.Namespace, target: FrameTarget, sharded: bool,
         raise SplatglError(f"{args.output}: EXR frames carry Z (the depth layer), which --preview "
                            "does not draw; give --layers colour,alpha for EXR drafts without Z, or "
                            "use a .png pattern, a folder or a video")
-        if refused:
-            raise SplatglError(message)
 
 
 def refuse_path_only_options(args: argparse.Namespace) -> None:
@@ -176,14 +174,6 @@ def path_cameras(args: argparse.Namespace, scene: Scene) -> tuple[list[Camera], 
     return cams, fps, numbers
 
 
-def run_path(args: argparse.Namespace) -> int:
-    if args.camera is not None:
-        raise SplatglError("--camera and --path exclude each other (a path brings its cameras)")
-    if args.distance is not None:
-        raise SplatglError("--distance places the default camera; with --path it has no effect "
-                           "(an orbit's radius: splatgl path orbit --radius)")
-    if args.depth_png is not None:
-        raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
 def check_frame_outputs(args: argparse.Namespace, target: FrameTarget, numbers) -> None:
     """Every file the frames (and their layer pictures) or the video go to, before any frame
     renders: none is a file this command reads, and one that exists is replaced only with
@@ -192,12 +182,21 @@ def check_frame_outputs(args: argparse.Namespace, target: FrameTarget, numbers) 
     check_outputs(args, paths, "-o", keep=args.resume)
 
 
+def run_path(args: argparse.Namespace) -> int:
+    if args.camera is not None:
+        raise SplatglError("--camera and --path exclude each other (a path brings its cameras)")
+    if args.distance is not None:
+        raise SplatglError("--distance places the default camera; with --path it has no effect "
+                           "(an orbit's radius: splatgl path orbit --radius)")
+    if args.depth_png is not None:
+        raise SplatglError("--depth-png renders one view; use -o frames/%05d.exr for depth per frame")
     if args.under is not None:
         raise SplatglError("--under composites one view into a render of its geometry; not with --path")
     target = FrameTarget.parse(args.output, args.format).with_layers(named_layers(args),
                                                                      args.normal_space)
     layer_files(args, None)     # --normal-space world needs the normal layer
     check_under_options(args)
+    check_convention(args, RendererKind(args.renderer))  # no option the renderer ignores
     executor = executor_from_args(args)
     check_not_sharded(args, executor.sharded)
     if args.stereo is not None and executor.sharded:
@@ -221,6 +220,7 @@ def check_frame_outputs(args: argparse.Namespace, target: FrameTarget, numbers) 
     if not target.is_video:
         check_exact_ids(target.files(), target.frame_path(0), scene.count)
     cameras, source_fps, numbers = path_cameras(args, scene)
+    check_frame_outputs(args, target, numbers)
     fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
@@ -230,7 +230,6 @@ def check_frame_outputs(args: argparse.Namespace, target: FrameTarget, numbers) 
         # the output folder exists: a Ctrl-C during the compile leaves nothing behind
         from ..renderers.cpu import check_scene, prepare
         check_scene(scene, settings)
-    check_frame_outputs(args, target, numbers)
         prepare()
     run = None
     gl_name = "not known here (the frames were rendered by workers)"

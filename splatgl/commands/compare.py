@@ -59,8 +59,9 @@ examples:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("--renderer", choices=[k.value for k in RendererKind], default="quad",
-                   help="the renderer under test (default quad)")
+    p.add_argument("--renderer", choices=[k.value for k in RendererKind], default=None,
+                   help="the renderer under test (default quad; not with --image, where the "
+                        "image is under test)")
     p.add_argument("--against", choices=[k.value for k in RendererKind], default="reference",
                    help="the renderer taken as truth (default reference)")
     g = p.add_argument_group("another program's image")
@@ -84,15 +85,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write a heat map of the per-pixel error with its colour scale")
     p.add_argument("--heatmap-scale", type=positive_float, default=4.0 / 255.0, metavar="ERR",
                    help="error shown at the top of the heat map's scale (default 4/255)")
-    add_camera_arguments(p)
     add_force_argument(p)
+    add_camera_arguments(p)
     add_settings_arguments(p)
 
 
 def _check_options(args: argparse.Namespace) -> tuple[RendererKind, ...]:
     """Everything checkable before loading or rendering; returns the kinds that render."""
     against = RendererKind(args.against)
-    kinds = (against,) if args.image is not None else (RendererKind(args.renderer), against)
+    if args.image is not None and args.renderer is not None:
+        raise SplatglError(f"--renderer {args.renderer}: with --image the image is under test, "
+                           "not a renderer (--against picks what it is measured against)")
+    kinds = ((against,) if args.image is not None
+             else (RendererKind(args.renderer or RendererKind.QUAD.value), against))
     check_convention(args, *kinds)
     if args.order == Order.PER_PIXEL.value and RendererKind.QUAD in kinds:
         raise SplatglError("--order per-pixel: the quad path has none (docs/fidelity.md); compare "
@@ -110,16 +115,16 @@ def _check_options(args: argparse.Namespace) -> tuple[RendererKind, ...]:
     return kinds
 
 
-def _side(settings, kind: RendererKind):
-    """The settings a side renders with: the GPU renderers draw the inria rules without
-    emulation (the knobs are the reference's)."""
-    if kind is RendererKind.REFERENCE:
-        return settings
 def _files(args: argparse.Namespace):
     """The pictures compare writes (checked against its inputs and --force)."""
     return output_files(args, {"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
 
 
+def _side(settings, kind: RendererKind):
+    """The settings a side renders with: the GPU renderers draw the inria rules without
+    emulation (the knobs are the reference's)."""
+    if kind is RendererKind.REFERENCE:
+        return settings
     return dataclasses.replace(settings, convention=Convention.INRIA, emulation=Emulation())
 
 

@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 
 from ..errors import SplatglError
+from ..model.settings import RendererKind
 from ..reference.pixel import check_pixel, pixel_splats
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      camera_from_args, default_size, load_scene_arg, projection_from_args,
+                      camera_from_args, check_convention, default_size, load_scene_arg, projection_from_args,
                       settings_from_args)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
-from ._layers import under_from_args
 from ._outputs import add_force_argument
+from ._layers import under_from_args
 
 NAME = "pixel"
 ORDER = 17
@@ -25,7 +26,8 @@ after it.  The weights sum to the pixel's alpha, and the listed colours with the
 its colour: the pixel splatgl render --renderer reference draws with the same options
 (--order per-pixel and --emulate included: the listing follows their order and rules).  It is
 how to find the index of a floater (the splat with the largest weight, the top-id layer of
-splatgl render --layers) to delete it.
+splatgl render --layers) to delete it: splatgl edit scene.ply -o clean.ply --remove
+'index == 123' (with the same --drop-invalid).
 
 examples:
   splatgl pixel scene.ply --camera cam.json --at 640,360
@@ -49,9 +51,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--limit", type=int, default=50, metavar="N",
                    help="list at most N splats in the text (default 50; 0: all; --json lists all)")
     add_json_argument(p, "the listing")
+    add_force_argument(p)
     g = p.add_argument_group("geometry")
     g.add_argument("--under", default=None, metavar="FILE.exr",
-    add_force_argument(p)
                    help="leave out the splats at or behind this geometry's depth (as render --under)")
     g.add_argument("--under-depth", choices=("z", "distance"), default=None,
                    help="what --under's depth holds (default: the file's splatgl:depth)")

@@ -173,9 +173,78 @@ def check_fidelity(settings: "RenderSettings", *kinds: RendererKind | str) -> No
         raise SplatglError(f"--emulate {settings.emulation.label()} applies to the NumPy reference "
                            f"only, not the {names} renderer (use --renderer reference)")
     if settings.order is Order.PER_PIXEL and not ({RendererKind.REFERENCE, RendererKind.TILE} & set(kinds)):
+        why = ("; docs/fidelity.md says why the quad path has no per-pixel order"
+               if RendererKind.QUAD in kinds else "")
         raise SplatglError("--order per-pixel is drawn by the tile renderer and the NumPy reference, "
-                           "not the quad path (use --renderer tile or reference; docs/fidelity.md "
-                           "says why the quad path has no per-pixel order)")
+                           f"not the {_renderers(kinds)} (use --renderer tile or reference{why})")
+
+
+#: What each renderer honours among the settings not every renderer reads: the field, the
+#: option that sets it, and the renderers that draw it (the rest, background, near plane,
+#: antialiasing, SH cap and model transform, every renderer draws).  A value away from the
+#: field's default is refused in one line unless a renderer in play draws it
+#: (:func:`check_convention`, :func:`check_fidelity`, :func:`check_honoured`): no option is
+#: accepted and ignored.  ``order_window`` moreover needs the per-pixel order.
+HONOURED_BY: dict[str, tuple[str, frozenset[RendererKind]]] = {
+    "precision": ("--precision", frozenset({RendererKind.QUAD})),
+    "extent": ("--extent", frozenset({RendererKind.QUAD})),
+    "sort_key": ("--sort", frozenset({RendererKind.QUAD})),
+    "resort_interval": ("resort interval", frozenset({RendererKind.QUAD})),
+    "preprocess": ("--preprocess", frozenset({RendererKind.QUAD})),
+    "cull": ("cull", frozenset({RendererKind.QUAD})),
+    "early_stop": ("--early-stop", frozenset({RendererKind.QUAD})),
+    "gpu_storage": ("--gpu-storage", frozenset({RendererKind.QUAD, RendererKind.TILE})),
+    "convention": ("--convention", frozenset({RendererKind.REFERENCE})),
+    "emulation": ("--emulate", frozenset({RendererKind.REFERENCE})),
+    "order": ("--order", frozenset({RendererKind.REFERENCE, RendererKind.TILE})),
+    "order_window": ("--order-window", frozenset({RendererKind.TILE})),
+}
+
+
+def honours(kind: RendererKind | str, field: str) -> bool:
+    """Whether renderer ``kind`` draws the setting ``field`` (:data:`HONOURED_BY`; a field not
+    listed there every renderer draws)."""
+    return field not in HONOURED_BY or RendererKind(kind) in HONOURED_BY[field][1]
+
+
+def _renderers(kinds) -> str:
+    """``"cpu renderer"``, ``"quad and tile renderers"`` (the reference: "reference")."""
+    given = {RendererKind(k) for k in kinds}
+    names = [k.value for k in RendererKind if k in given]
+    return " and ".join(names) + (" renderers" if len(names) > 1 else " renderer")
+
+
+def _spelled(value) -> str:
+    if isinstance(value, enum.Enum):
+        return str(value.value)
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return str(value)
+
+
+def check_honoured(settings: "RenderSettings", *kinds: RendererKind | str,
+                   advice: str = "use --renderer {which}, or leave {option} out") -> None:
+    """Refuse, in one line naming the option, its value and the renderers, a setting away from
+    its default that none of ``kinds`` draws (:data:`HONOURED_BY`), and ``order_window`` without
+    the per-pixel order; with :func:`check_fidelity` (whose own messages cover the emulation
+    and the order; :func:`check_convention` the convention).  ``advice`` ends the message
+    (``{which}``: the renderers that draw the setting, ``{option}``: its option)."""
+    kinds = tuple(RendererKind(k) for k in kinds)
+    check_fidelity(settings, *kinds)
+    default = RenderSettings()
+    if settings.order_window != default.order_window and settings.order is not Order.PER_PIXEL:
+        raise SplatglError(f"--order-window {settings.order_window} applies to --order per-pixel "
+                           "only; the global order has no window (add --order per-pixel)")
+    for field, (option, drawn_by) in HONOURED_BY.items():
+        if field in ("convention", "emulation", "order"):
+            continue                                # their own messages, above
+        value = getattr(settings, field)
+        if value == getattr(default, field) or drawn_by & set(kinds):
+            continue
+        which = " or ".join(k.value for k in RendererKind if k in drawn_by)
+        raise SplatglError(f"{option} {_spelled(value)} applies to the {_renderers(drawn_by)} "
+                           f"only, not the {_renderers(kinds)}, which would ignore it "
+                           f"({advice.format(which=which, option=option)})")
 
 
 #: Auto near plane: this fraction of the scene's robust radius, never more than the reference's.

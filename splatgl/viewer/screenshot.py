@@ -11,7 +11,7 @@ from ..output.images import write_image
 from ..output.files import OutputFiles
 from ..api import Renderer
 from ..model.scene import Scene
-from ..model.settings import GpuStorage, RendererKind, RenderSettings
+from ..model.settings import GpuStorage, RendererKind, RenderSettings, honours
 from ..renderers.stereo import StereoLayout, StereoRenderer
 
 PREFIX = "splatgl-view-"
@@ -28,17 +28,20 @@ def next_paths(directory: Path) -> tuple[Path, Path]:
 
 def settings_arguments(settings: RenderSettings, kind: RendererKind) -> list[str]:
     """``splatgl render`` options giving ``settings`` and ``kind`` (model transform excluded)."""
-    args = ["--renderer", kind.value, "--precision", settings.precision.value,
-            "--extent", settings.extent.value,
-            "--background", ",".join(repr(float(v)) for v in settings.background)]
+    args = ["--renderer", kind.value]
+    if honours(kind, "precision"):       # only the options the renderer reads (the CLI refuses
+        args += ["--precision", settings.precision.value,      # the others)
+                 "--extent", settings.extent.value]
+    args += ["--background", ",".join(repr(float(v)) for v in settings.background)]
     if settings.near is not None:
         args += ["--near", repr(settings.near)]
     if settings.antialias:
         args.append("--antialias")
     if settings.sh_degree is not None:
         args += ["--sh-degree", str(settings.sh_degree)]
-    args += ["--preprocess", settings.preprocess.value, "--sort", settings.sort_key.value]
-    if settings.gpu_storage is not GpuStorage.FLOAT32:
+    if honours(kind, "preprocess"):
+        args += ["--preprocess", settings.preprocess.value, "--sort", settings.sort_key.value]
+    if settings.gpu_storage is not GpuStorage.FLOAT32 and honours(kind, "gpu_storage"):
         args += ["--gpu-storage", settings.gpu_storage.value]
     return args
 
