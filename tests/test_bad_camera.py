@@ -151,3 +151,41 @@ def test_a_repeated_key_is_one_line_naming_file_and_key(tmp_path, capsys):
     assert err == (f"splatgl: error: {path}: key 'fx' given twice in one object (JSON keeps only "
                    "the last)\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cam.json"]
+
+
+@pytest.mark.parametrize("extra, message", [
+    ({"projection": "perspective", "distortion": [0.1, 0.0, 0.0, 0.0]},
+     "field 'distortion' would be ignored: \"projection\": \"perspective\" does not read it; use "
+     "\"projection\": \"opencv\" for OpenCV's distCoeffs (k1 k2 p1 p2 [k3 [k4 k5 k6]]) or "
+     "\"fisheye\" for its k1 k2 k3 k4, or remove the field"),
+    ({"distortion": [0.1, 0.0, 0.0, 0.0, 0.02]},
+     "field 'distortion' would be ignored: the default projection \"perspective\" does not read "
+     "it; use \"projection\": \"opencv\" for OpenCV's distCoeffs (k1 k2 p1 p2 [k3 [k4 k5 k6]]) or "
+     "\"fisheye\" for its k1 k2 k3 k4, or remove the field"),
+    ({"projection": "orthographic", "ods_eye": 0.03},
+     "field 'ods_eye' would be ignored: \"projection\": \"orthographic\" does not read it; use "
+     "\"projection\": \"equirectangular\", or remove the field"),
+    ({"projection": "opencv", "distortion": "0.1 0 0 0"},
+     "field 'distortion' must be a list of 4, 5 or 8 numbers (OpenCV's k1 k2 p1 p2 [k3 [k4 k5 "
+     "k6]]; 12 or 14 with s1..s4, tauX, tauY 0), got '0.1 0 0 0'"),
+    ({"projection": "opencv", "distortion": [0.1] * 8 + [0.0, 0.2, 0.0, 0.3]},
+     "field 'distortion': OpenCV's thin-prism and tilted-sensor terms (s2, s4 here) are not "
+     "supported; the opencv camera takes k1 k2 p1 p2 [k3 [k4 k5 k6]] (the rest of its 12 numbers "
+     "must be 0)"),
+    ({"projection": "fisheye", "distortion": [0.1, 0.0, 0.0]},
+     "field 'distortion' must be a list of 4 numbers (OpenCV's fisheye k1 k2 k3 k4), got 3"),
+])
+def test_distortion_the_projection_does_not_take_is_refused(tmp_path, extra, message):
+    """Issue 38: a perspective camera with a distortion list rendered undistorted without a word;
+    a distortion that was not a list was said to need "8 numbers"."""
+    path = single(tmp_path, POSE, **extra)
+    with pytest.raises(CameraError) as info:
+        load_camera(path)
+    assert str(info.value) == f"{path}: {message}"
+
+
+def test_zero_distortion_and_opencv_14_coefficients_with_zero_extras_are_read(tmp_path):
+    assert load_camera(single(tmp_path, POSE, distortion=[0, 0, 0, 0])).model.name == "perspective"
+    k = [-0.1, 0.01, 0.001, 0.002, 0.003, 0.0, 0.0, 0.004]
+    cam = load_camera(single(tmp_path, POSE, projection="opencv", distortion=k + [0.0] * 6))
+    assert cam.model.coefficients == tuple(k)

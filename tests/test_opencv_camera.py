@@ -211,8 +211,9 @@ def test_camera_json_round_trip_and_bad_distortion(tmp_path):
         assert obj["projection"] == "opencv" and len(obj["distortion"]) == size
         assert camera_from_json(obj).model == model
     obj["distortion"] = [0.1, 0.2, 0.3]
-    with pytest.raises(CameraError, match=r"c.json: field 'distortion' must be 4, 5 or 8 numbers "
-                                          r"\(OpenCV's k1 k2 p1 p2 \[k3 \[k4 k5 k6\]\]\), got 3"):
+    with pytest.raises(CameraError, match=r"c.json: field 'distortion' must be a list of 4, 5 or 8 "
+                                          r"numbers \(OpenCV's k1 k2 p1 p2 \[k3 \[k4 k5 k6\]\]; "
+                                          r"12 or 14 with s1..s4, tauX, tauY 0\), got 3"):
         camera_from_json(obj, tmp_path / "c.json")
     obj["distortion"] = [0.1, None, 0, 0]
     with pytest.raises(CameraError, match="c.json: field 'distortion' holds NaN at entry 1"):

@@ -93,6 +93,7 @@ class Equirectangular(CameraModel):
     ods_eye: float = 0.0
 
     name: ClassVar[str] = "equirectangular"
+    json_fields: ClassVar[tuple[str, ...]] = ("ods_eye",)
     glsl: ClassVar[str] = "equirect"
     cull: ClassVar[CullKind] = CullKind.SPHERE
     draws_surfels: ClassVar[bool] = False

@@ -22,7 +22,7 @@ import numpy as np
 
 from .camera import Camera
 from .poses import check_rigid_pose
-from .registry import adapt_camera, model_class
+from .registry import MODELS, adapt_camera, model_class
 from ..errors import CameraError
 from .json_fields import matrix, read_json
 
@@ -63,6 +63,30 @@ def _camera_from_frustum(obj: dict, path: Path) -> Camera:
         raise CameraError(f"{path}: {exc}") from None
 
 
+#: What to say to a camera file giving a model's field under a projection that ignores it.
+_FIELD_HINTS = {"distortion": 'use "projection": "opencv" for OpenCV\'s distCoeffs (k1 k2 p1 p2 '
+                              '[k3 [k4 k5 k6]]) or "fisheye" for its k1 k2 k3 k4'}
+
+
+def _is_zero(value) -> bool:
+    """A number 0, or a list of them: a field that changes nothing whichever model reads it."""
+    values = value if isinstance(value, list) else [value]
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) and v == 0 for v in values)
+
+
+def _check_foreign_fields(obj: dict, cls, path: Path) -> None:
+    """Refuse a field only other projections read (a ``"distortion"`` list on a perspective
+    camera rendered undistorted without a word); zeros change nothing and pass."""
+    for key in dict.fromkeys(k for m in MODELS.values() for k in m.json_fields):
+        if key in obj and key not in cls.json_fields and not _is_zero(obj[key]):
+            readers = [m.name for m in MODELS.values() if key in m.json_fields]
+            given = (f'"projection": "{cls.name}"' if "projection" in obj
+                     else f'the default projection "{cls.name}"')
+            hint = _FIELD_HINTS.get(key, "use " + " or ".join(f'"projection": "{n}"' for n in readers))
+            raise CameraError(f"{path}: field '{key}' would be ignored: {given} does not read it; "
+                              f"{hint}, or remove the field")
+
+
 def camera_from_json(obj: dict, path: Path = Path("<camera>")) -> Camera:
     """A camera from the single-camera JSON object (form (a)).
 
@@ -78,6 +102,7 @@ def camera_from_json(obj: dict, path: Path = Path("<camera>")) -> Camera:
         cls = model_class(obj.get("projection", "perspective"), "field 'projection'")
     except CameraError as exc:
         raise CameraError(f"{path}: {exc}") from None
+    _check_foreign_fields(obj, cls, path)
     keys = ("width", "height", "fx", "fy", "cx", "cy")
     w2c = _pose(path, "", obj)
     model = cls.from_json(obj, path)

@@ -117,6 +117,7 @@ class Fisheye(CameraModel):
     colmap_names: ClassVar[tuple[str, ...]] = tuple(COLMAP_MODELS)
     transforms_names: ClassVar[tuple[str, ...]] = ("OPENCV_FISHEYE",)
     transforms_fields: ClassVar[tuple[str, ...]] = ("k1", "k2", "k3", "k4")
+    json_fields: ClassVar[tuple[str, ...]] = ("distortion",)
 
     def __post_init__(self) -> None:
         k = tuple(float(v) for v in self.k)
@@ -191,7 +192,12 @@ class Fisheye(CameraModel):
 
         if "distortion" not in obj:
             return cls()
-        return cls(tuple(matrix(path, where, {"distortion": obj["distortion"]}, "distortion", (4,))))
+        k = obj["distortion"]
+        if not isinstance(k, list) or len(k) != 4:
+            got = len(k) if isinstance(k, list) else repr(k)
+            raise CameraError(f"{path}: {where}field 'distortion' must be a list of 4 numbers "
+                              f"(OpenCV's fisheye k1 k2 k3 k4), got {got}")
+        return cls(tuple(matrix(path, where, {"distortion": k}, "distortion", (4,))))
 
     @classmethod
     def from_colmap(cls, name, params):

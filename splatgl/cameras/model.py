@@ -92,6 +92,9 @@ class CameraModel:
     transforms_names: ClassVar[tuple[str, ...]] = ()
     #: The ``transforms.json`` number fields (besides the intrinsics) it reads, e.g. ``k1``.
     transforms_fields: ClassVar[tuple[str, ...]] = ()
+    #: Its own fields of the single-camera JSON (:meth:`from_json`), e.g. ``distortion``: a
+    #: camera file giving one of another model's is refused (it would be ignored).
+    json_fields: ClassVar[tuple[str, ...]] = ()
 
     # ------------------------------------------------------------------ float64/float32 twins
     def project(self, p_cam: np.ndarray, camera: "Camera") -> np.ndarray:

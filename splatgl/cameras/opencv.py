@@ -156,6 +156,12 @@ def tangent_bounds(m: "OpenCV", fx: float, fy: float, cx: float, cy: float, widt
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
+#: The lengths of OpenCV's ``distCoeffs`` a camera file may give (OpenCV's own: 4, 5, 8, 12, 14).
+DISTORTION_COUNTS = (4, 5, 8, 12, 14)
+#: OpenCV's terms after k6 (thin prism, tilted sensor): accepted only as 0.
+EXTRA_TERMS = ("s1", "s2", "s3", "s4", "tauX", "tauY")
+
+
 @dataclass(frozen=True)
 class OpenCV(CameraModel):
     """OpenCV's distortion coefficients (``distCoeffs`` order: k1, k2, p1, p2, k3, k4, k5, k6)."""
@@ -178,6 +184,7 @@ class OpenCV(CameraModel):
     colmap_names: ClassVar[tuple[str, ...]] = tuple(COLMAP_MODELS)
     transforms_names: ClassVar[tuple[str, ...]] = ("OPENCV",)
     transforms_fields: ClassVar[tuple[str, ...]] = ("k1", "k2", "k3", "k4", "p1", "p2")
+    json_fields: ClassVar[tuple[str, ...]] = ("distortion",)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -285,15 +292,24 @@ class OpenCV(CameraModel):
     @classmethod
     def from_json(cls, obj, path, where=""):
         """``"distortion"``: OpenCV's ``distCoeffs``, 4, 5 or 8 numbers (k1 k2 p1 p2 [k3 [k4 k5
-        k6]]); absent: none."""
+        k6]]), or OpenCV's 12 or 14 when the thin-prism and tilt terms after them (s1 s2 s3 s4
+        [tauX tauY]) are 0, as ``cv2.calibrateCamera`` writes without those flags; absent: none."""
         from .json_fields import matrix
 
         coeffs = obj.get("distortion", [0.0] * 4)
-        if isinstance(coeffs, list) and len(coeffs) not in (4, 5, 8):
-            raise CameraError(f"{path}: {where}field 'distortion' must be 4, 5 or 8 numbers "
-                              f"(OpenCV's k1 k2 p1 p2 [k3 [k4 k5 k6]]), got {len(coeffs)}")
-        size = len(coeffs) if isinstance(coeffs, list) else 8
-        return cls(*matrix(path, where, {"distortion": coeffs}, "distortion", (size,)))
+        field = f"{path}: {where}field 'distortion'"
+        if not isinstance(coeffs, list) or len(coeffs) not in DISTORTION_COUNTS:
+            got = len(coeffs) if isinstance(coeffs, list) else repr(coeffs)
+            raise CameraError(f"{field} must be a list of 4, 5 or 8 numbers (OpenCV's k1 k2 p1 p2 "
+                              f"[k3 [k4 k5 k6]]; 12 or 14 with s1..s4, tauX, tauY 0), got {got}")
+        values = matrix(path, where, {"distortion": coeffs}, "distortion", (len(coeffs),))
+        extra = [name for name, v in zip(EXTRA_TERMS, values[8:]) if v != 0]
+        if extra:
+            raise CameraError(f"{field}: OpenCV's thin-prism and tilted-sensor terms ("
+                              f"{', '.join(extra)} here) are not supported; the opencv camera "
+                              f"takes k1 k2 p1 p2 [k3 [k4 k5 k6]] (the rest of its "
+                              f"{len(coeffs)} numbers must be 0)")
+        return cls(*values[:8])
 
     @classmethod
     def from_colmap(cls, name, params):
