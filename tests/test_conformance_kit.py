@@ -235,8 +235,15 @@ def test_render_output_clashes_are_refused_before_any_work(tmp_path, capsys, sma
     before = _snapshot(kit)
     out = kit / "cases" / "depth_range"
     assert main(["conformance", "render", str(kit), "-o", str(out)]) == 2
+    assert f"-o {out}: is inside the kit's folder" in _one_line(capsys)
+    linked = tmp_path / "linked"                # an image that is a link to the kit's reference
+    linked.mkdir()
+    (linked / "reference.exr").symlink_to(out / "reference.exr")
+    assert main(["conformance", "render", str(kit), "-o", str(linked), "--force"]) == 2
     assert "the same file as the kit's file" in _one_line(capsys)
     assert _snapshot(kit) == before
+    assert main(["conformance", "render", str(kit), "-o", "/proc/no/such"]) == 2
+    assert _one_line(capsys).startswith("splatgl: error: -o /proc/no/such: ")
     file = tmp_path / "file.exr"
     file.write_bytes(b"x")
     assert main(["conformance", "render", str(kit), "-o", str(file)]) == 2

@@ -154,9 +154,9 @@ def table(scores: list[CaseScore]) -> str:
 def check_render_output(kit: str | Path, out: str | Path, index: dict, suffix: str = ".exr",
                         overwrite: bool = False) -> None:
     """Refuse, before any work and in one line naming ``-o``, a folder ``out`` that
-    :func:`render_kit` cannot fill: a file, the kit's own folder, a folder that cannot be made
-    or written, an image that would be one of the kit's files (through a link too), or an image
-    that exists without ``overwrite``."""
+    :func:`render_kit` cannot fill: a file, the kit's own folder or one inside it, a folder
+    that cannot be made or written, an image that would be one of the kit's files (through a
+    link too), or an image that exists without ``overwrite``."""
     from ..output.files import check_not_an_input, check_output_path, same_file
 
     kit, out = Path(kit), Path(out)
@@ -164,6 +164,10 @@ def check_render_output(kit: str | Path, out: str | Path, index: dict, suffix: s
         raise SplatglError(f"--format {suffix.lstrip('.')}: must be exr or png")
     if same_file(out, kit):
         raise SplatglError(f"-o {out}: is the kit's folder {kit}; give the images a folder of their own")
+    inside = os.path.realpath(out).startswith(os.path.realpath(kit).rstrip(os.sep) + os.sep)
+    if inside:
+        raise SplatglError(f"-o {out}: is inside the kit's folder {kit} (a kit holds only its own "
+                           "files); give the images a folder of their own")
     if out.exists() and not out.is_dir():
         raise SplatglError(f"-o {out}: is a file; give a folder for the images")
     probe = Path(os.path.abspath(out))
@@ -196,7 +200,10 @@ def render_kit(kit: str | Path, out: str | Path, kind: str = "quad", suffix: str
     check_render_output(kit, out, index, suffix, overwrite)
     skipped = []
     with Renderer() as renderer:
-        out.mkdir(parents=True, exist_ok=True)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SplatglError(f"-o {out}: cannot make the folder ({exc.strerror})") from None
         for k, entry in enumerate(index["cases"]):
             try:
                 scene, camera, settings = case_inputs(kit, entry)
