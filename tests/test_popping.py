@@ -111,3 +111,54 @@ def test_bench_popping_cli(tmp_path, capsys):
     assert "--popping-configs: unknown fast" in capsys.readouterr().err
     assert main(["bench", "--popping", "--scale"]) == 2
     assert "--popping runs alone" in capsys.readouterr().err
+
+
+def _refused(capsys, tmp_path, argv, line):
+    from splatgl.cli import main
+    before = sorted(p.name for p in tmp_path.iterdir())
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    assert (rc, out, err) == (2, "", line + "\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_bench_popping_one_frame_is_one_line_before_work(tmp_path, capsys):
+    """Issue 38: --frames 1 measured every scene, then raised KeyError (no pair to score)."""
+    from splatgl.commands._common import demo_scene_path
+    _refused(capsys, tmp_path, ["bench", "--popping", demo_scene_path(), "--frames", "1",
+                                "--popping-metric", "own", "--out", tmp_path / "pop"],
+             "splatgl: error: --frames 1: --popping scores pairs of consecutive frames, so a "
+             "path needs at least 2")
+
+
+def test_popping_options_refuse_what_measures_nothing():
+    from splatgl.bench.popping import PoppingOptions
+    from splatgl.errors import SplatglError
+    with pytest.raises(SplatglError, match=r"^--frames 1: --popping scores pairs"):
+        PoppingOptions(frames=1)
+    with pytest.raises(SplatglError, match=r"^--popping-window must be 1..32, got 0$"):
+        PoppingOptions(window=0)
+    with pytest.raises(SplatglError, match=r"^--popping-configs: none given"):
+        PoppingOptions(configs=())
+
+
+def test_bench_popping_window_zero_is_refused(tmp_path, capsys):
+    """--popping-window 0 was taken as the default window."""
+    _refused(capsys, tmp_path, ["bench", "--popping", "--popping-window", "0"],
+             "splatgl: error: --popping-window must be 1..32, got 0")
+    _refused(capsys, tmp_path, ["bench", "--popping", "--popping-window", "8",
+                                "--popping-configs", "quad,tile"],
+             "splatgl: error: --popping-window 8: the window is the 'tile per-pixel' "
+             "configuration's, which --popping-configs leaves out")
+    _refused(capsys, tmp_path, ["bench", "--quick", "--popping-window", "8"],
+             "splatgl: error: --popping-window: an option of the popping benchmark; add --popping")
+
+
+def test_bench_interactive_and_popping_are_refused_together(tmp_path, capsys):
+    """--interactive --popping ran only the popping benchmark."""
+    _refused(capsys, tmp_path, ["bench", "--interactive", "--popping"],
+             "splatgl: error: --popping runs alone in one process (not with --interactive, "
+             "--scale, --lod, --workers, --executor ray or --json; --out DIR writes popping.json)")
+    _refused(capsys, tmp_path, ["bench", "--interactive", "--scale"],
+             "splatgl: error: --interactive and --scale are separate benchmarks: run one at a "
+             "time (each writes its own JSON with --out DIR)")

@@ -30,7 +30,8 @@ from ..cameras.poses import orbit
 from ..cameras.up import resolve_up
 from ..evaluation.metrics import psnr
 from ..evaluation.popping import Frame, default_metric, distribution, popping
-from ..model.settings import DEFAULT_ORDER_WINDOW, Order, RendererKind, RenderSettings
+from ..errors import SplatglError
+from ..model.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW, Order, RendererKind, RenderSettings
 
 #: Orbit step (degrees per frame) and the fly-through's distances (multiples of the framing
 #: distance) and turn per frame.
@@ -51,8 +52,16 @@ SCENES = (("ply/donut_sh0.ply", "+z"), ("compressed_ply/biker.compressed.ply", N
           ("compressed_ply/guitar.compressed.ply", None))
 
 
+#: Frames a path needs at the least: the metric scores pairs of consecutive frames.
+MIN_FRAMES = 2
+
+
 @dataclass(frozen=True)
 class PoppingOptions:
+    """What :func:`measure_scene` measures; refused in one line, before any work, where it
+    could measure nothing (fewer than :data:`MIN_FRAMES` frames: no pair to score) or a window
+    the tile renderer does not have."""
+
     width: int = 640
     height: int = 360
     frames: int = 16
@@ -60,6 +69,17 @@ class PoppingOptions:
     configs: tuple[str, ...] = tuple(CONFIGS)
     metric: str | None = None
     paths: tuple[str, ...] = ("orbit", "fly", "turn")
+
+    def __post_init__(self) -> None:
+        if int(self.frames) != self.frames or self.frames < MIN_FRAMES:
+            raise SplatglError(f"--frames {self.frames}: --popping scores pairs of consecutive "
+                               f"frames, so a path needs at least {MIN_FRAMES}")
+        if int(self.window) != self.window or not 1 <= self.window <= MAX_ORDER_WINDOW:
+            raise SplatglError(f"--popping-window must be 1..{MAX_ORDER_WINDOW}, got {self.window}")
+        unknown = [c for c in self.configs if c not in CONFIGS]
+        if unknown or not self.configs:
+            what = f"unknown {', '.join(unknown)}" if unknown else "none given"
+            raise SplatglError(f"--popping-configs: {what}; valid: {', '.join(CONFIGS)}")
 
 
 def turned(camera, degrees: float):

@@ -66,7 +66,8 @@ def add_popping_arguments(p: argparse.ArgumentParser) -> None:
                         "of each scene (default: the shared real scenes), every pair of frames "
                         "warped and scored for popping, the global order against the per-pixel "
                         "order on the quad path, tile renderer and reference (default 640x360, 16 "
-                        "frames a path; see splatgl/bench/popping.py and docs/fidelity.md)")
+                        "frames a path, --frames at least 2; see splatgl/bench/popping.py and "
+                        "docs/fidelity.md)")
     p.add_argument("--popping-configs", default=None, metavar="LIST",
                    help="--popping configurations, comma-separated: " + ", ".join(CONFIGS)
                         + " (default all)")
@@ -75,7 +76,8 @@ def add_popping_arguments(p: argparse.ArgumentParser) -> None:
                         "default where installed) or own (the fallback: a neighbourhood-min colour "
                         "difference, splatgl/evaluation/popping.py)")
     p.add_argument("--popping-window", type=int, default=None, metavar="N",
-                   help="--popping: the tile renderer's per-pixel window (default: --order-window's)")
+                   help="--popping: the tile renderer's per-pixel window of the 'tile per-pixel' "
+                        "configuration (1-32, default 32, as render --order-window)")
 
 
 def run_popping_command(args: argparse.Namespace) -> int:
@@ -99,9 +101,12 @@ def run_popping_command(args: argparse.Namespace) -> int:
     if unknown or not configs:
         raise SplatglError(f"--popping-configs: unknown {', '.join(unknown) or repr(args.popping_configs)}; "
                            f"valid: {', '.join(CONFIGS)}")
-    window = args.popping_window or DEFAULT_ORDER_WINDOW
-    if not 1 <= window <= MAX_ORDER_WINDOW:
+    window = DEFAULT_ORDER_WINDOW if args.popping_window is None else args.popping_window
+    if not 1 <= window <= MAX_ORDER_WINDOW:     # 0 was taken as "the default"
         raise SplatglError(f"--popping-window must be 1..{MAX_ORDER_WINDOW}, got {window}")
+    if args.popping_window is not None and "tile per-pixel" not in configs:
+        raise SplatglError(f"--popping-window {window}: the window is the 'tile per-pixel' "
+                           "configuration's, which --popping-configs leaves out")
     options = PoppingOptions(args.width or 640, args.height or 360, args.frames or 16, window, configs,
                              args.popping_metric or default_metric())
     if options.metric == "flip":

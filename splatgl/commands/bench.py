@@ -181,10 +181,21 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
     if args.popping:
-        if args.scale or args.lod or executor.sharded or args.json is not None:
-            raise SplatglError("--popping runs alone in one process (not with --scale, --lod, "
-                               "--workers, --executor ray or --json; --out DIR writes popping.json)")
+        if args.interactive or args.scale or args.lod or executor.sharded or args.json is not None:
+            raise SplatglError("--popping runs alone in one process (not with --interactive, "
+                               "--scale, --lod, --workers, --executor ray or --json; --out DIR "
+                               "writes popping.json)")
         return run_popping_command(args)
+    given = [f"--popping-{name}" for name in ("configs", "metric", "window")
+             if getattr(args, f"popping_{name}") is not None]
+    if given:
+        raise SplatglError(f"{', '.join(given)}: {'options' if len(given) > 1 else 'an option'} "
+                           "of the popping benchmark; add --popping")
+    modes = [m for m, on in (("--interactive", args.interactive), ("--scale", args.scale),
+                             ("--lod", args.lod)) if on]
+    if len(modes) > 1:     # each ran alone, the others silently left out
+        raise SplatglError(f"{' and '.join(modes)} are separate benchmarks: run one at a time "
+                           "(each writes its own JSON with --out DIR)")
     if (args.scale or args.lod) and executor.sharded:
         mode = "--scale" if args.scale else "--lod"
         raise SplatglError(f"{mode} measures in one process (memory, load and frame times); "
