@@ -49,12 +49,39 @@ def test_preview_refusals(tmp_path, capsys, extra, message):
 
 
 def test_preview_refuses_depth_layers_and_target_fps_needs_preview(tmp_path, capsys):
-    code, _, err = _run(capsys, "render", "--path", "orbit:2", "--preview",
-                        "-o", str(tmp_path / "f" / "%05d.exr"))
-    assert code == 2 and "colour frames only" in err
+    pattern = tmp_path / "f" / "%05d.exr"
+    code, _, err = _run(capsys, "render", "--path", "orbit:2", "--preview", "-o", str(pattern))
+    assert code == 2 and err == (f"splatgl: error: {pattern}: EXR frames carry Z (the depth layer), "
+                                 "which --preview does not draw; give --layers colour,alpha for EXR "
+                                 "drafts without Z, or use a .png pattern, a folder or a video\n")
+    code, _, err = _run(capsys, "render", "--path", "orbit:2", "--preview", "--layers",
+                        "colour,normal,depth", "-o", str(tmp_path / "f"))
+    assert code == 2 and err == ("splatgl: error: --preview draws colour and alpha only, not "
+                                 "--layers depth, normal (render the path without --preview for "
+                                 "them)\n")
+    assert not (tmp_path / "f").exists()
     code, _, err = _run(capsys, "render", "--path", "orbit:2", "--target-fps", "5",
                         "-o", str(tmp_path / "g"))
     assert code == 2 and "budget of --preview" in err
+
+
+def test_preview_writes_the_alpha_layer_it_draws(tmp_path, capsys):
+    """--layers alpha: each draft frame gets its alpha picture (it was dropped), and an EXR
+    pattern with --layers colour,alpha holds R, G, B, A (no Z: asked without it)."""
+    import OpenImageIO as oiio
+
+    size = ["--width", "64", "--height", "48", "--target-fps", "5000"]
+    code, _, err = _run(capsys, "render", "--path", "orbit:2", "--preview", "--layers", "alpha",
+                        *size, "-o", str(tmp_path / "p") + "/")
+    assert code == 0, err
+    assert sorted(f.name for f in (tmp_path / "p").iterdir()) == [
+        "00000.png", "00000_alpha.png", "00001.png", "00001_alpha.png"]
+    code, _, err = _run(capsys, "render", "--path", "orbit:2", "--preview", "--layers",
+                        "colour,alpha", *size, "-o", str(tmp_path / "e" / "%03d.exr"))
+    assert code == 0, err
+    inp = oiio.ImageInput.open(str(tmp_path / "e" / "001.exr"))
+    assert tuple(inp.spec().channelnames) == ("R", "G", "B", "A")
+    inp.close()
 
 
 def test_bench_interactive_refuses_no_budget(capsys):

@@ -114,3 +114,24 @@ def test_top_id_into_exr_is_refused_past_float32_integers():
     with pytest.raises(SplatglError, match="v.exr: the EXR id channel is float32, exact up to "
                                            "16,777,216 splats, and this scene has 16,777,217"):
         check_exact_ids(files, "v.exr", EXACT_FLOAT_IDS + 1)
+
+
+def test_the_docs_say_which_renderer_computes_which_layer(tmp_path, capsys):
+    """The README said "every renderer computes every layer"; the CPU renderer draws colour,
+    alpha and depth and refuses the others in one line, and the docs now say so."""
+    from helpers import REPO
+
+    readme = (REPO / "README.md").read_text()
+    layers_doc = (REPO / "docs" / "layers.md").read_text()
+    assert "Every renderer computes every layer" not in readme
+    assert "`--renderer cpu` computes colour, alpha and depth and refuses the rest" in readme
+    assert "All three renderers (quad, tile, reference) compute every layer" not in layers_doc
+    assert "computes colour, alpha and depth only and refuses the other" in layers_doc
+    from splatgl.renderers.cpu import LAYERS
+    assert LAYERS == with_layers(Layer.DEPTH)     # what the docs say it draws
+    for layer in ("median-depth", "normal", "count", "top-id"):
+        assert main(["render", "--renderer", "cpu", "--layers", layer, "-o",
+                     str(tmp_path / f"{layer}.exr")] + ARGS) == 2
+        err = capsys.readouterr().err
+        assert err == (f"splatgl: error: --renderer cpu draws colour, alpha and depth only, not "
+                       f"{layer} (use --renderer quad)\n")

@@ -70,3 +70,22 @@ def test_writer_checks_its_arguments_before_it_needs_pyav(tmp_path, monkeypatch)
         with pytest.raises(SplatglError, match=message):
             video.VideoWriter(*args)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_stopped_sharded_video_names_its_frames_or_leaves_nothing(tmp_path):
+    """After Ctrl-C or SIGTERM with workers: a hidden frames folder holding complete frames is
+    kept for --resume and named in one line; one holding none (only a temporary) is removed."""
+    from splatgl.tasks.render import frame_folder, stopped_video_note
+
+    video = tmp_path / "v.mp4"
+    assert stopped_video_note(video) is None                      # no folder at all
+    folder = frame_folder(video)
+    folder.mkdir()
+    (folder / ".00003.partial12.png").write_bytes(b"half")       # a worker's temporary
+    assert stopped_video_note(video) is None and not folder.exists()
+    folder.mkdir()
+    (folder / "00000.png").write_bytes(b"x")
+    assert stopped_video_note(video) == (
+        f"1 frame kept in the hidden folder {folder}/ (no video written): re-run with --resume "
+        f"to render the rest and write {video}, or delete the folder")
+    assert folder.is_dir()

@@ -134,6 +134,9 @@ def test_sigterm_mid_video_leaves_no_video_and_resume_encodes(tmp_path):
     frames = frame_folder(out)
     _, err = signal_and_wait(proc, signal.SIGTERM)
     assert proc.returncode == 143 and err.strip().endswith("splatgl: terminated"), err
+    # the interrupt line names the hidden folder the workers' frames wait in
+    assert (f"splatgl: 2 frames kept in the hidden folder {frames}/ (no video written): re-run "
+            f"with --resume to render the rest and write {out}, or delete the folder\n") in err, err
     assert os.listdir(tmp_path) == [frames.name]
     assert sorted(p.name for p in frames.iterdir()) == ["00000.png", "00100.png"]  # no partials
     assert main([*ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2", "--resume"]) == 0

@@ -51,8 +51,9 @@ class PreviewRenderer:
         """(H, W, 4) draft frames of ``cameras``, background composited, in order."""
         if RendererKind(kind) is not RendererKind.QUAD:
             raise SplatglError(f"--preview draws through the quad path, not --renderer {kind.value}")
-        if layers not in (None, BASE):
-            raise SplatglError("--preview writes colour frames only (no depth layers)")
+        if layers is not None and set(layers) - BASE:
+            names = ", ".join(sorted(layer.value for layer in set(layers) - BASE))
+            raise SplatglError(f"--preview draws colour and alpha only, not {names}")
         if scene.kind is not SplatKind.GAUSSIAN_3D:
             raise SplatglError("--preview draws 3DGS scenes (2DGS surfels render through the tile "
                                "renderer, which has no budget)")

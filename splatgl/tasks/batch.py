@@ -18,6 +18,7 @@ from ..cameras.camera import Camera
 from ..output.frames import FrameTarget, plan_frames
 from ..output.images import write_image
 from ..output.layer_files import write_layers
+from ..output.layers import RenderOutput
 from ..progress import ProgressCallback
 from ..api import Renderer
 from ..model.scene import Scene
@@ -118,7 +119,8 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
     def save(k: int, out) -> None:
         if video is not None:
             video.write(out)
-        elif target.layers is not None:
+        elif target.layers is not None or target.named:   # --layers alpha: its picture too
+            out = out if isinstance(out, RenderOutput) else RenderOutput(out, None)
             write_layers(target.frame_path(numbers[k]), out, target.files(cameras[k]), bit_depth)
         else:
             write_image(target.frame_path(numbers[k]), out, bit_depth)

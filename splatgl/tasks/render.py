@@ -10,8 +10,9 @@ hidden folder beside the video (``.NAME.mp4.frames/``), quantised exactly as the
 quantises (``clip(rgb) * 255 + 0.5``, truncated), so the encoder sees the same pixels as in a
 single-process run; then this process encodes them with :class:`splatgl.output.video.VideoWriter`
 (temporary file renamed when complete) and deletes the folder.  If anything fails or is
-interrupted the folder stays, no video is written, and ``--resume`` renders only the frames
-still missing before encoding.
+interrupted the folder stays (the command names it: :func:`stopped_video_note`; a folder
+without a complete frame is removed), no video is written, and ``--resume`` renders only the
+frames still missing before encoding.
 """
 
 from __future__ import annotations
@@ -88,6 +89,23 @@ class RenderChunk:
 def frame_folder(video: Path) -> Path:
     """The hidden folder beside ``video`` that holds its frames until it is assembled."""
     return video.with_name(f".{video.name}.frames")
+
+
+def stopped_video_note(video: Path) -> str | None:
+    """What a stopped sharded render of ``video`` (Ctrl-C, SIGTERM) leaves, in one line: the
+    complete frames kept in its hidden folder (:func:`frame_folder`) for ``--resume``, or None
+    when it holds none, in which case the folder (empty, or holding only temporaries) is
+    removed, so nothing is left behind."""
+    folder = frame_folder(video)
+    if not folder.is_dir():
+        return None
+    frames = [p for p in folder.iterdir() if p.suffix == ".png" and not p.name.startswith(".")]
+    if not frames:
+        shutil.rmtree(folder, ignore_errors=True)
+        return None
+    return (f"{len(frames)} frame{'s' if len(frames) != 1 else ''} kept in the hidden folder "
+            f"{folder}/ (no video written): re-run with --resume to render the rest and write "
+            f"{video}, or delete the folder")
 
 
 def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: RenderSettings,
