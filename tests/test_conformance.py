@@ -101,6 +101,6 @@ def test_cli_score_json_missing_and_bad_kit(kit, tmp_path, capsys):
     assert main(["conformance", "score", str(tmp_path), "--images", str(tmp_path / "none")]) == 2
     assert "not a conformance kit (no index.json" in capsys.readouterr().err
     assert main(["conformance", "export", str(kit)]) == 2
-    assert "exists; pass --force" in capsys.readouterr().err
+    assert "exists (use --force to replace it)" in capsys.readouterr().err
     with pytest.raises(SplatglError, match="no such folder"):
         score_kit(kit, tmp_path / "nowhere")

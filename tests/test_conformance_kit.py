@@ -82,7 +82,7 @@ def test_export_force_on_the_current_folder_or_a_file_gives_one_line(tmp_path, c
     file = tmp_path / "notes.txt"
     file.write_text("x")
     assert main(["conformance", "export", str(file), "--no-real"]) == 2
-    assert _one_line(capsys).endswith(f"{file}: exists; pass --force to replace it")
+    assert _one_line(capsys).endswith(f"{file}: exists (use --force to replace it)")
     # with --force a file is replaced by the kit (the library's call, as the CLI makes it)
     index = export_kit(file, [depth_range_case()], force=True)
     assert file.is_dir() and load_index(file) == index

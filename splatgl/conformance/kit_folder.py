@@ -79,7 +79,7 @@ def check_export_target(out: str | Path, force: bool = False) -> None:
         raise SplatglError(f"{out}: is a symbolic link; name the kit's folder itself")
     if out.exists():
         if not force:
-            raise SplatglError(f"{out}: exists; pass --force to replace it")
+            raise SplatglError(f"{out}: exists (use --force to replace it)")
         if out.is_dir():
             problem = kit_problem(out)
             if problem is not None:
