@@ -94,9 +94,7 @@ def _named_for_user(exc: BaseException, tmp: Path, out: Path) -> BaseException:
     write: one line, :func:`~splatgl.output.atomic.write_error`)."""
     if isinstance(exc, OSError):
         name = str(exc.filename or "")
-        if name.startswith(str(tmp)):
-            return write_error(out / os.path.relpath(name, tmp), exc)
-        return write_error(out, exc) if exc.filename is None else exc
+        return write_error(out / os.path.relpath(name, tmp) if name.startswith(str(tmp)) else out, exc)
     if isinstance(exc, SplatglError) and str(tmp) in str(exc):
         exc.args = (str(exc).replace(str(tmp), str(out)),)
         if str(getattr(exc, "path", "")).startswith(str(tmp)):
