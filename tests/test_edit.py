@@ -4,8 +4,11 @@ order of operations, merging with transforms, and the refusals, through the Pyth
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
+from hypothesis import given, settings as hsettings, strategies as st
 
 from helpers import random_scene
 from splatgl.constants import SH_C0
@@ -13,6 +16,7 @@ from splatgl.edit import (CropBox, CropSphere, Decimate, DropInvalid, Filter, Re
                           ShDegree, apply_operations, edit_scene, merge_scenes, parse_expression,
                           transform_scene)
 from splatgl.edit.attributes import Rows
+from splatgl.edit.statistics import attribute_statistics, overdraw
 from splatgl.edit.options import crop_box, operation, remove_floaters
 from splatgl.errors import SplatglError
 from splatgl.model.scene import Scene, SplatKind
@@ -73,8 +77,13 @@ def test_a_placed_box_tests_the_points_in_its_own_frame():
 @pytest.mark.parametrize("text,message", [
     ("1,0,0,0,1,1", "--crop-box: min x 1 > max x 0: the box is empty"),
     ("0,0,0,1,1", "--crop-box '0,0,0,1,1': expected X0,Y0,Z0,X1,Y1,Z1 (6 numbers, got 5)"),
-    ("0,0,nan,1,1,1", "--crop-box min: every number must be finite"),
+    ("0,0,nan,1,1,1", "--crop-box min: every number must be a number or +-inf, not NaN"),
     ('{"min": [0, 0, 0]}', '--crop-box: a JSON box needs "min" and "max"'),
+    ('{"min": [0, 0, 0], "max": [1, 1, 1], "sclae": 2}',
+     "--crop-box: unknown key(s) ['sclae'] (use rotate_deg, rotation, translate, scale)"),
+    ('{"min": [0, 0, 0], "max": [1, 1, 1], "min": [-1, -1, -1]}',
+     "--crop-box: key 'min' given twice in one object (JSON keeps only the last)"),
+    ('{"min": [0, 0, 0], "max": 1}', '--crop-box: "max" must be a list of 3 numbers, got 1'),
 ])
 def test_impossible_boxes_are_refused_in_one_line(text, message):
     with pytest.raises(SplatglError) as e:
@@ -127,6 +136,9 @@ def test_filters_see_decoded_values_in_stated_units():
     ("opcity < 0.1", "unknown attribute 'opcity' (did you mean 'opacity'?)"),
     ("opacity < 0.1 && x > 0", "'&&' is not an operator here; write 'and'"),
     ("opacity = 0.5", "syntax error at column"),
+    ("opacity <", "syntax error at column 10 (the expression ends too early)"),
+    ("  x y", "syntax error at column 5"),
+    ("(opacity < 1", "syntax error at column 1: '(' was never closed"),
     ("x ** 2 > 1", "unsupported operator"),
     ("x in (1, 2)", "unsupported comparison"),
     ("", "empty expression"),
@@ -328,3 +340,102 @@ def test_selecting_holds_a_mask_and_the_result_not_a_second_scene(monkeypatch):
     tracemalloc.stop()
     assert 0.4 < out.count / s.count < 0.6
     assert peak < 0.6 * s_bytes + 8e6, f"peak {peak / 1e6:.1f} MB for a {s_bytes / 1e6:.1f} MB scene"
+
+
+# ------------------------------------------------------------------ issue 38: limits and notes
+
+
+@pytest.mark.parametrize("n", [2, 3, 7, 9, 10000])
+def test_decimate_reaches_one_splat_through_an_odd_round(n):
+    """An odd round that starts at two splats has no pair at offset 1: it pairs from row 0
+    (it raised 'need at least one array to concatenate')."""
+    s = random_scene(n, seed=n)
+    for op in (Decimate(count=1), Decimate.parse("0.01%")):
+        assert apply_operations(s, [op]).scene.count == 1
+
+
+@given(st.integers(1, 40), st.floats(0.0, 1.0), st.booleans(), st.integers(0, 1000))
+@hsettings(max_examples=150)
+def test_decimate_reaches_every_small_target(n, share, percent, seed):
+    s = random_scene(n, seed=seed, spread=1.0)
+    op = (Decimate(percent=max(1e-3, 100.0 * share)) if percent
+          else Decimate(count=1 + int(share * (n + 3))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = apply_operations(s, [op]).scene
+    assert out.count == op.target(n) and np.isfinite(out.means).all()
+
+
+def test_decimate_above_the_count_says_nothing_merged_and_counts_are_singular():
+    step = apply_operations(random_scene(3), [Decimate(count=5)]).steps[0]
+    assert step.removed == 0
+    assert step.detail == "the scene has 3 splats, not more than 5: nothing merged"
+    assert Decimate(count=1).describe().startswith("to 1 splat by ")
+    assert apply_operations(random_scene(9), [Decimate(count=5)]).steps[0].detail == ""
+
+
+def test_floaters_on_a_tiny_scene_say_why_none_is_removed():
+    step = apply_operations(random_scene(5), [RemoveFloaters(neighbours=16)]).steps[0]
+    assert step.removed == 0 and "inf" not in step.detail
+    assert step.detail == ("5 splats, not more than the 16 neighbours: none can be isolated, "
+                           "none removed")
+
+
+def test_index_is_the_row_in_the_input_and_is_refused_after_decimate():
+    s = random_scene(50, seed=5)
+    assert kept(s, Filter("index == 7", invert=True)).tolist() == [i for i in range(50) if i != 7]
+    crop = CropBox((-np.inf, -np.inf, -np.inf), (np.inf, np.inf, 0.0))
+    below = kept(s, crop)
+    # after a crop the rows keep their input numbers
+    assert kept(s, crop, Filter("index >= 20")).tolist() == [i for i in below if i >= 20]
+    with pytest.raises(SplatglError, match="'index' is the splat's row in the input, which "
+                                           "--decimate renumbers: put this filter before"):
+        apply_operations(s, [Decimate(count=10), Filter("index < 3", invert=True)])
+    assert "index" not in attribute_statistics(s)
+
+
+def test_extreme_stored_values_raise_no_numpy_warning():
+    """Positions at float32's limits, huge and tiny log-scales, logits and SH: every operation,
+    the statistics and the overdraw run with warnings as errors; decimating scales whose
+    moments overflow is refused in one line."""
+    s = random_scene(64, seed=3, degree=1)
+    means, ls = np.array(s.means), np.array(s.log_scales)
+    logits, sh = np.array(s.opacity_logits), np.array(s.sh)
+    means[:8] = [3e38, -3e38, 1e38]
+    ls[10:14], ls[14:18], ls[18] = 99.0, -1000.0, -3e38
+    logits[20:24], logits[24:28], sh[30:34] = 1e30, -1e30, 3e38
+    wild = Scene(means, s.quats, ls, logits, sh)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for op in (CropBox((-1e30,) * 3, (1e30,) * 3), CropSphere((0, 0, 0), 1e308),
+                   CropSphere((1e308, 0, 0), 1.0), RemoveFloaters(neighbours=4),
+                   Filter("anisotropy > 2 or distance > 1e30 or max_scale < 1"),
+                   Decimate(count=5), ShDegree(0),
+                   CropBox((0, 0, 0), (1, 1, 1), ModelTransform(scale=1e-300))):
+            apply_operations(wild, [op])
+        attribute_statistics(wild)
+        overdraw(wild)
+        ls[18] = 3e38
+        with pytest.raises(SplatglError, match="--decimate: splat 18 has a scale above e.100 "
+                                               "world units, whose moments overflow"):
+            apply_operations(Scene(means, s.quats, ls, logits, sh), [Decimate(count=5)])
+
+
+@pytest.mark.parametrize("transform", [ModelTransform(translation=(1e39, 0, 0)),
+                                       ModelTransform(scale=1e300)])
+def test_a_transform_beyond_float32_is_refused(transform):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(SplatglError) as e:
+            transform_scene(random_scene(10), transform, "--transform of a.ply")
+    assert str(e.value).startswith("--transform of a.ply (") and "\n" not in str(e.value)
+    assert "beyond float32's range (|coordinate| <= 3.4e38): its position would be infinite" \
+        in str(e.value)
+
+
+def test_crops_take_infinite_bounds_and_huge_radii():
+    s = random_scene(100, seed=6)
+    half = CropBox((-np.inf, -np.inf, -np.inf), (np.inf, np.inf, 0.0))
+    assert kept(s, half).tolist() == np.flatnonzero(s.means[:, 2] <= 0).tolist()
+    assert crop_box("-inf,-inf,-inf,inf,inf,0") == half
+    assert kept(s, CropSphere((0, 0, 0), 1e308)).size == 100

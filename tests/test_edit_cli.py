@@ -73,8 +73,8 @@ def test_dry_run_prints_the_removals_and_writes_nothing(tmp_path, capsys, scene_
     (["--crop-box", "1,0,0,0,1,1"], "--crop-box: min x 1 > max x 0: the box is empty"),
     (["--filter", "import os"], "--filter 'import os': syntax error"),
     (["--invert"], "--invert must follow a --crop-box, --crop-sphere, --filter or --remove"),
-    (["--decimate", "10", "--invert"], "--invert applies to --crop-box, --crop-sphere and "
-                                       "--filter, not --decimate"),
+    (["--decimate", "10", "--invert"], "--invert applies to --crop-box, --crop-sphere, "
+                                       "--filter and --remove, not --decimate"),
     (["--transform", "{}", "--transform", "{}", "--sh-degree", "1"],
      "--transform given 2 time(s) for 1 input(s)"),
     (["--crop-sphere", "0,0,0,100", "-o", "x.xyz"], "cannot write this format"),
@@ -249,3 +249,106 @@ def test_ctrl_c_during_an_operation_is_one_line_and_leaves_no_file(tmp_path, sce
     rest, err = signal_and_wait(proc, signal.SIGINT)
     assert (proc.returncode, rest, err) == (130, "", "splatgl: interrupted\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.ply"]
+
+
+# ------------------------------------------------------------------ issue 38
+
+
+@pytest.mark.parametrize("move", ['{"translate": [1e39, 0, 0]}', '{"scale": 1e300}'])
+def test_a_transform_to_infinite_positions_is_one_line_and_writes_nothing(tmp_path, capsys,
+                                                                          scene_file, move):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")   # no raw NumPy warning may reach the user
+        line = one_line_error(capsys, scene_file, "-o", tmp_path / "o.ply", "--transform", move)
+    assert line.startswith(f"--transform of {scene_file} (")
+    assert line.endswith("beyond float32's range (|coordinate| <= 3.4e38): its position would "
+                         "be infinite")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.ply"]
+
+
+def test_a_transform_alone_is_the_operation(tmp_path, capsys, scene_file):
+    code, out, _ = cli(capsys, scene_file, "-o", tmp_path / "t.ply", "--transform",
+                       '{"translate": [1, 2, 3]}')
+    assert code == 0 and f"transform        placed       3,000              [{scene_file}: " \
+        "translate 1,2,3]" in out
+    moved, before = load_scene(tmp_path / "t.ply"), load_scene(scene_file)
+    assert np.array_equal(moved.means, (before.means.astype(np.float64) + [1, 2, 3])
+                          .astype(np.float32))
+    line = one_line_error(capsys, scene_file, "-o", tmp_path / "u.ply", "--transform", "{}")
+    assert line.startswith("edit: no operation given")
+
+
+@pytest.mark.parametrize("n", [3, 7, 9])
+def test_decimate_to_one_splat_on_small_scenes(tmp_path, capsys, n):
+    save_scene(tmp_path / "s.ply", random_scene(n, seed=n))
+    code, out, err = cli(capsys, tmp_path / "s.ply", "-o", tmp_path / "o.ply", "--decimate", "1")
+    assert (code, err) == (0, "") and "[to 1 splat by moment matching" in out
+    assert ": 1 splat, SH degree 0" in out and load_scene(tmp_path / "o.ply").count == 1
+    code, out, err = cli(capsys, tmp_path / "s.ply", "--decimate", "0.01%", "--dry-run")
+    assert (code, err) == (0, "") and "dry run: would write 1 splat," in out
+
+
+def test_notes_instead_of_silent_or_infinite_figures(tmp_path, capsys, scene_file):
+    code, out, err = cli(capsys, scene_file, "--decimate", "5000", "--dry-run")
+    assert code == 0 and "the scene has 3,000 splats, not more than 5,000: nothing merged" in out
+    save_scene(tmp_path / "tiny.ply", random_scene(4))
+    code, out, err = cli(capsys, tmp_path / "tiny.ply", "--remove-floaters", "--dry-run")
+    assert code == 0 and "inf" not in out
+    assert "4 splats, not more than the 16 neighbours: none can be isolated, none removed" in out
+
+
+def test_crops_at_the_limits_of_the_numbers(tmp_path, capsys, scene_file):
+    code, out, err = cli(capsys, scene_file, "--crop-sphere", "0,0,0,1e308", "--dry-run")
+    assert (code, err) == (0, "") and "would write 3,000 splats" in out
+    code, out, err = cli(capsys, scene_file, "--crop-box", "-inf,-inf,-inf,inf,inf,0",
+                         "--dry-run")   # a value starting with '-' needs no '='
+    below = int((load_scene(scene_file).means[:, 2] <= 0).sum())
+    assert (code, err) == (0, "") and f"dry run: would write {below:,} splats" in out
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--crop-sphere", "0,0,0,1", "--invert", "--invert"],
+     "--invert given twice after --crop-sphere (the second would undo the first): give it once"),
+    (["--transform", '{"scale": 2, "scale": 3}'],
+     "--transform: key 'scale' given twice in one object (JSON keeps only the last)"),
+    (["--crop-box", '{"min": [0, 0, 0], "max": [1, 1, 1], "rotate": [0, 0, 1]}'],
+     "--crop-box: unknown key(s) ['rotate']"),
+    (["--remove", "opacity <"], "--remove 'opacity <': syntax error at column 10 (the "
+                                "expression ends too early)"),
+    (["--remove", "opacity < 0.1", "--decimate", "2", "--invert"],
+     "--invert applies to --crop-box, --crop-sphere, --filter and --remove, not --decimate"),
+])
+def test_issue38_refusals_are_one_line(tmp_path, capsys, scene_file, argv, message):
+    line = one_line_error(capsys, scene_file, "-o", tmp_path / "o.ply", *argv)
+    assert line.startswith(message)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.ply"]
+
+
+def test_a_transform_file_with_a_repeated_key_is_refused(tmp_path, capsys, scene_file):
+    t = tmp_path / "t.json"
+    t.write_text('{"translate": [1, 0, 0], "translate": [0, 0, 0]}')
+    line = one_line_error(capsys, scene_file, "-o", tmp_path / "o.ply", "--transform", t)
+    assert line.startswith("--transform: key 'translate' given twice in one object")
+
+
+def test_the_command_pixel_suggests_deletes_that_splat(tmp_path, capsys, monkeypatch):
+    """pixel --help names the index of a floater and the edit command that deletes it: that
+    exact command works and removes exactly that row."""
+    import re
+    import shlex
+
+    from splatgl.commands import pixel
+
+    text = " ".join(pixel.DESCRIPTION.split())
+    suggested = re.search(r"(splatgl edit scene\.ply -o clean\.ply --remove '[^']*')", text)
+    assert suggested, "pixel's help no longer suggests an edit command"
+    argv = shlex.split(suggested.group(1))
+    index = int(re.search(r"index == (\d+)", argv[-1]).group(1))
+    save_scene(tmp_path / "scene.ply", random_scene(index + 10, seed=4))
+    monkeypatch.chdir(tmp_path)
+    assert main(argv[1:]) == 0
+    capsys.readouterr()
+    before, after = load_scene(tmp_path / "scene.ply"), load_scene(tmp_path / "clean.ply")
+    assert np.array_equal(after.means, np.delete(before.means, index, axis=0))

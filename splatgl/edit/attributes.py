@@ -28,6 +28,8 @@ class Attribute:
     compute: Callable[["Rows"], np.ndarray]
     #: The scene kinds it exists for (scale_2 does not exist for 2DGS surfels).
     surfels: bool = True
+    #: Whether ``info --stats`` summarises it (not the row number).
+    statistic: bool = True
 
 
 class Rows:
@@ -70,6 +72,8 @@ def _effective_sh_degree(r: Rows) -> np.ndarray:
 
 def _attributes() -> dict[str, Attribute]:
     table = [
+        Attribute("index", "the splat's row in the input, from 0 (as splatgl pixel lists it)",
+                  lambda r: np.arange(r.start, r.stop, dtype=np.float64), statistic=False),
         Attribute("x", "world units", lambda r: r.means[:, 0]),
         Attribute("y", "world units", lambda r: r.means[:, 1]),
         Attribute("z", "world units", lambda r: r.means[:, 2]),

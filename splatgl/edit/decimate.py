@@ -46,6 +46,13 @@ ROUND_SHARE = 0.5
 UNIFORM_ABOVE = 4
 #: Colour difference (0-1 units) that costs as much as centres one combined scale apart.
 COLOUR_SCALE = 0.1
+#: The largest log-scale merged: the squared scale (a covariance) stays within float64.
+MAX_LOG_SCALE = 100
+
+
+def plural(n: int, word: str) -> str:
+    """``"1 splat"``, ``"2 splats"`` (thousands separated)."""
+    return f"{n:,} {word}" + ("" if n == 1 else "s")
 
 
 @dataclass(frozen=True)
@@ -85,8 +92,15 @@ class Decimate:
         return min(n, max(1, int(round(n * self.percent / 100.0)))) if n else 0
 
     def describe(self) -> str:
-        return (f"to {self.count:,} splats" if self.count is not None else
+        return (f"to {plural(self.count, 'splat')}" if self.count is not None else
                 f"to {self.percent:g}%") + " by moment matching of neighbour pairs"
+
+    def note(self, n: int) -> str:
+        """What to say beside the step when ``n`` splats are already at or below the count."""
+        if self.count is not None and self.target(n) >= n and n:
+            return (f"the scene has {plural(n, 'splat')}, not more than {self.count:,}: "
+                    "nothing merged")
+        return ""
 
     def apply(self, scene: Scene, progress=None) -> Scene:
         """``scene`` merged down to :meth:`target` splats (the scene itself when already there)."""
@@ -96,26 +110,41 @@ class Decimate:
         if scene.kind is SplatKind.SURFEL_2D:
             raise SplatglError("--decimate: 2DGS surfels cannot be merged (moment matching "
                                "gives 3D Gaussians)")
+        _check_scales(scene)
         start, rnd = scene.count, 0
         if progress is not None:
             progress(0, start - target, "decimating")  # done == 0 starts the meter's clock
         while scene.count > target:
             share = 1.0 if scene.count > UNIFORM_ABOVE * target else ROUND_SHARE
-            scene = _round(scene, scene.count - target, rnd % 2, share)
+            with np.errstate(all="ignore"):  # extreme stored values: edit_files checks the result
+                scene = _round(scene, scene.count - target, rnd % 2, share)
             rnd += 1
             if progress is not None:
                 progress(start - scene.count, start - target, "decimating")
         return scene
 
 
+def _check_scales(scene: Scene) -> None:
+    """Refuse splats whose covariance overflows float64 (scale above e^MAX_LOG_SCALE): their
+    moments cannot be matched."""
+    for start in range(0, scene.count, BLOCK):
+        big = np.flatnonzero((scene.log_scales[start:start + BLOCK] > MAX_LOG_SCALE).any(axis=1))
+        if big.size:
+            raise SplatglError(f"--decimate: splat {start + int(big[0]):,} has a scale above "
+                               f"e^{MAX_LOG_SCALE} world units, whose moments overflow: remove "
+                               "such splats first (e.g. --remove 'max_scale > 1e40')")
+
+
 def _round(scene: Scene, need: int, offset: int, share: float) -> Scene:
     """One round: merge the cheapest ``share`` of the Morton-neighbour pairs (at most
     ``need``)."""
     order = morton_order_clamped_box(scene.means.astype(np.float64))
+    if scene.count - offset < 2:  # two splats on an odd round: the one pair starts at row 0
+        offset = 0
     npairs = (scene.count - offset) // 2
     a = order[offset:offset + 2 * npairs:2]
     b = order[offset + 1:offset + 2 * npairs:2]
-    limit = min(need, max(1, int(npairs * share)))
+    limit = min(need, npairs, max(1, int(npairs * share)))
     cost = np.concatenate([pair_cost(scene, a[s:s + BLOCK], b[s:s + BLOCK])
                            for s in range(0, npairs, BLOCK)])
     chosen = np.sort(np.argpartition(cost, limit - 1)[:limit]) if limit < npairs else np.arange(npairs)

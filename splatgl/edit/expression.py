@@ -74,7 +74,8 @@ def parse_expression(text: str, what: str = "--filter") -> Expression:
         tree = ast.parse(text.strip(), mode="eval").body
     except SyntaxError as exc:
         hint = " (compare with '==', not '=')" if "=" in text and "==" not in text else ""
-        raise fail(f"syntax error at column {exc.offset or 0}{hint}") from None
+        said = f": {exc.msg}" if exc.msg and exc.msg != "invalid syntax" else ""
+        raise fail(f"syntax error at {_column(text, exc)}{said}{hint}") from None
     except (ValueError, RecursionError, MemoryError):
         raise fail("cannot be parsed") from None
     names: set[str] = set()
@@ -82,6 +83,18 @@ def parse_expression(text: str, what: str = "--filter") -> Expression:
     if kind != "bool":
         raise fail("is a value, not a condition (compare it, e.g. 'opacity < 0.02')")
     return Expression(text, tree, frozenset(names))
+
+
+def _column(text: str, exc: SyntaxError) -> str:
+    """Where ``exc`` points in ``text`` (columns from 1; the parser saw ``text.strip()``, and
+    gives no column when the expression stops short)."""
+    lead = len(text) - len(text.lstrip())
+    line = text.strip().splitlines()[(exc.lineno or 1) - 1] if text.strip() else ""
+    if not exc.offset or exc.offset > len(line):
+        return f"column {lead + len(text.strip()) + 1} (the expression ends too early)"
+    if (exc.lineno or 1) > 1:
+        return f"line {exc.lineno} column {exc.offset}"
+    return f"column {lead + exc.offset}"
 
 
 def _check(node: ast.AST, fail, names: set[str], depth: int) -> str:

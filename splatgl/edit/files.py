@@ -8,6 +8,8 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import SplatglError
 from ..formats import detect_format, load_scene, save_scene, writer_for
 from ..formats.convert import MAX_SH_DEGREE_OF_FORMAT
@@ -16,7 +18,7 @@ from ..model.transform import ModelTransform
 from ..output.files import check_output_path
 from ..progress import default_progress
 from .pipeline import Step, apply_operations
-from .placement import MergeBuilder, merged_sh_degree, transform_scene
+from .placement import MergeBuilder, describe_transform, merged_sh_degree, transform_scene
 
 
 #: Writers that can write a scene of zero splats (``--allow-empty``); the others' files need
@@ -108,6 +110,7 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
                      f"{limit + 1}..{result.sh_degree} dropped")
         result = result.with_sh_degree(limit)
     steps += list(edited.steps)
+    _check_finite(result)
     if result.count == 0 and not allow_empty:
         culprit = next((s for s in steps if s.before and not s.after), None)
         by = f" ({culprit.name} [{culprit.parameters}] removed the last {culprit.before:,})" \
@@ -128,9 +131,23 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
                       result.sh_degree, dry_run, time.perf_counter() - t0, size, tuple(notes))
 
 
+def _check_finite(scene) -> None:
+    """Refuse a result holding NaN or an infinity (no file of it would load again)."""
+    fields = {"position": scene.means, "rotation": scene.quats, "scale": scene.log_scales,
+              "opacity": scene.opacity_logits, "sh": scene.sh}
+    for name, arr in fields.items():
+        flat = arr.reshape(arr.shape[0], int(np.prod(arr.shape[1:])))
+        for start in range(0, flat.shape[0], 1 << 16):  # a block's temporaries at a time
+            bad = ~np.isfinite(flat[start:start + (1 << 16)]).all(axis=1)
+            if bad.any():
+                raise SplatglError(f"edit: the result's field '{name}' holds NaN or Inf (first "
+                                   f"at row {start + int(np.flatnonzero(bad)[0]):,}); nothing "
+                                   "written")
+
+
 def _read(inputs, transforms, drop_invalid, progress, spz_axes):
     """The merged, placed scene of ``inputs``, their counts, and the drop-invalid step."""
-    scenes, counts, dropped, total = [], [], 0, 0
+    scenes, counts, dropped, total, placed = [], [], 0, 0, []
     for path, transform in zip(inputs, transforms):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", InvalidRowsDropped)
@@ -145,10 +162,14 @@ def _read(inputs, transforms, drop_invalid, progress, spz_axes):
         dropped += here
         counts.append(scene.count + here)
         total += counts[-1]
-        scenes.append(transform_scene(scene, transform))
+        scenes.append(transform_scene(scene, transform, f"--transform of {path}"))
+        if transform is not None and not transform.is_identity:
+            placed.append(Step("transform", f"{path}: {describe_transform(transform)}",
+                               scene.count, scene.count))
         del scene
     steps = [Step("drop-invalid", "NaN/Inf values or zero quaternions, on reading", total,
                   total - dropped)] if drop_invalid else []
+    steps += placed
     kinds = {s.kind for s in scenes}
     if len(kinds) > 1:
         raise SplatglError(f"edit: cannot merge 3DGS Gaussians with 2DGS surfels "

@@ -99,3 +99,12 @@ class Floaters:
     def describe(self) -> str:
         return (f"{self.test.describe()} (mean {self.mean:.4g}, sd {self.sd:.4g}: threshold "
                 f"{self.threshold:.4g} world units)")
+
+    def detail(self) -> str:
+        """The step's note: the threshold and its statistics, or why nothing could be isolated."""
+        if not math.isfinite(self.threshold):
+            n = self.mask.size
+            return (f"{n:,} splat{'' if n == 1 else 's'}, not more than the {self.test.neighbours} "
+                    "neighbours: none can be isolated, none removed")
+        return (f"threshold {self.threshold:.4g} world units (mean {self.mean:.4g} + "
+                f"{self.test.sigma:g} x sd {self.sd:.4g})")

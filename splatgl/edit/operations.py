@@ -33,15 +33,17 @@ from .attributes import ATTRIBUTES, Rows
 from .expression import Expression, parse_expression
 
 
-def _vec(values, n: int, what: str) -> tuple[float, ...]:
+def _vec(values, n: int, what: str, infinite: bool = False) -> tuple[float, ...]:
+    """``n`` floats of ``values``; finite ones (or, with ``infinite``, anything but NaN)."""
     try:
         out = tuple(float(v) for v in values)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise SplatglError(f"{what}: expected {n} numbers, got {values!r}") from None
     if len(out) != n:
         raise SplatglError(f"{what}: expected {n} numbers, got {len(out)}")
-    if not all(math.isfinite(v) for v in out):
-        raise SplatglError(f"{what}: every number must be finite, got {values!r}")
+    if not all(math.isfinite(v) or (infinite and not math.isnan(v)) for v in out):
+        kind = "a number or +-inf, not NaN" if infinite else "finite"
+        raise SplatglError(f"{what}: every number must be {kind}, got {values!r}")
     return out
 
 
@@ -61,7 +63,8 @@ class CropBox:
     name = "crop-box"
 
     def __post_init__(self):
-        lo, hi = _vec(self.lo, 3, "--crop-box min"), _vec(self.hi, 3, "--crop-box max")
+        lo = _vec(self.lo, 3, "--crop-box min", infinite=True)
+        hi = _vec(self.hi, 3, "--crop-box max", infinite=True)
         for axis, a, b in zip("xyz", lo, hi):
             if a > b:
                 raise SplatglError(f"--crop-box: min {axis} {a:g} > max {axis} {b:g}: the box "
@@ -73,7 +76,8 @@ class CropBox:
         p = rows.means
         if self.transform is not None and not self.transform.is_identity:
             t = self.transform
-            p = (p - np.asarray(t.translation)) @ np.asarray(t.rotation) / t.scale
+            with np.errstate(over="ignore", invalid="ignore"):  # far beyond the box: outside
+                p = (p - np.asarray(t.translation)) @ np.asarray(t.rotation) / t.scale
         inside = ((p >= self.lo) & (p <= self.hi)).all(axis=1)
         return inside != self.invert
 
@@ -103,7 +107,9 @@ class CropSphere:
 
     def keep(self, rows: Rows) -> np.ndarray:
         d = rows.means - np.asarray(self.centre)
-        inside = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2] < self.radius ** 2
+        with np.errstate(over="ignore"):  # squares beyond float64: inf, compared as such
+            inside = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2]
+                      < np.square(np.float64(self.radius)))
         return inside != self.invert
 
     def describe(self) -> str:
@@ -122,16 +128,21 @@ class Filter:
 
     def __post_init__(self):
         if isinstance(self.expression, str):
-            what = "--remove" if self.invert else "--filter"
-            object.__setattr__(self, "expression", parse_expression(self.expression, what))
+            object.__setattr__(self, "expression", parse_expression(self.expression,
+                                                                    self.option))
+
+    @property
+    def option(self) -> str:
+        """The command-line option of this filter: ``--remove`` when inverted."""
+        return "--remove" if self.invert else "--filter"
 
     def check(self, scene: Scene) -> None:
         """Refuse attributes the scene's kind lacks (scale_2 of 2DGS surfels)."""
         if scene.kind is SplatKind.SURFEL_2D:
             bad = sorted(n for n in self.expression.names if not ATTRIBUTES[n].surfels)
             if bad:
-                raise SplatglError(f"--filter {self.expression.text!r}: 2DGS surfels have no "
-                                   f"{', '.join(bad)} (two scales only)")
+                raise SplatglError(f"{self.option} {self.expression.text!r}: 2DGS surfels have "
+                                   f"no {', '.join(bad)} (two scales only)")
 
     def keep(self, rows: Rows) -> np.ndarray:
         return self.expression.evaluate(rows) != self.invert

@@ -3,10 +3,9 @@ CLI and a Python caller holding the same strings get the same operations and the
 
 from __future__ import annotations
 
-import json
-
 from ..errors import SplatglError
-from ..model.transform import parse_transform
+from ..model.json_text import loads_strict
+from ..model.transform import transform_from_object
 from .decimate import Decimate
 from .floaters import RemoveFloaters
 from .operations import CropBox, CropSphere, DropInvalid, Filter, ShDegree
@@ -33,14 +32,15 @@ def crop_box(text: str) -> CropBox:
     ``scale``) placing the box: a rotated box."""
     t = str(text).strip()
     if t.startswith("{"):
-        try:
-            obj = json.loads(t)
-        except json.JSONDecodeError as exc:
-            raise SplatglError(f"--crop-box: not JSON ({exc.msg} at column {exc.colno})") from None
+        obj = loads_strict(t, "--crop-box")
         if not isinstance(obj, dict) or "min" not in obj or "max" not in obj:
             raise SplatglError("--crop-box: a JSON box needs \"min\" and \"max\" (3 numbers each)")
         placement = {k: v for k, v in obj.items() if k not in ("min", "max")}
-        transform = parse_transform(json.dumps(placement)) if placement else None
+        transform = transform_from_object(placement, "--crop-box") if placement else None
+        for key in ("min", "max"):
+            if not isinstance(obj[key], list):
+                raise SplatglError(f"--crop-box: \"{key}\" must be a list of 3 numbers, got "
+                                   f"{obj[key]!r}")
         return CropBox(tuple(obj["min"]), tuple(obj["max"]), transform)
     v = _numbers(t, 6, "--crop-box", "X0,Y0,Z0,X1,Y1,Z1")
     return CropBox(tuple(v[:3]), tuple(v[3:]))
@@ -103,6 +103,6 @@ def inverted(op):
     from dataclasses import replace
 
     if not hasattr(op, "invert"):
-        raise SplatglError(f"--invert applies to --crop-box, --crop-sphere and --filter, not "
-                           f"--{op.name}")
+        raise SplatglError(f"--invert applies to --crop-box, --crop-sphere, --filter and "
+                           f"--remove, not --{op.name}")
     return replace(op, invert=not op.invert)

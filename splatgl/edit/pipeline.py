@@ -46,6 +46,8 @@ class Step:
                 "after": self.after, "removed": self.removed, "detail": self.detail}
 
     def line(self) -> str:
+        if self.name == "transform":  # moves splats, removes none
+            return f"{self.name:<16} placed  {self.after:>10,}{'':<10}    [{self.parameters}]"
         share = f" ({100.0 * self.removed / self.before:.2f}%)" if self.before else ""
         verb = "merged" if self.name == "decimate" else "removed"
         text = f"{self.name:<16} {verb} {self.removed:>10,}{share:<10} -> {self.after:,}"
@@ -76,6 +78,7 @@ def apply_operations(scene: Scene, operations, progress=None) -> Edited:
             raise SplatglError(f"not an edit operation: {op!r}")
         if isinstance(op, Filter):
             op.check(scene)
+    _check_index_order(operations)
     keep = np.ones(scene.count, bool)
     degree = scene.sh_degree
     steps: list[Step] = []
@@ -94,14 +97,12 @@ def apply_operations(scene: Scene, operations, progress=None) -> Edited:
             rows = np.flatnonzero(keep)
             found = op.find(scene.means[rows], _opacity(scene, rows), progress)
             keep[rows[found.mask]] = False
-            steps.append(Step(op.name, op.describe(), before, int(keep.sum()),
-                              f"threshold {found.threshold:.4g} world units (mean "
-                              f"{found.mean:.4g} + {op.sigma:g} x sd {found.sd:.4g})"))
+            steps.append(Step(op.name, op.describe(), before, int(keep.sum()), found.detail()))
         elif isinstance(op, Decimate):
             scene = select(scene, keep, degree)
             scene = op.apply(scene, progress)
             keep = np.ones(scene.count, bool)
-            steps.append(Step(op.name, op.describe(), before, scene.count))
+            steps.append(Step(op.name, op.describe(), before, scene.count, op.note(before)))
         elif isinstance(op, ShDegree):
             new = min(degree, op.degree)
             steps.append(Step(op.name, op.describe(), before, before,
@@ -111,6 +112,19 @@ def apply_operations(scene: Scene, operations, progress=None) -> Edited:
             raise SplatglError(f"not an edit operation: {op!r}")
         i += 1
     return Edited(select(scene, keep, degree), tuple(steps))
+
+
+def _check_index_order(operations) -> None:
+    """Refuse a filter reading ``index`` (the row in the input) after a --decimate, which
+    renumbers the rows."""
+    merged = False
+    for op in operations:
+        if isinstance(op, Decimate):
+            merged = True
+        elif isinstance(op, Filter) and merged and "index" in op.expression.names:
+            raise SplatglError(f"{op.option} {op.expression.text!r}: 'index' is the splat's row "
+                               "in the input, which --decimate renumbers: put this filter "
+                               "before --decimate")
 
 
 def _opacity(scene: Scene, rows: np.ndarray) -> np.ndarray:

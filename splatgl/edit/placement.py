@@ -61,9 +61,11 @@ def sh_rotation(rotation: np.ndarray, degree: int) -> np.ndarray:
     return out
 
 
-def transform_scene(scene: Scene, transform: ModelTransform | None) -> Scene:
+def transform_scene(scene: Scene, transform: ModelTransform | None,
+                    what: str = "transform") -> Scene:
     """``scene`` with ``transform`` baked into its stored values (see the module notes); the
-    same scene when the transform is None or the identity."""
+    same scene when the transform is None or the identity.  A transform that moves a splat
+    beyond what float32 holds is refused (:class:`SplatglError` naming ``what``)."""
     if transform is None or transform.is_identity:
         return scene
     n = scene.count
@@ -75,12 +77,41 @@ def transform_scene(scene: Scene, transform: ModelTransform | None) -> Scene:
     m_sh = sh_rotation(rot, scene.sh_degree)
     for start in range(0, n, BLOCK):
         rows = slice(start, start + BLOCK)
-        means[rows] = transform.apply_points(scene.means[rows])
+        with np.errstate(over="ignore", invalid="ignore"):
+            placed = transform.apply_points(scene.means[rows])
+        _check_float32(placed, start, scene.means[rows], transform, what)
+        means[rows] = placed
         quats[rows] = quat_multiply(q_rot, scene.quats[rows].astype(np.float64))
         sh[rows] = np.einsum("kj,njc->nkc", m_sh, scene.sh[rows].astype(np.float64))
     log_scales = (scene.log_scales.astype(np.float64) + np.log(transform.scale)).astype(np.float32)
     return Scene(_frozen(means), _frozen(quats), _frozen(log_scales), scene.opacity_logits,
                  _frozen(sh), scene.kind)
+
+
+def describe_transform(transform: ModelTransform) -> str:
+    """``rotate 90 deg, scale 2, translate 1,0,0`` (the parts that are not the identity)."""
+    rot = np.asarray(transform.rotation)
+    angle = float(np.degrees(np.arccos(np.clip((np.trace(rot) - 1.0) / 2.0, -1.0, 1.0))))
+    parts = [f"rotate {angle:.4g} deg"] if angle > 0 else []
+    parts += [f"scale {transform.scale:g}"] if transform.scale != 1 else []
+    parts += ([f"translate {','.join(f'{v:g}' for v in transform.translation)}"]
+              if any(transform.translation) else [])
+    return ", ".join(parts) or "identity"
+
+
+#: The largest finite float32: positions beyond it are infinite in the file.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def _check_float32(placed: np.ndarray, start: int, before: np.ndarray, transform, what: str):
+    """Refuse positions that float32 cannot hold (they would be stored as infinities)."""
+    bad = ~(np.abs(placed) <= FLOAT32_MAX).all(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        was = ",".join(f"{v:.4g}" for v in before[i])
+        raise SplatglError(f"{what} ({describe_transform(transform)}) moves splat {start + i:,} "
+                           f"(at {was}) beyond float32's range (|coordinate| <= 3.4e38): its "
+                           "position would be infinite")
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:

@@ -32,10 +32,13 @@ def attribute_statistics(scene: Scene) -> dict[str, dict]:
     ``p99``, ``max``, ``mean`` over the finite values, and ``nonfinite`` (how many are not)."""
     out = {}
     for name in names_for(scene):
+        if not ATTRIBUTES[name].statistic:
+            continue
         values = np.empty(scene.count)
         for start in range(0, scene.count, BLOCK):
             stop = min(start + BLOCK, scene.count)
-            values[start:stop] = ATTRIBUTES[name].compute(Rows(scene, start, stop))
+            with np.errstate(all="ignore"):  # values beyond float64 count as not finite
+                values[start:stop] = ATTRIBUTES[name].compute(Rows(scene, start, stop))
         finite = values[np.isfinite(values)]
         entry = {"unit": ATTRIBUTES[name].unit, "nonfinite": int(values.size - finite.size)}
         if finite.size:
@@ -51,6 +54,15 @@ def overdraw(scene: Scene, camera=None) -> dict:
     ``pixels``, ``per_pixel`` and the camera's ``width``/``height``."""
     cam = camera if camera is not None else default_camera(scene)
     near = resolve_near(RenderSettings(), scene.robust_radius)
+    with np.errstate(all="ignore"):  # extreme stored values: their splats count nothing
+        total = _fragments(scene, cam, near)
+    pixels = cam.width * cam.height
+    return {"fragments": total, "pixels": pixels, "per_pixel": total / pixels,
+            "width": cam.width, "height": cam.height}
+
+
+def _fragments(scene: Scene, cam, near: float) -> float:
+    """The estimated fragments of every splat (those whose footprint is not finite: none)."""
     total = 0.0
     for start in range(0, scene.count, BLOCK):
         rows = slice(start, start + BLOCK)
@@ -71,10 +83,10 @@ def overdraw(scene: Scene, camera=None) -> dict:
         half = np.abs(axes[:, 0]) + np.abs(axes[:, 1])
         area = 4.0 * np.abs(axes[:, 0, 0] * axes[:, 1, 1] - axes[:, 0, 1] * axes[:, 1, 0])
         centre = project_means(p_cam, cam)
-        total += coverage(centre - half, centre + half, area, cam.width, cam.height)
-    pixels = cam.width * cam.height
-    return {"fragments": total, "pixels": pixels, "per_pixel": total / pixels,
-            "width": cam.width, "height": cam.height}
+        ok = np.isfinite(centre).all(axis=1) & np.isfinite(half).all(axis=1) & np.isfinite(area)
+        total += coverage(centre[ok] - half[ok], centre[ok] + half[ok], area[ok], cam.width,
+                          cam.height)
+    return total
 
 
 def _surfel_fragments(means, rot, scales, opac, cam, near) -> float:
@@ -83,7 +95,8 @@ def _surfel_fragments(means, rot, scales, opac, cam, near) -> float:
     screen = surfel_screen(means, rot, scales, cam)
     boxes = surfel_bounds(screen, opac, cam, near)
     shown = boxes.visible & (to_camera(means, cam)[:, 2] > near)
-    return float((4.0 * boxes.half[:, 0] * boxes.half[:, 1])[shown].sum())
+    area = 4.0 * boxes.half[:, 0] * boxes.half[:, 1]
+    return float(area[shown & np.isfinite(area)].sum())
 
 
 def format_statistics(stats: dict[str, dict], draw: dict | None) -> str:

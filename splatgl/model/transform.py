@@ -81,24 +81,34 @@ class ModelTransform:
         return self.scale * np.asarray(points, np.float64) @ np.asarray(self.rotation).T + self.translation
 
 
-def parse_transform(text: str) -> ModelTransform:
+def parse_transform(text: str, what: str = "--transform") -> ModelTransform:
     """A transform from inline JSON or a JSON file: ``{"rotate_deg": [rx, ry, rz] or
-    "rotation": 3x3, "translate": [x, y, z], "scale": s}`` (all keys optional)."""
+    "rotation": 3x3, "translate": [x, y, z], "scale": s}`` (all keys optional; a key repeated
+    in the object is refused).  ``what`` names the option in messages."""
+    from .json_text import DuplicateKeyError, unique_keys
+
     source = text
     path = Path(text)
     if not text.lstrip().startswith("{") and path.is_file():
         source = path.read_text()
     try:
-        obj = json.loads(source)
+        obj = json.loads(source, object_pairs_hook=unique_keys)
+    except DuplicateKeyError as exc:
+        raise SplatglError(f"{what}: {exc}: {text!r}") from None
     except json.JSONDecodeError as exc:
-        raise SplatglError(f"--transform: not JSON or a JSON file ({exc.msg} at column {exc.colno}): {text!r}") from None
+        raise SplatglError(f"{what}: not JSON or a JSON file ({exc.msg} at column {exc.colno}): {text!r}") from None
+    return transform_from_object(obj, what)
+
+
+def transform_from_object(obj, what: str = "--transform") -> ModelTransform:
+    """A transform from a parsed JSON object (:func:`parse_transform`'s keys)."""
     if not isinstance(obj, dict):
-        raise SplatglError("--transform: expected a JSON object")
+        raise SplatglError(f"{what}: expected a JSON object")
     unknown = set(obj) - {"rotate_deg", "rotation", "translate", "scale"}
     if unknown:
-        raise SplatglError(f"--transform: unknown key(s) {sorted(unknown)} (use rotate_deg, rotation, translate, scale)")
+        raise SplatglError(f"{what}: unknown key(s) {sorted(unknown)} (use rotate_deg, rotation, translate, scale)")
     if "rotation" in obj and "rotate_deg" in obj:
-        raise SplatglError("--transform: give either 'rotate_deg' or 'rotation', not both "
+        raise SplatglError(f"{what}: give either 'rotate_deg' or 'rotation', not both "
                            "(one would be ignored)")
     try:
         if "rotation" in obj:
@@ -106,5 +116,5 @@ def parse_transform(text: str) -> ModelTransform:
         else:
             rot = tuple(map(tuple, _euler_xyz(obj.get("rotate_deg", (0, 0, 0)))))
         return ModelTransform(rot, tuple(obj.get("translate", (0.0, 0.0, 0.0))), float(obj.get("scale", 1.0)))
-    except (TypeError, ValueError) as exc:
-        raise SplatglError(f"--transform: {exc}") from None
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise SplatglError(f"{what}: {exc}") from None
