@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..formats.convert import convert
+from ..formats.convert import convert, dropped_note
 from ..errors import SplatglError
 from ._spz_axes import add_spz_axes_argument
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
@@ -108,6 +108,9 @@ def _print_result(result) -> None:
     for side, axes in (("input", result.input_axes), ("output", result.output_axes)):
         if axes is not None:
             print(f"SPZ axes of the {side}: {axes.describe()}")
+    dropped = dropped_note(e["dropped"], result.output_format)
+    if dropped:
+        print(f"note: {dropped}")
     if e["bit_exact"]:
         print("round trip: bit-exact (every stored value identical)")
         return

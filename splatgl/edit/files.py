@@ -12,13 +12,15 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..formats import detect_format, load_scene, save_scene, writer_for
-from ..formats.convert import MAX_SH_DEGREE_OF_FORMAT
+from ..formats.convert import (EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT, dropped_note,
+                               extra_properties)
 from ..model.scene import InvalidRowsDropped
 from ..model.transform import ModelTransform
 from ..output.files import check_output_path
 from ..progress import default_progress
 from .pipeline import Step, apply_operations
-from .placement import MergeBuilder, describe_transform, merged_sh_degree, transform_scene
+from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shared_extras,
+                        transform_scene)
 
 
 #: Writers that can write a scene of zero splats (``--allow-empty``); the others' files need
@@ -100,7 +102,7 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
     if spz_axes is not None and "spz" not in formats:
         raise SplatglError("--spz-axes applies to .spz inputs only")
     progress = progress if progress is not None else default_progress()
-    scene, counts, steps = _read(inputs, transforms, drop_invalid, progress, spz_axes)
+    scene, counts, steps, extras = _read(inputs, transforms, drop_invalid, progress, spz_axes)
     edited = apply_operations(scene, operations, progress)
     del scene
     result, notes = edited.scene, []
@@ -110,6 +112,7 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
                      f"{limit + 1}..{result.sh_degree} dropped")
         result = result.with_sh_degree(limit)
     steps += list(edited.steps)
+    notes += _dropped_extras(extras, result, writer, steps)
     _check_finite(result)
     if result.count == 0 and not allow_empty:
         culprit = next((s for s in steps if s.before and not s.after), None)
@@ -145,9 +148,23 @@ def _check_finite(scene) -> None:
                                    "written")
 
 
+def _dropped_extras(names, result, writer, steps) -> list[str]:
+    """The note naming the other per-splat properties of the inputs (``names``) that the output
+    does not keep (none, or one line)."""
+    if writer is not None and writer.NAME not in EXTRAS_FORMATS:
+        note = dropped_note(list(names), writer.NAME)
+    else:
+        kept = () if result.extras is None else result.extras.dtype.names
+        why = ("--decimate merges splats, whose own values they were" if
+               any(s.name == "decimate" for s in steps) else "not every input has them")
+        note = dropped_note([n for n in names if n not in kept], why=why)
+    return [note] if note else []
+
+
 def _read(inputs, transforms, drop_invalid, progress, spz_axes):
-    """The merged, placed scene of ``inputs``, their counts, and the drop-invalid step."""
-    scenes, counts, dropped, total, placed = [], [], 0, 0, []
+    """The merged, placed scene of ``inputs``, their counts, the drop-invalid step, and the
+    names of the inputs' other per-splat properties (:func:`extra_properties`)."""
+    scenes, counts, dropped, total, placed, extras = [], [], 0, 0, [], []
     for path, transform in zip(inputs, transforms):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", InvalidRowsDropped)
@@ -162,6 +179,7 @@ def _read(inputs, transforms, drop_invalid, progress, spz_axes):
         dropped += here
         counts.append(scene.count + here)
         total += counts[-1]
+        extras += [n for n in extra_properties(scene) if n not in extras]
         scenes.append(transform_scene(scene, transform, f"--transform of {path}"))
         if transform is not None and not transform.is_identity:
             placed.append(Step("transform", f"{path}: {describe_transform(transform)}",
@@ -175,9 +193,10 @@ def _read(inputs, transforms, drop_invalid, progress, spz_axes):
         raise SplatglError(f"edit: cannot merge 3DGS Gaussians with 2DGS surfels "
                            f"({', '.join(f'{p}: {s.kind.value}' for p, s in zip(inputs, scenes))})")
     if len(scenes) == 1:
-        return scenes[0], counts, steps
+        return scenes[0], counts, steps, extras
     builder = MergeBuilder(sum(s.count for s in scenes),
-                           merged_sh_degree([s.sh_degree for s in scenes]), scenes[0].kind)
+                           merged_sh_degree([s.sh_degree for s in scenes]), scenes[0].kind,
+                           shared_extras(scenes))
     while scenes:  # each input is released once copied
         builder.add(scenes.pop(0))
-    return builder.scene(), counts, steps
+    return builder.scene(), counts, steps, extras

@@ -172,4 +172,4 @@ def select(scene: Scene, keep: np.ndarray, degree: int) -> Scene:
     for arr in out.values():
         arr.flags.writeable = False
     return Scene(out["means"], out["quats"], out["log_scales"], out["opacity_logits"], out["sh"],
-                 scene.kind)
+                 scene.kind, extras=None if scene.extras is None else scene.extras[keep])

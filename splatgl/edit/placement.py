@@ -85,7 +85,31 @@ def transform_scene(scene: Scene, transform: ModelTransform | None,
         sh[rows] = np.einsum("kj,njc->nkc", m_sh, scene.sh[rows].astype(np.float64))
     log_scales = (scene.log_scales.astype(np.float64) + np.log(transform.scale)).astype(np.float32)
     return Scene(_frozen(means), _frozen(quats), _frozen(log_scales), scene.opacity_logits,
-                 _frozen(sh), scene.kind)
+                 _frozen(sh), scene.kind, extras=_turned_extras(scene.extras, rot))
+
+
+def _turned_extras(extras: np.ndarray | None, rot: np.ndarray) -> np.ndarray | None:
+    """A scene's other per-splat properties after a turn by ``rot``: its normals (``nx ny nz``)
+    turn with the splats, the rest is kept as it is."""
+    axes = ("nx", "ny", "nz")
+    if extras is None or not set(axes) <= set(extras.dtype.names):
+        return extras
+    out = extras.copy()
+    turned = np.stack([extras[a].astype(np.float64) for a in axes], axis=1) @ rot.T
+    for i, a in enumerate(axes):
+        out[a] = turned[:, i]
+    return out
+
+
+def shared_extras(scenes) -> np.dtype | None:
+    """The other per-splat properties every one of ``scenes`` has (same name and type), which a
+    merge keeps; None when they share none."""
+    names = None
+    for scene in scenes:
+        own = [] if scene.extras is None else [(n, scene.extras.dtype[n])
+                                               for n in scene.extras.dtype.names]
+        names = own if names is None else [f for f in names if f in own]
+    return np.dtype(names) if names else None
 
 
 def describe_transform(transform: ModelTransform) -> str:
@@ -140,7 +164,8 @@ def merge_scenes(scenes, transforms=None, sh_degree: int | None = None) -> Scene
     degree = merged_sh_degree([s.sh_degree for s in scenes], sh_degree)
     if len(scenes) == 1 and degree == scenes[0].sh_degree:
         return transform_scene(scenes[0], transforms[0])
-    builder = MergeBuilder(sum(s.count for s in scenes), degree, scenes[0].kind)
+    builder = MergeBuilder(sum(s.count for s in scenes), degree, scenes[0].kind,
+                           shared_extras(scenes))
     for scene, transform in zip(scenes, transforms):
         builder.add(transform_scene(scene, transform))
     return builder.scene()
@@ -150,7 +175,7 @@ class MergeBuilder:
     """Fills one merged scene's arrays input by input, so a caller that loads the inputs one at
     a time holds one input and the merged arrays, never every input at once."""
 
-    def __init__(self, count: int, sh_degree: int, kind):
+    def __init__(self, count: int, sh_degree: int, kind, extras: np.dtype | None = None):
         self.k = sh_coeff_count(sh_degree)
         self.kind = kind
         self.means = np.empty((count, 3), np.float32)
@@ -159,6 +184,7 @@ class MergeBuilder:
         self.log_scales = np.empty((count, nscale), np.float32)
         self.opacity_logits = np.empty(count, np.float32)
         self.sh = np.zeros((count, self.k, 3), np.float32)
+        self.extras = None if extras is None else np.empty(count, extras)  # shared_extras()
         self.filled = 0
 
     def add(self, scene: Scene) -> None:
@@ -171,10 +197,12 @@ class MergeBuilder:
         self.opacity_logits[rows] = scene.opacity_logits
         k = min(self.k, scene.sh.shape[1])
         self.sh[rows, :k] = scene.sh[:, :k]
+        for name in self.extras.dtype.names if self.extras is not None else ():
+            self.extras[name][rows] = scene.extras[name]
         self.filled += scene.count
 
     def scene(self) -> Scene:
         arrays = [self.means, self.quats, self.log_scales, self.opacity_logits, self.sh]
         for a in arrays:
             a.flags.writeable = False
-        return Scene(*arrays, self.kind)
+        return Scene(*arrays, self.kind, extras=self.extras)

@@ -26,6 +26,27 @@ from ..model.scene import Scene
 MAX_SH_DEGREE_OF_FORMAT = {"splat": 0}
 #: The attributes :func:`conversion_error` measures and writers bound.
 ATTRIBUTES = ("position", "scale", "opacity", "rotation", "color", "sh_rest")
+#: Formats that store a scene's other per-splat properties (:attr:`Scene.extras`).
+EXTRAS_FORMATS = ("ply",)
+
+
+def extra_properties(scene: Scene) -> tuple[str, ...]:
+    """The names of ``scene``'s other per-splat properties that hold something: normals that
+    are all zero (the INRIA files' placeholders, which the PLY writer writes anyway) do not."""
+    extras = scene.extras
+    if extras is None:
+        return ()
+    normals = [n for n in ("nx", "ny", "nz") if n in extras.dtype.names]
+    blank = not any(np.any(extras[n] != 0) for n in normals)
+    return tuple(n for n in extras.dtype.names if not (blank and n in normals))
+
+
+def dropped_note(names, format_name: str | None = None, why: str | None = None) -> str | None:
+    """The one line saying which per-splat properties were not written, or None for none."""
+    if not names:
+        return None
+    why = why or f"the {format_name} format cannot hold them; .ply keeps them"
+    return f"per-splat properties dropped: {', '.join(names)} ({why})"
 
 
 def error_bounds(writer, scene: Scene, **options) -> dict | None:
@@ -84,8 +105,10 @@ def conversion_error(a: Scene, b: Scene) -> dict:
     - ``sh_rest``: absolute error of the SH coefficients of degree >= 1 both scenes hold, or
       None when either has degree 0.
 
-    Also ``count``, ``sh_degree`` ``[a, b]``, ``bit_exact`` (every stored float32 identical,
-    same SH degree and kind) and ``color_outside_01``: how many DC colour channels of ``a``
+    Also ``count``, ``sh_degree`` ``[a, b]``, ``bit_exact`` (every stored value identical,
+    the other per-splat properties of ``a`` too, same SH degree and kind), ``dropped``: the
+    other per-splat properties of ``a`` that ``b`` lacks (:func:`extra_properties`), and
+    ``color_outside_01``: how many DC colour channels of ``a``
     (``0.5 + SH_C0 f_dc``) lie outside [0, 1], which 8-bit formats clip (their error is the
     distance clipped, not a quantisation step).
     """
@@ -104,13 +127,18 @@ def conversion_error(a: Scene, b: Scene) -> dict:
     rest = None
     if k > 1:
         rest = _stats(np.abs(b.sh[:, 1:k].astype(f64) - a.sh[:, 1:k].astype(f64)))
+    kept = b.extras.dtype.names if b.extras is not None else ()
+    dropped = [n for n in extra_properties(a) if n not in kept]
     bit_exact = a.sh.shape == b.sh.shape and all(
         np.array_equal(getattr(a, n), getattr(b, n))
-        for n in ("means", "quats", "log_scales", "opacity_logits", "sh"))
+        for n in ("means", "quats", "log_scales", "opacity_logits", "sh")) and all(
+        n in kept and a.extras[n].tobytes() == b.extras[n].astype(a.extras[n].dtype).tobytes()
+        for n in (a.extras.dtype.names if a.extras is not None else ()))
     return {
         "count": a.count,
         "sh_degree": [a.sh_degree, b.sh_degree],
         "bit_exact": bool(bit_exact),
+        "dropped": dropped,
         "position": _stats(position),
         "scale": _stats(scale),
         "opacity": _stats(np.abs(ob - oa)),

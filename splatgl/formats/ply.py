@@ -5,8 +5,9 @@ The vertex element holds one splat per row with (at least) the properties
 
     x y z  f_dc_0..2  opacity  scale_0..2 (scale_0..1 for 2DGS surfels)  rot_0..3 (w, x, y, z)
 
-plus optional ``nx ny nz`` (ignored), ``f_rest_*`` (0, 9, 24 or 45 of them, channel-major) and
-anything else (ignored).  Values are the raw training values (log-scales, opacity logits,
+plus optional ``f_rest_*`` (0, 9, 24 or 45 of them, channel-major) and anything else (``nx ny
+nz``, a ``label``): kept as the scene's :attr:`~splatgl.model.scene.Scene.extras`, in their
+stored types, which the writer writes again.  Values are the raw training values (log-scales, opacity logits,
 unnormalised quaternions); :func:`splatgl.model.scene.activate` validates them.
 
 Other elements may precede or follow the vertex element.  In binary files they are skipped by
@@ -166,7 +167,7 @@ class _Columns:
     the file) into ``sh[:, 1:]`` (N, K - 1, 3).  Checks the required properties on creation.
     """
 
-    def __init__(self, path, names: list[str], count: int):
+    def __init__(self, path, names: list[str], count: int, dtype: np.dtype | None = None):
         have = set(names)
         surfel = "scale_1" in have and "scale_2" not in have
         self.surfel = surfel
@@ -204,17 +205,25 @@ class _Columns:
         for j in rest_idx:  # channel-major: f_rest_{c (K-1) + m} is coefficient m + 1 of c
             c, m = divmod(j, k - 1)
             self.targets.append((f"f_rest_{j}", self.sh, (m + 1, c)))
+        used = {name for name, _, _ in self.targets}
+        others = [(n, dtype[n].newbyteorder("=")) for n in names if n not in used and
+                  dtype is not None]
+        #: every other property, in its stored type (None when there is none)
+        self.extras = np.empty(count, np.dtype(others)) if others else None
 
     def freeze(self) -> None:
         """Mark the arrays read-only: nothing else holds them, so a scene may adopt them."""
-        for arr in (self.means, self.quats, self.log_scales, self.opacity, self.sh):
-            arr.flags.writeable = False
+        for arr in (self.means, self.quats, self.log_scales, self.opacity, self.sh, self.extras):
+            if arr is not None:
+                arr.flags.writeable = False
 
     def fill(self, rows: np.ndarray, start: int) -> None:
         """Copy the structured ``rows`` (any scalar types, either byte order) to ``start:``."""
         stop = start + rows.shape[0]
         for name, target, index in self.targets:
             target[(slice(start, stop),) + index] = rows[name]
+        for name in self.extras.dtype.names if self.extras is not None else ():
+            self.extras[name][start:stop] = rows[name]
 
 
 def _sh_coeffs(names: list[str]) -> int:
@@ -259,7 +268,7 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
                              3 * file_size, "vertex")
                 vertex = _read_vertex_ascii(path, fh, header)
                 _check_not_empty(path, count)
-                plan = _Columns(path, prop_names, count)
+                plan = _Columns(path, prop_names, count, vertex.dtype)
                 if progress is not None:
                     progress(0, count, what)
                 plan.fill(vertex, 0)
@@ -272,14 +281,14 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
                 # binary: rows go straight into the float32 arrays through one chunk buffer
                 check_memory(path, count, _sh_coeffs(prop_names), 0,
                              min(count, CHUNK_ROWS) * dtype.itemsize, "vertex")
-                plan = _Columns(path, prop_names, count)
+                plan = _Columns(path, prop_names, count, dtype)
                 _read_rows_chunked(path, fh, offset, dtype, count, plan, progress, what)
     except OSError as exc:
         raise _error(path, f"cannot read: {exc.strerror or exc}") from None
     kind = SplatKind.SURFEL_2D if plan.surfel else SplatKind.GAUSSIAN_3D
     plan.freeze()
     return activate(path, plan.means, plan.quats, plan.log_scales, plan.opacity, plan.sh, kind,
-                    drop_invalid)
+                    drop_invalid, plan.extras)
 
 
 def _check_not_empty(path, count: int) -> None:

@@ -4,7 +4,9 @@ properties (the compressed PLY and the level-of-detail file use it too).
 
 The vertex layout is :func:`scene_to_vertices`: ``x y z [nx ny nz] f_dc_0..2 f_rest_*
 (channel-major) opacity scale_* rot_0..3``, the raw training values (log-scales, opacity
-logits, quaternions as stored).
+logits, quaternions as stored), then the scene's other per-splat properties
+(:attr:`~splatgl.model.scene.Scene.extras`, read from a PLY) in their stored types; its normals
+take the place of the zeros.
 """
 
 from __future__ import annotations
@@ -64,11 +66,16 @@ def _header(elements, byte_order: str, ascii: bool, comments) -> bytes:
 def scene_to_vertices(scene: Scene, normals: bool = True) -> np.ndarray:
     """The INRIA vertex layout of ``scene``: a structured float32 array, one row per splat.
 
-    Fields: x y z [nx ny nz] f_dc_0..2 f_rest_* (channel-major) opacity scale_* rot_0..3.
+    Fields: x y z [nx ny nz] f_dc_0..2 f_rest_* (channel-major) opacity scale_* rot_0..3, then
+    the scene's extras (its own ``nx ny nz`` in their place, written even without ``normals``).
     """
     dc, rest = sh_to_rest(scene.sh)
+    extras = scene.extras
+    names = extras.dtype.names if extras is not None else ()
     cols: list[tuple[str, np.ndarray]] = [(n, scene.means[:, i]) for i, n in enumerate("xyz")]
-    if normals:
+    if all(n in names for n in ("nx", "ny", "nz")):
+        cols += [(n, extras[n]) for n in ("nx", "ny", "nz")]
+    elif normals and not {"nx", "ny", "nz"} & set(names):
         zero = np.zeros(scene.count, np.float32)
         cols += [("nx", zero), ("ny", zero), ("nz", zero)]
     cols += [(f"f_dc_{i}", dc[:, i]) for i in range(3)]
@@ -76,7 +83,9 @@ def scene_to_vertices(scene: Scene, normals: bool = True) -> np.ndarray:
     cols.append(("opacity", scene.opacity_logits))
     cols += [(f"scale_{i}", scene.log_scales[:, i]) for i in range(scene.log_scales.shape[1])]
     cols += [(f"rot_{i}", scene.quats[:, i]) for i in range(4)]
-    out = np.empty(scene.count, np.dtype([(n, "<f4") for n, _ in cols]))
+    cols += [(n, extras[n]) for n in names if n not in {c for c, _ in cols}]
+    out = np.empty(scene.count, np.dtype([(n, np.asarray(c).dtype.newbyteorder("<") if n in names
+                                           else "<f4") for n, c in cols]))
     for n, c in cols:
         out[n] = c
     return out

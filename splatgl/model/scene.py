@@ -70,6 +70,9 @@ class Scene:
             :func:`splatgl.load_scene`; None for a scene built in memory (a subset, a
             transformed copy).  It gives the scene's defaults: its training cameras' up
             (:func:`splatgl.default_camera`) and antialiasing (:func:`splatgl.default_settings`).
+        extras: the file's other per-splat properties (a PLY's ``nx ny nz``, a ``label``): a
+            (N,) structured array of their stored types, or None; :meth:`subset` and the edit
+            operations keep them with their rows, the PLY writer writes them.
 
     Keeping the raw values makes a PLY written from a scene read back bit-identical.  The
     activations (exp scale, sigmoid opacity, normalised quaternion) live in the three cached
@@ -84,6 +87,7 @@ class Scene:
     sh: np.ndarray
     kind: SplatKind = SplatKind.GAUSSIAN_3D
     source: SceneSource | None = field(default=None, compare=False, repr=False)
+    extras: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         n = np.shape(self.means)[0]
@@ -104,6 +108,8 @@ class Scene:
             raise ValueError(f"Scene.sh has shape {sh_shape}, expected ({n}, K, 3)")
         if sh_shape[1] not in [sh_coeff_count(d) for d in range(MAX_SH_DEGREE + 1)]:
             raise ValueError(f"Scene.sh has {sh_shape[1]} coefficients per channel")
+        if self.extras is not None and (self.extras.shape != (n,) or self.extras.dtype.names is None):
+            raise ValueError(f"Scene.extras must be a ({n},) structured array")
         for name in ("means", "quats", "log_scales", "opacity_logits", "sh"):
             if _adoptable(getattr(self, name)):
                 continue  # a loader's read-only float32 array: nothing can change it, no copy
@@ -208,7 +214,7 @@ class Scene:
         """A new scene with only ``rows`` (boolean mask or index array)."""
         return Scene(
             self.means[rows], self.quats[rows], self.log_scales[rows], self.opacity_logits[rows],
-            self.sh[rows], self.kind,
+            self.sh[rows], self.kind, extras=None if self.extras is None else self.extras[rows],
         )
 
     def with_sh_degree(self, degree: int) -> "Scene":
@@ -217,7 +223,8 @@ class Scene:
         sh = self.sh[:, :k]
         if sh.shape[1] < k:
             sh = np.concatenate([sh, np.zeros((self.count, k - sh.shape[1], 3), np.float32)], 1)
-        return Scene(self.means, self.quats, self.log_scales, self.opacity_logits, sh, self.kind)
+        return Scene(self.means, self.quats, self.log_scales, self.opacity_logits, sh, self.kind,
+                     extras=self.extras)
 
 
 def _adoptable(arr) -> bool:
@@ -343,6 +350,7 @@ def activate(
     sh: np.ndarray,
     kind: SplatKind = SplatKind.GAUSSIAN_3D,
     drop_invalid: bool = False,
+    extras: np.ndarray | None = None,
 ) -> Scene:
     """Validate raw file values and build the :class:`Scene` (the one entry point for loaders).
 
@@ -384,4 +392,5 @@ def activate(
             raise SceneFormatError(path, f"all {n} rows are invalid; nothing left to render")
         means, quats, log_scales = means[keep], quats[keep], log_scales[keep]
         opacity_logits, sh = opacity_logits[keep], sh[keep]
-    return Scene(means, quats, log_scales, opacity_logits, sh, kind)
+        extras = None if extras is None else extras[keep]
+    return Scene(means, quats, log_scales, opacity_logits, sh, kind, extras=extras)
