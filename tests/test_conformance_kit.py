@@ -141,6 +141,18 @@ def test_export_checks_its_folder_before_any_work(tmp_path, capsys, monkeypatch)
     out = tmp_path / "no" / "kit"
     assert main(["conformance", "export", str(out), "--no-real"]) == 2
     assert f"{out}: folder {out.parent} does not exist" in _one_line(capsys)
+    monkeypatch.setattr(os, "access", lambda path, mode: False)   # as a user, not root, sees it
+    assert main(["conformance", "export", str(tmp_path / "kit"), "--no-real"]) == 2
+    assert f"{tmp_path / 'kit'}: folder {tmp_path} is not writable" in _one_line(capsys)
+
+
+def test_render_into_an_unwritable_folder_is_refused_before_any_work(tmp_path, capsys, monkeypatch,
+                                                                      small_kit):
+    monkeypatch.setattr(os, "access", lambda path, mode: False)
+    out = tmp_path / "a" / "b"
+    assert main(["conformance", "render", str(small_kit), "-o", str(out)]) == 2
+    assert f"-o {out}: folder {tmp_path} is not writable" in _one_line(capsys)
+    assert not (tmp_path / "a").exists()
 
 
 def test_export_says_when_the_real_scenes_are_left_out(tmp_path, capsys, monkeypatch):
