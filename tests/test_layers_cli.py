@@ -53,7 +53,7 @@ def test_exr_without_layers_is_unchanged(tmp_path):
     assert main(["render", "-o", str(out)] + ARGS) == 0
     ch, _ = _channels(out)
     assert list(ch) == ["R", "G", "B", "A", "Z"]
-    assert main(["render", "-o", str(out), "--layers", "normal"] + ARGS) == 0
+    assert main(["render", "-o", str(out), "--layers", "normal", "--force"] + ARGS) == 0
     ch, _ = _channels(out)
     assert set(ch) == {"R", "G", "B", "A", "N.X", "N.Y", "N.Z"}
 

@@ -257,7 +257,8 @@ def test_path_frames_are_the_one_view_lod_renders(demo_lod, tmp_path, capsys, cu
         name = f"{k:05d}.png"
         assert not np.array_equal(read_image(tmp_path / "lod" / name), read_image(tmp_path / "full" / name))
         save_camera(tmp_path / "cam.json", cam)
-        assert render("--camera", tmp_path / "cam.json", *cut, "-o", tmp_path / "one.png") == 0
+        assert render("--camera", tmp_path / "cam.json", *cut, "-o", tmp_path / "one.png",
+                      "--force") == 0
         np.testing.assert_array_equal(read_image(tmp_path / "one.png"), read_image(tmp_path / "lod" / name))
     assert full != lod
 

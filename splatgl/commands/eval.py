@@ -100,7 +100,6 @@ def run(args: argparse.Namespace) -> int:
     # or none
     json_file = None if json_to_stdout(args) else args.json
     reports = {"--csv": args.csv, "--json": json_file, "--sheet": args.sheet}
-    output_files(args, reports)
     views = load_dataset(args.dataset, args.images, args.split, args.max_width)
     if args.select:
         views = [views[i] for i in select_indices(args.select, len(views), str(args.dataset))]
