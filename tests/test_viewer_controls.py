@@ -207,3 +207,64 @@ def test_status_panel_reuses_rendered_text_and_draws_what_render_text_draws(monk
     panel = o.text_image(lines)
     assert [c[3] for c in calls] == [lines[0]]          # only the changed line is rendered
     assert np.array_equal(panel, _panel_by_render_text(lines, o.FONT_SIZE))
+
+
+def _status(**changes):
+    from splatgl.viewer.overlay import Status
+
+    fields = dict(renderer="quad", fps=9.6, frame=0.1612, sort=0.0121, draw=0.1474,
+                  splats="splats 45,624 drawn / 45,624", settings="rgba32f  SH 0/0  ellipse  bg 0,0,0",
+                  size=(640, 360), fov="fov 50.0", view="colour", camera="",
+                  quality="exact (as splatgl render)", moving=True)
+    return Status(**{**fields, **changes})
+
+
+def test_status_panel_shows_the_moving_rate_apart_from_the_exact_frames_cost():
+    """With a budget: the rate of the moving frames, and what the last exact frame cost, whole
+    (no shorter than its sort and draw); without one, the plain rate and the last frame."""
+    from splatgl.viewer.overlay import status_lines
+
+    lines = status_lines(_status())
+    assert lines[0] == "quad  moving 9.6 fps  exact 161.2 ms (sort 12.1, draw 147.4)"
+    assert lines[1] == "splats 45,624 drawn / 45,624"       # no "splats ... splats"
+    assert status_lines(_status(moving=False, fps=6.2))[0] == \
+        "quad  6.2 fps  frame 161.2 ms (sort 12.1, draw 147.4)"
+    assert status_lines(_status(frame=0.0, fps=0.0))[0] == "quad  moving - fps  exact -"
+
+
+def test_small_windows_get_a_compact_panel():
+    """A 640x360 window: the panel covers about a third of it at full size, a small corner
+    compact (the rate, the size and view, the quality and the message)."""
+    from splatgl.viewer.overlay import Overlay, status_lines
+
+    full, compact = Overlay(), Overlay()
+    full.update(status_lines(_status(message="saved splatgl-view-0001.png")), 0.0)
+    compact.update(status_lines(_status(message="saved splatgl-view-0001.png"), compact=True),
+                   0.0, compact=True)
+    area = lambda o: o.image.shape[0] * o.image.shape[1] / (640 * 360)   # noqa: E731
+    assert area(full) > 0.2 and area(compact) < 0.12
+    assert "saved splatgl-view-0001.png" in compact.lines
+    assert compact.lines[0].startswith("quad  moving 9.6 fps  exact 161.2 ms")
+
+
+def test_status_messages_expire():
+    from splatgl.viewer.overlay import MESSAGE_SECONDS, Message
+
+    m = Message()
+    m.say("saved splatgl-view-0001.png", now=100.0)
+    assert m.current(now=100.0 + MESSAGE_SECONDS - 0.1) == "saved splatgl-view-0001.png"
+    assert m.current(now=100.0 + MESSAGE_SECONDS) == ""
+    assert 2.0 <= MESSAGE_SECONDS <= 8.0
+
+
+def test_lens_views_name_the_lens_field_of_view():
+    """A fisheye shows the field of view it is drawn with (180 by default, as --help says),
+    not the orbit's vertical one (115 for that fisheye's focal length)."""
+    from splatgl.cameras.registry import retarget
+    from splatgl.viewer.display import lens_fov
+
+    cam = Camera.from_fov(640, 360, 50.0, np.eye(4))
+    assert lens_fov(retarget(cam, "fisheye", None), 115.0) == "fov 180.0 fisheye"
+    assert lens_fov(retarget(cam, "fisheye", 220.0), 115.0) == "fov 220.0 fisheye"
+    assert lens_fov(retarget(cam, "equirectangular"), 90.0) == "fov 360x180 panorama"
+    assert lens_fov(cam, 50.0) == "fov 50.0"

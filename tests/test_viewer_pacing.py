@@ -66,6 +66,11 @@ def test_moving_drafts_then_exact_at_rest(xvfb_display, scene, tmp_path, kind):
             assert steps < 10
         assert v.pacer.exact and v.last.quality.startswith("exact")
         assert not v.step(dt=0.0)        # exact: nothing more to draw
+        # the panel: the moving frames' rate, and the exact frame's cost no shorter than its
+        # sort and draw (it said "sort 0.0", and a frame shorter than the draw)
+        status = v._status(v.camera())
+        assert status.moving and status.fps > 0.0 and status.sort > 0.0
+        assert status.frame >= status.sort + status.draw > 0.0
         v.overlay.visible = False
         v.present()
         want = np.clip(v.renderer.render(scene, v.camera(), v.settings, kind)[..., :3], 0.0, 1.0)

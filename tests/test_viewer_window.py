@@ -93,6 +93,10 @@ def test_drag_key_screenshot_matches_headless_render(viewer, demo, tmp_path):
     # What the window shows is that image: same rows (no y flip), within one 8-bit step.
     shown = _window_pixels(v).astype(np.int32)
     assert np.abs(shown - np.round(got * 255).astype(np.int32)).max() <= 1
+    # With the panel hidden, the window confirms the screenshot too (the message alone).
+    v.step()
+    assert v.overlay.lines == [f"saved {png.name} + {js.name} (exact render)"]
+    assert not v.overlay.full and v.overlay.image is not None
 
 
 def test_unchanged_camera_renders_no_new_frame(viewer):
@@ -133,8 +137,10 @@ def test_resize_to_zero_and_back(viewer):
     assert v.last.texture.size == (200, 150)
 
 
-def test_views_keys_and_closing(viewer):
+def test_views_keys_and_closing(viewer, monkeypatch):
     import glfw
+
+    from splatgl.viewer import app
 
     from splatgl.model.settings import Precision, RendererKind
     from splatgl.viewer.frames import ViewMode
@@ -160,8 +166,21 @@ def test_views_keys_and_closing(viewer):
     v.on_key(glfw.KEY_H, glfw.PRESS, 0)
     v.step()
     assert v.overlay.show_keys and v.overlay.image.shape[0] > 200
-    v.on_key(glfw.KEY_ESCAPE, glfw.PRESS, 0)
-    assert v.should_close()
+    assert any(line.startswith("U\tcycle the up direction") for line in v.overlay.lines)
+    frames = v.frames_rendered
+    v.on_key(glfw.KEY_U, glfw.PRESS, 0)            # up -y (the demo's) -> +z -> -z -> +y
+    assert v.state.up == v.home.up == (0.0, 0.0, 1.0) and v.message.startswith("up +z")
+    assert v.step() and v.frames_rendered == frames + 1
+    for up in ((0.0, 0.0, -1.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0)):
+        v.on_key(glfw.KEY_U, glfw.PRESS, 0)
+        assert v.state.up == up
+    # Esc while the loop waits for events: it quits without drawing another frame
+    steps = []
+    monkeypatch.setattr(app.glfw, "wait_events_timeout",
+                        lambda t: v.on_key(glfw.KEY_ESCAPE, glfw.PRESS, 0))
+    monkeypatch.setattr(v, "step", lambda *a: steps.append(a))
+    v.run()
+    assert v.should_close() and steps == []
     assert v.ctx.error == "GL_NO_ERROR"
 
 
@@ -325,8 +344,12 @@ def test_equirectangular_view_refuses_the_tile_toggles(xvfb_display, demo, tmp_p
             v.step(0.0)
             assert v.kind is RendererKind.QUAD
             views.append(v.view)
-        assert ViewMode.DIFFERENCE not in views and ViewMode.DEPTH in views
-        assert v.message == "Tab refused: the tile renderer cannot draw equirectangular images"
+        # one press, one view: Tab from the depth view goes straight back to colour
+        assert views == [ViewMode.COLOR, ViewMode.COLOR, ViewMode.DEPTH, ViewMode.COLOR,
+                         ViewMode.DEPTH]
+        assert v.message == ("Tab skipped the difference view: the tile renderer cannot draw "
+                             "equirectangular images")
+        assert "fov 360x180 panorama" in "\n".join(v.overlay.lines)
     finally:
         v.close()
 
@@ -354,6 +377,16 @@ def test_ctrl_click_lists_the_pixel_from_the_reference(viewer, demo, capsys):
     assert f"pixel ({W // 2}, {H // 2}):" in out and "weights sum" in out
     top = max(listing.splats, key=lambda s: s.weight)
     assert f"top splat {top.index}" in v.message
+    # a marker shows the pixel listed (open in the middle), until the view changes
+    from splatgl.viewer.display import MARKER_RADIUS
+
+    v.overlay.visible = False
+    v.step()
+    arm = _window_pixels(v)[H // 2, W // 2 + MARKER_RADIUS - 1]
+    assert tuple(arm) == (255, 0, 255)
+    v.on_scroll(0.0, 1.0)
+    v.step()
+    assert tuple(_window_pixels(v)[H // 2, W // 2 + MARKER_RADIUS - 1]) != (255, 0, 255)
 
 
 def test_view_benchmark_prints_its_figures_and_survives_an_older_benchmark(xvfb_display, demo,

@@ -61,13 +61,15 @@ class DraftFrame:
     """One drawn view: ``texture`` holds it at the camera's size (premultiplied ``(C, A)``, row 0
     at the top; valid until the next draw), ``level`` what was drawn, ``size`` the pixels drawn
     (w, h: the camera's times the level's scale), ``splats`` how many, ``seconds`` how long the
-    draw took (order stage, draw and upscale, to a finish)."""
+    draw took (order stage, draw and upscale, to a finish), ``sort`` the order stage's share
+    of it (cull and sort; the CPU renderer's projection and sort)."""
 
     level: Level
     texture: moderngl.Texture
     size: tuple[int, int]
     splats: int
     seconds: float
+    sort: float = 0.0
 
 
 class LevelRenderer:
@@ -117,8 +119,11 @@ class LevelRenderer:
         view = dataclasses.replace(View.of(cam, quad.settings, quad.scene),
                                    low_pass=draft_low_pass(camera, cam))
         t0 = time.perf_counter()
+        order_times = None         # (the draw's own call reuses the order and times nothing)
         if on_batch is not None:   # the order stage (cull and sort, on the CPU) comes first:
-            on_batch(0, len(quad.order(view)))   # a chance to abandon the frame after it
+            count = len(quad.order(view))        # a chance to abandon the frame after it
+            order_times = quad.rows.times
+            on_batch(0, count)
         target = quad.target(view)
         batches, mode = quad.batches, quad.batches.mode
         batches.max_batch = max_batch
@@ -138,7 +143,9 @@ class LevelRenderer:
                 self._upscaler = Upscaler(self.renderer.ctx)
             texture = self._upscaler.run(texture, (camera.width, camera.height))
             self.renderer.ctx.finish()
-        return DraftFrame(level, texture, (cam.width, cam.height), drawn, time.perf_counter() - t0)
+        t = order_times or quad.rows.times
+        return DraftFrame(level, texture, (cam.width, cam.height), drawn, time.perf_counter() - t0,
+                          t.cull + t.sort)
 
     def draw_cpu(self, camera: Camera, on_batch: BatchHook | None = None) -> DraftFrame:
         """The exact frame of ``camera`` drawn by the CPU renderer (the one the API renderer
@@ -155,8 +162,9 @@ class LevelRenderer:
                 self._cpu_texture.release()
             self._cpu_texture = self.renderer.ctx.texture(size, 4, dtype="f4")
         self._cpu_texture.write(rgba)
-        return DraftFrame(EXACT, self._cpu_texture, size, cpu.last_times.drawn,
-                          time.perf_counter() - t0)
+        t = cpu.last_times
+        return DraftFrame(EXACT, self._cpu_texture, size, t.drawn, time.perf_counter() - t0,
+                          t.project + t.sort)
 
     def read(self, frame: DraftFrame) -> np.ndarray:
         """(H, W, 4) float32 of ``frame`` at the camera's size with the background composited

@@ -24,10 +24,10 @@ from ..model.scene import Scene, SplatKind
 from ..model.settings import RendererKind, RenderSettings
 from . import keys, pick
 from .benchmark import orbit_benchmark
-from .display import Display
+from .display import Display, lens_fov
 from .frames import ViewMode
 from .navigation import Navigation, orbit_distance
-from .overlay import Status, key_help, status_lines
+from .overlay import Status, key_help
 from .pacing import Pacer, paced_frame
 from .screenshot import take_screenshot
 from .window import close_window, connect, open_window, swap
@@ -90,7 +90,6 @@ class Viewer:
         self.nav = Navigation(camera, cameras, camera_index, self.options.up,
                               lambda cam: orbit_distance(self.scene, self.settings, cam))
         self.view = ViewMode.COLOR
-        self.message = ""
         self.frames_rendered = 0
         self.presents = 0
         self.swap_idle = 0.0     # seconds the last swap waited without work (vsync), see present()
@@ -118,6 +117,9 @@ class Viewer:
     renderer = property(lambda self: self.display.renderer, doc="The window context's Renderer.")
     overlay = property(lambda self: self.display.overlay, doc="The status panel.")
     last = property(lambda self: self.display.last, doc="The last FrameResult rendered (or None).")
+    message = property(lambda self: self.display.message.current(),
+                       lambda self, text: self.display.message.say(text),
+                       doc="The status line's last word (it expires after a few seconds).")
 
     # ---------------------------------------------------------------------------- input
     def on_key(self, key: int, action: int, mods: int) -> None:
@@ -240,16 +242,17 @@ class Viewer:
             self.frames_rendered += 1
             self.need_present = True
             self._frame_start = t0
-        lines = status_lines(self._status(camera))
-        if self.overlay.visible and self.overlay.update(lines, now, force=not rendered and self.need_present):
+        if self.display.panel(self._status(camera), self.size, now, not rendered and self.need_present):
             self.need_present = True
         if self.need_present:
             self.present()
             if rendered:
                 seconds = time.perf_counter() - self._frame_start
-                self.display.record_frame_time(seconds)
-                if self.paced:     # the window's share of a moving frame comes off the draw's
-                    self.pacer.note_frame(seconds - self.swap_idle, self.last.draw)
+                paced = self.paced
+                self.display.record_frame_time(seconds, paced and self.pacer.moved,
+                                               not paced or self.pacer.exact)
+                if paced:     # the window's share of a moving frame comes off the draw's
+                    self.pacer.note_frame(seconds - self.swap_idle, self.last.sort + self.last.draw)
         return rendered
 
     @property
@@ -263,7 +266,7 @@ class Viewer:
 
     def present(self) -> None:
         """Draw the last frame (and the overlay) into the window and swap."""
-        self.display.draw(self.size, self.settings.background)
+        self.display.draw(self.size, self.settings.background, (self.state, self.size))
         self.swap_idle = swap(self.window, self.options.vsync)   # vsync's wait: not a cost
         self.presents += 1
         self.need_present = False
@@ -271,7 +274,7 @@ class Viewer:
     def _status(self, camera: Camera) -> Status:
         cam = f"camera {self.camera_index + 1}/{len(self.cameras)}" if self.cameras else ""
         return self.display.status(self.scene, self.settings, self.kind, self.view, camera,
-                                   self.state.fov_y, cam, self.message)
+                                   lens_fov(camera, self.state.fov_y), cam, self.paced)
 
     def should_close(self) -> bool:
         return bool(glfw.window_should_close(self.window))
@@ -284,7 +287,8 @@ class Viewer:
                 glfw.poll_events()
             else:
                 glfw.wait_events_timeout(1.0 / 4.0)
-            self.step()
+            if not self.should_close():    # Esc: quit now, not after one more (exact) frame
+                self.step()
 
     def benchmark(self, frames: int) -> dict[str, float]:
         """``--benchmark``: :func:`.benchmark.orbit_benchmark` (a method, so harnesses such as

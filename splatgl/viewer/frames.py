@@ -42,7 +42,7 @@ class FrameResult:
     Exactly one of ``texture`` (the quad target: premultiplied ``(C, A)``, row 0 = top, owned
     by the renderer) and ``image`` ((H, W, 4) float32, background already composited) is set.
     ``sort`` and ``draw`` are seconds (see :class:`splatgl.viewer.overlay.Status`); ``splats``
-    describes how many splats took part; ``note`` is extra status (the difference's maximum);
+    says how many splats took part (a phrase starting "splats"); ``note`` is extra status (the difference's maximum);
     ``quality`` says whether a budgeted frame is a draft or exact (:mod:`.pacing`).  A texture
     smaller than the window is a draft at a lower render scale: the display upscales it.
     """
@@ -64,11 +64,11 @@ def _times(renderer: Renderer, scene: Scene, settings: RenderSettings,
     if t is None:
         return 0.0, 0.0, ""
     if kind is RendererKind.TILE:
-        return t.sort, t.rasterize, f"{t.n_keys:,} tile keys, {scene.count:,} splats"
+        return t.sort, t.rasterize, f"splats {scene.count:,}, {t.n_keys:,} tile keys"
     if kind is RendererKind.CPU:
         return (t.project + t.sort, t.bin + t.rasterize,
-                f"{t.n_keys:,} tile entries, {scene.count:,} splats")
-    return t.cull + t.sort, t.upload + t.draw, f"{scene.count:,} splats"
+                f"splats {scene.count:,}, {t.n_keys:,} tile entries")
+    return t.cull + t.sort, t.upload + t.draw, f"splats {t.drawn:,} drawn / {scene.count:,}"
 
 
 def render_frame(renderer: Renderer, scene: Scene, camera: Camera, settings: RenderSettings,
@@ -84,7 +84,7 @@ def render_frame(renderer: Renderer, scene: Scene, camera: Camera, settings: Ren
         quad.draw(frame, target)  # upload + draw, ends with a finish
         t2 = time.perf_counter()
         return FrameResult(target.texture, None, True, t1 - t0, t2 - t1,
-                           f"{len(order):,} visible / {scene.count:,}")
+                           f"splats {len(order):,} visible / {scene.count:,}")
     if view is ViewMode.COLOR:
         rgba = renderer.render(scene, camera, settings, kind)
         return FrameResult(None, rgba, False, *_times(renderer, scene, settings, kind))
@@ -114,4 +114,5 @@ def render_stereo(renderer: Renderer, scene: Scene, camera: Camera, settings: Re
         pad = np.zeros((image.shape[0], camera.width - image.shape[1], 4), np.float32)
         pad[..., :3] = settings.background
         image = np.concatenate([image, pad], axis=1)
-    return FrameResult(None, image, False, 0.0, time.perf_counter() - t0, f"stereo, IPD {ipd:g}")
+    return FrameResult(None, image, False, 0.0, time.perf_counter() - t0,
+                       f"splats {scene.count:,}, stereo IPD {ipd:g}")

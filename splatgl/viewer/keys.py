@@ -57,8 +57,8 @@ def on_key(v, key: int, action: int, mods: int) -> None:
     elif key == glfw.KEY_TAB:
         modes = list(ViewMode)
         view = modes[(modes.index(v.view) + 1) % len(modes)]
-        if view is ViewMode.DIFFERENCE and not tile_allowed(v, "Tab"):
-            view = modes[(modes.index(view) + 1) % len(modes)]   # skip it
+        if view is ViewMode.DIFFERENCE and not tile_allowed(v, "Tab skipped the difference view"):
+            view = modes[(modes.index(view) + 1) % len(modes)]   # skip it: one press, one view
         v.view = view
     elif key == glfw.KEY_C:
         if v.view is ViewMode.DIFFERENCE:
@@ -67,6 +67,8 @@ def on_key(v, key: int, action: int, mods: int) -> None:
             v.view = ViewMode.DIFFERENCE
     elif key == glfw.KEY_F12 or (key == glfw.KEY_S and ctrl):
         v.screenshot()
+    elif key == glfw.KEY_U:
+        v.message = f"up {v.nav.cycle_up()} (U cycles +y / -y / +z / -z)"
     elif key == glfw.KEY_I:
         v.overlay.visible = not v.overlay.visible
     elif key == glfw.KEY_H:
@@ -100,7 +102,7 @@ def tile_allowed(v, key: str) -> bool:
     side); if not, the status line says why and the key changes nothing."""
     why = refusal(v, RendererKind.TILE)
     if why is not None:
-        v.message = f"{key} refused: {why}"
+        v.message = f"{key}: {why}" if " " in key else f"{key} refused: {why}"
     return why is None
 
 
@@ -114,7 +116,8 @@ def next_renderer(v) -> None:
         why = refusal(v, kind)
         if why is None:
             v.kind = kind
-            v.message = f"T skipped {'; '.join(skipped)}" if skipped else v.message
+            if skipped:
+                v.message = f"T skipped {'; '.join(skipped)}"
             return
         skipped.append(f"{kind.value}: {why}")
     v.message = f"T refused: {'; '.join(skipped)}"

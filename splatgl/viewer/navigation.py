@@ -8,11 +8,14 @@ changes themselves are the pure functions of :mod:`.controls`.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Callable
 
 import glfw
+import numpy as np
 
 from ..cameras.camera import Camera
+from ..cameras.up import UP_AXES
 from ..model.scene import Scene
 from ..model.settings import RenderSettings
 from . import controls
@@ -123,6 +126,17 @@ class Navigation:
         """Forget held keys and the drag (focus lost: their releases never report)."""
         self.held.clear()
         self.drag = None
+
+    def cycle_up(self) -> str:
+        """U: the next world up of +y, -y, +z, -z (from an up between them: +y); the orbit
+        turns about it from here on, and R returns to the start view under it.  Returns the
+        axis's name."""
+        names = list(UP_AXES)
+        now = [n for n in names if np.allclose(UP_AXES[n], self.state.up)]
+        name = names[(names.index(now[0]) + 1) % len(names)] if now else names[0]
+        self.state = replace(self.state, up=UP_AXES[name])
+        self.home = replace(self.home, up=UP_AXES[name])
+        return name
 
     # ---------------------------------------------------------------------------- cameras
     def step_camera(self, delta: int) -> str:

@@ -70,9 +70,10 @@ class Pacer:
         drawn = session.frame(camera, input_pending)
         if drawn is None:
             return None
-        self.shown = FrameResult(drawn.texture, None, True, 0.0, drawn.seconds,
-                           f"{drawn.splats:,} drawn / {self.scene.count:,}",
-                           quality=self.describe())
+        self.shown = FrameResult(drawn.texture, None, True, drawn.sort,
+                                 max(drawn.seconds - drawn.sort, 0.0),
+                                 f"splats {drawn.splats:,} drawn / {self.scene.count:,}",
+                                 quality=self.describe())
         return self.shown
 
     def redraw(self) -> None:
@@ -97,6 +98,11 @@ class Pacer:
     @property
     def exact(self) -> bool:
         return self.session is not None and self.session.exact
+
+    @property
+    def moved(self) -> bool:
+        """Whether the last frame drawn was a moving frame (not a refinement step)."""
+        return self.session is not None and self.session.moved
 
     def describe(self) -> str:
         """The status line: whether the frame shown is moving, refining or exact, and its level."""
@@ -136,7 +142,8 @@ def paced_frame(viewer, camera: Camera, key: tuple) -> bool:
 
     def input_pending() -> bool:
         glfw.poll_events()
-        return v._events != start_events or (v.state, v.size) != start_state or v.nav.animating
+        return (v._events != start_events or (v.state, v.size) != start_state or v.nav.animating
+                or v.should_close())
 
     v._queued = []
     try:

@@ -41,6 +41,7 @@ def list_pixel(viewer, x: float, y: float) -> PixelListing | None:
     except SplatglError as exc:          # a camera the reference cannot draw for this scene
         viewer.message = f"pixel listing: {exc}"
         return None
+    viewer.display.marker = (pixel, (viewer.state, viewer.size))   # until the view changes
     print(listing.table(PRINTED), flush=True)
     top = max(listing.splats, key=lambda s: s.weight, default=None)
     viewer.message = (f"pixel {pixel}: {len(listing.splats)} splats, alpha {listing.alpha:.3f}"
