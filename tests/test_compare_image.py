@@ -120,3 +120,21 @@ def test_cli_image_scores_explains_and_refuses(tmp_path, capsys):
     assert "flip.exr: looks upside down" in capsys.readouterr().err
     assert main(["compare", "--flip-y"] + base) == 2
     assert "apply to --image" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("damage", ["cut", "crc"])
+def test_a_damaged_png_is_one_line_without_libpng_s_own(tmp_path, capfd, damage):
+    """libpng printed its own ``libpng error: IDAT: CRC error`` line above splatgl's."""
+    good = tmp_path / "good.png"
+    write_image(good, np.random.default_rng(0).random((32, 32, 4), np.float32))
+    data = bytearray(good.read_bytes())
+    if damage == "cut":
+        data = data[:len(data) // 2]
+    else:
+        data[120:180] = bytes(60)          # inside IDAT: its CRC no longer matches
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(bytes(data))
+    rc = main(["compare", "--image", str(bad), "--width", "32", "--height", "32"])
+    out, err = capfd.readouterr()
+    assert rc == 2 and out == "" and "libpng" not in err and len(err.splitlines()) == 1, err
+    assert err.startswith(f"splatgl: error: --image {bad}: ")

@@ -51,7 +51,10 @@ def image_size(path: Path) -> tuple[int, int]:
     """(width, height) from an image file's header."""
     import OpenImageIO as oiio
 
-    inp = oiio.ImageInput.open(str(path))
+    from ..output.images import quiet_image_library
+
+    with quiet_image_library():
+        inp = oiio.ImageInput.open(str(path))
     if inp is None:
         raise CameraError(f"{path}: cannot read image header ({oiio.geterror()})")
     try:

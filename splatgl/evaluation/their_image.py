@@ -26,6 +26,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from ..errors import SplatglError
+from ..output.images import quiet_image_library
 from .metrics import psnr
 
 #: Alpha conventions ``--alpha`` accepts.
@@ -77,13 +78,15 @@ def read_their_image(path: str | Path, width: int, height: int) -> TheirImage:
         raise SplatglError(f"--image {path}: no such file")
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)      # the stored values, not premultiplied
-    inp = oiio.ImageInput.open(str(path), config)
+    with quiet_image_library():   # libpng's own "libpng error:" line: the reason is below
+        inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
         raise SplatglError(f"--image {path}: not a readable image ({' '.join(oiio.geterror().split())})")
     try:
         spec = inp.spec()
         _check_size(path, spec.width, spec.height, width, height)
-        pixels = inp.read_image(oiio.FLOAT)
+        with quiet_image_library():
+            pixels = inp.read_image(oiio.FLOAT)
         if pixels is None:
             raise SplatglError(f"--image {path}: cannot read its pixels ({' '.join(inp.geterror().split())})")
         pixels = np.asarray(pixels, np.float32).reshape(spec.height, spec.width, spec.nchannels)

@@ -9,6 +9,10 @@ naming the target and leaves nothing behind.
 
 from __future__ import annotations
 
+import os
+import sys
+import tempfile
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,6 +58,37 @@ class ImageFileInfo:
 def inspect_image(path: str | Path) -> ImageFileInfo | str:
     """The header of a complete image file, or why the file is not one (a string).
 
+#: The lines C libraries under OpenImageIO print on standard error themselves (libpng's
+#: default handlers), whose reason OpenImageIO also returns, for splatgl's one line.
+LIBRARY_LINES = ("libpng error:", "libpng warning:")
+
+
+@contextmanager
+def quiet_image_library():
+    """Keep the image libraries' own ``libpng error: ...`` lines (:data:`LIBRARY_LINES`) off
+    standard error while OpenImageIO reads a file: their reason comes back through
+    ``geterror()`` into splatgl's one-line message.  Standard error (file descriptor 2) goes to
+    a temporary file meanwhile; any other line written there is passed on afterwards."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):      # no file descriptor 2 to redirect
+        yield
+        return
+    with tempfile.TemporaryFile() as caught:
+        os.dup2(caught.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            caught.seek(0)
+            lines = caught.read().decode("utf-8", "replace").splitlines(keepends=True)
+            kept = "".join(line for line in lines if not line.startswith(LIBRARY_LINES))
+            if kept:
+                os.write(2, kept.encode("utf-8"))
+
+
     Cheap enough to run on every frame: reads the header and the end of the data, not the
     pixels (PNG: the file must end with its IEND chunk; TIFF/EXR: the last scanline must
     decode), so a file cut short by a full disk or a killed writer is found.
@@ -70,12 +105,15 @@ def inspect_image(path: str | Path) -> ImageFileInfo | str:
                     return f"the file is cut short ({size} bytes, no PNG end chunk)"
     except OSError as exc:
         return f"cannot read it ({exc.strerror})"
-    inp = oiio.ImageInput.open(str(path))
+    with quiet_image_library():
+        inp = oiio.ImageInput.open(str(path))
     if inp is None:
         return f"not a readable image ({' '.join(oiio.geterror().split())})"
     try:
         spec = inp.spec()
-        if path.suffix.lower() != ".png" and inp.read_scanline(spec.height - 1, 0, oiio.FLOAT) is None:
+        with quiet_image_library():
+            last = inp.read_scanline(spec.height - 1, 0, oiio.FLOAT) if path.suffix.lower() != ".png" else 0
+        if last is None:
             return f"the file is cut short ({size} bytes: {' '.join(inp.geterror().split())})"
         bits = {"uint8": 8, "uint16": 16}.get(str(spec.format))
         return ImageFileInfo(spec.width, spec.height, spec.nchannels, bits)
@@ -155,10 +193,15 @@ def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
 
 def read_image(path: str | Path) -> np.ndarray:
     """(H, W, C) float32 pixels of an image file (integer formats scaled to [0, 1])."""
-    inp = oiio.ImageInput.open(str(path))
+    with quiet_image_library():
+        inp = oiio.ImageInput.open(str(path))
     if inp is None:
-        raise SplatglError(f"{path}: cannot read image ({oiio.geterror()})")
+        raise SplatglError(f"{path}: cannot read image ({_clean(oiio.geterror())})")
     try:
-        return np.asarray(inp.read_image(oiio.FLOAT), np.float32)
+        with quiet_image_library():
+            pixels = inp.read_image(oiio.FLOAT)
+        if pixels is None:
+            raise SplatglError(f"{path}: cannot read its pixels ({_clean(inp.geterror())})")
+        return np.asarray(pixels, np.float32)
     finally:
         inp.close()
