@@ -42,6 +42,9 @@ class ImageFileInfo:
     height: int
     channels: int
     bits: int | None
+    #: The header's ``ImageDescription`` (``render --path`` frames: what made them,
+    #: :mod:`splatgl.output.frame_record`), None where it has none.
+    description: str | None = None
 
     def mismatch(self, width: int | None = None, height: int | None = None,
                  channels: int | None = None, bit_depth: int | None = None) -> str | None:
@@ -54,9 +57,6 @@ class ImageFileInfo:
             return f"it has {self.bits} bits per channel, not {bit_depth}"
         return None
 
-
-def inspect_image(path: str | Path) -> ImageFileInfo | str:
-    """The header of a complete image file, or why the file is not one (a string).
 
 #: The lines C libraries under OpenImageIO print on standard error themselves (libpng's
 #: default handlers), whose reason OpenImageIO also returns, for splatgl's one line.
@@ -89,6 +89,9 @@ def quiet_image_library():
                 os.write(2, kept.encode("utf-8"))
 
 
+def inspect_image(path: str | Path) -> ImageFileInfo | str:
+    """The header of a complete image file, or why the file is not one (a string).
+
     Cheap enough to run on every frame: reads the header and the end of the data, not the
     pixels (PNG: the file must end with its IEND chunk; TIFF/EXR: the last scanline must
     decode), so a file cut short by a full disk or a killed writer is found.
@@ -116,7 +119,9 @@ def quiet_image_library():
         if last is None:
             return f"the file is cut short ({size} bytes: {' '.join(inp.geterror().split())})"
         bits = {"uint8": 8, "uint16": 16}.get(str(spec.format))
-        return ImageFileInfo(spec.width, spec.height, spec.nchannels, bits)
+        description = spec.getattribute("ImageDescription")
+        return ImageFileInfo(spec.width, spec.height, spec.nchannels, bits,
+                             description if isinstance(description, str) else None)
     finally:
         inp.close()
 
@@ -146,7 +151,8 @@ def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
     ``depth`` (H, W) is given a Z channel (the expected depth, 0 where nothing was drawn), and
     the (H, W) planes of ``extra`` as float32 channels of those names, in that order (the
     further layers, :func:`splatgl.output.layer_files.exr_channels`); ``attributes`` become
-    string attributes of an EXR header (what the channels mean: ``splatgl:depth``).
+    string attributes of the header (EXR: what the channels mean, ``splatgl:depth``; any
+    format: a path frame's ``ImageDescription``, :mod:`splatgl.output.frame_record`).
     """
     path = Path(path)
     fmt = image_format(path)
@@ -169,9 +175,8 @@ def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
     h, w = pixels.shape[:2]
     spec = oiio.ImageSpec(w, h, len(channels), pixel_type)
     spec.channelnames = channels
-    if fmt.is_float:
-        for name, value in (attributes or {}).items():
-            spec.attribute(name, str(value))
+    for name, value in (attributes or {}).items():
+        spec.attribute(name, str(value))
 
     def complete(tmp: Path) -> str | None:
         return image_file_problem(tmp, w, h, len(channels), None if fmt.is_float else bit_depth)
