@@ -58,10 +58,11 @@ def _parser_class():
     import argparse
 
     class OneLineParser(argparse.ArgumentParser):
-        """Argument errors as one line (``splatgl render: error: ...``) with the --help hint."""
+        """Argument errors as one line with the --help hint, under the one prefix every error
+        has (``splatgl: error: ...``, as :func:`main` prints a SplatglError)."""
 
         def error(self, message: str):
-            raise BadArguments(f"{self.prog}: error: {message} (see {self.prog} --help)")
+            raise BadArguments(f"splatgl: error: {message} (see {self.prog} --help)")
 
         def parse_known_args(self, args=None, namespace=None):
             if args is not None:   # a sub-command's words: the older bare --json spelling

@@ -42,7 +42,7 @@ def camera_file(tmp_path, name="cam.json", width=64, height=48, w2c=None):
     return path
 
 
-R = "splatgl render: error: argument "
+R = "splatgl: error: argument "
 HINT = " (see splatgl render --help)"
 
 
@@ -200,13 +200,13 @@ def test_bench_arguments_fail_before_measuring(tmp_path, capsys):
                     "splatgl: error: --groups: unknown group(s) bogus; valid: precision, extent, "
                     "sort, sh, storage, resort, preprocess, cull, early-stop, projection, renderer")
     expect_one_line(capsys, tmp_path, ["bench", "--synthetic", "-5"],
-                    "splatgl bench: error: argument --synthetic: must be 0 or more, got -5 "
+                    "splatgl: error: argument --synthetic: must be 0 or more, got -5 "
                     "(see splatgl bench --help)")
     expect_one_line(capsys, tmp_path, ["bench", "--width", "0", "--frames", "0"],
-                    "splatgl bench: error: argument --width: must be at least 1, got 0 "
+                    "splatgl: error: argument --width: must be at least 1, got 0 "
                     "(see splatgl bench --help)")
     expect_one_line(capsys, tmp_path, ["bench", "--frames", "0"],
-                    "splatgl bench: error: argument --frames: must be at least 1, got 0 "
+                    "splatgl: error: argument --frames: must be at least 1, got 0 "
                     "(see splatgl bench --help)")
     assert existing.read_text() == "keep me"
 
@@ -231,7 +231,7 @@ def test_zero_sizes_and_closed_renderers_are_one_line_errors(tmp_path, capsys):
     from splatgl.api import Renderer, default_camera
 
     expect_one_line(capsys, tmp_path, ["path", "orbit", "--width", "0", "-o", tmp_path / "p.json"],
-                    "splatgl path orbit: error: argument --width: must be at least 1, got 0 "
+                    "splatgl: error: argument --width: must be at least 1, got 0 "
                     "(see splatgl path orbit --help)")
     scene = load_scene(demo_scene_path())
     for size, field in (((0, 0), "width"), ((8, 0), "height"), ((8.5, 4), "width")):

@@ -132,3 +132,13 @@ def test_flight_with_the_cpu_renderers_exact_frame(gl_renderer):
 def test_bench_exact_needs_interactive(capsys):
     code, _, err = _run(capsys, "bench", "--exact", "cpu")
     assert code == 2 and "add --interactive" in err
+
+
+def test_view_errors_have_the_prefix_of_every_command(tmp_path, capsys):
+    """A bad argument and a bad file say ``splatgl: error:`` alike (the argument error said
+    ``splatgl view: error:``), both before any window opens."""
+    code, out, err = _run(capsys, "view", "--target-fps", "fast")
+    assert code == 2 and err.startswith("splatgl: error: argument --target-fps: ")
+    assert err.endswith(" (see splatgl view --help)\n") and len(err.splitlines()) == 1
+    code, out, err = _run(capsys, "view", str(tmp_path / "missing.ply"))
+    assert code == 2 and err.startswith("splatgl: error: ") and len(err.splitlines()) == 1

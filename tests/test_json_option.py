@@ -71,5 +71,5 @@ def test_json_never_overwrites_a_scene(capsys, tmp_path):
 def test_unknown_options_point_to_the_command_help(capsys, command, required):
     rc, out, err = run(capsys, command, *required, "--no-such-option")
     assert (rc, out) == (2, "")
-    assert err == (f"splatgl {command}: error: unrecognized arguments: --no-such-option "
+    assert err == (f"splatgl: error: unrecognized arguments: --no-such-option "
                    f"(see splatgl {command} --help)\n")

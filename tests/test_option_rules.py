@@ -62,10 +62,10 @@ def test_depth_png_with_separate_stereo_eyes(tmp_path, capsys):
 def test_path_command_refuses_zero_fps_and_keeps_files_without_force(tmp_path, capsys):
     out = tmp_path / "p.json"
     refused(capsys, tmp_path, ["path", "orbit", DEMO, "--fps", "0", "-o", out],
-            "splatgl path orbit: error: argument --fps: must be a finite number > 0, got '0' "
+            "splatgl: error: argument --fps: must be a finite number > 0, got '0' "
             "(see splatgl path orbit --help)")
     refused(capsys, tmp_path, ["render", "--path", "orbit:2", "--fps", "0", "-o", tmp_path / "o.mp4"],
-            "splatgl render: error: argument --fps: must be a finite number > 0, got '0' "
+            "splatgl: error: argument --fps: must be a finite number > 0, got '0' "
             "(see splatgl render --help)")
     out.write_text("{}")
     refused(capsys, tmp_path, ["path", "orbit", DEMO, "--frames", "2", "-o", out],

@@ -162,5 +162,5 @@ def test_cli_gpu_storage(tmp_path, capsys):
     capsys.readouterr()
     assert main(["render", "-o", str(out_c), "--gpu-storage", "tiny"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
-    assert lines == ["splatgl render: error: argument --gpu-storage: invalid choice: 'tiny' (choose "
+    assert lines == ["splatgl: error: argument --gpu-storage: invalid choice: 'tiny' (choose "
                      "from 'float32', 'half-sh', 'compact') (see splatgl render --help)"]
