@@ -281,3 +281,48 @@ def test_stereo_paths_go_to_video_at_the_doubled_size(tmp_path, capsys, layout, 
     for k, f in enumerate(frames):
         png = read_image(tmp_path / "png" / f"{k:05d}.png")
         assert png.shape == shape and np.abs(f / 255.0 - png).mean() < 5 / 255
+
+
+def _mtimes(folder):
+    return {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
+
+
+def test_resume_refuses_frames_of_another_path_scene_or_options(tmp_path, capsys):
+    """Each frame records the path, camera, scene and options it was rendered from
+    (splatgl.output.frame_record): an orbit:6 folder resumed with orbit:8 (its frame 1 is
+    another camera) or another --background stops before any work, in one line, and the
+    frames are untouched; the same path resumes (a selection of it too)."""
+    out = tmp_path / "f"
+    assert _render("--path", "orbit:6", *SIZE, "-o", out) == 0
+    (out / "00003.png").unlink()
+    before = _mtimes(out)
+    capsys.readouterr()
+    assert _render("--path", "orbit:8", *SIZE, "-o", out, "--resume") == 2
+    assert capsys.readouterr().err == (
+        f"splatgl: error: {out}/00001.png: rendered with another camera (for --path orbit:6, not "
+        "this run's --path orbit:8); --resume only completes frames of the same path, scene and "
+        "options (render into another folder, or replace them: --force without --resume)\n")
+    assert _render("--path", "orbit:6", *SIZE, "-o", out, "--resume", "--background", "1,0,0") == 2
+    assert "00000.png: rendered with other render options (also for --path orbit:6)" in capsys.readouterr().err
+    assert _mtimes(out) == before and not (out / "00003.png").exists()
+    assert _render("--path", "orbit:6", *SIZE, "-o", out, "--resume", "--select", "2:5") == 0
+    assert "wrote 1 frames to" in capsys.readouterr().out and (out / "00003.png").is_file()
+
+
+def test_resume_refuses_preview_drafts_and_keeps_unrecorded_frames(tmp_path, capsys):
+    """Draft frames of --preview are recorded as such: an exact --resume does not keep them.
+    Frames without a record (an older splatgl wrote them) are kept, as before, and the
+    summary says how many could not be checked."""
+    from splatgl.output.images import write_image
+
+    out = tmp_path / "p"
+    assert _render("--path", "orbit:2", *SIZE, "--preview", "--target-fps", "5000", "-o", out) == 0
+    capsys.readouterr()
+    assert _render("--path", "orbit:2", *SIZE, "-o", out, "--resume") == 2
+    assert "00000.png: rendered with other render options" in capsys.readouterr().err
+    old = tmp_path / "old"
+    old.mkdir()
+    write_image(old / "00000.png", np.zeros((64, 96, 4), np.float32))       # no record
+    assert _render("--path", "orbit:2", *SIZE, "-o", old, "--resume") == 0
+    assert ("wrote 1 frames to " f"{old}/%05d.png, 1 already there, 1 of them without a record of "
+            "their path, scene and options to check (older splatgl)") in capsys.readouterr().out

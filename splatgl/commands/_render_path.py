@@ -17,6 +17,7 @@ from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
 from ..output.layer_files import check_exact_ids
 from ..output.layers import BASE
+from ..output.frame_record import FrameRecord, options_digest, scene_digest
 from ._layers import check_under_options, layer_files, named_layers
 from ..output.frames import FrameTarget
 from ..output.image_formats import FORMAT_NAMES
@@ -59,7 +60,9 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--resume", action="store_true",
                    help="skip frames whose files already exist (frames are written atomically, "
                         "so an existing file is complete); for a video with --workers or "
-                        "--executor ray, the frames kept from a stopped run")
+                        "--executor ray, the frames kept from a stopped run. Each frame records "
+                        "the path, camera, scene and options it was rendered from: frames of "
+                        "another are refused")
     g.add_argument("--format", default=None, choices=FORMAT_NAMES,
                    help="image format when -o is a folder (default png; refused with a video or "
                         "a pattern, whose suffix says it)")
@@ -182,6 +185,19 @@ def check_frame_outputs(args: argparse.Namespace, target: FrameTarget, numbers) 
     check_outputs(args, paths, "-o", keep=args.resume)
 
 
+def frame_record(args: argparse.Namespace, scene: Scene, settings, target: FrameTarget,
+                 kind: RendererKind, lod: LodSettings | None) -> FrameRecord:
+    """What this run's frames are rendered from (:mod:`splatgl.output.frame_record`): written
+    into every frame, and checked by --resume against the frames it keeps."""
+    layers = sorted(layer.value for layer in (target.layers or BASE))
+    options = options_digest(settings=repr(settings), renderer=kind.value, bit_depth=args.bit_depth,
+                             layers=layers, named=[layer.value for layer in target.named],
+                             normal_space=target.normal_space.value, lod=repr(lod),
+                             stereo=[args.stereo, args.stereo_layout] if args.stereo is not None
+                             else None, preview=bool(args.preview), video=target.is_video)
+    return FrameRecord(args.path, scene_digest(scene), options)
+
+
 def run_path(args: argparse.Namespace) -> int:
     if args.camera is not None:
         raise SplatglError("--camera and --path exclude each other (a path brings its cameras)")
@@ -225,6 +241,7 @@ def run_path(args: argparse.Namespace) -> int:
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
     kind = RendererKind(args.renderer)
+    record = frame_record(args, scene, settings, target, kind, lod)
     if kind is RendererKind.CPU and not executor.sharded:
         # refusals first, then the kernels (compiled on first use, half a minute), all before
         # the output folder exists: a Ctrl-C during the compile leaves nothing behind
@@ -241,7 +258,7 @@ def run_path(args: argparse.Namespace) -> int:
             result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
                                          cameras, settings, target, executor, kind, args.bit_depth,
                                          args.resume, args.drop_invalid, fps, default_progress(),
-                                         numbers, lod)
+                                         numbers, lod, record)
         except KeyboardInterrupt:     # Ctrl-C or SIGTERM: say what the workers left, if anything
             note = stopped_video_note(target.video) if target.is_video else None
             if note is not None:
@@ -252,7 +269,7 @@ def run_path(args: argparse.Namespace) -> int:
                              else demo_scene_path()) as renderer:
             gl_name = renderer_name(renderer.ctx)
             result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
-                                   False, fps, default_progress(), numbers=numbers)
+                                   False, fps, default_progress(), numbers=numbers, record=record)
         print(renderer.report())
     else:
         with Renderer() if tree is None else LodFrames(tree, settings, lod) as renderer:
@@ -261,11 +278,15 @@ def run_path(args: argparse.Namespace) -> int:
                 renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
                 size = renderer.frame_size(cameras[0])
             result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
-                                   args.resume, fps, default_progress(), numbers=numbers)
+                                   args.resume, fps, default_progress(), numbers=numbers,
+                                   record=record)
     where = target.video if target.is_video else target.pattern
     skipped = f", {result.skipped} already there" if result.skipped else ""
     if result.damaged:
         skipped += f", {result.damaged} damaged ones rendered again"
+    if result.unchecked:
+        skipped += (f", {result.unchecked} of them without a record of their path, scene and "
+                    "options to check (older splatgl)")
     kind_text = f"{kind.value}, level of detail" if lod is not None else kind.value
     print(f"wrote {result.written} frames to {where}{skipped} ({size[0]}x{size[1]}, "
           f"{scene.count} splats, {kind_text}, {result.fps:.2f} frames/s)")

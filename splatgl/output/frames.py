@@ -22,6 +22,7 @@ from .layers import BASE, Layer, NormalSpace
 from .image_formats import (DEFAULT_FORMAT, FORMAT_NAMES, IMAGE_SUFFIXES, ImageFormat, find_format,
                             format_named)
 from .images import inspect_image
+from .frame_record import FrameRecord, kept_frame
 from .layer_files import LayerFiles
 from .under import DepthKind
 from .video import VIDEO_SUFFIXES
@@ -145,25 +146,31 @@ class FrameTarget:
 @dataclass(frozen=True)
 class FramePlan:
     """Which frames a run renders: ``todo`` (indices into its cameras), how many complete
-    frames it keeps (``skipped``) and how many damaged ones it renders again (``damaged``)."""
+    frames it keeps (``skipped``), how many damaged ones it renders again (``damaged``) and
+    how many of those kept carry no record of what made them (``unchecked``: written before
+    splatgl recorded it, or by another program; :mod:`splatgl.output.frame_record`)."""
 
     todo: list[int]
     skipped: int = 0
     damaged: int = 0
+    unchecked: int = 0
 
 
 def plan_frames(target: FrameTarget, sizes: Sequence[tuple[int, int]], numbers: Sequence[int],
-                bit_depth: int = 8, resume: bool = False) -> FramePlan:
+                bit_depth: int = 8, resume: bool = False, record: FrameRecord | None = None,
+                cameras: Sequence | None = None) -> FramePlan:
     """The frames to render of cameras whose frames are ``sizes`` (width, height) numbered
     ``numbers``.  Without ``resume`` (or into a video): all of them.  With ``resume`` a frame
     file that exists is kept only when it is complete (:func:`splatgl.output.images.inspect_image`:
     a file cut short by a full disk or a killed run is rendered again); a complete frame of
-    another size, channel count or bit depth stops the run before any work, in one line."""
+    another size, channel count or bit depth stops the run before any work, in one line, and
+    so does, given the run's ``record`` and ``cameras``, one recorded as rendered from another
+    camera, scene or options (:func:`splatgl.output.frame_record.kept_frame`)."""
     if not resume or target.is_video:
         return FramePlan(list(range(len(sizes))))
     fmt = target.image_format
     channels = len(fmt.channels(target.layers or BASE))
-    todo, damaged = [], 0
+    todo, damaged, unchecked = [], 0, 0
     for k, ((width, height), number) in enumerate(zip(sizes, numbers)):
         path = target.frame_path(number)
         paths = target.frame_paths(number)
@@ -180,4 +187,6 @@ def plan_frames(target: FrameTarget, sizes: Sequence[tuple[int, int]], numbers: 
             raise SplatglError(f"{path}: {mismatch} as this run renders its frames; --resume only "
                                "completes frames of the same kind (render into another folder, "
                                "or without --resume to replace them)")
-    return FramePlan(todo, len(sizes) - len(todo), damaged)
+        if record is not None and not kept_frame(path, info.description, record, cameras[k]):
+            unchecked += 1
+    return FramePlan(todo, len(sizes) - len(todo), damaged, unchecked)

@@ -122,21 +122,26 @@ def layer_picture(out: RenderOutput, layer: Layer, files: LayerFiles) -> np.ndar
 
 
 def write_layers(path: str | Path, out: RenderOutput, files: LayerFiles, bit_depth: int = 8,
-                 temp=lambda p: p, write=write_image) -> None:
+                 temp=lambda p: p, write=write_image,
+                 attributes: dict[str, str] | None = None) -> None:
     """Write ``out`` to ``path`` (and its pictures), each through ``temp(final path)`` (the
     name to write to: an :class:`~splatgl.output.files.OutputFiles` temporary, or the path)
-    with ``write`` (:func:`~splatgl.output.images.write_image`'s signature)."""
+    with ``write`` (:func:`~splatgl.output.images.write_image`'s signature); ``attributes``
+    go into the header of ``path``'s file (a path frame's record)."""
     fmt = find_format(path)
     layers = files.render_layers(path)
     if fmt.is_float:
         depth = out.expected_depth() if Layer.DEPTH in layers else None
         extra = exr_channels(out, layers, files.world_to_camera)
-        attributes = {DEPTH_ATTRIBUTE: files.depth_kind.value}
+        header = {**(attributes or {}), DEPTH_ATTRIBUTE: files.depth_kind.value}
         if Layer.NORMAL in layers:
-            attributes[NORMAL_ATTRIBUTE] = files.normal_space.value
+            header[NORMAL_ATTRIBUTE] = files.normal_space.value
         write(temp(Path(path)), out.rgba, bit_depth, depth=depth, extra=extra,
-              attributes=attributes)
+              attributes=header)
         return
-    write(temp(Path(path)), out.rgba, bit_depth)
+    if attributes:
+        write(temp(Path(path)), out.rgba, bit_depth, attributes=attributes)
+    else:
+        write(temp(Path(path)), out.rgba, bit_depth)
     for layer in files.pictures(path):
         write(temp(picture_path(path, layer)), layer_picture(out, layer, files))

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Callable, Optional, Sequence
 
 from ..cameras.camera import Camera
+from ..output.frame_record import FrameRecord
 from ..output.frames import FrameTarget, plan_frames
 from ..output.images import write_image
 from ..output.layer_files import write_layers
@@ -42,6 +43,8 @@ class BatchResult:
     render_seconds: float
     #: Of ``written``: frame files found damaged (cut short) by ``resume`` and rendered again.
     damaged: int = 0
+    #: Of ``skipped``: frames kept without a record of what made them (older splatgl).
+    unchecked: int = 0
 
     @property
     def fps(self) -> float:
@@ -83,8 +86,8 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
                   kind: RendererKind = RendererKind.QUAD, bit_depth: int = 8,
                   resume: bool = False, fps: float = 30.0,
                   progress: Optional[ProgressCallback] = None,
-                  write_queue: int = WRITE_QUEUE, numbers: Optional[Sequence[int]] = None
-                  ) -> BatchResult:
+                  write_queue: int = WRITE_QUEUE, numbers: Optional[Sequence[int]] = None,
+                  record: Optional[FrameRecord] = None) -> BatchResult:
     """Render ``cameras`` in order to ``target``.
 
     Image frames are written atomically and checked, so a frame file is complete or absent;
@@ -97,7 +100,9 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
     parts of a path rendered apart never collide).  Frame k is rendered exactly as ``splatgl
     render --camera`` renders the same camera (same renderer call), so the files are
     identical bit for bit.  A renderer with a ``frame_size(camera)`` method (stereo: both
-    eyes in one frame) makes frames of that size.
+    eyes in one frame) makes frames of that size.  ``record``: what the frames are rendered
+    from (:mod:`splatgl.output.frame_record`), written into each frame file, and with
+    ``resume`` checked against the frames kept.
     """
     from ..output.video import VideoWriter
 
@@ -105,7 +110,8 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
     if len(numbers) != len(cameras):
         raise ValueError(f"{len(numbers)} frame numbers for {len(cameras)} cameras")
     size_of = getattr(renderer, "frame_size", lambda c: (c.width, c.height))
-    plan = plan_frames(target, [size_of(c) for c in cameras], numbers, bit_depth, resume)
+    plan = plan_frames(target, [size_of(c) for c in cameras], numbers, bit_depth, resume, record,
+                       cameras)
     target.prepare()
     todo = plan.todo
     skipped = plan.skipped
@@ -117,13 +123,15 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
         video = VideoWriter(target.video, *size_of(cameras[0]), fps)
 
     def save(k: int, out) -> None:
+        header = record.attributes(cameras[k]) if record is not None else None
         if video is not None:
             video.write(out)
         elif target.layers is not None or target.named:   # --layers alpha: its picture too
             out = out if isinstance(out, RenderOutput) else RenderOutput(out, None)
-            write_layers(target.frame_path(numbers[k]), out, target.files(cameras[k]), bit_depth)
+            write_layers(target.frame_path(numbers[k]), out, target.files(cameras[k]), bit_depth,
+                         attributes=header)
         else:
-            write_image(target.frame_path(numbers[k]), out, bit_depth)
+            write_image(target.frame_path(numbers[k]), out, bit_depth, attributes=header)
 
     # One writer thread encodes frame k while frame k + 1 renders (OpenImageIO and FFmpeg
     # release the GIL); it works in order, and at most ``write_queue`` frames wait for it.
@@ -154,4 +162,5 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
     if video is not None:
         video.close()
     meter(len(cameras), len(todo))
-    return BatchResult(len(todo), skipped, time.perf_counter() - t0, render_seconds, plan.damaged)
+    return BatchResult(len(todo), skipped, time.perf_counter() - t0, render_seconds, plan.damaged,
+                       plan.unchecked)

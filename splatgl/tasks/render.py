@@ -27,6 +27,7 @@ from .batch import BatchResult, FrameMeter
 from .task import Done, Files, TaskProgress
 from ..cameras.camera import Camera
 from .executor import Executor, ExecutorKind, RunResult, run_tasks
+from ..output.frame_record import FrameRecord
 from ..output.frames import FrameTarget, plan_frames
 from ..lod.render import LodSettings
 from ..progress import ProgressCallback
@@ -54,6 +55,8 @@ class RenderChunk:
     resume: bool
     #: Render the scene (a .lod.ply) through this cut (``render --lod-*``); None: full detail.
     lod: Optional[LodSettings] = None
+    #: What the frames are rendered from, written into each (``--resume`` checks it).
+    record: Optional[FrameRecord] = None
 
     @property
     def units(self) -> int:
@@ -82,7 +85,7 @@ class RenderChunk:
             result = render_frames(renderer, scene, self.cameras, self.settings, self.target, self.kind,
                                    self.bit_depth, self.resume,
                                    progress=lambda done, total, what: report(done, total),
-                                   numbers=self.numbers)
+                                   numbers=self.numbers, record=self.record)
         return Done(result, result.written)
 
 
@@ -112,13 +115,15 @@ def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: Render
                    target: FrameTarget, executor: Executor, kind: RendererKind = RendererKind.QUAD,
                    bit_depth: int = 8, resume: bool = False, drop_invalid: bool = False,
                    fps: float = 30.0, progress: Optional[ProgressCallback] = None,
-                   numbers: Optional[Sequence[int]] = None, lod: Optional[LodSettings] = None
-                   ) -> tuple[BatchResult, RunResult]:
+                   numbers: Optional[Sequence[int]] = None, lod: Optional[LodSettings] = None,
+                   record: Optional[FrameRecord] = None) -> tuple[BatchResult, RunResult]:
     """Render ``cameras`` to ``target`` (images or a video, module doc) on ``executor``:
     local workers get one contiguous chunk each, Ray tasks at most :data:`MAX_CHUNK_FRAMES`.
     Camera i is frame ``numbers[i]`` (default i), as in :func:`splatgl.tasks.batch.render_frames`;
     with ``resume`` the frames there are checked here, before any task starts.  ``lod``: every
-    task renders the scene file (a .lod.ply) through that cut.
+    task renders the scene file (a .lod.ply) through that cut.  ``record``: what the frames
+    are rendered from, written into each and checked by ``resume``
+    (:mod:`splatgl.output.frame_record`).
 
     Returns the summed :class:`BatchResult` (``seconds``: wall time including the video's
     encoding) and the run's per-task reports (for :func:`splatgl.tasks.executor.summary`).
@@ -135,13 +140,14 @@ def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: Render
         frames = FrameTarget.parse(f"{frame_folder(target.video)}/", "png")  # a folder
         bit_depth = 8  # what the video holds; quantised as VideoWriter quantises
     numbers = list(range(len(cameras))) if numbers is None else list(numbers)
-    plan = plan_frames(frames, [(c.width, c.height) for c in cameras], numbers, bit_depth, resume)
+    plan = plan_frames(frames, [(c.width, c.height) for c in cameras], numbers, bit_depth, resume,
+                       record, cameras)
     frames.prepare()
     n_tasks = (executor.workers if executor.kind is ExecutorKind.LOCAL
                else math.ceil(len(cameras) / MAX_CHUNK_FRAMES))
     tasks = [RenderChunk(Path(scene_path), drop_invalid, tuple(cameras[i] for i in part),
                          tuple(numbers[i] for i in part), settings, frames, RendererKind(kind),
-                         bit_depth, resume, lod)
+                         bit_depth, resume, lod, record)
              for part in chunks(len(cameras), n_tasks)]
     run = run_tasks(tasks, executor, "frames", progress, RESUME_HINT)
     results = run.values
@@ -150,7 +156,7 @@ def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: Render
         seconds += assemble_video(frames, numbers, target.video, fps, progress)
         shutil.rmtree(frame_folder(target.video))
     return BatchResult(sum(r.written for r in results), sum(r.skipped for r in results), seconds,
-                       sum(r.render_seconds for r in results), plan.damaged), run
+                       sum(r.render_seconds for r in results), plan.damaged, plan.unchecked), run
 
 
 def assemble_video(frames: FrameTarget, numbers: Sequence[int], video: Path, fps: float,
