@@ -403,6 +403,7 @@ def test_view_benchmark_prints_its_figures_and_survives_an_older_benchmark(xvfb_
     assert main(argv) == 0
     out = capsys.readouterr().out
     line = next(x for x in out.splitlines() if x.startswith("benchmark: 3 frames at 96x64"))
+    assert "up: -y (COLMAP convention) (U cycles +y / -y / +z / -z)" in out.splitlines()
     assert "median" in line and "10th percentile" in line, line
     monkeypatch.setattr(Viewer, "benchmark", lambda self, n: {"frame": 0.01, "sort": 0.001,
                                                               "draw": 0.008, "fps": 100.0})

@@ -107,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
 
     from ..viewer.app import Viewer, ViewerOptions  # glfw only when a window is wanted
 
-    up, _ = resolve_up(args.up, args.scene, args.camera)
+    up, up_source = resolve_up(args.up, args.scene, args.camera)
+    print(f"up: {up_source} (U cycles +y / -y / +z / -z)", flush=True)
     options = ViewerOptions(title=f"splatgl view - {Path(path).name}",
                             screenshot_dir=args.screenshot_dir, render_args=_render_args(args),
                             vsync=not args.no_vsync and args.benchmark is None,
