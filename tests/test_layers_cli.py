@@ -135,3 +135,16 @@ def test_the_docs_say_which_renderer_computes_which_layer(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err == (f"splatgl: error: --renderer cpu draws colour, alpha and depth only, not "
                        f"{layer} (use --renderer quad)\n")
+
+
+def test_a_path_with_layers_alpha_writes_its_picture_per_frame(tmp_path, capsys):
+    """--layers alpha (colour and alpha: the frame's own layers) wrote no alpha picture, and
+    --resume then found every frame incomplete and rendered it again."""
+    out = tmp_path / "a"
+    assert main(["render", "--path", "orbit:2", "-o", f"{out}/", "--layers", "alpha"] + ARGS) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["00000.png", "00000_alpha.png", "00001.png",
+                                                     "00001_alpha.png"]
+    capsys.readouterr()
+    assert main(["render", "--path", "orbit:2", "-o", f"{out}/", "--layers", "alpha",
+                 "--resume"] + ARGS) == 0
+    assert "wrote 0 frames" in capsys.readouterr().out
