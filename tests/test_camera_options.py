@@ -69,10 +69,10 @@ def test_cli_render_takes_the_pose_and_the_options_size(cam_file, tmp_path, caps
                  "--width", "128", "--height", "48", "-o", str(out)]) == 0
     assert "wrote" in capsys.readouterr().out and read_image(out).shape[:2] == (48, 128)
     assert main(["render", "--camera", str(cam_file), "--projection", "equirectangular",
-                 "-o", str(out)]) == 0
+                 "-o", str(out), "--force"]) == 0
     assert read_image(out).shape[:2] == (48, 96)
     assert main(["render", "--camera", str(cam_file), "--projection", "fisheye", "--fov", "200",
-                 "--width", "40", "--height", "40", "-o", str(out)]) == 0
+                 "--width", "40", "--height", "40", "-o", str(out), "--force"]) == 0
     assert read_image(out).shape[:2] == (40, 40)
 
 

@@ -38,7 +38,8 @@ def test_frame_k_equals_single_render_bit_for_bit(tmp_path, capsys, ext):
     cams = orbit(load_scene(demo_scene_path()), 3, 96, 64)
     for k, cam in enumerate(cams):
         save_camera(tmp_path / "cam.json", cam)
-        assert _render("--camera", tmp_path / "cam.json", "-o", tmp_path / f"one.{ext}", "--background", "0.2,0.3,0.4") == 0
+        assert _render("--camera", tmp_path / "cam.json", "-o", tmp_path / f"one.{ext}", "--background",
+                       "0.2,0.3,0.4", "--force") == 0
         got, single = read_image(tmp_path / f"f_{k:03d}.{ext}"), read_image(tmp_path / f"one.{ext}")
         assert got.shape == single.shape == (64, 96, 5 if ext == "exr" else 3)
         np.testing.assert_array_equal(got, single)
