@@ -7,7 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 out=$(mktemp -d)
 mkdir -p docs/results
-splatgl bench --out "$out" | tee docs/results/bench-1280x720.txt
+splatgl bench --out "$out" --force | tee docs/results/bench-1280x720.txt
 cp "$out/bench.csv" docs/results/bench-1280x720.csv
 cp "$out/bench.png" docs/results/bench.png
 python benchmarks/compare_table.py > docs/results/compare-512x384.md

@@ -164,13 +164,13 @@ fi
 
 if wants bench; then
   if [ "$quick" -eq 1 ]; then args=(--quick --frames 2); else args=(); fi
-  step bench "$out/bench.txt" run "$py" -m splatgl bench ${args[@]+"${args[@]}"} --out "$out/bench" || true
+  step bench "$out/bench.txt" run "$py" -m splatgl bench ${args[@]+"${args[@]}"} --out "$out/bench" --force || true
 fi
 
 if wants early-stop; then
   if [ "$quick" -eq 1 ]; then args=(--quick --frames 2 --real-splats 20000); else args=(); fi
   step early-stop "$out/early-stop.txt" \
-    run "$py" -m splatgl bench --groups early-stop ${args[@]+"${args[@]}"} --out "$out/early-stop" || true
+    run "$py" -m splatgl bench --groups early-stop ${args[@]+"${args[@]}"} --out "$out/early-stop" --force || true
 fi
 
 # The scale benchmark in benchmarks/scale.sh's four runs (each short; a failed size keeps the
@@ -179,15 +179,15 @@ scale_all() {
   local s="$out/scale" rc=0
   if [ "$quick" -eq 1 ]; then
     run "$py" -m splatgl bench --scale --sizes 0.02M --sh3-sizes none --width 64 --height 48 \
-      --frames 2 --out "$s/a" || return 1
+      --frames 2 --out "$s/a" --force || return 1
     run "$py" -m splatgl.commands._bench_tools scale-report "$s/a/scale.json" --out "$s" || return 1
     return 0
   fi
-  run "$py" -m splatgl bench --scale --sizes 0.1M,0.3M --sh3-sizes none --out "$s/a" || rc=1
-  run "$py" -m splatgl bench --scale --sizes 1M --sh3-sizes 1M --out "$s/b" || rc=1
-  run "$py" -m splatgl bench --scale --sizes 3M,6M --sh3-sizes none --out "$s/c" || rc=1
+  run "$py" -m splatgl bench --scale --sizes 0.1M,0.3M --sh3-sizes none --out "$s/a" --force || rc=1
+  run "$py" -m splatgl bench --scale --sizes 1M --sh3-sizes 1M --out "$s/b" --force || rc=1
+  run "$py" -m splatgl bench --scale --sizes 3M,6M --sh3-sizes none --out "$s/c" --force || rc=1
   run "$py" -m splatgl bench --scale --sizes none --sh3-sizes 6M --width 1280 --height 720 \
-    --out "$s/d" || rc=1
+    --out "$s/d" --force || rc=1
   local parts=()   # the runs that wrote their JSON
   for r in a b c d; do
     if [ "$dry" -eq 1 ] || [ -f "$s/$r/scale.json" ]; then parts+=("$s/$r/scale.json"); fi
