@@ -268,3 +268,20 @@ def test_lens_views_name_the_lens_field_of_view():
     assert lens_fov(retarget(cam, "fisheye", 220.0), 115.0) == "fov 220.0 fisheye"
     assert lens_fov(retarget(cam, "equirectangular"), 90.0) == "fov 360x180 panorama"
     assert lens_fov(cam, 50.0) == "fov 50.0"
+
+
+@pytest.mark.parametrize("x, y, steps", [(40.0, 30.0, 1.0), (300.0, 200.0, -2.0), (160.0, 120.0, 3.0)])
+def test_zoom_keeps_the_point_under_the_cursor(state, x, y, steps):
+    """Wheel over a point: the point of the target's plane under the cursor stays there (the
+    window's centre zooms straight in, as before)."""
+    cam = controls.to_camera(state, W, H)
+    right, down, forward = controls.axes(state)
+    s = controls.world_per_pixel(state, H)
+    point = np.array(state.target) + right * (x - W / 2) * s + down * (y - H / 2) * s
+    zoomed = controls.zoom_at(state, steps, x, y, W, H)
+    assert zoomed.distance == pytest.approx(controls.zoom(state, steps).distance)
+    for c in (cam, controls.to_camera(zoomed, W, H)):
+        p = c.world_to_camera @ np.append(point, 1.0)
+        assert (c.fx * p[0] / p[2] + c.cx, c.fy * p[1] / p[2] + c.cy) == pytest.approx((x, y), abs=1e-6)
+    centre = controls.zoom_at(state, steps, W / 2, H / 2, W, H)
+    assert np.allclose(centre.target, state.target) and centre.distance == zoomed.distance

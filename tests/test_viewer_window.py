@@ -410,3 +410,45 @@ def test_view_benchmark_prints_its_figures_and_survives_an_older_benchmark(xvfb_
     assert main(argv) == 0
     line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("benchmark:"))
     assert "100.00 fps" in line and "median" not in line, line
+
+
+def test_k_records_the_flight_as_a_path_file_and_b_changes_the_background(viewer, tmp_path, capsys):
+    """K starts and stops recording: the path file (what `render --path` reads) starts at the
+    camera K was pressed at and ends at the one it was stopped at; B cycles the background."""
+    from dataclasses import replace
+
+    import glfw
+
+    from splatgl.datasets.sources import load_source
+    from splatgl.viewer import recorder
+
+    v = viewer
+    v.step()
+    start = v.camera()
+    v.on_key(glfw.KEY_K, glfw.PRESS, 0)
+    assert v.recorder.recording and v.message.startswith("recording")
+    t0 = v.recorder._start
+    for i in range(1, 4):                      # a flight of 0.3 s in three steps
+        v.state = replace(v.state, yaw=v.state.yaw + 10.0)
+        v.recorder.add(v.camera(), t0 + 0.1 * i)
+    end = v.camera()
+    path = v.recorder.stop(tmp_path, end, t0 + 0.4)
+    assert path == tmp_path / "splatgl-view-path-0001.json"
+    views, fps = load_source(path)
+    assert fps == recorder.FPS and len(views) == round(0.4 * recorder.FPS) + 1
+    assert np.allclose(views[0].camera.world_to_camera, start.world_to_camera, atol=1e-9)
+    assert np.allclose(views[-1].camera.world_to_camera, end.world_to_camera, atol=1e-9)
+    assert (views[0].camera.width, views[0].camera.height) == (W, H)
+    v.on_key(glfw.KEY_K, glfw.PRESS, 0)        # through the key: a second file, its command
+    v.state = replace(v.state, yaw=v.state.yaw + 10.0)
+    v.recorder.keys.append((0.2, v.camera()))
+    v.on_key(glfw.KEY_K, glfw.PRESS, 0)
+    assert not v.recorder.recording and v.message == "saved splatgl-view-path-0002.json (splatgl render --path)"
+    assert "--path " + str(tmp_path / "splatgl-view-path-0002.json") in capsys.readouterr().out
+
+    v.on_key(glfw.KEY_I, glfw.PRESS, 0)
+    v.on_key(glfw.KEY_B, glfw.PRESS, 0)        # (0.1, 0.2, 0.3) -> black -> white
+    v.on_key(glfw.KEY_B, glfw.PRESS, 0)
+    assert v.settings.background == (1.0, 1.0, 1.0) and v.message == "background 1,1,1"
+    v.step()
+    assert tuple(_window_pixels(v)[H - 1, 0]) == (255, 255, 255)

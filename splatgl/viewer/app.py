@@ -29,6 +29,7 @@ from .frames import ViewMode
 from .navigation import Navigation, orbit_distance
 from .overlay import Status, key_help
 from .pacing import Pacer, paced_frame
+from .recorder import Recorder
 from .screenshot import take_screenshot
 from .window import close_window, connect, open_window, swap
 
@@ -100,6 +101,7 @@ class Viewer:
         self.last_pixel = None   # the last Ctrl+click listing
         o = self.options
         self.pacer = Pacer(scene, o.target_fps, o.scene_path)
+        self.recorder = Recorder()                # K: the camera's flight as a path file
         self._queued: list | None = None   # input that acts after the draw in progress (callables)
         self._events = 0                                         # input events seen so far
         self.window, self.ctx, self.context_api = open_window(camera.width, camera.height, o.title,
@@ -159,9 +161,10 @@ class Viewer:
         return self.last_pixel
 
     def on_scroll(self, dx: float, dy: float) -> None:
-        """glfw scroll callback: zoom."""
+        """glfw scroll callback: zoom towards the point under the cursor."""
         self._events += 1
-        self.nav.on_scroll(dy)
+        flat = self.options.projection is None     # a lens view zooms about its centre
+        self.nav.on_scroll(dy, self._cursor if flat else None, glfw.get_window_size(self.window))
 
     def on_resize(self, width: int, height: int) -> None:
         """glfw framebuffer-size callback; 0 in either dimension (minimised) pauses rendering."""
@@ -218,6 +221,8 @@ class Viewer:
         dt = min(now - self._clock if dt is None else dt, _MAX_DT)
         self._clock = now
         self.nav.apply_held(dt)
+        if self.recorder.recording:
+            self.recorder.add(self.nav.camera(max(self.size[0], 1), max(self.size[1], 1)))
         if self.size[0] <= 0 or self.size[1] <= 0:
             return False  # minimised: nothing to draw into
         glfw.make_context_current(self.window)

@@ -158,6 +158,19 @@ def zoom(state: ViewState, steps: float, factor: float = ZOOM_FACTOR) -> ViewSta
     return replace(state, distance=state.distance * factor ** (-steps))
 
 
+def zoom_at(state: ViewState, steps: float, x: float, y: float, width: int, height: int,
+            factor: float = ZOOM_FACTOR) -> ViewState:
+    """Wheel over window point (``x``, ``y``) of a ``width`` x ``height`` window (y down): zoom
+    as :func:`zoom`, moving the target towards the point under the cursor on the plane through
+    the target, so that point stays under the cursor (the window's centre: :func:`zoom`)."""
+    right, down, _ = axes(state)
+    s = world_per_pixel(state, height)
+    under = np.array(state.target) + right * (x - 0.5 * width) * s + down * (y - 0.5 * height) * s
+    keep = factor ** (-steps)          # the new distance's share of the old one
+    target = under + (np.array(state.target) - under) * keep
+    return replace(state, target=tuple(target), distance=state.distance * keep)
+
+
 def fly(state: ViewState, forward: float = 0.0, right: float = 0.0, up: float = 0.0) -> ViewState:
     """Move eye and target together along the view axes by the given world distances.
 

@@ -11,13 +11,15 @@ import glfw
 
 from ..errors import SplatglError
 from ..model.settings import Precision, RendererKind
-from . import controls
+from . import controls, recorder
 from .frames import ViewMode
 from .overlay import key_help
 
 #: Keys that act on auto-repeat too (field of view); the rest act once per press.
 REPEATING = (glfw.KEY_LEFT_BRACKET, glfw.KEY_RIGHT_BRACKET, glfw.KEY_MINUS, glfw.KEY_EQUAL,
              glfw.KEY_KP_ADD, glfw.KEY_KP_SUBTRACT)
+#: The backgrounds B cycles through (from one that is none of them: the first).
+BACKGROUNDS = ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (0.5, 0.5, 0.5))
 #: The blend precisions P cycles through.
 PRECISIONS = (Precision.RGBA32F, Precision.RGBA16F, Precision.RGBA8)
 
@@ -67,6 +69,12 @@ def on_key(v, key: int, action: int, mods: int) -> None:
             v.view = ViewMode.DIFFERENCE
     elif key == glfw.KEY_F12 or (key == glfw.KEY_S and ctrl):
         v.screenshot()
+    elif key == glfw.KEY_K:
+        v.message = recorder.toggle(v)
+    elif key == glfw.KEY_B:
+        i = next((i for i, bg in enumerate(BACKGROUNDS) if bg == v.settings.background), -1)
+        v.set_settings(background=BACKGROUNDS[(i + 1) % len(BACKGROUNDS)])
+        v.message = "background " + ",".join(f"{c:g}" for c in v.settings.background)
     elif key == glfw.KEY_U:
         v.message = f"up {v.nav.cycle_up()} (U cycles +y / -y / +z / -z)"
     elif key == glfw.KEY_I:

@@ -119,8 +119,14 @@ class Navigation:
                 self.state = controls.pan(self.state, dx, dy, max(window_height(), 1))
         self.cursor = (x, y)
 
-    def on_scroll(self, dy: float) -> None:
-        self.state = controls.zoom(self.state, dy)
+    def on_scroll(self, dy: float, cursor: tuple[float, float] | None = None,
+                  window: tuple[int, int] | None = None) -> None:
+        """Zoom by ``dy`` wheel steps towards the point under ``cursor`` (window coordinates of
+        a ``window``-sized window; None: towards the centre)."""
+        if cursor is None or window is None or min(window) <= 0:
+            self.state = controls.zoom(self.state, dy)
+        else:
+            self.state = controls.zoom_at(self.state, dy, *cursor, *window)
 
     def drop_input(self) -> None:
         """Forget held keys and the drag (focus lost: their releases never report)."""
