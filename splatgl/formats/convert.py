@@ -118,8 +118,8 @@ def conversion_error(a: Scene, b: Scene) -> dict:
         raise SplatglError(f"cannot compare a {a.kind.value} scene with a {b.kind.value} scene")
     f64 = np.float64
     position = np.linalg.norm(b.means.astype(f64) - a.means.astype(f64), axis=1)
-    scale = np.abs(np.expm1(b.log_scales.astype(f64) - a.log_scales.astype(f64)))
-    with np.errstate(over="ignore"):
+    with np.errstate(over="ignore"):  # a log-scale clipped by hundreds: an error of inf
+        scale = np.abs(np.expm1(b.log_scales.astype(f64) - a.log_scales.astype(f64)))
         oa = 1.0 / (1.0 + np.exp(-a.opacity_logits.astype(f64)))
         ob = 1.0 / (1.0 + np.exp(-b.opacity_logits.astype(f64)))
     color = SH_C0 * np.abs(b.sh[:, 0].astype(f64) - a.sh[:, 0].astype(f64))

@@ -33,6 +33,7 @@ def document(scene: Scene, path=None) -> tuple[dict, bytes]:
     if scene.kind is not SplatKind.GAUSSIAN_3D:
         raise SceneFormatError(path, "KHR_gaussian_splatting stores 3D Gaussians only; cannot "
                                      "write a 2DGS surfel scene (write .ply instead)", "scale")
+    qz.check_linear_scales(scene, path, "glTF")
     means, quats, _, _, sh = turn(scene.means.astype(np.float64),
                                    scene.rotations.astype(np.float64), None, None, scene.sh)
     columns = [("POSITION", means.astype(np.float32), "VEC3"),

@@ -14,22 +14,30 @@ import numpy as np
 BLOCK_BYTES = 64 << 20
 
 
+#: Above this magnitude the squared distances could overflow float32: they are taken in float64.
+FLOAT32_SAFE = 1e18
+
+
 def assign(x: np.ndarray, centroids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(labels (N,) int64, squared distances (N,) float32) of each row of ``x`` (N, D) to its
-    nearest row of ``centroids`` (K, D)."""
-    c = centroids.astype(np.float32)
+    nearest row of ``centroids`` (K, D); float32 math unless values beyond
+    :data:`FLOAT32_SAFE` need float64 (no overflow, no NumPy warning)."""
+    big = x.size and float(np.abs(x).max()) > FLOAT32_SAFE
+    work = np.float64 if big else np.float32
+    c = centroids.astype(work)
     cc = (c * c).sum(axis=1)
     n = x.shape[0]
     rows = max(1, BLOCK_BYTES // (4 * max(1, c.shape[0])))
     labels = np.empty(n, np.int64)
     dist = np.empty(n, np.float32)
     for start in range(0, n, rows):
-        xb = x[start:start + rows].astype(np.float32)
+        xb = x[start:start + rows].astype(work)
         d = cc[None, :] - 2.0 * (xb @ c.T)
         lab = np.argmin(d, axis=1)
         labels[start:start + rows] = lab
-        dist[start:start + rows] = np.maximum(
-            0.0, d[np.arange(len(lab)), lab] + (xb * xb).sum(axis=1))
+        near = np.maximum(0.0, d[np.arange(len(lab)), lab] + (xb * xb).sum(axis=1))
+        with np.errstate(over="ignore"):  # a float64 distance beyond float32: inf, still largest
+            dist[start:start + rows] = near
     return labels, dist
 
 
@@ -39,7 +47,7 @@ def kmeans(x: np.ndarray, k: int, iterations: int) -> tuple[np.ndarray, np.ndarr
     x = np.ascontiguousarray(x, np.float32)
     n = x.shape[0]
     k = max(1, min(k, n))
-    order = np.argsort(x.sum(axis=1), kind="stable")
+    order = np.argsort(x.sum(axis=1, dtype=np.float64), kind="stable")
     centroids = x[order[np.linspace(0, n - 1, k).astype(np.int64)]].copy()
     labels = np.zeros(n, np.int64)
     for _ in range(max(1, iterations)):

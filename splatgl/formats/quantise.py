@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from ..constants import SH_C0
+from ..errors import SceneFormatError
 # smallest-three quaternions are shared with the GPU layout (gl/storage): defined with the
 # quaternions, re-exported here for the writers (qz.smallest_three)
 from ..model.quaternion import half_step_rotation_deg, smallest_three  # noqa: F401
@@ -89,9 +90,26 @@ def colour_from_dc(dc_step: float) -> float:
     return SH_C0 * dc_step
 
 
+def check_linear_scales(scene, path, format_name: str) -> None:
+    """Refuse, in one line naming the first row, a scene with a scale that a format storing
+    linear float32 scales (.splat, glTF) would store as 0 or inf, a file no reader takes back."""
+    for start in range(0, scene.count, 1 << 16):  # the float32 scales, a block at a time
+        scales = scene.activated_rows(start, start + (1 << 16)).scales
+        bad = ~((scales > 0) & np.isfinite(scales)).all(axis=1)
+        if bad.any():
+            row = start + int(np.flatnonzero(bad)[0])
+            logs = scene.log_scales[row]
+            worst = float(logs[np.argmax(np.abs(logs))])
+            raise SceneFormatError(path, f"row {row}: log-scale {worst:g} is beyond what the "
+                                         f"{format_name} format's linear float32 scales hold "
+                                         "(e^-103 to e^88); write .ply, which stores log-scales",
+                                   "scale")
+
+
 def relative_scale(log_step: float) -> float:
-    """Relative scale error of a log-scale error ``log_step``."""
-    return math.expm1(log_step)
+    """Relative scale error of a log-scale error ``log_step`` (inf beyond float64's range: a
+    log-scale clipped by hundreds)."""
+    return math.expm1(log_step) if log_step < 709.0 else math.inf
 
 
 def position_slack(means: np.ndarray) -> float:
@@ -133,6 +151,7 @@ def codebook_1d(values: np.ndarray, size: int = SOG_CODEBOOK_SIZE,
 def codebook_labels(values: np.ndarray, codebook: np.ndarray) -> np.ndarray:
     """uint8 index of the nearest ``codebook`` entry (sorted) for each value (same shape)."""
     v = np.asarray(values, np.float64)
+    codebook = np.asarray(codebook, np.float64)  # a float32 book's extremes would overflow
     edges = 0.5 * (codebook[1:] + codebook[:-1])
     return np.searchsorted(edges, v).astype(np.uint8)
 

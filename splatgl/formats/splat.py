@@ -22,6 +22,7 @@ import numpy as np
 from ..constants import MAX_LOGIT, SH_C0
 from ..errors import SceneFormatError
 from ..model.scene import Scene, SplatKind, activate
+from . import quantise as qz
 from ._memory import check_memory
 from ._messages import reader_guard
 
@@ -76,6 +77,7 @@ def encode(scene: Scene, path=None) -> np.ndarray:
     if scene.kind is not SplatKind.GAUSSIAN_3D:
         raise SceneFormatError(path, ".splat stores 3D Gaussians only; cannot write a 2DGS "
                                      "surfel scene (write .ply instead)", "scale")
+    qz.check_linear_scales(scene, path, ".splat")
     if scene.sh_degree > 0:
         warnings.warn(f".splat stores SH degree 0 only; dropping degrees 1..{scene.sh_degree}",
                       stacklevel=3)

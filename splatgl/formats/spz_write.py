@@ -41,14 +41,15 @@ FLAG_ANTIALIASED = 0x1
 GZIP_LEVEL = 6
 
 
-def fractional_bits(means: np.ndarray) -> int:
-    """Fractional bits of the 24-bit fixed point: the default, or fewer so ``max |x|`` fits."""
+def fractional_bits(means: np.ndarray, path=None) -> int:
+    """Fractional bits of the 24-bit fixed point: the default, or fewer so ``max |x|`` fits
+    (refused, naming ``path``, when nothing fits)."""
     biggest = float(np.abs(np.asarray(means, np.float64)).max()) if len(means) else 0.0
     bits = qz.SPZ_FRACTIONAL_BITS
     while bits > 0 and biggest * 2.0 ** bits >= (1 << 23) - 1:
         bits -= 1
     if biggest * 2.0 ** bits >= (1 << 23) - 1:
-        raise SceneFormatError(None, f"positions up to {biggest:g} do not fit SPZ's 24-bit fixed "
+        raise SceneFormatError(path, f"positions up to {biggest:g} do not fit SPZ's 24-bit fixed "
                                      "point even with 0 fractional bits", "position")
     return bits
 
@@ -100,7 +101,7 @@ def encode(scene: Scene, version: int = DEFAULT_VERSION, antialiased: bool = Fal
         spz_axes.flip_axes(means, q, sh, spz_axes.axis_signs(stored))
     rest = sh[:, 1:]
     record = b"" if (version, stored) == (3, spz_axes.SPEC_AXES) else spz_axes.encode_record(stored)
-    bits = fractional_bits(means)
+    bits = fractional_bits(means, path)
     fixed = np.rint(means * 2.0 ** bits).astype(np.int64) & 0xFFFFFF
     positions = np.stack([(fixed >> s) & 0xFF for s in (0, 8, 16)], axis=-1).astype(np.uint8)
     alphas = _byte(scene.opacities.astype(np.float64) * 255.0)

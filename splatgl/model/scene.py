@@ -251,9 +251,11 @@ class ActivatedRows:
 
 
 def activate_scales(log_scales: np.ndarray) -> np.ndarray:
-    """(N, S) float64 ``exp(log_scales)`` (world units)."""
+    """(N, S) float64 ``exp(log_scales)`` (world units); inf beyond float32's range, so the
+    float32 copies hold inf without NumPy's overflow warning (as for a log-scale of 1000)."""
     with np.errstate(over="ignore"):
-        return np.exp(log_scales.astype(np.float64))
+        out = np.exp(log_scales.astype(np.float64))
+    return np.where(out > np.finfo(np.float32).max, np.inf, out)
 
 
 def rotation_ok(quats: np.ndarray) -> np.ndarray:
