@@ -149,6 +149,9 @@ def test_views_keys_and_closing(viewer, monkeypatch):
     v.step()
     v.on_key(glfw.KEY_D, glfw.PRESS, glfw.MOD_CONTROL)
     assert v.view is ViewMode.DEPTH and v.step() and v.last.image is not None
+    # the depth view is exact too, and names its splats once ("splats 1,604 splats")
+    assert "exact (as splatgl render)" in v.overlay.lines
+    assert v._status(v.camera()).splats == "splats 1,604 drawn / 1,604"
     v.on_key(glfw.KEY_C, glfw.PRESS, 0)
     assert v.view is ViewMode.DIFFERENCE and v.step()
     assert "max |quad - tile|" in v.last.note
