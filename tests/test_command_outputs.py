@@ -60,6 +60,7 @@ CLASHES = [
     (["convert", "{f}", "{f}", "--force"], "s.ply", "", "IN"),
     (["edit", "{f}", "-o", "{f}", "--force", "--decimate", "1"], "s.ply", "-o", "IN"),
     (["path", "interpolate", "--cameras", "{f}", "-o", "{f}", "--force"], "p.json", "-o", "--cameras"),
+    (["lod", "{f}", "-o", "{f}", "--force"], "s.lod.ply", "-o", "SCENE"),
 ]
 
 

@@ -8,9 +8,9 @@ from pathlib import Path
 
 from ..errors import SplatglError
 from ..formats import load_scene
-from ..output.files import check_output_path
 from ..progress import StderrProgress, enabled
 from ..model.scene import SplatKind
+from ._outputs import add_force_argument, check_output
 
 NAME = "lod"
 ORDER = 27
@@ -37,7 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="output .lod.ply (default: SCENE's name with .lod.ply)")
     p.add_argument("--branching", type=int, default=4, metavar="B",
                    help="children per parent (default 4; 2-64)")
-    p.add_argument("--force", action="store_true", help="replace the output if it exists")
+    add_force_argument(p)
 
 
 def default_output(scene: Path) -> Path:
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(f"--branching must be 2-64, got {args.branching}")
     out = args.output or default_output(args.scene)
     check_lod_name(out)
-    check_output_path(out, "-o", overwrite=args.force)  # before the (long) build
+    check_output(args, out, "-o")  # before the (long) build: not SCENE; existing only with --force
     progress = StderrProgress() if enabled() else None
     scene = load_scene(args.scene, progress=progress)
     if scene.kind is not SplatKind.GAUSSIAN_3D:
