@@ -178,3 +178,37 @@ def test_a_link_output_is_written_through_to_its_target(tmp_path, capsys):
     rc, _, err = run_cli(capsys, "info", demo_scene_path(), "--json", link, "--force")
     assert (rc, err) == (0, "") and link.is_symlink()
     assert json.loads(target.read_text())["count"] > 0
+
+
+@pytest.mark.parametrize("mode, names", [
+    (["--quick"], "bench.csv, bench.json and bench.png"),
+    (["--popping"], "popping.json"),
+    (["--interactive"], "interactive.json and interactive.png"),
+    (["--scale", "--sizes", "0.01M"], "scale.json and scale.png"),
+    (["--lod", "--sizes", "0.01M"], "lod.json and lod.png"),
+])
+def test_bench_out_is_checked_before_measuring(tmp_path, capsys, monkeypatch, mode, names):
+    """``bench --popping/--interactive --out`` ran the whole benchmark, then crashed on the
+    folder and lost the results."""
+    from splatgl.api import Renderer
+    from splatgl.bench import scale
+
+    def measured(*args, **kwargs):
+        raise AssertionError("measured before --out was checked")
+
+    monkeypatch.setattr(Renderer, "__init__", measured)
+    monkeypatch.setattr(scale, "run_scale", measured)
+    import splatgl.bench.lod_bench as lod_bench
+    monkeypatch.setattr(lod_bench, "run_lod", measured)
+    scene, _ = _existing(tmp_path)
+    bench = ["bench", *mode, "--out"]
+    a_file = tmp_path / "results.txt"
+    a_file.write_text("x")
+    refused(capsys, [*bench, a_file, scene],
+            f"--out {a_file}: is a file; --out names a folder for {names}")
+    missing = tmp_path / "no" / "out"
+    refused(capsys, [*bench, missing, scene], f"--out {missing}: folder {missing.parent} does not exist")
+    first = names.split(",")[0].split(" ")[0]
+    (tmp_path / "out" / first).mkdir(parents=True)
+    refused(capsys, [*bench, tmp_path / "out", scene, "--force"],
+            f"--out ({first}) {tmp_path / 'out' / first}: is a directory; give a file name")
