@@ -65,7 +65,7 @@ def on_key(v, key: int, action: int, mods: int) -> None:
     elif key == glfw.KEY_C:
         if v.view is ViewMode.DIFFERENCE:
             v.view = ViewMode.COLOR
-        elif tile_allowed(v, "C"):
+        elif tile_allowed(v, "C refused"):
             v.view = ViewMode.DIFFERENCE
     elif key == glfw.KEY_F12 or (key == glfw.KEY_S and ctrl):
         v.screenshot()
@@ -105,12 +105,12 @@ def refusal(v, kind: RendererKind) -> str | None:
     return None
 
 
-def tile_allowed(v, key: str) -> bool:
+def tile_allowed(v, what: str) -> bool:
     """Whether the tile renderer can draw the current view (the difference view's other
-    side); if not, the status line says why and the key changes nothing."""
+    side); if not, the status line says why after ``what`` ("C refused") and the view stays."""
     why = refusal(v, RendererKind.TILE)
     if why is not None:
-        v.message = f"{key}: {why}" if " " in key else f"{key} refused: {why}"
+        v.message = f"{what}: {why}"
     return why is None
 
 
