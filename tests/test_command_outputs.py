@@ -212,3 +212,18 @@ def test_bench_out_is_checked_before_measuring(tmp_path, capsys, monkeypatch, mo
     (tmp_path / "out" / first).mkdir(parents=True)
     refused(capsys, [*bench, tmp_path / "out", scene, "--force"],
             f"--out ({first}) {tmp_path / 'out' / first}: is a directory; give a file name")
+
+
+def test_convert_to_a_link_writes_its_target(tmp_path, capsys):
+    """``convert IN link.ply --force`` left the old target and a plain file instead of the link."""
+    from splatgl.commands._common import demo_scene_path
+    from splatgl.formats import load_scene
+
+    target = tmp_path / "real.ply"
+    target.write_bytes(BYTES)
+    link = tmp_path / "link.ply"
+    link.symlink_to(target)
+    rc, _, err = run_cli(capsys, "convert", demo_scene_path(), link, "--force")
+    assert (rc, err) == (0, "") and link.is_symlink()
+    assert load_scene(target).count == load_scene(demo_scene_path()).count
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.ply", "real.ply"]
