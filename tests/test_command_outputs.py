@@ -227,3 +227,14 @@ def test_convert_to_a_link_writes_its_target(tmp_path, capsys):
     assert (rc, err) == (0, "") and link.is_symlink()
     assert load_scene(target).count == load_scene(demo_scene_path()).count
     assert sorted(p.name for p in tmp_path.iterdir()) == ["link.ply", "real.ply"]
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc") or os.statvfs("/proc").f_blocks != 0,
+                    reason="no /proc pseudo file system here")
+def test_an_output_in_proc_is_not_called_a_full_disk(capsys):
+    """``convert IN /proc/x.ply`` said "cannot write (...); the disk is full"."""
+    from splatgl.commands._common import demo_scene_path
+
+    refused(capsys, ["convert", demo_scene_path(), "/proc/x.ply"],
+            "/proc/x.ply: folder /proc is on a system pseudo file system (such as /proc or /sys), "
+            "where no files can be made; give a folder on a disk")

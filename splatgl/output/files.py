@@ -79,6 +79,14 @@ def _input_paths(inputs: Inputs | None) -> list[tuple[str, Path]]:
     return pairs
 
 
+def _pseudo_file_system(folder: Path) -> bool:
+    """Whether ``folder`` lies on a file system without storage (/proc, /sys: no blocks)."""
+    try:
+        return os.statvfs(folder).f_blocks == 0
+    except (OSError, AttributeError):  # cannot tell (or no statvfs): the write will say
+        return False
+
+
 def check_not_an_input(path: PathLike, name: str, inputs: Inputs | None) -> None:
     """Refuse output ``path`` (option ``name``) where it is the same file (:func:`same_file`)
     as one of the command's ``inputs``, in one line naming both options."""
@@ -109,6 +117,9 @@ def check_output_path(path: PathLike, name: str = "", overwrite: bool = False,
         raise SplatglError(f"{where}: folder {shown} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise SplatglError(f"{where}: folder {shown} is not writable")
+    if _pseudo_file_system(parent):
+        raise SplatglError(f"{where}: folder {shown} is on a system pseudo file system (such as "
+                           "/proc or /sys), where no files can be made; give a folder on a disk")
     if path.exists() and not overwrite:
         raise SplatglError(f"{where}: exists (use --force to replace it)")
 
