@@ -9,7 +9,10 @@ camera, so the camera is interpreted in one place:
   every path projects ``means - anchor``;
 - the near plane (``settings.near`` or the scene-relative default) and its float32 and float64
   thresholds (:func:`near_threshold`);
-- the model's shader ``#define`` switches and the values of every camera uniform.
+- the model's shader ``#define`` switches and the values of every camera uniform;
+- its :class:`Frustum`: which cull the order stage, the level-of-detail cut and the CPU
+  renderer use (the model's :class:`~splatgl.cameras.model.CullKind`) and the planes it tests.
+  No other module computes frustum planes.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ import numpy as np
 from ..constants import LOW_PASS
 from ..output.under import DepthKind, UnderImage, UnderLayer
 from .camera import Camera
-from .model import CameraModel
+from .model import CameraModel, CullKind
 
 if TYPE_CHECKING:
     from ..model.scene import Scene
@@ -79,6 +82,48 @@ def near_threshold(near: float, dtype) -> np.floating:
     return value
 
 
+@dataclass(frozen=True)
+class Frustum:
+    """What a camera's cull tests splats against (:func:`frustum_of`).
+
+    Attributes:
+        kind: the model's cull (:class:`~splatgl.cameras.model.CullKind`); the order stage's
+            table :data:`splatgl.order.stage.CULLS` maps it to the cull that runs.
+        camera: the camera whose image edges bound what is drawn: the camera itself, or for a
+            model with its own cull frustum (lens distortion,
+            :meth:`~splatgl.cameras.model.CameraModel.cull_frustum`) a pinhole with its pose
+            whose side planes hold every ray the image sees.
+        peak: whether the peak-alpha bound may cull (it holds for pinhole images only).
+        edges: per image axis (x, y) ``(f, lo, hi)``: the focal length and the image's edges,
+            ``-c / f`` and ``(size - c) / f``: slopes ``x / z`` of the four side planes through
+            the camera centre (FRUSTUM), or camera-space coordinates of the box (BOX).
+        angle_limit: SPHERE: the largest angle from the optical axis kept (radians), or None.
+    """
+
+    kind: CullKind
+    camera: Camera
+    peak: bool
+    edges: tuple[tuple[float, float, float], tuple[float, float, float]]
+    angle_limit: float | None = None
+
+    @property
+    def pinhole(self) -> bool:
+        """Whether the image is a pinhole's (its own four side planes, the peak bound): what the
+        CPU renderer's compiled pinhole projection draws."""
+        return self.kind is CullKind.FRUSTUM and self.peak
+
+
+def frustum_of(camera: Camera) -> Frustum:
+    """The :class:`Frustum` of ``camera`` (anchored or not: the planes pass through its centre)."""
+    own = camera.model.cull_frustum(camera)
+    bound = camera if own is None else own
+    edges = tuple((f, -c / f, (size - c) / f) for f, c, size in
+                  ((bound.fx, bound.cx, bound.width), (bound.fy, bound.cy, bound.height)))
+    kind = camera.model.cull
+    limit = camera.model.angle_limit(camera) if kind is CullKind.SPHERE else None
+    return Frustum(kind, bound, own is None, edges, limit)
+
+
 @dataclass(frozen=True, eq=False)
 class View:
     """One frame's camera, interpreted once.
@@ -128,6 +173,11 @@ class View:
     def anchored(self) -> Camera:
         """The camera for anchored points (``p - anchor``): what the GPU and the order stage use."""
         return anchored_camera(self.camera, self.anchor)
+
+    @cached_property
+    def frustum(self) -> Frustum:
+        """The anchored camera's :class:`Frustum`: the cull the order stages run and its planes."""
+        return frustum_of(self.anchored)
 
     @cached_property
     def scale(self) -> float:

@@ -34,7 +34,7 @@ from . import kernels as cull_kernel
 from ..cameras.camera import Camera
 from ..constants import JACOBIAN_CLAMP
 from .cull import CULL_BLOCK, CullData, cull_visible, peak_keeps, plane_constants, view_axis
-from ..cameras.view import near_threshold
+from ..cameras.view import frustum_of, near_threshold
 from ..cameras.equirect import WRAP_FLAG
 from ..model.spatial import morton_order_clamped_box
 from .sort import depth_keys
@@ -136,12 +136,9 @@ class ChunkedCull:
         """(K,) uint64 sort keys ``(float_bits(z) << 32) | scene index`` of the splats
         :func:`~splatgl.order.cull.cull_visible` keeps, in chunk order (unsorted).
 
-        ``camera`` anchored to ``data.xyz``'s origin; ``scale`` multiplies the world radii.
-        The array is a view of a buffer the next call overwrites: sort (copy) it first.
+        ``camera`` (a FRUSTUM or BOX model's: :data:`splatgl.order.stage.CULLS`) anchored to
+        ``data.xyz``'s origin; ``scale`` multiplies the world radii.  The array is a view of a buffer the next call overwrites: sort (copy) it first.
         """
-        if camera.is_lens:
-            raise ValueError("visible_keys takes pinhole and orthographic cameras; lens cameras "
-                             "take splatgl.order.lens_cull.lens_visible_keys")
         n_chunks = self.starts.size - 1
         self.views += 1
         self.last_path = "numpy"
@@ -202,7 +199,7 @@ class ChunkedCull:
                 data.radius, data.faint, data.max_scale, data.opacities, self.index, self.starts,
                 camera.rotation.astype(np.float64), camera.translation.astype(np.float64), view,
                 sides, camera.rotation.astype(np.float32), camera.translation.astype(np.float32),
-                plane_constants(camera, scale), near_threshold(near, np.float32), peak,
+                plane_constants(frustum_of(camera), scale), near_threshold(near, np.float32), peak,
                 self._keys.view(np.uint32), self._keys.view(np.float32))
         n_groups = self.groups.packed.shape[0]
         split = self._split
@@ -307,7 +304,7 @@ def rows_keys(data: CullData, rows: np.ndarray, camera: Camera, near: float,
     xyz = data.xyz
     n, c = kern.rows_pass(rows, xyz[0], xyz[1], xyz[2], data.radius, data.alive, data.faint,
                           data.max_scale, data.opacities, camera.rotation.astype(np.float32),
-                          camera.translation.astype(np.float32), plane_constants(camera, scale),
+                          camera.translation.astype(np.float32), plane_constants(frustum_of(camera), scale),
                           near_threshold(near, np.float32), peak, keys.view(np.uint32),
                           keys.view(np.float32), *unsure)
     if c > UNSURE_ROWS:  # too many undecided rows (almost never): NumPy culls the view

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..constants import AA_MIN_FACTOR, ALPHA_MIN, JACOBIAN_CLAMP, LOW_PASS
-from ..cameras.view import near_threshold
+from ..cameras.view import Frustum, frustum_of, near_threshold
 from ..twins.project import to_camera
 
 #: Extra screen margin (pixels) so the 0.3 px^2 dilation and pixel-centre rounding never cull
@@ -71,28 +71,23 @@ def cull(p_cam: np.ndarray, max_scale: np.ndarray, opacities: np.ndarray, camera
         antialias: whether the opacity compensation applies (tightens the peak bound).
 
     A model with its own cull frustum (:meth:`~splatgl.cameras.model.CameraModel.cull_frustum`,
-    lens distortion) is culled against that frustum's planes without the peak bound.
+    lens distortion) is culled against that frustum's planes without the peak bound
+    (:func:`splatgl.cameras.view.frustum_of`, which gives the planes).
     """
-    frustum = camera.model.cull_frustum(camera)
-    peak = frustum is None
-    camera = camera if peak else frustum
+    frustum = frustum_of(camera)
+    peak, camera = frustum.peak, frustum.camera
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         k = np.sqrt(np.maximum(2.0 * np.log(np.maximum(opacities, 1e-30) / ALPHA_MIN), 0.0))
     radius = (k * max_scale).astype(np.float64)
     x, y, z = (p_cam[:, i].astype(np.float64) for i in range(3))
     keep = (z > near) & (opacities >= ALPHA_MIN)
-    if camera.is_orthographic:
-        rx = radius + MARGIN_PX / camera.fx
-        ry = radius + MARGIN_PX / camera.fy
-        u_lo, u_hi = -camera.cx / camera.fx, (camera.width - camera.cx) / camera.fx
-        v_lo, v_hi = -camera.cy / camera.fy, (camera.height - camera.cy) / camera.fy
-        keep &= (x >= u_lo - rx) & (x <= u_hi + rx) & (y >= v_lo - ry) & (y <= v_hi + ry)
+    if camera.is_orthographic:   # the box's edges
+        for coord, (f, lo, hi) in zip((x, y), frustum.edges):
+            keep &= (coord >= lo - (radius + MARGIN_PX / f)) & (coord <= hi + (radius + MARGIN_PX / f))
         return _peak_cull(keep, p_cam, max_scale, opacities, camera, antialias) if peak else keep
     # Side planes through the camera centre: x / z = s for slopes s at the image edges.
     # The signed distance of a point from the plane x - s z = 0 is (x - s z) / sqrt(1 + s^2).
-    for coord, f, c, size in ((x, camera.fx, camera.cx, camera.width),
-                              (y, camera.fy, camera.cy, camera.height)):
-        lo, hi = -c / f, (size - c) / f
+    for coord, (f, lo, hi) in zip((x, y), frustum.edges):
         reach = radius + MARGIN_PX * np.maximum(z, 0.0) / f
         keep &= (coord - hi * z) / np.sqrt(1.0 + hi * hi) <= reach
         keep &= (lo * z - coord) / np.sqrt(1.0 + lo * lo) <= reach
@@ -191,10 +186,8 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
     that frustum's planes without the peak bound.
     """
     n = data.count
-    peak = True
-    frustum = camera.model.cull_frustum(camera)
-    if frustum is not None:
-        camera, peak = frustum, False
+    frustum = frustum_of(camera)
+    camera, peak = frustum.camera, frustum.peak
     if camera.is_orthographic:
         p_cam = to_camera(data.xyz.T, camera)
         keep = np.flatnonzero(cull(p_cam, data.max_scale * scale, data.opacities, camera, near,
@@ -202,7 +195,7 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
         return keep.astype(np.uint32), np.ascontiguousarray(p_cam[keep, 2], np.float32)
     r = camera.rotation.astype(np.float32)
     t = camera.translation.astype(np.float32)
-    planes = plane_constants(camera, scale)
+    planes = plane_constants(frustum, scale)
     near32 = near_threshold(near, np.float32)
     block = min(CULL_BLOCK, max(n, 1))
     z, v, w, u = (np.empty(block, np.float32) for _ in range(4))
@@ -253,16 +246,15 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
     return np.concatenate(out_idx), np.concatenate(out_z)
 
 
-def plane_constants(camera: Camera, scale: float = 1.0) -> np.ndarray:
-    """(2, 6) float32 per image axis (x, y): ``a_hi, b_hi, a_lo, b_lo, lo, hi``.  A splat at
+def plane_constants(frustum: Frustum, scale: float = 1.0) -> np.ndarray:
+    """(2, 6) float32 per image axis (x, y) of ``frustum``'s side planes
+    (:func:`splatgl.cameras.view.frustum_of`): ``a_hi, b_hi, a_lo, b_lo, lo, hi``.  A splat at
     camera-space ``(v, z)`` on that axis with world radius ``rad`` passes the side planes when
     ``v <= (rad * b_hi) + (z * a_hi)`` and ``v >= (rad * b_lo) + (z * a_lo)`` (float32, in that
     order: :func:`cull_visible`'s rearranged plane test); its centre projects inside the image
     when ``v <= z * hi`` and ``v >= z * lo``."""
     out = np.empty((2, 6), np.float32)
-    for axis, (f, c, size) in enumerate(((camera.fx, camera.cx, camera.width),
-                                         (camera.fy, camera.cy, camera.height))):
-        lo, hi = -c / f, (size - c) / f
+    for axis, (f, lo, hi) in enumerate(frustum.edges):
         n_hi, n_lo = np.sqrt(1.0 + hi * hi), np.sqrt(1.0 + lo * lo)
         out[axis] = (hi + n_hi * MARGIN_PX / f, n_hi * scale, lo - n_lo * MARGIN_PX / f,
                      -n_lo * scale, lo, hi)

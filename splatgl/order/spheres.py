@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cameras.camera import Camera
+from ..cameras.view import frustum_of
 from .cull import MARGIN_PX
 
 #: Relative float32 rounding margin of the chunk tests: a chunk is accepted or rejected only
@@ -78,15 +79,13 @@ class Spheres:
 def sphere_constants(camera: Camera, near: float, scale: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-view constants of :meth:`Spheres.classify` (float64): ``view = (s, near, |t|,
     scale, ROUNDING)`` with ``s`` the camera-space length of a world unit, and ``sides`` (2, 8), per
-    image axis ``hi, lo`` (the image edges' slopes), ``n_hi, n_lo`` (``hypot(1, slope)``),
+    image axis ``hi, lo`` (the image edges' slopes, :func:`splatgl.cameras.view.frustum_of`), ``n_hi, n_lo`` (``hypot(1, slope)``),
     ``a_hi, a_lo`` (the slopes widened by the screen margin) and ``hypot(1, a)`` of those."""
     s = float(np.linalg.norm(camera.rotation, axis=1).max())
     view = np.array([s, near, float(np.linalg.norm(camera.translation)), scale, ROUNDING],
                     np.float64)
     sides = np.empty((2, 8), np.float64)
-    for axis, (f, c, size) in enumerate(((camera.fx, camera.cx, camera.width),
-                                         (camera.fy, camera.cy, camera.height))):
-        lo, hi = -c / f, (size - c) / f
+    for axis, (f, lo, hi) in enumerate(frustum_of(camera).edges):
         n_hi, n_lo = np.hypot(1.0, hi), np.hypot(1.0, lo)
         a_hi, a_lo = hi + n_hi * MARGIN_PX / f, lo - n_lo * MARGIN_PX / f
         sides[axis] = hi, lo, n_hi, n_lo, a_hi, a_lo, np.hypot(1.0, a_hi), np.hypot(1.0, a_lo)
