@@ -41,7 +41,10 @@ if TYPE_CHECKING:
 
 
 class CullKind(enum.Enum):
-    """The order stage's cull strategies (:mod:`splatgl.order`); a model picks one.
+    """The order stage's cull strategies; a model picks one.  A view's
+    :attr:`~splatgl.cameras.view.View.frustum` carries it with the planes, and the one table
+    :data:`splatgl.order.stage.CULLS` maps it to the cull the scene order, the level-of-detail
+    cut and order, and the CPU renderer use.
 
     FRUSTUM: view z beyond the near plane and the splat's reach inside the four side planes
         through the camera centre (the pinhole's pyramid), plus the peak-alpha bound.

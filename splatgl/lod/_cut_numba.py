@@ -3,7 +3,7 @@
 
 :func:`cut_pass` walks the tree top-down as :func:`splatgl.lod.cut.select_cut_weights` does, but
 over each level's candidates only, with no per-level NumPy calls: the same float32 operations
-in the same order (``_View.test``'s size and frustum tests, :func:`~splatgl.lod.cut.expansion`,
+in the same order (``_NodeTest.test``'s size and frustum tests, :func:`~splatgl.lod.cut.expansion`,
 the weights ``a (1 - e)`` and the carry ``a e``), so the same rows and the same weight bits
 (tested against the NumPy path).  The one float64 decision, whether the cut would draw at
 least ``leaves_at`` nodes per leaf, sums in another order than NumPy and could differ from it
@@ -11,6 +11,8 @@ only where the two sides are equal to rounding.
 """
 
 from __future__ import annotations
+
+import math
 
 import numba
 import numpy as np
@@ -21,19 +23,31 @@ KERNELS = ("cut_pass",)
 
 
 @numba.njit(inline="always", fastmath=False, error_model="numpy")
-def _node_test(cx, cy, cz, rad, rt, scale, f, ortho, planes):
+def _in_cone(p0, p1, p2, d, rad, gap, limit):
+    """SPHERE: the node reaches within ``limit`` radians of the axis (float64, as NumPy's)."""
+    if gap <= F32(0):
+        return True
+    off = (math.atan2(math.hypot(np.float64(p0), np.float64(p1)), np.float64(p2))
+           - math.asin(np.float64(min(rad / d, F32(1)))))
+    return off <= np.float64(limit)
+
+
+@numba.njit(inline="always", fastmath=False, error_model="numpy")
+def _node_test(cx, cy, cz, rad, rt, scale, f, kind, planes):
     """``(projected radius px, sphere touches the frustum)`` of one node (float32,
-    ``splatgl.lod.cut._View.test``'s operations)."""
+    ``splatgl.lod.cut._NodeTest.test``'s operations; ``kind`` 0 planes, 1 box, 2 sphere)."""
     rad = rad * scale
     p0 = cx * rt[0] + cy * rt[1] + cz * rt[2] + rt[9]
     p1 = cx * rt[3] + cy * rt[4] + cz * rt[5] + rt[10]
     p2 = cx * rt[6] + cy * rt[7] + cz * rt[8] + rt[11]
     inside = p2 + rad > F32(0)
-    if ortho:
+    if kind == 1:
         return rad * f, inside
     d = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
     gap = d - rad
     size = f * rad / gap if gap > F32(0) else F32(np.inf)
+    if kind == 2:
+        return size, _in_cone(p0, p1, p2, d, rad, gap, planes[0])
     inside = (inside and p0 - planes[2] * p2 <= rad * planes[3]
               and planes[0] * p2 - p0 <= rad * planes[1]
               and p1 - planes[6] * p2 <= rad * planes[7]
@@ -42,18 +56,18 @@ def _node_test(cx, cy, cz, rad, rt, scale, f, ortho, planes):
 
 
 @numba.njit(inline="always", fastmath=False, error_model="numpy")
-def _level_test(cx, cy, cz, radius, lo, n, rt, scale, f, ortho, planes, sizes, inside):
+def _level_test(cx, cy, cz, radius, lo, n, rt, scale, f, kind, planes, sizes, inside):
     """:func:`_node_test` of the rows ``lo:lo + n`` into ``sizes`` / ``inside``, as one loop
     without branches (for a level whose candidates are most of it: LLVM vectorises it)."""
     for q in range(n):
         size, ins = _node_test_flat(cx[lo + q], cy[lo + q], cz[lo + q], radius[lo + q], rt,
-                                    scale, f, ortho, planes)
+                                    scale, f, kind, planes)
         sizes[q] = size
         inside[q] = ins
 
 
 @numba.njit(inline="always", fastmath=False, error_model="numpy")
-def _node_test_flat(cx, cy, cz, rad, rt, scale, f, ortho, planes):
+def _node_test_flat(cx, cy, cz, rad, rt, scale, f, kind, planes):
     """:func:`_node_test`, every operation done and the results selected (no early exits)."""
     rad = rad * scale
     p0 = cx * rt[0] + cy * rt[1] + cz * rt[2] + rt[9]
@@ -66,8 +80,10 @@ def _node_test_flat(cx, cy, cz, rad, rt, scale, f, ortho, planes):
     persp = q if gap > F32(0) else F32(np.inf)
     sides = ((p0 - planes[2] * p2 <= rad * planes[3]) & (planes[0] * p2 - p0 <= rad * planes[1])
              & (p1 - planes[6] * p2 <= rad * planes[7]) & (planes[4] * p2 - p1 <= rad * planes[5]))
-    if ortho:
+    if kind == 1:
         return rad * f, front
+    if kind == 2:
+        return persp, _in_cone(p0, p1, p2, d, rad, gap, planes[0])
     return persp, front & sides
 
 
@@ -88,11 +104,13 @@ def _expansion(size, mode, t, k):
 
 
 @numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False, error_model="numpy")
-def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, ortho, planes,
+def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, kind, planes,
              mode, t, k, blend, leaves_at, dense_fraction, sizes, inside, out_rows, out_w):
     """The cut of :func:`splatgl.lod.cut.select_cut_weights` into the tails ``out_rows[pos:]``
     (int64, rows ascending) and ``out_w[pos:]`` (float32 weights, 1 without ``blend``), both at
-    least the node count long.  ``planes`` (8,) float32 per axis ``lo, n_lo, hi, n_hi``;
+    least the node count long.  ``kind``: 0 the side planes, 1 the box, 2 the sphere
+    (:data:`splatgl.lod.cut.NODE_TESTS`); ``planes`` (8,) float32 per axis ``lo, n_lo, hi,
+    n_hi`` (the sphere: its angle limit first);
     ``mode``, ``t``, ``k`` as :func:`_expansion` takes them; ``leaves_at`` < 0 for none.  A
     level whose candidates are at least ``dense_fraction`` of it is tested whole first
     (:func:`_level_test`, into the scratch ``sizes`` float32 / ``inside`` bool, each at least
@@ -137,7 +155,7 @@ def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, ortho
         n_next = 0
         dense = n_cand >= dense_fraction * n
         if dense:
-            _level_test(cx, cy, cz, radius, lo, n, rt, scale, f, ortho, planes, sizes, inside)
+            _level_test(cx, cy, cz, radius, lo, n, rt, scale, f, kind, planes, sizes, inside)
         base = pos - n_cand
         d = 0
         w_sum = 0.0
@@ -150,7 +168,7 @@ def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, ortho
                     size, ins = sizes[local], inside[local]
                 else:
                     size, ins = _node_test(cx[row], cy[row], cz[row], radius[row], rt, scale,
-                                           f, ortho, planes)
+                                           f, kind, planes)
                 # written unconditionally and counted by the tests (no branches to mispredict:
                 # slots past the count are overwritten or never read)
                 e = F32(0) if level == 0 else _expansion(size, mode, t, k)
@@ -192,6 +210,6 @@ def warm_up() -> None:
     """Compile (or load from numba's cache) for the argument types the cut uses."""
     f4 = np.zeros(3, np.float32)
     cut_pass(f4, f4, f4, f4, np.array([0, 2, 3], np.int64), 2, np.eye(3, dtype=np.float32),
-             np.zeros(3, np.float32), F32(1), F32(1), False, np.zeros(8, np.float32), 2, F32(1),
+             np.zeros(3, np.float32), F32(1), F32(1), 0, np.zeros(8, np.float32), 2, F32(1),
              F32(1), True, -1.0, 0.25, np.zeros(3, np.float32), np.zeros(3, np.bool_),
              np.zeros(3, np.int64), np.zeros(3, np.float32))

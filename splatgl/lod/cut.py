@@ -8,7 +8,8 @@ its children's, so along any path from the root the size only falls: the cut at 
 It is found top-down, level by level, over index arrays (vectorised NumPy): a level's
 candidates are the children of the previous level's nodes that were too large.  Nodes whose
 sphere lies wholly outside the view frustum are dropped with their subtrees (nothing in them
-can touch the image).
+can touch the image): the camera's own (:func:`splatgl.cameras.view.frustum_of`), which for a
+lens camera is every direction (a fisheye's: its cone).
 
 With a transition band (:func:`select_cut_weights`) nodes near the threshold are drawn as a
 blend of parent and children (opacity weights), so the cut changes continuously as the camera
@@ -24,7 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cameras.camera import Camera
-from ..cameras.view import anchored_camera
+from ..cameras.model import CullKind
+from ..cameras.view import anchored_camera, frustum_of
 from ..order import kernels
 
 kernels.register(f"{__package__}._cut_numba")  # the compiled cut_pass (numba, where installed)
@@ -78,21 +80,32 @@ BLOCK = 1 << 15
 _SCRATCH = threading.local()
 
 
-class _View:
-    """Per-view constants of the size and frustum tests."""
+#: The node test of each cull kind (the compiled pass's ``kind``): the four side planes, the box
+#: (only the plane behind the camera), the sphere (every direction; a fisheye's cone).
+NODE_TESTS = {CullKind.FRUSTUM: 0, CullKind.BOX: 1, CullKind.SPHERE: 2}
+#: Radians a node may lie beyond a fisheye's angle limit and still be kept (float32 rounding).
+CONE_MARGIN = 1e-4
+
+
+class _NodeTest:
+    """Per-view constants of the size and frustum tests, from the camera's frustum
+    (:func:`splatgl.cameras.view.frustum_of`: its cull kind and planes)."""
 
     def __init__(self, data: CutData, camera: Camera):
         cam = anchored_camera(camera, data.anchor)
+        frustum = frustum_of(cam)
         self.r = cam.rotation.astype(np.float32)
         self.t = cam.translation.astype(np.float32)
         self.scale = np.float32(camera.scale)
         self.f = np.float32(max(camera.fx, camera.fy))
-        self.ortho = camera.is_orthographic
-        self.planes = []  # (slope, sqrt(1 + slope^2)) of the four side planes, per axis
-        for fl, cc, extent in ((camera.fx, camera.cx, camera.width), (camera.fy, camera.cy, camera.height)):
-            lo, hi = -cc / fl, (extent - cc) / fl
-            self.planes.append((np.float32(lo), np.float32(np.sqrt(1 + lo * lo)),
-                                np.float32(hi), np.float32(np.sqrt(1 + hi * hi))))
+        self.kind = NODE_TESTS[frustum.kind]
+        # (slope, sqrt(1 + slope^2)) of the four side planes, per axis; SPHERE: the angle limit
+        self.planes = np.array([v for _, lo, hi in frustum.edges
+                                for v in (lo, np.sqrt(1 + lo * lo), hi, np.sqrt(1 + hi * hi))],
+                               np.float32)
+        if self.kind == 2:
+            limit = np.pi if frustum.angle_limit is None else frustum.angle_limit
+            self.planes[0] = limit + CONE_MARGIN
 
     def test(self, c: np.ndarray, rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(projected radius in px, sphere touches the frustum) for centres (3, K), radii (K,)."""
@@ -100,19 +113,24 @@ class _View:
         rad = rad * self.scale
         p = [c[0] * r[i, 0] + c[1] * r[i, 1] + c[2] * r[i, 2] + t[i] for i in range(3)]
         inside = p[2] + rad > 0
-        if self.ortho:
+        if self.kind == 1:
             return rad * self.f, inside
         d = np.sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
         gap = d - rad
         with np.errstate(divide="ignore", invalid="ignore"):
             size = np.where(gap > 0, self.f * rad / gap, np.inf)
-        for coord, (lo, n_lo, hi, n_hi) in zip(p[:2], self.planes):
+            if self.kind == 2:   # the angle to the axis, less the sphere's angular radius
+                rho = np.hypot(p[0].astype(np.float64), p[1])
+                off = np.arctan2(rho, p[2]) - np.arcsin(np.minimum(rad / d, 1.0).astype(np.float64))
+                return size, (gap <= 0) | (off <= self.planes[0])
+        pl = self.planes
+        for coord, (lo, n_lo, hi, n_hi) in zip(p[:2], (pl[0:4], pl[4:8])):
             inside &= coord - hi * p[2] <= rad * n_hi
             inside &= lo * p[2] - coord <= rad * n_lo
         return size, inside
 
 
-def _dense(data: CutData, view: _View, lo: int, hi: int):
+def _dense(data: CutData, view: _NodeTest, lo: int, hi: int):
     """Sizes and frustum flags of the contiguous node rows lo:hi, block by block."""
     size = np.empty(hi - lo, np.float32)
     inside = np.empty(hi - lo, bool)
@@ -183,7 +201,7 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     levels compiled, over the candidates only (the same rows and weights); None: NumPy.
     """
     offsets, b = data.offsets, data.branching
-    view = _View(data, camera)
+    view = _NodeTest(data, camera)
     if kern is not None:
         return _compiled_cut(kern, data, view, threshold_px, band, leaves_at)
     top = len(offsets) - 2
@@ -231,7 +249,7 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     return rows_all, (np.concatenate(weights[::-1]) if blend else None)
 
 
-def _compiled_cut(kern, data: CutData, view: _View, threshold_px: float, band: float,
+def _compiled_cut(kern, data: CutData, view: _NodeTest, threshold_px: float, band: float,
                   leaves_at: float | None) -> tuple[np.ndarray | None, np.ndarray | None]:
     """:func:`select_cut_weights` through the compiled ``cut_pass``."""
     n = int(data.offsets[-1])
@@ -243,10 +261,9 @@ def _compiled_cut(kern, data: CutData, view: _View, threshold_px: float, band: f
     finite = bool(np.isfinite(threshold_px))
     mode = 0 if not finite else (1 if band <= 1.0 else 2)
     ramp = 1.0 / (threshold_px * (band - 1.0)) if mode == 2 else 0.0
-    planes = np.array([v for axis in view.planes for v in axis], np.float32)
     pos = kern.cut_pass(data.centres[0], data.centres[1], data.centres[2], data.radius,
                           np.asarray(data.offsets, np.int64), int(data.branching), view.r, view.t,
-                          view.scale, view.f, bool(view.ortho), planes, mode,
+                          view.scale, view.f, view.kind, view.planes, mode,
                           np.float32(threshold_px if finite else 0.0), np.float32(ramp),
                           band > 1.0, -1.0 if leaves_at is None else float(leaves_at),
                           DENSE_FRACTION, *scratch, rows, weights)

@@ -2,8 +2,10 @@
 
 :class:`LodOrder` is a :class:`~splatgl.order.stage.RowSource` over every node of a
 :class:`splatgl.lod.build.LodTree` (leaves and merged parents, uploaded once as
-``tree.nodes``): per view it first selects the cut (:mod:`splatgl.lod.cut`), then culls and
-sorts only the cut's nodes.  With a transition band the cut's nodes carry opacity weights: one
+``tree.nodes``): per view it first selects the cut (:mod:`splatgl.lod.cut`, which tests the
+view's frustum), then culls and sorts only the cut's nodes through the view's cull
+(:func:`splatgl.order.stage.cull_for`, as a plain scene's order does: a lens camera's by
+distance, with a panorama's seam copies).  With a transition band the cut's nodes carry opacity weights: one
 float per sorted slot (:attr:`LodOrder.slot_weights`), which the quad path's compute pre-pass
 applies to the opacity as a factor on its optical depth, ``1 - (1 - o) ** w``
 (shaders/quad_prepass.comp, OPACITY_WEIGHT).  Everything after (draw, blending, read-back) is
@@ -24,9 +26,9 @@ from ..errors import SplatglError
 from ..gl.shaders import ProgramCache
 from ..model.settings import RenderSettings, SortKey
 from ..order import kernels as cull_kernel
-from ..order.chunks import ChunkedCull, keys_order, keys_pairs, rows_keys
-from ..order.cull import CullData, cull_visible
-from ..order.stage import OrderTimes, SortFn, cpu_sort
+from ..order.chunks import ChunkedCull, keys_order, keys_pairs
+from ..order.cull import CullData
+from ..order.stage import OrderTimes, SortFn, cpu_sort, cull_for
 from ..renderers.quad import QuadRenderer
 from .build import LodTree
 from .cut import CutData, select_cut_budget, select_cut_budget_near
@@ -91,9 +93,7 @@ class LodOrder:
         decides, the cut's selection).
         """
         t0 = time.perf_counter()
-        camera = view.camera
-        frustum = view.model.cull_frustum(camera)   # lens distortion: the cut's frustum test
-        camera = camera if frustum is None else frustum
+        camera = view.camera   # the cut tests its frustum (splatgl.cameras.view.frustum_of)
         dist = float(np.linalg.norm(camera.center - self._root))
         if self._cull_data is None:
             self._cull_data = CullData.from_scene(self.scene)
@@ -126,8 +126,8 @@ class LodOrder:
             return order
         if self._cut_keys is None or self._cut_keys.size < ids.size:
             self._cut_keys = np.empty(ids.size, np.uint64)
-        keys = rows_keys(self._cull_data, ids, view.anchored, view.near, self.settings.antialias,
-                         view.scale, kern if frustum is None else None, self._cut_keys)
+        keys = cull_for(view).rows(self._cull_data, ids, view, self.settings.antialias, kern,
+                                   self._cut_keys)
         t2 = time.perf_counter()
         order = self._sorted(keys)
         self.slot_weights = None
@@ -146,28 +146,19 @@ class LodOrder:
     def _leaves_order(self, view: View, t0: float) -> np.ndarray:
         """Cull and sort the leaves alone (full detail) for ``view``; stage times from ``t0``.
 
-        Pinhole views use the leaves' chunked cull (built on first use, timed as ``build``),
-        as a plain scene's order does; lens views and models with their own cull frustum (lens
-        distortion) the per-splat cull of the leaves' rows (a contiguous view of the cull data)."""
+        The leaves' chunked cull (built on first use, timed as ``build``) through the view's
+        cull (:func:`splatgl.order.stage.cull_for`), as a plain scene's order does."""
         n_leaves = self.tree.level_size(0)
-        leaves = self._cull_data.subset(slice(0, n_leaves))
         build = 0.0
-        if view.camera.is_lens or view.model.cull_frustum(view.camera) is not None:
-            keep, depth = cull_visible(leaves, view.anchored, view.near, self.settings.antialias,
-                                       view.scale)
-            t2 = time.perf_counter()
-            order = self.sort(depth, keep)
-        else:
-            if self._leaf_chunks is None:
-                tb = time.perf_counter()  # waits for the background build, or builds here
-                self._leaf_chunks = (self._leaf_build.result() if self._leaf_build is not None
-                                     else ChunkedCull(leaves))
-                build = time.perf_counter() - tb
-                t0 += build
-            keys = self._leaf_chunks.visible_keys(view.anchored, view.near, self.settings.antialias,
-                                                  view.scale)
-            t2 = time.perf_counter()
-            order = self._sorted(keys)
+        if self._leaf_chunks is None:
+            tb = time.perf_counter()  # waits for the background build, or builds here
+            self._leaf_chunks = (self._leaf_build.result() if self._leaf_build is not None
+                                 else ChunkedCull(self._cull_data.subset(slice(0, n_leaves))))
+            build = time.perf_counter() - tb
+            t0 += build
+        keys = cull_for(view).scene(self._leaf_chunks, view, self.settings.antialias)
+        t2 = time.perf_counter()
+        order = self._sorted(keys)
         self.times = OrderTimes(t2 - t0, time.perf_counter() - t2, build)
         self.last_cut_nodes, self.last_cut_s = n_leaves, 0.0
         self.last_drew_leaves = True

@@ -24,7 +24,7 @@ from ..cameras.camera import Camera
 from ..cameras.equirect import SEAM_MARGIN_PX, WRAP_FLAG, eye_space, wrap_copies
 from ..constants import ALPHA_MIN
 from ..twins.project import splat_reach
-from .cull import CULL_BLOCK, view_axis
+from .cull import CULL_BLOCK, CullData, view_axis
 from .chunks import ChunkedCull
 from .sort import depth_keys
 
@@ -42,7 +42,18 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
     (multiplies the world reach of the seam test).  Same keys as :func:`lens_cull`
     + :func:`lens_order` give through :func:`splatgl.order.sort.depth_keys`.
     """
-    data = chunks.data
+    chunks.views += 1
+    kern = chunks._kernel() if not getattr(camera.model, "ods_eye", 0.0) else None
+    keys, chunks.last_path = lens_keys(chunks.data, chunks.index, chunks.key_buffer(), camera,
+                                       near, scale, kern)
+    return keys
+
+
+def lens_keys(data: CullData, index: np.ndarray, keys: np.ndarray, camera: Camera, near: float,
+              scale: float = 1.0, kern=None) -> tuple[np.ndarray, str]:
+    """:func:`lens_visible_keys` of the rows of ``data`` (drawable splats only), whose keys
+    carry ``index`` (their (M,) uint32 indices), written into ``keys`` (at least M long):
+    ``(keys, "compiled" or "numpy")``.  ``kern``: the compiled ``lens_pass``'s kernels, or None."""
     n = data.count
     rot = camera.rotation.astype(np.float32)
     t = camera.translation.astype(np.float32)
@@ -54,18 +65,14 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
     limit32 = cos_limit = np.float32(0.0)
     if fisheye:
         limit32, cos_limit = np.float32(limit), np.float32(np.cos(limit))
-    chunks.views += 1
-    chunks.last_path = "numpy"
-    kern = chunks._kernel() if not ods_eye else None
-    if kern is not None:
-        keys = _compiled_keys(kern, chunks, camera, near32, limit32, cos_limit, scale)
-        if keys is not None:
-            chunks.last_path = "compiled"
-            return keys
+    if kern is not None and not ods_eye:
+        done = _compiled_keys(kern, data, index, keys, camera, near32, limit32, cos_limit, scale)
+        if done is not None:
+            return done, "compiled"
     block = min(CULL_BLOCK, max(n, 1))
     x, y, z, d, tmp = (np.empty(block, np.float32) for _ in range(5))
     keep, band = np.empty(block, bool), np.empty(block, bool)
-    keys, out, copies = chunks.key_buffer(), 0, []
+    out, copies = 0, []
     for start in range(0, n, block):
         stop = min(n, start + block)
         m = stop - start
@@ -98,24 +105,23 @@ def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: f
             tb *= np.float32(1.0 + ANGLE_BAND)
             cand = np.flatnonzero(kb & (np.abs(xb) < tb) & (zb < tb))
             if cand.size:
-                cand = cand[_seam_copies(chunks, start + cand, xb[cand], yb[cand], zb[cand],
+                cand = cand[_seam_copies(data, start + cand, xb[cand], yb[cand], zb[cand],
                                          camera, scale)]
-                copies.append(depth_keys(db[cand], chunks.index[start + cand] | WRAP_FLAG))
+                copies.append(depth_keys(db[cand], index[start + cand] | WRAP_FLAG))
         if kb.all():  # no compaction
-            depth_keys(db, chunks.index[start:stop], keys[out:out + m])
+            depth_keys(db, index[start:stop], keys[out:out + m])
             out += m
         else:
             idx = np.flatnonzero(kb)
-            depth_keys(db[idx], chunks.index[start + idx], keys[out:out + idx.size])
+            depth_keys(db[idx], index[start + idx], keys[out:out + idx.size])
             out += idx.size
-    return np.concatenate([keys[:out], *copies]) if copies else keys[:out]
+    return (np.concatenate([keys[:out], *copies]) if copies else keys[:out]), "numpy"
 
 
-def _seam_copies(chunks: ChunkedCull, rows: np.ndarray, x, y, z, camera: Camera,
+def _seam_copies(data: CullData, rows: np.ndarray, x, y, z, camera: Camera,
                  scale: float) -> np.ndarray:
     """(R,) bool: which of the kept splats ``rows`` (with camera-space ``x, y, z`` (R,)
     float32) :func:`splatgl.cameras.equirect.wrap_copies` duplicates (its float64 test, its reach)."""
-    data = chunks.data
     radius = splat_reach(data.max_scale[rows] * scale, data.opacities[rows])
     return wrap_copies(np.stack([x, y, z], 1), radius, camera)
 
@@ -125,19 +131,19 @@ def _seam_copies(chunks: ChunkedCull, rows: np.ndarray, x, y, z, camera: Camera,
 LIST_ROWS = 1 << 16
 
 
-def _compiled_keys(kern, chunks: ChunkedCull, camera: Camera, near32: np.float32,
-                   limit32: np.float32, cos_limit: np.float32, scale: float) -> np.ndarray | None:
+def _compiled_keys(kern, data: CullData, index: np.ndarray, keys: np.ndarray, camera: Camera,
+                   near32: np.float32, limit32: np.float32, cos_limit: np.float32, scale: float
+                   ) -> np.ndarray | None:
     """:func:`lens_visible_keys` through the compiled ``lens_pass`` (over two threads from
     :data:`splatgl.order.chunks.SPLIT_ROWS` rows, as the pinhole pass): NumPy's ``arctan2`` on
     the fisheye rows it leaves in doubt, NumPy's float64 seam test on its candidates; None if
     either list overflows."""
     from . import chunks as cull_chunks, kernels as cull_kernel
 
-    data, keys = chunks.data, chunks.key_buffer()
     n = data.count
     mode = 1 if camera.model.angle_limit(camera) is not None else (
         2 if camera.model.seam_period(camera) is not None else 0)
-    args = (data.xyz[0], data.xyz[1], data.xyz[2], data.radius, chunks.index,
+    args = (data.xyz[0], data.xyz[1], data.xyz[2], data.radius, index,
             camera.rotation.astype(np.float32), camera.translation.astype(np.float32), near32,
             mode, cos_limit, np.float32(ANGLE_BAND), np.float32(scale),
             np.float32(SEAM_MARGIN_PX / camera.fx), keys.view(np.uint32),
@@ -167,12 +173,12 @@ def _compiled_keys(kern, chunks: ChunkedCull, camera: Camera, near32: np.float32
         if nd:  # near the fisheye's cone: the float32 arctan2 test, as the NumPy path
             rows, p = doubt[:nd], doubt_p[:nd]
             ok = ~(np.arctan2(np.hypot(p[:, 0], p[:, 1]), p[:, 2]) > limit32)
-            depth_keys(p[ok, 3], chunks.index[rows[ok]], keys[out:out + int(ok.sum())])
+            depth_keys(p[ok, 3], index[rows[ok]], keys[out:out + int(ok.sum())])
             out += int(ok.sum())
         if ns:  # near the equirect seam: the float64 copy test on the candidates
             rows, p = seam[:ns], seam_p[:ns]
-            pick = _seam_copies(chunks, rows, p[:, 0], p[:, 1], p[:, 2], camera, scale)
-            copies.append(depth_keys(p[pick, 3], chunks.index[rows[pick]] | WRAP_FLAG))
+            pick = _seam_copies(data, rows, p[:, 0], p[:, 1], p[:, 2], camera, scale)
+            copies.append(depth_keys(p[pick, 3], index[rows[pick]] | WRAP_FLAG))
     return np.concatenate([keys[:out], *copies]) if copies else keys[:out]
 
 

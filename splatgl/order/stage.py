@@ -2,27 +2,33 @@
 
 A :class:`RowSource` turns a :class:`~splatgl.cameras.view.View` into the rows to draw, front to
 back (and, for a level-of-detail cut, an opacity weight per sorted slot).  :class:`SceneOrder`
-is the source of a plain scene: the chunked cull (:mod:`splatgl.order.chunks`, the lens
-cameras' :mod:`splatgl.order.lens_cull`, or for a model with its own cull frustum, lens
-distortion, :func:`splatgl.order.cull.cull_visible` on every row) and the sort the settings choose; the level-of-detail
-source is :class:`splatgl.lod.source.LodOrder`.  The quad path draws whatever a source gives.
+is the source of a plain scene: the view's cull (:data:`CULLS`) and the sort the settings
+choose; the level-of-detail source is :class:`splatgl.lod.source.LodOrder`, which culls its
+cut's rows and its leaves through the same table.  The quad path draws whatever a source gives.
+
+:data:`CULLS` is the one place that maps a camera model's cull kind
+(:attr:`View.frustum <splatgl.cameras.view.View.frustum>`) to the cull that runs: the planes'
+chunked cull (:mod:`splatgl.order.chunks`; for a model with its own cull frustum, lens
+distortion, :func:`splatgl.order.cull.cull_visible` on every row) for FRUSTUM and BOX, and the
+lens cameras' :mod:`splatgl.order.lens_cull` for SPHERE.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Callable, NamedTuple, Protocol
 
 import numpy as np
 
+from ..cameras.model import CullKind
 from ..cameras.view import View
 from ..model.scene import Scene
 from ..model.settings import RenderSettings, SortKey
 from ..twins.project import to_camera
-from .chunks import ChunkedCull, keys_order, keys_pairs
-from .cull import cull_visible
-from .lens_cull import lens_visible_keys
+from .chunks import ChunkedCull, keys_order, keys_pairs, rows_keys
+from .cull import CullData, cull_visible
+from .lens_cull import lens_keys, lens_visible_keys
 from .sort import bucket_sort, depth_keys, depth_sort
 
 #: ``sort(depth (M,) float32, rows (M,) uint32) -> rows front to back``: the sort stage.
@@ -52,6 +58,61 @@ class RowSource(Protocol):
     def order(self, view: View) -> np.ndarray:
         """(K,) uint32 rows of the scene, front to back."""
         ...
+
+
+def _planes_scene(chunks: ChunkedCull, view: View, antialias: bool) -> np.ndarray:
+    if view.frustum.peak:
+        return chunks.visible_keys(view.anchored, view.near, antialias, view.scale)
+    # a model with its own cull frustum (lens distortion): every row against its planes
+    idx, z = cull_visible(chunks.data, view.anchored, view.near, antialias, view.scale)
+    return depth_keys(z, chunks.index[idx])
+
+
+def _planes_rows(data: CullData, rows: np.ndarray, view: View, antialias: bool, kern=None,
+                 out: np.ndarray | None = None) -> np.ndarray:
+    return rows_keys(data, rows, view.anchored, view.near, antialias, view.scale,
+                     kern if view.frustum.peak else None, out)
+
+
+def _sphere_scene(chunks: ChunkedCull, view: View, antialias: bool) -> np.ndarray:
+    return lens_visible_keys(chunks, view.anchored, view.near, view.scale)
+
+
+def _sphere_rows(data: CullData, rows: np.ndarray, view: View, antialias: bool, kern=None,
+                 out: np.ndarray | None = None) -> np.ndarray:
+    live = rows[data.alive[rows]]      # lens_keys takes drawable rows only, as chunks hold
+    keys = np.empty(live.size, np.uint64) if out is None or out.size < live.size else out
+    return lens_keys(data.subset(live), live.astype(np.uint32), keys, view.anchored, view.near,
+                     view.scale, kern)[0]
+
+
+class Cull(NamedTuple):
+    """A cull of :data:`CULLS`; both give unsorted uint64 sort keys ``(float_bits(depth) << 32)
+    | index`` (:func:`splatgl.order.sort.depth_keys`; an equirectangular seam copy's index with
+    :data:`~splatgl.cameras.equirect.WRAP_FLAG`)."""
+
+    #: ``(chunks, view, antialias)``: the splats of a scene's chunked cull data, by scene index.
+    scene: Callable[[ChunkedCull, View, bool], np.ndarray]
+    #: ``(data, rows, view, antialias, kern=None, out=None)``: the rows ``rows`` (ascending) of
+    #: ``data`` (a level-of-detail cut's), by row; ``kern`` the compiled kernels or None,
+    #: ``out`` a key buffer to write into.
+    rows: Callable[..., np.ndarray]
+    #: Whether it runs with ``settings.cull`` off too (its keys order by distance, not z).
+    always: bool = False
+
+
+#: The cull of each camera model's :class:`~splatgl.cameras.model.CullKind`: what the scene
+#: order, the level-of-detail order and the CPU renderer run for a view (:func:`cull_for`).
+CULLS: dict[CullKind, Cull] = {
+    CullKind.FRUSTUM: Cull(_planes_scene, _planes_rows),
+    CullKind.BOX: Cull(_planes_scene, _planes_rows),     # chunks.visible_keys takes the box
+    CullKind.SPHERE: Cull(_sphere_scene, _sphere_rows, always=True),
+}
+
+
+def cull_for(view: View) -> Cull:
+    """The cull of ``view``'s camera model (:data:`CULLS`)."""
+    return CULLS[view.frustum.kind]
 
 
 def cpu_sort(settings: RenderSettings) -> SortFn:
@@ -89,23 +150,15 @@ class SceneOrder:
             self._key = view.key
             return self._order
         self._stale = 0
-        lens = view.camera.is_lens
+        cull = cull_for(view)
         build = 0.0
-        if (lens or self.settings.cull) and self.chunks is None:
+        if (cull.always or self.settings.cull) and self.chunks is None:
             tb = time.perf_counter()
             self.chunks = ChunkedCull.from_scene(self.scene)
             build = time.perf_counter() - tb
         t0 = time.perf_counter()
-        if lens or self.settings.cull:
-            if lens:   # distance keys; equirect seam splats twice (splatgl/cameras/equirect.py)
-                keys = lens_visible_keys(self.chunks, view.anchored, view.near, view.scale)
-            elif view.model.cull_frustum(view.anchored) is not None:  # its own frustum
-                idx, z = cull_visible(self.chunks.data, view.anchored, view.near,
-                                      self.settings.antialias, view.scale)
-                keys = depth_keys(z, self.chunks.index[idx])
-            else:
-                keys = self.chunks.visible_keys(view.anchored, view.near, self.settings.antialias,
-                                                view.scale)
+        if cull.always or self.settings.cull:
+            keys = cull.scene(self.chunks, view, self.settings.antialias)
             t1 = time.perf_counter()
             if self.settings.sort_key is SortKey.EXACT:
                 order = keys_order(keys)

@@ -26,7 +26,6 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..cameras.pinhole import Pinhole
 from ..cameras.view import View
 from ..errors import SplatglError
 from ..model.scene import Scene, SplatKind
@@ -203,8 +202,7 @@ class CpuRenderer:
 
         parts = _parts(self.scene.count, checkpoint)
         mean2d, conic, opacity, reach, color, z, box, rect = (
-            self.stage1.pinhole(view, parts) if type(view.camera.model) is Pinhole
-            else self.stage1.model(view, parts))
+            self.stage1.pinhole(view, parts) if view.frustum.pinhole else self.stage1.model(view, parts))
         t1 = time.perf_counter()
         checkpoint()
         order = depth_order(z, rect)
