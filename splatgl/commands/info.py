@@ -43,7 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     check_json_target(args)  # not SCENE, and an existing file only with --force
-    scene = load_scene(args.scene, drop_invalid=args.drop_invalid, spz_axes=args.spz_axes)
+    scene = load_scene(args.scene, drop_invalid=args.drop_invalid, spz_axes=args.spz_axes,
+                       allow_empty=True)  # what `edit --allow-empty` writes
     info = {"format": detect_format(args.scene).NAME, **scene_info(scene)}
     if info["format"] == "spz":
         from ..formats.spz import read_axes
@@ -51,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
             warnings.simplefilter("ignore")
             info["spz_axes"] = read_axes(args.scene, args.spz_axes).as_dict()
     text = format_info(args.scene, scene, info)
-    if args.stats:
+    if args.stats and scene.count:
         from ..edit.statistics import attribute_statistics, format_statistics, overdraw
 
         info["attributes"] = attribute_statistics(scene)

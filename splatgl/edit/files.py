@@ -12,8 +12,8 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..formats import detect_format, load_scene, save_scene, writer_for
-from ..formats.convert import (EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT, dropped_note,
-                               extra_properties)
+from ..formats.convert import (EMPTY_FORMATS, EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT,
+                               dropped_note, extra_properties)
 from ..model.scene import InvalidRowsDropped
 from ..model.transform import ModelTransform
 from ..output.files import check_output_path
@@ -23,9 +23,6 @@ from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shar
                         transform_scene)
 
 
-#: Writers that can write a scene of zero splats (``--allow-empty``); the others' files need
-#: bounds, chunks or textures of at least one splat.
-EMPTY_FORMATS = ("ply", "spz")
 
 
 @dataclass(frozen=True)
@@ -169,7 +166,8 @@ def _read(inputs, transforms, drop_invalid, progress, spz_axes):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", InvalidRowsDropped)
             axes = spz_axes if detect_format(path).NAME == "spz" else None
-            scene = load_scene(path, drop_invalid=drop_invalid, progress=progress, spz_axes=axes)
+            scene = load_scene(path, drop_invalid=drop_invalid, progress=progress, spz_axes=axes,
+                               allow_empty=True)  # an --allow-empty result merges like any
         here = 0
         for w in caught:
             if isinstance(w.message, InvalidRowsDropped):

@@ -65,7 +65,7 @@ def detect_format(path: Path) -> ModuleType:
 
 
 def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
-               spz_axes: str | None = None) -> Scene:
+               spz_axes: str | None = None, allow_empty: bool = False) -> Scene:
     """Load a scene file of any supported format.
 
     Raises :class:`SceneFormatError` (naming file, field and values) for anything malformed.
@@ -74,7 +74,9 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
     is handed to readers that read in chunks (those whose ``read`` takes ``progress``); when it
     is None, a stderr meter is used if stderr is a terminal or ``SPLATGL_PROGRESS=1``.
     ``spz_axes`` ("rub" or "rdf"): the axes of an SPZ file that records none (see
-    :mod:`splatgl.formats.spz_axes`); refused for other formats.
+    :mod:`splatgl.formats.spz_axes`); refused for other formats.  ``allow_empty``: a PLY or SPZ
+    file of zero splats (what ``splatgl edit --allow-empty`` writes) loads as an empty scene,
+    for callers that take one (``info``, ``convert``, ``edit``); otherwise it is refused.
 
     The scene's :attr:`~splatgl.model.scene.Scene.source` names the file and its tags
     (:func:`scene_source`), which give the scene's default camera up and settings.
@@ -88,6 +90,8 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
             raise SceneFormatError(path, f"--spz-axes applies to SPZ files only (this is "
                                          f"{mod.NAME})")
         options["axes"] = spz_axes
+    if allow_empty and "allow_empty" in inspect.signature(mod.read).parameters:
+        options["allow_empty"] = True
     if "progress" in inspect.signature(mod.read).parameters:
         options["progress"] = progress if progress is not None else default_progress()
     return dataclasses.replace(read(path, **options), source=scene_source(path))  # arrays shared

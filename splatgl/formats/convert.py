@@ -26,6 +26,9 @@ from ..model.scene import Scene
 MAX_SH_DEGREE_OF_FORMAT = {"splat": 0}
 #: The attributes :func:`conversion_error` measures and writers bound.
 ATTRIBUTES = ("position", "scale", "opacity", "rotation", "color", "sh_rest")
+#: Formats whose writers write, and readers read back (``allow_empty``), a scene of zero splats;
+#: the others' files need bounds, chunks or textures of at least one splat.
+EMPTY_FORMATS = ("ply", "spz")
 #: Formats that store a scene's other per-splat properties (:attr:`Scene.extras`).
 EXTRAS_FORMATS = ("ply",)
 
@@ -215,7 +218,11 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
         raise SplatglError(f"{source} -> {output}: --spz-axes applies to .spz files only")
     if axes_out is not None:
         writer_options["axes"] = axes_out
-    scene = load_scene(source, drop_invalid=drop_invalid, progress=progress, spz_axes=axes_in)
+    scene = load_scene(source, drop_invalid=drop_invalid, progress=progress, spz_axes=axes_in,
+                       allow_empty=True)
+    if scene.count == 0 and writer.NAME not in EMPTY_FORMATS:
+        raise SplatglError(f"{output}: {source} holds no splats, and the {writer.NAME} format "
+                           "cannot hold zero splats; nothing written (write .ply or .spz)")
     degree = scene.sh_degree if sh_degree is None else min(sh_degree, scene.sh_degree)
     limit = MAX_SH_DEGREE_OF_FORMAT.get(writer.NAME, 3)
     if degree > limit:
@@ -229,7 +236,7 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
         raise SplatglError(f"{output}: cannot write: {exc.strerror or exc}") from None
     bounds = error_bounds(writer, written, **writer_options)
     del written
-    back = load_scene(output, progress=progress, spz_axes=axes_out)
+    back = load_scene(output, progress=progress, spz_axes=axes_out, allow_empty=True)
     if order is not None:
         scene = scene.subset(order)
     error = conversion_error(scene, back)

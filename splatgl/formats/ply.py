@@ -233,14 +233,15 @@ def _sh_coeffs(names: list[str]) -> int:
 
 
 @reader_guard
-def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
+def read(path: Path, drop_invalid: bool = False, progress=None, allow_empty: bool = False) -> Scene:
     """Load an INRIA-style PLY into a :class:`Scene` (raw values kept, rows validated).
 
     Binary files are read :data:`CHUNK_ROWS` rows at a time straight into the float32 arrays the
     scene is built from, so memory beyond them is one chunk; ``progress(done_rows, total_rows,
     what)`` (see :mod:`splatgl.progress`) is called after every chunk when given.
 
-    Raises :class:`SceneFormatError` naming the file and, where one is at fault, the property.
+    Raises :class:`SceneFormatError` naming the file and, where one is at fault, the property;
+    a file of zero splats is refused unless ``allow_empty`` (see :func:`splatgl.load_scene`).
     """
     what = f"reading {Path(path).name}"
     try:
@@ -267,7 +268,7 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
                 check_memory(path, count, _sh_coeffs(prop_names), 96 * len(prop_names),
                              3 * file_size, "vertex")
                 vertex = _read_vertex_ascii(path, fh, header)
-                _check_not_empty(path, count)
+                _check_not_empty(path, count, allow_empty)
                 plan = _Columns(path, prop_names, count, vertex.dtype)
                 if progress is not None:
                     progress(0, count, what)
@@ -277,7 +278,7 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
                     progress(count, count, what)
             else:
                 offset, dtype = _vertex_layout(path, header, file_size)
-                _check_not_empty(path, count)
+                _check_not_empty(path, count, allow_empty)
                 # binary: rows go straight into the float32 arrays through one chunk buffer
                 check_memory(path, count, _sh_coeffs(prop_names), 0,
                              min(count, CHUNK_ROWS) * dtype.itemsize, "vertex")
@@ -287,10 +288,13 @@ def read(path: Path, drop_invalid: bool = False, progress=None) -> Scene:
         raise _error(path, f"cannot read: {exc.strerror or exc}") from None
     kind = SplatKind.SURFEL_2D if plan.surfel else SplatKind.GAUSSIAN_3D
     plan.freeze()
+    if count == 0:  # allowed: nothing to validate
+        return Scene(plan.means, plan.quats, plan.log_scales, plan.opacity, plan.sh, kind,
+                     extras=plan.extras)
     return activate(path, plan.means, plan.quats, plan.log_scales, plan.opacity, plan.sh, kind,
                     drop_invalid, plan.extras)
 
 
-def _check_not_empty(path, count: int) -> None:
-    if count == 0:
+def _check_not_empty(path, count: int, allow_empty: bool = False) -> None:
+    if count == 0 and not allow_empty:
         raise _error(path, "the scene has no splats (element vertex 0)", "vertex")

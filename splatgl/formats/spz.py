@@ -370,13 +370,18 @@ def decode(path, data: bytes, axes: str | None = None) -> tuple[np.ndarray, ...]
 
 
 @reader_guard
-def read_spz(path: Path, drop_invalid: bool = False, axes: str | None = None) -> Scene:
-    """Load an SPZ file as a 3DGS :class:`Scene`; ``axes`` as in :func:`decode`."""
+def read_spz(path: Path, drop_invalid: bool = False, axes: str | None = None,
+             allow_empty: bool = False) -> Scene:
+    """Load an SPZ file as a 3DGS :class:`Scene`; ``axes`` as in :func:`decode`; a file of
+    zero points is refused unless ``allow_empty`` (see :func:`splatgl.load_scene`)."""
     raw = decode(path, _binary.read_bytes(path), axes)
+    if allow_empty and raw[0].shape[0] == 0:  # nothing to validate
+        return Scene(*raw, SplatKind.GAUSSIAN_3D)
     return activate(path, *raw, SplatKind.GAUSSIAN_3D, drop_invalid)
 
 
 @reader_guard
-def read(path: Path, drop_invalid: bool = False, axes: str | None = None) -> Scene:
+def read(path: Path, drop_invalid: bool = False, axes: str | None = None,
+         allow_empty: bool = False) -> Scene:
     """Load an SPZ file, its axes decided as :mod:`.spz_axes` describes."""
-    return read_spz(path, drop_invalid, axes)
+    return read_spz(path, drop_invalid, axes, allow_empty)

@@ -26,8 +26,10 @@ def scene_info(scene: Scene) -> dict:
     means), ``opacity`` (min/median/max of the activated opacity and ``below_min_alpha``, the
     share of splats under 1/255 that can never draw a pixel), ``scale`` (min/median/max over all
     axes of the activated scales, world units) and ``anisotropy`` (median/max of the per-splat
-    ratio largest / smallest scale).
+    ratio largest / smallest scale).  A scene of zero splats has the first three keys only.
     """
+    if scene.count == 0:
+        return {"count": 0, "kind": scene.kind.value, "sh_degree": scene.sh_degree}
     means = scene.means.astype(np.float64)
     lo, hi = scene.robust_bounds
     opac = scene.opacities.astype(np.float64)
@@ -52,13 +54,16 @@ def _fmt_vec(v: list[float]) -> str:
 
 def format_info(path: str | Path, scene: Scene, info: dict) -> str:
     """A readable multi-line text block of :func:`scene_info`'s ``info`` for the file ``path``."""
+    kind = {"3dgs": "3D Gaussians", "2dgs": "2DGS surfels"}.get(info["kind"], info["kind"])
+    head = [f"file:        {path}" + (f" ({info['format']})" if "format" in info else ""),
+            f"splats:      {info['count']} {kind}, SH degree {info['sh_degree']}"]
+    if info["count"] == 0:
+        return "\n".join(head + ["(an empty scene: no bounds or statistics)"])
     b, r = info["bounds"], info["robust_bounds"]
     o, s, a = info["opacity"], info["scale"], info["anisotropy"]
-    kind = {"3dgs": "3D Gaussians", "2dgs": "2DGS surfels"}.get(info["kind"], info["kind"])
     extent = np.subtract(r["max"], r["min"])
     lines = [
-        f"file:        {path}" + (f" ({info['format']})" if "format" in info else ""),
-        f"splats:      {info['count']} {kind}, SH degree {info['sh_degree']}",
+        *head,
         f"bounds:      min {_fmt_vec(b['min'])}  max {_fmt_vec(b['max'])}",
         f"robust 1-99: min {_fmt_vec(r['min'])}  max {_fmt_vec(r['max'])}  "
         f"extent {_fmt_vec(extent)}",
