@@ -61,6 +61,7 @@ CLASHES = [
     (["edit", "{f}", "-o", "{f}", "--force", "--decimate", "1"], "s.ply", "-o", "IN"),
     (["path", "interpolate", "--cameras", "{f}", "-o", "{f}", "--force"], "p.json", "-o", "--cameras"),
     (["lod", "{f}", "-o", "{f}", "--force"], "s.lod.ply", "-o", "SCENE"),
+    (["bench", "--quick", "{f}", "--json", "{f}", "--force"], "b.json", "--json", "SCENE"),
 ]
 
 

@@ -27,9 +27,9 @@ FORCE_HELP = ("replace output files that exist (an output that is one of the com
               "input files is refused either way)")
 
 #: Argument attribute -> the option named in messages, for every file a command may read.
-READ_OPTIONS = (("scene", "SCENE"), ("input", "IN"), ("inputs", "IN"), ("camera", "--camera"),
-                ("under", "--under"), ("image", "--image"), ("transform", "--transform"),
-                ("path", "--path"), ("cameras", "--cameras"))
+READ_OPTIONS = (("scene", "SCENE"), ("scenes", "SCENE"), ("input", "IN"), ("inputs", "IN"),
+                ("camera", "--camera"), ("under", "--under"), ("image", "--image"),
+                ("transform", "--transform"), ("path", "--path"), ("cameras", "--cameras"))
 
 
 def add_force_argument(p: argparse.ArgumentParser, help: str = FORCE_HELP) -> None:
