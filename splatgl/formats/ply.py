@@ -208,8 +208,11 @@ class _Columns:
         used = {name for name, _, _ in self.targets}
         others = [(n, dtype[n].newbyteorder("=")) for n in names if n not in used and
                   dtype is not None]
-        #: every other property, in its stored type (None when there is none)
-        self.extras = np.empty(count, np.dtype(others)) if others else None
+        #: every other property, in its stored type (None when there is none, or only normals
+        #: that are all zero: the INRIA placeholders, allocated on the first that is not)
+        self.extra_dtype = np.dtype(others) if others else None
+        only_normals = all(n in ("nx", "ny", "nz") for n, _ in others)
+        self.extras = np.zeros(count, self.extra_dtype) if others and not only_normals else None
 
     def freeze(self) -> None:
         """Mark the arrays read-only: nothing else holds them, so a scene may adopt them."""
@@ -222,6 +225,9 @@ class _Columns:
         stop = start + rows.shape[0]
         for name, target, index in self.targets:
             target[(slice(start, stop),) + index] = rows[name]
+        if self.extras is None and self.extra_dtype is not None and any(
+                np.any(rows[n] != 0) for n in self.extra_dtype.names):
+            self.extras = np.zeros(self.means.shape[0], self.extra_dtype)  # rows before: zeros
         for name in self.extras.dtype.names if self.extras is not None else ():
             self.extras[name][start:stop] = rows[name]
 
