@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Iterable
 
 from ..errors import SplatglError
-from ..output.files import Inputs, OutputFiles, check_not_an_input, check_output_path
+from ..output.files import Inputs, InputIndex, OutputFiles, check_not_an_input, check_output_path
 
 #: The one help text of ``--force``.
 FORCE_HELP = ("replace output files that exist (an output that is one of the command's own "
@@ -92,7 +92,7 @@ def check_outputs(args: argparse.Namespace, paths: Iterable[Path], option: str,
     path's frames, eval's renders): none is a file the command reads, and none exists without
     ``--force``; ``keep``: existing files are allowed (``--resume`` keeps or completes them: no
     overwrite), though never an input."""
-    inputs = input_files(args, extra)
+    inputs = InputIndex(input_files(args, extra))   # many outputs against many inputs
     replace = force(args) or keep
     for path in paths:
         check_not_an_input(path, option, inputs)

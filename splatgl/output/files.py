@@ -79,6 +79,44 @@ def _input_paths(inputs: Inputs | None) -> list[tuple[str, Path]]:
     return pairs
 
 
+class InputIndex:
+    """A command's inputs indexed by absolute path, real path and inode, so that finding the
+    input an output is (:func:`same_file`'s rules) costs the same for thousands of inputs
+    (a dataset's photographs) as for one."""
+
+    def __init__(self, inputs: "Inputs | InputIndex | None"):
+        if isinstance(inputs, InputIndex):
+            self.paths, self.inodes = inputs.paths, inputs.inodes
+            return
+        self.paths: dict[str, tuple[str, Path]] = {}
+        self.inodes: dict[tuple[int, int], tuple[str, Path]] = {}
+        for option, path in _input_paths(inputs):
+            for key in (os.path.abspath(path), os.path.realpath(path)):
+                self.paths.setdefault(key, (option, path))
+            inode = _inode(path)
+            if inode is not None:
+                self.inodes.setdefault(inode, (option, path))
+
+    def find(self, path: PathLike) -> "tuple[str, Path] | None":
+        """(option, path) of the input that ``path`` is the same file as, or None."""
+        if not self.paths:
+            return None
+        for key in (os.path.abspath(path), os.path.realpath(path)):
+            if key in self.paths:
+                return self.paths[key]
+        inode = _inode(path)
+        return self.inodes.get(inode) if inode is not None else None
+
+
+def _inode(path: PathLike) -> "tuple[int, int] | None":
+    """(device, inode) of an existing file, else None."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return st.st_dev, st.st_ino
+
+
 def _pseudo_file_system(folder: Path) -> bool:
     """Whether ``folder`` lies on a file system without storage (/proc, /sys: no blocks)."""
     try:
@@ -87,19 +125,21 @@ def _pseudo_file_system(folder: Path) -> bool:
         return False
 
 
-def check_not_an_input(path: PathLike, name: str, inputs: Inputs | None) -> None:
+def check_not_an_input(path: PathLike, name: str, inputs: "Inputs | InputIndex | None") -> None:
     """Refuse output ``path`` (option ``name``) where it is the same file (:func:`same_file`)
-    as one of the command's ``inputs``, in one line naming both options."""
+    as one of the command's ``inputs`` (an :class:`InputIndex` to check many outputs against
+    many inputs), in one line naming both options."""
     path = Path(path)
-    where = f"{name} {path}" if name else str(path)
-    for option, source in _input_paths(inputs):
-        if same_file(path, source):
-            shown = option if os.path.abspath(source) == os.path.abspath(path) else f"{option} {source}"
-            raise SplatglError(f"{where}: the same file as {shown}; give the output its own name")
+    found = (inputs if isinstance(inputs, InputIndex) else InputIndex(inputs)).find(path)
+    if found is not None:
+        option, source = found
+        where = f"{name} {path}" if name else str(path)
+        shown = option if os.path.abspath(source) == os.path.abspath(path) else f"{option} {source}"
+        raise SplatglError(f"{where}: the same file as {shown}; give the output its own name")
 
 
 def check_output_path(path: PathLike, name: str = "", overwrite: bool = False,
-                      inputs: Inputs | None = None) -> None:
+                      inputs: "Inputs | InputIndex | None" = None) -> None:
     """Refuse, in one line naming option ``name`` (if any) and ``path``, an output path that
     cannot be written: one of the command's ``inputs`` (see :func:`check_not_an_input`; even
     with ``overwrite``), an existing directory, a folder that does not exist or is not
@@ -142,8 +182,9 @@ class OutputFiles:
     """
 
     def __init__(self, targets: dict[str, Path | str | None], overwrite: bool = False,
-                 inputs: Inputs | None = None):
+                 inputs: "Inputs | InputIndex | None" = None):
         self.targets = {name: Path(p) for name, p in targets.items() if p is not None}
+        inputs = InputIndex(inputs)
         self._files: dict[str, AtomicTarget] = {}
         seen: list[tuple[Path, str]] = []
         for name, path in self.targets.items():
