@@ -103,8 +103,66 @@ def build_parser():
     return parser
 
 
+#: ``SPLATGL_DEBUG_WARNINGS=1`` shows NumPy's numeric warnings as Python prints them (file, line
+#: and source), each one, instead of :func:`_warning_text`'s single splatgl line.
+DEBUG_WARNINGS_ENV = "SPLATGL_DEBUG_WARNINGS"
+#: Whether this run already printed its line about numeric warnings (:func:`main` resets it).
+_numeric_reported: list[bool] = []
+
+
+def _where(filename: str, lineno: int) -> str:
+    """``splatgl/cameras/view.py:76`` (the path from the package's folder on), else the file name."""
+    parts = filename.replace("\\", "/").split("/")
+    if "splatgl" in parts:
+        parts = parts[len(parts) - 1 - parts[::-1].index("splatgl"):]
+    else:
+        parts = parts[-1:]
+    return f"{'/'.join(parts)}:{lineno}"
+
+
+def _warning_text(message, category, filename: str, lineno: int) -> str | None:
+    """The one ``splatgl: warning:`` line of a warning (None: say nothing more this run).
+
+    splatgl's own warnings are already sentences.  A NumPy floating-point warning ("overflow
+    encountered in cast") is a bug's symptom or an input splatgl failed to refuse: it is said
+    once a run, where it happened, never as NumPy's raw text alone.  GLFW's errors arrive from
+    pyGLFW as ``(65550) b'X11: ...'``: the bytes are decoded.
+    """
+    text = str(message)
+    if category.__name__ == "GLFWError":
+        import ast
+        import re
+
+        match = re.fullmatch(r"\((\d+)\) (b'.*'|b\".*\")", text, re.S)
+        if match:
+            try:
+                text = ast.literal_eval(match.group(2)).decode("utf-8", "replace")
+            except (ValueError, SyntaxError):
+                pass
+        return f"window system: {' '.join(text.split())}"
+    numeric = issubclass(category, RuntimeWarning) and (
+        "encountered in" in text or "/numpy/" in filename.replace("\\", "/"))
+    if not numeric:
+        return text
+    if _numeric_reported:
+        return None
+    _numeric_reported.append(True)
+    return (f"a computation went out of range at {_where(filename, lineno)} (NumPy: {text}); "
+            "the output may hold inf or NaN values. Please report it with the command "
+            f"({DEBUG_WARNINGS_ENV}=1 shows every such warning)")
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None):
-    print(f"splatgl: warning: {message}", file=sys.stderr if file is None else file)
+    out = sys.stderr if file is None else file
+    if (os.environ.get(DEBUG_WARNINGS_ENV, "") not in ("", "0")
+            and issubclass(category, RuntimeWarning)):
+        import warnings
+
+        out.write(warnings.formatwarning(message, category, filename, lineno, line))
+        return
+    text = _warning_text(message, category, filename, lineno)
+    if text is not None:
+        print(f"splatgl: warning: {text}", file=out)
 
 
 def _silence_stdout() -> None:
@@ -120,6 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     handled = (signal.SIGINT, signal.SIGTERM)
     previous = {}
     del _received[:]
+    del _numeric_reported[:]
     try:
         # Handlers can only be installed from the main thread (tests may call main() from
         # others); there Ctrl-C still raises KeyboardInterrupt, SIGTERM keeps its default.

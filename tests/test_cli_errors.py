@@ -7,6 +7,7 @@ message, so a reworded or multi-line error fails here.
 from __future__ import annotations
 
 import json
+import re
 import warnings
 
 import numpy as np
@@ -267,3 +268,100 @@ def test_output_names_and_folders_are_checked_before_the_work(tmp_path, capsys, 
                     f"splatgl: error: -o {out}: folder {out.parent} does not exist")
     expect_one_line(capsys, tmp_path, ["convert", demo_scene_path(), out.with_name("x.spz")],
                     f"splatgl: error: {out.with_name('x.spz')}: folder {out.parent} does not exist")
+
+
+# ------------------------------------------------------------------------------ extreme numbers
+FRAME = "splatgl: error: cannot frame the scene: the camera would stand "
+
+
+@pytest.mark.parametrize("extra, line", [
+    (["--near", "1e308"],
+     "splatgl: error: --near 1e+308: must be at most 3.403e+38 (the largest depth a float32 holds)"),
+    (["--near", "1e39"],
+     "splatgl: error: --near 1e+39: must be at most 3.403e+38 (the largest depth a float32 holds)"),
+    (["--distance", "1e308"],
+     FRAME + "inf from it (scene radius 2.5, distance scale 1e+308); splatgl places it from 1e-09 "
+     "to 5e+17 away (float arithmetic)"),
+    (["--projection", "orthographic", "--distance", "1e300"],
+     FRAME + "6.22e+300 from it (scene radius 2.5, distance scale 1e+300); splatgl places it from "
+     "1e-09 to 5e+17 away (float arithmetic)"),
+    (["--distance", "1e-300"],
+     FRAME + "6.22e-300 from it (scene radius 2.5, distance scale 1e-300); splatgl places it from "
+     "1e-09 to 5e+17 away (float arithmetic)"),
+])
+def test_extreme_numbers_are_one_line_not_numpy_warnings(tmp_path, capsys, extra, line):
+    """Issue 38: `--near 1e308` and `--distance 1e308` leaked NumPy overflow warnings (here
+    warnings are errors, so a leak fails the test)."""
+    expect_one_line(capsys, tmp_path, ["render", "-o", tmp_path / "x.png", *extra], line)
+
+
+@pytest.mark.parametrize("field, value, line", [
+    ("fx", 1e300, "camera fx must be from 1e-06 to 1e+18 pixels (float32 arithmetic), got 1e+300"),
+    ("fx", 1e-300, "camera fx must be from 1e-06 to 1e+18 pixels (float32 arithmetic), got 1e-300"),
+    ("cx", -1e39, "camera cx must be within +-1e+18 pixels (float32 arithmetic), got -1e+39"),
+    ("t", 1e300, "world_to_camera holds 1e+300 at row 2, column 3 (the camera is that far from the "
+                 "origin); splatgl renders within 1e+18 (float32 arithmetic)"),
+])
+def test_camera_file_numbers_beyond_float32_are_one_line(tmp_path, capsys, field, value, line):
+    """fx 1e300 was an OverflowError traceback, a translation of 1e300 a NumPy warning."""
+    w2c = look_at([0.0, -0.5, -3.0], [0.0, 0.0, 0.0])
+    if field == "t":
+        w2c[2, 3] = value
+    path = camera_file(tmp_path, w2c=w2c)
+    if field != "t":
+        path.write_text(json.dumps(dict(json.loads(path.read_text()), **{field: value})))
+    expect_one_line(capsys, tmp_path, ["render", "--camera", path, "-o", tmp_path / "x.png"],
+                    f"splatgl: error: {path}: {line}")
+
+
+@pytest.mark.parametrize("extra", [
+    ["--near", "1e-300"], ["--near", "3.4e38"], ["--distance", "1e16"], ["--fov", "179.9"],
+    ["--background", "3.4e38,0,0"], ["--renderer", "reference", "--near", "3.4e38"],
+    ["--renderer", "cpu", "--distance", "1e16"], ["--renderer", "tile", "--near", "1e-300"],
+])
+def test_extreme_but_valid_numbers_render_without_a_warning(tmp_path, capsys, extra):
+    rc, out, err = run_cli(capsys, "render", "-o", tmp_path / "x.png", "--width", "16",
+                           "--height", "12", *extra)
+    assert (rc, err) == (0, "") and out.startswith(f"wrote {tmp_path / 'x.png'} (16x12")
+
+
+def _numpy_overflow(args):
+    np.float32(np.array([1e39]))  # float32 overflow: a RuntimeWarning, shown once per run
+    np.array([1e39]).astype(np.float32)
+    np.array([0.0]) / 0.0
+    return 0
+
+
+def test_a_numpy_warning_that_escapes_is_one_splatgl_line(capsys, monkeypatch):
+    """The CLI-wide net: NumPy's floating-point warnings never reach the user raw; one line per
+    run says where, and SPLATGL_DEBUG_WARNINGS=1 shows NumPy's own."""
+    from splatgl.commands import render as render_command
+
+    monkeypatch.setattr(render_command, "run", _numpy_overflow)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        assert main(["render", "-o", "unused.png"]) == 0
+    out, err = capsys.readouterr()
+    assert re.fullmatch(r"splatgl: warning: a computation went out of range at (\S+/)?"
+                        r"test_cli_errors\.py:\d+ \(NumPy: overflow encountered in cast\); the "
+                        r"output may hold inf or NaN values\. Please report it with the command "
+                        r"\(SPLATGL_DEBUG_WARNINGS=1 shows every such warning\)\n", err), err
+    monkeypatch.setenv("SPLATGL_DEBUG_WARNINGS", "1")
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        assert main(["render", "-o", "unused.png"]) == 0
+    out, err = capsys.readouterr()
+    assert err.count("RuntimeWarning: overflow encountered in cast") == 2
+    assert "RuntimeWarning: invalid value encountered in divide" in err
+
+
+def test_glfw_errors_are_decoded_into_one_splatgl_line():
+    """pyGLFW warns with "(65550) b'X11: ...'": the CLI prints the text, not the bytes."""
+    from splatgl.cli import _warning_text
+
+    class GLFWError(UserWarning):
+        pass
+
+    assert _warning_text("(65550) b'X11: The DISPLAY environment variable is missing'",
+                         GLFWError, "glfw/__init__.py", 1) == (
+        "window system: X11: The DISPLAY environment variable is missing")

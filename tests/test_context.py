@@ -144,3 +144,20 @@ def test_an_incomplete_framebuffer_is_one_line(gl_renderer, monkeypatch):
         "(the framebuffer is not complete (INCOMPLETE_ATTACHMENT), GL_OUT_OF_MEMORY); render a "
         "smaller image")
     assert gl_renderer.ctx.error == "GL_NO_ERROR"  # the driver's error is not left for others
+
+
+def test_glfw_errors_are_collected_as_text_not_printed_raw():
+    """pyGLFW's default prints each GLFW error as a raw ``(65544) b'X11: ...'`` warning; inside
+    ``glfw_errors`` they are collected as text for the caller's one line (issue 38)."""
+    import warnings
+
+    glfw = pytest.importorskip("glfw")
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        with context.glfw_errors() as errors:
+            glfw.window_hint(0x7FFF0001, 0)  # an unknown hint, or "not initialized": an error
+        assert shown == [] and len(errors) == 1
+        assert isinstance(errors[0], str) and not errors[0].startswith("b'")
+        assert "hint" in errors[0].lower() or "not initialized" in errors[0].lower()
+        glfw.window_hint(0x7FFF0001, 0)  # pyGLFW's own reporting is back
+    assert [type(w.message).__name__ for w in shown] == ["GLFWError"]

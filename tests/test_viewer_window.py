@@ -455,3 +455,16 @@ def test_k_records_the_flight_as_a_path_file_and_b_changes_the_background(viewer
     assert v.settings.background == (1.0, 1.0, 1.0) and v.message == "background 1,1,1"
     v.step()
     assert tuple(_window_pixels(v)[H - 1, 0]) == (255, 255, 255)
+
+
+@pytest.mark.slow
+def test_no_display_is_one_line_with_glfws_reason(tmp_path):
+    """Issue 38: GLFW's reason came as a raw ``splatgl: warning: (65550) b'X11: ...'`` line
+    before the error; it is now part of the one error line, decoded."""
+    env = {k: v for k, v in os.environ.items() if k != "WAYLAND_DISPLAY"}
+    r = subprocess.run([sys.executable, "-m", "splatgl", "view"], capture_output=True, text=True,
+                       timeout=60, env={**env, "DISPLAY": ""}, cwd=tmp_path)
+    assert r.returncode == 2 and "b'" not in r.stderr and "warning" not in r.stderr
+    assert r.stderr.startswith("splatgl: error: cannot open a window: glfw failed to initialise "
+                               "(X11: ") and r.stderr.count("\n") == 1
+    assert r.stderr.endswith("; set DISPLAY, e.g. run under Xvfb)\n")

@@ -22,6 +22,14 @@ from .pinhole import Pinhole
 from .poses import nonfinite_entry
 
 
+#: The largest magnitude of a camera's numbers (pixels: fx, fy, cx, cy; world units: the pose's
+#: entries), and the smallest focal length.  The renderers compute in float32, whose squares
+#: overflow beyond 1.8e19: larger values leaked NumPy overflow warnings (or an OverflowError)
+#: and drew nothing meaningful.  No real camera comes near either bound.
+MAX_CAMERA_VALUE = 1e18
+MIN_FOCAL = 1e-6
+
+
 def _frozen_matrix(m: object) -> np.ndarray:
     arr = np.array(m, dtype=np.float64, copy=True)
     if arr.shape != (4, 4):
@@ -29,6 +37,11 @@ def _frozen_matrix(m: object) -> np.ndarray:
     bad = nonfinite_entry(arr)
     if bad:
         raise CameraError(f"world_to_camera must be finite; it holds {bad}")
+    if np.abs(arr).max() > MAX_CAMERA_VALUE:
+        i, j = (int(v) for v in np.unravel_index(np.argmax(np.abs(arr)), arr.shape))
+        what = "the camera is that far from the origin" if j == 3 else "a scale that large"
+        raise CameraError(f"world_to_camera holds {arr[i, j]:.3g} at row {i}, column {j} ({what}); "
+                          f"splatgl renders within {MAX_CAMERA_VALUE:.0e} (float32 arithmetic)")
     if not np.allclose(arr[3], [0.0, 0.0, 0.0, 1.0]):
         raise CameraError(f"world_to_camera's last row must be (0, 0, 0, 1), got {arr[3].tolist()}")
     arr.flags.writeable = False
@@ -72,6 +85,13 @@ class Camera:
             object.__setattr__(self, name, value)
         if self.fx <= 0 or self.fy <= 0:
             raise CameraError(f"camera focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
+        for name in ("fx", "fy", "cx", "cy"):
+            value = getattr(self, name)
+            focal = name in ("fx", "fy")
+            if not (MIN_FOCAL if focal else -MAX_CAMERA_VALUE) <= value <= MAX_CAMERA_VALUE:
+                span = (f"from {MIN_FOCAL:g} to " if focal else "within +-")
+                raise CameraError(f"camera {name} must be {span}{MAX_CAMERA_VALUE:g} pixels "
+                                  f"(float32 arithmetic), got {value:g}")
         object.__setattr__(self, "world_to_camera", _frozen_matrix(self.world_to_camera))
         if not isinstance(self.model, CameraModel):
             raise CameraError(f"camera model must be a CameraModel (splatgl.cameras), got {self.model!r}")

@@ -11,7 +11,7 @@ from ..errors import CameraError
 from ..model.scene import Scene
 from ..model.transform import ModelTransform
 from . import registry
-from .camera import Camera
+from .camera import MAX_CAMERA_VALUE, MIN_FOCAL, Camera
 from .orthographic import Orthographic
 from .pinhole import DEFAULT_FOV, Pinhole
 from .poses import orbit
@@ -69,8 +69,13 @@ def default_camera(scene: Scene, width: int | None = None, height: int | None = 
     if cls is Orthographic:  # parallel rays: the zoom frames the scene
         scale = model.scale if model is not None else 1.0
         radius = max(scene.robust_radius * scale, 1e-9) * distance_scale
-        return Camera.orthographic(width, height, min(width, height) / (ORTHOGRAPHIC_SPAN * radius),
-                                   cam.world_to_camera)
+        zoom = min(width, height) / (ORTHOGRAPHIC_SPAN * radius)
+        if not MIN_FOCAL <= zoom <= MAX_CAMERA_VALUE:
+            raise CameraError(f"distance scale {distance_scale:g} zooms the orthographic camera to "
+                              f"{zoom:.3g} pixels per world unit (scene radius {radius:.3g}); "
+                              f"splatgl renders from {MIN_FOCAL:g} to {MAX_CAMERA_VALUE:g} "
+                              "(float32 arithmetic)")
+        return Camera.orthographic(width, height, zoom, cam.world_to_camera)
     return cam if pinhole else registry.retarget(cam, cls.name, fov_degrees)
 
 
@@ -81,6 +86,12 @@ def _up_vector(scene: Scene, up) -> np.ndarray:
             raise CameraError(f"up must be one of {', '.join(UP_AXES)} or a 3-vector, got {up!r}")
         return resolve_up(up, scene.source.path if scene.source is not None else None)[0]
     return np.asarray(up, np.float64)
+
+
+#: The closest the default camera stands to the scene's centre, relative to the centre's own
+#: distance from the origin (at least 1): closer, float64 cannot tell the eye from the target
+#: (a 1e-300 scale) and float32 cannot render it.
+MIN_FRAMING_DISTANCE = 1e-9
 
 
 def _framing_camera(scene: Scene, width: int, height: int, fov_y_degrees: float,
@@ -96,5 +107,14 @@ def _framing_camera(scene: Scene, width: int, height: int, fov_y_degrees: float,
     fov_x = 2.0 * math.atan(math.tan(fov_y / 2.0) * width / height)
     half = min(fov_x, fov_y) / 2.0
     distance = 1.05 * radius / math.sin(half) * distance_scale
+    far, near = float(np.abs(centre).max()), MIN_FRAMING_DISTANCE * max(float(np.abs(centre).max()), 1.0)
+    sizes = f"(scene radius {radius:.3g}, distance scale {distance_scale:g})"
+    if not far <= MAX_CAMERA_VALUE / 2:   # inf, NaN too
+        raise CameraError(f"cannot frame the scene: its centre lies {far:.3g} from the origin "
+                          f"{sizes}; splatgl renders within {MAX_CAMERA_VALUE / 2:g} (float32 arithmetic)")
+    if not near <= distance <= MAX_CAMERA_VALUE / 2:
+        raise CameraError(f"cannot frame the scene: the camera would stand {distance:.3g} from "
+                          f"it {sizes}; splatgl places it from {near:.3g} to "
+                          f"{MAX_CAMERA_VALUE / 2:g} away (float arithmetic)")
     pose = orbit(centre, distance, 180.0, DEFAULT_ELEVATION, up)
     return Camera.from_fov(width, height, fov_y_degrees, pose)

@@ -13,6 +13,7 @@ import ctypes
 import ctypes.util
 import enum
 import os
+from contextlib import contextmanager
 
 import moderngl
 
@@ -213,6 +214,27 @@ def create_window_context() -> moderngl.Context:
         raise ContextError(f"could not use the window's OpenGL context: {exc}") from None
 
 
+@contextmanager
+def glfw_errors():
+    """Collect the GLFW errors of the block as text (``"X11: The DISPLAY environment variable
+    is missing"``) in the list it yields, for the caller's one-line message, instead of
+    pyGLFW's default of a raw ``(65550) b'X11: ...'`` warning per error."""
+    import glfw
+
+    messages: list[str] = []
+
+    def collect(code: int, description) -> None:
+        text = (description.decode("utf-8", "replace") if isinstance(description, bytes)
+                else str(description))
+        messages.append(" ".join(text.split()))
+
+    previous = glfw.set_error_callback(collect)
+    try:
+        yield messages
+    finally:
+        glfw.set_error_callback(previous)   # None restores pyGLFW's default
+
+
 #: Window context versions tried in order (DESIGN.md section 6: 4.5 works under Xvfb, 4.6 fails;
 #: 4.3 is the least the renderers need; 3.3 only so the caller can say what is missing).
 WINDOW_VERSIONS = ((4, 5), (4, 3), (3, 3))
@@ -241,14 +263,15 @@ def create_glfw_window(width: int, height: int, title: str, visible: bool = True
             glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
             glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
             glfw.window_hint(glfw.VISIBLE, bool(visible))
-            try:
-                window = glfw.create_window(width, height, title, None, None)
-            except glfw.GLFWError:  # raised instead of returned when ERROR_REPORTING = 'raise'
-                window = None
+            with glfw_errors() as errors:   # a refused try is no news: the next may work
+                try:
+                    window = glfw.create_window(width, height, title, None, None)
+                except glfw.GLFWError:  # raised instead of returned when ERROR_REPORTING = 'raise'
+                    window = None
             if window:
                 glfw.make_context_current(window)
                 return window, (major, minor), api
-            failures.append(f"{major}.{minor} ({api})")
+            failures.append(f"{major}.{minor} ({api}{': ' + errors[-1] if errors else ''})")
     raise ContextError("could not open a window with an OpenGL core context (tried "
                        + ", ".join(failures) + ")")
 

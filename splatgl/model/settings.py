@@ -338,6 +338,11 @@ class RenderSettings:
             raise SplatglError(f"resort interval must be a positive integer, got {self.resort_interval}")
         if self.near is not None and not self.near > 0.0:
             raise SplatglError(f"near plane must be positive, got {self.near}")
+        if self.near is not None and not self.near <= MAX_BACKGROUND:
+            # every renderer culls z <= near in float32: a larger plane overflowed to inf (a raw
+            # NumPy overflow warning) and culled everything; float32's largest is beyond any scene
+            raise SplatglError(f"--near {self.near:g}: must be at most {MAX_BACKGROUND:.4g} "
+                               "(the largest depth a float32 holds)")
         if self.sh_degree is not None and not 0 <= self.sh_degree <= MAX_SH_DEGREE:
             raise SplatglError(f"SH degree cap must be 0..{MAX_SH_DEGREE}, got {self.sh_degree}")
 

@@ -9,7 +9,7 @@ import glfw
 import moderngl
 
 from ..errors import SplatglError
-from ..gl.context import REQUIRED_VERSION, create_glfw_context, create_glfw_window
+from ..gl.context import REQUIRED_VERSION, create_glfw_context, create_glfw_window, glfw_errors
 
 
 def open_window(width: int, height: int, title: str, visible: bool = True,
@@ -17,9 +17,12 @@ def open_window(width: int, height: int, title: str, visible: bool = True,
     """A ``width`` x ``height`` window and its moderngl context (current); returns
     ``(window, ctx, context_api)``.  Refused (:class:`SplatglError`, glfw shut down again)
     without a display or without an OpenGL 4.3 window context."""
-    if not glfw.init():
-        raise SplatglError("cannot open a window: glfw failed to initialise "
-                           "(no display? set DISPLAY, e.g. run under Xvfb)")
+    with glfw_errors() as errors:   # GLFW's reason goes into the one line, not a raw b'X11: ...'
+        ready = glfw.init()
+    if not ready:
+        raise SplatglError("cannot open a window: glfw failed to initialise ("
+                           + (f"{errors[-1]}; " if errors else "no display? ")
+                           + "set DISPLAY, e.g. run under Xvfb)")
     window = None
     try:
         window, version, context_api = create_glfw_window(width, height, title, visible)
