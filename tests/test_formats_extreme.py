@@ -90,3 +90,13 @@ def test_spz_names_the_file_when_positions_do_not_fit(tmp_path, capsys):
     assert code == 2 and err == (
         f"splatgl: error: {tmp_path / 'o.spz'}: field 'position': positions up to 3e+38 do not "
         "fit SPZ's 24-bit fixed point even with 0 fractional bits\n"), err
+
+
+def test_a_level_of_detail_of_scales_beyond_float32_is_refused_in_one_line(tmp_path, capsys):
+    """It printed a NumPy warning, then a LinAlgError traceback."""
+    path = extreme(tmp_path / "s.ply", log_scale=100.0)
+    code, _, err = cli(capsys, "lod", path, "-o", tmp_path / "s.lod.ply")
+    assert code == 2 and err == (
+        "splatgl: error: level of detail: splat 3 has a scale above e^88 world units, whose "
+        "moments overflow: remove such splats first (splatgl edit --remove 'max_scale > 1e38')\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]

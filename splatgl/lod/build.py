@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import ALPHA_MAX, ALPHA_MIN
+from ..errors import SplatglError
 from ..twins.project import covariance_3d, quat_to_rotmat
 from ..model.quaternion import rotmat_to_quat
 from ..model.scene import Scene
@@ -38,6 +39,8 @@ from ..model.spatial import morton_order_clamped_box
 BRANCHING = 4
 #: Rows per block when the leaves' covariances are formed (float64 (M, 3, 3) temporaries).
 BLOCK = 1 << 18
+#: Log-scales above this give scales beyond float32 (inf), whose moments cannot be matched.
+MAX_LOG_SCALE = 88
 
 
 @dataclass(frozen=True)
@@ -111,6 +114,12 @@ def build_hierarchy(scene: Scene, branching: int = BRANCHING, progress=None) -> 
     """
     if branching < 2:
         raise ValueError(f"branching must be at least 2, got {branching}")
+    for s in range(0, scene.count, BLOCK):  # NaN moments, then a LinAlgError, otherwise
+        big = np.flatnonzero((scene.log_scales[s:s + BLOCK] > MAX_LOG_SCALE).any(axis=1))
+        if big.size:
+            raise SplatglError(f"level of detail: splat {s + int(big[0]):,} has a scale above "
+                               f"e^{MAX_LOG_SCALE} world units, whose moments overflow: remove "
+                               "such splats first (splatgl edit --remove 'max_scale > 1e38')")
     order = morton_order_clamped_box(scene.means.astype(np.float64))
     leaves = scene.subset(order)
     n = leaves.count
