@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import struct
+import warnings
 
 import numpy as np
 import pytest
@@ -334,3 +335,25 @@ def test_a_repeated_key_is_refused_naming_file_and_key(fmt, tmp_path):
     source, _, _ = _hand_written(fmt, tmp_path)
     key = _repeat_first_key(source)
     assert _err(source) == f"{source}: key '{key}' given twice in one object (JSON keeps only the last)"
+
+
+@pytest.mark.parametrize("name, obj, line", [
+    ("p.json", {"splatgl_path": 1, "width": 8, "height": 8, "frames": 1,
+                "keyframes": [{"eye": [0, 0, -1e300], "target": [0, 0, 0]}]},
+     "keyframes[0]: look_at: eye [0.0, 0.0, -1e+300] and target [0.0, 0.0, 0.0] must lie within "
+     "1e+18 of the origin (float32 arithmetic)"),
+    ("p.json", {"splatgl_path": 1, "width": 8, "height": 8, "frames": 1,
+                "keyframes": [{"eye": [0, 0, -5], "target": [0, 0, 0], "fov": 1e-300}]},
+     "keyframes[0]: camera fx must be from 1e-06 to 1e+18 pixels (float32 arithmetic), got 4.58366e+302"),
+    ("transforms.json", {"w": 8, "h": 8, "fl_x": 5.0, "frames": [
+        {"transform_matrix": [[1, 0, 0, 1e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}]},
+     "frame 0: world_to_camera holds -1e+300 at row 0, column 3 (the camera is that far from the "
+     "origin); splatgl renders within 1e+18 (float32 arithmetic)"),
+])
+def test_numbers_beyond_float32_are_one_line_naming_the_entry(tmp_path, name, obj, line):
+    """Issue 38: a path key 1e300 away leaked NumPy's "overflow encountered in dot"."""
+    path = tmp_path / name
+    path.write_text(json.dumps(obj))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _err(path) == f"{path}: {line}"

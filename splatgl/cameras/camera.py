@@ -19,15 +19,7 @@ from .fisheye import Fisheye
 from .model import CameraModel, CullKind
 from .orthographic import Orthographic
 from .pinhole import Pinhole
-from .poses import nonfinite_entry
-
-
-#: The largest magnitude of a camera's numbers (pixels: fx, fy, cx, cy; world units: the pose's
-#: entries), and the smallest focal length.  The renderers compute in float32, whose squares
-#: overflow beyond 1.8e19: larger values leaked NumPy overflow warnings (or an OverflowError)
-#: and drew nothing meaningful.  No real camera comes near either bound.
-MAX_CAMERA_VALUE = 1e18
-MIN_FOCAL = 1e-6
+from .poses import MAX_CAMERA_VALUE, MIN_FOCAL, nonfinite_entry
 
 
 def _frozen_matrix(m: object) -> np.ndarray:

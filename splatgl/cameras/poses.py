@@ -14,6 +14,14 @@ from ..constants import RIGID_POSE_TOLERANCE
 from ..errors import CameraError
 
 
+#: The largest magnitude of a camera's numbers (pixels: fx, fy, cx, cy; world units: the pose's
+#: entries, look-at points), and the smallest focal length.  The renderers compute in float32,
+#: whose squares overflow beyond 1.8e19: larger values leaked NumPy overflow warnings (or an
+#: OverflowError) and drew nothing meaningful.  No real camera comes near either bound.
+MAX_CAMERA_VALUE = 1e18
+MIN_FOCAL = 1e-6
+
+
 def nonfinite_entry(arr: np.ndarray) -> str | None:
     """'NaN at row 1, column 2' for the first non-finite entry of a 2D array, else None."""
     bad = np.argwhere(~np.isfinite(arr))
@@ -86,7 +94,11 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, -1.0, 0.
     suits scenes trained from COLMAP, whose world y axis usually points down.
     """
     eye = np.asarray(eye, np.float64)
-    forward = np.asarray(target, np.float64) - eye
+    target = np.asarray(target, np.float64)
+    if not np.abs(np.concatenate([eye.ravel(), target.ravel()])).max() <= MAX_CAMERA_VALUE:
+        raise CameraError(f"look_at: eye {eye.tolist()} and target {target.tolist()} must lie "
+                          f"within {MAX_CAMERA_VALUE:g} of the origin (float32 arithmetic)")
+    forward = target - eye
     norm = np.linalg.norm(forward)
     if not norm > 0.0:
         raise CameraError("look_at: eye and target coincide")

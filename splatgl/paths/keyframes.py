@@ -61,7 +61,7 @@ def is_path_file(obj: object) -> bool:
     return isinstance(obj, dict) and FORMAT_KEY in obj
 
 
-def _keyframe(path: Path, i: int, entry: object) -> Keyframe:
+def _keyframe(path: Path, i: int, entry: object, height: int = 720) -> Keyframe:
     where = f"keyframes[{i}]: "
     if not isinstance(entry, dict):
         raise CameraError(f"{path}: {where}expected a JSON object")
@@ -74,13 +74,20 @@ def _keyframe(path: Path, i: int, entry: object) -> Keyframe:
         up = matrix(path, where, entry, "up", (3,)) if "up" in entry else np.array(DEFAULT_UP)
         if np.allclose(eye, target):
             raise CameraError(f"{path}: {where}'eye' and 'target' coincide")
-        w2c = look_at(eye, target, up)
+        try:
+            w2c = look_at(eye, target, up)
+        except CameraError as exc:
+            raise CameraError(f"{path}: {where}{exc}") from None
     else:
         raise CameraError(f"{path}: {where}needs 'world_to_camera', or 'eye' and 'target'")
     fov = number(path, where, entry, "fov", DEFAULT_FOV)
     if not 0.0 < fov < 180.0:
         raise CameraError(f"{path}: {where}field 'fov' must be in (0, 180) degrees, got {fov}")
     time = number(path, where, entry, "time") if "time" in entry else None
+    try:   # the key's numbers within what the renderers hold (a pose 1e20 away, a 1e-300 fov)
+        Camera.from_fov(1, height, fov, w2c)
+    except CameraError as exc:
+        raise CameraError(f"{path}: {where}{exc}") from None
     return Keyframe(w2c, fov, time)
 
 
@@ -144,7 +151,7 @@ def parse_path(path: Path, obj: dict) -> PathFile:
     h = number(path, "", obj, "height", 720.0, positive=True)
     if not (w.is_integer() and h.is_integer()):
         raise CameraError(f"{path}: 'width' and 'height' must be whole numbers, got {w} x {h}")
-    keys = tuple(_keyframe(path, i, e) for i, e in enumerate(entries(path, obj, "keyframes")))
+    keys = tuple(_keyframe(path, i, e, int(h)) for i, e in enumerate(entries(path, obj, "keyframes")))
     timed = [k.time is not None for k in keys]
     if any(timed) and not all(timed):
         raise CameraError(f"{path}: give 'time' on every keyframe or on none")
