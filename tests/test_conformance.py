@@ -104,3 +104,12 @@ def test_cli_score_json_missing_and_bad_kit(kit, tmp_path, capsys):
     assert "exists (use --force to replace it)" in capsys.readouterr().err
     with pytest.raises(SplatglError, match="no such folder"):
         score_kit(kit, tmp_path / "nowhere")
+
+
+def test_index_with_a_repeated_key_is_refused(tmp_path):
+    """Issue 38: a repeated key silently took the last value (here a case's "name")."""
+    (tmp_path / "index.json").write_text('{"version": 1, "version": 2, "cases": []}')
+    with pytest.raises(SplatglError) as info:
+        load_index(tmp_path)
+    assert str(info.value) == (f"{tmp_path / 'index.json'}: key 'version' given twice in one "
+                               "object (JSON keeps only the last)")

@@ -18,6 +18,7 @@ import re
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
 from ..errors import SplatglError
+from ..model.json_text import DuplicateKeyError, unique_keys
 
 #: A plain case name (module doc).
 PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]{0,127}")
@@ -109,7 +110,9 @@ def load_index(kit: str | Path) -> dict:
         raise SplatglError(f"{kit}: not a conformance kit (no index.json; splatgl conformance "
                            "export writes one)")
     try:
-        index = json.loads(path.read_bytes())
+        index = json.loads(path.read_bytes(), object_pairs_hook=unique_keys)
+    except DuplicateKeyError as exc:
+        raise SplatglError(f"{path}: {exc}") from None
     except (ValueError, UnicodeDecodeError) as exc:
         where = f" at line {exc.lineno} column {exc.colno}" if hasattr(exc, "lineno") else ""
         raise SplatglError(f"{path}: not valid JSON ({getattr(exc, 'msg', exc)}{where})") from None
