@@ -64,7 +64,7 @@ def test_eval_on_a_raw_colmap_dataset(raw_colmap, tmp_path, capsys):
 
     def mean_psnr(dataset):
         assert main(["eval", str(scene), "--dataset", str(dataset), "--background", "0.5,0.5,0.5",
-                     "--json", str(tmp_path / "e.json")]) == 0
+                     "--json", str(tmp_path / "e.json"), "--force"]) == 0
         return json.loads((tmp_path / "e.json").read_text())["mean"]["psnr"]
 
     assert mean_psnr(root) > 50.0
