@@ -141,3 +141,40 @@ def test_sigterm_mid_video_leaves_no_video_and_resume_encodes(tmp_path):
     assert sorted(p.name for p in frames.iterdir()) == ["00000.png", "00100.png"]  # no partials
     assert main([*ARGS[:2], "orbit:200", *ARGS[3:], "-o", str(out), "--workers", "2", "--resume"]) == 0
     assert len(_video(out)) == 200 and os.listdir(tmp_path) == ["v.mp4"]
+
+
+class _Overflowing:
+    """A task whose work leaks a NumPy warning (a float32 overflow)."""
+
+    units = 1
+
+    def run(self, files, report):
+        np.array([1e39]).astype(np.float32)
+        return None
+
+
+def test_a_workers_warning_reaches_the_parent_not_the_terminal(monkeypatch, capsys):
+    """Issue 38: no raw NumPy warning reaches the user, from a worker process either: its
+    warnings go to the parent, which shows them through the command line's one-line policy."""
+    import queue
+    import warnings
+
+    from splatgl.tasks.local import _worker, reissue_warning
+
+    monkeypatch.setattr(warnings, "showwarning", warnings.showwarning)  # _worker replaces it
+    todo, messages = queue.Queue(), queue.Queue()
+    for item in ((0, _Overflowing()), None):
+        todo.put(item)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        _worker(todo, messages)
+    got = [messages.get_nowait() for _ in range(messages.qsize())]
+    assert [kind for kind, _, _ in got] == ["start", "warning", "done"]
+    _, index, (text, category, filename, lineno) = got[1]
+    assert (index, text, category) == (0, "overflow encountered in cast", RuntimeWarning)
+    assert filename == __file__ and capsys.readouterr().err == ""
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        reissue_warning(got[1][2])
+    assert [(str(w.message), w.category, w.filename) for w in shown] == [
+        ("overflow encountered in cast", RuntimeWarning, __file__)]

@@ -7,15 +7,18 @@ scenes spread over the workers as they free up.  Workers report progress and res
 second queue; the parent shows one progress line for all of them.  Ctrl-C / SIGTERM interrupts
 every worker (SIGINT), which unwinds like a single process (a frame in hand is finished or
 dropped, never half-written); the parent then re-raises.  A worker that dies without reporting
-(killed) stops the run with an error naming its task.
+(killed) stops the run with an error naming its task.  A worker's warnings travel to the
+parent, which shows them as its own (the command line's one-line policy, splatgl/cli.py).
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import pickle
 import queue
 import signal
+import warnings
 from typing import Optional, Sequence
 
 from ..errors import SplatglError
@@ -32,14 +35,36 @@ def chunks(count: int, workers: int) -> list[range]:
     return [range(a, b) for a, b in zip(bounds, bounds[1:]) if b > a]
 
 
+def _forward_warnings(messages, current: list) -> None:
+    """Send this worker's warnings to the parent (``("warning", task index, (text, category,
+    file, line))``) instead of printing them raw on the shared terminal."""
+    def show(message, category, filename, lineno, file=None, line=None):
+        try:
+            pickle.dumps(category)
+        except Exception:  # noqa: BLE001 - a class the parent cannot import
+            category = RuntimeWarning if issubclass(category, RuntimeWarning) else UserWarning
+        messages.put(("warning", current[0], (str(message), category, filename, lineno)))
+
+    warnings.showwarning = show
+
+
+def reissue_warning(payload) -> None:
+    """Show a worker's forwarded warning (:func:`_forward_warnings`) here, as if raised here."""
+    text, category, filename, lineno = payload
+    warnings.warn_explicit(text, category, filename, lineno)
+
+
 def _worker(todo, messages) -> None:
     task_index = None
+    current = [None]
+    _forward_warnings(messages, current)
     try:
         while True:
             item = todo.get()
             if item is None:
                 return
             task_index, task = item
+            current[0] = task_index
             messages.put(("start", task_index, os.getpid()))
             die_once_for_test(lambda: (messages.close(), messages.join_thread()))
             report = run_here(task, Files(), lambda d, t, i=task_index: messages.put(("progress", i, (d, t))))
@@ -91,6 +116,8 @@ def run_local(tasks: Sequence[Task], workers: int, unit: str = "frames",
                 reports[i] = payload
                 running.pop(payload.worker.pid, None)
                 meter(i, meter.total[i], meter.total[i])
+            elif kind == "warning":
+                reissue_warning(payload)
             elif kind == "interrupted":
                 raise KeyboardInterrupt
             else:
