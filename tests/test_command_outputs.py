@@ -106,6 +106,9 @@ def test_eval_renders_never_replace_the_photographs(tmp_path, capsys):
                 f"--renders {photo}: the same file as --dataset; give the output its own name")
         refused(capsys, ["eval", "--dataset", root, "--csv", photo, *force],
                 f"--csv {photo}: the same file as --dataset; give the output its own name")
+        cameras = root / "transforms.json"
+        refused(capsys, ["eval", "--dataset", root, "--json", cameras, *force],
+                f"--json {cameras}: the same file as --dataset; give the output its own name")
     assert photo.read_bytes() == before
     assert sorted(p.name for p in (root / "images").iterdir()) == ["r_0.png"]
 

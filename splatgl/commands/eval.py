@@ -93,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
     check_convention(args, args.renderer)
     if args.sheet is not None:
         check_image_suffix(args.sheet, "--sheet")
-    check_json_target(args, {"--csv": args.csv, "--sheet": args.sheet})
+    check_json_target(args, {"--csv": args.csv, "--sheet": args.sheet},
+                      {"--dataset": _dataset_files(args.dataset, [])})
     renders = _render_files(args)
     # every report path checked before the views are scored (the same file twice, a missing
     # folder, an input, an existing file without --force); the reports are then written all
@@ -103,8 +104,8 @@ def run(args: argparse.Namespace) -> int:
     views = load_dataset(args.dataset, args.images, args.split, args.max_width)
     if args.select:
         views = [views[i] for i in select_indices(args.select, len(views), str(args.dataset))]
-    photographs = {"--dataset": [v.image for v in views if v.image is not None]}
-    outputs = output_files(args, reports, photographs)   # nor a photograph
+    photographs = {"--dataset": _dataset_files(args.dataset, views)}
+    outputs = output_files(args, reports, photographs)   # nor a photograph or camera file
     if renders is not None:
         renders.check(views)
         check_outputs(args, [p for v in views for p in renders.frames.files(v.camera).paths(renders.path(v))],
@@ -149,6 +150,20 @@ def run(args: argparse.Namespace) -> int:
     if renders is not None:
         print(f"wrote {len(views)} renders to {renders.folder}", file=text)
     return 0
+
+
+def _dataset_files(dataset: Path, views) -> list[Path]:
+    """The files of ``dataset`` eval reads, which no output may be: each view's photograph and
+    the camera files (the folder's own files, its ``sparse/*/`` models)."""
+    files = [v.image for v in views if v.image is not None]
+    dataset = Path(dataset)
+    if dataset.is_file():
+        return files + [dataset]
+    sparse = dataset / "sparse"
+    for folder in [dataset, sparse, *(sorted(sparse.iterdir()) if sparse.is_dir() else [])]:
+        if folder.is_dir():
+            files += [p for p in folder.iterdir() if p.is_file()]
+    return files
 
 
 def _render_files(args: argparse.Namespace) -> RenderFiles | None:
