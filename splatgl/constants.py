@@ -102,11 +102,12 @@ SH_C3 = (
 MAX_SH_DEGREE = 3
 
 
-#: GPU radix sort (shaders/radix_*.comp, splatgl/gl/radix_sort.py): bits per pass (16 digit
-#: values), keys per thread.  A group of RADIX_GROUP threads (splatgl/gl/bindings.py, 256)
-#: sorts one tile of RADIX_GROUP * RADIX_ITEMS = 4096 keys per pass; 8 passes cover 32-bit keys.
-RADIX_BITS = 4
-RADIX_ITEMS = 16
+#: GPU radix sort (shaders/radix_*.comp, splatgl/gl/radix_sort.py): bits per pass (256 digit
+#: values), keys per thread.  A group of RADIX_GROUP threads (splatgl/gl/bindings.py, 128)
+#: sorts one tile of RADIX_GROUP * RADIX_ITEMS = 4096 keys per pass; at most 4 passes cover
+#: 32-bit keys, fewer where the keys share bits.
+RADIX_BITS = 8
+RADIX_ITEMS = 32
 
 #: Compact GPU storage (``--gpu-storage compact``, splatgl/gl/storage.py, shaders/lib/dequantise.glsl):
 #: bits of each smallest-three quaternion component and of the linear opacity.  Two components

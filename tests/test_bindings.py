@@ -117,7 +117,7 @@ def test_each_program_binds_within_one_family():
 
 
 def test_every_program_receives_the_table_with_the_constants():
-    text = preprocess("radix_count.comp").text
+    text = preprocess("radix_upsweep.comp").text
     for name, value in bindings.glsl_defines().items():
         assert f"#define {name} {value}\n" in text
     assert f"#define TILE_SIZE {constants.TILE_SIZE}\n" in text
@@ -138,7 +138,7 @@ def test_compiled_blocks_sit_at_the_table_points(ctx):
                 cache.compute("occlusion_cull.comp", {**base, "PREPARED": 1}),
                 cache.compute("coverage.comp", base),
                 cache.compute("stop_tiles.comp"),
-                cache.compute("radix_scatter.comp"),
+                cache.compute("radix_downsweep.comp"),
                 cache.compute("tile_rasterize.comp", {**base, "TILE_LIST_CHUNK": 16, "TILE_EMIT_CHUNK": 16})]
     checked = 0
     try:

@@ -1,5 +1,6 @@
-"""The device radix sort: its NumPy twin and the compute shaders give exactly the CPU sort's
-order (depth, ties by index), bit for bit, and a quad frame sorted on the device is identical."""
+"""The device radix sort: its NumPy twin and the compute shaders give exactly NumPy's stable
+argsort (keys with values carried, every downsweep path the device has) and the CPU depth sort's
+order (depth, ties by index), bit for bit; a quad frame sorted on the device is identical."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from helpers import draw, view_for
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.gl.radix_sort import (TILE_KEYS, RadixSorter, device_depth_sort, radix_passes,
-                                   radix_sort_twin)
+                                   radix_sort_twin, subgroup_paths)
 from splatgl.renderers.quad import QuadRenderer
 from splatgl.model.scene import Scene
 from splatgl.model.settings import RenderSettings, SortKey
@@ -37,24 +38,101 @@ def test_twin_equals_cpu_sort(values):
     np.testing.assert_array_equal(got, depth_sort(z, idx))
 
 
-def test_passes_skip_shared_high_digits():
+def test_passes_cover_only_the_bits_keys_differ_in():
     keys = np.array([0x3F800000, 0x3F8000FF], np.uint32)  # differ in the low 8 bits only
-    assert radix_passes(keys) == [0, 4]
+    assert radix_passes(keys) == [0]
+    assert radix_passes(np.array([0x100, 0x300, 0x500], np.uint32)) == [9]  # bits 9, 10
+    assert radix_passes(np.array([1 << 4, 1 << 27], np.uint32)) == [4, 12, 20]
     assert radix_passes(np.array([5, 5], np.uint32)) == []
-    assert len(radix_passes(np.array([0, 0xFFFFFFFF], np.uint32))) == 8
+    assert radix_passes(np.array([7], np.uint32)) == []
+    assert radix_passes(np.array([0, 0xFFFFFFFF], np.uint32)) == [0, 8, 16, 24]
 
 
-@pytest.mark.parametrize("n", [1, 7, TILE_KEYS, TILE_KEYS + 1, 3 * TILE_KEYS + 123, 60_000])
+def _keys(kind: str, n: int, rng) -> np.ndarray:
+    """Test keys: full 32-bit, many duplicates, all equal, 1 or 3 passes from a shifted range."""
+    if kind == "random":
+        return rng.integers(0, 2 ** 32, n, dtype=np.uint64).astype(np.uint32)
+    if kind == "duplicates":
+        return (rng.integers(0, 40, n).astype(np.uint32) << np.uint32(13)) | np.uint32(0xF0000001)
+    if kind == "equal":
+        return np.full(n, 0xDEADBEEF, np.uint32)
+    if kind == "one pass":
+        return rng.integers(0, 200, n).astype(np.uint32) << np.uint32(20)
+    return rng.integers(0, 1 << 24, n).astype(np.uint32) << np.uint32(3)  # three passes
+
+
+KINDS = ("random", "duplicates", "equal", "one pass", "three passes")
+SIZES = (0, 1, 2, 7, TILE_KEYS - 1, TILE_KEYS, TILE_KEYS + 1, 3 * TILE_KEYS + 123, 60_000)
+
+
+@pytest.fixture(scope="module", params=["subgroup", "portable"])
+def sorter(request, ctx):
+    """One sorter per downsweep path (reused across sizes, as a renderer reuses it)."""
+    paths = subgroup_paths(ctx)
+    path = paths[0] if request.param == "subgroup" else "portable"
+    if request.param == "subgroup" and path == "portable":
+        pytest.skip("no subgroup extension on this device")
+    s = RadixSorter(ctx, path=path)
+    yield s
+    s.release()
+
+
+@pytest.mark.parametrize("n", SIZES)
+@pytest.mark.parametrize("kind", KINDS)
+def test_device_sort_is_numpys_stable_argsort(sorter, n, kind):
+    rng = np.random.default_rng(n + len(kind))
+    keys = _keys(kind, n, rng)
+    values = rng.integers(0, 2 ** 32, n, dtype=np.uint64).astype(np.uint32)  # a payload
+    want = np.argsort(keys, kind="stable")
+    got_keys, got_values = sorter.sort(keys, values)
+    np.testing.assert_array_equal(got_keys, keys[want])
+    np.testing.assert_array_equal(got_values, values[want])
+    if n >= 2:  # the device planned the passes the twin plans, nothing read back to do it
+        shifts = radix_passes(keys)
+        assert sorter.last_plan() == ((shifts[0] if shifts else 0), len(shifts))
+
+
+@pytest.mark.slow
+def test_device_sort_of_a_million_keys(sorter):
+    rng = np.random.default_rng(1)
+    keys = np.exp(rng.uniform(-3, 6, 1_000_000)).astype(np.float32).view(np.uint32)
+    keys[rng.integers(0, keys.size, keys.size // 3)] = keys[0]
+    values = np.arange(keys.size, dtype=np.uint32)
+    np.testing.assert_array_equal(sorter.sort_values(keys, values),
+                                  np.argsort(keys, kind="stable"))
+
+
+def test_subgroup_and_portable_paths_agree(ctx):
+    """Both ranking paths run here where llvmpipe exposes GL_ARB_shader_ballot."""
+    paths = subgroup_paths(ctx)
+    assert "portable" in paths
+    rng = np.random.default_rng(5)
+    keys = rng.integers(0, 300, 20_000).astype(np.uint32) * np.uint32(1 << 11)
+    values = np.arange(keys.size, dtype=np.uint32)
+    results = []
+    for path in dict.fromkeys([paths[0], "portable"]):
+        s = RadixSorter(ctx, path=path)
+        try:
+            assert s.path == path
+            results.append(s.sort_values(keys, values))
+        finally:
+            s.release()
+    for got in results:
+        np.testing.assert_array_equal(got, np.argsort(keys, kind="stable"))
+
+
+def test_unknown_path_is_refused(ctx):
+    with pytest.raises(ValueError, match="radix sort path 'cuda'"):
+        RadixSorter(ctx, path="cuda")
+
+
+@pytest.mark.parametrize("n", [1, 7, TILE_KEYS + 1, 60_000])
 @pytest.mark.parametrize("ties", [False, True])
-def test_device_sort_equals_cpu_sort_bit_for_bit(ctx, n, ties):
+def test_device_depth_sort_equals_cpu_sort_bit_for_bit(ctx, n, ties):
     z, idx = _depths(n, n, ties)
     sorter = RadixSorter(ctx)
     try:
-        keys, values = sorter.sort(z.view(np.uint32), idx)
-        want = depth_sort(z, idx)
-        np.testing.assert_array_equal(values, want)
-        np.testing.assert_array_equal(keys, np.sort(z.view(np.uint32)))
-        np.testing.assert_array_equal(device_depth_sort(sorter, z, idx), want)
+        np.testing.assert_array_equal(device_depth_sort(sorter, z, idx), depth_sort(z, idx))
     finally:
         sorter.release()
 

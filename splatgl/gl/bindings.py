@@ -74,13 +74,14 @@ TILE_BINDING_UNDER = 21
 #: The per-pixel order's peak-depth coefficients (tile_project.comp writes, tile_rasterize.comp reads).
 TILE_BINDING_PEAK = 22
 
-# --- The device radix sort (gl/radix_sort.py; shaders/radix_count.comp, radix_scan.comp,
-# radix_scatter.comp).
+# --- The device radix sort (gl/radix_sort.py; shaders/radix_*.comp, lib/radix.glsl).
 RADIX_BINDING_KEYS_IN = 0
 RADIX_BINDING_VALS_IN = 1
 RADIX_BINDING_KEYS_OUT = 2
 RADIX_BINDING_VALS_OUT = 3
 RADIX_BINDING_HIST = 4
+#: The plan, the key bits seen and the digit totals; also the indirect dispatch buffer.
+RADIX_BINDING_STATE = 5
 
 # --- Texture units.
 #: Early termination samples the accumulation target here: stop_mark.frag, stop_tiles.comp.
@@ -107,9 +108,15 @@ OCCLUSION_GROUP = 256
 OCCLUSION_PER_INVOCATION = 4
 #: tile_project.comp, tile_emit.comp (one invocation per splat, lib/tile_common.glsl).
 SPLAT_GROUP = 256
-#: radix_count.comp, radix_scan.comp, radix_scatter.comp: threads per group; a group sorts a
-#: tile of RADIX_GROUP * RADIX_ITEMS keys per pass (splatgl.constants.RADIX_ITEMS).
-RADIX_GROUP = 256
+#: radix_bits.comp, radix_upsweep.comp, radix_downsweep.comp, radix_copy.comp: threads per
+#: group; a group owns a tile of RADIX_GROUP * RADIX_ITEMS keys (splatgl.constants.RADIX_ITEMS).
+#: radix_downsweep.comp keeps a 256-digit histogram per warp in shared memory: 16 KB with
+#: 8-lane subgroups (llvmpipe).
+RADIX_GROUP = 128
+#: radix_scan.comp: threads per digit's scan over the tiles.
+RADIX_SCAN_GROUP = 64
+#: radix_downsweep.comp without subgroup operations: threads that exchange digits as one warp.
+RADIX_PORTABLE_WARP = 16
 
 #: Programs that bind together (see the module doc): in each, every binding point is distinct.
 _SCENE = ("BINDING_A", "BINDING_Q", "BINDING_S", "BINDING_DC", "BINDING_SH")

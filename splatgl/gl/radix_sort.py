@@ -1,14 +1,28 @@
 """Device sort: a compute-shader LSD radix sort of 32-bit keys with a 32-bit payload.
 
-Each pass sorts by one RADIX_BITS-bit digit in three dispatches (shaders/radix_count.comp,
-radix_scan.comp, radix_scatter.comp; the layout is in shaders/lib/radix.glsl): per-tile digit
-counts, one exclusive scan over all (digit, tile) counts, and a stable scatter.  Every pass is
-stable, so the whole sort is: equal keys keep their input order.  Fed the cull's ascending
-indices with the float32 bits of their depths, it gives exactly :func:`splatgl.order.sort.depth_sort`'s
-order (ties by index), which the tests check bit for bit.
+The design (reduce-then-scan, as in GPUSorting's DeviceRadixSort; ranking by warp-level
+multi-split, as in Onesweep), in dispatches that read their sizes from the device:
 
-Passes above the highest bit in which the smallest and largest key differ are skipped: every key
-between them shares those bits, so those passes would move nothing.
+1. ``radix_bits.comp``: the OR and the AND of all keys.
+2. ``radix_plan.comp``: the bits in which keys differ give the passes: RADIX_BITS-bit digits
+   from the lowest differing bit up to the highest, so bits every key shares cost nothing.  It
+   writes each pass slot's dispatch size (0 for a pass the keys do not need) and digit shift
+   into the state buffer, which the passes' ``glDispatchComputeIndirect`` read: nothing is read
+   back to plan a sort.
+3. Per pass slot (``32 / RADIX_BITS`` of them): ``radix_upsweep.comp`` counts each tile's digits
+   in shared memory; ``radix_scan.comp`` (one work group per digit, work-efficient) turns the
+   counts into each tile's start for each digit; ``radix_downsweep.comp`` ranks the tile's keys
+   stably and writes keys and values at their places.  Passes alternate A -> B -> A.
+4. ``radix_copy.comp``: after an odd number of passes, B back into A; a sort always leaves its
+   result in the A buffers (a draw can bind them without knowing how many passes ran).
+
+The downsweep ranks with subgroup operations where the device has them (``GL_KHR_shader_subgroup``
+ballots, or ``GL_ARB_shader_ballot`` broadcasts, which llvmpipe exposes) and through shared
+memory where it does not (the ``portable`` path); all give the same order.  Every pass is
+stable, so the whole sort is: equal keys keep their input order.  Fed the cull's ascending
+indices with the float32 bits of their depths, it gives exactly
+:func:`splatgl.order.sort.depth_sort`'s order (ties by index), which the tests check bit for
+bit.
 
 :func:`radix_sort_twin` is the NumPy twin: the same digits, passes and skip rule.
 """
@@ -19,29 +33,49 @@ import moderngl
 import numpy as np
 
 from ..constants import RADIX_BITS, RADIX_ITEMS
+from ..errors import ShaderError
 from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
-                       RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT, RADIX_GROUP)
+                       RADIX_BINDING_STATE, RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT,
+                       RADIX_GROUP, RADIX_PORTABLE_WARP)
 from .shaders import ProgramCache
 
-#: Keys one work group sorts per pass.
+#: Keys one work group owns per pass.
 TILE_KEYS = RADIX_GROUP * RADIX_ITEMS
 RADIX = 1 << RADIX_BITS
+#: Subgroups this narrow (a CPU's SIMD lanes, llvmpipe's 8) run one warp per work group with
+#: TILE_KEYS / warp keys per lane: no per-warp histograms to clear and scan (radix_downsweep.comp).
+NARROW_WARP = 16
+#: Pass slots: enough RADIX_BITS-bit digits for 32-bit keys.
+SLOTS = 32 // RADIX_BITS
+#: The downsweep's ways of ranking (see the module doc), best first.
+PATHS = ("khr", "arb", "portable")
+
+# The state buffer (lib/radix.glsl, RadixState, std430): 4 uints, then uvec4 per pass slot
+# (dispatch size, shift), uvec4 per slot (the scan's dispatch size), one uvec4 (the copy's),
+# then the digit totals.  Byte offsets of the indirect dispatch arguments:
+_PASS_ARGS = 16
+_SCAN_ARGS = _PASS_ARGS + 16 * SLOTS
+_COPY_ARGS = _SCAN_ARGS + 16 * SLOTS
+_STATE_BYTES = _COPY_ARGS + 16 + 4 * SLOTS * RADIX
 
 
 def radix_passes(keys: np.ndarray) -> list[int]:
-    """Bit shifts of the passes that can reorder ``keys`` (M,) uint32, lowest digit first."""
+    """Digit shifts of the passes that sort ``keys`` (M,) uint32, lowest digit first: from the
+    lowest bit in which keys differ to the highest (radix_plan.comp's rule)."""
     if keys.size < 2:
         return []
-    differ = int(keys.min()) ^ int(keys.max())
-    top = differ.bit_length()  # every key shares the bits at and above ``top``
-    return [shift for shift in range(0, 32, RADIX_BITS) if shift < top]
+    differ = int(np.bitwise_or.reduce(keys)) & ~int(np.bitwise_and.reduce(keys))
+    if not differ:
+        return []
+    lo = (differ & -differ).bit_length() - 1
+    return list(range(lo, differ.bit_length(), RADIX_BITS))
 
 
 def radix_sort_twin(keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """NumPy twin of :class:`RadixSorter`: ``(keys, values)`` (M,) uint32 sorted by key, stably.
 
-    Each pass reorders by one digit with a stable sort of the digit (what count, scan and
-    scatter compute on the device).
+    Each pass reorders by one digit with a stable sort of the digit (what upsweep, scan and
+    downsweep compute on the device).
     """
     keys = np.ascontiguousarray(keys, np.uint32)
     values = np.ascontiguousarray(values, np.uint32)
@@ -52,19 +86,75 @@ def radix_sort_twin(keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, n
     return keys, values
 
 
+def subgroup_paths(ctx: moderngl.Context) -> list[str]:
+    """The downsweep paths this context can compile, best first (``portable`` always)."""
+    ext = ctx.extensions
+    return ([p for p, name in (("khr", "GL_KHR_shader_subgroup"), ("arb", "GL_ARB_shader_ballot"))
+             if name in ext] + ["portable"])
+
+
+def _subgroup_size(programs: ProgramCache, state: moderngl.Buffer, path: str) -> int:
+    """The device's subgroup size, read back once from a one-invocation probe into ``state``."""
+    prog = programs.compute("radix_subgroup.comp", {f"RADIX_MATCH_{path.upper()}": 1})
+    state.bind_to_storage_buffer(RADIX_BINDING_STATE)
+    prog.run(group_x=1)
+    return int(np.frombuffer(state.read(4), np.uint32)[0])
+
+
 class RadixSorter:
     """Sorts (M,) uint32 keys with uint32 values on the device; reuse it, then :meth:`release`.
 
-    Buffers grow to the largest M seen and are kept between calls.
+    ``path`` picks the downsweep's ranking (:data:`PATHS`); by default the best the context
+    offers whose shaders compile with a subgroup size that divides RADIX_GROUP.  Buffers grow
+    to the largest M seen and are kept between calls.
     """
 
-    def __init__(self, ctx: moderngl.Context, programs: ProgramCache | None = None):
+    def __init__(self, ctx: moderngl.Context, programs: ProgramCache | None = None,
+                 path: str | None = None):
         self.ctx = ctx
         self.programs = programs or ProgramCache(ctx)
+        if path is not None and path not in PATHS:
+            raise ValueError(f"radix sort path {path!r}: expected one of {', '.join(PATHS)}")
         self._capacity = 0
         self._bufs: list[moderngl.Buffer] = []  # keys A, values A, keys B, values B, hist
+        self._state = ctx.buffer(reserve=_STATE_BYTES)
+        self.path, self.warp, self._progs = self._choose(path)
+        self._state.write(np.array([0, 0xFFFFFFFF], np.uint32).tobytes())  # no bits seen
 
-    def _reserve(self, count: int) -> None:
+    def _choose(self, wanted: str | None):
+        """(path, warp width, programs by name): ``wanted``, or the best that compiles."""
+        for path in [wanted] if wanted else subgroup_paths(self.ctx):
+            warp = RADIX_PORTABLE_WARP
+            if path != "portable":
+                try:
+                    warp = _subgroup_size(self.programs, self._state, path)
+                except ShaderError:
+                    if wanted:
+                        raise
+                    continue
+                if warp < 1 or RADIX_GROUP % warp or TILE_KEYS % warp:
+                    if wanted:
+                        raise ShaderError(f"radix sort path {path}: subgroup size {warp} does "
+                                          f"not divide the work group ({RADIX_GROUP})")
+                    continue
+            defines = {}
+            if path != "portable":
+                defines = {"RADIX_WARP": warp, f"RADIX_MATCH_{path.upper()}": 1}
+                if warp <= NARROW_WARP:  # one warp per group, many keys per lane
+                    defines.update(RADIX_GROUP=warp, RADIX_ITEMS=TILE_KEYS // warp)
+            try:
+                progs = {name: self.programs.compute(f"radix_{name}.comp", defines)
+                         for name in ("bits", "plan", "upsweep", "scan", "downsweep", "copy")}
+            except ShaderError:
+                if wanted:
+                    raise
+                continue
+            return path, warp, progs
+        raise ShaderError("radix sort: no downsweep path compiles")  # portable always should
+
+    def reserve(self, count: int) -> None:
+        """Room for ``count`` keys (the buffers are replaced, their contents lost, when they
+        grow): call it before writing keys into :meth:`buffers` for :meth:`sort_buffers`."""
         if count <= self._capacity:
             return
         for buf in self._bufs:
@@ -76,56 +166,88 @@ class RadixSorter:
 
     def sort(self, keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(keys, values)`` (M,) uint32, sorted by key, equal keys in input order."""
+        keys, values, count = self._upload(keys, values)
+        if count < 2:
+            return keys.copy(), values.copy()
+        k_a, v_a = self.sort_buffers(count)
+        return (np.frombuffer(k_a.read(4 * count), np.uint32),
+                np.frombuffer(v_a.read(4 * count), np.uint32))
+
+    def sort_values(self, keys: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """:meth:`sort`'s values alone (reads back half as much)."""
+        keys, values, count = self._upload(keys, values)
+        if count < 2:
+            return values.copy()
+        return np.frombuffer(self.sort_buffers(count)[1].read(4 * count), np.uint32)
+
+    def _upload(self, keys: np.ndarray, values: np.ndarray):
         keys = np.ascontiguousarray(keys, np.uint32)
         values = np.ascontiguousarray(values, np.uint32)
-        count = keys.size
-        passes = radix_passes(keys)
-        if not passes:
-            return keys.copy(), values.copy()
-        self._reserve(count)
-        src, dst = self.sort_on_device(keys, values, passes)
-        return (np.frombuffer(src[0].read(4 * count), np.uint32),
-                np.frombuffer(src[1].read(4 * count), np.uint32))
+        if keys.shape != values.shape or keys.ndim != 1:
+            raise ValueError(f"radix sort: keys {keys.shape} and values {values.shape} must be "
+                             "(M,) alike")
+        if keys.size >= 2:
+            self.reserve(keys.size)
+            self._bufs[0].write(keys)
+            self._bufs[1].write(values)
+        return keys, values, keys.size
 
-    def sort_on_device(self, keys: np.ndarray, values: np.ndarray, passes: list[int]):
-        """Upload, run ``passes``; returns ((keys, values) buffers holding the result, the other
-        pair).  The result stays on the device (a draw can bind it as its index buffer)."""
-        count = keys.size
+    def sort_buffers(self, count: int) -> tuple[moderngl.Buffer, moderngl.Buffer]:
+        """Sort the first ``count`` keys and values of the A buffers (:meth:`buffers`, after
+        :meth:`reserve`) in place on the device; returns them.  Nothing is read back."""
+        self.reserve(count)
         k_a, v_a, k_b, v_b, hist = self._bufs
-        k_a.write(keys.tobytes())
-        v_a.write(values.tobytes())
-        tiles = -(-count // TILE_KEYS)
-        count_prog = self.programs.compute("radix_count.comp")
-        scan_prog = self.programs.compute("radix_scan.comp")
-        scatter_prog = self.programs.compute("radix_scatter.comp")
-        for prog in (count_prog, scan_prog, scatter_prog):
+        tiles = max(1, -(-count // TILE_KEYS))
+        progs = self._progs
+        for prog in progs.values():
             for name, value in (("u_count", count), ("u_tiles", tiles)):
                 if name in prog:
                     prog[name].value = value
-        src, dst = (k_a, v_a), (k_b, v_b)
+        self._state.bind_to_storage_buffer(RADIX_BINDING_STATE)
         hist.bind_to_storage_buffer(RADIX_BINDING_HIST)
-        for shift in passes:
-            src[0].bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
-            src[1].bind_to_storage_buffer(RADIX_BINDING_VALS_IN)
-            dst[0].bind_to_storage_buffer(RADIX_BINDING_KEYS_OUT)
-            dst[1].bind_to_storage_buffer(RADIX_BINDING_VALS_OUT)
-            for prog in (count_prog, scan_prog, scatter_prog):
-                if "u_shift" in prog:
-                    prog["u_shift"].value = shift
-            count_prog.run(group_x=tiles)
+        k_a.bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
+        progs["bits"].run(group_x=tiles)
+        self.ctx.memory_barrier()
+        progs["plan"].run(group_x=1)
+        self.ctx.memory_barrier()
+        src, dst = (k_a, v_a), (k_b, v_b)
+        for slot in range(SLOTS):
+            self._bind(src, dst)
+            for name in ("upsweep", "scan", "downsweep"):
+                progs[name]["u_slot"].value = slot
+            progs["upsweep"].run_indirect(self._state, _PASS_ARGS + 16 * slot)
             self.ctx.memory_barrier()
-            scan_prog.run(group_x=1)
+            progs["scan"].run_indirect(self._state, _SCAN_ARGS + 16 * slot)
             self.ctx.memory_barrier()
-            scatter_prog.run(group_x=tiles)
+            progs["downsweep"].run_indirect(self._state, _PASS_ARGS + 16 * slot)
             self.ctx.memory_barrier()
             src, dst = dst, src
-        return src, dst
+        self._bind((k_b, v_b), (k_a, v_a))
+        progs["copy"].run_indirect(self._state, _COPY_ARGS)
+        self.ctx.memory_barrier()
+        return k_a, v_a
+
+    def _bind(self, src, dst) -> None:
+        src[0].bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
+        src[1].bind_to_storage_buffer(RADIX_BINDING_VALS_IN)
+        dst[0].bind_to_storage_buffer(RADIX_BINDING_KEYS_OUT)
+        dst[1].bind_to_storage_buffer(RADIX_BINDING_VALS_OUT)
+
+    def buffers(self) -> tuple[moderngl.Buffer, moderngl.Buffer]:
+        """The A keys and values buffers (:meth:`sort_buffers` sorts them)."""
+        return self._bufs[0], self._bufs[1]
+
+    def last_plan(self) -> tuple[int, int]:
+        """(lowest differing bit, passes) of the last sort, read back (for tests)."""
+        lo, passes = np.frombuffer(self._state.read(8, offset=8), np.uint32)
+        return int(lo), int(passes)
 
     def release(self) -> None:
         for buf in self._bufs:
             buf.release()
         self._bufs = []
         self._capacity = 0
+        self._state.release()
 
 
 def device_depth_sort(sorter: RadixSorter, depth: np.ndarray, indices: np.ndarray) -> np.ndarray:
@@ -135,4 +257,4 @@ def device_depth_sort(sorter: RadixSorter, depth: np.ndarray, indices: np.ndarra
     if depth.size and not (depth > 0).all():
         raise ValueError("device_depth_sort needs positive depths (cull at the near plane first)")
     keys = np.ascontiguousarray(depth, np.float32).view(np.uint32)
-    return sorter.sort(keys, indices)[1]
+    return sorter.sort_values(keys, indices)
