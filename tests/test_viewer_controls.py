@@ -285,3 +285,14 @@ def test_zoom_keeps_the_point_under_the_cursor(state, x, y, steps):
         assert (c.fx * p[0] / p[2] + c.cx, c.fy * p[1] / p[2] + c.cy) == pytest.approx((x, y), abs=1e-6)
     centre = controls.zoom_at(state, steps, W / 2, H / 2, W, H)
     assert np.allclose(centre.target, state.target) and centre.distance == zoomed.distance
+
+
+def test_zooming_out_for_ever_keeps_a_camera_the_renderers_take():
+    """Issue 38: a camera beyond float32's reach is refused (one line); the viewer's wheel must
+    never make one, however many steps it turns."""
+    state = ViewState(target=(0.0, 0.0, 0.0), distance=3.0)
+    for _ in range(400):   # 1.15 ** 400 ~ 2e24
+        state = controls.zoom(state, -1)
+    assert state.distance == controls.MAX_DISTANCE
+    camera = controls.to_camera(state, 64, 48)
+    assert np.isfinite(camera.world_to_camera).all()

@@ -28,6 +28,9 @@ ORBIT_DEGREES_PER_PIXEL = 0.3
 ZOOM_FACTOR = 1.15
 #: Smallest orbit distance, as a fraction of the home distance is up to the caller; absolute:
 MIN_DISTANCE = 1e-6
+#: Largest orbit distance: well inside the camera's reach (splatgl.cameras.poses.MAX_CAMERA_VALUE,
+#: what float32 arithmetic holds), so no number of wheel steps makes an unrenderable camera.
+MAX_DISTANCE = 1e15
 
 
 @dataclass(frozen=True)
@@ -53,7 +56,7 @@ class ViewState:
     def __post_init__(self) -> None:
         object.__setattr__(self, "target", tuple(float(v) for v in self.target))
         object.__setattr__(self, "up", tuple(float(v) for v in self.up))
-        object.__setattr__(self, "distance", max(float(self.distance), MIN_DISTANCE))
+        object.__setattr__(self, "distance", min(max(float(self.distance), MIN_DISTANCE), MAX_DISTANCE))
         object.__setattr__(self, "pitch", float(np.clip(self.pitch, -PITCH_LIMIT, PITCH_LIMIT)))
         object.__setattr__(self, "yaw", float(self.yaw) % 360.0)
         object.__setattr__(self, "roll", (float(self.roll) + 180.0) % 360.0 - 180.0)
