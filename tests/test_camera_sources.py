@@ -344,7 +344,7 @@ def test_a_repeated_key_is_refused_naming_file_and_key(fmt, tmp_path):
      "1e+18 of the origin (float32 arithmetic)"),
     ("p.json", {"splatgl_path": 1, "width": 8, "height": 8, "frames": 1,
                 "keyframes": [{"eye": [0, 0, -5], "target": [0, 0, 0], "fov": 1e-300}]},
-     "keyframes[0]: camera fx must be from 1e-06 to 1e+18 pixels (float32 arithmetic), got 4.58366e+302"),
+     "keyframes[0]: camera fx must be from 1e-09 to 1e+18 pixels (float32 arithmetic), got 4.58366e+302"),
     ("transforms.json", {"w": 8, "h": 8, "fl_x": 5.0, "frames": [
         {"transform_matrix": [[1, 0, 0, 1e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}]},
      "frame 0: world_to_camera holds -1e+300 at row 0, column 3 (the camera is that far from the "

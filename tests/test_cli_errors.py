@@ -296,8 +296,8 @@ def test_extreme_numbers_are_one_line_not_numpy_warnings(tmp_path, capsys, extra
 
 
 @pytest.mark.parametrize("field, value, line", [
-    ("fx", 1e300, "camera fx must be from 1e-06 to 1e+18 pixels (float32 arithmetic), got 1e+300"),
-    ("fx", 1e-300, "camera fx must be from 1e-06 to 1e+18 pixels (float32 arithmetic), got 1e-300"),
+    ("fx", 1e300, "camera fx must be from 1e-09 to 1e+18 pixels (float32 arithmetic), got 1e+300"),
+    ("fx", 1e-300, "camera fx must be from 1e-09 to 1e+18 pixels (float32 arithmetic), got 1e-300"),
     ("cx", -1e39, "camera cx must be within +-1e+18 pixels (float32 arithmetic), got -1e+39"),
     ("t", 1e300, "world_to_camera holds 1e+300 at row 2, column 3 (the camera is that far from the "
                  "origin); splatgl renders within 1e+18 (float32 arithmetic)"),

@@ -19,7 +19,7 @@ from ..errors import CameraError
 #: whose squares overflow beyond 1.8e19: larger values leaked NumPy overflow warnings (or an
 #: OverflowError) and drew nothing meaningful.  No real camera comes near either bound.
 MAX_CAMERA_VALUE = 1e18
-MIN_FOCAL = 1e-6
+MIN_FOCAL = 1e-9
 
 
 def nonfinite_entry(arr: np.ndarray) -> str | None:
