@@ -84,7 +84,7 @@ void radix_match(uint d, uint lane, uint warp, out uint lower, out uint count) {
 #endif
 }
 
-#if RADIX_GROUP == RADIX_WARP
+#if defined(RADIX_NARROW)  // RADIX_GROUP == RADIX_WARP
 // One warp per group (narrow subgroups: a CPU's SIMD lanes, with many keys per lane): the warp's
 // counts are the tile's, which the upsweep counted and the scan turned into starts, so each
 // round writes its keys at once; no per-warp counting, no second loop.

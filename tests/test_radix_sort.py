@@ -65,14 +65,19 @@ KINDS = ("random", "duplicates", "equal", "one pass", "three passes")
 SIZES = (0, 1, 2, 7, TILE_KEYS - 1, TILE_KEYS, TILE_KEYS + 1, 3 * TILE_KEYS + 123, 60_000)
 
 
-@pytest.fixture(scope="module", params=["subgroup", "portable"])
+@pytest.fixture(scope="module", params=[
+    "subgroup", "subgroup, wide groups", "portable, narrow groups",
+    pytest.param("portable", marks=pytest.mark.slow)])  # llvmpipe compiles it in 5-15 s
 def sorter(request, ctx):
-    """One sorter per downsweep path (reused across sizes, as a renderer reuses it)."""
+    """One sorter per downsweep path and group shape (reused across sizes, as a renderer
+    reuses it).  On llvmpipe (8-lane subgroups) the default subgroup sorter runs one warp per
+    group; the wide-group one is the shape GPUs run."""
     paths = subgroup_paths(ctx)
-    path = paths[0] if request.param == "subgroup" else "portable"
-    if request.param == "subgroup" and path == "portable":
+    path = "portable" if request.param.startswith("portable") else paths[0]
+    if request.param.startswith("subgroup") and path == "portable":
         pytest.skip("no subgroup extension on this device")
-    s = RadixSorter(ctx, path=path)
+    narrow = {"subgroup": None, "portable": None}.get(request.param, request.param.endswith("narrow groups"))
+    s = RadixSorter(ctx, path=path, narrow=narrow)
     yield s
     s.release()
 
@@ -90,6 +95,26 @@ def test_device_sort_is_numpys_stable_argsort(sorter, n, kind):
     if n >= 2:  # the device planned the passes the twin plans, nothing read back to do it
         shifts = radix_passes(keys)
         assert sorter.last_plan() == ((shifts[0] if shifts else 0), len(shifts))
+
+
+@pytest.mark.parametrize("n", [2, TILE_KEYS + 1, 20_000])
+@pytest.mark.parametrize("kind", ["random", "equal", "one pass", "three passes"])
+def test_resident_sort_finds_the_key_bits_on_the_device(sorter, n, kind):
+    """Keys written straight into the sorter's buffers (as a device-resident producer would):
+    the bits kernel finds which bits differ, the plan reads them, the result lands in A."""
+    rng = np.random.default_rng(n)
+    keys = _keys(kind, n, rng)
+    values = np.arange(n, dtype=np.uint32)
+    sorter.reserve(n)
+    k_a, v_a = sorter.buffers()
+    k_a.write(keys)
+    v_a.write(values)
+    assert sorter.sort_buffers(n) == (k_a, v_a)
+    want = np.argsort(keys, kind="stable")
+    np.testing.assert_array_equal(np.frombuffer(v_a.read(4 * n), np.uint32), want)
+    np.testing.assert_array_equal(np.frombuffer(k_a.read(4 * n), np.uint32), keys[want])
+    shifts = radix_passes(keys)
+    assert sorter.last_plan() == ((shifts[0] if shifts else 0), len(shifts))
 
 
 @pytest.mark.slow

@@ -86,6 +86,11 @@ def radix_sort_twin(keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, n
     return keys, values
 
 
+def _bits(keys: np.ndarray) -> np.ndarray:
+    """(OR, AND) of ``keys`` (M,) uint32, M >= 1: what radix_bits.comp finds on the device."""
+    return np.array([np.bitwise_or.reduce(keys), np.bitwise_and.reduce(keys)], np.uint32)
+
+
 def subgroup_paths(ctx: moderngl.Context) -> list[str]:
     """The downsweep paths this context can compile, best first (``portable`` always)."""
     ext = ctx.extensions
@@ -105,12 +110,13 @@ class RadixSorter:
     """Sorts (M,) uint32 keys with uint32 values on the device; reuse it, then :meth:`release`.
 
     ``path`` picks the downsweep's ranking (:data:`PATHS`); by default the best the context
-    offers whose shaders compile with a subgroup size that divides RADIX_GROUP.  Buffers grow
-    to the largest M seen and are kept between calls.
+    offers whose shaders compile with a subgroup size that divides RADIX_GROUP.  ``narrow``
+    runs one warp per work group (by default where the warp is at most NARROW_WARP wide: a
+    CPU's SIMD lanes).  Buffers grow to the largest M seen and are kept between calls.
     """
 
     def __init__(self, ctx: moderngl.Context, programs: ProgramCache | None = None,
-                 path: str | None = None):
+                 path: str | None = None, narrow: bool | None = None):
         self.ctx = ctx
         self.programs = programs or ProgramCache(ctx)
         if path is not None and path not in PATHS:
@@ -118,6 +124,7 @@ class RadixSorter:
         self._capacity = 0
         self._bufs: list[moderngl.Buffer] = []  # keys A, values A, keys B, values B, hist
         self._state = ctx.buffer(reserve=_STATE_BYTES)
+        self.narrow = narrow
         self.path, self.warp, self._progs = self._choose(path)
         self._state.write(np.array([0, 0xFFFFFFFF], np.uint32).tobytes())  # no bits seen
 
@@ -137,11 +144,13 @@ class RadixSorter:
                         raise ShaderError(f"radix sort path {path}: subgroup size {warp} does "
                                           f"not divide the work group ({RADIX_GROUP})")
                     continue
-            defines = {}
+            defines: dict[str, object] = {}
             if path != "portable":
                 defines = {"RADIX_WARP": warp, f"RADIX_MATCH_{path.upper()}": 1}
-                if warp <= NARROW_WARP:  # one warp per group, many keys per lane
-                    defines.update(RADIX_GROUP=warp, RADIX_ITEMS=TILE_KEYS // warp)
+            if self.narrow is None:
+                self.narrow = path != "portable" and warp <= NARROW_WARP
+            if self.narrow:  # one warp per group, many keys per lane
+                defines.update(RADIX_GROUP=warp, RADIX_ITEMS=TILE_KEYS // warp, RADIX_NARROW=1)
             try:
                 progs = {name: self.programs.compute(f"radix_{name}.comp", defines)
                          for name in ("bits", "plan", "upsweep", "scan", "downsweep", "copy")}
@@ -169,7 +178,7 @@ class RadixSorter:
         keys, values, count = self._upload(keys, values)
         if count < 2:
             return keys.copy(), values.copy()
-        k_a, v_a = self.sort_buffers(count)
+        k_a, v_a = self.sort_buffers(count, _bits(keys))
         return (np.frombuffer(k_a.read(4 * count), np.uint32),
                 np.frombuffer(v_a.read(4 * count), np.uint32))
 
@@ -178,7 +187,7 @@ class RadixSorter:
         keys, values, count = self._upload(keys, values)
         if count < 2:
             return values.copy()
-        return np.frombuffer(self.sort_buffers(count)[1].read(4 * count), np.uint32)
+        return np.frombuffer(self.sort_buffers(count, _bits(keys))[1].read(4 * count), np.uint32)
 
     def _upload(self, keys: np.ndarray, values: np.ndarray):
         keys = np.ascontiguousarray(keys, np.uint32)
@@ -192,9 +201,13 @@ class RadixSorter:
             self._bufs[1].write(values)
         return keys, values, keys.size
 
-    def sort_buffers(self, count: int) -> tuple[moderngl.Buffer, moderngl.Buffer]:
+    def sort_buffers(self, count: int, bits: np.ndarray | None = None
+                     ) -> tuple[moderngl.Buffer, moderngl.Buffer]:
         """Sort the first ``count`` keys and values of the A buffers (:meth:`buffers`, after
-        :meth:`reserve`) in place on the device; returns them.  Nothing is read back."""
+        :meth:`reserve`) in place on the device; returns them.  Nothing is read back.
+
+        ``bits``: the keys' OR and AND (2,) uint32 where the caller has them (keys uploaded
+        from NumPy), which saves the device reading every key once more to find them."""
         self.reserve(count)
         k_a, v_a, k_b, v_b, hist = self._bufs
         tiles = max(1, -(-count // TILE_KEYS))
@@ -205,9 +218,12 @@ class RadixSorter:
                     prog[name].value = value
         self._state.bind_to_storage_buffer(RADIX_BINDING_STATE)
         hist.bind_to_storage_buffer(RADIX_BINDING_HIST)
-        k_a.bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
-        progs["bits"].run(group_x=tiles)
-        self.ctx.memory_barrier()
+        if bits is None:
+            k_a.bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
+            progs["bits"].run(group_x=tiles)
+            self.ctx.memory_barrier()
+        else:
+            self._state.write(np.asarray(bits, np.uint32))
         progs["plan"].run(group_x=1)
         self.ctx.memory_barrier()
         src, dst = (k_a, v_a), (k_b, v_b)
