@@ -66,7 +66,7 @@ void radix_match(uint d, uint lane, uint warp, out uint lower, out uint count) {
     lower = 0u;
     count = 0u;
     for (uint j = 0u; j < uint(RADIX_WARP); ++j) {
-        bool same = readInvocationARB(d, j) == d;
+        bool same = uint(readInvocationARB(int(d), j)) == d;  // int: glslang has no uint form
         count += same ? 1u : 0u;
         lower += (same && j < lane) ? 1u : 0u;
     }
