@@ -153,10 +153,11 @@ def measure(renderer, n: int, repeats: int, old: bool) -> list[dict]:
             res = _median_ms(resident, repeats, before=upload)
         finally:
             sorter.release()
-        rows.append(dict(splats=n, sort="gpu", path=f"{path} (warp {sorter.warp})",
-                         passes=passes, ms=ms, over_cpu=ms / cpu, identical=ok))
-        rows.append(dict(splats=n, sort="resident", path=f"{path} (warp {sorter.warp})",
-                         passes=passes, ms=res, over_cpu=res / cpu, identical=ok))
+        label = f"{path}, warp {sorter.warp}{', narrow' if sorter.narrow else ''}"
+        rows.append(dict(splats=n, sort="gpu", path=label, passes=passes, ms=ms,
+                         over_cpu=ms / cpu, identical=ok))
+        rows.append(dict(splats=n, sort="resident", path=label, passes=passes, ms=res,
+                         over_cpu=res / cpu, identical=ok))
     if old:
         sorter = OldSorter.from_git(renderer.ctx)
         if sorter is not None:
@@ -192,12 +193,12 @@ def main() -> None:
         print(describe(machine), flush=True)
         print(f"# medians of {args.repeats} runs; ms; gpu = upload, sort, read the order back; "
               "resident = the sort alone", flush=True)
-        print(f"{'keys':>10} {'sort':>9} {'path':>16} {'passes':>6} {'ms':>9} {'/cpu':>6} same")
+        print(f"{'keys':>10} {'sort':>9} {'path':>22} {'passes':>6} {'ms':>9} {'/cpu':>6} same")
         rows = []
         for n in sizes:
             for r in measure(renderer, n, args.repeats, not args.no_old):
                 rows.append(r)
-                print(f"{r['splats']:>10,} {r['sort']:>9} {r['path']:>16} {r['passes']:>6} "
+                print(f"{r['splats']:>10,} {r['sort']:>9} {r['path']:>22} {r['passes']:>6} "
                       f"{r['ms']:>9.1f} {r['over_cpu']:>6.2f} {'yes' if r['identical'] else 'NO'}",
                       flush=True)
     if args.json:
