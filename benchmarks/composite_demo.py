@@ -8,7 +8,7 @@ A box and a floor plane are placed inside a real scene (sized from its robust bo
 by the project's mesh rasterizer (splatgl.renderers.mesh) into colour and view z; the scene is
 composited into that render by the quad path, the tile renderer and the reference.  Figures:
 
-1. mesh depth against ray casting (splatgl.twins.mesh.ray_depth): coverage and relative error;
+1. mesh depth against ray casting (splatgl.splatmath.mesh.ray_depth): coverage and relative error;
 2. a plane at the median view z of the splats, a closed form: the composite must equal the
    splats in front of the plane drawn over the plane's colour (the splats behind it made
    transparent, so anchor and near plane stay the same);
@@ -37,8 +37,8 @@ from splatgl.output.layers import Layer, with_layers
 from splatgl.output.pictures import _label
 from splatgl.output.under import DepthKind, UnderImage
 from splatgl.renderers.mesh import MeshRenderer
-from splatgl.twins import mesh as meshes
-from splatgl.twins import project as pm
+from splatgl.splatmath import mesh as meshes
+from splatgl.splatmath import project as pm
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_SCENE = "compressed_ply/guitar.compressed.ply"

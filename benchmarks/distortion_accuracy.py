@@ -42,7 +42,7 @@ from splatgl.model.quaternion import quat_to_rotmat
 from splatgl.model.scene import Scene
 from splatgl.model.settings import RenderSettings
 from splatgl.constants import LOW_PASS
-from splatgl.twins.project import covariance_3d, jacobian, sh_color, to_camera, view_dirs
+from splatgl.splatmath.project import covariance_3d, jacobian, sh_color, to_camera, view_dirs
 
 #: The distortions measured: (label, model).  Mild: a typical phone or DSLR calibration;
 #: strong: action-camera barrel and a strong pincushion.

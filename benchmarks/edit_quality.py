@@ -44,7 +44,7 @@ from splatgl.lod.build import area_proxy, merge_groups  # noqa: E402
 from splatgl.model.scene import Scene  # noqa: E402
 from splatgl.model.spatial import morton_order_clamped_box  # noqa: E402
 from splatgl.output.images import write_image  # noqa: E402
-from splatgl.twins.project import covariance_3d, quat_to_rotmat  # noqa: E402
+from splatgl.splatmath.project import covariance_3d, quat_to_rotmat  # noqa: E402
 
 SCENES = ("ply/donut_sh0.ply", "compressed_ply/guitar.compressed.ply",
           "compressed_ply/biker.compressed.ply")

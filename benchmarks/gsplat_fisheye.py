@@ -127,7 +127,7 @@ def worker(src: str, dst: str) -> None:
 
 def gsplat_render(python, scene, camera, near, background, tmp):
     """(RGBA, projection arrays) of gsplat's side for ``camera`` (through ``python``)."""
-    from splatgl.twins import project as pm
+    from splatgl.splatmath import project as pm
 
     means, view = pm.anchored(scene.means, scene.anchor, camera, np.float64)
     colors = pm.sh_color(scene.sh.astype(np.float32), pm.view_dirs(means.astype(np.float32),
@@ -146,7 +146,7 @@ def gsplat_render(python, scene, camera, near, background, tmp):
 def reference(scene, camera, settings, compat, lens_rules=False, depth=None):
     """Reference RGBA; ``lens_rules``: splatgl's distance key and cull even under GSPLAT;
     ``depth``: replace the sort key of the visible rows by ``depth(p_cam)``."""
-    from splatgl.twins import project as pm
+    from splatgl.splatmath import project as pm
     from splatgl.reference import stages
     from splatgl.reference.binning import emit_keys, sort, tile_ranges
     from splatgl.reference.options import ReferenceOptions
@@ -173,7 +173,7 @@ def per_pixel_orders(scene, camera, settings):
     """{"distance", "view z", "per pixel"}: the GSPLAT reference's footprints blended in each
     order (:func:`composite`); per pixel: ``t* = d^T P mu / d^T P d`` (the depth of greatest
     contribution along the pixel's unit ray d, P the camera-space precision)."""
-    from splatgl.twins import project as pm
+    from splatgl.splatmath import project as pm
     from splatgl.model.quaternion import quat_to_rotmat
     from splatgl.reference import stages
     from splatgl.reference.options import ReferenceOptions

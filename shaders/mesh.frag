@@ -1,6 +1,6 @@
 // Mesh renderer, fragment stage: the face colour (opaque) and the view z of the surface at the
 // pixel centre, for compositing splats under it (splatgl/output/under.py).
-// Twin: splatgl/twins/mesh.py ray_depth().
+// Twin: splatgl/splatmath/mesh.py ray_depth().
 in float v_z;
 flat in vec3 v_color;
 layout(location = 0) out vec4 out_color;

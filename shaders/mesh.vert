@@ -5,7 +5,7 @@
 //   orthographic: u = fx x + cx      ->  clip = (2 (fx x + cx) / W - 1, ..., a z + b, 1)
 // with a, b mapping [u_near, u_far] to the depth range (hidden surfaces only: the depth layer
 // is the interpolated view z, exact at the pixel centre since z is linear on a triangle).
-// Twin: splatgl/twins/mesh.py ray_depth().
+// Twin: splatgl/splatmath/mesh.py ray_depth().
 in vec3 in_pos;      // camera space
 in vec3 in_color;    // face colour, shaded
 out float v_z;

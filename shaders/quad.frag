@@ -3,7 +3,7 @@
 //   skipped (written as (0, 0, 0, 0), which the blend adds as exactly nothing) when power > 0
 //   or alpha < 1/255.  Output premultiplied (c alpha, alpha) for
 //   front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).
-// Twin: splatgl/twins/blend.py splat_alpha(), blend_front_to_back().
+// Twin: splatgl/splatmath/blend.py splat_alpha(), blend_front_to_back().
 // With DEPTH_OUTPUT, a second target gets (z alpha, 0, 0, alpha) under the same blend, so its
 // own alpha channel tracks the same transmittance and red accumulates D = sum z alpha T; with
 // NORMAL_OUTPUT the target at location NORMAL_OUTPUT gets (n alpha, alpha): N = sum n alpha T.

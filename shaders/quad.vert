@@ -1,6 +1,6 @@
 // Quad path, vertex stage: one instance per visible splat, 4 vertices (triangle strip).
 // Evaluates SH colour and the EWA 2D covariance, and sizes a camera-facing quad.
-// Twin: splatgl/twins/project.py project(), ellipse_axes(), reference_radius().
+// Twin: splatgl/splatmath/project.py project(), ellipse_axes(), reference_radius().
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"
 #include "lib/project.glsl"

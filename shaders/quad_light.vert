@@ -1,7 +1,7 @@
 // Quad path, light vertex stage: instance k reads what quad_prepass.comp computed for the k-th
 // sorted splat and only places the corner.  Slot k is u_base + gl_InstanceID for a plain range
 // draw; with SURVIVORS (early termination) it comes from the occlusion cull's compacted list.
-// Twin: splatgl/twins/project.py project(), ellipse_axes().
+// Twin: splatgl/splatmath/project.py project(), ellipse_axes().
 #include "lib/camera.glsl"
 #include "lib/quad_emit.glsl"
 #include "lib/tile_rect.glsl"

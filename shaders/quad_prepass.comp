@@ -3,7 +3,7 @@
 // Layout per sorted slot k (4 vec4): (mean2d, axis1), (axis2, conic.ab), (conic.c, color),
 // (opacity, depth, visible, fragments in the viewport: camera.glsl visible_area).  With
 // OPACITY_WEIGHT, the scene with those opacities scaled (a level-of-detail cut's blend).
-// Twin: splatgl/twins/project.py project(), ellipse_axes(), reference_radius();
+// Twin: splatgl/splatmath/project.py project(), ellipse_axes(), reference_radius();
 //   splatgl/lod/render.py blended_scene().
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"

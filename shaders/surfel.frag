@@ -2,7 +2,7 @@
 // the screen-space low pass (eq. 11, rho = min(rho_3d, F |x - c|^2)), the reference clamp and
 // cut alpha = min(0.99, o exp(-rho / 2)), skipped below 1/255.  Premultiplied (c alpha, alpha)
 // for front-to-back blending (ONE_MINUS_DST_ALPHA, ONE).
-// Twin: splatgl/twins/surfel.py surfel_alpha().
+// Twin: splatgl/splatmath/surfel.py surfel_alpha().
 // With DEPTH_OUTPUT a second target gets (z alpha, 0, 0, alpha), z the camera z of the hit;
 // NORMAL_OUTPUT, UNDER and ORDERED_PASS as in quad.frag (with the hit's z).
 #ifdef ORDERED_PASS

@@ -1,7 +1,7 @@
 // Quad path for 2DGS surfels, vertex stage: one instance per visible surfel, 4 vertices
 // (triangle strip).  Builds the centred T = P H (2DGS eq. 5), sizes the quad to the screen box
 // of the k-sigma ellipse and the low-pass disc, and evaluates SH colour.
-// Twin: splatgl/twins/surfel.py surfel_screen(), surfel_bounds().
+// Twin: splatgl/splatmath/surfel.py surfel_screen(), surfel_bounds().
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"
 #include "lib/project.glsl"

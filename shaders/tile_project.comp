@@ -1,6 +1,6 @@
 // Tile renderer, stage 1 "project": one invocation per splat (3DGS preprocessCUDA).
 // Twin: splatgl/reference/stages.py project().
-// The math is lib/project.glsl's (its twin splatgl/twins/project.py).
+// The math is lib/project.glsl's (its twin splatgl/splatmath/project.py).
 // Culls view z <= near (before the divide), det(Sigma') <= 0, non-finite results and empty
 // tile rectangles; writes the screen quantities, the tile rectangle and tiles_touched.
 #include "lib/camera.glsl"
@@ -26,7 +26,7 @@ bool finite2(vec2 v) { return !any(isnan(v)) && !any(isinf(v)); }
 bool finite3(vec3 v) { return !any(isnan(v)) && !any(isinf(v)); }
 
 #ifdef SURFEL
-// 2DGS surfels (twin: reference/stages.py project_surfels with splatgl/twins/surfel.py).  Culls the
+// 2DGS surfels (twin: reference/stages.py project_surfels with splatgl/splatmath/surfel.py).  Culls the
 // centre's view z <= near, o <= 1/255, an empty or non-finite box, non-finite colour or depth
 // row and an empty tile rectangle; writes the centred rows (lib/tile_common.glsl, SURFEL).
 void main() {

@@ -15,7 +15,7 @@
 // tile's list), carrying (C, +-T) in out_rgba and D in out_depth between passes (T negated once
 // the pixel stopped): llvmpipe ends every loop of an invocation after 65535 iterations in all,
 // and one pass stays well below that, so a tile of 50k splats is not cut short.
-// SURFEL (2DGS, twin: reference/rasterize.py's surfel branch, splatgl/twins/surfel.py surfel_alpha):
+// SURFEL (2DGS, twin: reference/rasterize.py's surfel branch, splatgl/splatmath/surfel.py surfel_alpha):
 // every splat of the tile's list is kept (its tile rectangle is already the box_rect of its
 // pixel box) and a pixel evaluates the ray-splat intersection instead of the conic:
 //   h_u = T'_0 - dx T_2, h_v = T'_1 - dy T_2, (u, v, 1) ~ h_u x h_v (2DGS eq. 9-10),

@@ -23,7 +23,7 @@ AA_MIN_FACTOR = 2.5e-5
 EXTENT_DISCRIMINANT_FLOOR = 0.1
 #: ``det = a c - b^2`` of the 2D covariance is trusted where it exceeds this fraction of ``a c``
 #: (cancellation then costs at most ~eps / ratio, ~6e-6 relative in float32); below it the
-#: renderers use the cancellation-free form (:func:`splatgl.twins.project.covariance_2d_det`).
+#: renderers use the cancellation-free form (:func:`splatgl.splatmath.project.covariance_2d_det`).
 DET_CANCEL_RATIO = 1e-2
 #: Extent of the reference in standard deviations (radius ``ceil(3 sqrt(lambda_max))``).
 EXTENT_SIGMAS = 3.0

@@ -16,14 +16,14 @@ from splatgl.cameras.equirect import WRAP_FLAG, Equirectangular
 from splatgl.cameras.fisheye import Fisheye, fisheye_theta_limit
 from splatgl.cameras.registry import retarget
 from splatgl.order.lens_cull import lens_cull, lens_order
-from splatgl.twins.project import splat_reach
+from splatgl.splatmath.project import splat_reach
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.order.cull import CullData, cull
 from splatgl.order.chunks import ChunkedCull, keys_order, keys_pairs
 from splatgl.order.lens_cull import lens_visible_keys
 from splatgl.cameras.view import anchored_camera
-from splatgl.twins.project import to_camera
+from splatgl.splatmath.project import to_camera
 from splatgl.order.sort import depth_keys, depth_sort
 
 FISHEYE_K = (0.05, -0.01, 0.002, -0.0003)

@@ -9,7 +9,7 @@ import pytest
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.order.cull import CULL_BLOCK, CullData, cull, cull_visible
-from splatgl.twins.project import to_camera
+from splatgl.splatmath.project import to_camera
 
 
 def _scene_arrays(n: int, seed: int):

@@ -9,7 +9,7 @@ import numpy as np
 
 from helpers import REPO
 from splatgl.formats import load_scene
-from splatgl.twins.project import sh_color
+from splatgl.splatmath.project import sh_color
 
 
 def test_committed_demo_is_regenerated_byte_for_byte(tmp_path):
@@ -26,7 +26,7 @@ def test_demo_has_anisotropic_splats_at_many_orientations_and_view_dependent_sh(
     aniso = s.max(1) / s.min(1)
     assert (aniso > 5).sum() >= 50  # petals, needles and flattened shell splats
     # major-axis directions of the elongated splats cover many angles in the image plane
-    from splatgl.twins.project import quat_to_rotmat
+    from splatgl.splatmath.project import quat_to_rotmat
 
     rot = quat_to_rotmat(scene.rotations[aniso > 5].astype(np.float64))
     major = rot[np.arange(len(rot)), :, s[aniso > 5].argmax(1)]

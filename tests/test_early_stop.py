@@ -331,8 +331,8 @@ def test_coverage_estimate_matches_its_twin_and_the_fragments(ctx, kind, preproc
     draw(auto, cam).rgba
     estimate = auto.batches.fragments_estimate
     if kind is SplatKind.SURFEL_2D:   # the twin: the surfel boxes (clamped to the image)
-        from splatgl.twins.project import to_camera
-        from splatgl.twins.surfel import surfel_bounds, surfel_screen
+        from splatgl.splatmath.project import to_camera
+        from splatgl.splatmath.surfel import surfel_bounds, surfel_screen
 
         screen = surfel_screen(scene.means, scene.rotations, scene.scales, cam)
         boxes = surfel_bounds(screen, scene.opacities, cam, view_for(auto, cam).near)

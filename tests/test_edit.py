@@ -21,7 +21,7 @@ from splatgl.edit.options import crop_box, operation, remove_floaters
 from splatgl.errors import SplatglError
 from splatgl.model.scene import Scene, SplatKind
 from splatgl.model.transform import ModelTransform
-from splatgl.twins.project import quat_to_rotmat, sh_color
+from splatgl.splatmath.project import quat_to_rotmat, sh_color
 
 
 def points(xyz, logits=None, log_scales=None, degree=0) -> Scene:

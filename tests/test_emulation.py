@@ -16,7 +16,7 @@ from splatgl.reference.emulation import quad_emulation
 from splatgl.model.scene import Scene
 from splatgl.model.settings import GpuStorage, QuadExtent, RenderSettings, SortKey
 from splatgl.reference import ReferenceOptions, project, render_reference
-from splatgl.twins.project import reference_radius
+from splatgl.splatmath.project import reference_radius
 from splatgl.cameras.view import View
 
 W = H = 64

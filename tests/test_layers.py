@@ -29,7 +29,7 @@ from splatgl.output.layers import (BASE, Layer, NormalSpace, concat_outputs, par
                                    unit_normals, with_layers)
 from splatgl.reference.pixel import pixel_splats
 from splatgl.renderers.quad_layers import check_ordered
-from splatgl.twins.normals import splat_normals
+from splatgl.splatmath.normals import splat_normals
 
 ALL = with_layers(*Layer)
 #: The quad path's accumulated normals against the reference: unit vectors with the colour's

@@ -19,7 +19,7 @@ from helpers import shared_file
 from splatgl.cameras.equirect import Equirectangular, eye_space
 from splatgl.cameras.fisheye import Fisheye, fisheye_theta_limit
 from splatgl.cameras.registry import retarget
-from splatgl.twins import project as pm
+from splatgl.splatmath import project as pm
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.cameras.files import camera_from_json

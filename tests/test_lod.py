@@ -20,7 +20,7 @@ from splatgl.lod.render import LodSettings
 from splatgl.lod.source import lod_renderer
 from helpers import draw
 from splatgl.evaluation.metrics import image_errors
-from splatgl.twins.project import covariance_3d, quat_to_rotmat
+from splatgl.splatmath.project import covariance_3d, quat_to_rotmat
 from splatgl.renderers.quad import QuadRenderer
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene

@@ -1,4 +1,4 @@
-"""Float64 checks of the projection math (splatgl/twins/project.py) against the formulas themselves."""
+"""Float64 checks of the projection math (splatgl/splatmath/project.py) against the formulas themselves."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at, orbit
 from splatgl.constants import LOW_PASS, SH_C0, SH_C1
-from splatgl.twins.project import (antialias_factor, conic, covariance_2d, covariance_2d_det,
+from splatgl.splatmath.project import (antialias_factor, conic, covariance_2d, covariance_2d_det,
                                    covariance_3d, discriminant, ellipse_axes, jacobian,
                                    project_means, quat_to_rotmat, reference_radius, screen_factor,
                                    sh_basis, sh_color, to_camera)

@@ -28,7 +28,7 @@ from splatgl.datasets.views import View
 from splatgl.errors import CameraError
 from splatgl.evaluation.metrics import image_errors, psnr
 from splatgl.model.settings import RenderSettings
-from splatgl.twins import project as pm
+from splatgl.splatmath import project as pm
 
 from test_compare import MAX_OFF_1, MIN_PSNR
 from test_lens import MAX_ABS_LENS

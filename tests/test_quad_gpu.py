@@ -16,12 +16,12 @@ import pytest
 import helpers
 from helpers import image_tol, save_failure_images
 from helpers import scene_with_colors as make_scene
-from splatgl.twins.blend import blend_front_to_back, splat_alpha
+from splatgl.splatmath.blend import blend_front_to_back, splat_alpha
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import orbit
 from splatgl.cameras.view import View, draft_low_pass
 from splatgl.constants import ALPHA_MIN, FAST_CORNER_SIGMAS, LOW_PASS
-from splatgl.twins.project import ellipse_axes, project
+from splatgl.splatmath.project import ellipse_axes, project
 from splatgl.renderers.quad import composite
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene

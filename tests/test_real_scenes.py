@@ -7,7 +7,7 @@ import pytest
 
 from splatgl.bench.real_scenes import build_real_scene, load_real_sources
 from splatgl.errors import SplatglError
-from splatgl.twins.project import covariance_3d, quat_to_rotmat
+from splatgl.splatmath.project import covariance_3d, quat_to_rotmat
 from splatgl.model.scene import Scene
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from splatgl.cameras.camera import Camera
 from splatgl.constants import ALPHA_MIN, LOW_PASS, SH_C0, T_MIN
-from splatgl.twins.project import antialias_factor
+from splatgl.splatmath.project import antialias_factor
 from splatgl.reference import (Compat, ProjectedSplats, ReferenceOptions, depth_bits, emit_keys,
                                gsplat_radius, rasterize, render_reference,
                                render_reference_rgba, sort, tile_ranges)

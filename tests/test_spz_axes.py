@@ -22,7 +22,7 @@ from splatgl.cli import main
 from splatgl.formats.convert import conversion_error
 from splatgl.errors import SceneFormatError, SplatglError
 from splatgl.formats import load_scene, save_scene, spz, spz_axes, spz_write
-from splatgl.twins.project import sh_basis
+from splatgl.splatmath.project import sh_basis
 from splatgl.model.quaternion import quat_to_rotmat
 from splatgl.model.scene import Scene
 

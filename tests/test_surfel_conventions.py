@@ -5,7 +5,7 @@
 the 1-sigma ellipse; per-axis ``ceil(3.33 sqrt(max(1e-4, e^2)))`` tile radii; depth from the
 surfel centre; no per-pixel near test.  ``Convention.INRIA`` keeps the official rasterizer's
 low pass on the projected centre and splatgl's depth rule (the hit where the surfel's own
-Gaussian wins, the centre's z elsewhere; see :mod:`splatgl.twins.surfel`).
+Gaussian wins, the centre's z elsewhere; see :mod:`splatgl.splatmath.surfel`).
 
 The hand case: camera at the origin looking along +z (f = 100 px), a thin surfel in the
 horizontal plane y = h, centred at (0, h, z0), tangent axes x (scale s_u) and z (scale s_v),
@@ -26,11 +26,11 @@ import pytest
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.constants import ALPHA_MIN, GSPLAT_ALPHA_MAX, ALPHA_MAX
-from splatgl.twins.project import project_means, quat_to_rotmat, to_camera
+from splatgl.splatmath.project import project_means, quat_to_rotmat, to_camera
 from splatgl.reference import Compat, render_reference
 from splatgl.model.scene import Scene, SplatKind
 from splatgl.model.settings import RenderSettings
-from splatgl.twins.surfel import gsplat_screen, surfel_screen, surfel_transform
+from splatgl.splatmath.surfel import gsplat_screen, surfel_screen, surfel_transform
 
 F, CX, CY = 100.0, 16.0, 14.0
 H_PLANE, Z0 = 0.0625, 2.0          # exact in float32

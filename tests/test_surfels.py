@@ -24,11 +24,11 @@ from splatgl.cameras.poses import look_at, orbit
 from splatgl.constants import ALPHA_MIN, LOW_PASS, SURFEL_FILTER_INV_SQUARE
 from splatgl.formats import load_scene, save_scene
 from splatgl.evaluation.metrics import image_errors
-from splatgl.twins.project import project_means, quat_to_rotmat, to_camera
+from splatgl.splatmath.project import project_means, quat_to_rotmat, to_camera
 from splatgl.reference import render_reference
 from splatgl.model.scene import Scene, SplatKind
 from splatgl.model.settings import RenderSettings, resolve_near
-from splatgl.twins.surfel import (intersect, sigma_count, surfel_alpha, surfel_bounds,
+from splatgl.splatmath.surfel import (intersect, sigma_count, surfel_alpha, surfel_bounds,
                                   surfel_screen, surfel_transform)
 
 TOL32 = 2e-5

@@ -9,7 +9,7 @@ from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import orbit
 from splatgl.cli import main
 from splatgl.errors import SplatglError
-from splatgl.twins.project import sh_color, view_dirs
+from splatgl.splatmath.project import sh_color, view_dirs
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene
 from splatgl.model.settings import RendererKind, RenderSettings

@@ -5,7 +5,7 @@ The rule.  A shader's header is its leading ``//`` comment block (after an optio
 line).  It holds one or more twin entries, each a line ``// Twin: ...`` continued on the next
 header lines while a line ends with ``,`` or ``;``:
 
-    // Twin: splatgl/twins/project.py project(), ellipse_axes();
+    // Twin: splatgl/splatmath/project.py project(), ellipse_axes();
     //   splatgl/lod/render.py blended_scene().
 
 that is ``;``-separated groups of a module path under ``splatgl/`` and its ``name()`` list (a
@@ -138,8 +138,8 @@ def test_named_twins_are_used_by_a_test():
 
 @pytest.mark.parametrize("text,why", [
     ("// A pass.\nvoid main() {}\n", "no twin line"),
-    ("// Twin: splatgl/twins/project.py (same names).\n", "names must be listed"),
-    ("// Twin: splatgl/twins/project.py project + ellipse_axes.\n", "names are name()"),
+    ("// Twin: splatgl/splatmath/project.py (same names).\n", "names must be listed"),
+    ("// Twin: splatgl/splatmath/project.py project + ellipse_axes.\n", "names are name()"),
     ("// Twin: none.\n", "none needs a reason"),
 ])
 def test_the_rule_refuses_vague_headers(text, why):

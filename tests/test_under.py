@@ -30,8 +30,8 @@ from splatgl.output.layers import Layer, with_layers
 from splatgl.output.under import DepthKind, UnderImage, read_under
 from splatgl.reference.pixel import pixel_splats
 from splatgl.renderers.mesh import MeshRenderer
-from splatgl.twins import mesh as meshes
-from splatgl.twins import project as pm
+from splatgl.splatmath import mesh as meshes
+from splatgl.splatmath import project as pm
 
 DEPTH = with_layers(Layer.DEPTH)
 KINDS = (RendererKind.REFERENCE, RendererKind.QUAD, RendererKind.TILE)

@@ -3,7 +3,7 @@
 // R[2]; rotated into camera space by u_view_rot (normalised again: a model transform's scale
 // sits in u_view_rot) and turned towards the camera: negated where n . d > 0, d the direction
 // from the camera to the centre p (camera space; (0, 0, 1) for an orthographic camera).
-// Twin: splatgl/twins/normals.py splat_normals().
+// Twin: splatgl/splatmath/normals.py splat_normals().
 // Needs lib/camera.glsl included before it.
 
 vec3 camera_facing(vec3 axis, vec3 p) {

@@ -1,6 +1,6 @@
 // Per-splat projection math, DESIGN.md section 1; each function has the name of its twin.
 // Twin: splatgl/model/quaternion.py quat_to_rotmat();
-//   splatgl/twins/project.py covariance_3d(), covariance_2d(), screen_factor(),
+//   splatgl/splatmath/project.py covariance_3d(), covariance_2d(), screen_factor(),
 //   covariance_2d_det(), conic(), discriminant(), antialias_factor(), reference_radius(),
 //   ellipse_axes().
 // The camera model's project_mean, jacobian, in_view and view_depth come from its piece in

@@ -1,6 +1,6 @@
 // Real spherical harmonics colour, DESIGN.md section 1:
 //   c = max(sum_lm h_lm Y_lm(d) + 0.5, 0), trig-free polynomial basis, degree <= SH_DEGREE.
-// Twin: splatgl/twins/project.py sh_basis(), sh_color().
+// Twin: splatgl/splatmath/project.py sh_basis(), sh_color().
 // Needs SH_DEGREE, SH_REST_COEFFS and, for degree > 0, the sh_rest buffer (lib/scene.glsl).
 // dc is the degree-0 coefficient.
 

@@ -2,7 +2,7 @@
 // without drawing them (occlusion_cull.comp, coverage.comp).  Variants: PREPARED (3DGS after
 // quad_prepass.comp, read from `prepared`), SURFEL (2DGS, the box of surfel.vert), neither (the
 // 3DGS vertex path, the setup of quad.vert).  Binds Order and, with PREPARED, Prepared.
-// Twin: splatgl/twins/project.py ellipse_axes(); splatgl/twins/surfel.py surfel_bounds().
+// Twin: splatgl/splatmath/project.py ellipse_axes(); splatgl/splatmath/surfel.py surfel_bounds().
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"
 #include "lib/project.glsl"

@@ -1,5 +1,5 @@
 // Per-splat screen setup shared by the quad path's vertex shader and its compute pre-pass.
-// Twin: splatgl/twins/project.py project(), ellipse_axes(), reference_radius().
+// Twin: splatgl/splatmath/project.py project(), ellipse_axes(), reference_radius().
 // Needs lib/camera.glsl, lib/scene.glsl, lib/project.glsl, lib/sh.glsl (and lib/normal.glsl)
 // included before it.
 

@@ -1,5 +1,5 @@
 // 2DGS surfels (Huang et al. 2024, "2D Gaussian Splatting"), DESIGN.md section 1.
-// Twin: splatgl/twins/surfel.py surfel_screen(), sigma_count(), surfel_bounds(), surfel_alpha().
+// Twin: splatgl/splatmath/surfel.py surfel_screen(), sigma_count(), surfel_bounds(), surfel_alpha().
 // Each function has the name of its twin.  Needs lib/camera.glsl.
 //
 // T = P H maps tangent-plane (u, v, 1) to homogeneous pixels (paper eq. 5: H's columns are

@@ -30,7 +30,7 @@ layout(std430, binding = TILE_BINDING_PEAK) buffer ProjPeak { vec4 proj_peak[]; 
 #endif
 #ifdef SURFEL
 // 2DGS surfels (SURFEL defined) reuse the buffers above with these meanings (twin:
-// reference/stages.py project_surfels, rows of splatgl/twins/surfel.py SurfelScreen):
+// reference/stages.py project_surfels, rows of splatgl/splatmath/surfel.py SurfelScreen):
 //   proj_mean_depth[i] = (c_x, c_y, view z, opacity): projected centre c (the low-pass centre),
 //                        the centre's camera z (sort key; depth_row.z) and o.
 //   proj_conic_o[i]    = (T'_00, T'_01, T'_10, T'_11): centred rows T'_r = T_r - c_r T_2 of

@@ -18,7 +18,7 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..order.cull import cull
 from ..cameras.view import View
-from ..twins.project import to_camera
+from ..splatmath.project import to_camera
 from ..api import Renderer
 from ..model.scene import Scene
 from ..model.settings import Preprocess, RenderSettings, resolve_near

@@ -34,7 +34,7 @@ from ..errors import SplatglError
 from ..lod.build import area_proxy, merge_groups
 from ..model.scene import Scene, SplatKind, activate_opacities, activate_rotations
 from ..model.spatial import morton_order_clamped_box
-from ..twins.project import covariance_3d, quat_to_rotmat
+from ..splatmath.project import covariance_3d, quat_to_rotmat
 
 #: Pairs per block of the cost and merge computations (float64 temporaries of one block).
 BLOCK = 1 << 16

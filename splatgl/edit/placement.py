@@ -6,7 +6,7 @@ norms kept, so a zero quaternion stays invalid), log-scales ``+ log s``, and the
 that each splat shows the same colour in every world direction: band ``l``'s coefficients are
 multiplied by the ``(2l+1) x (2l+1)`` matrix ``B_l`` with ``Y_l(R^T d) = B_l^T Y_l(d)``, solved
 exactly (least squares on 64 directions, a square system's solution) from
-:func:`splatgl.twins.project.sh_basis`, so it follows splatgl's own SH convention by
+:func:`splatgl.splatmath.project.sh_basis`, so it follows splatgl's own SH convention by
 construction.  Opacity is unchanged.
 
 Merging (:func:`merge_scenes`): the scenes' rows one after another, in input order, each placed
@@ -27,7 +27,7 @@ from ..errors import SplatglError
 from ..model.quaternion import quat_multiply, rotmat_to_quat
 from ..model.scene import Scene
 from ..model.transform import ModelTransform
-from ..twins.project import sh_basis
+from ..splatmath.project import sh_basis
 
 #: Rows per block while baking (float64 temporaries of one block at a time).
 BLOCK = 1 << 18

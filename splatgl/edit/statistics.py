@@ -3,7 +3,7 @@ estimated overdraw of the default view, so a user can pick filter thresholds bef
 
 Overdraw: the fragments a plain quad-path draw of the default camera (:func:`default_camera`,
 1280 x 720) would shade, per image pixel: each splat's opacity-aware quad (the extent where its
-alpha reaches 1/255, :func:`~splatgl.twins.project.ellipse_axes`; for 2DGS surfels their
+alpha reaches 1/255, :func:`~splatgl.splatmath.project.ellipse_axes`; for 2DGS surfels their
 screen boxes) clipped to the image, summed by the coverage estimate the quad path's
 ``--early-stop auto`` uses (:func:`splatgl.renderers.early_stop.coverage`).  Splats behind the
 near plane count nothing.  Computed a block of rows at a time.
@@ -17,7 +17,7 @@ from ..cameras.framing import default_camera
 from ..model.scene import Scene, SplatKind, activate_opacities, activate_rotations
 from ..model.settings import RenderSettings, resolve_near
 from ..renderers.early_stop import coverage
-from ..twins.project import (covariance_2d, covariance_3d, ellipse_axes, project_means,
+from ..splatmath.project import (covariance_2d, covariance_3d, ellipse_axes, project_means,
                              quat_to_rotmat, to_camera)
 from .attributes import ATTRIBUTES, Rows, names_for
 
@@ -90,7 +90,7 @@ def _fragments(scene: Scene, cam, near: float) -> float:
 
 
 def _surfel_fragments(means, rot, scales, opac, cam, near) -> float:
-    from ..twins.surfel import surfel_bounds, surfel_screen
+    from ..splatmath.surfel import surfel_bounds, surfel_screen
 
     screen = surfel_screen(means, rot, scales, cam)
     boxes = surfel_bounds(screen, opac, cam, near)

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..constants import ALPHA_MAX, ALPHA_MIN
 from ..errors import SplatglError
-from ..twins.project import covariance_3d, quat_to_rotmat
+from ..splatmath.project import covariance_3d, quat_to_rotmat
 from ..model.quaternion import rotmat_to_quat
 from ..model.scene import Scene
 from ..model.spatial import morton_order_clamped_box

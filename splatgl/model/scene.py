@@ -183,7 +183,7 @@ class Scene:
     def anchor(self) -> np.ndarray:
         """(3,) float64 point amid the splats (the robust box centre, a float32 value), which
         every renderer subtracts from the means before float32 math (see :attr:`relative_means`
-        and :func:`splatgl.twins.project.anchored_camera`); zeros when the means are not finite."""
+        and :func:`splatgl.splatmath.project.anchored_camera`); zeros when the means are not finite."""
         lo, hi = self.robust_bounds
         centre = (0.5 * (lo + hi)).astype(np.float32).astype(np.float64)
         out = centre if np.isfinite(centre).all() else np.zeros(3)

@@ -17,7 +17,7 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..constants import AA_MIN_FACTOR, ALPHA_MIN, JACOBIAN_CLAMP, LOW_PASS
 from ..cameras.view import Frustum, frustum_of, near_threshold
-from ..twins.project import to_camera
+from ..splatmath.project import to_camera
 
 #: Extra screen margin (pixels) so the 0.3 px^2 dilation and pixel-centre rounding never cull
 #: a splat whose quad would touch the image.

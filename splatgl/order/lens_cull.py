@@ -23,7 +23,7 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..cameras.equirect import SEAM_MARGIN_PX, WRAP_FLAG, eye_space, wrap_copies
 from ..constants import ALPHA_MIN
-from ..twins.project import splat_reach
+from ..splatmath.project import splat_reach
 from .cull import CULL_BLOCK, CullData, view_axis
 from .chunks import ChunkedCull
 from .sort import depth_keys

@@ -25,7 +25,7 @@ from ..cameras.model import CullKind
 from ..cameras.view import View
 from ..model.scene import Scene
 from ..model.settings import RenderSettings, SortKey
-from ..twins.project import to_camera
+from ..splatmath.project import to_camera
 from .chunks import ChunkedCull, keys_order, keys_pairs, rows_keys
 from .cull import CullData, cull_visible
 from .lens_cull import lens_keys, lens_visible_keys

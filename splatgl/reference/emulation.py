@@ -25,7 +25,7 @@ from ..constants import FAST_CORNER_SIGMAS
 from ..model.emulation import Emulation
 from ..model.settings import GpuStorage, QuadExtent, RenderSettings, SortKey
 from ..order.sort import bucket_keys
-from ..twins import project as pm
+from ..splatmath import project as pm
 
 #: ``extent=fixed``: the ellipse out to sqrt(8) sigma, as ``q = d^T Q d <= FIXED_Q``.
 FIXED_Q = FAST_CORNER_SIGMAS ** 2

@@ -30,7 +30,7 @@ class RasterLayers:
 
     Attributes:
         normals: (rows, 3) unit camera-space normals of the projected rows
-            (:func:`splatgl.twins.normals.splat_normals`), or None (no normal layer).
+            (:func:`splatgl.splatmath.normals.splat_normals`), or None (no normal layer).
         median: whether to keep the median depth.  top: whether to keep the top contributor.
         source: (rows,) int64 scene row of each projected row (an equirectangular seam copy
             names its original), or None (the identity).

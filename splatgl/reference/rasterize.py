@@ -5,7 +5,7 @@ For every pixel of a tile, the tile's depth-sorted splats are blended in order w
     power = -0.5 (a dx^2 + c dy^2) - b dx dy,   d = pixel centre - mean2d   (pixels)
     alpha = min(alpha_max, o exp(power)), skipped when power > 0 or alpha < 1/255
     (2DGS surfels: power = -0.5 min(u^2 + v^2, F |d|^2) from the ray-splat intersection,
-    :func:`splatgl.twins.surfel.surfel_alpha`, d from the low-pass centre; z is the view z of the
+    :func:`splatgl.splatmath.surfel.surfel_alpha`, d from the low-pass centre; z is the view z of the
     hit per pixel, or under GSPLAT the centre's view z)
     stop (without adding the splat) once T (1 - alpha) < 1e-4   (GSPLAT: <= 1e-4)
     C = sum c alpha T,  D = sum z alpha T,  A = 1 - T_final,  out = C + T_final background
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..twins import surfel as sf
+from ..splatmath import surfel as sf
 from ..constants import ALPHA_MIN, T_MIN, TILE_SIZE
 from .layers import BatchLayers, RasterLayers
 from . import emulation
@@ -137,7 +137,7 @@ def _surfel_chunk_alpha(g: _Tiles, px: np.ndarray, py: np.ndarray, alpha_max: fl
                         ) -> tuple[np.ndarray, np.ndarray]:
     """2DGS: (n, K, 256) alpha (0 where skipped) and (n, K, 256) view z of the hit.
 
-    :func:`splatgl.twins.surfel.surfel_alpha` on the tile's pixel centres, as (n, K, 16 rows,
+    :func:`splatgl.splatmath.surfel.surfel_alpha` on the tile's pixel centres, as (n, K, 16 rows,
     16 columns) broadcasts: ``h_u`` varies along columns only, ``h_v`` along rows only.
     """
     dt = px.dtype.type

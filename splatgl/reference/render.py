@@ -15,8 +15,8 @@ from ..model.scene import Scene, SplatKind
 from ..model.settings import Order, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer, composite_depth, composite_under
-from ..twins import project as pm
-from ..twins.normals import splat_normals
+from ..splatmath import project as pm
+from ..splatmath.normals import splat_normals
 from .binning import emit_keys, sort, tile_ranges
 from .layers import RasterLayers
 from .options import Compat, ReferenceOptions, as_options
@@ -92,7 +92,7 @@ class ReferenceImage:
 
 def row_normals(scene: Scene, view: View, proj: ProjectedSplats) -> np.ndarray:
     """(rows, 3) unit camera-space normals of ``proj``'s rows, in its dtype
-    (:func:`splatgl.twins.normals.splat_normals` at the centres the projection used)."""
+    (:func:`splatgl.splatmath.normals.splat_normals` at the centres the projection used)."""
     means, camera = pm.anchored(scene.means, view.anchor, view.camera, proj.dtype)
     p_cam = eye_space(pm.to_camera(means, camera), camera)
     normals = splat_normals(scene.rotations, scene.scales, p_cam, camera.rotation,

@@ -1,7 +1,7 @@
 """Stage ``project`` of the reference: per-splat screen quantities, culling and tile rectangles.
 
 The twin of 3DGS's ``preprocessCUDA`` (and gsplat's projection + tile bounds under
-:attr:`Compat.GSPLAT`).  The math itself lives in :mod:`splatgl.twins.project`; this module adds the
+:attr:`Compat.GSPLAT`).  The math itself lives in :mod:`splatgl.splatmath.project`; this module adds the
 reference's culling rules and its tile rectangles.
 
 Coordinates: ``mean2d`` is in splatgl's image coordinates (pixel (i, j) has its centre at
@@ -20,8 +20,8 @@ import dataclasses
 
 from ..cameras.equirect import wrap_copies, wrap_shift
 from ..cameras.view import View
-from ..twins import project as pm
-from ..twins import surfel as sf
+from ..splatmath import project as pm
+from ..splatmath import surfel as sf
 from ..cameras.camera import Camera
 from ..cameras.fisheye import Fisheye
 from ..constants import ALPHA_MIN, TILE_SIZE
@@ -53,7 +53,7 @@ class ProjectedSplats:
             clamped to the grid; empty (min == max) for culled rows.
         width, height: image size in pixels.  grid: (tiles_x, tiles_y).
         surfel_rows, depth_rows: 2DGS surfels only (None for 3DGS): (N, 3, 3) centred
-            ``T' = A P H`` and (N, 3) view-z rows (:class:`splatgl.twins.surfel.SurfelScreen`); then
+            ``T' = A P H`` and (N, 3) view-z rows (:class:`splatgl.splatmath.surfel.SurfelScreen`); then
             ``mean2d`` is the projected centre (the low-pass centre), ``conic`` is zero and
             ``radius`` holds the per-axis ``ceil`` of the box half extents.
         wrap_period: equirectangular cameras only: pixels per turn of longitude; every splat
@@ -342,13 +342,13 @@ def project_surfels(scene: Scene, view: View, settings: RenderSettings,
     """Stage 1 for 2DGS surfels: centred ``T``, low-pass centre, SH colour and tile rects.
 
     INRIA (the official rasterizer's setup): the low-pass centre is the projected centre, the
-    rectangle is :func:`box_rect` of the box of :func:`splatgl.twins.surfel.surfel_bounds` (the quad
+    rectangle is :func:`box_rect` of the box of :func:`splatgl.splatmath.surfel.surfel_bounds` (the quad
     path draws that same box) and ``radius`` the per-axis ``ceil`` of its half extents.
     Culled: centre view z at or below the near plane, ``o <= 1/255``, non-finite values, an
     empty box or rectangle.
 
     GSPLAT (gsplat's ``fully_fused_projection_2dgs``): the low-pass centre is ``means2d``, the
-    centre of the image of the 1-sigma ellipse (:func:`splatgl.twins.surfel.gsplat_screen`; the rows
+    centre of the image of the 1-sigma ellipse (:func:`splatgl.splatmath.surfel.gsplat_screen`; the rows
     are centred on it), ``radius = ceil(3.33 extent)`` per axis and the rectangle
     :func:`gsplat_rect`.  Culled: centre view z at or below the near plane, ``C*_22 = 0``,
     non-finite values, the box ``means2d +- radius`` off screen; no opacity cull.

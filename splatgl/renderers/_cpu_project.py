@@ -2,7 +2,7 @@
 :mod:`splatgl.renderers.cpu`, which keeps numba optional.
 
 - :func:`project_pinhole`: the reference's stage 1 for a pinhole camera (INRIA rules) per splat,
-  in parallel: the same float32 formulas as :mod:`splatgl.twins.project` (camera space, the
+  in parallel: the same float32 formulas as :mod:`splatgl.splatmath.project` (camera space, the
   clamped EWA Jacobian, the dilated covariance with the cancellation guard on its determinant,
   the conic, antialiasing, ``ceil(3 sqrt(lambda_max))`` and 3DGS's ``getRect``, the SH colour).
   The order of a few float32 operations differs from NumPy's, so its numbers agree with the
@@ -26,7 +26,7 @@ import numpy as np
 from ..constants import (AA_MIN_FACTOR, DET_CANCEL_RATIO, EXTENT_DISCRIMINANT_FLOOR,
                          EXTENT_SIGMAS, SH_C0, SH_C1, SH_C2, SH_C3, SH_OFFSET, TILE_SIZE)
 
-#: Largest radius kept (pixels), :data:`splatgl.twins.project.MAX_RADIUS`.
+#: Largest radius kept (pixels), :data:`splatgl.splatmath.project.MAX_RADIUS`.
 MAX_RADIUS = float(2 ** 52)
 #: Pixels added on every side of a splat's box: the box is computed in float64 from the
 #: float32 conic, and the exp below differs from the reference's in the last bits, so a pixel
@@ -80,7 +80,7 @@ def _cut_to_box(u, v, qa, qb, qc, q2, tx0, tx1, ty0, ty1, x_end, y_end):
 @numba.njit(inline="always", fastmath=False)
 def _sh_color(sh, i, k, x, y, z):
     """``max(sum h_lm Y_lm(d) + 0.5, 0)`` of splat ``i``'s first ``k`` coefficients at the unit
-    direction (x, y, z) (:func:`splatgl.twins.project.sh_basis`'s trig-free form), as 3 floats."""
+    direction (x, y, z) (:func:`splatgl.splatmath.project.sh_basis`'s trig-free form), as 3 floats."""
     r = _F(SH_C0) * sh[i, 0, 0]
     g = _F(SH_C0) * sh[i, 0, 1]
     b = _F(SH_C0) * sh[i, 0, 2]

@@ -19,7 +19,7 @@ from ..model.quaternion import quat_to_rotmat
 from ..model.scene import Scene
 from ..model.settings import RenderSettings
 from ..reference.stages import tile_grid
-from ..twins.project import splat_reach, to_camera
+from ..splatmath.project import splat_reach, to_camera
 
 
 class Stage1:

@@ -1,4 +1,4 @@
-"""A small mesh rasterizer: opaque flat-shaded triangles (:class:`splatgl.twins.mesh.Mesh`)
+"""A small mesh rasterizer: opaque flat-shaded triangles (:class:`splatgl.splatmath.mesh.Mesh`)
 drawn through OpenGL with the camera's own pixel mapping, giving the colour and view-space z
 that ``--under`` composites splats into (:mod:`splatgl.output.under`).
 
@@ -6,7 +6,7 @@ The corners are moved into camera space in float64 on the CPU; the vertex stage 
 the camera's intrinsics exactly as the splats are mapped (pixel centres at ``j + 0.5``, row 0 at
 the top); the depth buffer removes hidden surfaces and a float target keeps the interpolated
 view z, which is exact at a pixel centre (z is linear on a triangle, and the interpolation is
-perspective-correct): :func:`splatgl.twins.mesh.ray_depth` is its closed form.  Shading is a
+perspective-correct): :func:`splatgl.splatmath.mesh.ray_depth` is its closed form.  Shading is a
 headlight along the view axis: ``colour (AMBIENT + (1 - AMBIENT) |n_z|)`` (camera space), so the
 two triangles of a flat quad shade alike.
 """
@@ -23,7 +23,7 @@ from ..cameras.camera import Camera
 from ..gl.shaders import ProgramCache
 from ..output.images import write_image
 from ..output.under import DEPTH_ATTRIBUTE, DepthKind, UnderImage
-from ..twins.mesh import Mesh, check_camera
+from ..splatmath.mesh import Mesh, check_camera
 
 #: Light every face gets whatever its angle.
 AMBIENT = 0.35
