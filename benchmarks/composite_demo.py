@@ -32,9 +32,9 @@ from splatgl.bench.machine import describe, probe_machine
 from splatgl.cameras.view import View
 from splatgl.model.scene import Scene
 from splatgl.evaluation.metrics import image_errors
-from splatgl.output.images import write_image
+from splatgl.imagefiles.images import write_image
 from splatgl.output.layers import Layer, with_layers
-from splatgl.output.pictures import _label
+from splatgl.imagefiles.pictures import _label
 from splatgl.output.under import DepthKind, UnderImage
 from splatgl.renderers.mesh import MeshRenderer
 from splatgl.splatmath import mesh as meshes

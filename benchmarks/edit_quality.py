@@ -43,7 +43,7 @@ from splatgl.formats import load_scene  # noqa: E402
 from splatgl.lod.build import area_proxy, merge_groups  # noqa: E402
 from splatgl.model.scene import Scene  # noqa: E402
 from splatgl.model.spatial import morton_order_clamped_box  # noqa: E402
-from splatgl.output.images import write_image  # noqa: E402
+from splatgl.imagefiles.images import write_image  # noqa: E402
 from splatgl.splatmath.project import covariance_3d, quat_to_rotmat  # noqa: E402
 
 SCENES = ("ply/donut_sh0.ply", "compressed_ply/guitar.compressed.ply",

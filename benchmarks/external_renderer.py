@@ -114,7 +114,7 @@ def main() -> None:
     from splatgl.conformance.score import case_inputs, load_index, score_kit, table
     from splatgl.evaluation.explain import candidates, explain
     from splatgl.formats import load_scene
-    from splatgl.output.images import read_image, write_image
+    from splatgl.imagefiles.images import read_image, write_image
     from splatgl.reference import render_reference
 
     print(describe(machine_info()))

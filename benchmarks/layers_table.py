@@ -79,8 +79,8 @@ def markdown(r: dict) -> str:
 
 def write_picture(path: Path, out) -> None:
     """The colour and every layer's picture (as ``--layers`` writes them) side by side."""
-    from splatgl.output.images import write_image
-    from splatgl.output.layer_files import LayerFiles, layer_picture
+    from splatgl.imagefiles.images import write_image
+    from splatgl.imagefiles.layer_files import LayerFiles, layer_picture
 
     files = LayerFiles(tuple(Layer))
     pictures = [out.rgba] + [layer_picture(out, layer, files)

@@ -50,8 +50,8 @@ def main() -> None:
     from splatgl.evaluation.popping import POP_THRESHOLD, score_pair
     from splatgl.formats import load_scene
     from splatgl.model.settings import Order, RendererKind, RenderSettings
-    from splatgl.output.images import write_image
-    from splatgl.output.pictures import _label
+    from splatgl.imagefiles.images import write_image
+    from splatgl.imagefiles.pictures import _label
 
     path = shared_scenes_dir() / args.scene
     scene = load_scene(path)

@@ -120,7 +120,7 @@ def shared_file(shared_scenes: Path, name: str) -> Path:
 
 def save_failure_images(directory: Path, name: str, got, expected) -> str:
     """Dump got / expected / |difference| (x10) images; returns a note for assertion messages."""
-    from splatgl.output.images import write_image
+    from splatgl.imagefiles.images import write_image
 
     diff = np.abs(np.asarray(got, np.float32) - np.asarray(expected, np.float32))
     paths = []

@@ -15,7 +15,7 @@ from splatgl.bench.configs import RowKind, configurations
 from splatgl.bench.report import pareto_front
 from splatgl.bench.runner import BenchOptions, bench_scene
 from splatgl.cli import main
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene
 from splatgl.model.settings import QuadExtent, RenderSettings

@@ -17,7 +17,7 @@ from splatgl.cameras.poses import look_at
 from splatgl.cli import build_parser, main
 from splatgl.commands._common import camera_from_args
 from splatgl.errors import CameraError
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 
 POSE = look_at([0.0, -0.5, -3.0], [0.0, 0.0, 0.0])
 

@@ -14,7 +14,7 @@ from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.errors import CameraError
 from splatgl.formats import load_scene
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 from splatgl.api import Renderer, default_camera
 
 

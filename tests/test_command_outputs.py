@@ -31,7 +31,7 @@ def refused(capsys, argv, line):
 
 def dataset(tmp_path):
     """A one-view transforms.json dataset whose photograph is images/r_0.png."""
-    from splatgl.output.images import write_image
+    from splatgl.imagefiles.images import write_image
 
     root = tmp_path / "ds"
     (root / "images").mkdir(parents=True)

@@ -26,7 +26,7 @@ import pytest
 from helpers import shared_file
 from splatgl.cli import main
 from splatgl.formats import load_scene
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 from splatgl.evaluation.metrics import image_errors, psnr, ssim
 from splatgl.reference import render_reference
 from splatgl.api import default_camera, render_reference_rgba

@@ -12,7 +12,7 @@ import pytest
 from splatgl.cli import main
 from splatgl.errors import SplatglError
 from splatgl.evaluation.their_image import match_to_reference, read_their_image
-from splatgl.output.images import write_image
+from splatgl.imagefiles.images import write_image
 
 
 def write_raw(path, pixels: np.ndarray, kind=oiio.UINT16) -> None:

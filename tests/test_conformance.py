@@ -16,7 +16,7 @@ from splatgl.conformance.export import export_kit
 from splatgl.conformance.score import case_inputs, load_index, render_kit, score_kit
 from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
-from splatgl.output.images import read_image, write_image
+from splatgl.imagefiles.images import read_image, write_image
 from splatgl.commands._common import demo_scene_path
 
 

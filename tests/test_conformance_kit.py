@@ -19,7 +19,7 @@ from splatgl.conformance.cases import depth_range_case
 from splatgl.conformance.export import export_kit
 from splatgl.conformance.score import load_index, score_case
 from splatgl.errors import SplatglError
-from splatgl.output.images import read_image, write_image
+from splatgl.imagefiles.images import read_image, write_image
 
 
 @pytest.fixture(scope="module")

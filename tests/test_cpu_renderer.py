@@ -357,7 +357,7 @@ def test_real_scenes_match_reference(shared_scenes, name):
 
 def test_cli_render_writes_the_cpu_image(tmp_path):
     from splatgl.cli import main
-    from splatgl.output.images import read_image
+    from splatgl.imagefiles.images import read_image
 
     scene_path = tmp_path / "s.ply"
     from splatgl.formats import save_scene

@@ -14,7 +14,7 @@ import pytest
 from splatgl.cameras.camera import Camera
 from splatgl.cli import main
 from splatgl.constants import SH_C0
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 from splatgl.api import default_camera, render_reference_layers
 from splatgl.model.scene import Scene
 from splatgl.model.settings import RendererKind, RenderSettings

@@ -23,7 +23,7 @@ from splatgl.datasets.dataset import Split, load_dataset, split_views
 from splatgl.datasets.views import View
 from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
-from splatgl.output.images import read_image, write_image
+from splatgl.imagefiles.images import read_image, write_image
 from splatgl.evaluation.metrics import ssim
 from splatgl.model.settings import RenderSettings
 
@@ -283,7 +283,7 @@ def test_renders_carry_the_layers_of_every_view(dataset, capsys, tmp_path, gl_re
     colour is the render scored (the scores are unchanged)."""
     needs_framebuffer_fetch(gl_renderer.ctx)
     import OpenImageIO as oiio
-    from splatgl.output.images import read_image
+    from splatgl.imagefiles.images import read_image
 
     out = tmp_path / "renders"
     code, text, err = _run(capsys, "--dataset", dataset, "--renders", out, "--format", "exr",

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from splatgl.cli import main
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 
 
 def _run(capsys, *argv) -> tuple[int, str, str]:

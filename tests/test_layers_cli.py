@@ -13,7 +13,7 @@ from splatgl.commands._common import demo_scene_path
 from splatgl.formats import load_scene
 from helpers import needs_framebuffer_fetch
 from splatgl.model.settings import RenderSettings
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 from splatgl.output.layers import Layer, with_layers
 
 ARGS = ["--width", "96", "--height", "64"]
@@ -106,7 +106,7 @@ def test_layer_options_refused_in_one_line(tmp_path, capsys, monkeypatch, args, 
 
 def test_top_id_into_exr_is_refused_past_float32_integers():
     from splatgl.errors import SplatglError
-    from splatgl.output.layer_files import EXACT_FLOAT_IDS, LayerFiles, check_exact_ids
+    from splatgl.imagefiles.layer_files import EXACT_FLOAT_IDS, LayerFiles, check_exact_ids
 
     files = LayerFiles((Layer.TOP_ID,))
     check_exact_ids(files, "v.exr", EXACT_FLOAT_IDS)          # 2^24: still exact

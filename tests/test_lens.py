@@ -26,7 +26,7 @@ from splatgl.cameras.files import camera_from_json
 from splatgl.cli import main
 from splatgl.errors import CameraError
 from splatgl.formats import load_scene
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 from splatgl.evaluation.metrics import image_errors, psnr
 from splatgl.api import default_camera, render_reference_rgba
 from splatgl.model.settings import RenderSettings
@@ -369,7 +369,7 @@ def test_colmap_fisheye_models_load_and_project(tmp_path, line, k):
 def test_path_renders_projection_and_stereo_frames(tmp_path, shared_scenes, gl_renderer):
     """`render --path orbit:2 --projection equirectangular --stereo`: each frame is both eyes of
     that orbit camera as a panorama, exactly what the API renders for it."""
-    from splatgl.output.images import write_image
+    from splatgl.imagefiles.images import write_image
     from splatgl.paths import orbit
     from splatgl.renderers.stereo import StereoLayout, StereoRenderer
     scene_path = shared_file(shared_scenes, "ply/donut_sh0.ply")

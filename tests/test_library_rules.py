@@ -18,7 +18,7 @@ from splatgl.cli import build_parser, main
 from splatgl.commands._common import camera_from_args, demo_scene_path, settings_from_args
 from splatgl.errors import CameraError, SplatglError
 from splatgl.formats import save_scene
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 
 DEMO = demo_scene_path()
 

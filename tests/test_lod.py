@@ -241,7 +241,7 @@ def test_path_frames_are_the_one_view_lod_renders(demo_lod, tmp_path, capsys, cu
     one-view LOD render of camera k (each view chooses its cut alone)."""
     from splatgl.cameras.files import save_camera
     from splatgl.cli import main
-    from splatgl.output.images import read_image
+    from splatgl.imagefiles.images import read_image
     from splatgl.paths import orbit
 
     render = lambda *a: main(["render", str(demo_lod), *map(str, a)])

@@ -21,7 +21,7 @@ from splatgl.datasets import colmap
 from splatgl.datasets.views import View
 from splatgl.evaluation.metrics import image_errors, psnr
 from splatgl.model.settings import RenderSettings
-from splatgl.output.images import read_image, write_image
+from splatgl.imagefiles.images import read_image, write_image
 
 from test_compare import MIN_PSNR
 from test_viewer_window import _window_pixels  # (the Xvfb fixture comes from conftest)

@@ -12,7 +12,7 @@ from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.datasets import select_indices
 from splatgl.errors import CameraError
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 
 DEMO = str(demo_scene_path())
 

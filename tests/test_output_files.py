@@ -160,10 +160,10 @@ def test_a_failed_write_in_the_block_names_the_target(tmp_path, full_disk):
 
 def test_one_table_of_image_formats(tmp_path):
     """Suffixes, --format choices, channels and the layers a frame renders all come from
-    output.image_formats: EXR holds the depth layer (Z), PNG and TIFF colour alone."""
+    imagefiles.image_formats: EXR holds the depth layer (Z), PNG and TIFF colour alone."""
     from splatgl.cli import build_parser
-    from splatgl.output.frames import FrameTarget
-    from splatgl.output.image_formats import FORMAT_NAMES, IMAGE_SUFFIXES, image_format
+    from splatgl.imagefiles.frames import FrameTarget
+    from splatgl.imagefiles.image_formats import FORMAT_NAMES, IMAGE_SUFFIXES, image_format
     from splatgl.output.layers import Layer, with_layers
 
     assert FORMAT_NAMES == ("png", "tif", "exr")

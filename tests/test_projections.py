@@ -92,7 +92,7 @@ def test_frustum_camera_file_and_orthographic_flag(tmp_path):
     import json
 
     from splatgl.cameras.files import load_camera
-    from splatgl.output.images import read_image
+    from splatgl.imagefiles.images import read_image
 
     w2c = orbit([0, 0, 0], 6.0, 180.0, 20.0)
     frustum = {"width": 96, "height": 72, "world_to_camera": w2c.tolist(),

@@ -92,7 +92,7 @@ def test_ray_video_equals_the_single_process_video(local_ray, tmp_path, capsys):
     """16 frames as one Ray task (chunks of up to 32), encoded here: the same decoded frames as
     a single-process video; the summary names the node's IP."""
     pytest.importorskip("av", reason="PyAV is not installed (pip install 'splatgl[video]')")
-    from splatgl.output.video import read_video_frames
+    from splatgl.imagefiles.video import read_video_frames
 
     assert main(["render", *ARGS, "-o", str(tmp_path / "one.mp4")]) == 0
     capsys.readouterr()

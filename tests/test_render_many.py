@@ -19,7 +19,7 @@ from splatgl.cameras.files import save_camera
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.formats import load_scene
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 from splatgl.paths import orbit
 
 from helpers import signal_and_wait, start_gated
@@ -90,7 +90,7 @@ def test_a_path_rendered_in_parts_equals_the_whole(tmp_path, capsys):
 
 def test_video_output(tmp_path, capsys):
     av = pytest.importorskip("av")
-    from splatgl.output.video import read_video_frames
+    from splatgl.imagefiles.video import read_video_frames
 
     assert _render("--path", "orbit:5", *SIZE, "-o", tmp_path / "o.mp4", "--fps", "12") == 0
     assert _render("--path", "orbit:5", *SIZE, "-o", tmp_path / "png") == 0
@@ -176,7 +176,7 @@ def test_interrupt_leaves_complete_frames_only_and_resume_finishes(tmp_path, mon
 
 def test_interrupt_removes_the_video(tmp_path, monkeypatch):
     pytest.importorskip("av")
-    from splatgl.output import video
+    from splatgl.imagefiles import video
 
     real = video.VideoWriter.write
     calls = []
@@ -271,7 +271,7 @@ def test_stereo_paths_go_to_video_at_the_doubled_size(tmp_path, capsys, layout, 
     """Each video frame holds both eyes (it failed: "every video frame must be 96x64, got
     192x64")."""
     pytest.importorskip("av")
-    from splatgl.output.video import read_video_frames
+    from splatgl.imagefiles.video import read_video_frames
 
     stereo = ["--stereo", "0.05", "--stereo-layout", layout]
     assert _render("--path", "orbit:3", *SIZE, *stereo, "-o", tmp_path / "v.mp4") == 0
@@ -290,7 +290,7 @@ def _mtimes(folder):
 
 def test_resume_refuses_frames_of_another_path_scene_or_options(tmp_path, capsys):
     """Each frame records the path, camera, scene and options it was rendered from
-    (splatgl.output.frame_record): an orbit:6 folder resumed with orbit:8 (its frame 1 is
+    (splatgl.imagefiles.frame_record): an orbit:6 folder resumed with orbit:8 (its frame 1 is
     another camera) or another --background stops before any work, in one line, and the
     frames are untouched; the same path resumes (a selection of it too)."""
     out = tmp_path / "f"
@@ -314,7 +314,7 @@ def test_resume_refuses_preview_drafts_and_keeps_unrecorded_frames(tmp_path, cap
     """Draft frames of --preview are recorded as such: an exact --resume does not keep them.
     Frames without a record (an older splatgl wrote them) are kept, as before, and the
     summary says how many could not be checked."""
-    from splatgl.output.images import write_image
+    from splatgl.imagefiles.images import write_image
 
     out = tmp_path / "p"
     assert _render("--path", "orbit:2", *SIZE, "--preview", "--target-fps", "5000", "-o", out) == 0

@@ -9,7 +9,7 @@ from hypothesis import given, settings as hsettings, strategies as st
 
 from splatgl.cli import main
 from splatgl.constants import SH_C0
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 from splatgl.evaluation.metrics import image_errors
 from splatgl.api import default_camera
 from splatgl.model.scene import Scene, SplatKind

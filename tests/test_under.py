@@ -25,7 +25,7 @@ from splatgl.cli import main
 from splatgl.errors import CameraError, SplatglError
 from splatgl.model.scene import Scene
 from splatgl.model.settings import RendererKind, RenderSettings
-from splatgl.output.images import read_image, write_image
+from splatgl.imagefiles.images import read_image, write_image
 from splatgl.output.layers import Layer, with_layers
 from splatgl.output.under import DepthKind, UnderImage, read_under
 from splatgl.reference.pixel import pixel_splats

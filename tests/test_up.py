@@ -11,7 +11,7 @@ from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.cameras.up import average_up, cameras_beside, resolve_up
 from splatgl.cli import main
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 
 
 def orbit_cameras(up, n=6, elevation=0.3):

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from splatgl.output import video
+from splatgl.imagefiles import video
 
 AVX512_FLAGS = ("flags\t\t: fpu sse sse2 pni ssse3 sse4_1 sse4_2 avx fma bmi1 bmi2 avx2 abm "
                 "avx512f avx512dq avx512cd avx512bw avx512vl\n")

@@ -82,7 +82,7 @@ def test_moving_drafts_then_exact_at_rest(xvfb_display, scene, tmp_path, kind):
 def test_keys_during_a_refinement_act_after_it(xvfb_display, scene, tmp_path, monkeypatch):
     import glfw
 
-    from splatgl.output.images import read_image
+    from splatgl.imagefiles.images import read_image
     from splatgl.viewer import pacing
 
     with _viewer(scene, tmp_path, 5000.0) as v:

@@ -61,7 +61,7 @@ def _window_pixels(v) -> np.ndarray:
 def test_drag_key_screenshot_matches_headless_render(viewer, demo, tmp_path):
     import glfw
 
-    from splatgl.output.images import read_image
+    from splatgl.imagefiles.images import read_image
 
     v = viewer
     assert v.step() and v.frames_rendered == 1
@@ -269,7 +269,7 @@ def test_stereo_screenshot_is_the_pair_and_its_command_says_stereo(xvfb_display,
 
     from splatgl.cli import main
     from splatgl.errors import ContextError
-    from splatgl.output.images import read_image
+    from splatgl.imagefiles.images import read_image
     from splatgl.api import default_camera
     from splatgl.model.settings import RenderSettings
     from splatgl.viewer.app import Viewer, ViewerOptions

@@ -12,7 +12,7 @@ import pytest
 from helpers import signal_and_wait, start_gated, summary_counts
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
-from splatgl.output.images import read_image
+from splatgl.imagefiles.images import read_image
 from splatgl.tasks.render import frame_folder
 from splatgl.tasks.task import KILL_ONCE_ENV
 from splatgl.tasks.local import chunks
@@ -51,7 +51,7 @@ ARGS = ["render", "--path", "orbit:6", "--width", "96", "--height", "64"]
 
 
 def _video(path: Path) -> list[np.ndarray]:
-    from splatgl.output.video import read_video_frames
+    from splatgl.imagefiles.video import read_video_frames
 
     return read_video_frames(path)
 

@@ -10,7 +10,7 @@ import pytest
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.errors import SplatglError
-from splatgl.output.images import image_file_problem, read_image, write_image
+from splatgl.imagefiles.images import image_file_problem, read_image, write_image
 
 SIZE = ["--width", "96", "--height", "64"]
 
@@ -191,7 +191,7 @@ def test_video_to_a_full_or_read_only_folder_fails_in_one_line(tmp_path, capsys,
             assert _path(tmp_path, "-o", out) == 2
         assert _one_line(capsys) == f"splatgl: error: {out}: cannot write (File too large)"
         assert list(tmp_path.iterdir()) == []
-    import splatgl.output.frames as frame_output
+    import splatgl.imagefiles.frames as frame_output
 
     real = frame_output.os.access
     monkeypatch.setattr(frame_output.os, "access", lambda p, mode: False if str(p) == str(tmp_path) else real(p, mode))

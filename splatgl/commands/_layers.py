@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..cameras.camera import Camera
 from ..errors import SplatglError
-from ..output.layer_files import LayerFiles
+from ..imagefiles.layer_files import LayerFiles
 from ..output.layers import Layer, NormalSpace, parse_layer_names
 from ..output.under import DepthKind, UnderImage, read_under
 

@@ -15,12 +15,12 @@ from ..datasets import load_source, select_indices
 from ..errors import SplatglError
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
-from ..output.layer_files import check_exact_ids
+from ..imagefiles.layer_files import check_exact_ids
 from ..output.layers import BASE
-from ..output.frame_record import FrameRecord, options_digest, scene_digest
+from ..imagefiles.frame_record import FrameRecord, options_digest, scene_digest
 from ._layers import check_under_options, layer_files, named_layers
-from ..output.frames import FrameTarget
-from ..output.image_formats import FORMAT_NAMES
+from ..imagefiles.frames import FrameTarget
+from ..imagefiles.image_formats import FORMAT_NAMES
 from ..gl.context import renderer_name
 from ..paths import orbit
 from ..progress import default_progress
@@ -187,7 +187,7 @@ def check_frame_outputs(args: argparse.Namespace, target: FrameTarget, numbers) 
 
 def frame_record(args: argparse.Namespace, scene: Scene, settings, target: FrameTarget,
                  kind: RendererKind, lod: LodSettings | None) -> FrameRecord:
-    """What this run's frames are rendered from (:mod:`splatgl.output.frame_record`): written
+    """What this run's frames are rendered from (:mod:`splatgl.imagefiles.frame_record`): written
     into every frame, and checked by --resume against the frames it keeps."""
     layers = sorted(layer.value for layer in (target.layers or BASE))
     options = options_digest(settings=repr(settings), renderer=kind.value, bit_depth=args.bit_depth,

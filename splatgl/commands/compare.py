@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..output.pictures import heatmap, side_by_side
-from ..output.image_formats import image_format, suffix_list
-from ..output.images import write_image
+from ..imagefiles.pictures import heatmap, side_by_side
+from ..imagefiles.image_formats import image_format, suffix_list
+from ..imagefiles.images import write_image
 from ..progress import default_progress
 from ..errors import SplatglError
 from ..evaluation.explain import candidates, explain

@@ -13,9 +13,9 @@ from ..errors import SplatglError
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
 from ..evaluation.evaluate import RenderFiles, evaluate, worst_sheet
-from ..output.frames import FrameTarget
-from ..output.image_formats import FORMAT_NAMES
-from ..output.images import check_image_suffix, write_image
+from ..imagefiles.frames import FrameTarget
+from ..imagefiles.image_formats import FORMAT_NAMES
+from ..imagefiles.images import check_image_suffix, write_image
 from ..progress import default_progress
 from ..api import Renderer
 from ..model.settings import RendererKind

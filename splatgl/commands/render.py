@@ -8,13 +8,13 @@ from pathlib import Path
 
 from ..errors import SplatglError
 from ..gl.context import NO_GL_RENDERER
-from ..output.image_formats import (BIT_DEPTHS, IMAGE_FORMATS, image_format, picture_format,
+from ..imagefiles.image_formats import (BIT_DEPTHS, IMAGE_FORMATS, image_format, picture_format,
                                     suffix_list)
-from ..output.images import write_image
-from ..output.layer_files import check_exact_ids, picture_path, write_layers
+from ..imagefiles.images import write_image
+from ..imagefiles.layer_files import check_exact_ids, picture_path, write_layers
 from ..output.layers import BASE, Layer, RenderOutput
 from ..progress import default_progress
-from ..output.pictures import depth_preview
+from ..imagefiles.pictures import depth_preview
 from ..api import Renderer, gl_renderer_name, render_reference_layers
 from ..lod.frames import LodFrames, render_lod
 from ..lod.io import read_lod

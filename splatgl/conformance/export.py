@@ -29,7 +29,7 @@ from ..errors import SplatglError
 from ..formats import save_scene
 from ..cameras.files import save_camera
 from ..output.atomic import atomic_write_text, temp_path, write_error
-from ..output.images import write_image
+from ..imagefiles.images import write_image
 from ..reference import render_reference
 from .cases import Case
 from .index import GENERATOR, PLAIN_NAME, PLAIN_NAME_RULE

@@ -26,7 +26,7 @@ from ..evaluation.metrics import image_errors
 from ..evaluation.their_image import match_to_reference, read_their_image
 from ..formats import load_scene
 from ..model.settings import RenderSettings
-from ..output.images import read_image
+from ..imagefiles.images import read_image
 from ..reference import render_reference
 from .index import kit_files, load_index
 
@@ -193,7 +193,7 @@ def render_kit(kit: str | Path, out: str | Path, kind: str = "quad", suffix: str
     ``out`` is checked first (:func:`check_render_output`; an existing image is replaced only
     with ``overwrite``)."""
     from ..api import Renderer
-    from ..output.images import write_image
+    from ..imagefiles.images import write_image
 
     kit, out = Path(kit), Path(out)
     index = load_index(kit)

@@ -51,7 +51,7 @@ def image_size(path: Path) -> tuple[int, int]:
     """(width, height) from an image file's header."""
     import OpenImageIO as oiio
 
-    from ..output.images import quiet_image_library
+    from ..imagefiles.images import quiet_image_library
 
     with quiet_image_library():
         inp = oiio.ImageInput.open(str(path))

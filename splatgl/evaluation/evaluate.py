@@ -30,9 +30,9 @@ import numpy as np
 
 from ..datasets.views import View
 from ..errors import SplatglError
-from ..output.frames import FrameTarget
-from ..output.images import read_image
-from ..output.layer_files import write_layers
+from ..imagefiles.frames import FrameTarget
+from ..imagefiles.images import read_image
+from ..imagefiles.layer_files import write_layers
 from ..output.layers import RenderOutput
 from .metrics import check_ssim_size, psnr, ssim
 from ..api import Renderer
@@ -130,7 +130,7 @@ class Pair:
 @dataclass(frozen=True)
 class RenderFiles:
     """Where ``eval --renders`` writes each view's render: ``folder/<photograph stem><suffix>``
-    with the layers ``frames`` names (a :class:`~splatgl.output.frames.FrameTarget` of the
+    with the layers ``frames`` names (a :class:`~splatgl.imagefiles.frames.FrameTarget` of the
     folder: its format, ``--layers`` and normal space)."""
 
     folder: Path
@@ -197,7 +197,7 @@ def evaluate(renderer: Renderer, scene: Scene, views: Sequence[View],
 
 def worst_sheet(pairs: Sequence[Pair]) -> np.ndarray:
     """(H, W, 4) picture: per pair one row of render | photograph | error heat map, labelled."""
-    from ..output.pictures import heatmap, side_by_side
+    from ..imagefiles.pictures import heatmap, side_by_side
 
     rows = []
     for p in pairs:

@@ -26,7 +26,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from ..errors import SplatglError
-from ..output.images import quiet_image_library
+from ..imagefiles.images import quiet_image_library
 from .metrics import psnr
 
 #: Alpha conventions ``--alpha`` accepts.

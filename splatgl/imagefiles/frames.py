@@ -3,7 +3,7 @@
 - ``frames/`` (an existing folder, a name without a suffix, or one ending in ``/``): files
   ``frames/00000.png``, ``00001.png``, ... (``image_format`` picks png, tif or exr);
 - ``frames/%05d.exr``: a printf pattern with one integer field (the frame index);
-- ``flythrough.mp4`` (``.mov``, ``.mkv``): an H.264 video (:mod:`splatgl.output.video`).
+- ``flythrough.mp4`` (``.mov``, ``.mkv``): an H.264 video (:mod:`splatgl.imagefiles.video`).
 
 Any other suffix (``f.avi``, ``f.gif``, ``f.jpg``) is refused, never taken for a folder.
 """
@@ -18,13 +18,13 @@ from pathlib import Path
 from typing import Sequence
 
 from ..errors import SplatglError
-from .layers import BASE, Layer, NormalSpace
+from ..output.layers import BASE, Layer, NormalSpace
 from .image_formats import (DEFAULT_FORMAT, FORMAT_NAMES, IMAGE_SUFFIXES, ImageFormat, find_format,
                             format_named)
 from .images import inspect_image
 from .frame_record import FrameRecord, kept_frame
 from .layer_files import LayerFiles
-from .under import DepthKind
+from ..output.under import DepthKind
 from .video import VIDEO_SUFFIXES
 
 DEFAULT_PATTERN = "%05d"
@@ -120,7 +120,7 @@ class FrameTarget:
     def layers(self) -> frozenset[Layer] | None:
         """The layers each frame needs beyond colour and alpha (None: those alone): the ones
         named, else what the frames' format holds
-        (:attr:`~splatgl.output.image_formats.ImageFormat.render_layers`; EXR frames carry the
+        (:attr:`~splatgl.imagefiles.image_formats.ImageFormat.render_layers`; EXR frames carry the
         depth channel, as ``splatgl render -o x.exr`` does)."""
         fmt = self.image_format
         if fmt is None:
@@ -148,7 +148,7 @@ class FramePlan:
     """Which frames a run renders: ``todo`` (indices into its cameras), how many complete
     frames it keeps (``skipped``), how many damaged ones it renders again (``damaged``) and
     how many of those kept carry no record of what made them (``unchecked``: written before
-    splatgl recorded it, or by another program; :mod:`splatgl.output.frame_record`)."""
+    splatgl recorded it, or by another program; :mod:`splatgl.imagefiles.frame_record`)."""
 
     todo: list[int]
     skipped: int = 0
@@ -161,11 +161,11 @@ def plan_frames(target: FrameTarget, sizes: Sequence[tuple[int, int]], numbers: 
                 cameras: Sequence | None = None) -> FramePlan:
     """The frames to render of cameras whose frames are ``sizes`` (width, height) numbered
     ``numbers``.  Without ``resume`` (or into a video): all of them.  With ``resume`` a frame
-    file that exists is kept only when it is complete (:func:`splatgl.output.images.inspect_image`:
+    file that exists is kept only when it is complete (:func:`splatgl.imagefiles.images.inspect_image`:
     a file cut short by a full disk or a killed run is rendered again); a complete frame of
     another size, channel count or bit depth stops the run before any work, in one line, and
     so does, given the run's ``record`` and ``cameras``, one recorded as rendered from another
-    camera, scene or options (:func:`splatgl.output.frame_record.kept_frame`)."""
+    camera, scene or options (:func:`splatgl.imagefiles.frame_record.kept_frame`)."""
     if not resume or target.is_video:
         return FramePlan(list(range(len(sizes))))
     fmt = target.image_format

@@ -1,12 +1,12 @@
 """The image formats splatgl writes, in one table that every check, writer and command option
-reads: a new format is one row here (and its writer in :mod:`splatgl.output.images`).
+reads: a new format is one row here (and its writer in :mod:`splatgl.imagefiles.images`).
 
 Each format says what a file of it holds: integer formats (PNG, TIFF) the colour with the
 background composited, quantised to 8 or 16 bits; float formats (EXR) float32 colour, alpha, the
 expected depth (channel Z) and every further layer asked for (:data:`LAYER_CHANNELS`).  A render
 into a file asks for the layers its format holds by default (:attr:`ImageFormat.render_layers`):
 so ``-o x.exr`` renders the depth layer, ``-o x.png`` not; ``--layers`` asks for others
-(:mod:`splatgl.output.layer_files` writes them: EXR channels, or a picture per layer).
+(:mod:`splatgl.imagefiles.layer_files` writes them: EXR channels, or a picture per layer).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import SplatglError
-from .layers import BASE, Layer
+from ..output.layers import BASE, Layer
 
 #: Bits per channel an integer format can be written with (``--bit-depth``).
 BIT_DEPTHS = (8, 16)
@@ -67,7 +67,7 @@ class ImageFormat:
                      if layer in layers and layer in self.layers for c in names)
 
 
-#: Every image format :func:`splatgl.output.images.write_image` writes, in the order messages
+#: Every image format :func:`splatgl.imagefiles.images.write_image` writes, in the order messages
 #: and ``--format`` list them.
 IMAGE_FORMATS: tuple[ImageFormat, ...] = (
     ImageFormat("png", (".png",), False, frozenset({Layer.COLOUR})),

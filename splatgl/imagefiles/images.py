@@ -1,4 +1,4 @@
-"""Image output through OpenImageIO, in the formats of :mod:`splatgl.output.image_formats`:
+"""Image output through OpenImageIO, in the formats of :mod:`splatgl.imagefiles.image_formats`:
 PNG and TIFF (8 or 16 bit, RGB), EXR (float RGBA, and Z with the depth layer).
 
 Every file is written atomically (:func:`splatgl.output.atomic.atomic_target`): checked
@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from .atomic import atomic_target, cannot_write
+from ..output.atomic import atomic_target, cannot_write
 from .image_formats import BIT_DEPTHS, image_format
-from .layers import Layer, with_layers
+from ..output.layers import Layer, with_layers
 from ..errors import SplatglError
 
 #: The last 12 bytes of every complete PNG file: the IEND chunk (length 0, type, CRC).
@@ -30,7 +30,7 @@ _PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
 
 def check_image_suffix(path: str | Path, what: str = "") -> None:
     """Refuse a file name :func:`write_image` cannot write (before any work); ``what`` (an
-    option name) starts the message (:func:`splatgl.output.image_formats.image_format`)."""
+    option name) starts the message (:func:`splatgl.imagefiles.image_formats.image_format`)."""
     image_format(path, what)
 
 
@@ -43,7 +43,7 @@ class ImageFileInfo:
     channels: int
     bits: int | None
     #: The header's ``ImageDescription`` (``render --path`` frames: what made them,
-    #: :mod:`splatgl.output.frame_record`), None where it has none.
+    #: :mod:`splatgl.imagefiles.frame_record`), None where it has none.
     description: str | None = None
 
     def mismatch(self, width: int | None = None, height: int | None = None,
@@ -145,14 +145,14 @@ def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
                 attributes: dict[str, str] | None = None) -> None:
     """Write an (H, W, 4) float32 image (row 0 at the top), atomically.
 
-    What the file holds follows its format (:mod:`splatgl.output.image_formats`): PNG/TIFF get
+    What the file holds follows its format (:mod:`splatgl.imagefiles.image_formats`): PNG/TIFF get
     RGB (the background already composited), clipped to [0, 1] and quantised once to
     ``bit_depth`` (8 or 16).  EXR gets float32 R, G, B, A (A = accumulated alpha), when
     ``depth`` (H, W) is given a Z channel (the expected depth, 0 where nothing was drawn), and
     the (H, W) planes of ``extra`` as float32 channels of those names, in that order (the
-    further layers, :func:`splatgl.output.layer_files.exr_channels`); ``attributes`` become
+    further layers, :func:`splatgl.imagefiles.layer_files.exr_channels`); ``attributes`` become
     string attributes of the header (EXR: what the channels mean, ``splatgl:depth``; any
-    format: a path frame's ``ImageDescription``, :mod:`splatgl.output.frame_record`).
+    format: a path frame's ``ImageDescription``, :mod:`splatgl.imagefiles.frame_record`).
     """
     path = Path(path)
     fmt = image_format(path)

@@ -1,7 +1,7 @@
 """A render's layers written to files (``--layers``): one EXR with a channel per layer, or a
 colourised picture per layer beside an integer image.
 
-- EXR (:data:`~splatgl.output.image_formats.LAYER_CHANNELS`): R, G, B, A, Z (expected depth
+- EXR (:data:`~splatgl.imagefiles.image_formats.LAYER_CHANNELS`): R, G, B, A, Z (expected depth
   ``D / A``), ``median.Z``, ``N.X N.Y N.Z`` (unit normals), ``count`` and ``id`` (-1: none), all
   float32; the header says what the depths and normals are (``splatgl:depth`` ``z`` or
   ``distance``, ``splatgl:normal`` ``camera`` or ``world``), so the file can go back in as
@@ -22,9 +22,9 @@ import numpy as np
 from ..errors import SplatglError
 from .image_formats import find_format
 from .images import write_image
-from .layers import MIN_DEPTH_ALPHA, Layer, NormalSpace, RenderOutput
+from ..output.layers import MIN_DEPTH_ALPHA, Layer, NormalSpace, RenderOutput
 from .pictures import depth_preview, id_preview, normal_preview, value_preview
-from .under import DEPTH_ATTRIBUTE, DepthKind
+from ..output.under import DEPTH_ATTRIBUTE, DepthKind
 
 #: The EXR header attribute that says which space the normals are in.
 NORMAL_ATTRIBUTE = "splatgl:normal"
@@ -126,7 +126,7 @@ def write_layers(path: str | Path, out: RenderOutput, files: LayerFiles, bit_dep
                  attributes: dict[str, str] | None = None) -> None:
     """Write ``out`` to ``path`` (and its pictures), each through ``temp(final path)`` (the
     name to write to: an :class:`~splatgl.output.files.OutputFiles` temporary, or the path)
-    with ``write`` (:func:`~splatgl.output.images.write_image`'s signature); ``attributes``
+    with ``write`` (:func:`~splatgl.imagefiles.images.write_image`'s signature); ``attributes``
     go into the header of ``path``'s file (a path frame's record)."""
     fmt = find_format(path)
     layers = files.render_layers(path)

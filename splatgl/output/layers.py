@@ -5,7 +5,7 @@ Every render returns colour and alpha; further layers are asked for as data, a s
 normal")`` from ``--layers``), which each renderer reads: the quad path then adds the target,
 shader outputs or pass a layer needs, the tile renderer and the reference their buffers, and a
 layer not asked for costs nothing.  A new layer is one member here, its output in each renderer,
-and its channels in the image table (:data:`splatgl.output.image_formats.LAYER_CHANNELS`).
+and its channels in the image table (:data:`splatgl.imagefiles.image_formats.LAYER_CHANNELS`).
 
 What each layer holds (``z`` is a splat's depth: camera-space z for perspective and
 orthographic cameras, the distance from the camera for fisheye and equirectangular ones; a 2DGS

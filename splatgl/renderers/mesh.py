@@ -21,7 +21,7 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..gl.shaders import ProgramCache
-from ..output.images import write_image
+from ..imagefiles.images import write_image
 from ..output.under import DEPTH_ATTRIBUTE, DepthKind, UnderImage
 from ..splatmath.mesh import Mesh, check_camera
 

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 from typing import Callable, Optional, Sequence
 
 from ..cameras.camera import Camera
-from ..output.frame_record import FrameRecord
-from ..output.frames import FrameTarget, plan_frames
-from ..output.images import write_image
-from ..output.layer_files import write_layers
+from ..imagefiles.frame_record import FrameRecord
+from ..imagefiles.frames import FrameTarget, plan_frames
+from ..imagefiles.images import write_image
+from ..imagefiles.layer_files import write_layers
 from ..output.layers import RenderOutput
 from ..progress import ProgressCallback
 from ..api import Renderer
@@ -92,7 +92,7 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
 
     Image frames are written atomically and checked, so a frame file is complete or absent;
     with ``resume`` complete ones are kept and damaged ones (cut short, from older versions or
-    other programs) rendered again (:func:`splatgl.output.frames.plan_frames`, which also
+    other programs) rendered again (:func:`splatgl.imagefiles.frames.plan_frames`, which also
     refuses, before any work, frames of another size).  A video is written to a temporary
     file and renamed when complete (removed on any error or interrupt).  ``write_queue``
     frames may wait for the writer thread while the next renders (0: write in line).  Camera
@@ -101,10 +101,10 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
     render --camera`` renders the same camera (same renderer call), so the files are
     identical bit for bit.  A renderer with a ``frame_size(camera)`` method (stereo: both
     eyes in one frame) makes frames of that size.  ``record``: what the frames are rendered
-    from (:mod:`splatgl.output.frame_record`), written into each frame file, and with
+    from (:mod:`splatgl.imagefiles.frame_record`), written into each frame file, and with
     ``resume`` checked against the frames kept.
     """
-    from ..output.video import VideoWriter
+    from ..imagefiles.video import VideoWriter
 
     numbers = list(range(len(cameras))) if numbers is None else list(numbers)
     if len(numbers) != len(cameras):

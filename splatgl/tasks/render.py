@@ -8,7 +8,7 @@ equal a single-process render's frame by frame.
 A video output is assembled once all frames exist: the workers write 8-bit PNG frames to a
 hidden folder beside the video (``.NAME.mp4.frames/``), quantised exactly as the video writer
 quantises (``clip(rgb) * 255 + 0.5``, truncated), so the encoder sees the same pixels as in a
-single-process run; then this process encodes them with :class:`splatgl.output.video.VideoWriter`
+single-process run; then this process encodes them with :class:`splatgl.imagefiles.video.VideoWriter`
 (temporary file renamed when complete) and deletes the folder.  If anything fails or is
 interrupted the folder stays (the command names it: :func:`stopped_video_note`; a folder
 without a complete frame is removed), no video is written, and ``--resume`` renders only the
@@ -27,8 +27,8 @@ from .batch import BatchResult, FrameMeter
 from .task import Done, Files, TaskProgress
 from ..cameras.camera import Camera
 from .executor import Executor, ExecutorKind, RunResult, run_tasks
-from ..output.frame_record import FrameRecord
-from ..output.frames import FrameTarget, plan_frames
+from ..imagefiles.frame_record import FrameRecord
+from ..imagefiles.frames import FrameTarget, plan_frames
 from ..lod.render import LodSettings
 from ..progress import ProgressCallback
 from ..model.settings import RenderSettings, RendererKind
@@ -123,14 +123,14 @@ def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: Render
     with ``resume`` the frames there are checked here, before any task starts.  ``lod``: every
     task renders the scene file (a .lod.ply) through that cut.  ``record``: what the frames
     are rendered from, written into each and checked by ``resume``
-    (:mod:`splatgl.output.frame_record`).
+    (:mod:`splatgl.imagefiles.frame_record`).
 
     Returns the summed :class:`BatchResult` (``seconds``: wall time including the video's
     encoding) and the run's per-task reports (for :func:`splatgl.tasks.executor.summary`).
     """
     frames = target
     if target.is_video:
-        from ..output.video import _import_av, check_video_size
+        from ..imagefiles.video import _import_av, check_video_size
 
         # The size check and the install hint before any frame renders (the size first: a
         # wrong size is wrong with PyAV too)
@@ -165,8 +165,8 @@ def assemble_video(frames: FrameTarget, numbers: Sequence[int], video: Path, fps
     the video appears complete or not at all).  Returns the seconds it took."""
     import time
 
-    from ..output.images import read_image
-    from ..output.video import VideoWriter
+    from ..imagefiles.images import read_image
+    from ..imagefiles.video import VideoWriter
 
     t0 = time.perf_counter()
     first = read_image(frames.frame_path(numbers[0]))

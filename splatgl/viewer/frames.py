@@ -17,7 +17,7 @@ import moderngl
 import numpy as np
 
 from ..cameras.camera import Camera
-from ..output.pictures import depth_preview, heatmap
+from ..imagefiles.pictures import depth_preview, heatmap
 from ..api import Renderer
 from ..model.scene import Scene
 from ..model.settings import RendererKind, RenderSettings

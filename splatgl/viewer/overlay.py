@@ -1,6 +1,6 @@
 """On-screen text: the status panel and the key list, rasterised by OpenImageIO.
 
-Text is drawn with ``ImageBufAlgo.render_text`` (its built-in font, as :mod:`splatgl.output.pictures`
+Text is drawn with ``ImageBufAlgo.render_text`` (its built-in font, as :mod:`splatgl.imagefiles.pictures`
 labels are) into a small straight-alpha RGBA image on a translucent dark panel; the viewer
 uploads it as a texture and alpha-blends it over the top-left corner.  Rasterising costs a few
 milliseconds, so :class:`Overlay` redoes it at most :data:`REFRESH_HZ` times a second.

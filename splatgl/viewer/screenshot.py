@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..cameras.camera import Camera
 from ..cameras.files import save_camera
-from ..output.images import write_image
+from ..imagefiles.images import write_image
 from ..output.files import OutputFiles
 from ..api import Renderer
 from ..model.scene import Scene

@@ -10,7 +10,7 @@ import os
 if os.environ.get("SPLATGL_TEST_GATE"):
     import threading
 
-    from splatgl.output import images as image_io
+    from splatgl.imagefiles import images as image_io
     from splatgl.api import Renderer
 
     _after = int(os.environ["SPLATGL_TEST_GATE"])
