@@ -51,6 +51,9 @@ def run(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():  # a conflict with the file was reported on loading
             warnings.simplefilter("ignore")
             info["spz_axes"] = read_axes(args.scene, args.spz_axes).as_dict()
+    level_info = getattr(detect_format(args.scene), "level_info", None)
+    if level_info is not None:  # a level-of-detail format (Streamed SOG, LCC): splats per level
+        info["lod_levels"] = level_info(args.scene)
     text = format_info(args.scene, scene, info)
     if args.stats and scene.count:
         from ..edit.statistics import attribute_statistics, format_statistics, overdraw

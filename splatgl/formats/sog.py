@@ -263,7 +263,8 @@ def read(path: Path, drop_invalid: bool = False) -> Scene:
             raw = _decode_v1(path, files, meta)
         else:
             raise SceneFormatError(path, f"SOG version {version!r} is not supported (supported: "
-                                         "1, 2)", "version")
+                                         "2, and version 1, which has no 'version' key and "
+                                         "gives means.shape)", "version")
     except (TypeError, AttributeError, KeyError, IndexError, ValueError) as exc:
         if isinstance(exc, SceneFormatError):
             raise

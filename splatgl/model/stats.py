@@ -74,4 +74,9 @@ def format_info(path: str | Path, scene: Scene, info: dict) -> str:
     ]
     if "spz_axes" in info:  # an SPZ file: which axes it stores (splatgl.formats.spz_axes)
         lines.append(f"axes:        {info['spz_axes']['description']}")
+    if "lod_levels" in info:  # a level-of-detail file: splats per level, the level loaded
+        lv = info["lod_levels"]
+        counts = ", ".join(f"{i}: {c}" for i, c in enumerate(lv["counts"]))
+        lines.append(f"levels:      {len(lv['counts'])} in {lv['chunks']} chunks, splats per level "
+                     f"{counts} (level {lv['loaded']} shown; 0 is the finest)")
     return "\n".join(lines)
