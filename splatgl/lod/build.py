@@ -124,15 +124,7 @@ def build_hierarchy(scene: Scene, branching: int = BRANCHING, progress=None) -> 
     leaves = scene.subset(order)
     n = leaves.count
     total_levels = 1 + int(np.ceil(np.log(max(n, 1)) / np.log(branching)))
-    mu = leaves.means.astype(np.float64)
-    opac = leaves.opacities.astype(np.float64)
-    scales = leaves.scales.astype(np.float64)
-    area = area_proxy(scales)
-    sh = leaves.sh.astype(np.float64)
-    cov = np.empty((n, 3, 3))
-    for s in range(0, n, BLOCK):
-        cov[s:s + BLOCK] = covariance_3d(quat_to_rotmat(leaves.rotations[s:s + BLOCK].astype(np.float64)),
-                                         scales[s:s + BLOCK])
+    mu, cov, opac, area, sh = leaf_moments(leaves)
     levels = []  # (means, quats, scales, opacity, sh) of each internal level
     while mu.shape[0] > 1:
         p_mu, p_cov, p_opac, p_area, p_sh, p_scales, p_quat, owner = merge_groups(mu, cov, opac, area, sh,
@@ -142,9 +134,25 @@ def build_hierarchy(scene: Scene, branching: int = BRANCHING, progress=None) -> 
         if progress is not None:
             progress(len(levels) + 1, total_levels, "building levels")
     offsets = level_offsets(n, branching)
-    nodes = _concat_nodes(leaves, levels)
+    nodes = concat_nodes(leaves, levels)
     return LodTree(nodes, offsets, branching, order.astype(np.int64),
                    bounding_radii(nodes, offsets, branching))
+
+
+def leaf_moments(leaves: Scene):
+    """The float64 ``(means, covariances, opacities, areas, sh)`` that :func:`merge_groups`
+    merges, of the leaves (row by row: a chunk of leaves gets the values the whole would)."""
+    n = leaves.count
+    mu = leaves.means.astype(np.float64)
+    opac = leaves.opacities.astype(np.float64)
+    scales = leaves.scales.astype(np.float64)
+    area = area_proxy(scales)
+    sh = leaves.sh.astype(np.float64)
+    cov = np.empty((n, 3, 3))
+    for s in range(0, n, BLOCK):
+        cov[s:s + BLOCK] = covariance_3d(quat_to_rotmat(leaves.rotations[s:s + BLOCK].astype(np.float64)),
+                                         scales[s:s + BLOCK])
+    return mu, cov, opac, area, sh
 
 
 def level_offsets(n_leaves: int, branching: int) -> np.ndarray:
@@ -159,18 +167,30 @@ def bounding_radii(nodes: Scene, offsets: np.ndarray, branching: int) -> np.ndar
     """(M,) float32 bounding-sphere radius of every node, centred on its mean: the largest of
     its own extent ``k(o) * max scale`` and ``|child mean - mean| + child radius`` over its
     children, level by level from the leaves up (so a parent's sphere holds its children's)."""
-    means = nodes.means.astype(np.float64)
-    radius = _extent(nodes.opacities.astype(np.float64), nodes.scales.max(axis=1).astype(np.float64))
+    return propagate_radii(nodes.means.astype(np.float64), own_extents(nodes), offsets,
+                           branching).astype(np.float32)
+
+
+def own_extents(nodes: Scene) -> np.ndarray:
+    """(M,) float64 ``k(o) * max scale`` of each node: its sphere before its children's."""
+    return _extent(nodes.opacities.astype(np.float64), nodes.scales.max(axis=1).astype(np.float64))
+
+
+def propagate_radii(means: np.ndarray, radius: np.ndarray, offsets: np.ndarray,
+                    branching: int) -> np.ndarray:
+    """:func:`bounding_radii`'s pass from the leaves up over float64 ``means`` (M, 3) and
+    ``radius`` (M,) (updated in place and returned): the out-of-core build runs it per chunk
+    and then over the chunks' roots, with the same float64 values, so the radii are the same."""
     for level in range(len(offsets) - 2):
         lo, hi, top = offsets[level], offsets[level + 1], offsets[level + 2]
         owner = hi + np.arange(hi - lo) // branching
         child = np.linalg.norm(means[lo:hi] - means[owner], axis=1) + radius[lo:hi]
         radius[hi:top] = np.maximum(radius[hi:top],
                                     np.maximum.reduceat(child, np.arange(0, hi - lo, branching)))
-    return radius.astype(np.float32)
+    return radius
 
 
-def _concat_nodes(leaves: Scene, levels) -> Scene:
+def concat_nodes(leaves: Scene, levels) -> Scene:
     """One Scene of the leaves' stored values followed by every internal level (activated
     values turned back into stored ones by :meth:`Scene.from_activated`)."""
     if not levels:

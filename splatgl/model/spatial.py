@@ -21,6 +21,14 @@ def morton_order_clamped_box(points: np.ndarray) -> np.ndarray:
     (outliers clamped to the box's faces); 21 bits per axis."""
     lo = np.percentile(points, 1.0, axis=0)
     hi = np.percentile(points, 99.0, axis=0)
+    return np.argsort(morton_codes_clamped(points, lo, hi), kind="stable")
+
+
+def morton_codes_clamped(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(N,) uint64 Morton codes (21 bits per axis, 63 in all) of (N, 3) float64 points over the
+    box ``lo..hi`` (outliers clamped to its faces): :func:`morton_order_clamped_box`'s codes,
+    which the out-of-core level of detail (:mod:`splatgl.lod.external`) computes block by block
+    over the box it found in a streaming pass."""
     span = np.where(hi > lo, hi - lo, 1.0)
     q = np.clip((points - lo) / span, 0.0, 1.0)
     q = (q * ((1 << 21) - 1)).astype(np.uint64)
@@ -33,7 +41,7 @@ def morton_order_clamped_box(points: np.ndarray) -> np.ndarray:
         v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
         v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
         code |= v << np.uint64(axis)
-    return np.argsort(code, kind="stable")
+    return code
 
 
 def morton_order_full_box(means: np.ndarray, bits: int = 10) -> np.ndarray:
