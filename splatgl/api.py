@@ -22,12 +22,13 @@ from .errors import SplatglError
 from .gl.context import NO_GL_RENDERER, create_headless_context, make_current, renderer_name
 from .gl.shaders import ProgramCache
 from .gl.limits import check_image_size
-from .output.layers import Layer, RenderOutput, with_layers
+from .output.layers import BASE, Layer, RenderOutput, with_layers
 from .output.under import UnderImage
 from .progress import ProgressCallback
 from .model.scene import Scene, SceneSource
-from .model.settings import RenderSettings, RendererKind, check_convention, check_honoured
+from .model.settings import RenderSettings, RendererKind
 from .cameras.view import View
+from .renderers import registry
 
 def default_settings(scene: Scene | SceneSource | None = None, **fields) -> RenderSettings:
     """The settings ``splatgl render`` uses for ``scene`` (a loaded scene or its
@@ -44,13 +45,14 @@ def default_settings(scene: Scene | SceneSource | None = None, **fields) -> Rend
 #: What :meth:`Renderer.render_layers` returns unless asked otherwise.
 DEPTH_LAYERS = with_layers(Layer.DEPTH)
 
-#: GPU renderers (each holding an uploaded copy of its scene) kept per :class:`Renderer`; the
-#: least recently used is released beyond this.
+#: Renderers (each GPU one holding an uploaded copy of its scene) kept per :class:`Renderer`;
+#: the least recently used is released beyond this.
 MAX_CACHED_PATHS = 6
 
 
 class Renderer:
-    """Owns one headless OpenGL context and renders scenes with any renderer kind.
+    """Owns one headless OpenGL context and renders scenes with any renderer kind (made
+    through :mod:`splatgl.renderers.registry`).
 
     Per (scene, settings) the GPU state (uploaded scene, programs, targets) is kept, so
     rendering many views of one scene uploads it once.  Use as a context manager or call
@@ -78,32 +80,25 @@ class Renderer:
                              settings.precision)
             self._sizes_ok.add(key)
 
-    def _path(self, scene: Scene, settings: RenderSettings, kind: RendererKind):
+    def _path(self, scene: Scene, settings: RenderSettings,
+              kind: RendererKind) -> registry.FrameRenderer:
         key = (id(scene), settings, kind)
         path = self._paths.pop(key, None)
         if path is not None and path.scene is not scene:  # the id of a scene since collected
             path.release()
             path = None
         if path is None:
-            if kind is RendererKind.QUAD:
-                from .renderers.quad import QuadRenderer
-                path = QuadRenderer(self.ctx, scene, settings, self.programs)
-            elif kind is RendererKind.TILE:
-                from .renderers.tile import TileRenderer
-                path = TileRenderer(self.ctx, scene, settings, self.programs)
-            elif kind is RendererKind.CPU:
-                from .renderers.cpu import CpuRenderer
-                path = CpuRenderer(scene, settings)
-            else:
-                raise ValueError(f"{kind} has no GPU path")
+            path = registry.make(kind, scene, settings, self.ctx, self.programs)
         self._paths[key] = path  # most recently used last
         while len(self._paths) > MAX_CACHED_PATHS:
             oldest = next(iter(self._paths))
             self._paths.pop(oldest).release()
         return path
 
-    def renderer_for(self, scene: Scene, settings: RenderSettings, kind: RendererKind = RendererKind.QUAD):
-        """The (cached) GPU renderer object, e.g. to read its ``last_times``.
+    def renderer_for(self, scene: Scene, settings: RenderSettings,
+                     kind: RendererKind = RendererKind.QUAD) -> registry.FrameRenderer:
+        """The (cached) renderer object (:class:`~splatgl.renderers.registry.FrameRenderer`),
+        e.g. to read its ``last_times``.
 
         It makes ``self.ctx`` current; when other OpenGL contexts are created later, call
         :func:`splatgl.gl.context.make_current` before using the object directly.
@@ -123,15 +118,7 @@ class Renderer:
         reference, the tile renderer) during the frame.  The quad and tile renderers refuse
         ``convention`` gsplat (:func:`splatgl.model.settings.check_convention`).
         """
-        kind = RendererKind(kind)
-        camera, settings = _inputs(scene, camera, settings)
-        self._check_open()
-        if kind is RendererKind.REFERENCE:
-            return render_reference_rgba(scene, camera, settings, progress)
-        make_current(self.ctx)  # another context may have been made current since
-        self._check_size(camera, kind, settings)
-        with _reporting(self._path(scene, settings, kind), progress) as path:
-            return path.render(View.of(camera, settings, scene)).rgba
+        return self.render_layers(scene, camera, settings, kind, progress, BASE).rgba
 
     def render_layers(self, scene: Scene, camera: Camera | None = None,
                       settings: RenderSettings | None = None,
@@ -142,17 +129,15 @@ class Renderer:
         """The ``layers`` of one view (default colour, alpha and the accumulated depth; every
         layer with the colour's weights, :mod:`splatgl.output.layers`); ``camera`` and
         ``settings`` as in :meth:`render`.  ``under``: geometry rendered from the same camera
-        (:func:`splatgl.output.under.read_under`) to composite the splats into: splats at or
+        (:func:`splatgl.imagefiles.under_exr.read_under`) to composite the splats into: splats at or
         behind it are dropped, the rest composited over its colour."""
-        kind = RendererKind(kind)
+        kind = registry.entry(kind).kind
         camera, settings = _inputs(scene, camera, settings)
         self._check_open()
         layers = frozenset(layers)
         view = View.of(camera, settings, scene)
         geometry = view.geometry(under) if under is not None else None  # checked before work
-        if kind is RendererKind.REFERENCE:
-            return render_reference_layers(scene, camera, settings, progress, layers, under)
-        make_current(self.ctx)
+        make_current(self.ctx)  # another context may have been made current since
         self._check_size(camera, kind, settings)
         with _reporting(self._path(scene, settings, kind), progress) as path:
             if geometry is None:

@@ -1,4 +1,5 @@
-"""Splats composited into a render of opaque geometry (``--under``, splatgl/output/under.py),
+"""Splats composited into a render of opaque geometry (``--under``, splatgl/output/under.py; its
+files splatgl/imagefiles/under_exr.py),
 checked against closed forms: a plane at a known depth through a scene (the result is the
 splats in front of it over the plane's colour), a single splat before or behind a plane, and a
 box drawn by the project's mesh rasterizer (whose depth is checked against ray casting).
@@ -27,7 +28,8 @@ from splatgl.model.scene import Scene
 from splatgl.model.settings import RendererKind, RenderSettings
 from splatgl.imagefiles.images import read_image, write_image
 from splatgl.output.layers import Layer, with_layers
-from splatgl.output.under import DepthKind, UnderImage, read_under
+from splatgl.imagefiles.under_exr import read_under, write_under
+from splatgl.output.under import DepthKind, UnderImage
 from splatgl.reference.pixel import pixel_splats
 from splatgl.renderers.mesh import MeshRenderer
 from splatgl.splatmath import mesh as meshes
@@ -128,7 +130,7 @@ def test_mesh_renderer_depth_is_the_ray_casting_closed_form(ctx):
 def test_box_inside_a_scene_composites_by_depth(ctx, gl_renderer, kind, tmp_path):
     scene, camera, box = _box_scene()
     image = MeshRenderer(ctx).render(box, camera)
-    image.write(tmp_path / "box.exr")
+    write_under(tmp_path / "box.exr", image.rgba, image.depth)
     under = read_under(tmp_path / "box.exr")            # the file says its depth is z
     assert under.kind is DepthKind.Z
     settings = RenderSettings()
@@ -206,7 +208,8 @@ def test_cli_render_under_a_mesh(ctx, tmp_path, capsys):
     from splatgl.formats import save_scene
     save_scene(tmp_path / "s.ply", scene)
     save_camera(tmp_path / "cam.json", camera)
-    MeshRenderer(ctx).render(box, camera).write(tmp_path / "box.exr")
+    image = MeshRenderer(ctx).render(box, camera)
+    write_under(tmp_path / "box.exr", image.rgba, image.depth)
     out = tmp_path / "c.exr"
     assert main(["render", str(tmp_path / "s.ply"), "--camera", str(tmp_path / "cam.json"),
                  "--under", str(tmp_path / "box.exr"), "-o", str(out)]) == 0

@@ -9,7 +9,8 @@ from ..cameras.camera import Camera
 from ..errors import SplatglError
 from ..imagefiles.layer_files import LayerFiles
 from ..output.layers import Layer, NormalSpace, parse_layer_names
-from ..output.under import DepthKind, UnderImage, read_under
+from ..imagefiles.under_exr import read_under
+from ..output.under import DepthKind, UnderImage
 
 LAYER_NAMES = ", ".join(m.value for m in Layer)
 

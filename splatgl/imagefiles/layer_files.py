@@ -24,7 +24,8 @@ from .image_formats import find_format
 from .images import write_image
 from ..output.layers import MIN_DEPTH_ALPHA, Layer, NormalSpace, RenderOutput
 from .pictures import depth_preview, id_preview, normal_preview, value_preview
-from ..output.under import DEPTH_ATTRIBUTE, DepthKind
+from ..output.under import DepthKind
+from .under_exr import DEPTH_ATTRIBUTE
 
 #: The EXR header attribute that says which space the normals are in.
 NORMAL_ATTRIBUTE = "splatgl:normal"

@@ -21,8 +21,7 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..gl.shaders import ProgramCache
-from ..imagefiles.images import write_image
-from ..output.under import DEPTH_ATTRIBUTE, DepthKind, UnderImage
+from ..output.under import DepthKind, UnderImage
 from ..splatmath.mesh import Mesh, check_camera
 
 #: Light every face gets whatever its angle.
@@ -43,12 +42,11 @@ class MeshImage:
         return UnderImage(self.rgb * self.alpha[..., None], self.alpha, self.depth, DepthKind.Z,
                           Path(path))
 
-    def write(self, path: str | Path) -> None:
-        """An EXR of R, G, B, A and Z (view z, 0 where no face; ``splatgl:depth`` = ``z``):
-        what ``splatgl render --under`` reads."""
-        rgba = np.concatenate([self.rgb, self.alpha[..., None]], -1)
-        write_image(path, rgba, depth=np.where(np.isfinite(self.depth), self.depth, 0.0),
-                    attributes={DEPTH_ATTRIBUTE: DepthKind.Z.value})
+    @property
+    def rgba(self) -> np.ndarray:
+        """(H, W, 4) float32 colour and alpha, as an ``--under`` file holds them
+        (:func:`splatgl.imagefiles.under_exr.write_under` writes it with :attr:`depth`)."""
+        return np.concatenate([self.rgb, self.alpha[..., None]], -1)
 
 
 def shaded_corners(mesh: Mesh, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
