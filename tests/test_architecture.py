@@ -1,6 +1,8 @@
 """The package's shape (issue 26): the import contracts of pyproject.toml's [tool.importlinter]
-(the layers, bottom to top, and no import cycle inside a package) hold, and they catch an import
-that breaks them; the top level stays small, and so do modules and classes."""
+(the layers, bottom to top, no file reader and no image or video library on the render path,
+and no import cycle inside a package) hold, and they catch an import that breaks them; importing
+a renderer loads no image or video library (issue 39 item 5); the top level stays small, and so
+do modules and classes."""
 
 from __future__ import annotations
 
@@ -52,11 +54,13 @@ def contracts():
     options = read_configuration(str(PYPROJECT))
     session = options["session_options"]
     assert session["root_packages"] == ["splatgl"]
-    graph = grimp.build_graph("splatgl", exclude_type_checking_imports=True, cache_dir=None)
+    graph = grimp.build_graph("splatgl", exclude_type_checking_imports=True, cache_dir=None,
+                              include_external_packages=session.get("include_external_packages", False))
     kinds = {"layers": LayersContract, "forbidden": ForbiddenContract,
              "acyclic_siblings": AcyclicSiblingsContract}
     found = {c["id"]: (kinds[c["type"]], c) for c in options["contracts_options"]}
-    assert set(found) == {"layers", "render-path-reads-no-files", "acyclic"}
+    assert set(found) == {"layers", "render-path-reads-no-files", "render-path-loads-no-image-library",
+                          "acyclic"}
     return graph, found, session
 
 
@@ -75,7 +79,8 @@ def _check(contracts, contract_id: str, *extra: tuple[str, str]):
         graph, verbose=False)
 
 
-@pytest.mark.parametrize("contract_id", ["layers", "render-path-reads-no-files", "acyclic"])
+@pytest.mark.parametrize("contract_id", ["layers", "render-path-reads-no-files",
+                                         "render-path-loads-no-image-library", "acyclic"])
 def test_contracts_kept_on_the_package(contracts, contract_id):
     assert _check(contracts, contract_id).kept
 
@@ -106,6 +111,56 @@ def test_render_path_contract_refuses_file_imports(contracts, imports):
     check = _check(contracts, "render-path-reads-no-files", *imports)
     assert not check.kept
     assert imports[0][0] in repr(check.metadata)
+
+
+@pytest.mark.parametrize("imports", [
+    [("splatgl.output.under", "OpenImageIO")],  # the old --under reader, under the View
+    [("splatgl.renderers.quad", "av")],
+    [("splatgl.cameras.view", "PIL")],
+    # through a module of the image files (which may load them)
+    [("splatgl.renderers.mesh", "splatgl.imagefiles.images")],
+], ids=["output-oiio", "renderer-av", "cameras-pillow", "through-imagefiles"])
+def test_render_path_contract_refuses_image_libraries(contracts, imports):
+    """The render path imports no image or video library (OpenImageIO, PyAV, Pillow), directly
+    or through another module: they are splatgl.imagefiles' business."""
+    check = _check(contracts, "render-path-loads-no-image-library", *imports)
+    assert not check.kept
+    assert imports[0][0] in repr(check.metadata)
+
+
+#: Every module of the render path, and the API's, imported and used in a fresh interpreter.
+_RENDER_PATH_PROBE = """
+import importlib, pkgutil, sys
+import splatgl.renderers, splatgl.reference, splatgl.cameras, splatgl.order
+for package in (splatgl.renderers, splatgl.reference, splatgl.cameras, splatgl.order):
+    for info in pkgutil.iter_modules(package.__path__, package.__name__ + "."):
+        importlib.import_module(info.name)
+import numpy as np
+import splatgl
+from splatgl.api import render_reference_layers
+from splatgl.model.scene import Scene
+from splatgl.output.layers import Layer, with_layers
+rng = np.random.default_rng(0)
+scene = Scene(rng.normal(0, 0.5, (20, 3)), rng.normal(size=(20, 4)), rng.normal(-3, 0.3, (20, 3)),
+              rng.normal(1, 1, 20), rng.normal(0, 0.3, (20, 1, 3)))
+camera = splatgl.default_camera(scene, 16, 12)
+render_reference_layers(scene, camera, splatgl.default_settings(scene), layers=with_layers(Layer.DEPTH))
+try:
+    splatgl.render(scene, camera)
+except splatgl.ContextError:
+    pass  # no OpenGL here: the imports were still made
+print(sorted(m for m in ("OpenImageIO", "av", "PIL") if m in sys.modules))
+"""
+
+
+def test_rendering_loads_no_image_library():
+    """Importing every renderer, reference and camera module and rendering through the API
+    (the reference and, where OpenGL runs, the quad renderer) loads neither OpenImageIO, PyAV
+    nor Pillow: before, the View imported the ``--under`` reader and with it OpenImageIO."""
+    run = subprocess.run([sys.executable, "-c", _RENDER_PATH_PROBE], cwd=ROOT, capture_output=True,
+                         text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().splitlines()[-1] == "[]"
 
 
 @pytest.mark.parametrize("importer, imported", [
