@@ -15,6 +15,8 @@ from hypothesis import strategies as st
 from helpers import draw, view_for
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
+from splatgl.errors import ShaderError
+from splatgl.gl import radix_sort
 from splatgl.gl.shaders import preprocess
 from splatgl.gl.radix_sort import (TILE_KEYS, RadixSorter, device_depth_sort, radix_passes,
                                    radix_sort_twin, subgroup_paths)
@@ -163,6 +165,24 @@ def test_khr_subgroup_path_is_valid_glsl(tmp_path, narrow):
         path.write_text(preprocess(name, defines).text)
         done = subprocess.run(["glslangValidator", str(path)], capture_output=True, text=True)
         assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_a_path_that_sorts_wrongly_is_not_used(ctx, monkeypatch):
+    """A driver whose subgroups are not the size its probe said (Intel compiles at SIMD8, 16
+    or 32 per shader): the sorter checks its order once and falls back to the next path."""
+    if subgroup_paths(ctx) != ["arb", "portable"]:
+        pytest.skip("written for llvmpipe's paths")
+    monkeypatch.setattr(radix_sort, "_subgroup_size", lambda *args: 16)  # llvmpipe's is 8
+    s = RadixSorter(ctx)
+    try:
+        assert s.path == "portable"
+        keys = np.arange(5000, dtype=np.uint32)[::-1] % np.uint32(7)
+        np.testing.assert_array_equal(s.sort_values(keys, np.arange(5000, dtype=np.uint32)),
+                                      np.argsort(keys, kind="stable"))
+    finally:
+        s.release()
+    with pytest.raises(ShaderError, match="radix sort path arb .subgroup size 16. sorts wrongly"):
+        RadixSorter(ctx, path="arb")
 
 
 def test_unknown_path_is_refused(ctx):

@@ -124,42 +124,47 @@ class RadixSorter:
         self._capacity = 0
         self._bufs: list[moderngl.Buffer] = []  # keys A, values A, keys B, values B, hist
         self._state = ctx.buffer(reserve=_STATE_BYTES)
-        self.narrow = narrow
-        self.path, self.warp, self._progs = self._choose(path)
-        self._state.write(np.array([0, 0xFFFFFFFF], np.uint32).tobytes())  # no bits seen
+        self._narrow = narrow
+        try:
+            self.path, self.warp, self.narrow, self._progs = self._choose(path)
+        except BaseException:
+            self.release()
+            raise
 
     def _choose(self, wanted: str | None):
-        """(path, warp width, programs by name): ``wanted``, or the best that compiles."""
+        """(path, warp width, narrow, programs by name): ``wanted``, or the best path that
+        compiles and sorts a test array right (a driver whose subgroups are not what its probe
+        said, e.g. a varying SIMD width, falls back to the next)."""
         for path in [wanted] if wanted else subgroup_paths(self.ctx):
-            warp = RADIX_PORTABLE_WARP
-            if path != "portable":
-                try:
-                    warp = _subgroup_size(self.programs, self._state, path)
-                except ShaderError:
-                    if wanted:
-                        raise
-                    continue
-                if warp < 1 or RADIX_GROUP % warp or TILE_KEYS % warp:
-                    if wanted:
-                        raise ShaderError(f"radix sort path {path}: subgroup size {warp} does "
-                                          f"not divide the work group ({RADIX_GROUP})")
-                    continue
-            defines: dict[str, object] = {}
-            if path != "portable":
-                defines = {"RADIX_WARP": warp, f"RADIX_MATCH_{path.upper()}": 1}
-            if self.narrow is None:
-                self.narrow = path != "portable" and warp <= NARROW_WARP
-            if self.narrow:  # one warp per group, many keys per lane
-                defines.update(RADIX_GROUP=warp, RADIX_ITEMS=TILE_KEYS // warp, RADIX_NARROW=1)
             try:
-                progs = {name: self.programs.compute(f"radix_{name}.comp", defines)
-                         for name in ("bits", "plan", "upsweep", "scan", "downsweep", "copy")}
+                return self._try(path)
             except ShaderError:
                 if wanted:
                     raise
-                continue
-            return path, warp, progs
         raise ShaderError("radix sort: no downsweep path compiles")  # portable always should
+
+    def _try(self, path: str):
+        warp, defines = RADIX_PORTABLE_WARP, {}
+        if path != "portable":
+            warp = _subgroup_size(self.programs, self._state, path)
+            if warp < 1 or RADIX_GROUP % warp or TILE_KEYS % warp:
+                raise ShaderError(f"radix sort path {path}: subgroup size {warp} does not "
+                                  f"divide the work group ({RADIX_GROUP})")
+            defines = {"RADIX_WARP": warp, f"RADIX_MATCH_{path.upper()}": 1}
+        narrow = self._narrow if self._narrow is not None else (
+            path != "portable" and warp <= NARROW_WARP)
+        if narrow:  # one warp per group, many keys per lane
+            defines.update(RADIX_GROUP=warp, RADIX_ITEMS=TILE_KEYS // warp, RADIX_NARROW=1)
+        self._progs = {name: self.programs.compute(f"radix_{name}.comp", defines)
+                       for name in ("bits", "plan", "upsweep", "scan", "downsweep", "copy")}
+        self._state.write(np.array([0, 0xFFFFFFFF], np.uint32).tobytes())  # no bits seen
+        keys = (np.arange(2 * TILE_KEYS + 77, dtype=np.uint32) * np.uint32(2654435761)
+                % np.uint32(3001)) << np.uint32(3)  # ties, two passes, a partial tile
+        if not np.array_equal(self.sort_values(keys, np.arange(keys.size, dtype=np.uint32)),
+                              np.argsort(keys, kind="stable")):
+            raise ShaderError(f"radix sort path {path} (subgroup size {warp}) sorts wrongly "
+                              "on this device")
+        return path, warp, narrow, self._progs
 
     def reserve(self, count: int) -> None:
         """Room for ``count`` keys (the buffers are replaced, their contents lost, when they
