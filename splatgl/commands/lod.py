@@ -28,7 +28,13 @@ sphere projects to at most PX pixels) or '--lod-budget N' (the finest cut of at 
 examples:
   splatgl lod scene.ply -o scene.lod.ply
   splatgl render scene.lod.ply --lod-threshold 1 -o far.png --distance 4
-  splatgl render scene.lod.ply --lod-budget 200000 -o view.png --timings"""
+  splatgl render scene.lod.ply --lod-budget 200000 -o view.png --timings
+
+Naming the output DIR/lod-meta.json writes PlayCanvas Streamed SOG instead (what splat-transform
+writes and PlayCanvas streams): the hierarchy's finest levels as SOG folders DIR/L_i/, in spatial
+chunks of --chunk-splats original splats, listed in lod-meta.json (see docs/formats.md).
+
+  splatgl lod scene.ply -o out/lod-meta.json"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -37,6 +43,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="output .lod.ply (default: SCENE's name with .lod.ply)")
     p.add_argument("--branching", type=int, default=4, metavar="B",
                    help="children per parent (default 4; 2-64)")
+    p.add_argument("--chunk-splats", type=int, default=None, metavar="N",
+                   help="Streamed SOG output (-o DIR/lod-meta.json): original splats per streamed "
+                        "chunk, at least (default 16384)")
     add_force_argument(p)
 
 
@@ -52,18 +61,35 @@ def default_output(scene: Path) -> Path:
 def run(args: argparse.Namespace) -> int:
     from ..lod.build import build_hierarchy
     from ..lod.io import check_lod_name, write_lod
+    from ..lod import streamed_sog_write as streamed
 
     if not 2 <= args.branching <= 64:
         raise SplatglError(f"--branching must be 2-64, got {args.branching}")
     out = args.output or default_output(args.scene)
-    check_lod_name(out)
+    sog = streamed.is_streamed_sog_name(out)
+    if not sog:
+        check_lod_name(out)
+        if args.chunk_splats is not None:
+            raise SplatglError("--chunk-splats applies to Streamed SOG output (-o "
+                               "DIR/lod-meta.json) only")
+    elif args.chunk_splats is not None and args.chunk_splats < 1:
+        raise SplatglError(f"--chunk-splats must be at least 1, got {args.chunk_splats}")
     check_output(args, out, "-o")  # before the (long) build: not SCENE; existing only with --force
+    if sog:
+        streamed.check_folder(out)  # no unit folder the manifest there does not name
     progress = StderrProgress() if enabled() else None
     scene = load_scene(args.scene, progress=progress)
     if scene.kind is not SplatKind.GAUSSIAN_3D:
         raise SplatglError(f"{args.scene}: level of detail needs 3DGS splats, this file holds 2DGS surfels")
     t0 = time.perf_counter()
     tree = build_hierarchy(scene, args.branching, progress=progress)
+    if sog:
+        meta = streamed.write_streamed_sog(out, tree, args.chunk_splats or streamed.CHUNK_SPLATS)
+        counts = ", ".join(f"{c:,}" for c in meta["counts"])
+        print(f"wrote {out}: Streamed SOG of {meta['lodLevels']} levels ({counts} splats) in "
+              f"{len(meta['filenames'])} SOG units (branching {args.branching}) in "
+              f"{time.perf_counter() - t0:.1f} s")
+        return 0
     write_lod(out, tree)
     print(f"wrote {out}: {scene.count:,} leaves, {tree.nodes.count - scene.count:,} parents in "
           f"{tree.levels} levels (branching {args.branching}) in {time.perf_counter() - t0:.1f} s")
