@@ -27,6 +27,9 @@ EXTENT_DISCRIMINANT_FLOOR = 0.1
 DET_CANCEL_RATIO = 1e-2
 #: Extent of the reference in standard deviations (radius ``ceil(3 sqrt(lambda_max))``).
 EXTENT_SIGMAS = 3.0
+#: Largest extent (pixels) a splat's radius is clamped to, so that it fits an int64; far beyond
+#: any image (a larger radius covers the same tiles).
+MAX_RADIUS = float(2 ** 52)
 #: Upper clamp of a splat's alpha.
 ALPHA_MAX = 0.99
 #: Smallest alpha that contributes; smaller ones are skipped (and discarded on the GPU).

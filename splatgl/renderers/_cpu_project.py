@@ -24,10 +24,9 @@ import numba
 import numpy as np
 
 from ..constants import (AA_MIN_FACTOR, DET_CANCEL_RATIO, EXTENT_DISCRIMINANT_FLOOR,
-                         EXTENT_SIGMAS, SH_C0, SH_C1, SH_C2, SH_C3, SH_OFFSET, TILE_SIZE)
+                         EXTENT_SIGMAS, MAX_RADIUS, SH_C0, SH_C1, SH_C2, SH_C3, SH_OFFSET,
+                         TILE_SIZE)
 
-#: Largest radius kept (pixels), :data:`splatgl.splatmath.project.MAX_RADIUS`.
-MAX_RADIUS = float(2 ** 52)
 #: Pixels added on every side of a splat's box: the box is computed in float64 from the
 #: float32 conic, and the exp below differs from the reference's in the last bits, so a pixel
 #: the reference blends at exactly 1/255 stays inside.

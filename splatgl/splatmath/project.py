@@ -15,7 +15,7 @@ from ..cameras.equirect import eye_space
 from ..cameras.view import anchored_camera
 from ..model.quaternion import quat_to_rotmat  # noqa: F401 (the projection's rotations; re-exported)
 from ..constants import (ALPHA_MIN, DET_CANCEL_RATIO, EXTENT_DISCRIMINANT_FLOOR, EXTENT_SIGMAS,
-                         LOW_PASS, AA_MIN_FACTOR, SH_C0, SH_C1, SH_C2, SH_C3,
+                         LOW_PASS, AA_MIN_FACTOR, MAX_RADIUS, SH_C0, SH_C1, SH_C2, SH_C3,
                          SH_OFFSET, sh_coeff_count)
 
 
@@ -156,11 +156,6 @@ def discriminant(cov2d: np.ndarray) -> np.ndarray:
         disc = mid * mid - (a * c - b * b)
         half = 0.5 * (a - c)
         return np.where(np.isfinite(disc), disc, half * half + b * b)
-
-
-#: Largest extent (pixels) :func:`reference_radius` returns, so that it fits an int64; far
-#: beyond any image (a larger radius covers the same tiles).
-MAX_RADIUS = float(2 ** 52)
 
 
 def reference_radius(cov2d: np.ndarray) -> np.ndarray:
