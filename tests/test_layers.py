@@ -33,7 +33,7 @@ from splatgl.splatmath.normals import splat_normals
 
 ALL = with_layers(*Layer)
 #: The quad path's accumulated normals against the reference: unit vectors with the colour's
-#: weights, so within the alpha the quad adds beyond the reference (README: up to 0.066 at a
+#: weights, so within the alpha the quad adds beyond the reference (docs/results/summary.md: up to 0.066 at a
 #: pixel from the tile rectangle, under 0.01 from the early stop).
 QUAD_NORMAL = 0.07
 

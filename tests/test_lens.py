@@ -162,7 +162,7 @@ def _scene(shared_scenes, name="ply/donut_sh0.ply"):
 
 #: A fisheye squeezes wide, faint splats into few pixels, so the reference's tile-rectangle cut
 #: (3DGS getRect stops up to a pixel short of the 3-sigma radius on the right and bottom; the
-#: quad path draws that tail, documented up to alpha 0.066 at one pixel in the README) shows
+#: quad path draws that tail, documented up to alpha 0.066 at one pixel in docs/results/summary.md) shows
 #: more often: measured max 0.048 in colour and 0.048 in alpha, always at the first pixel
 #: column or row of a tile.  Everything else keeps test_compare's bounds.
 MAX_ABS_LENS = 0.07

@@ -5,7 +5,7 @@ splats in front of it over the plane's colour), a single splat before or behind 
 box drawn by the project's mesh rasterizer (whose depth is checked against ray casting).
 
 Tolerances: the reference and the tile renderer agree to float32 rounding (1e-5); the quad
-path as for colour against the reference (README: max 0.006-0.027 on real scenes; 0.02 here).
+path as for colour against the reference (docs/results/summary.md: max 0.006-0.027 on real scenes; 0.02 here).
 """
 
 from __future__ import annotations

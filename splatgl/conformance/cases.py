@@ -27,7 +27,7 @@ from ..stress.cases import case_by_name
 #: MAX_OFF_4 of its pixels differ by more than 4/255 in some channel.  40 dB: an 8-bit PNG's
 #: rounding alone costs about 59 dB on a full-range image, and splatgl's quad path, which differs
 #: from the reference by its missing early stop, its extent and the tile rectangle's tails,
-#: scores 66-89 dB on the real scenes (README); a flipped image, a bucketed sort that ties
+#: scores 66-89 dB on the real scenes (docs/results/summary.md); a flipped image, a bucketed sort that ties
 #: overlapping splats or an extent of sqrt(8) sigma score far below.
 MIN_PSNR = 40.0
 MAX_OFF_4 = 0.01

@@ -152,7 +152,7 @@ def quad_emulation(settings) -> Emulation:
     """The knobs that make the reference follow the quad path's variants in ``settings``
     (:class:`~splatgl.model.settings.RenderSettings`): its sort keys, its quad extent, and
     float16 scales of compact GPU storage (as ``half=on``).  Blend precision and the missing
-    early stop have no knob (the quad path's own differences, README)."""
+    early stop have no knob (the quad path's own differences, docs/results/summary.md)."""
     extent = {QuadExtent.ELLIPSE: "opacity", QuadExtent.SQUARE: "square",
               QuadExtent.FAST: "fixed-quad"}[settings.extent]
     return Emulation(sort="bucket16" if settings.sort_key is SortKey.BUCKET16 else "exact",

@@ -25,8 +25,8 @@ from .build import HEIGHT, WIDTH, at_pixel, front_camera, splats
 BOUND_NOTES = {
     "quad": "0.03 = the early stop the quad path cannot do (the dropped splat weighs <= 0.0099 "
             "x its colour, colours <= 0.95 here) + the tails the reference's tile rectangle "
-            "cuts up to ~1 px short of 3 sigma (alpha <= 0.016 measured on real scenes, README "
-            "'The quad path against the reference') + float32 rounding",
+            "cuts up to ~1 px short of 3 sigma (alpha <= 0.016 measured on real scenes, "
+            "docs/results/summary.md) + float32 rounding",
     "tile": "1e-4 = float32 rounding of the reference's own rules: positions and conics carry "
             "~6e-8 relative error (relative to the scene anchor), ~1e-5 px at these image "
             "sizes, ~1e-5 of alpha per layer; 10x margin for a few layers.  A splat sitting "
@@ -317,7 +317,7 @@ def _equirect_seam() -> Setup:
 
 
 #: The lens cases' quad bound: the reference's tile rectangle cuts splat tails up to ~1 px
-#: short of 3 sigma on the right and bottom and the quad path draws them (README, alpha up to
+#: short of 3 sigma on the right and bottom and the quad path draws them (docs/results/summary.md, alpha up to
 #: 0.066 at one pixel); wide, faint splats squeezed by a fisheye or stretched near a pole meet
 #: such a tile edge more often (docs/camera-models.md).
 _LENS_BOUNDS = Bounds(quad=0.07, why="lens: the tile-rectangle tail, up to alpha 0.066 at one pixel")
