@@ -27,7 +27,7 @@ from ..model.scene import Scene, SceneSource
 from ._messages import reader_guard
 
 #: Format modules in detection order (most specific signature first).
-_FORMAT_MODULES = ("streamed_sog", "sog", "gltf", "compressed_ply", "ply", "spz", "ksplat", "splat")
+_FORMAT_MODULES = ("streamed_sog", "lcc", "sog", "gltf", "compressed_ply", "ply", "spz", "ksplat", "splat")
 #: Writer modules, most specific extension first (.compressed.ply before .ply).
 _WRITER_MODULES = ("compressed_ply_write", "ply_write", "splat", "spz_write", "sog_write", "gltf_write")
 
