@@ -17,6 +17,10 @@ from ..model.scene import Scene, activate
 from .build import LodTree, bounding_radii, level_offsets
 
 ELEMENT = "lod_node"
+#: The element after ``lod_node`` with every node's bounding sphere (``x y z radius``, float32,
+#: leaves first, in node order): what a cut reads (:mod:`splatgl.lod.lazy`).  Files written
+#: before it are still read (the radii recomputed).
+BOUNDS = "lod_bound"
 #: A level-of-detail file's name ends so (any ``.ply`` is read, but not ``.compressed.ply``).
 SUFFIX = ".lod.ply"
 _COMMENT = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
@@ -29,6 +33,32 @@ def check_lod_name(path: Path) -> None:
         raise SceneFormatError(path, f"a level-of-detail file is an INRIA PLY; name it *{SUFFIX}")
 
 
+def COMMENTS(branching: int, anchor: np.ndarray) -> tuple[str, ...]:  # noqa: N802
+    """The header comments: who wrote it, the tree's shape, and the anchor the lazy reader's
+    cut subtracts (the centre of the leaves' 1-99 % box, a float32 value)."""
+    xyz = " ".join(repr(float(v)) for v in anchor)
+    return ("written by splatgl lod", f"lod branching {branching}", f"lod anchor {xyz}")
+
+
+def leaf_anchor(means: np.ndarray) -> np.ndarray:
+    """(3,) float64 centre of the 1-99 % box of the leaves' (N, 3) ``means`` (float32 value;
+    zeros where not finite): the one both writers store (the out-of-core build finds the same
+    box in its streaming passes, :mod:`splatgl.lod.ply_rows`)."""
+    points = means.astype(np.float64)
+    lo, hi = np.percentile(points, 1.0, axis=0), np.percentile(points, 99.0, axis=0)
+    anchor = (0.5 * (lo + hi)).astype(np.float32).astype(np.float64)
+    return anchor if np.isfinite(anchor).all() else np.zeros(3)
+
+
+def bounds_rows(means: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """The :data:`BOUNDS` rows of nodes with float32 ``means`` (K, 3) and ``radius`` (K,)."""
+    out = np.empty(means.shape[0], [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("radius", "<f4")])
+    for i, c in enumerate("xyz"):
+        out[c] = means[:, i]
+    out["radius"] = radius
+    return out
+
+
 def write_lod(path: Path, tree: LodTree) -> None:
     """Write ``tree`` (atomically: a temp file, checked to be complete, then renamed; a failed
     write raises one line naming ``path``) to a ``*.ply`` name (:func:`check_lod_name`)."""
@@ -39,8 +69,9 @@ def write_lod(path: Path, tree: LodTree) -> None:
     inner = tree.nodes.subset(slice(n, None))
     write_checked(path, lambda tmp: ply_write.write_elements(
         tmp, [("vertex", ply_write.scene_to_vertices(leaves, normals=False)),
-              (ELEMENT, ply_write.scene_to_vertices(inner, normals=False))],
-        comments=("written by splatgl lod", f"lod branching {tree.branching}")))
+              (ELEMENT, ply_write.scene_to_vertices(inner, normals=False)),
+              (BOUNDS, bounds_rows(tree.nodes.means, tree.radius))],
+        comments=COMMENTS(tree.branching, leaf_anchor(leaves.means))))
 
 
 def is_lod_file(path: Path) -> bool:
