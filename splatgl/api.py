@@ -14,12 +14,11 @@ from typing import Iterable, Iterator
 import moderngl
 import numpy as np
 
-from .cameras import registry
 from .cameras.camera import Camera
 # the default camera is camera code (the path generators use it too); part of the API
 from .cameras.framing import DEFAULT_ELEVATION, DEFAULT_FOV_Y, ORTHOGRAPHIC_SPAN, default_camera  # noqa: F401
 from .errors import SplatglError
-from .gl.context import NO_GL_RENDERER, create_headless_context, make_current, renderer_name
+from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
 from .gl.limits import check_image_size
 from .output.layers import BASE, Layer, RenderOutput, with_layers
@@ -55,17 +54,33 @@ class Renderer:
     through :mod:`splatgl.renderers.registry`).
 
     Per (scene, settings) the GPU state (uploaded scene, programs, targets) is kept, so
-    rendering many views of one scene uploads it once.  Use as a context manager or call
-    :meth:`close`.
+    rendering many views of one scene uploads it once.  The context is made when first needed
+    (the NumPy reference and the CPU renderer draw without one).  Use as a context manager or
+    call :meth:`close`.
     """
 
     def __init__(self, ctx: moderngl.Context | None = None):
         self._owns_ctx = ctx is None
-        self.ctx = ctx if ctx is not None else create_headless_context()
-        self.programs = ProgramCache(self.ctx)
-        self._paths: dict[tuple, object] = {}
+        self._ctx = ctx
+        self._programs: ProgramCache | None = None
+        self._paths: dict[tuple, registry.FrameRenderer] = {}
         self._sizes_ok: set[tuple] = set()
         self.closed = False
+
+    @property
+    def ctx(self) -> moderngl.Context:
+        """The OpenGL context (made on first use)."""
+        if self._ctx is None:
+            self._check_open()
+            self._ctx = create_headless_context()
+        return self._ctx
+
+    @property
+    def programs(self) -> ProgramCache:
+        """The compiled programs of :attr:`ctx`."""
+        if self._programs is None:
+            self._programs = ProgramCache(self.ctx)
+        return self._programs
 
     def _check_open(self) -> None:
         if self.closed:
@@ -76,7 +91,7 @@ class Renderer:
         """Refuse an image the context or the memory cannot hold, before allocating it."""
         key = (camera.width, camera.height, kind, settings.precision)
         if key not in self._sizes_ok:
-            check_image_size(camera.width, camera.height, "image", kind, self.ctx,
+            check_image_size(camera.width, camera.height, "image", kind, self._gl(kind),
                              settings.precision)
             self._sizes_ok.add(key)
 
@@ -88,12 +103,21 @@ class Renderer:
             path.release()
             path = None
         if path is None:
-            path = registry.make(kind, scene, settings, self.ctx, self.programs)
+            gl = self._gl(kind) is not None
+            path = registry.make(kind, scene, settings, self.ctx if gl else None,
+                                 self.programs if gl else None)
         self._paths[key] = path  # most recently used last
         while len(self._paths) > MAX_CACHED_PATHS:
             oldest = next(iter(self._paths))
             self._paths.pop(oldest).release()
         return path
+
+    def _gl(self, kind: RendererKind) -> moderngl.Context | None:
+        """The context, made current, where renderer ``kind`` draws with OpenGL; else None."""
+        if not registry.entry(kind).gl:
+            return None
+        make_current(self.ctx)   # another context may have been made current since
+        return self.ctx
 
     def renderer_for(self, scene: Scene, settings: RenderSettings,
                      kind: RendererKind = RendererKind.QUAD) -> registry.FrameRenderer:
@@ -104,8 +128,9 @@ class Renderer:
         :func:`splatgl.gl.context.make_current` before using the object directly.
         """
         self._check_open()
-        make_current(self.ctx)
-        return self._path(scene, settings, RendererKind(kind))
+        kind = registry.entry(kind).kind
+        self._gl(kind)
+        return self._path(scene, settings, kind)
 
     def render(self, scene: Scene, camera: Camera | None = None,
                settings: RenderSettings | None = None, kind: RendererKind = RendererKind.QUAD,
@@ -137,7 +162,6 @@ class Renderer:
         layers = frozenset(layers)
         view = View.of(camera, settings, scene)
         geometry = view.geometry(under) if under is not None else None  # checked before work
-        make_current(self.ctx)  # another context may have been made current since
         self._check_size(camera, kind, settings)
         with _reporting(self._path(scene, settings, kind), progress) as path:
             if geometry is None:
@@ -168,13 +192,15 @@ class Renderer:
         if self.closed:
             return
         self.closed = True
-        make_current(self.ctx)
+        if self._ctx is not None:
+            make_current(self._ctx)
         for path in self._paths.values():
             path.release()
         self._paths.clear()
-        self.programs.release()
-        if self._owns_ctx:
-            self.ctx.release()
+        if self._programs is not None:
+            self._programs.release()
+        if self._owns_ctx and self._ctx is not None:
+            self._ctx.release()
 
     def __enter__(self) -> "Renderer":
         return self
@@ -200,7 +226,7 @@ def _reporting(path, progress: ProgressCallback | None):
 def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings,
                           progress: ProgressCallback | None = None) -> np.ndarray:
     """The NumPy per-tile reference as an (H, W, 4) float32 image (no OpenGL)."""
-    return render_reference_layers(scene, camera, settings, progress).rgba
+    return render_reference_layers(scene, camera, settings, progress, BASE).rgba
 
 
 def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettings,
@@ -209,25 +235,16 @@ def render_reference_layers(scene: Scene, camera: Camera, settings: RenderSettin
                             under: UnderImage | None = None) -> RenderOutput:
     """The NumPy per-tile reference's ``layers`` (colour, alpha and depth always; float32
     math, no OpenGL), composited into ``under`` if given (:meth:`Renderer.render_layers`)."""
-    from .reference import render_reference
-
-    geometry = View.of(camera, settings, scene).geometry(under) if under is not None else None
-    ref = render_reference(scene, camera, settings, compat=settings.convention,
-                           progress=progress, layers=frozenset(layers), under=geometry)
-    return ref.output(frozenset(layers))
+    with Renderer() as r:
+        return r.render_layers(scene, camera, settings, RendererKind.REFERENCE, progress, layers,
+                               under)
 
 
 def gl_renderer_name(kind: RendererKind | str, ctx: moderngl.Context | None) -> str:
     """What drew a frame of ``kind``, as ``--timings`` prints it: the OpenGL renderer's name
     (``ctx``'s), or what stands in for it where no OpenGL draws (the NumPy reference, the CPU
-    renderer)."""
-    kind = RendererKind(kind)
-    if kind is RendererKind.REFERENCE or ctx is None:
-        return NO_GL_RENDERER
-    if kind is RendererKind.CPU:
-        from .renderers.cpu import describe
-        return describe()
-    return renderer_name(ctx)
+    renderer): :func:`splatgl.renderers.registry.describe`."""
+    return registry.describe(kind, ctx)
 
 
 def _inputs(scene: Scene, camera: Camera | None,
@@ -241,13 +258,10 @@ def render(scene: Scene, camera: Camera | None = None, settings: RenderSettings 
            kind: RendererKind = RendererKind.QUAD) -> np.ndarray:
     """Render one view with a fresh context (use :class:`Renderer` for many views); ``camera``
     and ``settings`` as in :meth:`Renderer.render`.  As ``splatgl render``, a setting ``kind``
-    does not draw is refused (:func:`splatgl.model.settings.check_honoured`); a
+    does not read is refused (:func:`splatgl.renderers.registry.check_settings`); a
     :class:`Renderer` draws one ``settings`` with every kind (the viewer's Tab), each reading
-    its own part."""
+    its own part.  No OpenGL context is made for a renderer that needs none."""
     camera, settings = _inputs(scene, camera, settings)
-    check_convention(settings.convention, kind)
-    check_honoured(settings, kind)
-    if RendererKind(kind) is RendererKind.REFERENCE:
-        return render_reference_rgba(scene, camera, settings)
+    registry.check_settings(settings, kind)
     with Renderer() as r:
         return r.render(scene, camera, settings, kind)

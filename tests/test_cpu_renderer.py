@@ -287,7 +287,9 @@ def test_what_it_does_not_draw_is_refused_in_one_line(case, fragment):
 
 
 def test_without_numba_it_says_which_extra(monkeypatch):
-    monkeypatch.setattr(cpu, "installed", lambda: False)
+    from splatgl.renderers import registry
+
+    monkeypatch.setattr(registry, "installed", lambda kind: False)
     with pytest.raises(SplatglError, match=r"pip install 'splatgl\[fast\]'"):
         cpu.CpuRenderer(random_scene(10, 1), RenderSettings())
 

@@ -195,7 +195,7 @@ def test_quad_variants_map_onto_knobs():
 
 
 def test_gpu_renderers_refuse_an_emulation():
-    from splatgl.model.settings import check_fidelity
+    from splatgl.renderers.registry import check_fidelity
     settings = RenderSettings(emulation=Emulation(extent="fixed"))
     with pytest.raises(SplatglError, match="applies to the NumPy reference only"):
         check_fidelity(settings, "quad")

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import pytest
 
-from helpers import shared_file
+from helpers import SURFELS, random_scene, shared_file
 from splatgl.cameras.equirect import Equirectangular, eye_space
 from splatgl.cameras.fisheye import Fisheye, fisheye_theta_limit
 from splatgl.cameras.registry import retarget
@@ -30,6 +30,7 @@ from splatgl.imagefiles.images import read_image
 from splatgl.evaluation.metrics import image_errors, psnr
 from splatgl.api import default_camera, render_reference_rgba
 from splatgl.model.settings import RenderSettings
+from splatgl.renderers.registry import check
 from splatgl.renderers.stereo import eye_cameras
 
 from test_compare import MAX_OFF_1, MIN_PSNR
@@ -281,9 +282,9 @@ def test_equirect_matches_cube_faces(gl_renderer, shared_scenes):
 
 def test_unsupported_combinations_are_errors():
     with pytest.raises(CameraError, match="3DGS scenes only"):
-        Camera.fisheye(8, 8, 180).model.check_support(True, "quad")
+        check("quad", model=Camera.fisheye(8, 8, 180).model, scene=random_scene(2, **SURFELS))
     with pytest.raises(CameraError, match="cannot draw equirectangular"):
-        Camera.equirectangular(8, 4).model.check_support(False, "tile")
+        check("tile", model=Camera.equirectangular(8, 4).model)
     with pytest.raises(CameraError, match="4 finite numbers"):
         Fisheye((0.1, float("nan"), 0.0, 0.0))
     with pytest.raises(CameraError, match="must be a CameraModel"):

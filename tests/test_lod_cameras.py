@@ -21,6 +21,7 @@ from splatgl.lod.cut import CutData, select_cut_weights
 from splatgl.lod.render import LodSettings, blended_scene
 from splatgl.lod.source import lod_renderer
 from splatgl.model.settings import RenderSettings
+from splatgl.renderers.registry import refusal
 from splatgl.renderers.stereo import eye_cameras
 
 W, H = 48, 32
@@ -101,7 +102,8 @@ def test_quad_cut_at_the_leaves_draws_the_plain_scene(ctx, shell, model, cut):
         lod.release()
 
 
-@pytest.mark.parametrize("model", [m for m in MODELS if _cameras(W, H)[m].model.draws_tiles])
+@pytest.mark.parametrize("model", [m for m in MODELS
+                                   if refusal("tile", model=_cameras(W, H)[m].model) is None])
 def test_tile_cut_at_the_leaves_draws_the_plain_scene(ctx, shell, model):
     from splatgl.renderers.tile import TileRenderer
 
@@ -121,8 +123,9 @@ def test_tile_cut_at_the_leaves_draws_the_plain_scene(ctx, shell, model):
 @pytest.mark.parametrize("model", MODELS)
 def test_cpu_cut_at_the_leaves_draws_the_plain_scene(shell, model):
     from splatgl.renderers import cpu
+    from splatgl.renderers.registry import installed
 
-    if not cpu.installed():
+    if not installed("cpu"):
         pytest.skip("the CPU renderer needs numba")
     scene, tree = shell
     camera = _cameras(W, H)[model]

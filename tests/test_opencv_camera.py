@@ -17,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from helpers import IN_VIEW, random_scene, scene_with_colors
+from helpers import IN_VIEW, SURFELS, random_scene, scene_with_colors
 from splatgl.api import render_reference_rgba
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.files import camera_from_json
@@ -28,6 +28,7 @@ from splatgl.datasets.views import View
 from splatgl.errors import CameraError
 from splatgl.evaluation.metrics import image_errors, psnr
 from splatgl.model.settings import RenderSettings
+from splatgl.renderers.registry import check
 from splatgl.splatmath import project as pm
 
 from test_compare import MAX_OFF_1, MIN_PSNR
@@ -225,8 +226,8 @@ def test_camera_json_round_trip_and_bad_distortion(tmp_path):
 def test_surfels_are_refused_and_the_tile_renderer_draws_it():
     model = OpenCV(k1=0.1)
     with pytest.raises(CameraError, match="opencv cameras render 3DGS scenes only"):
-        model.check_support(True, "quad")
-    model.check_support(False, "tile")
+        check("quad", model=model, scene=random_scene(2, **SURFELS))
+    check("tile", model=model)
 
 
 # ------------------------------------------------------------------ the shader piece

@@ -113,7 +113,7 @@ def test_orbit_path_takes_up_and_refuses_distance(tmp_path, capsys):
 
 # Issue 38: options only some renderers read were accepted and ignored by the others (the
 # quad path's --extent, --sort, --precision ... on the cpu and reference renderers) while
-# --emulate was refused there; one table (model/settings.py HONOURED_BY) now rules them all.
+# --emulate was refused there; one table (each entry's reads, splatgl/renderers/registry.py) now rules them all.
 @pytest.mark.parametrize("renderer, option, value, drawn_by, use", [
     ("cpu", "--extent", "square", "quad renderer", "quad"),
     ("reference", "--extent", "fast", "quad renderer", "quad"),

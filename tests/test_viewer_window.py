@@ -303,10 +303,10 @@ def test_t_skips_the_cpu_renderer_without_numba(viewer, monkeypatch):
     import glfw
 
     from splatgl.model.settings import RendererKind
-    from splatgl.renderers import cpu
+    from splatgl.renderers import registry
 
     v = viewer
-    monkeypatch.setattr(cpu, "installed", lambda: False)
+    monkeypatch.setattr(registry, "installed", lambda kind: RendererKind(kind) is not RendererKind.CPU)
     v.on_key(glfw.KEY_T, glfw.PRESS, 0)
     assert v.kind is RendererKind.TILE and v.step()
     v.on_key(glfw.KEY_T, glfw.PRESS, 0)

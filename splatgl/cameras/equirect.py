@@ -97,7 +97,6 @@ class Equirectangular(CameraModel):
     glsl: ClassVar[str] = "equirect"
     cull: ClassVar[CullKind] = CullKind.SPHERE
     draws_surfels: ClassVar[bool] = False
-    draws_tiles: ClassVar[bool] = False   # the tile renderer makes no seam copies
     intrinsics_optional: ClassVar[bool] = True
     no_fov: ClassVar[str] = "an equirectangular panorama always spans 360 x 180 degrees"
     aspect: ClassVar[float | None] = 2.0

@@ -11,7 +11,8 @@ same for every model.  Around those two a model also says:
 - the depth that orders and layers its splats (:meth:`~CameraModel.depth`);
 - its shader piece (``shaders/cameras/<glsl>.glsl``: ``project_mean``, ``jacobian``,
   ``in_view``, ``view_depth``), its ``#define`` switches and its uniform values;
-- what it cannot draw (:meth:`~CameraModel.check_support`);
+- whether it draws 2DGS surfels (:meth:`~CameraModel.check_surfels`; what each renderer draws:
+  :mod:`splatgl.renderers.registry`);
 - how it is made from a field of view (:meth:`~CameraModel.intrinsics`, the CLI's ``--projection``)
   and how its parameters read and write in camera files: splatgl's camera JSON
   (:meth:`~CameraModel.to_json`), COLMAP's ``cameras.txt``/``.bin`` (:attr:`~CameraModel.colmap_names`,
@@ -74,8 +75,6 @@ class CameraModel:
     parallel_rays: ClassVar[bool] = False
     #: Whether 2DGS surfels can be drawn (their ray-plane intersection needs a pinhole matrix).
     draws_surfels: ClassVar[bool] = True
-    #: Whether the tile renderer can draw it.
-    draws_tiles: ClassVar[bool] = True
     #: Why ``--fov`` does not apply to this model ("" where it does).
     no_fov: ClassVar[str] = ""
     #: Whether re-projecting a camera to this model keeps its intrinsics (orthographic: fx, fy
@@ -176,15 +175,12 @@ class CameraModel:
         return {}
 
     # ------------------------------------------------------------------ use
-    def check_support(self, surfels: bool, renderer: str) -> None:
-        """Raise :class:`~splatgl.errors.CameraError` where ``renderer`` cannot draw this model
-        (or cannot draw it for a scene of 2DGS surfels)."""
+    def check_surfels(self, surfels: bool) -> None:
+        """Raise :class:`~splatgl.errors.CameraError` for a scene of 2DGS surfels (``surfels``)
+        where this model draws none, in any renderer."""
         if surfels and not self.draws_surfels:
             raise CameraError(f"{self.name} cameras render 3DGS scenes only; this scene holds 2DGS "
                               "surfels (use a perspective or orthographic camera)")
-        if renderer == "tile" and not self.draws_tiles:
-            raise CameraError(f"the tile renderer cannot draw {self.name} images; use --renderer "
-                              "quad or reference")
 
     @classmethod
     def intrinsics(cls, width: int, height: int, fov_degrees: float | None,

@@ -19,8 +19,7 @@ from ..model.scene import Scene
 from ..constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
 from ..model.settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
                               RendererKind, RenderSettings, SortKey)
-from ..model.settings import check_convention as library_check_convention
-from ..model.settings import check_honoured
+from ..renderers.registry import check_settings
 from ._fidelity_args import add_fidelity_arguments, fidelity_fields
 from ..renderers.stereo import StereoLayout
 from ..model.transform import parse_transform
@@ -223,16 +222,15 @@ def settings_from_args(args: argparse.Namespace) -> RenderSettings:
 def check_convention(args: argparse.Namespace, *kinds: RendererKind | str, **advice) -> None:
     """``--convention gsplat`` and ``--emulate`` need the NumPy reference among ``kinds``,
     ``--order per-pixel`` the reference or the tile renderer, and every option only some
-    renderers read one that reads it (:data:`splatgl.model.settings.HONOURED_BY`;
-    :func:`splatgl.model.settings.check_convention`, :func:`~splatgl.model.settings.check_honoured`),
+    renderers read one that reads it (:func:`splatgl.renderers.registry.check_settings`),
     checked before any work."""
-    library_check_convention(args.convention, *kinds)
-    check_honoured(RenderSettings(**quad_fields(args), **fidelity_fields(args)), *kinds, **advice)
+    check_settings(RenderSettings(convention=args.convention, **quad_fields(args),
+                                  **fidelity_fields(args)), *kinds, **advice)
 
 
 def quad_fields(args: argparse.Namespace) -> dict:
     """The RenderSettings fields of the options only some renderers read
-    (:data:`splatgl.model.settings.HONOURED_BY`), where the command has them."""
+    (:data:`splatgl.renderers.registry.OPTIONS`), where the command has them."""
     names = {"precision": "precision", "extent": "extent", "sort_key": "sort",
              "preprocess": "preprocess", "early_stop": "early_stop", "gpu_storage": "gpu_storage"}
     return {field: getattr(args, name) for field, name in names.items()

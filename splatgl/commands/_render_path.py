@@ -36,6 +36,7 @@ from ..lod.frames import LodFrames
 from ..lod.io import is_lod_file, read_lod
 from ..lod.render import LodSettings
 from ..model.settings import RendererKind
+from ..renderers.registry import check
 from ..renderers.stereo import StereoLayout, StereoRenderer
 from ._common import (check_convention, default_size, demo_scene_path, load_scene_arg,
                       positive_float, projection_from_args, settings_from_args)
@@ -242,11 +243,11 @@ def run_path(args: argparse.Namespace) -> int:
         raise SplatglError(f"--fps must be positive, got {fps}")
     kind = RendererKind(args.renderer)
     record = frame_record(args, scene, settings, target, kind, lod)
+    check(kind, scene=scene, settings=settings)     # before the output folder exists
     if kind is RendererKind.CPU and not executor.sharded:
-        # refusals first, then the kernels (compiled on first use, half a minute), all before
-        # the output folder exists: a Ctrl-C during the compile leaves nothing behind
-        from ..renderers.cpu import check_scene, prepare
-        check_scene(scene, settings)
+        # the kernels (compiled on first use, half a minute) before the output folder exists
+        # too: a Ctrl-C during the compile leaves nothing behind
+        from ..renderers.cpu import prepare
         prepare()
     run = None
     gl_name = "not known here (the frames were rendered by workers)"

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..renderers.registry import names as renderer_names
 from ..imagefiles.pictures import heatmap, side_by_side
 from ..imagefiles.image_formats import image_format, suffix_list
 from ..imagefiles.images import write_image
@@ -59,10 +60,10 @@ examples:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("--renderer", choices=[k.value for k in RendererKind], default=None,
+    p.add_argument("--renderer", choices=renderer_names(), default=None,
                    help="the renderer under test (default quad; not with --image, where the "
                         "image is under test)")
-    p.add_argument("--against", choices=[k.value for k in RendererKind], default="reference",
+    p.add_argument("--against", choices=renderer_names(), default="reference",
                    help="the renderer taken as truth (default reference)")
     g = p.add_argument_group("another program's image")
     g.add_argument("--image", type=Path, default=None, metavar="FILE",

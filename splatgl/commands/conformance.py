@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..renderers.registry import names as renderer_names
 from ..model.settings import RendererKind
 from ..progress import default_progress
 from ._common import add_force_argument
@@ -50,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     r.add_argument("dir", type=Path, metavar="DIR")
     r.add_argument("-o", "--output", type=Path, required=True, metavar="OUT",
                    help="folder for NAME.exr (or --format png)")
-    r.add_argument("--renderer", choices=[k.value for k in RendererKind], default="quad",
+    r.add_argument("--renderer", choices=renderer_names(), default="quad",
                    help="splatgl's renderer (default quad)")
     r.add_argument("--format", choices=("exr", "png"), default="exr", help="image format (default exr)")
     add_force_argument(r, "replace images in OUT that exist (never the kit's own files)")

@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..renderers.registry import names as renderer_names
 from ..output.atomic import atomic_write_text
 from ..datasets.dataset import MAX_WIDTH, Split, load_dataset
 from ..datasets.sources import select_indices
@@ -63,7 +64,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="only these views of the split (start:stop:step and/or indices)")
     g.add_argument("--max-width", type=int, default=MAX_WIDTH,
                    help=f"downscale wider photographs to this width (default {MAX_WIDTH}, 3DGS's rule; 0: never)")
-    g.add_argument("--renderer", choices=[k.value for k in RendererKind], default="quad",
+    g.add_argument("--renderer", choices=renderer_names(), default="quad",
                    help="renderer (default quad)")
     o = p.add_argument_group("reports")
     o.add_argument("--csv", type=Path, default=None, metavar="FILE", help="write per-view scores and means as CSV")

@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import argparse
-from contextlib import nullcontext
 from pathlib import Path
 
 from ..errors import SplatglError
-from ..gl.context import NO_GL_RENDERER
 from ..imagefiles.image_formats import (BIT_DEPTHS, IMAGE_FORMATS, image_format, picture_format,
                                     suffix_list)
 from ..imagefiles.images import write_image
@@ -15,7 +13,7 @@ from ..imagefiles.layer_files import check_exact_ids, picture_path, write_layers
 from ..output.layers import BASE, Layer, RenderOutput
 from ..progress import default_progress
 from ..imagefiles.pictures import depth_preview
-from ..api import Renderer, gl_renderer_name, render_reference_layers
+from ..api import Renderer, gl_renderer_name
 from ..lod.frames import LodFrames, render_lod
 from ..lod.io import read_lod
 from ..model.settings import RendererKind
@@ -25,6 +23,7 @@ from ._layers import add_layer_arguments, layer_files, under_from_args
 from ._outputs import add_force_argument, output_files
 from ._render_path import (add_path_arguments, lod_settings_from_args, refuse_path_only_options,
                            run_path)
+from ..renderers.registry import entry, names as renderer_names
 from ..renderers.stereo import StereoLayout, combine, eye_cameras
 
 NAME = "render"
@@ -59,7 +58,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "pattern such as frames/%%05d.png, or a video (.mp4)")
     p.add_argument("--bit-depth", type=int, choices=BIT_DEPTHS, default=8,
                    help="bits per channel of PNG/TIFF output (default 8)")
-    p.add_argument("--renderer", choices=[k.value for k in RendererKind], default="quad",
+    p.add_argument("--renderer", choices=renderer_names(), default="quad",
                    help="quad = the OpenGL quad path (default); tile = the per-tile compute-shader "
                         "renderer; reference = the NumPy per-tile reference (slow); cpu = the "
                         "reference's algorithm compiled for the CPU, no OpenGL (needs the fast "
@@ -173,20 +172,16 @@ def _render(args, scene, settings, cameras, kind, layers, under=None):
     """(a RenderOutput per camera, the renderer's last_times or None, the GL renderer's name):
     one context for all; ``under``: geometry to composite into."""
     progress = default_progress()
-    times = None
-    gl_name = NO_GL_RENDERER
     outs = []
-    with Renderer() if kind is not RendererKind.REFERENCE else nullcontext() as renderer:
+    gl = entry(kind).gl        # no OpenGL context for a renderer that draws without one
+    with Renderer() as renderer:
         for camera in cameras:
-            check_size(args, camera, kind, renderer.ctx if renderer is not None else None)
-            if renderer is None:
-                outs.append(render_reference_layers(scene, camera, settings, progress, layers, under))
-            elif layers != BASE or under is not None:
+            check_size(args, camera, kind, renderer.ctx if gl else None)
+            if layers != BASE or under is not None:
                 outs.append(renderer.render_layers(scene, camera, settings, kind, progress, layers,
                                                    under))
             else:
                 outs.append(RenderOutput(renderer.render(scene, camera, settings, kind, progress), None))
-        if renderer is not None:
-            times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
-            gl_name = gl_renderer_name(kind, renderer.ctx)
+        times = renderer.renderer_for(scene, settings, kind).last_times
+        gl_name = gl_renderer_name(kind, renderer.ctx if gl else None)
     return outs, times, gl_name

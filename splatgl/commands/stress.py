@@ -55,8 +55,8 @@ def run(args: argparse.Namespace) -> int:
         cases = [c for c in cases if not c.slow]
     renderers = tuple(args.renderer) if args.renderer else default_renderers()
     if "cpu" in renderers:
-        from ..renderers.cpu import check_available
-        check_available()
+        from ..renderers.registry import check
+        check("cpu")
 
     def progress(case) -> None:
         if not json_to_stdout(args):

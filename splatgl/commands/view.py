@@ -11,6 +11,7 @@ from ..cameras.up import resolve_up
 from ..errors import SplatglError
 from ..interactive.budget import check_fps
 from ..model.settings import RendererKind
+from ..renderers.registry import check, names
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       camera_from_args, check_convention, demo_scene_path, load_scene_arg,
                       settings_from_args)
@@ -38,8 +39,7 @@ MAX_WINDOW = (1600, 1000)
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("--renderer", choices=[RendererKind.QUAD.value, RendererKind.TILE.value,
-                                          RendererKind.CPU.value],
+    p.add_argument("--renderer", choices=names(interactive=True),
                    default="quad", help="start with the quad path (default), the tile renderer or "
                                         "the CPU renderer (the fast extra; no OpenGL for the "
                                         "exact frame: while the camera moves, the quad path's "
@@ -96,9 +96,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"loaded {scene.count:,} splats (SH degree {scene.sh_degree}) in "
           f"{time.perf_counter() - t0:.2f} s", flush=True)
     settings = settings_from_args(args)
-    if args.renderer == RendererKind.CPU.value:   # refused here, before a window opens
-        from ..renderers.cpu import check_scene, prepare
-        check_scene(scene, settings)
+    check(args.renderer, scene=scene, settings=settings)   # refused here, before a window opens
+    if args.renderer == RendererKind.CPU.value:
+        from ..renderers.cpu import prepare
         prepare()     # compiled on first use (half a minute), not in the window's first rest
     camera = camera_from_args(args, scene, settings)
     cameras = load_cameras(args.camera) if args.camera is not None else []

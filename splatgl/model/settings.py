@@ -136,115 +136,14 @@ MAX_ORDER_WINDOW = 32
 
 
 class RendererKind(enum.Enum):
+    """The ``--renderer`` names; what each draws and reads: :mod:`splatgl.renderers.registry`."""
+
     QUAD = "quad"
     TILE = "tile"
     REFERENCE = "reference"
     #: The reference's per-tile algorithm compiled for the CPU (numba), no OpenGL:
     #: :mod:`splatgl.renderers.cpu`.
     CPU = "cpu"
-
-
-def check_convention(convention: Convention | str, *kinds: RendererKind | str) -> None:
-    """Refuse ``convention`` gsplat unless one of ``kinds`` is the NumPy reference.
-
-    Only the reference implements the gsplat rules; the quad and tile renderers would silently
-    draw the inria ones.  Each GPU renderer checks its own kind (:class:`splatgl.Renderer`);
-    ``splatgl compare`` passes both of its sides, where a reference on either makes it
-    meaningful (the other renderer, drawing the inria rules, measured against the gsplat ones).
-    """
-    convention = Convention(convention)
-    if convention is Convention.INRIA:
-        return
-    if not any(RendererKind(k) is RendererKind.REFERENCE for k in kinds):
-        names = " and ".join(dict.fromkeys(RendererKind(k).value for k in kinds))
-        which = f"the {names} renderers follow" if " and " in names else f"the {names} renderer follows"
-        raise SplatglError(f"--convention {convention.value} applies to the NumPy reference only; "
-                           f"{which} the inria rules (use --renderer reference)")
-
-
-def check_fidelity(settings: "RenderSettings", *kinds: RendererKind | str) -> None:
-    """Refuse what only some renderers draw, unless one of ``kinds`` draws it: an emulation
-    (:mod:`splatgl.model.emulation`, the NumPy reference only) and the per-pixel order (the
-    reference and the tile renderer).  Like :func:`check_convention`, so the Python API never
-    silently draws the plain rules where a setting asked for others."""
-    kinds = tuple(RendererKind(k) for k in kinds)
-    if not settings.emulation.is_default and RendererKind.REFERENCE not in kinds:
-        names = " and ".join(dict.fromkeys(k.value for k in kinds))
-        raise SplatglError(f"--emulate {settings.emulation.label()} applies to the NumPy reference "
-                           f"only, not the {names} renderer (use --renderer reference)")
-    if settings.order is Order.PER_PIXEL and not ({RendererKind.REFERENCE, RendererKind.TILE} & set(kinds)):
-        why = ("; docs/fidelity.md says why the quad path has no per-pixel order"
-               if RendererKind.QUAD in kinds else "")
-        raise SplatglError("--order per-pixel is drawn by the tile renderer and the NumPy reference, "
-                           f"not the {_renderers(kinds)} (use --renderer tile or reference{why})")
-
-
-#: What each renderer honours among the settings not every renderer reads: the field, the
-#: option that sets it, and the renderers that draw it (the rest, background, near plane,
-#: antialiasing, SH cap and model transform, every renderer draws).  A value away from the
-#: field's default is refused in one line unless a renderer in play draws it
-#: (:func:`check_convention`, :func:`check_fidelity`, :func:`check_honoured`): no option is
-#: accepted and ignored.  ``order_window`` moreover needs the per-pixel order.
-HONOURED_BY: dict[str, tuple[str, frozenset[RendererKind]]] = {
-    "precision": ("--precision", frozenset({RendererKind.QUAD})),
-    "extent": ("--extent", frozenset({RendererKind.QUAD})),
-    "sort_key": ("--sort", frozenset({RendererKind.QUAD})),
-    "resort_interval": ("resort interval", frozenset({RendererKind.QUAD})),
-    "preprocess": ("--preprocess", frozenset({RendererKind.QUAD})),
-    "cull": ("cull", frozenset({RendererKind.QUAD})),
-    "early_stop": ("--early-stop", frozenset({RendererKind.QUAD})),
-    "gpu_storage": ("--gpu-storage", frozenset({RendererKind.QUAD, RendererKind.TILE})),
-    "convention": ("--convention", frozenset({RendererKind.REFERENCE})),
-    "emulation": ("--emulate", frozenset({RendererKind.REFERENCE})),
-    "order": ("--order", frozenset({RendererKind.REFERENCE, RendererKind.TILE})),
-    "order_window": ("--order-window", frozenset({RendererKind.TILE})),
-}
-
-
-def honours(kind: RendererKind | str, field: str) -> bool:
-    """Whether renderer ``kind`` draws the setting ``field`` (:data:`HONOURED_BY`; a field not
-    listed there every renderer draws)."""
-    return field not in HONOURED_BY or RendererKind(kind) in HONOURED_BY[field][1]
-
-
-def _renderers(kinds) -> str:
-    """``"cpu renderer"``, ``"quad and tile renderers"`` (the reference: "reference")."""
-    given = {RendererKind(k) for k in kinds}
-    names = [k.value for k in RendererKind if k in given]
-    return " and ".join(names) + (" renderers" if len(names) > 1 else " renderer")
-
-
-def _spelled(value) -> str:
-    if isinstance(value, enum.Enum):
-        return str(value.value)
-    if isinstance(value, bool):
-        return "on" if value else "off"
-    return str(value)
-
-
-def check_honoured(settings: "RenderSettings", *kinds: RendererKind | str,
-                   advice: str = "use --renderer {which}, or leave {option} out") -> None:
-    """Refuse, in one line naming the option, its value and the renderers, a setting away from
-    its default that none of ``kinds`` draws (:data:`HONOURED_BY`), and ``order_window`` without
-    the per-pixel order; with :func:`check_fidelity` (whose own messages cover the emulation
-    and the order; :func:`check_convention` the convention).  ``advice`` ends the message
-    (``{which}``: the renderers that draw the setting, ``{option}``: its option)."""
-    kinds = tuple(RendererKind(k) for k in kinds)
-    check_fidelity(settings, *kinds)
-    default = RenderSettings()
-    if settings.order_window != default.order_window and settings.order is not Order.PER_PIXEL:
-        raise SplatglError(f"--order-window {settings.order_window} applies to --order per-pixel "
-                           "only; the global order has no window (add --order per-pixel)")
-    for field, (option, drawn_by) in HONOURED_BY.items():
-        if field in ("convention", "emulation", "order"):
-            continue                                # their own messages, above
-        value = getattr(settings, field)
-        if value == getattr(default, field) or drawn_by & set(kinds):
-            continue
-        which = " or ".join(k.value for k in RendererKind if k in drawn_by)
-        raise SplatglError(f"{option} {_spelled(value)} applies to the {_renderers(drawn_by)} "
-                           f"only, not the {_renderers(kinds)}, which would ignore it "
-                           f"({advice.format(which=which, option=option)})")
 
 
 #: Auto near plane: this fraction of the scene's robust radius, never more than the reference's.

@@ -227,7 +227,7 @@ def project(scene: Scene, view: View, settings: RenderSettings | None = None,
     if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise ValueError(f"reference dtype must be float32 or float64, got {dt}")
     camera = view.camera
-    camera.model.check_support(scene.kind is SplatKind.SURFEL_2D, "reference")
+    camera.model.check_surfels(scene.kind is SplatKind.SURFEL_2D)
     if scene.kind is SplatKind.SURFEL_2D:
         return project_surfels(scene, view, settings, dt, options)
     near = view.near_in(dt)

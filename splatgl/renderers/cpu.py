@@ -19,7 +19,6 @@ distortion, orthographic) projects with the reference's NumPy stage 1, which is 
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import time
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -27,19 +26,19 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..cameras.view import View
-from ..errors import SplatglError
-from ..model.scene import Scene, SplatKind
-from ..model.settings import RendererKind, RenderSettings, check_convention, check_fidelity
+from ..model.scene import Scene
+from ..model.settings import RendererKind, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from ..progress import ProgressCallback, default_progress
 from ..order.sort import depth_sort
 from ..reference.stages import tile_grid
 from ._cpu_stage1 import Stage1
+from .registry import RENDERERS, Registered, check
 from .quad_layers import composite
 
-#: The layers this renderer draws.
-LAYERS = frozenset(BASE | {Layer.DEPTH})
+#: The layers this renderer draws (its entry in :mod:`splatgl.renderers.registry`).
+LAYERS = RENDERERS[RendererKind.CPU].layers
 
 
 @dataclass(frozen=True)
@@ -57,16 +56,16 @@ class CpuTimes:
     def total(self) -> float:
         return self.project + self.sort + self.bin + self.rasterize
 
+    @property
+    def ordering(self) -> float:
+        return self.project + self.sort
 
-def installed() -> bool:
-    """numba (the ``fast`` extra) is importable."""
-    return importlib.util.find_spec("numba") is not None
+    @property
+    def drawing(self) -> float:
+        return self.bin + self.rasterize
 
-
-def check_available() -> None:
-    """A one-line error naming the extra when numba is missing."""
-    if not installed():
-        raise SplatglError("--renderer cpu needs numba: pip install 'splatgl[fast]'")
+    def summary(self, count: int) -> str:
+        return f"splats {count:,}, {self.n_keys:,} tile entries"
 
 
 #: The compiled stages, once loaded (:func:`prepare`).
@@ -87,7 +86,7 @@ def prepare(progress: ProgressCallback | None = None) -> None:
 def _kernels(progress: ProgressCallback | None = None) -> SimpleNamespace:
     """The compiled stages (:mod:`._cpu_project`, :mod:`._cpu_raster`), ready (:func:`prepare`)."""
     global _LOADED
-    check_available()
+    check(RendererKind.CPU)           # numba, the fast extra
     if _LOADED is None:
         project_mod = importlib.import_module("splatgl.renderers._cpu_project")
         raster_mod = importlib.import_module("splatgl.renderers._cpu_raster")
@@ -121,15 +120,6 @@ def _warm_up(progress: ProgressCallback | None) -> None:
         progress(len(cameras), len(cameras), what)
 
 
-def check_scene(scene: Scene, settings: RenderSettings) -> None:
-    """Refuse what the CPU renderer does not draw, with one line naming it."""
-    if scene.kind is SplatKind.SURFEL_2D:
-        raise SplatglError("--renderer cpu draws 3DGS splats; this scene holds 2DGS surfels "
-                           "(use --renderer quad or tile)")
-    check_convention(settings.convention, RendererKind.CPU)
-    check_fidelity(settings, RendererKind.CPU)
-
-
 def tile_order(n_tiles: int, threads: int) -> np.ndarray:
     """Tile ids in the order the compiled loop hands them out: its threads take contiguous
     runs, so the ids are interleaved (thread c gets c, c + n, c + 2n, ...), which spreads busy
@@ -140,7 +130,7 @@ def tile_order(n_tiles: int, threads: int) -> np.ndarray:
     return np.concatenate([np.arange(c, n_tiles, threads, dtype=np.int64) for c in range(threads)])
 
 
-class CpuRenderer:
+class CpuRenderer(Registered):
     """Renders one scene on the CPU; reuse it across views.
 
     Attributes: ``scene``, ``settings``, ``last_times`` (:class:`CpuTimes` of the last
@@ -148,8 +138,10 @@ class CpuRenderer:
     nothing (no GL objects) and is there for :class:`splatgl.api.Renderer`'s cache.
     """
 
+    kind = RendererKind.CPU
+
     def __init__(self, scene: Scene, settings: RenderSettings):
-        check_scene(scene, settings)
+        check(self.kind, scene=scene, settings=settings)
         self.k = _kernels()
         self.scene, self.settings = scene, settings
         self.last_times: CpuTimes | None = None
@@ -162,13 +154,7 @@ class CpuRenderer:
         """The ``layers`` of one view (colour and alpha; depth when asked): RGB = C + (1 - A)
         background, alpha = A, as the quad path composites it; row 0 is the top."""
         layers = frozenset(layers)
-        if under is not None:
-            raise SplatglError("--renderer cpu cannot composite into --under geometry yet "
-                               "(use --renderer quad)")
-        if layers - LAYERS:
-            names = ", ".join(sorted(layer.value for layer in layers - LAYERS))
-            raise SplatglError(f"--renderer cpu draws colour, alpha and depth only, not {names} "
-                               "(use --renderer quad)")
+        check(self.kind, layers=layers, under=under is not None)
         rgba, depth = self.draw(view, Layer.DEPTH in layers)
         if any(self.settings.background):
             rgba = composite(rgba, self.settings.background)

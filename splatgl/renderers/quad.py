@@ -35,8 +35,7 @@ from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..gl.targets import ColorTarget
 from ..model.scene import Scene
-from ..model.settings import (EarlyStop, QuadExtent, RenderSettings, RendererKind, SortKey,
-                              check_convention, check_fidelity)
+from ..model.settings import EarlyStop, QuadExtent, RenderSettings, RendererKind, SortKey
 from ..order.stage import RowSource, SceneOrder, cpu_sort
 from ..output.layers import BASE, ORDERED, Layer, RenderOutput
 from ..output.under import UnderLayer
@@ -46,6 +45,7 @@ from .quad_gpu import QuadResources
 from .quad_layers import (check_ordered, composite, draw_ordered,  # noqa: F401 (composite: API)
                           layer_output, normal_location)
 from .quad_programs import FrameSwitches, QuadPrograms
+from .registry import Registered, check
 
 
 @dataclass(frozen=True)
@@ -79,8 +79,19 @@ class QuadTimes:
         return (self.cull_build + self.cull + self.sort + self.upload + self.prepass + self.coverage
                 + self.draw + self.readback)
 
+    @property
+    def ordering(self) -> float:
+        return self.cull + self.sort
 
-class QuadRenderer:
+    @property
+    def drawing(self) -> float:
+        return self.upload + self.draw
+
+    def summary(self, count: int) -> str:
+        return f"splats {self.drawn:,} drawn / {count:,}"
+
+
+class QuadRenderer(Registered):
     """Renders one scene through the quad path; reuse it across views, then :meth:`release`.
 
     ``rows``: where the sorted rows come from (default: :class:`SceneOrder` of ``scene``);
@@ -88,10 +99,11 @@ class QuadRenderer:
     ``tree.nodes``).  After each frame :attr:`last_times` holds its :class:`QuadTimes`.
     """
 
+    kind = RendererKind.QUAD
+
     def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
                  programs: ProgramCache | None = None, rows: RowSource | None = None):
-        check_convention(settings.convention, RendererKind.QUAD)  # it draws the inria rules only
-        check_fidelity(settings, RendererKind.QUAD)   # no emulation knobs, no per-pixel order
+        check(self.kind, settings=settings)   # the inria rules only, no emulation, global order
         self.ctx = ctx
         self.scene = scene
         self.settings = settings
@@ -145,7 +157,7 @@ class QuadRenderer:
 
     def order(self, view: View) -> np.ndarray:
         """The rows this view draws, front to back (the order stage of :attr:`rows`)."""
-        view.model.check_support(self.programs.surfels, "quad")
+        check(self.kind, scene=self.scene, model=view.model)
         return self.rows.order(view)
 
     def prepare(self, view: View, layers: frozenset[Layer] = BASE, under: bool = False,

@@ -45,10 +45,11 @@ from ..gl.buffers import GrowableBuffer
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..model.scene import Scene, SplatKind
-from ..model.settings import Order, RenderSettings, RendererKind, check_convention, check_fidelity
+from ..model.settings import Order, RenderSettings, RendererKind
 from ..reference.peak import check_camera
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
+from .registry import Registered, check
 from .tile_layers import layer_output, layer_switches, size_layer_buffers
 from .tile_keys import (MAX_GROUPS, RASTER_BAND_TILES, TILE_EMIT_CHUNK,
                         TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, splat_groups, tile_grid)
@@ -68,7 +69,7 @@ def _splat_buffers(ctx: moderngl.Context, n: int, surfel: bool, per_pixel: bool
     return bufs
 
 
-class TileRenderer:
+class TileRenderer(Registered):
     """Renders one scene with the per-tile compute path; reuse across views, then :meth:`release`.
 
     Attributes: ``scene``, ``settings``,
@@ -77,10 +78,11 @@ class TileRenderer:
     last stage, or None).
     """
 
+    kind = RendererKind.TILE
+
     def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
                  programs: ProgramCache | None = None):
-        check_convention(settings.convention, RendererKind.TILE)  # it draws the inria rules only
-        check_fidelity(settings, RendererKind.TILE)               # no emulation knobs
+        check(self.kind, settings=settings)    # the inria rules only, no emulation knobs
         self.per_pixel = settings.order is Order.PER_PIXEL
         self.ctx = ctx
         self.scene = scene
@@ -116,7 +118,7 @@ class TileRenderer:
         d.update(self.scene_buffers.defines())
         if self.settings.antialias:
             d["ANTIALIAS"] = 1
-        view.model.check_support(self.surfel, "tile")
+        check(self.kind, scene=self.scene, model=view.model)    # no panoramas
         d.update(view.defines)
         return self.programs.compute("tile_project.comp", d)
 

@@ -88,6 +88,17 @@ class TileTimes:
         return (self.project + self.scan + self.emit + self.sort + self.ranges + self.rasterize
                 + self.readback)
 
+    @property
+    def ordering(self) -> float:
+        return self.sort
+
+    @property
+    def drawing(self) -> float:
+        return self.rasterize
+
+    def summary(self, count: int) -> str:
+        return f"splats {count:,}, {self.n_keys:,} tile keys"
+
 
 @dataclass(frozen=True)
 class TileStages:

@@ -140,9 +140,9 @@ def _row(renderer: str, case: StressCase, setup, gl, want_rgba, want_depth) -> R
 
 def default_renderers() -> tuple[str, ...]:
     """:data:`RENDERERS` less ``cpu`` where numba is not installed."""
-    from ..renderers.cpu import installed
+    from ..renderers.registry import installed, names
 
-    return tuple(r for r in RENDERERS if r != "cpu" or installed())
+    return tuple(r for r in RENDERERS if r not in names() or installed(r))
 
 
 def run_case(case: StressCase, gl=None, renderers=None) -> CaseResult:

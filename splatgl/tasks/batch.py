@@ -141,8 +141,7 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
         frames = renderer.render_many(scene, [cameras[k] for k in todo], settings, kind,
                                       layers=target.layers)
         for n, (k, out) in enumerate(zip(todo, frames), 1):
-            times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None) \
-                if kind is not RendererKind.REFERENCE else None
+            times = getattr(renderer.renderer_for(scene, settings, kind), "last_times", None)
             render_seconds += times.total if times is not None else 0.0
             while len(pending) >= max(write_queue, 1):
                 pending.popleft().result()  # re-raises a failed write

@@ -59,16 +59,12 @@ class FrameResult:
 
 def _times(renderer: Renderer, scene: Scene, settings: RenderSettings,
            kind: RendererKind) -> tuple[float, float, str]:
-    """(sort, draw, splats text) of the last frame of ``kind`` from its ``last_times``."""
+    """(sort, draw, splats text) of the last frame of ``kind`` from its ``last_times``
+    (:class:`~splatgl.renderers.registry.StageTimes`)."""
     t = renderer.renderer_for(scene, settings, kind).last_times
     if t is None:
         return 0.0, 0.0, ""
-    if kind is RendererKind.TILE:
-        return t.sort, t.rasterize, f"splats {scene.count:,}, {t.n_keys:,} tile keys"
-    if kind is RendererKind.CPU:
-        return (t.project + t.sort, t.bin + t.rasterize,
-                f"splats {scene.count:,}, {t.n_keys:,} tile entries")
-    return t.cull + t.sort, t.upload + t.draw, f"splats {t.drawn:,} drawn / {scene.count:,}"
+    return t.ordering, t.drawing, t.summary(scene.count)
 
 
 def render_frame(renderer: Renderer, scene: Scene, camera: Camera, settings: RenderSettings,

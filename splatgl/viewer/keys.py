@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import glfw
 
-from ..errors import SplatglError
 from ..model.settings import Precision, RendererKind
+from ..renderers import registry
 from . import controls, recorder
 from .frames import ViewMode
 from .overlay import key_help
@@ -86,23 +86,15 @@ def on_key(v, key: int, action: int, mods: int) -> None:
     v.need_present = True
 
 
-#: The renderers T steps through, in order.
-_CYCLE = (RendererKind.QUAD, RendererKind.TILE, RendererKind.CPU)
+#: The renderers T steps through, in order: every one that draws at a window's pace.
+_CYCLE = tuple(RendererKind(name) for name in registry.names(interactive=True))
 
 
 def refusal(v, kind: RendererKind) -> str | None:
     """Why ``kind`` cannot draw viewer ``v``'s current view (the first clause of its error),
-    or None: the tile renderer has no panoramas; the CPU renderer needs numba and 3DGS splats."""
-    try:
-        if kind is RendererKind.TILE:
-            v.camera().model.check_support(False, kind.value)
-        elif kind is RendererKind.CPU:
-            from ..renderers.cpu import check_available, check_scene
-            check_available()
-            check_scene(v.scene, v.settings)
-    except SplatglError as exc:
-        return str(exc).split(";")[0].split(" (use ")[0]
-    return None
+    or None (:func:`splatgl.renderers.registry.refusal`)."""
+    why = registry.refusal(kind, scene=v.scene, settings=v.settings, model=v.camera().model)
+    return None if why is None else why.split(";")[0].split(" (use ")[0]
 
 
 def tile_allowed(v, what: str) -> bool:

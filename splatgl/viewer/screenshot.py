@@ -11,7 +11,8 @@ from ..imagefiles.images import write_image
 from ..output.files import OutputFiles
 from ..api import Renderer
 from ..model.scene import Scene
-from ..model.settings import GpuStorage, RendererKind, RenderSettings, honours
+from ..model.settings import GpuStorage, RendererKind, RenderSettings
+from ..renderers.registry import honours
 from ..renderers.stereo import StereoLayout, StereoRenderer
 
 PREFIX = "splatgl-view-"

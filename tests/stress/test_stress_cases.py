@@ -93,9 +93,10 @@ def test_cli_json(capsys):
 
 def test_without_numba_the_cpu_row_is_left_out_and_asking_for_it_names_the_extra(capsys,
                                                                                  monkeypatch):
-    from splatgl.renderers import cpu
+    from splatgl.model.settings import RendererKind
+    from splatgl.renderers import registry
 
-    monkeypatch.setattr(cpu, "installed", lambda: False)
+    monkeypatch.setattr(registry, "installed", lambda kind: RendererKind(kind) is not RendererKind.CPU)
     assert main(["stress", "--case", "image_1x1", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)["cases"][0]["rows"]
     assert [r["renderer"] for r in rows] == ["reference64", "quad", "tile", "reference32"]

@@ -1,0 +1,346 @@
+"""The renderers by kind: what each one draws, the settings it reads, and making one.
+
+One entry per renderer in :data:`RENDERERS` (as :mod:`splatgl.cameras.registry` has one line per
+camera model); everything about drawing a frame lives in the renderer's own module.  This is the
+one place that answers "can renderer R draw this request": :func:`refusal` (a view's camera
+model, the scene's splats, the layers, geometry under the splats, what must be installed and the
+settings' rules) and :func:`check_settings` (options only some renderers read, for the kinds in
+play).  The CLI, the API (:class:`splatgl.Renderer`), the viewer and every renderer's own
+constructor ask it; no other module keeps a list of what a renderer can draw.
+
+Every renderer follows :class:`FrameRenderer`: made once per (scene, settings), it renders a
+per-frame :class:`~splatgl.cameras.view.View`, keeps the last frame's stage times and releases
+what it holds.  Each is imported only when first made (:func:`make`), so importing this module
+loads neither OpenGL nor numba.
+"""
+
+from __future__ import annotations
+
+import enum
+import importlib
+import importlib.util
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
+
+from ..errors import CameraError, SplatglError
+from ..model.scene import Scene, SplatKind
+from ..model.settings import Convention, Order, RendererKind, RenderSettings
+from ..output.layers import BASE, Layer, RenderOutput
+
+if TYPE_CHECKING:
+    import moderngl
+
+    from ..cameras.model import CameraModel
+    from ..cameras.view import View
+    from ..gl.shaders import ProgramCache
+    from ..output.under import UnderLayer
+
+
+@runtime_checkable
+class StageTimes(Protocol):
+    """A renderer's stage times of one frame (a frozen dataclass of seconds and counts)."""
+
+    @property
+    def total(self) -> float: ...
+    @property
+    def ordering(self) -> float:
+        """Seconds of the work before blending (cull, project, sort)."""
+    @property
+    def drawing(self) -> float:
+        """Seconds of blending the splats and reading the image back."""
+    def summary(self, count: int) -> str:
+        """The viewer's line on the splats of a scene of ``count`` splats ("splats 10 drawn / 12")."""
+
+
+@runtime_checkable
+class FrameRenderer(Protocol):
+    """A renderer of one scene under one :class:`RenderSettings`, reused across views."""
+
+    kind: RendererKind
+    scene: Scene
+    settings: RenderSettings
+    #: The last frame's :class:`StageTimes` (None before the first).
+    last_times: StageTimes | None
+
+    def supports(self, view: "View", layers: frozenset[Layer] = BASE,
+                 under: "UnderLayer | None" = None) -> str | None:
+        """Why this renderer cannot draw the request (one line), or None: :func:`refusal`."""
+    def render(self, view: "View", layers: frozenset[Layer] = BASE,
+               under: "UnderLayer | None" = None) -> RenderOutput:
+        """The ``layers`` of ``view``: RGB = C + (1 - A) background, alpha = A, row 0 on top."""
+    def release(self) -> None:
+        """Free what the renderer holds (GPU objects); it is not used afterwards."""
+
+
+@dataclass(frozen=True)
+class RendererEntry:
+    """What one renderer is, and what it draws.
+
+    Attributes:
+        kind: its ``--renderer`` name.
+        title: how messages name it ("the tile renderer").
+        factory: ``"module:Class"`` of its :class:`FrameRenderer`, imported when first made.
+        reads: the settings it reads beyond those every renderer draws (background, near plane,
+            antialiasing, SH cap, model transform); a value away from the default of a setting
+            no renderer in play reads is refused (:func:`check_settings`).
+        gl: whether it draws with OpenGL (made with the context and program cache).
+        surfels: whether it draws 2DGS surfel scenes.
+        lacks_models: camera model names it cannot draw.
+        layers: the layers it draws (None: every one).
+        under: whether it composites into geometry under the splats.
+        needs: a module that must be importable, and the extra that installs it.
+        interactive: whether it draws at a window's pace (the viewer's T steps through these).
+    """
+
+    kind: RendererKind
+    title: str
+    factory: str
+    reads: frozenset[str] = frozenset()
+    gl: bool = True
+    surfels: bool = True
+    lacks_models: frozenset[str] = frozenset()
+    layers: frozenset[Layer] | None = None
+    under: bool = True
+    needs: tuple[str, str] | None = None
+    interactive: bool = True
+
+    def renderer_class(self) -> type:
+        module, name = self.factory.split(":")
+        return getattr(importlib.import_module(module), name)
+
+
+#: Options some renderers ignore: the setting's field and the option that sets it.
+OPTIONS: dict[str, str] = {
+    "precision": "--precision", "extent": "--extent", "sort_key": "--sort",
+    "resort_interval": "resort interval", "preprocess": "--preprocess", "cull": "cull",
+    "early_stop": "--early-stop", "gpu_storage": "--gpu-storage", "convention": "--convention",
+    "emulation": "--emulate", "order": "--order", "order_window": "--order-window",
+}
+
+_QUAD_READS = frozenset({"precision", "extent", "sort_key", "resort_interval", "preprocess",
+                         "cull", "early_stop", "gpu_storage"})
+
+#: Every renderer, by kind.  The first is the default.
+RENDERERS: dict[RendererKind, RendererEntry] = {e.kind: e for e in (
+    RendererEntry(RendererKind.QUAD, "the quad renderer", "splatgl.renderers.quad:QuadRenderer",
+                  reads=_QUAD_READS),
+    RendererEntry(RendererKind.TILE, "the tile renderer", "splatgl.renderers.tile:TileRenderer",
+                  reads=frozenset({"gpu_storage", "order", "order_window"}),
+                  lacks_models=frozenset({"equirectangular"})),   # it makes no seam copies
+    RendererEntry(RendererKind.REFERENCE, "the NumPy reference",
+                  "splatgl.renderers.reference_renderer:ReferenceRenderer",
+                  reads=frozenset({"convention", "emulation", "order"}), gl=False,
+                  interactive=False),
+    RendererEntry(RendererKind.CPU, "the CPU renderer", "splatgl.renderers.cpu:CpuRenderer",
+                  gl=False, surfels=False, layers=frozenset(BASE | {Layer.DEPTH}), under=False,
+                  needs=("numba", "fast")),
+)}
+
+
+def entry(kind: RendererKind | str) -> RendererEntry:
+    """The entry of ``kind`` (a :class:`RendererKind` or its name); one line naming the choices
+    otherwise."""
+    try:
+        return RENDERERS[RendererKind(kind)]
+    except ValueError:
+        choices = ", ".join(f"'{k.value}'" for k in RENDERERS)
+        raise SplatglError(f"--renderer must be one of {choices}, got {kind!r}") from None
+
+
+def names(interactive: bool = False) -> list[str]:
+    """The renderer names, default first (``--renderer`` choices); ``interactive``: only those
+    that draw at a window's pace (``splatgl view``'s)."""
+    return [k.value for k, e in RENDERERS.items() if e.interactive or not interactive]
+
+
+def installed(kind: RendererKind | str) -> bool:
+    """Whether what renderer ``kind`` needs is installed (the CPU renderer: numba, the
+    ``fast`` extra)."""
+    needs = entry(kind).needs
+    return needs is None or importlib.util.find_spec(needs[0]) is not None
+
+
+def make(kind: RendererKind | str, scene: Scene, settings: RenderSettings,
+         ctx: "moderngl.Context | None" = None,
+         programs: "ProgramCache | None" = None) -> FrameRenderer:
+    """A new renderer of ``kind`` for ``scene`` under ``settings`` (an OpenGL one draws in
+    ``ctx``, compiling into ``programs``); it refuses what it cannot draw (:func:`refusal`)."""
+    e = entry(kind)
+    cls = e.renderer_class()
+    if e.gl:
+        if ctx is None:
+            raise ValueError(f"{e.title} draws with OpenGL: give it a context")
+        return cls(ctx, scene, settings, programs)
+    return cls(scene, settings)
+
+
+def _which(kinds) -> str:
+    """``"quad"``, ``"tile or reference"``, ``"quad, reference or cpu"``: the ``--renderer``
+    values of ``kinds``, in order."""
+    names_ = [k.value for k in RENDERERS if k in kinds]
+    return " or ".join(filter(None, (", ".join(names_[:-1]), names_[-1])))
+
+
+def _renderers(kinds) -> str:
+    """``"cpu renderer"``, ``"quad and tile renderers"`` (the reference: "reference")."""
+    given = {RendererKind(k) for k in kinds}
+    names_ = [k.value for k in RENDERERS if k in given]
+    return " and ".join(names_) + (" renderers" if len(names_) > 1 else " renderer")
+
+
+def readers(setting: str) -> frozenset[RendererKind]:
+    """The renderers that read the setting ``setting`` (a :class:`RenderSettings` field); every
+    renderer for one that is not in :data:`OPTIONS`."""
+    return frozenset(k for k, e in RENDERERS.items() if setting not in OPTIONS or setting in e.reads)
+
+
+def honours(kind: RendererKind | str, setting: str) -> bool:
+    """Whether renderer ``kind`` reads the setting ``setting`` (:func:`readers`)."""
+    return RendererKind(kind) in readers(setting)
+
+
+def refusal(kind: RendererKind | str, *, scene: Scene | None = None,
+            settings: RenderSettings | None = None, model: "CameraModel | None" = None,
+            layers: frozenset[Layer] | None = None, under: bool = False) -> str | None:
+    """Why renderer ``kind`` cannot draw this request, in one line, or None; what is not given
+    is not checked.  :func:`check` raises it."""
+    try:
+        check(kind, scene=scene, settings=settings, model=model, layers=layers, under=under)
+    except SplatglError as exc:
+        return str(exc)
+    return None
+
+
+def check(kind: RendererKind | str, *, scene: Scene | None = None,
+          settings: RenderSettings | None = None, model: "CameraModel | None" = None,
+          layers: frozenset[Layer] | None = None, under: bool = False) -> None:
+    """Raise :class:`SplatglError` (:class:`CameraError` for a camera model) where renderer
+    ``kind`` cannot draw: it is not installed; a scene of surfels; a camera ``model`` (a lens
+    model also draws no surfels anywhere); ``layers`` or ``under`` geometry it does not draw;
+    ``settings`` whose convention, emulation or order it does not follow (the options it merely
+    ignores: :func:`check_settings`)."""
+    e = entry(kind)
+    if not installed(e.kind):
+        raise SplatglError(f"--renderer {e.kind.value} needs {e.needs[0]}: "
+                           f"pip install 'splatgl[{e.needs[1]}]'")
+    surfels = scene is not None and scene.kind is SplatKind.SURFEL_2D
+    others = [k for k, o in RENDERERS.items() if o.gl and o.surfels]
+    if surfels and not e.surfels:
+        raise SplatglError(f"--renderer {e.kind.value} draws 3DGS splats; this scene holds 2DGS "
+                           f"surfels (use --renderer {_which(others)})")
+    if model is not None:
+        model.check_surfels(surfels)
+        if model.name in e.lacks_models:
+            able = [k for k, o in RENDERERS.items() if model.name not in o.lacks_models]
+            raise CameraError(f"{e.title} cannot draw {model.name} images; use --renderer "
+                              f"{_which(able)}")
+    full = [next(k for k, o in RENDERERS.items() if o.layers is None and o.under)]
+    if under and not e.under:
+        raise SplatglError(f"--renderer {e.kind.value} cannot composite into --under geometry "
+                           f"yet (use --renderer {_which(full)})")
+    if layers is not None and e.layers is not None and frozenset(layers) - e.layers:
+        names_ = ", ".join(sorted(layer.value for layer in frozenset(layers) - e.layers))
+        raise SplatglError(f"--renderer {e.kind.value} draws colour, alpha and depth only, not "
+                           f"{names_} (use --renderer {_which(full)})")
+    if settings is not None:
+        check_convention(settings.convention, e.kind)
+        check_fidelity(settings, e.kind)
+
+
+def check_convention(convention: Convention | str, *kinds: RendererKind | str) -> None:
+    """Refuse ``convention`` gsplat unless one of ``kinds`` follows it (the NumPy reference).
+
+    The quad and tile renderers would silently draw the inria rules.  ``splatgl compare``
+    passes both of its sides, where a reference on either makes it meaningful (the other
+    renderer, drawing the inria rules, measured against the gsplat ones).
+    """
+    convention = Convention(convention)
+    kinds = tuple(RendererKind(k) for k in kinds)
+    if convention is Convention.INRIA or readers("convention") & set(kinds):
+        return
+    names_ = " and ".join(dict.fromkeys(k.value for k in kinds))
+    which = f"the {names_} renderers follow" if " and " in names_ else f"the {names_} renderer follows"
+    raise SplatglError(f"--convention {convention.value} applies to the NumPy reference only; "
+                       f"{which} the inria rules (use --renderer {_which(readers('convention'))})")
+
+
+def check_fidelity(settings: RenderSettings, *kinds: RendererKind | str) -> None:
+    """Refuse an emulation (:mod:`splatgl.model.emulation`) and the per-pixel order unless one
+    of ``kinds`` draws it (:func:`readers`), so that nothing silently draws the plain rules
+    where a setting asked for others."""
+    kinds = tuple(RendererKind(k) for k in kinds)
+    if not settings.emulation.is_default and not readers("emulation") & set(kinds):
+        names_ = " and ".join(dict.fromkeys(k.value for k in kinds))
+        raise SplatglError(f"--emulate {settings.emulation.label()} applies to the NumPy reference "
+                           f"only, not the {names_} renderer (use --renderer "
+                           f"{_which(readers('emulation'))})")
+    by = readers("order")
+    if settings.order is Order.PER_PIXEL and not by & set(kinds):
+        why = ("; docs/fidelity.md says why the quad path has no per-pixel order"
+               if RendererKind.QUAD in kinds else "")
+        drawn = " and ".join(RENDERERS[k].title for k in RENDERERS if k in by)
+        raise SplatglError(f"--order per-pixel is drawn by {drawn}, not the {_renderers(kinds)} "
+                           f"(use --renderer {_which(by)}{why})")
+
+
+def _spelled(value) -> str:
+    if isinstance(value, enum.Enum):
+        return str(value.value)
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return str(value)
+
+
+def check_settings(settings: RenderSettings, *kinds: RendererKind | str,
+                   advice: str = "use --renderer {which}, or leave {option} out") -> None:
+    """Refuse, in one line naming the option, its value and the renderers, a setting away from
+    its default that none of ``kinds`` reads (:data:`OPTIONS`, each entry's ``reads``), and
+    ``order_window`` without the per-pixel order; the convention, emulation and order as
+    :func:`check_convention` and :func:`check_fidelity`.  ``advice`` ends the message
+    (``{which}``: the renderers that read the setting, ``{option}``: its option)."""
+    kinds = tuple(RendererKind(k) for k in kinds)
+    check_convention(settings.convention, *kinds)
+    check_fidelity(settings, *kinds)
+    default = RenderSettings()
+    if settings.order_window != default.order_window and settings.order is not Order.PER_PIXEL:
+        raise SplatglError(f"--order-window {settings.order_window} applies to --order per-pixel "
+                           "only; the global order has no window (add --order per-pixel)")
+    for name, option in OPTIONS.items():
+        if name in ("convention", "emulation", "order"):
+            continue                                # their own messages, above
+        value, by = getattr(settings, name), readers(name)
+        if value == getattr(default, name) or by & set(kinds):
+            continue
+        raise SplatglError(f"{option} {_spelled(value)} applies to the {_renderers(by)} "
+                           f"only, not the {_renderers(kinds)}, which would ignore it "
+                           f"({advice.format(which=_which(by), option=option)})")
+
+
+def describe(kind: RendererKind | str, ctx: "moderngl.Context | None") -> str:
+    """What drew a frame of ``kind``, as ``--timings`` prints it: the OpenGL renderer's name
+    (``ctx``'s; none known without one) for an OpenGL renderer, else what the renderer's module
+    says of itself (its ``describe()``)."""
+    from ..gl.context import NO_GL_RENDERER, renderer_name
+
+    e = entry(kind)
+    if e.gl:
+        return NO_GL_RENDERER if ctx is None else renderer_name(ctx)
+    return getattr(importlib.import_module(e.factory.split(":")[0]), "describe")()
+
+
+class Registered:
+    """The :class:`FrameRenderer` part every renderer shares: :meth:`supports` (the subclass
+    sets ``kind``, and ``scene`` and ``settings`` when made)."""
+
+    kind: ClassVar[RendererKind]
+
+    def supports(self, view: "View", layers: frozenset[Layer] = BASE,
+                 under: "UnderLayer | None" = None) -> str | None:
+        return refusal(self.kind, scene=self.scene, settings=self.settings, model=view.model,
+                       layers=frozenset(layers), under=under is not None)
+
+    def check(self, view: "View", layers: frozenset[Layer] = BASE,
+              under: "UnderLayer | None" = None) -> None:
+        """Raise what :meth:`supports` says (:func:`check`)."""
+        check(self.kind, scene=self.scene, settings=self.settings, model=view.model,
+              layers=frozenset(layers), under=under is not None)
