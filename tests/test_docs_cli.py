@@ -204,6 +204,23 @@ def test_shared_groups_match_the_parsers():
                     f"splatgl {' '.join(words)} links #{anchor} but has no such options")
 
 
+def test_links_into_the_pages_land_on_a_heading():
+    """Links with an anchor between the README and the pages this item wrote (``cli.md#...``,
+    ``#camera-options``) name a heading that exists: a renamed command heading fails here."""
+    pages = [REPO / "README.md", PAGE, *(REPO / "docs").glob("*.md"), *(REPO / "docs/results").glob("*.md")]
+    anchors = {p.resolve(): {_anchor(t) for t, _, _ in _sections(p.read_text())} for p in pages}
+    checked = {PAGE.resolve(), (REPO / "docs/api.md").resolve(), (REPO / "docs/how-it-works.md").resolve(),
+               (REPO / "docs/testing.md").resolve(), (REPO / "docs/results/summary.md").resolve(),
+               (REPO / "README.md").resolve()}
+    broken = []
+    for page in pages:
+        for target, anchor in re.findall(r"\]\(([^)#\s]*)#([^)\s]+)\)", page.read_text()):
+            dest = (page.parent / target).resolve() if target else page.resolve()
+            if dest in checked and anchor not in anchors.get(dest, set()):
+                broken.append(f"{page.relative_to(REPO)}: {target}#{anchor}")
+    assert not broken, "links to headings that do not exist:\n" + "\n".join(broken)
+
+
 def test_the_checks_catch_a_stale_page():
     """The helpers see what they must: a family, an option in a command line, section bounds."""
     assert _known("--ray-*", _options(LEAVES[("render",)]))
