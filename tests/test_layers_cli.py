@@ -122,9 +122,11 @@ def test_the_docs_say_which_renderer_computes_which_layer(tmp_path, capsys):
     from helpers import REPO
 
     readme = (REPO / "README.md").read_text()
+    reference = (REPO / "docs" / "cli.md").read_text()     # the command reference (issue 39)
     layers_doc = (REPO / "docs" / "layers.md").read_text()
-    assert "Every renderer computes every layer" not in readme
-    assert "`--renderer cpu` computes colour, alpha and depth and refuses the rest" in readme
+    for page in (readme, reference):
+        assert "Every renderer computes every layer" not in page
+        assert "`--renderer cpu` computes colour, alpha and depth and refuses the rest" in page
     assert "All three renderers (quad, tile, reference) compute every layer" not in layers_doc
     assert "computes colour, alpha and depth only and refuses the other" in layers_doc
     from splatgl.renderers.cpu import LAYERS
