@@ -33,7 +33,12 @@ uniform uint u_slot;
 #define RADIX_WARP RADIX_PORTABLE_WARP
 #endif
 #define WARPS (uint(RADIX_GROUP) / uint(RADIX_WARP))
-shared uint s_warp[WARPS * RADIX];  // [w * RADIX + d]: warp w's keys of digit d, then their start
+#if defined(RADIX_NARROW)
+shared uint s_warp[RADIX];  // [d]: where the next key of digit d goes
+#else
+// [w * RADIX + d]: warp w's keys of digit d, then their start; then the tile staged in order
+shared uint s_warp[max(WARPS * RADIX, TILE_KEYS)];
+#endif
 
 #if defined(RADIX_MATCH_KHR)
 #define LANE gl_SubgroupInvocationID
@@ -115,6 +120,13 @@ void main() {
     }
 }
 #else
+// Wide groups (GPUs): rank every key of the tile first (per-warp counts in s_warp), then place
+// the tile sorted by digit in shared memory and write it out in order, so neighbouring threads
+// write neighbouring addresses (coalesced), keys first, then values through the same memory.
+shared uint s_shift[RADIX];  // per digit: its tile start in the output minus its start here
+shared uint s_scan[RADIX_GROUP];
+#define STAGE_ITEMS ((TILE_KEYS + uint(RADIX_GROUP) - 1u) / uint(RADIX_GROUP))
+
 void main() {
     uint t = gl_LocalInvocationID.x;
     uint tile = gl_WorkGroupID.x;
@@ -144,22 +156,64 @@ void main() {
         rank[i] = before + lower;
     }
     barrier();
-    for (uint d = t; d < RADIX; d += uint(RADIX_GROUP)) {
-        uint run = hist[d * u_tiles + tile];
+    // Per digit: the warps' starts within the digit's run, and the run's length.
+    uint runs[(RADIX + uint(RADIX_GROUP) - 1u) / uint(RADIX_GROUP)];
+    uint sum = 0u;
+    for (uint d = t, k = 0u; d < RADIX; d += uint(RADIX_GROUP), ++k) {
+        uint run = 0u;
         for (uint w = 0u; w < WARPS; ++w) {
             uint c = s_warp[w * RADIX + d];
             s_warp[w * RADIX + d] = run;
             run += c;
         }
+        runs[k] = run;
+        sum += run;
+    }
+    // Where each digit's run goes in the staged tile: after the runs of the threads before
+    // (a scan of the threads' sums) and of this thread's earlier digits.  The runs need not be
+    // in digit order here, only apart: s_shift maps each back to its place in the output.
+    s_scan[t] = sum;
+    barrier();
+    for (uint off = 1u; off < uint(RADIX_GROUP); off <<= 1u) {
+        uint add = t >= off ? s_scan[t - off] : 0u;
+        barrier();
+        s_scan[t] += add;
+        barrier();
+    }
+    barrier();
+    uint start = s_scan[t] - sum;
+    for (uint d = t, k = 0u; d < RADIX; d += uint(RADIX_GROUP), ++k) {
+        for (uint w = 0u; w < WARPS; ++w) s_warp[w * RADIX + d] += start;
+        s_shift[d] = hist[d * u_tiles + tile] - start;
+        start += runs[k];
+    }
+    barrier();
+    for (uint i = 0u; i < uint(RADIX_ITEMS); ++i)
+        rank[i] += s_warp[warp * RADIX + radix_digit(keys[i], shift)];  // place in the tile
+    barrier();  // s_warp is the staging memory from here
+    uint first = tile * TILE_KEYS;
+    uint here = min(u_count - first, TILE_KEYS);  // keys in this tile
+    for (uint i = 0u; i < uint(RADIX_ITEMS); ++i)
+        if (seg + i * uint(RADIX_WARP) < u_count) s_warp[rank[i]] = keys[i];
+    barrier();
+    uint out_at[STAGE_ITEMS];
+    for (uint m = 0u; m < STAGE_ITEMS; ++m) {
+        uint j = t + m * uint(RADIX_GROUP);
+        if (j < here) {
+            uint key = s_warp[j];
+            out_at[m] = s_shift[radix_digit(key, shift)] + j;
+            keys_out[out_at[m]] = key;
+        }
     }
     barrier();
     for (uint i = 0u; i < uint(RADIX_ITEMS); ++i) {
         uint idx = seg + i * uint(RADIX_WARP);
-        if (idx < u_count) {
-            uint pos = s_warp[warp * RADIX + radix_digit(keys[i], shift)] + rank[i];
-            keys_out[pos] = keys[i];
-            vals_out[pos] = vals_in[idx];
-        }
+        if (idx < u_count) s_warp[rank[i]] = vals_in[idx];
+    }
+    barrier();
+    for (uint m = 0u; m < STAGE_ITEMS; ++m) {
+        uint j = t + m * uint(RADIX_GROUP);
+        if (j < here) vals_out[out_at[m]] = s_warp[j];
     }
 }
 #endif

@@ -17,7 +17,7 @@ from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.errors import ShaderError
 from splatgl.gl import radix_sort
-from splatgl.gl.shaders import preprocess
+from splatgl.gl.shaders import ProgramCache, preprocess
 from splatgl.gl.radix_sort import (TILE_KEYS, RadixSorter, device_depth_sort, radix_passes,
                                    radix_sort_twin, subgroup_paths)
 from splatgl.renderers.quad import QuadRenderer
@@ -71,10 +71,20 @@ KINDS = ("random", "duplicates", "equal", "one pass", "three passes")
 SIZES = (0, 1, 2, 7, TILE_KEYS - 1, TILE_KEYS, TILE_KEYS + 1, 3 * TILE_KEYS + 123, 60_000)
 
 
+@pytest.fixture(scope="module")
+def programs(ctx):
+    """One program cache for the module: each sorter compiles nothing another one did."""
+    cache = ProgramCache(ctx)
+    yield cache
+    cache.release()
+
+
 @pytest.fixture(scope="module", params=[
-    "subgroup", "subgroup, wide groups", "portable, narrow groups",
-    pytest.param("portable", marks=pytest.mark.slow)])  # llvmpipe compiles it in 5-15 s
-def sorter(request, ctx):
+    "subgroup", "portable, narrow groups",
+    # the wide groups GPUs run: llvmpipe compiles them in 5-45 s
+    pytest.param("subgroup, wide groups", marks=pytest.mark.slow),
+    pytest.param("portable", marks=pytest.mark.slow)])
+def sorter(request, ctx, programs):
     """One sorter per downsweep path and group shape (reused across sizes, as a renderer
     reuses it).  On llvmpipe (8-lane subgroups) the default subgroup sorter runs one warp per
     group; the wide-group one is the shape GPUs run."""
@@ -83,7 +93,7 @@ def sorter(request, ctx):
     if request.param.startswith("subgroup") and path == "portable":
         pytest.skip("no subgroup extension on this device")
     narrow = {"subgroup": None, "portable": None}.get(request.param, request.param.endswith("narrow groups"))
-    s = RadixSorter(ctx, path=path, narrow=narrow)
+    s = RadixSorter(ctx, programs, path=path, narrow=narrow)
     yield s
     s.release()
 
@@ -133,7 +143,7 @@ def test_device_sort_of_a_million_keys(sorter):
                                   np.argsort(keys, kind="stable"))
 
 
-def test_subgroup_and_portable_paths_agree(ctx):
+def test_subgroup_and_portable_paths_agree(ctx, programs):
     """Both ranking paths run here where llvmpipe exposes GL_ARB_shader_ballot."""
     paths = subgroup_paths(ctx)
     assert "portable" in paths
@@ -142,7 +152,7 @@ def test_subgroup_and_portable_paths_agree(ctx):
     values = np.arange(keys.size, dtype=np.uint32)
     results = []
     for path in dict.fromkeys([paths[0], "portable"]):
-        s = RadixSorter(ctx, path=path)
+        s = RadixSorter(ctx, programs, path=path, narrow=True)  # wide shapes: slow fixtures
         try:
             assert s.path == path
             results.append(s.sort_values(keys, values))
@@ -167,13 +177,13 @@ def test_khr_subgroup_path_is_valid_glsl(tmp_path, narrow):
         assert done.returncode == 0, done.stdout + done.stderr
 
 
-def test_a_path_that_sorts_wrongly_is_not_used(ctx, monkeypatch):
+def test_a_path_that_sorts_wrongly_is_not_used(ctx, programs, monkeypatch):
     """A driver whose subgroups are not the size its probe said (Intel compiles at SIMD8, 16
     or 32 per shader): the sorter checks its order once and falls back to the next path."""
     if subgroup_paths(ctx) != ["arb", "portable"]:
         pytest.skip("written for llvmpipe's paths")
     monkeypatch.setattr(radix_sort, "_subgroup_size", lambda *args: 16)  # llvmpipe's is 8
-    s = RadixSorter(ctx)
+    s = RadixSorter(ctx, programs, narrow=True)
     try:
         assert s.path == "portable"
         keys = np.arange(5000, dtype=np.uint32)[::-1] % np.uint32(7)
@@ -182,7 +192,7 @@ def test_a_path_that_sorts_wrongly_is_not_used(ctx, monkeypatch):
     finally:
         s.release()
     with pytest.raises(ShaderError, match="radix sort path arb .subgroup size 16. sorts wrongly"):
-        RadixSorter(ctx, path="arb")
+        RadixSorter(ctx, programs, path="arb", narrow=True)
 
 
 def test_unknown_path_is_refused(ctx):
@@ -192,9 +202,9 @@ def test_unknown_path_is_refused(ctx):
 
 @pytest.mark.parametrize("n", [1, 7, TILE_KEYS + 1, 60_000])
 @pytest.mark.parametrize("ties", [False, True])
-def test_device_depth_sort_equals_cpu_sort_bit_for_bit(ctx, n, ties):
+def test_device_depth_sort_equals_cpu_sort_bit_for_bit(ctx, programs, n, ties):
     z, idx = _depths(n, n, ties)
-    sorter = RadixSorter(ctx)
+    sorter = RadixSorter(ctx, programs)
     try:
         np.testing.assert_array_equal(device_depth_sort(sorter, z, idx), depth_sort(z, idx))
     finally:
