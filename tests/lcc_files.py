@@ -120,9 +120,9 @@ def write_lcc(folder: Path, levels: list, cells: int = 2, environment=None, lowe
     attrs = [{"name": "scale", "min": scale_range[0].tolist(), "max": scale_range[1].tolist()},
              {"name": "envscale", "min": scale_range[0].tolist(), "max": scale_range[1].tolist()},
              {"name": "opacity", "min": [0.0], "max": [1.0]}]
-    if quality:
-        attrs += [{"name": "shcoef", "min": sh_range[0].tolist(), "max": sh_range[1].tolist()},
-                  {"name": "envshcoef", "min": sh_range[0].tolist(), "max": sh_range[1].tolist()}]
+    sh_lo, sh_hi = sh_range if quality else (np.zeros(3), np.zeros(3))  # listed either way
+    attrs += [{"name": "shcoef", "min": sh_lo.tolist(), "max": sh_hi.tolist()},
+              {"name": "envshcoef", "min": sh_lo.tolist(), "max": sh_hi.tolist()}]
     meta = {"version": "5.0", "name": "splatgl test", "source": "ply", "dataType": "None",
             "totalSplats": int(sum(lv.count for lv in levels)), "totalLevel": len(levels),
             "cellLengthX": float(cell[0]), "cellLengthY": float(cell[1]),
