@@ -102,3 +102,19 @@ def test_the_checks_catch_stale_names():
     assert _dotted_problem("splatgl.Camera.from_fov") is None
     assert "no 'cull_chunks'" in _dotted_problem("splatgl.cull_chunks.ChunkedCull")
     assert "no 'LodRenderer'" in _dotted_problem("splatgl.lod.render.LodRenderer")
+
+
+def test_the_readme_is_what_a_user_reads():
+    """Issue 39 item 7: the README stays short (what it is, install, quick start, the commands, a
+    Python example, links); the command reference, the design, the measurements and the test
+    counts live in docs/.  Its Quick start is the two commands a new user runs, and the second
+    is the one .ci/run runs."""
+    readme = (REPO / "README.md").read_text()
+    assert len(readme.splitlines()) <= 300
+    quick = readme.split("## Quick start", 1)[1].split("\n## ", 1)[0]
+    assert re.findall(r"```sh\n(.*?)```", quick, re.S) == [
+        "pip install . && splatgl render -o demo.png\npip install '.[test]' && pytest\n"]
+    assert "\npip install '.[test]' && pytest\n" in (REPO / ".ci" / "run").read_text()
+    assert not re.search(r"\b\d[\d,]* tests\b", readme), "test counts belong nowhere in the README"
+    for page in ("docs/cli.md", "docs/how-it-works.md", "docs/results/summary.md", "docs/api.md"):
+        assert f"]({page})" in readme, f"the README links {page}"
