@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -46,6 +47,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--chunk-splats", type=int, default=None, metavar="N",
                    help="Streamed SOG output (-o DIR/lod-meta.json): original splats per streamed "
                         "chunk, at least (default 16384)")
+    p.add_argument("--memory", default=None, metavar="SIZE",
+                   help="peak memory of the build from a binary PLY, e.g. 200M or 4G (default: "
+                        "half this machine's RAM, printed); larger scenes are built in spatial "
+                        "chunks from temporary files beside the output")
     add_force_argument(p)
 
 
@@ -62,6 +67,9 @@ def run(args: argparse.Namespace) -> int:
     from ..lod.build import build_hierarchy
     from ..lod.io import check_lod_name, write_lod
     from ..lod import streamed_sog_write as streamed
+    from ..lod.budget import budget_from, plan
+    from ..lod.external import build_lod_file
+    from ..lod.ply_rows import streamable
 
     if not 2 <= args.branching <= 64:
         raise SplatglError(f"--branching must be 2-64, got {args.branching}")
@@ -77,7 +85,20 @@ def run(args: argparse.Namespace) -> int:
     check_output(args, out, "-o")  # before the (long) build: not SCENE; existing only with --force
     if sog:
         streamed.check_folder(out)  # no unit folder the manifest there does not name
+    budget, how = budget_from(args.memory)
     progress = StderrProgress() if enabled() else None
+    if not sog and streamable(args.scene):
+        if progress is not None:  # on a terminal; the summary below says it too
+            print(f"lod: memory budget {how}", file=sys.stderr)
+        t0 = time.perf_counter()
+        info = build_lod_file(args.scene, out, args.branching,
+                              lambda record, count: plan(budget, args.branching, record, count),
+                              progress)
+        print(f"wrote {out}: {info['leaves']:,} leaves, {info['parents']:,} parents in "
+              f"{info['levels']} levels (branching {args.branching}) in "
+              f"{time.perf_counter() - t0:.1f} s ({info['chunks']:,} chunks of at most "
+              f"{info['window']:,} leaves; memory budget {how})")
+        return 0
     scene = load_scene(args.scene, progress=progress)
     if scene.kind is not SplatKind.GAUSSIAN_3D:
         raise SplatglError(f"{args.scene}: level of detail needs 3DGS splats, this file holds 2DGS surfels")

@@ -71,6 +71,14 @@ def default_budget() -> tuple[int, str]:
                     f"{format_size(ram)} RAM; --memory SIZE to change)")
 
 
+def budget_from(text: str | None) -> tuple[int, str]:
+    """``(bytes, what to print)`` of ``--memory`` (None: :func:`default_budget`)."""
+    if text is None:
+        return default_budget()
+    n = parse_size(text)
+    return n, f"{format_size(n)} (--memory)"
+
+
 def resident_now() -> int:
     """Bytes this process holds resident now (its peak so far where /proc is missing)."""
     try:

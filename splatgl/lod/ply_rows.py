@@ -93,6 +93,20 @@ class PlyRows:
             raise
 
 
+def streamable(path: Path) -> bool:
+    """Whether ``path`` is a binary PLY of fixed-size vertex rows (not the compressed PLY):
+    what :class:`PlyRows` reads (other files are read whole)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+    except OSError:
+        return False  # the reader says why
+    if not ply.sniff(head):
+        return False
+    text = head.split(b"end_header", 1)[0]
+    return b"format binary_" in text and b" list " not in text
+
+
 def not_streamable(path: Path) -> SplatglError:
     return SplatglError(f"{path}: the out-of-core level of detail reads binary INRIA PLY "
                         f"(fixed-size rows); convert it first: splatgl convert {path} -o "
