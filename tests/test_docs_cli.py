@@ -32,8 +32,9 @@ GROUPS = {
 _HEADING = re.compile(r"^(#{1,6}) +(.*)$", re.M)
 #: A long option as written in prose: ``--lod-threshold``, or a family ``--ray-*``.
 _LONG = re.compile(r"(?<![\w-])--[a-z][a-z0-9]*(?:-[a-z0-9]+)*(?:-\*)?")
-#: A command line written out: a code span or a fenced example line starting ``splatgl``.
-_COMMAND_LINE = re.compile(r"`(splatgl [^`]*)`|^(splatgl .*)$", re.M)
+#: A command line written out: a code span starting ``splatgl``, or such a line in a fenced block.
+_SPAN = re.compile(r"`(splatgl [^`]*)`")
+_FENCE = re.compile(r"^```[^\n]*\n(.*?)^```", re.M | re.S)
 
 
 def _commands() -> dict[tuple[str, ...], argparse.ArgumentParser]:
@@ -108,8 +109,27 @@ def _known(name: str, options: set[str]) -> bool:
     return name in options
 
 
+def _command_lines(text: str) -> list[str]:
+    fenced = [line for block in _FENCE.findall(text) for line in block.splitlines()
+              if line.startswith("splatgl ")]
+    return _SPAN.findall(text) + fenced
+
+
 def _without_command_lines(text: str) -> str:
-    return _COMMAND_LINE.sub(" ", text)
+    text = _FENCE.sub(lambda m: "\n".join(line for line in m.group(0).splitlines()
+                                          if not line.startswith("splatgl ")), text)
+    return _SPAN.sub(" ", text)
+
+
+def _misused(line: str) -> list[str]:
+    """What is wrong with a written-out ``splatgl ...`` line: no such command, or options
+    the command (or, for ``path``, any of its sub-commands) does not take."""
+    words = _command_of(line)
+    if words is None:
+        return ["no such command"]
+    options = set().union({"--help"}, *(_options(p) for w, p in LEAVES.items()
+                                        if w[:len(words)] == words))
+    return [o for o in sorted(_named(line)) if not _known(o, options)]
 
 
 def _page() -> str:
@@ -157,15 +177,7 @@ def test_the_page_names_no_option_a_command_lacks():
     every = set().union({"--help"}, *(_options(p) for p in LEAVES.values()))
     wrong = []
     # Written-out command lines, anywhere on the page.
-    for m in _COMMAND_LINE.finditer(page):
-        line = m.group(1) or m.group(2)
-        words = _command_of(line)
-        if words is None:
-            wrong.append(f"{line!r}: no such command")
-            continue
-        options = set().union({"--help"}, *(_options(p) for w, p in LEAVES.items()
-                                            if w[:len(words)] == words))
-        wrong += [f"{line!r}: {o}" for o in sorted(_named(line)) if not _known(o, options)]
+    wrong += [f"{line!r}: {problem}" for line in _command_lines(page) for problem in _misused(line)]
     # Each command's own section (without its written-out command lines).
     for title, _, body in _sections(page):
         words = _command_heading(title)
@@ -183,6 +195,16 @@ def test_the_page_names_no_option_a_command_lacks():
     wrong += [f"page: {o}" for o in sorted(_named(_without_command_lines(page)))
               if not _known(o, every)]
     assert not wrong, "options docs/cli.md names that the parsers lack:\n" + "\n".join(wrong)
+
+
+def test_command_lines_in_every_page_use_real_options():
+    """A ``splatgl CMD ...`` written out in the README or any note takes only options CMD has
+    (prose that merely starts with the word splatgl, ``splatgl frame {...}``, is no command)."""
+    pages = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
+    wrong = [f"{page.relative_to(REPO)}: {line!r}: {problem}" for page in pages
+             for line in _command_lines(page.read_text()) if _command_of(line)
+             for problem in _misused(line)]
+    assert not wrong, "command lines with options their command lacks:\n" + "\n".join(wrong)
 
 
 def test_shared_groups_match_the_parsers():
@@ -227,6 +249,9 @@ def test_the_checks_catch_a_stale_page():
     assert not _known("--lod-*", _options(LEAVES[("view",)]))
     assert _command_of("splatgl path orbit scene.ply -o p.json") == ("path", "orbit")
     assert _command_of("splatgl nothing --x") is None
+    assert _misused("splatgl info scene.ply --json --lod-budget 3") == ["--lod-budget"]
+    assert _command_lines("a `splatgl info --stats` b\n```sh\nsplatgl lod s -o t\nother\n```\n") == [
+        "splatgl info --stats", "splatgl lod s -o t"]
     assert _named("`--json -`, `--lod-*` and -o, not ---x or a--b") == {"--json", "--lod-*"}
     text = "## `splatgl info SCENE`\nA `--stats`.\n### More\nB\n## Other\nC\n"
     assert [(t, b.strip()) for t, _, b in _sections(text)] == [
