@@ -17,6 +17,7 @@ from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.errors import ShaderError
 from splatgl.gl import radix_sort
+from splatgl.gl.egl_devices import is_software_renderer
 from splatgl.gl.shaders import ProgramCache, preprocess
 from splatgl.gl.radix_sort import (TILE_KEYS, RadixSorter, device_depth_sort, radix_passes,
                                    radix_sort_twin, subgroup_paths)
@@ -80,20 +81,20 @@ def programs(ctx):
 
 
 @pytest.fixture(scope="module", params=[
-    "subgroup", "portable, narrow groups",
+    "subgroup", "portable",
     # the wide groups GPUs run: llvmpipe compiles them in 5-45 s
     pytest.param("subgroup, wide groups", marks=pytest.mark.slow),
-    pytest.param("portable", marks=pytest.mark.slow)])
+    pytest.param("portable, wide groups", marks=pytest.mark.slow)])
 def sorter(request, ctx, programs):
     """One sorter per downsweep path and group shape (reused across sizes, as a renderer
-    reuses it).  On llvmpipe (8-lane subgroups) the default subgroup sorter runs one warp per
-    group; the wide-group one is the shape GPUs run."""
+    reuses it).  On llvmpipe the default sorters run one warp per group; the wide-group ones
+    are the shape GPUs run."""
     paths = subgroup_paths(ctx)
     path = "portable" if request.param.startswith("portable") else paths[0]
     if request.param.startswith("subgroup") and path == "portable":
         pytest.skip("no subgroup extension on this device")
-    narrow = {"subgroup": None, "portable": None}.get(request.param, request.param.endswith("narrow groups"))
-    s = RadixSorter(ctx, programs, path=path, narrow=narrow)
+    s = RadixSorter(ctx, programs, path=path,
+                    narrow=False if request.param.endswith("wide groups") else None)
     yield s
     s.release()
 
@@ -152,9 +153,11 @@ def test_subgroup_and_portable_paths_agree(ctx, programs):
     values = np.arange(keys.size, dtype=np.uint32)
     results = []
     for path in dict.fromkeys([paths[0], "portable"]):
-        s = RadixSorter(ctx, programs, path=path, narrow=True)  # wide shapes: slow fixtures
+        s = RadixSorter(ctx, programs, path=path)
         try:
             assert s.path == path
+            # one warp per work group on a CPU renderer, wide groups on a GPU
+            assert s.narrow == is_software_renderer(ctx.info["GL_RENDERER"])
             results.append(s.sort_values(keys, values))
         finally:
             s.release()
@@ -183,7 +186,7 @@ def test_a_path_that_sorts_wrongly_is_not_used(ctx, programs, monkeypatch):
     if subgroup_paths(ctx) != ["arb", "portable"]:
         pytest.skip("written for llvmpipe's paths")
     monkeypatch.setattr(radix_sort, "_subgroup_size", lambda *args: 16)  # llvmpipe's is 8
-    s = RadixSorter(ctx, programs, narrow=True)
+    s = RadixSorter(ctx, programs)
     try:
         assert s.path == "portable"
         keys = np.arange(5000, dtype=np.uint32)[::-1] % np.uint32(7)
@@ -192,7 +195,7 @@ def test_a_path_that_sorts_wrongly_is_not_used(ctx, programs, monkeypatch):
     finally:
         s.release()
     with pytest.raises(ShaderError, match="radix sort path arb .subgroup size 16. sorts wrongly"):
-        RadixSorter(ctx, programs, path="arb", narrow=True)
+        RadixSorter(ctx, programs, path="arb")
 
 
 def test_unknown_path_is_refused(ctx):

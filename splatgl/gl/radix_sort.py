@@ -37,14 +37,12 @@ from ..errors import ShaderError
 from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
                        RADIX_BINDING_STATE, RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT,
                        RADIX_GROUP, RADIX_PORTABLE_WARP)
+from .egl_devices import is_software_renderer
 from .shaders import ProgramCache
 
 #: Keys one work group owns per pass.
 TILE_KEYS = RADIX_GROUP * RADIX_ITEMS
 RADIX = 1 << RADIX_BITS
-#: Subgroups this narrow (a CPU's SIMD lanes, llvmpipe's 8) run one warp per work group with
-#: TILE_KEYS / warp keys per lane: no per-warp histograms to clear and scan (radix_downsweep.comp).
-NARROW_WARP = 16
 #: Pass slots: enough RADIX_BITS-bit digits for 32-bit keys.
 SLOTS = 32 // RADIX_BITS
 #: The downsweep's ways of ranking (see the module doc), best first.
@@ -111,8 +109,10 @@ class RadixSorter:
 
     ``path`` picks the downsweep's ranking (:data:`PATHS`); by default the best the context
     offers whose shaders compile with a subgroup size that divides RADIX_GROUP.  ``narrow``
-    runs one warp per work group (by default where the warp is at most NARROW_WARP wide: a
-    CPU's SIMD lanes).  Buffers grow to the largest M seen and are kept between calls.
+    runs one warp per work group with TILE_KEYS / warp keys a lane (radix_downsweep.comp: no
+    per-warp histograms to clear and scan), by default on software renderers, where a work
+    group runs on one CPU thread and a warp is its SIMD lanes (llvmpipe's 8).  Buffers grow to
+    the largest M seen and are kept between calls.
     """
 
     def __init__(self, ctx: moderngl.Context, programs: ProgramCache | None = None,
@@ -125,6 +125,7 @@ class RadixSorter:
         self._bufs: list[moderngl.Buffer] = []  # keys A, values A, keys B, values B, hist
         self._state = ctx.buffer(reserve=_STATE_BYTES)
         self._narrow = narrow
+        self._software = is_software_renderer(ctx.info.get("GL_RENDERER", ""))
         try:
             self.path, self.warp, self.narrow, self._progs = self._choose(path)
         except BaseException:
@@ -151,8 +152,7 @@ class RadixSorter:
                 raise ShaderError(f"radix sort path {path}: subgroup size {warp} does not "
                                   f"divide the work group ({RADIX_GROUP})")
             defines = {"RADIX_WARP": warp, f"RADIX_MATCH_{path.upper()}": 1}
-        narrow = self._narrow if self._narrow is not None else (
-            path != "portable" and warp <= NARROW_WARP)
+        narrow = self._narrow if self._narrow is not None else self._software
         if narrow:  # one warp per group, many keys per lane
             defines.update(RADIX_GROUP=warp, RADIX_ITEMS=TILE_KEYS // warp, RADIX_NARROW=1)
         self._progs = {name: self.programs.compute(f"radix_{name}.comp", defines)
