@@ -88,6 +88,8 @@ def test_cli_writes_refuses_and_replaces_whole(tmp_path, capsys):
     assert sorted(p.name for p in out.parent.iterdir()) == sorted(
         ["lod-meta.json", *{n.split("/")[0] for n in meta["filenames"]}])
     assert meta["lodLevels"] == 5 and load_scene(out).count == 900
+    assert main(["convert", str(out), str(tmp_path / "back.ply")]) == 0  # any reader's scene
+    assert load_scene(tmp_path / "back.ply").count == 900
     capsys.readouterr()
     assert main(["info", str(out)]) == 0
     text = capsys.readouterr().out
@@ -141,6 +143,17 @@ def test_sog_version_message(tmp_path):
     assert str(err.value) == (f"{path}: field 'version': SOG version 1 is not supported "
                               "(supported: 2, and version 1, which has no 'version' key and "
                               "gives means.shape)")
+
+
+def test_convert_to_a_streamed_sog_name_says_how(tmp_path, capsys):
+    """`convert` named lod-meta.json wrote a plain SOG folder under that name; it now refuses,
+    naming the command that writes one."""
+    save_scene(tmp_path / "s.ply", _scene(10))
+    assert main(["convert", str(tmp_path / "s.ply"), str(tmp_path / "lod-meta.json")]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "lod-meta.json: a Streamed SOG holds levels of detail: write it with 'splatgl lod SCENE "
+        "-o DIR/lod-meta.json'")
+    assert not (tmp_path / "lod-meta.json").exists()
 
 
 BAD_MANIFESTS = [

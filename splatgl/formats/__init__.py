@@ -6,7 +6,7 @@ Each format module provides ``NAME`` (str), ``EXTENSIONS`` (tuple of lower-case 
 see :mod:`splatgl.progress`).  Writers (the modules in ``_WRITER_MODULES``) provide
 ``NAME``, ``EXTENSIONS`` and ``write(path, scene)``, which returns None or, for writers that
 reorder the splats, the (N,) row order written (``path`` is a temporary,
-:func:`splatgl.output.atomic.temp_path`; a writer whose output depends on the file's name, such
+:func:`splatgl.writing.atomic.temp_path`; a writer whose output depends on the file's name, such
 as glTF's ``.gltf`` or SOG's folder form, takes the user's name as ``target=``; one whose
 ``writes_folder(target)`` holds publishes its several files itself, as a whole, and is handed
 the target); lossy writers also provide
@@ -109,6 +109,9 @@ def scene_source(path: str | Path) -> SceneSource:
 def writer_for(path: str | Path) -> ModuleType:
     """The format module that writes files named like ``path`` (by extension)."""
     name = Path(path).name.lower()
+    if name.endswith("lod-meta.json"):  # not a SOG folder's meta.json: levels of detail
+        raise SceneFormatError(path, "a Streamed SOG holds levels of detail: write it with "
+                                     "'splatgl lod SCENE -o DIR/lod-meta.json'")
     mods = _modules(_WRITER_MODULES)
     for mod in mods:
         if any(name.endswith(ext) for ext in mod.EXTENSIONS):
