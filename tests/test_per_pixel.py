@@ -76,6 +76,33 @@ def test_per_pixel_order_equals_a_brute_force_per_pixel_sort():
     assert np.abs(glob.color - expected).max() > 1e-3       # the order matters in this scene
 
 
+
+def test_one_rasterizer_takes_the_order_from_its_options():
+    """``rasterize`` draws either order (no second rasterizer): the same projection and tile
+    lists give the per-pixel image under ``order=PER_PIXEL``, the global one otherwise; a
+    projection made without the per-pixel order, or further layers, are refused."""
+    from splatgl.reference import emit_keys, project, rasterize, sort, tile_ranges
+    from splatgl.reference import per_pixel
+
+    assert not hasattr(per_pixel, "rasterize_per_pixel")
+    scene = random_scene(60, seed=11, spread=0.6, log_scale=(-2.2, 0.4), logit=(1.0, 1.0))
+    cam = Camera.from_fov(32, 24, 60.0, look_at([0.3, -0.2, -3.0], [0, 0, 0]))
+    options = ReferenceOptions(order=Order.PER_PIXEL)
+    proj = project(scene, View.of(cam, PER_PIXEL, scene), PER_PIXEL, np.float64, options)
+    keys, values = sort(*emit_keys(proj))
+    ranges = tile_ranges(keys, proj.n_tiles)
+    per = rasterize(proj, values, ranges, options=options)
+    glob = rasterize(proj, values, ranges, options=ReferenceOptions())
+    assert np.array_equal(per.color, render_reference(scene, cam, PER_PIXEL, np.float64).color)
+    assert np.abs(per.color - glob.color).max() > 1e-3
+    plain = project(scene, View.of(cam, PER_PIXEL, scene), PER_PIXEL, np.float64, ReferenceOptions())
+    with pytest.raises(ValueError, match="no peak coefficients"):
+        rasterize(plain, values, ranges, options=options)
+    from splatgl.reference.layers import RasterLayers
+    with pytest.raises(ValueError, match="no further layers"):
+        rasterize(proj, values, ranges, options=options, layers=RasterLayers(median=True))
+
+
 def test_window_order_known_sequences():
     pix = np.zeros(3, np.int64)
     pos = np.arange(3)

@@ -6,7 +6,7 @@ Stages, each usable on its own::
     keys, values = emit_keys(proj)                              # (tile << 32 | depth bits, index)
     keys, values = sort(keys, values)                           # stable
     ranges = tile_ranges(keys, proj.n_tiles)                    # [start, end) per tile
-    raster = rasterize(proj, values, ranges, background, options)
+    raster = rasterize(proj, values, ranges, background, options)  # options.order: global or per pixel
 
 or all at once with :func:`render_reference`.  Never imports the OpenGL paths.
 """
@@ -14,7 +14,8 @@ or all at once with :func:`render_reference`.  Never imports the OpenGL paths.
 from .binning import depth_bits, emit_keys, sort, tile_ranges
 from ..constants import GSPLAT_ALPHA_MAX, GSPLAT_EXTENT_SIGMAS
 from .options import Compat, ReferenceOptions
-from .rasterize import Raster, gaussian_alpha, gaussian_power, rasterize, transmittance_trace
+from .chunk import gaussian_alpha, gaussian_power
+from .rasterize import Raster, rasterize, transmittance_trace
 from .render import ReferenceImage, render_reference, render_reference_rgba
 from .stages import ProjectedSplats, gsplat_radius, gsplat_rect, inria_rect, project, tile_grid
 

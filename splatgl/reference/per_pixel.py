@@ -30,13 +30,11 @@ contribution arrives more than ``W`` places after one it should precede.
 
 from __future__ import annotations
 
-import functools
 import numpy as np
 
-from ..cameras.camera import Camera
+from .chunk import (TILE_PIXELS, ChunkSplats, blend_chunk, chunk_alpha, surfel_chunk_alpha,
+                    tile_centres, tile_outputs)
 from .peak import Rays, peak_depth
-from .rasterize import (TILE_PIXELS, Raster, _blend_chunk, _chunk_alpha, _surfel_chunk_alpha,
-                        _Tiles, rasterize)
 from .stages import ProjectedSplats
 
 #: Entries of a tile's list one tile-renderer pass reads (the per-pixel window restarts there):
@@ -48,21 +46,24 @@ COLLECT_CHUNK = 256
 
 
 def _contributions(proj: ProjectedSplats, values: np.ndarray, start: int, end: int,
-                   px: np.ndarray, py: np.ndarray, rays: Rays, options) -> tuple[np.ndarray, ...]:
+                   px: np.ndarray, py: np.ndarray, rays: Rays | None, options
+                   ) -> tuple[np.ndarray, ...]:
     """Every (pixel, splat) pair of one tile with alpha >= the skip threshold, as flat arrays
-    ``(pixel (M,), list position (M,), t (M,), alpha (M,), colour (M, 3))`` in list order."""
+    ``(pixel (M,), list position (M,), t (M,), alpha (M,), colour (M, 3))`` in list order
+    (``rays``: the camera's, for 3DGS; surfels sort by their hit's z and need none)."""
     dt = proj.dtype.type
-    ax = ((px - dt(rays.cx)) / dt(rays.fx))[None, :]             # (1, 16) by column
-    ay = ((py - dt(rays.cy)) / dt(rays.fy))[None, :]             # (1, 16) by row
+    if not proj.is_surfel:
+        ax = ((px - dt(rays.cx)) / dt(rays.fx))[None, :]         # (1, 16) by column
+        ay = ((py - dt(rays.cy)) / dt(rays.fy))[None, :]         # (1, 16) by row
     out = []
     for s in range(start, end, COLLECT_CHUNK):
         pos = np.arange(s, min(s + COLLECT_CHUNK, end))[None]
-        g = _Tiles(proj, values, pos, pos < end)
+        g = ChunkSplats(proj, values, pos, pos < end)
         if proj.is_surfel:
-            alpha, t = _surfel_chunk_alpha(g, px[None], py[None], options.resolved_alpha_max,
-                                           options.compat, options.alpha_min)
+            alpha, t = surfel_chunk_alpha(g, px[None], py[None], options.resolved_alpha_max,
+                                          options.compat, options.alpha_min)
         else:
-            alpha = _chunk_alpha(g, px[None], py[None], options.resolved_alpha_max, options.alpha_min)
+            alpha = chunk_alpha(g, px[None], py[None], options.resolved_alpha_max, options.alpha_min)
             pk = proj.peak[values[pos]][0]                          # (K, 10)
             t = peak_depth(pk[:, None, None, :], ax[:, None, :], ay[0][None, :, None], rays.parallel)
             t = t.reshape(1, -1, TILE_PIXELS)
@@ -106,24 +107,28 @@ def _window(ids: np.ndarray, t: np.ndarray, pos: np.ndarray, window: int) -> lis
     return emitted
 
 
-def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
-                  tiles: np.ndarray, options, chunk: int, rays: Rays):
-    """The per-pixel twin of :func:`splatgl.reference.rasterize._raster_batch` (same outputs)."""
-    b = tiles.shape[0]
-    out_t = np.ones((b, TILE_PIXELS), proj.dtype)
-    out_c = np.zeros((b, TILE_PIXELS, 3), proj.dtype)
-    out_d = np.zeros((b, TILE_PIXELS), proj.dtype)
-    out_n = np.zeros((b, TILE_PIXELS), np.int32)
-    out_b = np.zeros((b, TILE_PIXELS), np.int32)
-    lanes = np.arange(16, dtype=np.float64) + 0.5
-    gw = proj.grid[0]
+def check_projection(proj: ProjectedSplats, layers) -> None:
+    """ValueError unless ``proj`` was projected for the per-pixel order (3DGS: its ``peak``
+    coefficients and ``rays``) and no further layers are asked for."""
+    if not proj.is_surfel and (proj.peak is None or proj.rays is None):
+        raise ValueError("the projection has no peak coefficients (project with the per-pixel order)")
+    if layers is not None:
+        raise ValueError("the per-pixel order computes no further layers")
+
+
+def raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
+                 tiles: np.ndarray, options):
+    """Blend the tiles ``tiles`` (b,) in the per-pixel order (exact, or the tile renderer's
+    window when ``options.window`` is set): the per-pixel half of
+    :func:`splatgl.reference.rasterize.rasterize`, with the same outputs as its global batch."""
+    out_t, out_c, out_d, out_n, out_b = tile_outputs(tiles.shape[0], proj.dtype)
+    cols, rows = tile_centres(tiles, proj)
     for row, tile in enumerate(tiles):
         start, end = (int(v) for v in ranges[tile])
         if end <= start:
             continue
-        px = ((tile % gw) * 16 + lanes).astype(proj.dtype)
-        py = ((tile // gw) * 16 + lanes).astype(proj.dtype)
-        pix, pos, t, alpha, color = _contributions(proj, values, start, end, px, py, rays, options)
+        pix, pos, t, alpha, color = _contributions(proj, values, start, end, cols[row], rows[row],
+                                                   proj.rays, options)
         if not len(pix):
             continue
         idx = (exact_order(pix, pos, t) if options.window is None
@@ -134,7 +139,7 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
         length = int(counts.max())
         a = np.zeros((1, length, TILE_PIXELS), proj.dtype)
         a[0, rank, pix] = alpha
-        w, kept, t_seq = _blend_chunk(np.ones((1, TILE_PIXELS), proj.dtype), a, options.stop_inclusive)
+        w, kept, t_seq = blend_chunk(np.ones((1, TILE_PIXELS), proj.dtype), a, options.stop_inclusive)
         wk = w[0, rank, pix]                                   # per contribution
         np.add.at(out_c[row], pix, wk[:, None] * color)
         np.add.at(out_d[row], pix, wk * t)
@@ -147,15 +152,3 @@ def _raster_batch(proj: ProjectedSplats, values: np.ndarray, ranges: np.ndarray,
         out_n[row] = last_pos
     return out_t, out_c, out_d, out_n, out_b
 
-
-def rasterize_per_pixel(proj: ProjectedSplats, sorted_values: np.ndarray, ranges: np.ndarray,
-                        camera: Camera, background=(0.0, 0.0, 0.0), options=None,
-                        progress=None) -> Raster:
-    """:func:`splatgl.reference.rasterize.rasterize` with the per-pixel order (exact, or the
-    tile renderer's window when ``options.window`` is set); ``proj`` must carry ``peak``
-    (3DGS; :func:`splatgl.reference.stages.project` with the per-pixel order)."""
-    if not proj.is_surfel and proj.peak is None:
-        raise ValueError("the projection has no peak coefficients (project with the per-pixel order)")
-    batch = functools.partial(_raster_batch, rays=Rays.of(camera))
-    return rasterize(proj, sorted_values, ranges, background, options, tiles_per_batch=4,
-                     progress=progress, batch=batch)

@@ -30,7 +30,7 @@ from .binning import depth_bits
 from .options import Compat, ReferenceOptions, as_options
 from .peak import Rays, tile_key_bits
 from .per_pixel import _contributions, exact_order, window_order
-from .rasterize import _blend_chunk, _chunk_alpha, _surfel_chunk_alpha, _Tiles
+from .chunk import ChunkSplats, blend_chunk, chunk_alpha, surfel_chunk_alpha
 from .render import PER_PIXEL_LAYERS_REFUSED, with_settings
 from .stages import ProjectedSplats, project
 
@@ -136,8 +136,8 @@ def pixel_splats(scene: Scene, camera: Camera, x: int, y: int,
             behind = (z >= under.depth[y, x]) & (alpha > 0)
             hidden = int(behind.sum())
             alpha = np.where(behind, dt(0.0), alpha)
-        w, kept, t_seq = _blend_chunk(np.ones((1, 1), proj.dtype), alpha[None, :, None],
-                                      options.stop_inclusive)
+        w, kept, t_seq = blend_chunk(np.ones((1, 1), proj.dtype), alpha[None, :, None],
+                                     options.stop_inclusive)
     w, t_seq, kept = w[0, :, 0], t_seq[0, :, 0], int(kept[0, 0])
     source = proj.source if proj.source is not None else np.arange(proj.count)
     splats = tuple(PixelSplat(int(source[seq[k]]), float(z[k]), float(alpha[k]),
@@ -173,13 +173,13 @@ def _global_sequence(proj: ProjectedSplats, rows: np.ndarray, px: np.ndarray, py
     """The global order: the tile's list as it is, with each splat's alpha and depth at the
     pixel; ``(rows (L,), alpha (L,), depth (L,))``."""
     pos = np.arange(rows.size)[None]
-    g = _Tiles(proj, rows, pos, pos < rows.size)
+    g = ChunkSplats(proj, rows, pos, pos < rows.size)
     if proj.is_surfel:
-        alpha, z = _surfel_chunk_alpha(g, px[None], py[None], options.resolved_alpha_max,
-                                       options.compat, options.alpha_min)
+        alpha, z = surfel_chunk_alpha(g, px[None], py[None], options.resolved_alpha_max,
+                                      options.compat, options.alpha_min)
         z = z[0, :, lane]
     else:
-        alpha = _chunk_alpha(g, px[None], py[None], options.resolved_alpha_max, options.alpha_min)
+        alpha = chunk_alpha(g, px[None], py[None], options.resolved_alpha_max, options.alpha_min)
         z = g.depth[0]
     return rows, alpha[0, :, lane], z
 
@@ -187,7 +187,7 @@ def _global_sequence(proj: ProjectedSplats, rows: np.ndarray, px: np.ndarray, py
 def _per_pixel_sequence(proj: ProjectedSplats, rows: np.ndarray, px: np.ndarray, py: np.ndarray,
                         lane: int, rays: Rays, options: ReferenceOptions):
     """The per-pixel order: the pixel's contributions sorted as
-    :func:`splatgl.reference.per_pixel.rasterize_per_pixel` sorts them (exactly, or by the tile
+    :func:`splatgl.reference.rasterize.rasterize` (per-pixel order) sorts them (exactly, or by the tile
     renderer's window), with the depth of each splat's peak along the ray."""
     pix, pos, t, alpha, _ = _contributions(proj, rows, 0, rows.size, px, py, rays, options)
     idx = (exact_order(pix, pos, t) if options.window is None

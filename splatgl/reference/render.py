@@ -20,7 +20,6 @@ from ..splatmath.normals import splat_normals
 from .binning import emit_keys, sort, tile_ranges
 from .layers import RasterLayers
 from .options import Compat, ReferenceOptions, as_options
-from .per_pixel import rasterize_per_pixel
 from .rasterize import rasterize
 from .stages import ProjectedSplats, project
 
@@ -136,14 +135,9 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
             median=Layer.MEDIAN_DEPTH in layers, top=Layer.TOP_ID in layers, source=proj.source,
             under_depth=None if under is None else under.depth.astype(proj.dtype))
     background = settings.background if under is None else (0.0, 0.0, 0.0)
-    if options.order is Order.PER_PIXEL:
-        if extra is not None:
-            raise SplatglError(PER_PIXEL_LAYERS_REFUSED)
-        raster = rasterize_per_pixel(proj, values, ranges, camera, background, options,
-                                     progress=progress)
-    else:
-        raster = rasterize(proj, values, ranges, background, options, progress=progress,
-                           layers=extra)
+    if options.order is Order.PER_PIXEL and extra is not None:
+        raise SplatglError(PER_PIXEL_LAYERS_REFUSED)
+    raster = rasterize(proj, values, ranges, background, options, progress=progress, layers=extra)
     color, alpha, depth = raster.color, raster.alpha, raster.depth
     if under is not None:
         rgba = composite_under(color, alpha, under, settings.background)
