@@ -45,6 +45,17 @@ def test_twin_equals_cpu_sort(values):
     np.testing.assert_array_equal(got, depth_sort(z, idx))
 
 
+@given(st.lists(st.integers(0, 2 ** 20), min_size=0, max_size=200), st.integers(0, 12))
+@settings(max_examples=60)
+def test_twin_is_a_stable_argsort_of_any_keys(values, shift):
+    keys = (np.array(values, np.uint32) << np.uint32(shift)) | np.uint32(0x80000000)
+    payload = np.arange(keys.size, dtype=np.uint32)[::-1].copy()
+    got_keys, got_values = radix_sort_twin(keys, payload)
+    want = np.argsort(keys, kind="stable")
+    np.testing.assert_array_equal(got_keys, keys[want])
+    np.testing.assert_array_equal(got_values, payload[want])
+
+
 def test_passes_cover_only_the_bits_keys_differ_in():
     keys = np.array([0x3F800000, 0x3F8000FF], np.uint32)  # differ in the low 8 bits only
     assert radix_passes(keys) == [0]
