@@ -36,7 +36,7 @@ from splatgl.interactive.budget import Level
 from splatgl.interactive.draft import LevelRenderer
 from splatgl.interactive.lod_cache import LodProvider
 from splatgl.model.settings import RenderSettings
-from splatgl.output.atomic import atomic_write_text
+from splatgl.writing.atomic import atomic_write_text
 
 SCALES = (1.0, 0.7, 0.5, 0.35, 0.25)
 BUDGETS = (None, 100_000, 50_000, 25_000, 12_000, 6_000)

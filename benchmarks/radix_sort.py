@@ -185,7 +185,7 @@ def main() -> None:
     from splatgl.bench.machine import describe, machine_info
     from splatgl.bench.scale import parse_sizes
     from splatgl.gl.context import renderer_name
-    from splatgl.output.atomic import atomic_write_text
+    from splatgl.writing.atomic import atomic_write_text
 
     sizes = parse_sizes(args.sizes, (100_000, 1_000_000, 6_000_000), "--sizes")
     with Renderer() as renderer:

@@ -103,8 +103,8 @@ def test_layers_contract_refuses_an_import_against_the_layers(contracts, importe
 @pytest.mark.parametrize("imports", [
     [("splatgl.gl.storage", "splatgl.formats.quantise")],  # the old smallest_three import
     [("splatgl.order.cull", "splatgl.paths.keyframes")],
-    # through a module the render path may import (output.files), made to use a format
-    [("splatgl.renderers.quad", "splatgl.output.files"), ("splatgl.output.files", "splatgl.formats.ply")],
+    # through a module the render path may import (writing.outputs), made to use a format
+    [("splatgl.renderers.quad", "splatgl.writing.outputs"), ("splatgl.writing.outputs", "splatgl.formats.ply")],
 ], ids=["gl-formats", "order-paths", "through-output"])
 def test_render_path_contract_refuses_file_imports(contracts, imports):
     """The render path imports no file reader or writer, directly or through another module."""

@@ -10,8 +10,8 @@ import pytest
 from splatgl.gl import limits
 from splatgl.errors import SplatglError
 from splatgl.gl.limits import image_size_problem
-from splatgl.output.files import OutputFiles
-from splatgl.output.atomic import atomic_target, atomic_write_text, temp_path
+from splatgl.writing.outputs import OutputFiles
+from splatgl.writing.atomic import atomic_target, atomic_write_text, temp_path
 
 
 def test_commit_renames_every_temporary(tmp_path):
@@ -223,7 +223,7 @@ def test_a_folder_input_gives_its_files(tmp_path):
 
 
 def test_check_output_path_refuses_inputs_and_existing_files(tmp_path):
-    from splatgl.output.files import check_output_path
+    from splatgl.writing.outputs import check_output_path
 
     scene = tmp_path / "s.ply"
     scene.write_bytes(b"ply")
@@ -255,7 +255,7 @@ def test_a_failed_write_on_a_pseudo_file_system_is_not_a_full_disk():
     """``-o /proc/x.ply`` was reported as a full disk."""
     import errno
 
-    from splatgl.output.atomic import disk_note, write_error
+    from splatgl.writing.atomic import disk_note, write_error
 
     assert disk_note("/proc") == ""
     message = str(write_error("/proc/x.ply", OSError(errno.ENOENT, "No such file or directory")))

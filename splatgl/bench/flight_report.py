@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..output.atomic import atomic_write_text
+from ..writing.atomic import atomic_write_text
 from .flight import MOVE_END, ORBIT_END, FlightResult
 from .report import save_figure
 

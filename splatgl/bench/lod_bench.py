@@ -228,7 +228,7 @@ def run_lod(sizes, width: int, height: int, frames: int, thresholds, budgets, ba
     """Measure every size (scene and hierarchy built and cached on first use), print the table,
     and with ``out`` write lod.json and lod.png there (each atomically); the summary rows."""
     from ..order import kernels as cull_kernel
-    from ..output.files import OutputFiles
+    from ..writing.outputs import OutputFiles
     from .scale import scene_file
 
     from .machine import describe, probe_machine

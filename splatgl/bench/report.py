@@ -106,11 +106,11 @@ def plot(path: Path, rows: list[BenchRow]) -> None:
 
 
 def save_figure(fig, path: Path) -> None:
-    """Write a matplotlib figure atomically (:func:`splatgl.output.atomic.atomic_target`) and
+    """Write a matplotlib figure atomically (:func:`splatgl.writing.atomic.atomic_target`) and
     close it; every benchmark plot goes through here."""
     import matplotlib.pyplot as plt
 
-    from ..output.atomic import atomic_target
+    from ..writing.atomic import atomic_target
 
     try:
         with atomic_target(path) as tmp:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from .scale import ScaleRow  # noqa: F401 (annotations)
-from ..output.atomic import atomic_write_text
+from ..writing.atomic import atomic_write_text
 from .report import save_figure
 
 #: The figures whose growth with the splat count is fitted and plotted: (label, getter).

@@ -168,6 +168,6 @@ def load_camera(path: str | Path, index: int = 0, *, width: int | None = None,
 def save_camera(path: str | Path, camera: Camera) -> None:
     """Write the single-camera JSON form (a) of ``camera``, atomically (a failed write raises
     one line naming ``path`` and leaves the old file, if any)."""
-    from ..output.atomic import atomic_write_text
+    from ..writing.atomic import atomic_write_text
 
     atomic_write_text(path, json.dumps(camera.to_json(), indent=2) + "\n")

@@ -94,7 +94,7 @@ def run_popping_command(args: argparse.Namespace) -> int:
     from ..formats import load_scene
     from ..gl.context import renderer_name
     from ..model.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW
-    from ..output.atomic import atomic_write_text
+    from ..writing.atomic import atomic_write_text
 
     configs = tuple(c.strip() for c in (args.popping_configs or ",".join(CONFIGS)).split(",") if c.strip())
     unknown = [c for c in configs if c not in CONFIGS]

@@ -18,7 +18,7 @@ def gpu_probe_main(argv: list[str] | None = None) -> int:
     error (one line)."""
     from ..bench import gpu_probe
     from ..bench.machine import describe
-    from ..output.atomic import atomic_write_text
+    from ..writing.atomic import atomic_write_text
 
     p = argparse.ArgumentParser(prog="python -m splatgl.commands._bench_tools gpu-probe", description=gpu_probe.__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)

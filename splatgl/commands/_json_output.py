@@ -12,9 +12,9 @@ import argparse
 import json
 from pathlib import Path
 
-from ..output.atomic import atomic_write_text
+from ..writing.atomic import atomic_write_text
 from ..errors import SplatglError
-from ..output.files import Inputs, same_file
+from ..writing.outputs import Inputs, same_file
 from ._outputs import output_files
 
 #: The FILE that means standard output.

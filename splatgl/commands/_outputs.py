@@ -1,6 +1,6 @@
 """The two rules every command's outputs follow, checked before any work, on every command alike
-(one mechanism: :class:`splatgl.output.files.OutputFiles` and
-:func:`~splatgl.output.files.check_output_path`):
+(one mechanism: :class:`splatgl.writing.outputs.OutputFiles` and
+:func:`~splatgl.writing.outputs.check_output_path`):
 
 * an output that is one of the files the command reads (the same path, or the same file
   through a symbolic or hard link) is refused in one line naming both options, ``--force`` or
@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Iterable
 
 from ..errors import SplatglError
-from ..output.files import Inputs, InputIndex, OutputFiles, check_not_an_input, check_output_path
+from ..writing.outputs import Inputs, InputIndex, OutputFiles, check_not_an_input, check_output_path
 
 #: The one help text of ``--force``.
 FORCE_HELP = ("replace output files that exist (an output that is one of the command's own "

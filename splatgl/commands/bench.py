@@ -21,7 +21,7 @@ from ._executor import add_executor_arguments, executor_from_args
 from ..gl.context import renderer_name
 from ..gl.limits import check_image_size
 from ..evaluation.metrics import check_ssim_size
-from ..output.files import OutputFiles
+from ..writing.outputs import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
 from ..api import Renderer
 from ..model.settings import RenderSettings

@@ -101,7 +101,7 @@ def _render(args: argparse.Namespace) -> int:
 def _score(args: argparse.Namespace) -> int:
     from ..conformance.index import kit_files
     from ..conformance.score import load_index, score_kit, table
-    from ..output.files import check_not_an_input
+    from ..writing.outputs import check_not_an_input
 
     index = load_index(args.dir)
     check_json_target(args, {"--images": args.images})

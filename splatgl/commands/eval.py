@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..renderers.registry import names as renderer_names
-from ..output.atomic import atomic_write_text
+from ..writing.atomic import atomic_write_text
 from ..datasets.dataset import MAX_WIDTH, Split, load_dataset
 from ..datasets.sources import select_indices
 from ..errors import SplatglError

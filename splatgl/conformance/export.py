@@ -28,7 +28,7 @@ from ..constants import ALPHA_MAX, ALPHA_MIN, LOW_PASS, T_MIN, TILE_SIZE
 from ..errors import SplatglError
 from ..formats import save_scene
 from ..cameras.files import save_camera
-from ..output.atomic import atomic_write_text, temp_path, write_error
+from ..writing.atomic import atomic_write_text, temp_path, write_error
 from ..imagefiles.images import write_image
 from ..reference import render_reference
 from .cases import Case
@@ -91,7 +91,7 @@ def case_entry(case: Case) -> dict:
 
 def _named_for_user(exc: BaseException, tmp: Path, out: Path) -> BaseException:
     """``exc`` naming the user's ``out`` where it named the temporary folder ``tmp`` (a failed
-    write: one line, :func:`~splatgl.output.atomic.write_error`)."""
+    write: one line, :func:`~splatgl.writing.atomic.write_error`)."""
     if isinstance(exc, OSError):
         name = str(exc.filename or "")
         return write_error(out / os.path.relpath(name, tmp) if name.startswith(str(tmp)) else out, exc)

@@ -157,7 +157,7 @@ def check_render_output(kit: str | Path, out: str | Path, index: dict, suffix: s
     :func:`render_kit` cannot fill: a file, the kit's own folder or one inside it, a folder
     that cannot be made or written, an image that would be one of the kit's files (through a
     link too), or an image that exists without ``overwrite``."""
-    from ..output.files import check_not_an_input, check_output_path, same_file
+    from ..writing.outputs import check_not_an_input, check_output_path, same_file
 
     kit, out = Path(kit), Path(out)
     if suffix not in (".exr", ".png"):

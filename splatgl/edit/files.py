@@ -16,7 +16,7 @@ from ..formats.convert import (EMPTY_FORMATS, EXTRAS_FORMATS, MAX_SH_DEGREE_OF_F
                                dropped_note, extra_properties)
 from ..model.scene import InvalidRowsDropped
 from ..model.transform import ModelTransform
-from ..output.files import check_output_path
+from ..writing.outputs import check_output_path
 from ..progress import default_progress
 from .pipeline import Step, apply_operations
 from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shared_extras,

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SplatglError
-from ..output.files import check_output_path
+from ..writing.outputs import check_output_path
 from . import detect_format, load_scene, save_scene, writer_for
 from .spz_axes import Axes, check_choice as check_spz_axes
 from ..model.scene import Scene

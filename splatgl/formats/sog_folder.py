@@ -5,7 +5,7 @@ every instant it names a complete set of textures, the old scene's or the new on
 the write ends (a full disk, Ctrl-C, SIGTERM, a kill).
 
 1. Every new texture is written to its hidden temporary beside the target
-   (:func:`splatgl.output.atomic.temp_path`) and checked to hold all its bytes.
+   (:func:`splatgl.writing.atomic.temp_path`) and checked to hold all its bytes.
 2. When the old ``meta.json`` names none of the new textures' names, they are renamed into
    place (no reader looks at them) and step 4 follows.
 3. Otherwise the old scene still needs those names, so a ``meta.json`` naming the temporaries
@@ -25,7 +25,7 @@ import json
 import os
 from pathlib import Path
 
-from ..output.atomic import atomic_write_bytes, cannot_write, size_problem, temp_path, write_error
+from ..writing.atomic import atomic_write_bytes, cannot_write, size_problem, temp_path, write_error
 
 
 def named_files(meta_path: Path) -> set[str]:

@@ -15,7 +15,7 @@ import zlib
 from pathlib import Path
 from typing import Callable, TypeVar
 
-from ..output.atomic import atomic_target
+from ..writing.atomic import atomic_target
 from ..errors import SplatglError
 
 T = TypeVar("T")
@@ -26,7 +26,7 @@ _CHUNK = 1 << 20
 
 def write_checked(path: str | Path, write: Callable[[Path], T]) -> T:
     """``write(tmp)`` to the temporary of ``path``, checked (:func:`written_problem`), then
-    renamed onto ``path`` (:func:`splatgl.output.atomic.atomic_target`); returns what ``write``
+    renamed onto ``path`` (:func:`splatgl.writing.atomic.atomic_target`); returns what ``write``
     returns.  A failed or short write raises one line naming ``path`` (never the temporary)
     and leaves nothing behind."""
     with atomic_target(path, written_problem) as tmp:

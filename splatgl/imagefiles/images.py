@@ -1,7 +1,7 @@
 """Image output through OpenImageIO, in the formats of :mod:`splatgl.imagefiles.image_formats`:
 PNG and TIFF (8 or 16 bit, RGB), EXR (float RGBA, and Z with the depth layer).
 
-Every file is written atomically (:func:`splatgl.output.atomic.atomic_target`): checked
+Every file is written atomically (:func:`splatgl.writing.atomic.atomic_target`): checked
 (:func:`image_file_problem`: the header's size, channels and type, and the end of the data
 really there) before it is renamed, so a failed or short write (a full disk) raises one line
 naming the target and leaves nothing behind.
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from ..output.atomic import atomic_target, cannot_write
+from ..writing.atomic import atomic_target, cannot_write
 from .image_formats import BIT_DEPTHS, image_format
 from ..output.layers import Layer, with_layers
 from ..errors import SplatglError

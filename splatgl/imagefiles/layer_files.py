@@ -126,7 +126,7 @@ def write_layers(path: str | Path, out: RenderOutput, files: LayerFiles, bit_dep
                  temp=lambda p: p, write=write_image,
                  attributes: dict[str, str] | None = None) -> None:
     """Write ``out`` to ``path`` (and its pictures), each through ``temp(final path)`` (the
-    name to write to: an :class:`~splatgl.output.files.OutputFiles` temporary, or the path)
+    name to write to: an :class:`~splatgl.writing.outputs.OutputFiles` temporary, or the path)
     with ``write`` (:func:`~splatgl.imagefiles.images.write_image`'s signature); ``attributes``
     go into the header of ``path``'s file (a path frame's record)."""
     fmt = find_format(path)

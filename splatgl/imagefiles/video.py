@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..output.atomic import AtomicTarget, write_error
+from ..writing.atomic import AtomicTarget, write_error
 from ..errors import SplatglError
 
 VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")

@@ -17,7 +17,7 @@ read block by block, :mod:`splatgl.lod.ply_rows`):
    output and its levels to one file per level, appended at the end, with the bounds.
 
 Temporary files live in a hidden folder beside the output, removed on any exit (errors, Ctrl-C,
-SIGTERM); the output is written to its atomic temporary (:mod:`splatgl.output.atomic`), checked,
+SIGTERM); the output is written to its atomic temporary (:mod:`splatgl.writing.atomic`), checked,
 then renamed.
 """
 
@@ -34,7 +34,7 @@ from ..formats import ply_write
 from ..formats.written import written_problem
 from ..model.scene import Scene
 from ..model.spatial import morton_codes_clamped
-from ..output.atomic import atomic_target
+from ..writing.atomic import atomic_target
 from .budget import Plan
 from .build import (MAX_LOG_SCALE, concat_nodes, leaf_moments, level_offsets, merge_groups,
                     own_extents, propagate_radii)

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..formats import sog_write, webp
-from ..output.atomic import atomic_write_bytes, cannot_write, size_problem, temp_path, write_error
+from ..writing.atomic import atomic_write_bytes, cannot_write, size_problem, temp_path, write_error
 from .build import LodTree
 
 #: What the output's name ends with.

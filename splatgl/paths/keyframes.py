@@ -209,6 +209,6 @@ def path_json(cameras: list[Camera], frames: int | None = None, loop: bool = Fal
 
 
 def write_path(path: Path, obj: dict) -> None:
-    from ..output.atomic import atomic_write_text
+    from ..writing.atomic import atomic_write_text
 
     atomic_write_text(Path(path), json.dumps(obj, indent=1) + "\n")

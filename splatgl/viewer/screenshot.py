@@ -8,7 +8,7 @@ from pathlib import Path
 from ..cameras.camera import Camera
 from ..cameras.files import save_camera
 from ..imagefiles.images import write_image
-from ..output.files import OutputFiles
+from ..writing.outputs import OutputFiles
 from ..api import Renderer
 from ..model.scene import Scene
 from ..model.settings import GpuStorage, RendererKind, RenderSettings

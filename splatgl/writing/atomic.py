@@ -8,7 +8,7 @@ old file or the whole new one, never a half-written one.
 Leaving the block normally runs ``check(tmp)`` (why the file is not complete, or None) and
 renames; leaving it by any exception (a failed write, Ctrl-C, SIGTERM through
 :mod:`splatgl.cli`) removes the temporary.  A failed write comes out as one line naming the
-target, never the temporary.  :class:`splatgl.output.files.OutputFiles` commits several such
+target, never the temporary.  :class:`splatgl.writing.outputs.OutputFiles` commits several such
 files together; :class:`AtomicTarget` serves writers that span calls (the video writer).
 """
 

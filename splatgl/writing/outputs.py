@@ -11,7 +11,7 @@ declares them up front, so bad paths fail before any work:
 ...     write_image(outputs.temp("--depth-png"), preview)
 
 Each file is written to a temporary beside its target
-(:func:`splatgl.output.atomic.temp_path`: same folder, so the rename is atomic; same extension,
+(:func:`splatgl.writing.atomic.temp_path`: same folder, so the rename is atomic; same extension,
 so writers that pick the format by name still do).  Leaving the ``with`` block
 normally renames every temporary onto its target; an exception (a failed write, Ctrl-C,
 SIGTERM through :mod:`splatgl.cli`) removes them all, so no output is half-written and none is
@@ -223,7 +223,7 @@ class OutputFiles:
 
     def _named(self, exc: BaseException) -> BaseException:
         """``exc`` naming the targets where it named their temporaries
-        (:func:`~splatgl.output.atomic.naming_targets`); a full disk's ``OSError`` without a file
+        (:func:`~splatgl.writing.atomic.naming_targets`); a full disk's ``OSError`` without a file
         name is laid to the latest file."""
         temps = {file.tmp: file.path for file in self._files.values()}
         if isinstance(exc, OSError) and exc.filename is None and exc.errno in _FULL and temps:
