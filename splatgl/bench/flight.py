@@ -37,6 +37,7 @@ from ..interactive.lod_cache import LodProvider
 from ..interactive.session import Session
 from ..model.scene import Scene
 from ..model.settings import RendererKind, RenderSettings
+from ..renderers.registry import DEFAULT_RENDERER
 
 #: The flight's phases (seconds): orbit until ORBIT_END, fly in until MOVE_END, then rest.
 ORBIT_END = 5.0
@@ -150,7 +151,7 @@ def _level_of(frame: FlightFrame) -> Level:
 def fly(renderer: Renderer, scene: Scene, name: str, width: int = 1280, height: int = 720,
         target_fps: float = 10.0, settings: RenderSettings | None = None,
         psnr_every: int = 1, log=print, speed: float = 1.0,
-        exact_kind: RendererKind | str = RendererKind.QUAD) -> FlightResult:
+        exact_kind: RendererKind | str = DEFAULT_RENDERER) -> FlightResult:
     """Fly over ``scene`` (see the module doc); ``psnr_every``: score every n-th moving frame
     (more apart where the flight has over :data:`MAX_SCORED`);
     ``speed``: fly the path that many times faster (tests); ``exact_kind``: the renderer of

@@ -38,6 +38,7 @@ from .metrics import check_ssim_size, psnr, ssim
 from ..api import Renderer
 from ..model.scene import Scene
 from ..model.settings import RenderSettings, RendererKind
+from ..renderers.registry import DEFAULT_RENDERER
 
 
 @dataclass(frozen=True)
@@ -155,7 +156,7 @@ class RenderFiles:
 
 def evaluate_views(renderer: Renderer, scene: Scene, views: Sequence[View],
                    settings: RenderSettings = RenderSettings(),
-                   kind: RendererKind = RendererKind.QUAD,
+                   kind: RendererKind = DEFAULT_RENDERER,
                    renders: RenderFiles | None = None) -> Iterator[Pair]:
     """Render each view and score it against its photograph, yielding as it goes (and with
     ``renders``, write each view's layers)."""
@@ -179,7 +180,7 @@ def evaluate_views(renderer: Renderer, scene: Scene, views: Sequence[View],
 
 
 def evaluate(renderer: Renderer, scene: Scene, views: Sequence[View],
-             settings: RenderSettings = RenderSettings(), kind: RendererKind = RendererKind.QUAD,
+             settings: RenderSettings = RenderSettings(), kind: RendererKind = DEFAULT_RENDERER,
              keep_worst: int = 0,
              progress: Optional[Callable[[int, int, str], None]] = None,
              renders: RenderFiles | None = None) -> tuple[Evaluation, list[Pair]]:

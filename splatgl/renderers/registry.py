@@ -137,6 +137,10 @@ RENDERERS: dict[RendererKind, RendererEntry] = {e.kind: e for e in (
 )}
 
 
+#: The renderer used where none is named (the quad path).
+DEFAULT_RENDERER: RendererKind = next(iter(RENDERERS))
+
+
 def entry(kind: RendererKind | str) -> RendererEntry:
     """The entry of ``kind`` (a :class:`RendererKind` or its name); one line naming the choices
     otherwise."""

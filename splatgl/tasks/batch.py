@@ -24,6 +24,7 @@ from ..progress import ProgressCallback
 from ..api import Renderer
 from ..model.scene import Scene
 from ..model.settings import RenderSettings, RendererKind
+from ..renderers.registry import DEFAULT_RENDERER
 
 #: Frames rendered but not yet written that may wait for the writer thread.
 #: 0 writes each frame before the next renders.  Measured on 2 cores (llvmpipe), biker at
@@ -83,7 +84,7 @@ class FrameMeter:
 
 def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
                   settings: RenderSettings, target: FrameTarget,
-                  kind: RendererKind = RendererKind.QUAD, bit_depth: int = 8,
+                  kind: RendererKind = DEFAULT_RENDERER, bit_depth: int = 8,
                   resume: bool = False, fps: float = 30.0,
                   progress: Optional[ProgressCallback] = None,
                   write_queue: int = WRITE_QUEUE, numbers: Optional[Sequence[int]] = None,

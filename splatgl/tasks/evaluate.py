@@ -20,6 +20,7 @@ from .executor import Executor, ExecutorKind, RunResult, run_tasks
 from ..progress import ProgressCallback
 from .task import Done, Files, TaskProgress
 from ..model.settings import RenderSettings, RendererKind
+from ..renderers.registry import DEFAULT_RENDERER
 from .local import chunks
 from .ray import MAX_CHUNK_FRAMES
 
@@ -59,7 +60,7 @@ class EvalChunk:
 
 
 def evaluate_sharded(scene_path: Path, views: Sequence[View], executor: Executor,
-                     settings: RenderSettings = RenderSettings(), kind: RendererKind = RendererKind.QUAD,
+                     settings: RenderSettings = RenderSettings(), kind: RendererKind = DEFAULT_RENDERER,
                      keep_worst: int = 0, drop_invalid: bool = False,
                      progress: Optional[ProgressCallback] = None,
                      renders: Optional[RenderFiles] = None

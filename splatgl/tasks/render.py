@@ -32,6 +32,7 @@ from ..imagefiles.frames import FrameTarget, plan_frames
 from ..lod.render import LodSettings
 from ..progress import ProgressCallback
 from ..model.settings import RenderSettings, RendererKind
+from ..renderers.registry import DEFAULT_RENDERER
 from .local import chunks
 from .ray import MAX_CHUNK_FRAMES
 
@@ -112,7 +113,7 @@ def stopped_video_note(video: Path) -> str | None:
 
 
 def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: RenderSettings,
-                   target: FrameTarget, executor: Executor, kind: RendererKind = RendererKind.QUAD,
+                   target: FrameTarget, executor: Executor, kind: RendererKind = DEFAULT_RENDERER,
                    bit_depth: int = 8, resume: bool = False, drop_invalid: bool = False,
                    fps: float = 30.0, progress: Optional[ProgressCallback] = None,
                    numbers: Optional[Sequence[int]] = None, lod: Optional[LodSettings] = None,

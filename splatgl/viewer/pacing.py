@@ -26,6 +26,7 @@ from ..interactive.lod_cache import LodProvider
 from ..interactive.session import Session, default_fps
 from ..model.scene import Scene
 from ..model.settings import RendererKind, RenderSettings
+from ..renderers.registry import DEFAULT_RENDERER
 from .frames import FrameResult
 
 class Pacer:
@@ -49,7 +50,7 @@ class Pacer:
         return self.fps(renderer) > 0.0
 
     def _session(self, renderer: Renderer, settings: RenderSettings,
-                 kind: RendererKind = RendererKind.QUAD) -> Session:
+                 kind: RendererKind = DEFAULT_RENDERER) -> Session:
         owner = (id(renderer), settings, kind)
         if self.session is None or self._owner != owner:
             self.release_session()
@@ -62,7 +63,7 @@ class Pacer:
 
     def frame(self, renderer: Renderer, camera: Camera, settings: RenderSettings,
               input_pending: Callable[[], bool] | None = None,
-              kind: RendererKind = RendererKind.QUAD) -> FrameResult | None:
+              kind: RendererKind = DEFAULT_RENDERER) -> FrameResult | None:
         """The next frame for ``camera``: a moving frame, or the next refinement step at rest
         (None: nothing new, or a refinement step interrupted by input).  ``kind``: the
         renderer of the exact frame (the quad path, or the CPU renderer after quad drafts)."""
