@@ -234,7 +234,7 @@ def _lcc_bad(tmp_path, what):
         return path, "Index.bin: field 'indexDataSize': 141 bytes is not a whole number of 36-byte units for 2 levels"
     if what == "data":
         (tmp_path / "Data.bin").write_bytes((tmp_path / "Data.bin").read_bytes()[:100])
-        return path, "are past its end (Index.bin names them)"
+        return path, "Index.bin: unit 0 names bytes past the end of Data.bin (100 bytes)"
     if what == "missing":
         (tmp_path / "Index.bin").unlink()
         return path, "meta.lcc: no Index.bin beside it"
@@ -250,3 +250,35 @@ def test_bad_lcc_is_one_line(tmp_path, what, capsys):
     assert main(["info", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
+
+
+# --- damage: load or one clean line (the rules of tests/test_formats_fuzz.py) ----------------
+
+
+def test_damaged_manifest_and_lcc_files(written, tmp_path):
+    """JSON damage to lod-meta.json and meta.lcc, truncation and corruption of Index.bin and
+    Data.bin: a scene or SceneFormatError with one clean line, nothing else."""
+    from helpers import check_case, corruptions, truncations
+    from test_formats_fuzz_new import json_damage
+
+    rng = np.random.default_rng(7)
+    _, tree, _, _ = written
+    folder = tmp_path / "s"
+    folder.mkdir()
+    target = folder / "lod-meta.json"
+    writer.write_streamed_sog(target, tree, chunk_splats=512)
+    meta = json.loads(target.read_text())
+    for k, damaged in enumerate(json_damage(meta, rng, 40)):
+        check_case(load_scene, target, json.dumps(damaged).encode(), f"lod-meta.json case {k}")
+    path = write_lcc(tmp_path / "l", _lcc_levels(3), cells=2)
+    meta = json.loads(path.read_text())
+    for k, damaged in enumerate(json_damage(meta, rng, 40)):
+        check_case(load_scene, path, json.dumps(damaged).encode(), f"meta.lcc case {k}")
+    path.write_text(json.dumps(meta))
+    for name in ("Index.bin", "Data.bin", "Shcoef.bin"):
+        data = (path.parent / name).read_bytes()
+        cases = [data[:n] for n in truncations(len(data), 6, rng)] + corruptions(data, 6, rng)
+        for k, blob in enumerate(cases):
+            (path.parent / name).write_bytes(blob)
+            check_case(load_scene, path, path.read_bytes(), f"{name} case {k}")
+        (path.parent / name).write_bytes(data)

@@ -161,8 +161,8 @@ class Lcc:
             with open(path, "rb") as fh:
                 fh.seek(offset)
                 blob = fh.read(size)
-        except OSError as exc:
-            raise SceneFormatError(path, f"cannot read: {exc.strerror or exc}") from None
+        except (OSError, ValueError, OverflowError) as exc:
+            raise SceneFormatError(path, f"cannot read: {getattr(exc, 'strerror', None) or exc}") from None
         if len(blob) != size:
             raise SceneFormatError(path, f"bytes {offset}-{offset + size} are past its end "
                                          f"(Index.bin names them)")
@@ -219,7 +219,7 @@ def read_structure(path: str | Path) -> Lcc:
     attrs = meta.get("attributes")
     if not isinstance(attrs, list) or not all(isinstance(a, dict) for a in attrs):
         raise SceneFormatError(path, "expected a list of objects", "attributes")
-    attrs = {a.get("name"): a for a in attrs}
+    attrs = {a["name"]: a for a in attrs if isinstance(a.get("name"), str)}
     file_type = meta.get("fileType")
     has_sh = file_type == "Quality" or (file_type != "Portable" and "shcoef" in attrs)
     ranges = {"scale": _range(path, attrs, "scale"), "envscale": _range(path, attrs, "envscale", "scale")}
@@ -244,6 +244,16 @@ def read_structure(path: str | Path) -> Lcc:
         u = int(np.flatnonzero(bad.any(1))[0])
         raise SceneFormatError(index_path, f"unit {u}: a level's offset or size is not whole "
                                            "32-byte records of its splat count")
+    ends = lods["offset"].astype(np.float64) + lods["size"]
+    for name, scale in (("Data.bin", 1), ("Shcoef.bin", 2))[: 1 + has_sh]:
+        found = _file(path, name)
+        if found is None:
+            raise SceneFormatError(path, f"no {name} beside it")
+        size = found.stat().st_size
+        if ends.size and scale * ends.max() > size:
+            u = int(np.flatnonzero((scale * ends > size).any(1))[0])
+            raise SceneFormatError(index_path, f"unit {u} names bytes past the end of {name} "
+                                               f"({size} bytes)")
     try:
         box = meta["boundingBox"]
         lo, hi = np.asarray(box["min"], np.float64), np.asarray(box["max"], np.float64)
@@ -264,7 +274,7 @@ def read_structure(path: str | Path) -> Lcc:
             for level in range(levels)}))
     counts = tuple(int(lods["count"][:, level].sum()) for level in range(levels))
     splats = meta.get("splats")
-    if splats is not None and list(splats) != list(counts):
+    if splats is not None and splats != list(counts):
         raise SceneFormatError(path, f"splats {splats!r} disagree with Index.bin's {list(counts)}",
                                "splats")
     return Lcc(path, levels, counts, tuple(chunks), has_sh, ranges)
