@@ -414,7 +414,8 @@ def test_extreme_stored_values_raise_no_numpy_warning():
                    CropBox((0, 0, 0), (1, 1, 1), ModelTransform(scale=1e-300))):
             apply_operations(wild, [op])
         attribute_statistics(wild)
-        overdraw(wild)
+        assert overdraw(wild)["not_estimated"].startswith("cannot frame the scene: its centre")
+        assert overdraw(Scene(means[8:], s.quats[8:], ls[8:], logits[8:], sh[8:]))["per_pixel"] > 0
         ls[18] = 3e38
         with pytest.raises(SplatglError, match="--decimate: splat 18 has a scale above e.100 "
                                                "world units, whose moments overflow"):

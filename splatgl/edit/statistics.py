@@ -51,8 +51,12 @@ def attribute_statistics(scene: Scene) -> dict[str, dict]:
 
 def overdraw(scene: Scene, camera=None) -> dict:
     """The default view's estimated fragments (see the module notes): ``fragments``,
-    ``pixels``, ``per_pixel`` and the camera's ``width``/``height``."""
-    cam = camera if camera is not None else default_camera(scene)
+    ``pixels``, ``per_pixel`` and the camera's ``width``/``height``; where no default view can
+    frame the scene (positions near float32's limits), ``not_estimated`` says why instead."""
+    try:
+        cam = camera if camera is not None else default_camera(scene)
+    except CameraError as exc:
+        return {"not_estimated": str(exc)}
     near = resolve_near(RenderSettings(), scene.robust_radius)
     with np.errstate(all="ignore"):  # extreme stored values: their splats count nothing
         total = _fragments(scene, cam, near)
@@ -110,7 +114,9 @@ def format_statistics(stats: dict[str, dict], draw: dict | None) -> str:
         cells = " ".join(f"{s[k]:>10.4g}" for k in ("min", "p1", "median", "p99", "max"))
         bad = f" ({s['nonfinite']} not finite)" if s["nonfinite"] else ""
         lines.append(f"{name:<14} {cells}  {s['unit']}{bad}")
-    if draw is not None:
+    if draw is not None and "not_estimated" in draw:
+        lines.append(f"overdraw:      not estimated: {draw['not_estimated']}")
+    elif draw is not None:
         lines.append(f"overdraw:      {draw['per_pixel']:.3g} fragments per pixel in the default "
                      f"{draw['width']}x{draw['height']} view ({draw['fragments']:.4g} fragments, "
                      "quad-path estimate)")
