@@ -91,6 +91,8 @@ def test_contracts_kept_on_the_package(contracts, contract_id):
     ("splatgl.model.scene", "splatgl.api"),  # from the bottom to the API
     ("splatgl.gl.buffers", "splatgl.reference.render"),  # between independent siblings
     ("splatgl.bench.runner", "splatgl.viewer.app"),  # between independent siblings
+    ("splatgl.output.under", "splatgl.imagefiles.under_exr"),  # data up to its file reader
+    ("splatgl.writing.atomic", "splatgl.output.layers"),  # between independent siblings
 ])
 def test_layers_contract_refuses_an_import_against_the_layers(contracts, importer, imported):
     """An import up the layers, or across packages that share a layer as independent siblings,
