@@ -136,7 +136,11 @@ import importlib, pkgutil, sys
 import splatgl.renderers, splatgl.reference, splatgl.cameras, splatgl.order
 for package in (splatgl.renderers, splatgl.reference, splatgl.cameras, splatgl.order):
     for info in pkgutil.iter_modules(package.__path__, package.__name__ + "."):
-        importlib.import_module(info.name)
+        try:
+            importlib.import_module(info.name)
+        except ModuleNotFoundError as e:  # an optional dependency (numba kernels)
+            if e.name.startswith("splatgl"):
+                raise
 import numpy as np
 import splatgl
 from splatgl.api import render_reference_layers
