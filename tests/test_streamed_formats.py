@@ -231,7 +231,8 @@ def _lcc_bad(tmp_path, what):
     path = write_lcc(tmp_path, _lcc_levels(0), cells=2)
     if what == "index":
         (tmp_path / "Index.bin").write_bytes((tmp_path / "Index.bin").read_bytes()[:-3])
-        return path, "Index.bin: field 'indexDataSize': 141 bytes is not a whole number of 36-byte units for 2 levels"
+        return path, ("Index.bin: field 'indexDataSize': 141 bytes is not a whole number of "
+                      "36-byte units for 2 levels")
     if what == "data":
         (tmp_path / "Data.bin").write_bytes((tmp_path / "Data.bin").read_bytes()[:100])
         return path, "Index.bin: unit 0 names bytes past the end of Data.bin (100 bytes)"

@@ -7,8 +7,8 @@ level above merges ``branching`` neighbours), up to :data:`MAX_LEVELS` and no co
 node per chunk.  Chunks (the tree's leaves, what a renderer streams): runs of ``span``
 consecutive leaves in the tree's Morton order, ``span`` a multiple of ``branching ** (levels -
 1)`` so that every node of every level written lies in exactly one chunk; a chunk's box holds
-its original splats' extents (``k(o)`` times the largest scale, as the cull).  The chunks form a balanced binary tree (boxes the union
-of their children's).  Units: each level's chunks, in order, packed into SOG folders
+its original splats' extents (``k(o)`` times the largest scale, as the cull).  The chunks form
+a balanced binary tree (boxes the union of their children's).  Units: each level's chunks, in order, packed into SOG folders
 ``L_i/meta.json`` of about :data:`UNIT_SPLATS` splats (a chunk is never split), each row in the
 chunks' order (so ``offset`` and ``count`` address its rows).
 
