@@ -113,3 +113,17 @@ def test_few_modules_outside_the_registry_and_the_commands_name_a_renderer_kind(
         if named - ({own.group(1)} if own else set()):
             naming.add(rel)
     assert len(naming) <= 9, sorted(naming)     # 19 before the registry
+
+
+def test_own_settings_puts_back_what_a_renderer_does_not_read():
+    from splatgl.model.emulation import Emulation
+
+    asked = RenderSettings(extent="square", convention="gsplat", emulation=Emulation(extent="fixed"),
+                           order=Order.PER_PIXEL, background=(0.5, 0.5, 0.5))
+    tile = registry.own_settings(asked, "tile")
+    assert tile == RenderSettings(order=Order.PER_PIXEL, background=(0.5, 0.5, 0.5))
+    assert registry.own_settings(asked, "reference") == RenderSettings(
+        convention="gsplat", emulation=Emulation(extent="fixed"), order=Order.PER_PIXEL,
+        background=(0.5, 0.5, 0.5))
+    plain = RenderSettings()
+    assert registry.own_settings(plain, "cpu") is plain

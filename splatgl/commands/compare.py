@@ -4,14 +4,13 @@ reference from the same camera; ``--explain`` says which approximation accounts 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from ..renderers.registry import names as renderer_names
+from ..renderers.registry import names as renderer_names, own_settings
 from ..imagefiles.pictures import heatmap, side_by_side
 from ..imagefiles.image_formats import image_format, suffix_list
 from ..imagefiles.images import write_image
@@ -21,8 +20,7 @@ from ..evaluation.explain import candidates, explain
 from ..evaluation.metrics import check_ssim_size, depth_errors, image_errors
 from ..evaluation.their_image import ALPHA_CONVENTIONS, match_to_reference, read_their_image
 from ..api import Renderer
-from ..model.emulation import Emulation
-from ..model.settings import Convention, Order, RendererKind
+from ..model.settings import Order, RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, inputs_from_args, positive_float, size_origin)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
@@ -121,14 +119,6 @@ def _files(args: argparse.Namespace):
     return output_files(args, {"--side-by-side": args.side_by_side, "--heatmap": args.heatmap})
 
 
-def _side(settings, kind: RendererKind):
-    """The settings a side renders with: the GPU renderers draw the inria rules without
-    emulation (the knobs are the reference's)."""
-    if kind is RendererKind.REFERENCE:
-        return settings
-    return dataclasses.replace(settings, convention=Convention.INRIA, emulation=Emulation())
-
-
 def run(args: argparse.Namespace) -> int:
     kinds = _check_options(args)
     files = _files(args)
@@ -141,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         for kind in kinds:
             check_size(args, camera, kind, renderer.ctx)
         for kind in kinds:
-            side = _side(settings, kind)
+            side = own_settings(settings, kind)   # e.g. the knobs are the reference's
             if kind is not RendererKind.REFERENCE:
                 renderer.render(scene, camera, side, kind, progress)  # warm-up: compile, upload
             t0 = time.perf_counter()

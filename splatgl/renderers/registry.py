@@ -16,6 +16,7 @@ loads neither OpenGL nor numba.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import importlib
 import importlib.util
@@ -285,6 +286,16 @@ def check_fidelity(settings: RenderSettings, *kinds: RendererKind | str) -> None
         drawn = " and ".join(RENDERERS[k].title for k in RENDERERS if k in by)
         raise SplatglError(f"--order per-pixel is drawn by {drawn}, not the {_renderers(kinds)} "
                            f"(use --renderer {_which(by)}{why})")
+
+
+def own_settings(settings: RenderSettings, kind: RendererKind | str) -> RenderSettings:
+    """``settings`` as renderer ``kind`` reads them: every setting of :data:`OPTIONS` it does
+    not read back at its default (one ``settings`` drawn by several renderers, each its own
+    part: ``splatgl compare``'s two sides)."""
+    e, default = entry(kind), RenderSettings()
+    changes = {name: getattr(default, name) for name in OPTIONS
+               if name not in e.reads and getattr(settings, name) != getattr(default, name)}
+    return dataclasses.replace(settings, **changes) if changes else settings
 
 
 def _spelled(value) -> str:
