@@ -4,7 +4,7 @@
 // rectangle inside the viewport (lib/camera.glsl visible_area; PREPARED: computed by the
 // pre-pass), and writes its float sum to partial[invocation]; the caller adds the partial sums
 // (no atomics, no barriers: both are slow on llvmpipe).
-// Twin: splatgl/renderers/early_stop.py coverage().
+// Twin: splatgl/splatmath/early_stop.py coverage().
 #include "lib/splat_rect.glsl"
 
 layout(local_size_x = COVERAGE_GROUP) in;

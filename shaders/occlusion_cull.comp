@@ -10,7 +10,7 @@
 // survivors[baseInstance + instance]).  Variants: PREPARED (3DGS after quad_prepass.comp:
 // the survivor value is the slot, read back by quad_light.vert), SURFEL (2DGS, the value is the
 // splat index for surfel.vert), neither (3DGS vertex path, the splat index for quad.vert).
-// Twin: splatgl/renderers/early_stop.py occlusion_cull().
+// Twin: splatgl/splatmath/early_stop.py occlusion_cull().
 #include "lib/splat_rect.glsl"
 
 layout(local_size_x = OCCLUSION_GROUP) in;

@@ -2,7 +2,7 @@
 // transmittance T = 1 - A has fallen below T_MIN, the reference's stop threshold (DESIGN.md 2).
 // The accumulation target is sampled, never attached: this pass renders into a depth-only
 // framebuffer.
-// Twin: splatgl/renderers/early_stop.py stop_mask().
+// Twin: splatgl/splatmath/early_stop.py stop_mask().
 layout(binding = ACCUM_UNIT) uniform sampler2D u_accum;
 
 void main() {

@@ -4,7 +4,7 @@
 // a tile is wholly stopped when all 16 bits are set.  One invocation per tile, scanning each
 // block until its first open pixel (open blocks mostly leave at once; a work group per tile
 // with a shared-memory reduction measured 3x slower on llvmpipe).
-// Twin: splatgl/renderers/early_stop.py stop_tiles(), stop_blocks().
+// Twin: splatgl/splatmath/early_stop.py stop_tiles(), stop_blocks().
 layout(local_size_x = STOP_TILES_GROUP) in;
 layout(binding = ACCUM_UNIT) uniform sampler2D u_accum;
 layout(std430, binding = BINDING_STOP_TILES) writeonly buffer StopTiles { uint stopped[]; };

@@ -8,7 +8,7 @@
 // as many dispatches as the largest rectangle needs (one, below 32768 tiles).
 // PER_PIXEL (3DGS): the key's depth is the splat's peak depth along the ray through its centre
 // clamped into the box of the tile's pixel centres (lib/peak_depth.glsl; twin
-// splatgl/reference/peak.py tile_key_bits), clamped below at MIN_KEY_DEPTH, so that each
+// splatgl/splatmath/peak.py tile_key_bits), clamped below at MIN_KEY_DEPTH, so that each
 // pixel's window has little order left to fix.
 #include "lib/tile_common.glsl"
 #if defined(PER_PIXEL) && !defined(SURFEL)

@@ -5,7 +5,7 @@
 // row 0 are both the image's top.  Along the pass's axis, output pixel centre x + 1/2 samples
 // the source at u = (x + 1/2) * src / dst - 1/2 texels; the four taps around it are clamped to
 // the edge.  The second pass clips the ringing: alpha to [0, 1], colour to [0, inf).
-// Twin: splatgl/interactive/upscale.py upscale().
+// Twin: splatgl/splatmath/upscale.py upscale().
 
 layout(binding = UPSCALE_UNIT) uniform sampler2D u_source;
 uniform float u_ratio;         // source size / target size along the pass's axis

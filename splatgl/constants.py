@@ -43,7 +43,7 @@ MEDIAN_T = 0.5
 #: 2 sqrt(2), the corner distance web viewers use (their corner coordinate 2 times sqrt(2) sigma).
 FAST_CORNER_SIGMAS = 2.0 * math.sqrt(2.0)
 #: The per-pixel order (``--order per-pixel``) clamps the depth of a splat's peak along a ray to
-#: this many standard deviations of its view depth about its centre (splatgl/reference/peak.py).
+#: this many standard deviations of its view depth about its centre (splatgl/splatmath/peak.py).
 PEAK_CLAMP_SIGMAS = 3.0
 #: The other published convention (gsplat), for ``Compat.GSPLAT``: per-axis opacity-aware extent
 #: of at most this many standard deviations, and its alpha clamp.

@@ -1,5 +1,5 @@
 """Early termination in the quad path (splatgl/renderers/early_stop.py): schedule, GPU passes against
-their NumPy twins, the accuracy bound against no stop and the reference, the batch hook."""
+their NumPy twins (splatgl/splatmath/early_stop.py), the accuracy bound against no stop and the reference, the batch hook."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from hypothesis import given, settings as hsettings, strategies as st
 
 import splatgl.renderers.batches as batches_module
 from splatgl.renderers import early_stop as es
+from splatgl.splatmath import early_stop as stops
 from splatgl.constants import ALPHA_MAX, T_MIN
 from splatgl.bench.probes import count_fragments
 from splatgl.renderers.quad import QuadRenderer
@@ -58,18 +59,18 @@ def test_twins_on_a_known_mask():
     alpha[:16, 16:32] = 1.0
     alpha[3, 20] = np.float32(1.0 - 2e-4)     # T = 2e-4 >= T_MIN: block (1, 0) of tile (0, 1) open
     alpha[16:, 32:] = 1.0                     # partial edge tile (1, 2): all its in-image pixels
-    tiles = es.stop_tiles(alpha)
+    tiles = stops.stop_tiles(alpha)
     assert (tiles == es.TILE_STOPPED).tolist() == [[True, False, False], [False, False, True]]
     assert tiles[0, 1] == es.TILE_STOPPED & ~(1 << 1)   # every block of tile (0, 1) but one
     # Blocks past the image edge count as stopped: tile (0, 2) keeps its first block column
     # (x 32..34) open, tile (1, 0) its first block row (y 16..19).
     assert tiles[0, 2] == 0xEEEE and tiles[1, 0] == 0xFFF0
-    np.testing.assert_array_equal(es.unpack_blocks(tiles), es.stop_blocks(alpha))
+    np.testing.assert_array_equal(stops.unpack_blocks(tiles), stops.stop_blocks(alpha))
     lo = np.array([[1.0, 1.0], [1.0, 1.0], [-9.0, 2.0], [33.0, 17.0], [40.0, 3.0],
                    [24.0, 8.0], [20.0, 2.0], [17.0, 4.0]])
     hi = np.array([[14.0, 15.0], [20.5, 15.0], [-0.5, 5.0], [34.0, 19.9], [50.0, 4.0],
                    [31.9, 15.0], [22.0, 5.0], [19.9, 9.0]])
-    keep = es.occlusion_cull(lo, hi, tiles, 35, 20)
+    keep = stops.occlusion_cull(lo, hi, tiles, 35, 20)
     # on a stopped tile only / reaches the open block of tile (0, 1) / off-image / stopped edge tile / off-image /
     # stopped blocks of tile (0, 1) / its open block / the blocks beside it
     assert keep.tolist() == [False, True, False, False, False, False, True, False]
@@ -114,8 +115,8 @@ def test_mark_and_tile_passes_match_their_twins(ctx):
     t[:16, 16:48] = 5e-5                       # two tiles certainly stopped
     alpha = (1.0 - t).astype(np.float32)
     marked, tiles = _gpu_passes(ctx, alpha)
-    np.testing.assert_array_equal(marked, es.stop_mask(alpha))
-    np.testing.assert_array_equal(tiles, es.stop_tiles(alpha))
+    np.testing.assert_array_equal(marked, stops.stop_mask(alpha))
+    np.testing.assert_array_equal(tiles, stops.stop_tiles(alpha))
     assert tiles[0, 1] == tiles[0, 2] == es.TILE_STOPPED
     assert 0 < np.count_nonzero((tiles != 0) & (tiles != es.TILE_STOPPED)), "partly stopped tiles"
 
@@ -139,7 +140,7 @@ def test_occlusion_cull_matches_its_twin(ctx, monkeypatch, preprocess):
 
     draw(quad, cam, on_batch=hook).rgba
     alpha = after_first["alpha"]
-    tiles = es.stop_tiles(alpha)
+    tiles = stops.stop_tiles(alpha)
     gpu_tiles = np.frombuffer(quad.batches.passes.tiles.read(size=4 * tiles.size), np.uint32)
     np.testing.assert_array_equal(gpu_tiles.reshape(tiles.shape), tiles)
     assert (tiles == es.TILE_STOPPED).mean() > 0.2, "the scene must stop some tiles for the test to mean anything"
@@ -148,8 +149,8 @@ def test_occlusion_cull_matches_its_twin(ctx, monkeypatch, preprocess):
     half = np.abs(a1) + np.abs(a2)
     visible = prepared[:, 3, 2] != 0
     lo, hi = mean - half, mean + half
-    first = es.occlusion_cull(lo[:split], hi[:split], None, cam.width, cam.height) & visible[:split]
-    second = es.occlusion_cull(lo[split:], hi[split:], tiles, cam.width, cam.height) & visible[split:]
+    first = stops.occlusion_cull(lo[:split], hi[:split], None, cam.width, cam.height) & visible[:split]
+    second = stops.occlusion_cull(lo[split:], hi[split:], tiles, cam.width, cam.height) & visible[split:]
     n_cmd_first = -(-split // es.SEGMENT)
     n_cmd = n_cmd_first + -(-(n - split) // es.SEGMENT)
     stop = quad.batches.passes
@@ -185,7 +186,7 @@ def test_quads_over_too_many_tiles_skip_the_walk(ctx, monkeypatch):
     np.testing.assert_array_equal(image, full)
     lo, hi = np.array([[0.0, 0.0], [0.0, 0.0]]), np.array([[15.0, 15.0], [40.0, 15.0]])
     tiles = np.full((4, 6), es.TILE_STOPPED, np.uint32)   # every tile stopped
-    assert es.occlusion_cull(lo, hi, tiles, 96, 64).tolist() == [False, True]
+    assert stops.occlusion_cull(lo, hi, tiles, 96, 64).tolist() == [False, True]
 
 
 def _bound_check(on, off, name):
@@ -352,7 +353,7 @@ def test_coverage_estimate_matches_its_twin_and_the_fragments(ctx, kind, preproc
         mean, a1, a2 = p[visible, 0, :2], p[visible, 0, 2:], p[visible, 1, :2]
         half = np.abs(a1) + np.abs(a2)
         area = 4.0 * np.abs(a1[:, 0] * a2[:, 1] - a1[:, 1] * a2[:, 0])
-        twin = es.coverage(mean - half, mean + half, area, cam.width, cam.height)
+        twin = stops.coverage(mean - half, mean + half, area, cam.width, cam.height)
         assert estimate == pytest.approx(twin, rel=1e-4)
     auto.release()
     plain.release()

@@ -19,7 +19,8 @@ from splatgl.errors import SplatglError
 from splatgl.interactive.budget import EXACT, FrameBudget, Level, check_fps, ladder, predicted_psnr
 from splatgl.interactive.lod_cache import LodProvider, cache_file
 from splatgl.interactive.session import Session
-from splatgl.interactive.upscale import Upscaler, catmull_rom_weights, upscale
+from splatgl.interactive.upscale import Upscaler
+from splatgl.splatmath.upscale import catmull_rom_weights, upscale
 from splatgl.model.settings import RenderSettings
 
 

@@ -11,9 +11,9 @@ from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at, orbit
 from splatgl.constants import LOW_PASS, SH_C0, SH_C1
 from splatgl.splatmath.project import (antialias_factor, conic, covariance_2d, covariance_2d_det,
-                                   covariance_3d, discriminant, ellipse_axes, jacobian,
-                                   project_means, quat_to_rotmat, reference_radius, screen_factor,
-                                   sh_basis, sh_color, to_camera)
+                                       covariance_3d, discriminant, ellipse_axes, jacobian,
+                                       project_means, quat_to_rotmat, reference_radius, screen_factor,
+                                       sh_basis, sh_color, to_camera)
 
 RNG = np.random.default_rng(7)
 

@@ -197,7 +197,7 @@ def test_tile_renderer_per_pixel_orthographic_and_surfels(ctx):
 def test_peak_coefficients_and_peak_depth_against_the_formula(ortho):
     """peak_depth(peak_coefficients(...)) is argmax_t of the 3D Gaussian along each pixel's ray
     (clamped to mu_z +- 3 sqrt(Sigma_zz)), in float64."""
-    from splatgl.reference.peak import peak_coefficients, peak_depth
+    from splatgl.splatmath.peak import peak_coefficients, peak_depth
 
     rng = np.random.default_rng(3)
     n = 50

@@ -127,3 +127,11 @@ def test_own_settings_puts_back_what_a_renderer_does_not_read():
         background=(0.5, 0.5, 0.5))
     plain = RenderSettings()
     assert registry.own_settings(plain, "cpu") is plain
+
+
+@pytest.mark.parametrize("kind", list(RendererKind))
+def test_render_takes_the_view_the_layers_and_the_geometry_under_in_that_order(kind):
+    import inspect
+
+    cls = registry.entry(kind).renderer_class()
+    assert list(inspect.signature(cls.render).parameters)[:4] == ["self", "view", "layers", "under"]

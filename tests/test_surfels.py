@@ -29,7 +29,7 @@ from splatgl.reference import render_reference
 from splatgl.model.scene import Scene, SplatKind
 from splatgl.model.settings import RenderSettings, resolve_near
 from splatgl.splatmath.surfel import (intersect, sigma_count, surfel_alpha, surfel_bounds,
-                                  surfel_screen, surfel_transform)
+                                      surfel_screen, surfel_transform)
 
 TOL32 = 2e-5
 

@@ -2,7 +2,7 @@
 // then the camera model's piece: cameras/<CAMERA_MODEL>.glsl (its own uniforms, project_mean,
 // jacobian, in_view, view_depth; splatgl/cameras/<model>.py is its twin).  visible_area below
 // is the share of each quad that early termination's coverage estimate adds up.
-// Twin: splatgl/renderers/early_stop.py coverage().
+// Twin: splatgl/splatmath/early_stop.py coverage().
 uniform mat3 u_view_rot;      // world-to-camera rotation R_cw (OpenCV axes)
 uniform vec3 u_view_trans;    // world-to-camera translation t_cw
 uniform vec3 u_cam_center;    // camera centre in the scene's own frame (for SH directions)

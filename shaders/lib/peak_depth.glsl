@@ -1,6 +1,6 @@
 // The depth at which a splat's Gaussian peaks along a pixel's ray: the key of the per-pixel
 // order (PER_PIXEL; derivation in splatgl/reference/per_pixel.py).
-// Twin: splatgl/reference/peak.py peak_coefficients(), peak_depth().
+// Twin: splatgl/splatmath/peak.py peak_coefficients(), peak_depth().
 //   perspective: t* = mu_z (A + B.delta) / (A + 2 B.delta + delta^T Q2 delta), delta = a - m,
 //     m = mu.xy / mu_z, A = m'^T Q m', B = (Q m')_xy with m' = (m, 1), Q2 the xy block of Q;
 //   orthographic: t* = mu_z + B.delta, delta = a - mu.xy, B = -(Q_zx, Q_zy) / Q_zz;

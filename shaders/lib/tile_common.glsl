@@ -24,7 +24,7 @@ layout(std430, binding = TILE_BINDING_KEYS) buffer SortKeys { uvec2 sort_keys[];
 layout(std430, binding = TILE_BINDING_VALUES) buffer SortValues { uint sort_values[]; };
 layout(std430, binding = TILE_BINDING_RANGES) buffer TileRanges { uvec2 tile_ranges[]; };
 #ifdef PER_PIXEL
-// The per-pixel order (twin: splatgl/reference/peak.py peak_coefficients): three vec4 per splat
+// The per-pixel order (twin: splatgl/splatmath/peak.py peak_coefficients): three vec4 per splat
 // of lib/peak_depth.glsl's coefficients, written by the project stage (3DGS only).
 layout(std430, binding = TILE_BINDING_PEAK) buffer ProjPeak { vec4 proj_peak[]; };
 #endif

@@ -5,7 +5,7 @@ Overdraw: the fragments a plain quad-path draw of the default camera (:func:`def
 1280 x 720) would shade, per image pixel: each splat's opacity-aware quad (the extent where its
 alpha reaches 1/255, :func:`~splatgl.splatmath.project.ellipse_axes`; for 2DGS surfels their
 screen boxes) clipped to the image, summed by the coverage estimate the quad path's
-``--early-stop auto`` uses (:func:`splatgl.renderers.early_stop.coverage`).  Splats behind the
+``--early-stop auto`` uses (:func:`splatgl.splatmath.early_stop.coverage`).  Splats behind the
 near plane count nothing.  Computed a block of rows at a time.
 """
 
@@ -16,9 +16,9 @@ import numpy as np
 from ..cameras.framing import default_camera
 from ..model.scene import Scene, SplatKind, activate_opacities, activate_rotations
 from ..model.settings import RenderSettings, resolve_near
-from ..renderers.early_stop import coverage
+from ..splatmath.early_stop import coverage
 from ..splatmath.project import (covariance_2d, covariance_3d, ellipse_axes, project_means,
-                             quat_to_rotmat, to_camera)
+                                 quat_to_rotmat, to_camera)
 from .attributes import ATTRIBUTES, Rows, names_for
 
 #: Rows per block.

@@ -7,8 +7,8 @@ small negative lobes ring a little at hard edges; the ringing is clipped (alpha 
 colour to at least 0).  It works on the premultiplied ``(C, A)`` target, so the background is
 composited after the filter, as for a full-size frame.
 
-:func:`upscale` is the float64 NumPy twin of the shader (the same sample positions, taps and
-clipping); :class:`Upscaler` runs the shader into a texture of the window's size.
+:class:`Upscaler` runs the shader into a texture of the window's size; its float64 NumPy twin
+(the same sample positions, taps and clipping) is :func:`splatgl.splatmath.upscale.upscale`.
 """
 
 from __future__ import annotations
@@ -18,37 +18,6 @@ import numpy as np
 
 from ..gl.bindings import UPSCALE_UNIT
 from ..gl.shaders import preprocess
-
-
-def catmull_rom_weights(t: np.ndarray) -> np.ndarray:
-    """(..., 4) weights of the taps at offsets -1, 0, 1, 2 for fractions ``t`` in [0, 1)."""
-    t = np.asarray(t, np.float64)
-    t2, t3 = t * t, t * t * t
-    return 0.5 * np.stack([-t3 + 2 * t2 - t, 3 * t3 - 5 * t2 + 2, -3 * t3 + 4 * t2 + t, t3 - t2], -1)
-
-
-def _axis(src: int, dst: int) -> tuple[np.ndarray, np.ndarray]:
-    """(dst, 4) source indices (clamped to the edge) and weights for one axis."""
-    u = (np.arange(dst, dtype=np.float64) + 0.5) * (src / dst) - 0.5
-    base = np.floor(u)
-    idx = np.clip(base[:, None].astype(np.int64) + np.arange(-1, 3), 0, src - 1)
-    return idx, catmull_rom_weights(u - base)
-
-
-def upscale(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """``image`` ((h, w, C) premultiplied, row 0 = top) resampled to ``size`` = (W, H) by the
-    filter of shaders/upscale.frag (along x, then along y); float64, clipped like the shader
-    (last channel = alpha)."""
-    img = np.asarray(image, np.float64)
-    h, w = img.shape[:2]
-    width, height = size
-    ix, wx = _axis(w, width)
-    iy, wy = _axis(h, height)
-    rows = np.einsum("xk,yxkc->yxc", wx, img[:, ix])         # (h, W, C): along x
-    out = np.einsum("yk,ykxc->yxc", wy, rows[iy])            # (H, W, C): along y
-    out[..., :-1] = np.maximum(out[..., :-1], 0.0)
-    out[..., -1] = np.clip(out[..., -1], 0.0, 1.0)
-    return out
 
 
 class Upscaler:

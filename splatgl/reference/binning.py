@@ -3,7 +3,7 @@ radix sort and identifyTileRanges).
 
 Key layout (DESIGN.md section 2): ``key = (tile_id << 32) | float32_bits(view z)`` as uint64 with
 ``tile_id = y * tiles_x + x`` (the per-pixel order: the depth of the splat's peak along the ray
-where it is nearest to the tile, :func:`splatgl.reference.peak.tile_key_bits`).  View z is positive after near culling, so its IEEE bits order like
+where it is nearest to the tile, :func:`splatgl.splatmath.peak.tile_key_bits`).  View z is positive after near culling, so its IEEE bits order like
 the depths.  Keys are emitted splat by splat in index order (within a splat, tile rows top to
 bottom, each left to right) and sorted stably, so equal keys keep splat-index order.
 """
@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..constants import TILE_SIZE
-from .peak import tile_key_bits
+from ..splatmath.peak import tile_key_bits
 from .stages import ProjectedSplats
 
 

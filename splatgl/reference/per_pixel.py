@@ -15,7 +15,7 @@ splat, and ``t* = mu_z`` on the centre's ray.  Orthographic (o = (a, 0), d = (0,
 ``a = (x - cx) / fx`` ...): ``t* = mu_z + B . delta`` with ``delta = a - mu_xy`` and
 ``B = -(Q_zx, Q_zy) / Q_zz``.  Q is scaled by the smallest squared scale (``t*`` does not change),
 so flat splats keep finite coefficients.  ``t*`` is clamped to the splat's 3-sigma range of view
-depth, ``mu_z +- 3 sqrt(Sigma_zz)`` (:data:`splatgl.reference.peak.PEAK_CLAMP_SIGMAS`): along a ray
+depth, ``mu_z +- 3 sqrt(Sigma_zz)`` (:data:`splatgl.splatmath.peak.PEAK_CLAMP_SIGMAS`): along a ray
 nearly parallel to a needle or a flat splat the unclamped peak lies far outside it.  2DGS surfels sort by the view z of the ray's hit, which
 the surfel branch already computes.  The depth layer accumulates the same per-pixel depth.
 
@@ -34,7 +34,7 @@ import numpy as np
 
 from .chunk import (TILE_PIXELS, ChunkSplats, blend_chunk, chunk_alpha, surfel_chunk_alpha,
                     tile_centres, tile_outputs)
-from .peak import Rays, peak_depth
+from ..splatmath.peak import Rays, peak_depth
 from .stages import ProjectedSplats
 
 #: Entries of a tile's list one tile-renderer pass reads (the per-pixel window restarts there):

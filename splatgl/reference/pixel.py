@@ -28,7 +28,7 @@ from ..model.settings import Order, RenderSettings
 from ..output.under import UnderLayer
 from .binning import depth_bits
 from .options import Compat, ReferenceOptions, as_options
-from .peak import Rays, tile_key_bits
+from ..splatmath.peak import Rays, tile_key_bits
 from .per_pixel import _contributions, exact_order, window_order
 from .chunk import ChunkSplats, blend_chunk, chunk_alpha, surfel_chunk_alpha
 from .render import PER_PIXEL_LAYERS_REFUSED, with_settings

@@ -30,7 +30,7 @@ from ..model.settings import RenderSettings
 from ..constants import GSPLAT_EXTENT_SIGMAS
 from ..model.settings import Order
 from . import emulation as em_rules
-from . import peak as pp
+from ..splatmath import peak as pp
 from .options import Compat, ReferenceOptions
 
 
@@ -67,8 +67,8 @@ class ProjectedSplats:
         clip_q, clip_rows: an ``extent`` knob's per-pixel clip
             (:class:`splatgl.reference.emulation.Support`), or None.
         peak: (N, 9) float coefficients of the depth at which each splat peaks along a pixel's
-            ray, for the per-pixel order (:func:`splatgl.reference.peak.peak_coefficients`),
-            or None; rays: the camera's pixel rays with it (:class:`splatgl.reference.peak.Rays`).
+            ray, for the per-pixel order (:func:`splatgl.splatmath.peak.peak_coefficients`),
+            or None; rays: the camera's pixel rays with it (:class:`splatgl.splatmath.peak.Rays`).
     """
 
     visible: np.ndarray

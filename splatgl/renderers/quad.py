@@ -236,7 +236,7 @@ class QuadRenderer(Registered):
         return count
 
     def render(self, view: View, layers: frozenset[Layer] = BASE,
-               on_batch: BatchHook | None = None, under: UnderLayer | None = None) -> RenderOutput:
+               under: UnderLayer | None = None, on_batch: BatchHook | None = None) -> RenderOutput:
         """The ``layers`` of ``view`` (colour and alpha always; depth and normal from the same
         pass, same weights; median depth, count and top contributor from an ordered pass,
         :mod:`~splatgl.renderers.quad_layers`), composited into ``under`` if given;

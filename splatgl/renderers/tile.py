@@ -46,7 +46,7 @@ from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..model.scene import Scene, SplatKind
 from ..model.settings import Order, RenderSettings, RendererKind
-from ..reference.peak import check_camera
+from ..splatmath.peak import check_camera
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from .registry import Registered, check
