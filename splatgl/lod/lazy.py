@@ -1,0 +1,213 @@
+"""Lazy reading of a ``.lod.ply`` (issue 41 item 2): open it by its header alone, read only the
+pages of node spheres a cut tests and the node rows it draws.
+
+The file's layout (:mod:`splatgl.lod.io`) makes this cheap: the tree is implicit (level offsets
+from the leaf count and the branching, children of node ``j`` at ``j * B ..``), levels are
+stored coarse after fine in Morton order, so a subtree is one contiguous row range per level,
+and the ``lod_bound`` element holds every node's sphere (16 bytes).  A cut walks from the root
+(:func:`splatgl.lod.cut.select_cut_weights`, here over arrays that read their pages on first
+use): a far view reads the few top levels' spheres and the rows it draws, whatever the file's
+size.  :attr:`LazyLod.bytes_read` counts what was read.
+
+    lod = LazyLod("city.lod.ply")
+    rows, weights = lod.cut(camera, LodSettings(threshold_px=1))
+    scene = lod.cut_scene(camera)      # the cut as a plain Scene any renderer draws
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..cameras.camera import Camera
+from ..errors import SceneFormatError
+from ..formats import ply
+from ..model.scene import Scene, activate
+from .build import level_offsets
+from .cut import CutData, select_cut_budget, select_cut_weights
+from .io import BOUNDS, ELEMENT
+from .render import LodSettings
+
+#: Node spheres per page (16 bytes each: 4 KiB), the unit they are read in.
+BOUND_PAGE = 256
+#: Node rows this close are read together (one read, the rows between discarded).
+NODE_GAP = 8
+_BRANCHING = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
+_ANCHOR = re.compile(rb"^comment lod anchor (\S+) (\S+) (\S+)\s*$", re.M)
+
+
+class LazyLod:
+    """A ``.lod.ply`` opened by its header: ``offsets``, ``branching``, ``levels``,
+    :attr:`cut_data` (whose arrays read on demand), :meth:`cut`, :meth:`nodes`."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.bytes_read = 0
+        try:
+            with open(self.path, "rb") as fh:
+                header = ply.parse_header(self.path, fh)
+                fh.seek(0)
+                head = fh.read(header.body_offset)
+        except OSError as exc:
+            raise SceneFormatError(self.path, f"cannot read: {exc.strerror or exc}") from None
+        self.bytes_read += len(head)
+        match = _BRANCHING.search(head)
+        if match is None or header.order is None:
+            raise SceneFormatError(self.path, "not a binary splatgl LOD file (no 'comment lod "
+                                              "branching B' line); build one with 'splatgl lod'")
+        self.branching = int(match.group(1))
+        anchor = _ANCHOR.search(head)
+        self.elements = {}  # name -> (byte offset, element)
+        offset = header.body_offset
+        for e in header.elements:
+            self.elements[e.name] = (offset, e)
+            offset += e.count * e.dtype(header.order).itemsize
+        if BOUNDS not in self.elements or anchor is None:
+            raise SceneFormatError(self.path, f"no '{BOUNDS}' element (written before lazy "
+                                              "reading): build it again with 'splatgl lod'", BOUNDS)
+        self.order = header.order
+        n = self.elements["vertex"][1].count
+        self.offsets = level_offsets(n, self.branching)
+        if self.elements[BOUNDS][1].count != self.offsets[-1]:
+            raise SceneFormatError(self.path, f"{self.elements[BOUNDS][1].count} spheres for "
+                                              f"{self.offsets[-1]} nodes", BOUNDS)
+        self.anchor = np.array([float(v) for v in anchor.groups()])
+        self._fd = os.open(self.path, os.O_RDONLY)
+        m = int(self.offsets[-1])
+        self._centres = np.zeros((3, m), np.float32)
+        self._radius = np.zeros(m, np.float32)
+        self._loaded = np.zeros(-(-m // BOUND_PAGE), bool)
+        self.cut_data = CutData(_Centres(self), _Radius(self), self.offsets, self.branching,
+                                self.anchor)
+
+    @property
+    def levels(self) -> int:
+        return len(self.offsets) - 1
+
+    def level_size(self, level: int) -> int:
+        return int(self.offsets[level + 1] - self.offsets[level])
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> "LazyLod":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _read(self, offset: int, size: int) -> bytes:
+        parts, done = [], 0
+        while done < size:
+            chunk = os.pread(self._fd, size - done, offset + done)
+            if not chunk:
+                raise SceneFormatError(self.path, "file is truncated (or changed since it was opened)")
+            parts.append(chunk)
+            done += len(chunk)
+        self.bytes_read += size
+        return b"".join(parts)
+
+    def _load(self, pages: np.ndarray) -> None:
+        """Read the sphere pages ``pages`` (ascending, not loaded yet), consecutive ones at once."""
+        start, elem = self.elements[BOUNDS]
+        dtype = elem.dtype(self.order)
+        cuts = np.concatenate([[0], np.flatnonzero(np.diff(pages) > 1) + 1, [pages.size]])
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            lo = int(pages[a]) * BOUND_PAGE
+            hi = min((int(pages[b - 1]) + 1) * BOUND_PAGE, elem.count)
+            rows = np.frombuffer(self._read(start + lo * dtype.itemsize, (hi - lo) * dtype.itemsize), dtype)
+            xyz = np.stack([rows[c].astype(np.float32) for c in "xyz"]).astype(np.float64)
+            self._centres[:, lo:hi] = (xyz - self.anchor[:, None]).astype(np.float32)
+            self._radius[lo:hi] = rows["radius"]
+        self._loaded[pages] = True
+
+    def spheres(self, rows) -> tuple[np.ndarray, np.ndarray]:
+        """(centres (3, K) float32 relative to :attr:`anchor`, radii (K,)) of node ``rows``
+        (an index array or a slice), reading the pages not read yet (into arrays allocated
+        whole but untouched, so only the pages read take memory)."""
+        if isinstance(rows, slice):
+            lo, hi, _ = rows.indices(self._radius.size)
+            pages = np.arange(lo // BOUND_PAGE, -(-hi // BOUND_PAGE))
+        else:
+            rows = np.asarray(rows, np.int64)
+            pages = np.unique(rows // BOUND_PAGE)
+        missing = pages[~self._loaded[pages]]
+        if missing.size:
+            self._load(missing)
+        return self._centres[:, rows], self._radius[rows]
+
+    def nodes(self, rows: np.ndarray) -> Scene:
+        """The stored values of node ``rows`` (ascending) as a :class:`Scene`, read in runs of
+        rows at most NODE_GAP apart (leaves from ``vertex``, parents from ``lod_node``)."""
+        rows = np.asarray(rows, np.int64)
+        n = int(self.offsets[1])
+        parts = []
+        for name, sel, base in (("vertex", rows[rows < n], 0), (ELEMENT, rows[rows >= n], n)):
+            if not sel.size:
+                continue
+            start, elem = self.elements[name]
+            dtype = elem.dtype(self.order)
+            local = sel - base
+            got = []
+            cuts = np.concatenate([[0], np.flatnonzero(np.diff(local) > NODE_GAP) + 1, [local.size]])
+            for a, b in zip(cuts[:-1], cuts[1:]):  # runs of near rows, one read each
+                lo, hi = int(local[a]), int(local[b - 1]) + 1
+                run = np.frombuffer(self._read(start + lo * dtype.itemsize,
+                                               (hi - lo) * dtype.itemsize), dtype)
+                got.append(run[local[a:b] - lo])
+            recs = np.concatenate(got)
+            cols = ply._Columns(self.path, [p for p, _ in elem.properties], recs.shape[0])
+            cols.fill(recs, 0)
+            parts.append(activate(self.path, cols.means, cols.quats, cols.log_scales,
+                                  cols.opacity, cols.sh))
+        if len(parts) == 1:
+            return parts[0]
+        return Scene(*(np.concatenate([getattr(s, f) for s in parts])
+                       for f in ("means", "quats", "log_scales", "opacity_logits", "sh")))
+
+    def cut(self, camera: Camera, lod: LodSettings = LodSettings()):
+        """``(rows, weights)`` of the cut for ``camera`` (:func:`select_cut_weights`, or the
+        budget's search), reading only the spheres it tests."""
+        if lod.budget is not None:
+            rows, weights, _ = select_cut_budget(self.cut_data, camera, lod.budget,
+                                                 lod.threshold_px, lod.band)
+            return rows, weights
+        return select_cut_weights(self.cut_data, camera, lod.threshold_px, lod.band)
+
+    def cut_scene(self, camera: Camera, lod: LodSettings = LodSettings()) -> Scene:
+        """The cut's nodes as a plain :class:`Scene`, each opacity ``o`` drawn with its weight
+        ``w`` as ``1 - (1 - o) ** w`` (:func:`splatgl.lod.render.blended_scene`'s twin)."""
+        rows, weights = self.cut(camera, lod)
+        sub = self.nodes(rows)
+        if weights is None:
+            return sub
+        o = 1.0 - (1.0 - sub.opacities.astype(np.float64)) ** weights.astype(np.float64)
+        return Scene.from_activated(sub.means, sub.quats, sub.scales, o, sub.sh, sub.kind)
+
+
+class _Centres:
+    """``centres[:, rows]`` (rows: an index array or a slice) of a :class:`LazyLod`'s nodes,
+    read on demand."""
+
+    def __init__(self, lod: LazyLod):
+        self.lod = lod
+        self.shape = (3, int(lod.offsets[-1]))
+
+    def __getitem__(self, key):
+        if isinstance(key, tuple) and len(key) == 2 and key[0] == slice(None):
+            return self.lod.spheres(key[1])[0]
+        raise TypeError(f"lazy centres take [:, rows], not {key!r}")
+
+
+class _Radius:
+    def __init__(self, lod: LazyLod):
+        self.lod = lod
+        self.shape = (int(lod.offsets[-1]),)
+
+    def __getitem__(self, key):
+        return self.lod.spheres(key)[1]
