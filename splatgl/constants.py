@@ -45,6 +45,14 @@ FAST_CORNER_SIGMAS = 2.0 * math.sqrt(2.0)
 #: The per-pixel order (``--order per-pixel``) clamps the depth of a splat's peak along a ray to
 #: this many standard deviations of its view depth about its centre (splatgl/splatmath/peak.py).
 PEAK_CLAMP_SIGMAS = 3.0
+#: Entries of a tile's sorted list one tile-renderer rasterize pass blends at most; longer lists
+#: take more passes (the pixel state carried in the output buffers), and the per-pixel order's
+#: window restarts at each pass (its twin, :func:`splatgl.reference.per_pixel.window_order`).
+#: llvmpipe ends all loops of an invocation after 65535 iterations in total (gallivm's
+#: LP_MAX_TGSI_LOOP_ITERATIONS), which a single pass over a 55k-splat tile exceeded, leaving the
+#: tile blank; a pass of 16384 entries runs about 2 x 16384 + 64 iterations (the blend loop, and
+#: the serial scan of invocation 0).
+TILE_LIST_CHUNK = 16384
 #: The other published convention (gsplat), for ``Compat.GSPLAT``: per-axis opacity-aware extent
 #: of at most this many standard deviations, and its alpha clamp.
 GSPLAT_EXTENT_SIGMAS = 3.33

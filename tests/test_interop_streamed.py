@@ -2,9 +2,10 @@
 tests/data/splat_transform_files.py; skips with the reason where it is not installed), issue 41
 item 4:
 
-1. A Streamed SOG splat-transform writes (two levels, several chunks) reads as its finest level:
-   the splats splat-transform itself decodes from level 0 (``-L 0`` to PLY), and splatgl's
-   render of it is at least 40 dB against the render of that level's own splats.
+1. A Streamed SOG splat-transform writes (two levels, several chunks, an environment) reads as
+   its finest level: the splats splat-transform itself decodes from level 0 (``-L 0`` to PLY,
+   which leaves the environment out) followed by the environment's, and splatgl's render of it
+   is at least 40 dB against the render of those splats.
 2. splat-transform reads every splat of level 0 (and of each level) of a Streamed SOG splatgl
    writes (``splatgl lod S -o DIR/lod-meta.json``), within SOG's position bound.
 3. LCC (splat-transform reads it but writes none): files written per the white paper's layout
@@ -56,7 +57,9 @@ def _matched(got, want, tol):
 
 
 def _psnr(a, b):
-    mse = np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2) / 255.0 ** 2
+    """PSNR (dB) of two images as read_image gives them (floats 0-1)."""
+    assert a.shape == b.shape and a.dtype.kind == "f" and a.max() > 0.5  # the donut is in view
+    mse = np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)
     return 10 * np.log10(1 / mse) if mse else np.inf
 
 
@@ -65,21 +68,29 @@ def test_streamed_sog_from_splat_transform(st, source, tmp_path):
 
     save_scene(tmp_path / "l0.ply", source)
     save_scene(tmp_path / "l1.ply", source.subset(np.arange(0, source.count, 4)))
+    save_scene(tmp_path / "env.ply", source.subset(np.arange(3, source.count, 100)))  # 60
     out = tmp_path / "out" / "lod-meta.json"
     st("-g", "cpu", tmp_path / "l0.ply", "-l", "0", tmp_path / "l1.ply", "-l", "1",
-       "--lod-chunk-count", "2", "--lod-chunk-extent", "1", out)
-    st(out, "-L", "0", tmp_path / "level0.ply")
+       tmp_path / "env.ply", "-l", "-1", "--lod-chunk-count", "2", "--lod-chunk-extent", "1", out)
+    st(out, "-L", "0", tmp_path / "level0.ply")  # level 0 without the environment
+    st(out.parent / "env" / "meta.json", tmp_path / "env_back.ply")
     lod = streamed_sog.read_structure(out)
     assert lod.levels == 2 and lod.counts == (6000, 1500) and len(lod.chunks) > 2
+    assert lod.environment == "env/meta.json"
     level0 = load_scene(tmp_path / "level0.ply")
-    got = load_scene(out)
+    got = lod.load(0, environment=False)
     ref = _matched(got, level0, 1e-6)
     np.testing.assert_allclose(got.opacities, ref.opacities, atol=1e-6)
     np.testing.assert_allclose(got.sh, ref.sh, atol=1e-5)
-    assert lod.load(1).count == 1500
+    assert lod.load(1, environment=False).count == 1500
+    whole = load_scene(out)  # the finest level and the environment
+    assert whole.count == 6060
+    _matched(whole.subset(np.arange(6000, 6060)), load_scene(tmp_path / "env_back.ply"), 1e-6)
+    save_scene(tmp_path / "own.ply", streamed_sog.concatenate(
+        [level0, load_scene(tmp_path / "env_back.ply")]))
     view = ["--width", "160", "--height", "120"]
     assert main(["render", str(out), "-o", str(tmp_path / "a.png"), *view]) == 0
-    assert main(["render", str(tmp_path / "level0.ply"), "-o", str(tmp_path / "b.png"), *view]) == 0
+    assert main(["render", str(tmp_path / "own.ply"), "-o", str(tmp_path / "b.png"), *view]) == 0
     assert _psnr(read_image(tmp_path / "a.png"), read_image(tmp_path / "b.png")) >= 40.0
 
 

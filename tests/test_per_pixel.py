@@ -126,7 +126,9 @@ def test_window_twin_is_exact_when_the_window_holds_every_splat():
 
 
 def test_pass_boundary_matches_the_tile_renderer():
-    assert TILE_LIST_CHUNK == tile_keys.TILE_LIST_CHUNK
+    from splatgl import constants
+
+    assert TILE_LIST_CHUNK is tile_keys.TILE_LIST_CHUNK is constants.TILE_LIST_CHUNK
 
 
 def crossing(angle: float) -> Scene:

@@ -32,15 +32,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..constants import TILE_LIST_CHUNK
 from .chunk import (TILE_PIXELS, ChunkSplats, blend_chunk, chunk_alpha, surfel_chunk_alpha,
                     tile_centres, tile_outputs)
 from ..splatmath.peak import Rays, peak_depth
 from .stages import ProjectedSplats
 
-#: Entries of a tile's list one tile-renderer pass reads (the per-pixel window restarts there):
-#: the tile renderer's TILE_LIST_CHUNK, repeated here because the reference must not import the
-#: GPU path (tests/test_per_pixel.py checks they agree).
-TILE_LIST_CHUNK = 16384
 #: List entries evaluated per step while collecting a tile's contributions.
 COLLECT_CHUNK = 256
 

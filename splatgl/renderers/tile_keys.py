@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import TILE_SIZE
+from ..constants import TILE_LIST_CHUNK, TILE_SIZE  # noqa: F401 (TILE_LIST_CHUNK: tile.py's)
 from ..gl.bindings import SPLAT_GROUP
 
 #: Largest number of work groups along one dispatch axis guaranteed by OpenGL.
@@ -17,12 +17,6 @@ DEPTH_BITS = 31
 #: Tiles per rasterize dispatch, at most: the image is drawn in bands of whole tile rows, with a
 #: finish between bands, so a long frame reports progress and Ctrl-C stops it within one band.
 RASTER_BAND_TILES = 512
-#: Entries of a tile's sorted list one rasterize pass blends at most; longer lists take more
-#: passes (the pixel state carried in the output buffers).  llvmpipe ends all loops of an
-#: invocation after 65535 iterations in total (gallivm's LP_MAX_TGSI_LOOP_ITERATIONS), which a
-#: single pass over a 55k-splat tile exceeded, leaving the tile blank; a pass of 16384 entries
-#: runs about 2 x 16384 + 64 iterations (the blend loop, and the serial scan of invocation 0).
-TILE_LIST_CHUNK = 16384
 #: Keys of one splat's tile rectangle one emit dispatch writes at most (the same loop limit: a
 #: splat covering a 4096 x 4096 image has 65536 tiles); larger rectangles take more dispatches.
 TILE_EMIT_CHUNK = 32768
