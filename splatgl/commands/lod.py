@@ -15,7 +15,8 @@ from ._outputs import add_force_argument, check_output
 
 NAME = "lod"
 ORDER = 27
-HELP = "build a level-of-detail hierarchy (.lod.ply) for rendering with --lod-threshold/--lod-budget"
+HELP = ("build a level-of-detail hierarchy (.lod.ply) for rendering with --lod-threshold/--lod-budget, "
+        "or as PlayCanvas Streamed SOG (DIR/lod-meta.json)")
 DESCRIPTION = """Build a scene's level-of-detail hierarchy offline: neighbouring splats (in Morton
 order of their centres) are merged bottom-up, BRANCHING at a time, into parents whose mean,
 covariance, opacity and SH match their children's moments (weighted by opacity x area, as in
