@@ -20,7 +20,6 @@ from .cameras.framing import DEFAULT_ELEVATION, DEFAULT_FOV_Y, ORTHOGRAPHIC_SPAN
 from .errors import SplatglError
 from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
-from .gl.limits import check_image_size
 from .output.layers import BASE, Layer, RenderOutput, with_layers
 from .output.under import UnderImage
 from .progress import ProgressCallback
@@ -91,7 +90,7 @@ class Renderer:
         """Refuse an image the context or the memory cannot hold, before allocating it."""
         key = (camera.width, camera.height, kind, settings.precision)
         if key not in self._sizes_ok:
-            check_image_size(camera.width, camera.height, "image", kind, self._gl(kind),
+            registry.check_image_size(camera.width, camera.height, "image", kind, self._gl(kind),
                              settings.precision)
             self._sizes_ok.add(key)
 

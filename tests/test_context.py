@@ -87,16 +87,17 @@ class RefusingContext:
 
 def test_a_colour_target_the_driver_refuses_is_named_before_any_work(monkeypatch):
     from splatgl.gl import limits
+    from splatgl.renderers import registry
 
     monkeypatch.setattr(limits, "available_memory", lambda: None)
     ctx = RefusingContext()
-    assert limits.image_size_problem(4096, 4096, "quad", ctx) is None  # 256 MiB: not tried
+    assert registry.image_size_problem(4096, 4096, "quad", ctx) is None  # 256 MiB: not tried
     assert ctx.tried == []
-    assert limits.image_size_problem(8192, 8192, "quad", ctx, "rgba8") is None
-    assert limits.image_size_problem(16384, 8192, "quad", ctx) == (
+    assert registry.image_size_problem(8192, 8192, "quad", ctx, "rgba8") is None
+    assert registry.image_size_problem(16384, 8192, "quad", ctx) == (
         "is larger than this OpenGL driver allocates (its RGBA32F colour target of 2.0 GiB was "
         "refused with GL_OUT_OF_MEMORY by fake GL)")
-    assert limits.image_size_problem(16384, 8192, "quad", ctx, "rgba16f") == (
+    assert registry.image_size_problem(16384, 8192, "quad", ctx, "rgba16f") == (
         "is larger than this OpenGL driver allocates (its RGBA16F colour target of 1.0 GiB was "
         "refused with GL_OUT_OF_MEMORY by fake GL)")
     assert ctx.tried == [((16384, 8192), "f4"), ((16384, 8192), "f2")]

@@ -9,7 +9,7 @@ import pytest
 
 from splatgl.gl import limits
 from splatgl.errors import SplatglError
-from splatgl.gl.limits import image_size_problem
+from splatgl.renderers.registry import image_size_problem
 from splatgl.writing.outputs import OutputFiles
 from splatgl.writing.atomic import atomic_target, atomic_write_text, temp_path
 

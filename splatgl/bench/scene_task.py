@@ -79,7 +79,7 @@ class BenchSceneTask:
         return f"scene {self.spec.name}"
 
     def run(self, files: Files, report: TaskProgress) -> Done:
-        from ..gl.limits import check_image_size
+        from ..renderers.registry import check_image_size
         from ..api import Renderer
         from ..gl.context import renderer_name
         from .machine import machine_info

@@ -13,13 +13,13 @@ from ..cameras.files import load_camera
 from ..errors import SplatglError
 from ..formats import load_scene, scene_source
 from ..cameras.orthographic import Orthographic
-from ..gl.limits import MAX_IMAGE_SIDE, check_image_size
+from ..gl.limits import MAX_IMAGE_SIDE
 from ..api import default_camera, default_settings
 from ..model.scene import Scene
 from ..constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
 from ..model.settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
                               RendererKind, RenderSettings, SortKey)
-from ..renderers.registry import check_settings
+from ..renderers.registry import check_image_size, check_settings
 from ._fidelity_args import add_fidelity_arguments, fidelity_fields
 from ..renderers.stereo import StereoLayout
 from ..model.transform import parse_transform

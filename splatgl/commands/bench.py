@@ -19,7 +19,7 @@ from ..errors import SplatglError
 from ..tasks.executor import run_tasks, summary
 from ._executor import add_executor_arguments, executor_from_args
 from ..gl.context import renderer_name
-from ..gl.limits import check_image_size
+from ..renderers.registry import check_image_size
 from ..evaluation.metrics import check_ssim_size
 from ..writing.outputs import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled

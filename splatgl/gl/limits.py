@@ -14,14 +14,14 @@ Two limits apply, whatever gave the size (``--width``/``--height`` or a camera f
   must fit the memory the kernel reports as available.
 
 Without a context (the NumPy reference) only the memory check and :data:`MAX_IMAGE_SIDE` apply.
+Which renderer needs which check: :func:`splatgl.renderers.registry.image_size_problem`.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import SplatglError
-from ..model.settings import Precision, RendererKind
+from ..model.settings import Precision
 
 #: Largest image side splatgl accepts before asking any context (the common GL 4.3 driver limit,
 #: llvmpipe's included); the context's real limits are checked as well.
@@ -78,57 +78,45 @@ def target_refused(ctx, width: int, height: int,
             f"{_gib(nbytes)} was refused with {error} by {ctx.info.get('GL_RENDERER', '?')})")
 
 
-def image_size_problem(width: int, height: int, kind: RendererKind | str = RendererKind.QUAD,
-                       ctx=None, precision: Precision | str = Precision.RGBA32F) -> str | None:
-    """Why a ``width`` x ``height`` image cannot be rendered here, or None.
-
-    Args:
-        width, height: image size in pixels (positive integers).
-        kind: the renderer that will draw it.
-        ctx: the moderngl context it will draw with (None: the NumPy reference, or not known
-            yet; then only :data:`MAX_IMAGE_SIDE` and memory are checked).
-        precision: the quad path's colour target (:func:`target_refused`).
-
-    Returns:
-        None, or a phrase such as ``"is larger than this OpenGL driver allows (16384 pixels a
-        side, GL_MAX_RENDERBUFFER_SIZE of llvmpipe ...)"``.
-    """
-    kind = RendererKind(kind)
+def side_problem(width: int, height: int, ctx=None) -> str | None:
+    """Why an image side is too long: beyond ``ctx``'s own limits (``GL_MAX_RENDERBUFFER_SIZE``,
+    ``GL_MAX_TEXTURE_SIZE``, ``GL_MAX_VIEWPORT_DIMS``), or without a context (a renderer that
+    draws without OpenGL) beyond :data:`MAX_IMAGE_SIDE`; or None."""
     side = max(width, height)
-    if ctx is not None and kind not in (RendererKind.REFERENCE, RendererKind.CPU):
-        info = ctx.info
-        limits = [(int(info.get("GL_MAX_RENDERBUFFER_SIZE", MAX_IMAGE_SIDE)), "GL_MAX_RENDERBUFFER_SIZE"),
-                  (int(info.get("GL_MAX_TEXTURE_SIZE", MAX_IMAGE_SIDE)), "GL_MAX_TEXTURE_SIZE")]
-        dims = info.get("GL_MAX_VIEWPORT_DIMS")
-        if dims:
-            limits.append((int(min(dims)), "GL_MAX_VIEWPORT_DIMS"))
-        limit, name = min(limits)
-        if side > limit:
-            return (f"is larger than this OpenGL driver allows ({limit} pixels a side, {name} of "
-                    f"{info.get('GL_RENDERER', '?')})")
-        if kind is RendererKind.TILE:
-            block = int(info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 0) or 0)
-            if block and width * height * TILE_RGBA_BYTES > block:
-                return (f"has too many pixels for the tile renderer on this driver ({width * height:,}; "
-                        f"its colour buffer of {TILE_RGBA_BYTES} bytes a pixel may hold "
-                        f"{block // TILE_RGBA_BYTES:,}, GL_MAX_SHADER_STORAGE_BLOCK_SIZE)")
-        elif kind is RendererKind.QUAD:
-            refused = target_refused(ctx, width, height, precision)
-            if refused:
-                return refused
-    elif side > MAX_IMAGE_SIDE:
-        return f"is larger than splatgl renders ({MAX_IMAGE_SIDE} pixels a side)"
+    if ctx is None:
+        return (f"is larger than splatgl renders ({MAX_IMAGE_SIDE} pixels a side)"
+                if side > MAX_IMAGE_SIDE else None)
+    info = ctx.info
+    limits = [(int(info.get("GL_MAX_RENDERBUFFER_SIZE", MAX_IMAGE_SIDE)), "GL_MAX_RENDERBUFFER_SIZE"),
+              (int(info.get("GL_MAX_TEXTURE_SIZE", MAX_IMAGE_SIDE)), "GL_MAX_TEXTURE_SIZE")]
+    dims = info.get("GL_MAX_VIEWPORT_DIMS")
+    if dims:
+        limits.append((int(min(dims)), "GL_MAX_VIEWPORT_DIMS"))
+    limit, name = min(limits)
+    if side > limit:
+        return (f"is larger than this OpenGL driver allows ({limit} pixels a side, {name} of "
+                f"{info.get('GL_RENDERER', '?')})")
+    return None
+
+
+def pixel_buffer_refused(ctx, width: int, height: int, precision=None) -> str | None:
+    """Why the tile renderer's per-pixel colour buffer (:data:`TILE_RGBA_BYTES` a pixel, one
+    storage block) will not fit ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE``, or None (``precision``:
+    unused, as :func:`target_refused` takes it)."""
+    block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 0) or 0)
+    if block and width * height * TILE_RGBA_BYTES > block:
+        return (f"has too many pixels for the tile renderer on this driver ({width * height:,}; "
+                f"its colour buffer of {TILE_RGBA_BYTES} bytes a pixel may hold "
+                f"{block // TILE_RGBA_BYTES:,}, GL_MAX_SHADER_STORAGE_BLOCK_SIZE)")
+    return None
+
+
+def memory_problem(width: int, height: int) -> str | None:
+    """Why the image buffers every renderer allocates (:data:`MIN_BYTES_PER_PIXEL`) will not fit
+    the available memory, or None."""
     need = width * height * MIN_BYTES_PER_PIXEL
     free = available_memory()
     if free is not None and need > free:
         return (f"needs at least {_gib(need)} of memory for its image buffers, "
                 f"{_gib(free)} available")
     return None
-
-
-def check_image_size(width: int, height: int, what: str, kind: RendererKind | str = RendererKind.QUAD,
-                     ctx=None, precision: Precision | str = Precision.RGBA32F) -> None:
-    """Raise :class:`SplatglError` ``"{what} {width}x{height} {problem}"`` if the size won't do."""
-    problem = image_size_problem(width, height, kind, ctx, precision)
-    if problem:
-        raise SplatglError(f"{what} {width}x{height} {problem}")

@@ -21,11 +21,12 @@ import enum
 import importlib
 import importlib.util
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Callable, ClassVar, Protocol, runtime_checkable
 
 from ..errors import CameraError, SplatglError
+from ..gl import limits
 from ..model.scene import Scene, SplatKind
-from ..model.settings import Convention, Order, RendererKind, RenderSettings
+from ..model.settings import Convention, Order, Precision, RendererKind, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 
 if TYPE_CHECKING:
@@ -91,6 +92,8 @@ class RendererEntry:
         under: whether it composites into geometry under the splats.
         needs: a module that must be importable, and the extra that installs it.
         interactive: whether it draws at a window's pace (the viewer's T steps through these).
+        gl_limit: an OpenGL renderer's own image size check beyond the context's side limits
+            (:mod:`splatgl.gl.limits`: ``(ctx, width, height, precision) -> why or None``).
     """
 
     kind: RendererKind
@@ -104,6 +107,7 @@ class RendererEntry:
     under: bool = True
     needs: tuple[str, str] | None = None
     interactive: bool = True
+    gl_limit: Callable[..., str | None] | None = None
 
     def renderer_class(self) -> type:
         module, name = self.factory.split(":")
@@ -124,10 +128,11 @@ _QUAD_READS = frozenset({"precision", "extent", "sort_key", "resort_interval", "
 #: Every renderer, by kind.  The first is the default.
 RENDERERS: dict[RendererKind, RendererEntry] = {e.kind: e for e in (
     RendererEntry(RendererKind.QUAD, "the quad renderer", "splatgl.renderers.quad:QuadRenderer",
-                  reads=_QUAD_READS),
+                  reads=_QUAD_READS, gl_limit=limits.target_refused),
     RendererEntry(RendererKind.TILE, "the tile renderer", "splatgl.renderers.tile:TileRenderer",
                   reads=frozenset({"gpu_storage", "order", "order_window"}),
-                  lacks_models=frozenset({"equirectangular"})),   # it makes no seam copies
+                  lacks_models=frozenset({"equirectangular"}),   # it makes no seam copies
+                  gl_limit=limits.pixel_buffer_refused),
     RendererEntry(RendererKind.REFERENCE, "the NumPy reference",
                   "splatgl.renderers.reference_renderer:ReferenceRenderer",
                   reads=frozenset({"convention", "emulation", "order"}), gl=False,
@@ -156,6 +161,31 @@ def names(interactive: bool = False) -> list[str]:
     """The renderer names, default first (``--renderer`` choices); ``interactive``: only those
     that draw at a window's pace (``splatgl view``'s)."""
     return [k.value for k, e in RENDERERS.items() if e.interactive or not interactive]
+
+
+def image_size_problem(width: int, height: int, kind: RendererKind | str = DEFAULT_RENDERER,
+                       ctx=None, precision: Precision | str = Precision.RGBA32F) -> str | None:
+    """Why a ``width`` x ``height`` image cannot be rendered here by ``kind``, or None: an
+    OpenGL renderer drawing in ``ctx`` is held to the context's side limits and its own
+    ``gl_limit`` (the quad path's colour target of ``precision``, the tile renderer's pixel
+    buffer); without a context, or for a renderer without OpenGL, :data:`~splatgl.gl.limits.
+    MAX_IMAGE_SIDE`; and every renderer to the memory available (:mod:`splatgl.gl.limits`)."""
+    e = entry(kind)
+    gl = ctx if e.gl else None
+    return (limits.side_problem(width, height, gl)
+            or (e.gl_limit(gl, width, height, precision)
+                if gl is not None and e.gl_limit is not None else None)
+            or limits.memory_problem(width, height))
+
+
+def check_image_size(width: int, height: int, what: str,
+                     kind: RendererKind | str = DEFAULT_RENDERER, ctx=None,
+                     precision: Precision | str = Precision.RGBA32F) -> None:
+    """Raise :class:`SplatglError` ``"{what} {width}x{height} {problem}"`` if the size won't do
+    (:func:`image_size_problem`)."""
+    problem = image_size_problem(width, height, kind, ctx, precision)
+    if problem:
+        raise SplatglError(f"{what} {width}x{height} {problem}")
 
 
 def installed(kind: RendererKind | str) -> bool:
