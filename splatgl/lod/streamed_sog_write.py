@@ -128,8 +128,8 @@ def _named_dirs(target: Path) -> set[str]:
 
 
 def check_folder(target: str | Path) -> None:
-    """Refuse (one line) a folder beside ``target`` named as a unit (``L_i``, ``env``) that no
-    manifest there names: never the writer's to replace.  Cheap: run before any work."""
+    """Refuse (one line) a folder beside ``target`` named as a unit splatgl writes (``L_i``)
+    that no manifest there names: never the writer's to replace.  Cheap: run before any work."""
     target = Path(target)
     named = _named_dirs(target)
     try:
@@ -137,7 +137,7 @@ def check_folder(target: str | Path) -> None:
     except OSError:
         return  # the output check names what is wrong with the folder
     for name in entries:
-        if _UNIT_DIR.match(name) and name not in named:
+        if _UNIT_DIR.match(name) and name != "env" and name not in named:
             raise SplatglError(f"{target.parent / name}: exists and {target.name} does not name "
                                "it; remove it or write the Streamed SOG to another folder")
 
