@@ -69,6 +69,7 @@ def test_streamed_sog_round_trip(written):
         assert (part.means >= chunk.bound_min - 1e-5).all() and (part.means <= chunk.bound_max + 1e-5).all()
 
 
+@pytest.mark.slow
 def test_cli_writes_refuses_and_replaces_whole(tmp_path, capsys):
     """`splatgl lod S -o DIR/lod-meta.json` writes; again refuses without --force (nothing
     touched); --force replaces the whole output (no unit folder of the old one left, no staging
@@ -256,6 +257,7 @@ def test_bad_lcc_is_one_line(tmp_path, what, capsys):
 # --- damage: load or one clean line (the rules of tests/test_formats_fuzz.py) ----------------
 
 
+@pytest.mark.slow
 def test_damaged_manifest_and_lcc_files(written, tmp_path):
     """JSON damage to lod-meta.json and meta.lcc, truncation and corruption of Index.bin and
     Data.bin: a scene or SceneFormatError with one clean line, nothing else."""
