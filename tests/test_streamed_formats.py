@@ -112,8 +112,10 @@ def test_stray_unit_folder_is_never_replaced(tmp_path, capsys):
     assert "--chunk-splats applies to Streamed SOG output" in capsys.readouterr().err
 
 
-def test_failed_write_leaves_the_old_output(written, tmp_path, monkeypatch):
-    """A write failing midway (a full disk) leaves the old output whole and no staging folder."""
+@pytest.mark.parametrize("error", [OSError(28, "No space left on device"), KeyboardInterrupt()])
+def test_failed_write_leaves_the_old_output(written, tmp_path, monkeypatch, error):
+    """A write failing midway (a full disk; Ctrl-C, or SIGTERM as splatgl.cli raises it) leaves
+    the old output whole and no staging folder."""
     scene, tree, out, _ = written
     folder = tmp_path / "o"
     folder.mkdir()
@@ -125,12 +127,13 @@ def test_failed_write_leaves_the_old_output(written, tmp_path, monkeypatch):
     def failing(rgba):
         calls.append(1)
         if len(calls) > 8:
-            raise OSError(28, "No space left on device")
+            raise error
         return real(rgba)
 
     real = writer.webp.encode
     monkeypatch.setattr(writer.webp, "encode", failing)
-    with pytest.raises(SplatglError, match="lod-meta.json: cannot write"):
+    with pytest.raises(SplatglError if isinstance(error, OSError) else KeyboardInterrupt,
+                       match="lod-meta.json: cannot write" if isinstance(error, OSError) else None):
         writer.write_streamed_sog(target, tree, chunk_splats=256)
     assert {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()} == before
 
