@@ -270,15 +270,23 @@ def build_lod_file(src: Path, out: Path, branching: int, plan_for, progress=None
         meter.phase(3)
         fh.write(header)
         chunks = _Chunks(rows, fh, folder, branching, window, k)
-        pending, done = None, 0
+        pending, done = None, 0  # pending: the rows short of a chunk, carried to the next run
         for run in _runs(cells, plan):  # 4: chunks in Morton order
-            pending = run if pending is None or not pending.size else np.concatenate([pending, run])
-            while pending.shape[0] >= window:
-                chunks.chunk(pending[:window])
-                pending = pending[window:].copy()
-                done += window
+            pos = 0
+            if pending is not None:
+                pos = window - pending.shape[0]
+                if run.shape[0] < pos:
+                    pending = np.concatenate([pending, run])
+                    continue
+                chunks.chunk(np.concatenate([pending, run[:pos]]))
+                pending, done = None, done + window
+            while run.shape[0] - pos >= window:
+                chunks.chunk(run[pos:pos + window])
+                pos, done = pos + window, done + window
                 meter(done, 3, what + ": building")
-        if pending is not None and pending.size:
+            pending = run[pos:].copy() if pos < run.shape[0] else None
+            del run
+        if pending is not None:
             chunks.chunk(pending)
         chunks.finish(folder)
         meter(n, 3, what + ": building")
