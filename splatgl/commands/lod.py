@@ -32,6 +32,11 @@ examples:
   splatgl render scene.lod.ply --lod-threshold 1 -o far.png --distance 4
   splatgl render scene.lod.ply --lod-budget 200000 -o view.png --timings
 
+A binary PLY is built within --memory SIZE (default half this machine's RAM): read by blocks,
+sorted on disk (temporary files beside the output, removed on any exit), the hierarchy built in
+spatial chunks of whole subtrees, into the same file as in memory (docs/scale.md).  Other formats
+are read whole.
+
 Naming the output DIR/lod-meta.json writes PlayCanvas Streamed SOG instead (what splat-transform
 writes and PlayCanvas streams): the hierarchy's finest levels as SOG folders DIR/L_i/, in spatial
 chunks of --chunk-splats original splats, listed in lod-meta.json (see docs/formats.md).
