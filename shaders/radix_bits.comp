@@ -1,5 +1,6 @@
 // Radix sort, step 1: the OR and the AND of every key, so radix_plan.comp can skip the bits all
-// keys share.  Twin: radix_passes() in splatgl/gl/radix_sort.py.
+// keys share.
+// Twin: splatgl/gl/radix_sort.py radix_passes().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;
@@ -8,6 +9,7 @@ layout(std430, binding = RADIX_BINDING_KEYS_IN) readonly buffer KeysIn { uint ke
 shared uint s_or, s_and;
 
 void main() {
+    uint count = radix_count();
     uint t = gl_LocalInvocationID.x;
     if (t == 0u) { s_or = 0u; s_and = ~0u; }
     barrier();
@@ -15,7 +17,7 @@ void main() {
     uint bits_or = 0u, bits_and = ~0u;
     for (uint i = 0u; i < uint(RADIX_ITEMS); ++i) {
         uint idx = base + i * uint(RADIX_GROUP);
-        if (idx < u_count) {
+        if (idx < count) {
             uint key = keys_in[idx];
             bits_or |= key;
             bits_and &= key;

@@ -11,7 +11,8 @@
 // The match: with GL_KHR_shader_subgroup, RADIX_BITS ballots (RADIX_MATCH_KHR); with
 // GL_ARB_shader_ballot, one broadcast per lane (RADIX_MATCH_ARB, for narrow subgroups: CPU
 // SIMD lanes); otherwise RADIX_WARP threads exchange their digits through shared memory between
-// work-group barriers (the portable path).  Twin: splatgl/gl/radix_sort.py radix_sort_twin().
+// work-group barriers (the portable path).
+// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
 #if defined(RADIX_MATCH_KHR)
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
@@ -94,6 +95,7 @@ void radix_match(uint d, uint lane, uint warp, out uint lower, out uint count) {
 // counts are the tile's, which the upsweep counted and the scan turned into starts, so each
 // round writes its keys at once; no per-warp counting, no second loop.
 void main() {
+    uint n_keys = radix_count();
     uint t = gl_LocalInvocationID.x;
     uint tile = gl_WorkGroupID.x;
     uint lane = LANE;
@@ -103,7 +105,7 @@ void main() {
     uint seg = tile * TILE_KEYS + lane;
     for (uint i = 0u; i < uint(RADIX_ITEMS); ++i) {
         uint idx = seg + i * uint(RADIX_WARP);
-        uint key = idx < u_count ? keys_in[idx] : ~0u;  // past the end: after every real key
+        uint key = idx < n_keys ? keys_in[idx] : ~0u;  // past the end: after every real key
         uint d = radix_digit(key, shift);
         uint lower, count;
         radix_match(d, lane, 0u, lower, count);
@@ -113,7 +115,7 @@ void main() {
 #if defined(RADIX_MATCH_KHR)
         WARP_SYNC();
 #endif
-        if (idx < u_count) {
+        if (idx < n_keys) {
             keys_out[before + lower] = key;
             vals_out[before + lower] = vals_in[idx];
         }
@@ -128,6 +130,7 @@ shared uint s_scan[RADIX_GROUP];
 #define STAGE_ITEMS ((TILE_KEYS + uint(RADIX_GROUP) - 1u) / uint(RADIX_GROUP))
 
 void main() {
+    uint n_keys = radix_count();
     uint t = gl_LocalInvocationID.x;
     uint tile = gl_WorkGroupID.x;
     uint lane = LANE, warp = WARP;
@@ -141,7 +144,7 @@ void main() {
         uint idx = seg + i * uint(RADIX_WARP);
         // Past the end: all ones, ranked after every real key of its warp (only later keys
         // are past the end too), never written.
-        uint key = idx < u_count ? keys_in[idx] : ~0u;
+        uint key = idx < n_keys ? keys_in[idx] : ~0u;
         uint d = radix_digit(key, shift);
         uint lower, count;
         radix_match(d, lane, warp, lower, count);
@@ -192,9 +195,9 @@ void main() {
         rank[i] += s_warp[warp * RADIX + radix_digit(keys[i], shift)];  // place in the tile
     barrier();  // s_warp is the staging memory from here
     uint first = tile * TILE_KEYS;
-    uint here = min(u_count - first, TILE_KEYS);  // keys in this tile
+    uint here = min(n_keys - first, TILE_KEYS);  // keys in this tile
     for (uint i = 0u; i < uint(RADIX_ITEMS); ++i)
-        if (seg + i * uint(RADIX_WARP) < u_count) s_warp[rank[i]] = keys[i];
+        if (seg + i * uint(RADIX_WARP) < n_keys) s_warp[rank[i]] = keys[i];
     barrier();
     uint out_at[STAGE_ITEMS];
     for (uint m = 0u; m < STAGE_ITEMS; ++m) {
@@ -208,7 +211,7 @@ void main() {
     barrier();
     for (uint i = 0u; i < uint(RADIX_ITEMS); ++i) {
         uint idx = seg + i * uint(RADIX_WARP);
-        if (idx < u_count) s_warp[rank[i]] = vals_in[idx];
+        if (idx < n_keys) s_warp[rank[i]] = vals_in[idx];
     }
     barrier();
     for (uint m = 0u; m < STAGE_ITEMS; ++m) {

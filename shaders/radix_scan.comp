@@ -2,7 +2,8 @@
 // tile's first key of digit d goes: the keys of all smaller digits (from the pass's digit
 // totals) plus the exclusive prefix over the tiles before it.  Reduce-then-scan, with O(tiles)
 // work: each thread sums a run of consecutive tiles, one thread scans the RADIX_SCAN_GROUP run
-// sums, each thread rescans its run.  Twin: splatgl/gl/radix_sort.py radix_sort_twin().
+// sums, each thread rescans its run.
+// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_SCAN_GROUP) in;

@@ -1,6 +1,7 @@
 // The radix sort's probe, one work group run once per sorter: the device's subgroup size, which the
 // downsweep's subgroup paths are compiled with (RADIX_WARP).  Writes it where the state
 // block's first word (st_or) goes; the sorter initialises the state after it.
+// Twin: none (plumbing: a probe of the device's subgroup size).
 #if defined(RADIX_MATCH_KHR)
 #extension GL_KHR_shader_subgroup_basic : require
 #define SUBGROUP_SIZE gl_SubgroupSize

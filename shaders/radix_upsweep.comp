@@ -19,6 +19,7 @@ shared uint s_count[RADIX];
 #endif
 
 void main() {
+    uint count = radix_count();
     uint t = gl_LocalInvocationID.x;
     uint tile = gl_WorkGroupID.x;
     for (uint i = t; i < s_count.length(); i += uint(RADIX_GROUP)) s_count[i] = 0u;
@@ -27,7 +28,7 @@ void main() {
     uint base = tile * TILE_KEYS + t;
     for (uint i = 0u; i < uint(RADIX_ITEMS); ++i) {
         uint idx = base + i * uint(RADIX_GROUP);
-        if (idx < u_count) {
+        if (idx < count) {
             uint d = radix_digit(keys_in[idx], shift);
 #if defined(RADIX_NARROW)
             s_count[d * uint(RADIX_GROUP) + t] += 1u;

@@ -145,6 +145,46 @@ def test_resident_sort_finds_the_key_bits_on_the_device(sorter, n, kind):
     assert sorter.last_plan() == ((shifts[0] if shifts else 0), len(shifts))
 
 
+@pytest.mark.parametrize("m", [0, 1, 2, TILE_KEYS + 5, 3 * TILE_KEYS])
+def test_device_count_sorts_that_many_keys_and_no_more(sorter, ctx, m):
+    """The count a GPU stage wrote (here: into a buffer at byte offset 8) sizes the sort on the
+    device: the first m keys sorted, those after untouched; a count above the buffers' capacity
+    sorts what they hold (the tile renderer's overflow)."""
+    n = 3 * TILE_KEYS
+    rng = np.random.default_rng(m)
+    keys = rng.integers(0, 5000, n).astype(np.uint32)
+    sorter.reserve(n)
+    k_a, v_a = sorter.buffers()
+    k_a.write(keys)
+    v_a.write(np.arange(n, dtype=np.uint32))
+    count = ctx.buffer(np.array([7, 7, m, 7], np.uint32).tobytes())
+    try:
+        sorter.sort_buffers(n, device_count=(count, 8))
+    finally:
+        count.release()
+    got = np.frombuffer(v_a.read(4 * n), np.uint32)
+    want = np.argsort(keys[:m], kind="stable") if m >= 2 else np.arange(m)
+    np.testing.assert_array_equal(got[:m], want)
+    np.testing.assert_array_equal(got[m:], np.arange(m, n))
+    np.testing.assert_array_equal(np.frombuffer(k_a.read(4 * n), np.uint32)[:m], keys[:m][want])
+
+
+def test_device_count_above_the_capacity_sorts_the_capacity(sorter, ctx):
+    sorter.reserve(TILE_KEYS + 3)
+    n = sorter._capacity          # the buffers' size (the largest reserved so far)
+    keys = (np.arange(n, dtype=np.uint32) * np.uint32(7919)) % np.uint32(1013)
+    k_a, v_a = sorter.buffers()
+    k_a.write(keys)
+    v_a.write(np.arange(n, dtype=np.uint32))
+    count = ctx.buffer(np.array([n + 1000], np.uint32).tobytes())
+    try:
+        sorter.sort_buffers(n, device_count=(count, 0))
+    finally:
+        count.release()
+    np.testing.assert_array_equal(np.frombuffer(v_a.read(4 * n), np.uint32),
+                                  np.argsort(keys, kind="stable"))
+
+
 @pytest.mark.slow
 def test_device_sort_of_a_million_keys(sorter):
     rng = np.random.default_rng(1)

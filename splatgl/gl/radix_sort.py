@@ -9,6 +9,9 @@ multi-split, as in Onesweep), in dispatches that read their sizes from the devic
    writes each pass slot's dispatch size (0 for a pass the keys do not need) and digit shift
    into the state buffer, which the passes' ``glDispatchComputeIndirect`` read: nothing is read
    back to plan a sort.
+   The key count lives in the state too: the host writes it, or :meth:`RadixSorter.sort_buffers`
+   copies it from a buffer a GPU stage wrote (``device_count``), so a sort of a device-sized
+   set of keys (the tile renderer's (tile, depth) keys) reads no count back.
 3. Per pass slot (``32 / RADIX_BITS`` of them): ``radix_upsweep.comp`` counts each tile's digits
    in shared memory; ``radix_scan.comp`` (one work group per digit, work-efficient) turns the
    counts into each tile's start for each digit; ``radix_downsweep.comp`` ranks the tile's keys
@@ -48,10 +51,12 @@ SLOTS = 32 // RADIX_BITS
 #: The downsweep's ways of ranking (see the module doc), best first.
 PATHS = ("khr", "arb", "portable")
 
-# The state buffer (lib/radix.glsl, RadixState, std430): 4 uints, then uvec4 per pass slot
-# (dispatch size, shift), uvec4 per slot (the scan's dispatch size), one uvec4 (the copy's),
-# then the digit totals.  Byte offsets of the indirect dispatch arguments:
-_PASS_ARGS = 16
+# The state buffer (lib/radix.glsl, RadixState, std430): 4 uints, the key count and 3 spare,
+# then uvec4 per pass slot (dispatch size, shift), uvec4 per slot (the scan's dispatch size),
+# one uvec4 (the copy's), then the digit totals.  Byte offsets of the count and of the indirect
+# dispatch arguments:
+_COUNT = 16
+_PASS_ARGS = 32
 _SCAN_ARGS = _PASS_ARGS + 16 * SLOTS
 _COPY_ARGS = _SCAN_ARGS + 16 * SLOTS
 _STATE_BYTES = _COPY_ARGS + 16 + 4 * SLOTS * RADIX
@@ -206,26 +211,36 @@ class RadixSorter:
             self._bufs[1].write(values)
         return keys, values, keys.size
 
-    def sort_buffers(self, count: int, bits: np.ndarray | None = None
+    def sort_buffers(self, count: int, bits: np.ndarray | None = None,
+                     device_count: tuple[moderngl.Buffer, int] | None = None
                      ) -> tuple[moderngl.Buffer, moderngl.Buffer]:
         """Sort the first ``count`` keys and values of the A buffers (:meth:`buffers`, after
         :meth:`reserve`) in place on the device; returns them.  Nothing is read back.
 
         ``bits``: the keys' OR and AND (2,) uint32 where the caller has them (keys uploaded
-        from NumPy), which saves the device reading every key once more to find them."""
+        from NumPy), which saves the device reading every key once more to find them.
+        ``device_count``: (buffer, byte offset) of a uint32 on the device holding how many keys
+        to sort, which a GPU stage wrote (copied into the state on the device, never read
+        back); ``count`` is then the most there can be (the buffers' size), and a device count
+        above it sorts ``count`` keys."""
         self.reserve(count)
         k_a, v_a, k_b, v_b, hist = self._bufs
-        tiles = max(1, -(-count // TILE_KEYS))
+        tiles = max(1, -(-self._capacity // TILE_KEYS))  # hist's rows; the plan sizes the passes
         progs = self._progs
         for prog in progs.values():
-            for name, value in (("u_count", count), ("u_tiles", tiles)):
+            for name, value in (("u_tiles", tiles), ("u_capacity", self._capacity)):
                 if name in prog:
                     prog[name].value = value
+        if device_count is None:
+            self._state.write(np.array([count], np.uint32), offset=_COUNT)
+        else:
+            self.ctx.copy_buffer(self._state, device_count[0], 4, read_offset=device_count[1],
+                                 write_offset=_COUNT)
         self._state.bind_to_storage_buffer(RADIX_BINDING_STATE)
         hist.bind_to_storage_buffer(RADIX_BINDING_HIST)
         if bits is None:
             k_a.bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
-            progs["bits"].run(group_x=tiles)
+            progs["bits"].run(group_x=tiles if device_count else max(1, -(-count // TILE_KEYS)))
             self.ctx.memory_barrier()
         else:
             self._state.write(np.asarray(bits, np.uint32))
