@@ -49,7 +49,7 @@ class StageTimes(Protocol):
         """Seconds of the work before blending (cull, project, sort)."""
     @property
     def drawing(self) -> float:
-        """Seconds of blending the splats and reading the image back."""
+        """Seconds of drawing: uploading, binning and blending the splats."""
     def summary(self, count: int) -> str:
         """The viewer's line on the splats of a scene of ``count`` splats ("splats 10 drawn / 12")."""
 
