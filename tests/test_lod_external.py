@@ -157,6 +157,17 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, capsys, monkeypatc
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
 
 
+def test_too_little_disk_is_one_line_before_the_work(tmp_path, capsys, monkeypatch):
+    src = _ply(tmp_path, _scene(1000))
+    monkeypatch.setattr(external.shutil, "disk_usage", lambda p: type("U", (), {"free": 4096})())
+    code, out, err = _cli(capsys, "lod", src, "-o", tmp_path / "o.lod.ply")
+    assert (code, out) == (2, "")
+    assert err.startswith(f"splatgl: error: {tmp_path / 'o.lod.ply'}: cannot write: the build "
+                          "needs about ") and err.endswith(" beside it (temporary files and the "
+                                                           "output), 4 KiB free\n"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
+
+
 def _far_camera(distance: float) -> Camera:
     return Camera.from_fov(320, 180, 60.0, look_at(np.array([0.0, 0.0, -distance]), np.zeros(3)))
 

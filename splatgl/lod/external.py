@@ -35,7 +35,7 @@ from ..formats.written import written_problem
 from ..model.scene import Scene
 from ..model.spatial import morton_codes_clamped
 from ..writing.atomic import atomic_target
-from .budget import Plan
+from .budget import Plan, format_size
 from .build import (MAX_LOG_SCALE, concat_nodes, leaf_moments, level_offsets, merge_groups,
                     own_extents, propagate_radii)
 from .io import BOUNDS, COMMENTS, ELEMENT, bounds_rows
@@ -217,6 +217,19 @@ def _append(path: Path, out) -> None:
     path.unlink()
 
 
+def _check_space(out: Path, need: int) -> None:
+    """One line before the work where the output's file system cannot hold ``need`` bytes (the
+    temporaries and the output); a disk that fills during the build says so too
+    (:func:`splatgl.output.atomic.write_error`)."""
+    try:
+        free = shutil.disk_usage(out.parent).free
+    except OSError:
+        return  # the write says why
+    if free < need:
+        raise SplatglError(f"{out}: cannot write: the build needs about {format_size(need)} free "
+                           f"beside it (temporary files and the output), {format_size(free)} free")
+
+
 def build_lod_file(src: Path, out: Path, branching: int, plan_for, progress=None) -> dict:
     """Build the level of detail of the binary PLY ``src`` into ``out`` (``*.lod.ply``) within
     the budget ``plan_for(record_bytes, count)`` gives (a :class:`~splatgl.lod.budget.Plan`).
@@ -255,6 +268,7 @@ def build_lod_file(src: Path, out: Path, branching: int, plan_for, progress=None
                                "little", False, COMMENTS(branching, anchor))
     rec = np.dtype([("code", "<u8"), ("idx", "<i8"), ("rec", rows.dtype)])
     out = Path(out)
+    _check_space(out, n * rec.itemsize + 2 * (len(header) + int(offsets[-1]) * (vertex.itemsize + 16)))
     with atomic_target(out, written_problem) as tmp, tempfile.TemporaryDirectory(
             prefix=f".{out.name}.lodtmp", dir=out.parent) as scratch, open(tmp, "wb") as fh:
         folder = Path(scratch)
