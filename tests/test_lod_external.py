@@ -86,6 +86,17 @@ def test_cli_builds_within_a_small_memory_budget(tmp_path, capsys, monkeypatch):
     assert (tmp_path / "o.lod.ply").read_bytes() == expected
 
 
+def test_other_formats_are_read_whole_and_the_summary_says_so(tmp_path, capsys):
+    src = _ply(tmp_path, _scene(300))
+    assert main(["convert", str(src), str(tmp_path / "s.spz")]) == 0
+    capsys.readouterr()
+    code, out, err = _cli(capsys, "lod", tmp_path / "s.spz", "-o", tmp_path / "o.lod.ply",
+                          "--memory", "4G")
+    assert (code, err) == (0, "")
+    assert out.rstrip().endswith("(s.spz was read whole: --memory bounds the build from a "
+                                 "binary PLY)"), out
+
+
 def test_progress_says_the_time_left(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("SPLATGL_PROGRESS", "1")
     src = _ply(tmp_path, _scene(2000))

@@ -118,6 +118,9 @@ def run(args: argparse.Namespace) -> int:
               f"{time.perf_counter() - t0:.1f} s")
         return 0
     write_lod(out, tree)
+    whole = (f" ({args.scene.name} was read whole: --memory bounds the build from a binary PLY)"
+             if args.memory is not None else "")
     print(f"wrote {out}: {scene.count:,} leaves, {tree.nodes.count - scene.count:,} parents in "
-          f"{tree.levels} levels (branching {args.branching}) in {time.perf_counter() - t0:.1f} s")
+          f"{tree.levels} levels (branching {args.branching}) in {time.perf_counter() - t0:.1f} s"
+          + whole)
     return 0
