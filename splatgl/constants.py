@@ -120,6 +120,19 @@ MAX_SH_DEGREE = 3
 RADIX_BITS = 8
 RADIX_ITEMS = 32
 
+#: The tile renderer's device order (``--sort gpu``, splatgl/renderers/tile_device.py): tiles
+#: touched per thread of the scan (shaders/tile_scan.comp; a block is TILE_SCAN_GROUP times
+#: this), and the keys per splat the key buffers first hold (grown, and the frame drawn again,
+#: when a frame emits more: the capacity is kept).
+TILE_SCAN_ITEMS = 16
+TILE_KEYS_PER_SPLAT = 8
+
+#: Device-resident order (``--sort gpu``, shaders/order_cull.comp): the GPU cull computes the
+#: peak-alpha bound in float32 (the CPU's is float64, splatgl/order/cull.py) and keeps a splat
+#: whose log bound lies within this of log(ALPHA_MIN): a superset of the CPU's kept set by
+#: splats whose brightest pixel centre is within 0.1% of 1/255 (they draw nothing either way).
+DEVICE_CULL_BAND = 1e-3
+
 #: Compact GPU storage (``--gpu-storage compact``, splatgl/gl/storage.py, shaders/lib/dequantise.glsl):
 #: bits of each smallest-three quaternion component and of the linear opacity.  Two components
 #: and the 2-bit index fill one uint; the third shares a uint with the opacity.  15 bits, not
@@ -203,6 +216,8 @@ def glsl_defines() -> dict[str, str]:
         "SH_C1": glsl_float(SH_C1),
         "RADIX_BITS": str(RADIX_BITS),
         "RADIX_ITEMS": str(RADIX_ITEMS),
+        "TILE_SCAN_ITEMS": str(TILE_SCAN_ITEMS),
+        "DEVICE_CULL_BAND": glsl_float(DEVICE_CULL_BAND),
         "COMPACT_QUAT_BITS": str(COMPACT_QUAT_BITS),
         "COMPACT_OPACITY_BITS": str(COMPACT_OPACITY_BITS),
         "OCCLUSION_MAX_TILES": str(OCCLUSION_MAX_TILES),

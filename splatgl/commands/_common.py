@@ -14,6 +14,7 @@ from ..errors import SplatglError
 from ..formats import load_scene, scene_source
 from ..cameras.orthographic import Orthographic
 from ..gl.limits import MAX_IMAGE_SIDE
+from ..gl.transfers import TransferCounts
 from ..api import default_camera, default_settings
 from ..model.scene import Scene
 from ..constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
@@ -319,12 +320,15 @@ def inputs_from_args(args: argparse.Namespace) -> tuple[Scene, RenderSettings, C
 def format_timings(times: object) -> str:
     """A renderer's ``last_times`` dataclass as one line: float fields are seconds (shown in
     ms, with their total), int fields are counts and strings are already formatted (both
-    shown as they are)."""
+    shown as they are); the frame's transfers read ``per-frame uploads N bytes, read back N
+    bytes, N syncs``."""
     parts, total = [], 0.0
     for name, value in vars(times).items():
         if isinstance(value, bool) or value is None:
             continue
-        if isinstance(value, int):
+        if isinstance(value, TransferCounts):   # the frame's transfers (issue 40 item 3)
+            parts.append(value.text())
+        elif isinstance(value, int):
             parts.append(f"{name} {value:,}")
         elif isinstance(value, str):
             parts.append(f"{name} {value}")

@@ -73,6 +73,14 @@ TILE_BINDING_OUT_ORDERED_U = 20
 TILE_BINDING_UNDER = 21
 #: The per-pixel order's peak-depth coefficients (tile_project.comp writes, tile_rasterize.comp reads).
 TILE_BINDING_PEAK = 22
+#: The device order (``--sort gpu``, renderers/tile_device.py; DEVICE_SORT in lib/tile_common.glsl):
+#: the order's state and indirect dispatch arguments, the scan's per-block sums, the sorted
+#: splat indices the rasterizer reads, and the radix sorter's keys and values (its A buffers).
+TILE_BINDING_STATE = 23
+TILE_BINDING_SCAN_BLOCKS = 24
+TILE_BINDING_ORDER = 25
+TILE_BINDING_SORT_KEYS = 26
+TILE_BINDING_SORT_VALUES = 27
 
 # --- The device radix sort (gl/radix_sort.py; shaders/radix_*.comp, lib/radix.glsl).
 RADIX_BINDING_KEYS_IN = 0
@@ -108,6 +116,8 @@ OCCLUSION_GROUP = 256
 OCCLUSION_PER_INVOCATION = 4
 #: tile_project.comp, tile_emit.comp (one invocation per splat, lib/tile_common.glsl).
 SPLAT_GROUP = 256
+#: tile_scan.comp: threads per block of the scan of tiles touched (TILE_SCAN_ITEMS each).
+TILE_SCAN_GROUP = 256
 #: radix_bits.comp, radix_upsweep.comp, radix_downsweep.comp, radix_copy.comp: threads per
 #: group; a group owns a tile of RADIX_GROUP * RADIX_ITEMS keys (splatgl.constants.RADIX_ITEMS).
 #: radix_downsweep.comp keeps a 256-digit histogram per warp in shared memory: 16 KB with
@@ -118,6 +128,16 @@ RADIX_SCAN_GROUP = 64
 #: radix_downsweep.comp without subgroup operations: threads that exchange digits as one warp.
 RADIX_PORTABLE_WARP = 16
 
+#: order_cull.comp (the device-resident order, splatgl/renderers/quad_device.py): the cull data
+#: (two vec4 per splat), the sort's keys and values (the radix sorter's A buffers) and the
+#: indirect draw command whose instance count the cull counts into.
+ORDER_BINDING_CULL = 15
+ORDER_BINDING_KEYS = 16
+ORDER_BINDING_VALUES = 17
+ORDER_BINDING_COMMAND = 18
+#: order_cull.comp: splats per work group (one invocation each).
+ORDER_GROUP = 128
+
 #: Programs that bind together (see the module doc): in each, every binding point is distinct.
 _SCENE = ("BINDING_A", "BINDING_Q", "BINDING_S", "BINDING_DC", "BINDING_SH")
 FAMILIES: dict[str, tuple[str, ...]] = {
@@ -127,6 +147,8 @@ FAMILIES: dict[str, tuple[str, ...]] = {
         "BINDING_PREPARED_NORMAL", "BINDING_PREPARED_RADIUS"),
     "tile renderer storage": _SCENE + tuple(
         name for name in globals() if name.startswith("TILE_BINDING_")),
+    "device order storage": _SCENE + tuple(
+        name for name in globals() if name.startswith("ORDER_BINDING_")),
     "radix sort storage": tuple(name for name in globals() if name.startswith("RADIX_BINDING_")),
     "quad path textures": ("ACCUM_UNIT", "UNDER_UNIT"),
     "viewer textures": ("PRESENT_UNIT",),

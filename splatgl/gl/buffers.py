@@ -5,6 +5,8 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from .transfers import transfers
+
 
 class GrowableBuffer:
     """One moderngl buffer, re-created larger when a frame needs more bytes than it holds.
@@ -36,7 +38,7 @@ class GrowableBuffer:
         """Write ``data`` at the start (growing first if needed)."""
         buf = self.ensure(len(data))
         if data:
-            buf.write(data)
+            transfers(self.ctx).write(buf, data)
         return buf
 
     def bind(self, binding: int | None = None) -> None:
@@ -44,6 +46,8 @@ class GrowableBuffer:
         self.ensure(self.minimum).bind_to_storage_buffer(self.binding if binding is None else binding)
 
     def read(self, nbytes: int, dtype) -> np.ndarray:
+        if nbytes:
+            transfers(self.ctx).read(nbytes)
         return np.frombuffer(self.buf.read(size=nbytes), dtype) if nbytes else np.zeros(0, dtype)
 
     def release(self) -> None:

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..model.settings import Precision
+from .transfers import transfers
 
 _DTYPES = {Precision.RGBA32F: "f4", Precision.RGBA16F: "f2", Precision.RGBA8: "f1"}
 
@@ -62,12 +63,14 @@ class ColorTarget:
         """(H, W) float32 accumulated depth (red channel of the depth attachment)."""
         w, h = self.size
         raw = self.fbo.read(components=4, dtype="f4", attachment=1)
+        transfers(self.fbo.ctx).read(len(raw))
         return np.frombuffer(raw, np.float32).reshape(h, w, 4)[..., 0].copy()
 
     def read_normal(self) -> np.ndarray:
         """(H, W, 3) float32 accumulated normal (rgb of the normal attachment)."""
         w, h = self.size
         raw = self.fbo.read(components=4, dtype="f4", attachment=self.normal_location)
+        transfers(self.fbo.ctx).read(len(raw))
         return np.frombuffer(raw, np.float32).reshape(h, w, 4)[..., :3].copy()
 
     def read(self) -> np.ndarray:
@@ -75,6 +78,7 @@ class ColorTarget:
         w, h = self.size
         dtype = _DTYPES[self.precision]
         raw = self.fbo.read(components=4, dtype=dtype)
+        transfers(self.fbo.ctx).read(len(raw))
         if dtype == "f1":
             return np.frombuffer(raw, np.uint8).reshape(h, w, 4).astype(np.float32) / 255.0
         return np.frombuffer(raw, np.float16 if dtype == "f2" else np.float32).reshape(h, w, 4).astype(np.float32)
@@ -110,13 +114,14 @@ class OrderedTarget:
     def clear(self) -> None:
         """T = 1 and everything else 0 (an integer attachment cannot be cleared by glClear)."""
         self.state_fbo.clear(1.0, 0.0, 0.0, 0.0)
-        self.ids.write(self._zeros)
+        transfers(self.ids.ctx).write(self.ids, self._zeros)
 
     def read(self) -> tuple[np.ndarray, np.ndarray]:
         """(H, W, 4) float32 state and (H, W, 4) uint32 ids."""
         w, h = self.size
         f = np.frombuffer(self.fbo.read(components=4, dtype="f4", attachment=0), np.float32)
         u = np.frombuffer(self.fbo.read(components=4, dtype="u4", attachment=1), np.uint32)
+        transfers(self.fbo.ctx).read(f.nbytes + u.nbytes)
         return f.reshape(h, w, 4).copy(), u.reshape(h, w, 4).copy()
 
     def release(self) -> None:

@@ -18,6 +18,7 @@ from ..constants import (EARLY_STOP_FINE_QUAD_FRAGMENTS, EARLY_STOP_MIN_OVERDRAW
 from ..gl.bindings import (ACCUM_UNIT, BINDING_COMMANDS, BINDING_COVERAGE, BINDING_STOP_TILES,
                            BINDING_SURVIVORS, COVERAGE_GROUP, STOP_TILES_GROUP)
 from ..gl.buffers import GrowableBuffer
+from ..gl.transfers import transfers
 from ..model.settings import EarlyStop
 from .early_stop import (COARSE_SCHEDULE, COMMAND_BYTES, COVERAGE_MIN_INVOCATIONS,
                          COVERAGE_SLOTS_PER_INVOCATION, FINE_SCHEDULE, MAX_BATCH, SEGMENT,
@@ -103,6 +104,7 @@ class EarlyStopPasses:
         comp.run(group_x=groups)
         self.ctx.memory_barrier()
         sums = np.frombuffer(partial.read(size=4 * groups * COVERAGE_GROUP), np.float32)
+        transfers(self.ctx).read(sums.nbytes)
         return float(sums.sum(dtype=np.float64))
 
     def survivor_count(self, n_cmd: int) -> int:
@@ -110,6 +112,7 @@ class EarlyStopPasses:
         if n_cmd == 0:
             return 0
         cmds = np.frombuffer(self.commands.read(size=n_cmd * COMMAND_BYTES), np.uint32)
+        transfers(self.ctx).read(cmds.nbytes)
         return int(cmds.reshape(n_cmd, COMMAND_BYTES // 4)[:, 1].sum())
 
     def release(self) -> None:

@@ -33,14 +33,16 @@ from ..cameras.view import View
 from ..gl.radix_sort import RadixSorter, device_depth_sort
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
+from ..gl.transfers import TransferCounts, transfers
 from ..gl.targets import ColorTarget
 from ..model.scene import Scene
 from ..model.settings import EarlyStop, QuadExtent, RenderSettings, RendererKind, SortKey
-from ..order.stage import RowSource, SceneOrder, cpu_sort
+from ..order.stage import OrderTimes, RowSource, SceneOrder, cpu_sort
 from ..output.layers import BASE, ORDERED, Layer, RenderOutput
 from ..output.under import UnderLayer
 from .batches import Batches
 from .early_stop import BatchHook
+from .quad_device import DeviceOrder
 from .quad_gpu import QuadResources
 from .quad_layers import (check_ordered, composite, draw_ordered,  # noqa: F401 (composite: API)
                           layer_output, normal_location)
@@ -73,6 +75,11 @@ class QuadTimes:
     fragments_estimate: int = 0
     batches: int = 1
     batched: bool = False
+    #: The frame's transfers (:mod:`splatgl.gl.transfers`), apart from the one-time scene upload.
+    transfers: TransferCounts = TransferCounts()
+    #: Whether the order stayed on the device (``--sort gpu``, :mod:`.quad_device`); ``drawn``
+    #: is then -1: the count lives in the draw command and is not read back.
+    device_order: bool = False
 
     @property
     def total(self) -> float:
@@ -88,6 +95,8 @@ class QuadTimes:
         return self.upload + self.draw
 
     def summary(self, count: int) -> str:
+        if self.drawn < 0:
+            return f"splats counted on the device / {count:,}"
         return f"splats {self.drawn:,} drawn / {count:,}"
 
 
@@ -113,6 +122,8 @@ class QuadRenderer(Registered):
         self.gpu = QuadResources(ctx, self.uses_prepass)
         self.batches = Batches(ctx, settings.early_stop, self.gpu, self.programs)
         self._sorter: RadixSorter | None = None  # built on the first device sort
+        self._device: DeviceOrder | None = None  # the device-resident order, on first use
+        self._device_frame = False
         self.rows: RowSource = rows if rows is not None else SceneOrder(scene, settings, self.sort)
         #: Told the splats drawn after each batch (set per frame by ``Renderer.render(...,
         #: progress=...)``, :mod:`splatgl.progress`); Ctrl-C is seen between batches.
@@ -132,6 +143,18 @@ class QuadRenderer(Registered):
             self._sorter = self._sorter or RadixSorter(self.ctx, self.programs.cache)
             return device_depth_sort(self._sorter, depth, keep)
         return cpu_sort(self.settings)(depth, keep)
+
+    def device_order(self, view: View, layers: frozenset[Layer] = BASE) -> DeviceOrder | None:
+        """The device-resident order (:mod:`.quad_device`) when it draws this frame: ``--sort
+        gpu`` with the cull on, the plain scene's rows, a view it culls, no ordered layers."""
+        if (self.settings.sort_key is not SortKey.GPU or not self.settings.cull
+                or not isinstance(self.rows, SceneOrder) or self.scene.count == 0
+                or layers & ORDERED or not DeviceOrder.covers(view)):
+            return None
+        if self._device is None:   # its own sorter: the CPU order's device sort reuses its buffers
+            self._device = DeviceOrder(self.ctx, self.scene, self.programs.cache,
+                                       RadixSorter(self.ctx, self.programs.cache))
+        return self._device
 
     def target(self, view: View, layers: frozenset[Layer] = BASE) -> ColorTarget:
         """The blend target for ``view`` with the attachments ``layers`` need."""
@@ -165,7 +188,13 @@ class QuadRenderer(Registered):
         """Order, upload and (with the pre-pass) prepare the quads of ``view``; returns the
         splats to draw and the frame's switches (``under``: a geometry depth test).  The scene
         and the order stay bound.  ``on_batch(0, count)`` is called between chunks of the
-        pre-pass as between batches of the draw (:meth:`draw`), so input can abandon it."""
+        pre-pass as between batches of the draw (:meth:`draw`), so input can abandon it.
+        With the device-resident order the count is the scene's (the pre-pass runs on every
+        sorted slot; the draw takes the kept ones from its command)."""
+        device = self.device_order(view, layers)
+        self._device_frame = device is not None
+        if device is not None:
+            return self._prepare_device(device, view, layers, under)
         order = self.order(view)
         weights = self.rows.slot_weights
         frame = FrameSwitches(depth=Layer.DEPTH in layers, weights=weights is not None,
@@ -184,8 +213,29 @@ class QuadRenderer(Registered):
             self.gpu.run_prepass(comp, len(order), frame.weights, bool(frame.normal),
                                  frame.ordered_rect, self.batches.max_batch, between)
             self.ctx.finish()
+            transfers(self.ctx).sync()
         self._t_prepass = time.perf_counter() - t1
         return len(order), frame
+
+    def _prepare_device(self, device: DeviceOrder, view: View, layers: frozenset[Layer],
+                        under: bool) -> tuple[int, FrameSwitches]:
+        check(self.kind, scene=self.scene, model=view.model)
+        frame = FrameSwitches(depth=Layer.DEPTH in layers, weights=False,
+                              extra=tuple(self.frame_extra.items()),
+                              normal=normal_location(layers), under=under)
+        cull, sort = device.run(view, 3 if self.gpu.triangles else 4, self.settings.antialias)
+        self._device_times = (cull, sort)
+        self._t_upload = 0.0
+        self.buffers.bind()
+        t1 = time.perf_counter()
+        if self.uses_prepass:
+            comp = self.programs.prepass(view, frame)
+            view.set_uniforms(comp)
+            transfers(self.ctx).uniforms(comp)
+            self.gpu.run_prepass(comp, device.count, False, bool(frame.normal), False,
+                                 order=device.values)
+        self._t_prepass = time.perf_counter() - t1
+        return device.count, frame
 
     def draw(self, view: View, target: ColorTarget, layers: frozenset[Layer] = BASE,
              on_batch: BatchHook | None = None, under: UnderLayer | None = None) -> int:
@@ -201,7 +251,7 @@ class QuadRenderer(Registered):
         if under is not None:
             self.gpu.bind_under(under.depth)
         tp = time.perf_counter()
-        if self.gpu.triangles:   # plain draws only (see use_triangles)
+        if self.gpu.triangles or self._device_frame:   # plain draws only (see use_triangles)
             batched = self.batches.batched = False
         else:
             batched = self.batches.decide(view, count, frame)
@@ -210,6 +260,7 @@ class QuadRenderer(Registered):
         tc = time.perf_counter()
         prog = self.programs.draw(view, frame)
         view.set_uniforms(prog)
+        transfers(self.ctx).uniforms(prog)
         fbo = target.fbo
         fbo.use()
         self.ctx.viewport = (0, 0, view.width, view.height)
@@ -222,8 +273,12 @@ class QuadRenderer(Registered):
         self.batches.batches = 0
         self.batches.occlusion_culled = 0
         try:
-            if count:
+            if self._device_frame:
+                run = lambda: self.gpu.draw_indirect(prog, self._device.values,  # noqa: E731
+                                                     self._device.command)
+            else:
                 run = lambda: self.batches.draw(view, target, prog, count, frame, on_batch)  # noqa: E731
+            if count:
                 if self.around_draw is not None:
                     self.around_draw(run)
                 else:
@@ -231,9 +286,10 @@ class QuadRenderer(Registered):
         finally:
             self.ctx.disable(moderngl.BLEND | moderngl.DEPTH_TEST)
         self.ctx.finish()
+        transfers(self.ctx).sync()
         self._t_coverage, self._t_draw = tc - tp, time.perf_counter() - tc
-        self._drawn = count
-        return count
+        self._drawn = -1 if self._device_frame else count
+        return self._drawn
 
     def render(self, view: View, layers: frozenset[Layer] = BASE,
                under: UnderLayer | None = None, on_batch: BatchHook | None = None) -> RenderOutput:
@@ -243,6 +299,7 @@ class QuadRenderer(Registered):
         ``on_batch`` as in :meth:`draw`; without one, :attr:`progress` hears each batch."""
         layers = frozenset(layers)
         check_ordered(self.ctx, layers)
+        before = transfers(self.ctx).snapshot()
         if on_batch is None and self.progress is not None:
             report = self.progress
             on_batch = lambda done, total: report(done, total, "quad: drawing splats")  # noqa: E731
@@ -255,15 +312,22 @@ class QuadRenderer(Registered):
         out = layer_output(target, rgba, layers, ordered, under, self.settings.background)
         t1 = time.perf_counter()
         order, b = self.rows.times, self.batches
+        if self._device_frame:
+            order = OrderTimes(*self._device_times)
         self.last_times = QuadTimes(order.cull, order.sort, self._t_upload, self._t_prepass,
                                     self._t_draw, t1 - t0, self._drawn, b.occlusion_culled,
                                     order.build, self._t_coverage, b.fragments_estimate,
-                                    b.batches, b.batched)
+                                    b.batches, b.batched,
+                                    transfers(self.ctx).snapshot().since(before),
+                                    self._device_frame)
         return out
 
     def release(self) -> None:
         self.batches.release()
         self.gpu.release()
+        if self._device is not None:
+            self._device.release()
+            self._device = None
         if self._sorter is not None:
             self._sorter.release()
             self._sorter = None

@@ -16,6 +16,7 @@ from ..gl.bindings import (BINDING_OPACITY_WEIGHT, BINDING_ORDER, BINDING_PREPAR
                            BINDING_PREPARED_NORMAL, BINDING_PREPARED_RADIUS, PREPASS_GROUP,
                            UNDER_UNIT)
 from ..gl.buffers import GrowableBuffer
+from ..gl.transfers import transfers
 from ..gl.targets import ColorTarget, OrderedTarget
 from ..model.settings import Precision
 from .early_stop import COMMAND_BYTES
@@ -57,12 +58,15 @@ class QuadResources:
 
     def run_prepass(self, comp: moderngl.ComputeShader, count: int, weighted: bool,
                     normals: bool = False, radii: bool = False, chunk: int | None = None,
-                    between: Callable[[], None] | None = None) -> None:
+                    between: Callable[[], None] | None = None,
+                    order: moderngl.Buffer | None = None) -> None:
         """Run ``comp`` (quad_prepass.comp, uniforms set) over the ``count`` sorted splats into
         the prepared buffer (with ``normals`` the normal layer's buffer, with ``radii`` the
         ordered pass's).  With ``between``, the pass runs in chunks of ``chunk`` slots and
         ``between()`` is called after each but the last, to a finish (it may raise to abandon
-        the frame: a million splats' pre-pass takes about half a second on llvmpipe)."""
+        the frame: a million splats' pre-pass takes about half a second on llvmpipe).
+        ``order``: the sorted indices' buffer where it is not :attr:`index` (the device-resident
+        order's, :mod:`~splatgl.renderers.quad_device`)."""
         self.prepared.ensure(count * PREPARED_BYTES).bind_to_storage_buffer(BINDING_PREPARED)
         if normals:
             self.prepared_normal.ensure(count * 16).bind_to_storage_buffer(BINDING_PREPARED_NORMAL)
@@ -73,7 +77,10 @@ class QuadResources:
         if weighted:
             self.weights.bind()
         comp["u_count"].value = count
-        self.index.bind()
+        if order is None:
+            self.index.bind()
+        else:
+            order.bind_to_storage_buffer(BINDING_ORDER)
         step = count if between is None or not chunk else max(PREPASS_GROUP, int(chunk))
         for first in range(0, count, step):
             comp["u_first"].value = first
@@ -112,7 +119,7 @@ class QuadResources:
                 self._under.release()
             self._under = self.ctx.texture((w, h), 1, dtype="f4")
             self._under.filter = moderngl.NEAREST, moderngl.NEAREST
-        self._under.write(np.ascontiguousarray(depth, np.float32).tobytes())
+        transfers(self.ctx).write(self._under, np.ascontiguousarray(depth, np.float32).tobytes())
         self._under.use(UNDER_UNIT)
 
     def vertex_array(self, prog: moderngl.Program, source: moderngl.Buffer | None) -> moderngl.VertexArray:
@@ -153,8 +160,20 @@ class QuadResources:
         # A later range: the instanced attribute starts at baseInstance (an indirect command).
         if self._plain_command is None:
             self._plain_command = self.ctx.buffer(reserve=COMMAND_BYTES)
-        self._plain_command.write(np.array([vertices, n, 0, start, 0], np.uint32).tobytes())
+        transfers(self.ctx).write(self._plain_command,
+                                  np.array([vertices, n, 0, start, 0], np.uint32).tobytes())
         vao.render_indirect(self._plain_command, mode, count=1)
+
+    def draw_indirect(self, prog: moderngl.Program, order: moderngl.Buffer,
+                      command: moderngl.Buffer) -> None:
+        """One draw of the sorted slots whose count ``command`` holds on the device (the
+        device-resident order): instance k reads ``order[k]`` (or the pre-pass's slot k)."""
+        self.ctx.enable(moderngl.BLEND)
+        mode = moderngl.TRIANGLES if self.triangles else moderngl.TRIANGLE_STRIP
+        if self.uses_prepass:
+            prog["u_base"].value = 0
+        self.vertex_array(prog, None if self.uses_prepass else order).render_indirect(
+            command, mode, count=1)
 
     def _release_vaos(self) -> None:
         for vao, _, _ in self._vaos.values():

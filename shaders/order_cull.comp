@@ -1,0 +1,112 @@
+// Device-resident order (--sort gpu, splatgl/renderers/quad_device.py): the cull and the depth
+// keys of every splat, one invocation each, for a view whose cull is the side planes
+// (CullKind.FRUSTUM).  The twin of splatgl.order.cull.cull_visible: the same float32 operations
+// in the same order (precise: no fused multiply-add), so the same depth bits and the same plane
+// decisions; the peak-alpha bound, float64 on the CPU, runs here in float32 and keeps whatever
+// lies within DEVICE_CULL_BAND of the cut (a superset by splats that draw nothing).
+//
+// Output: key i = float bits of z for a kept splat (positive z: the bits order like the
+// values), 0xFFFFFFFF for a culled one; value i = i.  A stable sort of all N then puts the kept
+// splats first, by (z, index): the CPU order, ties included.  The kept count is added into the
+// indirect draw command's instance count, which the draw reads: nothing comes back to the host.
+
+layout(local_size_x = ORDER_GROUP) in;
+
+struct CullRow {
+    vec4 p;     // anchored centre x, y, z; world radius k(o) max_scale (CullData.radius)
+    vec4 q;     // max_scale, opacity, alive (1/0), faint (1/0)
+};
+layout(std430, binding = ORDER_BINDING_CULL) readonly buffer Cull { CullRow rows[]; };
+layout(std430, binding = ORDER_BINDING_KEYS) writeonly buffer Keys { uint keys[]; };
+layout(std430, binding = ORDER_BINDING_VALUES) writeonly buffer Values { uint values[]; };
+layout(std430, binding = ORDER_BINDING_COMMAND) buffer Command { uint command[]; };
+
+uniform uint u_count;
+uniform vec3 u_r0;            // rows of the anchored camera's rotation (float32)
+uniform vec3 u_r1;
+uniform vec3 u_r2;
+uniform vec3 u_t;             // its translation (float32)
+uniform float u_near;         // near_threshold(near, float32)
+uniform vec4 u_plane_x;       // plane_constants(frustum, scale)[0][:4]: a_hi, b_hi, a_lo, b_lo
+uniform vec4 u_plane_y;
+uniform vec4 u_inside;        // lo_x, hi_x, lo_y, hi_y (plane_constants[:, 4:6])
+uniform bool u_peak;          // the peak-alpha bound may cull (a pinhole image)
+uniform bool u_antialias;
+uniform float u_scale;        // the view's uniform scale (max_scale * scale in the bound)
+uniform vec4 u_focal;         // fx, fy, cx, cy of the frustum's camera
+uniform vec4 u_image;         // width, height, tan half fov x, y
+
+float view_axis(vec3 p, vec3 r, float t) {
+    precise float out_ = p.x * r.x;
+    out_ += p.y * r.y;
+    out_ += p.z * r.z;
+    out_ += t;
+    return out_;
+}
+
+// The planes of one axis (cull_visible's loop): v <= rad b_hi + z a_hi, v >= rad b_lo + z a_lo.
+bool planes(float v, float z, float rad, vec4 c) {
+    precise float w_hi = rad * c.y;
+    precise float u_hi = z * c.x;
+    w_hi += u_hi;
+    precise float w_lo = rad * c.w;
+    precise float u_lo = z * c.z;
+    w_lo += u_lo;
+    return v <= w_hi && v >= w_lo;
+}
+
+// log of peak_alpha_bound (splatgl/order/cull.py), in float32, against log(ALPHA_MIN).
+bool peak_keeps(vec3 p, float max_scale, float opacity) {
+    float x = p.x, y = p.y, z = p.z;
+    float fx = u_focal.x, fy = u_focal.y;
+    float tx = u_image.z, ty = u_image.w;
+    float xc = clamp(x / z, -JACOBIAN_CLAMP * tx, JACOBIAN_CLAMP * tx);
+    float yc = clamp(y / z, -JACOBIAN_CLAMP * ty, JACOBIAN_CLAMP * ty);
+    float jf2 = (fx * fx * (1.0 + xc * xc) + fy * fy * (1.0 + yc * yc)) / (z * z);
+    float u = fx * x / z + u_focal.z, v = fy * y / z + u_focal.w;
+    float ms = max_scale * u_scale;
+    float lam = jf2 * ms * ms + LOW_PASS;
+    float nu = clamp(roundEven(u - 0.5), 0.0, u_image.x - 1.0) + 0.5;
+    float nv = clamp(roundEven(v - 0.5), 0.0, u_image.y - 1.0) + 0.5;
+    float d2 = (u - nu) * (u - nu) + (v - nv) * (v - nv);
+    float log_bound = log(opacity) - 0.5 * d2 / lam;
+    if (u_antialias)
+        log_bound += log(max(1.0 - LOW_PASS / lam, sqrt(AA_MIN_FACTOR)));
+    if (isnan(log_bound) || isinf(lam) || isnan(lam)) return true;  // never on a non-finite bound
+    return log_bound >= log(ALPHA_MIN) - DEVICE_CULL_BAND;
+}
+
+shared uint group_kept;     // one atomic per work group on the command, not one per splat
+
+bool cull(uint i) {
+    CullRow row = rows[i];
+    vec3 p = row.p.xyz;
+    float rad = row.p.w;
+    float z = view_axis(p, u_r2, u_t.z);
+    bool keep = z > u_near && row.q.z != 0.0;
+    bool inside = true;
+    float vx = view_axis(p, u_r0, u_t.x);
+    float vy = view_axis(p, u_r1, u_t.y);
+    if (keep) {
+        keep = planes(vx, z, rad, u_plane_x) && planes(vy, z, rad, u_plane_y);
+        precise float ex_lo = z * u_inside.x;
+        precise float ex_hi = z * u_inside.y;
+        precise float ey_lo = z * u_inside.z;
+        precise float ey_hi = z * u_inside.w;
+        inside = vx <= ex_hi && vx >= ex_lo && vy <= ey_hi && vy >= ey_lo;
+    }
+    if (keep && u_peak && (u_antialias || !inside || row.q.w != 0.0))
+        keep = peak_keeps(vec3(vx, vy, z), row.q.x, row.q.y);
+    keys[i] = keep ? floatBitsToUint(z) : 0xFFFFFFFFu;
+    values[i] = i;
+    return keep;
+}
+
+void main() {
+    if (gl_LocalInvocationIndex == 0u) group_kept = 0u;
+    barrier();
+    uint i = gl_GlobalInvocationID.x;
+    if (i < u_count && cull(i)) atomicAdd(group_kept, 1u);
+    barrier();
+    if (gl_LocalInvocationIndex == 0u && group_kept != 0u) atomicAdd(command[1], group_kept);
+}

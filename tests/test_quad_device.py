@@ -1,0 +1,181 @@
+"""The quad path's device-resident order (``--sort gpu``, splatgl/renderers/quad_device.py) and
+the frame's transfer accounting (splatgl/gl/transfers.py), on llvmpipe.
+
+The device cull (shaders/order_cull.comp) keeps what the CPU cull keeps, in the same order,
+plus at most splats whose float64 peak-alpha bound lies within DEVICE_CULL_BAND of the 1/255
+cut; frames are identical to the CPU order's (early termination off on both: the device order
+draws plainly); a moving-camera frame uploads only uniforms and its 16-byte draw command and
+reads back only the image.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from helpers import shared_file
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.opencv import OpenCV
+from splatgl.cameras.poses import look_at
+from splatgl.cameras.view import View
+from splatgl.cli import main
+from splatgl.constants import ALPHA_MIN, DEVICE_CULL_BAND
+from splatgl.formats import load_scene
+from splatgl.model.scene import Scene
+from splatgl.model.settings import EarlyStop, Preprocess, RenderSettings, SortKey
+from splatgl.order.chunks import ChunkedCull
+from splatgl.order.cull import CullData, peak_alpha_bound
+from splatgl.order.stage import cull_for
+from splatgl.renderers.quad import QuadRenderer
+from splatgl.stress import CASES
+
+REPO = Path(__file__).resolve().parent.parent
+#: What a moving-camera frame may upload on llvmpipe (issue 40: at most 4 KB).
+UPLOAD_BUDGET = 4096
+
+
+def _scene(n: int = 4000, seed: int = 5) -> Scene:
+    """Splats from faint to opaque, tiny to large, some outside every view used below."""
+    rng = np.random.default_rng(seed)
+    return Scene(rng.uniform(-1.5, 1.5, (n, 3)), rng.normal(size=(n, 4)),
+                 rng.uniform(-7.0, -2.5, (n, 3)), rng.uniform(-6.0, 4.0, n),
+                 rng.normal(0, 0.5, (n, 1, 3)))
+
+
+def _cameras() -> list[Camera]:
+    pose = look_at(np.array([0.4, -0.3, -3.2]), np.zeros(3))
+    inside = look_at(np.array([0.1, 0.2, -0.4]), np.array([0.5, 0.0, 1.0]))
+    pin = Camera.from_fov(80, 60, 55.0, pose)
+    return [pin, Camera.from_fov(64, 48, 30.0, inside), pin.with_model(OpenCV(k1=-0.3, k2=0.05))]
+
+
+def _settings(key: SortKey, **changes) -> RenderSettings:
+    return dataclasses.replace(RenderSettings(sort_key=key, early_stop=EarlyStop.OFF), **changes)
+
+
+def _frames(ctx, scene, cameras, settings) -> tuple[list[np.ndarray], QuadRenderer]:
+    r = QuadRenderer(ctx, scene, settings)
+    return [r.render(View.of(c, settings, scene)).rgba for c in cameras], r
+
+
+@pytest.mark.parametrize("antialias", [False, True])
+@pytest.mark.parametrize("camera", _cameras(), ids=["pinhole", "inside", "opencv"])
+def test_device_cull_is_the_cpu_cull_up_to_the_band(ctx, camera, antialias):
+    scene = _scene()
+    settings = _settings(SortKey.GPU, antialias=antialias)
+    r = QuadRenderer(ctx, scene, settings)
+    try:
+        view = View.of(camera, settings, scene)
+        r.render(view)
+        assert r.last_times.device_order
+        got, want = r._device.order(), r.order(view)
+        assert 0 < want.size < scene.count            # the cull drops splats here
+        extra = np.setdiff1d(got, want)
+        same = ~np.isin(got, extra)
+        np.testing.assert_array_equal(got[same], want)   # same order
+        # and the same depth bits (the sort keys) as the CPU cull's keys
+        keys = np.frombuffer(r._device.sorter.buffers()[0].read(4 * got.size), np.uint32)
+        cpu_keys = np.sort(cull_for(view).scene(ChunkedCull.from_scene(scene), view, antialias))
+        np.testing.assert_array_equal(keys[same], (cpu_keys >> np.uint64(32)).astype(np.uint32))
+        if extra.size:   # only splats at the peak-alpha cut (the CPU's float64 bound)
+            cam, data = view.frustum.camera, CullData.from_scene(scene)
+            p = data.xyz.T[extra].astype(np.float64) @ cam.rotation.T + cam.translation
+            bound = peak_alpha_bound(p, data.max_scale[extra] * view.scale,
+                                     data.opacities[extra], cam, antialias)
+            assert (bound >= ALPHA_MIN * np.exp(-2 * DEVICE_CULL_BAND)).all()
+    finally:
+        r.release()
+
+
+@pytest.mark.parametrize("preprocess", [Preprocess.COMPUTE, Preprocess.VERTEX])
+@pytest.mark.parametrize("antialias", [False, True])
+def test_frames_are_identical_to_the_cpu_order(ctx, preprocess, antialias):
+    scene = _scene()
+    cams = _cameras()
+    images = {}
+    for key in (SortKey.EXACT, SortKey.GPU):
+        images[key], r = _frames(ctx, scene, cams, _settings(key, preprocess=preprocess,
+                                                            antialias=antialias))
+        r.release()
+    for k, (a, b) in enumerate(zip(images[SortKey.EXACT], images[SortKey.GPU])):
+        assert a.any(), k
+        np.testing.assert_array_equal(b, a, err_msg=f"camera {k}")
+
+
+def test_demo_scene_and_its_views_are_identical(ctx):
+    scene = load_scene(REPO / "scenes" / "demo.ply")
+    centre = scene.means.mean(axis=0)
+    cams = [Camera.from_fov(96, 72, 50.0, look_at(centre + d, centre))
+            for d in (np.array([0.0, -0.5, -4.0]), np.array([3.0, 0.2, 0.5]),
+                      np.array([0.3, 0.3, -0.6]))]
+    exact, r = _frames(ctx, scene, cams, _settings(SortKey.EXACT))
+    r.release()
+    gpu, r = _frames(ctx, scene, cams, _settings(SortKey.GPU))
+    r.release()
+    for a, b in zip(exact, gpu):
+        np.testing.assert_array_equal(b, a)
+
+
+def test_a_shared_scene_is_identical(ctx, shared_scenes):
+    scene = load_scene(shared_file(shared_scenes, "ply/donut_sh0.ply"))
+    centre = np.median(scene.means, axis=0)
+    radius = float(np.percentile(np.linalg.norm(scene.means - centre, axis=1), 90))
+    cams = [Camera.from_fov(128, 96, 50.0, look_at(centre + radius * d, centre))
+            for d in (np.array([0.0, -0.6, -2.0]), np.array([1.5, -0.3, 0.4]))]
+    exact, r = _frames(ctx, scene, cams, _settings(SortKey.EXACT))
+    r.release()
+    gpu, r = _frames(ctx, scene, cams, _settings(SortKey.GPU))
+    assert r.last_times.device_order
+    r.release()
+    for a, b in zip(exact, gpu):
+        np.testing.assert_array_equal(b, a)
+
+
+_STRESS = [c for c in CASES if not c.slow and "quad" not in c.unsupported]
+
+
+@pytest.mark.parametrize("case", _STRESS, ids=[c.name for c in _STRESS])
+def test_stress_cases_are_identical(ctx, case):
+    setup = case.build()
+    images = []
+    for key in (SortKey.EXACT, SortKey.GPU):
+        settings = dataclasses.replace(setup.settings, sort_key=key, early_stop=EarlyStop.OFF)
+        frames, r = _frames(ctx, setup.scene, [setup.camera], settings)
+        r.release()
+        images.append(frames[0])
+    np.testing.assert_array_equal(images[1], images[0])
+
+
+def test_a_moving_camera_uploads_uniforms_only_and_reads_back_the_image(ctx):
+    scene = _scene()
+    cams = [Camera.from_fov(80, 60, 55.0, look_at(np.array([0.4 + 0.05 * k, -0.3, -3.2]),
+                                                  np.zeros(3))) for k in range(4)]
+    settings = _settings(SortKey.GPU)
+    r = QuadRenderer(ctx, scene, settings)
+    cpu = QuadRenderer(ctx, scene, _settings(SortKey.EXACT))
+    try:
+        image_bytes = 80 * 60 * 16   # RGBA32F
+        for k, cam in enumerate(cams):
+            r.render(View.of(cam, settings, scene))
+            t = r.last_times
+            assert t.device_order and t.drawn == -1
+            assert t.transfers.read_back == image_bytes, k
+            assert t.transfers.uploaded <= UPLOAD_BUDGET, k   # no splat crosses the bus
+            assert t.transfers.syncs <= 3, k     # the draw's finish, the prepass's, the read
+        cpu.render(View.of(cams[-1], settings, scene))   # the CPU order uploads its indices
+        assert cpu.last_times.transfers.uploaded >= 4 * 1000
+    finally:
+        r.release()
+        cpu.release()
+
+
+def test_timings_report_the_frame_transfers(tmp_path, capsys):
+    out = tmp_path / "a.png"
+    assert main(["render", str(REPO / "scenes" / "demo.ply"), "--width", "48", "--height", "32",
+                 "-o", str(out), "--sort", "gpu", "--timings"]) == 0
+    line = [s for s in capsys.readouterr().out.splitlines() if s.startswith("timings")][0]
+    assert "per-frame uploads " in line and f"read back {48 * 32 * 16:,} bytes" in line
+    assert " syncs" in line
