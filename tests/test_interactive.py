@@ -102,7 +102,7 @@ def test_motion_after_a_rest_starts_at_the_level_the_model_predicts_to_fit():
     want a better level from 0 (left over from before the rest, it let the level jump up after
     two frames: 1.0-1.3 s frames on 1M splats).  A resume never moves the level up."""
     budget = FrameBudget(0.1, 600_000, 1280 * 720, 0, has_lod=True)
-    assert budget.index == 0 and budget.current.exact
+    budget.index = 0                               # full detail in use (it starts lower)
     pixels = budget.pixels
     for level in (Level(), Level(0.5, 50_000), Level(0.25, 12_000), Level(1.0, 100_000)):
         splats = level.budget or 600_000
@@ -211,6 +211,76 @@ def test_a_smaller_budget_moves_the_level_down_and_settles_under_it():
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(SplatglError, match="budget"):
             budget.set_budget(bad)
+
+
+def _fly(budget: FrameBudget, frames: int, speed: float = 1.0, **cost) -> list[tuple[Level, float]]:
+    """``frames`` moving frames on a fake device ``speed`` times faster than ``_cost``'s."""
+    drawn = []
+    for _ in range(frames):
+        level = budget.level()
+        seconds = _cost(level, budget.count, budget.pixels, **cost) / speed
+        budget.report(level, min(level.budget or budget.count, budget.count), seconds)
+        drawn.append((level, seconds))
+    return drawn
+
+
+@pytest.mark.parametrize("software, fps", [(True, 10.0), (False, 60.0)])
+def test_a_device_20x_faster_than_its_prior_reaches_the_exact_frame_within_a_few_frames(software, fps):
+    """Issue 40 item 5: the model learns the device from its first frames (the whole model
+    rescaled where a frame is far off it) instead of climbing from llvmpipe's costs one probe at
+    a time; the exact frame, which fits, is drawn from the fourth frame (patience) on."""
+    count = 1_000_000 if software else 100_000
+    budget = FrameBudget(1.0 / fps, count, 1280 * 720, 3, has_lod=True, software=software)
+    drawn = _fly(budget, 12, speed=20.0)
+    assert not drawn[0][0].exact                        # a safe start: nothing measured yet
+    assert all(lv.exact for lv, _ in drawn[budget.patience:])
+    assert all(seconds <= budget.budget for _, seconds in drawn)
+
+
+def test_the_first_moving_frame_of_a_large_scene_fits_the_budget():
+    """Issue 40 item 5: the first frame is drawn at the level the prior predicts to fit, not at
+    full detail (760 ms on llvmpipe for 1M splats), and also after a rest whose exact frame was
+    slow (the model learnt from that frame alone)."""
+    budget = FrameBudget(0.1, 1_000_000, 1280 * 720, 3, has_lod=True)
+    level, seconds = _fly(budget, 1)[0]
+    assert not level.exact and seconds <= budget.budget
+    budget = FrameBudget(0.1, 1_000_000, 1280 * 720, 3, has_lod=True)
+    budget.observe(EXACT, 1_000_000, 1.3 * _cost(EXACT, 1_000_000, budget.pixels))   # at rest
+    budget.resume()
+    assert _cost(budget.level(), 1_000_000, budget.pixels) <= budget.budget
+
+
+def test_the_exact_frame_is_drawn_while_moving_where_its_measured_cost_fits():
+    """Where the exact frame measured at rest fits the budget, motion resumes at it (from the
+    safe start, below it); a slow exact frame while moving goes down at once and is priced by
+    that measurement (never two slow frames in a row)."""
+    budget = FrameBudget(0.1, 300_000, 1280 * 720, 0, has_lod=True)
+    assert not budget.level().exact
+    budget.observe(EXACT, 300_000, 0.08)
+    budget.resume()
+    assert budget.level() == EXACT
+    budget.report(EXACT, 300_000, 0.3)                  # a view the exact frame is slow for
+    assert not budget.level().exact and budget.exact_seconds == 0.3
+    budget.set_pixels(640 * 480)                        # measured at other pixels: forgotten
+    assert budget.exact_seconds is None
+
+
+def test_where_the_budget_is_tight_learning_changes_nothing(monkeypatch):
+    """On a device its prior fits (llvmpipe-like costs, a budget nothing exact fits), the first
+    frames rescale nothing: the levels are those of the filter alone; a measured exact frame over
+    the budget does not bring the exact frame back."""
+    import splatgl.interactive.costs as costs
+
+    def levels():
+        budget = FrameBudget(0.1, 600_000, 1280 * 720, 3, has_lod=True)
+        budget.observe(EXACT, 600_000, _cost(EXACT, 600_000, budget.pixels))
+        budget.resume()
+        return [lv for lv, _ in _fly(budget, 40)] + [budget.current]
+
+    learnt = levels()
+    monkeypatch.setattr(costs, "LEARN_FRAMES", 0)
+    assert learnt == levels()
+    assert not any(lv.exact for lv in learnt)
 
 
 @pytest.mark.parametrize("bad", [-1.0, math.inf, math.nan])

@@ -6,11 +6,12 @@ at most that many nodes: llvmpipe's per-quad front end, about a microsecond a qu
 scenes over about 100k splats) and the SH degree.  A :class:`Level` is one choice of the three;
 :class:`FrameBudget` picks one per frame.
 
-How it picks: a linear cost model, ``t = fixed + per_splat * splats + per_pixel * pixels``,
-tracked over the frames drawn so far (a Kalman filter whose costs drift, so the model follows
-the view: the cost is stable across nearby frames, not across a whole flight), predicts each
-level's time; the best level whose prediction fits ``margin * budget`` is the
-target.  Hysteresis keeps it from flickering between levels:
+How it picks: a linear cost model, ``t = fixed + per_splat * splats + per_pixel * pixels``
+(:mod:`.costs`: from a prior for a software or a hardware device, rescaled by the first frames,
+then tracked by a Kalman filter whose costs drift, so the model follows the view), predicts
+each level's time (the exact level's: its measured time where lower); the best level whose
+prediction fits ``margin * budget`` is the target, and the first frame's level.  Hysteresis
+keeps it from flickering between levels:
 
 - a frame over ``over`` (1.15) times the budget, or a level predicted over ``hold`` (1.05) of it,
   moves down to the target at once (never a visibly slow frame twice in a row);
@@ -30,11 +31,10 @@ target.  Hysteresis keeps it from flickering between levels:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-
-import numpy as np
+from dataclasses import dataclass
 
 from ..errors import SplatglError
+from .costs import CostModel
 
 #: Render scales tried, best first (fractions of the window's width and height).  The ones below
 #: 0.25 are for fill-bound views on slow machines: on a 2-core AVX2 llvmpipe donut's close rest
@@ -160,60 +160,25 @@ def cut_factor_for(level: Level, count: int, measured_psnr: float) -> float | No
     return float(min(hi, max(lo, cut / by_cut)))
 
 
-#: The cost model's units: splats in 100k, pixels in millions (so its three numbers are of one
-#: order, seconds per unit, and the least squares stay well conditioned).
-SPLAT_UNIT, PIXEL_UNIT = 1e5, 1e6
-
-
-@dataclass
-class CostModel:
-    """``t = fixed + per_splat * splats + per_pixel * pixels`` (seconds; ``theta`` per
-    :data:`SPLAT_UNIT` splats and :data:`PIXEL_UNIT` pixels), tracked by a Kalman filter from a
-    prior that assumes llvmpipe-like costs (10 ms, 0.1 s per 100k splats, 50 ms per megapixel).
-
-    Each frame is one measurement with ``noise`` seconds of error; between frames the costs may
-    drift by ``drift`` times the prior's widths (the view changes the cost per splat and per
-    pixel), so recent frames count most, and a direction frames never probe (frames at one
-    level see only one combination of the three) grows uncertain slowly and evenly instead of
-    blowing up as least squares with forgetting would.
-    """
-
-    noise: float = 0.005
-    drift: float = 0.15
-    theta: np.ndarray = field(default_factory=lambda: np.array([0.01, 0.1, 0.05]))
-    cov: np.ndarray = field(default_factory=lambda: np.diag([0.05, 0.1, 0.1]) ** 2)
-
-    def __post_init__(self) -> None:
-        self._q = np.diag(np.diag(self.cov)) * self.drift ** 2
-
-    @staticmethod
-    def features(splats: float, pixels: float) -> np.ndarray:
-        return np.array([1.0, splats / SPLAT_UNIT, pixels / PIXEL_UNIT])
-
-    def predict(self, splats: float, pixels: float) -> float:
-        return max(float(self.theta @ self.features(splats, pixels)), 0.0)
-
-    def update(self, splats: float, pixels: float, seconds: float) -> None:
-        x = self.features(splats, pixels)
-        cov = self.cov + self._q                      # the costs drift between frames
-        px = cov @ x
-        gain = px / (self.noise ** 2 + x @ px)
-        self.theta = self.theta + gain * (seconds - x @ self.theta)
-        cov = cov - np.outer(gain, px)
-        self.cov = 0.5 * (cov + cov.T)
+#: The exact frame's measured seconds (at rest or moving) are smoothed exponentially, this
+#: weight on the newest; where they fit the budget the exact frame is drawn while moving too.
+EXACT_SMOOTHING = 0.5
 
 
 class FrameBudget:
     """Picks a :class:`Level` per moving frame so frames land within ``budget`` seconds.
 
     ``count``: the scene's splats; ``pixels``: the window's pixels at scale 1; ``has_lod``:
-    whether a level-of-detail tree can serve budgets.  Call :meth:`level` before a frame and
-    :meth:`report` after it with what it drew and how long it took.
+    whether a level-of-detail tree can serve budgets; ``software``: whether the device is a
+    software rasteriser (the cost model's prior: :meth:`CostModel.for_device`).  The first frame
+    is drawn at the level the prior predicts to fit, not at full detail: nothing was measured
+    yet (a 1M-splat scene's first moving frame took 760 ms on llvmpipe).  Call :meth:`level`
+    before a frame and :meth:`report` after it with what it drew and how long it took.
     """
 
     def __init__(self, budget: float, count: int, pixels: int, sh_degree: int = 0,
                  has_lod: bool = False, margin: float = 0.95, hold: float = 1.05, over: float = 1.15,
-                 patience: int = 3, probe: float = 0.6):
+                 patience: int = 3, probe: float = 0.6, software: bool = True):
         if not (math.isfinite(budget) and budget > 0.0):
             raise SplatglError(f"frame-time budget must be a positive number of seconds, got {budget}")
         self.budget, self.count, self.pixels = float(budget), int(count), int(pixels)
@@ -223,10 +188,13 @@ class FrameBudget:
         self._fast = 0          # frames in a row under ``probe`` times the budget
         self._probe_wait: dict[int, int] = {}   # level index -> frames before probing it again
         self._probing: int | None = None        # the level a probe moved to
-        self.model = CostModel()
+        self.model = CostModel.for_device(software)
         self.has_lod, self.cut_factor = has_lod, 1.0
         self.levels = ladder(self.count, has_lod, sh_degree)
-        self.index = 0          # the level in use (an index into :attr:`levels`)
+        #: The exact frame's measured seconds, smoothed (:data:`EXACT_SMOOTHING`); None until
+        #: one is measured at these pixels.  :meth:`predict` prices the exact level by it.
+        self.exact_seconds: float | None = None
+        self.index = self.target()   # the level in use (an index into :attr:`levels`): safe
         self._ups = 0           # frames in a row whose target was higher than the level in use
         self._last: tuple[Level, float] | None = None   # the last moving frame's level and seconds
 
@@ -258,8 +226,17 @@ class FrameBudget:
         """A frame's cost that is not a moving frame (a refinement step): the cost model
         learns from it; the level does not move."""
         self.model.update(float(splats), self.pixels * level.scale * level.scale, float(seconds))
+        self._note_exact(level, seconds)
+
+    def _note_exact(self, level: Level, seconds: float) -> None:
+        if level.exact and math.isfinite(seconds) and seconds >= 0.0:
+            last = self.exact_seconds   # slower: at once (never a slow frame twice); faster: smoothed
+            self.exact_seconds = float(seconds) if last is None or seconds > last else \
+                EXACT_SMOOTHING * float(seconds) + (1.0 - EXACT_SMOOTHING) * last
 
     def set_pixels(self, pixels: int) -> None:
+        if int(pixels) != self.pixels:
+            self.exact_seconds = None     # measured at other pixels
         self.pixels = int(pixels)
 
     def set_budget(self, budget: float) -> None:
@@ -274,8 +251,13 @@ class FrameBudget:
         return self.levels[self.index]
 
     def predict(self, level: Level) -> float:
+        """``level``'s expected seconds: the cost model's, or the exact frame's measured cost
+        where there is one and it is lower (a linear model fitted to drafts can price it high)."""
         splats = self.count if level.budget is None else min(level.budget, self.count)
-        return self.model.predict(splats, self.pixels * level.scale * level.scale)
+        seconds = self.model.predict(splats, self.pixels * level.scale * level.scale)
+        if level.exact and self.exact_seconds is not None:
+            return min(seconds, self.exact_seconds)
+        return seconds
 
     def target(self) -> int:
         """The best level whose predicted time fits ``margin * budget`` (the cheapest if none)."""
@@ -303,7 +285,9 @@ class FrameBudget:
         to fit where the one in use is better."""
         last = self._last
         measured = last is not None and last[0] == self.current and last[1] <= self.hold * self.budget
-        if not measured:
+        if self.exact_seconds is not None and self.exact_seconds <= self.margin * self.budget:
+            self.index = 0          # the exact frame, measured (at rest) within the budget
+        elif not measured:
             self.index = max(self.index, self.target())
         self._ups = 0
 
@@ -311,6 +295,7 @@ class FrameBudget:
         """What the last frame drew (``splats``, at ``level``) and how long it took; moves the
         level for the next frame (see the module doc for the hysteresis)."""
         self.model.update(float(splats), self.pixels * level.scale * level.scale, float(seconds))
+        self._note_exact(level, seconds)
         self._last = (level, float(seconds))
         target = self.target()
         probed, self._probing = self._probing, None

@@ -28,7 +28,8 @@ from ..gl.egl_devices import is_software_renderer
 from ..model.scene import Scene
 from ..model.settings import RendererKind, RenderSettings
 from ..renderers.early_stop import MAX_BATCH
-from .budget import EXACT, SPLAT_UNIT, FrameBudget, Level
+from .budget import EXACT, FrameBudget, Level
+from .costs import SPLAT_UNIT
 from .draft import DraftFrame, LevelRenderer
 from .lod_cache import LodProvider
 
@@ -111,7 +112,9 @@ class Session:
         self.cpu_exact = RendererKind(exact_kind) is RendererKind.CPU
         self.lod = lod
         self.levels = LevelRenderer(renderer, scene, settings, lod)
-        self.budget = FrameBudget(budget, scene.count, 1280 * 720, scene.sh_degree, has_lod=False)
+        software = is_software_renderer(renderer_name(renderer.ctx))   # the cost model's prior
+        self.budget = FrameBudget(budget, scene.count, 1280 * 720, scene.sh_degree, has_lod=False,
+                                  software=software)
         self.period = self.budget.budget
         self._overheads: list[float] = []
         #: Whether the last frame drawn was a moving frame (not a refinement step).
