@@ -6,10 +6,15 @@
 // the rectangle's row-major index): llvmpipe ends an invocation's loops after 65535 iterations
 // in all, which one splat covering a 4096 x 4096 image would reach, so splatgl/renderers/tile.py issues
 // as many dispatches as the largest rectangle needs (one, below 32768 tiles).
+// DEVICE_SORT (--sort gpu): also the radix sorter's keys and values, (depth bits, emission
+// place), and splatgl/renderers/tile_device.py issues the chunks indirectly (tile_scan.comp).
 // PER_PIXEL (3DGS): the key's depth is the splat's peak depth along the ray through its centre
 // clamped into the box of the tile's pixel centres (lib/peak_depth.glsl; twin
 // splatgl/splatmath/peak.py tile_key_bits), clamped below at MIN_KEY_DEPTH, so that each
 // pixel's window has little order left to fix.
+#ifdef DEVICE_SORT
+#define TILE_DEV_KEYS 1
+#endif
 #include "lib/tile_common.glsl"
 #if defined(PER_PIXEL) && !defined(SURFEL)
 #include "lib/peak_depth.glsl"
@@ -45,6 +50,10 @@ void main() {
         sort_keys[base + j] = tile_key(y * u_grid.x + x, depth_bits, i);
 #ifndef KEY_PACKED
         sort_values[base + j] = i;
+#endif
+#ifdef DEVICE_SORT
+        dev_keys[base + j] = depth_bits;  // the radix sort's first pass: by depth, stably
+        dev_values[base + j] = base + j;  // ... carrying the key's emission place
 #endif
     }
 }

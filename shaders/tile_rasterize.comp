@@ -11,6 +11,8 @@
 // the tile (o exp(-q_min / 2) < 1/255, q_min from conic_min_over_box, with a safety margin) is
 // dropped from the batch before blending, keeping the order of the others; and a pixel skips
 // exp() where power is below that splat's cut-off by the same margin.
+// DEVICE_SORT (--sort gpu): the splat indices come from tile_order and the passes from the
+// device (ts_passes; each pass an indirect dispatch of whole bands, rows past the grid idle).
 // Long lists run in passes (u_pass of u_passes, each over at most TILE_LIST_CHUNK entries of every
 // tile's list), carrying (C, +-T) in out_rgba and D in out_depth between passes (T negated once
 // the pixel stopped): llvmpipe ends every loop of an invocation after 65535 iterations in all,
@@ -35,6 +37,11 @@
 // each new one joins them and, when that makes ORDER_WINDOW + 1, the nearest is blended (ties:
 // the earlier in the list).  The rest are blended in order at the end of each pass.  D sums
 // that depth.
+#ifdef DEVICE_SORT
+#define TILE_STATE 1
+#define TILE_ORDER 1
+#define TILE_NO_KEYS 1
+#endif
 #include "lib/tile_common.glsl"
 #ifdef SURFEL
 #include "lib/camera.glsl"
@@ -144,6 +151,12 @@ void window_flush(inout vec3 C, inout float D, inout float T, inout bool done) {
 
 void main() {
     uvec2 group = gl_WorkGroupID.xy + uvec2(0u, u_tile_row0);   // this tile's (x, y) in the grid
+#ifdef DEVICE_SORT
+    if (group.y >= u_grid.y) return;             // a whole band past the last row (indirect)
+    uint passes = ts_passes;                     // from the device (tile_ranges.comp)
+#else
+    uint passes = u_passes;
+#endif
     uint tile = group.y * u_grid.x + group.x;
     uvec2 pix = group * uint(TILE_SIZE) + gl_LocalInvocationID.xy;  // (column, row), row 0 = top
     uint rank = gl_LocalInvocationIndex;
@@ -206,7 +219,9 @@ void main() {
         vec4 pk0 = vec4(0.0), pk1 = vec4(0.0);
 #endif
         if (k < range.y) {
-#ifdef KEY_PACKED
+#if defined(DEVICE_SORT)
+            uint idx = tile_order[k];
+#elif defined(KEY_PACKED)
             uint idx = sort_keys[k].x & u_index_mask;
 #else
             uint idx = sort_values[k];
@@ -340,7 +355,7 @@ void main() {
     window_flush(C, D, T, done);                 // the window restarts with every pass
 #endif
     if (inside) {
-        bool last = u_pass + 1u == u_passes;
+        bool last = u_pass + 1u == passes;
         out_rgba[o] = last ? vec4(C + T * u_background, 1.0 - T) : vec4(C, done ? -T : T);
         out_depth[o] = D;
 #ifdef NORMAL_OUTPUT

@@ -20,8 +20,10 @@ layout(std430, binding = TILE_BINDING_COLOR) buffer ProjColor { vec4 proj_color[
 layout(std430, binding = TILE_BINDING_RECT) buffer ProjRect { uvec4 proj_rect[]; };
 layout(std430, binding = TILE_BINDING_TOUCHED) buffer TilesTouched { uint tiles_touched[]; };
 layout(std430, binding = TILE_BINDING_OFFSETS) buffer TileOffsets { uint tile_offsets[]; };
+#ifndef TILE_NO_KEYS  // (a compute shader may have 16 storage blocks on llvmpipe)
 layout(std430, binding = TILE_BINDING_KEYS) buffer SortKeys { uvec2 sort_keys[]; };
 layout(std430, binding = TILE_BINDING_VALUES) buffer SortValues { uint sort_values[]; };
+#endif
 layout(std430, binding = TILE_BINDING_RANGES) buffer TileRanges { uvec2 tile_ranges[]; };
 #ifdef PER_PIXEL
 // The per-pixel order (twin: splatgl/splatmath/peak.py peak_coefficients): three vec4 per splat
@@ -40,6 +42,43 @@ layout(std430, binding = TILE_BINDING_PEAK) buffer ProjPeak { vec4 proj_peak[]; 
 //                        camera z of tangent point (u, v, 1); perspective T_2 = depth_row,
 //                        orthographic T_2 = (0, 0, 1).
 layout(std430, binding = TILE_BINDING_SURFEL) buffer ProjSurfel { vec4 proj_surfel[]; };
+#endif
+// The device order (--sort gpu, splatgl/renderers/tile_device.py; twin: the CPU order in
+// splatgl/renderers/tile.py, _scan, _sort, _ranges), each block declared where a shader asks
+// for it (TILE_STATE, TILE_SCAN_BLOCKS, TILE_ORDER, TILE_DEV_KEYS), as llvmpipe allows a compute
+// shader 16 storage blocks.  ts_args holds u_emit_slots emit dispatches, then u_raster_slots
+// rasterize passes, each (groups x, y, z, 0), 0 groups to skip.
+#ifdef TILE_STATE
+layout(std430, binding = TILE_BINDING_STATE) coherent buffer TileState {
+    uint ts_total;       // keys the splats emit: the scan's end
+    uint ts_overflow;    // 1 when ts_total > the key buffers' capacity: nothing emitted
+    uint ts_sort_count;  // keys to sort (ts_total, 0 after an overflow): the sorter reads it
+    uint ts_max_touched; // the largest tiles_touched
+    uint ts_passes;      // rasterize passes: the longest tile list over TILE_LIST_CHUNK
+    uint ts_pad0, ts_pad1, ts_pad2;
+    uvec4 ts_key_args;   // groups of SPLAT_GROUP over the keys (0 after an overflow)
+    uvec4 ts_args[];
+};
+#endif
+#ifdef TILE_SCAN_BLOCKS
+layout(std430, binding = TILE_BINDING_SCAN_BLOCKS) buffer ScanBlocks { uvec2 scan_blocks[]; };
+#endif
+#ifdef TILE_ORDER
+layout(std430, binding = TILE_BINDING_ORDER) buffer TileOrder { uint tile_order[]; };
+#endif
+#ifdef TILE_DEV_KEYS
+layout(std430, binding = TILE_BINDING_SORT_KEYS) buffer DevKeys { uint dev_keys[]; };
+layout(std430, binding = TILE_BINDING_SORT_VALUES) buffer DevValues { uint dev_values[]; };
+#endif
+
+#ifdef TILE_STATE
+// Dispatch arguments covering n invocations of groups of SPLAT_GROUP, 2D past 65535 groups
+// (splatgl/renderers/tile_keys.py splat_groups).
+uvec4 splat_args(uint n) {
+    uint groups = max(1u, (n + uint(SPLAT_GROUP) - 1u) / uint(SPLAT_GROUP));
+    uint gy = (groups + 65534u) / 65535u;
+    return uvec4((groups + gy - 1u) / gy, gy, 1u, 0u);
+}
 #endif
 #ifdef NORMAL_OUTPUT
 // proj_normal[i] = (n, 0): the normal layer's camera-space unit normal (lib/normal.glsl).

@@ -45,11 +45,12 @@ from ..gl.buffers import GrowableBuffer
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..model.scene import Scene, SplatKind
-from ..model.settings import Order, RenderSettings, RendererKind
+from ..model.settings import Order, RenderSettings, RendererKind, SortKey
 from ..splatmath.peak import check_camera
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from .registry import Registered, check
+from .tile_device import DeviceOrder, device_frame
 from .tile_layers import layer_output, layer_switches, size_layer_buffers
 from .tile_keys import (MAX_GROUPS, RASTER_BAND_TILES, TILE_EMIT_CHUNK,
                         TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, splat_groups, tile_grid)
@@ -84,23 +85,23 @@ class TileRenderer(Registered):
                  programs: ProgramCache | None = None):
         check(self.kind, settings=settings)    # the inria rules only, no emulation knobs
         self.per_pixel = settings.order is Order.PER_PIXEL
-        self.ctx = ctx
-        self.scene = scene
-        self.settings = settings
+        self.ctx, self.scene, self.settings = ctx, scene, settings
         self.programs = programs or ProgramCache(ctx)
-        self.surfel = scene.kind is SplatKind.SURFEL_2D
-        self.count = scene.count
+        self.surfel, self.count = scene.kind is SplatKind.SURFEL_2D, scene.count
         self.scene_buffers = SceneBuffers(ctx, scene, settings.gpu_storage) if self.count else None
         self._max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
         self._bufs = _splat_buffers(ctx, self.count, self.surfel, self.per_pixel)
-        self.last_times: TileTimes | None = None
+        self.last_times: TileTimes | None = None   # and the progress callback:
         self.progress = None
         self._switches: dict[str, object] = {}   # the frame's layer switches (tile_layers.py)
+        #: The device-resident order (``--sort gpu``, :mod:`splatgl.renderers.tile_device`)
+        self.device = DeviceOrder.make(ctx, self.programs, self.count, self._max_block, settings)
 
     # ------------------------------------------------------------------------------ programs
     def _defines(self, layout: KeyLayout | None = None) -> dict[str, object]:
         d: dict[str, object] = {"TILE_LIST_CHUNK": TILE_LIST_CHUNK, "TILE_EMIT_CHUNK": TILE_EMIT_CHUNK}
         d.update(self._switches)
+        d.update({"DEVICE_SORT": 1} if self.device else {})
         if layout is not None and layout.packed:
             d["KEY_PACKED"] = 1
         if self.surfel:
@@ -132,6 +133,8 @@ class TileRenderer(Registered):
             self.scene_buffers.bind()
         for b in self._bufs.values():
             b.bind()
+        if self.device is not None:
+            self.device.bind_sorter()
 
     # -------------------------------------------------------------------------------- stages
     def _project(self, view: View, grid: tuple[int, int]) -> None:
@@ -166,6 +169,8 @@ class TileRenderer(Registered):
                   u_depth_shift=layout.depth_shift)
         cam = view.camera
         self._set(prog, u_rays=(cam.cx, cam.cy, cam.fx, cam.fy))
+        if self.device is not None:     # chunks sized on the device
+            return self.device.emit(prog, self._bufs["STATE"].buf, grid[0] * grid[1])
         for first in range(0, int(counts.max(initial=0)), TILE_EMIT_CHUNK):
             self._set(prog, u_first=first)
             prog.run(*splat_groups(self.count))
@@ -199,9 +204,11 @@ class TileRenderer(Registered):
         return ranges
 
     def _rasterize(self, view: View, layout: KeyLayout, grid: tuple[int, int],
-                   ranges: np.ndarray) -> None:
-        longest = int((ranges[:, 1] - ranges[:, 0]).max(initial=0))
-        passes = max(1, -(-longest // TILE_LIST_CHUNK))
+                   ranges: np.ndarray | None) -> None:
+        """``ranges`` None: the device order's (its passes' dispatches sized on the device)."""
+        indirect = None if ranges is not None else self.device.raster_offsets(grid[0] * grid[1])
+        passes = len(indirect) if indirect else max(1, -(-int(
+            (ranges[:, 1] - ranges[:, 0]).max(initial=0)) // TILE_LIST_CHUNK))
         pixels = view.width * view.height
         self._bufs["OUT_RGBA"].ensure(pixels * 16)
         self._bufs["OUT_DEPTH"].ensure(pixels * 4)
@@ -220,7 +227,8 @@ class TileRenderer(Registered):
             self._set(prog, u_tile_row0=row0)
             for p in range(passes):
                 self._set(prog, u_pass=p)
-                prog.run(grid[0], min(band, grid[1] - row0), 1)
+                (prog.run_indirect(self._bufs["STATE"].buf, indirect[p]) if indirect  # whole bands
+                 else prog.run(grid[0], min(band, grid[1] - row0), 1))
                 if p + 1 < passes:
                     self.ctx.memory_barrier()     # the next pass reads this one's state
             if band < grid[1]:
@@ -246,6 +254,8 @@ class TileRenderer(Registered):
             self.ctx.finish()
             clock.append(time.perf_counter())
 
+        if self.device is not None:
+            return device_frame(self, view, grid, lap, clock, stages)
         counts, total, emitted, keys = np.zeros(0, np.uint32), 0, None, np.zeros(0, np.uint64)
         self._bind_all()
         if self.count:
@@ -299,23 +309,33 @@ class TileRenderer(Registered):
 
     def debug_stages(self, view: View) -> TileStages:
         """Run one frame and return its integer stages in the reference's layout."""
-        layout, counts, emitted, keys = self._frame(view, stages=True)
-        rect = (self._bufs["RECT"].read(self.count * 16, np.uint32).reshape(-1, 4).astype(np.int64)
-                if self.count else np.zeros((0, 4), np.int64))
-        if emitted is None:
-            e_keys, e_vals = np.zeros(0, np.uint64), np.zeros(0, np.int64)
-        else:
-            e_keys, e_vals = layout.to_reference(*emitted)
-        values = None if layout.packed else self._bufs["VALUES"].read(len(keys) * 4, np.uint32)
-        s_keys, s_vals = layout.to_reference(keys, values)
-        grid = tile_grid(view.width, view.height)
-        ranges = self._bufs["RANGES"].read(grid[0] * grid[1] * 8, np.uint32).reshape(-1, 2)
-        return TileStages(counts.astype(np.int64), rect[:, :2], rect[:, 2:], e_keys, e_vals,
-                          s_keys, s_vals, ranges.astype(np.int64))
+        return _debug_stages(self, view)
 
     def release(self) -> None:
+        if self.device is not None:
+            self.device.release()
+            self.device = None
         for b in self._bufs.values():
             b.release()
         if self.scene_buffers is not None:
             self.scene_buffers.release()
             self.scene_buffers = None
+
+
+def _debug_stages(r: TileRenderer, view: View) -> TileStages:
+    """:meth:`TileRenderer.debug_stages`."""
+    layout, counts, emitted, keys = r._frame(view, stages=True)
+    rect = (r._bufs["RECT"].read(r.count * 16, np.uint32).reshape(-1, 4).astype(np.int64)
+            if r.count else np.zeros((0, 4), np.int64))
+    if emitted is None:
+        e_keys, e_vals = np.zeros(0, np.uint64), np.zeros(0, np.int64)
+    else:
+        e_keys, e_vals = layout.to_reference(*emitted)
+    values = None if layout.packed else r._bufs["VALUES"].read(len(keys) * 4, np.uint32)
+    if r.device is not None:    # the device order: VALUES holds the emitted ones
+        values = r.device.sorted[1]
+    s_keys, s_vals = layout.to_reference(keys, values)
+    grid = tile_grid(view.width, view.height)
+    ranges = r._bufs["RANGES"].read(grid[0] * grid[1] * 8, np.uint32).reshape(-1, 2)
+    return TileStages(counts.astype(np.int64), rect[:, :2], rect[:, 2:], e_keys, e_vals,
+                      s_keys, s_vals, ranges.astype(np.int64))

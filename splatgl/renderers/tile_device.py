@@ -1,0 +1,237 @@
+"""The tile renderer's device-resident order (``--sort gpu``, issue 40): the stages between
+``project`` and ``rasterize`` run on the GPU, sized from the device, and nothing but the image
+(and one 8-byte status word, read after it) comes back.
+
+1. ``scan`` (shaders/tile_scan.comp): the exclusive prefix sum of tiles_touched, reduce then
+   scan over blocks of TILE_SCAN_GROUP * TILE_SCAN_ITEMS splats; its last block also writes the
+   frame's state: the keys' total, an overflow flag when the total exceeds the key buffers'
+   capacity, the count the sort reads and the indirect dispatch sizes of the stages after it.
+2. ``emit`` (tile_emit.comp with DEVICE_SORT): the reference layout's keys ``(tile << 32) |
+   depth bits`` and splat indices, as the CPU order emits them, plus the radix sorter's keys
+   (the depth bits) and values (each key's emission place); its chunks are indirect
+   dispatches, skipped after an overflow.
+3. ``sort``: two stable passes of :class:`splatgl.gl.radix_sort.RadixSorter`, each over only
+   the bits its keys differ in, with the count read on the device (``device_count``): by depth,
+   then (tile_ranges.comp stage 1 gathers each sorted key's tile) by tile.  An LSD sort by the
+   low word then the high word is the stable sort of the 64-bit keys, ties in emission order:
+   the CPU order exactly.
+4. ``ranges`` (tile_ranges.comp): where the tile changes, the sorted splat indices, and the
+   rasterize passes the longest tile list needs, as indirect dispatches.
+
+An overflow draws nothing useful: :meth:`DeviceOrder.overflowed` (the status word, read after
+the frame) tells the renderer to grow the buffers to the total (with a quarter more) and draw
+the frame again; the capacity is kept for the frames after.  The NumPy twins are the CPU order
+of :mod:`splatgl.renderers.tile` (:func:`scan_twin`, :func:`ranges_twin`).
+"""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from ..constants import TILE_KEYS_PER_SPLAT, TILE_SCAN_ITEMS
+from ..errors import SplatglError
+from ..gl.bindings import (TILE_BINDING_SORT_KEYS, TILE_BINDING_SORT_VALUES, TILE_SCAN_GROUP)
+from ..gl.radix_sort import RadixSorter
+from ..gl.shaders import ProgramCache
+from ..model.settings import SortKey
+from .tile_keys import (RASTER_BAND_TILES, TILE_EMIT_CHUNK, TILE_LIST_CHUNK, KeyLayout,
+                        splat_groups)
+
+#: Bytes of the state before its dispatch arguments (lib/tile_common.glsl TileState), and the
+#: byte offsets of the total (the overflow flag follows it) and of the count the sort reads.
+_ARGS = 48
+_TOTAL = 0
+_SORT_COUNT = 8
+#: Keys the key buffers first hold at the least.
+_MIN_CAPACITY = 4096
+
+
+def _chunks() -> dict[str, int]:
+    return {"TILE_EMIT_CHUNK": TILE_EMIT_CHUNK, "TILE_LIST_CHUNK": TILE_LIST_CHUNK}
+
+
+def scan_twin(counts: np.ndarray) -> tuple[np.ndarray, int]:
+    """NumPy twin of tile_scan.comp: (exclusive prefix sum of ``counts`` (N,), total)."""
+    ends = np.cumsum(counts, dtype=np.uint64)
+    total = int(ends[-1]) if len(ends) else 0
+    return (ends - counts).astype(np.uint32), total
+
+
+def ranges_twin(tiles: np.ndarray, n_tiles: int) -> np.ndarray:
+    """NumPy twin of tile_ranges.comp stage 2: (n_tiles, 2) ``[start, end)`` of each tile's
+    run in ``tiles`` (M,), the sorted keys' tiles; (0, 0) for a tile without keys."""
+    ranges = np.zeros((n_tiles, 2), np.uint32)
+    if len(tiles):
+        t, start, count = np.unique(tiles, return_index=True, return_counts=True)
+        ranges[t, 0] = start
+        ranges[t, 1] = start + count
+    return ranges
+
+
+class DeviceOrder:
+    """The device order's buffers, programs and capacity for one :class:`TileRenderer`."""
+
+    def __init__(self, ctx: moderngl.Context, programs: ProgramCache, n_splats: int,
+                 max_block: int, capacity: int | None = None):
+        self.ctx, self.programs, self.count, self.max_block = ctx, programs, n_splats, max_block
+        #: Keys the key buffers hold (grown after an overflow, never shrunk).
+        self.capacity = capacity or max(_MIN_CAPACITY, TILE_KEYS_PER_SPLAT * n_splats)
+        self.sorter = RadixSorter(ctx, programs)
+        #: Frames drawn again after an overflow (for tests and the timings).
+        self.retries = 0
+        #: Keys of the last frame (its status word).
+        self.total = 0
+        #: The sorted keys and splat indices, read back by ``TileRenderer.debug_stages``.
+        self.sorted: tuple[np.ndarray, np.ndarray] | None = None
+
+    @classmethod
+    def make(cls, ctx, programs, n_splats: int, max_block: int, settings) -> "DeviceOrder | None":
+        """The device order where ``settings`` ask for it (``--sort gpu``) and there are
+        splats, else None (the CPU order); ``--sort bucket16`` is refused (the tile renderer
+        sorts exact keys)."""
+        if settings.sort_key is SortKey.BUCKET16:
+            raise SplatglError("--sort bucket16 applies to the quad path only; the tile renderer "
+                               "sorts exact keys (use --sort exact or gpu)")
+        if settings.sort_key is SortKey.GPU and n_splats:
+            return cls(ctx, programs, n_splats, max_block)
+        return None
+
+    def slots(self, n_tiles: int) -> tuple[int, int]:
+        """(emit dispatches, rasterize passes) the state holds arguments for: enough for the
+        largest rectangle (every tile) and the longest list (every splat, or every key)."""
+        emit = max(1, -(-n_tiles // TILE_EMIT_CHUNK))
+        raster = max(1, -(-min(self.count, self.capacity) // TILE_LIST_CHUNK))
+        return emit, raster
+
+    def ensure(self, bufs: dict, n_tiles: int) -> None:
+        """Size the per-view buffers for the capacity and this grid."""
+        if self.capacity * 8 > self.max_block:
+            raise SplatglError(f"the tile renderer needs {self.capacity} keys "
+                               f"({self.capacity * 8} bytes), more than this OpenGL's "
+                               f"storage-block limit of {self.max_block} bytes")
+        emit, raster = self.slots(n_tiles)
+        bufs["STATE"].ensure(_ARGS + 16 * (emit + raster))
+        bufs["SCAN_BLOCKS"].ensure(8 * self.blocks)
+        bufs["KEYS"].ensure(8 * self.capacity)
+        bufs["VALUES"].ensure(4 * self.capacity)
+        bufs["ORDER"].ensure(4 * self.capacity)
+        bufs["RANGES"].ensure(8 * n_tiles)
+        self.sorter.reserve(self.capacity)
+
+    @property
+    def blocks(self) -> int:
+        return max(1, -(-self.count // (TILE_SCAN_GROUP * TILE_SCAN_ITEMS)))
+
+    def bind_sorter(self) -> None:
+        """The sorter's A buffers at the tile family's points (after the renderer's own)."""
+        keys, values = self.sorter.buffers()
+        keys.bind_to_storage_buffer(TILE_BINDING_SORT_KEYS)
+        values.bind_to_storage_buffer(TILE_BINDING_SORT_VALUES)
+
+    def scan(self, n_tiles: int) -> None:
+        prog = self.programs.compute("tile_scan.comp", _chunks())
+        emit, _ = self.slots(n_tiles)
+        for name, value in (("u_count", self.count), ("u_blocks", self.blocks),
+                            ("u_capacity", self.capacity), ("u_emit_slots", emit),
+                            ("u_splat_groups", splat_groups(self.count))):
+            if name in prog:
+                prog[name].value = value
+        for stage, groups in ((0, self.blocks), (1, 1), (2, self.blocks)):
+            prog["u_stage"].value = stage
+            prog.run(groups)
+            self.ctx.memory_barrier()
+
+    def emit(self, prog: moderngl.ComputeShader, state: moderngl.Buffer, n_tiles: int) -> None:
+        """Run ``prog`` (tile_emit.comp, DEVICE_SORT, uniforms set) once per chunk slot,
+        each an indirect dispatch the scan sized (no groups past the largest rectangle)."""
+        emit, _ = self.slots(n_tiles)
+        for c in range(emit):
+            prog["u_first"].value = c * TILE_EMIT_CHUNK
+            prog.run_indirect(state, _ARGS + 16 * c)
+        self.ctx.memory_barrier()
+
+    def sort_and_ranges(self, state: moderngl.Buffer, n_tiles: int, raster_args: tuple,
+                        rebind, lap) -> None:
+        """The two sorts and the key passes; ``rebind()`` binds the renderer's buffers again
+        after each sort (the sorter binds its own at overlapping points); ``lap()`` ends the
+        sort's time and starts the ranges'."""
+        prog = self.programs.compute("tile_ranges.comp", _chunks())
+        emit, raster = self.slots(n_tiles)
+        for name, value in (("u_tiles", n_tiles), ("u_raster_args", raster_args),
+                            ("u_emit_slots", emit), ("u_raster_slots", raster)):
+            if name in prog:
+                prog[name].value = value
+        tile_groups = splat_groups(n_tiles)
+
+        def stage(s: int, groups=None) -> None:
+            prog["u_stage"].value = s
+            if groups is None:
+                prog.run_indirect(state, _ARGS - 16)   # ts_key_args
+            else:
+                prog.run(*groups)
+            self.ctx.memory_barrier()
+
+        self.sorter.sort_buffers(self.capacity, device_count=(state, _SORT_COUNT))
+        rebind()
+        stage(0, tile_groups)
+        stage(1)
+        self.sorter.sort_buffers(self.capacity, device_count=(state, _SORT_COUNT))
+        rebind()
+        lap()
+        stage(2)
+        stage(3, tile_groups)
+
+    def raster_offsets(self, n_tiles: int) -> list[int]:
+        """Byte offsets of the rasterize passes' dispatch arguments."""
+        emit, raster = self.slots(n_tiles)
+        return [_ARGS + 16 * (emit + p) for p in range(raster)]
+
+    def overflowed(self, state: moderngl.Buffer) -> bool:
+        """Read the frame's status (8 bytes: total, overflow); on an overflow grow the
+        capacity to the total and a quarter more, and say so (the frame is to be drawn again)."""
+        total, over = (int(v) for v in np.frombuffer(state.read(8, offset=_TOTAL), np.uint32))
+        self.total = total
+        if not over:
+            return False
+        self.capacity = max(self.capacity, total + total // 4)
+        self.retries += 1
+        return True
+
+    def release(self) -> None:
+        self.sorter.release()
+
+
+def device_frame(r, view, grid: tuple[int, int], lap, clock, stages: bool):
+    """The device order's frame of :class:`TileRenderer` ``r`` (``lap()`` ends a stage
+    on ``clock``): drawn again, with the key buffers grown, after an overflow.  Returns what
+    ``TileRenderer._frame`` does (read back only with ``stages``)."""
+    dev, n_tiles = r.device, grid[0] * grid[1]
+    layout = KeyLayout(32, 0, False)       # the reference's: the sort needs no packing
+    state = lambda: r._bufs["STATE"].buf             # noqa: E731
+    band = max(1, RASTER_BAND_TILES // grid[0])
+    while True:
+        dev.ensure(r._bufs, n_tiles)
+        r._bind_all()
+        r._project(view, grid)
+        lap()
+        dev.scan(n_tiles)
+        lap()
+        r._emit(view, layout, grid, 0, None)
+        lap()
+        dev.sort_and_ranges(state(), n_tiles, (grid[0], band, 1), r._bind_all, lap)
+        lap()
+        r._rasterize(view, layout, grid, None)
+        lap()
+        if not dev.overflowed(state()):
+            break
+        del clock[1:]
+    total = dev.total
+    r._frame_clock = (clock, total)
+    if not stages:
+        return layout, None, None, None
+    counts = r._bufs["TOUCHED"].read(r.count * 4, np.uint32)
+    emitted = r._read_keys(layout, total)
+    perm = np.frombuffer(dev.sorter.buffers()[1].read(4 * total), np.uint32)
+    dev.sorted = (emitted[0][perm], emitted[1][perm])
+    return layout, counts, emitted, dev.sorted[0]

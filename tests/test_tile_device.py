@@ -1,0 +1,166 @@
+"""The tile renderer's device-resident order (``--sort gpu``, splatgl/renderers/tile_device.py,
+issue 40): the scan, the key emission, the two radix-sort passes and the tile ranges on the GPU,
+with images identical to the CPU order's, bit for bit; the overflow and the frame drawn again;
+nothing read back but the image and the 8-byte status word."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import moderngl
+import numpy as np
+import pytest
+
+from helpers import (IN_DEPTH, SURFELS, SURFELS_POSE, draw, random_scene, view_for)
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import orbit
+from splatgl.errors import SplatglError
+from splatgl.model.settings import Order, RenderSettings, SortKey
+from splatgl.renderers import tile as tile_mod
+from splatgl.renderers.tile import TileRenderer
+from splatgl.renderers.tile_device import ranges_twin, scan_twin
+
+CAM = Camera.from_fov(128, 96, 60.0)
+GPU = RenderSettings(sort_key=SortKey.GPU)
+
+
+def _pair(ctx, scene, cam, settings=RenderSettings(), depth=False, capacity=None):
+    """(CPU order's render, device order's render, the device renderer's retries)."""
+    cpu = TileRenderer(ctx, scene, settings)
+    dev = TileRenderer(ctx, scene, dataclasses.replace(settings, sort_key=SortKey.GPU))
+    try:
+        if capacity is not None:
+            dev.device.capacity = capacity
+        return draw(cpu, cam, depth=depth), draw(dev, cam, depth=depth), dev.device.retries
+    finally:
+        cpu.release()
+        dev.release()
+
+
+def _same(a, b, depth=False):
+    np.testing.assert_array_equal(b.rgba, a.rgba)
+    if depth:
+        np.testing.assert_array_equal(b.depth, a.depth)
+
+
+def test_scan_and_ranges_twins():
+    counts = np.array([0, 3, 1, 0, 5], np.uint32)
+    offsets, total = scan_twin(counts)
+    assert offsets.tolist() == [0, 0, 3, 4, 4] and total == 9
+    ranges = ranges_twin(np.array([0, 0, 2, 2, 2, 5], np.uint32), 6)
+    assert ranges.tolist() == [[0, 2], [0, 0], [2, 5], [0, 0], [0, 0], [5, 6]]
+
+
+def test_device_stages_equal_the_cpu_order(ctx):
+    """Offsets, emitted keys, the sorted keys and splat indices and the ranges: the CPU
+    order's (the twins), bit for bit."""
+    scene = random_scene(3000, 7, degree=1, **IN_DEPTH)
+    cpu = TileRenderer(ctx, scene, RenderSettings())
+    dev = TileRenderer(ctx, scene, GPU)
+    try:
+        a = cpu.debug_stages(view_for(cpu, CAM))
+        b = dev.debug_stages(view_for(dev, CAM))
+        offsets = dev._bufs["OFFSETS"].read(scene.count * 4, np.uint32)
+    finally:
+        cpu.release()
+        dev.release()
+    assert len(a.keys) > 5000
+    np.testing.assert_array_equal(offsets, scan_twin(a.tiles_touched.astype(np.uint32))[0])
+    for field in ("tiles_touched", "emitted_keys", "emitted_values", "keys", "values", "ranges"):
+        np.testing.assert_array_equal(getattr(b, field), getattr(a, field), err_msg=field)
+    tiles = (a.keys >> np.uint64(32)).astype(np.uint32)
+    np.testing.assert_array_equal(b.ranges, ranges_twin(tiles, len(a.ranges)))
+
+
+@pytest.mark.parametrize("name, settings, camera", [
+    ("default", RenderSettings(), CAM),
+    ("aa_bg", RenderSettings(antialias=True, background=(0.2, 0.4, 0.9)), CAM),
+    ("partial_tiles", RenderSettings(), Camera.from_fov(101, 77, 60.0)),
+    ("orthographic", RenderSettings(near=0.5), Camera.orthographic(128, 96, 24.0)),
+    ("per_pixel", RenderSettings(order=Order.PER_PIXEL), CAM),
+])
+def test_images_identical_to_the_cpu_order(ctx, name, settings, camera):
+    scene = random_scene(2000, 5, degree=1, **IN_DEPTH)
+    a, b, _ = _pair(ctx, scene, camera, settings, depth=True)
+    assert a.rgba[..., 3].max() > 0.5
+    _same(a, b, depth=True)
+
+
+def test_surfels_identical_to_the_cpu_order(ctx):
+    scene = random_scene(2000, 7, degree=1, **SURFELS)
+    a, b, _ = _pair(ctx, scene, Camera.from_fov(128, 96, 60.0, SURFELS_POSE), depth=True)
+    _same(a, b, depth=True)
+
+
+def test_overflow_grows_the_buffers_and_draws_again(ctx):
+    """A capacity far too small: the scan flags it on the device, the frame is drawn again with
+    room for every key, the image the CPU order's; the next frame needs no retry."""
+    scene = random_scene(2000, 3, degree=1, **IN_DEPTH)
+    a, b, retries = _pair(ctx, scene, CAM, capacity=5)
+    assert retries == 1
+    _same(a, b)
+    dev = TileRenderer(ctx, scene, GPU)
+    try:
+        dev.device.capacity = 5
+        draw(dev, CAM)
+        cap = dev.device.capacity
+        draw(dev, CAM)
+        assert dev.device.retries == 1 and dev.device.capacity == cap   # kept
+    finally:
+        dev.release()
+
+
+def test_long_lists_take_device_sized_passes(ctx, monkeypatch):
+    """Tile lists longer than TILE_LIST_CHUNK: the passes come from the device (indirect), the
+    image the CPU order's in as many passes."""
+    monkeypatch.setattr(tile_mod, "TILE_LIST_CHUNK", 100)
+    monkeypatch.setattr("splatgl.renderers.tile_device.TILE_LIST_CHUNK", 100)
+    scene = random_scene(3000, 11, degree=1, **IN_DEPTH)
+    a, b, _ = _pair(ctx, scene, CAM, RenderSettings(background=(0.2, 0.4, 0.9)), depth=True)
+    _same(a, b, depth=True)
+
+
+def test_moving_camera_and_empty_view(ctx):
+    scene = random_scene(1500, 9, degree=1, **IN_DEPTH)
+    cpu, dev = TileRenderer(ctx, scene, RenderSettings()), TileRenderer(ctx, scene, GPU)
+    try:
+        for azimuth in (170.0, 200.0, 20.0):   # the last looks away: no keys at all
+            cam = Camera.from_fov(96, 80, 60.0, orbit(np.array([0.0, 0.0, 5.0]), 6.0, azimuth, 10.0))
+            _same(draw(cpu, cam), draw(dev, cam))
+    finally:
+        cpu.release()
+        dev.release()
+
+
+def test_only_the_image_is_read_back(ctx, monkeypatch):
+    """A frame of the device order, after the first: reads back the image and the 8-byte status
+    word, and uploads nothing (uniforms aside)."""
+    scene = random_scene(2000, 5, degree=1, **IN_DEPTH)
+    dev = TileRenderer(ctx, scene, GPU)
+    reads, writes = [], []
+    real_read, real_write = moderngl.Buffer.read, moderngl.Buffer.write
+
+    def read(self, size=-1, offset=0, **kw):
+        data = real_read(self, size, offset, **kw)
+        reads.append(len(data))
+        return data
+
+    def write(self, data, offset=0):
+        writes.append(len(memoryview(data).cast("B")))
+        return real_write(self, data, offset)
+
+    try:
+        draw(dev, CAM)
+        monkeypatch.setattr(moderngl.Buffer, "read", read)
+        monkeypatch.setattr(moderngl.Buffer, "write", write)
+        draw(dev, Camera.from_fov(128, 96, 60.0, orbit(np.array([0.0, 0.0, 5.0]), 6.0, 170.0, 10.0)))
+    finally:
+        monkeypatch.undo()
+        dev.release()
+    assert sorted(reads) == [8, 128 * 96 * 16] and writes == []
+
+
+def test_bucket16_is_refused_by_the_tile_renderer(ctx):
+    scene = random_scene(10, 1, degree=0, **IN_DEPTH)
+    with pytest.raises(SplatglError, match="--sort bucket16 applies to the quad path only"):
+        TileRenderer(ctx, scene, RenderSettings(sort_key=SortKey.BUCKET16))
