@@ -81,6 +81,12 @@ def test_bench_scene_rows_and_limit(gl_renderer):
     assert by["default"].fragments_estimate == pytest.approx(by["default"].fragments_shaded, rel=0.1)
     assert on.fragments_estimate == by["default"].fragments_estimate
     assert on.fragments_shaded <= on.fragments_rasterised <= by["default"].fragments_shaded
+    # Each quad row carries the frame's transfers (issue 40 item 3): the image read back at
+    # least, and the sorted indices uploaded (the CPU order).
+    moved = by["default"].transfers
+    assert set(moved) == {"upload_bytes", "readback_bytes", "syncs"}
+    assert moved["readback_bytes"] >= 64 * 48 * 16 and moved["upload_bytes"] >= 4 * by["default"].drawn
+    assert by["tile"].transfers is None or "syncs" in by["tile"].transfers
 
 
 def test_early_stop_table_reads_modes_and_auto_decision():

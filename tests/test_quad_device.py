@@ -179,3 +179,28 @@ def test_timings_report_the_frame_transfers(tmp_path, capsys):
     line = [s for s in capsys.readouterr().out.splitlines() if s.startswith("timings")][0]
     assert "per-frame uploads " in line and f"read back {48 * 32 * 16:,} bytes" in line
     assert " syncs" in line
+
+
+def test_window_frames_move_no_splat_and_read_nothing_back(gl_renderer):
+    """The viewer's frames (drafts at a lower scale, the exact one, as the window draws them)
+    read nothing back with ``--sort gpu`` and upload only uniforms; the status panel says so."""
+    from splatgl.interactive.budget import EXACT, Level
+    from splatgl.interactive.draft import LevelRenderer
+    from splatgl.viewer.frames import splats_phrase
+
+    scene = _scene()
+    settings = RenderSettings(sort_key=SortKey.GPU)
+    drafts = LevelRenderer(gl_renderer, scene, settings)
+    try:
+        for k, level in enumerate((Level(0.5, None, 0), EXACT, EXACT)):
+            cam = Camera.from_fov(96, 72, 55.0, look_at(np.array([0.4 + 0.1 * k, -0.3, -3.2]),
+                                                        np.zeros(3)))
+            frame = drafts.draw(cam, level, on_batch=lambda done, total: None)
+            assert frame.device_order and frame.splats == scene.count
+            assert frame.transfers.read_back == 0, level
+            assert frame.transfers.uploaded <= UPLOAD_BUDGET, level
+        text = splats_phrase(frame, scene.count)
+        assert text.startswith("splats counted on the device / 4,000; per-frame uploads ")
+        assert "read back 0 bytes" in text
+    finally:
+        drafts.release()

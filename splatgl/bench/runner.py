@@ -89,6 +89,10 @@ class BenchRow:
     #: ``early-stop=auto`` rows: the coverage estimate of the fragments a plain draw would
     #: rasterise (median over the path), which auto's decision rests on.
     fragments_estimate: int | None = None
+    #: Quad rows: the most a timed frame moved between host and device, apart from the
+    #: one-time scene upload (``upload_bytes``, ``readback_bytes``, ``syncs``; splatgl/gl/
+    #: transfers.py): what ``--timings`` reports for a frame.
+    transfers: dict | None = None
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -228,7 +232,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
         runner.render(retarget(warm, config.projection) if config.projection else warm)
         runner.render(path[-1])
         times, stages, gpu, drawn, errs, occluded, f32_psnr, batched = [], [], [], [], [], [], [], []
-        estimates = []
+        estimates, moved = [], []
         for i, cam in enumerate(path):
             t0 = time.perf_counter()
             img = runner.render(cam)
@@ -239,6 +243,7 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             occluded.append(getattr(last, "occlusion_culled", None))
             batched.append(bool(getattr(last, "batched", False)))
             estimates.append(getattr(last, "fragments_estimate", 0))
+            moved.append(getattr(last, "transfers", None))
             if timer is not None and timer.last_ns is not None:
                 gpu.append(timer.last_ns / 1e6)
             if i in refs and config.kind is not RowKind.LIMIT and not config.projection:
@@ -275,6 +280,8 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
                            if config.kind is RowKind.QUAD and batched else None),
             fragments_estimate=(int(statistics.median(estimates))
                                 if config.kind is RowKind.QUAD and any(estimates) else None),
+            transfers=({k: max(m.as_dict()[k] for m in moved) for k in moved[0].as_dict()}
+                       if moved and None not in moved else None),
         ))
         tick(config.name)
     limit = next((r.frame_ms for r in rows if r.group == "limit"), None)

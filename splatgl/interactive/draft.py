@@ -20,6 +20,7 @@ import moderngl
 import numpy as np
 
 from ..api import Renderer
+from ..gl.transfers import TransferCounts, transfers
 from ..cameras.camera import Camera
 from ..cameras.view import View, draft_low_pass
 from ..lod.render import LodSettings
@@ -70,6 +71,12 @@ class DraftFrame:
     splats: int
     seconds: float
     sort: float = 0.0
+    #: What the draw moved between host and device (:mod:`splatgl.gl.transfers`); None for
+    #: the CPU renderer's frames (whose image is uploaded as a texture).
+    transfers: TransferCounts | None = None
+    #: The order stayed on the device (``--sort gpu``): ``splats`` is then the scene's count
+    #: (every sorted slot), the drawn count is not read back.
+    device_order: bool = False
 
 
 class LevelRenderer:
@@ -119,8 +126,10 @@ class LevelRenderer:
         view = dataclasses.replace(View.of(cam, quad.settings, quad.scene),
                                    low_pass=draft_low_pass(camera, cam))
         t0 = time.perf_counter()
+        before = transfers(self.renderer.ctx).snapshot()
+        device = quad.device_order(view) is not None   # the order stays on the device
         order_times = None         # (the draw's own call reuses the order and times nothing)
-        if on_batch is not None:   # the order stage (cull and sort, on the CPU) comes first:
+        if on_batch is not None and not device:   # the CPU order stage comes first:
             count = len(quad.order(view))        # a chance to abandon the frame after it
             order_times = quad.rows.times
             on_batch(0, count)
@@ -143,9 +152,13 @@ class LevelRenderer:
                 self._upscaler = Upscaler(self.renderer.ctx)
             texture = self._upscaler.run(texture, (camera.width, camera.height))
             self.renderer.ctx.finish()
+            transfers(self.renderer.ctx).sync()
         t = order_times or quad.rows.times
+        moved = transfers(self.renderer.ctx).snapshot().since(before)
+        if device:
+            t, drawn = quad.order_times, quad.scene.count
         return DraftFrame(level, texture, (cam.width, cam.height), drawn, time.perf_counter() - t0,
-                          t.cull + t.sort)
+                          t.cull + t.sort, moved, device)
 
     def draw_cpu(self, camera: Camera, on_batch: BatchHook | None = None) -> DraftFrame:
         """The exact frame of ``camera`` drawn by the CPU renderer (the one the API renderer

@@ -124,6 +124,7 @@ class QuadRenderer(Registered):
         self._sorter: RadixSorter | None = None  # built on the first device sort
         self._device: DeviceOrder | None = None  # the device-resident order, on first use
         self._device_frame = False
+        self._device_times = (0.0, 0.0)
         self.rows: RowSource = rows if rows is not None else SceneOrder(scene, settings, self.sort)
         #: Told the splats drawn after each batch (set per frame by ``Renderer.render(...,
         #: progress=...)``, :mod:`splatgl.progress`); Ctrl-C is seen between batches.
@@ -155,6 +156,11 @@ class QuadRenderer(Registered):
             self._device = DeviceOrder(self.ctx, self.scene, self.programs.cache,
                                        RadixSorter(self.ctx, self.programs.cache))
         return self._device
+
+    @property
+    def order_times(self) -> OrderTimes:
+        """The last frame's order stage times (the device order's, or :attr:`rows`')."""
+        return OrderTimes(*self._device_times) if self._device_frame else self.rows.times
 
     def target(self, view: View, layers: frozenset[Layer] = BASE) -> ColorTarget:
         """The blend target for ``view`` with the attachments ``layers`` need."""
@@ -311,9 +317,7 @@ class QuadRenderer(Registered):
         rgba = target.read()
         out = layer_output(target, rgba, layers, ordered, under, self.settings.background)
         t1 = time.perf_counter()
-        order, b = self.rows.times, self.batches
-        if self._device_frame:
-            order = OrderTimes(*self._device_times)
+        order, b = self.order_times, self.batches
         self.last_times = QuadTimes(order.cull, order.sort, self._t_upload, self._t_prepass,
                                     self._t_draw, t1 - t0, self._drawn, b.occlusion_culled,
                                     order.build, self._t_coverage, b.fragments_estimate,

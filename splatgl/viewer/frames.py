@@ -12,6 +12,7 @@ from __future__ import annotations
 import enum
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import moderngl
 import numpy as np
@@ -19,6 +20,7 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..imagefiles.pictures import depth_preview, heatmap
 from ..api import Renderer
+from ..gl.transfers import TransferCounts, transfers
 from ..model.scene import Scene
 from ..model.settings import RendererKind, RenderSettings
 from ..cameras.view import View
@@ -57,6 +59,21 @@ class FrameResult:
     quality: str = ""
 
 
+class _Drawn(NamedTuple):
+    splats: int
+    transfers: TransferCounts | None
+    device_order: bool
+
+
+def splats_phrase(drawn, count: int, verb: str = "drawn") -> str:
+    """The status panel's splats line for a frame drawn in the window (a
+    :class:`~splatgl.interactive.draft.DraftFrame`, or alike): the splats drawn, or that the
+    order stayed on the device, and what the frame moved between host and device."""
+    head = (f"splats counted on the device / {count:,}" if drawn.device_order
+            else f"splats {drawn.splats:,} {verb} / {count:,}")
+    return head if drawn.transfers is None else f"{head}; {drawn.transfers.text()}"
+
+
 def _times(renderer: Renderer, scene: Scene, settings: RenderSettings,
            kind: RendererKind) -> tuple[float, float, str]:
     """(sort, draw, splats text) of the last frame of ``kind`` from its ``last_times``
@@ -73,14 +90,19 @@ def render_frame(renderer: Renderer, scene: Scene, camera: Camera, settings: Ren
     if view is ViewMode.COLOR and kind is RendererKind.QUAD:
         quad = renderer.renderer_for(scene, settings, kind)
         frame = View.of(camera, settings, scene)
+        before = transfers(renderer.ctx).snapshot()
         t0 = time.perf_counter()
-        order = quad.order(frame)  # cull + sort (draw() reuses it for this view)
+        device = quad.device_order(frame) is not None   # the order stays on the device
+        count = scene.count if device else len(quad.order(frame))  # cull + sort (draw() reuses it)
         t1 = time.perf_counter()
         target = quad.target(frame)
         quad.draw(frame, target)  # upload + draw, ends with a finish
         t2 = time.perf_counter()
+        if device:
+            t1 = t0 + quad.order_times.cull + quad.order_times.sort
+        drawn = _Drawn(count, transfers(renderer.ctx).snapshot().since(before), device)
         return FrameResult(target.texture, None, True, t1 - t0, t2 - t1,
-                           f"splats {len(order):,} visible / {scene.count:,}")
+                           splats_phrase(drawn, scene.count, "visible"))
     if view is ViewMode.COLOR:
         rgba = renderer.render(scene, camera, settings, kind)
         return FrameResult(None, rgba, False, *_times(renderer, scene, settings, kind))

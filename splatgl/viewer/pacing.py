@@ -27,7 +27,7 @@ from ..interactive.session import Session, default_fps
 from ..model.scene import Scene
 from ..model.settings import RendererKind, RenderSettings
 from ..renderers.registry import DEFAULT_RENDERER
-from .frames import FrameResult
+from .frames import FrameResult, splats_phrase
 
 class Pacer:
     """The budgeted colour frames of one viewer (see the module doc).
@@ -73,7 +73,7 @@ class Pacer:
             return None
         self.shown = FrameResult(drawn.texture, None, True, drawn.sort,
                                  max(drawn.seconds - drawn.sort, 0.0),
-                                 f"splats {drawn.splats:,} drawn / {self.scene.count:,}",
+                                 splats_phrase(drawn, self.scene.count),
                                  quality=self.describe())
         return self.shown
 
