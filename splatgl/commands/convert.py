@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..formats.convert import convert, dropped_note
+from ..edit.streamed_convert import convert_file
+from ..formats.convert import dropped_note
 from ..errors import SplatglError
 from ._spz_axes import add_spz_axes_argument
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
+from ._memory import add_memory_argument, memory_budget
 from ._outputs import add_force_argument
 
 NAME = "convert"
@@ -66,6 +68,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_spz_axes_argument(p, "for .spz files that record none: rub (the SPZ specification; "
                              "default for versions 3-4) or rdf (PLY axes as is; splat-transform "
                              "3.x); for .spz output, the axes written (default rub for version 3)")
+    add_memory_argument(p, "a larger binary PLY written as .ply is converted a block at a time")
     add_json_argument(p, "the result (one object)")
 
 
@@ -87,9 +90,9 @@ def run(args: argparse.Namespace) -> int:
             raise SplatglError(f"{args.output}: --spz-version applies to .spz output only")
         options["version"] = args.spz_version
     check_json_target(args, {"OUT": args.output})  # nor IN; an existing file only with --force
-    result = convert(args.input, args.output, drop_invalid=args.drop_invalid,
-                     sh_degree=args.sh_degree, force=args.force, spz_axes=args.spz_axes,
-                     **options)
+    result = convert_file(args.input, args.output, drop_invalid=args.drop_invalid,
+                          sh_degree=args.sh_degree, force=args.force, spz_axes=args.spz_axes,
+                          memory=memory_budget(args), **options)
     if json_to_stdout(args):
         emit_json(args, result.as_dict())
         return 0

@@ -13,6 +13,7 @@ from ..edit.options import inverted, operation
 from ..errors import SplatglError
 from ..model.transform import parse_transform
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
+from ._memory import add_memory_argument, memory_budget
 from ._outputs import add_force_argument, check_output
 from ._spz_axes import add_spz_axes_argument
 
@@ -116,6 +117,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dry-run", action="store_true",
                    help="print what each operation would remove; write nothing")
     add_force_argument(p)
+    add_memory_argument(p, "binary PLY inputs larger are edited a block at a time into a .ply "
+                           "(crops, filters, --sh-degree, --transform, merges; --remove-floaters "
+                           "and --decimate are refused)")
     add_spz_axes_argument(p)
     add_json_argument(p, "the report (inputs, one entry per operation, the result)")
 
@@ -151,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
                            "format only, use splatgl convert")
     report = edit_files(args.inputs, args.output, ops, transforms, drop_invalid=args.drop_invalid,
                         allow_empty=args.allow_empty, force=args.force, dry_run=args.dry_run,
-                        spz_axes=args.spz_axes)
+                        spz_axes=args.spz_axes, memory=memory_budget(args))
     if not json_to_stdout(args):
         _print(report)
     if args.json is not None:

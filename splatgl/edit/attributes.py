@@ -33,11 +33,14 @@ class Attribute:
 
 
 class Rows:
-    """Rows ``start:stop`` of a scene, with the decoded values computed once per block."""
+    """Rows ``start:stop`` of a scene, with the decoded values computed once per block;
+    ``first``: the input row of the scene's row 0 (a block of a streamed input,
+    :mod:`splatgl.edit.streamed`), which ``index`` adds."""
 
-    def __init__(self, scene: Scene, start: int, stop: int):
+    def __init__(self, scene: Scene, start: int, stop: int, first: int = 0):
         self.scene, self.start, self.stop = scene, start, stop
         self.rows = slice(start, stop)
+        self.first = first
 
     @functools.cached_property
     def means(self) -> np.ndarray:
@@ -73,7 +76,8 @@ def _effective_sh_degree(r: Rows) -> np.ndarray:
 def _attributes() -> dict[str, Attribute]:
     table = [
         Attribute("index", "the splat's row in the input, from 0 (as splatgl pixel lists it)",
-                  lambda r: np.arange(r.start, r.stop, dtype=np.float64), statistic=False),
+                  lambda r: np.arange(r.first + r.start, r.first + r.stop, dtype=np.float64),
+                  statistic=False),
         Attribute("x", "world units", lambda r: r.means[:, 0]),
         Attribute("y", "world units", lambda r: r.means[:, 1]),
         Attribute("z", "world units", lambda r: r.means[:, 2]),

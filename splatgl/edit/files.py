@@ -10,7 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..constants import sh_coeff_count
 from ..errors import SplatglError
+from ..formats._memory import scene_bytes
+from ..lod.budget import format_size
 from ..formats import detect_format, load_scene, save_scene, writer_for
 from ..formats.convert import (EMPTY_FORMATS, EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT,
                                dropped_note, extra_properties)
@@ -19,6 +22,8 @@ from ..model.transform import ModelTransform
 from ..writing.outputs import check_output_path
 from ..progress import default_progress
 from .pipeline import Step, apply_operations
+from .streamed import IN_MEMORY_COPIES
+from .streamed_edit import plan_edit
 from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shared_extras,
                         transform_scene)
 
@@ -65,7 +70,7 @@ def _check_transforms(inputs, transforms):
 
 def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_invalid=False,
                allow_empty=False, force=False, dry_run=False, progress=None, spz_axes=None,
-               **writer_options) -> EditReport:
+               memory=None, **writer_options) -> EditReport:
     """Read ``inputs`` (scene files), merge them, apply ``operations``, write ``output``.
 
     Args:
@@ -78,6 +83,9 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
             first step), instead of refusing such files.
         allow_empty: write a scene of zero splats instead of refusing it.
         force: replace an existing output.  dry_run: do everything but write.
+        memory: bytes (None: no bound); binary PLY inputs whose scene would take more are
+            edited a block at a time into a PLY (:mod:`splatgl.edit.streamed_edit`; the same
+            file), other inputs and outputs load whole (a note says so).
     Everything that can be checked before reading is checked first (output format and folder,
     an existing output, the number of transforms); the output appears only when complete.
     """
@@ -99,6 +107,16 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
     if spz_axes is not None and "spz" not in formats:
         raise SplatglError("--spz-axes applies to .spz inputs only")
     progress = progress if progress is not None else default_progress()
+    streamed = plan_edit(inputs, writer, operations, transforms, memory, drop_invalid,
+                         writer_options)
+    if streamed is not None:
+        counts, steps, count, degree, names = streamed.scan(progress)
+        kept = () if streamed.extras is None else streamed.extras.names
+        note = dropped_note([n for n in names if n not in kept], why="not every input has them")
+        _refuse_empty(steps, count, allow_empty, writer, output)
+        size = None if dry_run else streamed.write(output, count, progress)
+        return EditReport(tuple(inputs), tuple(counts), output, tuple(steps), count, degree,
+                          dry_run, time.perf_counter() - t0, size, tuple([note] if note else []))
     scene, counts, steps, extras = _read(inputs, transforms, drop_invalid, progress, spz_axes)
     edited = apply_operations(scene, operations, progress)
     del scene
@@ -111,15 +129,11 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
     steps += list(edited.steps)
     notes += _dropped_extras(extras, result, writer, steps)
     _check_finite(result)
-    if result.count == 0 and not allow_empty:
-        culprit = next((s for s in steps if s.before and not s.after), None)
-        by = f" ({culprit.name} [{culprit.parameters}] removed the last {culprit.before:,})" \
-            if culprit else ""
-        raise SplatglError(f"edit: no splats left{by}; nothing written (use --allow-empty to "
-                           "write an empty scene)")
-    if result.count == 0 and writer is not None and writer.NAME not in EMPTY_FORMATS:
-        raise SplatglError(f"{output}: the {writer.NAME} format cannot hold zero splats; nothing "
-                           f"written (write .ply or .spz for an empty scene)")
+    _refuse_empty(steps, result.count, allow_empty, writer, output)
+    need = IN_MEMORY_COPIES * sum(scene_bytes(n, sh_coeff_count(result.sh_degree)) for n in counts)
+    if memory is not None and need > memory:
+        notes.append(f"read and edited in memory (about {format_size(need)}, over --memory "
+                     f"{format_size(memory)}): only binary PLY inputs written as .ply stream")
     size = None
     if not dry_run:
         try:
@@ -129,6 +143,19 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
         size = getattr(writer, "stored_bytes", lambda p: p.stat().st_size)(output)
     return EditReport(tuple(inputs), tuple(counts), output, tuple(steps), result.count,
                       result.sh_degree, dry_run, time.perf_counter() - t0, size, tuple(notes))
+
+
+def _refuse_empty(steps, count: int, allow_empty: bool, writer, output) -> None:
+    """Refuse an empty result unless ``allow_empty``, and one a format cannot hold."""
+    if count == 0 and not allow_empty:
+        culprit = next((s for s in steps if s.before and not s.after), None)
+        by = f" ({culprit.name} [{culprit.parameters}] removed the last {culprit.before:,})" \
+            if culprit else ""
+        raise SplatglError(f"edit: no splats left{by}; nothing written (use --allow-empty to "
+                           "write an empty scene)")
+    if count == 0 and writer is not None and writer.NAME not in EMPTY_FORMATS:
+        raise SplatglError(f"{output}: the {writer.NAME} format cannot hold zero splats; nothing "
+                           f"written (write .ply or .spz for an empty scene)")
 
 
 def _check_finite(scene) -> None:

@@ -30,7 +30,7 @@ class PlyRows:
     """The vertex rows of a binary PLY at ``path``: ``count``, ``dtype`` (one record),
     ``names``; :meth:`blocks` reads them in order, :meth:`scene` decodes a block."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, surfels: bool = False):
         self.path = Path(path)
         try:
             with open(self.path, "rb") as fh:
@@ -48,7 +48,8 @@ class PlyRows:
         self.count = elem.count
         self.names = [n for n, _ in elem.properties]
         plan = ply._Columns(self.path, self.names, 0, self.dtype)  # required properties
-        if plan.surfel:
+        self.surfel = plan.surfel  # 2DGS: refused unless ``surfels`` (splatgl.edit.streamed)
+        if plan.surfel and not surfels:
             raise SplatglError(f"{self.path}: level of detail needs 3DGS splats, this file holds "
                                "2DGS surfels")
         if self.count == 0:

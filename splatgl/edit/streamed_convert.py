@@ -1,0 +1,95 @@
+"""``splatgl convert`` within a memory budget (issue 41 item 5): a binary PLY larger than the
+budget, written as a PLY (format change within PLY, ``--sh-degree``, ``--drop-invalid``), goes
+through :mod:`.streamed_edit` a block at a time, and the round-trip error is measured by reading
+the output back block by block beside the input.  Anything else converts in memory
+(:func:`splatgl.formats.convert.convert`); an input over the budget then says so.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SplatglError
+from ..formats import writer_for
+from ..formats._memory import scene_bytes
+from ..formats.convert import Conversion, conversion_error, convert
+from ..lod.budget import format_size
+from ..writing.outputs import check_output_path
+from .operations import ShDegree
+from .streamed import IN_MEMORY_COPIES, Source
+from .streamed_edit import plan_edit
+
+#: The per-attribute errors :func:`conversion_error` gives as ``{"max", "mean"}``.
+_MEASURED = ("position", "scale", "opacity", "rotation", "color", "sh_rest")
+
+
+def convert_file(source, output, *, memory: int | None = None, drop_invalid: bool = False,
+                 sh_degree: int | None = None, force: bool = False, progress=None,
+                 spz_axes: str | None = None, **writer_options) -> Conversion:
+    """:func:`splatgl.formats.convert.convert`, streamed where ``memory`` (bytes; None: no
+    bound) is below what loading the input would take and the input and output are binary
+    PLY (see the module notes); the same file and report either way."""
+    source, output = Path(source), Path(output)
+    streamed = None
+    if spz_axes is None:
+        writer_for(output)  # an unsupported extension: the converter's one line first
+        check_output_path(output, overwrite=force, inputs={"IN": source})
+        if sh_degree is not None and not 0 <= sh_degree <= 3:
+            raise SplatglError(f"--sh-degree must be 0-3, got {sh_degree}")
+        ops = [] if sh_degree is None else [ShDegree(sh_degree)]
+        streamed = plan_edit([source], writer_for(output), ops, [None], memory, drop_invalid,
+                             writer_options)
+    if streamed is None:
+        result = convert(source, output, drop_invalid=drop_invalid, sh_degree=sh_degree,
+                         force=force, progress=progress, spz_axes=spz_axes, **writer_options)
+        need = IN_MEMORY_COPIES * scene_bytes(result.count, (result.sh_degree_in + 1) ** 2)
+        if memory is not None and need > memory:
+            warnings.warn(f"{source}: converted in memory (about {format_size(need)}, over "
+                          f"--memory {format_size(memory)}): only a binary PLY written as .ply "
+                          "streams", stacklevel=2)
+        return result
+    t0 = time.perf_counter()
+    streamed.warn = True
+    counts, steps, count, degree, _ = streamed.scan(progress)
+    size = streamed.write(output, count, progress)
+    src = streamed.sources[0]
+    error = _round_trip(src, output, streamed.rows)
+    return Conversion(source, output, "ply", "ply", count, src.sh_degree, degree, size,
+                      time.perf_counter() - t0, error)
+
+
+def _round_trip(src: Source, output: Path, rows: int) -> dict:
+    """:func:`conversion_error` of the written ``output`` against ``src``, block by block."""
+    back = Source(output)
+    back.use_extras(src.extras is not None)
+    total, sums, out = 0, {}, None
+    with open(output, "rb") as fh:
+        fh.seek(back.rows.offset)
+        for first, a in src.blocks(rows, warn=False):
+            b = back.decode(np.fromfile(fh, back.dtype, a.count), first)
+            e = conversion_error(a, b)
+            if out is None:
+                out = dict(e)
+            else:
+                out["bit_exact"] = out["bit_exact"] and e["bit_exact"]
+                out["dropped"] += [n for n in e["dropped"] if n not in out["dropped"]]
+                out["color_outside_01"] += e["color_outside_01"]
+                for name in _MEASURED:
+                    if e[name] is not None:
+                        out[name] = {"max": max(out[name]["max"], e[name]["max"]),
+                                     "mean": out[name]["mean"]}
+            for name in _MEASURED:
+                if e[name] is not None:
+                    sums[name] = sums.get(name, 0.0) + e[name]["mean"] * a.count
+            total += a.count
+    out["count"] = total
+    for name in _MEASURED:
+        if out[name] is not None:
+            out[name]["mean"] = sums[name] / total
+    out["bounds"] = None
+    out["within_bounds"] = None
+    return out

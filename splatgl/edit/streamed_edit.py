@@ -1,0 +1,184 @@
+"""``splatgl edit`` of binary PLY inputs larger than memory (issue 41 item 5): each input read a
+block at a time (:mod:`.streamed`), placed by its transform, merged, put through the per-row
+operations (crops, filters, dropping invalid rows, SH bands) and written as a PLY, never the
+whole scene at once.  The file is the in-memory path's, byte for byte.
+
+When the result's count is not known beforehand (a crop or filter, ``--drop-invalid``), a first
+pass counts it (and finds every refusal: nothing is written), a second writes: the PLY header,
+which comes first, holds the count.  Operations that need every splat's neighbours
+(``--remove-floaters``, ``--decimate``) are refused in one line naming the limit.
+"""
+
+from __future__ import annotations
+
+import re
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..errors import SplatglError
+from ..lod.budget import format_size
+from .attributes import Rows
+from .decimate import Decimate
+from .floaters import RemoveFloaters
+from .operations import ROW_TESTS, Filter, ShDegree
+from .pipeline import Step, select
+from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shared_extras,
+                        transform_scene)
+from .streamed import IN_MEMORY_COPIES, NORMALS, block_rows, sources_of, vertex_dtype, write_blocks
+
+
+def plan_edit(inputs, writer, operations, transforms, memory: int | None,
+              drop_invalid: bool, writer_options: dict) -> "StreamedEdit | None":
+    """The streamed edit of ``inputs`` when ``memory`` (bytes; None: never) is below what the
+    in-memory path would hold and every input is a binary PLY and the output a PLY; None to
+    edit in memory.  Floaters and decimation over the bound are refused in one line."""
+    if memory is None or (writer is not None and (writer.NAME != "ply" or writer_options)):
+        return None
+    sources = sources_of(inputs, drop_invalid)
+    if sources is None:
+        return None
+    need = IN_MEMORY_COPIES * sum(s.in_memory_bytes() for s in sources)
+    if need <= memory:
+        return None
+    for op in operations:
+        if isinstance(op, (RemoveFloaters, Decimate)):
+            raise SplatglError(
+                f"--{op.name} needs every splat's neighbours in memory: the input needs about "
+                f"{format_size(need)}, over --memory {format_size(memory)}; crop or filter it "
+                "into smaller files first, or give a larger --memory")
+    return StreamedEdit(sources, transforms, list(operations), memory)
+
+
+class StreamedEdit:
+    """One streamed edit (see the module notes): :meth:`scan` says what it does,
+    :meth:`write` writes it."""
+
+    def __init__(self, sources, transforms, operations, memory: int, warn: bool = False):
+        self.warn = warn  # InvalidRowsDropped once, in the first pass (convert; edit counts)
+        self.sources, self.transforms, self.operations = sources, transforms, operations
+        kinds = {s.kind for s in sources}
+        if len(kinds) > 1:
+            raise SplatglError("edit: cannot merge 3DGS Gaussians with 2DGS surfels (" + ", ".join(
+                f"{s.path}: {s.kind.value}" for s in sources) + ")")
+        self.kind = sources[0].kind
+        for op in operations:
+            if isinstance(op, Filter):
+                op.check(SimpleNamespace(kind=self.kind))
+        self.rows = min(block_rows(memory, s.dtype.itemsize, s.values) for s in sources)
+        moved = any(t is not None and not t.is_identity for t in transforms)
+        for s in sources:  # the reader keeps normals that are all zero as no normals
+            names = () if s.extra_dtype is None else s.extra_dtype.names
+            if any(n in names for n in NORMALS) and (
+                    len(sources) > 1 or (s.normals_only and (moved or any(
+                        s.extra_dtype[n] != np.float32 for n in names)))):
+                s.nonzero_normals = s.normals_nonzero(self.rows)
+            s.use_extras(s.nonzero_normals is not False)
+        self.degree = merged_sh_degree([s.sh_degree for s in sources])
+        self.shared = shared_extras([SimpleNamespace(extras=None if s.extras is None else
+                                                     np.zeros(0, s.extras)) for s in sources])
+        degree, self.details = self.degree, {}
+        for j, op in enumerate(operations):
+            if isinstance(op, ShDegree):
+                self.details[j] = f"SH degree {degree} -> {min(degree, op.degree)}"
+                degree = min(degree, op.degree)
+        self.final_degree = degree
+        self.extras = self.shared if len(sources) > 1 else sources[0].extras
+        self.dtype = vertex_dtype(self.kind, degree, self.extras)
+        self.counted = None
+
+    def scan(self, progress=None):
+        """``(input counts, steps, result count, SH degree, extra names of the inputs)``; a
+        first pass over the inputs where the count depends on the rows (the blocks are
+        checked as when writing, so a refusal comes before anything is written)."""
+        if self.counted is None:
+            if any(isinstance(op, ROW_TESTS) for op in self.operations) or \
+                    self.sources[0].drop_invalid:
+                tally = self._tally()
+                for _ in self._blocks(tally, progress, self.warn):
+                    pass
+                self.counted = tally
+            else:  # every row stays: known from the headers
+                self.counted = {"inputs": [s.count for s in self.sources],
+                                "ops": {j: [sum(s.count for s in self.sources)] * 2
+                                        for j in range(len(self.operations))}, "out": None}
+        t = self.counted
+        counts = t["inputs"]
+        kept = [n - d for n, d in zip(counts, t.get("dropped", [0] * len(counts)))]
+        steps = [Step("drop-invalid", "NaN/Inf values or zero quaternions, on reading",
+                      sum(counts), sum(kept))] if self.sources[0].drop_invalid else []
+        for s, n, tr in zip(self.sources, kept, self.transforms):
+            if tr is not None and not tr.is_identity:
+                steps.append(Step("transform", f"{s.path}: {describe_transform(tr)}", n, n))
+        for j, op in enumerate(self.operations):
+            before, after = t["ops"][j]
+            steps.append(Step(op.name, op.describe(), before, after, self.details.get(j, "")))
+        count = sum(kept) if not self.operations else t["ops"][len(self.operations) - 1][1]
+        names = []
+        for s in self.sources:
+            own = () if s.extra_dtype is None else s.extra_dtype.names
+            names += [n for n in own if n not in names and (n not in NORMALS or
+                                                            s.nonzero_normals)]
+        return counts, steps, count, self.final_degree, names
+
+    def write(self, output, count: int, progress=None) -> int:
+        """Write the result (``count`` rows, from :meth:`scan`) to ``output``; its bytes."""
+        return write_blocks(output, count, self.dtype, self._blocks(self._tally(), progress))
+
+    def _tally(self) -> dict:
+        return {"inputs": [s.count for s in self.sources], "dropped": [0] * len(self.sources),
+                "ops": {j: [0, 0] for j in range(len(self.operations))}}
+
+    def _blocks(self, tally: dict, progress=None, warn: bool = False):
+        """The result's blocks, in order, each checked; ``tally`` gets the counts."""
+        first = 0  # the merged input row of the block's row 0 (what 'index' reads)
+        total = sum(s.count for s in self.sources)
+        done = 0
+        for i, (s, tr) in enumerate(zip(self.sources, self.transforms)):
+            for own, block in s.blocks(self.rows, warn):
+                block = _placed(block, tr, own, f"--transform of {s.path}")
+                if len(self.sources) > 1:
+                    merged = MergeBuilder(block.count, self.degree, self.kind, self.shared)
+                    merged.add(block)
+                    block = merged.scene()
+                out = self._edited(block, first, tally)
+                _check_finite(out, tally.setdefault("out", 0))
+                tally["out"] += out.count
+                first += block.count
+                if out.count:
+                    yield out
+                if progress is not None:
+                    done = min(done + self.rows, total)
+                    progress(done, total, f"editing {s.path.name}")
+            tally["dropped"][i] = s.dropped
+
+    def _edited(self, block, first: int, tally: dict):
+        keep = np.ones(block.count, bool)
+        for j, op in enumerate(self.operations):
+            counts = tally["ops"][j]
+            counts[0] += int(keep.sum())
+            if isinstance(op, ROW_TESTS):
+                keep &= op.keep(Rows(block, 0, block.count, first))
+            counts[1] += int(keep.sum())
+        return select(block, keep, self.final_degree)
+
+
+def _placed(block, transform, first: int, what: str):
+    """``block`` placed by ``transform``; a splat moved beyond float32 named by its input row."""
+    try:
+        return transform_scene(block, transform, what)
+    except SplatglError as exc:
+        exc.args = (re.sub(r"moves splat ([\d,]+)", lambda m: "moves splat "
+                           f"{first + int(m.group(1).replace(',', '')):,}", str(exc), count=1),)
+        raise
+
+
+def _check_finite(scene, offset: int) -> None:
+    """Refuse a result holding NaN or an infinity, naming the result's row (as in memory)."""
+    fields = {"position": scene.means, "rotation": scene.quats, "scale": scene.log_scales,
+              "opacity": scene.opacity_logits, "sh": scene.sh}
+    for name, arr in fields.items():
+        bad = ~np.isfinite(arr.reshape(arr.shape[0], int(np.prod(arr.shape[1:])))).all(axis=1)
+        if bad.any():
+            raise SplatglError(f"edit: the result's field '{name}' holds NaN or Inf (first at "
+                               f"row {offset + int(np.flatnonzero(bad)[0]):,}); nothing written")
