@@ -158,6 +158,24 @@ def test_only_the_image_is_read_back(ctx, monkeypatch):
         monkeypatch.undo()
         dev.release()
     assert sorted(reads) == [8, 128 * 96 * 16] and writes == []
+    moved = dev.last_times.transfers       # the same, as --timings and the bench report it
+    assert dev.last_times.device_order
+    assert moved.read_back == 8 + 128 * 96 * 16 and 0 < moved.uploaded <= 4096, moved
+
+
+def test_cpu_order_transfers_are_counted(ctx):
+    """The CPU order reads the counts and keys back and uploads offsets, keys and ranges: its
+    --timings line says so (the device order's contrast)."""
+    scene = random_scene(2000, 5, degree=1, **IN_DEPTH)
+    cpu = TileRenderer(ctx, scene, RenderSettings())
+    try:
+        draw(cpu, CAM)
+        moved, keys = cpu.last_times.transfers, cpu.last_times.n_keys
+    finally:
+        cpu.release()
+    assert not cpu.last_times.device_order
+    assert moved.read_back >= 128 * 96 * 16 + 4 * 2000 + 8 * keys
+    assert moved.uploaded >= 4 * 2000 + 8 * keys
 
 
 def test_bucket16_is_refused_by_the_tile_renderer(ctx):

@@ -42,6 +42,7 @@ from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_
                        RADIX_GROUP, RADIX_PORTABLE_WARP)
 from .egl_devices import is_software_renderer
 from .shaders import ProgramCache
+from .transfers import transfers
 
 #: Keys one work group owns per pass.
 TILE_KEYS = RADIX_GROUP * RADIX_ITEMS
@@ -231,8 +232,10 @@ class RadixSorter:
             for name, value in (("u_tiles", tiles), ("u_capacity", self._capacity)):
                 if name in prog:
                     prog[name].value = value
+        moved = transfers(self.ctx)
         if device_count is None:
             self._state.write(np.array([count], np.uint32), offset=_COUNT)
+            moved.upload(4)
         else:
             self.ctx.copy_buffer(self._state, device_count[0], 4, read_offset=device_count[1],
                                  write_offset=_COUNT)
@@ -244,6 +247,7 @@ class RadixSorter:
             self.ctx.memory_barrier()
         else:
             self._state.write(np.asarray(bits, np.uint32))
+            moved.upload(8)
         progs["plan"].run(group_x=1)
         self.ctx.memory_barrier()
         src, dst = (k_a, v_a), (k_b, v_b)
@@ -256,6 +260,8 @@ class RadixSorter:
             progs["scan"].run_indirect(self._state, _SCAN_ARGS + 16 * slot)
             self.ctx.memory_barrier()
             progs["downsweep"].run_indirect(self._state, _PASS_ARGS + 16 * slot)
+            for name in ("upsweep", "scan", "downsweep"):   # the uniforms of this pass slot
+                moved.uniforms(progs[name])
             self.ctx.memory_barrier()
             src, dst = dst, src
         self._bind((k_b, v_b), (k_a, v_a))

@@ -44,6 +44,7 @@ from ..gl.bindings import TILE_BINDINGS
 from ..gl.buffers import GrowableBuffer
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
+from ..gl.transfers import transfers
 from ..model.scene import Scene, SplatKind
 from ..model.settings import Order, RenderSettings, RendererKind, SortKey
 from ..splatmath.peak import check_camera
@@ -53,7 +54,8 @@ from .registry import Registered, check
 from .tile_device import DeviceOrder, device_frame
 from .tile_layers import layer_output, layer_switches, size_layer_buffers
 from .tile_keys import (MAX_GROUPS, RASTER_BAND_TILES, TILE_EMIT_CHUNK,
-                        TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, splat_groups, tile_grid)
+                        TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, read_keys, splat_groups,
+                        tile_grid)
 
 
 def _splat_buffers(ctx: moderngl.Context, n: int, surfel: bool, per_pixel: bool
@@ -141,6 +143,7 @@ class TileRenderer(Registered):
         prog = self._project_program(view)
         view.set_uniforms(prog)
         self._set(prog, u_count=self.count, u_grid=grid)
+        transfers(self.ctx).uniforms(prog)
         prog.run(*splat_groups(self.count))
         self.ctx.memory_barrier()
 
@@ -153,7 +156,8 @@ class TileRenderer(Registered):
             raise SplatglError(f"the tile renderer needs {total} keys ({total * 8} bytes), more than "
                                f"this OpenGL's storage-block limit of {self._max_block} bytes")
         if total:
-            self._bufs["OFFSETS"].buf.write((ends - counts).astype(np.uint32).tobytes())
+            transfers(self.ctx).write(self._bufs["OFFSETS"].buf,
+                                      (ends - counts).astype(np.uint32).tobytes())
         return counts, total
 
     def _emit(self, view: View, layout: KeyLayout, grid: tuple[int, int], total: int,
@@ -173,35 +177,21 @@ class TileRenderer(Registered):
             return self.device.emit(prog, self._bufs["STATE"].buf, grid[0] * grid[1])
         for first in range(0, int(counts.max(initial=0)), TILE_EMIT_CHUNK):
             self._set(prog, u_first=first)
+            transfers(self.ctx).uniforms(prog)
             prog.run(*splat_groups(self.count))
         self.ctx.memory_barrier()
 
-    def _read_keys(self, layout: KeyLayout, total: int) -> tuple[np.ndarray, np.ndarray | None]:
-        keys = self._bufs["KEYS"].read(total * 8, np.uint64)
-        values = None if layout.packed else self._bufs["VALUES"].read(total * 4, np.uint32)
-        return keys, values
-
     def _sort(self, layout: KeyLayout, total: int) -> np.ndarray:
         """Sort the emitted keys on the CPU and write them back; returns the sorted keys."""
-        keys, values = self._read_keys(layout, total)
+        keys, values = read_keys(self._bufs, layout, total)
         if layout.packed:
             keys = np.sort(keys)
         else:
             order = np.argsort(keys, kind="stable")
             keys, values = keys[order], values[order]
-            self._bufs["VALUES"].buf.write(values.tobytes())
-        self._bufs["KEYS"].buf.write(keys.tobytes())
+            transfers(self.ctx).write(self._bufs["VALUES"].buf, values.tobytes())
+        transfers(self.ctx).write(self._bufs["KEYS"].buf, keys.tobytes())
         return keys
-
-    def _ranges(self, layout: KeyLayout, keys: np.ndarray, n_tiles: int) -> np.ndarray:
-        """(n_tiles, 2) uint32 [start, end) per tile, uploaded."""
-        first = np.arange(n_tiles, dtype=np.uint64) << np.uint64(layout.tile_shift)
-        starts = np.empty(n_tiles + 1, np.int64)
-        starts[:n_tiles] = np.searchsorted(keys, first, "left")
-        starts[n_tiles] = len(keys)
-        ranges = np.stack([starts[:-1], starts[1:]], 1).astype(np.uint32)
-        self._bufs["RANGES"].ensure(n_tiles * 8).write(ranges.tobytes())
-        return ranges
 
     def _rasterize(self, view: View, layout: KeyLayout, grid: tuple[int, int],
                    ranges: np.ndarray | None) -> None:
@@ -227,12 +217,14 @@ class TileRenderer(Registered):
             self._set(prog, u_tile_row0=row0)
             for p in range(passes):
                 self._set(prog, u_pass=p)
+                transfers(self.ctx).uniforms(prog)
                 (prog.run_indirect(self._bufs["STATE"].buf, indirect[p]) if indirect  # whole bands
                  else prog.run(grid[0], min(band, grid[1] - row0), 1))
                 if p + 1 < passes:
                     self.ctx.memory_barrier()     # the next pass reads this one's state
             if band < grid[1]:
                 self.ctx.finish()  # Python sees Ctrl-C / SIGTERM here, between bands
+                transfers(self.ctx).sync()
                 if self.progress is not None:
                     self.progress(min(row0 + band, grid[1]) * grid[0], grid[0] * grid[1],
                                   "tile renderer: rasterizing tiles")
@@ -252,6 +244,7 @@ class TileRenderer(Registered):
 
         def lap() -> None:
             self.ctx.finish()
+            transfers(self.ctx).sync()
             clock.append(time.perf_counter())
 
         if self.device is not None:
@@ -267,22 +260,23 @@ class TileRenderer(Registered):
         if total:
             self._emit(view, layout, grid, total, counts)
             if stages:
-                emitted = self._read_keys(layout, total)
+                emitted = read_keys(self._bufs, layout, total)
         lap()
         if total:
             keys = self._sort(layout, total)
         lap()
-        ranges = self._ranges(layout, keys, n_tiles)
+        ranges = _cpu_ranges(self._bufs, layout, keys, n_tiles)
         lap()
         self._rasterize(view, layout, grid, ranges)
         lap()
         self._frame_clock = (clock, total)
         return layout, counts, emitted, keys
 
-    def _times(self, readback: float) -> TileTimes:
+    def _times(self, readback: float, moved) -> TileTimes:
         clock, total = self._frame_clock
         d = np.diff(clock)
-        return TileTimes(*(float(v) for v in d), float(readback), int(total))
+        return TileTimes(*(float(v) for v in d), float(readback), int(total), moved,
+                         self.device is not None)
 
     def render(self, view: View, layers: frozenset[Layer] = BASE,
                under: UnderLayer | None = None) -> RenderOutput:
@@ -290,6 +284,7 @@ class TileRenderer(Registered):
         :mod:`splatgl.renderers.tile_layers`); RGB = C + (1 - A) background, alpha = A (with
         ``under``, composited over the geometry); row 0 is the top."""
         layers = frozenset(layers)
+        before = transfers(self.ctx).snapshot()
         self._switches = layer_switches(layers, under, self.per_pixel)
         try:
             size_layer_buffers(self._bufs, self._switches, self.count, view.width * view.height,
@@ -304,7 +299,8 @@ class TileRenderer(Registered):
                if Layer.DEPTH in layers else None)
         out = layer_output(self._bufs, rgba, dep, layers, under if switches else None,
                            self.settings.background)
-        self.last_times = self._times(time.perf_counter() - t0)
+        self.last_times = self._times(time.perf_counter() - t0,
+                                      transfers(self.ctx).snapshot().since(before))
         return out
 
     def debug_stages(self, view: View) -> TileStages:
@@ -339,3 +335,15 @@ def _debug_stages(r: TileRenderer, view: View) -> TileStages:
     ranges = r._bufs["RANGES"].read(grid[0] * grid[1] * 8, np.uint32).reshape(-1, 2)
     return TileStages(counts.astype(np.int64), rect[:, :2], rect[:, 2:], e_keys, e_vals,
                       s_keys, s_vals, ranges.astype(np.int64))
+
+
+def _cpu_ranges(bufs: dict[str, GrowableBuffer], layout: KeyLayout, keys: np.ndarray,
+                n_tiles: int) -> np.ndarray:
+    """The CPU order's tile ranges: (n_tiles, 2) uint32 [start, end) per tile, uploaded."""
+    first = np.arange(n_tiles, dtype=np.uint64) << np.uint64(layout.tile_shift)
+    starts = np.empty(n_tiles + 1, np.int64)
+    starts[:n_tiles] = np.searchsorted(keys, first, "left")
+    starts[n_tiles] = len(keys)
+    ranges = np.stack([starts[:-1], starts[1:]], 1).astype(np.uint32)
+    bufs["RANGES"].upload(ranges.tobytes())
+    return ranges

@@ -34,9 +34,10 @@ from ..errors import SplatglError
 from ..gl.bindings import (TILE_BINDING_SORT_KEYS, TILE_BINDING_SORT_VALUES, TILE_SCAN_GROUP)
 from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
+from ..gl.transfers import transfers
 from ..model.settings import SortKey
 from .tile_keys import (RASTER_BAND_TILES, TILE_EMIT_CHUNK, TILE_LIST_CHUNK, KeyLayout,
-                        splat_groups)
+                        read_keys, splat_groups)
 
 #: Bytes of the state before its dispatch arguments (lib/tile_common.glsl TileState), and the
 #: byte offsets of the total (the overflow flag follows it) and of the count the sort reads.
@@ -139,6 +140,7 @@ class DeviceOrder:
                 prog[name].value = value
         for stage, groups in ((0, self.blocks), (1, 1), (2, self.blocks)):
             prog["u_stage"].value = stage
+            transfers(self.ctx).uniforms(prog)
             prog.run(groups)
             self.ctx.memory_barrier()
 
@@ -148,6 +150,7 @@ class DeviceOrder:
         emit, _ = self.slots(n_tiles)
         for c in range(emit):
             prog["u_first"].value = c * TILE_EMIT_CHUNK
+            transfers(self.ctx).uniforms(prog)
             prog.run_indirect(state, _ARGS + 16 * c)
         self.ctx.memory_barrier()
 
@@ -166,6 +169,7 @@ class DeviceOrder:
 
         def stage(s: int, groups=None) -> None:
             prog["u_stage"].value = s
+            transfers(self.ctx).uniforms(prog)
             if groups is None:
                 prog.run_indirect(state, _ARGS - 16)   # ts_key_args
             else:
@@ -191,6 +195,7 @@ class DeviceOrder:
         """Read the frame's status (8 bytes: total, overflow); on an overflow grow the
         capacity to the total and a quarter more, and say so (the frame is to be drawn again)."""
         total, over = (int(v) for v in np.frombuffer(state.read(8, offset=_TOTAL), np.uint32))
+        transfers(self.ctx).read(8)
         self.total = total
         if not over:
             return False
@@ -231,7 +236,7 @@ def device_frame(r, view, grid: tuple[int, int], lap, clock, stages: bool):
     if not stages:
         return layout, None, None, None
     counts = r._bufs["TOUCHED"].read(r.count * 4, np.uint32)
-    emitted = r._read_keys(layout, total)
+    emitted = read_keys(r._bufs, layout, total)
     perm = np.frombuffer(dev.sorter.buffers()[1].read(4 * total), np.uint32)
     dev.sorted = (emitted[0][perm], emitted[1][perm])
     return layout, counts, emitted, dev.sorted[0]

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..constants import TILE_LIST_CHUNK, TILE_SIZE  # noqa: F401 (TILE_LIST_CHUNK: tile.py's)
 from ..gl.bindings import SPLAT_GROUP
+from ..gl.transfers import TransferCounts
 
 #: Largest number of work groups along one dispatch axis guaranteed by OpenGL.
 MAX_GROUPS = 65535
@@ -76,6 +77,10 @@ class TileTimes:
     rasterize: float
     readback: float
     n_keys: int
+    #: The frame's transfers (:mod:`splatgl.gl.transfers`), apart from the one-time scene upload.
+    transfers: TransferCounts = TransferCounts()
+    #: Whether the order stayed on the device (``--sort gpu``, :mod:`.tile_device`).
+    device_order: bool = False
 
     @property
     def total(self) -> float:
@@ -119,3 +124,11 @@ def splat_groups(n: int) -> tuple[int, int]:
     groups = max(1, -(-n // SPLAT_GROUP))
     gy = -(-groups // MAX_GROUPS)
     return -(-groups // gy), gy
+
+
+def read_keys(bufs: dict, layout: KeyLayout, total: int
+              ) -> tuple[np.ndarray, np.ndarray | None]:
+    """The ``total`` keys (and values, unpacked) in the key buffers, read back."""
+    keys = bufs["KEYS"].read(total * 8, np.uint64)
+    values = None if layout.packed else bufs["VALUES"].read(total * 4, np.uint32)
+    return keys, values
