@@ -1,0 +1,311 @@
+"""Streaming a level of detail from disk (issue 41 item 3): the resident set of node chunks.
+
+A :class:`~splatgl.lod.lazy.LazyLod`'s node rows are cut into chunks of :data:`CHUNK_ROWS`
+consecutive rows (levels are stored in Morton order, so a chunk is a compact patch of one
+level).  :class:`ResidentSet` holds decoded chunks under a byte budget: loads run on a small
+pool of background threads, the bytes of loads in flight are reserved before they start, and
+the least recently used chunks are evicted to make room, so the chunks held plus those being
+read never exceed the budget (:attr:`ResidentSet.peak_bytes` records the most it held).
+
+Two ways to draw a cut (node rows and opacity weights, :mod:`splatgl.lod.cut`):
+
+- :meth:`ResidentSet.gather` waits for every chunk the cut needs and returns its nodes as one
+  :class:`~splatgl.model.scene.Scene`, exact (path and screenshot frames, ``render``, ``eval``,
+  ``bench``).  Chunks are copied out as they arrive, so a cut larger than the budget is still
+  drawn: only the budget's worth stays resident.
+- :meth:`ResidentSet.resident_cut` never waits (the viewer): a node whose chunk is not in yet
+  is drawn as its nearest resident ancestor (the coarser node standing for it, its weight the
+  sum of those it stands in for, at most 1), the missing chunks are requested, and
+  ``on_loaded`` is called as each arrives (the viewer redraws).  Once every chunk is in, the
+  cut is the exact one.  The chunks of the top :data:`PINNED_LEVELS` levels are loaded first
+  and never evicted, so some ancestor is always there.
+
+:meth:`ResidentSet.close` stops the loaders promptly (Ctrl-C: loads not started are cancelled).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from concurrent.futures import CancelledError, Future, ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SplatglError
+from ..model.scene import Scene
+from .budget import format_size
+
+#: Node rows per chunk (a few MiB of decoded SH3 rows).
+CHUNK_ROWS = 4096
+#: Loader threads.
+LOADERS = 2
+#: The chunks of this many levels from the top are loaded first and never evicted.
+PINNED_LEVELS = 2
+_FIELDS = ("means", "quats", "log_scales", "opacity_logits", "sh")
+
+
+def scene_bytes(scene: Scene) -> int:
+    """Bytes of a scene's stored arrays."""
+    return int(sum(getattr(scene, f).nbytes for f in _FIELDS))
+
+
+class LazyChunks:
+    """Chunks of a :class:`~splatgl.lod.lazy.LazyLod`'s node rows: ``count`` chunks of
+    ``rows`` rows; :meth:`load` reads one (thread-safe: the reader uses ``pread``)."""
+
+    def __init__(self, lazy, rows: int = CHUNK_ROWS):
+        if rows < 1:
+            raise SplatglError(f"chunk rows must be at least 1, got {rows}")
+        self.lazy, self.rows = lazy, int(rows)
+        self.nodes = int(lazy.offsets[-1])
+        self.count = -(-self.nodes // self.rows)
+        self.row_bytes = scene_bytes(lazy.nodes(np.zeros(1, np.int64)))  # decoded bytes a row
+
+    def span(self, chunk: int) -> tuple[int, int]:
+        lo = chunk * self.rows
+        return lo, min(lo + self.rows, self.nodes)
+
+    def estimate(self, chunk: int) -> int:
+        lo, hi = self.span(chunk)
+        return (hi - lo) * self.row_bytes
+
+    def load(self, chunk: int) -> Scene:
+        lo, hi = self.span(chunk)
+        return self.lazy.nodes(np.arange(lo, hi, dtype=np.int64))
+
+
+@dataclass
+class StreamStats:
+    """What a :class:`ResidentSet` did: bytes held now and at most, chunks loaded and evicted."""
+
+    resident_bytes: int = 0
+    peak_bytes: int = 0
+    loaded: int = 0
+    evicted: int = 0
+    resident_chunks: int = 0
+
+    def summary(self, budget: int) -> str:
+        return (f"resident {format_size(self.resident_bytes)} (peak {format_size(self.peak_bytes)}"
+                f" of {format_size(budget)}), chunks {self.resident_chunks} resident, "
+                f"{self.loaded} loaded, {self.evicted} evicted")
+
+
+class ResidentSet:
+    """Decoded chunks of ``chunks`` (a :class:`LazyChunks` or anything with ``count``,
+    ``rows``, ``nodes``, ``estimate(c)``, ``load(c)``) held under ``budget`` bytes (see the
+    module doc).  ``offsets`` and ``branching``: the tree's, for the ancestors."""
+
+    def __init__(self, chunks, budget: int, offsets: np.ndarray, branching: int,
+                 threads: int = LOADERS, on_loaded=None):
+        self.chunks, self.budget = chunks, int(budget)
+        self.offsets, self.branching = np.asarray(offsets, np.int64), int(branching)
+        self.on_loaded = on_loaded
+        self._held: OrderedDict[int, Scene] = OrderedDict()   # LRU first
+        self._sizes: dict[int, int] = {}
+        self._pending: dict[int, Future] = {}
+        self._reserved = 0   # bytes held back for loads in flight
+        self._lock = threading.Condition()
+        self._stop = threading.Event()
+        self._pool = ThreadPoolExecutor(max(1, threads), thread_name_prefix="splatgl-lod-load")
+        self.stats = StreamStats()
+        top = max(0, len(self.offsets) - 1 - PINNED_LEVELS)
+        first = int(self.offsets[top]) // chunks.rows
+        self._pinned = frozenset(range(first, chunks.count))
+        need = sum(chunks.estimate(c) for c in self._pinned) + max(
+            chunks.estimate(c) for c in range(min(chunks.count, 1))) * max(1, threads)
+        if need > self.budget:
+            raise SplatglError(f"--memory {format_size(self.budget)} is too small to stream this "
+                               f"level of detail: its top levels and {max(1, threads)} chunks "
+                               f"in flight need {format_size(need)}")
+
+    # ------------------------------------------------------------------ loading and eviction
+    def _evict_for(self, size: int, keep: frozenset | set = frozenset()) -> bool:
+        """Evict least recently used chunks (not pinned, not in ``keep``) until ``size`` more
+        bytes fit; False when they cannot.  Holds the lock."""
+        held = self.stats.resident_bytes + self._reserved
+        if held + size <= self.budget:
+            return True
+        for c in list(self._held):
+            if c in self._pinned or c in keep:
+                continue
+            del self._held[c]
+            freed = self._sizes.pop(c)
+            self.stats.resident_bytes -= freed
+            self.stats.evicted += 1
+            held -= freed
+            if held + size <= self.budget:
+                break
+        self.stats.resident_chunks = len(self._held)
+        return held + size <= self.budget
+
+    def _load(self, chunk: int, size: int) -> Scene | None:
+        if self._stop.is_set():
+            with self._lock:
+                self._reserved -= size
+                self._pending.pop(chunk, None)
+                self._lock.notify_all()
+            return None
+        try:
+            scene = self.chunks.load(chunk)
+        except BaseException:
+            with self._lock:
+                self._reserved -= size
+                self._pending.pop(chunk, None)
+                self._lock.notify_all()
+            raise
+        with self._lock:
+            self._reserved -= size
+            self._pending.pop(chunk, None)
+            self.stats.loaded += 1
+            actual = scene_bytes(scene)
+            if self._evict_for(actual):
+                self._held[chunk] = scene
+                self._sizes[chunk] = actual
+                self.stats.resident_bytes += actual
+                self.stats.peak_bytes = max(self.stats.peak_bytes, self.stats.resident_bytes
+                                            + self._reserved)
+            else:   # no room (a frame being gathered holds the rest): used once, not kept
+                self.stats.evicted += 1
+            self.stats.resident_chunks = len(self._held)
+            self._lock.notify_all()
+        if self.on_loaded is not None and not self._stop.is_set():
+            self.on_loaded()
+        return scene
+
+    def request(self, chunks, keep: frozenset | set = frozenset()) -> dict[int, Future]:
+        """Start loading those of ``chunks`` (in order of priority) neither held nor in flight,
+        as far as the budget allows after evicting chunks not in ``keep``; returns the loads
+        in flight for ``chunks``."""
+        out = {}
+        with self._lock:
+            for c in chunks:
+                c = int(c)
+                if c in self._held:
+                    continue
+                fut = self._pending.get(c)
+                if fut is None:
+                    if self._stop.is_set():
+                        break
+                    size = self.chunks.estimate(c)
+                    if not self._evict_for(size, keep):
+                        break   # the rest waits for room
+                    self._reserved += size
+                    self.stats.peak_bytes = max(self.stats.peak_bytes,
+                                                self.stats.resident_bytes + self._reserved)
+                    fut = self._pool.submit(self._load, c, size)
+                    self._pending[c] = fut
+                out[c] = fut
+        return out
+
+    def held(self, chunk: int) -> Scene | None:
+        """The chunk if resident (marked as just used), else None."""
+        with self._lock:
+            scene = self._held.get(chunk)
+            if scene is not None:
+                self._held.move_to_end(chunk)
+            return scene
+
+    def chunk_of(self, rows: np.ndarray) -> np.ndarray:
+        return np.asarray(rows, np.int64) // self.chunks.rows
+
+    def load_pinned(self) -> None:
+        """Load the top levels' chunks (pinned) and wait for them."""
+        first = min(self._pinned) * self.chunks.rows if self._pinned else 0
+        self.gather(np.arange(first, self.chunks.nodes))
+
+    # ------------------------------------------------------------------------- the two draws
+    def gather(self, rows: np.ndarray) -> Scene:
+        """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact)."""
+        rows = np.asarray(rows, np.int64)
+        ids = self.chunk_of(rows)
+        need = np.unique(ids)
+        cuts = np.searchsorted(ids, need)
+        bounds = dict(zip(need.tolist(), zip(cuts.tolist(), np.append(cuts[1:], rows.size).tolist())))
+        parts: dict[int, Scene] = {}
+        todo = need.tolist()
+        while todo:
+            for c in todo:
+                scene = self.held(c)
+                if scene is not None:
+                    parts[c] = self._pick(scene, c, rows, *bounds[c])
+            todo = [c for c in todo if c not in parts]
+            if not todo:
+                break
+            futures = self.request(todo)
+            if not futures:   # nothing in flight and no room: wait for room, or fail
+                if self._stop.is_set():
+                    raise KeyboardInterrupt
+                raise SplatglError(f"--memory {format_size(self.budget)}: no room to load a "
+                                   f"chunk of {format_size(self.chunks.estimate(todo[0]))}")
+            for c, fut in futures.items():
+                try:
+                    scene = fut.result()
+                except CancelledError:
+                    raise KeyboardInterrupt from None
+                if scene is None:
+                    raise KeyboardInterrupt
+                parts[c] = self._pick(scene, c, rows, *bounds[c])
+            todo = [c for c in todo if c not in parts]
+        order = [parts[c] for c in need.tolist()]
+        if not order:
+            return self._pick(self.chunks.load(0), 0, rows, 0, 0)
+        if len(order) == 1:
+            return order[0]
+        return Scene(*(np.concatenate([getattr(s, f) for s in order]) for f in _FIELDS),
+                     order[0].kind)
+
+    def _pick(self, scene: Scene, chunk: int, rows: np.ndarray, a: int, b: int) -> Scene:
+        return scene.subset(rows[a:b] - chunk * self.chunks.rows)
+
+    def resident_cut(self, rows: np.ndarray, weights: np.ndarray | None
+                     ) -> tuple[np.ndarray, np.ndarray | None, bool]:
+        """The cut ``(rows, weights)`` drawn from what is resident now, without waiting:
+        ``(rows, weights, complete)`` (see the module doc); requests the missing chunks."""
+        rows = np.asarray(rows, np.int64)
+        with self._lock:
+            present = np.zeros(self.chunks.count, bool)
+            present[list(self._held)] = True
+            for c in np.unique(self.chunk_of(rows)).tolist():
+                if present[c]:
+                    self._held.move_to_end(c)
+        have = present[self.chunk_of(rows)]
+        missing = np.unique(self.chunk_of(rows[~have]))
+        if missing.size:   # coarse first: the upper levels' chunks come before the leaves'
+            self.request(missing[::-1], keep=frozenset(np.flatnonzero(present).tolist()))
+        if have.all():
+            return rows, weights, True
+        w = np.ones(rows.size, np.float32) if weights is None else weights.astype(np.float32)
+        out = rows.copy()
+        todo = ~have
+        offsets, b = self.offsets, self.branching
+        level = np.searchsorted(offsets, out, side="right") - 1
+        while todo.any():   # climb one level where the chunk is missing
+            idx = np.flatnonzero(todo)
+            lv = level[idx]
+            top = lv >= len(offsets) - 2
+            if top.any():
+                raise SplatglError("the top level of the level of detail is not resident")
+            local = (out[idx] - offsets[lv]) // b
+            out[idx] = offsets[lv + 1] + local
+            level[idx] = lv + 1
+            todo[idx] = ~present[self.chunk_of(out[idx])]
+        uniq, inv = np.unique(out, return_inverse=True)
+        wsum = np.minimum(np.bincount(inv, weights=w.astype(np.float64)), 1.0).astype(np.float32)
+        return uniq, (None if weights is None and wsum.size == uniq.size and (wsum >= 1).all()
+                      else wsum), False
+
+    def close(self) -> None:
+        """Stop the loaders: loads not started are cancelled, the one running finishes."""
+        self._stop.set()
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        with self._lock:
+            for fut in self._pending.values():
+                fut.cancel()
+            self._lock.notify_all()
+
+    def __enter__(self) -> "ResidentSet":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

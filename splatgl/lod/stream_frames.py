@@ -1,0 +1,194 @@
+"""Views of a ``.lod.ply`` streamed from disk under a memory budget (issue 41 item 3).
+
+:class:`StreamFrames` has :class:`~splatgl.lod.frames.LodFrames`' interface (``render_view``,
+``render_many``, ``renderer_for``) but never reads the file whole: the cut is chosen over the
+lazily read node spheres (:class:`~splatgl.lod.lazy.LazyLod`), exactly as the in-memory cut is
+(the same threshold cut with its switch to the leaves, or the budget's search), its nodes are
+gathered from the :class:`~splatgl.lod.stream.ResidentSet` (waiting for the chunks not
+resident: every frame is exact) and drawn by the quad path over those nodes alone, culled,
+sorted and weighted as :class:`~splatgl.lod.source.LodOrder` draws them (:class:`CutRows`).
+
+Positions are taken relative to the anchor stored in the file (the centre of the leaves' 1-99 %
+box) where the in-memory path subtracts its node scene's own: the images agree to float32
+rounding, and are identical given the same anchor (tests/test_lod_stream.py).  The default
+camera and near plane frame a proxy of the scene (:func:`framing_scene`: the 1-99 % box of the
+first level from the top with at least :data:`FRAMING_NODES` nodes).
+"""
+
+from __future__ import annotations
+
+import time
+from types import SimpleNamespace
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from ..cameras.camera import Camera
+from ..cameras.view import View
+from ..errors import SplatglError
+from ..gl.context import create_headless_context, make_current
+from ..gl.shaders import ProgramCache
+from ..model.settings import RenderSettings, SortKey
+from ..order import kernels as cull_kernel
+from ..order.chunks import keys_order, keys_pairs
+from ..order.cull import CullData
+from ..order.stage import OrderTimes, cull_for
+from ..output.layers import BASE, Layer, RenderOutput
+from ..output.under import UnderImage
+from ..renderers.quad import QuadRenderer
+from .budget import format_size
+from .cut import select_cut_budget, select_cut_weights
+from .lazy import LazyLod
+from .render import LodSettings, threshold_cut
+from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet
+
+#: The framing proxy's level: the first from the top with at least this many nodes.
+FRAMING_NODES = 4096
+#: The threshold of the cut that stands for "the leaves" (every leaf in view).
+LEAVES_PX = 1e-30
+
+
+def framing_scene(lazy: LazyLod):
+    """What the default camera, an orbit and the near plane read of a scene (``robust_bounds``,
+    ``robust_radius``, ``anchor``, ``source``, ``count``), from one coarse level's spheres."""
+    level = 0
+    for lv in range(lazy.levels - 1, -1, -1):
+        if lazy.level_size(lv) >= FRAMING_NODES:
+            level = lv
+            break
+    centres, _ = lazy.spheres(slice(int(lazy.offsets[level]), int(lazy.offsets[level + 1])))
+    pts = centres.T.astype(np.float64) + lazy.anchor
+    lo, hi = np.percentile(pts, 1.0, axis=0), np.percentile(pts, 99.0, axis=0)
+    return SimpleNamespace(robust_bounds=(lo, hi), robust_radius=float(0.5 * np.linalg.norm(hi - lo)),
+                           anchor=lazy.anchor, source=None, count=lazy.level_size(0))
+
+
+def choose_cut(lazy: LazyLod, camera: Camera, lod: LodSettings):
+    """``(rows, weights)``: the cut :class:`~splatgl.lod.source.LodOrder` draws for ``camera``
+    in a path's frame (no warm start; the leaves where the threshold cut switches to them)."""
+    if lod.budget is not None:
+        rows, weights, _ = select_cut_budget(lazy.cut_data, camera, lod.budget, lod.threshold_px,
+                                             lod.band)
+        return rows, weights
+    rows, weights, _ = threshold_cut(lazy, lazy.cut_data, camera, lod)
+    if rows is None:   # the leaves, every one in view (the in-memory path culls them by chunks)
+        return select_cut_weights(lazy.cut_data, camera, LEAVES_PX, 1.0)[0], None
+    return rows, weights
+
+
+class CutRows:
+    """The quad path's rows over a scene holding a cut's nodes in ascending row order, with
+    their weights: culled, sorted and weighted as :class:`~splatgl.lod.source.LodOrder` does
+    its cut (the same keys, ties in the same order)."""
+
+    def __init__(self, scene, weights: np.ndarray | None, settings: RenderSettings, sort,
+                 views: int = 1):
+        self.count, self.settings, self.sort = scene.count, settings, sort
+        self.weights = weights
+        self.times = OrderTimes()
+        self.slot_weights: np.ndarray | None = None
+        self._views = views
+        self._cull = CullData.from_scene(scene)
+
+    def order(self, view: View) -> np.ndarray:
+        t0 = time.perf_counter()
+        kern = cull_kernel.for_view(self._views)
+        ids = np.arange(self.count, dtype=np.int64)
+        keys = cull_for(view).rows(self._cull, ids, view, self.settings.antialias, kern,
+                                   np.empty(self.count, np.uint64))
+        t1 = time.perf_counter()
+        order = (keys_order(keys) if self.settings.sort_key is SortKey.EXACT
+                 else self.sort(*keys_pairs(keys, self.count)))
+        w = self.weights
+        self.slot_weights = w[order] if w is not None and (w < 1).any() else None
+        self.times = OrderTimes(t1 - t0, time.perf_counter() - t1, 0.0)
+        return order
+
+
+class StreamFrames:
+    """Views of the ``.lod.ply`` at ``path`` through the cut ``lod``, streamed under ``memory``
+    bytes of resident chunks (see the module doc); owns its context (a context manager).
+    ``framing``: what frames views (default :func:`framing_scene`)."""
+
+    stereo_refusal = "--stereo and --memory (streaming a level of detail) cannot be combined yet"
+
+    def __init__(self, path, settings: RenderSettings, lod: LodSettings, memory: int,
+                 chunk_rows: int = CHUNK_ROWS, threads: int = LOADERS, framing=None):
+        self.settings, self.lod, self.memory = settings, lod, int(memory)
+        self.lazy = LazyLod(path)
+        self.ctx = self.renderer = self.resident = None
+        try:
+            self.framing = framing if framing is not None else framing_scene(self.lazy)
+            self.resident = ResidentSet(LazyChunks(self.lazy, chunk_rows), self.memory,
+                                        self.lazy.offsets, self.lazy.branching, threads)
+            self.ctx = create_headless_context()
+            self.programs = ProgramCache(self.ctx)
+        except BaseException:
+            self.close()
+            raise
+        self.last_cut_nodes = 0
+        self.last_cut_s = 0.0
+        self._views = 0
+
+    @property
+    def nodes(self):
+        return self.framing
+
+    def render_view(self, camera: Camera, layers: frozenset[Layer] = BASE,
+                    under: UnderImage | None = None) -> RenderOutput:
+        """One exact view: waits for every chunk its cut needs."""
+        make_current(self.ctx)
+        view = View.of(camera, self.settings, self.framing)
+        t0 = time.perf_counter()
+        rows, weights = choose_cut(self.lazy, view.camera, self.lod)
+        self.last_cut_s = time.perf_counter() - t0
+        self.last_cut_nodes = int(rows.size)
+        scene = self.resident.gather(rows)
+        scene.__dict__["anchor"] = np.asarray(self.framing.anchor, np.float64)  # cached_property
+        self._views += 1
+        if self.renderer is not None:
+            self.renderer.release()
+            self.renderer = None
+        quad = QuadRenderer(self.ctx, scene, self.settings, self.programs,
+                            rows=CutRows(scene, None, self.settings, None))
+        if self.lod.band > 1.0 and not quad.uses_prepass:
+            quad.release()
+            raise SplatglError(f"--lod-blend {self.lod.band:g} weights opacities in the compute "
+                               "pre-pass: use --preprocess compute (the default), or --lod-blend 1")
+        quad.rows = CutRows(scene, weights, self.settings, quad.sort, self._views)
+        self.renderer = quad
+        if under is None:
+            return quad.render(view, layers)
+        return quad.render(view, layers, under=view.geometry(under))
+
+    def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
+                    layers: frozenset[Layer] | None = None) -> Iterator:
+        for camera in cameras:
+            out = self.render_view(camera, BASE if layers is None else layers)
+            yield out.rgba if layers is None else out
+
+    def renderer_for(self, scene=None, settings=None, kind=None):
+        return self.renderer
+
+    def summary(self) -> str:
+        """Resident memory and chunks, and the bytes read from the file (for ``--timings``)."""
+        return (f"streaming: {self.resident.stats.summary(self.memory)}; "
+                f"{format_size(self.lazy.bytes_read)} read")
+
+    def close(self) -> None:
+        if self.resident is not None:
+            self.resident.close()
+        if self.ctx is not None:
+            make_current(self.ctx)
+            if self.renderer is not None:
+                self.renderer.release()
+                self.renderer = None
+            self.ctx.release()
+            self.ctx = None
+        self.lazy.close()
+
+    def __enter__(self) -> "StreamFrames":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

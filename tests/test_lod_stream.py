@@ -1,0 +1,185 @@
+"""Streaming a level of detail under a memory budget (issue 41 item 3): splatgl.lod.stream
+(the resident set of chunks) and splatgl.lod.stream_frames (exact frames from it)."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.poses import look_at
+from splatgl.cli import main
+from splatgl.errors import SplatglError
+from splatgl.formats import load_scene, ply_write
+from splatgl.lod.build import build_hierarchy, level_offsets
+from splatgl.lod.frames import LodFrames
+from splatgl.lod.io import read_lod, write_lod
+from splatgl.lod.lazy import LazyLod
+from splatgl.lod.render import LodSettings
+from splatgl.lod.stream import ResidentSet
+from splatgl.lod.stream_frames import StreamFrames
+from splatgl.model.scene import Scene
+from splatgl.model.settings import RenderSettings
+
+SETTINGS = RenderSettings(near=0.01)
+
+
+def _lod(tmp_path, n: int = 3000):
+    rng = np.random.default_rng(0)
+    scene = Scene(rng.uniform(-1, 1, (n, 3)), rng.normal(size=(n, 4)),
+                  rng.normal(-3.5, 0.4, (n, 3)), rng.normal(1, 1, n),
+                  rng.normal(0, 0.3, (n, 4, 3)))
+    ply_write.write(tmp_path / "s.ply", scene)
+    path = tmp_path / "s.lod.ply"
+    write_lod(path, build_hierarchy(load_scene(tmp_path / "s.ply"), 4))
+    return path
+
+
+def _camera(z: float, x: float = 0.0) -> Camera:
+    return Camera.from_fov(96, 64, 50.0, look_at(np.array([x, 0.0, z]), np.zeros(3)))
+
+
+def _tree_on_file_anchor(path):
+    """The in-memory tree with the anchor the file stores (the streamed frames subtract it)."""
+    tree = read_lod(path)
+    with LazyLod(path) as lazy:
+        tree.nodes.__dict__["anchor"] = lazy.anchor
+    return tree
+
+
+@pytest.mark.parametrize("lod", [LodSettings(), LodSettings(threshold_px=2.0, band=1.0),
+                                 LodSettings(budget=300)], ids=["blend", "hard", "budget"])
+def test_streamed_frames_are_the_in_memory_lod_frames(tmp_path, lod):
+    """Far and middle views (cuts of coarse nodes) and a budget's cut: identical images, with
+    chunks of 64 rows under a budget smaller than the file (so chunks are evicted on the way)."""
+    path = _lod(tmp_path)
+    tree = _tree_on_file_anchor(path)
+    cams = [_camera(8.0), _camera(3.0, 0.5), _camera(6.0, -1.0)]
+    with LodFrames(tree, SETTINGS, lod) as ref, \
+            StreamFrames(path, SETTINGS, lod, 96 << 10, chunk_rows=64, framing=tree.nodes) as st:
+        for a, b in zip(ref.render_many(None, cams), st.render_many(None, cams)):
+            assert np.array_equal(a, b)
+        assert st.resident.stats.peak_bytes <= 96 << 10
+        assert st.resident.stats.loaded > 0
+
+
+def test_streamed_close_view_draws_the_leaves_in_view(tmp_path):
+    """Where the in-memory cut switches to every leaf, the stream draws the leaves whose sphere
+    is in view: the same image but for splats just outside the frustum (guard band)."""
+    path = _lod(tmp_path)
+    tree = _tree_on_file_anchor(path)
+    with LodFrames(tree, SETTINGS, LodSettings()) as ref, \
+            StreamFrames(path, SETTINGS, LodSettings(), 1 << 20, chunk_rows=64,
+                         framing=tree.nodes) as st:
+        a, b = ref.render_view(_camera(1.5)).rgba, st.render_view(_camera(1.5)).rgba
+        assert st.last_cut_nodes < tree.level_size(0)
+        assert np.abs(a - b).max() < 1e-3
+
+
+def test_streamed_frames_agree_with_the_node_scenes_own_anchor(tmp_path):
+    """Untouched in-memory LOD (its node scene's anchor): float32 rounding apart."""
+    path = _lod(tmp_path)
+    tree = read_lod(path)
+    with LodFrames(tree, SETTINGS, LodSettings()) as ref, \
+            StreamFrames(path, SETTINGS, LodSettings(), 1 << 20, chunk_rows=64) as st:
+        a, b = ref.render_view(_camera(5.0)).rgba, st.render_view(_camera(5.0)).rgba
+        assert np.abs(a - b).max() < 1e-3
+
+
+def test_a_path_evicts_least_recently_used_chunks_under_the_budget(tmp_path):
+    """A fly-through under a budget of a fraction of the file: every chunk load is checked
+    against the budget (instrumented), chunks are evicted, the frames stay exact."""
+    path = _lod(tmp_path)
+    tree = _tree_on_file_anchor(path)
+    budget = 64 << 10
+    cams = [_camera(4.0 - 0.4 * i, -1.0 + 0.25 * i) for i in range(8)]
+    with LodFrames(tree, SETTINGS, LodSettings(band=1.0)) as ref, \
+            StreamFrames(path, SETTINGS, LodSettings(band=1.0), budget, chunk_rows=32,
+                         framing=tree.nodes) as st:
+        res = st.resident
+        seen = []
+        load = res.chunks.load
+
+        def checked(chunk):
+            seen.append(res.stats.resident_bytes + res._reserved)
+            return load(chunk)
+
+        res.chunks.load = checked
+        for a, b in zip(ref.render_many(None, cams), st.render_many(None, cams)):
+            assert np.array_equal(a, b)
+        assert seen and max(seen) <= budget
+        assert res.stats.peak_bytes <= budget and res.stats.resident_bytes <= budget
+        assert res.stats.evicted > 0
+        whole = sum(res.chunks.estimate(c) for c in range(res.chunks.count))
+        assert whole > 2 * budget
+
+
+class _FakeChunks:
+    """Chunks of 4 rows of a tree of 64 leaves (branching 4); loads wait for ``gate``."""
+
+    rows = 4
+
+    def __init__(self):
+        self.offsets = level_offsets(64, 4)
+        self.nodes = int(self.offsets[-1])
+        self.count = -(-self.nodes // self.rows)
+        self.gate = threading.Event()
+        self.loads = []
+
+    def estimate(self, chunk):
+        return 100
+
+    def load(self, chunk):
+        if chunk < self.count - 2:   # the top levels' chunks come at once
+            self.gate.wait(5)
+        self.loads.append(chunk)
+        n = min(self.rows, self.nodes - chunk * self.rows)
+        z = np.zeros((n, 3), np.float32)
+        q = np.tile(np.float32([1, 0, 0, 0]), (n, 1))
+        return Scene(z, q, z, np.zeros(n, np.float32), np.zeros((n, 1, 3), np.float32))
+
+
+def test_viewer_cut_stands_in_ancestors_then_refines():
+    """Headless, a fake loader: a cut of leaves not resident is drawn as the nearest resident
+    ancestors (weights summed, at most 1); as chunks arrive ``on_loaded`` asks for a redraw and
+    the cut becomes the exact one."""
+    chunks = _FakeChunks()
+    redraws = threading.Semaphore(0)
+    res = ResidentSet(chunks, 10_000, chunks.offsets, 4, on_loaded=redraws.release)
+    try:
+        res.load_pinned()   # levels 2 and 3 (rows 80..84): chunks 20, 21
+        leaves = np.arange(0, 16)
+        rows, weights, complete = res.resident_cut(leaves, None)
+        assert not complete and weights is None
+        # leaves 0..15 -> level 1 nodes 64..67 (chunk 16, not resident) -> level 2 node 80
+        assert rows.tolist() == [80]
+        half = np.full(16, 0.5, np.float32)
+        rows, weights, complete = res.resident_cut(leaves, half)
+        assert rows.tolist() == [80] and weights.tolist() == [1.0] and not complete
+        chunks.gate.set()
+        for _ in range(4):   # the leaves' 4 chunks, requested above
+            assert redraws.acquire(timeout=5)
+        rows, weights, complete = res.resident_cut(leaves, None)
+        assert complete and rows.tolist() == leaves.tolist()
+    finally:
+        res.close()
+
+
+def test_close_stops_the_loaders_promptly():
+    """Loads not started are cancelled; a frame waiting for them is interrupted."""
+    chunks = _FakeChunks()
+    res = ResidentSet(chunks, 10_000, chunks.offsets, 4, threads=1)
+    res.request(range(10))
+    res.close()
+    chunks.gate.set()
+    with pytest.raises((KeyboardInterrupt, SplatglError)):
+        res.gather(np.arange(0, 40))
+    assert len(chunks.loads) <= 1
+
+
+def test_a_budget_too_small_is_one_line(tmp_path):
+    path = _lod(tmp_path)
+    with pytest.raises(SplatglError, match="--memory .* too small to stream"):
+        StreamFrames(path, SETTINGS, LodSettings(), 1000, chunk_rows=64)
