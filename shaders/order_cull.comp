@@ -5,10 +5,11 @@
 // decisions; the peak-alpha bound, float64 on the CPU, runs here in float32 and keeps whatever
 // lies within DEVICE_CULL_BAND of the cut (a superset by splats that draw nothing).
 //
-// Output: key i = float bits of z for a kept splat (positive z: the bits order like the
-// values), 0xFFFFFFFF for a culled one; value i = i.  A stable sort of all N then puts the kept
-// splats first, by (z, index): the CPU order, ties included.  The kept count is added into the
-// indirect draw command's instance count, which the draw reads: nothing comes back to the host.
+// Output: staged key i = float bits of z for a kept splat (positive z: the bits order like the
+// values), 0xFFFFFFFF for a culled one, and each work group's kept count; order_scan.comp turns
+// the counts into the groups' first slots and the draw's instance count, order_compact.comp
+// writes the kept keys and indices in index order for the stable sort: the CPU order, ties
+// included.  Nothing comes back to the host.
 
 layout(local_size_x = ORDER_GROUP) in;
 
@@ -17,9 +18,8 @@ struct CullRow {
     vec4 q;     // max_scale, opacity, alive (1/0), faint (1/0)
 };
 layout(std430, binding = ORDER_BINDING_CULL) readonly buffer Cull { CullRow rows[]; };
-layout(std430, binding = ORDER_BINDING_KEYS) writeonly buffer Keys { uint keys[]; };
-layout(std430, binding = ORDER_BINDING_VALUES) writeonly buffer Values { uint values[]; };
-layout(std430, binding = ORDER_BINDING_COMMAND) buffer Command { uint command[]; };
+layout(std430, binding = ORDER_BINDING_STAGED) writeonly buffer Staged { uint staged[]; };
+layout(std430, binding = ORDER_BINDING_BLOCKS) writeonly buffer Blocks { uint blocks[]; };
 
 uniform uint u_count;
 uniform vec3 u_r0;            // rows of the anchored camera's rotation (float32)
@@ -76,7 +76,7 @@ bool peak_keeps(vec3 p, float max_scale, float opacity) {
     return log_bound >= log(ALPHA_MIN) - DEVICE_CULL_BAND;
 }
 
-shared uint group_kept;     // one atomic per work group on the command, not one per splat
+shared uint group_kept;
 
 bool cull(uint i) {
     CullRow row = rows[i];
@@ -97,8 +97,7 @@ bool cull(uint i) {
     }
     if (keep && u_peak && (u_antialias || !inside || row.q.w != 0.0))
         keep = peak_keeps(vec3(vx, vy, z), row.q.x, row.q.y);
-    keys[i] = keep ? floatBitsToUint(z) : 0xFFFFFFFFu;
-    values[i] = i;
+    staged[i] = keep ? floatBitsToUint(z) : 0xFFFFFFFFu;
     return keep;
 }
 
@@ -108,5 +107,5 @@ void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i < u_count && cull(i)) atomicAdd(group_kept, 1u);
     barrier();
-    if (gl_LocalInvocationIndex == 0u && group_kept != 0u) atomicAdd(command[1], group_kept);
+    if (gl_LocalInvocationIndex == 0u) blocks[gl_WorkGroupID.x] = group_kept;
 }

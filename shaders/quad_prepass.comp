@@ -29,10 +29,19 @@ layout(std430, binding = BINDING_OPACITY_WEIGHT) readonly buffer OpacityWeight {
 #endif
 uniform uint u_count;
 uniform uint u_first;   // slot of invocation 0 (a long pre-pass runs in chunks, polled between)
+#ifdef DEVICE_COUNT
+// The device-resident order (splatgl/renderers/quad_device.py): the slots to prepare are the
+// kept count in its draw command (dispatched indirectly from the same buffer).
+layout(std430, binding = BINDING_DEVICE_COUNT) readonly buffer DeviceCount { uint device_command[]; };
+#endif
 
 void main() {
     uint k = u_first + gl_GlobalInvocationID.x;
+#ifdef DEVICE_COUNT
+    if (k >= device_command[1]) return;
+#else
     if (k >= u_count) return;
+#endif
     ScreenSplat s;
 #ifdef OPACITY_WEIGHT
     bool ok = setup_splat(order[k], opacity_weight[k], s);

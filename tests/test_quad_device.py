@@ -61,6 +61,28 @@ def _frames(ctx, scene, cameras, settings) -> tuple[list[np.ndarray], QuadRender
     return [r.render(View.of(c, settings, scene)).rgba for c in cameras], r
 
 
+def _assert_cpu_order_up_to_band(r: QuadRenderer, scene: Scene, view: View, antialias: bool):
+    """The device's drawn order is the CPU's, plus at most splats at the peak-alpha cut (their
+    float64 bound within the band), with the CPU's depth bits as keys."""
+    got, want = r._device.order(), r.order(view)
+    if got.size == 0:
+        assert want.size == 0
+        return
+    extra = np.setdiff1d(got, want)
+    same = ~np.isin(got, extra)
+    np.testing.assert_array_equal(got[same], want)   # same order
+    # and the same depth bits (the sort keys) as the CPU cull's keys
+    keys = np.frombuffer(r._device.sorter.buffers()[0].read(4 * got.size), np.uint32)
+    cpu_keys = np.sort(cull_for(view).scene(ChunkedCull.from_scene(scene), view, antialias))
+    np.testing.assert_array_equal(keys[same], (cpu_keys >> np.uint64(32)).astype(np.uint32))
+    if extra.size:   # only splats at the peak-alpha cut (the CPU's float64 bound)
+        cam, data = view.frustum.camera, CullData.from_scene(scene)
+        p = data.xyz.T[extra].astype(np.float64) @ cam.rotation.T + cam.translation
+        bound = peak_alpha_bound(p, data.max_scale[extra] * view.scale,
+                                 data.opacities[extra], cam, antialias)
+        assert (bound >= ALPHA_MIN * np.exp(-2 * DEVICE_CULL_BAND)).all()
+
+
 @pytest.mark.parametrize("antialias", [False, True])
 @pytest.mark.parametrize("camera", _cameras(), ids=["pinhole", "inside", "opencv"])
 def test_device_cull_is_the_cpu_cull_up_to_the_band(ctx, camera, antialias):
@@ -71,21 +93,8 @@ def test_device_cull_is_the_cpu_cull_up_to_the_band(ctx, camera, antialias):
         view = View.of(camera, settings, scene)
         r.render(view)
         assert r.last_times.device_order
-        got, want = r._device.order(), r.order(view)
-        assert 0 < want.size < scene.count            # the cull drops splats here
-        extra = np.setdiff1d(got, want)
-        same = ~np.isin(got, extra)
-        np.testing.assert_array_equal(got[same], want)   # same order
-        # and the same depth bits (the sort keys) as the CPU cull's keys
-        keys = np.frombuffer(r._device.sorter.buffers()[0].read(4 * got.size), np.uint32)
-        cpu_keys = np.sort(cull_for(view).scene(ChunkedCull.from_scene(scene), view, antialias))
-        np.testing.assert_array_equal(keys[same], (cpu_keys >> np.uint64(32)).astype(np.uint32))
-        if extra.size:   # only splats at the peak-alpha cut (the CPU's float64 bound)
-            cam, data = view.frustum.camera, CullData.from_scene(scene)
-            p = data.xyz.T[extra].astype(np.float64) @ cam.rotation.T + cam.translation
-            bound = peak_alpha_bound(p, data.max_scale[extra] * view.scale,
-                                     data.opacities[extra], cam, antialias)
-            assert (bound >= ALPHA_MIN * np.exp(-2 * DEVICE_CULL_BAND)).all()
+        assert 0 < r.order(view).size < scene.count            # the cull drops splats here
+        _assert_cpu_order_up_to_band(r, scene, view, antialias)
     finally:
         r.release()
 
@@ -204,3 +213,21 @@ def test_window_frames_move_no_splat_and_read_nothing_back(gl_renderer):
         assert "read back 0 bytes" in text
     finally:
         drafts.release()
+
+
+@pytest.mark.parametrize("n, target", [(70_001, np.zeros(3)), (3000, np.array([0.0, 0.0, -9.0]))],
+                         ids=["scan-runs", "nothing-kept"])
+def test_the_compaction_keeps_index_order_across_groups(ctx, n, target):
+    """order_scan.comp's runs (more groups than its threads: several each) and a view that
+    keeps nothing: the device's kept rows and order are the CPU's."""
+    scene = _scene(n, seed=n)
+    cam = Camera.from_fov(40, 30, 40.0, look_at(np.array([0.2, 0.1, -3.5]), target))
+    settings = _settings(SortKey.GPU)
+    r = QuadRenderer(ctx, scene, settings)
+    try:
+        view = View.of(cam, settings, scene)
+        image = r.render(view).rgba
+        _assert_cpu_order_up_to_band(r, scene, view, False)
+        assert (r._device.kept() == 0) == (not image.any())
+    finally:
+        r.release()

@@ -128,15 +128,24 @@ RADIX_SCAN_GROUP = 64
 #: radix_downsweep.comp without subgroup operations: threads that exchange digits as one warp.
 RADIX_PORTABLE_WARP = 16
 
-#: order_cull.comp (the device-resident order, splatgl/renderers/quad_device.py): the cull data
-#: (two vec4 per splat), the sort's keys and values (the radix sorter's A buffers) and the
-#: indirect draw command whose instance count the cull counts into.
+#: order_cull.comp, order_scan.comp, order_compact.comp (the device-resident order,
+#: splatgl/renderers/quad_device.py): the cull data (two vec4 per splat), each splat's staged
+#: key, each work group's kept count (then its first slot), the indirect draw command (whose
+#: instance count the scan writes; the pre-pass's dispatch size after it), and the sort's keys
+#: and values (the radix sorter's A buffers) the compaction fills.
 ORDER_BINDING_CULL = 15
-ORDER_BINDING_KEYS = 16
-ORDER_BINDING_VALUES = 17
+ORDER_BINDING_STAGED = 16
+ORDER_BINDING_BLOCKS = 17
 ORDER_BINDING_COMMAND = 18
-#: order_cull.comp: splats per work group (one invocation each).
+ORDER_BINDING_KEYS = 19
+ORDER_BINDING_VALUES = 20
+#: order_cull.comp, order_compact.comp: splats per work group (one invocation each).
 ORDER_GROUP = 128
+#: order_scan.comp: threads of its one work group (each scans a run of the groups' counts).
+ORDER_SCAN_GROUP = 256
+#: quad_prepass.comp with DEVICE_COUNT: the device order's draw command, whose instance count
+#: (the kept splats) bounds the slots it prepares.
+BINDING_DEVICE_COUNT = 15
 
 #: Programs that bind together (see the module doc): in each, every binding point is distinct.
 _SCENE = ("BINDING_A", "BINDING_Q", "BINDING_S", "BINDING_DC", "BINDING_SH")
@@ -144,7 +153,7 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "quad path storage": _SCENE + (
         "BINDING_ORDER", "BINDING_PREPARED", "BINDING_FRAGMENT_COUNTS", "BINDING_STOP_TILES",
         "BINDING_SURVIVORS", "BINDING_COMMANDS", "BINDING_OPACITY_WEIGHT", "BINDING_COVERAGE",
-        "BINDING_PREPARED_NORMAL", "BINDING_PREPARED_RADIUS"),
+        "BINDING_PREPARED_NORMAL", "BINDING_PREPARED_RADIUS", "BINDING_DEVICE_COUNT"),
     "tile renderer storage": _SCENE + tuple(
         name for name in globals() if name.startswith("TILE_BINDING_")),
     "device order storage": _SCENE + tuple(

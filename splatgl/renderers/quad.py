@@ -234,12 +234,13 @@ class QuadRenderer(Registered):
         self._t_upload = 0.0
         self.buffers.bind()
         t1 = time.perf_counter()
-        if self.uses_prepass:
-            comp = self.programs.prepass(view, frame)
+        if self.uses_prepass:   # over the kept slots, the count read on the device
+            comp = self.programs.prepass(view, dataclasses.replace(
+                frame, extra=frame.extra + (("DEVICE_COUNT", 1),)))
             view.set_uniforms(comp)
             transfers(self.ctx).uniforms(comp)
             self.gpu.run_prepass(comp, device.count, False, bool(frame.normal), False,
-                                 order=device.values)
+                                 order=device.values, dispatch=device.run_prepass)
         self._t_prepass = time.perf_counter() - t1
         return device.count, frame
 

@@ -5,16 +5,19 @@ Per view, with nothing per splat crossing the bus:
 1. ``shaders/order_cull.comp``, one invocation per splat: the cull of
    :func:`splatgl.order.cull.cull_visible` (same float32 operations, so the same depth bits and
    plane decisions; the peak-alpha bound in float32 with a band of
-   :data:`~splatgl.constants.DEVICE_CULL_BAND` that only ever keeps more) writes key i = the
-   float bits of z (0xFFFFFFFF when culled) and value i = i into the radix sorter's A buffers,
-   and adds the kept count into the indirect draw command's instance count (one atomic per
-   work group);
-2. :meth:`splatgl.gl.radix_sort.RadixSorter.sort_buffers` sorts all N keys on the device (the
-   pass plan read from the keys there): stable, so the kept splats come first ordered by
+   :data:`~splatgl.constants.DEVICE_CULL_BAND` that only ever keeps more) stages key i = the
+   float bits of z (0xFFFFFFFF when culled) and counts each work group's kept splats;
+2. ``order_scan.comp`` (one work group) turns the counts into each group's first slot and
+   writes the total into the indirect draw command (and the pre-pass's dispatch size);
+   ``order_compact.comp`` writes the kept keys with their indices, in index order, into the
+   radix sorter's A buffers (an ordered stream compaction);
+3. :meth:`splatgl.gl.radix_sort.RadixSorter.sort_buffers` sorts that many keys (its count
+   copied from the command on the device): stable, so the kept splats come ordered by
    (z, index), exactly :class:`splatgl.order.stage.SceneOrder`'s order;
-3. the draw reads its instance count from the command (``glDrawArraysInstancedIndirect``) and
-   its splats from the sorted values (the vertex stage's instanced ``splat_index``, or the
-   pre-pass's ``order``, which runs over all N slots: the host never learns the count).
+4. the draw reads its instance count from the command (``glDrawArraysInstancedIndirect``) and
+   its splats from the sorted values (the vertex stage's instanced ``splat_index``), or the
+   pre-pass (``DEVICE_COUNT``) is dispatched from the command's second half and prepares that
+   many slots: the host never learns the count.
 
 Per frame the host writes the 16-byte command (its vertex count, a zero instance count) and the
 programs' uniforms; the scene's cull data (:class:`~splatgl.order.cull.CullData`, 32 bytes a
@@ -32,16 +35,19 @@ import numpy as np
 
 from ..cameras.model import CullKind
 from ..cameras.view import View
-from ..gl.bindings import (ORDER_BINDING_COMMAND, ORDER_BINDING_CULL, ORDER_BINDING_KEYS,
-                           ORDER_BINDING_VALUES, ORDER_GROUP)
+from ..gl.bindings import (BINDING_DEVICE_COUNT, ORDER_BINDING_BLOCKS, ORDER_BINDING_COMMAND, ORDER_BINDING_CULL,
+                           ORDER_BINDING_KEYS, ORDER_BINDING_STAGED, ORDER_BINDING_VALUES,
+                           ORDER_GROUP)
 from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
 from ..model.scene import Scene
 from ..order.cull import CullData, plane_constants
 
-#: Bytes of the indirect draw command (count, instance count, first, base instance).
-COMMAND_BYTES = 16
+#: Bytes of the indirect draw command (count, instance count, first, base instance), then the
+#: pre-pass's indirect dispatch size (x, y, z, unused) at :data:`PREPASS_ARGS`.
+COMMAND_BYTES = 32
+PREPASS_ARGS = 16
 
 
 def cull_rows(data: CullData) -> np.ndarray:
@@ -68,7 +74,11 @@ class DeviceOrder:
         rows = cull_rows(CullData.from_scene(scene)).tobytes()
         self._cull = ctx.buffer(rows)       # the one-time upload (not a per-frame transfer)
         self._command = ctx.buffer(reserve=COMMAND_BYTES)
-        self._prog = programs.compute("order_cull.comp")
+        self._groups = max(1, -(-self.count // ORDER_GROUP))
+        self._staged = ctx.buffer(reserve=4 * max(self.count, 1))
+        self._blocks = ctx.buffer(reserve=4 * self._groups)
+        self._progs = {name: programs.compute(f"order_{name}.comp")
+                       for name in ("cull", "scan", "compact")}
         self._state: tuple | None = None    # (view key, vertices) of the order on the device
         sorter.reserve(max(self.count, 2))
 
@@ -85,7 +95,8 @@ class DeviceOrder:
 
     @property
     def command(self) -> moderngl.Buffer:
-        """The indirect draw command (vertices, kept count, 0, 0)."""
+        """The indirect draw command (vertices, kept count, 0, 0), then the pre-pass's
+        dispatch size at :data:`PREPASS_ARGS`."""
         return self._command
 
     def run(self, view: View, vertices: int, antialias: bool) -> tuple[float, float]:
@@ -98,24 +109,38 @@ class DeviceOrder:
         t0 = time.perf_counter()
         counter = transfers(self.ctx)
         counter.write(self._command, np.array([vertices, 0, 0, 0], np.uint32).tobytes())
-        prog = self._prog
-        self._set_uniforms(prog, view, antialias)
-        counter.uniforms(prog)
+        cull, scan, compact = (self._progs[name] for name in ("cull", "scan", "compact"))
+        self._set_uniforms(cull, view, antialias)
+        scan["u_blocks"].value = self._groups
+        compact["u_count"].value = self.count
+        for prog in (cull, scan, compact):
+            counter.uniforms(prog)
         keys, values = self.sorter.buffers()
-        self._cull.bind_to_storage_buffer(ORDER_BINDING_CULL)
-        keys.bind_to_storage_buffer(ORDER_BINDING_KEYS)
-        values.bind_to_storage_buffer(ORDER_BINDING_VALUES)
-        self._command.bind_to_storage_buffer(ORDER_BINDING_COMMAND)
-        prog.run(group_x=-(-self.count // ORDER_GROUP))
+        for buf, binding in ((self._cull, ORDER_BINDING_CULL), (self._staged, ORDER_BINDING_STAGED),
+                             (self._blocks, ORDER_BINDING_BLOCKS),
+                             (self._command, ORDER_BINDING_COMMAND), (keys, ORDER_BINDING_KEYS),
+                             (values, ORDER_BINDING_VALUES)):
+            buf.bind_to_storage_buffer(binding)
+        cull.run(group_x=self._groups)
+        self.ctx.memory_barrier()
+        scan.run(group_x=1)
+        self.ctx.memory_barrier()
+        compact.run(group_x=self._groups)
         self.ctx.memory_barrier()
         t1 = time.perf_counter()
-        if self.count >= 2:
-            self.sorter.sort_buffers(self.count)
-            counter.upload(4)                          # the sort's key count
-            for sort_prog in self.sorter._progs.values():   # and its programs' uniforms
-                counter.uniforms(sort_prog)
+        self.sorter.sort_buffers(self.count, device_count=(self._command, 4))
+        for sort_prog in self.sorter._progs.values():   # the sort's uniforms
+            counter.uniforms(sort_prog)
         self._state = state
         return t1 - t0, time.perf_counter() - t1
+
+    def run_prepass(self, comp: moderngl.ComputeShader) -> None:
+        """Dispatch ``comp`` (quad_prepass.comp with DEVICE_COUNT, uniforms set, buffers bound)
+        over the kept slots, sized from the command on the device."""
+        self._command.bind_to_storage_buffer(BINDING_DEVICE_COUNT)
+        comp["u_first"].value = 0
+        comp.run_indirect(self._command, PREPASS_ARGS)
+        self.ctx.memory_barrier()
 
     def _set_uniforms(self, prog: moderngl.ComputeShader, view: View, antialias: bool) -> None:
         frustum = view.frustum
@@ -149,6 +174,6 @@ class DeviceOrder:
 
     def release(self) -> None:
         """Release its buffers and its sorter."""
-        self._cull.release()
-        self._command.release()
+        for buf in (self._cull, self._command, self._staged, self._blocks):
+            buf.release()
         self.sorter.release()

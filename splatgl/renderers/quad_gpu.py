@@ -59,14 +59,16 @@ class QuadResources:
     def run_prepass(self, comp: moderngl.ComputeShader, count: int, weighted: bool,
                     normals: bool = False, radii: bool = False, chunk: int | None = None,
                     between: Callable[[], None] | None = None,
-                    order: moderngl.Buffer | None = None) -> None:
+                    order: moderngl.Buffer | None = None,
+                    dispatch: Callable[[moderngl.ComputeShader], None] | None = None) -> None:
         """Run ``comp`` (quad_prepass.comp, uniforms set) over the ``count`` sorted splats into
         the prepared buffer (with ``normals`` the normal layer's buffer, with ``radii`` the
         ordered pass's).  With ``between``, the pass runs in chunks of ``chunk`` slots and
         ``between()`` is called after each but the last, to a finish (it may raise to abandon
         the frame: a million splats' pre-pass takes about half a second on llvmpipe).
         ``order``: the sorted indices' buffer where it is not :attr:`index` (the device-resident
-        order's, :mod:`~splatgl.renderers.quad_device`)."""
+        order's, :mod:`~splatgl.renderers.quad_device`); ``dispatch(comp)`` then runs it (its
+        size read from the device; ``count`` is the most slots there can be)."""
         self.prepared.ensure(count * PREPARED_BYTES).bind_to_storage_buffer(BINDING_PREPARED)
         if normals:
             self.prepared_normal.ensure(count * 16).bind_to_storage_buffer(BINDING_PREPARED_NORMAL)
@@ -76,11 +78,15 @@ class QuadResources:
             return
         if weighted:
             self.weights.bind()
-        comp["u_count"].value = count
+        if "u_count" in comp:    # (the DEVICE_COUNT variant reads its count on the device)
+            comp["u_count"].value = count
         if order is None:
             self.index.bind()
         else:
             order.bind_to_storage_buffer(BINDING_ORDER)
+        if dispatch is not None:
+            dispatch(comp)
+            return
         step = count if between is None or not chunk else max(PREPASS_GROUP, int(chunk))
         for first in range(0, count, step):
             comp["u_first"].value = first
