@@ -147,9 +147,10 @@ def test_viewer_cut_stands_in_ancestors_then_refines():
     the cut becomes the exact one."""
     chunks = _FakeChunks()
     redraws = threading.Semaphore(0)
-    res = ResidentSet(chunks, 10_000, chunks.offsets, 4, on_loaded=redraws.release)
+    res = ResidentSet(chunks, 10_000, chunks.offsets, 4)
     try:
         res.load_pinned()   # levels 2 and 3 (rows 80..84): chunks 20, 21
+        res.on_loaded = redraws.release
         leaves = np.arange(0, 16)
         rows, weights, complete = res.resident_cut(leaves, None)
         assert not complete and weights is None
@@ -183,3 +184,47 @@ def test_a_budget_too_small_is_one_line(tmp_path):
     path = _lod(tmp_path)
     with pytest.raises(SplatglError, match="--memory .* too small to stream"):
         StreamFrames(path, SETTINGS, LodSettings(), 1000, chunk_rows=64)
+
+
+def _png(path):
+    from splatgl.imagefiles.images import read_image
+    return read_image(path)
+
+
+def test_render_and_path_stream_with_memory(tmp_path, capsys):
+    """``render --memory`` and ``render --path --memory``: the streamed frames (the API's, same
+    framing proxy), resident memory and chunks under --timings; the frame record names the
+    file by its spheres' digest (never read whole)."""
+    path = _lod(tmp_path)
+    code = main(["render", str(path), "-o", str(tmp_path / "a.png"), "--memory", "1.2M",
+                 "--width", "96", "--height", "64", "--timings"])
+    out = capsys.readouterr().out
+    assert code == 0 and "level of detail streamed under 1.2 MiB" in out
+    assert "streaming resident" in out and "loaded" in out and "evicted" in out
+    code = main(["render", str(path), "--path", "orbit:3", "-o", str(tmp_path / "f%02d.png"),
+                 "--memory", "1.2M", "--width", "96", "--height", "64", "--timings"])
+    out = capsys.readouterr().out
+    assert code == 0 and "wrote 3 frames" in out and "streaming: resident" in out
+    assert (tmp_path / "f02.png").exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--memory", "1.2M", "--renderer", "tile"], "render through the quad path"),
+    (["--memory", "2X"], "--memory: expected a size"),
+    (["--memory", "2K"], "--memory 2 KiB is too small to stream"),
+    (["--memory", "1M", "--path", "orbit:2", "--workers", "2"], "--memory streams a path's frames "
+                                                                "in one process"),
+])
+def test_render_memory_refusals_are_one_line(tmp_path, capsys, argv, message):
+    path = _lod(tmp_path)
+    out = tmp_path / ("f%02d.png" if "--path" in argv else "a.png")
+    assert main(["render", str(path), "-o", str(out), "--width", "96", "--height", "64", *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and not (tmp_path / "a.png").exists()
+
+
+def test_render_memory_needs_a_level_of_detail(tmp_path, capsys):
+    _lod(tmp_path)
+    assert main(["render", str(tmp_path / "s.ply"), "-o", str(tmp_path / "a.png"),
+                 "--memory", "1M"]) == 2
+    assert "not a level-of-detail file" in capsys.readouterr().err

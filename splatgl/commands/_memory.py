@@ -19,3 +19,29 @@ def add_memory_argument(p: argparse.ArgumentParser, what: str) -> None:
 def memory_budget(args: argparse.Namespace) -> int:
     """Bytes of ``--memory`` (its default when not given)."""
     return budget_from(getattr(args, "memory", None))[0]
+
+
+#: ``--memory``'s help on render, view, eval and bench (issue 41 item 3).
+STREAM_HELP = ("stream a level of detail (SCENE from 'splatgl lod') from disk, holding at most "
+               "SIZE of its nodes resident: chunks of nodes are read on background threads as "
+               "the cut needs them, the least recently used evicted; implies the level of "
+               "detail's default cut where no --lod-* option is given")
+
+
+def memory_given(args: argparse.Namespace) -> int | None:
+    """Bytes of ``--memory`` where it was given, else None (render, view: not streamed)."""
+    value = getattr(args, "memory", None)
+    return None if value is None else budget_from(value)[0]
+
+
+def stream_inputs(args: argparse.Namespace, settings):
+    """``(framing scene, camera)`` of a streamed render: the camera framed by the level of
+    detail's proxy (:func:`splatgl.lod.stream_frames.framing_scene`), never the whole file."""
+    from ..lod.lazy import LazyLod
+    from ..lod.stream_frames import framing_scene
+    from ._common import camera_from_args
+
+    camera_from_args(args, None, settings)   # the camera file and options checked first
+    with LazyLod(args.scene) as lazy:
+        framing = framing_scene(lazy)
+    return framing, camera_from_args(args, framing, settings)

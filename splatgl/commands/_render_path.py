@@ -34,13 +34,16 @@ from ..interactive.budget import check_fps
 from ..interactive.preview import PreviewRenderer
 from ..lod.frames import LodFrames
 from ..lod.io import is_lod_file, read_lod
+from ..lod.budget import format_size
 from ..lod.render import LodSettings
+from ..lod.stream_frames import StreamFrames
 from ..model.settings import RendererKind
 from ..renderers.registry import check
 from ..renderers.stereo import StereoLayout, StereoRenderer
 from ._common import (check_convention, default_size, demo_scene_path, load_scene_arg,
                       positive_float, projection_from_args, settings_from_args)
 from ._spz_axes import check_not_sharded
+from ._memory import memory_given, stream_inputs
 from ._outputs import check_outputs
 
 DEFAULT_FPS = 30.0
@@ -93,11 +96,11 @@ def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
     given = {name: value for name, value in (("threshold_px", args.lod_threshold),
                                              ("budget", args.lod_budget), ("band", args.lod_blend))
              if value is not None}
-    if not given:
+    if not given and getattr(args, "memory", None) is None:
         return None
     if args.renderer != "quad":
-        raise SplatglError(f"--lod-threshold/--lod-budget render through the quad path, not "
-                           f"--renderer {args.renderer}")
+        raise SplatglError(f"--lod-threshold/--lod-budget/--memory render through the quad path, "
+                           f"not --renderer {args.renderer}")
     if args.scene is None or not is_lod_file(args.scene):
         raise SplatglError(f"{args.scene}: not a level-of-detail file; build one with "
                            "'splatgl lod SCENE -o SCENE.lod.ply'")
@@ -196,7 +199,8 @@ def frame_record(args: argparse.Namespace, scene: Scene, settings, target: Frame
                              normal_space=target.normal_space.value, lod=repr(lod),
                              stereo=[args.stereo, args.stereo_layout] if args.stereo is not None
                              else None, preview=bool(args.preview), video=target.is_video)
-    return FrameRecord(args.path, scene_digest(scene), options)
+    digest = getattr(scene, "digest", None)   # a streamed level of detail's (never read whole)
+    return FrameRecord(args.path, digest if isinstance(digest, str) else scene_digest(scene), options)
 
 
 def run_path(args: argparse.Namespace) -> int:
@@ -230,10 +234,16 @@ def run_path(args: argparse.Namespace) -> int:
     elif args.target_fps is not None:
         raise SplatglError("--target-fps is the budget of --preview; without --preview every "
                            "frame is exact")
-    tree = read_lod(args.scene) if lod is not None else None
-    # the scene frames the orbit and is counted in the summary: a LOD file's leaves
-    scene = load_scene_arg(args) if tree is None else tree.nodes.subset(slice(0, tree.level_size(0)))
+    memory = memory_given(args)
+    if memory is not None and (executor.sharded or args.preview):
+        raise SplatglError("--memory streams a path's frames in one process, not with "
+                           "--workers, --executor ray or --preview")
+    tree = read_lod(args.scene) if lod is not None and memory is None else None
     settings = settings_from_args(args)
+    if memory is not None:   # streamed: a proxy of the leaves frames the orbit
+        scene, _ = stream_inputs(args, settings)
+    else:  # the scene frames the orbit and is counted in the summary: a LOD file's leaves
+        scene = load_scene_arg(args) if tree is None else tree.nodes.subset(slice(0, tree.level_size(0)))
     if not target.is_video:
         check_exact_ids(target.files(), target.frame_path(0), scene.count)
     cameras, source_fps, numbers = path_cameras(args, scene)
@@ -273,7 +283,9 @@ def run_path(args: argparse.Namespace) -> int:
                                    False, fps, default_progress(), numbers=numbers, record=record)
         print(renderer.report())
     else:
-        with Renderer() if tree is None else LodFrames(tree, settings, lod) as renderer:
+        with (StreamFrames(args.scene, settings, lod, memory, framing=scene) if memory is not None
+              else Renderer() if tree is None else LodFrames(tree, settings, lod)) as renderer:
+            streamed = renderer if memory is not None else None
             gl_name = gl_renderer_name(kind, renderer.ctx)
             if args.stereo is not None:    # each frame holds both eyes
                 renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
@@ -289,6 +301,8 @@ def run_path(args: argparse.Namespace) -> int:
         skipped += (f", {result.unchecked} of them without a record of their path, scene and "
                     "options to check (older splatgl)")
     kind_text = f"{kind.value}, level of detail" if lod is not None else kind.value
+    if memory is not None:
+        kind_text += f" streamed under {format_size(memory)}"
     print(f"wrote {result.written} frames to {where}{skipped} ({size[0]}x{size[1]}, "
           f"{scene.count} splats, {kind_text}, {result.fps:.2f} frames/s)")
     if run is not None:
@@ -298,4 +312,6 @@ def run_path(args: argparse.Namespace) -> int:
         ratio = result.seconds / result.render_seconds if result.render_seconds > 0 else float("nan")
         print(f"timings: {result.seconds:.3f} s for {result.written} frames; renderer stages "
               f"{result.render_seconds:.3f} s; ratio {ratio:.3f}")
+        if memory is not None:
+            print(f"streaming: {streamed.summary()}")
     return 0

@@ -15,11 +15,15 @@ from ..progress import default_progress
 from ..imagefiles.pictures import depth_preview
 from ..api import Renderer, gl_renderer_name
 from ..lod.frames import LodFrames, render_lod
+from ..lod.budget import format_size
 from ..lod.io import read_lod
+from ..lod.stream_frames import StreamFrames, render_streamed
 from ..model.settings import RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      check_convention, check_size, format_timings, inputs_from_args)
+                      check_convention, check_size, format_timings, inputs_from_args,
+                      settings_from_args)
 from ._layers import add_layer_arguments, layer_files, under_from_args
+from ._memory import STREAM_HELP, add_memory_argument, memory_given, stream_inputs
 from ._outputs import add_force_argument, output_files
 from ._render_path import (add_path_arguments, lod_settings_from_args, refuse_path_only_options,
                            run_path)
@@ -80,6 +84,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "drawn as a blend of themselves and their children (opacity weights), so "
                         "a path's frames change smoothly instead of popping; 1 for no blending "
                         "(default 2)")
+    add_memory_argument(p, STREAM_HELP)
     add_camera_arguments(p)
     add_settings_arguments(p)
     add_layer_arguments(p)
@@ -115,7 +120,15 @@ def run(args: argparse.Namespace) -> int:
     keys = {path: name for name, path in targets.items()}
     fmt = image_format(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     under = under_from_args(args)
-    scene, settings, camera = inputs_from_args(args)
+    memory = memory_given(args)
+    if memory is not None:     # streamed: the file is never read whole
+        cut = lod_settings_from_args(args)   # a .lod.ply, the quad path
+        if stereo is not None:
+            raise SplatglError(StreamFrames.stereo_refusal)
+        settings = settings_from_args(args)
+        scene, camera = stream_inputs(args, settings)
+    else:
+        scene, settings, camera = inputs_from_args(args)
     files = layer_files(args, camera)
     check_exact_ids(files, args.output, scene.count)
     # what the file holds (EXR: the depth layer as Z), and the depth the preview needs
@@ -124,7 +137,12 @@ def run(args: argparse.Namespace) -> int:
     if lod and stereo is not None:
         raise SplatglError(LodFrames.stereo_refusal)
     times = None
-    if lod:
+    if memory is not None:
+        out, times, gl_name = render_streamed(args.scene, camera, settings, cut, memory, layers,
+                                              under, scene)
+        eyes = [out]
+        kind_text = f"{kind.value}, level of detail streamed under {format_size(memory)}"
+    elif lod:
         cut = lod_settings_from_args(args)  # its checks before reading the tree
         out, times, gl_name = render_lod(read_lod(args.scene), camera, settings, cut, layers, under)
         eyes = [out]

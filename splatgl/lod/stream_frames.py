@@ -17,6 +17,7 @@ first level from the top with at least :data:`FRAMING_NODES` nodes).
 
 from __future__ import annotations
 
+import hashlib
 import time
 from types import SimpleNamespace
 from typing import Iterable, Iterator
@@ -28,6 +29,7 @@ from ..cameras.view import View
 from ..errors import SplatglError
 from ..gl.context import create_headless_context, make_current
 from ..gl.shaders import ProgramCache
+from ..model.scene import SplatKind
 from ..model.settings import RenderSettings, SortKey
 from ..order import kernels as cull_kernel
 from ..order.chunks import keys_order, keys_pairs
@@ -50,17 +52,21 @@ LEAVES_PX = 1e-30
 
 def framing_scene(lazy: LazyLod):
     """What the default camera, an orbit and the near plane read of a scene (``robust_bounds``,
-    ``robust_radius``, ``anchor``, ``source``, ``count``), from one coarse level's spheres."""
+    ``robust_radius``, ``anchor``, ``source``, ``count``), from one coarse level's spheres, and
+    ``digest`` (of those spheres, the tree's shape and anchor: what a path's frames record)."""
     level = 0
     for lv in range(lazy.levels - 1, -1, -1):
         if lazy.level_size(lv) >= FRAMING_NODES:
             level = lv
             break
-    centres, _ = lazy.spheres(slice(int(lazy.offsets[level]), int(lazy.offsets[level + 1])))
+    centres, radius = lazy.spheres(slice(int(lazy.offsets[level]), int(lazy.offsets[level + 1])))
     pts = centres.T.astype(np.float64) + lazy.anchor
     lo, hi = np.percentile(pts, 1.0, axis=0), np.percentile(pts, 99.0, axis=0)
+    digest = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in (
+        lazy.offsets, lazy.anchor, centres, radius))).hexdigest()[:20]
     return SimpleNamespace(robust_bounds=(lo, hi), robust_radius=float(0.5 * np.linalg.norm(hi - lo)),
-                           anchor=lazy.anchor, source=None, count=lazy.level_size(0))
+                           anchor=lazy.anchor, source=None, count=lazy.level_size(0),
+                           digest=f"lod-{digest}", kind=SplatKind.GAUSSIAN_3D)
 
 
 def choose_cut(lazy: LazyLod, camera: Camera, lod: LodSettings):
@@ -172,8 +178,7 @@ class StreamFrames:
 
     def summary(self) -> str:
         """Resident memory and chunks, and the bytes read from the file (for ``--timings``)."""
-        return (f"streaming: {self.resident.stats.summary(self.memory)}; "
-                f"{format_size(self.lazy.bytes_read)} read")
+        return f"{self.resident.stats.summary(self.memory)}; {format_size(self.lazy.bytes_read)} read"
 
     def close(self) -> None:
         if self.resident is not None:
@@ -192,3 +197,19 @@ class StreamFrames:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def render_streamed(path, camera: Camera, settings: RenderSettings, lod: LodSettings, memory: int,
+                    layers: frozenset[Layer] = BASE, under: UnderImage | None = None,
+                    framing=None) -> tuple[RenderOutput, SimpleNamespace, str]:
+    """One exact view of the ``.lod.ply`` at ``path`` streamed under ``memory`` bytes: (the
+    ``layers``, times as :func:`splatgl.lod.frames.render_lod` gives them plus ``streaming``
+    (:meth:`StreamFrames.summary`), the GL renderer's name)."""
+    from ..gl.context import renderer_name
+
+    with StreamFrames(path, settings, lod, memory, framing=framing) as frames:
+        gl_name = renderer_name(frames.ctx)
+        out = frames.render_view(camera, layers, under)
+        times = SimpleNamespace(**vars(frames.renderer.last_times), cut_nodes=frames.last_cut_nodes,
+                                cut=frames.last_cut_s, streaming=frames.summary())
+    return out, times, gl_name
