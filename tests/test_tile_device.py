@@ -11,9 +11,16 @@ import moderngl
 import numpy as np
 import pytest
 
-from helpers import (IN_DEPTH, SURFELS, SURFELS_POSE, draw, random_scene, view_for)
+from pathlib import Path
+
+from helpers import (IN_DEPTH, SURFELS, SURFELS_POSE, draw, random_scene, shared_file, view_for)
 from splatgl.cameras.camera import Camera
-from splatgl.cameras.poses import orbit
+from splatgl.cameras.fisheye import Fisheye
+from splatgl.cameras.opencv import OpenCV
+from splatgl.cameras.poses import look_at, orbit
+from splatgl.cli import main
+from splatgl.formats import load_scene
+from splatgl.stress import CASES
 from splatgl.errors import SplatglError
 from splatgl.model.settings import Order, RenderSettings, SortKey
 from splatgl.renderers import tile as tile_mod
@@ -21,6 +28,7 @@ from splatgl.renderers.tile import TileRenderer
 from splatgl.renderers.tile_device import ranges_twin, scan_twin
 
 CAM = Camera.from_fov(128, 96, 60.0)
+REPO = Path(__file__).resolve().parent.parent
 GPU = RenderSettings(sort_key=SortKey.GPU)
 
 
@@ -78,6 +86,8 @@ def test_device_stages_equal_the_cpu_order(ctx):
     ("partial_tiles", RenderSettings(), Camera.from_fov(101, 77, 60.0)),
     ("orthographic", RenderSettings(near=0.5), Camera.orthographic(128, 96, 24.0)),
     ("per_pixel", RenderSettings(order=Order.PER_PIXEL), CAM),
+    ("opencv", RenderSettings(), CAM.with_model(OpenCV(k1=-0.3, k2=0.05))),
+    ("fisheye", RenderSettings(), CAM.with_model(Fisheye((0.05, -0.01, 0.002, 0.0)))),
 ])
 def test_images_identical_to_the_cpu_order(ctx, name, settings, camera):
     scene = random_scene(2000, 5, degree=1, **IN_DEPTH)
@@ -182,3 +192,71 @@ def test_bucket16_is_refused_by_the_tile_renderer(ctx):
     scene = random_scene(10, 1, degree=0, **IN_DEPTH)
     with pytest.raises(SplatglError, match="--sort bucket16 applies to the quad path only"):
         TileRenderer(ctx, scene, RenderSettings(sort_key=SortKey.BUCKET16))
+
+
+def test_demo_scene_views_are_identical(ctx):
+    scene = load_scene(REPO / "scenes" / "demo.ply")
+    centre = scene.means.mean(axis=0)
+    cpu, dev = TileRenderer(ctx, scene, RenderSettings()), TileRenderer(ctx, scene, GPU)
+    try:
+        for d in (np.array([0.0, -0.5, -4.0]), np.array([3.0, 0.2, 0.5]), np.array([0.3, 0.3, -0.6])):
+            cam = Camera.from_fov(96, 72, 50.0, look_at(centre + d, centre))
+            _same(draw(cpu, cam, depth=True), draw(dev, cam, depth=True), depth=True)
+    finally:
+        cpu.release()
+        dev.release()
+
+
+def test_a_shared_scene_is_identical(ctx, shared_scenes):
+    scene = load_scene(shared_file(shared_scenes, "ply/donut_sh0.ply"))
+    centre = np.median(scene.means, axis=0)
+    radius = float(np.percentile(np.linalg.norm(scene.means - centre, axis=1), 90))
+    for d in (np.array([0.0, -0.6, -2.0]), np.array([1.5, -0.3, 0.4])):
+        cam = Camera.from_fov(128, 96, 50.0, look_at(centre + radius * d, centre))
+        a, b, _ = _pair(ctx, scene, cam)
+        assert a.rgba[..., 3].max() > 0.5
+        _same(a, b)
+
+
+_STRESS = [c for c in CASES if not c.slow and "tile" not in c.unsupported]
+
+
+@pytest.mark.parametrize("case", _STRESS, ids=[c.name for c in _STRESS])
+def test_stress_cases_are_identical(ctx, case):
+    setup = case.build()
+    a, b, _ = _pair(ctx, setup.scene, setup.camera, setup.settings, depth=True)
+    _same(a, b, depth=True)
+
+
+def test_cli_renders_the_cpu_orders_image(tmp_path, capsys):
+    """``render --renderer tile --sort gpu`` writes the image ``--sort exact`` does; its
+    ``--timings`` line names the transfers: the image read back and 8 bytes."""
+    demo = str(REPO / "scenes" / "demo.ply")
+    args = ["render", demo, "--width", "48", "--height", "32", "--renderer", "tile"]
+    assert main(args + ["-o", str(tmp_path / "a.png")]) == 0
+    assert main(args + ["-o", str(tmp_path / "b.png"), "--sort", "gpu", "--timings"]) == 0
+    line = [s for s in capsys.readouterr().out.splitlines() if s.startswith("timings")][0]
+    assert f"read back {48 * 32 * 16 + 8:,} bytes" in line
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
+
+
+@pytest.mark.parametrize("renderer, message", [
+    ("tile", "splatgl: error: --sort bucket16 applies to the quad renderer only, not the tile "
+             "renderer, which would ignore it (use --renderer quad, or leave --sort out)"),
+])
+def test_bucket16_on_the_tile_renderer_is_refused_in_one_line(tmp_path, capsys, renderer, message):
+    rc = main(["render", str(REPO / "scenes" / "demo.ply"), "-o", str(tmp_path / "x.png"),
+               "--renderer", renderer, "--sort", "bucket16"])
+    out, err = capsys.readouterr()
+    assert (rc, out, err) == (2, "", message + "\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_sort_gpu_on_the_cpu_renderer_names_both_readers(tmp_path, capsys):
+    rc = main(["render", str(REPO / "scenes" / "demo.ply"), "-o", str(tmp_path / "x.png"),
+               "--renderer", "cpu", "--sort", "gpu"])
+    out, err = capsys.readouterr()
+    assert (rc, out) == (2, "")
+    assert err == ("splatgl: error: --sort gpu applies to the quad and tile renderers only, not "
+                   "the cpu renderer, which would ignore it (use --renderer quad or tile, or "
+                   "leave --sort out)\n")

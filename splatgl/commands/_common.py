@@ -155,9 +155,10 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                    help="where the quad path's per-splat math runs: 'vertex' shader (per corner) "
                         "or a 'compute' pre-pass (per splat); default: what the benchmark chose")
     g.add_argument("--sort", choices=[m.value for m in SortKey], default="exact",
-                   help="quad path depth sort: 'exact' 32-bit keys on the CPU (default), 'gpu' the same "
-                        "keys by a compute-shader radix sort (identical order; faster on real GPUs, "
-                        "slower on llvmpipe), or 'bucket16' 16-bit buckets (approximate)")
+                   help="depth sort: 'exact' 32-bit keys on the CPU (default), 'gpu' the same "
+                        "keys by a compute-shader radix sort, the order kept on the device (quad "
+                        "path and tile renderer; identical images; faster on real GPUs, slower on "
+                        "llvmpipe), or 'bucket16' 16-bit buckets (quad path, approximate)")
     g.add_argument("--convention", choices=[m.value for m in Convention], default="inria",
                    help="rules of the NumPy reference: 'inria' = the 3DGS rasterizer (default), "
                         "'gsplat' = per-axis opacity-aware extent up to 3.33 sigma, alpha clamp 0.999. "

@@ -34,7 +34,7 @@ class QuadExtent(enum.Enum):
 
 
 class SortKey(enum.Enum):
-    """Depth keys of the quad path's sort.
+    """Depth keys of the quad path's sort, and where the quad path and the tile renderer order.
 
     EXACT: the float32 bits of view z (exact order; ties by index).
     BUCKET16: z quantised into 65536 buckets between the nearest and farthest splat (the
@@ -42,6 +42,9 @@ class SortKey(enum.Enum):
     GPU: the EXACT keys sorted on the device by a compute-shader radix sort
         (:mod:`splatgl.gl.radix_sort`): the identical order.  On llvmpipe the CPU sort is
         faster (``splatgl bench --scale`` measures both), so EXACT stays the default.
+        The tile renderer reads EXACT (its CPU order) and GPU (the scan, keys, sort and tile
+        ranges on the device, :mod:`splatgl.renderers.tile_device`: the identical image); it
+        refuses BUCKET16.
     """
 
     EXACT = "exact"

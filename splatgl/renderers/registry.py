@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Callable, ClassVar, Protocol, runtime_checkabl
 from ..errors import CameraError, SplatglError
 from ..gl import limits
 from ..model.scene import Scene, SplatKind
-from ..model.settings import Convention, Order, Precision, RendererKind, RenderSettings
+from ..model.settings import Convention, Order, Precision, RendererKind, RenderSettings, SortKey
 from ..output.layers import BASE, Layer, RenderOutput
 
 if TYPE_CHECKING:
@@ -130,7 +130,7 @@ RENDERERS: dict[RendererKind, RendererEntry] = {e.kind: e for e in (
     RendererEntry(RendererKind.QUAD, "the quad renderer", "splatgl.renderers.quad:QuadRenderer",
                   reads=_QUAD_READS, gl_limit=limits.target_refused),
     RendererEntry(RendererKind.TILE, "the tile renderer", "splatgl.renderers.tile:TileRenderer",
-                  reads=frozenset({"gpu_storage", "order", "order_window"}),
+                  reads=frozenset({"gpu_storage", "order", "order_window", "sort_key"}),
                   lacks_models=frozenset({"equirectangular"}),   # it makes no seam copies
                   gl_limit=limits.pixel_buffer_refused),
     RendererEntry(RendererKind.REFERENCE, "the NumPy reference",
@@ -223,10 +223,15 @@ def _renderers(kinds) -> str:
     return " and ".join(names_) + (" renderers" if len(names_) > 1 else " renderer")
 
 
-def readers(setting: str) -> frozenset[RendererKind]:
+#: (setting, value) -> the renderers that draw it, where fewer than read the setting.
+VALUE_READERS = {("sort_key", SortKey.BUCKET16): frozenset({RendererKind.QUAD})}
+
+
+def readers(setting: str, value: object = None) -> frozenset[RendererKind]:
     """The renderers that read the setting ``setting`` (a :class:`RenderSettings` field); every
-    renderer for one that is not in :data:`OPTIONS`."""
-    return frozenset(k for k, e in RENDERERS.items() if setting not in OPTIONS or setting in e.reads)
+    renderer for one not in :data:`OPTIONS`; with ``value``, those that draw it."""
+    kinds = frozenset(k for k, e in RENDERERS.items() if setting not in OPTIONS or setting in e.reads)
+    return kinds & VALUE_READERS.get((setting, value), kinds)
 
 
 def honours(kind: RendererKind | str, setting: str) -> bool:
@@ -324,7 +329,8 @@ def own_settings(settings: RenderSettings, kind: RendererKind | str) -> RenderSe
     part: ``splatgl compare``'s two sides)."""
     e, default = entry(kind), RenderSettings()
     changes = {name: getattr(default, name) for name in OPTIONS
-               if name not in e.reads and getattr(settings, name) != getattr(default, name)}
+               if e.kind not in readers(name, getattr(settings, name))
+               and getattr(settings, name) != getattr(default, name)}
     return dataclasses.replace(settings, **changes) if changes else settings
 
 
@@ -353,7 +359,8 @@ def check_settings(settings: RenderSettings, *kinds: RendererKind | str,
     for name, option in OPTIONS.items():
         if name in ("convention", "emulation", "order"):
             continue                                # their own messages, above
-        value, by = getattr(settings, name), readers(name)
+        value = getattr(settings, name)
+        by = readers(name, value)
         if value == getattr(default, name) or by & set(kinds):
             continue
         raise SplatglError(f"{option} {_spelled(value)} applies to the {_renderers(by)} "
