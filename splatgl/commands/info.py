@@ -10,6 +10,7 @@ from ..formats import detect_format, load_scene
 from ..model.stats import format_info, scene_info
 from ._spz_axes import add_spz_axes_argument
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
+from ._memory import add_memory_argument, memory_budget
 from ._outputs import add_force_argument
 
 NAME = "info"
@@ -38,11 +39,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also per-attribute statistics (min, 1st percentile, median, 99th "
                              "percentile, max of what `splatgl edit --filter` sees) and the "
                              "estimated overdraw of the default view (fragments per pixel)")
+    add_memory_argument(parser, "a larger binary PLY is read a block of rows at a time (in "
+                                "two or three passes; docs/editing.md)")
     add_spz_axes_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     check_json_target(args)  # not SCENE, and an existing file only with --force
+    if args.spz_axes is None and _streamed(args):
+        return 0
     scene = load_scene(args.scene, drop_invalid=args.drop_invalid, spz_axes=args.spz_axes,
                        allow_empty=True)  # what `edit --allow-empty` writes
     info = {"format": detect_format(args.scene).NAME, **scene_info(scene)}
@@ -66,3 +71,24 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         emit_json(args, {"path": str(args.scene), **info}, indent=2)
     return 0
+
+
+def _streamed(args: argparse.Namespace) -> bool:
+    """Report a binary PLY larger than --memory read a block at a time; False to load it."""
+    from ..edit.statistics import format_statistics
+    from ..edit.streamed_stats import info_streamed
+
+    found = info_streamed(args.scene, memory_budget(args), args.drop_invalid, args.stats)
+    if found is None:
+        return False
+    stats, table, draw = found
+    info = {"format": "ply", **stats}
+    text = format_info(args.scene, None, info)
+    if table is not None:
+        info["attributes"], info["overdraw"] = table, draw
+        text += "\n" + format_statistics(table, draw)
+    if not json_to_stdout(args):
+        print(text)
+    if args.json is not None:
+        emit_json(args, {"path": str(args.scene), **info}, indent=2)
+    return True
