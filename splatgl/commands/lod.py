@@ -11,6 +11,7 @@ from ..errors import SplatglError
 from ..formats import load_scene
 from ..progress import StderrProgress, enabled
 from ..model.scene import SplatKind
+from ._memory import add_memory_argument
 from ._outputs import add_force_argument, check_output
 
 NAME = "lod"
@@ -53,10 +54,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--chunk-splats", type=int, default=None, metavar="N",
                    help="Streamed SOG output (-o DIR/lod-meta.json): original splats per streamed "
                         "chunk, at least (default 16384)")
-    p.add_argument("--memory", default=None, metavar="SIZE",
-                   help="peak memory of the build from a binary PLY, e.g. 200M or 4G (default: "
-                        "half this machine's RAM, printed); larger scenes are built in spatial "
-                        "chunks from temporary files beside the output")
+    add_memory_argument(p, "the build from a binary PLY keeps within it (the budget is "
+                           "printed): larger scenes are built in spatial chunks from temporary "
+                           "files beside the output")
     add_force_argument(p)
 
 
