@@ -231,3 +231,30 @@ def test_the_compaction_keeps_index_order_across_groups(ctx, n, target):
         assert (r._device.kept() == 0) == (not image.any())
     finally:
         r.release()
+
+
+def test_depth_layer_and_geometry_under_are_identical(ctx):
+    """The depth layer (same pass) and a geometry depth test (``under``) with the device order."""
+    from splatgl.output.layers import Layer, with_layers
+    from splatgl.output.under import UnderLayer
+
+    scene = _scene()
+    cam = _cameras()[0]
+    depth = np.full((cam.height, cam.width), 3.3, np.float32)
+    depth[:, : cam.width // 2] = np.inf
+    under = UnderLayer(np.zeros((cam.height, cam.width, 3), np.float32),
+                       np.zeros((cam.height, cam.width), np.float32), depth)
+    outs = []
+    for key in (SortKey.EXACT, SortKey.GPU):
+        settings = _settings(key)
+        r = QuadRenderer(ctx, scene, settings)
+        try:
+            view = View.of(cam, settings, scene)
+            outs.append((r.render(view, with_layers(Layer.DEPTH)), r.render(view, under=under)))
+            assert r.last_times.device_order is (key is SortKey.GPU)
+        finally:
+            r.release()
+    (a_depth, a_under), (b_depth, b_under) = outs
+    np.testing.assert_array_equal(b_depth.rgba, a_depth.rgba)
+    np.testing.assert_array_equal(b_depth.expected_depth(), a_depth.expected_depth())
+    np.testing.assert_array_equal(b_under.rgba, a_under.rgba)

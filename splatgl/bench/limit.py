@@ -17,7 +17,8 @@ from ..gl.shaders import ProgramCache
 from ..output.layers import RenderOutput
 from ..renderers.quad import QuadRenderer, QuadTimes, composite
 from ..model.scene import Scene
-from ..model.settings import Preprocess, RenderSettings
+from ..gl.transfers import transfers
+from ..model.settings import Preprocess, RenderSettings, SortKey
 
 
 class LimitRenderer:
@@ -32,13 +33,18 @@ class LimitRenderer:
         self.ctx = ctx
         self.scene = scene
         self.settings = settings
-        self.quad = QuadRenderer(ctx, scene, dataclasses.replace(settings, preprocess=Preprocess.COMPUTE),
-                                 programs)
+        # the CPU order: the trivial draw needs the count on the host (the device order keeps it
+        # in its draw command), and the order does not change what a limit frame costs
+        self.quad = QuadRenderer(ctx, scene, dataclasses.replace(
+            settings, preprocess=Preprocess.COMPUTE,
+            sort_key=SortKey.EXACT if settings.sort_key is SortKey.GPU else settings.sort_key),
+            programs)
         self.program = self.quad.programs.cache.program("limit.vert", "limit.frag")
         self.vao = ctx.vertex_array(self.program, [])
         self.last_times: QuadTimes | None = None
 
     def render(self, view: View) -> RenderOutput:
+        before = transfers(self.ctx).snapshot()
         count, _ = self.quad.prepare(view)   # cull, sort, upload, pre-pass: untimed
         target = self.quad.target(view)
         self.program["u_viewport"].value = (float(view.width), float(view.height))
@@ -55,7 +61,8 @@ class LimitRenderer:
         t1 = time.perf_counter()
         rgba = target.read()
         t2 = time.perf_counter()
-        self.last_times = QuadTimes(0.0, 0.0, 0.0, 0.0, t1 - t0, t2 - t1, count)
+        self.last_times = QuadTimes(0.0, 0.0, 0.0, 0.0, t1 - t0, t2 - t1, count,
+                                    transfers=transfers(self.ctx).snapshot().since(before))
         return RenderOutput(composite(rgba, self.settings.background), np.zeros(rgba.shape[:2], np.float32))
 
     def release(self) -> None:

@@ -239,7 +239,8 @@ def bench_scene(renderer: Renderer, name: str, scene: Scene, options: BenchOptio
             times.append((time.perf_counter() - t0) * 1e3)
             last = getattr(runner.impl, "last_times", None)
             stages.append(_stage_ms(last))
-            drawn.append(getattr(last, "drawn", None))
+            d = getattr(last, "drawn", None)
+            drawn.append(None if d is None or d < 0 else d)   # < 0: counted on the device
             occluded.append(getattr(last, "occlusion_culled", None))
             batched.append(bool(getattr(last, "batched", False)))
             estimates.append(getattr(last, "fragments_estimate", 0))

@@ -42,6 +42,9 @@ class SortKey(enum.Enum):
     GPU: the EXACT keys sorted on the device by a compute-shader radix sort
         (:mod:`splatgl.gl.radix_sort`): the identical order.  On llvmpipe the CPU sort is
         faster (``splatgl bench --scale`` measures both), so EXACT stays the default.
+        The quad path keeps the whole order on the device where the view's cull is the
+        side planes (pinhole, OpenCV; :mod:`splatgl.renderers.quad_device`): cull, keys,
+        sort and the draw count in compute shaders, nothing per splat crossing the bus.
         The tile renderer reads EXACT (its CPU order) and GPU (the scan, keys, sort and tile
         ranges on the device, :mod:`splatgl.renderers.tile_device`: the identical image); it
         refuses BUCKET16.
