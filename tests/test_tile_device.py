@@ -130,6 +130,27 @@ def test_long_lists_take_device_sized_passes(ctx, monkeypatch):
     _same(a, b, depth=True)
 
 
+def test_gpu_shape_one_pass_one_band(ctx, monkeypatch):
+    """On a GPU (no loop limit) the device order blends every list in one pass over the whole
+    image: forced here on llvmpipe with a small chunk the CPU order needs passes for, the same
+    image."""
+    monkeypatch.setattr(tile_mod, "TILE_LIST_CHUNK", 100)
+    monkeypatch.setattr(tile_mod, "RASTER_BAND_TILES", 8)
+    scene = random_scene(3000, 11, degree=1, **IN_DEPTH)
+    cpu = TileRenderer(ctx, scene, RenderSettings())
+    dev = TileRenderer(ctx, scene, GPU)
+    try:
+        dev.device.software = False
+        grid = (8, 6)
+        assert dev.device.band(grid) == 6 and dev.device.slots(48)[1] == 1
+        _same(draw(cpu, CAM, depth=True), draw(dev, CAM, depth=True), depth=True)
+        # the 6 stage laps, the status word, colour and depth: no finishes between bands
+        assert dev.last_times.transfers.syncs == 9
+    finally:
+        cpu.release()
+        dev.release()
+
+
 def test_moving_camera_and_empty_view(ctx):
     scene = random_scene(1500, 9, degree=1, **IN_DEPTH)
     cpu, dev = TileRenderer(ctx, scene, RenderSettings()), TileRenderer(ctx, scene, GPU)

@@ -103,7 +103,7 @@ class TileRenderer(Registered):
     def _defines(self, layout: KeyLayout | None = None) -> dict[str, object]:
         d: dict[str, object] = {"TILE_LIST_CHUNK": TILE_LIST_CHUNK, "TILE_EMIT_CHUNK": TILE_EMIT_CHUNK}
         d.update(self._switches)
-        d.update({"DEVICE_SORT": 1} if self.device else {})
+        d.update(dict(self.device.chunks(), DEVICE_SORT=1) if self.device else {})
         if layout is not None and layout.packed:
             d["KEY_PACKED"] = 1
         if self.surfel:
@@ -211,7 +211,7 @@ class TileRenderer(Registered):
                   u_background=background, u_index_mask=layout.index_mask)
         cam = view.camera
         self._set(prog, u_rays=(cam.cx, cam.cy, cam.fx, cam.fy))   # the per-pixel order's rays
-        band = max(1, RASTER_BAND_TILES // grid[0])  # tile rows per dispatch
+        band = self.device.band(grid) if self.device else max(1, RASTER_BAND_TILES // grid[0])
         self._set(prog, u_passes=passes)
         for row0 in range(0, grid[1], band):
             self._set(prog, u_tile_row0=row0)

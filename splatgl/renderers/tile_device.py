@@ -32,6 +32,7 @@ import numpy as np
 from ..constants import TILE_KEYS_PER_SPLAT, TILE_SCAN_ITEMS
 from ..errors import SplatglError
 from ..gl.bindings import (TILE_BINDING_SORT_KEYS, TILE_BINDING_SORT_VALUES, TILE_SCAN_GROUP)
+from ..gl.egl_devices import is_software_renderer
 from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
@@ -48,8 +49,6 @@ _SORT_COUNT = 8
 _MIN_CAPACITY = 4096
 
 
-def _chunks() -> dict[str, int]:
-    return {"TILE_EMIT_CHUNK": TILE_EMIT_CHUNK, "TILE_LIST_CHUNK": TILE_LIST_CHUNK}
 
 
 def scan_twin(counts: np.ndarray) -> tuple[np.ndarray, int]:
@@ -79,6 +78,11 @@ class DeviceOrder:
         #: Keys the key buffers hold (grown after an overflow, never shrunk).
         self.capacity = capacity or max(_MIN_CAPACITY, TILE_KEYS_PER_SPLAT * n_splats)
         self.sorter = RadixSorter(ctx, programs)
+        #: A software renderer (llvmpipe) ends an invocation's loops after 65535 iterations,
+        #: so long tile lists take passes of TILE_LIST_CHUNK entries there, and the image is
+        #: drawn in bands with a finish between them (Ctrl-C); a GPU blends every list in one
+        #: pass over the whole image (no mostly empty pass dispatches, no finishes).
+        self.software = is_software_renderer(ctx.info.get("GL_RENDERER", ""))
         #: Frames drawn again after an overflow (for tests and the timings).
         self.retries = 0
         #: Keys of the last frame (its status word).
@@ -102,7 +106,7 @@ class DeviceOrder:
         """(emit dispatches, rasterize passes) the state holds arguments for: enough for the
         largest rectangle (every tile) and the longest list (every splat, or every key)."""
         emit = max(1, -(-n_tiles // TILE_EMIT_CHUNK))
-        raster = max(1, -(-min(self.count, self.capacity) // TILE_LIST_CHUNK))
+        raster = max(1, -(-min(self.count, self.capacity) // self.list_chunk))
         return emit, raster
 
     def ensure(self, bufs: dict, n_tiles: int) -> None:
@@ -121,6 +125,19 @@ class DeviceOrder:
         self.sorter.reserve(self.capacity)
 
     @property
+    def list_chunk(self) -> int:
+        """Entries of a tile's list one rasterize pass blends at most."""
+        return TILE_LIST_CHUNK if self.software else 1 << 30
+
+    def band(self, grid: tuple[int, int]) -> int:
+        """Tile rows one rasterize dispatch covers."""
+        return max(1, RASTER_BAND_TILES // grid[0]) if self.software else grid[1]
+
+    def chunks(self) -> dict[str, int]:
+        """The chunk defines of the device order's programs."""
+        return {"TILE_EMIT_CHUNK": TILE_EMIT_CHUNK, "TILE_LIST_CHUNK": self.list_chunk}
+
+    @property
     def blocks(self) -> int:
         return max(1, -(-self.count // (TILE_SCAN_GROUP * TILE_SCAN_ITEMS)))
 
@@ -131,7 +148,7 @@ class DeviceOrder:
         values.bind_to_storage_buffer(TILE_BINDING_SORT_VALUES)
 
     def scan(self, n_tiles: int) -> None:
-        prog = self.programs.compute("tile_scan.comp", _chunks())
+        prog = self.programs.compute("tile_scan.comp", self.chunks())
         emit, _ = self.slots(n_tiles)
         for name, value in (("u_count", self.count), ("u_blocks", self.blocks),
                             ("u_capacity", self.capacity), ("u_emit_slots", emit),
@@ -159,7 +176,7 @@ class DeviceOrder:
         """The two sorts and the key passes; ``rebind()`` binds the renderer's buffers again
         after each sort (the sorter binds its own at overlapping points); ``lap()`` ends the
         sort's time and starts the ranges'."""
-        prog = self.programs.compute("tile_ranges.comp", _chunks())
+        prog = self.programs.compute("tile_ranges.comp", self.chunks())
         emit, raster = self.slots(n_tiles)
         for name, value in (("u_tiles", n_tiles), ("u_raster_args", raster_args),
                             ("u_emit_slots", emit), ("u_raster_slots", raster)):
@@ -214,7 +231,7 @@ def device_frame(r, view, grid: tuple[int, int], lap, clock, stages: bool):
     dev, n_tiles = r.device, grid[0] * grid[1]
     layout = KeyLayout(32, 0, False)       # the reference's: the sort needs no packing
     state = lambda: r._bufs["STATE"].buf             # noqa: E731
-    band = max(1, RASTER_BAND_TILES // grid[0])
+    band = dev.band(grid)
     while True:
         dev.ensure(r._bufs, n_tiles)
         r._bind_all()
