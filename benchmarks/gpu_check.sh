@@ -12,7 +12,19 @@
 #   --steps LIST   the steps after the renderer check (which always runs), comma-separated, of
 #                  tests,bench,early-stop,scale (default all); with --steps OUT_DIR may hold an
 #                  earlier run, whose files of those steps are replaced
-#   --quick        tiny sizes and a few tests, to try the script itself (no benchmark figures)
+#   --quick        issue 40's figures in under 8 minutes, each saved as it is made (no tests):
+#                  the radix sort alone (100k and --sizes keys), both renderers with --sort exact
+#                  and --sort gpu at --sizes splats (default 1M,6M; scenes built from the shared
+#                  files) and --resolutions (default 1280x720,1920x1080) with their stage times
+#                  and transfers (figures.jsonl, a line a figure), then the viewer's flight
+#                  (headless) on --flights (default donut,biker,guitar,large: the largest size);
+#                  a time guard (--seconds, default 450) skips what would not finish.  OUT_DIR
+#                  defaults to docs/results/gpu-<device>-<date>/
+#   --wheelhouse DIR  with --quick: install from the wheels of benchmarks/gpu_wheels.sh (no
+#                  package index) into a folder on PYTHONPATH, over $PYTHON's own packages
+#   --sizes L, --resolutions L, --flights L, --seconds N   --quick's sizes (e.g. 0.02M,0.05M
+#                  to try it on llvmpipe), resolutions (WxH,...), flights and time guard
+#   --smoke        tiny sizes and a few tests, to try the script itself (no benchmark figures)
 #   --dry-run      print the commands; run and check nothing
 # environment:
 #   SPLATGL_SHARED_SCENES  the shared real scenes (default ../shared/scenes beside the repository)
@@ -37,22 +49,37 @@ usage() { sed -n '2,/^# shellcheck/{/^# shellcheck/d;s/^# \{0,1\}//;p}' "${BASH_
 bad_usage() { echo "gpu_check: error: $*" >&2; exit 2; }
 die() { echo "gpu_check: error: $*" >&2; exit 1; }
 
-venv="$REPO/.venv" install=1 steps=$ALL_STEPS steps_given=0 quick=0 dry=0 out=""
+venv="$REPO/.venv" install=1 steps=$ALL_STEPS steps_given=0 quick=0 dry=0 out="" full=0
+wheelhouse="" sizes=1M,6M resolutions=1280x720,1920x1080 flights=donut,biker,guitar,large seconds=450
 while [ $# -gt 0 ]; do
   case "$1" in
     --venv) [ $# -ge 2 ] || bad_usage "--venv needs a folder"; venv=$2; shift 2 ;;
     --no-install) install=0; shift ;;
     --steps) [ $# -ge 2 ] || bad_usage "--steps needs a list"; steps=$2; steps_given=1; shift 2 ;;
-    --quick) quick=1; shift ;;
+    --smoke) quick=1; shift ;;
+    --quick) full=1; shift ;;
+    --wheelhouse) [ $# -ge 2 ] || bad_usage "--wheelhouse needs a folder"; wheelhouse=$(realpath -m "$2"); shift 2 ;;
+    --sizes) [ $# -ge 2 ] || bad_usage "--sizes needs a list"; sizes=$2; shift 2 ;;
+    --resolutions) [ $# -ge 2 ] || bad_usage "--resolutions needs a list"; resolutions=$2; shift 2 ;;
+    --flights) [ $# -ge 2 ] || bad_usage "--flights needs a list"; flights=$2; shift 2 ;;
+    --seconds) [[ $# -ge 2 && $2 =~ ^[0-9]+$ ]] || bad_usage "--seconds needs a whole number"; seconds=$2; shift 2 ;;
     --dry-run) dry=1; shift ;;
     -h|--help) usage; exit 0 ;;
     -*) bad_usage "unknown option $1 (see --help)" ;;
     *) [ -z "$out" ] || bad_usage "one output folder, got '$out' and '$1'"; out=$1; shift ;;
   esac
 done
+if [ -z "$out" ] && [ "$full" -eq 1 ]; then   # docs/results/gpu-<device>-<date>
+  device=$( (nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null || true) | head -1 \
+    | tr 'A-Z' 'a-z' | sed 's/nvidia//g; s/[^a-z0-9]\{1,\}/-/g; s/^-//; s/-$//')
+  out="$REPO/docs/results/gpu-${device:-software}-$(date -u +%Y-%m-%d)"
+fi
 [ -n "$out" ] || bad_usage "no output folder (usage: benchmarks/gpu_check.sh [options] OUT_DIR)"
+[ -z "$wheelhouse" ] || [ "$full" -eq 1 ] || bad_usage "--wheelhouse goes with --quick"
+[ "$full" -eq 0 ] || [ "$quick" -eq 0 ] || bad_usage "--quick or --smoke, not both"
+[ "$full" -eq 0 ] || steps=quick
 for s in ${steps//,/ }; do
-  case ",$ALL_STEPS,renderer," in *",$s,"*) ;; *) bad_usage "--steps: unknown step '$s' (steps: $ALL_STEPS)" ;; esac
+  case ",$ALL_STEPS,renderer,quick," in *",$s,"*) ;; *) bad_usage "--steps: unknown step '$s' (steps: $ALL_STEPS)" ;; esac
 done
 wants() { case ",$steps," in *",$1,"*) return 0 ;; *) return 1 ;; esac; }
 
@@ -89,6 +116,8 @@ step() {
   set -e
   if [ "$rc" -eq 0 ]; then
     echo "$name: ok ($((SECONDS - t0)) s)" >> "$out/summary.txt"
+  elif [ "$rc" -eq 3 ] && grep -q '^skipped: the time guard' "$log"; then
+    echo "$name: skipped (the time guard, --seconds $seconds)" >> "$out/summary.txt"
   else
     echo "$name: FAILED (exit $rc, $((SECONDS - t0)) s; see $(basename "$log"))" >> "$out/summary.txt"
     failed=1
@@ -106,14 +135,14 @@ if [ "$dry" -eq 0 ]; then
     [ "$allow_software" = 1 ] || die "nvidia-smi not found: this check is for a machine with an NVIDIA GPU and its driver (SPLATGL_GPU_CHECK_ALLOW_SOFTWARE=1 tries it without one)"
     echo "gpu_check: warning: no nvidia-smi (allowed by SPLATGL_GPU_CHECK_ALLOW_SOFTWARE=1)" >&2
   fi
-  if wants tests || wants bench || wants early-stop || wants scale; then
+  if wants tests || wants bench || wants early-stop || wants scale || wants quick; then
     for f in "${REAL_FILES[@]}"; do
       [ -f "$scenes/$f" ] || die "$scenes/$f: shared real scene not found (set SPLATGL_SHARED_SCENES to the shared scenes folder)"
     done
   fi
   mkdir -p "$out"
   { echo "gpu_check $(date -u +%Y-%m-%dT%H:%M:%SZ) on $(hostname)"
-    echo "repository $REPO, shared scenes $scenes, steps $steps$([ "$quick" -eq 1 ] && echo ' (--quick)')"
+    echo "repository $REPO, shared scenes $scenes, steps $steps$([ "$quick" -eq 1 ] && echo ' (--smoke)')"
   } >> "$out/summary.txt"
 fi
 commit=$(git -C "$REPO" rev-parse HEAD 2>/dev/null || echo unknown)
@@ -134,7 +163,16 @@ install_env() {
   run "$venv/bin/python" -m pip install -q --upgrade pip \
     && run "$venv/bin/python" -m pip install '.[test,fast,bench]'
 }
-if [ "$install" -eq 1 ]; then
+install_wheels() {   # no package index: the wheels of benchmarks/gpu_wheels.sh
+  run "$PYTHON" -m pip install -q --no-index --find-links "$wheelhouse" --no-deps --no-compile \
+    --upgrade --target "$site" "$wheelhouse"/*.whl
+}
+if [ -n "$wheelhouse" ]; then
+  site=${SPLATGL_GPU_CHECK_SITE:-/tmp/splatgl-gpu-site}
+  step install "$out/install.log" install_wheels || die "the install failed; see $out/install.log"
+  export PYTHONPATH="$site${PYTHONPATH:+:$PYTHONPATH}"
+  py=$(command -v "$PYTHON") || die "$PYTHON not found"
+elif [ "$install" -eq 1 ]; then
   step install "$out/install.log" install_env || die "the install failed; see $out/install.log"
   py="$venv/bin/python"
 else
@@ -146,6 +184,48 @@ probe=("$py" -m splatgl.commands._bench_tools gpu-probe --out "$out/machine.json
 [ "$allow_software" = 1 ] && probe+=(--allow-software)
 step renderer "$out/machine.txt" run "${probe[@]}" \
   || die "the GL renderer check failed (see $out/machine.txt); nothing else was run"
+
+# ---------------------------------------------------------------- --quick: issue 40's figures
+# guarded CMD...: run CMD under what is left of the time guard (--seconds from the start); a
+# step that would start with under 20 s left is skipped (marked so in summary.txt).
+guarded() {
+  local left=$((seconds - SECONDS))
+  if [ "$left" -lt 20 ]; then echo "skipped: the time guard (--seconds $seconds)"; return 3; fi
+  run timeout --kill-after=5 "$left" "$@"
+}
+quick_figures() {
+  local cache=${SPLATGL_GPU_CHECK_SCENES:-/tmp/splatgl-gpu-scenes} files=() f name
+  step radix "$out/radix.txt" guarded "$py" benchmarks/radix_sort.py --sizes "100k,$sizes" \
+    --repeats 5 --no-old --json "$out/radix.json" || true
+  step scenes "$out/scenes.txt" guarded "$py" benchmarks/gpu_figures.py scene "$sizes" --cache "$cache" || true
+  [ "$dry" -eq 1 ] || mapfile -t files < <(grep '\.ply$' "$out/scenes.txt" || true)
+  [ "$dry" -eq 0 ] || files=("$cache/SIZE.ply")
+  if [ ${#files[@]} -gt 0 ]; then
+    step renderers "$out/renderers.txt" guarded "$py" benchmarks/gpu_figures.py renderers \
+      "${files[@]}" --resolutions "$resolutions" --frames 5 --out "$out/figures.jsonl" \
+      --deadline "$(( $(date +%s) + seconds - SECONDS ))" || true
+  fi
+  local res=${resolutions%%,*}
+  for name in ${flights//,/ }; do
+    case "$name" in
+      donut) f="$scenes/ply/donut_sh0.ply" ;;
+      biker) f="$scenes/compressed_ply/biker.compressed.ply" ;;
+      guitar) f="$scenes/compressed_ply/guitar.compressed.ply" ;;
+      large) [ ${#files[@]} -gt 0 ] || continue; f=${files[-1]} ;;
+      *) f=$name; name=$(basename "$name" .ply) ;;
+    esac
+    step "flight-$name" "$out/flight-$name.txt" guarded "$py" -m splatgl bench --interactive "$f" \
+      --width "${res%x*}" --height "${res#*x}" --out "$out/flight-$name" --force || true
+  done
+}
+if wants quick; then
+  quick_figures
+  if [ "$dry" -eq 0 ]; then
+    echo "== summary ($out/summary.txt)"
+    cat "$out/summary.txt"
+  fi
+  exit "$failed"
+fi
 
 # ---------------------------------------------------------------- tests and benchmarks
 if wants tests; then

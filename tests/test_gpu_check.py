@@ -61,6 +61,38 @@ def test_dry_run_prints_every_step_and_writes_nothing(tmp_path):
     assert not out.exists()
 
 
+def test_quick_dry_run_gathers_issue_40s_figures_from_wheels(tmp_path):
+    """--quick (issue 40 item 6): installs from the wheelhouse with no package index, then the
+    radix sort alone, the scenes, both renderers with both orders at both resolutions and the
+    flights, each under the time guard; without OUT_DIR into docs/results/gpu-<device>-<date>."""
+    wheels = tmp_path / "wheels"
+    r = _run(["--dry-run", "--quick", "--wheelhouse", str(wheels)], tmp_path)
+    assert r.returncode == 0, r.stderr
+    probe = next(line for line in r.stdout.splitlines() if "gpu-probe" in line)
+    out = str(Path(probe.split("--out ")[1].split()[0]).parent)
+    assert Path(out).parent == REPO / "docs" / "results" and Path(out).name.startswith("gpu-")
+    py = sys.executable
+    expected = [
+        f"+ {py} -m pip install -q --no-index --find-links {wheels} --no-deps",
+        f"+ {py} -m splatgl.commands._bench_tools gpu-probe --out {out}/machine.json",
+        f"{py} benchmarks/radix_sort.py --sizes 100k,1M,6M --repeats 5 --no-old --json {out}/radix.json",
+        f"{py} benchmarks/gpu_figures.py scene 1M,6M --cache",
+        f"{py} benchmarks/gpu_figures.py renderers /tmp/splatgl-gpu-scenes/SIZE.ply "
+        f"--resolutions 1280x720,1920x1080 --frames 5 --out {out}/figures.jsonl --deadline",
+        f"{py} -m splatgl bench --interactive {tmp_path}/ply/donut_sh0.ply --width 1280 --height 720 "
+        f"--out {out}/flight-donut",
+        f"--out {out}/flight-guitar",
+        f"--out {out}/flight-large",
+    ]
+    at = 0
+    for want in expected:  # in this order
+        found = [i for i, line in enumerate(r.stdout.splitlines()) if i >= at and want in line]
+        assert found, f"{want!r} not printed (after line {at}):\n{r.stdout}"
+        at = found[0] + 1
+    assert "timeout --kill-after=5" in r.stdout and "-m pytest" not in r.stdout
+    assert not Path(out).exists()
+
+
 def test_dry_run_steps_and_no_install(tmp_path):
     r = _run(["--dry-run", "--no-install", "--steps", "bench", str(tmp_path / "o")], tmp_path)
     assert r.returncode == 0, r.stderr
@@ -72,6 +104,8 @@ def test_dry_run_steps_and_no_install(tmp_path):
     (["--steps", "bench,lod", "o"], "--steps: unknown step 'lod' (steps: tests,bench,early-stop,scale)"),
     (["--frobnicate", "o"], "unknown option --frobnicate (see --help)"),
     ([], "no output folder (usage: benchmarks/gpu_check.sh [options] OUT_DIR)"),
+    (["--quick", "--smoke", "o"], "--quick or --smoke, not both"),
+    (["--wheelhouse", "w", "o"], "--wheelhouse goes with --quick"),
 ])
 def test_bad_usage_is_one_line_exit_2(tmp_path, args, message):
     r = _run(args, tmp_path)
