@@ -244,3 +244,11 @@ def test_peak_memory_is_a_few_blocks_not_the_scene(tmp_path, monkeypatch):
     assert (tmp_path / "streamed.ply").read_bytes() == (tmp_path / "memory.ply").read_bytes()
     assert peaks["memory"] > 10e6
     assert peaks["streamed"] < 2e6, peaks
+
+
+def test_convert_to_another_format_over_the_bound_says_it_loads_whole(tmp_path, capsys):
+    src = _ply(tmp_path, _scene(100))
+    assert main(["convert", str(src), str(tmp_path / "o.spz"), "--memory", "1K"]) == 0
+    err = capsys.readouterr().err
+    assert err == (f"splatgl: warning: {src}: converted in memory (about 18 KiB, over --memory "
+                   "1 KiB): only a binary PLY written as .ply streams\n"), err

@@ -22,7 +22,7 @@ from ..model.transform import ModelTransform
 from ..writing.outputs import check_output_path
 from ..progress import default_progress
 from .pipeline import Step, apply_operations
-from .streamed import IN_MEMORY_COPIES
+from .streamed import IN_MEMORY_COPIES, memory_bound
 from .streamed_edit import plan_edit
 from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shared_extras,
                         transform_scene)
@@ -83,7 +83,8 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
             first step), instead of refusing such files.
         allow_empty: write a scene of zero splats instead of refusing it.
         force: replace an existing output.  dry_run: do everything but write.
-        memory: bytes (None: no bound); binary PLY inputs whose scene would take more are
+        memory: bytes (None: ``--memory``'s default, half this machine's RAM); binary PLY
+            inputs whose scene would take more are
             edited a block at a time into a PLY (:mod:`splatgl.edit.streamed_edit`; the same
             file), other inputs and outputs load whole (a note says so).
     Everything that can be checked before reading is checked first (output format and folder,
@@ -131,9 +132,9 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
     _check_finite(result)
     _refuse_empty(steps, result.count, allow_empty, writer, output)
     need = IN_MEMORY_COPIES * sum(scene_bytes(n, sh_coeff_count(result.sh_degree)) for n in counts)
-    if memory is not None and need > memory:
+    if need > memory_bound(memory):
         notes.append(f"read and edited in memory (about {format_size(need)}, over --memory "
-                     f"{format_size(memory)}): only binary PLY inputs written as .ply stream")
+                     f"{format_size(memory_bound(memory))}): only binary PLY inputs written as .ply stream")
     size = None
     if not dry_run:
         try:

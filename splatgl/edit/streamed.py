@@ -28,7 +28,7 @@ from ..errors import SceneFormatError, SplatglError
 from ..formats import ply
 from ..formats._memory import ACTIVATE_BYTES, scene_bytes
 from ..formats.ply_write import _header, _ordered, scene_to_vertices
-from ..lod.budget import MIN_WORKING, RESERVE, format_size, resident_now
+from ..lod.budget import MIN_WORKING, RESERVE, default_budget, format_size, resident_now
 from ..lod.ply_rows import PlyRows, streamable
 from ..model.scene import InvalidRowsDropped, Scene, SplatKind, activate
 from ..writing.atomic import atomic_target, size_problem
@@ -47,6 +47,12 @@ NORMALS = ("nx", "ny", "nz")
 #: What the decision compares with the budget: this many times the decoded scene (the input
 #: and the edited copy the in-memory path holds at once).
 IN_MEMORY_COPIES = 2
+
+
+def memory_bound(memory: int | None) -> int:
+    """Bytes of a ``memory`` argument: None is the commands' default (``--memory``'s, a fraction
+    of this machine's RAM: :func:`splatgl.lod.budget.default_budget`)."""
+    return default_budget()[0] if memory is None else int(memory)
 
 
 def block_rows(budget: int, record_bytes: int, values: int, held: int | None = None) -> int:

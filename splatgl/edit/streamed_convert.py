@@ -20,7 +20,7 @@ from ..formats.convert import Conversion, conversion_error, convert
 from ..lod.budget import format_size
 from ..writing.outputs import check_output_path
 from .operations import ShDegree
-from .streamed import IN_MEMORY_COPIES, Source
+from .streamed import IN_MEMORY_COPIES, Source, memory_bound
 from .streamed_edit import plan_edit
 
 #: The per-attribute errors :func:`conversion_error` gives as ``{"max", "mean"}``.
@@ -30,10 +30,11 @@ _MEASURED = ("position", "scale", "opacity", "rotation", "color", "sh_rest")
 def convert_file(source, output, *, memory: int | None = None, drop_invalid: bool = False,
                  sh_degree: int | None = None, force: bool = False, progress=None,
                  spz_axes: str | None = None, **writer_options) -> Conversion:
-    """:func:`splatgl.formats.convert.convert`, streamed where ``memory`` (bytes; None: no
-    bound) is below what loading the input would take and the input and output are binary
+    """:func:`splatgl.formats.convert.convert`, streamed where ``memory`` (bytes; None: the
+    default, half this machine's RAM) is below what loading the input would take and the input and output are binary
     PLY (see the module notes); the same file and report either way."""
     source, output = Path(source), Path(output)
+    memory = memory_bound(memory)
     streamed = None
     if spz_axes is None:
         writer_for(output)  # an unsupported extension: the converter's one line first
@@ -47,7 +48,7 @@ def convert_file(source, output, *, memory: int | None = None, drop_invalid: boo
         result = convert(source, output, drop_invalid=drop_invalid, sh_degree=sh_degree,
                          force=force, progress=progress, spz_axes=spz_axes, **writer_options)
         need = IN_MEMORY_COPIES * scene_bytes(result.count, (result.sh_degree_in + 1) ** 2)
-        if memory is not None and need > memory:
+        if need > memory:
             warnings.warn(f"{source}: converted in memory (about {format_size(need)}, over "
                           f"--memory {format_size(memory)}): only a binary PLY written as .ply "
                           "streams", stacklevel=2)

@@ -25,15 +25,18 @@ from .operations import ROW_TESTS, Filter, ShDegree
 from .pipeline import Step, select
 from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shared_extras,
                         transform_scene)
-from .streamed import IN_MEMORY_COPIES, NORMALS, block_rows, sources_of, vertex_dtype, write_blocks
+from .streamed import (IN_MEMORY_COPIES, NORMALS, block_rows, memory_bound, sources_of,
+                       vertex_dtype, write_blocks)
 
 
 def plan_edit(inputs, writer, operations, transforms, memory: int | None,
               drop_invalid: bool, writer_options: dict) -> "StreamedEdit | None":
-    """The streamed edit of ``inputs`` when ``memory`` (bytes; None: never) is below what the
+    """The streamed edit of ``inputs`` when ``memory`` (bytes; None: the default, half this
+    machine's RAM, :func:`~.streamed.memory_bound`) is below what the
     in-memory path would hold and every input is a binary PLY and the output a PLY; None to
     edit in memory.  Floaters and decimation over the bound are refused in one line."""
-    if memory is None or (writer is not None and (writer.NAME != "ply" or writer_options)):
+    memory = memory_bound(memory)
+    if writer is not None and (writer.NAME != "ply" or writer_options):
         return None
     sources = sources_of(inputs, drop_invalid)
     if sources is None:

@@ -24,7 +24,7 @@ from ..lod.ply_rows import BoxFinder, float_keys, key_floats
 from ..model.settings import RenderSettings, resolve_near
 from .attributes import ATTRIBUTES, Rows, names_for
 from .statistics import PERCENTILES, overdraw, _fragments
-from .streamed import IN_MEMORY_COPIES, block_rows, sources_of
+from .streamed import IN_MEMORY_COPIES, block_rows, memory_bound, sources_of
 
 _SIGN = np.uint64(1 << 63)
 
@@ -113,9 +113,11 @@ class Quantiles:
 
 def info_streamed(path, memory: int | None, drop_invalid: bool = False, stats: bool = False):
     """``(scene_info, attribute statistics or None, overdraw or None)`` of the binary PLY
-    ``path`` read a block at a time, where ``memory`` (bytes) is below what loading it takes;
+    ``path`` read a block at a time, where ``memory`` (bytes; None: the default, half this
+    machine's RAM) is below what loading it takes;
     None to load it whole (another format, or it fits)."""
-    sources = sources_of([path], drop_invalid) if memory is not None else None
+    memory = memory_bound(memory)
+    sources = sources_of([path], drop_invalid)
     if sources is None or IN_MEMORY_COPIES * sources[0].in_memory_bytes() <= memory:
         return None
     src = sources[0]
