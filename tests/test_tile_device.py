@@ -281,3 +281,20 @@ def test_sort_gpu_on_the_cpu_renderer_names_both_readers(tmp_path, capsys):
     assert err == ("splatgl: error: --sort gpu applies to the quad and tile renderers only, not "
                    "the cpu renderer, which would ignore it (use --renderer quad or tile, or "
                    "leave --sort out)\n")
+
+
+def test_bench_tile_row_takes_its_part_of_sort():
+    """``splatgl bench --sort bucket16``: the tile row draws its exact order (it used to ignore
+    --sort, and refuses bucket16 now); ``--sort gpu``: the tile row runs the device order."""
+    from splatgl.api import Renderer
+    from splatgl.bench.configs import BenchConfig, RowKind
+    from splatgl.bench.runner import _Runner
+    scene = load_scene(REPO / "scenes" / "demo.ply")
+    r = Renderer()
+    try:
+        for key, device in ((SortKey.BUCKET16, False), (SortKey.GPU, True)):
+            row = BenchConfig("tile", "renderer", RowKind.TILE, RenderSettings(sort_key=key))
+            run = _Runner(r, scene, row)
+            assert (run.impl.device is not None) == device
+    finally:
+        r.close()

@@ -23,6 +23,7 @@ from ..model.settings import GpuStorage, RendererKind, RenderSettings
 from ..order.sort import depth_sort
 from .configs import BenchConfig, RowKind, configurations
 from .limit import LimitRenderer
+from ..renderers.registry import own_settings
 
 Progress = Callable[[int, int, str], None]
 
@@ -148,7 +149,8 @@ class _Runner:
         if config.kind is RowKind.LIMIT:
             self.impl = LimitRenderer(renderer.ctx, scene, config.settings, renderer.programs)
         elif config.kind in (RowKind.QUAD, RowKind.TILE, RowKind.CPU):
-            self.impl = renderer.renderer_for(scene, config.settings, RendererKind(config.kind.value))
+            kind = RendererKind(config.kind.value)   # its own part of the settings (--sort)
+            self.impl = renderer.renderer_for(scene, own_settings(config.settings, kind), kind)
         else:
             self.impl = None
         self.scene = scene
