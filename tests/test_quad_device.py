@@ -258,3 +258,22 @@ def test_depth_layer_and_geometry_under_are_identical(ctx):
     np.testing.assert_array_equal(b_depth.rgba, a_depth.rgba)
     np.testing.assert_array_equal(b_depth.expected_depth(), a_depth.expected_depth())
     np.testing.assert_array_equal(b_under.rgba, a_under.rgba)
+
+
+def test_the_viewers_colour_frame_reads_nothing_back(gl_renderer):
+    """The window's own quad frame (viewer/frames.py, no budget) with ``--sort gpu``: its
+    status line says the order stayed on the device and nothing was read back."""
+    from splatgl.model.settings import RendererKind
+    from splatgl.viewer.frames import ViewMode, render_frame
+
+    scene = _scene()
+    settings = RenderSettings(sort_key=SortKey.GPU)
+    for k in range(2):   # the second frame: the programs already made
+        cam = Camera.from_fov(96, 72, 55.0, look_at(np.array([0.4 + 0.1 * k, -0.3, -3.2]),
+                                                    np.zeros(3)))
+        frame = render_frame(gl_renderer, scene, cam, settings, RendererKind.QUAD, ViewMode.COLOR)
+    assert frame.texture is not None and frame.image is None
+    assert frame.splats.startswith("splats counted on the device / 4,000; per-frame uploads ")
+    assert "read back 0 bytes" in frame.splats
+    uploaded = int(frame.splats.split("per-frame uploads ")[1].split(" bytes")[0].replace(",", ""))
+    assert uploaded <= UPLOAD_BUDGET
