@@ -211,7 +211,8 @@ def test_cpu_order_transfers_are_counted(ctx):
 
 def test_bucket16_is_refused_by_the_tile_renderer(ctx):
     scene = random_scene(10, 1, degree=0, **IN_DEPTH)
-    with pytest.raises(SplatglError, match="--sort bucket16 applies to the quad path only"):
+    with pytest.raises(SplatglError, match="--sort bucket16 applies to the quad renderer only, "
+                                           "not the tile renderer"):
         TileRenderer(ctx, scene, RenderSettings(sort_key=SortKey.BUCKET16))
 
 
@@ -263,7 +264,7 @@ def test_cli_renders_the_cpu_orders_image(tmp_path, capsys):
 
 @pytest.mark.parametrize("renderer, message", [
     ("tile", "splatgl: error: --sort bucket16 applies to the quad renderer only, not the tile "
-             "renderer, which would ignore it (use --renderer quad, or leave --sort out)"),
+             "renderer (use --renderer quad)"),
 ])
 def test_bucket16_on_the_tile_renderer_is_refused_in_one_line(tmp_path, capsys, renderer, message):
     rc = main(["render", str(REPO / "scenes" / "demo.ply"), "-o", str(tmp_path / "x.png"),
@@ -298,3 +299,15 @@ def test_bench_tile_row_takes_its_part_of_sort():
             assert (run.impl.device is not None) == device
     finally:
         r.close()
+
+
+def test_the_viewer_cycle_skips_the_tile_renderer_for_bucket16():
+    """The registry's check (the viewer's T cycle, api.Renderer) refuses what the tile renderer
+    reads but cannot draw, instead of the renderer failing once made."""
+    from splatgl.model.settings import RendererKind
+    from splatgl.renderers import registry
+    why = registry.refusal(RendererKind.TILE, settings=RenderSettings(sort_key=SortKey.BUCKET16))
+    assert why == ("--sort bucket16 applies to the quad renderer only, not the tile renderer "
+                   "(use --renderer quad)")
+    assert registry.refusal(RendererKind.TILE, settings=GPU) is None
+    assert registry.refusal(RendererKind.QUAD, settings=RenderSettings(sort_key=SortKey.BUCKET16)) is None

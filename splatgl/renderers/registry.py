@@ -228,8 +228,7 @@ VALUE_READERS = {("sort_key", SortKey.BUCKET16): frozenset({RendererKind.QUAD})}
 
 
 def readers(setting: str, value: object = None) -> frozenset[RendererKind]:
-    """The renderers that read the setting ``setting`` (a :class:`RenderSettings` field); every
-    renderer for one not in :data:`OPTIONS`; with ``value``, those that draw it."""
+    """Who reads ``setting`` (all, for one not in :data:`OPTIONS`); with ``value``: who draws it."""
     kinds = frozenset(k for k, e in RENDERERS.items() if setting not in OPTIONS or setting in e.reads)
     return kinds & VALUE_READERS.get((setting, value), kinds)
 
@@ -314,6 +313,10 @@ def check_fidelity(settings: RenderSettings, *kinds: RendererKind | str) -> None
         raise SplatglError(f"--emulate {settings.emulation.label()} applies to the NumPy reference "
                            f"only, not the {names_} renderer (use --renderer "
                            f"{_which(readers('emulation'))})")
+    for (name, value), by in VALUE_READERS.items():   # read, but not this value (tile: bucket16)
+        if getattr(settings, name) == value and readers(name) & set(kinds) and not by & set(kinds):
+            raise SplatglError(f"{OPTIONS[name]} {_spelled(value)} applies to the {_renderers(by)} "
+                               f"only, not the {_renderers(kinds)} (use --renderer {_which(by)})")
     by = readers("order")
     if settings.order is Order.PER_PIXEL and not by & set(kinds):
         why = ("; docs/fidelity.md says why the quad path has no per-pixel order"
@@ -359,8 +362,7 @@ def check_settings(settings: RenderSettings, *kinds: RendererKind | str,
     for name, option in OPTIONS.items():
         if name in ("convention", "emulation", "order"):
             continue                                # their own messages, above
-        value = getattr(settings, name)
-        by = readers(name, value)
+        value, by = getattr(settings, name), readers(name, getattr(settings, name))
         if value == getattr(default, name) or by & set(kinds):
             continue
         raise SplatglError(f"{option} {_spelled(value)} applies to the {_renderers(by)} "

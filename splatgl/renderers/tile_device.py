@@ -93,11 +93,7 @@ class DeviceOrder:
     @classmethod
     def make(cls, ctx, programs, n_splats: int, max_block: int, settings) -> "DeviceOrder | None":
         """The device order where ``settings`` ask for it (``--sort gpu``) and there are
-        splats, else None (the CPU order); ``--sort bucket16`` is refused (the tile renderer
-        sorts exact keys)."""
-        if settings.sort_key is SortKey.BUCKET16:
-            raise SplatglError("--sort bucket16 applies to the quad path only; the tile renderer "
-                               "sorts exact keys (use --sort exact or gpu)")
+        splats, else None (the CPU order; ``--sort bucket16`` the registry refuses)."""
         if settings.sort_key is SortKey.GPU and n_splats:
             return cls(ctx, programs, n_splats, max_block)
         return None
