@@ -252,3 +252,14 @@ def test_convert_to_another_format_over_the_bound_says_it_loads_whole(tmp_path, 
     err = capsys.readouterr().err
     assert err == (f"splatgl: warning: {src}: converted in memory (about 18 KiB, over --memory "
                    "1 KiB): only a binary PLY written as .ply streams\n"), err
+
+
+def test_a_dry_run_reads_every_row_as_in_memory(tmp_path, small_blocks):
+    """A streamed --dry-run of an operation that removes nothing still finds a bad row."""
+    src = _ply(tmp_path, _scene(50, bad=1))
+    for memory in (None, 1):
+        with pytest.raises(SplatglError, match=r"s\.ply: field .* \(first at index \d+\)") as err:
+            edit_files([src], None, [ShDegree(0)], dry_run=True, memory=memory)
+        if memory is None:
+            expected = str(err.value)
+    assert str(err.value) == expected

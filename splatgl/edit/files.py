@@ -111,7 +111,7 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
     streamed = plan_edit(inputs, writer, operations, transforms, memory, drop_invalid,
                          writer_options)
     if streamed is not None:
-        counts, steps, count, degree, names = streamed.scan(progress)
+        counts, steps, count, degree, names = streamed.scan(progress, full=dry_run)
         kept = () if streamed.extras is None else streamed.extras.names
         note = dropped_note([n for n in names if n not in kept], why="not every input has them")
         _refuse_empty(steps, count, allow_empty, writer, output)

@@ -18,7 +18,6 @@ Ctrl-C or SIGTERM removes the temporary).  The bytes are the in-memory writer's.
 
 from __future__ import annotations
 
-import re
 import warnings
 from pathlib import Path
 
@@ -30,7 +29,7 @@ from ..formats._memory import ACTIVATE_BYTES, scene_bytes
 from ..formats.ply_write import _header, _ordered, scene_to_vertices
 from ..lod.budget import MIN_WORKING, RESERVE, default_budget, format_size, resident_now
 from ..lod.ply_rows import PlyRows, streamable
-from ..model.scene import InvalidRowsDropped, Scene, SplatKind, activate
+from ..model.scene import MIN_QUAT_NORM, InvalidRowsDropped, Scene, SplatKind, activate
 from ..writing.atomic import atomic_target, size_problem
 from .attributes import Rows
 from .operations import DropInvalid
@@ -90,6 +89,7 @@ class Source:
         self.extras = None if self.normals_only else self.extra_dtype
         self.drop_invalid = drop_invalid
         self.dropped = 0
+        self.block = 1 << 16  # rows per block of the last pass (:meth:`blocks`)
         #: Whether a stored normal is not zero (None: not looked at), :meth:`normals_nonzero`.
         self.nonzero_normals: bool | None = None
         self.values = 11 + 3 * self.coeffs + (0 if self.extra_dtype is None else
@@ -119,6 +119,7 @@ class Source:
         reports at the end as the reader does (:class:`InvalidRowsDropped`)."""
         first = 0
         self.dropped = 0
+        self.block = rows
         for start, records in self.rows.blocks(rows):
             scene = self.decode(records, start)
             if scene is None:
@@ -155,10 +156,34 @@ class Source:
         try:
             return activate(self.path, raw.means, raw.quats, raw.log_scales, raw.opacity_logits,
                             raw.sh, self.kind, extras=raw.extras)
-        except SceneFormatError as exc:  # the row in the file, not in the block
-            exc.args = (re.sub(r"first at index (\d+)",
-                               lambda m: f"first at index {start + int(m.group(1))}", str(exc)),)
-            raise
+        except SceneFormatError:  # what the reader says of the whole file, not of this block
+            raise self._invalid_rows() from None
+
+    def _invalid_rows(self) -> SceneFormatError:
+        """The reader's error for the file's invalid rows: the first field (in
+        :func:`activate`'s order) holding any, how many, and the first row (a pass)."""
+        checks = [("position", "hold NaN or Inf"), ("rotation", "hold NaN or Inf"),
+                  ("scale", "hold NaN or Inf"), ("opacity", "hold NaN or Inf"),
+                  ("sh", "hold NaN or Inf"), ("rotation", "have a zero or degenerate quaternion")]
+        found = [[0, None] for _ in checks]
+        for start, records in self.rows.blocks(self.block):
+            plan = ply._Columns(self.path, self.rows.names, records.shape[0], self.dtype)
+            plan.fill(records, 0)
+            q = plan.quats.astype(np.float64)
+            with np.errstate(invalid="ignore", over="ignore"):
+                norms = np.sqrt((q * q).sum(axis=1))
+            n = records.shape[0]
+            masks = [~np.isfinite(a.reshape(n, -1)).all(axis=1) for a in
+                     (plan.means, plan.quats, plan.log_scales, plan.opacity, plan.sh)]
+            masks.append(np.isfinite(norms) & (norms < MIN_QUAT_NORM))
+            for entry, bad in zip(found, masks):
+                if bad.any():
+                    entry[0] += int(bad.sum())
+                    if entry[1] is None:
+                        entry[1] = start + int(np.flatnonzero(bad)[0])
+        (field, what), (count, first) = next((c, f) for c, f in zip(checks, found) if f[0])
+        return SceneFormatError(self.path, f"{count} row(s) {what} (first at index {first}); "
+                                "use --drop-invalid to drop them", field)
 
 
 def sources_of(inputs, drop_invalid: bool = False) -> list[Source] | None:

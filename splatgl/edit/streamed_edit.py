@@ -90,12 +90,13 @@ class StreamedEdit:
         self.dtype = vertex_dtype(self.kind, degree, self.extras)
         self.counted = None
 
-    def scan(self, progress=None):
+    def scan(self, progress=None, full: bool = False):
         """``(input counts, steps, result count, SH degree, extra names of the inputs)``; a
-        first pass over the inputs where the count depends on the rows (the blocks are
-        checked as when writing, so a refusal comes before anything is written)."""
+        first pass over the inputs where the count depends on the rows, or ``full`` (a dry
+        run: every row read and checked as when writing, so a refusal comes before anything
+        is written)."""
         if self.counted is None:
-            if any(isinstance(op, ROW_TESTS) for op in self.operations) or \
+            if full or any(isinstance(op, ROW_TESTS) for op in self.operations) or \
                     self.sources[0].drop_invalid:
                 tally = self._tally()
                 for _ in self._blocks(tally, progress, self.warn):
