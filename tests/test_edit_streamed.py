@@ -168,9 +168,13 @@ def test_other_formats_load_whole_and_say_so(tmp_path, capsys):
             "PLY inputs written as .ply stream") in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, None])
-def test_an_interrupted_or_failed_write_leaves_nothing(tmp_path, monkeypatch, small_blocks, sig):
-    """Ctrl-C (or a failure) after some blocks are written: no output, no temporary."""
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143), (None, 2)])
+def test_an_interrupted_or_failed_write_leaves_nothing(tmp_path, capsys, monkeypatch,
+                                                       small_blocks, sig, code):
+    """Ctrl-C, SIGTERM or a full disk after some blocks are written: the old output, no
+    temporary; the full disk in one line."""
+    import os
+
     src = _ply(tmp_path, _scene(100))
     (tmp_path / "o.ply").write_bytes(b"old")
     calls = []
@@ -179,12 +183,19 @@ def test_an_interrupted_or_failed_write_leaves_nothing(tmp_path, monkeypatch, sm
     def failing(block):
         calls.append(1)
         if len(calls) == 4:
-            raise KeyboardInterrupt if sig else OSError(28, "No space left on device")
+            if sig is None:
+                raise OSError(28, "No space left on device")
+            os.kill(os.getpid(), sig)
         return real(block)
 
     monkeypatch.setattr(streamed, "scene_to_vertices", failing)
-    with pytest.raises(KeyboardInterrupt if sig else SplatglError):
-        edit_files([src], tmp_path / "o.ply", [ShDegree(0)], force=True, memory=1)
+    rc = main(["edit", str(src), "-o", str(tmp_path / "o.ply"), "--sh-degree", "0", "--force",
+               "--memory", "1K"])
+    err = capsys.readouterr().err
+    assert rc == code and len(calls) == 4
+    if sig is None:
+        assert err.startswith(f"splatgl: error: {tmp_path / 'o.ply'}: cannot write (No space "
+                              "left on device)") and err.count("\n") == 1, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o.ply", "s.ply"]
     assert (tmp_path / "o.ply").read_bytes() == b"old"
 
