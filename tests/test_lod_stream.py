@@ -228,3 +228,86 @@ def test_render_memory_needs_a_level_of_detail(tmp_path, capsys):
     assert main(["render", str(tmp_path / "s.ply"), "-o", str(tmp_path / "a.png"),
                  "--memory", "1M"]) == 2
     assert "not a level-of-detail file" in capsys.readouterr().err
+
+
+class _Gated:
+    """A LazyChunks whose loads wait for ``gate`` once ``gated`` is set."""
+
+    def __init__(self, inner):
+        self.inner, self.gate, self.gated = inner, threading.Event(), False
+        self.rows, self.nodes, self.count = inner.rows, inner.nodes, inner.count
+
+    def estimate(self, chunk):
+        return self.inner.estimate(chunk)
+
+    def load(self, chunk):
+        if self.gated:
+            self.gate.wait(10)
+        return self.inner.load(chunk)
+
+
+def test_streamed_scene_draws_what_is_resident_then_the_exact_cut(tmp_path):
+    """The viewer's scene: a close view first draws coarse stand-ins (fewer nodes, not
+    complete), each chunk that arrives bumps the generation (the viewer redraws), and at the
+    end the scene is the exact cut's (the one a screenshot waits for)."""
+    from splatgl.lod.stream import LazyChunks
+    from splatgl.lod.stream_view import StreamedScene
+
+    path = _lod(tmp_path)
+    with LazyLod(path) as lazy:
+        chunks = _Gated(LazyChunks(lazy, 64))
+        changes = threading.Semaphore(0)
+        stream = StreamedScene(path, LodSettings(threshold_px=2.0, band=1.0), 1 << 20,
+                               on_change=changes.release, chunks=chunks)
+        try:
+            chunks.gated = True
+            camera = _camera(3.0, 0.5)
+            first = stream.scene_for(camera, SETTINGS)
+            assert not stream.complete and "refining" in stream.summary()
+            assert stream.scene_for(camera, SETTINGS) is first   # nothing new: the same upload
+            chunks.gate.set()
+            for _ in range(200):
+                if changes.acquire(timeout=5) and (
+                        stream.scene_for(camera, SETTINGS) is not None and stream.complete):
+                    break
+            assert stream.complete and stream.generation > 0
+            last = stream.scene_for(camera, SETTINGS)
+            exact = stream.exact_scene(camera, SETTINGS)
+            assert last.count > first.count and np.array_equal(last.means, exact.means)
+            assert "resident" in stream.summary() and "refining" not in stream.summary()
+        finally:
+            stream.close()
+
+
+@pytest.mark.window
+def test_view_memory_window_refines_and_screenshots(xvfb_display, tmp_path):
+    """One short window: ``view --memory``'s scene in the viewer; frames are drawn again as
+    chunks arrive until the cut is complete; the status panel shows resident memory; F12 waits
+    for the chunks and writes the screenshot."""
+    from splatgl.errors import ContextError
+    from splatgl.lod.stream_view import StreamedScene
+    from splatgl.viewer.app import Viewer, ViewerOptions
+    from splatgl.viewer.screenshot import take_screenshot
+
+    path = _lod(tmp_path)
+    stream = StreamedScene(path, LodSettings(), 1 << 20, chunk_rows=64)
+    options = ViewerOptions(visible=True, screenshot_dir=tmp_path, render_args=(str(path),),
+                            vsync=False, target_fps=0.0, stream=stream)
+    try:
+        try:
+            v = Viewer(stream.framing, SETTINGS, _camera(3.0, 0.5), options=options)
+        except ContextError as exc:
+            pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
+        with v:
+            assert v.step()
+            for _ in range(100):
+                if stream.complete:
+                    break
+                threading.Event().wait(0.02)
+                v.step()
+            assert stream.complete
+            assert "resident" in v._status(v.camera()).message
+            png, _ = take_screenshot(v)
+            assert png.exists()
+    finally:
+        stream.close()

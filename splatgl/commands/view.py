@@ -15,6 +15,7 @@ from ..renderers.registry import check, names
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       camera_from_args, check_convention, demo_scene_path, load_scene_arg,
                       settings_from_args)
+from ._memory import STREAM_HELP, add_memory_argument, memory_given
 
 NAME = "view"
 ORDER = 15
@@ -57,6 +58,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "rests (default: 10 on software OpenGL such as llvmpipe, 60 on a GPU; "
                         "0: every frame exact)")
     p.add_argument("--no-vsync", action="store_true", help="do not wait for the display refresh")
+    add_memory_argument(p, STREAM_HELP + "; the window draws what is resident and refines as "
+                           "chunks arrive, screenshots wait for theirs")
     add_camera_arguments(p)
     add_settings_arguments(p)
 
@@ -90,11 +93,17 @@ def run(args: argparse.Namespace) -> int:
     if args.screenshot_dir.exists() and not args.screenshot_dir.is_dir():
         raise SplatglError(f"--screenshot-dir {args.screenshot_dir}: is a file, not a folder")
     path = args.scene if args.scene is not None else demo_scene_path()
-    print(f"loading {path} ...", flush=True)
+    memory = memory_given(args)
+    stream = None
     t0 = time.perf_counter()
-    scene = load_scene_arg(args)
-    print(f"loaded {scene.count:,} splats (SH degree {scene.sh_degree}) in "
-          f"{time.perf_counter() - t0:.2f} s", flush=True)
+    if memory is not None:
+        stream = _open_stream(args, memory)
+        scene = stream.framing   # frames the views; each frame draws the resident cut
+    else:
+        print(f"loading {path} ...", flush=True)
+        scene = load_scene_arg(args)
+        print(f"loaded {scene.count:,} splats (SH degree {scene.sh_degree}) in "
+              f"{time.perf_counter() - t0:.2f} s", flush=True)
     settings = settings_from_args(args)
     check(args.renderer, scene=scene, settings=settings)   # refused here, before a window opens
     if args.renderer == RendererKind.CPU.value:
@@ -117,7 +126,38 @@ def run(args: argparse.Namespace) -> int:
                             fisheye_fov=args.fov if args.projection == "fisheye" else None,
                             stereo=args.stereo,
                             target_fps=target_fps,
-                            scene_path=Path(path))
+                            scene_path=Path(path), stream=stream)
+    try:
+        return _show(args, scene, settings, camera, cameras, options)
+    finally:
+        if stream is not None:
+            stream.close()
+
+
+def _open_stream(args: argparse.Namespace, memory: int):
+    """``view --memory``: the level of detail streamed under ``memory`` bytes."""
+    from ..lod.budget import format_size
+    from ..lod.io import is_lod_file
+    from ..lod.render import LodSettings
+    from ..lod.stream_view import StreamedScene
+
+    if args.scene is None or not is_lod_file(args.scene):
+        raise SplatglError(f"{args.scene}: not a level-of-detail file (--memory streams one); "
+                           "build one with 'splatgl lod SCENE -o SCENE.lod.ply'")
+
+    def wake() -> None:   # a chunk arrived (a loader thread): the window's loop draws again
+        import glfw
+        glfw.post_empty_event()
+
+    stream = StreamedScene(args.scene, LodSettings(), memory, on_change=wake)
+    print(f"streaming {args.scene}: {stream.framing.count:,} leaves in {stream.lazy.levels} "
+          f"levels under {format_size(memory)} (--memory)", flush=True)
+    return stream
+
+
+def _show(args, scene, settings, camera, cameras, options) -> int:
+    from ..viewer.app import Viewer
+
     with Viewer(scene, settings, camera, cameras, args.camera_index or 0,
                 RendererKind(args.renderer), options) as viewer:
         print(f"OpenGL {viewer.ctx.info['GL_VERSION']} on {viewer.ctx.info['GL_RENDERER']}", flush=True)

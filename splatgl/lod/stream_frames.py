@@ -52,7 +52,7 @@ LEAVES_PX = 1e-30
 
 def framing_scene(lazy: LazyLod):
     """What the default camera, an orbit and the near plane read of a scene (``robust_bounds``,
-    ``robust_radius``, ``anchor``, ``source``, ``count``), from one coarse level's spheres, and
+    ``robust_radius``, ``anchor``, ``source``, ``count``, ``kind``, ``sh_degree``), from one coarse level's spheres, and
     ``digest`` (of those spheres, the tree's shape and anchor: what a path's frames record)."""
     level = 0
     for lv in range(lazy.levels - 1, -1, -1):
@@ -66,7 +66,8 @@ def framing_scene(lazy: LazyLod):
         lazy.offsets, lazy.anchor, centres, radius))).hexdigest()[:20]
     return SimpleNamespace(robust_bounds=(lo, hi), robust_radius=float(0.5 * np.linalg.norm(hi - lo)),
                            anchor=lazy.anchor, source=None, count=lazy.level_size(0),
-                           digest=f"lod-{digest}", kind=SplatKind.GAUSSIAN_3D)
+                           digest=f"lod-{digest}", kind=SplatKind.GAUSSIAN_3D,
+                           sh_degree=lazy.nodes(np.zeros(1, np.int64)).sh_degree)
 
 
 def choose_cut(lazy: LazyLod, camera: Camera, lod: LodSettings):

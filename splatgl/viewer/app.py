@@ -57,6 +57,9 @@ class ViewerOptions:
         target_fps: the frame-time budget while the camera moves (``--target-fps``; None: 10 on
             software GL, 60 on a GPU; 0: every frame exact), :mod:`.pacing`.
         scene_path: the scene's file, where the level-of-detail tree for budgets is cached.
+        stream: a level of detail streamed from disk (``--memory``,
+            :class:`splatgl.lod.stream_view.StreamedScene`): each frame draws what is resident
+            and draws again as chunks arrive; screenshots wait for their chunks.
     """
 
     title: str = "splatgl view"
@@ -70,6 +73,7 @@ class ViewerOptions:
     stereo: float | None = None
     target_fps: float | None = None
     scene_path: Path | None = None
+    stream: object | None = None
 
 
 class Viewer:
@@ -227,14 +231,14 @@ class Viewer:
             return False  # minimised: nothing to draw into
         glfw.make_context_current(self.window)
         camera = self.camera()
-        key = (self.state, self.size, self.settings, self.kind, self.view)
+        key = (self.state, self.size, self.settings, self.kind, self.view, _generation(self))
         t0 = time.perf_counter()
         if self.paced:
             rendered = paced_frame(self, camera, key)
         elif key != self._rendered_key:
             try:
-                self.display.render(self.scene, camera, self.settings, self.kind, self.view,
-                                    self.options.stereo)
+                self.display.render(self.scene_now(camera), camera, self.settings, self.kind,
+                                    self.view, self.options.stereo)
             except NotImplementedError as exc:  # e.g. the quad path and 2DGS surfels
                 self.message = str(exc)
                 self.kind = RendererKind.TILE
@@ -267,6 +271,7 @@ class Viewer:
         eye, with a budget set."""
         return (self.view is ViewMode.COLOR and self.kind in (RendererKind.QUAD, RendererKind.CPU)
                 and self.options.stereo is None and self.scene.kind is SplatKind.GAUSSIAN_3D
+                and self.options.stream is None
                 and self.pacer.enabled(self.renderer))
 
     def present(self) -> None:
@@ -276,10 +281,15 @@ class Viewer:
         self.presents += 1
         self.need_present = False
 
+    def scene_now(self, camera: Camera, exact: bool = False) -> Scene:
+        """The scene to draw for ``camera`` (a streamed one's: :func:`_streamed`)."""
+        return _streamed(self, camera, exact)
+
     def _status(self, camera: Camera) -> Status:
         cam = f"camera {self.camera_index + 1}/{len(self.cameras)}" if self.cameras else ""
-        return self.display.status(self.scene, self.settings, self.kind, self.view, camera,
-                                   lens_fov(camera, self.state.fov_y), cam, self.paced)
+        return _stream_status(self.display.status(
+            self.scene, self.settings, self.kind, self.view, camera,
+            lens_fov(camera, self.state.fov_y), cam, self.paced), self.options.stream)
 
     def should_close(self) -> bool:
         return bool(glfw.window_should_close(self.window))
@@ -316,3 +326,25 @@ class Viewer:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _generation(viewer: Viewer) -> int | None:
+    """Chunks a streamed level of detail has received (a new one draws the frame again)."""
+    stream = viewer.options.stream
+    return None if stream is None else stream.generation
+
+
+def _streamed(viewer: Viewer, camera: Camera, exact: bool) -> Scene:
+    """The scene shown, or a streamed level of detail's resident cut for ``camera``
+    (``exact``: waiting for every chunk it needs)."""
+    stream = viewer.options.stream
+    if stream is None:
+        return viewer.scene
+    return (stream.exact_scene if exact else stream.scene_for)(camera, viewer.settings)
+
+
+def _stream_status(status: Status, stream) -> Status:
+    """The status panel with a streamed level of detail's resident memory and chunks."""
+    if stream is None:
+        return status
+    return replace(status, message="  ".join(m for m in (status.message, stream.summary()) if m))

@@ -81,7 +81,8 @@ def take_screenshot(viewer) -> tuple[Path, Path]:
     camera = v.camera()
     if v.options.stereo is not None:
         camera = controls.fit_camera(camera, max(camera.width // 2, 1), camera.height)
-    png, js, command = save_screenshot(v.renderer, v.scene, camera, v.settings, v.kind,
+    png, js, command = save_screenshot(v.renderer, v.scene_now(camera, exact=True), camera,
+                                       v.settings, v.kind,
                                        v.options.screenshot_dir, v.options.render_args,
                                        v.options.stereo)
     v.message = f"saved {png.name} + {js.name} (exact render)"
