@@ -4,7 +4,7 @@
 # test suite, `splatgl bench` on the shared scenes, the early-termination group and the scale
 # benchmark up to 6M splats, and write every result with the machine line into one folder.
 #
-# usage: benchmarks/gpu_check.sh [options] OUT_DIR
+# usage: benchmarks/gpu_check.sh [options] OUT_DIR   (OUT_DIR optional with --quick)
 #   --venv DIR     the virtual environment to use (default: .venv in the repository); made with
 #                  $PYTHON -m venv where missing; the project is installed into it with
 #                  pip install '.[test,fast,bench]' (PyPI must be reachable)
@@ -30,6 +30,8 @@
 #   SPLATGL_SHARED_SCENES  the shared real scenes (default ../shared/scenes beside the repository)
 #   SPLATGL_EGL_DEVICE=N   render on EGL device N (default: the first hardware device)
 #   SPLATGL_GPU_CHECK_ALLOW_SOFTWARE=1  go on without nvidia-smi and on a software renderer
+#   SPLATGL_GPU_CHECK_SCENES  --quick's built scenes (default /tmp/splatgl-gpu-scenes)
+#   SPLATGL_GPU_CHECK_SITE    where --wheelhouse installs (default /tmp/splatgl-gpu-site)
 #   PYTHON                 the interpreter (default python3)
 # OUT_DIR gets: summary.txt (every step ok or FAILED, with seconds); machine.txt and machine.json
 # (the machine line, GL renderer, vendor and version, the EGL devices and vendor files, versions,
@@ -170,7 +172,8 @@ install_wheels() {   # no package index: the wheels of benchmarks/gpu_wheels.sh
 if [ -n "$wheelhouse" ]; then
   site=${SPLATGL_GPU_CHECK_SITE:-/tmp/splatgl-gpu-site}
   step install "$out/install.log" install_wheels || die "the install failed; see $out/install.log"
-  export PYTHONPATH="$site${PYTHONPATH:+:$PYTHONPATH}"
+  # the checkout first: the figures are of the tree as it is here (the wheel may be older)
+  export PYTHONPATH="$REPO:$site${PYTHONPATH:+:$PYTHONPATH}"
   py=$(command -v "$PYTHON") || die "$PYTHON not found"
 elif [ "$install" -eq 1 ]; then
   step install "$out/install.log" install_env || die "the install failed; see $out/install.log"

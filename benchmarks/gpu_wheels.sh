@@ -14,6 +14,9 @@
 # order, each kept only while the total fits the limit: zstandard (SPZ files), glfw (the window),
 # OpenImageIO (image files: the figures write none), then with --numerics numpy, llvmlite, numba.
 # What is left out is printed: with it the figures that need it are lost (none, today).
+# It also copies the three shared real scenes the figures are built from ($SPLATGL_SHARED_SCENES,
+# else ../shared/scenes) into .gpu-scenes/ (ignored), and prints what a device run carries in
+# all (the working tree, wheelhouse/, .gpu-scenes/ and .gl/) against the 64 MiB limit.
 set -euo pipefail
 REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 PYTHON=${PYTHON:-python3}
@@ -58,3 +61,18 @@ echo "gpu_wheels: $(mib) MiB in $dir (limit $limit MiB)"
 if [ ${#left[@]} -gt 0 ]; then
   echo "gpu_wheels: left out: ${left[*]}"
 fi
+shared=${SPLATGL_SHARED_SCENES:-$REPO/../shared/scenes}
+if [ -d "$shared" ]; then
+  rm -rf "$REPO/.gpu-scenes"
+  for f in ply/donut_sh0.ply compressed_ply/biker.compressed.ply compressed_ply/guitar.compressed.ply; do
+    mkdir -p "$REPO/.gpu-scenes/$(dirname "$f")"
+    cp "$shared/$f" "$REPO/.gpu-scenes/$f"
+  done
+  echo "gpu_wheels: the shared real scenes copied into .gpu-scenes/ ($(du -sm "$REPO/.gpu-scenes" | cut -f1) MiB)"
+else
+  echo "gpu_wheels: warning: no shared scenes at $shared (set SPLATGL_SHARED_SCENES): none copied" >&2
+fi
+tree=$(cd "$REPO" && git ls-files -z --cached --others --exclude-standard | xargs -0 -r du -cb 2>/dev/null \
+       | awk '$2 == "total" {s += $1} END {print int(s / 1048576)}')
+carried=$(du -smc "$dir" "$REPO/.gpu-scenes" "$REPO/.gl" 2>/dev/null | awk '$2 == "total" {print $1}')
+echo "gpu_wheels: a device run carries about $((tree + carried)) MiB (working tree $tree, carried $carried; limit 64)"
