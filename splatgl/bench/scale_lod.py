@@ -1,0 +1,207 @@
+"""Scenes larger than memory, measured (``splatgl bench --scale --lod``, issue 41 item 6).
+
+For each size the scene is written to a scratch folder a block of rows at a time from the shared
+real scenes (:func:`splatgl.bench.scale_lod_steps.write_tiled_scene`: never whole in memory),
+then each step runs in its own process (:mod:`splatgl.bench.scale_lod_steps`), which reports its
+own time and peak resident memory (VmHWM); the time of the whole process (interpreter start
+to exit: a cold start) is measured here too.  Steps: the scene file, the out-of-core level of
+detail under ``memory`` (``splatgl lod --memory``), the lazy open, the first frame of the
+whole-scene view streamed under ``memory``, the full-detail frame of the same view where the
+scene fits in memory (else "does not fit") and the PSNR between the two, and the interactive
+flight's camera path over the streamed scene (moving frame rate, time from rest to the exact
+cut).
+
+Every result is written to ``scale-lod.json`` as it is made (a Ctrl-C keeps what was
+measured), and ``scale-lod.png`` (memory and time against size, log axes) after each size.  The
+scene and level-of-detail files are removed after each size unless ``keep_scenes``.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from ..errors import SplatglError
+from ..lod.budget import format_size
+from .real_scenes import REAL_SOURCES, shared_scenes_dir, shared_scenes_help
+
+#: Default sizes (splats).
+SIZES = (1_000_000, 5_000_000, 20_000_000, 100_000_000)
+#: Bytes of one SH0 row of the scene PLY (x y z, normals, DC, opacity, 3 scales, 4 rotation).
+ROW_BYTES = 68
+#: Disk for one size: the scene, the level of detail (about 1.4x) and the build's temporaries
+#: (about 1.2x the scene), in scene bytes.
+DISK_FACTOR = 3.6
+#: A full-detail render's memory: a fixed part (driver, framebuffers) and bytes a splat
+#: (measured by ``bench --scale``: 2.0 GB at 6M SH0), against the memory available.
+FULL_FIXED, FULL_PER_SPLAT = 250e6, 350.0
+
+
+@dataclass(frozen=True)
+class ScaleLodOptions:
+    """sizes: splats per scene.  memory: bytes of the build's and the streaming's budget.
+    width, height: frames.  scratch: folder of the scene files (default: a new folder in the
+    temp dir).  keep_scenes: leave them there.  available: bytes of memory a full-detail
+    render may use (default: MemAvailable).  speed: the flight's speed (tests fly faster).
+    branching: of the level of detail.  block: rows of the scene written at a time."""
+
+    sizes: tuple[int, ...] = SIZES
+    memory: int = 2 << 30
+    width: int = 1280
+    height: int = 720
+    scratch: Path | None = None
+    keep_scenes: bool = False
+    available: int | None = None
+    speed: float = 1.0
+    branching: int = 4
+    block: int = 1_000_000
+
+
+def mem_available() -> int:
+    """MemAvailable of /proc/meminfo in bytes (0 where unknown)."""
+    try:
+        for line in open("/proc/meminfo"):
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
+def disk_need(sizes, keep: bool) -> int:
+    """Bytes of scratch disk the run needs: the largest size's files (all of them with
+    ``keep``, which leaves every size's scene and level of detail)."""
+    if keep:   # every scene and level of detail stays; one build's temporaries at a time
+        return int(sum(n * ROW_BYTES * 2.4 for n in sizes) + max(sizes) * ROW_BYTES * 1.2)
+    return int(max(sizes) * ROW_BYTES * DISK_FACTOR)
+
+
+def check_disk(folder: Path, sizes, keep: bool) -> None:
+    """One line when ``folder``'s file system lacks the room :func:`disk_need` names."""
+    need = disk_need(sizes, keep)
+    probe = folder if folder.exists() else folder.parent
+    free = shutil.disk_usage(probe).free
+    if free < need:
+        raise SplatglError(f"--scale --lod: {probe} has {format_size(free)} free, the scenes of "
+                           f"--sizes and their levels of detail need about {format_size(need)}: "
+                           "choose smaller --sizes or another TMPDIR")
+
+
+def full_fits(n: int, available: int) -> tuple[bool, str]:
+    """Whether the full-detail render of ``n`` splats fits in ``available`` bytes, and why not."""
+    need = FULL_FIXED + FULL_PER_SPLAT * n
+    if need <= available:
+        return True, ""
+    return False, f"does not fit: about {format_size(int(need))} needed, {format_size(available)} available"
+
+
+class StepFailed(Exception):
+    pass
+
+
+def run_step(step: str, args: dict) -> dict:
+    """One step in a fresh process: its JSON plus ``wall_s`` (process start to exit)."""
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "splatgl.bench.scale_lod_steps", step,
+                           json.dumps(args)], capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        tail = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
+        raise StepFailed(tail)
+    return {**json.loads(proc.stdout.strip().splitlines()[-1]), "wall_s": wall}
+
+
+def _psnr(a_path: Path, b_path: Path) -> float | None:
+    import numpy as np
+
+    from ..evaluation.metrics import psnr
+
+    value = float(psnr(np.load(a_path), np.load(b_path)))
+    return None if value == float("inf") else value
+
+
+def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save, log) -> None:
+    """Every step of the ``n``-splat scene into ``row`` (``save()`` after each)."""
+    scene, lod = folder / f"scale-{n}.ply", folder / f"scale-{n}.lod.ply"
+    common = {"scene": str(scene), "lod": str(lod), "memory": options.memory,
+              "shared": str(shared_scenes_dir()),
+              "width": options.width, "height": options.height}
+    available = options.available if options.available is not None else mem_available()
+    fits, why = full_fits(n, available)
+    steps = [("scene", {"splats": n, "block": options.block}),
+             ("build", {"branching": options.branching}), ("open", {}),
+             ("frame", {"image": str(folder / f"lod-{n}.npy")})]
+    steps += [("full", {"image": str(folder / f"full-{n}.npy")})] if fits else []
+    steps += [("flight", {"speed": options.speed})]
+    if not fits:
+        row["full"] = {"skipped": why}
+    try:
+        for step, extra in steps:
+            log(f"scale-lod: {n:,} splats: {step} ...")
+            try:
+                row[step] = run_step(step, {**common, **extra})
+            except StepFailed as exc:
+                row[step] = {"failed": str(exc)}
+                log(f"scale-lod: {n:,} splats: {step} failed: {exc}")
+                save()
+                if step in ("scene", "build"):
+                    return
+                continue
+            r = row[step]
+            log(f"scale-lod: {n:,} splats: {step} {r['seconds']:.2f} s ({r['wall_s']:.2f} s "
+                f"from process start), peak {r['peak_rss_mb']:.0f} MB")
+            if step == "full" and "seconds" in row.get("frame", {}):
+                row["psnr_far_db"] = _psnr(folder / f"lod-{n}.npy", folder / f"full-{n}.npy")
+                log(f"scale-lod: {n:,} splats: whole-scene view {row['psnr_far_db'] or 'inf'} dB "
+                    "against full detail")
+            save()
+        if not fits:
+            row["psnr_far_db"] = why
+            save()
+    finally:
+        if not options.keep_scenes:
+            for p in (scene, lod, folder / f"lod-{n}.npy", folder / f"full-{n}.npy"):
+                p.unlink(missing_ok=True)
+
+
+def run_scale_lod(options: ScaleLodOptions, out: Path | None, machine: dict, log=print) -> dict:
+    """Measure every size; the report (also written to ``out``/scale-lod.json as it grows)."""
+    from .scale_lod_report import plot, write_json
+
+    missing = [n for n in REAL_SOURCES if not (shared_scenes_dir() / n).is_file()]
+    if missing:
+        raise SplatglError(f"--scale --lod: {shared_scenes_dir() / missing[0]}: shared real scene "
+                           f"not found ({shared_scenes_help()})")
+    made = options.scratch is None
+    folder = Path(tempfile.mkdtemp(prefix="splatgl-scale-lod-")) if made else Path(options.scratch)
+    check_disk(folder, options.sizes, options.keep_scenes)
+    folder.mkdir(parents=True, exist_ok=True)
+    report = {"machine": machine, "options": {**asdict(options), "scratch": str(folder)},
+              "rows": []}
+
+    def save() -> None:
+        if out is not None:
+            write_json(out / "scale-lod.json", report)
+
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    try:
+        for n in options.sizes:
+            row = {"splats": n}
+            report["rows"].append(row)
+            measure_size(n, options, folder, row, save, log)
+            if out is not None:
+                plot(out / "scale-lod.png", report["rows"])
+    finally:
+        if made and not options.keep_scenes:
+            shutil.rmtree(folder, ignore_errors=True)
+        elif options.keep_scenes:
+            log(f"scale-lod: scene files kept in {folder}")
+    return report
+
