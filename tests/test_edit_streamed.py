@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import signal
+import warnings
 
 import numpy as np
 import pytest
@@ -274,3 +275,23 @@ def test_a_dry_run_reads_every_row_as_in_memory(tmp_path, small_blocks):
         if memory is None:
             expected = str(err.value)
     assert str(err.value) == expected
+
+
+def test_a_non_finite_result_is_refused_as_in_memory(tmp_path, small_blocks):
+    """Overflows in two fields in different blocks: the same field and row are named."""
+    scene = _scene(30, degree=1)
+    quats, sh = scene.quats.copy(), scene.sh.copy()
+    sh[3] = 3e38     # the rotated SH overflows float32 (block 0)
+    quats[12] = 3e38  # so does the rotated quaternion (block 1), an earlier field
+    src = _ply(tmp_path, Scene(scene.means, quats, scene.log_scales, scene.opacity_logits, sh))
+    turn = [ModelTransform(rotation=np.array([[0.6, -0.8, 0], [0.8, 0.6, 0], [0, 0, 1]]))]
+    messages = []
+    for memory in (None, 1):
+        with pytest.raises(SplatglError, match="holds NaN or Inf") as err, \
+                warnings.catch_warnings():
+            warnings.simplefilter("error")  # no raw NumPy overflow warning either
+            edit_files([src], tmp_path / "o.ply", [], turn, memory=memory)
+        messages.append(str(err.value))
+    assert messages[1] == messages[0] == ("edit: the result's field 'rotation' holds NaN or Inf "
+                                          "(first at row 12); nothing written")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]

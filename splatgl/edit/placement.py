@@ -81,8 +81,9 @@ def transform_scene(scene: Scene, transform: ModelTransform | None,
             placed = transform.apply_points(scene.means[rows])
         _check_float32(placed, start, scene.means[rows], transform, what)
         means[rows] = placed
-        quats[rows] = quat_multiply(q_rot, scene.quats[rows].astype(np.float64))
-        sh[rows] = np.einsum("kj,njc->nkc", m_sh, scene.sh[rows].astype(np.float64))
+        with np.errstate(over="ignore", invalid="ignore"):  # beyond float32: refused by edit
+            quats[rows] = quat_multiply(q_rot, scene.quats[rows].astype(np.float64))
+            sh[rows] = np.einsum("kj,njc->nkc", m_sh, scene.sh[rows].astype(np.float64))
     log_scales = (scene.log_scales.astype(np.float64) + np.log(transform.scale)).astype(np.float32)
     return Scene(_frozen(means), _frozen(quats), _frozen(log_scales), scene.opacity_logits,
                  _frozen(sh), scene.kind, extras=_turned_extras(scene.extras, rot))

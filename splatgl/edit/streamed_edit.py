@@ -146,7 +146,7 @@ class StreamedEdit:
                     merged.add(block)
                     block = merged.scene()
                 out = self._edited(block, first, tally)
-                _check_finite(out, tally.setdefault("out", 0))
+                _nonfinite(out, tally.setdefault("out", 0), tally.setdefault("bad", {}))
                 tally["out"] += out.count
                 first += block.count
                 if out.count:
@@ -155,6 +155,10 @@ class StreamedEdit:
                     done = min(done + self.rows, total)
                     progress(done, total, f"editing {s.path.name}")
             tally["dropped"][i] = s.dropped
+        for name in FIELDS:  # the first field holding any, as the in-memory check names it
+            if name in tally.get("bad", {}):
+                raise SplatglError(f"edit: the result's field '{name}' holds NaN or Inf (first "
+                                   f"at row {tally['bad'][name]:,}); nothing written")
 
     def _edited(self, block, first: int, tally: dict):
         keep = np.ones(block.count, bool)
@@ -177,12 +181,16 @@ def _placed(block, transform, first: int, what: str):
         raise
 
 
-def _check_finite(scene, offset: int) -> None:
-    """Refuse a result holding NaN or an infinity, naming the result's row (as in memory)."""
-    fields = {"position": scene.means, "rotation": scene.quats, "scale": scene.log_scales,
-              "opacity": scene.opacity_logits, "sh": scene.sh}
-    for name, arr in fields.items():
-        bad = ~np.isfinite(arr.reshape(arr.shape[0], int(np.prod(arr.shape[1:])))).all(axis=1)
-        if bad.any():
-            raise SplatglError(f"edit: the result's field '{name}' holds NaN or Inf (first at "
-                               f"row {offset + int(np.flatnonzero(bad)[0]):,}); nothing written")
+#: The result's fields checked for NaN and Inf, in the in-memory check's order.
+FIELDS = {"position": "means", "rotation": "quats", "scale": "log_scales",
+          "opacity": "opacity_logits", "sh": "sh"}
+
+
+def _nonfinite(scene, offset: int, bad: dict) -> None:
+    """Note in ``bad`` the first result row (``offset``: the block's first) holding NaN or an
+    infinity in each field, for the refusal once every block is seen."""
+    for name, attr in FIELDS.items():
+        arr = getattr(scene, attr)
+        rows = ~np.isfinite(arr.reshape(arr.shape[0], int(np.prod(arr.shape[1:])))).all(axis=1)
+        if rows.any() and name not in bad:
+            bad[name] = offset + int(np.flatnonzero(rows)[0])
