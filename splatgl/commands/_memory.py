@@ -45,3 +45,27 @@ def stream_inputs(args: argparse.Namespace, settings):
     with LazyLod(args.scene) as lazy:
         framing = framing_scene(lazy)
     return framing, camera_from_args(args, framing, settings)
+
+
+def streamed_frames(args: argparse.Namespace, settings, memory: int):
+    """``eval``/``bench --memory``: :class:`splatgl.lod.stream_frames.StreamFrames` of the
+    ``.lod.ply`` SCENE under ``memory`` bytes, the cut its ``--lod-*`` options ask for (the
+    defaults where the command has none); a scene not from ``splatgl lod``, or another renderer
+    than the quad path, is one line."""
+    from ..errors import SplatglError
+    from ..lod.io import is_lod_file
+    from ..lod.render import LodSettings
+    from ..lod.stream_frames import StreamFrames
+
+    renderer = getattr(args, "renderer", "quad")
+    if renderer != "quad":
+        raise SplatglError(f"--memory streams a level of detail through the quad path, not "
+                           f"--renderer {renderer}")
+    scene = getattr(args, "scene", None)
+    if scene is None or not is_lod_file(scene):
+        raise SplatglError(f"{scene}: not a level-of-detail file (--memory streams one); build "
+                           "one with 'splatgl lod SCENE -o SCENE.lod.ply'")
+    given = {name: getattr(args, option) for name, option in (
+        ("threshold_px", "lod_threshold"), ("budget", "lod_budget"), ("band", "lod_blend"))
+        if getattr(args, option, None) is not None}
+    return StreamFrames(scene, settings, LodSettings(**given), memory)

@@ -23,6 +23,7 @@ from ..model.settings import RendererKind
 from ._common import (add_scene_arguments, add_settings_arguments, check_convention, demo_scene_path,
                       load_scene_arg, settings_from_args)
 from ._layers import add_layer_arguments, layer_files, named_layers
+from ._memory import STREAM_HELP, add_memory_argument, memory_given, streamed_frames
 from ._spz_axes import check_not_sharded
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._outputs import add_force_argument, check_outputs, output_files
@@ -79,6 +80,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="image format of --renders (default png)")
     add_force_argument(o)
     add_layer_arguments(p, under=False)
+    add_memory_argument(p, STREAM_HELP + "; every view waits for its chunks")
     add_settings_arguments(p)
     add_executor_arguments(p, "contiguous chunks of the views (the scores merge into the same "
                               "table, CSV and JSON as one process's)",
@@ -115,6 +117,10 @@ def run(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
     check_not_sharded(args, executor.sharded)
     settings = settings_from_args(args)
+    memory = memory_given(args)
+    if memory is not None and executor.sharded:
+        raise SplatglError("--memory streams the views in one process, not with --workers or "
+                           "--executor ray")
     keep = args.worst if args.sheet is not None else 0
     run = None
     if executor.sharded:   # the workers load the scene; this process only merges
@@ -124,13 +130,16 @@ def run(args: argparse.Namespace) -> int:
                                               views, executor, settings, RendererKind(args.renderer),
                                               keep, args.drop_invalid, default_progress(), renders)
     else:
-        scene = load_scene_arg(args)
-        with Renderer() as renderer:
+        streamed = streamed_frames(args, settings, memory) if memory is not None else None
+        scene = load_scene_arg(args) if streamed is None else streamed.framing
+        with Renderer() if streamed is None else streamed as renderer:
             result, worst = evaluate(renderer, scene, views, settings, RendererKind(args.renderer),
                                      keep, default_progress(), renders)
     text = sys.stderr if json_to_stdout(args) else sys.stdout   # stdout: the JSON alone
     if not json_to_stdout(args):
         print(result.table())
+        if memory is not None:
+            print(f"streaming: {streamed.summary()}")
         if run is not None:
             print(summary(run, "views"))
     with outputs:
