@@ -54,16 +54,18 @@ def memory_bound(memory: int | None) -> int:
     return default_budget()[0] if memory is None else int(memory)
 
 
-def block_rows(budget: int, record_bytes: int, values: int, held: int | None = None) -> int:
+def block_rows(budget: int, record_bytes: int, values: int, held: int | None = None,
+               fixed: int = 0) -> int:
     """Rows per block within ``budget`` bytes of peak memory, for input records of
     ``record_bytes`` decoding to ``values`` float32 values; ``held``: what the process holds
-    already (measured when None).  A budget leaving less than MIN_WORKING is one line."""
+    already (measured when None); ``fixed``: bytes the pass holds besides its blocks.  A
+    budget leaving less than MIN_WORKING is one line."""
     held = resident_now() if held is None else held
-    working = budget - held - RESERVE
+    working = budget - held - RESERVE - fixed
     if working < MIN_WORKING:
         raise SplatglError(f"--memory {format_size(budget)} is too small: this process already "
                            f"holds {format_size(held)}; give at least "
-                           f"{format_size(held + RESERVE + MIN_WORKING)}")
+                           f"{format_size(held + RESERVE + fixed + MIN_WORKING)}")
     per_row = PER_RECORD * record_bytes + PER_VALUE * values
     return int(min(max(working // per_row, 1), MAX_BLOCK))
 

@@ -27,6 +27,8 @@ from .statistics import PERCENTILES, overdraw, _fragments
 from .streamed import IN_MEMORY_COPIES, block_rows, memory_bound, sources_of
 
 _SIGN = np.uint64(1 << 63)
+#: Histograms a summary of three percentiles holds at most: the upper bits' and six others.
+HISTOGRAMS = 7
 
 
 class Quantiles:
@@ -121,7 +123,11 @@ def info_streamed(path, memory: int | None, drop_invalid: bool = False, stats: b
     if sources is None or IN_MEMORY_COPIES * sources[0].in_memory_bytes() <= memory:
         return None
     src = sources[0]
-    rows = block_rows(memory, src.dtype.itemsize, src.values)
+    # the histograms first: per summary one of the upper bits and at most one per order
+    # statistic wanted (6 for three percentiles) of the lower, 2^16 int64 counts each
+    summaries = 3 + (sum(1 for a in ATTRIBUTES.values() if a.statistic) if stats else 0)
+    rows = block_rows(memory, src.dtype.itemsize, src.values,
+                      fixed=summaries * HISTOGRAMS * (8 << 16))
     box = BoxFinder(src.count)
     parts = {"opacity": Quantiles([50.0], True), "scale": Quantiles([50.0], True),
              "anisotropy": Quantiles([50.0], False)}
