@@ -341,3 +341,20 @@ def test_eval_memory_scores_the_streamed_views(tmp_path, capsys):
     assert main(["eval", str(path), "--dataset", str(root), "--memory", "1M", "--renderer",
                  "tile"]) == 2
     assert "--memory streams a level of detail through the quad path" in capsys.readouterr().err
+
+
+def test_bench_memory_times_a_streamed_orbit(tmp_path, capsys):
+    """``bench SCENE.lod.ply --memory``: an orbit's frames streamed, the figures as JSON; a
+    plain scene or another benchmark with it is one line."""
+    import json
+
+    path = _lod(tmp_path)
+    assert main(["bench", str(path), "--memory", "4M", "--quick", "--frames", "2",
+                 "--width", "64", "--height", "48", "--json", "-"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["frames"] == 2 and report["chunks_loaded"] >= 1
+    assert 0 < report["resident_peak_bytes"] <= 4 << 20 and report["bytes_read"] > 0
+    assert main(["bench", str(tmp_path / "s.ply"), "--memory", "4M"]) == 2
+    assert "--memory: give one level-of-detail file" in capsys.readouterr().err
+    assert main(["bench", str(path), "--memory", "4M", "--lod"]) == 2
+    assert "not with --lod" in capsys.readouterr().err

@@ -29,6 +29,7 @@ from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_pop
                            check_interactive_options, run_interactive_command, run_lod_command,
                            run_popping_command, run_scale_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
+from ._memory import STREAM_HELP, add_memory_argument, run_stream_bench
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._outputs import add_force_argument, check_out_folder
 
@@ -118,6 +119,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                               "machine, i.e. Ray across machines)",
                            "one task per scene")
     add_lod_arguments(p)
+    add_memory_argument(p, STREAM_HELP + "; with one such SCENE: frames along an orbit, first "
+                           "and median frame time, resident memory, chunks, peak RSS")
     add_popping_arguments(p)
     add_interactive_arguments(p)
 
@@ -180,6 +183,8 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
+    if args.memory is not None:
+        return run_stream_bench(args, executor.sharded)
     if args.popping:
         if args.interactive or args.scale or args.lod or executor.sharded or args.json is not None:
             raise SplatglError("--popping runs alone in one process (not with --interactive, "
