@@ -117,9 +117,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dry-run", action="store_true",
                    help="print what each operation would remove; write nothing")
     add_force_argument(p)
-    add_memory_argument(p, "binary PLY inputs larger are edited a block at a time into a .ply "
-                           "(crops, filters, --sh-degree, --transform, merges; --remove-floaters "
-                           "and --decimate are refused)")
+    add_memory_argument(p, "binary PLY inputs whose scene exceeds it are edited a block of rows "
+                           "at a time into a .ply (crops, filters, --sh-degree, --transform, "
+                           "merges; --remove-floaters and --decimate are refused)")
     add_spz_axes_argument(p)
     add_json_argument(p, "the report (inputs, one entry per operation, the result)")
 
