@@ -130,6 +130,27 @@ def test_long_lists_take_device_sized_passes(ctx, monkeypatch):
     _same(a, b, depth=True)
 
 
+def test_emit_chunks_are_indirect_dispatches_sized_on_the_device(ctx, monkeypatch):
+    """Rectangles over TILE_EMIT_CHUNK tiles: the scan writes a dispatch for each chunk the
+    largest one needs (none for the rest); the keys and image are the CPU order's."""
+    monkeypatch.setattr(tile_mod, "TILE_EMIT_CHUNK", 3)
+    monkeypatch.setattr("splatgl.renderers.tile_device.TILE_EMIT_CHUNK", 3)
+    scene = random_scene(2000, 3, degree=1, **IN_DEPTH)
+    cpu, dev = TileRenderer(ctx, scene, RenderSettings()), TileRenderer(ctx, scene, GPU)
+    try:
+        a, b = cpu.debug_stages(view_for(cpu, CAM)), dev.debug_stages(view_for(dev, CAM))
+        args = dev._bufs["STATE"].read(48 + 16 * 16, np.uint32)[12:].reshape(-1, 4)[:16]
+        _same(draw(cpu, CAM), draw(dev, CAM))
+    finally:
+        cpu.release()
+        dev.release()
+    need = -(-int(a.tiles_touched.max()) // 3)
+    assert 4 <= need < 16
+    assert (args[:need, 0] > 0).all() and (args[need:, :3] == 0).all()
+    np.testing.assert_array_equal(b.keys, a.keys)
+    np.testing.assert_array_equal(b.values, a.values)
+
+
 def test_gpu_shape_one_pass_one_band(ctx, monkeypatch):
     """On a GPU (no loop limit) the device order blends every list in one pass over the whole
     image: forced here on llvmpipe with a small chunk the CPU order needs passes for, the same
@@ -248,6 +269,18 @@ def test_stress_cases_are_identical(ctx, case):
     setup = case.build()
     a, b, _ = _pair(ctx, setup.scene, setup.camera, setup.settings, depth=True)
     _same(a, b, depth=True)
+
+
+_SLOW_STRESS = [c for c in CASES if c.slow and "tile" not in c.unsupported]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", _SLOW_STRESS, ids=[c.name for c in _SLOW_STRESS])
+def test_slow_stress_cases_are_identical(ctx, case):
+    """The 8192 x 8192 image: more tiles than one emit chunk's worth, bands, long lists."""
+    setup = case.build()
+    a, b, _ = _pair(ctx, setup.scene, setup.camera, setup.settings)
+    _same(a, b)
 
 
 def test_cli_renders_the_cpu_orders_image(tmp_path, capsys):
