@@ -53,7 +53,7 @@ def _order_stage(quad, cams) -> tuple[float, float, int]:
     """Median cull and sort seconds over ``cams[1:]`` (the first view builds the cull data)."""
     cull, sort, kept = [], [], 0
     for i, cam in enumerate(cams):
-        order = quad.order(View.of(cam, quad.settings, quad.scene))
+        order = quad.order(View.of(cam, quad.options, quad.scene))
         if i:
             c, s = quad.rows.times.cull, quad.rows.times.sort
             cull.append(c)

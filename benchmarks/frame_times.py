@@ -38,7 +38,7 @@ def measure(name: str, scene: Scene, width: int, height: int, frames: int) -> di
         for i in range(frames + 1):
             cam = base.with_pose(orbit(centre, distance, 180.0 + 3.0 * i, 20.0))
             t0 = time.perf_counter()
-            quad.render(View.of(cam, quad.settings, scene))
+            quad.render(View.of(cam, quad.options, scene))
             wall = time.perf_counter() - t0
             if i > 0:
                 t = quad.last_times

@@ -52,8 +52,10 @@ class Renderer:
     """Owns one headless OpenGL context and renders scenes with any renderer kind (made
     through :mod:`splatgl.renderers.registry`).
 
-    Per (scene, settings) the GPU state (uploaded scene, programs, targets) is kept, so
-    rendering many views of one scene uploads it once.  The context is made when first needed
+    Per (scene, renderer kind, that renderer's own options: :func:`splatgl.renderers.registry.
+    options_for`) the renderer and its GPU state (uploaded scene, programs, targets) are kept, so
+    rendering many views of one scene uploads it once, and a setting one renderer reads (the
+    quad path's ``precision``) makes no other renderer anew.  The context is made when first needed
     (the NumPy reference and the CPU renderer draw without one).  Use as a context manager or
     call :meth:`close`.
     """
@@ -96,14 +98,15 @@ class Renderer:
 
     def _path(self, scene: Scene, settings: RenderSettings,
               kind: RendererKind) -> registry.FrameRenderer:
-        key = (id(scene), settings, kind)
+        options = registry.options_for(kind, settings)   # refuses what it would draw otherwise
+        key = (id(scene), kind, options)
         path = self._paths.pop(key, None)
         if path is not None and path.scene is not scene:  # the id of a scene since collected
             path.release()
             path = None
         if path is None:
             gl = self._gl(kind) is not None
-            path = registry.make(kind, scene, settings, self.ctx if gl else None,
+            path = registry.make(kind, scene, options, self.ctx if gl else None,
                                  self.programs if gl else None)
         self._paths[key] = path  # most recently used last
         while len(self._paths) > MAX_CACHED_PATHS:

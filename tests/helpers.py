@@ -361,7 +361,7 @@ def project(scene, camera, settings: RenderSettings | None = None, dtype=np.floa
 
 def view_for(renderer, camera) -> View:
     """The view of ``camera`` built from ``renderer``'s own scene and settings."""
-    return View.of(camera, renderer.settings, renderer.scene)
+    return View.of(camera, renderer.options, renderer.scene)
 
 
 def draw(renderer, camera, depth: bool = False, **options):

@@ -32,6 +32,7 @@ from ..evaluation.metrics import psnr
 from ..evaluation.popping import Frame, default_metric, distribution, popping
 from ..errors import SplatglError
 from ..model.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW, Order, RendererKind, RenderSettings
+from ..renderers.registry import entry
 
 #: Orbit step (degrees per frame) and the fly-through's distances (multiples of the framing
 #: distance) and turn per frame.
@@ -112,7 +113,7 @@ def render_frames(renderer: Renderer, scene, cameras, settings: RenderSettings,
                   kind: RendererKind) -> tuple[list[Frame], list[float]]:
     """Every camera's frame (colour, expected depth, alpha) and its render time (seconds)."""
     frames, times = [], []
-    if kind is not RendererKind.REFERENCE:
+    if entry(kind).warms_up:
         renderer.render(scene, cameras[0], settings, kind)        # warm-up: compile, upload
     for cam in cameras:
         t0 = time.perf_counter()

@@ -28,7 +28,7 @@ from .runner import BenchOptions, BenchRow, orbit_path
 def _time(quad, cameras: list[Camera]) -> tuple[float, float, float, dict]:
     """(median, p10, p90) milliseconds of ``quad.render`` over ``cameras`` after one warm-up,
     and the median of each stage."""
-    views = [View.of(cam, quad.settings, quad.scene) for cam in cameras]
+    views = [View.of(cam, quad.options, quad.scene) for cam in cameras]
     quad.render(views[-1])
     times, stages = [], []
     for view in views:

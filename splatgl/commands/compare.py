@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..renderers.registry import names as renderer_names, own_settings
+from ..renderers.registry import entry, names as renderer_names, own_settings
 from ..imagefiles.pictures import heatmap, side_by_side
 from ..imagefiles.image_formats import image_format, suffix_list
 from ..imagefiles.images import write_image
@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
             check_size(args, camera, kind, renderer.ctx)
         for kind in kinds:
             side = own_settings(settings, kind)   # e.g. the knobs are the reference's
-            if kind is not RendererKind.REFERENCE:
+            if entry(kind).warms_up:
                 renderer.render(scene, camera, side, kind, progress)  # warm-up: compile, upload
             t0 = time.perf_counter()
             outputs.append(renderer.render_layers(scene, camera, side, kind, progress))

@@ -123,7 +123,7 @@ class LevelRenderer:
         the frame (the image is the same whatever the batches)."""
         quad = self._quad(level)
         cam = scaled(camera, level.scale)
-        view = dataclasses.replace(View.of(cam, quad.settings, quad.scene),
+        view = dataclasses.replace(View.of(cam, quad.options, quad.scene),
                                    low_pass=draft_low_pass(camera, cam))
         t0 = time.perf_counter()
         before = transfers(self.renderer.ctx).snapshot()

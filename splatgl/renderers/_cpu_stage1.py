@@ -17,9 +17,9 @@ from ..cameras.view import View, anchored_camera
 from ..constants import JACOBIAN_CLAMP, LOW_PASS, sh_coeff_count
 from ..model.quaternion import quat_to_rotmat
 from ..model.scene import Scene
-from ..model.settings import RenderSettings
 from ..reference.stages import tile_grid
 from ..splatmath.project import splat_reach, to_camera
+from .options import CpuOptions
 
 
 class Stage1:
@@ -30,17 +30,17 @@ class Stage1:
     per splat (a panorama: then one more per seam copy); a culled row has an empty ``rect``.
     """
 
-    def __init__(self, scene: Scene, settings: RenderSettings, kernels: SimpleNamespace):
+    def __init__(self, scene: Scene, options: CpuOptions, kernels: SimpleNamespace):
         f32 = np.float32
         self.kernels, self.scene, self.count = kernels, scene, scene.count
         rot = quat_to_rotmat(scene.rotations.astype(f32))
         self._rs = np.ascontiguousarray(rot * scene.scales.astype(f32)[:, None, :], f32)
         self._opacity = np.ascontiguousarray(scene.opacities, f32)
         self._sh = np.ascontiguousarray(scene.sh, f32)
-        degree = scene.sh_degree if settings.sh_degree is None else min(settings.sh_degree,
+        degree = scene.sh_degree if options.sh_degree is None else min(options.sh_degree,
                                                                         scene.sh_degree)
         self._coeffs = sh_coeff_count(degree)
-        self.antialias = bool(settings.antialias)
+        self.antialias = bool(options.antialias)
         self._anchor: tuple[bytes, np.ndarray] | None = None   # (anchor bytes, means - anchor)
         self._reach: tuple[float, np.ndarray] | None = None     # (scale, world reach): panoramas
 

@@ -34,6 +34,7 @@ from ..progress import ProgressCallback, default_progress
 from ..order.sort import depth_sort
 from ..reference.stages import tile_grid
 from ._cpu_stage1 import Stage1
+from .options import CpuOptions
 from .registry import RENDERERS, Registered, check
 from .quad_layers import composite
 
@@ -109,13 +110,13 @@ def _warm_up(progress: ProgressCallback | None) -> None:
     means = rng.normal(0.0, 0.3, (16, 3)) + [0.0, 0.0, 3.0]
     scene = Scene(means, rng.normal(size=(16, 4)), rng.normal(-2.5, 0.3, (16, 3)),
                   rng.normal(1.0, 1.0, 16), rng.normal(0.0, 0.3, (16, 4, 3)))
-    settings = RenderSettings()
-    renderer = CpuRenderer(scene, settings)
+    options = CpuOptions()
+    renderer = CpuRenderer(scene, options)
     cameras = (Camera.from_fov(32, 32, 60.0), Camera.of_model(Fisheye, 32, 32, 180.0))
     for i, camera in enumerate(cameras):
         if progress is not None:
             progress(i, len(cameras), what)
-        renderer.draw(View.of(camera, settings, scene), with_depth=True)
+        renderer.draw(View.of(camera, options, scene), with_depth=True)
     if progress is not None:
         progress(len(cameras), len(cameras), what)
 
@@ -133,19 +134,20 @@ def tile_order(n_tiles: int, threads: int) -> np.ndarray:
 class CpuRenderer(Registered):
     """Renders one scene on the CPU; reuse it across views.
 
-    Attributes: ``scene``, ``settings``, ``last_times`` (:class:`CpuTimes` of the last
-    frame, or None).  :meth:`render` has the GPU renderers' signature; :meth:`release` frees
+    Attributes: ``scene``, ``options`` (:class:`CpuOptions`), ``last_times`` (:class:`CpuTimes`
+    of the last frame, or None).  :meth:`render` has the GPU renderers' signature; :meth:`release` frees
     nothing (no GL objects) and is there for :class:`splatgl.api.Renderer`'s cache.
     """
 
     kind = RendererKind.CPU
 
-    def __init__(self, scene: Scene, settings: RenderSettings):
-        check(self.kind, scene=scene, settings=settings)
+    def __init__(self, scene: Scene, options: CpuOptions | RenderSettings):
+        options = self.own(options)
+        check(self.kind, scene=scene)
         self.k = _kernels()
-        self.scene, self.settings = scene, settings
+        self.scene = scene
         self.last_times: CpuTimes | None = None
-        self.stage1 = Stage1(scene, settings, self.k)
+        self.stage1 = Stage1(scene, options, self.k)
         self._tiles: dict[tuple, list[np.ndarray]] = {}     # the bands of each grid
         self._rec = np.empty((0, self.k.REC_SIZE), np.float32)   # the splat records, reused
 
@@ -156,8 +158,8 @@ class CpuRenderer(Registered):
         layers = frozenset(layers)
         check(self.kind, layers=layers, under=under is not None)
         rgba, depth = self.draw(view, Layer.DEPTH in layers)
-        if any(self.settings.background):
-            rgba = composite(rgba, self.settings.background)
+        if any(self.options.background):
+            rgba = composite(rgba, self.options.background)
         return RenderOutput(rgba, depth, layers | BASE)
 
     def draw(self, view: View, with_depth: bool = False, on_batch=None,

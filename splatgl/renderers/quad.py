@@ -45,6 +45,7 @@ from ..order.stage import OrderTimes, RowSource, SceneOrder, cpu_sort
 from ..output.layers import BASE, ORDERED, Layer, RenderOutput
 from ..output.under import UnderLayer
 from .batches import Batches
+from .options import QuadOptions
 from .early_stop import BatchHook
 from .quad_device import DeviceOrder
 from .quad_gpu import QuadResources
@@ -114,22 +115,21 @@ class QuadRenderer(Registered):
 
     kind = RendererKind.QUAD
 
-    def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
+    def __init__(self, ctx: moderngl.Context, scene: Scene, options: QuadOptions | RenderSettings,
                  programs: ProgramCache | None = None, rows: RowSource | None = None):
-        check(self.kind, settings=settings)   # the inria rules only, no emulation, global order
+        options = self.own(options)   # the inria rules only, no emulation, global order
         self.ctx = ctx
         self.scene = scene
-        self.settings = settings
-        self.buffers = SceneBuffers(ctx, scene, settings.gpu_storage)
-        self.programs = QuadPrograms(scene, settings, self.buffers, programs or ProgramCache(ctx))
+        self.buffers = SceneBuffers(ctx, scene, options.gpu_storage)
+        self.programs = QuadPrograms(scene, options, self.buffers, programs or ProgramCache(ctx))
         self.uses_prepass = self.programs.uses_prepass
         self.gpu = QuadResources(ctx, self.uses_prepass)
-        self.batches = Batches(ctx, settings.early_stop, self.gpu, self.programs)
+        self.batches = Batches(ctx, options.early_stop, self.gpu, self.programs)
         self._sorter: RadixSorter | None = None  # built on the first device sort
         self._device: DeviceOrder | None = None  # the device-resident order, on first use
         self._device_frame = False
         self._device_times = (0.0, 0.0)
-        self.rows: RowSource = rows if rows is not None else SceneOrder(scene, settings, self.sort)
+        self.rows: RowSource = rows if rows is not None else SceneOrder(scene, options, self.sort)
         #: Told the splats drawn after each batch (set per frame by ``Renderer.render(...,
         #: progress=...)``, :mod:`splatgl.progress`); Ctrl-C is seen between batches.
         self.progress = None
@@ -144,15 +144,15 @@ class QuadRenderer(Registered):
     # ---------------------------------------------------------------------------- stages
     def sort(self, depth: np.ndarray, keep: np.ndarray) -> np.ndarray:
         """The sort stage the settings choose: (M,) uint32 ``keep`` front to back by ``depth``."""
-        if self.settings.sort_key is SortKey.GPU:
+        if self.options.sort_key is SortKey.GPU:
             self._sorter = self._sorter or RadixSorter(self.ctx, self.programs.cache)
             return device_depth_sort(self._sorter, depth, keep)
-        return cpu_sort(self.settings)(depth, keep)
+        return cpu_sort(self.options)(depth, keep)
 
     def device_order(self, view: View, layers: frozenset[Layer] = BASE) -> DeviceOrder | None:
         """The device-resident order (:mod:`.quad_device`) when it draws this frame: ``--sort
         gpu`` with the cull on, the plain scene's rows, a view it culls, no ordered layers."""
-        if (self.settings.sort_key is not SortKey.GPU or not self.settings.cull
+        if (self.options.sort_key is not SortKey.GPU or not self.options.cull
                 or not isinstance(self.rows, SceneOrder) or self.scene.count == 0
                 or layers & ORDERED or not DeviceOrder.covers(view)):
             return None
@@ -168,8 +168,8 @@ class QuadRenderer(Registered):
 
     def target(self, view: View, layers: frozenset[Layer] = BASE) -> ColorTarget:
         """The blend target for ``view`` with the attachments ``layers`` need."""
-        return self.gpu.target(view.width, view.height, self.settings.precision,
-                               Layer.DEPTH in layers, self.settings.early_stop is not EarlyStop.OFF,
+        return self.gpu.target(view.width, view.height, self.options.precision,
+                               Layer.DEPTH in layers, self.options.early_stop is not EarlyStop.OFF,
                                Layer.NORMAL in layers)
 
     def use_triangles(self, on: bool) -> None:
@@ -181,7 +181,7 @@ class QuadRenderer(Registered):
         quad.  Frames drawn with triangles are never batched by early termination (its indirect
         commands draw strips).  Only the ellipse extent draws triangles: the square and fast
         extents shade their quads' corners beyond the ellipse, which the triangle cuts off."""
-        on = on and self.settings.extent is QuadExtent.ELLIPSE
+        on = on and self.options.extent is QuadExtent.ELLIPSE
         self.gpu.triangles = on
         if on:
             self.frame_extra["TRIANGLE_PER_SPLAT"] = 1
@@ -233,7 +233,7 @@ class QuadRenderer(Registered):
         frame = FrameSwitches(depth=Layer.DEPTH in layers, weights=False,
                               extra=tuple(self.frame_extra.items()),
                               normal=normal_location(layers), under=under)
-        cull, sort = device.run(view, 3 if self.gpu.triangles else 4, self.settings.antialias)
+        cull, sort = device.run(view, 3 if self.gpu.triangles else 4, self.options.antialias)
         self._device_times = (cull, sort)
         self._t_upload = 0.0
         self.buffers.bind()
@@ -320,7 +320,7 @@ class QuadRenderer(Registered):
                    if layers & ORDERED else None)
         t0 = time.perf_counter()
         rgba = target.read()
-        out = layer_output(target, rgba, layers, ordered, under, self.settings.background)
+        out = layer_output(target, rgba, layers, ordered, under, self.options.background)
         t1 = time.perf_counter()
         order, b = self.order_times, self.batches
         self.last_times = QuadTimes(order.cull, order.sort, self._t_upload, self._t_prepass,

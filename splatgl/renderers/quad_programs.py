@@ -17,7 +17,8 @@ from ..cameras.view import View
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..model.scene import Scene, SplatKind
-from ..model.settings import Preprocess, QuadExtent, RenderSettings
+from ..model.settings import Preprocess, QuadExtent
+from .options import QuadOptions
 
 #: Switches that only the draw programs read (the compute passes leave them out).
 DRAW_ONLY = ("EARLY_STOP", "SURVIVORS", "COUNT_FRAGMENTS", "COUNT_RASTERISED", "ORDERED_PASS",
@@ -48,27 +49,27 @@ class FrameSwitches:
 
 
 class QuadPrograms:
-    """The quad path's programs for one scene and settings (see the module doc)."""
+    """The quad path's programs for one scene and its options (see the module doc)."""
 
-    def __init__(self, scene: Scene, settings: RenderSettings, buffers: SceneBuffers,
+    def __init__(self, scene: Scene, options: QuadOptions, buffers: SceneBuffers,
                  programs: ProgramCache):
-        self.scene, self.settings, self.buffers, self.cache = scene, settings, buffers, programs
+        self.scene, self.options, self.buffers, self.cache = scene, options, buffers, programs
         self.surfels = scene.kind is SplatKind.SURFEL_2D
         #: The compute pre-pass covers 3DGS; surfels always take their vertex stage.
-        self.uses_prepass = settings.preprocess is Preprocess.COMPUTE and not self.surfels
+        self.uses_prepass = options.preprocess is Preprocess.COMPUTE and not self.surfels
 
     def defines(self, view: View, frame: FrameSwitches) -> dict[str, object]:
         """Every switch of the draw programs for this scene, view and frame."""
-        cap = self.settings.sh_degree
+        cap = self.options.sh_degree
         defines: dict[str, object] = {
             "SH_DEGREE": self.scene.sh_degree if cap is None else min(cap, self.scene.sh_degree),
             "SH_REST_COEFFS": self.buffers.sh_rest_coeffs,
         }
-        if self.settings.extent is QuadExtent.SQUARE:
+        if self.options.extent is QuadExtent.SQUARE:
             defines["EXTENT_SQUARE"] = 1
-        elif self.settings.extent is QuadExtent.FAST:
+        elif self.options.extent is QuadExtent.FAST:
             defines["EXTENT_FAST"] = 1
-        if self.settings.antialias:
+        if self.options.antialias:
             defines["ANTIALIAS"] = 1
         defines.update(view.defines)
         if frame.depth:

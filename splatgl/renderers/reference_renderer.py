@@ -14,6 +14,7 @@ from ..model.settings import RendererKind, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from ..reference import render_reference
+from .options import ReferenceRendererOptions
 from .registry import Registered, check
 
 
@@ -46,11 +47,12 @@ class ReferenceRenderer(Registered):
 
     kind = RendererKind.REFERENCE
 
-    def __init__(self, scene: Scene, settings: RenderSettings):
-        check(self.kind, scene=scene, settings=settings)
-        self.scene, self.settings = scene, settings
+    def __init__(self, scene: Scene, options: ReferenceRendererOptions | RenderSettings):
+        options = self.own(options)
+        check(self.kind, scene=scene)
+        self.scene = scene
         # the View carries the model transform folded into its camera
-        self._plain = dataclasses.replace(settings, model=None)
+        self._plain = dataclasses.replace(options, model=None).as_settings()
         self.last_times: ReferenceTimes | None = None
         self.progress = None
 
@@ -62,7 +64,7 @@ class ReferenceRenderer(Registered):
         self.check(view, layers, under)
         t0 = time.perf_counter()
         ref = render_reference(self.scene, view.camera, self._plain,
-                               compat=self.settings.convention, progress=self.progress,
+                               compat=self.options.reference, progress=self.progress,
                                layers=layers, under=under)
         self.last_times = ReferenceTimes(time.perf_counter() - t0)
         return ref.output(layers)

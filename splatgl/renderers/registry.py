@@ -8,10 +8,11 @@ settings' rules) and :func:`check_settings` (options only some renderers read, f
 play).  The CLI, the API (:class:`splatgl.Renderer`), the viewer and every renderer's own
 constructor ask it; no other module keeps a list of what a renderer can draw.
 
-Every renderer follows :class:`FrameRenderer`: made once per (scene, settings), it renders a
-per-frame :class:`~splatgl.cameras.view.View`, keeps the last frame's stage times and releases
-what it holds.  Each is imported only when first made (:func:`make`), so importing this module
-loads neither OpenGL nor numba.
+Every renderer follows :class:`~splatgl.renderers.protocol.FrameRenderer`, made with its own
+options (:mod:`splatgl.renderers.options`), which :func:`options_for` builds from the user's
+:class:`RenderSettings`: the one place a renderer's part of the settings is taken.  Each is
+imported only when first made (:func:`make`), so importing this module loads neither OpenGL nor
+numba.
 """
 
 from __future__ import annotations
@@ -21,13 +22,16 @@ import enum
 import importlib
 import importlib.util
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Callable, ClassVar
 
 from ..errors import CameraError, SplatglError
 from ..gl import limits
 from ..model.scene import Scene, SplatKind
 from ..model.settings import Convention, Order, Precision, RendererKind, RenderSettings, SortKey
-from ..output.layers import BASE, Layer, RenderOutput
+from ..output.layers import BASE, Layer
+from .options import (DRAWN, CpuOptions, DrawOptions, QuadOptions, ReferenceRendererOptions,
+                      TileOptions, own_fields)
+from .protocol import FrameRenderer, StageTimes  # noqa: F401 (the interface, named here too)
 
 if TYPE_CHECKING:
     import moderngl
@@ -38,42 +42,6 @@ if TYPE_CHECKING:
     from ..output.under import UnderLayer
 
 
-@runtime_checkable
-class StageTimes(Protocol):
-    """A renderer's stage times of one frame (a frozen dataclass of seconds and counts)."""
-
-    @property
-    def total(self) -> float: ...
-    @property
-    def ordering(self) -> float:
-        """Seconds of the work before blending (cull, project, sort)."""
-    @property
-    def drawing(self) -> float:
-        """Seconds of drawing: uploading, binning and blending the splats."""
-    def summary(self, count: int) -> str:
-        """The viewer's line on the splats of a scene of ``count`` splats ("splats 10 drawn / 12")."""
-
-
-@runtime_checkable
-class FrameRenderer(Protocol):
-    """A renderer of one scene under one :class:`RenderSettings`, reused across views."""
-
-    kind: RendererKind
-    scene: Scene
-    settings: RenderSettings
-    #: The last frame's :class:`StageTimes` (None before the first).
-    last_times: StageTimes | None
-
-    def supports(self, view: "View", layers: frozenset[Layer] = BASE,
-                 under: "UnderLayer | None" = None) -> str | None:
-        """Why this renderer cannot draw the request (one line), or None: :func:`refusal`."""
-    def render(self, view: "View", layers: frozenset[Layer] = BASE,
-               under: "UnderLayer | None" = None) -> RenderOutput:
-        """The ``layers`` of ``view``: RGB = C + (1 - A) background, alpha = A, row 0 on top."""
-    def release(self) -> None:
-        """Free what the renderer holds (GPU objects); it is not used afterwards."""
-
-
 @dataclass(frozen=True)
 class RendererEntry:
     """What one renderer is, and what it draws.
@@ -82,9 +50,10 @@ class RendererEntry:
         kind: its ``--renderer`` name.
         title: how messages name it ("the tile renderer").
         factory: ``"module:Class"`` of its :class:`FrameRenderer`, imported when first made.
-        reads: the settings it reads beyond those every renderer draws (background, near plane,
-            antialiasing, SH cap, model transform); a value away from the default of a setting
-            no renderer in play reads is refused (:func:`check_settings`).
+        options: its options class (:mod:`splatgl.renderers.options`), whose fields are the
+            settings it reads; :attr:`reads`, those beyond the ones every renderer draws
+            (:data:`~splatgl.renderers.options.DRAWN`).  A value away from the default of a
+            setting no renderer in play reads is refused (:func:`check_settings`).
         gl: whether it draws with OpenGL (made with the context and program cache).
         surfels: whether it draws 2DGS surfel scenes.
         lacks_models: camera model names it cannot draw.
@@ -94,12 +63,14 @@ class RendererEntry:
         interactive: whether it draws at a window's pace (the viewer's T steps through these).
         gl_limit: an OpenGL renderer's own image size check beyond the context's side limits
             (:mod:`splatgl.gl.limits`: ``(ctx, width, height, precision) -> why or None``).
+        warms_up: whether its first frame costs more than the next (compiling, uploading), so
+            that a timed frame follows an untimed one (``compare``, the popping benchmark).
     """
 
     kind: RendererKind
     title: str
     factory: str
-    reads: frozenset[str] = frozenset()
+    options: type[DrawOptions] = DrawOptions
     gl: bool = True
     surfels: bool = True
     lacks_models: frozenset[str] = frozenset()
@@ -108,6 +79,12 @@ class RendererEntry:
     needs: tuple[str, str] | None = None
     interactive: bool = True
     gl_limit: Callable[..., str | None] | None = None
+    warms_up: bool = True
+
+    @property
+    def reads(self) -> frozenset[str]:
+        """The settings it reads beyond :data:`~splatgl.renderers.options.DRAWN`."""
+        return own_fields(self.options)
 
     def renderer_class(self) -> type:
         module, name = self.factory.split(":")
@@ -122,23 +99,20 @@ OPTIONS: dict[str, str] = {
     "emulation": "--emulate", "order": "--order", "order_window": "--order-window",
 }
 
-_QUAD_READS = frozenset({"precision", "extent", "sort_key", "resort_interval", "preprocess",
-                         "cull", "early_stop", "gpu_storage"})
-
 #: Every renderer, by kind.  The first is the default.
 RENDERERS: dict[RendererKind, RendererEntry] = {e.kind: e for e in (
     RendererEntry(RendererKind.QUAD, "the quad renderer", "splatgl.renderers.quad:QuadRenderer",
-                  reads=_QUAD_READS, gl_limit=limits.target_refused),
+                  options=QuadOptions, gl_limit=limits.target_refused),
     RendererEntry(RendererKind.TILE, "the tile renderer", "splatgl.renderers.tile:TileRenderer",
-                  reads=frozenset({"gpu_storage", "order", "order_window", "sort_key"}),
+                  options=TileOptions,
                   lacks_models=frozenset({"equirectangular"}),   # it makes no seam copies
                   gl_limit=limits.pixel_buffer_refused),
     RendererEntry(RendererKind.REFERENCE, "the NumPy reference",
                   "splatgl.renderers.reference_renderer:ReferenceRenderer",
-                  reads=frozenset({"convention", "emulation", "order"}), gl=False,
-                  interactive=False),
+                  options=ReferenceRendererOptions, gl=False, interactive=False,
+                  warms_up=False),
     RendererEntry(RendererKind.CPU, "the CPU renderer", "splatgl.renderers.cpu:CpuRenderer",
-                  gl=False, surfels=False, layers=frozenset(BASE | {Layer.DEPTH}), under=False,
+                  options=CpuOptions, gl=False, surfels=False, layers=frozenset(BASE | {Layer.DEPTH}), under=False,
                   needs=("numba", "fast")),
 )}
 
@@ -195,18 +169,38 @@ def installed(kind: RendererKind | str) -> bool:
     return needs is None or importlib.util.find_spec(needs[0]) is not None
 
 
-def make(kind: RendererKind | str, scene: Scene, settings: RenderSettings,
+def make(kind: RendererKind | str, scene: Scene, settings: RenderSettings | DrawOptions,
          ctx: "moderngl.Context | None" = None,
          programs: "ProgramCache | None" = None) -> FrameRenderer:
-    """A new renderer of ``kind`` for ``scene`` under ``settings`` (an OpenGL one draws in
-    ``ctx``, compiling into ``programs``); it refuses what it cannot draw (:func:`refusal`)."""
+    """A new renderer of ``kind`` for ``scene`` under ``settings`` (or its options already
+    taken; an OpenGL one draws in
+    ``ctx``, compiling into ``programs``), made with its own options (:func:`options_for`); it
+    refuses what it cannot draw (:func:`refusal`)."""
     e = entry(kind)
-    cls = e.renderer_class()
+    cls, options = e.renderer_class(), options_for(e.kind, settings)
     if e.gl:
         if ctx is None:
             raise ValueError(f"{e.title} draws with OpenGL: give it a context")
-        return cls(ctx, scene, settings, programs)
-    return cls(scene, settings)
+        return cls(ctx, scene, options, programs)
+    return cls(scene, options)
+
+
+def options_for(kind: RendererKind | str, settings: RenderSettings | DrawOptions) -> DrawOptions:
+    """Renderer ``kind``'s own options (its entry's ``options`` class) from the user's
+    ``settings``: the settings it reads, the others left behind.  Settings it would draw by
+    other rules than asked are refused first (:func:`check_fidelity`: the convention, an
+    emulation, the per-pixel order, a value only other readers draw); a setting it merely
+    ignores is not (:func:`check_settings` refuses those where one renderer is asked for).
+    Options of ``kind``'s own class are returned as they are."""
+    e = entry(kind)
+    if isinstance(settings, e.options):
+        return settings
+    if not isinstance(settings, RenderSettings):
+        raise TypeError(f"{e.title} takes {e.options.__name__} or RenderSettings, "
+                        f"not {type(settings).__name__}")
+    check_convention(settings.convention, e.kind)
+    check_fidelity(settings, e.kind)
+    return e.options.of(settings)
 
 
 def _which(kinds) -> str:
@@ -383,18 +377,24 @@ def describe(kind: RendererKind | str, ctx: "moderngl.Context | None") -> str:
 
 
 class Registered:
-    """The :class:`FrameRenderer` part every renderer shares: :meth:`supports` (the subclass
-    sets ``kind``, and ``scene`` and ``settings`` when made)."""
+    """The :class:`FrameRenderer` part every renderer shares: its own options and
+    :meth:`supports` (the subclass sets ``kind``, and ``scene`` when made)."""
 
     kind: ClassVar[RendererKind]
 
+    def own(self, options: DrawOptions | RenderSettings) -> DrawOptions:
+        """Set and return :attr:`options`, the renderer's own (:func:`options_for`; the user's
+        :class:`RenderSettings` are taken too, as ``CpuRenderer(scene, settings)``)."""
+        self.options = options_for(self.kind, options)
+        return self.options
+
     def supports(self, view: "View", layers: frozenset[Layer] = BASE,
                  under: "UnderLayer | None" = None) -> str | None:
-        return refusal(self.kind, scene=self.scene, settings=self.settings, model=view.model,
+        return refusal(self.kind, scene=self.scene, model=view.model,
                        layers=frozenset(layers), under=under is not None)
 
     def check(self, view: "View", layers: frozenset[Layer] = BASE,
               under: "UnderLayer | None" = None) -> None:
         """Raise what :meth:`supports` says (:func:`check`)."""
-        check(self.kind, scene=self.scene, settings=self.settings, model=view.model,
-              layers=frozenset(layers), under=under is not None)
+        check(self.kind, scene=self.scene, model=view.model, layers=frozenset(layers),
+              under=under is not None)

@@ -50,6 +50,7 @@ from ..model.settings import Order, RenderSettings, RendererKind, SortKey
 from ..splatmath.peak import check_camera
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
+from .options import TileOptions
 from .registry import Registered, check
 from .tile_device import DeviceOrder, device_frame
 from .tile_layers import layer_output, layer_switches, size_layer_buffers
@@ -75,7 +76,7 @@ def _splat_buffers(ctx: moderngl.Context, n: int, surfel: bool, per_pixel: bool
 class TileRenderer(Registered):
     """Renders one scene with the per-tile compute path; reuse across views, then :meth:`release`.
 
-    Attributes: ``scene``, ``settings``,
+    Attributes: ``scene``, ``options`` (:class:`TileOptions`),
     ``last_times`` (:class:`TileTimes` of the last frame, or None) and ``progress`` (a
     :data:`splatgl.progress.ProgressCallback` told the tiles rasterized after each band of the
     last stage, or None).
@@ -83,21 +84,21 @@ class TileRenderer(Registered):
 
     kind = RendererKind.TILE
 
-    def __init__(self, ctx: moderngl.Context, scene: Scene, settings: RenderSettings,
+    def __init__(self, ctx: moderngl.Context, scene: Scene, options: TileOptions | RenderSettings,
                  programs: ProgramCache | None = None):
-        check(self.kind, settings=settings)    # the inria rules only, no emulation knobs
-        self.per_pixel = settings.order is Order.PER_PIXEL
-        self.ctx, self.scene, self.settings = ctx, scene, settings
+        options = self.own(options)    # the inria rules only, no emulation knobs
+        self.per_pixel = options.order is Order.PER_PIXEL
+        self.ctx, self.scene = ctx, scene
         self.programs = programs or ProgramCache(ctx)
         self.surfel, self.count = scene.kind is SplatKind.SURFEL_2D, scene.count
-        self.scene_buffers = SceneBuffers(ctx, scene, settings.gpu_storage) if self.count else None
+        self.scene_buffers = SceneBuffers(ctx, scene, options.gpu_storage) if self.count else None
         self._max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
         self._bufs = _splat_buffers(ctx, self.count, self.surfel, self.per_pixel)
         self.last_times: TileTimes | None = None   # and the progress callback:
         self.progress = None
         self._switches: dict[str, object] = {}   # the frame's layer switches (tile_layers.py)
         #: The device-resident order (``--sort gpu``, :mod:`splatgl.renderers.tile_device`)
-        self.device = DeviceOrder.make(ctx, self.programs, self.count, self._max_block, settings)
+        self.device = DeviceOrder.make(ctx, self.programs, self.count, self._max_block, options)
 
     # ------------------------------------------------------------------------------ programs
     def _defines(self, layout: KeyLayout | None = None) -> dict[str, object]:
@@ -110,16 +111,16 @@ class TileRenderer(Registered):
             d["SURFEL"] = 1
         if self.per_pixel:              # per-pixel order, a window of order_window splats
             d["PER_PIXEL"] = 1
-            d["ORDER_WINDOW"] = self.settings.order_window
+            d["ORDER_WINDOW"] = self.options.order_window
         return d
 
     def _project_program(self, view: View) -> moderngl.ComputeShader:
-        cap = self.settings.sh_degree
+        cap = self.options.sh_degree
         d = self._defines()
         d["SH_DEGREE"] = self.scene.sh_degree if cap is None else min(cap, self.scene.sh_degree)
         d["SH_REST_COEFFS"] = self.scene_buffers.sh_rest_coeffs
         d.update(self.scene_buffers.defines())
-        if self.settings.antialias:
+        if self.options.antialias:
             d["ANTIALIAS"] = 1
         check(self.kind, scene=self.scene, model=view.model)    # no panoramas
         d.update(view.defines)
@@ -206,7 +207,7 @@ class TileRenderer(Registered):
         d = self._defines(layout)
         d.update(view.defines)          # surfels: orthographic T_2 = (0, 0, 1)
         prog = self.programs.compute("tile_rasterize.comp", d)
-        background = (0.0, 0.0, 0.0) if "UNDER" in self._switches else self.settings.background
+        background = (0.0, 0.0, 0.0) if "UNDER" in self._switches else self.options.background
         self._set(prog, u_grid=grid, u_size=(view.width, view.height),
                   u_background=background, u_index_mask=layout.index_mask)
         cam = view.camera
@@ -298,7 +299,7 @@ class TileRenderer(Registered):
         dep = (self._bufs["OUT_DEPTH"].read(h * w * 4, np.float32).reshape(h, w)
                if Layer.DEPTH in layers else None)
         out = layer_output(self._bufs, rgba, dep, layers, under if switches else None,
-                           self.settings.background)
+                           self.options.background)
         self.last_times = self._times(time.perf_counter() - t0,
                                       transfers(self.ctx).snapshot().since(before))
         return out

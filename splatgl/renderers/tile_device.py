@@ -76,7 +76,8 @@ class DeviceOrder:
                  max_block: int, capacity: int | None = None):
         self.ctx, self.programs, self.count, self.max_block = ctx, programs, n_splats, max_block
         #: Keys the key buffers hold (grown after an overflow, never shrunk).
-        self.capacity = capacity or max(_MIN_CAPACITY, TILE_KEYS_PER_SPLAT * n_splats)
+        self.capacity = capacity or min(max(_MIN_CAPACITY, TILE_KEYS_PER_SPLAT * n_splats),
+                                        max_block // 8)   # a key is 8 bytes in one block
         self.sorter = RadixSorter(ctx, programs)
         #: A software renderer (llvmpipe) ends an invocation's loops after 65535 iterations,
         #: so long tile lists take passes of TILE_LIST_CHUNK entries there, and the image is
@@ -91,10 +92,11 @@ class DeviceOrder:
         self.sorted: tuple[np.ndarray, np.ndarray] | None = None
 
     @classmethod
-    def make(cls, ctx, programs, n_splats: int, max_block: int, settings) -> "DeviceOrder | None":
-        """The device order where ``settings`` ask for it (``--sort gpu``) and there are
-        splats, else None (the CPU order; ``--sort bucket16`` the registry refuses)."""
-        if settings.sort_key is SortKey.GPU and n_splats:
+    def make(cls, ctx, programs, n_splats: int, max_block: int, options) -> "DeviceOrder | None":
+        """The device order where the tile renderer's ``options`` ask for it (``--sort gpu``)
+        and there are splats, else None (the CPU order; ``--sort bucket16`` the registry
+        refuses)."""
+        if options.sort_key is SortKey.GPU and n_splats:
             return cls(ctx, programs, n_splats, max_block)
         return None
 
@@ -212,7 +214,10 @@ class DeviceOrder:
         self.total = total
         if not over:
             return False
-        self.capacity = max(self.capacity, total + total // 4)
+        if total * 8 > self.max_block:   # the CPU order's limit and message
+            raise SplatglError(f"the tile renderer needs {total} keys ({total * 8} bytes), more "
+                               f"than this OpenGL's storage-block limit of {self.max_block} bytes")
+        self.capacity = min(max(self.capacity, total + total // 4), self.max_block // 8)
         self.retries += 1
         return True
 
