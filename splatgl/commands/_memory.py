@@ -58,7 +58,7 @@ def streamed_frames(args: argparse.Namespace, settings, memory: int):
     from ..lod.stream_frames import StreamFrames
 
     renderer = getattr(args, "renderer", "quad")
-    if renderer != "quad":
+    if renderer not in ("quad", "auto"):   # auto: a level of detail draws through the quad path
         raise SplatglError(f"--memory streams a level of detail through the quad path, not "
                            f"--renderer {renderer}")
     scene = getattr(args, "scene", None)
