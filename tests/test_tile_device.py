@@ -120,6 +120,27 @@ def test_overflow_grows_the_buffers_and_draws_again(ctx):
         dev.release()
 
 
+def test_the_capacity_stays_within_the_storage_block_limit(ctx):
+    """The key buffers start and grow within GL_MAX_SHADER_STORAGE_BLOCK_SIZE (a 6M-splat scene
+    on llvmpipe's 128 MiB would otherwise be refused before drawing); a frame whose keys
+    exceed it is refused in one line, as the CPU order refuses it."""
+    scene = random_scene(2000, 3, degree=1, **IN_DEPTH)
+    dev = TileRenderer(ctx, scene, GPU)
+    try:
+        need = dev.debug_stages(view_for(dev, CAM)).keys.size
+        dev.device.capacity, dev.device.max_block = 5, 8 * need      # exactly room for them
+        a = draw(dev, CAM)
+        assert dev.device.capacity == need
+        dev.device.capacity, dev.device.max_block = 5, 8 * need - 8
+        with pytest.raises(SplatglError, match=f"the tile renderer needs {need} keys "
+                                               f"\\({8 * need} bytes\\), more than this OpenGL's "
+                                               f"storage-block limit of {8 * need - 8} bytes"):
+            draw(dev, CAM)
+    finally:
+        dev.release()
+    assert a.rgba[..., 3].max() > 0.5
+
+
 def test_long_lists_take_device_sized_passes(ctx, monkeypatch):
     """Tile lists longer than TILE_LIST_CHUNK: the passes come from the device (indirect), the
     image the CPU order's in as many passes."""
