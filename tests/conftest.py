@@ -31,6 +31,12 @@ settings.register_profile("explore", derandomize=False, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
+# `--renderer auto` (render, render --path, view) draws with the CPU renderer on a software
+# OpenGL device only where numba's on-disk cache holds its kernels: pinned to the quad path for
+# the suite (and the processes it starts), so that no test depends on whether that cache is
+# warm.  Tests of the auto choice itself unset it (tests/test_renderer_auto.py; docs/testing.md).
+os.environ["SPLATGL_RENDERER_AUTO"] = "quad"
+
 
 def shared_scenes_dir() -> Path:
     """``$SPLATGL_SHARED_SCENES`` or ``../shared/scenes`` beside the repository (the library's

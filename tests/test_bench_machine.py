@@ -33,7 +33,8 @@ def test_machine_info_from_cpuinfo_text():
     cull = "compiled (numba)" if cull_kernel.installed() else "numpy"
     assert info["cull"] == cull
     assert describe(info) == (f"machine: AMD EPYC 7B13 (avx2), {info['cores']} cores, "
-                              f"GL renderer llvmpipe (LLVM 15.0.6, 256 bits), cull {cull}")
+                              f"GL renderer llvmpipe (LLVM 15.0.6, 256 bits), cull {cull}, "
+                              "software device: sort auto -> exact, early-stop auto -> by coverage")
 
 
 def test_this_machine_is_described():
@@ -55,3 +56,13 @@ def test_probe_machine_names_the_contexts_renderer():
     info = probe_machine()
     assert info["gl_renderer"] == name and name not in ("", "?")
     assert f"GL renderer {name}, cull" in describe(info)
+
+
+def test_machine_line_says_what_auto_takes_on_a_gpu(monkeypatch):
+    """Issue 40 item 4: the bench's machine line names the device class and what --sort auto
+    and --early-stop auto take there."""
+    monkeypatch.delenv("SPLATGL_DEVICE_CLASS", raising=False)
+    info = machine_info("NVIDIA H100 80GB HBM3/PCIe/SSE2", XEON)
+    assert (info["device_class"], info["sort_auto"], info["early_stop_auto"]) == (
+        "hardware", "gpu", "on")
+    assert describe(info).endswith(", hardware device: sort auto -> gpu, early-stop auto -> on")

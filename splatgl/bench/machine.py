@@ -62,7 +62,19 @@ def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None
     return {"cpu": model or platform.processor() or platform.machine() or "?",
             "simd": simd_level(flags), "cores": cores,
             "gl_renderer": gl_renderer or "?", "platform": platform.platform(terse=True),
-            "cull": "compiled (numba)" if cull_kernel.installed() else "numpy"}
+            "cull": "compiled (numba)" if cull_kernel.installed() else "numpy",
+            **(auto_choices(gl_renderer) if gl_renderer else {})}
+
+
+def auto_choices(gl_renderer: str) -> dict:
+    """What ``--sort auto`` and ``--early-stop auto`` take on this GL renderer's device
+    (:mod:`splatgl.gl.device_class`): ``{"device_class", "sort_auto", "early_stop_auto"}``."""
+    from ..gl.device_class import AUTO, classify, resolve_early_stop, resolve_sort
+
+    device = classify(gl_renderer)
+    stop = resolve_early_stop(AUTO, device).value
+    return {"device_class": device.cls.value, "sort_auto": resolve_sort(AUTO, device).value,
+            "early_stop_auto": "by coverage" if stop == AUTO else stop}
 
 
 def probe_machine() -> dict:
@@ -81,4 +93,6 @@ def describe(info: dict) -> str:
     """One line: ``machine: AMD EPYC (avx2), 2 cores, GL renderer llvmpipe (...), cull numpy``
     (the cull path matters to the cull figures: the compiled one where numba is installed)."""
     return (f"machine: {info['cpu']} ({info['simd']}), {info['cores']} cores, "
-            f"GL renderer {info['gl_renderer']}, cull {info.get('cull', '?')}")
+            f"GL renderer {info['gl_renderer']}, cull {info.get('cull', '?')}"
+            + (f", {info['device_class']} device: sort auto -> {info['sort_auto']}, early-stop "
+               f"auto -> {info['early_stop_auto']}" if "device_class" in info else ""))

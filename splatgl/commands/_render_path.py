@@ -39,6 +39,7 @@ from ..lod.render import LodSettings
 from ..lod.stream_frames import StreamFrames
 from ..model.settings import RendererKind
 from ..renderers.registry import check
+from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ..renderers.stereo import StereoLayout, StereoRenderer
 from ._common import (check_convention, default_size, demo_scene_path, load_scene_arg,
                       positive_float, projection_from_args, settings_from_args)
@@ -98,7 +99,7 @@ def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
              if value is not None}
     if not given and getattr(args, "memory", None) is None:
         return None
-    if args.renderer != "quad":
+    if args.renderer not in ("quad", AUTO):
         raise SplatglError(f"--lod-threshold/--lod-budget/--memory render through the quad path, "
                            f"not --renderer {args.renderer}")
     if args.scene is None or not is_lod_file(args.scene):
@@ -112,7 +113,7 @@ def check_preview(args: argparse.Namespace, target: FrameTarget, sharded: bool,
     """Refuse, before any work, what ``--preview`` cannot combine with (one line each)."""
     check_fps(args.target_fps)
     refusals = (
-        (args.renderer != "quad", f"--preview draws through the quad path, not --renderer {args.renderer}"),
+        (args.renderer not in ("quad", AUTO), f"--preview draws through the quad path, not --renderer {args.renderer}"),
         (sharded, "--preview renders in one process (not with --workers or --executor ray)"),
         (args.stereo is not None, "--preview and --stereo cannot be combined"),
         (lod is not None, "--preview chooses its own level-of-detail cut; drop --lod-threshold/"
@@ -217,7 +218,7 @@ def run_path(args: argparse.Namespace) -> int:
                                                                      args.normal_space)
     layer_files(args, None)     # --normal-space world needs the normal layer
     check_under_options(args)
-    check_convention(args, RendererKind(args.renderer))  # no option the renderer ignores
+    check_convention(args, RendererKind(args.renderer if args.renderer != AUTO else "quad"))
     executor = executor_from_args(args)
     check_not_sharded(args, executor.sharded)
     if args.stereo is not None and executor.sharded:
@@ -251,6 +252,10 @@ def run_path(args: argparse.Namespace) -> int:
     fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
+    if args.renderer == AUTO and lod is None and memory is None and not args.preview:
+        choose_renderer(args, scene, settings, cameras[0], target.layers or None, None)
+    elif args.renderer == AUTO:       # a level of detail, streaming, drafts: the quad path's
+        args.renderer = RendererKind.QUAD.value
     kind = RendererKind(args.renderer)
     record = frame_record(args, scene, settings, target, kind, lod)
     check(kind, scene=scene, settings=settings)     # before the output folder exists
@@ -309,6 +314,8 @@ def run_path(args: argparse.Namespace) -> int:
         print(summary(run, "frames"))
     if args.timings:
         print(f"GL renderer: {gl_name}")
+        for line in auto_lines(args, settings, gl_name if not executor.sharded else None):
+            print(line)
         ratio = result.seconds / result.render_seconds if result.render_seconds > 0 else float("nan")
         print(f"timings: {result.seconds:.3f} s for {result.written} frames; renderer stages "
               f"{result.render_seconds:.3f} s; ratio {ratio:.3f}")

@@ -19,6 +19,7 @@ from ..lod.budget import format_size
 from ..lod.io import read_lod
 from ..lod.stream_frames import StreamFrames, render_streamed
 from ..model.settings import RendererKind
+from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args,
                       settings_from_args)
@@ -62,12 +63,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "pattern such as frames/%%05d.png, or a video (.mp4)")
     p.add_argument("--bit-depth", type=int, choices=BIT_DEPTHS, default=8,
                    help="bits per channel of PNG/TIFF output (default 8)")
-    p.add_argument("--renderer", choices=renderer_names(), default="quad",
-                   help="quad = the OpenGL quad path (default); tile = the per-tile compute-shader "
-                        "renderer; reference = the NumPy per-tile reference (slow); cpu = the "
-                        "reference's algorithm compiled for the CPU, no OpenGL (needs the fast "
-                        "extra; 3DGS colour, alpha and depth; faster than the quad path on "
-                        "software OpenGL)")
+    p.add_argument("--renderer", choices=[AUTO] + renderer_names(), default=AUTO,
+                   help="auto (default) = cpu on a machine without a GPU where it can draw the "
+                        "request and its compiled kernels are ready (no option only the quad path "
+                        "reads), else quad; quad = the OpenGL quad path; tile = the per-tile "
+                        "compute-shader renderer; reference = the NumPy per-tile reference (slow); "
+                        "cpu = the reference's algorithm compiled for the CPU, no OpenGL (needs "
+                        "the fast extra; 3DGS colour, alpha and depth; about 3x faster than the "
+                        "quad path on software OpenGL). --timings says which ran")
     p.add_argument("--depth-png", type=Path, default=None, metavar="FILE",
                    help="also write a colourised preview of the expected depth with a scale bar")
     add_force_argument(p)
@@ -96,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         return run_path(args)
     args.output = Path(args.output)
     refuse_path_only_options(args)
-    kind = RendererKind(args.renderer)
+    kind = RendererKind(args.renderer if args.renderer != AUTO else "quad")   # auto: below
     check_convention(args, kind)
     if args.depth_png is not None:
         picture_format(args.depth_png, "--depth-png")
@@ -129,11 +132,16 @@ def run(args: argparse.Namespace) -> int:
         scene, camera = stream_inputs(args, settings)
     else:
         scene, settings, camera = inputs_from_args(args)
+    if args.renderer == AUTO and memory is None and not lod_given(args):
+        kind = choose_renderer(args, scene, settings, camera, plan.render_layers(args.output)
+                               | ({Layer.DEPTH} if args.depth_png is not None else set()), under)
+    elif args.renderer == AUTO:     # a level of detail, streamed or not: the quad path's
+        args.renderer = RendererKind.QUAD.value
     files = layer_files(args, camera)
     check_exact_ids(files, args.output, scene.count)
     # what the file holds (EXR: the depth layer as Z), and the depth the preview needs
     layers = files.render_layers(args.output) | ({Layer.DEPTH} if args.depth_png is not None else set())
-    lod = any(v is not None for v in (args.lod_threshold, args.lod_budget, args.lod_blend))
+    lod = lod_given(args)
     if lod and stereo is not None:
         raise SplatglError(LodFrames.stereo_refusal)
     times = None
@@ -169,8 +177,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {path} ({width}x{height}, {scene.count} splats, {kind_text}{extra})")
         for layer in plan.pictures(path):
             print(f"wrote {picture_path(path, layer)} ({layer.value})")
-    _print_timings(args, gl_name, times)
+    _print_timings(args, gl_name, times, settings)
     return 0
+
+
+def lod_given(args: argparse.Namespace) -> bool:
+    """Whether a --lod-* option asks for a level-of-detail cut (drawn by the quad path)."""
+    return any(v is not None for v in (args.lod_threshold, args.lod_budget, args.lod_blend))
 
 
 def _eye_name(path: Path, eye: str) -> Path:
@@ -178,10 +191,13 @@ def _eye_name(path: Path, eye: str) -> Path:
     return path.with_name(f"{path.stem}_{eye}{path.suffix}")
 
 
-def _print_timings(args: argparse.Namespace, gl_name: str, times) -> None:
-    """With --timings: the GL renderer (which device ran the frame) and the stage times."""
+def _print_timings(args: argparse.Namespace, gl_name: str, times, settings) -> None:
+    """With --timings: the GL renderer (which device ran the frame), what each ``auto`` option
+    chose, and the stage times."""
     if args.timings:
         print(f"GL renderer: {gl_name}")
+        for line in auto_lines(args, settings, gl_name):
+            print(line)
         if times is not None:
             print(f"timings: {format_timings(times)}")
 

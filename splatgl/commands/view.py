@@ -12,6 +12,7 @@ from ..errors import SplatglError
 from ..interactive.budget import check_fps
 from ..model.settings import RendererKind
 from ..renderers.registry import check, names
+from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       camera_from_args, check_convention, demo_scene_path, load_scene_arg,
                       settings_from_args)
@@ -40,8 +41,12 @@ MAX_WINDOW = (1600, 1000)
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("--renderer", choices=names(interactive=True),
-                   default="quad", help="start with the quad path (default), the tile renderer or "
+    p.add_argument("--renderer", choices=[AUTO] + names(interactive=True),
+                   default=AUTO, help="auto (default): the CPU renderer's exact frame on a "
+                                        "machine without a GPU where it draws the scene and its "
+                                        "compiled kernels are ready (compiled in the background "
+                                        "on first use, quad meanwhile), else quad; or start "
+                                        "with the quad path, the tile renderer or "
                                         "the CPU renderer (the fast extra; no OpenGL for the "
                                         "exact frame: while the camera moves, the quad path's "
                                         "drafts; at rest, the CPU renderer's exact frame, 2-3x "
@@ -86,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError("the viewer shows stereo side by side; --stereo-layout is for render")
     if args.benchmark is not None and args.benchmark < 1:
         raise SplatglError(f"--benchmark needs at least 1 frame, got {args.benchmark}")
-    check_convention(args, args.renderer)
+    check_convention(args, args.renderer if args.renderer != AUTO else "quad")
     # --benchmark times same-work frames (the peer race): exact unless a budget is asked for
     target_fps = check_fps(0.0 if args.benchmark is not None and args.target_fps is None
                            else args.target_fps)
@@ -105,6 +110,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"loaded {scene.count:,} splats (SH degree {scene.sh_degree}) in "
               f"{time.perf_counter() - t0:.2f} s", flush=True)
     settings = settings_from_args(args)
+    if args.renderer == AUTO:     # the exact frame at rest; moving frames are quad drafts
+        choose_renderer(args, scene, settings, None, None, None, background=True)
+        print(args.renderer_choice.text(), flush=True)
+        for line in auto_lines(args, settings)[1:]:
+            print(line, flush=True)
     check(args.renderer, scene=scene, settings=settings)   # refused here, before a window opens
     if args.renderer == RendererKind.CPU.value:
         from ..renderers.cpu import prepare

@@ -19,6 +19,7 @@ from ..gl.bindings import (ACCUM_UNIT, BINDING_COMMANDS, BINDING_COVERAGE, BINDI
                            BINDING_SURVIVORS, COVERAGE_GROUP, STOP_TILES_GROUP)
 from ..gl.buffers import GrowableBuffer
 from ..gl.transfers import transfers
+from ..gl.device_class import of_context, resolve_early_stop
 from ..model.settings import EarlyStop
 from .early_stop import (COARSE_SCHEDULE, COMMAND_BYTES, COVERAGE_MIN_INVOCATIONS,
                          COVERAGE_SLOTS_PER_INVOCATION, FINE_SCHEDULE, MAX_BATCH, SEGMENT,
@@ -134,6 +135,9 @@ class Batches:
     """
 
     def __init__(self, ctx: moderngl.Context, mode: EarlyStop, resources, programs):
+        #: ``mode`` on this device: AUTO is ON on a hardware GPU (measured on one H100,
+        #: docs/gpu.md), the coverage rule below on a software rasteriser (tuned on llvmpipe).
+        mode = resolve_early_stop(mode, of_context(ctx))
         self.ctx, self.mode, self.res, self.programs = ctx, mode, resources, programs
         self.passes = EarlyStopPasses(ctx, programs.cache) if mode is not EarlyStop.OFF else None
         #: Whether the current frame draws in early-termination batches (:meth:`decide`), its

@@ -19,6 +19,7 @@ distortion, orthographic) projects with the reference's NumPy stage 1, which is 
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import time
 from dataclasses import dataclass
 from types import SimpleNamespace
@@ -71,6 +72,31 @@ class CpuTimes:
 
 #: The compiled stages, once loaded (:func:`prepare`).
 _LOADED: SimpleNamespace | None = None
+#: Whether :func:`prepare` finished in this process (every kernel compiled or loaded).
+_READY = False
+#: The kernels numba caches on disk (``cache=True``), by module.
+_CACHED_KERNELS = {"splatgl.renderers._cpu_project": ("project_pinhole", "project_model"),
+                   "splatgl.renderers._cpu_raster": ("pack", "bin_tiles", "rasterize")}
+
+
+def kernels_ready() -> bool:
+    """Whether the kernels are ready without compiling: loaded in this process, or each held
+    by numba's on-disk cache for this source and numba (loading them then takes about 0.5 s,
+    not the 25 s of a compile).  False where numba is missing.  ``--renderer auto`` draws with
+    this renderer only when they are (:mod:`splatgl.renderers.auto`)."""
+    if _READY:
+        return True
+    if importlib.util.find_spec("numba") is None:
+        return False
+    try:
+        for module, names in _CACHED_KERNELS.items():
+            mod = importlib.import_module(module)
+            for name in names:
+                if not getattr(mod, name)._cache._cache_file._load_index():
+                    return False     # never compiled here, or stale (source or numba changed)
+    except (AttributeError, OSError, EOFError, ValueError):   # numba's internals moved
+        return False
+    return True
 
 
 def prepare(progress: ProgressCallback | None = None) -> None:
@@ -86,7 +112,7 @@ def prepare(progress: ProgressCallback | None = None) -> None:
 
 def _kernels(progress: ProgressCallback | None = None) -> SimpleNamespace:
     """The compiled stages (:mod:`._cpu_project`, :mod:`._cpu_raster`), ready (:func:`prepare`)."""
-    global _LOADED
+    global _LOADED, _READY
     check(RendererKind.CPU)           # numba, the fast extra
     if _LOADED is None:
         project_mod = importlib.import_module("splatgl.renderers._cpu_project")
@@ -96,6 +122,7 @@ def _kernels(progress: ProgressCallback | None = None) -> SimpleNamespace:
                                   pack=raster_mod.pack, bin_tiles=raster_mod.bin_tiles,
                                   rasterize=raster_mod.rasterize, REC_SIZE=raster_mod.REC_SIZE)
         _warm_up(default_progress() if progress is None else progress)
+    _READY = True
     return _LOADED
 
 
