@@ -26,8 +26,9 @@ from ..progress import StderrProgress, default_progress, enabled
 from ..api import Renderer
 from ..model.settings import RenderSettings
 from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_popping_arguments,
-                           check_interactive_options, run_interactive_command, run_lod_command,
-                           run_popping_command, run_scale_command)
+                           add_scale_lod_arguments, check_interactive_options,
+                           check_scale_lod_options, run_interactive_command, run_lod_command,
+                           run_popping_command, run_scale_command, run_scale_lod_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
 from ._memory import STREAM_HELP, add_memory_argument, run_stream_bench
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
@@ -99,7 +100,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the scale benchmark instead: scenes of --sizes splats built from the "
                         "shared real files (and one SH3 size), load time, peak memory, GPU bytes "
                         "per splat, cull/sort/pre-pass/draw and tile frame times, CPU and GPU "
-                        "sort, log-log slopes (see splatgl/bench/scale.py)")
+                        "sort, log-log slopes (see splatgl/bench/scale.py); with --lod: scenes "
+                        "larger than memory (default 1M,5M,20M,100M) written to a scratch folder, "
+                        "their out-of-core level of detail, lazy open, streamed first frame, "
+                        "flight and far-view PSNR, each step's time and peak memory "
+                        "(splatgl/bench/scale_lod.py)")
     p.add_argument("--lod", action="store_true",
                    help="the level-of-detail benchmark instead: scenes of --sizes splats (default "
                         "3M,6M) and their hierarchies, frame time, PSNR/SSIM against full detail "
@@ -121,6 +126,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_lod_arguments(p)
     add_memory_argument(p, STREAM_HELP + "; with one such SCENE: frames along an orbit, first "
                            "and median frame time, resident memory, chunks, peak RSS")
+    add_scale_lod_arguments(p)
     add_popping_arguments(p)
     add_interactive_arguments(p)
 
@@ -196,17 +202,20 @@ def run(args: argparse.Namespace) -> int:
     if given:
         raise SplatglError(f"{', '.join(given)}: {'options' if len(given) > 1 else 'an option'} "
                            "of the popping benchmark; add --popping")
+    check_scale_lod_options(args)
     modes = [m for m, on in (("--interactive", args.interactive), ("--scale", args.scale),
                              ("--lod", args.lod)) if on]
+    if modes == ["--scale", "--lod"]:   # one benchmark: scenes larger than memory
+        modes = ["--scale --lod"]
     if len(modes) > 1:     # each ran alone, the others silently left out
         raise SplatglError(f"{' and '.join(modes)} are separate benchmarks: run one at a time "
                            "(each writes its own JSON with --out DIR)")
     if (args.scale or args.lod) and executor.sharded:
-        mode = "--scale" if args.scale else "--lod"
+        mode = modes[0]
         raise SplatglError(f"{mode} measures in one process (memory, load and frame times); "
                            "--workers and --executor ray shard the scene benchmark")
     if (args.scale or args.lod) and args.json is not None:
-        mode = "--scale" if args.scale else "--lod"
+        mode = modes[0]
         raise SplatglError(f"--json: {mode} writes its JSON with --out DIR")
     if args.exact != "quad" and not args.interactive:
         raise SplatglError("--exact chooses the exact frame of --interactive's flight; add "
@@ -214,6 +223,8 @@ def run(args: argparse.Namespace) -> int:
     if args.interactive:
         check_interactive_options(args)          # before looking for the scenes
         return run_interactive_command(args, _interactive_scenes(args))
+    if args.scale and args.lod:
+        return run_scale_lod_command(args)
     if args.scale:
         return run_scale_command(args)
     if args.lod:
