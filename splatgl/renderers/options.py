@@ -34,6 +34,12 @@ class DrawOptions:
     sh_degree: int | None = None
     model: "ModelTransform | None" = None
 
+    def __post_init__(self) -> None:
+        # validated and normalised as the settings are ("square" -> QuadExtent.SQUARE)
+        checked = self.as_settings()
+        for name in field_names(type(self)):
+            object.__setattr__(self, name, getattr(checked, name))
+
     @classmethod
     def of(cls, settings: RenderSettings):
         """This class's part of ``settings`` (validated there)."""
