@@ -160,6 +160,9 @@ def step_flight(a: dict) -> dict:
     from ..model.settings import RenderSettings
     from .flight import Flight
 
+    from .. import api
+
+    api.MAX_CACHED_PATHS = 1   # this process only: one cut's upload held, as the viewer holds one
     settings = RenderSettings()
     streamed = StreamedScene(a["lod"], LodSettings(), int(a["memory"]))
     try:
