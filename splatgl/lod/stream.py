@@ -45,6 +45,13 @@ PINNED_LEVELS = 2
 _FIELDS = ("means", "quats", "log_scales", "opacity_logits", "sh")
 
 
+def concatenate(parts: list[Scene]) -> Scene:
+    """The scenes ``parts`` one after the other."""
+    if len(parts) == 1:
+        return parts[0]
+    return Scene(*(np.concatenate([getattr(s, f) for s in parts]) for f in _FIELDS), parts[0].kind)
+
+
 def scene_bytes(scene: Scene) -> int:
     """Bytes of a scene's stored arrays."""
     return int(sum(getattr(scene, f).nbytes for f in _FIELDS))
@@ -99,7 +106,8 @@ class ResidentSet:
     def __init__(self, chunks, budget: int, offsets: np.ndarray, branching: int,
                  threads: int = LOADERS, on_loaded=None):
         self.chunks, self.budget = chunks, int(budget)
-        self.offsets, self.branching = np.asarray(offsets, np.int64), int(branching)
+        self.offsets = None if offsets is None else np.asarray(offsets, np.int64)
+        self.branching = int(branching)
         self.on_loaded = on_loaded
         self._held: OrderedDict[int, Scene] = OrderedDict()   # LRU first
         self._sizes: dict[int, int] = {}
@@ -109,11 +117,12 @@ class ResidentSet:
         self._stop = threading.Event()
         self._pool = ThreadPoolExecutor(max(1, threads), thread_name_prefix="splatgl-lod-load")
         self.stats = StreamStats()
-        top = max(0, len(self.offsets) - 1 - PINNED_LEVELS)
-        first = int(self.offsets[top]) // chunks.rows
-        self._pinned = frozenset(range(first, chunks.count))
-        need = sum(chunks.estimate(c) for c in self._pinned) + max(
-            chunks.estimate(c) for c in range(min(chunks.count, 1))) * max(1, threads)
+        self._pinned = frozenset()   # no tree (chunks of a level): nothing pinned
+        if self.offsets is not None:
+            top = max(0, len(self.offsets) - 1 - PINNED_LEVELS)
+            self._pinned = frozenset(range(int(self.offsets[top]) // chunks.rows, chunks.count))
+        largest = max((chunks.estimate(c) for c in range(chunks.count)), default=0)
+        need = sum(chunks.estimate(c) for c in self._pinned) + largest * max(1, threads)
         if need > self.budget:
             raise SplatglError(f"--memory {format_size(self.budget)} is too small to stream this "
                                f"level of detail: its top levels and {max(1, threads)} chunks "
@@ -222,13 +231,22 @@ class ResidentSet:
         need = np.unique(ids)
         cuts = np.searchsorted(ids, need)
         bounds = dict(zip(need.tolist(), zip(cuts.tolist(), np.append(cuts[1:], rows.size).tolist())))
-        parts: dict[int, Scene] = {}
-        todo = need.tolist()
+        parts = self.collect(need.tolist(), lambda c, scene: self._pick(scene, c, rows, *bounds[c]))
+        order = [parts[c] for c in need.tolist()]
+        if not order:
+            return self._pick(self.chunks.load(0), 0, rows, 0, 0)
+        return concatenate(order)
+
+    def collect(self, need: list[int], take) -> dict:
+        """``{chunk: take(chunk, its scene)}`` for the chunks ``need``, waiting for those not
+        resident; each is taken as it arrives (a chunk with no room is used once, not kept)."""
+        parts: dict = {}
+        todo = list(need)
         while todo:
             for c in todo:
                 scene = self.held(c)
                 if scene is not None:
-                    parts[c] = self._pick(scene, c, rows, *bounds[c])
+                    parts[c] = take(c, scene)
             todo = [c for c in todo if c not in parts]
             if not todo:
                 break
@@ -245,15 +263,9 @@ class ResidentSet:
                     raise KeyboardInterrupt from None
                 if scene is None:
                     raise KeyboardInterrupt
-                parts[c] = self._pick(scene, c, rows, *bounds[c])
+                parts[c] = take(c, scene)
             todo = [c for c in todo if c not in parts]
-        order = [parts[c] for c in need.tolist()]
-        if not order:
-            return self._pick(self.chunks.load(0), 0, rows, 0, 0)
-        if len(order) == 1:
-            return order[0]
-        return Scene(*(np.concatenate([getattr(s, f) for s in order]) for f in _FIELDS),
-                     order[0].kind)
+        return parts
 
     def _pick(self, scene: Scene, chunk: int, rows: np.ndarray, a: int, b: int) -> Scene:
         return scene.subset(rows[a:b] - chunk * self.chunks.rows)
