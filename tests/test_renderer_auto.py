@@ -186,3 +186,18 @@ def test_the_quad_renderer_batches_by_auto_as_the_device_class_says(unpinned):
         with Renderer() as renderer:
             quad = renderer.renderer_for(scene, RenderSettings(), RendererKind.QUAD)
             assert quad.batches.mode is mode
+
+
+def test_the_viewer_panel_names_the_sort_that_ran(ctx):
+    from splatgl.cameras.camera import Camera
+    from splatgl.viewer.display import Display
+    from splatgl.viewer.frames import ViewMode
+
+    display = Display(ctx)
+    try:
+        status = display.status(random_scene(8), RenderSettings(sort_key=resolve_sort("auto", HARDWARE)),
+                                RendererKind.QUAD, ViewMode.COLOR, Camera.from_fov(32, 24, 60.0),
+                                "fov 60", "", False)
+    finally:
+        display.release()
+    assert status.settings == "rgba32f  SH 0/0  ellipse  sort gpu  bg 0,0,0"

@@ -166,7 +166,8 @@ class Display:
         return Status(renderer=kind.value, fps=1.0 / mean if mean > 0 else 0.0, frame=whole,
                       sort=sort, draw=draw,
                       splats=last.splats if last else f"splats - / {scene.count:,}",
-                      settings=f"{s.precision.value}  {sh}  {s.extent.value}  bg {bg}"
+                      settings=f"{s.precision.value}  {sh}  {s.extent.value}  sort "
+                               f"{s.sort_key.value}  bg {bg}"   # the sort --sort auto took
                                + ("  antialias" if s.antialias else ""),
                       size=(camera.width, camera.height), fov=fov,
                       view=view.value, camera=camera_text,
