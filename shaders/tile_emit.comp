@@ -8,12 +8,19 @@
 // as many dispatches as the largest rectangle needs (one, below 32768 tiles).
 // DEVICE_SORT (--sort gpu): also the radix sorter's keys and values, (depth bits, emission
 // place), and splatgl/renderers/tile_device.py issues the chunks indirectly (tile_scan.comp).
+// DEVICE_PRESORT (--sort gpu, global order): invocation k emits the k-th nearest splat
+// (splat_order) and only the sorter's (tile, splat index): a stable sort by tile then gives
+// the (tile, depth) order, ties in index order.
 // PER_PIXEL (3DGS): the key's depth is the splat's peak depth along the ray through its centre
 // clamped into the box of the tile's pixel centres (lib/peak_depth.glsl; twin
 // splatgl/splatmath/peak.py tile_key_bits), clamped below at MIN_KEY_DEPTH, so that each
 // pixel's window has little order left to fix.
 #ifdef DEVICE_SORT
 #define TILE_DEV_KEYS 1
+#endif
+#ifdef DEVICE_PRESORT
+#define TILE_NO_KEYS 1
+#define TILE_SPLAT_ORDER 1
 #endif
 #include "lib/tile_common.glsl"
 #if defined(PER_PIXEL) && !defined(SURFEL)
@@ -31,11 +38,16 @@ uniform uint u_first;   // first key of each splat's rectangle this dispatch wri
 void main() {
     uint i = splat_invocation();
     if (i >= u_count) return;
+#ifdef DEVICE_PRESORT
+    uint base = tile_offsets[i];
+    i = splat_order[i];
+#else
+    uint base = tile_offsets[i];
+#endif
     uint touched = tiles_touched[i];
     if (touched <= u_first) return;
     uvec4 rect = proj_rect[i];
     uint width = rect.z - rect.x;
-    uint base = tile_offsets[i];
     uint depth_bits = floatBitsToUint(proj_mean_depth[i].z);  // z > near > 0: sign bit clear
     uint last = min(touched, u_first + uint(TILE_EMIT_CHUNK));
     for (uint j = u_first; j < last; ++j) {
@@ -47,11 +59,16 @@ void main() {
                              (at - u_rays.xy) / u_rays.zw);
         depth_bits = floatBitsToUint(max(t, MIN_KEY_DEPTH));
 #endif
+#if defined(DEVICE_PRESORT)
+        dev_keys[base + j] = y * u_grid.x + x;
+        dev_values[base + j] = i;
+#else
         sort_keys[base + j] = tile_key(y * u_grid.x + x, depth_bits, i);
 #ifndef KEY_PACKED
         sort_values[base + j] = i;
 #endif
-#ifdef DEVICE_SORT
+#endif
+#if defined(DEVICE_SORT) && !defined(DEVICE_PRESORT)
         dev_keys[base + j] = depth_bits;  // the radix sort's first pass: by depth, stably
         dev_values[base + j] = base + j;  // ... carrying the key's emission place
 #endif

@@ -6,6 +6,9 @@
 //   2 (over the keys, after the tile sort): tile_ranges from where the tile changes, and
 //     tile_order, the sorted keys' splat indices, which the rasterizer reads.
 //   3 (over the tiles): the rasterize passes the longest list needs, as indirect dispatches.
+//   4 (over the splats, DEVICE_PRESORT): the depth sort's keys, the float bits of view z (all
+//     ones for a splat that touches no tile), and values, the splat indices.
+// DEVICE_PRESORT: the sorted values are already the splat indices (no emission places).
 // The keys' count and dispatch sizes come from tile_scan.comp's state: nothing is read back.
 // Twin: splatgl/renderers/tile_device.py ranges_twin().
 #define DEVICE_SORT 1
@@ -21,6 +24,7 @@ uniform uint u_tiles;         // tiles in the grid
 uniform uvec3 u_raster_args;  // one rasterize pass's groups (tiles x, band rows, 1)
 uniform uint u_emit_slots;    // ts_args: emit slots first, then u_raster_slots passes
 uniform uint u_raster_slots;
+uniform uint u_splats;        // splats N (stage 4)
 
 void main() {
     uint i = splat_invocation();
@@ -31,6 +35,13 @@ void main() {
             for (uint p = 0u; p < u_raster_slots; ++p)
                 ts_args[u_emit_slots + p] = p == 0u ? uvec4(u_raster_args, 0u) : uvec4(0u);
         }
+        return;
+    }
+    if (u_stage == 4u) {
+        if (i == 0u) ts_splats = u_splats;   // the sort reads its count here, not from the host
+        if (i >= u_splats) return;
+        dev_keys[i] = tiles_touched[i] > 0u ? floatBitsToUint(proj_mean_depth[i].z) : ~0u;
+        dev_values[i] = i;
         return;
     }
     if (u_stage == 3u) {
@@ -53,5 +64,9 @@ void main() {
     uint tile = dev_keys[i];
     if (i == 0u || dev_keys[i - 1u] != tile) tile_ranges[tile].x = i;
     if (i + 1u == n || dev_keys[i + 1u] != tile) tile_ranges[tile].y = i + 1u;
+#ifdef DEVICE_PRESORT
+    tile_order[i] = dev_values[i];
+#else
     tile_order[i] = sort_values[dev_values[i]];
+#endif
 }

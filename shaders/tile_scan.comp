@@ -5,11 +5,16 @@
 // total, the overflow flag (total above u_capacity keys), the count the sorter reads and the
 // indirect dispatches sized from them (emit chunks, the key passes); u_stage 2 rescans each
 // block from its start.  Nothing is read back (splatgl/renderers/tile_device.py).
+// DEVICE_PRESORT: the splats are taken in depth order (splat_order), so tile_offsets[k] is
+// where the k-th nearest splat's keys start.
 // Twin: splatgl/renderers/tile_device.py scan_twin().
 #define DEVICE_SORT 1
 #define TILE_STATE 1
 #define TILE_SCAN_BLOCKS 1
 #define TILE_NO_KEYS 1
+#ifdef DEVICE_PRESORT
+#define TILE_SPLAT_ORDER 1
+#endif
 #include "lib/tile_common.glsl"
 
 layout(local_size_x = TILE_SCAN_GROUP) in;
@@ -24,6 +29,14 @@ uniform uvec2 u_splat_groups;  // an emit dispatch's groups (splat_groups(N))
 shared uint s_sum[TILE_SCAN_GROUP];
 shared uint s_max[TILE_SCAN_GROUP];
 #define BLOCK (uint(TILE_SCAN_GROUP) * uint(TILE_SCAN_ITEMS))
+
+uint touched_at(uint k) {
+#ifdef DEVICE_PRESORT
+    return tiles_touched[splat_order[k]];
+#else
+    return tiles_touched[k];
+#endif
+}
 
 void scan_blocks_stage(uint t) {
     uint per = (u_blocks + uint(TILE_SCAN_GROUP) - 1u) / uint(TILE_SCAN_GROUP);
@@ -75,7 +88,7 @@ void main() {
     for (uint i = 0u; i < uint(TILE_SCAN_ITEMS); ++i) {
         uint idx = first + i;
         if (idx < u_count) {
-            uint c = tiles_touched[idx];
+            uint c = touched_at(idx);
             sum += c;
             most = max(most, c);
         }
@@ -108,7 +121,7 @@ void main() {
         uint idx = first + i;
         if (idx < u_count) {
             tile_offsets[idx] = run;
-            run += tiles_touched[idx];
+            run += touched_at(idx);
         }
     }
 }

@@ -59,22 +59,36 @@ def test_scan_and_ranges_twins():
     assert ranges.tolist() == [[0, 2], [0, 0], [2, 5], [0, 0], [0, 0], [5, 6]]
 
 
-def test_device_stages_equal_the_cpu_order(ctx):
-    """Offsets, emitted keys, the sorted keys and splat indices and the ranges: the CPU
-    order's (the twins), bit for bit."""
+@pytest.mark.parametrize("order", [Order.GLOBAL, Order.PER_PIXEL])
+def test_device_stages_equal_the_cpu_order(ctx, order):
+    """The sorted keys and splat indices and the ranges: the CPU order's (the twins), bit for
+    bit.  The global order scans and emits the splats in depth order (the depth presort, ties
+    by index): its offsets are the twin's scan of the counts in that order.  The per-pixel
+    order emits in index order, as the CPU does: offsets and emitted keys are the CPU's."""
     scene = random_scene(3000, 7, degree=1, **IN_DEPTH)
-    cpu = TileRenderer(ctx, scene, RenderSettings())
-    dev = TileRenderer(ctx, scene, GPU)
+    settings = RenderSettings(order=order)
+    cpu = TileRenderer(ctx, scene, settings)
+    dev = TileRenderer(ctx, scene, dataclasses.replace(settings, sort_key=SortKey.GPU))
     try:
         a = cpu.debug_stages(view_for(cpu, CAM))
         b = dev.debug_stages(view_for(dev, CAM))
         offsets = dev._bufs["OFFSETS"].read(scene.count * 4, np.uint32)
+        z = dev._bufs["MEAN_DEPTH"].read(scene.count * 16, np.float32).reshape(-1, 4)[:, 2]
+        presort = dev.device.presort
     finally:
         cpu.release()
         dev.release()
-    assert len(a.keys) > 5000
-    np.testing.assert_array_equal(offsets, scan_twin(a.tiles_touched.astype(np.uint32))[0])
-    for field in ("tiles_touched", "emitted_keys", "emitted_values", "keys", "values", "ranges"):
+    assert len(a.keys) > 5000 and presort == (order is Order.GLOBAL)
+    counts = a.tiles_touched.astype(np.uint32)
+    if presort:
+        depth_keys = np.where(counts > 0, z.view(np.uint32), np.uint32(0xFFFFFFFF))
+        counts = counts[np.argsort(depth_keys, kind="stable")]
+        assert len(b.emitted_keys) == 0          # not kept: the sort's keys are the tiles
+    else:
+        for field in ("emitted_keys", "emitted_values"):
+            np.testing.assert_array_equal(getattr(b, field), getattr(a, field), err_msg=field)
+    np.testing.assert_array_equal(offsets, scan_twin(counts)[0])
+    for field in ("tiles_touched", "keys", "values", "ranges"):
         np.testing.assert_array_equal(getattr(b, field), getattr(a, field), err_msg=field)
     tiles = (a.keys >> np.uint64(32)).astype(np.uint32)
     np.testing.assert_array_equal(b.ranges, ranges_twin(tiles, len(a.ranges)))
@@ -365,3 +379,19 @@ def test_the_viewer_cycle_skips_the_tile_renderer_for_bucket16():
                    "(use --renderer quad)")
     assert registry.refusal(RendererKind.TILE, settings=GPU) is None
     assert registry.refusal(RendererKind.QUAD, settings=RenderSettings(sort_key=SortKey.BUCKET16)) is None
+
+
+def test_both_device_shapes_agree_on_the_global_order(ctx):
+    """The depth presort (the global order's shape) and the general shape (two sorts of the
+    emitted keys, the per-pixel order's) give the same image for the global order."""
+    scene = random_scene(2000, 5, degree=1, **IN_DEPTH)
+    images = []
+    for presort in (True, False):
+        dev = TileRenderer(ctx, scene, GPU)
+        try:
+            dev.device.presort = presort
+            dev.programs = type(dev.programs)(ctx)
+            images.append(draw(dev, CAM, depth=True))
+        finally:
+            dev.release()
+    _same(images[0], images[1], depth=True)

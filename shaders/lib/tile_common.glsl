@@ -55,7 +55,8 @@ layout(std430, binding = TILE_BINDING_STATE) coherent buffer TileState {
     uint ts_sort_count;  // keys to sort (ts_total, 0 after an overflow): the sorter reads it
     uint ts_max_touched; // the largest tiles_touched
     uint ts_passes;      // rasterize passes: the longest tile list over TILE_LIST_CHUNK
-    uint ts_pad0, ts_pad1, ts_pad2;
+    uint ts_splats;      // splats N: the depth presort's count (tile_ranges.comp stage 4)
+    uint ts_pad1, ts_pad2;
     uvec4 ts_key_args;   // groups of SPLAT_GROUP over the keys (0 after an overflow)
     uvec4 ts_args[];
 };
@@ -65,6 +66,9 @@ layout(std430, binding = TILE_BINDING_SCAN_BLOCKS) buffer ScanBlocks { uvec2 sca
 #endif
 #ifdef TILE_ORDER
 layout(std430, binding = TILE_BINDING_ORDER) buffer TileOrder { uint tile_order[]; };
+#endif
+#ifdef TILE_SPLAT_ORDER
+layout(std430, binding = TILE_BINDING_SPLAT_ORDER) buffer SplatOrder { uint splat_order[]; };
 #endif
 #ifdef TILE_DEV_KEYS
 layout(std430, binding = TILE_BINDING_SORT_KEYS) buffer DevKeys { uint dev_keys[]; };

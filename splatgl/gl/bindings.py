@@ -81,6 +81,8 @@ TILE_BINDING_SCAN_BLOCKS = 24
 TILE_BINDING_ORDER = 25
 TILE_BINDING_SORT_KEYS = 26
 TILE_BINDING_SORT_VALUES = 27
+#: The splats in depth order (DEVICE_PRESORT: the scan and emission walk them in it).
+TILE_BINDING_SPLAT_ORDER = 28
 
 # --- The device radix sort (gl/radix_sort.py; shaders/radix_*.comp, lib/radix.glsl).
 RADIX_BINDING_KEYS_IN = 0

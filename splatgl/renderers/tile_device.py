@@ -10,11 +10,15 @@
    depth bits`` and splat indices, as the CPU order emits them, plus the radix sorter's keys
    (the depth bits) and values (each key's emission place); its chunks are indirect
    dispatches, skipped after an overflow.
-3. ``sort``: two stable passes of :class:`splatgl.gl.radix_sort.RadixSorter`, each over only
-   the bits its keys differ in, with the count read on the device (``device_count``): by depth,
-   then (tile_ranges.comp stage 1 gathers each sorted key's tile) by tile.  An LSD sort by the
-   low word then the high word is the stable sort of the 64-bit keys, ties in emission order:
-   the CPU order exactly.
+3. ``sort`` (:class:`splatgl.gl.radix_sort.RadixSorter`, each sort over only the bits its keys
+   differ in, its count read on the device: ``device_count``).  The global order
+   (:attr:`DeviceOrder.presort`): before the scan, the N splats sorted by depth (stable: ties
+   by index); the scan and the emission walk them in that order and emit (tile, splat index);
+   one stable sort by the tile (few bits) gives the (tile, depth) order, ties by index.  The
+   per-pixel order (a per-tile key depth): the emitted keys sorted by depth, then (tile_ranges
+   stage 1 gathers each sorted key's tile) by tile: an LSD sort by the low word then the high
+   word is the stable sort of the 64-bit keys, ties in emission order.  Both: the CPU order
+   exactly.
 4. ``ranges`` (tile_ranges.comp): where the tile changes, the sorted splat indices, and the
    rasterize passes the longest tile list needs, as indirect dispatches.
 
@@ -36,7 +40,7 @@ from ..gl.egl_devices import is_software_renderer
 from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
-from ..model.settings import SortKey
+from ..model.settings import Order, SortKey
 from .tile_keys import (RASTER_BAND_TILES, TILE_EMIT_CHUNK, TILE_LIST_CHUNK, KeyLayout,
                         read_keys, splat_groups)
 
@@ -45,6 +49,7 @@ from .tile_keys import (RASTER_BAND_TILES, TILE_EMIT_CHUNK, TILE_LIST_CHUNK, Key
 _ARGS = 48
 _TOTAL = 0
 _SORT_COUNT = 8
+_SPLATS = 20
 #: Keys the key buffers first hold at the least.
 _MIN_CAPACITY = 4096
 
@@ -84,6 +89,10 @@ class DeviceOrder:
         #: drawn in bands with a finish between them (Ctrl-C); a GPU blends every list in one
         #: pass over the whole image (no mostly empty pass dispatches, no finishes).
         self.software = is_software_renderer(ctx.info.get("GL_RENDERER", ""))
+        #: The global order's shape: the splats sorted by depth (N keys), emitted in that
+        #: order, the keys sorted by tile alone (few bits).  The per-pixel order's keys carry
+        #: a per-tile depth, so it sorts the emitted keys by depth, then by tile.
+        self.presort = True
         #: Frames drawn again after an overflow (for tests and the timings).
         self.retries = 0
         #: Keys of the last frame (its status word).
@@ -97,7 +106,9 @@ class DeviceOrder:
         and there are splats, else None (the CPU order; ``--sort bucket16`` the registry
         refuses)."""
         if options.sort_key is SortKey.GPU and n_splats:
-            return cls(ctx, programs, n_splats, max_block)
+            order = cls(ctx, programs, n_splats, max_block)
+            order.presort = options.order is Order.GLOBAL
+            return order
         return None
 
     def slots(self, n_tiles: int) -> tuple[int, int]:
@@ -120,7 +131,8 @@ class DeviceOrder:
         bufs["VALUES"].ensure(4 * self.capacity)
         bufs["ORDER"].ensure(4 * self.capacity)
         bufs["RANGES"].ensure(8 * n_tiles)
-        self.sorter.reserve(self.capacity)
+        bufs["SPLAT_ORDER"].ensure(4 * self.count)
+        self.sorter.reserve(max(self.capacity, self.count))
 
     @property
     def list_chunk(self) -> int:
@@ -133,7 +145,8 @@ class DeviceOrder:
 
     def chunks(self) -> dict[str, int]:
         """The chunk defines of the device order's programs."""
-        return {"TILE_EMIT_CHUNK": TILE_EMIT_CHUNK, "TILE_LIST_CHUNK": self.list_chunk}
+        return dict({"TILE_EMIT_CHUNK": TILE_EMIT_CHUNK, "TILE_LIST_CHUNK": self.list_chunk},
+                    **({"DEVICE_PRESORT": 1} if self.presort else {}))
 
     @property
     def blocks(self) -> int:
@@ -158,6 +171,21 @@ class DeviceOrder:
             transfers(self.ctx).uniforms(prog)
             prog.run(groups)
             self.ctx.memory_barrier()
+
+    def depth_presort(self, bufs: dict, n_tiles: int, rebind) -> None:
+        """The global order's first step: the splats sorted by depth (stably: ties by index),
+        their indices copied into SPLAT_ORDER for the scan and the emission."""
+        prog = self.programs.compute("tile_ranges.comp", self.chunks())
+        prog["u_stage"].value = 4
+        prog["u_splats"].value = self.count
+        transfers(self.ctx).uniforms(prog)
+        rebind()
+        prog.run(*splat_groups(self.count))
+        self.ctx.memory_barrier()
+        self.sorter.sort_buffers(self.count, device_count=(bufs["STATE"].buf, _SPLATS))
+        self.ctx.copy_buffer(bufs["SPLAT_ORDER"].buf, self.sorter.buffers()[1], 4 * self.count)
+        self.ctx.memory_barrier()
+        rebind()
 
     def emit(self, prog: moderngl.ComputeShader, state: moderngl.Buffer, n_tiles: int) -> None:
         """Run ``prog`` (tile_emit.comp, DEVICE_SORT, uniforms set) once per chunk slot,
@@ -191,10 +219,13 @@ class DeviceOrder:
                 prog.run(*groups)
             self.ctx.memory_barrier()
 
-        self.sorter.sort_buffers(self.capacity, device_count=(state, _SORT_COUNT))
-        rebind()
-        stage(0, tile_groups)
-        stage(1)
+        if not self.presort:   # by depth, then gather each sorted key's tile
+            self.sorter.sort_buffers(self.capacity, device_count=(state, _SORT_COUNT))
+            rebind()
+            stage(0, tile_groups)
+            stage(1)
+        else:
+            stage(0, tile_groups)
         self.sorter.sort_buffers(self.capacity, device_count=(state, _SORT_COUNT))
         rebind()
         lap()
@@ -238,6 +269,8 @@ def device_frame(r, view, grid: tuple[int, int], lap, clock, stages: bool):
         r._bind_all()
         r._project(view, grid)
         lap()
+        if dev.presort:
+            dev.depth_presort(r._bufs, n_tiles, r._bind_all)
         dev.scan(n_tiles)
         lap()
         r._emit(view, layout, grid, 0, None)
@@ -254,7 +287,12 @@ def device_frame(r, view, grid: tuple[int, int], lap, clock, stages: bool):
     if not stages:
         return layout, None, None, None
     counts = r._bufs["TOUCHED"].read(r.count * 4, np.uint32)
+    keys, values = (np.frombuffer(b.read(4 * total), np.uint32) for b in dev.sorter.buffers())
+    if dev.presort:   # (tiles, splat indices): the keys from the splats' depths
+        depth = r._bufs["MEAN_DEPTH"].read(r.count * 16, np.float32).reshape(-1, 4)[:, 2]
+        dev.sorted = ((keys.astype(np.uint64) << np.uint64(32))
+                      | depth.view(np.uint32)[values].astype(np.uint64), values)
+        return layout, counts, None, dev.sorted[0]
     emitted = read_keys(r._bufs, layout, total)
-    perm = np.frombuffer(dev.sorter.buffers()[1].read(4 * total), np.uint32)
-    dev.sorted = (emitted[0][perm], emitted[1][perm])
+    dev.sorted = (emitted[0][values], emitted[1][values])
     return layout, counts, emitted, dev.sorted[0]
