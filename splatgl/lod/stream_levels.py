@@ -20,6 +20,7 @@ from ..cameras.camera import Camera
 from ..errors import SplatglError
 from ..model.settings import RendererKind, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
+from ..renderers.registry import DEFAULT_RENDERER
 from .budget import format_size
 from .stream import LOADERS, ResidentSet, concatenate, scene_bytes
 
@@ -57,7 +58,7 @@ class LevelFrames:
     :class:`splatgl.api.Renderer` (the caller's, which it draws with)."""
 
     def __init__(self, path, renderer, settings: RenderSettings, memory: int, level: int = 0,
-                 kind: RendererKind = RendererKind.QUAD, threads: int = LOADERS):
+                 kind: RendererKind = DEFAULT_RENDERER, threads: int = LOADERS):
         from ..formats import lcc, streamed_sog
 
         reader = streamed_sog if str(path).lower().endswith("lod-meta.json") else lcc
