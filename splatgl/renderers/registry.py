@@ -172,10 +172,9 @@ def installed(kind: RendererKind | str) -> bool:
 def make(kind: RendererKind | str, scene: Scene, settings: RenderSettings | DrawOptions,
          ctx: "moderngl.Context | None" = None,
          programs: "ProgramCache | None" = None) -> FrameRenderer:
-    """A new renderer of ``kind`` for ``scene`` under ``settings`` (or its options already
-    taken; an OpenGL one draws in
-    ``ctx``, compiling into ``programs``), made with its own options (:func:`options_for`); it
-    refuses what it cannot draw (:func:`refusal`)."""
+    """A new renderer of ``kind`` for ``scene`` with its own options (:func:`options_for` of
+    ``settings``); an OpenGL one draws in ``ctx``, compiling into ``programs``.  It refuses
+    what it cannot draw (:func:`refusal`)."""
     e = entry(kind)
     cls, options = e.renderer_class(), options_for(e.kind, settings)
     if e.gl:
@@ -222,8 +221,8 @@ VALUE_READERS = {("sort_key", SortKey.BUCKET16): frozenset({RendererKind.QUAD})}
 
 
 def readers(setting: str, value: object = None) -> frozenset[RendererKind]:
-    """Who reads ``setting`` (all, for one not in :data:`OPTIONS`); with ``value``: who draws it."""
-    kinds = frozenset(k for k, e in RENDERERS.items() if setting not in OPTIONS or setting in e.reads)
+    """Who reads ``setting`` (whose options hold it); with ``value``: who draws it."""
+    kinds = frozenset(k for k, e in RENDERERS.items() if setting in DRAWN or setting in e.reads)
     return kinds & VALUE_READERS.get((setting, value), kinds)
 
 
