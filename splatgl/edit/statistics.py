@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cameras.framing import default_camera
+from ..errors import CameraError
 from ..model.scene import Scene, SplatKind, activate_opacities, activate_rotations
 from ..model.settings import RenderSettings, resolve_near
 from ..splatmath.early_stop import coverage
