@@ -201,3 +201,17 @@ def test_the_viewer_panel_names_the_sort_that_ran(ctx):
     finally:
         display.release()
     assert status.settings == "rgba32f  SH 0/0  ellipse  sort gpu  bg 0,0,0"
+
+
+def test_compiled_in_the_background_once_and_then_told(unpinned):
+    import threading
+
+    calls = []
+    unpinned.setattr(cpu, "prepare", lambda progress=None: calls.append("prepare"))
+    unpinned.setattr(auto, "_compiling", None)
+    unpinned.setattr(auto, "_compiled", threading.Event())
+    unpinned.setattr(auto, "_when_compiled", [])
+    auto.compile_in_background().join()
+    auto.compile_in_background().join()                   # once a process
+    auto.when_compiled(lambda: calls.append("told"))      # ready already: told now
+    assert calls == ["prepare", "told"]

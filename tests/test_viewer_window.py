@@ -468,3 +468,21 @@ def test_no_display_is_one_line_with_glfws_reason(tmp_path):
     assert r.stderr.startswith("splatgl: error: cannot open a window: glfw failed to initialise "
                                "(X11: ") and r.stderr.count("\n") == 1
     assert r.stderr.endswith("; set DISPLAY, e.g. run under Xvfb)\n")
+
+
+def test_renderer_auto_switches_to_the_cpu_renderer_once_its_kernels_compiled(viewer):
+    """Issue 40 item 4: the viewer drew with quad while the CPU renderer's kernels compiled;
+    the compiling thread sets ``switch_to`` and the next step draws the CPU renderer's exact
+    frame, saying so; a renderer chosen meanwhile (T: the tile renderer) is kept."""
+    pytest.importorskip("numba")
+    from splatgl.model.settings import RendererKind
+
+    v = viewer
+    assert v.step() and v.kind is RendererKind.QUAD
+    v.switch_to = RendererKind.CPU
+    assert v.step() and v.kind is RendererKind.CPU and v.switch_to is None
+    assert v.message == "renderer auto -> cpu (its kernels are compiled)"
+    v.kind = RendererKind.TILE
+    v.switch_to = RendererKind.CPU
+    v.step()
+    assert v.kind is RendererKind.TILE

@@ -12,6 +12,7 @@ from ..errors import SplatglError
 from ..interactive.budget import check_fps
 from ..model.settings import RendererKind
 from ..renderers.registry import check, names
+from ..renderers import auto as renderer_auto
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       camera_from_args, check_convention, demo_scene_path, load_scene_arg,
@@ -165,11 +166,23 @@ def _open_stream(args: argparse.Namespace, memory: int):
     return stream
 
 
+def _switch(viewer, choice) -> None:
+    """The CPU renderer's kernels are ready (the compiling thread): its exact frame from the
+    viewer's next step, where the viewer still draws with quad; the loop is woken for it."""
+    import glfw
+
+    viewer.switch_to = RendererKind.CPU
+    glfw.post_empty_event()
+
+
 def _show(args, scene, settings, camera, cameras, options) -> int:
     from ..viewer.app import Viewer
 
     with Viewer(scene, settings, camera, cameras, args.camera_index or 0,
                 RendererKind(args.renderer), options) as viewer:
+        choice = getattr(args, "renderer_choice", None)
+        if choice is not None and choice.kernels_missing:   # compiling: cpu once they are ready
+            renderer_auto.when_compiled(lambda: _switch(viewer, choice))
         print(f"OpenGL {viewer.ctx.info['GL_VERSION']} on {viewer.ctx.info['GL_RENDERER']}", flush=True)
         if args.benchmark is not None:
             viewer.step()  # first frame: uploads and compiles

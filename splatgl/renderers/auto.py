@@ -14,8 +14,8 @@ renderer draws the exact frame about 3x sooner than llvmpipe's quads
 
 Otherwise, and on every hardware GPU, ``auto`` is the quad path.  Where only the missing
 kernels stood in the way the caller says so once (:func:`compiling_notice`): the viewer
-compiles them on a background thread (:func:`compile_in_background`) and draws with the quad
-path meanwhile; a one-shot ``render`` draws with the quad path rather than wait half a minute
+compiles them on a background thread (:func:`compile_in_background`), draws with the quad
+path meanwhile and with the CPU renderer once they are ready (:func:`when_compiled`); a one-shot ``render`` draws with the quad path rather than wait half a minute
 for a frame that takes a second or two there, and says how to compile them.
 
 ``SPLATGL_RENDERER_AUTO=quad`` pins ``auto`` to the quad path (the test suite sets it, so that
@@ -28,6 +28,7 @@ import os
 import sys
 import threading
 from dataclasses import dataclass
+from typing import Callable
 
 from ..errors import SplatglError
 from ..gl.device_class import Device, expected
@@ -96,7 +97,7 @@ def compiling_notice(choice: Choice, background: bool) -> None:
     _told = True
     if background:
         line = ("the cpu renderer's kernels are compiling (first use, about half a minute, in "
-                "the background); drawing with quad this time")
+                "the background); drawing with quad until they are ready")
     else:
         line = ("the cpu renderer's kernels are not compiled yet (first use, about half a "
                 "minute once: '--renderer cpu' compiles them); drawing with quad this time")
@@ -104,6 +105,20 @@ def compiling_notice(choice: Choice, background: bool) -> None:
 
 
 _compiling: threading.Thread | None = None
+_compiled = threading.Event()
+_when_compiled: list[Callable[[], None]] = []
+
+
+def _compile() -> None:
+    from .cpu import prepare
+
+    try:
+        prepare(lambda *_: None)
+    except Exception:   # noqa: BLE001 (a failed compile leaves the quad path drawing)
+        return
+    _compiled.set()
+    for callback in list(_when_compiled):
+        callback()
 
 
 def compile_in_background() -> threading.Thread:
@@ -111,9 +126,14 @@ def compile_in_background() -> threading.Thread:
     numba keeps them in its on-disk cache, so the next ``auto`` finds them ready."""
     global _compiling
     if _compiling is None:
-        from .cpu import prepare
-
-        _compiling = threading.Thread(target=prepare, args=(lambda *_: None,),
-                                      name="splatgl-cpu-kernels", daemon=True)
+        _compiling = threading.Thread(target=_compile, name="splatgl-cpu-kernels", daemon=True)
         _compiling.start()
     return _compiling
+
+
+def when_compiled(callback: Callable[[], None]) -> None:
+    """Call ``callback`` (on the compiling thread) once :func:`compile_in_background`'s kernels
+    are ready, or now if they are: the viewer then draws its exact frame with them."""
+    _when_compiled.append(callback)
+    if _compiled.is_set():
+        callback()

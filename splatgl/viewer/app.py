@@ -91,6 +91,9 @@ class Viewer:
                  cameras: list[Camera] | None = None, camera_index: int = 0,
                  kind: RendererKind = RendererKind.QUAD, options: ViewerOptions | None = None):
         self.scene, self.settings, self.kind = scene, settings, RendererKind(kind)
+        #: Set from another thread (``--renderer auto``: the CPU renderer's kernels compiled):
+        #: the renderer of the exact frame from the next step, where the quad path's still is.
+        self.switch_to: RendererKind | None = None
         self.options = options or ViewerOptions()
         self.nav = Navigation(camera, cameras, camera_index, self.options.up,
                               lambda cam: orbit_distance(self.scene, self.settings, cam))
@@ -224,6 +227,11 @@ class Viewer:
         now = time.perf_counter()
         dt = min(now - self._clock if dt is None else dt, _MAX_DT)
         self._clock = now
+        if self.switch_to is not None:
+            if self.kind is RendererKind.QUAD:
+                self.kind = self.switch_to
+                self.message = f"renderer auto -> {self.kind.value} (its kernels are compiled)"
+            self.switch_to = None
         self.nav.apply_held(dt)
         if self.recorder.recording:
             self.recorder.add(self.nav.camera(max(self.size[0], 1), max(self.size[1], 1)))
