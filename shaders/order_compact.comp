@@ -2,6 +2,7 @@
 // staged keys and their indices, written in index order at their group's first slot
 // (order_scan.comp) plus their rank among the group's kept ones (a scan in shared memory), into
 // the radix sorter's keys and values: a stable sort then gives the CPU order, ties by index.
+// Twin: splatgl/order/cull.py cull_visible().
 
 layout(local_size_x = ORDER_GROUP) in;
 layout(std430, binding = ORDER_BINDING_STAGED) readonly buffer Staged { uint staged[]; };

@@ -10,6 +10,7 @@
 // the counts into the groups' first slots and the draw's instance count, order_compact.comp
 // writes the kept keys and indices in index order for the stable sort: the CPU order, ties
 // included.  Nothing comes back to the host.
+// Twin: splatgl/order/cull.py cull_visible().
 
 layout(local_size_x = ORDER_GROUP) in;
 

@@ -3,6 +3,7 @@
 // slot (an exclusive scan, in place), writes the total into the indirect draw command's
 // instance count and the pre-pass's dispatch size after it (a group of PREPASS_GROUP slots).
 // Each thread scans a run of consecutive groups; thread 0 scans the runs' sums.
+// Twin: splatgl/order/cull.py cull_visible().
 
 layout(local_size_x = ORDER_SCAN_GROUP) in;
 layout(std430, binding = ORDER_BINDING_BLOCKS) buffer Blocks { uint blocks[]; };
