@@ -37,6 +37,15 @@ from .window import close_window, connect, open_window, swap
 _MAX_DT = 0.1
 
 
+def _switch_renderer(v) -> None:
+    """``v.switch_to``, set from another thread (``--renderer auto``: the CPU renderer's kernels
+    compiled), becomes the renderer of the exact frame where the quad path's still is."""
+    kind = v.__dict__.pop("switch_to", None)
+    if kind is not None and v.kind is RendererKind.QUAD:
+        v.kind = kind
+        v.message = f"renderer auto -> {kind.value} (its kernels are compiled)"
+
+
 @dataclass
 class ViewerOptions:
     """How the viewer starts.
@@ -91,15 +100,11 @@ class Viewer:
                  cameras: list[Camera] | None = None, camera_index: int = 0,
                  kind: RendererKind = RendererKind.QUAD, options: ViewerOptions | None = None):
         self.scene, self.settings, self.kind = scene, settings, RendererKind(kind)
-        #: Set from another thread (``--renderer auto``: the CPU renderer's kernels compiled):
-        #: the renderer of the exact frame from the next step, where the quad path's still is.
-        self.switch_to: RendererKind | None = None
         self.options = options or ViewerOptions()
         self.nav = Navigation(camera, cameras, camera_index, self.options.up,
                               lambda cam: orbit_distance(self.scene, self.settings, cam))
         self.view = ViewMode.COLOR
-        self.frames_rendered = 0
-        self.presents = 0
+        self.frames_rendered = self.presents = 0
         self.swap_idle = 0.0     # seconds the last swap waited without work (vsync), see present()
         self._rendered_key: tuple | None = None
         self.need_present = True
@@ -227,11 +232,7 @@ class Viewer:
         now = time.perf_counter()
         dt = min(now - self._clock if dt is None else dt, _MAX_DT)
         self._clock = now
-        if self.switch_to is not None:
-            if self.kind is RendererKind.QUAD:
-                self.kind = self.switch_to
-                self.message = f"renderer auto -> {self.kind.value} (its kernels are compiled)"
-            self.switch_to = None
+        _switch_renderer(self)
         self.nav.apply_held(dt)
         if self.recorder.recording:
             self.recorder.add(self.nav.camera(max(self.size[0], 1), max(self.size[1], 1)))
