@@ -215,3 +215,14 @@ def test_compiled_in_the_background_once_and_then_told(unpinned):
     auto.compile_in_background().join()                   # once a process
     auto.when_compiled(lambda: calls.append("told"))      # ready already: told now
     assert calls == ["prepare", "told"]
+
+
+def test_an_unclear_renderer_name_is_measured_once(unpinned, ctx):
+    """A GL_RENDERER naming neither a software rasteriser nor a GPU vendor: the one-off probe
+    (the radix sort against the CPU sort on the context) decides; on llvmpipe the CPU wins."""
+    unpinned.setattr(device_class, "_MEASURED", {})
+    assert classify("virgl (a host's GPU, or not)", ctx).cls is DeviceClass.SOFTWARE
+    assert device_class._MEASURED == {"virgl (a host's GPU, or not)": DeviceClass.SOFTWARE}
+    assert classify("virgl (a host's GPU, or not)", ctx).cls is DeviceClass.SOFTWARE  # cached
+    assert classify("NVIDIA GeForce RTX 4090/PCIe/SSE2", ctx).cls is DeviceClass.HARDWARE
+    assert len(device_class._MEASURED) == 1                      # a vendor's name: no probe

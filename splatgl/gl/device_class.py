@@ -11,7 +11,10 @@ One place decides the class, from what the device says it is:
   :func:`splatgl.gl.context.create_headless_context` also reads: a hardware device there is
   what a context gets first, so the class is hardware; software devices only, software.  Where
   EGL lists no devices (no enumeration extension, OSMesa) the list cannot say: a context is
-  made once, its ``GL_RENDERER`` read and the context released (the one-off probe).
+  made once, its ``GL_RENDERER`` read and the context released.
+- a ``GL_RENDERER`` that names neither a software rasteriser nor a GPU vendor (virgl, a
+  d3d12 or zink layer) is measured once (:func:`measured`: the radix sort against the CPU
+  sort on the context).
 
 The defaults, by measurement:
 
@@ -78,18 +81,70 @@ def short_name(gl_renderer: str) -> str:
     return gl_renderer.split(" (")[0].split("/")[0].strip() or gl_renderer
 
 
-def classify(gl_renderer: str) -> Device:
-    """The device behind a ``GL_RENDERER`` string (``SPLATGL_DEVICE_CLASS`` first)."""
-    cls = forced() or (DeviceClass.SOFTWARE if is_software_renderer(gl_renderer)
-                       else DeviceClass.HARDWARE)
-    return Device(cls, short_name(gl_renderer))
+#: Words of a GL_RENDERER string that name a GPU vendor (lower case): a name with none of
+#: these and none of the software words is unclear, and a context's device is then measured.
+HARDWARE_WORDS = ("nvidia", "geforce", "quadro", "tesla", "radeon", "amd", "intel", "iris",
+                  "apple", "mali", "adreno", "powervr", "immortalis")
+#: Keys the measured probe sorts, on the CPU and with the compute radix sort.
+PROBE_KEYS = 1 << 18
+
+
+def classify(gl_renderer: str, ctx=None) -> Device:
+    """The device behind a ``GL_RENDERER`` string (``SPLATGL_DEVICE_CLASS`` first); a name
+    that says neither (virgl, a d3d12 or zink layer) is measured on ``ctx`` where given
+    (:func:`measured`), taken as hardware otherwise."""
+    cls = forced()
+    if cls is None and is_software_renderer(gl_renderer):
+        cls = DeviceClass.SOFTWARE
+    elif cls is None and ctx is not None and not any(w in gl_renderer.lower()
+                                                     for w in HARDWARE_WORDS):
+        cls = measured(gl_renderer, ctx)
+    return Device(cls or DeviceClass.HARDWARE, short_name(gl_renderer))
 
 
 def of_context(ctx) -> Device:
-    """The device a context draws on (its ``GL_RENDERER``)."""
+    """The device a context draws on (its ``GL_RENDERER``; measured where unclear)."""
     from .context import renderer_name
 
-    return classify(renderer_name(ctx))
+    return classify(renderer_name(ctx), ctx)
+
+
+_MEASURED: dict[str, DeviceClass] = {}
+
+
+def measured(gl_renderer: str, ctx) -> DeviceClass:
+    """The one-off probe, once per renderer name and process: :data:`PROBE_KEYS` depth keys
+    sorted by the compute radix sort against the CPU sort (best of 3 each, after a warm-up);
+    hardware where the device sorts faster, as on a GPU, software where the CPU does (llvmpipe
+    sorts 3-4x slower than the CPU)."""
+    if gl_renderer not in _MEASURED:
+        import time
+
+        import numpy as np
+
+        from ..order.sort import depth_sort
+        from .radix_sort import RadixSorter
+
+        rng = np.random.default_rng(0)
+        depth = rng.uniform(0.5, 50.0, PROBE_KEYS).astype(np.float32)
+        keys, rows = depth.view(np.uint32), np.arange(PROBE_KEYS, dtype=np.uint32)
+        sorter = RadixSorter(ctx)
+        try:
+            def best(run) -> float:
+                run()
+                times = []
+                for _ in range(3):
+                    t0 = time.perf_counter()
+                    run()
+                    times.append(time.perf_counter() - t0)
+                return min(times)
+
+            device = best(lambda: sorter.sort_values(keys, rows))
+            cpu = best(lambda: depth_sort(depth, rows))
+        finally:
+            sorter.release()
+        _MEASURED[gl_renderer] = DeviceClass.HARDWARE if device < cpu else DeviceClass.SOFTWARE
+    return _MEASURED[gl_renderer]
 
 
 def expected() -> Device:
