@@ -33,7 +33,13 @@ def default_settings(scene: Scene | SceneSource | None = None, **fields) -> Rend
     :class:`~splatgl.model.scene.SceneSource`): ``RenderSettings(**fields)``, where
     ``antialias``, unless given (None counts as not given), is on for a file tagged as trained
     with antialiasing (mip-splatting's 2D filter: SPZ's antialiased flag, a PLY
-    ``SplatRenderMode: mip`` comment, ...; :func:`splatgl.formats.metadata.antialias_tag`)."""
+    ``SplatRenderMode: mip`` comment, ...; :func:`splatgl.formats.metadata.antialias_tag`),
+    and ``sort_key``, unless given (or given as ``"auto"``), is the device's
+    (:func:`splatgl.gl.device_class.resolve_sort`: ``gpu`` on a hardware GPU, ``exact`` on a
+    software rasteriser), as ``--sort auto``."""
+    from .gl.device_class import AUTO, resolve_sort
+
+    fields["sort_key"] = resolve_sort(fields.get("sort_key", AUTO))
     source = scene.source if isinstance(scene, Scene) else scene
     if fields.get("antialias") is None:
         fields["antialias"] = source is not None and source.antialias_tag is not None

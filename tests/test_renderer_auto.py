@@ -226,3 +226,13 @@ def test_an_unclear_renderer_name_is_measured_once(unpinned, ctx):
     assert classify("virgl (a host's GPU, or not)", ctx).cls is DeviceClass.SOFTWARE  # cached
     assert classify("NVIDIA GeForce RTX 4090/PCIe/SSE2", ctx).cls is DeviceClass.HARDWARE
     assert len(device_class._MEASURED) == 1                      # a vendor's name: no probe
+
+
+def test_the_apis_default_settings_take_the_devices_sort(unpinned):
+    from splatgl.api import default_settings
+
+    unpinned.setenv(device_class.CLASS_ENV, "hardware")
+    assert default_settings().sort_key is SortKey.GPU
+    assert default_settings(sort_key="exact").sort_key is SortKey.EXACT
+    unpinned.setenv(device_class.CLASS_ENV, "software")
+    assert default_settings(sort_key="auto").sort_key is SortKey.EXACT

@@ -206,7 +206,7 @@ def antialias_from_args(args: argparse.Namespace) -> bool:
         return args.antialias
     path = getattr(args, "scene", None)
     source = scene_source(path) if path is not None else None
-    antialias = default_settings(source).antialias
+    antialias = default_settings(source, sort_key="exact").antialias   # no device asked
     if antialias:
         print(f"splatgl: {path}: {source.antialias_tag}: rendering with --antialias "
               "(--no-antialias turns it off)", file=sys.stderr)
