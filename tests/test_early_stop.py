@@ -360,7 +360,9 @@ def test_coverage_estimate_matches_its_twin_and_the_fragments(ctx, kind, preproc
 
 
 def test_auto_batches_only_views_of_large_quads_over_an_overdrawn_image(ctx, monkeypatch):
-    """AUTO draws exactly what OFF draws below either threshold and what ON draws above both."""
+    """AUTO draws exactly what OFF draws below either threshold and what ON draws above both
+    (the rule of a software rasteriser; on a hardware GPU AUTO is ON: test_renderer_auto.py)."""
+    monkeypatch.setenv("SPLATGL_DEVICE_CLASS", "software")
     scene = dense_scene()
     cam = front_camera(4.0, 50.0, 96, 64, target=(0.0, 0.0, 0.5))
     images = {}
