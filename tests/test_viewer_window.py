@@ -80,6 +80,12 @@ def test_drag_key_screenshot_matches_headless_render(viewer, demo, tmp_path):
 
     png, js = v.screenshot()
     assert json.loads(js.read_text())["width"] == W
+    shown = _window_pixels(v).astype(np.int32)  # before the confirmation is drawn
+    # With the panel hidden, the window confirms the screenshot too (the message alone), read
+    # before the headless render below, which can outlast the message's few seconds when busy.
+    v.step()
+    assert v.overlay.lines == [f"saved {png.name} + {js.name} (exact render)"]
+    assert not v.overlay.full and v.overlay.image is not None
     ref = tmp_path / "headless.png"
     r = subprocess.run([sys.executable, "-m", "splatgl", "render", str(demo[0]), "--camera", str(js),
                         "--background", "0.1,0.2,0.3", "-o", str(ref)],
@@ -91,12 +97,7 @@ def test_drag_key_screenshot_matches_headless_render(viewer, demo, tmp_path):
     assert want.std() > 0.01  # the scene is in view, not just background
 
     # What the window shows is that image: same rows (no y flip), within one 8-bit step.
-    shown = _window_pixels(v).astype(np.int32)
     assert np.abs(shown - np.round(got * 255).astype(np.int32)).max() <= 1
-    # With the panel hidden, the window confirms the screenshot too (the message alone).
-    v.step()
-    assert v.overlay.lines == [f"saved {png.name} + {js.name} (exact render)"]
-    assert not v.overlay.full and v.overlay.image is not None
 
 
 def test_unchanged_camera_renders_no_new_frame(viewer):
