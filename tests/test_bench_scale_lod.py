@@ -17,7 +17,7 @@ from splatgl.commands._common import demo_scene_path
 from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
 
-STEPS = ("scene", "build", "open", "frame", "full", "flight")
+STEPS = ("scene", "build", "open", "frame", "far", "full", "flight")
 
 
 def _refused(capsys, argv, message):
@@ -59,8 +59,10 @@ def _fake_steps(monkeypatch, interrupt_at=None):
             raise KeyboardInterrupt
         if step == "scene":
             Path(args["scene"]).write_bytes(b"x")
-        if step in ("frame", "full"):
-            np.save(args["image"], np.full((4, 4, 3), 0.5 if step == "frame" else 0.51, np.float32))
+        if step in ("frame", "far", "full"):
+            np.save(args["image"], np.full((4, 4, 3), 0.51 if step == "full" else 0.5, np.float32))
+        if step == "full":
+            np.save(args["far_image"], np.full((4, 4, 3), 0.6, np.float32))
         return {"seconds": 1.0, "wall_s": 1.5, "peak_rss_mb": 100.0 * len(calls),
                 "fps_median": 12.0, "rest_to_exact_s": 2.0, "frame_ms_median": 80.0}
 
@@ -83,8 +85,10 @@ def test_cli_writes_json_and_plot_and_removes_scenes(tmp_path, monkeypatch, caps
     assert doc["options"]["memory"] == 300 << 20 and doc["options"]["width"] == 64
     small, big = doc["rows"]
     assert small["splats"] == 20_000 and set(STEPS) <= set(small)
-    assert small["psnr_far_db"] == pytest.approx(-20 * np.log10(0.01), abs=1e-3)
-    assert big["full"]["skipped"].startswith("does not fit") and big["psnr_far_db"] == big["full"]["skipped"]
+    assert small["psnr_view_db"] == pytest.approx(-20 * np.log10(0.01), abs=1e-3)
+    assert small["psnr_far_db"] == pytest.approx(-20 * np.log10(0.1), abs=1e-3)
+    assert big["full"]["skipped"].startswith("does not fit")
+    assert big["psnr_far_db"] == big["psnr_view_db"] == big["full"]["skipped"]
     assert (out / "scale-lod.png").stat().st_size > 0
     assert list((tmp_path / "tmp").iterdir()) == []   # the scratch folder is gone
     assert "| 2,000,000 |" in capsys.readouterr().out
@@ -146,6 +150,8 @@ def test_end_to_end_tiny_sizes(tmp_path, shared_scenes):
             assert row[step]["peak_rss_mb"] > 0 and row[step]["seconds"] > 0, (step, row[step])
             assert row[step]["wall_s"] >= row[step]["seconds"]
         assert row["build"]["leaves"] == row["splats"]
-        assert row["psnr_far_db"] is None or row["psnr_far_db"] > 25   # the same view; None: identical
+        for key in ("psnr_view_db", "psnr_far_db"):   # the same views; None: identical
+            assert row[key] is None or row[key] > 25, (key, row[key])
+        assert row["far"]["cut_nodes"] < row["frame"]["cut_nodes"]   # a cut, not the leaves
         assert row["flight"]["moving_frames"] >= 1 and row["flight"]["rest_to_exact_s"] > 0
     assert json.loads((tmp_path / "out" / "scale-lod.json").read_text())["rows"] == report["rows"]

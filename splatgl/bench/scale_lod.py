@@ -6,9 +6,9 @@ then each step runs in its own process (:mod:`splatgl.bench.scale_lod_steps`), w
 own time and peak resident memory (VmHWM); the time of the whole process (interpreter start
 to exit: a cold start) is measured here too.  Steps: the scene file, the out-of-core level of
 detail under ``memory`` (``splatgl lod --memory``), the lazy open, the first frame of the
-whole-scene view streamed under ``memory``, the full-detail frame of the same view where the
-scene fits in memory (else "does not fit") and the PSNR between the two, and the interactive
-flight's camera path over the streamed scene (moving frame rate, time from rest to the exact
+whole-scene view streamed under ``memory``, the same for the far view (6x the framing
+distance), both views at full detail where the scene fits in memory (else "does not fit") and
+the PSNRs, and the interactive flight's camera path over the streamed scene (moving frame rate, time from rest to the exact
 cut).
 
 Every result is written to ``scale-lod.json`` as it is made (a Ctrl-C keeps what was
@@ -134,10 +134,13 @@ def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save
               "width": options.width, "height": options.height}
     available = options.available if options.available is not None else mem_available()
     fits, why = full_fits(n, available)
+    images = {k: folder / f"{k.replace(' ', '-')}-{n}.npy" for k in ("frame", "far", "full", "full far")}
     steps = [("scene", {"splats": n, "block": options.block}),
              ("build", {"branching": options.branching}), ("open", {}),
-             ("frame", {"image": str(folder / f"lod-{n}.npy")})]
-    steps += [("full", {"image": str(folder / f"full-{n}.npy")})] if fits else []
+             ("frame", {"image": str(images["frame"])}),
+             ("far", {"image": str(images["far"]), "far": True})]
+    steps += [("full", {"image": str(images["full"]), "far_image": str(images["full far"])})
+              ] if fits else []
     steps += [("flight", {"speed": options.speed})]
     if not fits:
         row["full"] = {"skipped": why}
@@ -156,17 +159,20 @@ def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save
             r = row[step]
             log(f"scale-lod: {n:,} splats: {step} {r['seconds']:.2f} s ({r['wall_s']:.2f} s "
                 f"from process start), peak {r['peak_rss_mb']:.0f} MB")
-            if step == "full" and "seconds" in row.get("frame", {}):
-                row["psnr_far_db"] = _psnr(folder / f"lod-{n}.npy", folder / f"full-{n}.npy")
-                log(f"scale-lod: {n:,} splats: whole-scene view {row['psnr_far_db'] or 'inf'} dB "
-                    "against full detail")
+            if step == "full":
+                for key, lod_image, full_image in (("psnr_view_db", "frame", "full"),
+                                                   ("psnr_far_db", "far", "full far")):
+                    if "seconds" in row.get(lod_image, {}):
+                        row[key] = _psnr(images[lod_image], images[full_image])
+                log(f"scale-lod: {n:,} splats: against full detail: default view "
+                    f"{row.get('psnr_view_db') or 'inf'} dB, far view {row.get('psnr_far_db') or 'inf'} dB")
             save()
         if not fits:
-            row["psnr_far_db"] = why
+            row["psnr_view_db"] = row["psnr_far_db"] = why
             save()
     finally:
         if not options.keep_scenes:
-            for p in (scene, lod, folder / f"lod-{n}.npy", folder / f"full-{n}.npy"):
+            for p in (scene, lod, *images.values()):
                 p.unlink(missing_ok=True)
 
 

@@ -14,7 +14,9 @@ Steps:
 - ``frame``: a cold start's first frame: the whole-scene view (the default camera framing the
   proxy) streamed under ``memory`` (:func:`splatgl.lod.stream_frames.render_streamed`, exact);
   the image saved for the PSNR.
-- ``full``: the same view at full detail from the PLY loaded whole (only where it fits).
+- ``far``: the same from the far view (:data:`FAR` times the framing distance), in its own
+  process.
+- ``full``: both views at full detail from the PLY loaded whole (only where it fits).
 - ``flight``: the interactive flight's camera path (:class:`splatgl.bench.flight.Flight`) over
   the streamed scene (:class:`splatgl.lod.stream_view.StreamedScene`, resident under
   ``memory``): every moving frame draws what is resident and requests the rest; at rest the
@@ -91,12 +93,25 @@ def _save_image(path: str, image: np.ndarray) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def _camera(lazy, a: dict):
+#: The far view's distance, in framing distances (``bench --lod``'s far view).
+FAR = 6.0
+
+
+def _camera(lazy, a: dict, far: bool = False):
+    """(framing proxy, camera): the default camera, or the far view (:data:`FAR` times the
+    framing distance, as ``bench --lod``'s fly-through starts)."""
     from ..api import default_camera
+    from ..cameras.poses import orbit
     from ..lod.stream_frames import framing_scene
 
     framing = framing_scene(lazy)
-    return framing, default_camera(framing, a["width"], a["height"])
+    camera = default_camera(framing, a["width"], a["height"])
+    if far:
+        lo, hi = framing.robust_bounds
+        centre = 0.5 * (np.asarray(lo) + np.asarray(hi))
+        dist = float(np.linalg.norm(camera.center - centre))
+        camera = camera.with_pose(orbit(centre, FAR * dist, 0.0, 20.0))
+    return framing, camera
 
 
 def step_scene(a: dict) -> dict:
@@ -131,7 +146,7 @@ def step_frame(a: dict) -> dict:
     from ..model.settings import RenderSettings
 
     with LazyLod(a["lod"]) as lazy:
-        framing, camera = _camera(lazy, a)
+        framing, camera = _camera(lazy, a, a.get("far", False))
     out, times, _ = render_streamed(a["lod"], camera, RenderSettings(), LodSettings(),
                                     int(a["memory"]), framing=framing)
     _save_image(a["image"], out.rgba)
@@ -145,11 +160,11 @@ def step_full(a: dict) -> dict:
     from ..model.settings import RenderSettings
 
     with LazyLod(a["lod"]) as lazy:
-        _, camera = _camera(lazy, a)
+        cameras = [_camera(lazy, a, far)[1] for far in (False, True)]
     scene = load_scene(a["scene"], progress=lambda *x: None)
     with Renderer() as renderer:
-        image = renderer.render(scene, camera, RenderSettings())
-    _save_image(a["image"], image)
+        for camera, image in zip(cameras, (a["image"], a["far_image"])):
+            _save_image(image, renderer.render(scene, camera, RenderSettings()))
     return {}
 
 
@@ -195,7 +210,7 @@ def step_flight(a: dict) -> dict:
 
 
 STEPS = {"scene": step_scene, "build": step_build, "open": step_open, "frame": step_frame,
-         "full": step_full, "flight": step_flight}
+         "far": step_frame, "full": step_full, "flight": step_flight}
 
 
 def main(argv: list[str]) -> int:
