@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from splatgl.bench import scale_lod
-from splatgl.bench.scale_lod import ScaleLodOptions, check_disk, full_fits, run_scale_lod
+from splatgl.bench.scale_lod import (ScaleLodOptions, StepFailed, check_disk, full_fits,
+                                    run_scale_lod, run_step)
 from splatgl.bench.scale_lod_steps import write_tiled_scene
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
@@ -50,10 +51,19 @@ def test_disk_and_full_detail_limits(tmp_path):
     assert not fits and why.startswith("does not fit: about ")
 
 
+def test_a_step_over_the_memory_cap_is_stopped(tmp_path):
+    """A step polled past its cap is killed, and a failing step's last line is its message."""
+    args = {"lod": str(tmp_path / "none.lod.ply"), "width": 8, "height": 8}
+    with pytest.raises(StepFailed, match=r"^stopped at 1 B resident \(the cap: MemAvailable"):
+        run_step("open", args, cap=1)
+    with pytest.raises(StepFailed, match="none.lod.ply"):
+        run_step("open", args)
+
+
 def _fake_steps(monkeypatch, interrupt_at=None):
     calls = []
 
-    def fake(step, args):
+    def fake(step, args, cap=0):
         calls.append(step)
         if step == interrupt_at:
             raise KeyboardInterrupt

@@ -41,6 +41,11 @@ DISK_FACTOR = 3.6
 #: A full-detail render's memory: a fixed part (driver, framebuffers) and bytes a splat
 #: (measured by ``bench --scale``: 2.0 GB at 6M SH0), against the memory available.
 FULL_FIXED, FULL_PER_SPLAT = 250e6, 350.0
+#: Seconds between polls of a step's resident memory.
+POLL_S = 0.05
+#: Memory left to the rest of the machine: a step is stopped at MemAvailable (at the start of
+#: the run) less this.
+HEADROOM = 2 << 30
 
 
 @dataclass(frozen=True)
@@ -105,16 +110,45 @@ class StepFailed(Exception):
     pass
 
 
-def run_step(step: str, args: dict) -> dict:
-    """One step in a fresh process: its JSON plus ``wall_s`` (process start to exit)."""
+def _rss(pid: int) -> int:
+    """Resident bytes of process ``pid`` now (0 once it is gone)."""
+    try:
+        for line in open(f"/proc/{pid}/status"):
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return 0
+
+
+def run_step(step: str, args: dict, cap: int = 0) -> dict:
+    """One step in a fresh process: its JSON plus ``wall_s`` (process start to exit).  ``cap``:
+    resident bytes past which the process is killed (polled; 0: none), so a step that would
+    not fit fails alone instead of taking the machine's memory."""
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "splatgl.bench.scale_lod_steps", step,
-                           json.dumps(args)], capture_output=True, text=True)
-    wall = time.perf_counter() - t0
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        proc = subprocess.Popen([sys.executable, "-m", "splatgl.bench.scale_lod_steps", step,
+                                 json.dumps(args)], stdout=out, stderr=err, text=True)
+        try:
+            while proc.poll() is None:
+                if cap and _rss(proc.pid) > cap:
+                    proc.kill()
+                    proc.wait()
+                    raise StepFailed(f"stopped at {format_size(cap)} resident (the cap: "
+                                     "MemAvailable at the start less 2 GiB)")
+                time.sleep(POLL_S)
+        finally:
+            if proc.poll() is None:   # Ctrl-C here: the child goes too
+                proc.kill()
+                proc.wait()
+        wall = time.perf_counter() - t0
+        out.seek(0)
+        err.seek(0)
+        stdout, stderr = out.read(), err.read()
     if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
+        tail = (stderr.strip().splitlines() or [f"exit code {proc.returncode}"])[-1]
         raise StepFailed(tail)
-    return {**json.loads(proc.stdout.strip().splitlines()[-1]), "wall_s": wall}
+    return {**json.loads(stdout.strip().splitlines()[-1]), "wall_s": wall}
 
 
 def _psnr(a_path: Path, b_path: Path) -> float | None:
@@ -134,6 +168,7 @@ def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save
               "width": options.width, "height": options.height}
     available = options.available if options.available is not None else mem_available()
     fits, why = full_fits(n, available)
+    cap = max(available - HEADROOM, 1 << 30) if available else 0
     images = {k: folder / f"{k.replace(' ', '-')}-{n}.npy" for k in ("frame", "far", "full", "full far")}
     steps = [("scene", {"splats": n, "block": options.block}),
              ("build", {"branching": options.branching}), ("open", {}),
@@ -148,7 +183,7 @@ def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save
         for step, extra in steps:
             log(f"scale-lod: {n:,} splats: {step} ...")
             try:
-                row[step] = run_step(step, {**common, **extra})
+                row[step] = run_step(step, {**common, **extra}, cap)
             except StepFailed as exc:
                 row[step] = {"failed": str(exc)}
                 log(f"scale-lod: {n:,} splats: {step} failed: {exc}")
