@@ -8,8 +8,8 @@ to exit: a cold start) is measured here too.  Steps: the scene file, the out-of-
 detail under ``memory`` (``splatgl lod --memory``), the lazy open, the first frame of the
 whole-scene view streamed under ``memory``, the same for the far view (6x the framing
 distance), both views at full detail where the scene fits in memory (else "does not fit") and
-the PSNRs, and the interactive flight's camera path over the streamed scene (moving frame rate, time from rest to the exact
-cut).
+the PSNRs, and the interactive flight's camera path over the streamed scene (moving frame rate,
+time from rest to the exact cut).
 
 Every result is written to ``scale-lod.json`` as it is made (a Ctrl-C keeps what was
 measured), and ``scale-lod.png`` (memory and time against size, log axes) after each size.  The
