@@ -149,7 +149,7 @@ class Renderer:
         (the scene file's tags decide antialiasing), as ``splatgl render`` without options.
         ``progress`` (:mod:`splatgl.progress`) hears from the renderers that report it (the
         reference, the tile renderer) during the frame.  The quad and tile renderers refuse
-        ``convention`` gsplat (:func:`splatgl.model.settings.check_convention`).
+        ``convention`` gsplat (:func:`splatgl.renderers.registry.check_convention`).
         """
         return self.render_layers(scene, camera, settings, kind, progress, BASE).rgba
 

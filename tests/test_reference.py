@@ -11,8 +11,7 @@ from splatgl.cameras.camera import Camera
 from splatgl.constants import ALPHA_MIN, LOW_PASS, SH_C0, T_MIN
 from splatgl.splatmath.project import antialias_factor
 from splatgl.reference import (Compat, ProjectedSplats, ReferenceOptions, depth_bits, emit_keys,
-                               gsplat_radius, rasterize, render_reference,
-                               render_reference_rgba, sort, tile_ranges)
+                               gsplat_radius, rasterize, render_reference, sort, tile_ranges)
 from splatgl.model.scene import Scene, SplatKind
 from splatgl.model.settings import RenderSettings
 from helpers import project
@@ -246,7 +245,7 @@ def test_rasterize_does_not_depend_on_vectorisation_knobs():
 def test_rgba_is_float32_with_row_zero_on_top():
     cam = Camera(32, 64, 80.0, 80.0, 16.0, 32.0)
     scene = scene_of([[0.0, -1.2, 4.0]], scale=0.05)    # v = 32 - 24 = 8: near the top
-    rgba = render_reference_rgba(scene, cam, RenderSettings(near=0.2, background=(0, 0, 1)))
+    rgba = render_reference(scene, cam, RenderSettings(near=0.2, background=(0, 0, 1))).rgba
     assert rgba.shape == (64, 32, 4) and rgba.dtype == np.float32
     assert rgba[:16, :, 3].max() > 0.5 and rgba[32:, :, 3].max() == 0.0
     np.testing.assert_array_equal(rgba[40, 0], [0, 0, 1, 0])

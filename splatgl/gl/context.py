@@ -206,14 +206,6 @@ def renderer_name(ctx: moderngl.Context) -> str:
     return name
 
 
-def create_window_context() -> moderngl.Context:
-    """Wrap the OpenGL context current on this thread (a glfw window's) in moderngl."""
-    try:
-        return moderngl.create_context(require=330)
-    except Exception as exc:
-        raise ContextError(f"could not use the window's OpenGL context: {exc}") from None
-
-
 @contextmanager
 def glfw_errors():
     """Collect the GLFW errors of the block as text (``"X11: The DISPLAY environment variable

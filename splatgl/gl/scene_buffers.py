@@ -55,7 +55,7 @@ class SceneBuffers:
         #: Per-scene power of two of the compact scales (splatgl.gl.storage.scale_exponent).
         self.scale_exponent = scale_exponent(scene.log_scales) if compact else 0
         # Means relative to the scene's anchor (float32-safe far from the origin); the camera
-        # uniforms fold the anchor back in (splatgl.renderers.quad.set_camera_uniforms).
+        # uniforms fold the anchor back in (splatgl.cameras.view.anchored_camera).
         self.a = self.q = self.s = self.dc = self.packed = None
         if compact:
             self.packed = ctx.buffer(reserve=4 * COMPACT_WORDS * max(n, 1))

@@ -178,7 +178,7 @@ class RenderSettings:
         antialias: multiply opacity by the reference's antialiasing compensation factor.
         sh_degree: cap on the SH bands evaluated (``None``: all the scene has).
         model: where the scene sits in the world (rotation, translation, uniform scale);
-            renderers fold it into the camera (:func:`splatgl.model.transform.apply_model`).
+            renderers fold it into the camera (:func:`splatgl.cameras.view.apply_model`).
         sort_key: quad path depth keys.  resort_interval: re-sort every N camera changes
             (1 = always; larger values show sort lag, for the benchmark).
         preprocess: where the quad path's per-splat math runs.  The compute pre-pass is the

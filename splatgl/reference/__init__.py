@@ -16,7 +16,7 @@ from ..constants import GSPLAT_ALPHA_MAX, GSPLAT_EXTENT_SIGMAS
 from .options import Compat, ReferenceOptions
 from .chunk import gaussian_alpha, gaussian_power
 from .rasterize import Raster, rasterize, transmittance_trace
-from .render import ReferenceImage, render_reference, render_reference_rgba
+from .render import ReferenceImage, render_reference
 from .stages import ProjectedSplats, gsplat_radius, gsplat_rect, inria_rect, project, tile_grid
 
 __all__ = [
@@ -24,5 +24,5 @@ __all__ = [
     "ProjectedSplats", "project", "tile_grid", "inria_rect", "gsplat_rect", "gsplat_radius",
     "emit_keys", "sort", "tile_ranges", "depth_bits",
     "Raster", "rasterize", "gaussian_power", "gaussian_alpha", "transmittance_trace",
-    "ReferenceImage", "render_reference", "render_reference_rgba",
+    "ReferenceImage", "render_reference",
 ]

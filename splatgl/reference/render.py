@@ -158,10 +158,3 @@ def with_settings(options: ReferenceOptions, settings: RenderSettings) -> Refere
     if settings.order is Order.PER_PIXEL:
         changes["order"] = Order.PER_PIXEL
     return dataclasses.replace(options, **changes) if changes else options
-
-
-def render_reference_rgba(scene: Scene, camera: Camera, settings: RenderSettings | None = None,
-                          dtype: np.dtype | type = np.float32,
-                          compat: Compat | ReferenceOptions | str = Compat.INRIA) -> np.ndarray:
-    """(H, W, 4) float32 RGBA of :func:`render_reference` (colour composited, row 0 on top)."""
-    return render_reference(scene, camera, settings, dtype, compat).rgba

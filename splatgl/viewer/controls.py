@@ -2,7 +2,7 @@
 
 The view is a frozen :class:`ViewState`: the camera orbits ``target`` at ``distance`` with
 ``yaw`` (about the world ``up``) and ``pitch`` (towards ``up``) in degrees, exactly as
-:func:`splatgl.cameras.camera.orbit` places it, then rolls by ``roll`` degrees about its own viewing
+:func:`splatgl.cameras.poses.orbit` places it, then rolls by ``roll`` degrees about its own viewing
 axis.  Every function returns a new state; :func:`to_camera` turns one into a
 :class:`~splatgl.cameras.camera.Camera` for a window of a given size (square pixels, vertical field of
 view ``fov_y``).  Pixel deltas are in window coordinates (x right, y down).
