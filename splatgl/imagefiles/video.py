@@ -9,6 +9,7 @@ either a complete, playable video or absent, and a failed write is one line nami
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from fractions import Fraction
 from pathlib import Path
 
@@ -105,20 +106,27 @@ class VideoWriter:
         self._file = AtomicTarget(self.path, lambda tmp: video_problem(tmp, self.frames))
         self.tmp = self._file.tmp
         self._container = None
-        try:
+        with self._or_abort():
             self._container = av.open(str(self.tmp), mode="w")
             rate = Fraction(fps).limit_denominator(1001)
             self._stream = self._container.add_stream("libx264", rate=rate)
             self._stream.width, self._stream.height = width, height
             self._stream.pix_fmt = "yuv420p"
             self._stream.options = x264_options(crf)
+        self._av = av
+
+    @contextmanager
+    def _or_abort(self):
+        """Whatever stops the block stops the video (:meth:`abort`); a failed write (a full disk)
+        is said as the target's write error."""
+        try:
+            yield
         except OSError as exc:
             self.abort()
             raise write_error(self.path, exc) from None
         except BaseException:
             self.abort()
             raise
-        self._av = av
 
     def write(self, rgba: np.ndarray) -> None:
         if rgba.shape[:2] != (self.height, self.width):
@@ -137,17 +145,11 @@ class VideoWriter:
     def close(self) -> None:
         """Flush the encoder, finish the file, check it (:func:`video_problem`) and rename it
         into place."""
-        try:
+        with self._or_abort():
             for packet in self._stream.encode(None):
                 self._container.mux(packet)
             self._container.close()
             self._file.commit()
-        except OSError as exc:
-            self.abort()
-            raise write_error(self.path, exc) from None
-        except BaseException:
-            self.abort()
-            raise
 
     def abort(self) -> None:
         """Stop without a video: close and delete the temporary file."""

@@ -48,6 +48,12 @@ class FrameSwitches:
     under: bool = False
 
 
+#: The switches a frame turns on, from its :class:`FrameSwitches` field: 1 where the field is true
+#: (NORMAL_OUTPUT: the normal layer's location; the pre-pass writes normals in either pass).
+FRAME_SWITCHES = (("depth", "DEPTH_OUTPUT"), ("normal", "NORMAL_OUTPUT"), ("ordered", "ORDERED_PASS"),
+                  ("ordered_rect", "ORDERED_RECT"), ("under", "UNDER"))
+
+
 class QuadPrograms:
     """The quad path's programs for one scene and its options (see the module doc)."""
 
@@ -72,16 +78,8 @@ class QuadPrograms:
         if self.options.antialias:
             defines["ANTIALIAS"] = 1
         defines.update(view.defines)
-        if frame.depth:
-            defines["DEPTH_OUTPUT"] = 1
-        if frame.normal:
-            defines["NORMAL_OUTPUT"] = frame.normal    # the prepass writes normals in either pass
-        if frame.ordered:
-            defines["ORDERED_PASS"] = 1
-        if frame.ordered_rect:
-            defines["ORDERED_RECT"] = 1
-        if frame.under:
-            defines["UNDER"] = 1
+        defines.update((name, int(getattr(frame, field))) for field, name in FRAME_SWITCHES
+                       if getattr(frame, field))
         defines.update(frame.extra)
         defines.update(self.buffers.defines())
         if frame.batched:
