@@ -7,6 +7,7 @@ message that says what was expected and what was found.
 
 from __future__ import annotations
 
+import json
 import os
 import struct
 from pathlib import Path
@@ -15,6 +16,7 @@ import numpy as np
 
 from ..constants import MAX_LOGIT, MIN_SCALE  # noqa: F401 (re-exported to the loaders)
 from ..errors import SceneFormatError
+from ..model.json_text import unique_keys
 from ._memory import require
 
 
@@ -29,6 +31,18 @@ def read_bytes(path: Path) -> bytes:
             return fh.read()
     except OSError as exc:
         raise SceneFormatError(path, f"cannot read: {exc.strerror or exc}") from None
+
+
+def json_object(path: Path, name: str) -> dict:
+    """The JSON object of the file ``path`` (``name``: what messages call it, ``meta.lcc``),
+    duplicate keys refused; anything else is a :class:`SceneFormatError`."""
+    try:
+        meta = json.loads(read_bytes(path).decode("utf-8"), object_pairs_hook=unique_keys)
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise SceneFormatError(path, f"{name} is not valid JSON: {str(exc)[:100]}") from None
+    if not isinstance(meta, dict):
+        raise SceneFormatError(path, f"{name} is not a JSON object")
+    return meta
 
 
 def need(path, data: bytes, offset: int, size: int, what: str, field: str | None = None) -> None:

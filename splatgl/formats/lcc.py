@@ -30,7 +30,6 @@ their boxes: a streaming renderer's chunks); :meth:`Lcc.load` decodes a level or
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -40,7 +39,6 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SceneFormatError
-from ..model.json_text import unique_keys
 from ..model.quaternion import quat_multiply, rotmat_to_quat
 from ..model.scene import Scene, activate
 from ..splatmath.project import sh_basis
@@ -199,20 +197,10 @@ class Lcc:
                         scene.opacity_logits, scene.sh, drop_invalid=drop_invalid)
 
 
-def _meta(path: Path) -> dict:
-    try:
-        meta = json.loads(_binary.read_bytes(path).decode("utf-8"), object_pairs_hook=unique_keys)
-    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
-        raise SceneFormatError(path, f"meta.lcc is not valid JSON: {str(exc)[:100]}") from None
-    if not isinstance(meta, dict):
-        raise SceneFormatError(path, "meta.lcc is not a JSON object")
-    return meta
-
-
 def read_structure(path: str | Path) -> Lcc:
     """``meta.lcc`` and ``Index.bin`` at ``path``, checked; no splat is read."""
     path = Path(path)
-    meta = _meta(path)
+    meta = _binary.json_object(path, "meta.lcc")
     levels = meta.get("totalLevel")
     if not isinstance(levels, int) or isinstance(levels, bool) or not 1 <= levels <= 64:
         raise SceneFormatError(path, f"{levels!r} is not a level count (1-64)", "totalLevel")

@@ -24,14 +24,12 @@ level (or chosen chunks of it); :func:`read` loads the finest level as a scene. 
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import SceneFormatError
-from ..model.json_text import unique_keys
 from ..model.scene import Scene
 from . import _binary, sog
 
@@ -204,12 +202,7 @@ def read_structure(path: str | Path) -> StreamedSog:
     """The manifest at ``path`` (levels, per-level counts, chunks with bounds), checked whole;
     no splat is read."""
     path = Path(path)
-    try:
-        meta = json.loads(_binary.read_bytes(path).decode("utf-8"), object_pairs_hook=unique_keys)
-    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
-        raise SceneFormatError(path, f"lod-meta.json is not valid JSON: {str(exc)[:100]}") from None
-    if not isinstance(meta, dict):
-        raise SceneFormatError(path, "lod-meta.json is not a JSON object")
+    meta = _binary.json_object(path, "lod-meta.json")
     if meta.get("version") not in VERSIONS:
         raise SceneFormatError(path, f"Streamed SOG version {meta.get('version')!r} is not "
                                      "supported (supported: 1, or none)", "version")
