@@ -4,12 +4,11 @@ against RMS error)."""
 
 from __future__ import annotations
 
-import math
 import statistics
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .report import save_figure
+from .report import _fmt, log_axes, save_figure
 
 if TYPE_CHECKING:
     from .lod_bench import LodFrame
@@ -52,20 +51,21 @@ def summary(rows: list[LodFrame]) -> list[dict]:
     return out
 
 
+#: The table's columns: title, key of :func:`summary`'s rows, width, number format.
+COLUMNS = (("scene", "scene", 5, ""), ("path", "path", 10, ""), ("config", "config", 16, ""),
+           ("ms", "frame_ms", 8, ".0f"), ("full ms", "full_ms", 8, ".0f"), ("far x", "far_speedup", 6, ".2f"),
+           ("max LOD/full", "slowest_ratio", 12, ".2f"), ("min PSNR", "min_psnr", 8, ".1f"),
+           ("min SSIM", "min_ssim", 8, ".4f"), ("pop PSNR", "min_popping_psnr", 8, ".1f"),
+           ("pop max", "pop_max", 7, ".3f"), ("pop mean", "pop_mean", 8, ".5f"),
+           ("cut max", "cut_change_max", 7, ".3f"), ("cut mean", "cut_change_mean", 8, ".5f"),
+           ("F max", "full_change_max", 6, ".3f"), ("F mean", "full_change_mean", 7, ".4f"),
+           ("cut nodes", "cut_nodes", 10, ",.0f"), ("cut ms", "cut_ms", 7, ".0f"))
+
+
 def table(summ: list[dict]) -> str:
-    f = lambda v, s: "-" if v is None else ("inf" if isinstance(v, float) and math.isinf(v) else format(v, s))
-    out = [f"{'scene':>5} {'path':>10} {'config':>16} {'ms':>8} {'full ms':>8} {'far x':>6} "
-           f"{'max LOD/full':>12} {'min PSNR':>8} {'min SSIM':>8} {'pop PSNR':>8} {'pop max':>7} "
-           f"{'pop mean':>8} {'cut max':>7} {'cut mean':>8} {'F max':>6} {'F mean':>7} "
-           f"{'cut nodes':>10} {'cut ms':>7}"]
-    for s in summ:
-        out.append(f"{s['scene']:>5} {s['path']:>10} {s['config']:>16} {s['frame_ms']:>8.0f} "
-                   f"{s['full_ms']:>8.0f} {f(s['far_speedup'], '.2f'):>6} {s['slowest_ratio']:>12.2f} "
-                   f"{f(s['min_psnr'], '.1f'):>8} {s['min_ssim']:>8.4f} "
-                   f"{f(s['min_popping_psnr'], '.1f'):>8} {f(s['pop_max'], '.3f'):>7} "
-                   f"{f(s['pop_mean'], '.5f'):>8} {f(s['cut_change_max'], '.3f'):>7} "
-                   f"{f(s['cut_change_mean'], '.5f'):>8} {f(s['full_change_max'], '.3f'):>6} "
-                   f"{f(s['full_change_mean'], '.4f'):>7} {s['cut_nodes']:>10,.0f} {s['cut_ms']:>7.0f}")
+    """One right-aligned line per summary row ("-" where a figure is missing)."""
+    out = [" ".join(f"{title:>{width}}" for title, _, width, _ in COLUMNS)]
+    out += [" ".join(f"{_fmt(s[key], spec):>{width}}" for _, key, width, spec in COLUMNS) for s in summ]
     return "\n".join(out)
 
 
@@ -88,12 +88,6 @@ def plot(path: Path, rows: list[LodFrame]) -> None:
         ax.axvline(statistics.median(r.full_ms for r in sub), ls="--", c="gray",
                    label="full detail (median)")
         ax.axhline(10 ** (-40 / 20), ls=":", c="red", lw=1, label="40 dB")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("frame time (ms)")
-        ax.set_ylabel("RMS error against full detail")
-        ax.set_title(f"{scene} splats, {p}")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        log_axes(ax, "frame time (ms)", "RMS error against full detail", f"{scene} splats, {p}", legend_size=7)
     fig.tight_layout()
     save_figure(fig, path)

@@ -92,17 +92,24 @@ def plot(path: Path, rows: list[BenchRow]) -> None:
         limit = next((r.frame_ms for r in rows if r.scene == scene and r.group == "limit"), None)
         if limit:
             ax.axvline(limit, ls="--", c="gray", lw=1, label=f"limit row {limit:.0f} ms")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        log_axes(ax, "median frame time (ms)", "RMS error against the reference",
+                 f"{scene} ({sub[0].splats if sub else 0} splats)", legend_size=8)
         ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.set_xlabel("median frame time (ms)")
-        ax.set_ylabel("RMS error against the reference")
-        ax.set_title(f"{scene} ({sub[0].splats if sub else 0} splats)")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure(fig, path)
+
+
+def log_axes(ax, xlabel: str, ylabel: str, title: str, legend_size: int) -> None:
+    """A frame-time-against-error panel's axes: both logarithmic, labelled, titled, a light grid
+    and the legend."""
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=legend_size)
 
 
 def save_figure(fig, path: Path) -> None:
