@@ -134,7 +134,7 @@ def _rss_mb() -> float:
     return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
 
 
-def _peak_rss_mb() -> float:
+def peak_rss_mb() -> float:
     """Peak resident set size (MB) of this process image: /proc/self/status VmHWM.  Not
     getrusage's ru_maxrss, which Linux carries across exec from the forked parent (a parent
     that had just built a 6M SH3 scene made the child's figure 3x too high)."""
@@ -178,7 +178,7 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
     t0 = time.perf_counter()
     scene = load_scene(path, progress=lambda *a: None)
     load_s = time.perf_counter() - t0
-    rss_load = _peak_rss_mb() - base
+    rss_load = peak_rss_mb() - base
     arrays = (scene.means, scene.quats, scene.log_scales, scene.opacity_logits, scene.sh)
     decoded = sum(a.nbytes for a in arrays) / 1e6
     settings = RenderSettings(gpu_storage=options.gpu_storage)
@@ -209,7 +209,7 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
                 tt.append(time.perf_counter() - t1)
             tile.release()
             tile_ms = 1e3 * _median(tt[1:])
-        rss_peak = _peak_rss_mb() - base
+        rss_peak = peak_rss_mb() - base
         sort_gpu = identical = None
         if options.gpu_sort:  # after the memory figure: its own cull data is a second copy
             view = View.of(cams[-1], settings, scene)

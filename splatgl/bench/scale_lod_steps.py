@@ -29,28 +29,18 @@ import io
 import json
 import math
 import os
-import resource
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from .scale import peak_rss_mb
+
 #: Rows built and written at a time (each block is a grid of copies of the shared scenes).
 BLOCK = 1_000_000
 #: Seed of the first block (block i uses SEED + i).
 SEED = 0
-
-
-def peak_rss_mb() -> float:
-    """This process's peak resident set size (MB): /proc/self/status VmHWM."""
-    try:
-        for line in open("/proc/self/status"):
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1e3
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
 
 
 def write_tiled_scene(path: Path, splats: int, block: int = BLOCK, sources=None,
