@@ -25,12 +25,12 @@ from pathlib import Path
 import numpy as np
 
 from splatgl.api import Renderer
-from splatgl.bench.flight import Flight
-from splatgl.bench.machine import describe, probe_machine
+from splatgl.measure.bench.flight import Flight
+from splatgl.measure.bench.machine import describe, probe_machine
 from splatgl.cameras.view import View
-from splatgl.evaluation.metrics import psnr
+from splatgl.measure.evaluation.metrics import psnr
 from splatgl.formats import load_scene
-from splatgl.model.settings import RenderSettings
+from splatgl.scene.settings import RenderSettings
 from splatgl.interactive.budget import Level
 from splatgl.interactive.draft import LevelRenderer
 from splatgl.interactive.lod_cache import LodProvider

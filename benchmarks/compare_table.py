@@ -15,9 +15,9 @@ import sys
 from pathlib import Path
 
 from splatgl import RenderSettings, Renderer, RendererKind, default_camera, load_scene
-from splatgl.bench.runner import median_seconds
+from splatgl.measure.bench.runner import median_seconds
 from splatgl.errors import SplatglError
-from splatgl.evaluation.metrics import image_errors
+from splatgl.measure.evaluation.metrics import image_errors
 from splatgl.api import render_reference_rgba
 
 REPO = Path(__file__).resolve().parent.parent

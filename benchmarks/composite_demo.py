@@ -28,10 +28,10 @@ import numpy as np
 
 from splatgl import RenderSettings, Renderer, RendererKind, default_camera, load_scene
 from splatgl.api import render_reference_layers
-from splatgl.bench.machine import describe, probe_machine
+from splatgl.measure.bench.machine import describe, probe_machine
 from splatgl.cameras.view import View
-from splatgl.model.scene import Scene
-from splatgl.evaluation.metrics import image_errors
+from splatgl.scene.splats import Scene
+from splatgl.measure.evaluation.metrics import image_errors
 from splatgl.imagefiles.images import write_image
 from splatgl.output.layers import Layer, with_layers
 from splatgl.imagefiles.pictures import _label

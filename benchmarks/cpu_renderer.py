@@ -33,8 +33,8 @@ def _psnr(img: np.ndarray, ref: np.ndarray) -> float:
 
 def measure(path: str, width: int, height: int, frames: int) -> dict:
     import splatgl
-    from splatgl.bench.flight import Flight
-    from splatgl.model.settings import RendererKind
+    from splatgl.measure.bench.flight import Flight
+    from splatgl.scene.settings import RendererKind
     from splatgl.reference import render_reference
 
     scene = splatgl.load_scene(path)
@@ -80,7 +80,7 @@ def main() -> None:
     missing = [s for s in args.scenes if not os.path.isfile(s)]
     if missing:
         p.error(f"no such scene file: {missing[0]}")
-    from splatgl.bench.machine import describe, probe_machine
+    from splatgl.measure.bench.machine import describe, probe_machine
     machine = probe_machine()
     print(describe(machine), flush=True)
     results = {"machine": machine, "python": platform.python_version(), "scenes": []}

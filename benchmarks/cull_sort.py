@@ -9,7 +9,7 @@ extra), for the compiled one.  Run it under the timing gate on a shared machine:
 
     /work/tools/timed python benchmarks/cull_sort.py --sizes 0.1M,1M --frames 5
 
-The scenes are the scale benchmark's (``splatgl.bench.scale.scene_file``, built on first use).
+The scenes are the scale benchmark's (``splatgl.measure.bench.scale.scene_file``, built on first use).
 """
 
 from __future__ import annotations
@@ -21,16 +21,16 @@ import statistics
 import numpy as np
 
 from splatgl.order import kernels as cull_kernel
-from splatgl.bench.scale import scene_file
-from splatgl.bench.machine import CPU_ONLY, describe, machine_info
-from splatgl.bench.scale import parse_sizes
+from splatgl.measure.bench.scale import scene_file
+from splatgl.measure.bench.machine import CPU_ONLY, describe, machine_info
+from splatgl.measure.bench.scale import parse_sizes
 from splatgl.cameras.poses import orbit
 from splatgl.formats import load_scene
 from splatgl.cameras.registry import retarget
 from splatgl.cameras.view import View
 from splatgl.renderers.quad import QuadRenderer
 from splatgl.api import Renderer, default_camera
-from splatgl.model.settings import RenderSettings
+from splatgl.scene.settings import RenderSettings
 
 VIEWS = ("pinhole", "pinhole-close", "fisheye", "equirect")
 

@@ -36,11 +36,11 @@ from splatgl.cameras.camera import Camera
 from splatgl.cameras.opencv import OpenCV, undistort
 from splatgl.cameras.view import View
 from splatgl.constants import ALPHA_MAX, ALPHA_MIN, T_MIN
-from splatgl.evaluation.metrics import psnr
+from splatgl.measure.evaluation.metrics import psnr
 from splatgl.formats import load_scene
-from splatgl.model.quaternion import quat_to_rotmat
-from splatgl.model.scene import Scene
-from splatgl.model.settings import RenderSettings
+from splatgl.scene.quaternion import quat_to_rotmat
+from splatgl.scene.splats import Scene
+from splatgl.scene.settings import RenderSettings
 from splatgl.constants import LOW_PASS
 from splatgl.splatmath.project import covariance_3d, jacobian, sh_color, to_camera, view_dirs
 

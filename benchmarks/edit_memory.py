@@ -3,7 +3,7 @@ bounded extra memory).
 
     python benchmarks/edit_memory.py [--size 6M] [--out docs/results/edit-memory-6M.json]
 
-For one scene of the scale benchmark (:func:`splatgl.bench.scale.scene_file`, built and cached
+For one scene of the scale benchmark (:func:`splatgl.measure.bench.scale.scene_file`, built and cached
 on first use), each case runs in a fresh child process (so its peak resident memory, VmHWM, is
 its own): ``load`` only reads the scene; every other case runs ``splatgl edit`` with one
 operation and writes a PLY (atomically, into a temporary folder).  "extra" is the case's peak
@@ -26,7 +26,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from splatgl.bench.scale import parse_sizes, scene_file  # noqa: E402
+from splatgl.measure.bench.scale import parse_sizes, scene_file  # noqa: E402
 
 #: (case, edit options); {box} and {sphere} are filled from the scene's robust bounds so that
 #: the crops keep about half of it.

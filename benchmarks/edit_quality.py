@@ -36,13 +36,13 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from splatgl.api import Renderer, default_camera  # noqa: E402
-from splatgl.bench.real_scenes import shared_scenes_dir  # noqa: E402
+from splatgl.measure.bench.real_scenes import shared_scenes_dir  # noqa: E402
 from splatgl.edit import Decimate, RemoveFloaters, apply_operations  # noqa: E402
-from splatgl.evaluation.metrics import psnr  # noqa: E402
+from splatgl.measure.evaluation.metrics import psnr  # noqa: E402
 from splatgl.formats import load_scene  # noqa: E402
 from splatgl.lod.build import area_proxy, merge_groups  # noqa: E402
-from splatgl.model.scene import Scene  # noqa: E402
-from splatgl.model.spatial import morton_order_clamped_box  # noqa: E402
+from splatgl.scene.splats import Scene  # noqa: E402
+from splatgl.scene.spatial import morton_order_clamped_box  # noqa: E402
 from splatgl.imagefiles.images import write_image  # noqa: E402
 from splatgl.splatmath.project import covariance_3d, quat_to_rotmat  # noqa: E402
 

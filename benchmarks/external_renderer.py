@@ -80,7 +80,7 @@ def worker(jobs_path: str) -> None:
 
 def job_for(entry: dict, kit: Path, out: Path):
     """The gsplat job of a kit case, or None (with why) where its path cannot draw it."""
-    from splatgl.cameras.files import load_camera
+    from splatgl.cameras.camera_files import load_camera
     from splatgl.formats import load_scene
 
     if entry["projection"] not in ("perspective", "orthographic") or entry["kind"] != "3dgs":
@@ -107,12 +107,12 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None, help="keep gsplat's images here")
     args = ap.parse_args()
 
-    from splatgl.bench.machine import describe, machine_info
+    from splatgl.measure.bench.machine import describe, machine_info
     from splatgl.commands._common import demo_scene_path
-    from splatgl.conformance.cases import all_cases
-    from splatgl.conformance.export import export_kit
-    from splatgl.conformance.score import case_inputs, load_index, score_kit, table
-    from splatgl.evaluation.explain import candidates, explain
+    from splatgl.measure.conformance.cases import all_cases
+    from splatgl.measure.conformance.export import export_kit
+    from splatgl.measure.conformance.score import case_inputs, load_index, score_kit, table
+    from splatgl.measure.evaluation.explain import candidates, explain
     from splatgl.formats import load_scene
     from splatgl.imagefiles.images import read_image, write_image
     from splatgl.reference import render_reference

@@ -21,8 +21,8 @@ import numpy as np
 from splatgl.cameras.view import View
 from splatgl import RenderSettings, Renderer, default_camera, load_scene
 from splatgl.cameras.poses import orbit
-from splatgl.bench.synthetic import synthetic_scene
-from splatgl.model.scene import Scene
+from splatgl.measure.bench.synthetic import synthetic_scene
+from splatgl.scene.splats import Scene
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -233,7 +233,7 @@ fi
 # ---------------------------------------------------------------- tests and benchmarks
 if wants tests; then
   tests=()
-  [ "$quick" -eq 1 ] && tests=(tests/test_context.py tests/test_egl_devices.py)
+  [ "$quick" -eq 1 ] && tests=(tests/gl/test_context.py tests/gl/test_egl_devices.py)
   stamp="$out/.tests-started"
   [ "$dry" -eq 1 ] || touch "$stamp"
   step tests "$out/pytest.txt" run "$py" -m pytest -ra --junitxml="$out/pytest.xml" ${tests[@]+"${tests[@]}"} || true

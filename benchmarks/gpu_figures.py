@@ -3,7 +3,7 @@
 Two commands:
 
 - ``scene N [N ...] --cache DIR``: build the N-splat scenes from the shared real files (the
-  scale benchmark's builder, :func:`splatgl.bench.scale.scene_file`; cached as INRIA PLY) and
+  scale benchmark's builder, :func:`splatgl.measure.bench.scale.scene_file`; cached as INRIA PLY) and
   print their paths, one a line.
 - ``renderers FILE [FILE ...] --out FIGURES.jsonl``: for each scene file, each resolution, each
   renderer (quad, tile) and each order (``--sort exact``, ``--sort gpu``): one warm-up frame
@@ -74,7 +74,7 @@ def _figure(api, scene, path: Path, size, kind, sort: str, frames: int, deadline
 
     from splatgl.cameras.framing import default_camera
     from splatgl.cameras.poses import orbit
-    from splatgl.model.settings import RenderSettings
+    from splatgl.scene.settings import RenderSettings
 
     width, height = size
     row = {"figure": "render", "scene": path.name, "splats": scene.count, "width": width,
@@ -105,7 +105,7 @@ def _figure(api, scene, path: Path, size, kind, sort: str, frames: int, deadline
 def renderers_main(args: argparse.Namespace) -> None:
     from splatgl.api import Renderer, gl_renderer_name
     from splatgl.formats import load_scene
-    from splatgl.model.settings import RendererKind
+    from splatgl.scene.settings import RendererKind
 
     out = Path(args.out)
     deadline = args.deadline or float("inf")
@@ -134,7 +134,7 @@ def renderers_main(args: argparse.Namespace) -> None:
 
 def _guarded(api, scene, path: Path, size, kind: str, sort: str, frames: int, deadline: float) -> dict:
     """:func:`_figure`, or a row saying why not (the deadline, an error)."""
-    from splatgl.model.settings import RendererKind
+    from splatgl.scene.settings import RendererKind
 
     row = {"figure": "render", "scene": path.name, "width": size[0], "height": size[1],
            "renderer": kind, "sort": sort}
@@ -147,7 +147,7 @@ def _guarded(api, scene, path: Path, size, kind: str, sort: str, frames: int, de
 
 
 def scene_main(args: argparse.Namespace) -> None:
-    from splatgl.bench.scale import parse_sizes, scene_file
+    from splatgl.measure.bench.scale import parse_sizes, scene_file
 
     for n in parse_sizes(args.sizes, (), "sizes"):
         print(scene_file(n, 0, Path(args.cache)), flush=True)

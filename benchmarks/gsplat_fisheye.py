@@ -174,7 +174,7 @@ def per_pixel_orders(scene, camera, settings):
     order (:func:`composite`); per pixel: ``t* = d^T P mu / d^T P d`` (the depth of greatest
     contribution along the pixel's unit ray d, P the camera-space precision)."""
     from splatgl.splatmath import project as pm
-    from splatgl.model.quaternion import quat_to_rotmat
+    from splatgl.scene.quaternion import quat_to_rotmat
     from splatgl.reference import stages
     from splatgl.reference.options import ReferenceOptions
 
@@ -203,7 +203,7 @@ def per_pixel_orders(scene, camera, settings):
 
 def compare_view(python, scene, cam, settings, near, per_pixel: bool) -> None:
     """Print one camera's lines (see the module docstring)."""
-    from splatgl.evaluation.metrics import image_errors, psnr
+    from splatgl.measure.evaluation.metrics import image_errors, psnr
 
     def fmt(a, b):
         off = round(image_errors(a, b).off_1 * a.shape[0] * a.shape[1])
@@ -241,7 +241,7 @@ def compare_view(python, scene, cam, settings, near, per_pixel: bool) -> None:
 
 def main() -> None:
     from splatgl import Camera, RenderSettings, default_camera, load_scene
-    from splatgl.model.settings import resolve_near
+    from splatgl.scene.settings import resolve_near
 
     repo = Path(__file__).resolve().parents[1]
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])

@@ -1,7 +1,7 @@
 """What each level of the frame-time budget costs in image quality (issue 27).
 
 For each scene and three views of the interactive flight (start of the orbit, mid fly-in, the
-rest view: :class:`splatgl.bench.flight.Flight`) at 1280x720: the PSNR against the exact frame
+rest view: :class:`splatgl.measure.bench.flight.Flight`) at 1280x720: the PSNR against the exact frame
 of every render scale in ``SCALES`` times every splat budget (a level-of-detail cut, with the SH
 degree capped at 0, as the budget's levels draw).  The quality model of
 :func:`splatgl.interactive.budget.predicted_psnr` was fitted to this output
@@ -29,13 +29,13 @@ import numpy as np
 from _script import run
 
 from splatgl.api import Renderer
-from splatgl.bench.flight import MOVE_END, Flight
-from splatgl.evaluation.metrics import psnr
+from splatgl.measure.bench.flight import MOVE_END, Flight
+from splatgl.measure.evaluation.metrics import psnr
 from splatgl.formats import load_scene
 from splatgl.interactive.budget import Level
 from splatgl.interactive.draft import LevelRenderer
 from splatgl.interactive.lod_cache import LodProvider
-from splatgl.model.settings import RenderSettings
+from splatgl.scene.settings import RenderSettings
 from splatgl.writing.atomic import atomic_write_text
 
 SCALES = (1.0, 0.7, 0.5, 0.35, 0.25)

@@ -19,8 +19,8 @@ import numpy as np
 from _script import run
 
 from splatgl.api import Renderer, default_settings
-from splatgl.bench.flight import Flight
-from splatgl.evaluation.metrics import psnr
+from splatgl.measure.bench.flight import Flight
+from splatgl.measure.evaluation.metrics import psnr
 from splatgl.formats import load_scene
 from splatgl.interactive.lod_cache import LodProvider
 from splatgl.interactive.session import Session

@@ -8,7 +8,7 @@ For each scene in ../shared/scenes that loads (or the scenes given) and each cam
 (the default camera, retargeted), prints a markdown row per renderer: colour PSNR, the expected
 depth's largest error over the scene's depth, the normal's angle (median / 99th percentile /
 max, degrees, where both alphas reach 0.5), and the shares of blended pixels whose median
-depth, count or top contributor differ (:func:`splatgl.evaluation.metrics.layer_errors`).
+depth, count or top contributor differ (:func:`splatgl.measure.evaluation.metrics.layer_errors`).
 A seeded 2DGS surfel scene is added (no real 2DGS scene is shared).  No timings.
 """
 
@@ -23,11 +23,11 @@ import numpy as np
 
 from splatgl import RenderSettings, Renderer, RendererKind, default_camera, load_scene
 from splatgl.api import render_reference_layers
-from splatgl.bench.machine import describe, probe_machine
+from splatgl.measure.bench.machine import describe, probe_machine
 from splatgl.cameras.registry import retarget
 from splatgl.errors import SplatglError
-from splatgl.evaluation.metrics import depth_errors, image_errors, layer_errors
-from splatgl.model.scene import Scene, SplatKind
+from splatgl.measure.evaluation.metrics import depth_errors, image_errors, layer_errors
+from splatgl.scene.splats import Scene, SplatKind
 from splatgl.output.layers import Layer, with_layers
 
 REPO = Path(__file__).resolve().parent.parent

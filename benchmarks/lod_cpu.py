@@ -18,18 +18,18 @@ import json
 import numpy as np
 
 from splatgl.order import kernels as cull_kernel
-from splatgl.bench.lod_bench import cameras, lod_file
-from splatgl.bench.scale import scene_file
-from splatgl.bench.machine import CPU_ONLY, describe, machine_info
-from splatgl.bench.runner import median_seconds
-from splatgl.bench.scale import parse_sizes
+from splatgl.measure.bench.lod_bench import cameras, lod_file
+from splatgl.measure.bench.scale import scene_file
+from splatgl.measure.bench.machine import CPU_ONLY, describe, machine_info
+from splatgl.measure.bench.runner import median_seconds
+from splatgl.measure.bench.scale import parse_sizes
 from splatgl.order.cull import CullData
 from splatgl.order.chunks import keys_order, rows_keys
 from splatgl.lod.cut import CutData, select_cut_weights
 from splatgl.lod.io import read_lod
-from splatgl.lod.render import SKIP_NODES_PER_LEAF
+from splatgl.lod.selection import SKIP_NODES_PER_LEAF
 from splatgl.cameras.view import anchored_camera
-from splatgl.model.settings import RenderSettings, resolve_near
+from splatgl.scene.settings import RenderSettings, resolve_near
 
 
 def _median_ms(fn, repeats: int):

@@ -7,7 +7,7 @@ only on their rays draws the same world-fixed picture, while the global order, s
 view-space z, reorders overlapping splats as the view direction swings.  The per-pixel order
 sorts along each ray, which turning does not change.  The script renders the path with the tile
 renderer (global order) and the reference (per-pixel order), scores every pair with the popping
-metric (splatgl/evaluation/popping.py; ``own`` metric, so it needs no extra package), picks the
+metric (splatgl/measure/evaluation/popping.py; ``own`` metric, so it needs no extra package), picks the
 pair where the global order pops most, and writes, cropped around the pop and enlarged: frame
 k-1, frame k and the popping error map (black 0, white >= 0.1) for each order.
 
@@ -24,14 +24,14 @@ import numpy as np
 DEFAULT_SCENE, DEFAULT_UP = "ply/donut_sh0.ply", "+z"
 WIDTH, HEIGHT = 400, 225
 #: Camera distance (multiple of the framing distance) and yaw per frame (degrees) of the turn
-#: (splatgl.bench.popping.camera_paths, elevation 15 degrees).
+#: (splatgl.measure.bench.popping_bench.camera_paths, elevation 15 degrees).
 DISTANCE, YAW_STEP, FRAMES = 0.35, 3.0, 8
 #: Crop margin around the popped pixels, and the enlargement.
 MARGIN, ZOOM = 24, 2
 
 
 def turning_cameras(scene, path: Path, up: str | None):
-    from splatgl.bench.popping import camera_paths
+    from splatgl.measure.bench.popping_bench import camera_paths
 
     return camera_paths(scene, path, up, WIDTH, HEIGHT, FRAMES, ("turn",),
                         (DISTANCE, YAW_STEP))["turn"]
@@ -45,11 +45,11 @@ def main() -> None:
     args = ap.parse_args()
 
     from splatgl.api import Renderer
-    from splatgl.bench.popping import render_frames
-    from splatgl.bench.real_scenes import shared_scenes_dir
-    from splatgl.evaluation.popping import POP_THRESHOLD, score_pair
+    from splatgl.measure.bench.popping_bench import render_frames
+    from splatgl.measure.bench.real_scenes import shared_scenes_dir
+    from splatgl.measure.evaluation.popping import POP_THRESHOLD, score_pair
     from splatgl.formats import load_scene
-    from splatgl.model.settings import Order, RendererKind, RenderSettings
+    from splatgl.scene.settings import Order, RendererKind, RenderSettings
     from splatgl.imagefiles.images import write_image
     from splatgl.imagefiles.pictures import _label
 

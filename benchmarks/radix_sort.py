@@ -182,8 +182,8 @@ def main() -> None:
     if args.repeats < 1:
         p.error(f"--repeats must be at least 1, got {args.repeats}")
     from splatgl.api import Renderer
-    from splatgl.bench.machine import describe, machine_info
-    from splatgl.bench.scale import parse_sizes
+    from splatgl.measure.bench.machine import describe, machine_info
+    from splatgl.measure.bench.scale import parse_sizes
     from splatgl.gl.context import renderer_name
     from splatgl.writing.atomic import atomic_write_text
 

@@ -28,7 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from splatgl.bench.real_scenes import shared_scenes_dir
+from splatgl.measure.bench.real_scenes import shared_scenes_dir
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED = shared_scenes_dir(REPO)
@@ -75,7 +75,7 @@ def main() -> None:
     ap.add_argument("--height", type=int, default=720)
     args = ap.parse_args()
     sys.path.insert(0, str(REPO))
-    from splatgl.cameras.files import save_camera
+    from splatgl.cameras.camera_files import save_camera
     from splatgl.formats import load_scene
     from splatgl.gl.context import create_headless_context
     from splatgl.paths import orbit

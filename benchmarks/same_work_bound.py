@@ -4,7 +4,7 @@ For each scene, at 1280x720 along the start of the interactive flight's orbit (m
 ``--frames``), two renderers:
 
 - ``quad``: the quad path's exact frame (cull, sort, upload, pre-pass and draw; no readback);
-- ``limit``: the same quads with trivial shaders (``splatgl/bench/limit.py``: the draw only),
+- ``limit``: the same quads with trivial shaders (``splatgl/measure/bench/limit.py``: the draw only),
   what llvmpipe costs for this geometry, blending and target at all.
 
 Each runs twice, with llvmpipe's default threads and with ``LP_NUM_THREADS=0`` (everything in
@@ -34,8 +34,8 @@ ORBIT_STEP = 0.05
 def _time(scene_path: str, kind: str, frames: int) -> float:
     """Median seconds of ``kind`` ("quad" or "limit") frames, in this process."""
     import splatgl
-    from splatgl.bench.flight import Flight
-    from splatgl.bench.limit import LimitRenderer
+    from splatgl.measure.bench.flight import Flight
+    from splatgl.measure.bench.limit import LimitRenderer
     from splatgl.cameras.view import View
     from splatgl.gl.context import create_headless_context
     from splatgl.renderers.quad import QuadRenderer

@@ -5,7 +5,7 @@ rasterisation in its own threads, so one idea for same-work speed on a 2-core ma
 split the frame between two processes (left and right halves, each its own context) and let
 both front ends run at once.  This script measures whether that can pay at all, with
 ``Renderer.render`` (the exact frame, readback included) along the start of the interactive
-flight's orbit (:class:`splatgl.bench.flight.Flight`) at 1280x720:
+flight's orbit (:class:`splatgl.measure.bench.flight.Flight`) at 1280x720:
 
 - ``full``: one process draws whole frames;
 - ``halves``: two processes draw the left and right halves at the same time (the camera's
@@ -40,7 +40,7 @@ def _frames(scene_path: str, part: str, frames: int) -> float:
     import dataclasses
 
     import splatgl
-    from splatgl.bench.flight import Flight
+    from splatgl.measure.bench.flight import Flight
 
     scene = splatgl.load_scene(scene_path)
     flight = Flight(scene, WIDTH, HEIGHT)

@@ -3,7 +3,7 @@ within ``--memory`` (issue 41 item 5).
 
     python benchmarks/stream_memory.py [--size 3M] [--sh 3] [--memory 300M] [--out FILE.json]
 
-The scene is the scale benchmark's real-data scene (:func:`splatgl.bench.scale.scene_file`,
+The scene is the scale benchmark's real-data scene (:func:`splatgl.measure.bench.scale.scene_file`,
 built from the shared scenes on first use and cached in the temporary folder, never in the
 repository).  Each case runs in a fresh child process (its peak resident memory, VmHWM, is its
 own), once with the default budget (half the RAM: the scene loads whole) and once with
@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from benchmarks.edit_memory import run_child  # noqa: E402
-from splatgl.bench.scale import parse_sizes, scene_file  # noqa: E402
+from splatgl.measure.bench.scale import parse_sizes, scene_file  # noqa: E402
 
 
 def cases(scene: Path, tmp: str) -> list[tuple[str, list[str], str | None]]:

@@ -24,7 +24,7 @@ sys.path.insert(0, str(HERE.parent))
 
 from splatgl.constants import SH_C0  # noqa: E402
 from splatgl.formats import save_scene  # noqa: E402
-from splatgl.model.scene import Scene  # noqa: E402
+from splatgl.scene.splats import Scene  # noqa: E402
 
 
 def _quat_z(theta: np.ndarray) -> np.ndarray:

@@ -4,7 +4,7 @@
 // (opacity, depth, visible, fragments in the viewport: camera.glsl visible_area).  With
 // OPACITY_WEIGHT, the scene with those opacities scaled (a level-of-detail cut's blend).
 // Twin: splatgl/splatmath/project.py project(), ellipse_axes(), reference_radius();
-//   splatgl/lod/render.py blended_scene().
+//   splatgl/lod/selection.py blended_scene().
 #include "lib/camera.glsl"
 #include "lib/scene.glsl"
 #include "lib/project.glsl"
@@ -24,7 +24,7 @@ layout(std430, binding = BINDING_PREPARED_NORMAL) writeonly buffer PreparedNorma
 layout(std430, binding = BINDING_PREPARED_RADIUS) writeonly buffer PreparedRadius { float prepared_radius[]; };
 #endif
 #ifdef OPACITY_WEIGHT
-// Level-of-detail blend: a factor on each sorted slot's opacity (splatgl/lod/render.py).
+// Level-of-detail blend: a factor on each sorted slot's opacity (splatgl/lod/selection.py).
 layout(std430, binding = BINDING_OPACITY_WEIGHT) readonly buffer OpacityWeight { float opacity_weight[]; };
 #endif
 uniform uint u_count;

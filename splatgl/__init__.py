@@ -23,14 +23,14 @@ _EXPORTS = {
     "Camera": "cameras.camera", "look_at": "cameras.poses", "orbit": "cameras.poses",
     "Pinhole": "cameras.pinhole", "Orthographic": "cameras.orthographic", "Fisheye": "cameras.fisheye",
     "Equirectangular": "cameras.equirect", "View": "cameras.view",
-    "load_camera": "cameras.files", "load_cameras": "datasets", "save_camera": "cameras.files",
+    "load_camera": "cameras.camera_files", "load_cameras": "datasets", "save_camera": "cameras.camera_files",
     "CameraError": "errors", "ContextError": "errors", "SceneFormatError": "errors",
     "ShaderError": "errors", "SplatglError": "errors",
     "load_scene": "formats", "save_scene": "formats",
     "Renderer": "api", "default_camera": "api", "default_settings": "api", "render": "api",
-    "Scene": "model.scene", "SceneSource": "model.scene", "SplatKind": "model.scene",
-    "Precision": "model.settings", "QuadExtent": "model.settings", "RenderSettings": "model.settings",
-    "RendererKind": "model.settings",
+    "Scene": "scene.splats", "SceneSource": "scene.splats", "SplatKind": "scene.splats",
+    "Precision": "scene.settings", "QuadExtent": "scene.settings", "RenderSettings": "scene.settings",
+    "RendererKind": "scene.settings",
 }
 
 __all__ = sorted(_EXPORTS)
@@ -57,10 +57,10 @@ if TYPE_CHECKING:  # static analysers see the names directly
     from .cameras.pinhole import Pinhole
     from .cameras.poses import look_at, orbit
     from .cameras.view import View
-    from .cameras.files import load_camera, save_camera
+    from .cameras.camera_files import load_camera, save_camera
     from .datasets import load_cameras
     from .errors import CameraError, ContextError, SceneFormatError, ShaderError, SplatglError
     from .formats import load_scene, save_scene
     from .api import Renderer, default_camera, default_settings, render
-    from .model.scene import Scene, SceneSource, SplatKind
-    from .model.settings import Precision, QuadExtent, RenderSettings, RendererKind
+    from .scene.splats import Scene, SceneSource, SplatKind
+    from .scene.settings import Precision, QuadExtent, RenderSettings, RendererKind

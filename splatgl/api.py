@@ -23,14 +23,14 @@ from .gl.shaders import ProgramCache
 from .output.layers import BASE, Layer, RenderOutput, with_layers
 from .output.under import UnderImage
 from .progress import ProgressCallback
-from .model.scene import Scene, SceneSource
-from .model.settings import RenderSettings, RendererKind
+from .scene.splats import Scene, SceneSource
+from .scene.settings import RenderSettings, RendererKind
 from .cameras.view import View
 from .renderers import registry
 
 def default_settings(scene: Scene | SceneSource | None = None, **fields) -> RenderSettings:
     """The settings ``splatgl render`` uses for ``scene`` (a loaded scene or its
-    :class:`~splatgl.model.scene.SceneSource`): ``RenderSettings(**fields)``, where
+    :class:`~splatgl.scene.splats.SceneSource`): ``RenderSettings(**fields)``, where
     ``antialias``, unless given (None counts as not given), is on for a file tagged as trained
     with antialiasing (mip-splatting's 2D filter: SPZ's antialiased flag, a PLY
     ``SplatRenderMode: mip`` comment, ...; :func:`splatgl.formats.metadata.antialias_tag`),
@@ -259,7 +259,7 @@ def _inputs(scene: Scene, camera: Camera | None,
             settings: RenderSettings | None) -> tuple[Camera, RenderSettings]:
     """``camera`` and ``settings``, or the scene's defaults where None (``splatgl render``'s)."""
     settings = settings if settings is not None else default_settings(scene)
-    return camera if camera is not None else default_camera(scene, model=settings.model), settings
+    return camera if camera is not None else default_camera(scene, model=settings.transform), settings
 
 
 def render(scene: Scene, camera: Camera | None = None, settings: RenderSettings | None = None,

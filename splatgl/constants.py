@@ -11,7 +11,7 @@ import math
 #: Tile edge in pixels (the reference bins splats into 16 x 16 tiles).
 TILE_SIZE = 16
 #: Default near-plane distance of the reference (view-space z <= this is culled).  splatgl's own
-#: default is scene-relative (see :func:`splatgl.model.settings.resolve_near`), never larger than this.
+#: default is scene-relative (see :func:`splatgl.scene.settings.resolve_near`), never larger than this.
 REFERENCE_NEAR = 0.2
 #: ``x/z`` and ``y/z`` are clamped to +-JACOBIAN_CLAMP * tan(half fov) inside the Jacobian only.
 JACOBIAN_CLAMP = 1.3

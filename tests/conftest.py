@@ -20,6 +20,16 @@ pytest.register_assert_rewrite("helpers")
 import helpers  # noqa: E402 (after the rewrite hook)
 from helpers import REPO  # noqa: E402
 
+# Tests live in one folder per package they test (tests/<package>/test_*.py); a few import each
+# other's constants and fixtures by module name (``from test_compare import MIN_PSNR``), so every
+# test folder is on sys.path, as the one flat folder was.
+import sys as _sys  # noqa: E402
+
+for _folder in sorted(Path(__file__).parent.iterdir()):
+    if _folder.is_dir() and _folder.name not in ("data", "frame_gate", "__pycache__") \
+            and str(_folder) not in _sys.path:
+        _sys.path.append(str(_folder))
+
 # Hypothesis: every run draws the same examples ("ci", the default): derandomised (examples
 # follow from each test's source), no example database (earlier failures do not change what
 # runs), and no timing health check.  The deadline only catches an example 100x slower than the
@@ -34,14 +44,14 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 # `--renderer auto` (render, render --path, view) draws with the CPU renderer on a software
 # OpenGL device only where numba's on-disk cache holds its kernels: pinned to the quad path for
 # the suite (and the processes it starts), so that no test depends on whether that cache is
-# warm.  Tests of the auto choice itself unset it (tests/test_renderer_auto.py; docs/testing.md).
+# warm.  Tests of the auto choice itself unset it (tests/renderers/test_renderer_auto.py; docs/testing.md).
 os.environ["SPLATGL_RENDERER_AUTO"] = "quad"
 
 
 def shared_scenes_dir() -> Path:
     """``$SPLATGL_SHARED_SCENES`` or ``../shared/scenes`` beside the repository (the library's
     one lookup, from the repository root whatever the working directory)."""
-    from splatgl.bench.real_scenes import shared_scenes_dir as lookup
+    from splatgl.measure.bench.real_scenes import shared_scenes_dir as lookup
 
     return lookup(REPO)
 

@@ -15,8 +15,8 @@ import pytest
 from splatgl.cameras.poses import orbit
 from splatgl.cameras.view import View
 from splatgl.constants import SH_C0, sh_coeff_count
-from splatgl.model.scene import Scene, SplatKind
-from splatgl.model.settings import RenderSettings
+from splatgl.scene.splats import Scene, SplatKind
+from splatgl.scene.settings import RenderSettings
 from splatgl.output.layers import BASE, Layer, with_layers
 
 REPO = Path(__file__).resolve().parent.parent

@@ -28,12 +28,12 @@ def _sh_turn(rot: np.ndarray) -> np.ndarray:
 
 
 def _quat(r: np.ndarray) -> np.ndarray:
-    from splatgl.model.quaternion import rotmat_to_quat
+    from splatgl.scene.quaternion import rotmat_to_quat
     return rotmat_to_quat(r[None])[0]
 
 
 def _records(scene, scale_range, sh_range) -> tuple[bytes, bytes | None]:
-    from splatgl.model.quaternion import quat_multiply
+    from splatgl.scene.quaternion import quat_multiply
 
     n = scene.count
     pos = scene.means.astype(np.float64) @ FROM_PLY.T

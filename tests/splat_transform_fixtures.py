@@ -1,5 +1,5 @@
 """The splat-transform versions the interoperability tests run against, as fixtures shared by
-tests/test_interop_splat_transform.py and tests/test_edit_interop.py.
+tests/formats/test_interop_splat_transform.py and tests/edit/test_edit_interop.py.
 
 ``stfiles`` is tests/data/splat_transform_files.py (also a script, so loaded by path);
 ``version`` is each pinned version, skipped with the reason where it is not installed;

@@ -1,6 +1,6 @@
 // The normal layer's per-splat normal (splatgl/output/layers.py; NORMAL_OUTPUT): 3DGS the axis
 // of the smallest scale (the first of equal ones), 2DGS surfels their normal t_u x t_v =
-// R[2]; rotated into camera space by u_view_rot (normalised again: a model transform's scale
+// R[2]; rotated into camera space by u_view_rot (normalised again: a scene transform's scale
 // sits in u_view_rot) and turned towards the camera: negated where n . d > 0, d the direction
 // from the camera to the centre p (camera space; (0, 0, 1) for an orthographic camera).
 // Twin: splatgl/splatmath/normals.py splat_normals().

@@ -1,5 +1,5 @@
 // Per-splat projection math, DESIGN.md section 1; each function has the name of its twin.
-// Twin: splatgl/model/quaternion.py quat_to_rotmat();
+// Twin: splatgl/scene/quaternion.py quat_to_rotmat();
 //   splatgl/splatmath/project.py covariance_3d(), covariance_2d(), screen_factor(),
 //   covariance_2d_det(), conic(), discriminant(), antialias_factor(), reference_radius(),
 //   ellipse_axes().

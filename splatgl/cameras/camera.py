@@ -50,7 +50,7 @@ class Camera:
             equirectangular: pixels per radian).
         cx, cy: principal point in image coordinates (pixels; (0, 0) is the top-left corner).
         world_to_camera: (4, 4) float64 transform, OpenCV axes: rigid, or rigid times a uniform
-            scale when a model transform is folded in (:func:`splatgl.cameras.view.apply_model`).
+            scale when a scene transform is folded in (:func:`splatgl.cameras.view.apply_transform`).
         model: the camera model with its own parameters (:class:`~splatgl.cameras.pinhole.
             Pinhole` by default).
     """
@@ -182,14 +182,14 @@ class Camera:
     def center(self) -> np.ndarray:
         """(3,) float64 camera centre in world space (``-R^-1 t``).
 
-        When a model transform is folded in (:func:`splatgl.cameras.view.apply_model`), the
+        When a scene transform is folded in (:func:`splatgl.cameras.view.apply_transform`), the
         matrix is scene-to-camera and this is the centre in the scene's own frame.
         """
         return -np.linalg.solve(self.rotation, self.translation)
 
     @property
     def scale(self) -> float:
-        """Uniform scale of the 3x3 block (1 for a rigid pose; the model scale when folded in)."""
+        """Uniform scale of the 3x3 block (1 for a rigid pose; the transform scale when folded in)."""
         return float(np.cbrt(np.linalg.det(self.rotation)))
 
     @property
@@ -209,7 +209,7 @@ class Camera:
         return self.width / (2.0 * self.fx), self.height / (2.0 * self.fy)
 
     def to_json(self) -> dict:
-        """The single-camera JSON form (see :func:`splatgl.cameras.files.load_camera`)."""
+        """The single-camera JSON form (see :func:`splatgl.cameras.camera_files.load_camera`)."""
         return {
             "width": self.width, "height": self.height,
             "fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy,

@@ -8,8 +8,8 @@ import math
 import numpy as np
 
 from ..errors import CameraError
-from ..model.scene import Scene
-from ..model.transform import ModelTransform
+from ..scene.splats import Scene
+from ..scene.transform import SceneTransform
 from . import registry
 from .camera import MAX_CAMERA_VALUE, MIN_FOCAL, Camera
 from .orthographic import Orthographic
@@ -28,7 +28,7 @@ ORTHOGRAPHIC_SPAN = 2.1
 
 def default_camera(scene: Scene, width: int | None = None, height: int | None = None,
                    fov_degrees: float | None = None, distance_scale: float = 1.0,
-                   model: ModelTransform | None = None, up=None, *,
+                   model: SceneTransform | None = None, up=None, *,
                    projection: str | None = None) -> Camera:
     """A camera that frames ``scene``: what ``splatgl render`` draws without ``--camera``.
 
@@ -95,7 +95,7 @@ MIN_FRAMING_DISTANCE = 1e-9
 
 
 def _framing_camera(scene: Scene, width: int, height: int, fov_y_degrees: float,
-                    distance_scale: float, model: ModelTransform | None, up) -> Camera:
+                    distance_scale: float, model: SceneTransform | None, up) -> Camera:
     """The perspective default camera (see :func:`default_camera`)."""
     lo, hi = scene.robust_bounds
     centre = 0.5 * (lo + hi)

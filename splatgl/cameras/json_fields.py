@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CameraError
-from ..model.json_text import DuplicateKeyError, unique_keys
+from ..scene.json_text import DuplicateKeyError, unique_keys
 
 
 def read_json(path: Path, what: str = "file") -> object:
     """The parsed JSON of ``path``; a one-line CameraError naming it (as ``what``) otherwise,
-    also for a key repeated in one object (:func:`splatgl.model.json_text.unique_keys`: JSON
+    also for a key repeated in one object (:func:`splatgl.scene.json_text.unique_keys`: JSON
     would keep the last without a word).  Every user JSON file splatgl reads for cameras
     (camera files, cameras.json, datasets' transforms.json, camera paths) comes through here."""
     try:

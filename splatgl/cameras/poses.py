@@ -35,7 +35,7 @@ def rigid_pose_problem(matrix: object, tolerance: float = RIGID_POSE_TOLERANCE) 
     """What keeps a camera pose from being a rigid transform, or None when it is one.
 
     A rigid pose is a rotation (orthonormal rows, determinant +1) plus a translation: no scale,
-    shear or mirror.  Camera files must hold one; only :func:`splatgl.cameras.view.apply_model`
+    shear or mirror.  Camera files must hold one; only :func:`splatgl.cameras.view.apply_transform`
     folds a uniform scale into a camera afterwards.
 
     Args:

@@ -64,7 +64,7 @@ def resolve_up(choice: str | None, scene_path: Path | None = None,
     """
     if choice is not None:
         return np.array(UP_AXES[choice]), f"--up {choice}"
-    from .files import load_cameras
+    from .camera_files import load_cameras
     from ..errors import CameraError
 
     if camera_file is not None:

@@ -4,7 +4,7 @@ Each stage (the order stage's cull and sort, the quad path's pre-pass and draw, 
 renderer, the NumPy reference, the level-of-detail cut) takes a :class:`View`, never the raw
 camera, so the camera is interpreted in one place:
 
-- the model transform folded into the camera (:func:`apply_model`: scene-to-camera);
+- the scene transform folded into the camera (:func:`apply_transform`: scene-to-camera);
 - the scene's anchor folded into the translation in float64 (:func:`anchored_camera`), since
   every path projects ``means - anchor``;
 - the near plane (``settings.near`` or the scene-relative default) and its float32 and float64
@@ -29,12 +29,12 @@ from .camera import Camera
 from .model import CameraModel, CullKind
 
 if TYPE_CHECKING:
-    from ..model.scene import Scene
-    from ..model.settings import RenderSettings
-    from ..model.transform import ModelTransform
+    from ..scene.splats import Scene
+    from ..scene.settings import RenderSettings
+    from ..scene.transform import SceneTransform
 
 
-def apply_model(camera: Camera, model: "ModelTransform | None") -> Camera:
+def apply_transform(camera: Camera, model: "SceneTransform | None") -> Camera:
     """The camera seen from the scene's own frame: matrix ``world_to_camera @ model.matrix``."""
     if model is None or model.is_identity:
         return camera
@@ -129,11 +129,11 @@ class View:
     """One frame's camera, interpreted once.
 
     Attributes:
-        camera: the camera in the scene's own frame (the model transform folded in), not
+        camera: the camera in the scene's own frame (the scene transform folded in), not
             anchored: what the CPU's float64 maths and the depth layer use.
         near: the near plane distance (world units of the scene's frame).
         anchor: (3,) float64 point subtracted from every mean before projecting (the scene's
-            :attr:`~splatgl.model.scene.Scene.anchor`; zeros for raw means).
+            :attr:`~splatgl.scene.splats.Scene.anchor`; zeros for raw means).
         low_pass: the screen-space dilation (px^2) the GPU paths add to each splat's 2D
             covariance, or None: ``constants.LOW_PASS``, as every exact frame.  A draft drawn
             at a fraction s of its window's width and height (:func:`draft_low_pass`) passes
@@ -151,9 +151,9 @@ class View:
     def of(cls, camera: Camera, settings: "RenderSettings", scene: "Scene") -> "View":
         """The view of ``camera`` (world frame) for ``scene`` under ``settings``: the model
         transform, the scene-relative near plane and the scene's anchor."""
-        from ..model.settings import resolve_near
+        from ..scene.settings import resolve_near
 
-        return cls(apply_model(camera, settings.model), resolve_near(settings, scene.robust_radius),
+        return cls(apply_transform(camera, settings.transform), resolve_near(settings, scene.robust_radius),
                    np.asarray(scene.anchor, np.float64))
 
     # ---------------------------------------------------------------- derived once per frame
@@ -181,7 +181,7 @@ class View:
 
     @cached_property
     def scale(self) -> float:
-        """The uniform scale folded into the camera (a model transform's; 1 otherwise)."""
+        """The uniform scale folded into the camera (a scene transform's; 1 otherwise)."""
         return self.camera.scale
 
     @cached_property

@@ -1,13 +1,13 @@
 """``splatgl bench --scale`` and ``--lod``: their options mapped onto the benchmarks
-(:func:`splatgl.bench.scale.run_scale`, :func:`splatgl.bench.lod_bench.run_lod`)."""
+(:func:`splatgl.measure.bench.scale.run_scale`, :func:`splatgl.measure.bench.lod_bench.run_lod`)."""
 
 from __future__ import annotations
 
 import argparse
 import math
 
-from ..bench.lod_bench import PATH_SETS
-from ..bench.scale import SH3_SIZES, SIZES, parse_sizes
+from ..measure.bench.lod_bench import PATH_SETS
+from ..measure.bench.scale import SH3_SIZES, SIZES, parse_sizes
 from ..errors import SplatglError
 from ._outputs import check_out_folder
 
@@ -42,10 +42,10 @@ _NOT_SCALE_LOD = ("sh3_sizes", "lod_thresholds", "lod_budgets", "lod_blend", "lo
 
 
 def run_scale_lod_command(args: argparse.Namespace) -> int:
-    """``splatgl bench --scale --lod``: :func:`splatgl.bench.scale_lod.run_scale_lod`."""
-    from ..bench.machine import describe, probe_machine
-    from ..bench.scale_lod import SIZES, ScaleLodOptions, run_scale_lod
-    from ..bench.scale_lod_report import table
+    """``splatgl bench --scale --lod``: :func:`splatgl.measure.bench.scale_lod.run_scale_lod`."""
+    from ..measure.bench.machine import describe, probe_machine
+    from ..measure.bench.scale_lod import SIZES, ScaleLodOptions, run_scale_lod
+    from ..measure.bench.scale_lod_report import table
     from ..lod.budget import parse_size
 
     given = ["--" + n.replace("_", "-") for n in _NOT_SCALE_LOD if getattr(args, n, None) is not None]
@@ -93,7 +93,7 @@ def _numbers(text: str, flag: str) -> list[float]:
 
 def run_lod_command(args: argparse.Namespace) -> int:
     """``splatgl bench --lod``."""
-    from ..bench.lod_bench import run_lod
+    from ..measure.bench.lod_bench import run_lod
 
     paths = args.lod_paths or "coarse"
     if paths not in PATH_SETS:
@@ -112,15 +112,15 @@ def run_lod_command(args: argparse.Namespace) -> int:
 
 def add_popping_arguments(p: argparse.ArgumentParser) -> None:
     """The --popping options of ``splatgl bench``."""
-    from ..bench.popping import CONFIGS
-    from ..evaluation.popping import METRICS
+    from ..measure.bench.popping_bench import CONFIGS
+    from ..measure.evaluation.popping import METRICS
 
     p.add_argument("--popping", action="store_true",
                    help="the popping benchmark instead: an orbit and a fly-through in small steps "
                         "of each scene (default: the shared real scenes), every pair of frames "
                         "warped and scored for popping, the global order against the per-pixel "
                         "order on the quad path, tile renderer and reference (default 640x360, 16 "
-                        "frames a path, --frames at least 2; see splatgl/bench/popping.py and "
+                        "frames a path, --frames at least 2; see splatgl/measure/bench/popping_bench.py and "
                         "docs/fidelity.md)")
     p.add_argument("--popping-configs", default=None, metavar="LIST",
                    help="--popping configurations, comma-separated: " + ", ".join(CONFIGS)
@@ -128,7 +128,7 @@ def add_popping_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--popping-metric", choices=METRICS, default=None,
                    help="--popping error metric: flip (NVIDIA FLIP, the 'fidelity' extra; the "
                         "default where installed) or own (the fallback: a neighbourhood-min colour "
-                        "difference, splatgl/evaluation/popping.py)")
+                        "difference, splatgl/measure/evaluation/popping.py)")
     p.add_argument("--popping-window", type=int, default=None, metavar="N",
                    help="--popping: the tile renderer's per-pixel window of the 'tile per-pixel' "
                         "configuration (1-32, default 32, as render --order-window)")
@@ -141,13 +141,13 @@ def run_popping_command(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..api import Renderer
-    from ..bench.machine import describe, machine_info
-    from ..bench.popping import CONFIGS, SCENES, PoppingOptions, measure_scene, table
-    from ..bench.real_scenes import shared_scenes_dir, shared_scenes_help
-    from ..evaluation.popping import default_metric
+    from ..measure.bench.machine import describe, machine_info
+    from ..measure.bench.popping_bench import CONFIGS, SCENES, PoppingOptions, measure_scene, table
+    from ..measure.bench.real_scenes import shared_scenes_dir, shared_scenes_help
+    from ..measure.evaluation.popping import default_metric
     from ..formats import load_scene
     from ..gl.context import renderer_name
-    from ..model.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW
+    from ..scene.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW
     from ..writing.atomic import atomic_write_text
 
     configs = tuple(c.strip() for c in (args.popping_configs or ",".join(CONFIGS)).split(",") if c.strip())
@@ -164,7 +164,7 @@ def run_popping_command(args: argparse.Namespace) -> int:
     options = PoppingOptions(args.width or 640, args.height or 360, args.frames or 16, window, configs,
                              args.popping_metric or default_metric())
     if options.metric == "flip":
-        from ..evaluation.popping import flip_available
+        from ..measure.evaluation.popping import flip_available
         if not flip_available():
             raise SplatglError("--popping-metric flip needs flip-evaluator (pip install "
                                "'splatgl[fidelity]'); without it the metric is 'own'")
@@ -198,9 +198,9 @@ def run_popping_command(args: argparse.Namespace) -> int:
 
 def run_scale_command(args: argparse.Namespace) -> int:
     """``splatgl bench --scale``."""
-    from ..bench.machine import describe, probe_machine
-    from ..bench.scale import ScaleOptions, run_scale
-    from ..bench.scale_report import plot, table, write_json
+    from ..measure.bench.machine import describe, probe_machine
+    from ..measure.bench.scale import ScaleOptions, run_scale
+    from ..measure.bench.scale_report import plot, table, write_json
 
     sizes = parse_sizes(args.sizes, SIZES, "--sizes")
     check_out_folder(args, ("scale.json", "scale.png"))   # before any measuring
@@ -233,7 +233,7 @@ def add_interactive_arguments(p: argparse.ArgumentParser) -> None:
                         "fly-in, rest) through the viewer's frame-time budget on each scene: "
                         "frames a second while moving, PSNR of the moving frames against the exact "
                         "render, time from rest to exact, input latency (see "
-                        "splatgl/bench/flight.py). Default scenes: the shared real files and a "
+                        "splatgl/measure/bench/flight.py). Default scenes: the shared real files and a "
                         "1M-splat scene built from them (--real-splats)")
     p.add_argument("--target-fps", type=float, default=None, metavar="F",
                    help="--interactive's frame-time budget (default: 10 on software OpenGL, 60 on "
@@ -258,9 +258,9 @@ def check_interactive_options(args: argparse.Namespace) -> float | None:
 def run_interactive_command(args: argparse.Namespace, scenes: list) -> int:
     """``splatgl bench --interactive`` over ``scenes`` (paths; the caller's defaults)."""
     from ..api import Renderer
-    from ..bench.flight import fly
-    from ..bench.flight_report import plot, table, write_json
-    from ..bench.machine import describe, probe_machine
+    from ..measure.bench.flight import fly
+    from ..measure.bench.flight_report import plot, table, write_json
+    from ..measure.bench.machine import describe, probe_machine
     from ..formats import load_scene
     from ..interactive.session import default_fps
 

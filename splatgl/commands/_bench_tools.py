@@ -13,11 +13,11 @@ from ..errors import SplatglError
 
 
 def gpu_probe_main(argv: list[str] | None = None) -> int:
-    """``python -m splatgl.commands._bench_tools gpu-probe``: :func:`splatgl.bench.gpu_probe.probe`, printed and
+    """``python -m splatgl.commands._bench_tools gpu-probe``: :func:`splatgl.measure.bench.gpu_probe.probe`, printed and
     written to ``--out``; exit 1 on a software renderer unless ``--allow-software``, 2 on an
     error (one line)."""
-    from ..bench import gpu_probe
-    from ..bench.machine import describe
+    from ..measure.bench import gpu_probe
+    from ..measure.bench.machine import describe
     from ..writing.atomic import atomic_write_text
 
     p = argparse.ArgumentParser(prog="python -m splatgl.commands._bench_tools gpu-probe", description=gpu_probe.__doc__,
@@ -51,7 +51,7 @@ def gpu_probe_main(argv: list[str] | None = None) -> int:
 
 def scale_report_main(argv: list[str] | None = None) -> int:
     """Merge scale.json files of separate runs (e.g. one per size) into one table and plot."""
-    from ..bench.scale_report import merge_reports, plot, table, write_json
+    from ..measure.bench.scale_report import merge_reports, plot, table, write_json
 
     p = argparse.ArgumentParser(prog="python -m splatgl.commands._bench_tools scale-report",
                                 description=scale_report_main.__doc__)

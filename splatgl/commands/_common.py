@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..cameras.camera import Camera
 from ..cameras import registry
-from ..cameras.files import load_camera
+from ..cameras.camera_files import load_camera
 from ..errors import SplatglError
 from ..formats import load_scene, scene_source
 from ..cameras.orthographic import Orthographic
@@ -17,14 +17,14 @@ from ..gl.device_class import AUTO, resolve_sort
 from ..gl.limits import MAX_IMAGE_SIDE
 from ..gl.transfers import TransferCounts
 from ..api import default_camera, default_settings
-from ..model.scene import Scene
+from ..scene.splats import Scene
 from ..constants import EARLY_STOP_MIN_OVERDRAW, EARLY_STOP_MIN_QUAD_FRAGMENTS
-from ..model.settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
+from ..scene.settings import (Convention, EarlyStop, GpuStorage, Precision, Preprocess, QuadExtent,
                               RendererKind, RenderSettings, SortKey)
 from ..renderers.registry import check_image_size, check_settings
 from ._fidelity_args import add_fidelity_arguments, fidelity_fields
 from ..renderers.stereo import StereoLayout
-from ..model.transform import parse_transform
+from ..scene.transform import parse_transform
 from ._spz_axes import add_spz_axes_argument
 from ._outputs import add_force_argument  # noqa: F401  (re-exported: one --force)
 from ..cameras.up import UP_CHOICES, resolve_up
@@ -221,7 +221,7 @@ def settings_from_args(args: argparse.Namespace) -> RenderSettings:
     return RenderSettings(background=args.background, precision=args.precision, extent=args.extent,
                           near=args.near, antialias=antialias_from_args(args),
                           sh_degree=args.sh_degree,
-                          model=model, sort_key=sort_from_args(args), gpu_storage=args.gpu_storage,
+                          transform=model, sort_key=sort_from_args(args), gpu_storage=args.gpu_storage,
                           convention=args.convention, **optional, **fidelity_fields(args))
 
 
@@ -315,7 +315,7 @@ def camera_from_args(args: argparse.Namespace, scene: Scene | None,
     up, _ = resolve_up(getattr(args, "up", None), args.scene)  # the demo has no training cameras
     return default_camera(scene, width, height, args.fov,
                           args.distance if args.distance is not None else 1.0,
-                          settings.model if settings is not None else None, up,
+                          settings.transform if settings is not None else None, up,
                           projection=projection)
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..model.emulation import parse_emulation
-from ..model.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW, Order
+from ..scene.emulation import parse_emulation
+from ..scene.settings import DEFAULT_ORDER_WINDOW, MAX_ORDER_WINDOW, Order
 
 EMULATE_HELP = ("follow another viewer's approximation in the NumPy reference (repeatable): "
                 "sort=exact|bucket16, extent=tiles|fixed|fixed-quad|square|opacity, "

@@ -54,7 +54,7 @@ def streamed_frames(args: argparse.Namespace, settings, memory: int):
     than the quad path, is one line."""
     from ..errors import SplatglError
     from ..lod.io import is_lod_file
-    from ..lod.render import LodSettings
+    from ..lod.selection import LodSettings
     from ..lod.stream_frames import StreamFrames
 
     renderer = getattr(args, "renderer", "quad")
@@ -72,9 +72,9 @@ def streamed_frames(args: argparse.Namespace, settings, memory: int):
 
 
 def run_stream_bench(args: argparse.Namespace, sharded: bool) -> int:
-    """``splatgl bench SCENE.lod.ply --memory SIZE``: :func:`splatgl.bench.stream_bench.run_stream`
+    """``splatgl bench SCENE.lod.ply --memory SIZE``: :func:`splatgl.measure.bench.stream_bench.run_stream`
     (its figures printed, or as JSON with --json)."""
-    from ..bench.stream_bench import describe, run_stream
+    from ..measure.bench.stream_bench import describe, run_stream
     from ..errors import SplatglError
     from ..lod.io import is_lod_file
     from ._json_output import emit_json, json_to_stdout

@@ -19,13 +19,13 @@ from ..imagefiles.layer_files import check_exact_ids
 from ..output.layers import BASE
 from ..imagefiles.frame_record import FrameRecord, options_digest, scene_digest
 from ._layers import check_under_options, layer_files, named_layers
-from ..imagefiles.frames import FrameTarget
+from ..imagefiles.frame_targets import FrameTarget
 from ..imagefiles.image_formats import FORMAT_NAMES
 from ..gl.context import renderer_name
 from ..paths import orbit
 from ..progress import default_progress
 from ..api import Renderer, gl_renderer_name
-from ..model.scene import Scene
+from ..scene.splats import Scene
 from ..cameras.up import resolve_up
 from ..cameras.orthographic import Orthographic
 from ..cameras.pinhole import Pinhole
@@ -35,9 +35,9 @@ from ..interactive.preview import PreviewRenderer
 from ..lod.frames import LodFrames
 from ..lod.io import is_lod_file, read_lod
 from ..lod.budget import format_size
-from ..lod.render import LodSettings
+from ..lod.selection import LodSettings
 from ..lod.stream_frames import StreamFrames
-from ..model.settings import RendererKind
+from ..scene.settings import RendererKind
 from ..renderers.registry import check
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ..renderers.stereo import StereoLayout, StereoRenderer
@@ -92,7 +92,7 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
 
 def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
     """The cut ``--lod-threshold/--lod-budget/--lod-blend`` ask for (None: no option given; the
-    others :class:`~splatgl.lod.render.LodSettings`' defaults), checked before any work: the
+    others :class:`~splatgl.lod.selection.LodSettings`' defaults), checked before any work: the
     quad renderer, a ``.lod.ply`` scene, valid values."""
     given = {name: value for name, value in (("threshold_px", args.lod_threshold),
                                              ("budget", args.lod_budget), ("band", args.lod_blend))
@@ -268,7 +268,7 @@ def run_path(args: argparse.Namespace) -> int:
     gl_name = "not known here (the frames were rendered by workers)"
     size = (cameras[0].width, cameras[0].height)
     if executor.sharded:
-        from ..tasks.render import render_sharded, stopped_video_note
+        from ..tasks.render_tasks import render_sharded, stopped_video_note
 
         try:
             result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 
 from ..gl.device_class import AUTO, choice_text, classify, expected, resolve_early_stop
-from ..model.settings import RendererKind, RenderSettings
+from ..scene.settings import RendererKind, RenderSettings
 from ..renderers import auto as renderer_auto
 
 __all__ = ["AUTO", "auto_lines", "choose_renderer"]

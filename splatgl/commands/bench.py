@@ -7,24 +7,24 @@ import shutil
 import textwrap
 from pathlib import Path
 
-from ..bench.early_stop_report import early_stop_table
-from ..bench.real_scenes import shared_scenes_dir, shared_scenes_help
-from ..bench.storage_report import storage_table
-from ..bench.report import plot, table, write_csv, write_json
-from ..bench.configs import configurations
-from ..bench.machine import describe, machine_info
-from ..bench.runner import BenchOptions, sort_benchmark
-from ..bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
+from ..measure.bench.early_stop_report import early_stop_table
+from ..measure.bench.real_scenes import shared_scenes_dir, shared_scenes_help
+from ..measure.bench.storage_report import storage_table
+from ..measure.bench.report import plot, table, write_csv, write_json
+from ..measure.bench.configs import configurations
+from ..measure.bench.machine import describe, machine_info
+from ..measure.bench.runner import BenchOptions, sort_benchmark
+from ..measure.bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
 from ..errors import SplatglError
 from ..tasks.executor import run_tasks, summary
 from ._executor import add_executor_arguments, executor_from_args
 from ..gl.context import renderer_name
 from ..renderers.registry import check_image_size
-from ..evaluation.metrics import check_ssim_size
+from ..measure.evaluation.metrics import check_ssim_size
 from ..writing.outputs import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
 from ..api import Renderer
-from ..model.settings import RenderSettings
+from ..scene.settings import RenderSettings
 from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_popping_arguments,
                            add_scale_lod_arguments, check_interactive_options,
                            check_scale_lod_options, run_interactive_command, run_lod_command,
@@ -100,16 +100,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the scale benchmark instead: scenes of --sizes splats built from the "
                         "shared real files (and one SH3 size), load time, peak memory, GPU bytes "
                         "per splat, cull/sort/pre-pass/draw and tile frame times, CPU and GPU "
-                        "sort, log-log slopes (see splatgl/bench/scale.py); with --lod: scenes "
+                        "sort, log-log slopes (see splatgl/measure/bench/scale.py); with --lod: scenes "
                         "larger than memory (default 1M,5M,20M,100M) written to a scratch folder, "
                         "their out-of-core level of detail, lazy open, streamed first frame, "
                         "flight and far-view PSNR, each step's time and peak memory "
-                        "(splatgl/bench/scale_lod.py)")
+                        "(splatgl/measure/bench/scale_lod.py)")
     p.add_argument("--lod", action="store_true",
                    help="the level-of-detail benchmark instead: scenes of --sizes splats (default "
                         "3M,6M) and their hierarchies, frame time, PSNR/SSIM against full detail "
                         "and popping between frames along camera paths, per cut (see "
-                        "splatgl/bench/lod_bench.py)")
+                        "splatgl/measure/bench/lod_bench.py)")
     p.add_argument("--sizes", default=None, metavar="LIST",
                    help="--scale sizes, e.g. 0.1M,0.3M,1M,3M,6M (the default); 'k' and 'M' suffixes; "
                         "--lod sizes (default 3M,6M)")
@@ -147,7 +147,7 @@ def _interactive_scenes(args: argparse.Namespace) -> list[Path]:
                            f"not at {shared} (set SPLATGL_SHARED_SCENES)")
     n = INTERACTIVE_REAL_SPLATS if args.real_splats is None else args.real_splats
     if n:
-        from ..bench.scale import scene_file
+        from ..measure.bench.scale import scene_file
 
         print(f"building (or reusing) the {n:,}-splat scene ...", flush=True)
         scenes.append(scene_file(n, 0))

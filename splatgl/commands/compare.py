@@ -16,11 +16,11 @@ from ..imagefiles.image_formats import image_format, suffix_list
 from ..imagefiles.images import write_image
 from ..progress import default_progress
 from ..errors import SplatglError
-from ..evaluation.explain import candidates, explain
-from ..evaluation.metrics import check_ssim_size, depth_errors, image_errors
-from ..evaluation.their_image import ALPHA_CONVENTIONS, match_to_reference, read_their_image
+from ..measure.evaluation.explain import candidates, explain
+from ..measure.evaluation.metrics import check_ssim_size, depth_errors, image_errors
+from ..measure.evaluation.their_image import ALPHA_CONVENTIONS, match_to_reference, read_their_image
 from ..api import Renderer
-from ..model.settings import Order, RendererKind
+from ..scene.settings import Order, RendererKind
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, inputs_from_args, positive_float, size_origin)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout

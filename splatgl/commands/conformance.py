@@ -1,4 +1,4 @@
-"""``splatgl conformance export|render|score``: the conformance kit (:mod:`splatgl.conformance`)."""
+"""``splatgl conformance export|render|score``: the conformance kit (:mod:`splatgl.measure.conformance`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..renderers.registry import names as renderer_names
-from ..model.settings import RendererKind
+from ..scene.settings import RendererKind
 from ..progress import default_progress
 from ._common import add_force_argument
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
@@ -66,10 +66,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from ..bench.real_scenes import shared_scenes_dir
-    from ..conformance.cases import all_cases, missing_real
-    from ..conformance.export import export_kit
-    from ..conformance.kit_folder import check_export_target
+    from ..measure.bench.real_scenes import shared_scenes_dir
+    from ..measure.conformance.cases import all_cases, missing_real
+    from ..measure.conformance.export import export_kit
+    from ..measure.conformance.kit_folder import check_export_target
     from ..formats import load_scene
     from ._common import demo_scene_path
 
@@ -87,7 +87,7 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from ..conformance.score import check_render_output, load_index, render_kit
+    from ..measure.conformance.score import check_render_output, load_index, render_kit
 
     suffix = "." + args.format
     check_render_output(args.dir, args.output, load_index(args.dir), suffix, args.force)
@@ -99,8 +99,8 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _score(args: argparse.Namespace) -> int:
-    from ..conformance.index import kit_files
-    from ..conformance.score import load_index, score_kit, table
+    from ..measure.conformance.index import kit_files
+    from ..measure.conformance.score import load_index, score_kit, table
     from ..writing.outputs import check_not_an_input
 
     index = load_index(args.dir)

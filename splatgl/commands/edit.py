@@ -11,7 +11,7 @@ from ..edit.attributes import help_table
 from ..edit.decimate import plural
 from ..edit.options import inverted, operation
 from ..errors import SplatglError
-from ..model.transform import parse_transform
+from ..scene.transform import parse_transform
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._memory import add_memory_argument, memory_budget
 from ._outputs import add_force_argument, check_output

@@ -13,13 +13,13 @@ from ..datasets.sources import select_indices
 from ..errors import SplatglError
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
-from ..evaluation.evaluate import RenderFiles, evaluate, worst_sheet
-from ..imagefiles.frames import FrameTarget
+from ..measure.evaluation.evaluate import RenderFiles, evaluate, worst_sheet
+from ..imagefiles.frame_targets import FrameTarget
 from ..imagefiles.image_formats import FORMAT_NAMES
 from ..imagefiles.images import check_image_suffix, write_image
 from ..progress import default_progress
 from ..api import Renderer
-from ..model.settings import RendererKind
+from ..scene.settings import RendererKind
 from ._common import (add_scene_arguments, add_settings_arguments, check_convention, demo_scene_path,
                       load_scene_arg, settings_from_args)
 from ._layers import add_layer_arguments, layer_files, named_layers
@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     keep = args.worst if args.sheet is not None else 0
     run = None
     if executor.sharded:   # the workers load the scene; this process only merges
-        from ..tasks.evaluate import evaluate_sharded
+        from ..measure.evaluation.evaluate_tasks import evaluate_sharded
 
         result, worst, run = evaluate_sharded(args.scene if args.scene is not None else demo_scene_path(),
                                               views, executor, settings, RendererKind(args.renderer),

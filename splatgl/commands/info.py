@@ -7,7 +7,7 @@ import warnings
 from pathlib import Path
 
 from ..formats import detect_format, load_scene
-from ..model.stats import format_info, scene_info
+from ..scene.stats import format_info, scene_info
 from ._spz_axes import add_spz_axes_argument
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._memory import add_memory_argument, memory_budget

@@ -10,7 +10,7 @@ from pathlib import Path
 from ..errors import SplatglError
 from ..formats import load_scene
 from ..progress import StderrProgress, enabled
-from ..model.scene import SplatKind
+from ..scene.splats import SplatKind
 from ._memory import add_memory_argument
 from ._outputs import add_force_argument, check_output
 

@@ -8,7 +8,7 @@ from pathlib import Path
 from ..datasets import load_cameras
 from ..datasets.gs_cameras import gs_cameras_json
 from ..datasets.nerfstudio_path import camera_path_json
-from ..datasets.views import View
+from ..datasets.named_camera import NamedCamera
 from ..errors import SplatglError
 from ..paths import ellipse, interpolate, orbit, path_json, spiral
 from ..paths.keyframes import write_path
@@ -107,6 +107,6 @@ def run(args: argparse.Namespace) -> int:
     elif args.fmt == "nerfstudio":
         write_path(args.output, camera_path_json(cams, args.fps))
     else:
-        write_path(args.output, gs_cameras_json([View(f"frame_{k:05d}", c) for k, c in enumerate(cams)]))
+        write_path(args.output, gs_cameras_json([NamedCamera(f"frame_{k:05d}", c) for k, c in enumerate(cams)]))
     print(f"wrote {args.output} ({len(cams)} frames, {args.generator}, {args.fmt})")
     return 0

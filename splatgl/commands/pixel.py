@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import SplatglError
-from ..model.settings import RendererKind
+from ..scene.settings import RendererKind
 from ..reference.pixel import check_pixel, pixel_splats
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       camera_from_args, check_convention, default_size, load_scene_arg, projection_from_args,

@@ -18,7 +18,7 @@ from ..lod.frames import LodFrames, render_lod
 from ..lod.budget import format_size
 from ..lod.io import read_lod
 from ..lod.stream_frames import StreamFrames, render_streamed
-from ..model.settings import RendererKind
+from ..scene.settings import RendererKind
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args,

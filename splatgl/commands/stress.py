@@ -6,8 +6,8 @@ import argparse
 import sys
 
 from ..errors import SplatglError
-from ..stress import CASES, case_by_name
-from ..stress.run import RENDERERS, default_renderers, format_report, results_json, run_cases
+from ..measure.stress import CASES, case_by_name
+from ..measure.stress.run import RENDERERS, default_renderers, format_report, results_json, run_cases
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._outputs import add_force_argument
 

@@ -6,11 +6,11 @@ import argparse
 import time
 from pathlib import Path
 
-from ..cameras.files import load_cameras
+from ..cameras.camera_files import load_cameras
 from ..cameras.up import resolve_up
 from ..errors import SplatglError
 from ..interactive.budget import check_fps
-from ..model.settings import RendererKind
+from ..scene.settings import RendererKind
 from ..renderers.registry import check, names
 from ..renderers import auto as renderer_auto
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
@@ -149,7 +149,7 @@ def _open_stream(args: argparse.Namespace, memory: int):
     """``view --memory``: the level of detail streamed under ``memory`` bytes."""
     from ..lod.budget import format_size
     from ..lod.io import is_lod_file
-    from ..lod.render import LodSettings
+    from ..lod.selection import LodSettings
     from ..lod.stream_view import StreamedScene
 
     if args.scene is None or not is_lod_file(args.scene):

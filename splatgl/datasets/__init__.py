@@ -5,6 +5,6 @@ Each format has one loader module; :mod:`.sources` detects the format by content
 """
 
 from .sources import load_cameras, load_source, load_views, select_indices
-from .views import View
+from .named_camera import NamedCamera
 
-__all__ = ["View", "load_cameras", "load_source", "load_views", "select_indices"]
+__all__ = ["NamedCamera", "load_cameras", "load_source", "load_views", "select_indices"]

@@ -22,9 +22,9 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..cameras.poses import check_rigid_pose
 from ..cameras.registry import COLMAP
-from ..model.quaternion import quat_to_rotmat, rotmat_to_quat
+from ..scene.quaternion import quat_to_rotmat, rotmat_to_quat
 from ..errors import CameraError
-from .views import View
+from .named_camera import NamedCamera
 
 #: COLMAP's camera model ids and their parameter counts (colmap/src/colmap/sensor/models.h).
 MODELS = {
@@ -189,7 +189,7 @@ def find_model(root: Path) -> Path | None:
     return None
 
 
-def load_colmap(model_dir: Path, images_dir: Path | None = None) -> list[View]:
+def load_colmap(model_dir: Path, images_dir: Path | None = None) -> list[NamedCamera]:
     """The views of a COLMAP model, sorted by image name (the trainers' order).
 
     ``images_dir``, when given, is where the photographs are looked up by name.
@@ -221,13 +221,13 @@ def load_colmap(model_dir: Path, images_dir: Path | None = None) -> list[View]:
         except CameraError as exc:
             raise CameraError(f"{cam_path}: camera {cam_id}: {exc}") from None
         image = images_dir / name if images_dir is not None and (images_dir / name).is_file() else None
-        views.append(View(name, camera, image))
+        views.append(NamedCamera(name, camera, image))
     return views
 
 
 # ------------------------------------------------------------------------------ writers (tests,
 # and `splatgl path` users who want a model other tools read)
-def write_colmap(model_dir: Path, views: list[View], binary: bool = True) -> None:
+def write_colmap(model_dir: Path, views: list[NamedCamera], binary: bool = True) -> None:
     """Write ``views`` as a COLMAP model (one camera per view, in its model's COLMAP form:
     :meth:`~splatgl.cameras.model.CameraModel.to_colmap`; no 2D points).  A camera COLMAP has
     no model for raises CameraError before anything is written."""

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from ..errors import CameraError
 from . import colmap, nerf
-from .views import View
+from .named_camera import NamedCamera
 
 #: Every ``TEST_EVERY``-th view (from index 0) is a test view (3DGS's ``llffhold``).
 TEST_EVERY = 8
@@ -37,7 +37,7 @@ class Split(enum.Enum):
     TEST = "test"
 
 
-def split_views(views: list[View], split: Split) -> list[View]:
+def split_views(views: list[NamedCamera], split: Split) -> list[NamedCamera]:
     split = Split(split)
     if split is Split.ALL:
         return list(views)
@@ -45,7 +45,7 @@ def split_views(views: list[View], split: Split) -> list[View]:
     return [v for i, v in enumerate(views) if (i % TEST_EVERY == 0) == test]
 
 
-def _with_photo_size(view: View, max_width: int) -> View:
+def _with_photo_size(view: NamedCamera, max_width: int) -> NamedCamera:
     """``view`` with its camera at its photograph's size; a photograph of another aspect (by
     more than a pixel's rounding) would stretch the render, so it is refused."""
     if view.image is None:
@@ -61,10 +61,10 @@ def _with_photo_size(view: View, max_width: int) -> View:
     cam = view.camera
     if (w, h) != (cam.width, cam.height):
         cam = cam.resized(w, h)
-    return View(view.name, cam, view.image)
+    return NamedCamera(view.name, cam, view.image)
 
 
-def _nerf_views(root: Path, images: str | None, split: Split) -> tuple[list[View], bool]:
+def _nerf_views(root: Path, images: str | None, split: Split) -> tuple[list[NamedCamera], bool]:
     """(views, already split) of a transforms.json dataset."""
     per_split = root / f"transforms_{split.value}.json"
     if split is not Split.ALL and per_split.is_file():
@@ -82,7 +82,7 @@ def _nerf_views(root: Path, images: str | None, split: Split) -> tuple[list[View
     return _redirect(nerf.load_transforms(path), root, images), done
 
 
-def _redirect(views: list[View], root: Path, images: str | None) -> list[View]:
+def _redirect(views: list[NamedCamera], root: Path, images: str | None) -> list[NamedCamera]:
     if not images or images == "images":
         return views
     out = []
@@ -90,12 +90,12 @@ def _redirect(views: list[View], root: Path, images: str | None) -> list[View]:
         name = v.name[2:] if v.name.startswith("./") else v.name
         if not name.startswith("images/"):
             raise CameraError(f"{root}: frame {v.name!r} is not under images/, so --images {images} cannot apply")
-        out.append(View(v.name, v.camera, nerf.find_image(root, images + name[len("images"):])))
+        out.append(NamedCamera(v.name, v.camera, nerf.find_image(root, images + name[len("images"):])))
     return out
 
 
 def load_dataset(root: str | Path, images: str | None = None, split: Split | str = Split.ALL,
-                 max_width: int = MAX_WIDTH) -> list[View]:
+                 max_width: int = MAX_WIDTH) -> list[NamedCamera]:
     """The views of the evaluation dataset in ``root`` with their photographs (see the module
     docstring); every view has an existing ``image``, else :class:`CameraError` names it."""
     root = Path(root)

@@ -10,23 +10,23 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..cameras.files import camera_from_3dgs
+from ..cameras.camera_files import camera_from_3dgs
 from ..errors import CameraError
-from .views import View
+from .named_camera import NamedCamera
 
 
-def load_gs_cameras(path: Path, obj: list) -> list[View]:
+def load_gs_cameras(path: Path, obj: list) -> list[NamedCamera]:
     if not obj:
         raise CameraError(f"{path}: the camera list is empty")
     views = []
     for i, entry in enumerate(obj):
         camera = camera_from_3dgs(entry, path, i)
         name = entry.get("img_name", f"camera_{i:05d}") if isinstance(entry, dict) else f"camera_{i:05d}"
-        views.append(View(str(name), camera))
+        views.append(NamedCamera(str(name), camera))
     return views
 
 
-def gs_cameras_json(views: list[View]) -> list[dict]:
+def gs_cameras_json(views: list[NamedCamera]) -> list[dict]:
     """The ``cameras.json`` list of ``views`` (their principal points must be centred)."""
     out = []
     for i, v in enumerate(views):

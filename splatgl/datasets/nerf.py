@@ -26,7 +26,7 @@ from ..cameras.poses import check_rigid_pose
 from ..cameras.registry import TRANSFORMS
 from ..errors import CameraError
 from ..cameras.json_fields import entries, matrix, number, read_json
-from .views import View
+from .named_camera import NamedCamera
 
 #: OpenGL camera axes -> OpenCV camera axes (flip y and z), applied on the right of c2w.
 GL_TO_CV = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -102,7 +102,7 @@ def _intrinsics(path: Path, where: str, frame: dict, top: dict, image: Path | No
     return w, h, fx, fy, (w / 2.0 if cx is None else cx), (h / 2.0 if cy is None else cy), model
 
 
-def load_transforms(path: Path, obj: dict | None = None) -> list[View]:
+def load_transforms(path: Path, obj: dict | None = None) -> list[NamedCamera]:
     """The views of a ``transforms.json`` in file order; photographs looked up beside it."""
     path = Path(path)
     obj = read_json(path) if obj is None else obj
@@ -124,15 +124,15 @@ def load_transforms(path: Path, obj: dict | None = None) -> list[View]:
             camera = Camera(int(round(w)), int(round(h)), fx, fy, cx, cy, w2c, model)
         except CameraError as exc:
             raise CameraError(f"{path}: {where}{exc}") from None
-        views.append(View(name, camera, image))
+        views.append(NamedCamera(name, camera, image))
     return views
 
 
-def transforms_json(views: list[View]) -> dict:
+def transforms_json(views: list[NamedCamera]) -> dict:
     """The ``transforms.json`` object of ``views`` (per-frame fl_x/fl_y/cx/cy/w/h, and the
     camera model's own fields where it is not the file's plain ``OPENCV``:
     :meth:`~splatgl.cameras.model.CameraModel.to_transforms`, which raises CameraError for a
-    model transforms.json cannot hold)."""
+    scene transforms.json cannot hold)."""
     frames = []
     for v in views:
         c = v.camera

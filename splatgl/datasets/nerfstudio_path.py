@@ -19,7 +19,7 @@ from ..cameras.poses import check_rigid_pose
 from ..errors import CameraError
 from ..cameras.json_fields import entries, matrix, number
 from .nerf import GL_TO_CV
-from .views import View
+from .named_camera import NamedCamera
 
 
 def is_camera_path(obj: object) -> bool:
@@ -31,7 +31,7 @@ def frame_rate(obj: dict) -> float | None:
     return float(fps) if isinstance(fps, (int, float)) and not isinstance(fps, bool) and fps > 0 else None
 
 
-def load_camera_path(path: Path, obj: dict) -> list[View]:
+def load_camera_path(path: Path, obj: dict) -> list[NamedCamera]:
     path = Path(path)
     kind = obj.get("camera_type", "perspective")
     if kind != "perspective":
@@ -53,7 +53,7 @@ def load_camera_path(path: Path, obj: dict) -> list[View]:
             camera = Camera.from_fov(int(w), int(h), fov, np.linalg.inv(c2w @ GL_TO_CV))
         except CameraError as exc:
             raise CameraError(f"{path}: {where}{exc}") from None
-        views.append(View(f"frame_{i:05d}", camera))
+        views.append(NamedCamera(f"frame_{i:05d}", camera))
     return views
 
 

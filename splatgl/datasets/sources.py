@@ -16,16 +16,16 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..cameras.camera import Camera
-from ..cameras.files import camera_from_json
+from ..cameras.camera_files import camera_from_json
 from ..errors import CameraError
 from . import colmap, gs_cameras, nerf, nerfstudio_path
 from ..cameras.json_fields import read_json
-from .views import View
+from .named_camera import NamedCamera
 
 _JSON_NAMES = ("transforms.json", "cameras.json", "camera_path.json")
 
 
-def _from_json(path: Path) -> tuple[list[View], float | None]:
+def _from_json(path: Path) -> tuple[list[NamedCamera], float | None]:
     from ..paths.keyframes import is_path_file, parse_path
 
     obj = read_json(path)
@@ -38,15 +38,15 @@ def _from_json(path: Path) -> tuple[list[View], float | None]:
     if is_path_file(obj):
         parsed = parse_path(path, obj)
         fps = parsed.fps if parsed.fps is not None else nerfstudio_path.frame_rate(obj)
-        return [View(f"frame_{i:05d}", c) for i, c in enumerate(parsed.cameras())], fps
+        return [NamedCamera(f"frame_{i:05d}", c) for i, c in enumerate(parsed.cameras())], fps
     if isinstance(obj, dict) and ("world_to_camera" in obj or "frustum" in obj):
-        return [View(path.stem, camera_from_json(obj, path))], None
+        return [NamedCamera(path.stem, camera_from_json(obj, path))], None
     raise CameraError(f"{path}: not a camera source splatgl knows (expected a 3DGS cameras.json list, "
                       "a transforms.json with 'frames', a nerfstudio camera_path.json, a splatgl "
                       "path file with 'splatgl_path', or a single camera with 'world_to_camera')")
 
 
-def load_source(path: str | Path) -> tuple[list[View], float | None]:
+def load_source(path: str | Path) -> tuple[list[NamedCamera], float | None]:
     """(views, frame rate or None) of any camera source; see the module docstring."""
     path = Path(path)
     if not path.exists():
@@ -72,7 +72,7 @@ def load_source(path: str | Path) -> tuple[list[View], float | None]:
     return _from_json(path)
 
 
-def load_views(path: str | Path, select: str | None = None) -> list[View]:
+def load_views(path: str | Path, select: str | None = None) -> list[NamedCamera]:
     """The views of any camera source, optionally narrowed by :func:`select_indices`."""
     views, _ = load_source(path)
     if select:

@@ -6,13 +6,13 @@ merge scenes (``splatgl edit``), and the statistics that show what a filter woul
 >>> small = edit_scene(scene, CropBox((-1, -1, -1), (1, 1, 1)), Filter("opacity >= 0.02"),
 ...                    RemoveFloaters(), Decimate(percent=25))
 
-Layer: above the formats, the model and the LOD merge it reuses; below the commands.
+Layer: above the formats, the scene and the LOD merge it reuses; below the commands.
 """
 
 from __future__ import annotations
 
 from ..errors import SplatglError
-from ..model.scene import Scene
+from ..scene.splats import Scene
 from .decimate import Decimate
 from .expression import Expression, parse_expression
 from .files import EditReport, edit_files

@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from ..constants import SH_C0, sh_coeff_count
-from ..model.scene import Scene, activate_opacities
+from ..scene.splats import Scene, activate_opacities
 
 
 @dataclass(frozen=True)
@@ -108,7 +108,7 @@ ATTRIBUTES: dict[str, Attribute] = _attributes()
 
 def names_for(scene: Scene) -> list[str]:
     """The attribute names that exist for ``scene``'s kind."""
-    from ..model.scene import SplatKind
+    from ..scene.splats import SplatKind
 
     surfel = scene.kind is SplatKind.SURFEL_2D
     return [name for name, a in ATTRIBUTES.items() if a.surfels or not surfel]

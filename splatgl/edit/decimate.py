@@ -5,7 +5,7 @@ The merge is the level-of-detail hierarchy's moment matching
 spread of the means, SH and opacity from the children), applied to pairs of neighbours in
 rounds instead of to fixed groups:
 
-1. put the splats in Morton order (:func:`~splatgl.model.spatial.morton_order_clamped_box`)
+1. put the splats in Morton order (:func:`~splatgl.scene.spatial.morton_order_clamped_box`)
    and pair consecutive ones (rows 0-1, 2-3, ... in even rounds, 1-2, 3-4, ... in odd ones,
    so pair boundaries move);
 2. price each pair: ``w_a w_b / (w_a + w_b) * (|mu_a - mu_b|^2 / (s_a^2 + s_b^2) +
@@ -32,8 +32,8 @@ import numpy as np
 from ..constants import SH_C0
 from ..errors import SplatglError
 from ..lod.build import area_proxy, merge_groups
-from ..model.scene import Scene, SplatKind, activate_opacities, activate_rotations
-from ..model.spatial import morton_order_clamped_box
+from ..scene.splats import Scene, SplatKind, activate_opacities, activate_rotations
+from ..scene.spatial import morton_order_clamped_box
 from ..splatmath.project import covariance_3d, quat_to_rotmat
 
 #: Pairs per block of the cost and merge computations (float64 temporaries of one block).

@@ -17,8 +17,8 @@ from ..lod.budget import format_size
 from ..formats import detect_format, load_scene, save_scene, writer_for
 from ..formats.convert import (EMPTY_FORMATS, EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT,
                                dropped_note, extra_properties)
-from ..model.scene import InvalidRowsDropped
-from ..model.transform import ModelTransform
+from ..scene.splats import InvalidRowsDropped
+from ..scene.transform import SceneTransform
 from ..writing.outputs import check_output_path
 from ..progress import default_progress
 from .pipeline import Step, apply_operations
@@ -63,8 +63,8 @@ def _check_transforms(inputs, transforms):
         raise SplatglError(f"--transform given {len(transforms)} time(s) for {len(inputs)} "
                            "input(s): give one per input, in input order ('{}' for none)")
     for t in transforms:
-        if t is not None and not isinstance(t, ModelTransform):
-            raise SplatglError(f"--transform: expected a ModelTransform, got {t!r}")
+        if t is not None and not isinstance(t, SceneTransform):
+            raise SplatglError(f"--transform: expected a SceneTransform, got {t!r}")
     return transforms
 
 
@@ -78,7 +78,7 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
             (:func:`splatgl.edit.merge_scenes`'s SH rule), each placed by its transform.
         output: the file to write (format from its extension); None only with ``dry_run``.
         operations: edit operations (:mod:`splatgl.edit`), applied in order to the merged scene.
-        transforms: one :class:`ModelTransform` (or None) per input.
+        transforms: one :class:`SceneTransform` (or None) per input.
         drop_invalid: drop rows with NaN/Inf or zero quaternions while reading (counted as the
             first step), instead of refusing such files.
         allow_empty: write a scene of zero splats instead of refusing it.

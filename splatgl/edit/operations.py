@@ -27,8 +27,8 @@ import numpy as np
 
 from ..constants import MAX_SH_DEGREE
 from ..errors import SplatglError
-from ..model.scene import MIN_QUAT_NORM, Scene, SplatKind
-from ..model.transform import ModelTransform
+from ..scene.splats import MIN_QUAT_NORM, Scene, SplatKind
+from ..scene.transform import SceneTransform
 from .attributes import ATTRIBUTES, Rows
 from .expression import Expression, parse_expression
 
@@ -58,7 +58,7 @@ class CropBox:
 
     lo: tuple
     hi: tuple
-    transform: ModelTransform | None = None
+    transform: SceneTransform | None = None
     invert: bool = False
     name = "crop-box"
 

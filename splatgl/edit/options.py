@@ -4,8 +4,8 @@ CLI and a Python caller holding the same strings get the same operations and the
 from __future__ import annotations
 
 from ..errors import SplatglError
-from ..model.json_text import loads_strict
-from ..model.transform import transform_from_object
+from ..scene.json_text import loads_strict
+from ..scene.transform import transform_from_object
 from .decimate import Decimate
 from .floaters import RemoveFloaters
 from .operations import CropBox, CropSphere, DropInvalid, Filter, ShDegree

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..constants import sh_coeff_count
 from ..errors import SplatglError
-from ..model.scene import Scene, activate_opacities
+from ..scene.splats import Scene, activate_opacities
 from .attributes import Rows
 from .decimate import Decimate
 from .floaters import RemoveFloaters

@@ -1,4 +1,4 @@
-"""Moving a scene's splats into the world (baking a :class:`ModelTransform`) and merging scenes.
+"""Moving a scene's splats into the world (baking a :class:`SceneTransform`) and merging scenes.
 
 Baking ``p_w = s R p + t`` into the stored values (what rendering with ``--transform`` shows,
 DESIGN.md section 1, now held in the file): means ``s R p + t``, quaternions ``q_R q`` (their
@@ -24,9 +24,9 @@ import numpy as np
 
 from ..constants import sh_coeff_count
 from ..errors import SplatglError
-from ..model.quaternion import quat_multiply, rotmat_to_quat
-from ..model.scene import Scene
-from ..model.transform import ModelTransform
+from ..scene.quaternion import quat_multiply, rotmat_to_quat
+from ..scene.splats import Scene
+from ..scene.transform import SceneTransform
 from ..splatmath.project import sh_basis
 
 #: Rows per block while baking (float64 temporaries of one block at a time).
@@ -61,7 +61,7 @@ def sh_rotation(rotation: np.ndarray, degree: int) -> np.ndarray:
     return out
 
 
-def transform_scene(scene: Scene, transform: ModelTransform | None,
+def transform_scene(scene: Scene, transform: SceneTransform | None,
                     what: str = "transform") -> Scene:
     """``scene`` with ``transform`` baked into its stored values (see the module notes); the
     same scene when the transform is None or the identity.  A transform that moves a splat
@@ -113,7 +113,7 @@ def shared_extras(scenes) -> np.dtype | None:
     return np.dtype(names) if names else None
 
 
-def describe_transform(transform: ModelTransform) -> str:
+def describe_transform(transform: SceneTransform) -> str:
     """``rotate 90 deg, scale 2, translate 1,0,0`` (the parts that are not the identity)."""
     rot = np.asarray(transform.rotation)
     angle = float(np.degrees(np.arccos(np.clip((np.trace(rot) - 1.0) / 2.0, -1.0, 1.0))))
@@ -151,7 +151,7 @@ def merged_sh_degree(degrees, sh_degree: int | None = None) -> int:
 
 def merge_scenes(scenes, transforms=None, sh_degree: int | None = None) -> Scene:
     """One scene holding every row of ``scenes`` in order, each placed by its transform
-    (``transforms``: one :class:`ModelTransform` or None per scene), SH degree by the rule in the
+    (``transforms``: one :class:`SceneTransform` or None per scene), SH degree by the rule in the
     module notes.  A single scene without a transform is returned as it is."""
     scenes = list(scenes)
     transforms = list(transforms) if transforms is not None else [None] * len(scenes)

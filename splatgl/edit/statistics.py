@@ -15,8 +15,8 @@ import numpy as np
 
 from ..cameras.framing import default_camera
 from ..errors import CameraError
-from ..model.scene import Scene, SplatKind, activate_opacities, activate_rotations
-from ..model.settings import RenderSettings, resolve_near
+from ..scene.splats import Scene, SplatKind, activate_opacities, activate_rotations
+from ..scene.settings import RenderSettings, resolve_near
 from ..splatmath.early_stop import coverage
 from ..splatmath.project import (covariance_2d, covariance_3d, ellipse_axes, project_means,
                                  quat_to_rotmat, to_camera)

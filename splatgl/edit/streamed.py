@@ -29,7 +29,7 @@ from ..formats._memory import ACTIVATE_BYTES, scene_bytes
 from ..formats.ply_write import _header, _ordered, scene_to_vertices
 from ..lod.budget import MIN_WORKING, RESERVE, default_budget, format_size, resident_now
 from ..lod.ply_rows import PlyRows, streamable
-from ..model.scene import MIN_QUAT_NORM, InvalidRowsDropped, Scene, SplatKind, activate
+from ..scene.splats import MIN_QUAT_NORM, InvalidRowsDropped, Scene, SplatKind, activate
 from ..writing.atomic import atomic_target, size_problem
 from .attributes import Rows
 from .operations import DropInvalid

@@ -21,7 +21,7 @@ import numpy as np
 from ..constants import ALPHA_MIN
 from ..formats import scene_source
 from ..lod.ply_rows import BoxFinder, float_keys, key_floats
-from ..model.settings import RenderSettings, resolve_near
+from ..scene.settings import RenderSettings, resolve_near
 from .attributes import ATTRIBUTES, Rows, names_for
 from .statistics import PERCENTILES, overdraw, _fragments
 from .streamed import IN_MEMORY_COPIES, block_rows, memory_bound, sources_of

@@ -23,7 +23,7 @@ from types import ModuleType
 
 from ..errors import SceneFormatError
 from ..progress import default_progress
-from ..model.scene import Scene, SceneSource
+from ..scene.splats import Scene, SceneSource
 from ._messages import reader_guard
 
 #: Format modules in detection order (most specific signature first).
@@ -78,7 +78,7 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
     file of zero splats (what ``splatgl edit --allow-empty`` writes) loads as an empty scene,
     for callers that take one (``info``, ``convert``, ``edit``); otherwise it is refused.
 
-    The scene's :attr:`~splatgl.model.scene.Scene.source` names the file and its tags
+    The scene's :attr:`~splatgl.scene.splats.Scene.source` names the file and its tags
     (:func:`scene_source`), which give the scene's default camera up and settings.
     """
     path = Path(path)

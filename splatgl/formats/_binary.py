@@ -16,7 +16,7 @@ import numpy as np
 
 from ..constants import MAX_LOGIT, MIN_SCALE  # noqa: F401 (re-exported to the loaders)
 from ..errors import SceneFormatError
-from ..model.json_text import unique_keys
+from ..scene.json_text import unique_keys
 from ._memory import require
 
 
@@ -103,7 +103,7 @@ def unorm(value: np.ndarray, shift: int, bits: int) -> np.ndarray:
 def log_of(values: np.ndarray) -> np.ndarray:
     """float32 natural log of linear scales; exact zeros are floored to MIN_SCALE.
 
-    Negative scales give NaN, which :func:`~splatgl.model.scene.activate` rejects (or drops).
+    Negative scales give NaN, which :func:`~splatgl.scene.splats.activate` rejects (or drops).
     """
     v = np.asarray(values, np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):

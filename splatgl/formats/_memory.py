@@ -16,7 +16,7 @@ from ..errors import SceneFormatError
 
 #: float32 values per splat in a Scene besides the SH: means 3, quats 4, log-scales 3, opacity 1.
 SCENE_FLOATS = 11
-#: Bytes per splat of :func:`splatgl.model.scene.activate`'s temporaries (float64 quaternions).
+#: Bytes per splat of :func:`splatgl.scene.splats.activate`'s temporaries (float64 quaternions).
 ACTIVATE_BYTES = 32
 #: Environment variable overriding the available-memory figure (bytes), for tests and for
 #: users who know better than /proc/meminfo (e.g. to allow swap).

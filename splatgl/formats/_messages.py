@@ -6,7 +6,7 @@ runs, megabytes without a newline.  Error lines quote such content only through 
 which escapes whatever is left in the final message, caps its length and keeps NumPy's
 floating-point warnings (``invalid value encountered in cast`` ...) from printing on their own:
 bad values are reported by the checks that name file and field
-(:func:`splatgl.model.scene.activate`), never by a stray warning line.
+(:func:`splatgl.scene.splats.activate`), never by a stray warning line.
 """
 
 from __future__ import annotations
@@ -67,7 +67,7 @@ def reader_guard(read):
     """Decorate a format's ``read``: NumPy float warnings silenced, error message cleaned.
 
     Inside, ``np.errstate(all="ignore")``: overflow or NaN from damaged values flows into the
-    arrays, where :func:`splatgl.model.scene.activate` reports it by field and row.  A
+    arrays, where :func:`splatgl.scene.splats.activate` reports it by field and row.  A
     :class:`SceneFormatError` leaving ``read`` has its message passed through
     :func:`clean_message` (its ``path`` and ``field`` attributes are kept).
     """

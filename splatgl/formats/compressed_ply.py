@@ -34,7 +34,7 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SceneFormatError
-from ..model.scene import Scene, SplatKind, activate, rest_to_sh, sh_degree_from_rest_count
+from ..scene.splats import Scene, SplatKind, activate, rest_to_sh, sh_degree_from_rest_count
 from . import _binary
 from ._memory import check_memory
 from ._messages import quote, reader_guard

@@ -22,8 +22,8 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SceneFormatError
-from ..model.scene import Scene, SplatKind, sh_to_rest
-from ..model.spatial import morton_order_full_box
+from ..scene.splats import Scene, SplatKind, sh_to_rest
+from ..scene.spatial import morton_order_full_box
 from . import quantise as qz
 from .compressed_ply import CHUNK_SIZE
 from .ply_write import write_elements

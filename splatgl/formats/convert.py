@@ -20,7 +20,7 @@ from ..errors import SplatglError
 from ..writing.outputs import check_output_path
 from . import detect_format, load_scene, save_scene, writer_for
 from .spz_axes import Axes, check_choice as check_spz_axes
-from ..model.scene import Scene
+from ..scene.splats import Scene
 
 #: Highest SH degree each writable format stores (formats not listed store degree 3).
 MAX_SH_DEGREE_OF_FORMAT = {"splat": 0}

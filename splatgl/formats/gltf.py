@@ -17,7 +17,7 @@ The SH basis order per degree (m = -l..l) is the 3DGS ``f_rest`` order, so coeff
 one.  Accessors may be float or (normalised) integer where the extension allows it.
 
 Axes: glTF is right-handed +Y up (Niantic's spec calls it LUF: left, up, front); 3DGS PLY (and
-:class:`~splatgl.model.scene.Scene`) is RDF (right, down, front).  RDF -> LUF is a 180-degree turn about
+:class:`~splatgl.scene.splats.Scene`) is RDF (right, down, front).  RDF -> LUF is a 180-degree turn about
 z: ``(x, y, z) -> (-x, -y, z)``, the rotation composed with that turn (``q -> (0, 0, 0, 1) q``:
 ``(w, x, y, z) -> (-z, -y, x, w)``) and the SH coefficients odd in ``(x, y)`` negated
 (:data:`Z180_SH_SIGNS`).  splat-transform and the PlayCanvas engine use the same turn between
@@ -43,9 +43,9 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SceneFormatError
-from ..model.json_text import unique_keys
-from ..model.quaternion import quat_multiply, quat_to_rotmat, rotmat_to_quat
-from ..model.scene import Scene, SplatKind, activate
+from ..scene.json_text import unique_keys
+from ..scene.quaternion import quat_multiply, quat_to_rotmat, rotmat_to_quat
+from ..scene.splats import Scene, SplatKind, activate
 from . import _binary, spz
 
 NAME = "gltf"

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneFormatError
-from ..model.scene import Scene, SplatKind
+from ..scene.splats import Scene, SplatKind
 from . import quantise as qz
 from .gltf import CHUNK_BIN, CHUNK_JSON, EXT, GLB_MAGIC, PREFIX, turn
 from .gltf import EXTENSIONS, NAME  # noqa: F401 (the format registry reads them here too)

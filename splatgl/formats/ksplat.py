@@ -41,7 +41,7 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SceneFormatError
-from ..model.scene import Scene, SplatKind, activate
+from ..scene.splats import Scene, SplatKind, activate
 from . import _binary
 from ._memory import check_memory
 from ._messages import reader_guard

@@ -39,8 +39,8 @@ import numpy as np
 
 from ..constants import SH_C0
 from ..errors import SceneFormatError
-from ..model.quaternion import quat_multiply, rotmat_to_quat
-from ..model.scene import Scene, activate
+from ..scene.quaternion import quat_multiply, rotmat_to_quat
+from ..scene.splats import Scene, activate
 from ..splatmath.project import sh_basis
 from . import _binary
 from .streamed_sog import Chunk, concatenate

@@ -6,9 +6,9 @@ The vertex element holds one splat per row with (at least) the properties
     x y z  f_dc_0..2  opacity  scale_0..2 (scale_0..1 for 2DGS surfels)  rot_0..3 (w, x, y, z)
 
 plus optional ``f_rest_*`` (0, 9, 24 or 45 of them, channel-major) and anything else (``nx ny
-nz``, a ``label``): kept as the scene's :attr:`~splatgl.model.scene.Scene.extras`, in their
+nz``, a ``label``): kept as the scene's :attr:`~splatgl.scene.splats.Scene.extras`, in their
 stored types, which the writer writes again.  Values are the raw training values (log-scales, opacity logits,
-unnormalised quaternions); :func:`splatgl.model.scene.activate` validates them.
+unnormalised quaternions); :func:`splatgl.scene.splats.activate` validates them.
 
 Other elements may precede or follow the vertex element.  In binary files they are skipped by
 size, so they must hold fixed-size scalar properties only; an element with a list property
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.scene import Scene, SplatKind, activate, sh_degree_from_rest_count
+from ..scene.splats import Scene, SplatKind, activate, sh_degree_from_rest_count
 from ._memory import check_memory
 from ._messages import quote, reader_guard
 from .ply_header import SCALAR_TYPES, Element, Header, _error, parse_header

@@ -5,7 +5,7 @@ properties (the compressed PLY and the level-of-detail file use it too).
 The vertex layout is :func:`scene_to_vertices`: ``x y z [nx ny nz] f_dc_0..2 f_rest_*
 (channel-major) opacity scale_* rot_0..3``, the raw training values (log-scales, opacity
 logits, quaternions as stored), then the scene's other per-splat properties
-(:attr:`~splatgl.model.scene.Scene.extras`, read from a PLY) in their stored types; its normals
+(:attr:`~splatgl.scene.splats.Scene.extras`, read from a PLY) in their stored types; its normals
 take the place of the zeros.
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.scene import Scene, sh_to_rest
+from ..scene.splats import Scene, sh_to_rest
 from .ply import EXTENSIONS, NAME  # noqa: F401 (the format registry reads them here too)
 from .ply_header import SCALAR_TYPES
 

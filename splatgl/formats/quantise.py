@@ -25,7 +25,7 @@ from ..constants import SH_C0
 from ..errors import SceneFormatError
 # smallest-three quaternions are shared with the GPU layout (gl/storage): defined with the
 # quaternions, re-exported here for the writers (qz.smallest_three)
-from ..model.quaternion import half_step_rotation_deg, smallest_three  # noqa: F401
+from ..scene.quaternion import half_step_rotation_deg, smallest_three  # noqa: F401
 
 #: Relative allowance for float32 rounding of decoded values (a few ulps of 2^-24).
 F32_SLACK = 4.0 * 2.0 ** -24

@@ -32,8 +32,8 @@ import numpy as np
 
 from ..constants import sh_coeff_count
 from ..errors import SceneFormatError
-from ..model.json_text import unique_keys
-from ..model.scene import Scene, SplatKind, activate
+from ..scene.json_text import unique_keys
+from ..scene.splats import Scene, SplatKind, activate
 from . import _binary, webp
 from . import quantise as qz
 

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from ..constants import SH_C0
-from ..model.spatial import morton_order_full_box
+from ..scene.spatial import morton_order_full_box
 from ..errors import SceneFormatError
-from ..model.scene import Scene, SplatKind
+from ..scene.splats import Scene, SplatKind
 from . import kmeans, sog_folder, webp
 from . import quantise as qz
 from .sog import EXTENSIONS, NAME  # noqa: F401 (the format registry reads them here too)

@@ -45,7 +45,7 @@ import numpy as np
 import zstandard
 
 from ..errors import SceneFormatError
-from ..model.scene import Scene, SplatKind, activate
+from ..scene.splats import Scene, SplatKind, activate
 from . import _binary, spz_attributes, spz_axes
 from ._memory import check_memory
 from ._messages import quote, reader_guard

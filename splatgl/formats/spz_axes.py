@@ -1,6 +1,6 @@
 """Which axes an SPZ file stores, how splatgl tells, and the conversion to the scene's RDF.
 
-splatgl's :class:`~splatgl.model.scene.Scene` uses 3DGS PLY axes, RDF (x right, y down, z forward).
+splatgl's :class:`~splatgl.scene.splats.Scene` uses 3DGS PLY axes, RDF (x right, y down, z forward).
 The SPZ specification (nianticlabs/spz README, "Coordinate System", since April 2025) says an
 SPZ file stores RUB (x right, y up, z back: OpenGL, three.js) unless the vendor extension
 ``SPZ_ADOBE_coordinate_system`` (type ``0xADBE0003``, payload one ``uint32``, the library's

@@ -25,7 +25,7 @@ import struct
 import numpy as np
 
 from ..errors import SceneFormatError
-from ..model.scene import Scene, SplatKind
+from ..scene.splats import Scene, SplatKind
 from . import quantise as qz
 from . import spz_axes
 from .spz import FLAG_EXTENSIONS, HEADER_FORMAT, MAGIC

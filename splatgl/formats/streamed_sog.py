@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SceneFormatError
-from ..model.scene import Scene
+from ..scene.splats import Scene
 from . import _binary, sog
 
 NAME = "streamed-sog"

@@ -5,7 +5,7 @@ Python binds and dispatches with these names; GLSL receives the same names as ge
 ``#define`` lines (:func:`glsl_defines`, added by :func:`splatgl.gl.shaders.preprocess` to every
 program like the constants of :mod:`splatgl.constants`), so a shader writes ``layout(std430,
 binding = BINDING_ORDER)`` and ``layout(local_size_x = PREPASS_GROUP) in;`` and no number is
-typed twice (tests/test_bindings.py fails on a literal one).
+typed twice (tests/gl/test_bindings.py fails on a literal one).
 
 The rule for binding points (checked by the test over :data:`FAMILIES`): a point is context
 state, so a buffer stays there until another is bound at it.  A *family* is what one renderer
@@ -25,7 +25,7 @@ BINDING_S = 2
 BINDING_DC = 3
 BINDING_SH = 4
 
-# --- The quad path (renderers/quad_gpu.py, batches.py; bench/probes.py).
+# --- The quad path (renderers/quad_gpu.py, batches.py; measure/bench/probes.py).
 #: Sorted rows: quad_prepass.comp, lib/splat_rect.glsl (occlusion_cull.comp, coverage.comp).
 BINDING_ORDER = 5
 #: The pre-pass's quads: quad_prepass.comp writes, quad_light.vert, limit.vert and

@@ -34,7 +34,7 @@ import os
 from dataclasses import dataclass
 
 from ..errors import SplatglError
-from ..model.settings import EarlyStop, SortKey
+from ..scene.settings import EarlyStop, SortKey
 from .egl_devices import DEVICE_ENV, is_software_renderer, query_devices
 
 #: The environment variable that forces the device class.

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..model.settings import Precision
+from ..scene.settings import Precision
 
 #: Largest image side splatgl accepts before asking any context (the common GL 4.3 driver limit,
 #: llvmpipe's included); the context's real limits are checked as well.

@@ -8,8 +8,8 @@ import moderngl
 import numpy as np
 
 from ..constants import glsl_float
-from ..model.scene import Scene
-from ..model.settings import GpuStorage
+from ..scene.splats import Scene
+from ..scene.settings import GpuStorage
 from .bindings import BINDING_A, BINDING_DC, BINDING_Q, BINDING_S, BINDING_SH
 from .storage import COMPACT_WORDS, encode_compact, scale_exponent
 

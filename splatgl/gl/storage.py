@@ -21,7 +21,7 @@ word  content
 ====  =======================================================================================
 
 The twin decodes in float64 what the shader decodes in float32; the two agree to float32
-rounding (tests/test_storage.py renders the twin-decoded scene in float32 storage against the
+rounding (tests/gl/test_storage.py renders the twin-decoded scene in float32 storage against the
 compact render).
 """
 
@@ -33,8 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import COMPACT_OPACITY_BITS, COMPACT_QUAT_BITS, SH_C0, sh_coeff_count
-from ..model.quaternion import half_step_rotation_deg, smallest_three
-from ..model.settings import GpuStorage
+from ..scene.quaternion import half_step_rotation_deg, smallest_three
+from ..scene.settings import GpuStorage
 
 #: uint32 words per splat of the compact layout (two uvec4).
 COMPACT_WORDS = 8

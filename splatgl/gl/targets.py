@@ -6,7 +6,7 @@ import moderngl
 import numpy as np
 
 from ..errors import SplatglError
-from ..model.settings import Precision
+from ..scene.settings import Precision
 from .transfers import transfers
 
 _DTYPES = {Precision.RGBA32F: "f4", Precision.RGBA16F: "f2", Precision.RGBA8: "f1"}

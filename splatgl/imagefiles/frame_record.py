@@ -55,7 +55,7 @@ def camera_digest(camera) -> str:
 
 
 def scene_digest(scene) -> str:
-    """The digest of a :class:`~splatgl.model.scene.Scene`'s splats (every value drawn)."""
+    """The digest of a :class:`~splatgl.scene.splats.Scene`'s splats (every value drawn)."""
     return _digest(str(scene.kind), *(np.asarray(getattr(scene, name)) for name in
                                       ("means", "quats", "log_scales", "opacity_logits", "sh")))
 

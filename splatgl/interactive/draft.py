@@ -23,10 +23,10 @@ from ..api import Renderer
 from ..gl.transfers import TransferCounts, transfers
 from ..cameras.camera import Camera
 from ..cameras.view import View, draft_low_pass
-from ..lod.render import LodSettings
+from ..lod.selection import LodSettings
 from ..lod.source import lod_renderer
-from ..model.scene import Scene
-from ..model.settings import EarlyStop, RendererKind, RenderSettings
+from ..scene.splats import Scene
+from ..scene.settings import EarlyStop, RendererKind, RenderSettings
 from ..renderers.early_stop import MAX_BATCH, BatchHook
 from ..renderers.quad import QuadRenderer, composite
 from .budget import EXACT, Level

@@ -19,7 +19,7 @@ from pathlib import Path
 from ..background import Background
 from ..lod.build import LodTree, build_hierarchy
 from ..lod.io import read_lod, write_lod
-from ..model.scene import Scene, SplatKind
+from ..scene.splats import Scene, SplatKind
 
 #: Scenes with at least this many splats get a level-of-detail tree for budgeted frames.
 LOD_MIN_SPLATS = 20_000

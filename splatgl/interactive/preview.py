@@ -17,8 +17,8 @@ from typing import Iterable, Iterator
 from ..api import Renderer
 from ..cameras.camera import Camera
 from ..errors import SplatglError
-from ..model.scene import Scene, SplatKind
-from ..model.settings import RendererKind, RenderSettings
+from ..scene.splats import Scene, SplatKind
+from ..scene.settings import RendererKind, RenderSettings
 from ..output.layers import BASE, Layer
 from .budget import Level, check_fps
 from .lod_cache import LodProvider

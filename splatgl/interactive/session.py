@@ -25,8 +25,8 @@ from ..api import Renderer
 from ..cameras.camera import Camera
 from ..gl.context import renderer_name
 from ..gl.egl_devices import is_software_renderer
-from ..model.scene import Scene
-from ..model.settings import RendererKind, RenderSettings
+from ..scene.splats import Scene
+from ..scene.settings import RendererKind, RenderSettings
 from ..renderers.early_stop import MAX_BATCH
 from .budget import EXACT, FrameBudget, Level
 from .costs import SPLAT_UNIT

@@ -31,9 +31,9 @@ import numpy as np
 from ..constants import ALPHA_MAX, ALPHA_MIN
 from ..errors import SplatglError
 from ..splatmath.project import covariance_3d, quat_to_rotmat
-from ..model.quaternion import rotmat_to_quat
-from ..model.scene import Scene
-from ..model.spatial import morton_order_clamped_box
+from ..scene.quaternion import rotmat_to_quat
+from ..scene.splats import Scene
+from ..scene.spatial import morton_order_clamped_box
 
 #: Default number of children per parent.
 BRANCHING = 4

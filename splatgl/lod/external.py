@@ -32,8 +32,8 @@ import numpy as np
 from ..errors import SplatglError
 from ..formats import ply_write
 from ..formats.written import written_problem
-from ..model.scene import Scene
-from ..model.spatial import morton_codes_clamped
+from ..scene.splats import Scene
+from ..scene.spatial import morton_codes_clamped
 from ..writing.atomic import atomic_target
 from .budget import Plan, format_size
 from .build import (MAX_LOG_SCALE, concat_nodes, leaf_moments, level_offsets, merge_groups,

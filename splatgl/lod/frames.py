@@ -12,10 +12,10 @@ from ..cameras.camera import Camera
 from ..gl.context import create_headless_context, make_current, renderer_name
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderImage
-from ..model.settings import RenderSettings
+from ..scene.settings import RenderSettings
 from ..cameras.view import View
 from .build import LodTree
-from .render import LodSettings
+from .selection import LodSettings
 from ..renderers.quad import QuadRenderer
 from .source import lod_renderer
 

@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import SceneFormatError
 from ..formats import ply, ply_write
 from ..formats.written import write_checked
-from ..model.scene import Scene, activate
+from ..scene.splats import Scene, activate
 from .build import LodTree, bounding_radii, level_offsets
 
 ELEMENT = "lod_node"

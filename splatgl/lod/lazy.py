@@ -25,11 +25,11 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..errors import SceneFormatError
 from ..formats import ply
-from ..model.scene import Scene, activate
+from ..scene.splats import Scene, activate
 from .build import level_offsets
 from .cut import CutData, select_cut_budget, select_cut_weights
 from .io import BOUNDS, ELEMENT
-from .render import LodSettings
+from .selection import LodSettings
 
 #: Node spheres per page (16 bytes each: 4 KiB), the unit they are read in.
 BOUND_PAGE = 256
@@ -181,7 +181,7 @@ class LazyLod:
 
     def cut_scene(self, camera: Camera, lod: LodSettings = LodSettings()) -> Scene:
         """The cut's nodes as a plain :class:`Scene`, each opacity ``o`` drawn with its weight
-        ``w`` as ``1 - (1 - o) ** w`` (:func:`splatgl.lod.render.blended_scene`'s twin)."""
+        ``w`` as ``1 - (1 - o) ** w`` (:func:`splatgl.lod.selection.blended_scene`'s twin)."""
         rows, weights = self.cut(camera, lod)
         sub = self.nodes(rows)
         if weights is None:

@@ -20,9 +20,9 @@ import numpy as np
 from ..errors import SceneFormatError, SplatglError
 from ..formats import ply
 from ..formats.ply_header import parse_header
-from ..model.scene import Scene, SplatKind, activate
+from ..scene.splats import Scene, SplatKind, activate
 
-#: The percentiles of the box (:func:`splatgl.model.spatial.morton_order_clamped_box`).
+#: The percentiles of the box (:func:`splatgl.scene.spatial.morton_order_clamped_box`).
 BOX_PERCENTILES = (1.0, 99.0)
 
 

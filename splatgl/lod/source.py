@@ -10,7 +10,7 @@ float per sorted slot (:attr:`LodOrder.slot_weights`), which the quad path's com
 applies to the opacity as a factor on its optical depth, ``1 - (1 - o) ** w``
 (shaders/quad_prepass.comp, OPACITY_WEIGHT).  Everything after (draw, blending, read-back) is
 the quad path's own: :func:`lod_renderer` puts the two together.  NumPy twin of the weighting:
-:func:`splatgl.lod.render.blended_scene`.
+:func:`splatgl.lod.selection.blended_scene`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from ..background import Background
 from ..cameras.view import View
 from ..errors import SplatglError
 from ..gl.shaders import ProgramCache
-from ..model.settings import RenderSettings, SortKey
+from ..scene.settings import RenderSettings, SortKey
 from ..order import kernels as cull_kernel
 from ..order.chunks import ChunkedCull, keys_order, keys_pairs
 from ..order.cull import CullData
@@ -32,7 +32,7 @@ from ..order.stage import OrderTimes, SortFn, cpu_sort, cull_for
 from ..renderers.quad import QuadRenderer
 from .build import LodTree
 from .cut import CutData, select_cut_budget, select_cut_budget_near
-from .render import PREFETCH_NODES_PER_LEAF, LodSettings, threshold_cut
+from .selection import PREFETCH_NODES_PER_LEAF, LodSettings, threshold_cut
 
 
 class LodOrder:
@@ -41,7 +41,7 @@ class LodOrder:
     After each view: ``last_cut_nodes`` (nodes in the cut), ``last_cut_s`` (seconds the cut
     selection took; also counted in the frame's ``cull`` time), ``last_threshold_px``,
     ``last_drew_leaves`` and ``last_cut``.  Views at most :attr:`skip_within` from the root's
-    centre draw the leaves (see :data:`splatgl.lod.render.SKIP_NODES_PER_LEAF`);
+    centre draw the leaves (see :data:`splatgl.lod.selection.SKIP_NODES_PER_LEAF`);
     :attr:`cut_override` ``(rows, weights)`` draws that cut instead of selecting one (the
     benchmark's measure of the change the cut alone makes between frames).
     """
@@ -87,7 +87,7 @@ class LodOrder:
         """Cut, cull and sort for ``view``: (M,) uint32 node rows, front to back.
 
         Without a budget, a view whose cut stands for at most 1 / SKIP_NODES_PER_LEAF leaves a
-        node (:func:`splatgl.lod.render.leaves_covered`), and from then on every view no
+        node (:func:`splatgl.lod.selection.leaves_covered`), and from then on every view no
         farther from the scene (the root's centre), draws the leaves instead, culled by chunks
         as full detail is: close views cost what full detail costs (plus, on the view that
         decides, the cut's selection).

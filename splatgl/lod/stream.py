@@ -10,7 +10,7 @@ read never exceed the budget (:attr:`ResidentSet.peak_bytes` records the most it
 Two ways to draw a cut (node rows and opacity weights, :mod:`splatgl.lod.cut`):
 
 - :meth:`ResidentSet.gather` waits for every chunk the cut needs and returns its nodes as one
-  :class:`~splatgl.model.scene.Scene`, exact (path and screenshot frames, ``render``, ``eval``,
+  :class:`~splatgl.scene.splats.Scene`, exact (path and screenshot frames, ``render``, ``eval``,
   ``bench``).  Chunks are copied out as they arrive, so a cut larger than the budget is still
   drawn: only the budget's worth stays resident.
 - :meth:`ResidentSet.resident_cut` never waits (the viewer): a node whose chunk is not in yet
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SplatglError
-from ..model.scene import Scene
+from ..scene.splats import Scene
 from .budget import format_size
 
 #: Node rows per chunk (a few MiB of decoded SH3 rows).

@@ -10,7 +10,7 @@ sorted and weighted as :class:`~splatgl.lod.source.LodOrder` draws them (:class:
 
 Positions are taken relative to the anchor stored in the file (the centre of the leaves' 1-99 %
 box) where the in-memory path subtracts its node scene's own: the images agree to float32
-rounding, and are identical given the same anchor (tests/test_lod_stream.py).  The default
+rounding, and are identical given the same anchor (tests/lod/test_lod_stream.py).  The default
 camera and near plane frame a proxy of the scene (:func:`framing_scene`: the 1-99 % box of the
 first level from the top with at least :data:`FRAMING_NODES` nodes).
 """
@@ -29,8 +29,8 @@ from ..cameras.view import View
 from ..errors import SplatglError
 from ..gl.context import create_headless_context, make_current
 from ..gl.shaders import ProgramCache
-from ..model.scene import SplatKind
-from ..model.settings import RenderSettings, SortKey
+from ..scene.splats import SplatKind
+from ..scene.settings import RenderSettings, SortKey
 from ..order import kernels as cull_kernel
 from ..order.chunks import keys_order, keys_pairs
 from ..order.cull import CullData
@@ -41,7 +41,7 @@ from ..renderers.quad import QuadRenderer
 from .budget import format_size
 from .cut import select_cut_budget, select_cut_weights
 from .lazy import LazyLod
-from .render import LodSettings, threshold_cut
+from .selection import LodSettings, threshold_cut
 from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet
 
 #: The framing proxy's level: the first from the top with at least this many nodes.

@@ -6,7 +6,7 @@ resident set as a ``.lod.ply`` (issue 41 items 3 and 4).
 the :class:`~splatgl.lod.stream.ResidentSet`'s chunks (a chunk's load decodes only its rows:
 ``structure.load(level, [chunk], environment=False)``).  :class:`LevelFrames` draws the level
 (every chunk, in the file's order, then the environment) with the :class:`splatgl.api.Renderer`:
-the image is the whole level's, loaded at once (tests/test_lod_stream.py), and at most the budget
+the image is the whole level's, loaded at once (tests/lod/test_lod_stream.py), and at most the budget
 of chunks stays resident between frames.  Not yet: choosing chunks (and coarser levels) by
 screen-space error, as the ``.lod.ply`` cut does; a Streamed SOG chunk's load decodes the whole
 SOG unit holding it.
@@ -18,7 +18,7 @@ from typing import Iterable, Iterator
 
 from ..cameras.camera import Camera
 from ..errors import SplatglError
-from ..model.settings import RendererKind, RenderSettings
+from ..scene.settings import RendererKind, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 from ..renderers.registry import DEFAULT_RENDERER
 from .budget import format_size

@@ -8,7 +8,7 @@ for the others, their nearest resident ancestors
 ``on_change`` (the viewer wakes its loop) is called as each arrives and :attr:`generation`
 counts them, so the viewer draws again and the image refines until :attr:`complete`: then it is
 the view's exact cut.  :meth:`exact_scene` waits for every chunk (screenshots).  A cut's opacity
-weights are applied to the nodes' opacities (:func:`splatgl.lod.render.blended_scene`'s rule),
+weights are applied to the nodes' opacities (:func:`splatgl.lod.selection.blended_scene`'s rule),
 so any renderer draws the scene.
 """
 
@@ -18,10 +18,10 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..cameras.view import View
-from ..model.scene import Scene
-from ..model.settings import RenderSettings
+from ..scene.splats import Scene
+from ..scene.settings import RenderSettings
 from .lazy import LazyLod
-from .render import LodSettings
+from .selection import LodSettings
 from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet
 from .stream_frames import choose_cut, framing_scene
 
@@ -62,7 +62,7 @@ class StreamedScene:
             self.on_change()
 
     def _camera(self, camera: Camera, settings: RenderSettings) -> Camera:
-        return View.of(camera, settings, self.framing).camera   # the model transform applied
+        return View.of(camera, settings, self.framing).camera   # the scene transform applied
 
     def _scene(self, rows: np.ndarray, weights: np.ndarray | None) -> Scene:
         last = self._last

@@ -36,7 +36,7 @@ from ..constants import JACOBIAN_CLAMP
 from .cull import CULL_BLOCK, CullData, cull_visible, peak_keeps, plane_constants, view_axis
 from ..cameras.view import frustum_of, near_threshold
 from ..cameras.equirect import WRAP_FLAG
-from ..model.spatial import morton_order_clamped_box
+from ..scene.spatial import morton_order_clamped_box
 from .sort import depth_keys
 from .spheres import Spheres, sphere_constants
 
@@ -128,7 +128,7 @@ class ChunkedCull:
 
     @classmethod
     def from_scene(cls, scene) -> "ChunkedCull":
-        """Built from a :class:`splatgl.model.scene.Scene` through :meth:`CullData.from_scene`."""
+        """Built from a :class:`splatgl.scene.splats.Scene` through :meth:`CullData.from_scene`."""
         return cls(CullData.from_scene(scene))
 
     def visible_keys(self, camera: Camera, near: float, antialias: bool = False,

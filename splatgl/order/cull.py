@@ -149,7 +149,7 @@ class CullData:
 
     @classmethod
     def from_scene(cls, scene, block: int = 1 << 16) -> "CullData":
-        """The cull data of a :class:`splatgl.model.scene.Scene`, activated block by block (no
+        """The cull data of a :class:`splatgl.scene.splats.Scene`, activated block by block (no
         full-size activated copy of the scene is made or cached)."""
         n = scene.count
         xyz = np.empty((3, n), np.float32)
@@ -172,7 +172,7 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
     peak alpha bound), fused with the camera transform and run in float32 over blocks of
     :data:`CULL_BLOCK` rows into reused buffers, so a block's temporaries stay in cache.
     ``camera`` must already be anchored to ``data.xyz``'s origin; ``scale`` multiplies the
-    world radii (a model transform's uniform scale).
+    world radii (a scene transform's uniform scale).
 
     The plane test ``(x - s z) / sqrt(1 + s^2) <= r + m z / f`` is rearranged to
     ``x <= (s + sqrt(1 + s^2) m / f) z + sqrt(1 + s^2) r`` (likewise for the other three

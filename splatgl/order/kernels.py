@@ -14,7 +14,7 @@ Importing numba and compiling the four kernels takes about 9 s the first time on
 then about 1 s from numba's on-disk cache, so :func:`request` starts that on a daemon thread
 and :func:`kernel` hands them out only once they are ready: until then, and wherever numba is
 missing, the NumPy paths run.  Both give the same keys and cuts, bit for bit
-(tests/test_cull_chunks.py, tests/test_lod_blend.py), so switching between them mid-session
+(tests/order/test_cull_chunks.py, tests/lod/test_lod_blend.py), so switching between them mid-session
 changes no image.
 """
 

@@ -23,8 +23,8 @@ import numpy as np
 
 from ..cameras.model import CullKind
 from ..cameras.view import View
-from ..model.scene import Scene
-from ..model.settings import RenderSettings, SortKey
+from ..scene.splats import Scene
+from ..scene.settings import RenderSettings, SortKey
 from ..splatmath.project import to_camera
 from .chunks import ChunkedCull, keys_order, keys_pairs, rows_keys
 from .cull import CullData, cull_visible

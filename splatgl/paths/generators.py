@@ -13,7 +13,7 @@ from ..cameras.camera import Camera
 from ..cameras.poses import look_at, orbit as orbit_pose
 from ..errors import CameraError
 from ..cameras.framing import DEFAULT_ELEVATION, DEFAULT_FOV_Y, default_camera
-from ..model.scene import Scene
+from ..scene.splats import Scene
 
 
 def orbit(scene: Scene, frames: int = 120, width: int = 1280, height: int = 720,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.quaternion import (quat_conjugate, quat_exp, quat_log, quat_multiply, quat_to_rotmat,
+from ..scene.quaternion import (quat_conjugate, quat_exp, quat_log, quat_multiply, quat_to_rotmat,
                                 rotmat_to_quat)
 
 

@@ -1,4 +1,4 @@
-"""How the reference applies the emulation knobs (:mod:`splatgl.model.emulation`).
+"""How the reference applies the emulation knobs (:mod:`splatgl.scene.emulation`).
 
 Each knob touches one stage; the stages call these helpers only when the knob differs from
 the reference's own rule, so with the default :class:`Emulation` nothing here runs:
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import FAST_CORNER_SIGMAS
-from ..model.emulation import Emulation
-from ..model.settings import GpuStorage, QuadExtent, RenderSettings, SortKey
+from ..scene.emulation import Emulation
+from ..scene.settings import GpuStorage, QuadExtent, RenderSettings, SortKey
 from ..order.sort import bucket_keys
 from ..splatmath import project as pm
 
@@ -77,7 +77,7 @@ def _eigen(cov2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nd
 
 def support(extent: str, cov2d: np.ndarray, opacity: np.ndarray, min_alpha: float) -> Support:
     """The support of each splat for an ``extent`` knob other than ``tiles`` (the module doc
-    of :mod:`splatgl.model.emulation` defines them); (N, 2, 2) dilated covariances (px^2),
+    of :mod:`splatgl.scene.emulation` defines them); (N, 2, 2) dilated covariances (px^2),
     (N,) opacities."""
     dt = cov2d.dtype
     sxx = np.maximum(cov2d[:, 0, 0].astype(np.float64), 0.0)
@@ -150,7 +150,7 @@ def key_bits(emulation: Emulation, depth: np.ndarray, p_cam: np.ndarray, visible
 
 def quad_emulation(settings) -> Emulation:
     """The knobs that make the reference follow the quad path's variants in ``settings``
-    (:class:`~splatgl.model.settings.RenderSettings`): its sort keys, its quad extent, and
+    (:class:`~splatgl.scene.settings.RenderSettings`): its sort keys, its quad extent, and
     float16 scales of compact GPU storage (as ``half=on``).  Blend precision and the missing
     early stop have no knob (the quad path's own differences, docs/results/summary.md)."""
     extent = {QuadExtent.ELLIPSE: "opacity", QuadExtent.SQUARE: "square",

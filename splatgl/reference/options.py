@@ -20,8 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..constants import ALPHA_MAX, GSPLAT_ALPHA_MAX
-from ..model.emulation import Emulation
-from ..model.settings import Convention, Order
+from ..scene.emulation import Emulation
+from ..scene.settings import Convention, Order
 
 
 #: Which published rasterizer's conventions the reference follows: the settings' enum, so
@@ -37,7 +37,7 @@ class ReferenceOptions:
         compat: the convention followed (see the module docstring).
         alpha_max: upper clamp of each splat's alpha; ``None`` takes the emulation's
             ``alpha_max`` knob if set, else the convention's own (0.99 for INRIA, 0.999 for GSPLAT).
-        emulation: the approximations of other viewers followed (:mod:`splatgl.model.emulation`;
+        emulation: the approximations of other viewers followed (:mod:`splatgl.scene.emulation`;
             applied by :mod:`splatgl.reference.emulation`).
         order: global (3DGS) or per pixel (:mod:`splatgl.reference.per_pixel`).
         window: with the per-pixel order, None sorts each pixel's list exactly; an integer is

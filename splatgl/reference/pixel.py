@@ -23,8 +23,8 @@ from ..cameras.camera import Camera
 from ..cameras.view import View
 from ..constants import TILE_SIZE
 from ..errors import SplatglError
-from ..model.scene import Scene
-from ..model.settings import Order, RenderSettings
+from ..scene.splats import Scene
+from ..scene.settings import Order, RenderSettings
 from ..output.under import UnderLayer
 from .binning import depth_bits
 from .options import Compat, ReferenceOptions, as_options

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import TILE_SIZE
-from ..model.settings import Order
+from ..scene.settings import Order
 from . import per_pixel
 from .chunk import (TILE_PIXELS, ChunkSplats, blend_chunk, chunk_alpha, surfel_chunk_alpha,
                     tile_centres, tile_outputs)

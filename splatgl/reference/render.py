@@ -11,8 +11,8 @@ from ..cameras.camera import Camera
 from ..cameras.equirect import eye_space
 from ..cameras.view import View
 from ..errors import SplatglError
-from ..model.scene import Scene, SplatKind
-from ..model.settings import Order, RenderSettings
+from ..scene.splats import Scene, SplatKind
+from ..scene.settings import Order, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer, composite_depth, composite_under
 from ..splatmath import project as pm
@@ -110,8 +110,8 @@ def render_reference(scene: Scene, camera: Camera, settings: RenderSettings | No
         scene: a 3DGS or 2DGS (surfel) scene.
         camera: any camera model the reference draws; the image is camera.height x
             camera.width.  The frame's :class:`~splatgl.cameras.view.View` is built from it,
-            the settings and the scene (model transform, near plane, anchor).
-        settings: background, near plane, antialiasing, SH cap, model transform, emulation
+            the settings and the scene (scene transform, near plane, anchor).
+        settings: background, near plane, antialiasing, SH cap, scene transform, emulation
             knobs and order (default RenderSettings()).
         dtype: float32 (GPU-like) or float64.
         compat: a :class:`Compat` (INRIA default, GSPLAT) or a full :class:`ReferenceOptions`.

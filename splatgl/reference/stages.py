@@ -25,10 +25,10 @@ from ..splatmath import surfel as sf
 from ..cameras.camera import Camera
 from ..cameras.fisheye import Fisheye
 from ..constants import ALPHA_MIN, TILE_SIZE
-from ..model.scene import Scene, SplatKind
-from ..model.settings import RenderSettings
+from ..scene.splats import Scene, SplatKind
+from ..scene.settings import RenderSettings
 from ..constants import GSPLAT_EXTENT_SIGMAS
-from ..model.settings import Order
+from ..scene.settings import Order
 from . import emulation as em_rules
 from ..splatmath import peak as pp
 from .options import Compat, ReferenceOptions

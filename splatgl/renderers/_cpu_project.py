@@ -6,7 +6,7 @@
   clamped EWA Jacobian, the dilated covariance with the cancellation guard on its determinant,
   the conic, antialiasing, ``ceil(3 sqrt(lambda_max))`` and 3DGS's ``getRect``, the SH colour).
   The order of a few float32 operations differs from NumPy's, so its numbers agree with the
-  twin to a few ulps, not bit for bit (tests/test_cpu_renderer.py).
+  twin to a few ulps, not bit for bit (tests/renderers/test_cpu_renderer.py).
 - :func:`project_model`: the same for any other camera model, from the points, Jacobians and
   culling its NumPy methods computed (:meth:`splatgl.renderers._cpu_stage1.Stage1.model`).
   Both share :func:`_finish`, everything after the Jacobian.

@@ -15,8 +15,8 @@ import numpy as np
 from ..cameras.equirect import eye_space, wrap_copies, wrap_shift
 from ..cameras.view import View, anchored_camera
 from ..constants import JACOBIAN_CLAMP, LOW_PASS, sh_coeff_count
-from ..model.quaternion import quat_to_rotmat
-from ..model.scene import Scene
+from ..scene.quaternion import quat_to_rotmat
+from ..scene.splats import Scene
 from ..reference.stages import tile_grid
 from ..splatmath.project import splat_reach, to_camera
 from .options import CpuOptions

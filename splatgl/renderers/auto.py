@@ -32,7 +32,7 @@ from typing import Callable
 
 from ..errors import SplatglError
 from ..gl.device_class import Device, expected
-from ..model.settings import RendererKind, RenderSettings
+from ..scene.settings import RendererKind, RenderSettings
 from .registry import check_settings, refusal
 
 #: The ``--renderer`` value this module resolves.

@@ -20,7 +20,7 @@ from ..gl.bindings import (ACCUM_UNIT, BINDING_COMMANDS, BINDING_COVERAGE, BINDI
 from ..gl.buffers import GrowableBuffer
 from ..gl.transfers import transfers
 from ..gl.device_class import of_context, resolve_early_stop
-from ..model.settings import EarlyStop
+from ..scene.settings import EarlyStop
 from .early_stop import (COARSE_SCHEDULE, COMMAND_BYTES, COVERAGE_MIN_INVOCATIONS,
                          COVERAGE_SLOTS_PER_INVOCATION, FINE_SCHEDULE, MAX_BATCH, SEGMENT,
                          BatchHook, batch_bounds, plain_bounds)

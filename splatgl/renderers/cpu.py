@@ -7,7 +7,7 @@ emission, sort, tile ranges, per-tile blending) run as three compiled passes
 (:mod:`splatgl.renderers._cpu_project`, :mod:`splatgl.renderers._cpu_raster`), the tiles shared by every core, and each splat
 evaluated only on the pixels of its box where it can reach alpha 1/255.  Its image is the
 reference's own algorithm in float32, so it agrees with :func:`splatgl.reference.render_reference`
-more closely than the quad path does (tests/test_cpu_renderer.py states the tolerances).
+more closely than the quad path does (tests/renderers/test_cpu_renderer.py states the tolerances).
 docs/interactive.md measures it against the quad path and limacv's viewer.
 
 It needs numba (the ``fast`` extra) and draws 3DGS splats with colour, alpha and the depth
@@ -27,8 +27,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..cameras.view import View
-from ..model.scene import Scene
-from ..model.settings import RendererKind, RenderSettings
+from ..scene.splats import Scene
+from ..scene.settings import RendererKind, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from ..progress import ProgressCallback, default_progress

@@ -8,7 +8,7 @@ from them which renderers read a setting, and refuses a value away from its defa
 renderer in play reads (:func:`~splatgl.renderers.registry.check_settings`).
 
 :class:`DrawOptions` holds what every renderer draws (background, near plane, antialiasing, SH
-cap, model transform); like :class:`RenderSettings` it makes a
+cap, scene transform); like :class:`RenderSettings` it makes a
 :class:`~splatgl.cameras.view.View` (``View.of(camera, options, scene)``).
 """
 
@@ -17,10 +17,10 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from ..model.emulation import Emulation
-from ..model.settings import (DEFAULT_ORDER_WINDOW, Convention, EarlyStop, GpuStorage, Order,
+from ..scene.emulation import Emulation
+from ..scene.settings import (DEFAULT_ORDER_WINDOW, Convention, EarlyStop, GpuStorage, Order,
                               Precision, Preprocess, QuadExtent, RenderSettings, SortKey)
-from ..model.transform import ModelTransform  # noqa: F401 (annotation)
+from ..scene.transform import SceneTransform  # noqa: F401 (annotation)
 from ..reference.options import ReferenceOptions
 
 
@@ -32,7 +32,7 @@ class DrawOptions:
     near: float | None = None
     antialias: bool = False
     sh_degree: int | None = None
-    model: "ModelTransform | None" = None
+    transform: "SceneTransform | None" = None
 
     def __post_init__(self) -> None:
         # validated and normalised as the settings are ("square" -> QuadExtent.SQUARE)

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
-from ..model.scene import Scene
-from ..model.settings import RendererKind
+from ..scene.splats import Scene
+from ..scene.settings import RendererKind
 from ..output.layers import BASE, Layer, RenderOutput
 
 if TYPE_CHECKING:

@@ -20,7 +20,7 @@ The pieces: :mod:`~splatgl.renderers.quad_programs` (which shaders, which switch
 :mod:`~splatgl.renderers.quad_gpu` (buffers, vertex arrays, target),
 :mod:`~splatgl.renderers.batches` (the batched draw); benchmark probes (fragment counters, GPU
 timers) reach the draw through :attr:`QuadRenderer.frame_extra` and :attr:`QuadRenderer.around_draw`
-(:mod:`splatgl.bench.probes`).
+(:mod:`splatgl.measure.bench.probes`).
 """
 
 from __future__ import annotations
@@ -39,8 +39,8 @@ from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import TransferCounts, transfers
 from ..gl.targets import ColorTarget
-from ..model.scene import Scene
-from ..model.settings import EarlyStop, QuadExtent, RenderSettings, RendererKind, SortKey
+from ..scene.splats import Scene
+from ..scene.settings import EarlyStop, QuadExtent, RenderSettings, RendererKind, SortKey
 from ..order.stage import OrderTimes, RowSource, SceneOrder, cpu_sort
 from ..output.layers import BASE, ORDERED, Layer, RenderOutput
 from ..output.under import UnderLayer

@@ -41,7 +41,7 @@ from ..gl.bindings import (BINDING_DEVICE_COUNT, ORDER_BINDING_BLOCKS, ORDER_BIN
 from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
-from ..model.scene import Scene
+from ..scene.splats import Scene
 from ..order.cull import CullData, plane_constants
 
 #: Bytes of the indirect draw command (count, instance count, first, base instance), then the

@@ -18,7 +18,7 @@ from ..gl.bindings import (BINDING_OPACITY_WEIGHT, BINDING_ORDER, BINDING_PREPAR
 from ..gl.buffers import GrowableBuffer
 from ..gl.transfers import transfers
 from ..gl.targets import ColorTarget, OrderedTarget
-from ..model.settings import Precision
+from ..scene.settings import Precision
 from .early_stop import COMMAND_BYTES
 
 #: Bytes per splat of the pre-pass output (4 vec4, see shaders/quad_prepass.comp).

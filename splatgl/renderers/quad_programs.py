@@ -16,8 +16,8 @@ import moderngl
 from ..cameras.view import View
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
-from ..model.scene import Scene, SplatKind
-from ..model.settings import Preprocess, QuadExtent
+from ..scene.splats import Scene, SplatKind
+from ..scene.settings import Preprocess, QuadExtent
 from .options import QuadOptions
 
 #: Switches that only the draw programs read (the compute passes leave them out).

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 from ..cameras.view import View
 from ..gl.context import NO_GL_RENDERER
-from ..model.scene import Scene
-from ..model.settings import RendererKind, RenderSettings
+from ..scene.splats import Scene
+from ..scene.settings import RendererKind, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from ..reference import render_reference
@@ -51,8 +51,8 @@ class ReferenceRenderer(Registered):
         options = self.own(options)
         check(self.kind, scene=scene)
         self.scene = scene
-        # the View carries the model transform folded into its camera
-        self._plain = dataclasses.replace(options, model=None).as_settings()
+        # the View carries the scene transform folded into its camera
+        self._plain = dataclasses.replace(options, transform=None).as_settings()
         self.last_times: ReferenceTimes | None = None
         self.progress = None
 

@@ -26,8 +26,8 @@ from typing import TYPE_CHECKING, Callable, ClassVar
 
 from ..errors import CameraError, SplatglError
 from ..gl import limits
-from ..model.scene import Scene, SplatKind
-from ..model.settings import Convention, Order, Precision, RendererKind, RenderSettings, SortKey
+from ..scene.splats import Scene, SplatKind
+from ..scene.settings import Convention, Order, Precision, RendererKind, RenderSettings, SortKey
 from ..output.layers import BASE, Layer
 from .options import (DRAWN, CpuOptions, DrawOptions, QuadOptions, ReferenceRendererOptions,
                       TileOptions, own_fields)
@@ -297,7 +297,7 @@ def check_convention(convention: Convention | str, *kinds: RendererKind | str) -
 
 
 def check_fidelity(settings: RenderSettings, *kinds: RendererKind | str) -> None:
-    """Refuse an emulation (:mod:`splatgl.model.emulation`) and the per-pixel order unless one
+    """Refuse an emulation (:mod:`splatgl.scene.emulation`) and the per-pixel order unless one
     of ``kinds`` draws it (:func:`readers`), so that nothing silently draws the plain rules
     where a setting asked for others."""
     kinds = tuple(RendererKind(k) for k in kinds)

@@ -45,8 +45,8 @@ from ..gl.buffers import GrowableBuffer
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
-from ..model.scene import Scene, SplatKind
-from ..model.settings import Order, RenderSettings, RendererKind, SortKey
+from ..scene.splats import Scene, SplatKind
+from ..scene.settings import Order, RenderSettings, RendererKind, SortKey
 from ..splatmath.peak import check_camera
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer

@@ -40,7 +40,7 @@ from ..gl.egl_devices import is_software_renderer
 from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
-from ..model.settings import Order, SortKey
+from ..scene.settings import Order, SortKey
 from .tile_keys import (RASTER_BAND_TILES, TILE_EMIT_CHUNK, TILE_LIST_CHUNK, KeyLayout,
                         read_keys, splat_groups)
 

@@ -2,4 +2,4 @@
 normals, blending, mesh ray casting.  Every renderer computes with it or is checked against it:
 the reference rasterizer and the CPU stages call it; each shader stage and each numba kernel
 names the function here that is its twin (same names, same array names) and a test compares
-them (tests/test_twins.py, tests/test_cpu_kernels.py)."""
+them (tests/splatmath/test_twins.py, tests/renderers/test_cpu_kernels.py)."""

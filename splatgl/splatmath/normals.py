@@ -5,7 +5,7 @@
   normal is its thin axis);
 - 2DGS surfels: the surfel's own normal ``t_u x t_v = R[:, 2]``;
 
-rotated into camera space (``R_cw``, normalised again: a model transform's uniform scale is
+rotated into camera space (``R_cw``, normalised again: a scene transform's uniform scale is
 folded into ``R_cw``) and turned towards the camera: negated where ``n . d > 0`` with ``d`` the
 direction from the camera to the splat's centre (its camera-space centre ``p``, the eye's for
 omni-directional stereo; ``(0, 0, 1)`` for parallel rays, an orthographic camera).  The normal

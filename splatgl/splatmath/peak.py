@@ -15,7 +15,7 @@ from ..cameras.orthographic import Orthographic
 from ..cameras.pinhole import Pinhole
 from ..constants import PEAK_CLAMP_SIGMAS
 from ..errors import CameraError
-from ..model.quaternion import quat_to_rotmat
+from ..scene.quaternion import quat_to_rotmat
 
 
 # ``t*`` is clamped to PEAK_CLAMP_SIGMAS standard deviations of the splat's view depth about its

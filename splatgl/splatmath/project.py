@@ -13,7 +13,7 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..cameras.equirect import eye_space
 from ..cameras.view import anchored_camera
-from ..model.quaternion import quat_to_rotmat  # noqa: F401 (the projection's rotations; re-exported)
+from ..scene.quaternion import quat_to_rotmat  # noqa: F401 (the projection's rotations; re-exported)
 from ..constants import (ALPHA_MIN, DET_CANCEL_RATIO, EXTENT_DISCRIMINANT_FLOOR, EXTENT_SIGMAS,
                          LOW_PASS, AA_MIN_FACTOR, MAX_RADIUS, SH_C0, SH_C1, SH_C2, SH_C3,
                          SH_OFFSET, sh_coeff_count)
@@ -224,14 +224,14 @@ def sh_color(sh: np.ndarray, dirs: np.ndarray, degree: int | None = None) -> np.
     return np.maximum(np.einsum("nk,nkc->nc", basis, sh[:, :k]) + SH_OFFSET, 0.0)
 
 
-def view_dirs(means: np.ndarray, camera: Camera, model_rotation: np.ndarray | None = None) -> np.ndarray:
+def view_dirs(means: np.ndarray, camera: Camera, scene_rotation: np.ndarray | None = None) -> np.ndarray:
     """Unit directions ``normalize(p_w - camera_centre)`` (N, 3) for SH evaluation.
 
-    With a model rotation (scene-to-world), the direction is rotated back into the scene's frame.
+    With a transform rotation (scene-to-world), the direction is rotated back into the scene's frame.
     """
     d = means - camera.center.astype(means.dtype)
-    if model_rotation is not None:
-        d = d @ np.asarray(model_rotation, means.dtype)  # R^T d, row-vector form
+    if scene_rotation is not None:
+        d = d @ np.asarray(scene_rotation, means.dtype)  # R^T d, row-vector form
     n = np.linalg.norm(d, axis=-1, keepdims=True)
     return d / np.where(n > 0, n, 1.0)
 
@@ -263,9 +263,9 @@ def project(means: np.ndarray, rotations: np.ndarray, scales: np.ndarray, opacit
             sh_degree: int | None = None, low_pass: float = LOW_PASS) -> Projected:
     """Project 3DGS splats to the screen (no culling): the twin of the vertex stage's math.
 
-    Arrays as in :class:`splatgl.model.scene.Scene` (activated), in the dtype wanted for the math.
+    Arrays as in :class:`splatgl.scene.splats.Scene` (activated), in the dtype wanted for the math.
     ``low_pass``: the dilation in px^2 (the GPU paths' LOW_PASS; the reference's ``low_pass``
-    emulation knob changes it, :mod:`splatgl.model.emulation`).
+    emulation knob changes it, :mod:`splatgl.scene.emulation`).
     """
     p_cam = eye_space(to_camera(means, camera), camera)  # ODS: per-splat eye
     rot = quat_to_rotmat(rotations)

@@ -53,7 +53,7 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..constants import ALPHA_MAX, ALPHA_MIN, GSPLAT_SURFEL_MIN_EXTENT_SQ, SURFEL_FILTER_INV_SQUARE
 from .project import quat_to_rotmat, to_camera
-from ..model.settings import Convention
+from ..scene.settings import Convention
 
 
 def camera_axes(means: np.ndarray, rotations: np.ndarray, scales: np.ndarray,

@@ -5,5 +5,5 @@ What a task is: :mod:`splatgl.tasks.task`.  The runners build on it (local proce
 ``--executor ray``, the engine people already use for GPU batch jobs: splatgl writes no
 scheduler of its own) and :mod:`splatgl.tasks.executor` picks one (``run_tasks``).
 The tasks: a camera path's frames (:mod:`.render`), a dataset's views for ``eval``
-(:mod:`.evaluate`) and, in :mod:`splatgl.bench.scene_task`, one benchmark scene.
+(:mod:`.evaluate`) and, in :mod:`splatgl.measure.bench.scene_task`, one benchmark scene.
 """

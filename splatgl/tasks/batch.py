@@ -16,14 +16,14 @@ from typing import Callable, Optional, Sequence
 
 from ..cameras.camera import Camera
 from ..imagefiles.frame_record import FrameRecord
-from ..imagefiles.frames import FrameTarget, plan_frames
+from ..imagefiles.frame_targets import FrameTarget, plan_frames
 from ..imagefiles.images import write_image
 from ..imagefiles.layer_files import write_layers
 from ..output.layers import RenderOutput
 from ..progress import ProgressCallback
 from ..api import Renderer
-from ..model.scene import Scene
-from ..model.settings import RenderSettings, RendererKind
+from ..scene.splats import Scene
+from ..scene.settings import RenderSettings, RendererKind
 from ..renderers.registry import DEFAULT_RENDERER
 
 #: Frames rendered but not yet written that may wait for the writer thread.
@@ -93,7 +93,7 @@ def render_frames(renderer: Renderer, scene: Scene, cameras: Sequence[Camera],
 
     Image frames are written atomically and checked, so a frame file is complete or absent;
     with ``resume`` complete ones are kept and damaged ones (cut short, from older versions or
-    other programs) rendered again (:func:`splatgl.imagefiles.frames.plan_frames`, which also
+    other programs) rendered again (:func:`splatgl.imagefiles.frame_targets.plan_frames`, which also
     refuses, before any work, frames of another size).  A video is written to a temporary
     file and renamed when complete (removed on any error or interrupt).  ``write_queue``
     frames may wait for the writer thread while the next renders (0: write in line).  Camera

@@ -20,12 +20,12 @@ import glfw
 
 from ..cameras.camera import Camera
 from ..cameras.registry import retarget
-from ..model.scene import Scene, SplatKind
-from ..model.settings import RendererKind, RenderSettings
+from ..scene.splats import Scene, SplatKind
+from ..scene.settings import RendererKind, RenderSettings
 from . import keys, pick
 from .benchmark import orbit_benchmark
 from .display import Display, lens_fov
-from .frames import ViewMode
+from .modes import ViewMode
 from .navigation import Navigation, orbit_distance
 from .overlay import Status, key_help
 from .pacing import Pacer, paced_frame

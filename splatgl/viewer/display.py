@@ -13,9 +13,9 @@ import numpy as np
 
 from ..api import Renderer
 from ..cameras.camera import Camera
-from ..model.scene import Scene
-from ..model.settings import RendererKind, RenderSettings
-from .frames import FrameResult, ViewMode, render_frame, render_stereo
+from ..scene.splats import Scene
+from ..scene.settings import RendererKind, RenderSettings
+from .modes import FrameResult, ViewMode, render_frame, render_stereo
 from .overlay import COMPACT_WINDOW, Message, Overlay, Status, status_lines
 from .present import Mode, Presenter, fit_viewport
 

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import glfw
 
-from ..model.settings import Precision, RendererKind
+from ..scene.settings import Precision, RendererKind
 from ..renderers import registry
 from . import controls, recorder
-from .frames import ViewMode
+from .modes import ViewMode
 from .overlay import key_help
 
 #: Keys that act on auto-repeat too (field of view); the rest act once per press.

@@ -16,8 +16,8 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..cameras.up import UP_AXES
-from ..model.scene import Scene
-from ..model.settings import RenderSettings
+from ..scene.splats import Scene
+from ..scene.settings import RenderSettings
 from . import controls
 
 #: Held keys that fly, as (forward, right, up) directions.
@@ -32,13 +32,13 @@ ROLL_KEYS = {glfw.KEY_Z: -60.0, glfw.KEY_X: 60.0}
 
 def orbit_distance(scene: Scene, settings: RenderSettings, camera: Camera) -> float:
     """Orbit about the scene centre's depth along the view axis (at least 10% of its size);
-    world units, the scene placed by ``settings.model``."""
+    world units, the scene placed by ``settings.transform``."""
     lo, hi = scene.robust_bounds
     centre = 0.5 * (lo + hi)
     radius = max(scene.robust_radius, 1e-6)
-    if settings.model is not None:
-        centre = settings.model.apply_points(centre[None])[0]
-        radius *= settings.model.scale
+    if settings.transform is not None:
+        centre = settings.transform.apply_points(centre[None])[0]
+        radius *= settings.transform.scale
     depth = float((centre - camera.center) @ (camera.rotation[2] / camera.scale))
     return max(depth, 0.1 * radius)
 

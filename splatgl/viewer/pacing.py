@@ -24,10 +24,10 @@ from ..cameras.camera import Camera
 from ..interactive.budget import check_fps
 from ..interactive.lod_cache import LodProvider
 from ..interactive.session import Session, default_fps
-from ..model.scene import Scene
-from ..model.settings import RendererKind, RenderSettings
+from ..scene.splats import Scene
+from ..scene.settings import RendererKind, RenderSettings
 from ..renderers.registry import DEFAULT_RENDERER
-from .frames import FrameResult, splats_phrase
+from .modes import FrameResult, splats_phrase
 
 class Pacer:
     """The budgeted colour frames of one viewer (see the module doc).

@@ -6,12 +6,12 @@ import shlex
 from pathlib import Path
 
 from ..cameras.camera import Camera
-from ..cameras.files import save_camera
+from ..cameras.camera_files import save_camera
 from ..imagefiles.images import write_image
 from ..writing.outputs import OutputFiles
 from ..api import Renderer
-from ..model.scene import Scene
-from ..model.settings import GpuStorage, RendererKind, RenderSettings
+from ..scene.splats import Scene
+from ..scene.settings import GpuStorage, RendererKind, RenderSettings
 from ..renderers.registry import honours
 from ..renderers.stereo import StereoLayout, StereoRenderer
 
@@ -28,7 +28,7 @@ def next_paths(directory: Path) -> tuple[Path, Path]:
 
 
 def settings_arguments(settings: RenderSettings, kind: RendererKind) -> list[str]:
-    """``splatgl render`` options giving ``settings`` and ``kind`` (model transform excluded)."""
+    """``splatgl render`` options giving ``settings`` and ``kind`` (scene transform excluded)."""
     args = ["--renderer", kind.value]
     if honours(kind, "precision"):       # only the options the renderer reads (the CLI refuses
         args += ["--precision", settings.precision.value,      # the others)

@@ -9,7 +9,7 @@ Writes, for each pinned splat-transform version (:data:`VERSIONS`) and each sour
 regenerated, never committed).  Each version is installed by .ci/run into its own prefix,
 ``.npm-tools/st<digits>`` (``npm install --prefix .npm-tools/st271
 @playcanvas/splat-transform@2.7.1``; 3.x asks for Node >= 22 but runs on Node 20 when
-installed by version).  tests/test_interop_splat_transform.py calls :func:`generate` itself
+installed by version).  tests/formats/test_interop_splat_transform.py calls :func:`generate` itself
 when the files are missing and the tool is present, and skips with the reason otherwise.
 """
 

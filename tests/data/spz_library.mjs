@@ -1,5 +1,5 @@
 // Runs the official SPZ library (nianticlabs/spz as WebAssembly, npm @adobe/spz) for
-// tests/test_interop_splat_transform.py; splat-transform's npm package brings it along.
+// tests/formats/test_interop_splat_transform.py; splat-transform's npm package brings it along.
 //
 //   node spz_library.mjs LIB enum                      -> {"RUB": 4, ...} (CoordinateSystem)
 //   node spz_library.mjs LIB load FILE TO              -> {"positions": [...], "extensions": [...]}

@@ -1,0 +1,216 @@
+"""The steps of ``splatgl bench --scale --lod`` (:mod:`splatgl.measure.bench.scale_lod`), each run in a
+fresh process: ``python -m splatgl.measure.bench.scale_lod_steps STEP JSON`` prints one JSON line with
+the step's figures, ``seconds`` (the step's own work, timed inside the process) and
+``peak_rss_mb`` (the process's VmHWM at its end: the step's peak resident memory, interpreter
+and OpenGL driver included).
+
+Steps:
+
+- ``scene``: the ``splats``-splat PLY written a block of rows at a time (:func:`write_tiled_scene`).
+- ``build``: the out-of-core level of detail (:func:`splatgl.lod.external.build_lod_file`) under
+  ``memory`` bytes, as ``splatgl lod --memory``.
+- ``open``: the ``.lod.ply`` opened lazily (:class:`~splatgl.lod.lazy.LazyLod`) and its framing
+  proxy read (what a first frame needs before its cut).
+- ``frame``: a cold start's first frame: the whole-scene view (the default camera framing the
+  proxy) streamed under ``memory`` (:func:`splatgl.lod.stream_frames.render_streamed`, exact);
+  the image saved for the PSNR.
+- ``far``: the same from the far view (:data:`FAR` times the framing distance), in its own
+  process.
+- ``full``: both views at full detail from the PLY loaded whole (only where it fits).
+- ``flight``: the interactive flight's camera path (:class:`splatgl.measure.bench.flight.Flight`) over
+  the streamed scene (:class:`splatgl.lod.stream_view.StreamedScene`, resident under
+  ``memory``): every moving frame draws what is resident and requests the rest; at rest the
+  frames go on until the cut is complete (exact).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .scale import peak_rss_mb
+
+#: Rows built and written at a time (each block is a grid of copies of the shared scenes).
+BLOCK = 1_000_000
+#: Seed of the first block (block i uses SEED + i).
+SEED = 0
+
+
+def write_tiled_scene(path: Path, splats: int, block: int = BLOCK, sources=None,
+                      shared: Path | None = None) -> int:
+    """Write a ``splats``-splat SH0 PLY at ``path`` (atomically), ``block`` rows at a time: block
+    i is :func:`splatgl.measure.bench.real_scenes.build_real_scene` (seed ``SEED + i``) moved to cell i
+    of a square grid of blocks, so the whole scene is never in memory.  Returns the bytes
+    written."""
+    from ...formats.ply_write import _header, scene_to_vertices
+    from ...writing.atomic import atomic_target
+    from .real_scenes import build_real_scene, load_real_sources
+
+    sources = load_real_sources(root=shared) if sources is None else sources
+    blocks = math.ceil(splats / block)
+    columns = math.ceil(math.sqrt(blocks))
+    spacing = None
+    with atomic_target(path) as tmp, open(tmp, "wb") as fh:
+        for i in range(blocks):
+            n = min(block, splats - i * block)
+            scene = build_real_scene(n, SEED + i, 0, sources)
+            rows = scene_to_vertices(scene)
+            if spacing is None:   # the first (full) block's width, plus the copies' gap
+                lo, hi = scene.robust_bounds
+                spacing = float(max(hi[0] - lo[0], hi[2] - lo[2])) * 1.1 + 1.25
+                fh.write(_header([("vertex", splats, rows.dtype)], "little", False,
+                                 (f"splatgl bench --scale --lod: {splats} splats",)))
+            row, col = divmod(i, columns)
+            rows["x"] += np.float32(spacing * (col - (columns - 1) / 2.0))
+            rows["z"] += np.float32(spacing * (row - (columns - 1) / 2.0))
+            rows.astype(rows.dtype.newbyteorder("<"), copy=False).tofile(fh)
+            del scene, rows
+    return path.stat().st_size
+
+
+def _save_image(path: str, image: np.ndarray) -> None:
+    from ...writing.atomic import atomic_write_bytes
+
+    buf = io.BytesIO()
+    np.save(buf, np.ascontiguousarray(image[..., :3], np.float32))
+    atomic_write_bytes(path, buf.getvalue())
+
+
+#: The far view's distance, in framing distances (``bench --lod``'s far view).
+FAR = 6.0
+
+
+def _camera(lazy, a: dict, far: bool = False):
+    """(framing proxy, camera): the default camera, or the far view (:data:`FAR` times the
+    framing distance, as ``bench --lod``'s fly-through starts)."""
+    from ...api import default_camera
+    from ...cameras.poses import orbit
+    from ...lod.stream_frames import framing_scene
+
+    framing = framing_scene(lazy)
+    camera = default_camera(framing, a["width"], a["height"])
+    if far:
+        lo, hi = framing.robust_bounds
+        centre = 0.5 * (np.asarray(lo) + np.asarray(hi))
+        dist = float(np.linalg.norm(camera.center - centre))
+        camera = camera.with_pose(orbit(centre, FAR * dist, 0.0, 20.0))
+    return framing, camera
+
+
+def step_scene(a: dict) -> dict:
+    size = write_tiled_scene(Path(a["scene"]), a["splats"], a.get("block", BLOCK),
+                             shared=Path(a["shared"]) if a.get("shared") else None)
+    return {"file_mb": size / 1e6}
+
+
+def step_build(a: dict) -> dict:
+    from ...lod.budget import plan
+    from ...lod.external import build_lod_file
+
+    budget, branching = int(a["memory"]), int(a["branching"])
+    info = build_lod_file(Path(a["scene"]), Path(a["lod"]), branching,
+                          lambda record, count: plan(budget, branching, record, count))
+    return {"lod_mb": Path(a["lod"]).stat().st_size / 1e6,
+            **{k: info[k] for k in ("leaves", "parents", "levels", "chunks") if k in info}}
+
+
+def step_open(a: dict) -> dict:
+    from ...lod.lazy import LazyLod
+
+    with LazyLod(a["lod"]) as lazy:
+        _camera(lazy, a)
+        return {"levels": int(lazy.levels)}
+
+
+def step_frame(a: dict) -> dict:
+    from ...lod.lazy import LazyLod
+    from ...lod.selection import LodSettings
+    from ...lod.stream_frames import render_streamed
+    from ...scene.settings import RenderSettings
+
+    with LazyLod(a["lod"]) as lazy:
+        framing, camera = _camera(lazy, a, a.get("far", False))
+    out, times, _ = render_streamed(a["lod"], camera, RenderSettings(), LodSettings(),
+                                    int(a["memory"]), framing=framing)
+    _save_image(a["image"], out.rgba)
+    return {"cut_nodes": int(times.cut_nodes), "streaming": times.streaming}
+
+
+def step_full(a: dict) -> dict:
+    from ...api import Renderer
+    from ...formats import load_scene
+    from ...lod.lazy import LazyLod
+    from ...scene.settings import RenderSettings
+
+    with LazyLod(a["lod"]) as lazy:
+        cameras = [_camera(lazy, a, far)[1] for far in (False, True)]
+    scene = load_scene(a["scene"], progress=lambda *x: None)
+    with Renderer() as renderer:
+        for camera, image in zip(cameras, (a["image"], a["far_image"])):
+            _save_image(image, renderer.render(scene, camera, RenderSettings()))
+    return {}
+
+
+def step_flight(a: dict) -> dict:
+    from ...api import Renderer
+    from ...lod.selection import LodSettings
+    from ...lod.stream_view import StreamedScene
+    from ...scene.settings import RenderSettings
+    from .flight import Flight
+
+    from ... import api
+
+    api.MAX_CACHED_PATHS = 1   # this process only: one cut's upload held, as the viewer holds one
+    settings = RenderSettings()
+    streamed = StreamedScene(a["lod"], LodSettings(), int(a["memory"]))
+    try:
+        flight = Flight(streamed.framing, a["width"], a["height"], a.get("speed", 1.0))
+        with Renderer() as renderer:
+            def draw(camera):
+                renderer.render(streamed.scene_for(camera, settings), camera, settings)
+
+            draw(flight.camera(0.0))   # the programs compiled: not part of the flight
+            frames, start = [], time.perf_counter()
+            while (t := time.perf_counter() - start) < flight.move_end:
+                t1 = time.perf_counter()
+                draw(flight.camera(t))
+                frames.append(time.perf_counter() - t1)
+            rest, start, draws = flight.camera(flight.move_end), time.perf_counter(), 0
+            while True:
+                draw(rest)
+                draws += 1
+                if streamed.complete:
+                    break
+        exact_s = time.perf_counter() - start
+        summary = streamed.summary()
+    finally:
+        streamed.close()
+    fps = [1.0 / s for s in frames if s > 0]
+    return {"moving_frames": len(frames), "fps_median": float(np.median(fps)) if fps else None,
+            "fps_p10": float(np.percentile(fps, 10)) if fps else None,
+            "frame_ms_median": 1e3 * float(np.median(frames)) if frames else None,
+            "rest_to_exact_s": exact_s, "rest_frames": draws, "streaming": summary}
+
+
+STEPS = {"scene": step_scene, "build": step_build, "open": step_open, "frame": step_frame,
+         "far": step_frame, "full": step_full, "flight": step_flight}
+
+
+def main(argv: list[str]) -> int:
+    step, args = argv[0], json.loads(argv[1])
+    t0 = time.perf_counter()
+    result = STEPS[step](args)
+    result.update(seconds=time.perf_counter() - t0, peak_rss_mb=peak_rss_mb(), pid=os.getpid())
+    print(json.dumps(result), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,60 @@
+"""``splatgl bench SCENE.lod.ply --memory SIZE`` (issue 41 item 3): frames of a level of detail
+streamed under a memory budget along an orbit (:class:`splatgl.lod.stream_frames.StreamFrames`,
+every frame exact): the first frame's time (a cold start: the chunks it needs are read), the
+median of the rest, what stayed resident, chunks loaded and evicted, bytes read, and the
+process's peak resident memory."""
+
+from __future__ import annotations
+
+import resource
+import sys
+import time
+
+import numpy as np
+
+from ...lod.budget import format_size
+from ...lod.selection import LodSettings
+from ...lod.stream_frames import StreamFrames
+from ...scene.settings import RenderSettings
+from ...paths import orbit
+
+
+def peak_rss() -> int:
+    """Bytes: this process's peak resident memory so far."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return int(peak if sys.platform == "darwin" else peak * 1024)
+
+
+def run_stream(path, memory: int, width: int, height: int, frames: int,
+               settings: RenderSettings = RenderSettings(), lod: LodSettings = LodSettings()) -> dict:
+    """The figures of ``frames`` orbit frames of the ``.lod.ply`` at ``path`` under ``memory``
+    bytes (a dict, seconds and bytes)."""
+    t0 = time.perf_counter()
+    with StreamFrames(path, settings, lod, memory) as stream:
+        opened = time.perf_counter() - t0
+        times, nodes = [], []
+        for camera in orbit(stream.framing, frames, width, height):
+            t = time.perf_counter()
+            stream.render_view(camera)
+            times.append(time.perf_counter() - t)
+            nodes.append(stream.last_cut_nodes)
+        stats = stream.resident.stats
+        read = stream.lazy.bytes_read
+    return {"scene": str(path), "memory": memory, "width": width, "height": height,
+            "frames": frames, "open_s": opened, "first_frame_s": times[0],
+            "median_frame_s": float(np.median(times[1:] if len(times) > 1 else times)),
+            "cut_nodes_median": int(np.median(nodes)), "resident_bytes": stats.resident_bytes,
+            "resident_peak_bytes": stats.peak_bytes, "chunks_loaded": stats.loaded,
+            "chunks_evicted": stats.evicted, "bytes_read": read, "peak_rss_bytes": peak_rss()}
+
+
+def describe(r: dict) -> str:
+    """The figures as lines for the terminal."""
+    return (f"{r['scene']} streamed under {format_size(r['memory'])}: {r['frames']} frames at "
+            f"{r['width']}x{r['height']} along an orbit\n"
+            f"open {r['open_s'] * 1e3:.1f} ms, first frame {r['first_frame_s'] * 1e3:.1f} ms, "
+            f"median frame {r['median_frame_s'] * 1e3:.1f} ms ({r['cut_nodes_median']:,} nodes)\n"
+            f"resident {format_size(r['resident_bytes'])} (peak "
+            f"{format_size(r['resident_peak_bytes'])}), chunks {r['chunks_loaded']} loaded, "
+            f"{r['chunks_evicted']} evicted, {format_size(r['bytes_read'])} read; process peak "
+            f"RSS {format_size(r['peak_rss_bytes'])}")
