@@ -28,10 +28,8 @@ def add_lod_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_scale_lod_arguments(p: argparse.ArgumentParser) -> None:
-    """The options of ``splatgl bench --scale --lod`` (scenes larger than memory)."""
-    p.add_argument("--lod-memory", default=None, metavar="SIZE",
-                   help="--scale --lod: the memory budget of the level-of-detail build and of the "
-                        "streamed frames (as lod/render --memory; default 2G)")
+    """The options of ``splatgl bench --scale --lod`` (scenes larger than memory) besides
+    ``--memory`` (:func:`._memory.add_memory_argument`, the budget of its build and frames)."""
     p.add_argument("--keep-scenes", action="store_true",
                    help="--scale --lod: keep the scene and level-of-detail files in the scratch "
                         "folder (default: removed after each size)")
@@ -46,18 +44,17 @@ def run_scale_lod_command(args: argparse.Namespace) -> int:
     from ..measure.bench.machine import describe, probe_machine
     from ..measure.bench.scale_lod import SIZES, ScaleLodOptions, run_scale_lod
     from ..measure.bench.scale_lod_report import table
-    from ..lod.budget import parse_size
+    from ._memory import memory_budget
 
     given = ["--" + n.replace("_", "-") for n in _NOT_SCALE_LOD if getattr(args, n, None) is not None]
     if given:
         raise SplatglError(f"{', '.join(given)}: not read by --scale --lod (it measures the "
                            "default cut of SH0 scenes; the options are --sizes, --width, --height, "
-                           "--lod-memory, --keep-scenes, --out)")
+                           "--memory, --keep-scenes, --out)")
     sizes = parse_sizes(args.sizes, SIZES, "--sizes")
     if not sizes:
         raise SplatglError("--sizes: --scale --lod needs at least one size")
-    memory = (ScaleLodOptions.memory if args.lod_memory is None
-              else parse_size(args.lod_memory, "--lod-memory"))
+    memory = memory_budget(args)   # as splatgl lod --memory: half this machine's RAM by default
     check_out_folder(args, ("scale-lod.json", "scale-lod.png"))   # before any measuring
     options = ScaleLodOptions(sizes=sizes, memory=memory, width=args.width or 1280,
                               height=args.height or 720, keep_scenes=args.keep_scenes)
@@ -71,14 +68,10 @@ def run_scale_lod_command(args: argparse.Namespace) -> int:
 
 
 def check_scale_lod_options(args: argparse.Namespace) -> None:
-    """--lod-memory and --keep-scenes belong to --scale --lod."""
-    if args.scale and args.lod:
-        return
-    given = [f for f, on in (("--lod-memory", args.lod_memory is not None),
-                             ("--keep-scenes", args.keep_scenes)) if on]
-    if given:
-        raise SplatglError(f"{', '.join(given)}: options of the out-of-core scale benchmark; "
-                           "add --scale --lod")
+    """--keep-scenes belongs to --scale --lod."""
+    if args.keep_scenes and not (args.scale and args.lod):
+        raise SplatglError("--keep-scenes: an option of the out-of-core scale benchmark; add "
+                           "--scale --lod")
 
 
 def _numbers(text: str, flag: str) -> list[float]:

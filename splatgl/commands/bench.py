@@ -125,7 +125,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                            "one task per scene")
     add_lod_arguments(p)
     add_memory_argument(p, STREAM_HELP + "; with one such SCENE: frames along an orbit, first "
-                           "and median frame time, resident memory, chunks, peak RSS")
+                           "and median frame time, resident memory, chunks, peak RSS. With "
+                           "--scale --lod: the budget of its level-of-detail builds and streamed "
+                           "frames")
     add_scale_lod_arguments(p)
     add_popping_arguments(p)
     add_interactive_arguments(p)
@@ -189,7 +191,7 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
-    if args.memory is not None:
+    if args.memory is not None and not (args.scale and args.lod):   # --scale --lod: its budget
         return run_stream_bench(args, executor.sharded)
     if args.popping:
         if args.interactive or args.scale or args.lod or executor.sharded or args.json is not None:

@@ -87,7 +87,7 @@ def test_cli_writes_json_and_plot_and_removes_scenes(tmp_path, monkeypatch, caps
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
     (tmp_path / "tmp").mkdir()
     out = tmp_path / "out"
-    assert main(["bench", "--scale", "--lod", "--sizes", "20k,2M", "--lod-memory", "300M",
+    assert main(["bench", "--scale", "--lod", "--sizes", "20k,2M", "--memory", "300M",
                  "--width", "64", "--height", "48", "--out", str(out)]) == 0
     assert calls == list(STEPS) + [s for s in STEPS if s != "full"]
     doc = json.loads((out / "scale-lod.json").read_text())
@@ -125,16 +125,15 @@ def test_keep_scenes(tmp_path, monkeypatch, shared_scenes):
 def test_refusals(tmp_path, capsys, monkeypatch):
     _refused(capsys, ["bench", "--scale", "--lod", "--frames", "3"],
              "splatgl: error: --frames: not read by --scale --lod (it measures the default cut of "
-             "SH0 scenes; the options are --sizes, --width, --height, --lod-memory, "
+             "SH0 scenes; the options are --sizes, --width, --height, --memory, "
              "--keep-scenes, --out)")
     _refused(capsys, ["bench", "--scale", "--keep-scenes"],
-             "splatgl: error: --keep-scenes: options of the out-of-core scale benchmark; add "
+             "splatgl: error: --keep-scenes: an option of the out-of-core scale benchmark; add "
              "--scale --lod")
-    _refused(capsys, ["bench", "--lod", "--lod-memory", "1G"],
-             "splatgl: error: --lod-memory: options of the out-of-core scale benchmark; add "
-             "--scale --lod")
-    _refused(capsys, ["bench", "--scale", "--lod", "--lod-memory", "3X"],
-             "splatgl: error: --lod-memory: expected a size such as 200M, 1.5G or 4GiB, got '3X'")
+    _refused(capsys, ["bench", "--lod", "--memory", "1G"],   # bench --memory streams one SCENE
+             "splatgl: error: --memory streams one level of detail in one process; not with --lod")
+    _refused(capsys, ["bench", "--scale", "--lod", "--memory", "3X"],
+             "splatgl: error: --memory: expected a size such as 200M, 1.5G or 4GiB, got '3X'")
     _refused(capsys, ["bench", "--scale", "--lod", "--json"],
              "splatgl: error: --json: --scale --lod writes its JSON with --out DIR")
     out = tmp_path / "out"
@@ -147,6 +146,26 @@ def test_refusals(tmp_path, capsys, monkeypatch):
     assert main(["bench", "--scale", "--lod", "--sizes", "20k"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1].startswith("splatgl: error: --scale --lod: ") and "shared real scene not found" in err[-1]
+
+
+def test_memory_is_the_one_budget_option(monkeypatch, capsys):
+    """--scale --lod takes --memory, parsed and defaulted as splatgl lod's (issue 39 item 8: the
+    old --lod-memory is gone); the library's default is the same."""
+    from splatgl.lod.budget import default_budget
+    from splatgl.measure.bench import machine
+
+    seen = []
+    monkeypatch.setattr(machine, "probe_machine", lambda: {"cpu": "test"})
+    monkeypatch.setattr(machine, "describe", lambda m: "test machine")
+    monkeypatch.setattr(scale_lod, "run_scale_lod",
+                        lambda options, out, m, log: seen.append(options) or {"rows": []})
+    assert main(["bench", "--scale", "--lod", "--sizes", "20k", "--memory", "1.5G"]) == 0
+    assert main(["bench", "--scale", "--lod", "--sizes", "20k"]) == 0
+    assert [o.memory for o in seen] == [int(1.5 * (1 << 30)), default_budget()[0]]
+    assert ScaleLodOptions().memory == default_budget()[0]
+    capsys.readouterr()
+    assert main(["bench", "--scale", "--lod", "--lod-memory", "2G"]) == 2
+    assert "unrecognized arguments: --lod-memory" in capsys.readouterr().err
 
 
 @pytest.mark.slow

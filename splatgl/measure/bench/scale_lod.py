@@ -24,11 +24,11 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from ...errors import SplatglError
-from ...lod.budget import format_size
+from ...lod.budget import default_budget, format_size
 from .real_scenes import REAL_SOURCES, shared_scenes_dir, shared_scenes_help
 
 #: Default sizes (splats).
@@ -50,14 +50,15 @@ HEADROOM = 2 << 30
 
 @dataclass(frozen=True)
 class ScaleLodOptions:
-    """sizes: splats per scene.  memory: bytes of the build's and the streaming's budget.
+    """sizes: splats per scene.  memory: bytes of the build's and the streaming's budget
+    (default: ``splatgl lod --memory``'s, :func:`splatgl.lod.budget.default_budget`).
     width, height: frames.  scratch: folder of the scene files (default: a new folder in the
     temp dir).  keep_scenes: leave them there.  available: bytes of memory a full-detail
     render may use (default: MemAvailable).  speed: the flight's speed (tests fly faster).
     branching: of the level of detail.  block: rows of the scene written at a time."""
 
     sizes: tuple[int, ...] = SIZES
-    memory: int = 2 << 30
+    memory: int = field(default_factory=lambda: default_budget()[0])
     width: int = 1280
     height: int = 720
     scratch: Path | None = None
