@@ -9,6 +9,7 @@ import math
 from ..measure.bench.lod_bench import PATH_SETS
 from ..measure.bench.scale import SH3_SIZES, SIZES, parse_sizes
 from ..errors import SplatglError
+from ._frame_budget import add_target_fps_argument
 from ._outputs import check_out_folder
 
 
@@ -228,9 +229,8 @@ def add_interactive_arguments(p: argparse.ArgumentParser) -> None:
                         "render, time from rest to exact, input latency (see "
                         "splatgl/measure/bench/flight.py). Default scenes: the shared real files and a "
                         "1M-splat scene built from them (--real-splats)")
-    p.add_argument("--target-fps", type=float, default=None, metavar="F",
-                   help="--interactive's frame-time budget (default: 10 on software OpenGL, 60 on "
-                        "a GPU, as splatgl view)")
+    add_target_fps_argument(p, "--interactive's frame-time budget in frames a second, as "
+                               "splatgl view's")
     p.add_argument("--exact", choices=("quad", "cpu"), default="quad",
                    help="--interactive: the renderer of the exact frame at rest, which the moving "
                         "frames are scored against (cpu: the CPU renderer after quad drafts, as "

@@ -15,6 +15,7 @@ from ..datasets import load_source, select_indices
 from ..errors import SplatglError
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
+from ._frame_budget import add_target_fps_argument
 from ..imagefiles.layer_files import check_exact_ids
 from ..output.layers import BASE
 from ..imagefiles.frame_record import FrameRecord, options_digest, scene_digest
@@ -78,9 +79,7 @@ def add_path_arguments(p: argparse.ArgumentParser) -> None:
                         "camera, within a frame-time budget (a lower render scale, a level-of-detail "
                         "cut and SH degree as needed, upscaled to full size); the levels used are "
                         "printed. For checking a path before the exact render")
-    g.add_argument("--target-fps", type=float, default=None, metavar="F",
-                   help="--preview's frame-time budget in frames a second (default: 10 on software "
-                        "OpenGL such as llvmpipe, 60 on a GPU)")
+    add_target_fps_argument(g, "--preview's frame-time budget in frames a second")
     executor = add_executor_arguments(p, "contiguous chunks of the path (a video is encoded here "
                                          "once every frame exists; its frames wait in "
                                          ".NAME.mp4.frames/, kept for --resume if the run stops)",

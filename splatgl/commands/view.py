@@ -17,6 +17,7 @@ from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       camera_from_args, check_convention, demo_scene_path, load_scene_arg,
                       settings_from_args)
+from ._frame_budget import add_target_fps_argument
 from ._memory import STREAM_HELP, add_memory_argument, memory_given
 
 NAME = "view"
@@ -57,12 +58,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--benchmark", type=int, default=None, metavar="FRAMES",
                    help="render FRAMES frames of a scripted orbit, print the frame rate and exit "
                         "(every frame exact unless --target-fps is given)")
-    p.add_argument("--target-fps", type=float, default=None, metavar="F",
-                   help="frame-time budget while the camera moves: frames are drawn at a lower "
-                        "render scale, a level-of-detail cut and a lower SH degree as needed to "
-                        "reach F frames a second, then refined to the exact image once the camera "
-                        "rests (default: 10 on software OpenGL such as llvmpipe, 60 on a GPU; "
-                        "0: every frame exact)")
+    add_target_fps_argument(p, "frame-time budget while the camera moves: frames are drawn at "
+                               "a lower render scale, a level-of-detail cut and a lower SH degree "
+                               "as needed to reach F frames a second, then refined to the exact "
+                               "image once the camera rests", zero="every frame exact")
     p.add_argument("--no-vsync", action="store_true", help="do not wait for the display refresh")
     add_memory_argument(p, STREAM_HELP + "; the window draws what is resident and refines as "
                            "chunks arrive, screenshots wait for theirs")

@@ -142,3 +142,19 @@ def test_view_errors_have_the_prefix_of_every_command(tmp_path, capsys):
     assert err.endswith(" (see splatgl view --help)\n") and len(err.splitlines()) == 1
     code, out, err = _run(capsys, "view", str(tmp_path / "missing.ply"))
     assert code == 2 and err.startswith("splatgl: error: ") and len(err.splitlines()) == 1
+
+
+def test_target_fps_is_one_option_in_every_command():
+    """view, render --path --preview and bench --interactive add --target-fps through one helper
+    (commands/_frame_budget.py): the same parsing and the default the library uses."""
+    from splatgl.cli import build_parser
+    from splatgl.interactive.session import GPU_FPS, SOFTWARE_FPS
+
+    parser = build_parser()
+    subs = next(a for a in parser._actions if hasattr(a, "choices") and isinstance(a.choices, dict))
+    default = (f"(default: {SOFTWARE_FPS:g} on software OpenGL such as llvmpipe, {GPU_FPS:g} on "
+               "a GPU")
+    for command in ("view", "render", "bench"):
+        action = next(a for a in subs.choices[command]._actions if "--target-fps" in a.option_strings)
+        assert (action.type, action.default, action.metavar) == (float, None, "F")
+        assert default in " ".join(action.help.split()), command
