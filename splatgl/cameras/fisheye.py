@@ -29,7 +29,7 @@ import numpy as np
 
 from ..constants import FISHEYE_SERIES_RHO, FISHEYE_THETA_CAP, FISHEYE_THETA_MARGIN
 from ..errors import CameraError
-from .model import CameraModel, CullKind, colmap_intrinsics
+from .model import CullKind, LensDistortion, colmap_intrinsics
 
 if TYPE_CHECKING:
     from .camera import Camera
@@ -103,21 +103,18 @@ def _fisheye_s_c2(p: np.ndarray, k) -> tuple[np.ndarray, ...]:
 
 
 @dataclass(frozen=True)
-class Fisheye(CameraModel):
+class Fisheye(LensDistortion):
     """``k``: the distortion coefficients k1..k4 of ``theta_d`` (zeros: equidistant)."""
 
     k: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
 
     name: ClassVar[str] = "fisheye"
-    glsl: ClassVar[str] = "fisheye"
     cull: ClassVar[CullKind] = CullKind.SPHERE
-    draws_surfels: ClassVar[bool] = False
     summary: ClassVar[str] = ("OpenCV's fisheye model, equidistant by default (--fov: the image "
                               "circle's field of view, default 180, up to 360)")
     colmap_names: ClassVar[tuple[str, ...]] = tuple(COLMAP_MODELS)
     transforms_names: ClassVar[tuple[str, ...]] = ("OPENCV_FISHEYE",)
     transforms_fields: ClassVar[tuple[str, ...]] = ("k1", "k2", "k3", "k4")
-    json_fields: ClassVar[tuple[str, ...]] = ("distortion",)
 
     def __post_init__(self) -> None:
         k = tuple(float(v) for v in self.k)

@@ -66,7 +66,7 @@ class CameraModel:
 
     #: The model's name: the CLI's ``--projection`` value and the camera files' "projection".
     name: ClassVar[str] = ""
-    #: Its shader piece, ``shaders/cameras/<glsl>.glsl``.
+    #: Its shader piece, ``shaders/cameras/<glsl>.glsl`` (a model that does not set it: its name).
     glsl: ClassVar[str] = ""
     #: How the order stage culls for it.
     cull: ClassVar[CullKind] = CullKind.FRUSTUM
@@ -97,6 +97,11 @@ class CameraModel:
     #: Its own fields of the single-camera JSON (:meth:`from_json`), e.g. ``distortion``: a
     #: camera file giving one of another model's is refused (it would be ignored).
     json_fields: ClassVar[tuple[str, ...]] = ()
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if "glsl" not in vars(cls):
+            cls.glsl = cls.name
 
     # ------------------------------------------------------------------ float64/float32 twins
     def project(self, p_cam: np.ndarray, camera: "Camera") -> np.ndarray:
@@ -234,6 +239,16 @@ class CameraModel:
     def to_transforms(self) -> dict[str, object]:
         """The ``transforms.json`` fields of this model: ``camera_model`` and its own fields."""
         raise CameraError(f"transforms.json has no camera model for {self.name} cameras")
+
+
+@dataclass(frozen=True)
+class LensDistortion(CameraModel):
+    """Base of the models with lens distortion coefficients (OpenCV's, the fisheye's): a camera
+    file gives them as ``distortion``, and 2DGS surfels are not drawn (their ray-plane
+    intersection needs an undistorted pinhole matrix)."""
+
+    draws_surfels: ClassVar[bool] = False
+    json_fields: ClassVar[tuple[str, ...]] = ("distortion",)
 
 
 def colmap_intrinsics(params: tuple[float, ...], focals: int) -> tuple[float, float, float, float]:

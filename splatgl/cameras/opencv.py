@@ -41,7 +41,7 @@ import numpy as np
 
 from ..constants import JACOBIAN_CLAMP
 from ..errors import CameraError
-from .model import CameraModel, CullKind, colmap_intrinsics
+from .model import LensDistortion, colmap_intrinsics
 from .pinhole import DEFAULT_FOV, Pinhole
 
 if TYPE_CHECKING:
@@ -163,7 +163,7 @@ EXTRA_TERMS = ("s1", "s2", "s3", "s4", "tauX", "tauY")
 
 
 @dataclass(frozen=True)
-class OpenCV(CameraModel):
+class OpenCV(LensDistortion):
     """OpenCV's distortion coefficients (``distCoeffs`` order: k1, k2, p1, p2, k3, k4, k5, k6)."""
 
     k1: float = 0.0
@@ -176,15 +176,11 @@ class OpenCV(CameraModel):
     k6: float = 0.0
 
     name: ClassVar[str] = "opencv"
-    glsl: ClassVar[str] = "opencv"
-    cull: ClassVar[CullKind] = CullKind.FRUSTUM
-    draws_surfels: ClassVar[bool] = False
     summary: ClassVar[str] = ("pinhole with OpenCV's radial-tangential lens distortion (from a "
                               "camera file; --fov as perspective, keeping the distortion)")
     colmap_names: ClassVar[tuple[str, ...]] = tuple(COLMAP_MODELS)
     transforms_names: ClassVar[tuple[str, ...]] = ("OPENCV",)
     transforms_fields: ClassVar[tuple[str, ...]] = ("k1", "k2", "k3", "k4", "p1", "p2")
-    json_fields: ClassVar[tuple[str, ...]] = ("distortion",)
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -21,7 +21,6 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class Orthographic(CameraModel):
     name: ClassVar[str] = "orthographic"
-    glsl: ClassVar[str] = "orthographic"
     cull: ClassVar[CullKind] = CullKind.BOX
     parallel_rays: ClassVar[bool] = True
     summary: ClassVar[str] = "parallel projection (fx, fy in pixels per world unit)"

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..constants import JACOBIAN_CLAMP
 from ..errors import CameraError
-from .model import CameraModel, CullKind, colmap_intrinsics
+from .model import CameraModel, colmap_intrinsics
 
 if TYPE_CHECKING:
     from .camera import Camera
@@ -38,7 +38,6 @@ COLMAP_FOCALS = {"SIMPLE_PINHOLE": 1, "PINHOLE": 2, "SIMPLE_RADIAL": 1, "RADIAL"
 class Pinhole(CameraModel):
     name: ClassVar[str] = "perspective"
     glsl: ClassVar[str] = "pinhole"
-    cull: ClassVar[CullKind] = CullKind.FRUSTUM
     summary: ClassVar[str] = "pinhole camera (--fov: vertical field of view, default 50)"
     colmap_names: ClassVar[tuple[str, ...]] = tuple(COLMAP_FOCALS)
     transforms_names: ClassVar[tuple[str, ...]] = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE")

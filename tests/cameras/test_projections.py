@@ -108,3 +108,24 @@ def test_frustum_camera_file_and_orthographic_flag(tmp_path):
     assert main(["render", "--orthographic", "--width", "64", "--height", "48", "-o", str(tmp_path / "o.exr")]) == 0
     ortho = read_image(tmp_path / "o.exr")
     assert ortho[..., 3].max() > 0.5  # the framed demo is visible
+
+
+def test_model_declarations_shared_by_the_base():
+    """A model's shader piece defaults to its name, and the lens-distortion models share their
+    declarations through one base (issue 39 item 8): each piece exists, and the distorted
+    models read "distortion" from camera files and draw no surfels."""
+    from pathlib import Path
+
+    from splatgl.cameras.model import LensDistortion
+    from splatgl.cameras.registry import MODELS
+
+    shaders = Path(__file__).resolve().parents[2] / "shaders" / "cameras"
+    assert {m.name: m.glsl for m in MODELS.values()} == {
+        "perspective": "pinhole", "orthographic": "orthographic", "fisheye": "fisheye",
+        "equirectangular": "equirect", "opencv": "opencv"}
+    for m in MODELS.values():
+        assert (shaders / f"{m.glsl}.glsl").is_file(), m.name
+        assert m().defines()["CAMERA_MODEL"] == m.glsl
+    lens = sorted(m.name for m in MODELS.values() if issubclass(m, LensDistortion))
+    assert lens == ["fisheye", "opencv"]
+    assert all(not MODELS[n].draws_surfels and MODELS[n].json_fields == ("distortion",) for n in lens)
