@@ -95,6 +95,19 @@ def test_what_each_renderer_reads_is_its_options_fields():
         registry.check_settings(RenderSettings(extent="square"), "tile")
 
 
+def test_options_fields_are_the_settings_own_declared_once():
+    """Each options class's fields take their type and default from RenderSettings (declared
+    there once, named by options.reads; issue 39 item 8), so a default changed there is the
+    renderers' default too."""
+    settings = {f.name: f for f in dataclasses.fields(RenderSettings)}
+    for cls in (options.DrawOptions, options.QuadOptions, options.TileOptions, options.CpuOptions,
+                options.ReferenceRendererOptions):
+        for f in dataclasses.fields(cls):
+            assert (f.type, f.default) == (settings[f.name].type, settings[f.name].default), f.name
+        assert cls() == cls.of(RenderSettings())
+    assert "precision:" not in Path(options.__file__).read_text()   # not declared again there
+
+
 def test_options_for_takes_each_renderers_part_of_the_settings_in_one_place():
     from splatgl.scene.emulation import Emulation
 
