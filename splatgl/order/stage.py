@@ -22,7 +22,8 @@ from typing import Callable, NamedTuple, Protocol
 import numpy as np
 
 from ..cameras.model import CullKind
-from ..cameras.view import View
+from ..cameras.view import Frustum, View
+from ..constants import JACOBIAN_CLAMP
 from ..scene.splats import Scene
 from ..scene.settings import RenderSettings, SortKey
 from ..splatmath.project import to_camera
@@ -60,12 +61,38 @@ class RowSource(Protocol):
         ...
 
 
-def _planes_scene(chunks: ChunkedCull, view: View, antialias: bool) -> np.ndarray:
+def _planes_scene(chunks: ChunkedCull, view: View, antialias: bool,
+                  ewa: bool = False) -> np.ndarray:
+    scale = view.scale * (ewa_widening(view.frustum) if ewa else 1.0)
     if view.frustum.peak:
-        return chunks.visible_keys(view.anchored, view.near, antialias, view.scale)
+        return chunks.visible_keys(view.anchored, view.near, antialias, scale)
     # a model with its own cull frustum (lens distortion): every row against its planes
-    idx, z = cull_visible(chunks.data, view.anchored, view.near, antialias, view.scale)
+    idx, z = cull_visible(chunks.data, view.anchored, view.near, antialias, scale)
     return depth_keys(z, chunks.index[idx])
+
+
+def ewa_widening(frustum: Frustum) -> float:
+    """The factor on the world radii that makes the planes' cull keep every splat whose EWA
+    footprint can reach alpha 1/255 on a pixel of the image (the conservative mode, which the
+    CPU renderer runs: its image must be the one every row gives).
+
+    A footprint's extent along x is ``k sqrt(Sxx + LOW_PASS)`` pixels, ``Sxx <= |J_x|^2 s^2``
+    with ``|J_x| = f sqrt(1 + a^2) / z`` and ``a`` the slope ``x / z`` clamped inside the
+    Jacobian (at most ``C = max(|lo|, |hi|) + (JACOBIAN_CLAMP - 1) / 2 (hi - lo)`` from the
+    axis: a centred pinhole's ``JACOBIAN_CLAMP tan(half fov)``).  A splat past a side plane of
+    slope ``e`` by ``d`` reaches ``d sqrt(1 + e^2) f / z`` pixels beyond the edge: the plane's
+    test ``d <= r + MARGIN_PX z / f`` holds every such footprint once ``r`` is widened by
+    ``sqrt(1 + C^2) / sqrt(1 + e^2)`` (the margin covers ``k sqrt(LOW_PASS)`` <= 1.83 px).  The
+    sphere's own test (``r`` against the true slopes) can miss a large splat just past a wide
+    image's edge, whose clamped Jacobian is steeper than the plane's slope.  1 for a BOX
+    (orthographic: no clamp, ``|J_x| = f``)."""
+    if frustum.kind is not CullKind.FRUSTUM:
+        return 1.0
+    factor = 1.0
+    for _f, lo, hi in frustum.edges:
+        c = max(abs(lo), abs(hi)) + 0.5 * (JACOBIAN_CLAMP - 1.0) * (hi - lo)
+        factor = max(factor, np.sqrt((1.0 + c * c) / (1.0 + min(lo * lo, hi * hi))))
+    return float(factor)
 
 
 def _planes_rows(data: CullData, rows: np.ndarray, view: View, antialias: bool, kern=None,
@@ -74,7 +101,8 @@ def _planes_rows(data: CullData, rows: np.ndarray, view: View, antialias: bool, 
                      kern if view.frustum.peak else None, out)
 
 
-def _sphere_scene(chunks: ChunkedCull, view: View, antialias: bool) -> np.ndarray:
+def _sphere_scene(chunks: ChunkedCull, view: View, antialias: bool,
+                  ewa: bool = False) -> np.ndarray:   # the centre's rules alone: as conservative
     return lens_visible_keys(chunks, view.anchored, view.near, view.scale)
 
 
@@ -91,8 +119,9 @@ class Cull(NamedTuple):
     | index`` (:func:`splatgl.order.sort.depth_keys`; an equirectangular seam copy's index with
     :data:`~splatgl.cameras.equirect.WRAP_FLAG`)."""
 
-    #: ``(chunks, view, antialias)``: the splats of a scene's chunked cull data, by scene index.
-    scene: Callable[[ChunkedCull, View, bool], np.ndarray]
+    #: ``(chunks, view, antialias, ewa=False)``: the splats of a scene's chunked cull data, by
+    #: scene index; ``ewa``: the conservative mode (:func:`ewa_widening`).
+    scene: Callable[..., np.ndarray]
     #: ``(data, rows, view, antialias, kern=None, out=None)``: the rows ``rows`` (ascending) of
     #: ``data`` (a level-of-detail cut's), by row; ``kern`` the compiled kernels or None,
     #: ``out`` a key buffer to write into.

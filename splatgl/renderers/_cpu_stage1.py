@@ -52,11 +52,27 @@ class Stage1:
             self._anchor = key, np.ascontiguousarray(rel, np.float32)
         return self._anchor[1]
 
-    def pinhole(self, view: View, parts: Iterable[tuple[int, int]]):
+    def inputs(self, view: View, rows: np.ndarray | None):
+        """``(means - anchor, R S, opacities, SH)`` of the scene rows ``rows`` (ascending, the
+        view's cull's: :meth:`splatgl.renderers.cpu.CpuRenderer.kept_rows`), or of every row
+        (None: no copy).  A copy keeps its source's read-only flag (numba compiles each apart)."""
+        arrays = (self.relative_means(view.anchor), self._rs, self._opacity, self._sh)
+        if rows is None:
+            return arrays
+        out = []
+        for a in arrays:
+            part = a[rows]
+            part.flags.writeable = a.flags.writeable
+            out.append(part)
+        return tuple(out)
+
+    def pinhole(self, view: View, parts: Iterable[tuple[int, int]], rows: np.ndarray | None = None):
         """Stage 1 for a pinhole camera, compiled: (mean2d, conic, opacity, reach, colour,
-        depth, box, rect) of every splat, computed over the row ranges ``parts`` in turn (the
+        depth, box, rect) of every splat (of the scene rows ``rows`` only, one output row each,
+        with ``rows``: see :meth:`inputs`), computed over the row ranges ``parts`` in turn (the
         caller may check for input between them)."""
-        n = self.count
+        rel, rs, opacity, sh = self.inputs(view, rows)
+        n = rel.shape[0]
         cam = anchored_camera(view.camera, view.anchor)
         tx, ty = cam.tan_half_fov
         params = np.concatenate([
@@ -67,40 +83,42 @@ class Stage1:
              LOW_PASS if view.low_pass is None else view.low_pass]])
         grid = tile_grid(cam.width, cam.height)
         out = outputs(n)
-        rel, center = self.relative_means(view.anchor), np.asarray(cam.center, np.float32)
+        center = np.asarray(cam.center, np.float32)
         for a, b in parts:
             self.kernels.project_pinhole(
-                rel[a:b], self._rs[a:b], self._opacity[a:b], self._sh[a:b], self._coeffs, params,
+                rel[a:b], rs[a:b], opacity[a:b], sh[a:b], self._coeffs, params,
                 center, float(grid[0]), float(grid[1]), self.antialias, *(o[a:b] for o in out))
         return out
 
-    def model(self, view: View, parts: Iterable[tuple[int, int]]):
+    def model(self, view: View, parts: Iterable[tuple[int, int]], rows: np.ndarray | None = None):
         """Stage 1 for every other camera model (fisheye, OpenCV distortion, orthographic,
         equirectangular): the model's own NumPy methods give each part's camera-space points,
         pixel positions, Jacobians, culling and depths, as in the reference's stage 1; the rest
         is :func:`~._cpu_project.project_model`, compiled.  A panorama then gets the
         reference's second rows for splats that may reach across its seam, and every box is
         cut to half a turn around its splat (:func:`clip_to_half_turn`).  ``parts`` as in
-        :meth:`pinhole`."""
-        n, f32 = self.count, np.float32
+        :meth:`pinhole`, and so ``rows``."""
+        f32 = np.float32
+        rel, rs, opacity, sh = self.inputs(view, rows)
+        n = rel.shape[0]
         cam = anchored_camera(view.camera, view.anchor)
         model, near = cam.model, view.near_in(f32)
         period = model.seam_period(cam)
         params = np.concatenate([np.asarray(cam.rotation, np.float64).ravel(),
                                  [LOW_PASS if view.low_pass is None else view.low_pass]])
         grid = tile_grid(cam.width, cam.height)
-        rel, center = self.relative_means(view.anchor), np.asarray(cam.center, f32)
+        center = np.asarray(cam.center, f32)
         uv, jac = np.empty((n, 2), f32), np.empty((n, 2, 3), f32)
         visible, p_cam = np.empty(n, np.bool_), np.empty((n, 3), f32)
         out = outputs(n)
 
-        def finish(rows, into: slice, u, ok):   # the compiled rest: scene rows -> out[into]
+        def finish(part, into: slice, u, ok):   # the compiled rest: input rows -> out[into]
             # the scene's opacities and SH are read-only, and so their slices; the seam copies'
             # rows (fancy indexing) are made so too: numba compiles each flag apart (9 s here)
             self.kernels.project_model(
-                rel[rows], self._rs[rows], _read_only(self._opacity[rows]),
-                _read_only(self._sh[rows]), self._coeffs, params, center, float(grid[0]),
-                float(grid[1]), self.antialias, u, jac[rows], ok,
+                rel[part], rs[part], _read_only(opacity[part]),
+                _read_only(sh[part]), self._coeffs, params, center, float(grid[0]),
+                float(grid[1]), self.antialias, u, jac[part], ok,
                 *(o[into] for i, o in enumerate(out) if i != 5))
 
         for a, b in parts:
@@ -117,7 +135,8 @@ class Stage1:
         if self._reach is None or self._reach[0] != cam.scale:
             self._reach = cam.scale, splat_reach(self.scene.scales.max(axis=1) * cam.scale,
                                                  self.scene.opacities)
-        dup = np.flatnonzero(visible & wrap_copies(p_cam, self._reach[1], cam))
+        reach = self._reach[1] if rows is None else self._reach[1][rows]
+        dup = np.flatnonzero(visible & wrap_copies(p_cam, reach, cam))
         out = tuple(np.concatenate([o, o[dup]]) for o in out)   # depth and shapes for the copies
         shifted = uv[dup]
         shifted[:, 0] += wrap_shift(shifted[:, 0], cam)

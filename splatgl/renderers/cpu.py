@@ -14,6 +14,9 @@ It needs numba (the ``fast`` extra) and draws 3DGS splats with colour, alpha and
 layer, under the inria rules, with the global order.  Pinhole cameras project in a compiled
 pass too; every other camera model the reference draws (fisheye, equirectangular, OpenCV
 distortion, orthographic) projects with the reference's NumPy stage 1, which is slower.
+Only the splats the view's cull keeps are projected (:meth:`CpuRenderer.kept_rows`: the table
+:data:`splatgl.order.stage.CULLS`, which the scene and level-of-detail orders run too, in its
+conservative mode); the image is the one projecting every splat gives.
 """
 
 from __future__ import annotations
@@ -32,7 +35,11 @@ from ..scene.settings import RendererKind, RenderSettings
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderLayer
 from ..progress import ProgressCallback, default_progress
+from ..cameras.equirect import WRAP_FLAG
+from ..constants import LOW_PASS
+from ..order.chunks import ChunkedCull
 from ..order.sort import depth_sort
+from ..order.stage import cull_for
 from ..reference.stages import tile_grid
 from ._cpu_stage1 import Stage1
 from .options import CpuOptions
@@ -177,6 +184,7 @@ class CpuRenderer(Registered):
         self.stage1 = Stage1(scene, options, self.k)
         self._tiles: dict[tuple, list[np.ndarray]] = {}     # the bands of each grid
         self._rec = np.empty((0, self.k.REC_SIZE), np.float32)   # the splat records, reused
+        self._chunks: ChunkedCull | None = None   # the view's cull's data, on the first frame
 
     def render(self, view: View, layers: frozenset[Layer] = BASE,
                under: UnderLayer | None = None) -> RenderOutput:
@@ -215,9 +223,10 @@ class CpuRenderer(Registered):
             if on_batch is not None:
                 on_batch(done, n_tiles)
 
-        parts = _parts(self.scene.count, checkpoint)
-        mean2d, conic, opacity, reach, color, z, box, rect = (
-            self.stage1.pinhole(view, parts) if view.frustum.pinhole else self.stage1.model(view, parts))
+        rows = self.kept_rows(view)
+        parts = _parts(self.scene.count if rows is None else rows.size, checkpoint)
+        project = self.stage1.pinhole if view.frustum.pinhole else self.stage1.model
+        mean2d, conic, opacity, reach, color, z, box, rect = project(view, parts, rows)
         t1 = time.perf_counter()
         checkpoint()
         order = depth_order(z, rect)
@@ -236,6 +245,22 @@ class CpuRenderer(Registered):
         self.last_times = CpuTimes(t1 - t0, t2 - t1, t3 - t2, t4 - t3, int(rows.shape[0]),
                                    int(order.shape[0]))
         return rgba, depth if with_depth else None
+
+    def kept_rows(self, view: View) -> np.ndarray | None:
+        """(K,) int64 scene rows, ascending, that the view's cull keeps (:func:`cull_for`: the
+        table the scene order and the level-of-detail order run), or None (every row).  Only
+        those rows are projected; the rest could not have had a tile rectangle, so the image
+        is the one every row gives.  None for a draft's smaller low pass (the peak bound
+        assumes the full one) and a view not anchored at the scene's anchor (the cull data's)."""
+        if (view.low_pass is not None and view.low_pass < LOW_PASS
+                or not np.array_equal(view.anchor, self.scene.anchor)):
+            return None
+        if self._chunks is None:
+            self._chunks = ChunkedCull.from_scene(self.scene)
+        keys = cull_for(view).scene(self._chunks, view, self.stage1.antialias, ewa=True)
+        kept = np.zeros(self.scene.count, np.bool_)
+        kept[(keys & np.uint64(0xFFFFFFFF)).astype(np.uint32) & ~WRAP_FLAG] = True  # seam copies
+        return np.flatnonzero(kept)
 
     def _records(self, m: int) -> np.ndarray:
         """(m, REC_SIZE) float32 for :func:`~._cpu_raster.pack`, from a buffer kept between

@@ -112,6 +112,30 @@ def test_other_camera_models_match_reference(name, monkeypatch):
     assert float(ref.alpha.max()) > 0.5
 
 
+@pytest.mark.parametrize("name", ["pinhole", "pinhole-wide", "fisheye", "fisheye-wide",
+                                  "fisheye-k", "opencv", "orthographic", "equirectangular"])
+def test_it_projects_the_rows_its_views_cull_keeps_and_draws_every_rows_image(name, monkeypatch):
+    """Only the rows the view's cull keeps are projected (:func:`splatgl.order.stage.cull_for`,
+    the table the scene and level-of-detail orders use, in its conservative mode), and the
+    image and depth are the ones every row gives, bit for bit.  Large splats all around the
+    camera; through the wide pinhole some lie just past the image's edge, where the clamped
+    EWA Jacobian's footprint reaches further than the splat's sphere
+    (:func:`splatgl.order.stage.ewa_widening`: without it, 4 pixels differ)."""
+    scene = random_scene(4000, 2, degree=1, **dict(IN_VIEW, center=(0.0, 0.0, 1.5),
+                                                   spread=(3.0, 2.5, 3.0), log_scale=(-3.0, 0.8)))
+    camera = {"pinhole": CAM, "pinhole-wide": Camera.from_fov(160, 112, 120.0)}.get(name)
+    camera = camera or _model_camera(name)
+    renderer = cpu.CpuRenderer(scene, RenderSettings())     # the kernels warmed up first
+    kinds, real = [], cpu.cull_for
+    monkeypatch.setattr(cpu, "cull_for", lambda view: kinds.append(view.frustum.kind) or real(view))
+    view = view_of(camera, scene, RenderSettings())
+    rgba, depth = renderer.draw(view, with_depth=True)
+    assert kinds == [view.frustum.kind] and 0 < renderer.kept_rows(view).size < scene.count
+    monkeypatch.setattr(renderer, "kept_rows", lambda view: None)
+    every_rgba, every_depth = renderer.draw(view, with_depth=True)
+    assert np.array_equal(rgba, every_rgba) and np.array_equal(depth, every_depth)
+
+
 def test_a_fisheye_frame_cut_into_pieces_is_the_same_frame(monkeypatch):
     scene = random_scene(3000, 4, degree=2, **IN_VIEW)
     camera = _model_camera("fisheye")
