@@ -13,6 +13,43 @@ from ._frame_budget import add_target_fps_argument
 from ._outputs import check_out_folder
 
 
+#: The benchmarks ``splatgl bench`` runs instead of the scene benchmark: each flag and its help.
+MODES = {
+    "interactive": "the interactive benchmark instead: a scripted 10 s camera flight (orbit, "
+                   "fly-in, rest) through the viewer's frame-time budget on each scene: frames a "
+                   "second while moving, PSNR of the moving frames against the exact render, time "
+                   "from rest to exact, input latency (see splatgl/measure/bench/flight.py). "
+                   "Default scenes: the shared real files and a 1M-splat scene built from them "
+                   "(--real-splats)",
+    "scale": "the scale benchmark instead: scenes of --sizes splats built from the shared real "
+             "files (and one SH3 size), load time, peak memory, GPU bytes per splat, "
+             "cull/sort/pre-pass/draw and tile frame times, CPU and GPU sort, log-log slopes (see "
+             "splatgl/measure/bench/scale.py); with --lod: scenes larger than memory (default "
+             "1M,5M,20M,100M) written to a scratch folder, their out-of-core level of detail, lazy "
+             "open, streamed first frame, flight and far-view PSNR, each step's time and peak "
+             "memory (splatgl/measure/bench/scale_lod.py)",
+    "lod": "the level-of-detail benchmark instead: scenes of --sizes splats (default 3M,6M) and "
+           "their hierarchies, frame time, PSNR/SSIM against full detail and popping between "
+           "frames along camera paths, per cut (see splatgl/measure/bench/lod_bench.py)",
+    "popping": "the popping benchmark instead: an orbit and a fly-through in small steps of each "
+               "scene (default: the shared real scenes), every pair of frames warped and scored "
+               "for popping, the global order against the per-pixel order on the quad path, tile "
+               "renderer and reference (default 640x360, 16 frames a path, --frames at least 2; "
+               "see splatgl/measure/bench/popping_bench.py and docs/fidelity.md)",
+}
+
+
+def add_mode_arguments(p: argparse.ArgumentParser) -> None:
+    """``--interactive``, ``--scale``, ``--lod``, ``--popping`` (:data:`MODES`)."""
+    for name, help in MODES.items():
+        p.add_argument(f"--{name}", action="store_true", help=help)
+
+
+def modes_given(args: argparse.Namespace) -> list[str]:
+    """The flags of :data:`MODES` given, in its order (``--scale --lod`` is two)."""
+    return [f"--{name}" for name in MODES if getattr(args, name)]
+
+
 def add_lod_arguments(p: argparse.ArgumentParser) -> None:
     """The --lod options of ``splatgl bench``."""
     p.add_argument("--lod-thresholds", default=None, metavar="LIST",
@@ -109,13 +146,6 @@ def add_popping_arguments(p: argparse.ArgumentParser) -> None:
     from ..measure.bench.popping_bench import CONFIGS
     from ..measure.evaluation.popping import METRICS
 
-    p.add_argument("--popping", action="store_true",
-                   help="the popping benchmark instead: an orbit and a fly-through in small steps "
-                        "of each scene (default: the shared real scenes), every pair of frames "
-                        "warped and scored for popping, the global order against the per-pixel "
-                        "order on the quad path, tile renderer and reference (default 640x360, 16 "
-                        "frames a path, --frames at least 2; see splatgl/measure/bench/popping_bench.py and "
-                        "docs/fidelity.md)")
     p.add_argument("--popping-configs", default=None, metavar="LIST",
                    help="--popping configurations, comma-separated: " + ", ".join(CONFIGS)
                         + " (default all)")
@@ -222,13 +252,6 @@ def run_scale_command(args: argparse.Namespace) -> int:
 
 def add_interactive_arguments(p: argparse.ArgumentParser) -> None:
     """The --interactive options of ``splatgl bench``."""
-    p.add_argument("--interactive", action="store_true",
-                   help="the interactive benchmark instead: a scripted 10 s camera flight (orbit, "
-                        "fly-in, rest) through the viewer's frame-time budget on each scene: "
-                        "frames a second while moving, PSNR of the moving frames against the exact "
-                        "render, time from rest to exact, input latency (see "
-                        "splatgl/measure/bench/flight.py). Default scenes: the shared real files and a "
-                        "1M-splat scene built from them (--real-splats)")
     add_target_fps_argument(p, "--interactive's frame-time budget in frames a second, as "
                                "splatgl view's")
     p.add_argument("--exact", choices=("quad", "cpu"), default="quad",

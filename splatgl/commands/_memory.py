@@ -71,17 +71,17 @@ def streamed_frames(args: argparse.Namespace, settings, memory: int):
     return StreamFrames(scene, settings, LodSettings(**given), memory)
 
 
-def run_stream_bench(args: argparse.Namespace, sharded: bool) -> int:
+def run_stream_bench(args: argparse.Namespace, sharded: bool, modes: list[str]) -> int:
     """``splatgl bench SCENE.lod.ply --memory SIZE``: :func:`splatgl.measure.bench.stream_bench.run_stream`
-    (its figures printed, or as JSON with --json)."""
+    (its figures printed, or as JSON with --json); ``modes``: the other benchmarks' flags given
+    (:func:`._bench_modes.modes_given`), refused."""
     from ..measure.bench.stream_bench import describe, run_stream
     from ..errors import SplatglError
     from ..lod.io import is_lod_file
     from ._json_output import emit_json, json_to_stdout
 
-    others = [m for m, on in (("--interactive", args.interactive), ("--scale", args.scale),
-                              ("--lod", args.lod), ("--popping", args.popping), ("--out", args.out),
-                              ("--workers/--executor ray", sharded)) if on]
+    others = modes + [m for m, on in (("--out", args.out), ("--workers/--executor ray", sharded))
+                      if on]
     if others:
         raise SplatglError(f"--memory streams one level of detail in one process; not with "
                            f"{', '.join(others)}")

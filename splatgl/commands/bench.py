@@ -25,10 +25,11 @@ from ..writing.outputs import OutputFiles
 from ..progress import StderrProgress, default_progress, enabled
 from ..api import Renderer
 from ..scene.settings import RenderSettings
-from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_popping_arguments,
-                           add_scale_lod_arguments, check_interactive_options,
-                           check_scale_lod_options, run_interactive_command, run_lod_command,
-                           run_popping_command, run_scale_command, run_scale_lod_command)
+from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_mode_arguments,
+                           add_popping_arguments, add_scale_lod_arguments,
+                           check_interactive_options, check_scale_lod_options, modes_given,
+                           run_interactive_command, run_lod_command, run_popping_command,
+                           run_scale_command, run_scale_lod_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
 from ._memory import STREAM_HELP, add_memory_argument, run_stream_bench
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
@@ -96,20 +97,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "picture there")
     add_force_argument(p)
     add_json_argument(p, "the rows and the machine (bench.json's content)")
-    p.add_argument("--scale", action="store_true",
-                   help="the scale benchmark instead: scenes of --sizes splats built from the "
-                        "shared real files (and one SH3 size), load time, peak memory, GPU bytes "
-                        "per splat, cull/sort/pre-pass/draw and tile frame times, CPU and GPU "
-                        "sort, log-log slopes (see splatgl/measure/bench/scale.py); with --lod: scenes "
-                        "larger than memory (default 1M,5M,20M,100M) written to a scratch folder, "
-                        "their out-of-core level of detail, lazy open, streamed first frame, "
-                        "flight and far-view PSNR, each step's time and peak memory "
-                        "(splatgl/measure/bench/scale_lod.py)")
-    p.add_argument("--lod", action="store_true",
-                   help="the level-of-detail benchmark instead: scenes of --sizes splats (default "
-                        "3M,6M) and their hierarchies, frame time, PSNR/SSIM against full detail "
-                        "and popping between frames along camera paths, per cut (see "
-                        "splatgl/measure/bench/lod_bench.py)")
+    add_mode_arguments(p)
     p.add_argument("--sizes", default=None, metavar="LIST",
                    help="--scale sizes, e.g. 0.1M,0.3M,1M,3M,6M (the default); 'k' and 'M' suffixes; "
                         "--lod sizes (default 3M,6M)")
@@ -192,9 +180,9 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
     if args.memory is not None and not (args.scale and args.lod):   # --scale --lod: its budget
-        return run_stream_bench(args, executor.sharded)
+        return run_stream_bench(args, executor.sharded, modes_given(args))
     if args.popping:
-        if args.interactive or args.scale or args.lod or executor.sharded or args.json is not None:
+        if modes_given(args) != ["--popping"] or executor.sharded or args.json is not None:
             raise SplatglError("--popping runs alone in one process (not with --interactive, "
                                "--scale, --lod, --workers, --executor ray or --json; --out DIR "
                                "writes popping.json)")
@@ -205,8 +193,7 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(f"{', '.join(given)}: {'options' if len(given) > 1 else 'an option'} "
                            "of the popping benchmark; add --popping")
     check_scale_lod_options(args)
-    modes = [m for m, on in (("--interactive", args.interactive), ("--scale", args.scale),
-                             ("--lod", args.lod)) if on]
+    modes = modes_given(args)   # not --popping: it ran alone above
     if modes == ["--scale", "--lod"]:   # one benchmark: scenes larger than memory
         modes = ["--scale --lod"]
     if len(modes) > 1:     # each ran alone, the others silently left out

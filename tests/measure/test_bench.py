@@ -160,3 +160,21 @@ def test_savings_rows_show_each_saving(gl_renderer):
     not_culled = [r for r in rows if r.config.endswith("off-screen, not culled")][0]
     assert off.drawn < 0.25 * n and off.drawn < 0.5 * not_culled.drawn  # culling removed most
     assert by["still camera"].frame_ms > 0 and by["moving camera (orbit)"].frame_ms > 0
+
+
+def test_benchmark_modes_are_one_table(capsys):
+    """The benchmarks bench runs instead of the scene benchmark are declared once
+    (_bench_modes.MODES): each a flag, and every refusal of two at once names them in its order."""
+    from splatgl.commands._bench_modes import MODES
+
+    assert list(MODES) == ["interactive", "scale", "lod", "popping"]
+    assert main(["bench", "--lod", "--interactive"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "splatgl: error: --interactive and --lod are separate benchmarks: run one at a time "
+        "(each writes its own JSON with --out DIR)")
+    assert main(["bench", "--popping", "--scale"]) == 2
+    assert "--popping runs alone in one process" in capsys.readouterr().err
+    assert main(["bench", "x.lod.ply", "--memory", "1G", "--popping", "--scale"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "splatgl: error: --memory streams one level of detail in one process; not with --scale, "
+        "--popping")
