@@ -70,30 +70,3 @@ def streamed_frames(args: argparse.Namespace, settings, memory: int):
         if getattr(args, option, None) is not None}
     return StreamFrames(scene, settings, LodSettings(**given), memory)
 
-
-def run_stream_bench(args: argparse.Namespace, sharded: bool, modes: list[str]) -> int:
-    """``splatgl bench SCENE.lod.ply --memory SIZE``: :func:`splatgl.measure.bench.stream_bench.run_stream`
-    (its figures printed, or as JSON with --json); ``modes``: the other benchmarks' flags given
-    (:func:`._bench_modes.modes_given`), refused."""
-    from ..measure.bench.stream_bench import describe, run_stream
-    from ..errors import SplatglError
-    from ..lod.io import is_lod_file
-    from ._json_output import emit_json, json_to_stdout
-
-    others = modes + [m for m, on in (("--out", args.out), ("--workers/--executor ray", sharded))
-                      if on]
-    if others:
-        raise SplatglError(f"--memory streams one level of detail in one process; not with "
-                           f"{', '.join(others)}")
-    if len(args.scenes) != 1 or not is_lod_file(args.scenes[0]):
-        raise SplatglError("--memory: give one level-of-detail file (from 'splatgl lod') to "
-                           f"stream, got {', '.join(map(str, args.scenes)) or 'none'}")
-    quick = args.quick
-    memory = memory_given(args)
-    report = run_stream(args.scenes[0], memory, args.width or (160 if quick else 1280),
-                        args.height or (120 if quick else 720), args.frames or (4 if quick else 12))
-    if not json_to_stdout(args):
-        print(describe(report))
-    if args.json is not None:
-        emit_json(args, report)
-    return 0

@@ -31,7 +31,7 @@ from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_mod
                            run_interactive_command, run_lod_command, run_popping_command,
                            run_scale_command, run_scale_lod_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
-from ._memory import STREAM_HELP, add_memory_argument, run_stream_bench
+from ._memory import STREAM_HELP, add_memory_argument, memory_given
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._outputs import add_force_argument, check_out_folder
 
@@ -156,6 +156,36 @@ def _parse_groups(text: str | None) -> frozenset[str] | None:
     return groups
 
 
+def _size(args: argparse.Namespace) -> tuple[int, int, int]:
+    """``(width, height, frames)``: as given, else 1280x720 and 12 frames (``--quick``: 160x120
+    and 4)."""
+    quick = args.quick
+    return (args.width or (160 if quick else 1280), args.height or (120 if quick else 720),
+            args.frames or (4 if quick else 12))
+
+
+def _run_stream_bench(args: argparse.Namespace, sharded: bool) -> int:
+    """``splatgl bench SCENE.lod.ply --memory SIZE``: :func:`splatgl.measure.bench.stream_bench.run_stream`
+    (its figures printed, or as JSON with --json)."""
+    from ..measure.bench.stream_bench import describe, run_stream
+    from ..lod.io import is_lod_file
+
+    others = modes_given(args) + [m for m, on in (("--out", args.out),
+                                                  ("--workers/--executor ray", sharded)) if on]
+    if others:
+        raise SplatglError(f"--memory streams one level of detail in one process; not with "
+                           f"{', '.join(others)}")
+    if len(args.scenes) != 1 or not is_lod_file(args.scenes[0]):
+        raise SplatglError("--memory: give one level-of-detail file (from 'splatgl lod') to "
+                           f"stream, got {', '.join(map(str, args.scenes)) or 'none'}")
+    report = run_stream(args.scenes[0], memory_given(args), *_size(args))
+    if not json_to_stdout(args):
+        print(describe(report))
+    if args.json is not None:
+        emit_json(args, report)
+    return 0
+
+
 #: The files ``bench --out DIR`` writes.
 BENCH_FILES = ("bench.csv", "bench.json", "bench.png")
 
@@ -180,7 +210,7 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
     if args.memory is not None and not (args.scale and args.lod):   # --scale --lod: its budget
-        return run_stream_bench(args, executor.sharded, modes_given(args))
+        return _run_stream_bench(args, executor.sharded)
     if args.popping:
         if modes_given(args) != ["--popping"] or executor.sharded or args.json is not None:
             raise SplatglError("--popping runs alone in one process (not with --interactive, "
@@ -219,9 +249,7 @@ def run(args: argparse.Namespace) -> int:
     if args.lod:
         return run_lod_command(args)
     quick = args.quick
-    width = args.width or (160 if quick else 1280)
-    height = args.height or (120 if quick else 720)
-    frames = args.frames or (4 if quick else 12)
+    width, height, frames = _size(args)
     groups = _parse_groups(args.groups)
     check_image_size(width, height, "--width/--height: image", "quad")
     check_ssim_size(width, height, "--width/--height: image")   # the error columns
