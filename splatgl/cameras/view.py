@@ -107,6 +107,15 @@ class Frustum:
     angle_limit: float | None = None
 
     @property
+    def sides(self) -> tuple[tuple[float, float, float, float], ...]:
+        """Per image axis (x, y) the side planes ``v = s z`` (FRUSTUM) as ``(lo, sqrt(1 + lo^2),
+        hi, sqrt(1 + hi^2))``: each slope and the length of its plane's normal ``(1, -s)``, by
+        which a point's ``v - s z`` is divided to give its distance from the plane.  What every
+        plane cull (the order's, the level-of-detail cut's, the quad path's shader) reads."""
+        return tuple((lo, float(np.sqrt(1.0 + lo * lo)), hi, float(np.sqrt(1.0 + hi * hi)))
+                     for _f, lo, hi in self.edges)
+
+    @property
     def pinhole(self) -> bool:
         """Whether the image is a pinhole's (its own four side planes, the peak bound): what the
         CPU renderer's compiled pinhole projection draws."""

@@ -100,9 +100,7 @@ class _NodeTest:
         self.f = np.float32(max(camera.fx, camera.fy))
         self.kind = NODE_TESTS[frustum.kind]
         # (slope, sqrt(1 + slope^2)) of the four side planes, per axis; SPHERE: the angle limit
-        self.planes = np.array([v for _, lo, hi in frustum.edges
-                                for v in (lo, np.sqrt(1 + lo * lo), hi, np.sqrt(1 + hi * hi))],
-                               np.float32)
+        self.planes = np.array([v for side in frustum.sides for v in side], np.float32)
         if self.kind == 2:
             limit = np.pi if frustum.angle_limit is None else frustum.angle_limit
             self.planes[0] = limit + CONE_MARGIN

@@ -87,10 +87,10 @@ def cull(p_cam: np.ndarray, max_scale: np.ndarray, opacities: np.ndarray, camera
         return _peak_cull(keep, p_cam, max_scale, opacities, camera, antialias) if peak else keep
     # Side planes through the camera centre: x / z = s for slopes s at the image edges.
     # The signed distance of a point from the plane x - s z = 0 is (x - s z) / sqrt(1 + s^2).
-    for coord, (f, lo, hi) in zip((x, y), frustum.edges):
+    for coord, (f, _lo, _hi), (lo, n_lo, hi, n_hi) in zip((x, y), frustum.edges, frustum.sides):
         reach = radius + MARGIN_PX * np.maximum(z, 0.0) / f
-        keep &= (coord - hi * z) / np.sqrt(1.0 + hi * hi) <= reach
-        keep &= (lo * z - coord) / np.sqrt(1.0 + lo * lo) <= reach
+        keep &= (coord - hi * z) / n_hi <= reach
+        keep &= (lo * z - coord) / n_lo <= reach
     return _peak_cull(keep, p_cam, max_scale, opacities, camera, antialias) if peak else keep
 
 
@@ -254,8 +254,7 @@ def plane_constants(frustum: Frustum, scale: float = 1.0) -> np.ndarray:
     order: :func:`cull_visible`'s rearranged plane test); its centre projects inside the image
     when ``v <= z * hi`` and ``v >= z * lo``."""
     out = np.empty((2, 6), np.float32)
-    for axis, (f, lo, hi) in enumerate(frustum.edges):
-        n_hi, n_lo = np.sqrt(1.0 + hi * hi), np.sqrt(1.0 + lo * lo)
+    for axis, ((f, _lo, _hi), (lo, n_lo, hi, n_hi)) in enumerate(zip(frustum.edges, frustum.sides)):
         out[axis] = (hi + n_hi * MARGIN_PX / f, n_hi * scale, lo - n_lo * MARGIN_PX / f,
                      -n_lo * scale, lo, hi)
     return out

@@ -79,14 +79,14 @@ class Spheres:
 def sphere_constants(camera: Camera, near: float, scale: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-view constants of :meth:`Spheres.classify` (float64): ``view = (s, near, |t|,
     scale, ROUNDING)`` with ``s`` the camera-space length of a world unit, and ``sides`` (2, 8), per
-    image axis ``hi, lo`` (the image edges' slopes, :func:`splatgl.cameras.view.frustum_of`), ``n_hi, n_lo`` (``hypot(1, slope)``),
+    image axis ``hi, lo`` (the image edges' slopes, :func:`splatgl.cameras.view.frustum_of`), ``n_hi, n_lo`` (``sqrt(1 + slope^2)``, :attr:`~splatgl.cameras.view.Frustum.sides`),
     ``a_hi, a_lo`` (the slopes widened by the screen margin) and ``hypot(1, a)`` of those."""
     s = float(np.linalg.norm(camera.rotation, axis=1).max())
     view = np.array([s, near, float(np.linalg.norm(camera.translation)), scale, ROUNDING],
                     np.float64)
     sides = np.empty((2, 8), np.float64)
-    for axis, (f, lo, hi) in enumerate(frustum_of(camera).edges):
-        n_hi, n_lo = np.hypot(1.0, hi), np.hypot(1.0, lo)
+    frustum = frustum_of(camera)
+    for axis, ((f, _lo, _hi), (lo, n_lo, hi, n_hi)) in enumerate(zip(frustum.edges, frustum.sides)):
         a_hi, a_lo = hi + n_hi * MARGIN_PX / f, lo - n_lo * MARGIN_PX / f
         sides[axis] = hi, lo, n_hi, n_lo, a_hi, a_lo, np.hypot(1.0, a_hi), np.hypot(1.0, a_lo)
     return view, sides
