@@ -78,8 +78,9 @@ class Spheres:
 
 def sphere_constants(camera: Camera, near: float, scale: float) -> tuple[np.ndarray, np.ndarray]:
     """Per-view constants of :meth:`Spheres.classify` (float64): ``view = (s, near, |t|,
-    scale, ROUNDING)`` with ``s`` the camera-space length of a world unit, and ``sides`` (2, 8), per
-    image axis ``hi, lo`` (the image edges' slopes, :func:`splatgl.cameras.view.frustum_of`), ``n_hi, n_lo`` (``sqrt(1 + slope^2)``, :attr:`~splatgl.cameras.view.Frustum.sides`),
+    scale, ROUNDING)`` with ``s`` the camera-space length of a world unit, and ``sides`` (2, 8),
+    per image axis ``hi, lo`` (the image edges' slopes, :func:`splatgl.cameras.view.frustum_of`),
+    ``n_hi, n_lo`` (``sqrt(1 + slope^2)``, :attr:`~splatgl.cameras.view.Frustum.sides`),
     ``a_hi, a_lo`` (the slopes widened by the screen margin) and ``hypot(1, a)`` of those."""
     s = float(np.linalg.norm(camera.rotation, axis=1).max())
     view = np.array([s, near, float(np.linalg.norm(camera.translation)), scale, ROUNDING],

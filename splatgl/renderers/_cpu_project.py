@@ -112,10 +112,11 @@ def _sh_color(sh, i, k, x, y, z):
 
 
 @numba.njit(inline="always", fastmath=False)
-def _finish(i, x0, y0, z0, u, v, t0, t1, rs, opacity, sh, k, center, lp, antialias, grid_x,
+def _finish(i, o_, x0, y0, z0, u, v, t0, t1, rs, opacity, sh, k, center, lp, antialias, grid_x,
             grid_y, mean2d, conic, opac_out, reach, color, box, rect):
-    """Row ``i`` of stage 1 from its pixel position (u, v) and ``T = J W`` (rows ``t0``, ``t1``:
-    the model's EWA Jacobian times the view rotation), for every camera model: the dilated
+    """Input row ``i`` of stage 1, written to output row ``o_``, from its pixel position
+    (u, v) and ``T = J W`` (rows ``t0``, ``t1``: the model's EWA Jacobian times the view
+    rotation), for every camera model: the dilated
     covariance ``M M^T + lp I`` with ``M = T R S``, the guarded determinant, the conic,
     antialiasing, the reference's radius and rectangle, the SH colour seen from ``center``
     (``x0, y0, z0`` is the anchored mean) and the pixel box.  A culled row keeps its empty
@@ -182,28 +183,29 @@ def _finish(i, x0, y0, z0, u, v, t0, t1, rs, opacity, sh, k, center, lp, antiali
         grid_x * TILE_SIZE + 1.0, grid_y * TILE_SIZE + 1.0)
     if not (tx1 > tx0 and ty1 > ty0):
         return
-    mean2d[i, 0], mean2d[i, 1] = u, v
-    conic[i, 0], conic[i, 1], conic[i, 2] = qa, qb, qc
-    opac_out[i] = o
-    reach[i] = q2
-    color[i, 0], color[i, 1], color[i, 2] = cr, cg, cb
-    box[i, 0], box[i, 1], box[i, 2], box[i, 3] = int(bx0), int(bx1), int(by0), int(by1)
-    rect[i, 0], rect[i, 1], rect[i, 2], rect[i, 3] = int(tx0), int(tx1), int(ty0), int(ty1)
+    mean2d[o_, 0], mean2d[o_, 1] = u, v
+    conic[o_, 0], conic[o_, 1], conic[o_, 2] = qa, qb, qc
+    opac_out[o_] = o
+    reach[o_] = q2
+    color[o_, 0], color[o_, 1], color[o_, 2] = cr, cg, cb
+    box[o_, 0], box[o_, 1], box[o_, 2], box[o_, 3] = int(bx0), int(bx1), int(by0), int(by1)
+    rect[o_, 0], rect[o_, 1], rect[o_, 2], rect[o_, 3] = int(tx0), int(tx1), int(ty0), int(ty1)
 
 
 @numba.njit(parallel=True, fastmath=False, cache=True)
-def project_pinhole(rel, rs, opacity, sh, k, cam, center, grid_x, grid_y, antialias,
+def project_pinhole(rel, rs, opacity, sh, rows, k, cam, center, grid_x, grid_y, antialias,
                     mean2d, conic, opac_out, reach, color, depth, box, rect):
-    """Project every splat for a pinhole camera; culled rows get an empty ``rect``.
+    """Project the splats ``rows`` (int64 indices into the inputs; output row j is input row
+    ``rows[j]``) for a pinhole camera; culled rows get an empty ``rect``.
 
     Inputs (float32 unless said): ``rel`` (N, 3) means minus the view's anchor; ``rs`` (N, 3, 3)
     ``R S`` (rotation times scales, per column); ``opacity`` (N,); ``sh`` (N, K, 3), ``k`` the
     coefficients used; ``cam`` (20,) float64: the anchored world-to-camera rotation (9,
     row-major), translation (3), fx, fy, cx, cy, the Jacobian's x/z and y/z limits, the near
     plane and the low pass; ``center`` (3,) the anchored camera centre; the tile grid; whether
-    to antialias.  Outputs (N rows each): ``mean2d`` (2), ``conic`` (3), ``opac_out``,
-    ``reach`` (``2 ln(255 o)``, the conic value where alpha falls to 1/255), ``color`` (3),
-    ``depth`` (view z), ``box`` (4) int32 pixel box ``[x0, x1) x [y0, y1)`` and
+    to antialias.  Outputs (one row per entry of ``rows``): ``mean2d`` (2), ``conic`` (3),
+    ``opac_out``, ``reach`` (``2 ln(255 o)``, the conic value where alpha falls to 1/255),
+    ``color`` (3), ``depth`` (view z), ``box`` (4) int32 pixel box ``[x0, x1) x [y0, y1)`` and
     ``rect`` (4) int32 tile rectangle ``[tx0, tx1) x [ty0, ty1)``: the reference's ``getRect``
     of its radius, shrunk to the tiles the box touches.
     """
@@ -211,16 +213,17 @@ def project_pinhole(rel, rs, opacity, sh, k, cam, center, grid_x, grid_y, antial
     t = cam[9:12].astype(np.float32)
     fx, fy, cx, cy = _F(cam[12]), _F(cam[13]), _F(cam[14]), _F(cam[15])
     limx, limy, near, lp = _F(cam[16]), _F(cam[17]), _F(cam[18]), _F(cam[19])
-    for i in numba.prange(rel.shape[0]):
-        rect[i, 0] = 0
-        rect[i, 1] = 0
-        rect[i, 2] = 0
-        rect[i, 3] = 0
+    for j in numba.prange(rows.shape[0]):
+        i = rows[j]
+        rect[j, 0] = 0
+        rect[j, 1] = 0
+        rect[j, 2] = 0
+        rect[j, 3] = 0
         x0, y0, z0 = rel[i, 0], rel[i, 1], rel[i, 2]
         x = ((x0 * w[0] + y0 * w[1]) + z0 * w[2]) + t[0]
         y = ((x0 * w[3] + y0 * w[4]) + z0 * w[5]) + t[1]
         z = ((x0 * w[6] + y0 * w[7]) + z0 * w[8]) + t[2]
-        depth[i] = z
+        depth[j] = z
         if not z > near:
             continue
         u = fx * x / z + cx
@@ -235,7 +238,7 @@ def project_pinhole(rel, rs, opacity, sh, k, cam, center, grid_x, grid_y, antial
         t0 = (j00 * w[0], j00 * w[1], j00 * w[2])
         t1 = (j11 * w[3] + j12 * w[6], j11 * w[4] + j12 * w[7], j11 * w[5] + j12 * w[8])
         t0 = (t0[0] + j02 * w[6], t0[1] + j02 * w[7], t0[2] + j02 * w[8])
-        _finish(i, x0, y0, z0, u, v, t0, t1, rs, opacity, sh, k, center, lp, antialias,
+        _finish(i, j, x0, y0, z0, u, v, t0, t1, rs, opacity, sh, k, center, lp, antialias,
                 grid_x, grid_y, mean2d, conic, opac_out, reach, color, box, rect)
 
 
@@ -262,6 +265,6 @@ def project_model(rel, rs, opacity, sh, k, cam, center, grid_x, grid_y, antialia
         t1 = ((jac[i, 1, 0] * w[0] + jac[i, 1, 1] * w[3]) + jac[i, 1, 2] * w[6],
               (jac[i, 1, 0] * w[1] + jac[i, 1, 1] * w[4]) + jac[i, 1, 2] * w[7],
               (jac[i, 1, 0] * w[2] + jac[i, 1, 1] * w[5]) + jac[i, 1, 2] * w[8])
-        _finish(i, rel[i, 0], rel[i, 1], rel[i, 2], uv[i, 0], uv[i, 1], t0, t1, rs, opacity, sh,
+        _finish(i, i, rel[i, 0], rel[i, 1], rel[i, 2], uv[i, 0], uv[i, 1], t0, t1, rs, opacity, sh,
                 k, center, lp, antialias, grid_x, grid_y, mean2d, conic, opac_out, reach, color,
                 box, rect)

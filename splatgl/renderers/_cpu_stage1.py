@@ -43,6 +43,7 @@ class Stage1:
         self.antialias = bool(options.antialias)
         self._anchor: tuple[bytes, np.ndarray] | None = None   # (anchor bytes, means - anchor)
         self._reach: tuple[float, np.ndarray] | None = None     # (scale, world reach): panoramas
+        self._every: np.ndarray | None = None     # arange(count): every row, for the pinhole pass
 
     def relative_means(self, anchor: np.ndarray) -> np.ndarray:
         """``means - anchor`` in float32 (the subtraction in float64), kept per anchor."""
@@ -55,7 +56,8 @@ class Stage1:
     def inputs(self, view: View, rows: np.ndarray | None):
         """``(means - anchor, R S, opacities, SH)`` of the scene rows ``rows`` (ascending, the
         view's cull's: :meth:`splatgl.renderers.cpu.CpuRenderer.kept_rows`), or of every row
-        (None: no copy).  A copy keeps its source's read-only flag (numba compiles each apart)."""
+        (None: no copy): the NumPy model pass's inputs.  A copy keeps its source's read-only
+        flag (numba compiles each apart)."""
         arrays = (self.relative_means(view.anchor), self._rs, self._opacity, self._sh)
         if rows is None:
             return arrays
@@ -68,11 +70,15 @@ class Stage1:
 
     def pinhole(self, view: View, parts: Iterable[tuple[int, int]], rows: np.ndarray | None = None):
         """Stage 1 for a pinhole camera, compiled: (mean2d, conic, opacity, reach, colour,
-        depth, box, rect) of every splat (of the scene rows ``rows`` only, one output row each,
-        with ``rows``: see :meth:`inputs`), computed over the row ranges ``parts`` in turn (the
-        caller may check for input between them)."""
-        rel, rs, opacity, sh = self.inputs(view, rows)
-        n = rel.shape[0]
+        depth, box, rect) of every splat (of the scene rows ``rows`` only, int64 ascending, one
+        output row each: the kernel reads them in place), computed over the ranges ``parts``
+        of its output rows in turn (the caller may check for input between them)."""
+        rel = self.relative_means(view.anchor)
+        if rows is None:
+            if self._every is None or self._every.size != self.count:
+                self._every = np.arange(self.count, dtype=np.int64)
+            rows = self._every
+        n = rows.size
         cam = anchored_camera(view.camera, view.anchor)
         tx, ty = cam.tan_half_fov
         params = np.concatenate([
@@ -86,7 +92,7 @@ class Stage1:
         center = np.asarray(cam.center, np.float32)
         for a, b in parts:
             self.kernels.project_pinhole(
-                rel[a:b], rs[a:b], opacity[a:b], sh[a:b], self._coeffs, params,
+                rel, self._rs, self._opacity, self._sh, rows[a:b], self._coeffs, params,
                 center, float(grid[0]), float(grid[1]), self.antialias, *(o[a:b] for o in out))
         return out
 
