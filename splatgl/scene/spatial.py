@@ -30,8 +30,9 @@ def morton_codes_clamped(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> 
     which the out-of-core level of detail (:mod:`splatgl.lod.external`) computes block by block
     over the box it found in a streaming pass."""
     span = np.where(hi > lo, hi - lo, 1.0)
-    q = np.clip((points - lo) / span, 0.0, 1.0)
-    q = (q * ((1 << 21) - 1)).astype(np.uint64)
+    with np.errstate(invalid="ignore"):  # non-finite points: NaN here, placed first below
+        q = np.clip((points - lo) / span, 0.0, 1.0)
+    q = (np.nan_to_num(q, nan=0.0) * ((1 << 21) - 1)).astype(np.uint64)
     code = np.zeros(points.shape[0], np.uint64)
     for axis in range(3):
         v = q[:, axis]
