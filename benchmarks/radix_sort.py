@@ -123,8 +123,8 @@ class OldSorter:
 
 
 def measure(renderer, n: int, repeats: int, old: bool) -> list[dict]:
-    from splatgl.gl.radix_sort import (RadixSorter, device_depth_sort, radix_passes,
-                                       subgroup_paths)
+    from splatgl.gl.radix_sort import RadixSorter, device_depth_sort, subgroup_paths
+    from splatgl.splatmath.radix import radix_passes
     from splatgl.order.sort import depth_sort
 
     z, idx = frame_keys(n)

@@ -1,6 +1,6 @@
 // Radix sort, step 1: the OR and the AND of every key, so radix_plan.comp can skip the bits all
 // keys share.
-// Twin: splatgl/gl/radix_sort.py radix_passes().
+// Twin: splatgl/splatmath/radix.py radix_passes().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;

@@ -12,7 +12,7 @@
 // GL_ARB_shader_ballot, one broadcast per lane (RADIX_MATCH_ARB, for narrow subgroups: CPU
 // SIMD lanes); otherwise RADIX_WARP threads exchange their digits through shared memory between
 // work-group barriers (the portable path).
-// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
+// Twin: splatgl/splatmath/radix.py radix_sort_twin().
 #if defined(RADIX_MATCH_KHR)
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require

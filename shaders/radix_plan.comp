@@ -4,7 +4,7 @@
 // bit get no work groups.  The passes alternate between the A and B buffers, so after an odd
 // number the copy dispatch brings the result back into A.  Also resets the bits and the digit
 // totals for the next sort.
-// Twin: splatgl/gl/radix_sort.py radix_passes().
+// Twin: splatgl/splatmath/radix.py radix_passes().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;

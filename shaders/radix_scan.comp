@@ -3,7 +3,7 @@
 // totals) plus the exclusive prefix over the tiles before it.  Reduce-then-scan, with O(tiles)
 // work: each thread sums a run of consecutive tiles, one thread scans the RADIX_SCAN_GROUP run
 // sums, each thread rescans its run.
-// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
+// Twin: splatgl/splatmath/radix.py radix_sort_twin().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_SCAN_GROUP) in;

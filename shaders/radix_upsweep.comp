@@ -1,6 +1,6 @@
 // Radix sort, pass step 1 of 3 (pass slot u_slot): each tile's count of each digit, counted in
 // shared memory, into hist (digit-major), and added to the pass's digit totals.
-// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
+// Twin: splatgl/splatmath/radix.py radix_sort_twin().
 #include "lib/radix.glsl"
 
 layout(local_size_x = RADIX_GROUP) in;

@@ -1,6 +1,6 @@
 // Shared by the radix sort's dispatches (splatgl/gl/radix_sort.py; the design is in its module
 // doc).
-// Twin: splatgl/gl/radix_sort.py radix_sort_twin().
+// Twin: splatgl/splatmath/radix.py radix_sort_twin().
 //
 // A work group of RADIX_GROUP threads owns a tile of TILE_KEYS = RADIX_GROUP * RADIX_ITEMS keys
 // per pass.  hist holds, digit-major, each tile's count of each digit, hist[d * u_tiles + tile],

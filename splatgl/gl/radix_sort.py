@@ -27,7 +27,7 @@ indices with the float32 bits of their depths, it gives exactly
 :func:`splatgl.order.sort.depth_sort`'s order (ties by index), which the tests check bit for
 bit.
 
-:func:`radix_sort_twin` is the NumPy twin: the same digits, passes and skip rule.
+:func:`splatgl.splatmath.radix.radix_sort_twin` is the NumPy twin: the same digits, passes and skip rule.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ import numpy as np
 
 from ..constants import RADIX_BITS, RADIX_ITEMS
 from ..errors import ShaderError
+from ..splatmath.radix import key_bits
 from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
                        RADIX_BINDING_STATE, RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT,
                        RADIX_GROUP, RADIX_PORTABLE_WARP)
@@ -61,38 +62,6 @@ _PASS_ARGS = 32
 _SCAN_ARGS = _PASS_ARGS + 16 * SLOTS
 _COPY_ARGS = _SCAN_ARGS + 16 * SLOTS
 _STATE_BYTES = _COPY_ARGS + 16 + 4 * SLOTS * RADIX
-
-
-def radix_passes(keys: np.ndarray) -> list[int]:
-    """Digit shifts of the passes that sort ``keys`` (M,) uint32, lowest digit first: from the
-    lowest bit in which keys differ to the highest (radix_plan.comp's rule)."""
-    if keys.size < 2:
-        return []
-    differ = int(np.bitwise_or.reduce(keys)) & ~int(np.bitwise_and.reduce(keys))
-    if not differ:
-        return []
-    lo = (differ & -differ).bit_length() - 1
-    return list(range(lo, differ.bit_length(), RADIX_BITS))
-
-
-def radix_sort_twin(keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """NumPy twin of :class:`RadixSorter`: ``(keys, values)`` (M,) uint32 sorted by key, stably.
-
-    Each pass reorders by one digit with a stable sort of the digit (what upsweep, scan and
-    downsweep compute on the device).
-    """
-    keys = np.ascontiguousarray(keys, np.uint32)
-    values = np.ascontiguousarray(values, np.uint32)
-    for shift in radix_passes(keys):
-        digit = ((keys >> np.uint32(shift)) & np.uint32(RADIX - 1)).astype(np.uint8)
-        perm = np.argsort(digit, kind="stable")
-        keys, values = keys[perm], values[perm]
-    return keys, values
-
-
-def _bits(keys: np.ndarray) -> np.ndarray:
-    """(OR, AND) of ``keys`` (M,) uint32, M >= 1: what radix_bits.comp finds on the device."""
-    return np.array([np.bitwise_or.reduce(keys), np.bitwise_and.reduce(keys)], np.uint32)
 
 
 def subgroup_paths(ctx: moderngl.Context) -> list[str]:
@@ -189,7 +158,7 @@ class RadixSorter:
         keys, values, count = self._upload(keys, values)
         if count < 2:
             return keys.copy(), values.copy()
-        k_a, v_a = self.sort_buffers(count, _bits(keys))
+        k_a, v_a = self.sort_buffers(count, key_bits(keys))
         return (np.frombuffer(k_a.read(4 * count), np.uint32),
                 np.frombuffer(v_a.read(4 * count), np.uint32))
 
@@ -198,7 +167,7 @@ class RadixSorter:
         keys, values, count = self._upload(keys, values)
         if count < 2:
             return values.copy()
-        return np.frombuffer(self.sort_buffers(count, _bits(keys))[1].read(4 * count), np.uint32)
+        return np.frombuffer(self.sort_buffers(count, key_bits(keys))[1].read(4 * count), np.uint32)
 
     def _upload(self, keys: np.ndarray, values: np.ndarray):
         keys = np.ascontiguousarray(keys, np.uint32)

@@ -19,8 +19,8 @@ from splatgl.errors import ShaderError
 from splatgl.gl import radix_sort
 from splatgl.gl.egl_devices import is_software_renderer
 from splatgl.gl.shaders import ProgramCache, preprocess
-from splatgl.gl.radix_sort import (TILE_KEYS, RadixSorter, device_depth_sort, radix_passes,
-                                   radix_sort_twin, subgroup_paths)
+from splatgl.gl.radix_sort import TILE_KEYS, RadixSorter, device_depth_sort, subgroup_paths
+from splatgl.splatmath.radix import radix_passes, radix_sort_twin
 from splatgl.renderers.quad import QuadRenderer
 from splatgl.scene.splats import Scene
 from splatgl.scene.settings import RenderSettings, SortKey
