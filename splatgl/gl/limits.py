@@ -13,6 +13,10 @@ Two limits apply, whatever gave the size (``--width``/``--height`` or a camera f
 - memory: the image buffers every renderer certainly allocates (:data:`MIN_BYTES_PER_PIXEL`)
   must fit the memory the kernel reports as available.
 
+The splats' storage buffers (:mod:`splatgl.gl.scene_buffers`) are refused before they are
+allocated when one would exceed :func:`buffer_limit` (:func:`check_splat_buffer`): llvmpipe
+crashes the process reading a buffer past 2 GiB.
+
 Without a context (the NumPy reference) only the memory check and :data:`MAX_IMAGE_SIDE` apply.
 Which renderer needs which check: :func:`splatgl.renderers.registry.image_size_problem`.
 """
@@ -21,6 +25,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import SplatglError
 from ..scene.settings import Precision
 
 #: Largest image side splatgl accepts before asking any context (the common GL 4.3 driver limit,
@@ -37,6 +42,12 @@ TILE_RGBA_BYTES = 16
 #: ones are within what every driver allocates; the try costs nothing on llvmpipe, which refuses
 #: before allocating).
 PROBE_BYTES = 256 << 20
+#: ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE`` assumed of a context that does not report it.
+DEFAULT_BLOCK = 2 ** 27
+#: The most bytes one storage buffer of splats may hold on any driver: shaders address storage
+#: buffers with 32-bit byte offsets (llvmpipe reads a buffer of 2 GiB to its last word and
+#: crashes the process, SIGSEGV, on one 4 bytes larger; it refuses 4 GiB with GL_OUT_OF_MEMORY).
+MAX_BUFFER_BYTES = 2 ** 31
 #: The texel of each colour target precision: (moderngl dtype, bytes a pixel, GL name).
 _TEXELS = {Precision.RGBA32F: ("f4", 16, "RGBA32F"), Precision.RGBA16F: ("f2", 8, "RGBA16F"),
            Precision.RGBA8: ("f1", 4, "RGBA8")}
@@ -103,12 +114,44 @@ def pixel_buffer_refused(ctx, width: int, height: int, precision=None) -> str | 
     """Why the tile renderer's per-pixel colour buffer (:data:`TILE_RGBA_BYTES` a pixel, one
     storage block) will not fit ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE``, or None (``precision``:
     unused, as :func:`target_refused` takes it)."""
-    block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE", 0) or 0)
-    if block and width * height * TILE_RGBA_BYTES > block:
+    block = storage_block_size(ctx)
+    if width * height * TILE_RGBA_BYTES > block:
         return (f"has too many pixels for the tile renderer on this driver ({width * height:,}; "
                 f"its colour buffer of {TILE_RGBA_BYTES} bytes a pixel may hold "
                 f"{block // TILE_RGBA_BYTES:,}, GL_MAX_SHADER_STORAGE_BLOCK_SIZE)")
     return None
+
+
+def storage_block_size(ctx) -> int:
+    """``GL_MAX_SHADER_STORAGE_BLOCK_SIZE`` of ``ctx`` as it reports it (:data:`DEFAULT_BLOCK`
+    where it does not): the tile renderer's limit on its key buffer."""
+    return int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or DEFAULT_BLOCK)
+
+
+def buffer_limit(ctx) -> tuple[int, str]:
+    """(bytes, what sets it): the largest one storage buffer of splats may be on ``ctx``.
+
+    :data:`MAX_BUFFER_BYTES` everywhere; below it, ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE`` where the
+    driver enforces it.  llvmpipe reports 128 MiB but reads 2 GiB buffers to their last word
+    (measured), and crashes the process (SIGSEGV) reading past 2 GiB: its limit is 2 GiB."""
+    renderer = ctx.info.get("GL_RENDERER", "?")
+    block = storage_block_size(ctx)
+    if renderer.startswith("llvmpipe") or block >= MAX_BUFFER_BYTES:
+        return MAX_BUFFER_BYTES, f"the most one buffer may hold on {renderer}"
+    return block, f"GL_MAX_SHADER_STORAGE_BLOCK_SIZE of {renderer}"
+
+
+def check_splat_buffer(ctx, count: int, nbytes: int, what: str) -> None:
+    """Refuse, before it is allocated, a storage buffer of ``nbytes`` holding ``count`` splats
+    (``what`` names it) larger than :func:`buffer_limit` allows: one line naming the count, the
+    bytes, the limit and what draws fewer splats or stores them smaller."""
+    limit, source = buffer_limit(ctx)
+    if nbytes > limit:
+        raise SplatglError(
+            f"{count:,} splats need a GPU buffer of {nbytes:,} bytes ({what}), more than this "
+            f"OpenGL driver allows in one ({limit:,} bytes, {source}); draw fewer splats "
+            "(a smaller --lod-budget or --memory), store them smaller (--gpu-storage compact) or "
+            "use --renderer cpu")
 
 
 def memory_problem(width: int, height: int) -> str | None:

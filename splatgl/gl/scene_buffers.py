@@ -11,6 +11,7 @@ from ..constants import glsl_float
 from ..scene.splats import Scene
 from ..scene.settings import GpuStorage
 from .bindings import BINDING_A, BINDING_DC, BINDING_Q, BINDING_S, BINDING_SH
+from .limits import check_splat_buffer
 from .storage import COMPACT_WORDS, encode_compact, scale_exponent
 
 
@@ -57,16 +58,21 @@ class SceneBuffers:
         # Means relative to the scene's anchor (float32-safe far from the origin); the camera
         # uniforms fold the anchor back in (splatgl.cameras.view.anchored_camera).
         self.a = self.q = self.s = self.dc = self.packed = None
-        if compact:
-            self.packed = ctx.buffer(reserve=4 * COMPACT_WORDS * max(n, 1))
-        else:
-            self.a, self.q, self.s, self.dc = (ctx.buffer(reserve=16 * max(n, 1)) for _ in range(4))
         rest_values = self.sh_rest_coeffs * 3
         rest_bytes = rest_values * (2 if half_sh else 4)
         if half_sh and (n * rest_values) % 2:
             rest_bytes_total = n * rest_bytes + 2  # whole uints
         else:
             rest_bytes_total = n * rest_bytes
+        base = 4 * COMPACT_WORDS if compact else 16
+        largest = max((base * n, f"--gpu-storage {storage.value}, {base} bytes a splat"),
+                      (rest_bytes_total, f"SH degree {scene.sh_degree} at --gpu-storage "
+                                         f"{storage.value}, {rest_bytes} bytes a splat"))
+        check_splat_buffer(ctx, n, *largest)   # before any is allocated (llvmpipe: SIGSEGV)
+        if compact:
+            self.packed = ctx.buffer(reserve=4 * COMPACT_WORDS * max(n, 1))
+        else:
+            self.a, self.q, self.s, self.dc = (ctx.buffer(reserve=16 * max(n, 1)) for _ in range(4))
         self.sh = ctx.buffer(reserve=max(rest_bytes_total, 4)) if self.sh_rest_coeffs > 0 else None
         for start in range(0, n, UPLOAD_ROWS):
             stop = min(n, start + UPLOAD_ROWS)

@@ -41,6 +41,7 @@ import numpy as np
 from ..cameras.view import View
 from ..errors import SplatglError
 from ..gl.bindings import TILE_BINDINGS
+from ..gl import limits
 from ..gl.buffers import GrowableBuffer
 from ..gl.scene_buffers import SceneBuffers
 from ..gl.shaders import ProgramCache
@@ -92,7 +93,7 @@ class TileRenderer(Registered):
         self.programs = programs or ProgramCache(ctx)
         self.surfel, self.count = scene.kind is SplatKind.SURFEL_2D, scene.count
         self.scene_buffers = SceneBuffers(ctx, scene, options.gpu_storage) if self.count else None
-        self._max_block = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 2 ** 27)
+        self._max_block = limits.storage_block_size(ctx)
         self._bufs = _splat_buffers(ctx, self.count, self.surfel, self.per_pixel)
         self.last_times: TileTimes | None = None   # and the progress callback:
         self.progress = None

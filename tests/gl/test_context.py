@@ -147,6 +147,48 @@ def test_an_incomplete_framebuffer_is_one_line(gl_renderer, monkeypatch):
     assert gl_renderer.ctx.error == "GL_NO_ERROR"  # the driver's error is not left for others
 
 
+# ------------------------------------------------------------- splat buffers the driver cannot hold
+def test_one_buffer_limit_per_driver():
+    """llvmpipe reports a 128 MiB storage block but reads 2 GiB buffers (and crashes past them);
+    a driver that reports less than 2 GiB is held to what it reports."""
+    from splatgl.gl import limits
+
+    llvmpipe = type("Ctx", (), {"info": {"GL_RENDERER": "llvmpipe (LLVM 15)",
+                                         "GL_MAX_SHADER_STORAGE_BLOCK_SIZE": 2 ** 27}})()
+    other = type("Ctx", (), {"info": {"GL_RENDERER": "other GL",
+                                      "GL_MAX_SHADER_STORAGE_BLOCK_SIZE": 2 ** 27}})()
+    assert limits.buffer_limit(llvmpipe) == (2 ** 31, "the most one buffer may hold on llvmpipe (LLVM 15)")
+    assert limits.buffer_limit(other) == (2 ** 27, "GL_MAX_SHADER_STORAGE_BLOCK_SIZE of other GL")
+    limits.check_splat_buffer(other, 2 ** 23, 2 ** 27, "x")   # at the limit: allowed
+
+
+def test_a_splat_buffer_past_the_driver_limit_is_one_line(gl_renderer, monkeypatch, tmp_path, capsys):
+    """bench --scale --lod at 100M splats: the SH buffer (18 GB at degree 3) crashed llvmpipe
+    (SIGSEGV) in a child process.  Refused before allocating, as one line, nothing written; the
+    demo scene (1,604 splats, degree 3: 180 bytes a splat of SH in float32) at exactly the limit
+    renders."""
+    from splatgl.cli import main
+    from splatgl.gl import limits
+
+    name = gl_renderer.ctx.info.get("GL_RENDERER", "?")
+    out = tmp_path / "x.png"
+    argv = ["render", "--width", "32", "--height", "24", "-o", str(out)]
+    monkeypatch.setattr(limits, "MAX_BUFFER_BYTES", 1604 * 180 - 1)
+    assert main(argv) == 2
+    stdout, err = capsys.readouterr()
+    assert stdout == ""
+    assert err == ("splatgl: error: 1,604 splats need a GPU buffer of 288,720 bytes (SH degree 3 "
+                   "at --gpu-storage float32, 180 bytes a splat), more than this OpenGL driver "
+                   f"allows in one (288,719 bytes, the most one buffer may hold on {name}); draw "
+                   "fewer splats (a smaller --lod-budget or --memory), store them smaller "
+                   "(--gpu-storage compact) or use --renderer cpu\n")
+    assert list(tmp_path.iterdir()) == []
+    assert main([*argv, "--gpu-storage", "compact"]) == 0   # 90 bytes a splat of SH
+    monkeypatch.setattr(limits, "MAX_BUFFER_BYTES", 1604 * 180)
+    assert main([*argv, "--force"]) == 0
+    assert out.exists()
+
+
 def test_glfw_errors_are_collected_as_text_not_printed_raw():
     """pyGLFW's default prints each GLFW error as a raw ``(65544) b'X11: ...'`` warning; inside
     ``glfw_errors`` they are collected as text for the caller's one line (issue 38)."""
