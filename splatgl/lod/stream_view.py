@@ -75,10 +75,12 @@ class StreamedScene:
         self._last = (rows, weights, scene)
         return scene
 
-    def scene_for(self, camera: Camera, settings: RenderSettings) -> Scene:
+    def scene_for(self, camera: Camera, settings: RenderSettings,
+                  lod: LodSettings | None = None) -> Scene:
         """The scene to draw now for ``camera`` (never waits; :attr:`complete` says whether it
-        is the exact cut)."""
-        rows, weights = choose_cut(self.lazy, self._camera(camera, settings), self.lod)
+        is the exact cut); ``lod``: another cut than the view's (the viewer's budgeted
+        frames, :mod:`splatgl.interactive.stream_levels`)."""
+        rows, weights = choose_cut(self.lazy, self._camera(camera, settings), lod or self.lod)
         rows, weights, self.complete = self.resident.resident_cut(rows, weights)
         return self._scene(rows, weights)
 
