@@ -50,6 +50,29 @@ def modes_given(args: argparse.Namespace) -> list[str]:
     return [f"--{name}" for name in MODES if getattr(args, name)]
 
 
+#: The options only one benchmark reads: (the flags that turn it on, what it is, their dests).
+#: Given without any of those flags, they are refused (they would be silently ignored).
+MODE_OPTIONS = (
+    (("popping",), "the popping benchmark", ("popping_configs", "popping_metric", "popping_window")),
+    (("interactive",), "the interactive benchmark", ("target_fps",)),
+    (("lod",), "the level-of-detail benchmark", ("lod_thresholds", "lod_budgets", "lod_blend",
+                                                 "lod_paths")),
+    (("scale", "lod"), "the scale and level-of-detail benchmarks", ("sizes",)),
+    (("scale",), "the scale benchmark", ("sh3_sizes",)),
+)
+
+
+def check_mode_options(args: argparse.Namespace) -> None:
+    """One line naming the options of a benchmark given without the flag that runs it
+    (:data:`MODE_OPTIONS`), before any work."""
+    for flags, what, dests in MODE_OPTIONS:
+        given = ["--" + d.replace("_", "-") for d in dests if getattr(args, d, None) is not None]
+        if given and not any(getattr(args, f) for f in flags):
+            add = " or ".join(f"--{f}" for f in flags)
+            raise SplatglError(f"{', '.join(given)}: {'options' if len(given) > 1 else 'an option'} "
+                               f"of {what}; add {add}")
+
+
 def add_lod_arguments(p: argparse.ArgumentParser) -> None:
     """The --lod options of ``splatgl bench``."""
     p.add_argument("--lod-thresholds", default=None, metavar="LIST",

@@ -102,7 +102,12 @@ def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
         raise SplatglError(f"--lod-threshold/--lod-budget/--memory render through the quad path, "
                            f"not --renderer {args.renderer}")
     if args.scene is None or not is_lod_file(args.scene):
-        raise SplatglError(f"{args.scene}: not a level-of-detail file; build one with "
+        options = [o for o, v in (("--lod-threshold", args.lod_threshold), ("--lod-budget", args.lod_budget),
+                                  ("--lod-blend", args.lod_blend), ("--memory", getattr(args, "memory", None)))
+                   if v is not None]
+        scene = args.scene if args.scene is not None else f"the bundled demo {demo_scene_path().name}"
+        raise SplatglError(f"{scene}: not a level-of-detail file, which {', '.join(options)} "
+                           f"{'read' if len(options) > 1 else 'reads'}; build one with "
                            "'splatgl lod SCENE -o SCENE.lod.ply'")
     return LodSettings(**given)
 

@@ -27,7 +27,8 @@ from ..api import Renderer
 from ..scene.settings import RenderSettings
 from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_mode_arguments,
                            add_popping_arguments, add_scale_lod_arguments,
-                           check_interactive_options, check_scale_lod_options, modes_given,
+                           check_interactive_options, check_mode_options,
+                           check_scale_lod_options, modes_given,
                            run_interactive_command, run_lod_command, run_popping_command,
                            run_scale_command, run_scale_lod_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
@@ -209,6 +210,7 @@ def _write_out(out: Path, rows: list, extra: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     executor = executor_from_args(args)
+    check_mode_options(args)    # a benchmark's options without its flag: refused, not ignored
     if args.memory is not None and not (args.scale and args.lod):   # --scale --lod: its budget
         return _run_stream_bench(args, executor.sharded)
     if args.popping:
@@ -217,11 +219,6 @@ def run(args: argparse.Namespace) -> int:
                                "--scale, --lod, --workers, --executor ray or --json; --out DIR "
                                "writes popping.json)")
         return run_popping_command(args)
-    given = [f"--popping-{name}" for name in ("configs", "metric", "window")
-             if getattr(args, f"popping_{name}") is not None]
-    if given:
-        raise SplatglError(f"{', '.join(given)}: {'options' if len(given) > 1 else 'an option'} "
-                           "of the popping benchmark; add --popping")
     check_scale_lod_options(args)
     modes = modes_given(args)   # not --popping: it ran alone above
     if modes == ["--scale", "--lod"]:   # one benchmark: scenes larger than memory

@@ -204,3 +204,41 @@ def test_the_api_refuses_them_as_the_cli_does():
     with pytest.raises(SplatglError, match=r"^--extent square applies to the quad renderer only, "
                                            r"not the reference renderer"):
         render(load_scene(DEMO), None, RenderSettings(extent="square"), "reference")
+
+
+# A benchmark's own options given without the flag that runs it were silently ignored (the
+# scene benchmark ran instead): bench --target-fps without --interactive, --lod-* without --lod.
+@pytest.mark.parametrize("extra, line", [
+    (["--target-fps", "5"], "--target-fps: an option of the interactive benchmark; add --interactive"),
+    (["--scale", "--target-fps", "5"],
+     "--target-fps: an option of the interactive benchmark; add --interactive"),
+    (["--lod-thresholds", "1", "--lod-paths", "fine"],
+     "--lod-thresholds, --lod-paths: options of the level-of-detail benchmark; add --lod"),
+    (["--interactive", "--lod-budgets", "1M"],
+     "--lod-budgets: an option of the level-of-detail benchmark; add --lod"),
+    (["--lod-blend", "2", "--memory", "1G"],
+     "--lod-blend: an option of the level-of-detail benchmark; add --lod"),
+    (["--sizes", "1M"], "--sizes: an option of the scale and level-of-detail benchmarks; add "
+                        "--scale or --lod"),
+    (["--lod", "--sh3-sizes", "1M"], "--sh3-sizes: an option of the scale benchmark; add --scale"),
+])
+def test_bench_mode_options_without_their_mode(tmp_path, capsys, extra, line):
+    refused(capsys, tmp_path, ["bench", "--quick", "--out", tmp_path / "b", *extra],
+            f"splatgl: error: {line}")
+
+
+def test_bench_mode_options_with_their_mode_pass_the_check():
+    from splatgl.cli import build_parser
+    from splatgl.commands._bench_modes import check_mode_options
+    for argv in (["--interactive", "--target-fps", "5"], ["--lod", "--lod-paths", "fine", "--sizes", "1M"],
+                 ["--scale", "--sizes", "1M", "--sh3-sizes", "none"], ["--popping", "--popping-window", "4"]):
+        check_mode_options(build_parser().parse_args(["bench", *argv]))
+
+
+def test_lod_options_name_themselves_without_a_level_of_detail_scene(tmp_path, capsys):
+    """render's --lod-* read a .lod.ply (which is what turns level of detail on); without one
+    the refusal named 'None' (the bundled demo) and not the option."""
+    refused(capsys, tmp_path, ["render", "-o", tmp_path / "x.png", "--lod-threshold", "1",
+                               "--lod-blend", "2"],
+            "splatgl: error: the bundled demo demo.ply: not a level-of-detail file, which "
+            "--lod-threshold, --lod-blend read; build one with 'splatgl lod SCENE -o SCENE.lod.ply'")

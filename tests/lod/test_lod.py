@@ -164,8 +164,9 @@ def test_cli_builds_and_renders_a_cut(tmp_path, shared_scenes):
     assert "cut_nodes" in proc.stdout and (tmp_path / "v.png").is_file()
     proc = run("render", src, "--lod-threshold", "1", "-o", tmp_path / "x.png")
     assert proc.returncode == 2
-    assert proc.stderr.strip() == (f"splatgl: error: {src}: not a level-of-detail file; build one "
-                                   "with 'splatgl lod SCENE -o SCENE.lod.ply'")
+    assert proc.stderr.strip() == (f"splatgl: error: {src}: not a level-of-detail file, which "
+                                   "--lod-threshold reads; build one with 'splatgl lod SCENE -o "
+                                   "SCENE.lod.ply'")
 
 
 @pytest.mark.slow
