@@ -18,7 +18,7 @@ from ._executor import add_executor_arguments, executor_from_args
 from ._frame_budget import add_target_fps_argument
 from ..imagefiles.layer_files import check_exact_ids
 from ..output.layers import BASE
-from ..imagefiles.frame_record import FrameRecord, options_digest, scene_digest
+from ..imagefiles.frame_record import FrameRecord, options_digest, recorded_renderer, scene_digest
 from ._layers import check_under_options, layer_files, named_layers
 from ..imagefiles.frame_targets import FrameTarget
 from ..imagefiles.image_formats import FORMAT_NAMES
@@ -39,6 +39,7 @@ from ..lod.budget import format_size
 from ..lod.selection import LodSettings
 from ..lod.stream_frames import StreamFrames
 from ..scene.settings import RendererKind
+from ..renderers.auto import Choice
 from ..renderers.registry import check
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ..renderers.stereo import StereoLayout, StereoRenderer
@@ -205,7 +206,34 @@ def frame_record(args: argparse.Namespace, scene: Scene, settings, target: Frame
                              stereo=[args.stereo, args.stereo_layout] if args.stereo is not None
                              else None, preview=bool(args.preview), video=target.is_video)
     digest = getattr(scene, "digest", None)   # a streamed level of detail's (never read whole)
-    return FrameRecord(args.path, digest if isinstance(digest, str) else scene_digest(scene), options)
+    return FrameRecord(args.path, digest if isinstance(digest, str) else scene_digest(scene), options,
+                       kind.value)
+
+
+def _resumed_renderer(args: argparse.Namespace, target: FrameTarget, numbers,
+                      sharded: bool) -> Choice | None:
+    """With ``--resume``: the renderer the frames already there record
+    (:func:`~splatgl.imagefiles.frame_record.recorded_renderer`), which ``--renderer auto``
+    takes (auto could choose another on this run: cpu once its kernels are compiled, else quad);
+    a ``--renderer`` naming another is refused in one line.  None: no such frame."""
+    if not args.resume:
+        return None
+    frames = target
+    if target.is_video:         # a sharded video's frames wait in its hidden folder
+        from ..tasks.render_tasks import frame_folder
+
+        if not sharded:
+            return None
+        frames = FrameTarget.parse(f"{frame_folder(target.video)}/", "png")
+    found = recorded_renderer(frames.frame_path(n) for n in numbers)
+    if found is None:
+        return None
+    kind, frame = found
+    if args.renderer not in (AUTO, kind):
+        raise SplatglError(f"--renderer {args.renderer}: {frame} (--resume keeps it) was rendered "
+                           f"by the {kind} renderer; leave --renderer out to complete the frames "
+                           "with it, or render into another folder")
+    return Choice(RendererKind(kind), f"the renderer of {frame}, kept by --resume")
 
 
 def run_path(args: argparse.Namespace) -> int:
@@ -256,7 +284,10 @@ def run_path(args: argparse.Namespace) -> int:
     fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)
     if not fps > 0:
         raise SplatglError(f"--fps must be positive, got {fps}")
-    if args.renderer == AUTO and lod is None and memory is None and not args.preview:
+    kept = _resumed_renderer(args, target, numbers, executor.sharded)
+    if kept is not None and args.renderer == AUTO:   # --resume: the renderer of the frames kept
+        args.renderer, args.renderer_choice = kept.kind.value, kept
+    elif args.renderer == AUTO and lod is None and memory is None and not args.preview:
         choose_renderer(args, scene, settings, cameras[0], target.layers or None, None)
     elif args.renderer == AUTO:       # a level of detail, streaming, drafts: the quad path's
         args.renderer = RendererKind.QUAD.value

@@ -5,7 +5,9 @@ Every frame file (PNG, TIFF, EXR; the frames a sharded video waits for too) carr
 ``ImageDescription`` header attribute a line ``splatgl frame {json}``: the ``--path`` it was
 rendered for (as given, for messages) and digests of its camera (size, intrinsics, pose and
 model), of the scene (its splats' values, after loading) and of the render options that decide
-the pixels (settings, renderer, layers, bit depth, level-of-detail cut, stereo, preview).  The
+the pixels (settings, renderer, layers, bit depth, level-of-detail cut, stereo, preview), and
+the renderer's name in plain text: ``--resume`` with ``--renderer auto`` draws the missing
+frames with the renderer that drew those kept (:func:`recorded_renderer`).  The
 record travels with the frame: written in the same atomic write, it can never describe another
 file, and parts of one path rendered apart (``--select``, workers, Ray) agree.
 
@@ -69,11 +71,17 @@ class FrameRecord:
     source: str
     scene: str
     options: str
+    #: The renderer that drew the frames, also in plain text (``--resume`` with ``--renderer
+    #: auto`` takes it up: :func:`recorded_renderer`); None: not said (older records).
+    renderer: str | None = None
 
     def text(self, camera) -> str:
         """The attribute text of the frame of ``camera``."""
-        return PREFIX + json.dumps({"path": self.source, "camera": camera_digest(camera),
-                                    "scene": self.scene, "options": self.options}, sort_keys=True)
+        fields = {"path": self.source, "camera": camera_digest(camera), "scene": self.scene,
+                  "options": self.options}
+        if self.renderer is not None:
+            fields["renderer"] = self.renderer
+        return PREFIX + json.dumps(fields, sort_keys=True)
 
     def attributes(self, camera) -> dict[str, str]:
         """The header attributes of the frame of ``camera``."""
@@ -94,6 +102,21 @@ def read_record(description: str | None) -> dict | None:
     except ValueError:
         return None
     return record if isinstance(record, dict) else None
+
+
+def recorded_renderer(paths) -> tuple[str, Path] | None:
+    """The renderer the first complete frame among ``paths`` that records one was drawn by,
+    and that frame (None: no such frame: none there yet, or only frames of older records)."""
+    from .images import inspect_image
+
+    for path in paths:
+        if not Path(path).is_file():
+            continue
+        info = inspect_image(path)
+        found = None if isinstance(info, str) else read_record(info.description)
+        if found is not None and isinstance(found.get("renderer"), str):
+            return found["renderer"], Path(path)
+    return None
 
 
 def kept_frame(path: Path, description: str | None, record: FrameRecord, camera) -> bool:

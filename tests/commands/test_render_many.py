@@ -310,6 +310,28 @@ def test_resume_refuses_frames_of_another_path_scene_or_options(tmp_path, capsys
     assert "wrote 1 frames to" in capsys.readouterr().out and (out / "00003.png").is_file()
 
 
+def test_resume_takes_the_renderer_the_kept_frames_record(tmp_path, capsys):
+    """--renderer auto could choose another renderer than the one that drew the frames kept
+    (cpu once its kernels are compiled, else quad: here pinned to quad) and the run was refused
+    as of other options: the frames record their renderer, and auto takes it up; naming another
+    is refused in one line."""
+    out = tmp_path / "f"
+    assert _render("--path", "orbit:3", *SIZE, "-o", out, "--renderer", "tile", "--select", "0:2") == 0
+    capsys.readouterr()
+    before = _mtimes(out)
+    assert _render("--path", "orbit:3", *SIZE, "-o", out, "--resume", "--renderer", "quad") == 2
+    assert capsys.readouterr().err == (
+        f"splatgl: error: --renderer quad: {out}/00000.png (--resume keeps it) was rendered by the "
+        "tile renderer; leave --renderer out to complete the frames with it, or render into "
+        "another folder\n")
+    assert _mtimes(out) == before
+    assert _render("--path", "orbit:3", *SIZE, "-o", out, "--resume", "--timings") == 0
+    printed = capsys.readouterr().out
+    assert f"wrote 1 frames to {out}/%05d.png, 2 already there (96x64" in printed
+    assert ", tile, " in printed
+    assert f"renderer auto -> tile (the renderer of {out}/00000.png, kept by --resume)" in printed
+
+
 def test_resume_refuses_preview_drafts_and_keeps_unrecorded_frames(tmp_path, capsys):
     """Draft frames of --preview are recorded as such: an exact --resume does not keep them.
     Frames without a record (an older splatgl wrote them) are kept, as before, and the
