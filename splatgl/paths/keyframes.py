@@ -8,6 +8,8 @@ A JSON object::
       "frames": 120,                      # or "fps": 30 with "seconds": 4
       "loop": false,                      # optional: close the path into a cycle
       "rotation": "squad",                # optional: "squad" (C1, default) or "slerp"
+      "projection": "fisheye",            # optional: the camera model (default "perspective")
+      "projection_fov": 200,              # optional: that model's field of view (its --fov)
       "keyframes": [
         {"eye": [x, y, z], "target": [x, y, z], "up": [0, -1, 0], "fov": 50, "time": 0.0},
         {"world_to_camera": [[...4x4...]], "fov": 50, "time": 2.0},
@@ -20,6 +22,13 @@ Each keyframe gives a pose as a look-at (``eye``, ``target``, optional ``up``, d
 axes, rigid), and a vertical ``fov`` in degrees (default 50).  ``time`` (seconds, strictly
 increasing) is optional: without it the keys are spread evenly over the path.  Positions follow
 a Catmull-Rom spline (C1), rotations squad, fov linearly (:mod:`splatgl.paths.spline`).
+
+The keys are perspective cameras.  With a ``projection`` other than ``perspective`` (a camera
+model of :mod:`splatgl.cameras.registry`: a fisheye, a panorama, an orthographic view) each
+frame's camera is that model at the frame's pose and size, as ``--projection NAME --fov
+projection_fov`` re-projects a perspective camera (:func:`~splatgl.cameras.registry.retarget`:
+an orthographic view keeps the perspective camera's focal length as pixels per world unit); the
+viewer's K key records its lens views this way, so the path renders them without options.
 
 ``frames`` N samples the path evenly, the first and last frames on the first and last keys
 (with ``loop``, N frames cover one cycle and the last key is not repeated); ``fps`` x
@@ -39,12 +48,15 @@ from ..cameras.camera import Camera
 from ..cameras.poses import check_rigid_pose, look_at
 from ..errors import CameraError
 from ..cameras.json_fields import entries, matrix, number
+from ..cameras.registry import model_class, names as model_names, retarget
 from .spline import sample_poses
 
 FORMAT_KEY = "splatgl_path"
 FORMAT_VERSION = 1
 DEFAULT_FOV = 50.0
 DEFAULT_UP = (0.0, -1.0, 0.0)
+#: The keys' own camera model (``projection`` left out).
+PERSPECTIVE = model_names()[0]
 
 
 @dataclass(frozen=True)
@@ -103,6 +115,10 @@ class PathFile:
     seconds: float | None = None
     loop: bool = False
     rotation: str = "squad"
+    #: The frames' camera model (None: perspective) and its field of view (None: the model's
+    #: default), as ``--projection`` and ``--fov`` re-project the keys' perspective cameras.
+    projection: str | None = None
+    projection_fov: float | None = None
 
     def _key_times(self) -> np.ndarray:
         given = [k.time for k in self.keyframes]
@@ -140,6 +156,8 @@ class PathFile:
             key = by_time.get(float(t))  # on a key: its own matrix, not inv(inv(.))
             w2c = key.world_to_camera if key is not None else np.linalg.inv(m)
             cams.append(Camera.from_fov(self.width, self.height, float(f), w2c))
+        if self.projection is not None:
+            cams = [retarget(c, self.projection, self.projection_fov) for c in cams]
         return cams
 
 
@@ -166,6 +184,7 @@ def parse_path(path: Path, obj: dict) -> PathFile:
     rotation = obj.get("rotation", "squad")
     if rotation not in ("squad", "slerp"):
         raise CameraError(f"{path}: field 'rotation' must be 'squad' or 'slerp', got {rotation!r}")
+    projection, projection_fov = _projection(path, obj)
     frames = fps = seconds = None
     if "frames" in obj:
         frames = number(path, "", obj, "frames", positive=True)
@@ -180,7 +199,29 @@ def parse_path(path: Path, obj: dict) -> PathFile:
             raise CameraError(f"{path}: fps x seconds = {fps * seconds:g} gives no frame")
     else:
         raise CameraError(f"{path}: needs 'frames', or 'fps' and 'seconds'")
-    return PathFile(int(w), int(h), keys, frames, fps, seconds, loop, rotation)
+    return PathFile(int(w), int(h), keys, frames, fps, seconds, loop, rotation, projection,
+                    projection_fov)
+
+
+def _projection(path: Path, obj: dict) -> tuple[str | None, float | None]:
+    """The ``projection`` (None: perspective) and ``projection_fov`` fields, checked."""
+    name = obj.get("projection", PERSPECTIVE)
+    try:
+        cls = model_class(name, "field 'projection'")
+    except CameraError as exc:
+        raise CameraError(f"{path}: {exc}") from None
+    if "projection_fov" not in obj:
+        return (None if cls.name == PERSPECTIVE else cls.name), None
+    fov = number(path, "", obj, "projection_fov")
+    if cls.no_fov or cls.name == PERSPECTIVE:
+        why = cls.no_fov or "the keys' own 'fov' is a perspective camera's"
+        raise CameraError(f"{path}: field 'projection_fov' does not apply to projection "
+                          f"'{cls.name}': {why}")
+    lo, hi, closed = cls.fov_range()
+    if not (lo < fov <= hi if closed else lo < fov < hi):
+        raise CameraError(f"{path}: field 'projection_fov' of a {cls.name} must be in ({lo:g}, "
+                          f"{hi:g}{']' if closed else ')'} degrees, got {fov:g}")
+    return cls.name, fov
 
 
 def path_json(cameras: list[Camera], frames: int | None = None, loop: bool = False,

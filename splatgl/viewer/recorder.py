@@ -6,7 +6,10 @@ rests); K again writes ``splatgl-view-path-NNNN.json`` beside the screenshots (a
 whole file or none), sampled at :data:`FPS` frames a second over the recorded time (the first
 and last frames are the cameras K was pressed at), and prints
 the command that renders it.  The format is :mod:`splatgl.paths.keyframes`'s: one
-``world_to_camera`` and vertical ``fov`` per key, with its ``time``.
+``world_to_camera`` and vertical ``fov`` per key, with its ``time``; in a lens view
+(``view --projection``: fisheye, panorama, orthographic) the file's ``projection`` (and
+``projection_fov``) name the model the viewer shows the keys' cameras through, so ``render
+--path`` draws the lens view without options.
 """
 
 from __future__ import annotations
@@ -36,17 +39,25 @@ def next_path(directory: Path) -> Path:
     return directory / f"{PREFIX}{n:04d}.json"
 
 
-def path_object(keys: list[tuple[float, Camera]], fps: float = FPS) -> dict:
-    """The path file object of timed cameras ``keys`` ((seconds from the start, camera), the
-    times increasing), at the size of the last camera: ``fps`` frames a second over the span,
-    the first and last frames on the first and last keys (the video's rate is ``fps``)."""
+def path_object(keys: list[tuple[float, Camera]], fps: float = FPS,
+                projection: str | None = None, projection_fov: float | None = None) -> dict:
+    """The path file object of timed perspective cameras ``keys`` ((seconds from the start,
+    camera), the times increasing), at the size of the last camera: ``fps`` frames a second
+    over the span, the first and last frames on the first and last keys (the video's rate is
+    ``fps``); ``projection`` (and its ``projection_fov``): the model the frames are seen
+    through, as the viewer's ``--projection`` (:mod:`splatgl.paths.keyframes`)."""
     last = keys[-1][1]
     frames = max(2, int(round((keys[-1][0] - keys[0][0]) * fps)) + 1)
-    return {FORMAT_KEY: FORMAT_VERSION, "width": last.width, "height": last.height,
-            "frames": frames, "fps": fps,
-            "keyframes": [{"world_to_camera": c.world_to_camera.tolist(),
-                           "fov": float(np.degrees(2.0 * np.arctan(0.5 * c.height / c.fy))),
-                           "time": t} for t, c in keys]}
+    obj = {FORMAT_KEY: FORMAT_VERSION, "width": last.width, "height": last.height,
+           "frames": frames, "fps": fps}
+    if projection is not None:
+        obj["projection"] = projection
+        if projection_fov is not None:
+            obj["projection_fov"] = float(projection_fov)
+    obj["keyframes"] = [{"world_to_camera": c.world_to_camera.tolist(),
+                         "fov": float(np.degrees(2.0 * np.arctan(0.5 * c.height / c.fy))),
+                         "time": t} for t, c in keys]
+    return obj
 
 
 class Recorder:
@@ -74,15 +85,17 @@ class Recorder:
         if gap > 0.0 and (force or gap >= 1.0 / RECORD_HZ):
             self.keys.append((t, camera))
 
-    def stop(self, directory: Path, camera: Camera, now: float | None = None) -> Path | None:
+    def stop(self, directory: Path, camera: Camera, now: float | None = None,
+             projection: str | None = None, projection_fov: float | None = None) -> Path | None:
         """End the recording with ``camera``; write the path file into ``directory`` and return
-        it, or None where the recording is shorter than one frame of the path."""
+        it, or None where the recording is shorter than one frame of the path.  ``projection``,
+        ``projection_fov``: the lens the cameras were shown through (:func:`path_object`)."""
         self.add(camera, now, force=True)
         keys, self.keys = self.keys or [], None
         if len(keys) < 2 or keys[-1][0] * FPS < 1.0:
             return None
         out = next_path(Path(directory))
-        write_path(out, path_object(keys))
+        write_path(out, path_object(keys, FPS, projection, projection_fov))
         return out
 
 
@@ -94,7 +107,8 @@ def toggle(viewer) -> str:
     if not rec.recording:
         rec.start(camera)
         return "recording the camera path (K stops and writes it)"
-    out = rec.stop(v.options.screenshot_dir, camera)
+    out = rec.stop(v.options.screenshot_dir, camera, projection=v.options.projection,
+                   projection_fov=v.options.fisheye_fov)
     if out is None:
         return "path not written: recorded for less than one frame"
     from .screenshot import settings_arguments

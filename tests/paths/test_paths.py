@@ -112,6 +112,13 @@ def test_path_file_frames_fps_and_loop(tmp_path):
     ({"keyframes": [{"eye": [0, 0, 1], "target": [0, 0, 0], "time": 1}, {"eye": [0, 0, 2], "target": [0, 0, 0], "time": 1}]},
      "keyframe times must increase strictly"),
     ({"rotation": "spline"}, "field 'rotation' must be 'squad' or 'slerp'"),
+    ({"projection": "lens"}, "field 'projection' must be one of 'perspective', 'orthographic'"),
+    ({"projection": "equirectangular", "projection_fov": 90},
+     "field 'projection_fov' does not apply to projection 'equirectangular': an equirectangular "
+     "panorama always spans 360 x 180 degrees"),
+    ({"projection_fov": 90}, "field 'projection_fov' does not apply to projection 'perspective'"),
+    ({"projection": "fisheye", "projection_fov": 400},
+     "field 'projection_fov' of a fisheye must be in (0, 360] degrees, got 400"),
 ])
 def test_path_file_errors(tmp_path, change, message):
     path = _path_file(tmp_path)
@@ -125,6 +132,26 @@ def test_path_file_errors(tmp_path, change, message):
     with pytest.raises(CameraError) as info:
         load_source(path)
     assert str(info.value).startswith(f"{path}: ") and message in str(info.value)
+
+
+def test_path_file_projection_reprojects_every_frame(tmp_path):
+    """A path's "projection" (the viewer's K in a lens view writes it): every frame is that
+    model at the frame's pose, as --projection/--fov re-project the perspective keys."""
+    from splatgl.cameras.registry import retarget
+
+    plain = [v.camera for v in load_source(_path_file(tmp_path))[0]]
+    for projection, fov, model in (("fisheye", 200.0, "Fisheye"),
+                                   ("equirectangular", None, "Equirectangular"),
+                                   ("orthographic", None, "Orthographic")):
+        extra = {"projection": projection, **({"projection_fov": fov} if fov else {})}
+        cams = [v.camera for v in load_source(_path_file(tmp_path, **extra))[0]]
+        assert [type(c.model).__name__ for c in cams] == [model] * len(plain)
+        for c, p in zip(cams, plain):
+            want = retarget(p, projection, fov)
+            np.testing.assert_array_equal(c.world_to_camera, p.world_to_camera)
+            assert (c.fx, c.fy, c.cx, c.cy, c.model) == (want.fx, want.fy, want.cx, want.cy, want.model)
+    same = [v.camera for v in load_source(_path_file(tmp_path, projection="perspective"))[0]]
+    assert [c.fx for c in same] == [c.fx for c in plain]
 
 
 def test_orbit_circles_the_robust_centre():

@@ -416,6 +416,57 @@ def test_view_benchmark_prints_its_figures_and_survives_an_older_benchmark(xvfb_
     assert "100.00 fps" in line and "median" not in line, line
 
 
+def test_k_in_a_fisheye_view_records_a_path_that_renders_the_fisheye(xvfb_display, demo, tmp_path, capsys):
+    """K recorded the perspective cameras behind a lens view, so `render --path` drew a
+    perspective flight unless --projection was repeated: the path file now names the
+    projection, and its frames are the viewer's fisheye cameras (recorded in each frame)."""
+    from dataclasses import replace
+
+    import glfw
+
+    from splatgl.api import default_camera
+    from splatgl.cameras.fisheye import Fisheye
+    from splatgl.cli import main
+    from splatgl.datasets.sources import load_source
+    from splatgl.errors import ContextError
+    from splatgl.imagefiles.frame_record import camera_digest, read_record
+    from splatgl.imagefiles.images import inspect_image
+    from splatgl.scene.settings import RenderSettings
+    from splatgl.viewer.app import Viewer, ViewerOptions
+
+    path, scene = demo
+    options = ViewerOptions(visible=True, screenshot_dir=tmp_path, render_args=(str(path),),
+                            vsync=False, target_fps=0.0, projection="fisheye", fisheye_fov=200.0)
+    try:
+        v = Viewer(scene, RenderSettings(), default_camera(scene, 64, 48), options=options)
+    except ContextError as exc:
+        pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
+    try:
+        v.step()
+        w, h = v.size
+        v.on_key(glfw.KEY_K, glfw.PRESS, 0)
+        start = v.camera()
+        v.state = replace(v.state, yaw=v.state.yaw + 10.0)
+        v.recorder.keys.append((0.1, v.nav.camera(w, h)))
+        end = v.camera()
+        v.on_key(glfw.KEY_K, glfw.PRESS, 0)
+    finally:
+        v.close()
+    recorded = tmp_path / "splatgl-view-path-0001.json"
+    obj = json.loads(recorded.read_text())
+    assert (obj["projection"], obj["projection_fov"]) == ("fisheye", 200.0)
+    views, _ = load_source(recorded)
+    assert isinstance(views[0].camera.model, Fisheye) and views[0].camera.fx == start.fx
+    assert camera_digest(views[0].camera) == camera_digest(start)
+    assert camera_digest(views[-1].camera) == camera_digest(end) != camera_digest(start)
+    capsys.readouterr()
+    assert main(["render", str(path), "--path", str(recorded), "-o", str(tmp_path / "f/")]) == 0
+    assert f"wrote {len(views)} frames" in capsys.readouterr().out
+    for k, cam in ((0, start), (len(views) - 1, end)):
+        info = inspect_image(tmp_path / "f" / f"{k:05d}.png")
+        assert read_record(info.description)["camera"] == camera_digest(cam)
+
+
 def test_k_records_the_flight_as_a_path_file_and_b_changes_the_background(viewer, tmp_path, capsys):
     """K starts and stops recording: the path file (what `render --path` reads) starts at the
     camera K was pressed at and ends at the one it was stopped at; B cycles the background."""
