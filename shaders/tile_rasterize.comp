@@ -13,6 +13,9 @@
 // exp() where power is below that splat's cut-off by the same margin.
 // DEVICE_SORT (--sort gpu): the splat indices come from tile_order and the passes from the
 // device (ts_passes; each pass an indirect dispatch of whole bands, rows past the grid idle).
+// A frame whose keys overflowed the key buffers (ts_overflow; nothing was emitted) writes
+// alpha TILE_OVERFLOW_ALPHA, never a drawn alpha, into every pixel: the image read back is the
+// renderer's only status (splatgl/renderers/tile_device.py DeviceOrder.overflowed).
 // Long lists run in passes (u_pass of u_passes, each over at most TILE_LIST_CHUNK entries of every
 // tile's list), carrying (C, +-T) in out_rgba and D in out_depth between passes (T negated once
 // the pixel stopped): llvmpipe ends every loop of an invocation after 65535 iterations in all,
@@ -357,6 +360,9 @@ void main() {
     if (inside) {
         bool last = u_pass + 1u == passes;
         out_rgba[o] = last ? vec4(C + T * u_background, 1.0 - T) : vec4(C, done ? -T : T);
+#ifdef DEVICE_SORT
+        if (last && ts_overflow != 0u) out_rgba[o].w = TILE_OVERFLOW_ALPHA;   // draw again
+#endif
         out_depth[o] = D;
 #ifdef NORMAL_OUTPUT
         out_normal[o] = vec4(N, 0.0);

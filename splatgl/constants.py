@@ -126,6 +126,10 @@ RADIX_ITEMS = 32
 #: when a frame emits more: the capacity is kept).
 TILE_SCAN_ITEMS = 16
 TILE_KEYS_PER_SPLAT = 8
+#: The alpha every pixel of a device-order frame whose keys overflowed the key buffers gets
+#: (shaders/tile_rasterize.comp): never a drawn alpha (1 - T, T in [0, 1]), so the image read
+#: back tells the renderer to grow the buffers and draw again, with no status read per frame.
+TILE_OVERFLOW_ALPHA = -1.0
 
 #: Device-resident order (``--sort gpu``, shaders/order_cull.comp): the GPU cull computes the
 #: peak-alpha bound in float32 (the CPU's is float64, splatgl/order/cull.py) and keeps a splat
@@ -217,6 +221,7 @@ def glsl_defines() -> dict[str, str]:
         "RADIX_BITS": str(RADIX_BITS),
         "RADIX_ITEMS": str(RADIX_ITEMS),
         "TILE_SCAN_ITEMS": str(TILE_SCAN_ITEMS),
+        "TILE_OVERFLOW_ALPHA": glsl_float(TILE_OVERFLOW_ALPHA),
         "DEVICE_CULL_BAND": glsl_float(DEVICE_CULL_BAND),
         "COMPACT_QUAT_BITS": str(COMPACT_QUAT_BITS),
         "COMPACT_OPACITY_BITS": str(COMPACT_OPACITY_BITS),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from .limits import DERIVED_ADVICE, buffer_limit, check_splat_buffer
 from .transfers import transfers
 
 
@@ -15,12 +16,17 @@ class GrowableBuffer:
     sizes do not re-create the buffer every frame.  ``minimum``: the smallest size made (a
     zero-byte buffer cannot be bound).  ``binding``: the storage-buffer slot :meth:`bind` uses.
     After :meth:`ensure`, :attr:`grew` tells whether the buffer object changed (vertex arrays
-    that read it must then be rebuilt).
+    that read it must then be rebuilt).  Each growth goes through the driver's buffer limit
+    (:func:`splatgl.gl.limits.check_splat_buffer`): a size past it is refused in one line before
+    anything is allocated (``what`` names the buffer, ``stride`` bytes per ``unit`` give the
+    count), and the slack never takes a buffer past it.
     """
 
     def __init__(self, ctx: moderngl.Context, binding: int | None = None, slack: float = 0.0,
-                 minimum: int = 16):
+                 minimum: int = 16, what: str = "a per-view buffer", stride: int = 0,
+                 unit: str = "splats"):
         self.ctx, self.binding, self.slack, self.minimum = ctx, binding, slack, minimum
+        self.what, self.stride, self.unit = what, stride, unit
         self.buf: moderngl.Buffer | None = None
         self.grew = False
 
@@ -29,9 +35,12 @@ class GrowableBuffer:
         nbytes = max(int(nbytes), self.minimum)
         self.grew = self.buf is None or self.buf.size < nbytes
         if self.grew:
+            check_splat_buffer(self.ctx, nbytes // self.stride if self.stride else None, nbytes,
+                               self.what, self.unit, DERIVED_ADVICE)
+            size = min(nbytes + int(nbytes * self.slack), max(nbytes, buffer_limit(self.ctx)[0]))
             if self.buf is not None:
                 self.buf.release()
-            self.buf = self.ctx.buffer(reserve=nbytes + int(nbytes * self.slack))
+            self.buf = self.ctx.buffer(reserve=size)
         return self.buf
 
     def upload(self, data: bytes) -> moderngl.Buffer:

@@ -13,9 +13,10 @@ Two limits apply, whatever gave the size (``--width``/``--height`` or a camera f
 - memory: the image buffers every renderer certainly allocates (:data:`MIN_BYTES_PER_PIXEL`)
   must fit the memory the kernel reports as available.
 
-The splats' storage buffers (:mod:`splatgl.gl.scene_buffers`) are refused before they are
-allocated when one would exceed :func:`buffer_limit` (:func:`check_splat_buffer`): llvmpipe
-crashes the process reading a buffer past 2 GiB.
+The splats' storage buffers (:mod:`splatgl.gl.scene_buffers`), and every per-splat, per-key
+or per-pixel buffer derived from them, are refused before they are allocated when one would
+exceed :func:`buffer_limit` (:func:`check_splat_buffer`): llvmpipe crashes the process reading
+a buffer past 2 GiB.
 
 Without a context (the NumPy reference) only the memory check and :data:`MAX_IMAGE_SIDE` apply.
 Which renderer needs which check: :func:`splatgl.renderers.registry.image_size_problem`.
@@ -48,6 +49,12 @@ DEFAULT_BLOCK = 2 ** 27
 #: buffers with 32-bit byte offsets (llvmpipe reads a buffer of 2 GiB to its last word and
 #: crashes the process, SIGSEGV, on one 4 bytes larger; it refuses 4 GiB with GL_OUT_OF_MEMORY).
 MAX_BUFFER_BYTES = 2 ** 31
+#: What :func:`check_splat_buffer` advises for the scene's own buffers, and for the buffers
+#: derived from the splats each frame (projections, cull rows, keys: the storage does not change
+#: their size).
+SCENE_ADVICE = ("draw fewer splats (a smaller --lod-budget or --memory), store them smaller "
+                "(--gpu-storage compact) or use --renderer cpu")
+DERIVED_ADVICE = "draw fewer splats (a smaller --lod-budget or --memory) or use --renderer cpu"
 #: The texel of each colour target precision: (moderngl dtype, bytes a pixel, GL name).
 _TEXELS = {Precision.RGBA32F: ("f4", 16, "RGBA32F"), Precision.RGBA16F: ("f2", 8, "RGBA16F"),
            Precision.RGBA8: ("f1", 4, "RGBA8")}
@@ -141,17 +148,22 @@ def buffer_limit(ctx) -> tuple[int, str]:
     return block, f"GL_MAX_SHADER_STORAGE_BLOCK_SIZE of {renderer}"
 
 
-def check_splat_buffer(ctx, count: int, nbytes: int, what: str) -> None:
-    """Refuse, before it is allocated, a storage buffer of ``nbytes`` holding ``count`` splats
-    (``what`` names it) larger than :func:`buffer_limit` allows: one line naming the count, the
-    bytes, the limit and what draws fewer splats or stores them smaller."""
+def check_splat_buffer(ctx, count: int | None, nbytes: int, what: str, unit: str = "splats",
+                       advice: str = SCENE_ADVICE) -> None:
+    """Refuse, before it is allocated, a storage buffer of ``nbytes`` holding ``count`` items
+    (``unit``: splats, tile keys; None: not counted) larger than :func:`buffer_limit` allows
+    (``what`` names it): one line naming the count, the bytes, the limit and ``advice``.
+
+    The one check for every GPU buffer whose size grows with the splats, the keys or the
+    pixels: the scene's (:mod:`splatgl.gl.scene_buffers`), the per-view buffers
+    (:class:`splatgl.gl.buffers.GrowableBuffer` checks each growth), the quad path's
+    device-order cull rows, the tile renderer's projections and key buffers."""
     limit, source = buffer_limit(ctx)
     if nbytes > limit:
+        need = f"{count:,} {unit} need" if count is not None else "it needs"
         raise SplatglError(
-            f"{count:,} splats need a GPU buffer of {nbytes:,} bytes ({what}), more than this "
-            f"OpenGL driver allows in one ({limit:,} bytes, {source}); draw fewer splats "
-            "(a smaller --lod-budget or --memory), store them smaller (--gpu-storage compact) or "
-            "use --renderer cpu")
+            f"{need} a GPU buffer of {nbytes:,} bytes ({what}), more than this OpenGL driver "
+            f"allows in one ({limit:,} bytes, {source}); {advice}")
 
 
 def memory_problem(width: int, height: int) -> str | None:

@@ -40,7 +40,6 @@ import numpy as np
 
 from ..cameras.view import View
 from ..errors import SplatglError
-from ..gl.bindings import TILE_BINDINGS
 from ..gl import limits
 from ..gl.buffers import GrowableBuffer
 from ..gl.scene_buffers import SceneBuffers
@@ -56,22 +55,8 @@ from .registry import Registered, check
 from .tile_device import DeviceOrder, device_frame
 from .tile_layers import layer_output, layer_switches, size_layer_buffers
 from .tile_keys import (MAX_GROUPS, RASTER_BAND_TILES, TILE_EMIT_CHUNK,
-                        TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, read_keys, splat_groups,
-                        tile_grid)
-
-
-def _splat_buffers(ctx: moderngl.Context, n: int, surfel: bool, per_pixel: bool
-                   ) -> dict[str, GrowableBuffer]:
-    """The per-view buffers by name (:data:`TILE_BINDINGS`), the per-splat ones sized for ``n``."""
-    bufs = {name: GrowableBuffer(ctx, b, slack=0.25) for name, b in TILE_BINDINGS.items()}
-    for name, stride in (("MEAN_DEPTH", 16), ("CONIC_O", 16), ("COLOR", 16), ("RECT", 16),
-                         ("TOUCHED", 4), ("OFFSETS", 4)):
-        bufs[name].ensure(n * stride)
-    if surfel:
-        bufs["SURFEL"].ensure(n * 16)
-    if per_pixel and not surfel:
-        bufs["PEAK"].ensure(n * 48)   # the peak depth's coefficients
-    return bufs
+                        TILE_LIST_CHUNK, KeyLayout, TileStages, TileTimes, check_splat_buffers,
+                        read_keys, splat_buffers, splat_groups, tile_grid)
 
 
 class TileRenderer(Registered):
@@ -92,9 +77,10 @@ class TileRenderer(Registered):
         self.ctx, self.scene = ctx, scene
         self.programs = programs or ProgramCache(ctx)
         self.surfel, self.count = scene.kind is SplatKind.SURFEL_2D, scene.count
+        check_splat_buffers(ctx, self.count, self.surfel, self.per_pixel)  # before allocating
         self.scene_buffers = SceneBuffers(ctx, scene, options.gpu_storage) if self.count else None
         self._max_block = limits.storage_block_size(ctx)
-        self._bufs = _splat_buffers(ctx, self.count, self.surfel, self.per_pixel)
+        self._bufs = splat_buffers(ctx, self.count, self.surfel, self.per_pixel)
         self.last_times: TileTimes | None = None   # and the progress callback:
         self.progress = None
         self._switches: dict[str, object] = {}   # the frame's layer switches (tile_layers.py)
@@ -277,8 +263,8 @@ class TileRenderer(Registered):
     def _times(self, readback: float, moved) -> TileTimes:
         clock, total = self._frame_clock
         d = np.diff(clock)
-        return TileTimes(*(float(v) for v in d), float(readback), int(total), moved,
-                         self.device is not None)
+        return TileTimes(*(float(v) for v in d), float(readback),
+                         None if total is None else int(total), moved, self.device is not None)
 
     def render(self, view: View, layers: frozenset[Layer] = BASE,
                under: UnderLayer | None = None) -> RenderOutput:
@@ -291,12 +277,15 @@ class TileRenderer(Registered):
         try:
             size_layer_buffers(self._bufs, self._switches, self.count, view.width * view.height,
                                under)
-            self._frame(view)
+            h, w = view.height, view.width
+            while True:   # the device order: drawn again after an overflow, seen in the image
+                self._frame(view)
+                t0 = time.perf_counter()
+                rgba = self._bufs["OUT_RGBA"].read(h * w * 16, np.float32).reshape(h, w, 4)
+                if self.device is None or not self.device.overflowed(rgba):
+                    break
         finally:
             switches, self._switches = self._switches, {}
-        t0 = time.perf_counter()
-        h, w = view.height, view.width
-        rgba = self._bufs["OUT_RGBA"].read(h * w * 16, np.float32).reshape(h, w, 4)
         dep = (self._bufs["OUT_DEPTH"].read(h * w * 4, np.float32).reshape(h, w)
                if Layer.DEPTH in layers else None)
         out = layer_output(self._bufs, rgba, dep, layers, under if switches else None,

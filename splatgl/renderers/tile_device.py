@@ -1,6 +1,6 @@
 """The tile renderer's device-resident order (``--sort gpu``, issue 40): the stages between
 ``project`` and ``rasterize`` run on the GPU, sized from the device, and nothing but the image
-(and one 8-byte status word, read after it) comes back.
+comes back.
 
 1. ``scan`` (shaders/tile_scan.comp): the exclusive prefix sum of tiles_touched, reduce then
    scan over blocks of TILE_SCAN_GROUP * TILE_SCAN_ITEMS splats; its last block also writes the
@@ -22,10 +22,21 @@
 4. ``ranges`` (tile_ranges.comp): where the tile changes, the sorted splat indices, and the
    rasterize passes the longest tile list needs, as indirect dispatches.
 
-An overflow draws nothing useful: :meth:`DeviceOrder.overflowed` (the status word, read after
-the frame) tells the renderer to grow the buffers to the total (with a quarter more) and draw
-the frame again; the capacity is kept for the frames after.  The NumPy twins are the CPU order
-of :mod:`splatgl.renderers.tile` (:func:`scan_twin`, :func:`ranges_twin`).
+An overflow draws nothing useful: the rasterizer then writes alpha
+:data:`~splatgl.constants.TILE_OVERFLOW_ALPHA` (never a drawn alpha) into every pixel, and
+:meth:`DeviceOrder.overflowed`, given the image read back, sees it in the first pixel.  Only
+then is the 8-byte status (the keys' total) read, the buffers grown to the total and a quarter
+more, and the frame drawn again; the capacity is kept for the frames after.  A frame that fits
+reads back the image alone: no status word, no extra synchronisation point.
+
+Memory: the key capacity starts at ``TILE_KEYS_PER_SPLAT`` (8) keys a splat and grows only to
+1.25x a frame's measured total, never past the key limit (the smaller of
+``GL_MAX_SHADER_STORAGE_BLOCK_SIZE`` and :func:`splatgl.gl.limits.buffer_limit`, over 8 bytes a
+key; a frame needing more is refused in one line).  A key of capacity holds 8 + 4 + 4 bytes of
+keys, values and order (with the buffers' quarter of slack, 20) and the sorter's 16: at most
+36 bytes a key, 0.6 GiB at llvmpipe's 128 MiB block (16.8M keys), 1.7 GiB for 6M splats'
+first 48M keys.  The NumPy twins are the CPU order of :mod:`splatgl.renderers.tile`
+(:func:`scan_twin`, :func:`ranges_twin`).
 """
 
 from __future__ import annotations
@@ -33,10 +44,11 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..constants import TILE_KEYS_PER_SPLAT, TILE_SCAN_ITEMS
+from ..constants import TILE_KEYS_PER_SPLAT, TILE_OVERFLOW_ALPHA, TILE_SCAN_ITEMS
 from ..errors import SplatglError
 from ..gl.bindings import (TILE_BINDING_SORT_KEYS, TILE_BINDING_SORT_VALUES, TILE_SCAN_GROUP)
 from ..gl.egl_devices import is_software_renderer
+from ..gl.limits import DERIVED_ADVICE, buffer_limit, check_splat_buffer
 from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
@@ -82,7 +94,7 @@ class DeviceOrder:
         self.ctx, self.programs, self.count, self.max_block = ctx, programs, n_splats, max_block
         #: Keys the key buffers hold (grown after an overflow, never shrunk).
         self.capacity = capacity or min(max(_MIN_CAPACITY, TILE_KEYS_PER_SPLAT * n_splats),
-                                        max_block // 8)   # a key is 8 bytes in one block
+                                        self.key_limit)
         self.sorter = RadixSorter(ctx, programs)
         #: A software renderer (llvmpipe) ends an invocation's loops after 65535 iterations,
         #: so long tile lists take passes of TILE_LIST_CHUNK entries there, and the image is
@@ -95,8 +107,10 @@ class DeviceOrder:
         self.presort = True
         #: Frames drawn again after an overflow (for tests and the timings).
         self.retries = 0
-        #: Keys of the last frame (its status word).
-        self.total = 0
+        #: Keys of the last frame where it was read (an overflow, or ``debug_stages``), else
+        #: None: a frame that fits reads nothing but the image.
+        self.total: int | None = None
+        self._state = None   # the renderer's STATE buffer (GrowableBuffer), from ensure()
         #: The sorted keys and splat indices, read back by ``TileRenderer.debug_stages``.
         self.sorted: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -110,6 +124,12 @@ class DeviceOrder:
             order.presort = options.order is Order.GLOBAL
             return order
         return None
+
+    @property
+    def key_limit(self) -> int:
+        """Keys one key buffer may hold: 8 bytes each within the storage block and the
+        driver's limit on one buffer."""
+        return min(self.max_block, buffer_limit(self.ctx)[0]) // 8
 
     def slots(self, n_tiles: int) -> tuple[int, int]:
         """(emit dispatches, rasterize passes) the state holds arguments for: enough for the
@@ -125,6 +145,7 @@ class DeviceOrder:
                                f"({self.capacity * 8} bytes), more than this OpenGL's "
                                f"storage-block limit of {self.max_block} bytes")
         emit, raster = self.slots(n_tiles)
+        self._state = bufs["STATE"]
         bufs["STATE"].ensure(_ARGS + 16 * (emit + raster))
         bufs["SCAN_BLOCKS"].ensure(8 * self.blocks)
         bufs["KEYS"].ensure(8 * self.capacity)
@@ -237,18 +258,35 @@ class DeviceOrder:
         emit, raster = self.slots(n_tiles)
         return [_ARGS + 16 * (emit + p) for p in range(raster)]
 
-    def overflowed(self, state: moderngl.Buffer) -> bool:
-        """Read the frame's status (8 bytes: total, overflow); on an overflow grow the
-        capacity to the total and a quarter more, and say so (the frame is to be drawn again)."""
-        total, over = (int(v) for v in np.frombuffer(state.read(8, offset=_TOTAL), np.uint32))
+    def overflowed(self, rgba: np.ndarray) -> bool:
+        """Whether the frame whose image (H, W, 4) was read back overflowed the key buffers
+        (its first pixel's alpha is :data:`~splatgl.constants.TILE_OVERFLOW_ALPHA`); if so,
+        read the status and grow the capacity (the frame is to be drawn again)."""
+        if rgba.size == 0 or rgba.reshape(-1, 4)[0, 3] != TILE_OVERFLOW_ALPHA:
+            return False
+        return self.grow(*self.status())
+
+    def status(self) -> tuple[int, bool]:
+        """(the keys' total, overflowed) of the last frame, read back (8 bytes, a sync): after
+        an overflow, and for ``debug_stages``."""
+        total, over = (int(v) for v in np.frombuffer(self._state.buf.read(8, offset=_TOTAL),
+                                                          np.uint32))
         transfers(self.ctx).read(8)
         self.total = total
+        return total, bool(over)
+
+    def grow(self, total: int, over: bool) -> bool:
+        """After an overflow (``over``) of ``total`` keys, grow the capacity to the total and a
+        quarter more (within :attr:`key_limit`; a frame needing more is refused in one line)
+        and say so: the frame is to be drawn again."""
         if not over:
             return False
         if total * 8 > self.max_block:   # the CPU order's limit and message
             raise SplatglError(f"the tile renderer needs {total} keys ({total * 8} bytes), more "
                                f"than this OpenGL's storage-block limit of {self.max_block} bytes")
-        self.capacity = min(max(self.capacity, total + total // 4), self.max_block // 8)
+        check_splat_buffer(self.ctx, total, total * 8, "the tile renderer's keys buffer, 8 bytes "
+                           "a tile key", "tile keys", DERIVED_ADVICE)
+        self.capacity = min(max(self.capacity, total + total // 4), self.key_limit)
         self.retries += 1
         return True
 
@@ -258,8 +296,9 @@ class DeviceOrder:
 
 def device_frame(r, view, grid: tuple[int, int], lap, clock, stages: bool):
     """The device order's frame of :class:`TileRenderer` ``r`` (``lap()`` ends a stage
-    on ``clock``): drawn again, with the key buffers grown, after an overflow.  Returns what
-    ``TileRenderer._frame`` does (read back only with ``stages``)."""
+    on ``clock``).  Returns what ``TileRenderer._frame`` does: read back only with ``stages``,
+    which reads the status too and draws again, grown, after an overflow; without, the
+    renderer sees an overflow in the image it reads (:meth:`DeviceOrder.overflowed`)."""
     dev, n_tiles = r.device, grid[0] * grid[1]
     layout = KeyLayout(32, 0, False)       # the reference's: the sort needs no packing
     state = lambda: r._bufs["STATE"].buf             # noqa: E731
@@ -279,13 +318,15 @@ def device_frame(r, view, grid: tuple[int, int], lap, clock, stages: bool):
         lap()
         r._rasterize(view, layout, grid, None)
         lap()
-        if not dev.overflowed(state()):
+        if not stages:
+            dev.total = None
+            r._frame_clock = (clock, None)
+            return layout, None, None, None
+        if not dev.grow(*dev.status()):
             break
         del clock[1:]
     total = dev.total
     r._frame_clock = (clock, total)
-    if not stages:
-        return layout, None, None, None
     counts = r._bufs["TOUCHED"].read(r.count * 4, np.uint32)
     keys, values = (np.frombuffer(b.read(4 * total), np.uint32) for b in dev.sorter.buffers())
     if dev.presort:   # (tiles, splat indices): the keys from the splats' depths

@@ -8,7 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import TILE_LIST_CHUNK, TILE_SIZE  # noqa: F401 (TILE_LIST_CHUNK: tile.py's)
-from ..gl.bindings import SPLAT_GROUP
+from ..gl.bindings import SPLAT_GROUP, TILE_BINDINGS
+from ..gl.buffers import GrowableBuffer
+from ..gl.limits import DERIVED_ADVICE, check_splat_buffer
 from ..gl.transfers import TransferCounts
 
 #: Largest number of work groups along one dispatch axis guaranteed by OpenGL.
@@ -21,6 +23,58 @@ RASTER_BAND_TILES = 512
 #: Keys of one splat's tile rectangle one emit dispatch writes at most (the same loop limit: a
 #: splat covering a 4096 x 4096 image has 65536 tiles); larger rectangles take more dispatches.
 TILE_EMIT_CHUNK = 32768
+#: The per-view buffers that grow with the splats, the keys, the tiles or the pixels: name ->
+#: (bytes an item, the item), for the driver's limit on one buffer, which each growth checks
+#: (:func:`splatgl.gl.limits.check_splat_buffer`, one line naming the buffer).
+BUFFER_ITEMS: dict[str, tuple[int, str]] = {
+    **{name: (16, "splats") for name in ("MEAN_DEPTH", "CONIC_O", "COLOR", "RECT", "SURFEL",
+                                         "NORMAL")},
+    "TOUCHED": (4, "splats"), "OFFSETS": (4, "splats"), "SPLAT_ORDER": (4, "splats"),
+    "PEAK": (48, "splats"),
+    "KEYS": (8, "tile keys"), "VALUES": (4, "tile keys"), "ORDER": (4, "tile keys"),
+    "RANGES": (8, "tiles"),
+    **{name: (16, "pixels") for name in ("OUT_RGBA", "OUT_NORMAL")},
+    "OUT_DEPTH": (4, "pixels"), "UNDER": (4, "pixels"),
+    "OUT_ORDERED_F": (8, "pixels"), "OUT_ORDERED_U": (8, "pixels"),
+}
+
+
+def buffer_what(name: str) -> str:
+    """How the driver-limit refusal names the tile renderer's buffer ``name``."""
+    stride, unit = BUFFER_ITEMS.get(name, (0, ""))
+    what = f"the tile renderer's {name.lower().replace('_', ' ')} buffer"
+    return f"{what}, {stride} bytes a {unit[:-1]}" if stride else what
+
+
+def _splat_sizes(surfel: bool, per_pixel: bool) -> dict[str, int]:
+    """Bytes a splat of each per-splat buffer a renderer of this kind allocates at once."""
+    sizes = {name: BUFFER_ITEMS[name][0] for name in ("MEAN_DEPTH", "CONIC_O", "COLOR", "RECT",
+                                                        "TOUCHED", "OFFSETS")}
+    if surfel:
+        sizes["SURFEL"] = 16
+    if per_pixel and not surfel:
+        sizes["PEAK"] = 48   # the peak depth's coefficients
+    return sizes
+
+
+def check_splat_buffers(ctx, n: int, surfel: bool, per_pixel: bool) -> None:
+    """Refuse in one line, before anything is allocated, ``n`` splats whose largest per-splat
+    buffer the driver cannot hold in one (:func:`splatgl.gl.limits.check_splat_buffer`)."""
+    sizes = _splat_sizes(surfel, per_pixel)
+    largest = max(sizes, key=sizes.get)
+    check_splat_buffer(ctx, n, n * sizes[largest], buffer_what(largest), advice=DERIVED_ADVICE)
+
+
+def splat_buffers(ctx, n: int, surfel: bool, per_pixel: bool) -> dict[str, GrowableBuffer]:
+    """The per-view buffers by name (:data:`TILE_BINDINGS`), the per-splat ones sized for ``n``
+    (each growth checked against the driver's limit, in :class:`GrowableBuffer`)."""
+    bufs = {name: GrowableBuffer(ctx, b, slack=0.25, what=buffer_what(name),
+                                 stride=BUFFER_ITEMS.get(name, (0,))[0],
+                                 unit=BUFFER_ITEMS.get(name, (0, "splats"))[1])
+            for name, b in TILE_BINDINGS.items()}
+    for name, stride in _splat_sizes(surfel, per_pixel).items():
+        bufs[name].ensure(n * stride)
+    return bufs
 
 
 def tile_grid(width: int, height: int) -> tuple[int, int]:
@@ -76,7 +130,9 @@ class TileTimes:
     ranges: float
     rasterize: float
     readback: float
-    n_keys: int
+    #: Keys the frame emitted; None where they stayed on the device (``--sort gpu``: a frame
+    #: reads back nothing but the image).
+    n_keys: int | None
     #: The frame's transfers (:mod:`splatgl.gl.transfers`), apart from the one-time scene upload.
     transfers: TransferCounts = TransferCounts()
     #: Whether the order stayed on the device (``--sort gpu``, :mod:`.tile_device`).
@@ -96,7 +152,8 @@ class TileTimes:
         return self.rasterize
 
     def summary(self, count: int) -> str:
-        return f"splats {count:,}, {self.n_keys:,} tile keys"
+        keys = "tile keys on the device" if self.n_keys is None else f"{self.n_keys:,} tile keys"
+        return f"splats {count:,}, {keys}"
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The tile renderer's device-resident order (``--sort gpu``, splatgl/renderers/tile_device.py,
 issue 40): the scan, the key emission, the two radix-sort passes and the tile ranges on the GPU,
-with images identical to the CPU order's, bit for bit; the overflow and the frame drawn again;
-nothing read back but the image and the 8-byte status word."""
+with images identical to the CPU order's, bit for bit; the overflow, seen in the image read
+back, and the frame drawn again; nothing read back but the image."""
 
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from splatgl.cameras.fisheye import Fisheye
 from splatgl.cameras.opencv import OpenCV
 from splatgl.cameras.poses import look_at, orbit
 from splatgl.cli import main
+from splatgl.constants import TILE_OVERFLOW_ALPHA
 from splatgl.formats import load_scene
 from splatgl.measure.stress import CASES
 from splatgl.errors import SplatglError
@@ -117,21 +118,31 @@ def test_surfels_identical_to_the_cpu_order(ctx):
 
 
 def test_overflow_grows_the_buffers_and_draws_again(ctx):
-    """A capacity far too small: the scan flags it on the device, the frame is drawn again with
-    room for every key, the image the CPU order's; the next frame needs no retry."""
+    """A capacity far too small: the scan flags it on the device, the rasterizer marks every
+    pixel's alpha TILE_OVERFLOW_ALPHA, the renderer sees it in the image it reads and only then
+    reads the 8-byte status, grows the buffers to the total and a quarter and draws again: the
+    image the CPU order's; the next frame needs no retry and reads the image alone."""
     scene = random_scene(2000, 3, degree=1, **IN_DEPTH)
     a, b, retries = _pair(ctx, scene, CAM, capacity=5)
     assert retries == 1
     _same(a, b)
     dev = TileRenderer(ctx, scene, GPU)
+    image = CAM.width * CAM.height * 16
     try:
-        dev.device.capacity = 5
+        need = dev.debug_stages(view_for(dev, CAM)).keys.size
+        dev.device.capacity, dev.device.retries = 5, 0
         draw(dev, CAM)
-        cap = dev.device.capacity
+        cap, first = dev.device.capacity, dev.last_times.transfers
         draw(dev, CAM)
-        assert dev.device.retries == 1 and dev.device.capacity == cap   # kept
+        assert dev.device.retries == 1 and cap == need + need // 4   # grown, then kept
+        assert first.read_back == 2 * image + 8 and dev.last_times.transfers.read_back == image
+        rgba = dev._bufs["OUT_RGBA"].read(image, np.float32).reshape(-1, 4)
+        dev.device.capacity = 5          # the overflowed frame's image: every alpha the mark
+        dev._frame(view_for(dev, CAM))
+        marked = dev._bufs["OUT_RGBA"].read(image, np.float32).reshape(-1, 4)
     finally:
         dev.release()
+    assert (rgba[:, 3] >= 0).all() and (marked[:, 3] == TILE_OVERFLOW_ALPHA).all()
 
 
 def test_the_capacity_stays_within_the_storage_block_limit(ctx):
@@ -200,8 +211,8 @@ def test_gpu_shape_one_pass_one_band(ctx, monkeypatch):
         grid = (8, 6)
         assert dev.device.band(grid) == 6 and dev.device.slots(48)[1] == 1
         _same(draw(cpu, CAM, depth=True), draw(dev, CAM, depth=True), depth=True)
-        # the 6 stage laps, the status word, colour and depth: no finishes between bands
-        assert dev.last_times.transfers.syncs == 9
+        # the 6 stage laps, colour and depth: no finishes between bands, no status word
+        assert dev.last_times.transfers.syncs == 8
     finally:
         cpu.release()
         dev.release()
@@ -220,8 +231,9 @@ def test_moving_camera_and_empty_view(ctx):
 
 
 def test_only_the_image_is_read_back(ctx, monkeypatch):
-    """A frame of the device order, after the first: reads back the image and the 8-byte status
-    word, and uploads nothing (uniforms aside)."""
+    """A frame of the device order, after the first: reads back the image, exactly, in one
+    read (no status word: an overflow shows in the image), and uploads nothing (uniforms
+    aside)."""
     scene = random_scene(2000, 5, degree=1, **IN_DEPTH)
     dev = TileRenderer(ctx, scene, GPU)
     reads, writes = [], []
@@ -244,10 +256,10 @@ def test_only_the_image_is_read_back(ctx, monkeypatch):
     finally:
         monkeypatch.undo()
         dev.release()
-    assert sorted(reads) == [8, 128 * 96 * 16] and writes == []
+    assert reads == [128 * 96 * 16] and writes == []
     moved = dev.last_times.transfers       # the same, as --timings and the bench report it
-    assert dev.last_times.device_order
-    assert moved.read_back == 8 + 128 * 96 * 16 and 0 < moved.uploaded <= 4096, moved
+    assert dev.last_times.device_order and dev.last_times.n_keys is None
+    assert moved.read_back == 128 * 96 * 16 and 0 < moved.uploaded <= 4096, moved
 
 
 def test_cpu_order_transfers_are_counted(ctx):
@@ -320,13 +332,13 @@ def test_slow_stress_cases_are_identical(ctx, case):
 
 def test_cli_renders_the_cpu_orders_image(tmp_path, capsys):
     """``render --renderer tile --sort gpu`` writes the image ``--sort exact`` does; its
-    ``--timings`` line names the transfers: the image read back and 8 bytes."""
+    ``--timings`` line names the transfers: the image read back, nothing else."""
     demo = str(REPO / "scenes" / "demo.ply")
     args = ["render", demo, "--width", "48", "--height", "32", "--renderer", "tile"]
     assert main(args + ["-o", str(tmp_path / "a.png")]) == 0
     assert main(args + ["-o", str(tmp_path / "b.png"), "--sort", "gpu", "--timings"]) == 0
     line = [s for s in capsys.readouterr().out.splitlines() if s.startswith("timings")][0]
-    assert f"read back {48 * 32 * 16 + 8:,} bytes" in line
+    assert f"read back {48 * 32 * 16:,} bytes" in line and "n_keys" not in line
     assert (tmp_path / "a.png").read_bytes() == (tmp_path / "b.png").read_bytes()
 
 
