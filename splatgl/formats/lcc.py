@@ -166,6 +166,11 @@ class Lcc:
                                          f"(Index.bin names them)")
         return blob
 
+    @property
+    def has_environment(self) -> bool:
+        env = _file(self.path, "Environment.bin")
+        return env is not None and env.stat().st_size > 0
+
     def load(self, level: int = 0, chunks=None, drop_invalid: bool = False,
              environment: bool = True) -> Scene:
         """The splats of ``level`` in the units ``chunks`` (default all), then the environment."""

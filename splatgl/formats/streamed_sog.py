@@ -85,6 +85,10 @@ class StreamedSog:
                                               "meta.json inside the folder", field)
         return self.path.parent / name
 
+    @property
+    def has_environment(self) -> bool:
+        return self.environment is not None
+
     def load(self, level: int = 0, chunks=None, drop_invalid: bool = False,
              environment: bool = True) -> Scene:
         """The splats of ``level`` in the ``chunks`` (indices into :attr:`chunks`; default all),

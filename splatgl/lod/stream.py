@@ -101,10 +101,11 @@ class StreamStats:
 class ResidentSet:
     """Decoded chunks of ``chunks`` (a :class:`LazyChunks` or anything with ``count``,
     ``rows``, ``nodes``, ``estimate(c)``, ``load(c)``) held under ``budget`` bytes (see the
-    module doc).  ``offsets`` and ``branching``: the tree's, for the ancestors."""
+    module doc).  ``offsets`` and ``branching``: the tree's, for the ancestors; ``pinned``:
+    chunks never evicted instead of the top levels' (:mod:`splatgl.lod.stream_levels`)."""
 
     def __init__(self, chunks, budget: int, offsets: np.ndarray, branching: int,
-                 threads: int = LOADERS, on_loaded=None):
+                 threads: int = LOADERS, on_loaded=None, pinned=None):
         self.chunks, self.budget = chunks, int(budget)
         self.offsets = None if offsets is None else np.asarray(offsets, np.int64)
         self.branching = int(branching)
@@ -121,6 +122,8 @@ class ResidentSet:
         if self.offsets is not None:
             top = max(0, len(self.offsets) - 1 - PINNED_LEVELS)
             self._pinned = frozenset(range(int(self.offsets[top]) // chunks.rows, chunks.count))
+        if pinned is not None:   # chosen by the caller (a chunked level's coarsest chunks)
+            self._pinned = frozenset(int(c) for c in pinned)
         largest = max((chunks.estimate(c) for c in range(chunks.count)), default=0)
         need = sum(chunks.estimate(c) for c in self._pinned) + largest * max(1, threads)
         if need > self.budget:
@@ -225,17 +228,33 @@ class ResidentSet:
 
     # ------------------------------------------------------------------------- the two draws
     def gather(self, rows: np.ndarray) -> Scene:
-        """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact)."""
+        """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact).  Each
+        chunk's rows are copied into the scene's arrays (allocated once, at the cut's size)
+        as it arrives: no per-chunk copies to concatenate, so the cut is held once."""
         rows = np.asarray(rows, np.int64)
         ids = self.chunk_of(rows)
         need = np.unique(ids)
         cuts = np.searchsorted(ids, need)
         bounds = dict(zip(need.tolist(), zip(cuts.tolist(), np.append(cuts[1:], rows.size).tolist())))
-        parts = self.collect(need.tolist(), lambda c, scene: self._pick(scene, c, rows, *bounds[c]))
-        order = [parts[c] for c in need.tolist()]
-        if not order:
+        out: dict[str, np.ndarray] = {}
+
+        def take(c: int, scene: Scene) -> bool:
+            a, b = bounds[c]
+            local = rows[a:b] - c * self.chunks.rows
+            if not out:   # the arrays, at the cut's size, from the first chunk's shapes
+                kind = scene.kind
+                out.update({f: np.empty((rows.size,) + getattr(scene, f).shape[1:], np.float32)
+                            for f in _FIELDS}, kind=kind)
+            for f in _FIELDS:
+                np.take(getattr(scene, f), local, axis=0, out=out[f][a:b], mode="clip")
+            return True
+
+        self.collect(need.tolist(), take)
+        if not out:
             return self._pick(self.chunks.load(0), 0, rows, 0, 0)
-        return concatenate(order)
+        for f in _FIELDS:
+            out[f].flags.writeable = False   # adopted by the Scene as they are (no copy)
+        return Scene(*(out[f] for f in _FIELDS), out["kind"])
 
     def collect(self, need: list[int], take) -> dict:
         """``{chunk: take(chunk, its scene)}`` for the chunks ``need``, waiting for those not
@@ -282,9 +301,6 @@ class ResidentSet:
                 if present[c]:
                     self._held.move_to_end(c)
         have = present[self.chunk_of(rows)]
-        missing = np.unique(self.chunk_of(rows[~have]))
-        if missing.size:   # coarse first: the upper levels' chunks come before the leaves'
-            self.request(missing[::-1], keep=frozenset(np.flatnonzero(present).tolist()))
         if have.all():
             return rows, weights, True
         w = np.ones(rows.size, np.float32) if weights is None else weights.astype(np.float32)
@@ -303,6 +319,11 @@ class ResidentSet:
             level[idx] = lv + 1
             todo[idx] = ~present[self.chunk_of(out[idx])]
         uniq, inv = np.unique(out, return_inverse=True)
+        # The missing chunks, coarse first (the upper levels' before the leaves'); only the
+        # chunks this frame draws are kept: the rest of the resident set may make room (with
+        # every resident chunk kept, a full budget never refined a new view).
+        self.request(np.unique(self.chunk_of(rows[~have]))[::-1],
+                     keep=frozenset(np.unique(self.chunk_of(uniq)).tolist()))
         wsum = np.minimum(np.bincount(inv, weights=w.astype(np.float64)), 1.0).astype(np.float32)
         return uniq, (None if weights is None and wsum.size == uniq.size and (wsum >= 1).all()
                       else wsum), False

@@ -1,107 +1,271 @@
-"""A level of a chunked scene (PlayCanvas Streamed SOG, XGrids LCC) streamed through the same
-resident set as a ``.lod.ply`` (issue 41 items 3 and 4).
+"""PlayCanvas Streamed SOG (``lod-meta.json``) and XGrids LCC (``meta.lcc``) streamed under a
+memory budget, as a ``.lod.ply`` is (issue 41 items 3 and 4): ``render``, ``render --path``,
+``eval`` and ``bench`` with ``--memory`` (:class:`ChunkedFrames`) and ``view --memory``
+(:class:`splatgl.lod.stream_levels_view.ChunkedScene`).
 
-:class:`LevelChunks` makes the chunks of one level of a structure from
-:func:`splatgl.formats.streamed_sog.read_structure` or :func:`splatgl.formats.lcc.read_structure`
-the :class:`~splatgl.lod.stream.ResidentSet`'s chunks (a chunk's load decodes only its rows:
-``structure.load(level, [chunk], environment=False)``).  :class:`LevelFrames` draws the level
-(every chunk, in the file's order, then the environment) with the :class:`splatgl.api.Renderer`:
-the image is the whole level's, loaded at once (tests/lod/test_lod_stream.py), and at most the budget
-of chunks stays resident between frames.  Not yet: choosing chunks (and coarser levels) by
-screen-space error, as the ``.lod.ply`` cut does; a Streamed SOG chunk's load decodes the whole
-SOG unit holding it.
+The structure (:func:`read_structure`: the manifest and index only) gives the chunks and, per
+chunk and level, its splats.  :class:`ChunkLevels` makes each (chunk, level) holding splats one
+chunk of the :class:`~splatgl.lod.stream.ResidentSet` (loaded on its background threads, the
+least recently used evicted; a load decodes that chunk's rows of that level:
+``structure.load(level, [chunk], environment=False)``; a Streamed SOG's decodes the SOG unit
+holding them).  Each view chooses a level per chunk by screen-space error under the splat budget
+(:func:`splatgl.lod.level_cut.choose_levels`), or the level ``--lod-level`` gives; a headless
+frame waits for its chunks and draws them, in the file's chunk order followed by the
+environment (loaded once, counted in the budget), with the renderer asked for: the image of
+those chunks read whole.  With a level given and every chunk in view that is the level read whole
+(``structure.load(level)``), given the same anchor and near plane (tests/lod/test_stream_levels.py).
+The default camera frames the boxes of the chunks (:func:`framing_of`), not the splats' 1-99 %
+box as for a scene read whole.
 """
 
 from __future__ import annotations
 
+import hashlib
+from pathlib import Path
+from types import SimpleNamespace
 from typing import Iterable, Iterator
 
+import numpy as np
+
 from ..cameras.camera import Camera
+from ..cameras.view import View
 from ..errors import SplatglError
-from ..scene.settings import RendererKind, RenderSettings
+from ..gl.context import create_headless_context, make_current
+from ..gl.shaders import ProgramCache
 from ..output.layers import BASE, Layer, RenderOutput
-from ..renderers.registry import DEFAULT_RENDERER
+from ..output.under import UnderImage
+from ..renderers import registry
+from ..scene.settings import RendererKind, RenderSettings
+from ..scene.splats import SplatKind
 from .budget import format_size
+from .level_cut import NOT_DRAWN, ChunkTable, choose_levels
+from .selection import LodSettings
 from .stream import LOADERS, ResidentSet, concatenate, scene_bytes
 
+#: The format names (``formats.detect_format``) streamed here.
+CHUNKED_FORMATS = ("streamed-sog", "lcc")
 
-class LevelChunks:
-    """The chunks of ``level`` of ``structure`` that hold splats, as resident-set chunks
-    (``count``, ``estimate(c)``, ``load(c)``); decoded bytes a row measured on the smallest."""
 
-    rows = 1   # no tree rows: the resident set pins nothing
+def is_chunked(path) -> bool:
+    """Whether ``path`` is a Streamed SOG ``lod-meta.json`` or an LCC ``meta.lcc`` (by content)."""
+    from ..formats import lcc, streamed_sog
 
-    def __init__(self, structure, level: int = 0):
-        if not 0 <= level < structure.levels:
-            raise SplatglError(f"{structure.path}: level {level} does not exist (levels 0-"
-                               f"{structure.levels - 1})")
-        self.structure, self.level = structure, level
-        self.ids = [i for i, c in enumerate(structure.chunks) if c.count(level) > 0]
-        self.counts = [structure.chunks[i].count(level) for i in self.ids]
-        self.count = len(self.ids)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+    except (OSError, TypeError):
+        return False
+    return streamed_sog.sniff(head) or lcc.sniff(head)
+
+
+def read_structure(path):
+    """The structure (levels, chunks) of the Streamed SOG or LCC scene at ``path``."""
+    from ..formats import lcc, streamed_sog
+
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    return (streamed_sog if streamed_sog.sniff(head) else lcc).read_structure(path)
+
+
+def check_level(structure, level: int | None) -> None:
+    """Refuse ``--lod-level`` past the file's levels (one line)."""
+    if level is not None and not 0 <= level < structure.levels:
+        raise SplatglError(f"--lod-level {level}: {structure.path} has {structure.levels} "
+                           f"levels (0-{structure.levels - 1}, 0 the finest)")
+
+
+class ChunkLevels:
+    """Each (chunk, level) of ``structure`` holding splats, as one resident-set chunk (``count``,
+    ``estimate(i)``, ``load(i)``; ``key[(chunk, level)]`` its index); decoded bytes a row
+    measured on the smallest (:attr:`sample`: that load)."""
+
+    rows = 1   # no tree rows
+
+    def __init__(self, structure):
+        self.structure = structure
+        self.pairs = [(c, level) for c, chunk in enumerate(structure.chunks)
+                      for level in range(structure.levels) if chunk.count(level) > 0]
+        if not self.pairs:
+            raise SplatglError(f"{structure.path}: no level holds splats")
+        self.key = {pair: i for i, pair in enumerate(self.pairs)}
+        self.counts = [structure.chunks[c].count(level) for c, level in self.pairs]
+        self.count = len(self.pairs)
         self.nodes = sum(self.counts)
-        if not self.count:
-            raise SplatglError(f"{structure.path}: level {level} holds no splats")
         small = min(range(self.count), key=self.counts.__getitem__)
-        self.row_bytes = -(-scene_bytes(self.load(small)) // self.counts[small])
+        self.sample = self.load(small)
+        self.row_bytes = -(-scene_bytes(self.sample) // self.counts[small])
 
-    def estimate(self, chunk: int) -> int:
-        return self.counts[chunk] * self.row_bytes
+    def estimate(self, i: int) -> int:
+        return self.counts[i] * self.row_bytes
 
-    def load(self, chunk: int):
-        return self.structure.load(self.level, [self.ids[chunk]], environment=False)
+    def load(self, i: int):
+        chunk, level = self.pairs[i]
+        return self.structure.load(level, [chunk], environment=False)
 
 
-class LevelFrames:
-    """Views of ``level`` of the chunked scene at ``path`` (a ``lod-meta.json`` or ``meta.lcc``)
-    through a :class:`ResidentSet` of ``memory`` bytes; ``renderer``: a
-    :class:`splatgl.api.Renderer` (the caller's, which it draws with)."""
+def framing_of(structure, sample) -> SimpleNamespace:
+    """What frames the views (as :func:`splatgl.lod.stream_frames.framing_scene` gives it):
+    the box of the chunks holding level-0 splats (every chunk where level 0 has none), its
+    centre the anchor; ``sample``: a decoded chunk (the SH degree)."""
+    boxes = [(c.bound_min, c.bound_max) for c in structure.chunks if c.count(0) > 0] or [
+        (c.bound_min, c.bound_max) for c in structure.chunks]
+    lo = np.min([b[0] for b in boxes], 0).astype(np.float64)
+    hi = np.max([b[1] for b in boxes], 0).astype(np.float64)
+    anchor = (0.5 * (lo + hi)).astype(np.float32).astype(np.float64)
+    digest = hashlib.sha256(repr((structure.levels, structure.counts, lo.tolist(), hi.tolist(),
+                                  len(structure.chunks))).encode()).hexdigest()[:20]
+    return SimpleNamespace(robust_bounds=(lo, hi), robust_radius=float(0.5 * np.linalg.norm(hi - lo)),
+                           anchor=anchor, source=None, count=int(structure.counts[0]),
+                           digest=f"chunked-{digest}", kind=SplatKind.GAUSSIAN_3D,
+                           sh_degree=sample.sh_degree)
 
-    def __init__(self, path, renderer, settings: RenderSettings, memory: int, level: int = 0,
-                 kind: RendererKind = DEFAULT_RENDERER, threads: int = LOADERS):
-        from ..formats import lcc, streamed_sog
 
-        reader = streamed_sog if str(path).lower().endswith("lod-meta.json") else lcc
-        self.structure = reader.read_structure(path)
-        self.renderer, self.settings, self.kind, self.memory = renderer, settings, kind, int(memory)
-        self.chunks = LevelChunks(self.structure, level)
-        self.resident = ResidentSet(self.chunks, self.memory, None, 1, threads)
-        self._environment = self._load_environment(level)
+class ChunkedStream:
+    """What the headless frames and the viewer share: the structure, the chunks, the framing,
+    the environment and the :class:`ResidentSet` of ``memory`` bytes (``pinned``: the
+    coarsest level of every chunk, loaded at once and never evicted)."""
 
-    def _load_environment(self, level: int):
-        """The environment's splats (drawn at every level), or None."""
-        try:
-            return self.structure.load(level, [], environment=True)
-        except SplatglError:   # none: "level holds no splats"
+    def __init__(self, path, lod: LodSettings, memory: int, level: int | None = None,
+                 threads: int = LOADERS, pinned: bool = False, on_loaded=None, framing=None):
+        self.path, self.lod, self.level, self.memory = Path(path), lod, level, int(memory)
+        self.structure = read_structure(path)
+        check_level(self.structure, level)
+        self.chunks = ChunkLevels(self.structure)
+        self.framing = framing if framing is not None else framing_of(self.structure,
+                                                                      self.chunks.sample)
+        self.chunks.sample = None
+        self.table = ChunkTable.of(self.structure, self.framing.anchor)
+        self.environment = self._load_environment()
+        env_bytes = 0 if self.environment is None else scene_bytes(self.environment)
+        if env_bytes >= self.memory:
+            raise SplatglError(f"--memory {format_size(self.memory)} is too small to stream "
+                               f"{self.path.name}: its environment alone is {format_size(env_bytes)}")
+        coarsest = [self.chunks.key[(c, int(np.flatnonzero(row)[-1]))]
+                    for c, row in enumerate(self.table.counts > 0) if row.any()]
+        self.resident = ResidentSet(self.chunks, self.memory - env_bytes, None, 1, threads,
+                                    on_loaded, pinned=coarsest if pinned else None)
+        if pinned:
+            self.resident.collect(sorted(coarsest), lambda i, scene: None)
+
+    def _load_environment(self):
+        if not self.structure.has_environment:
             return None
+        return self.structure.load(0, [], environment=True)
 
-    def scene(self):
-        """The level's splats, waiting for the chunks not resident."""
-        parts = self.resident.collect(list(range(self.chunks.count)), lambda c, scene: scene)
-        order = [parts[c] for c in range(self.chunks.count)]
-        if self._environment is not None:
-            order.append(self._environment)
-        return concatenate(order)
+    def view_camera(self, camera: Camera, settings: RenderSettings) -> Camera:
+        return View.of(camera, settings, self.framing).camera   # the scene transform applied
 
-    def render_view(self, camera: Camera, layers: frozenset[Layer] = BASE) -> RenderOutput:
-        scene = self.scene()
-        if layers == BASE:
-            return RenderOutput(self.renderer.render(scene, camera, self.settings, self.kind), None)
-        return self.renderer.render_layers(scene, camera, self.settings, self.kind, None, layers)
+    def choose(self, camera: Camera, lod: LodSettings | None = None) -> np.ndarray:
+        """(K,) the level of each chunk for ``camera`` (the transformed one)."""
+        return choose_levels(self.table, camera, lod or self.lod, self.level)
 
-    def render_many(self, cameras: Iterable[Camera]) -> Iterator:
-        for camera in cameras:
-            yield self.render_view(camera).rgba
+    def ids(self, levels: np.ndarray) -> list[int]:
+        """The resident-set chunks of a choice, in the file's chunk order."""
+        return [self.chunks.key[(c, int(levels[c]))] for c in np.flatnonzero(levels != NOT_DRAWN)]
+
+    def scene_of(self, ids: list[int]):
+        """The chunks ``ids`` (waiting for those not resident) and the environment, one scene
+        anchored at the framing's anchor."""
+        parts = self.resident.collect(ids, lambda i, scene: scene)
+        order = [parts[i] for i in ids]
+        if self.environment is not None:
+            order.append(self.environment)
+        if not order:   # nothing in view: one splat of the coarsest chunk, fully transparent
+            scene = self.chunks.load(self.chunks.key[next(iter(self.chunks.pairs))]).subset(
+                np.zeros(1, np.int64))
+            scene = type(scene)(scene.means, scene.quats, scene.log_scales,
+                                np.full(1, -1e4, scene.opacity_logits.dtype), scene.sh, scene.kind)
+        else:
+            scene = concatenate(order)
+        scene.__dict__["anchor"] = np.asarray(self.framing.anchor, np.float64)  # cached_property
+        return scene
 
     def summary(self) -> str:
-        return (f"{self.resident.stats.summary(self.memory)}; level {self.chunks.level}: "
-                f"{self.chunks.count} chunks, {self.chunks.nodes:,} splats, budget "
-                f"{format_size(self.memory)}")
+        where = "" if self.level is None else f", --lod-level {self.level}"
+        return (f"{self.resident.stats.summary(self.memory)}; {self.chunks.count} chunk levels "
+                f"of {len(self.structure.chunks)} chunks x {self.structure.levels} levels{where}")
 
     def close(self) -> None:
         self.resident.close()
 
-    def __enter__(self) -> "LevelFrames":
+
+class ChunkedFrames:
+    """Views of the Streamed SOG or LCC at ``path`` streamed under ``memory`` bytes, each
+    waiting for its chunks (see the module doc), drawn by renderer ``kind``; the interface of
+    :class:`splatgl.lod.stream_frames.StreamFrames` (``render_view``, ``render_many``,
+    ``renderer_for``, ``summary``, ``framing``); owns its context (a context manager)."""
+
+    stereo_refusal = "--stereo and --memory (streaming a level of detail) cannot be combined yet"
+
+    def __init__(self, path, settings: RenderSettings, lod: LodSettings, memory: int,
+                 level: int | None = None, kind: RendererKind = RendererKind.QUAD,
+                 threads: int = LOADERS, framing=None):
+        self.settings, self.lod, self.memory, self.kind = settings, lod, int(memory), kind
+        self.ctx = self.renderer = self.programs = None
+        self.stream = ChunkedStream(path, lod, memory, level, threads, framing=framing)
+        self.framing, self.resident = self.stream.framing, self.stream.resident
+        self._ids: list[int] | None = None
+        self.last_cut_nodes = 0
+        try:
+            if registry.entry(kind).gl:
+                self.ctx = create_headless_context()
+                self.programs = ProgramCache(self.ctx)
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def nodes(self):
+        return self.framing
+
+    def render_view(self, camera: Camera, layers: frozenset[Layer] = BASE,
+                    under: UnderImage | None = None) -> RenderOutput:
+        """One exact view: waits for every chunk its levels need."""
+        view = View.of(camera, self.settings, self.framing)
+        ids = self.stream.ids(self.stream.choose(view.camera))
+        if ids != self._ids or self.renderer is None:   # the same chunks: the upload is kept
+            scene = self.stream.scene_of(ids)
+            self._release()
+            if self.ctx is not None:
+                make_current(self.ctx)
+            self.renderer = registry.make(self.kind, scene, self.settings, self.ctx,
+                                          self.programs)
+            self._ids = ids
+            self.last_cut_nodes = scene.count
+        elif self.ctx is not None:
+            make_current(self.ctx)
+        if under is None:
+            return self.renderer.render(view, layers)
+        return self.renderer.render(view, layers, under=view.geometry(under))
+
+    def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
+                    layers: frozenset[Layer] | None = None) -> Iterator:
+        for camera in cameras:
+            out = self.render_view(camera, BASE if layers is None else layers)
+            yield out.rgba if layers is None else out
+
+    def renderer_for(self, scene=None, settings=None, kind=None):
+        return self.renderer
+
+    def summary(self) -> str:
+        """Resident memory and chunks (for ``--timings``)."""
+        return self.stream.summary()
+
+    def _release(self) -> None:
+        if self.renderer is not None:
+            if self.ctx is not None:
+                make_current(self.ctx)
+            self.renderer.release()
+            self.renderer = None
+
+    def close(self) -> None:
+        self.stream.close()
+        self._release()
+        if self.ctx is not None:
+            self.ctx.release()
+            self.ctx = None
+
+    def __enter__(self) -> "ChunkedFrames":
         return self
 
     def __exit__(self, *exc) -> None:

@@ -361,37 +361,3 @@ def test_bench_memory_times_a_streamed_orbit(tmp_path, capsys):
     assert "--memory: give one level-of-detail file" in capsys.readouterr().err
     assert main(["bench", str(path), "--memory", "4M", "--lod"]) == 2
     assert "not with --lod" in capsys.readouterr().err
-
-
-@pytest.mark.parametrize("kind", ["streamed-sog", "lcc"])
-def test_chunked_level_streams_through_the_resident_set(tmp_path, kind, gl_renderer):
-    """A Streamed SOG's (or LCC's) finest level drawn through the same resident set, under a
-    budget smaller than the level (chunks evicted between frames): the whole level's image."""
-    from helpers import random_scene
-    from splatgl.formats import lcc, streamed_sog
-    from splatgl.lod import streamed_sog_write
-    from splatgl.lod.stream_levels import LevelFrames
-
-    scene = random_scene(1200, 3, 0, wild_colors=0.0, log_scale=(-4.0, 0.5))
-    if kind == "lcc":
-        from lcc_files import write_lcc
-        dc = np.clip(scene.sh[:, :1], -0.45 / 0.2821, 0.45 / 0.2821)
-        scene = Scene(scene.means, scene.quats, scene.log_scales, scene.opacity_logits, dc)
-        path = write_lcc(tmp_path, [scene, scene.subset(np.arange(0, 1200, 4))], cells=5,
-                         environment=scene.subset(np.arange(20)))
-        structure = lcc.read_structure(path)
-    else:
-        path = tmp_path / "lod-meta.json"
-        streamed_sog_write.write_streamed_sog(path, build_hierarchy(scene, 4), chunk_splats=256)
-        structure = streamed_sog.read_structure(path)
-    whole = structure.load(0)
-    cams = [_camera(4.0), _camera(3.0, 1.0)]
-    want = [gl_renderer.render(whole, c, SETTINGS) for c in cams]
-    with LevelFrames(path, gl_renderer, SETTINGS, 40 << 10) as frames:
-        assert frames.chunks.count > 2
-        got = list(frames.render_many(cams))
-        stats = frames.resident.stats
-        assert stats.peak_bytes <= 40 << 10 and stats.evicted > 0
-        assert "chunks" in frames.summary()
-    for a, b in zip(want, got):
-        assert np.array_equal(a, b)

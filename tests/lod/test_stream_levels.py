@@ -1,0 +1,149 @@
+"""Streamed SOG and LCC streamed under a memory budget (issue 41 items 3 and 4):
+splatgl.lod.level_cut (a level per chunk by screen error), splatgl.lod.stream_levels (headless
+frames, exact for their choice) and splatgl.lod.stream_levels_view (the viewer's scene)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from helpers import random_scene
+from lcc_files import write_lcc
+from splatgl.cameras.camera import Camera
+from splatgl.cameras.camera_files import save_camera
+from splatgl.cameras.poses import look_at
+from splatgl.cli import main
+from splatgl.errors import SplatglError
+from splatgl.formats import lcc, streamed_sog
+from splatgl.imagefiles.images import read_image
+from splatgl.lod import streamed_sog_write
+from splatgl.lod.build import build_hierarchy
+from splatgl.lod.level_cut import NOT_DRAWN, ChunkTable, choose_levels, level_errors
+from splatgl.lod.selection import LodSettings
+from splatgl.lod.stream_levels import ChunkedFrames
+from splatgl.lod.stream_levels_view import ChunkedScene
+from splatgl.scene.settings import EarlyStop, RenderSettings
+from splatgl.scene.splats import Scene
+
+SETTINGS = RenderSettings(near=0.01, early_stop=EarlyStop.OFF)
+BUDGET = 40 << 10   # smaller than a level: chunks are evicted between frames
+
+
+def _scene(n: int = 1200) -> Scene:
+    return random_scene(n, 3, 0, wild_colors=0.0, log_scale=(-4.0, 0.5))
+
+
+def _chunked(tmp_path, kind: str):
+    """A small Streamed SOG (splatgl's own writer) or LCC (the white paper's layout) with an
+    environment (LCC) and several chunks; its structure."""
+    scene = _scene()
+    if kind == "lcc":
+        dc = np.clip(scene.sh[:, :1], -0.45 / 0.2821, 0.45 / 0.2821)
+        scene = Scene(scene.means, scene.quats, scene.log_scales, scene.opacity_logits, dc)
+        path = write_lcc(tmp_path, [scene, scene.subset(np.arange(0, 1200, 4))], cells=5,
+                         environment=scene.subset(np.arange(20)))
+        return path, lcc.read_structure(path)
+    path = tmp_path / "lod-meta.json"
+    streamed_sog_write.write_streamed_sog(path, build_hierarchy(scene, 4), chunk_splats=256)
+    return path, streamed_sog.read_structure(path)
+
+
+def _camera(z: float, x: float = 0.0) -> Camera:
+    return Camera.from_fov(96, 64, 50.0, look_at(np.array([x, 0.0, z]), np.zeros(3)))
+
+
+def _anchored(scene: Scene, anchor) -> Scene:
+    scene.__dict__["anchor"] = np.asarray(anchor, np.float64)
+    return scene
+
+
+@pytest.mark.parametrize("kind", ["streamed-sog", "lcc"])
+@pytest.mark.parametrize("level", [0, 1])
+def test_streamed_level_is_the_level_read_whole(tmp_path, gl_renderer, kind, level):
+    """--lod-level N under a budget smaller than the level: each frame is the whole level's image
+    (with its environment), the same anchor and near plane; chunks evicted between frames."""
+    path, structure = _chunked(tmp_path, kind)
+    cams = [_camera(4.0), _camera(3.0, 1.0)]
+    with ChunkedFrames(path, SETTINGS, LodSettings(), BUDGET, level=level) as frames:
+        got = [out.rgba for out in map(frames.render_view, cams)]
+        stats = frames.resident.stats
+        whole = _anchored(structure.load(level), frames.framing.anchor)
+        assert stats.peak_bytes <= BUDGET and (stats.evicted > 0) == (level == 0)  # 1 fits
+        assert frames.last_cut_nodes == whole.count
+        assert f"--lod-level {level}" in frames.summary()
+    for cam, image in zip(cams, got):
+        assert np.array_equal(gl_renderer.render(whole, cam, SETTINGS), image)
+
+
+def test_level_errors_grow_with_coarser_levels():
+    lo, hi = np.zeros((2, 3)), np.array([[2.0, 2.0, 2.0], [4.0, 4.0, 0.0]])  # the second flat
+    err = level_errors(lo, hi, np.array([[800, 100, 0], [0, 50, 60]]))
+    assert err[0, 0] == 0.0 and 0 < err[0, 1] < np.inf and err[0, 2] == np.inf
+    assert err[1, 0] == np.inf and err[1, 1] == 0.0   # its finest level holding splats
+    assert err[1, 2] >= err[1, 1]                     # never below a finer level's
+    sphere = np.cbrt(3 * 8.0 / (4 * np.pi * 100))     # volume 8 shared by 100 splats
+    assert err[0, 1] == pytest.approx(sphere)
+
+
+@pytest.mark.parametrize("kind", ["streamed-sog", "lcc"])
+def test_levels_by_screen_error_and_budget(tmp_path, gl_renderer, kind):
+    """Far views draw coarser levels than near ones; a budget coarsens until the splats fit;
+    chunks out of view are not drawn; the frame is the image of the chosen chunks read whole."""
+    path, structure = _chunked(tmp_path, kind)
+    with ChunkedFrames(path, SETTINGS, LodSettings(threshold_px=1.0), BUDGET) as frames:
+        table = frames.stream.table
+        near = choose_levels(table, frames.stream.view_camera(_camera(1.5), SETTINGS),
+                             LodSettings(threshold_px=1.0))
+        far = choose_levels(table, _camera(4000.0), LodSettings(threshold_px=1.0))
+        coarsest = table.levels - 1 - np.argmax((table.counts > 0)[:, ::-1], 1)
+        assert np.array_equal(far, coarsest) and (near == 0).any()   # far: each chunk's coarsest
+        assert table.splats(far) < table.splats(near)
+        budget = choose_levels(table, _camera(1.5), LodSettings(threshold_px=1.0, budget=700))
+        assert table.splats(budget) <= 700 and (budget >= 0).all()
+        aside = choose_levels(table, Camera.from_fov(96, 64, 20.0, look_at(
+            np.array([20.0, 0.0, 0.0]), np.array([60.0, 0.0, 0.0]))))
+        assert (aside == NOT_DRAWN).all()   # looking away: nothing in view
+        cam = _camera(2.5, 0.5)
+        image = frames.render_view(cam).rgba
+        levels = frames.stream.choose(frames.stream.view_camera(cam, SETTINGS))
+        chosen = [structure.load(int(levels[c]), [c], environment=False)
+                  for c in np.flatnonzero(levels >= 0)]
+        if structure.has_environment:
+            chosen.append(structure.load(0, [], environment=True))
+        want = _anchored(streamed_sog.concatenate(chosen), frames.framing.anchor)
+    assert np.array_equal(gl_renderer.render(want, cam, SETTINGS), image)
+
+
+@pytest.mark.parametrize("kind", ["streamed-sog", "lcc"])
+def test_viewer_draws_resident_levels_and_refines(tmp_path, kind):
+    """The viewer's scene never waits: the pinned coarsest levels stand in, then (once the
+    requested chunks are in) the view's exact choice, which exact_scene also gives."""
+    path, structure = _chunked(tmp_path, kind)
+    woke = []
+    scene = ChunkedScene(path, LodSettings(threshold_px=1.0), 1 << 20, on_change=lambda: woke.append(1))
+    try:
+        counts = scene.stream.table.counts
+        coarse = sum(int(row[row > 0][-1]) for row in counts) + (
+            structure.load(0, [], environment=True).count if structure.has_environment else 0)
+        cam = _camera(1.5)
+        first = scene.scene_for(cam, SETTINGS)
+        assert not scene.complete and first.count == coarse   # every chunk's coarsest level
+        exact = scene.exact_scene(cam, SETTINGS)
+        assert exact.count > coarse
+        again = scene.scene_for(cam, SETTINGS)
+        assert scene.complete and again is exact and woke and scene.generation >= len(woke)
+        assert "refining" not in scene.summary()
+    finally:
+        scene.close()
+
+
+def test_level_that_does_not_exist_is_one_line(tmp_path):
+    path, _ = _chunked(tmp_path, "streamed-sog")
+    with pytest.raises(SplatglError, match=r"--lod-level 7: .*lod-meta.json has \d levels"):
+        ChunkedFrames(path, SETTINGS, LodSettings(), BUDGET, level=7)
+
+
+def test_budget_too_small_for_the_pinned_levels(tmp_path):
+    path, _ = _chunked(tmp_path, "lcc")
+    with pytest.raises(SplatglError, match="--memory .* too small"):
+        ChunkedScene(path, LodSettings(), 2 << 10)
