@@ -228,33 +228,17 @@ class ResidentSet:
 
     # ------------------------------------------------------------------------- the two draws
     def gather(self, rows: np.ndarray) -> Scene:
-        """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact).  Each
-        chunk's rows are copied into the scene's arrays (allocated once, at the cut's size)
-        as it arrives: no per-chunk copies to concatenate, so the cut is held once."""
+        """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact)."""
         rows = np.asarray(rows, np.int64)
         ids = self.chunk_of(rows)
         need = np.unique(ids)
         cuts = np.searchsorted(ids, need)
         bounds = dict(zip(need.tolist(), zip(cuts.tolist(), np.append(cuts[1:], rows.size).tolist())))
-        out: dict[str, np.ndarray] = {}
-
-        def take(c: int, scene: Scene) -> bool:
-            a, b = bounds[c]
-            local = rows[a:b] - c * self.chunks.rows
-            if not out:   # the arrays, at the cut's size, from the first chunk's shapes
-                kind = scene.kind
-                out.update({f: np.empty((rows.size,) + getattr(scene, f).shape[1:], np.float32)
-                            for f in _FIELDS}, kind=kind)
-            for f in _FIELDS:
-                np.take(getattr(scene, f), local, axis=0, out=out[f][a:b], mode="clip")
-            return True
-
-        self.collect(need.tolist(), take)
-        if not out:
+        parts = self.collect(need.tolist(), lambda c, scene: self._pick(scene, c, rows, *bounds[c]))
+        order = [parts[c] for c in need.tolist()]
+        if not order:
             return self._pick(self.chunks.load(0), 0, rows, 0, 0)
-        for f in _FIELDS:
-            out[f].flags.writeable = False   # adopted by the Scene as they are (no copy)
-        return Scene(*(out[f] for f in _FIELDS), out["kind"])
+        return concatenate(order)
 
     def collect(self, need: list[int], take) -> dict:
         """``{chunk: take(chunk, its scene)}`` for the chunks ``need``, waiting for those not
@@ -301,6 +285,9 @@ class ResidentSet:
                 if present[c]:
                     self._held.move_to_end(c)
         have = present[self.chunk_of(rows)]
+        missing = np.unique(self.chunk_of(rows[~have]))
+        if missing.size:   # coarse first: the upper levels' chunks come before the leaves'
+            self.request(missing[::-1], keep=frozenset(np.flatnonzero(present).tolist()))
         if have.all():
             return rows, weights, True
         w = np.ones(rows.size, np.float32) if weights is None else weights.astype(np.float32)
@@ -319,11 +306,6 @@ class ResidentSet:
             level[idx] = lv + 1
             todo[idx] = ~present[self.chunk_of(out[idx])]
         uniq, inv = np.unique(out, return_inverse=True)
-        # The missing chunks, coarse first (the upper levels' before the leaves'); only the
-        # chunks this frame draws are kept: the rest of the resident set may make room (with
-        # every resident chunk kept, a full budget never refined a new view).
-        self.request(np.unique(self.chunk_of(rows[~have]))[::-1],
-                     keep=frozenset(np.unique(self.chunk_of(uniq)).tolist()))
         wsum = np.minimum(np.bincount(inv, weights=w.astype(np.float64)), 1.0).astype(np.float32)
         return uniq, (None if weights is None and wsum.size == uniq.size and (wsum >= 1).all()
                       else wsum), False
