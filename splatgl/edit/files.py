@@ -109,15 +109,24 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
         raise SplatglError("--spz-axes applies to .spz inputs only")
     progress = progress if progress is not None else default_progress()
     streamed = plan_edit(inputs, writer, operations, transforms, memory, drop_invalid,
-                         writer_options)
+                         writer_options, output)
     if streamed is not None:
         counts, steps, count, degree, names = streamed.scan(progress, full=dry_run)
+        notes = []
+        if streamed.edited_degree > degree:
+            notes.append(f"the {writer.NAME} format stores SH degree {degree} only: degrees "
+                         f"{degree + 1}..{streamed.edited_degree} dropped")
         kept = () if streamed.extras is None else streamed.extras.names
-        note = dropped_note([n for n in names if n not in kept], why="not every input has them")
+        if writer is not None and writer.NAME not in EXTRAS_FORMATS:
+            note = dropped_note(list(names), writer.NAME)
+        else:
+            note = dropped_note([n for n in names if n not in kept],
+                                why="not every input has them")
+        notes += [note] if note else []
         _refuse_empty(steps, count, allow_empty, writer, output)
         size = None if dry_run else streamed.write(output, count, progress)
         return EditReport(tuple(inputs), tuple(counts), output, tuple(steps), count, degree,
-                          dry_run, time.perf_counter() - t0, size, tuple([note] if note else []))
+                          dry_run, time.perf_counter() - t0, size, tuple(notes))
     scene, counts, steps, extras = _read(inputs, transforms, drop_invalid, progress, spz_axes)
     edited = apply_operations(scene, operations, progress)
     del scene
@@ -134,7 +143,7 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
     need = IN_MEMORY_COPIES * sum(scene_bytes(n, sh_coeff_count(result.sh_degree)) for n in counts)
     if need > memory_bound(memory):
         notes.append(f"read and edited in memory (about {format_size(need)}, over --memory "
-                     f"{format_size(memory_bound(memory))}): only binary PLY inputs written as .ply stream")
+                     f"{format_size(memory_bound(memory))}): only binary PLY inputs stream")
     size = None
     if not dry_run:
         try:

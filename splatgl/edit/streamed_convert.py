@@ -22,6 +22,7 @@ from ..writing.outputs import check_output_path
 from .operations import ShDegree
 from .streamed import IN_MEMORY_COPIES, Source, memory_bound
 from .streamed_edit import plan_edit
+from .streamed_outputs import RoundTrip
 
 #: The per-attribute errors :func:`conversion_error` gives as ``{"max", "mean"}``.
 _MEASURED = ("position", "scale", "opacity", "rotation", "color", "sh_rest")
@@ -43,23 +44,35 @@ def convert_file(source, output, *, memory: int | None = None, drop_invalid: boo
             raise SplatglError(f"--sh-degree must be 0-3, got {sh_degree}")
         ops = [] if sh_degree is None else [ShDegree(sh_degree)]
         streamed = plan_edit([source], writer_for(output), ops, [None], memory, drop_invalid,
-                             writer_options)
+                             writer_options, output)
     if streamed is None:
         result = convert(source, output, drop_invalid=drop_invalid, sh_degree=sh_degree,
                          force=force, progress=progress, spz_axes=spz_axes, **writer_options)
         need = IN_MEMORY_COPIES * scene_bytes(result.count, (result.sh_degree_in + 1) ** 2)
         if need > memory:
             warnings.warn(f"{source}: converted in memory (about {format_size(need)}, over "
-                          f"--memory {format_size(memory)}): only a binary PLY written as .ply "
-                          "streams", stacklevel=2)
+                          f"--memory {format_size(memory)}): only a binary PLY input streams",
+                          stacklevel=2)
         return result
     t0 = time.perf_counter()
     streamed.warn = True
-    counts, steps, count, degree, _ = streamed.scan(progress)
-    size = streamed.write(output, count, progress)
-    src = streamed.sources[0]
-    error = _round_trip(src, output, streamed.rows)
-    return Conversion(source, output, "ply", "ply", count, src.sh_degree, degree, size,
+    name, src = streamed.format_name, streamed.sources[0]
+    if streamed.edited_degree > streamed.final_degree:  # convert's words
+        warnings.warn(f"{output}: the {name} format stores SH degree {streamed.final_degree} "
+                      f"only; dropping SH degrees {streamed.final_degree + 1}.."
+                      f"{streamed.edited_degree} of the input", stacklevel=2)
+    counts, steps, count, degree, names = streamed.scan(progress)
+    if name == "ply":
+        size = streamed.write(output, count, progress)
+        error = _round_trip(src, output, streamed.rows)
+    else:
+        trip = RoundTrip(writer_for(output))
+        size = streamed.write(output, count, progress, trip)
+        error = trip.result()
+        error["sh_degree"] = [src.sh_degree, degree]  # of the input, as convert compares
+        error["bit_exact"] = error["bit_exact"] and src.sh_degree == degree
+        error["dropped"] = list(names)  # the input's other properties: the format holds none
+    return Conversion(source, output, "ply", name, count, src.sh_degree, degree, size,
                       time.perf_counter() - t0, error)
 
 

@@ -17,7 +17,9 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..errors import SplatglError
+from ..formats.convert import EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT
 from ..lod.budget import format_size
+from ..writing.atomic import write_error
 from .attributes import Rows
 from .decimate import Decimate
 from .floaters import RemoveFloaters
@@ -27,16 +29,20 @@ from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shar
                         transform_scene)
 from .streamed import (IN_MEMORY_COPIES, NORMALS, block_rows, memory_bound, sources_of,
                        vertex_dtype, write_blocks)
+from .streamed_outputs import (STREAMED_FORMATS, check_kind, refusal, whole_chunks,
+                               write_compressed, write_splat)
+from .streamed_sort import full_box_codes, record_dtype, scratch, sorted_runs, to_records, to_scene
 
 
 def plan_edit(inputs, writer, operations, transforms, memory: int | None,
-              drop_invalid: bool, writer_options: dict) -> "StreamedEdit | None":
-    """The streamed edit of ``inputs`` when ``memory`` (bytes; None: the default, half this
-    machine's RAM, :func:`~.streamed.memory_bound`) is below what the
-    in-memory path would hold and every input is a binary PLY and the output a PLY; None to
-    edit in memory.  Floaters and decimation over the bound are refused in one line."""
+              drop_invalid: bool, writer_options: dict, output=None) -> "StreamedEdit | None":
+    """The streamed edit of ``inputs`` into ``output`` when ``memory`` (bytes; None: the
+    default, half this machine's RAM, :func:`~.streamed.memory_bound`) is below what the
+    in-memory path would hold and every input is a binary PLY; None to edit in memory.  An
+    output format that cannot stream (:data:`~.streamed_outputs.STREAMED_FORMATS`) is then
+    refused in one line."""
     memory = memory_bound(memory)
-    if writer is not None and (writer.NAME != "ply" or writer_options):
+    if writer is not None and writer_options:
         return None
     sources = sources_of(inputs, drop_invalid)
     if sources is None:
@@ -44,27 +50,33 @@ def plan_edit(inputs, writer, operations, transforms, memory: int | None,
     need = IN_MEMORY_COPIES * sum(s.in_memory_bytes() for s in sources)
     if need <= memory:
         return None
+    if writer is not None and writer.NAME not in STREAMED_FORMATS:
+        raise refusal(output, writer.NAME, need, memory)
     for op in operations:
         if isinstance(op, (RemoveFloaters, Decimate)):
             raise SplatglError(
                 f"--{op.name} needs every splat's neighbours in memory: the input needs about "
                 f"{format_size(need)}, over --memory {format_size(memory)}; crop or filter it "
                 "into smaller files first, or give a larger --memory")
-    return StreamedEdit(sources, transforms, list(operations), memory)
+    return StreamedEdit(sources, transforms, list(operations), memory,
+                        format_name="ply" if writer is None else writer.NAME, output=output)
 
 
 class StreamedEdit:
     """One streamed edit (see the module notes): :meth:`scan` says what it does,
     :meth:`write` writes it."""
 
-    def __init__(self, sources, transforms, operations, memory: int, warn: bool = False):
+    def __init__(self, sources, transforms, operations, memory: int, warn: bool = False,
+                 format_name: str = "ply", output=None):
         self.warn = warn  # InvalidRowsDropped once, in the first pass (convert; edit counts)
+        self.format_name, self.output = format_name, output
         self.sources, self.transforms, self.operations = sources, transforms, operations
         kinds = {s.kind for s in sources}
         if len(kinds) > 1:
             raise SplatglError("edit: cannot merge 3DGS Gaussians with 2DGS surfels (" + ", ".join(
                 f"{s.path}: {s.kind.value}" for s in sources) + ")")
         self.kind = sources[0].kind
+        check_kind(output, format_name, self.kind)
         for op in operations:
             if isinstance(op, Filter):
                 op.check(SimpleNamespace(kind=self.kind))
@@ -73,7 +85,8 @@ class StreamedEdit:
         for s in sources:  # the reader keeps normals that are all zero as no normals
             names = () if s.extra_dtype is None else s.extra_dtype.names
             if any(n in names for n in NORMALS) and (
-                    len(sources) > 1 or (s.normals_only and (moved or any(
+                    len(sources) > 1 or format_name not in EXTRAS_FORMATS or
+                    (s.normals_only and (moved or any(
                         s.extra_dtype[n] != np.float32 for n in names)))):
                 s.nonzero_normals = s.normals_nonzero(self.rows)
             s.use_extras(s.nonzero_normals is not False)
@@ -85,6 +98,9 @@ class StreamedEdit:
             if isinstance(op, ShDegree):
                 self.details[j] = f"SH degree {degree} -> {min(degree, op.degree)}"
                 degree = min(degree, op.degree)
+        #: The SH degree the operations leave (:attr:`final_degree`: what the format stores).
+        self.edited_degree = degree
+        degree = min(degree, MAX_SH_DEGREE_OF_FORMAT.get(format_name, 3))
         self.final_degree = degree
         self.extras = self.shared if len(sources) > 1 else sources[0].extras
         self.dtype = vertex_dtype(self.kind, degree, self.extras)
@@ -125,8 +141,28 @@ class StreamedEdit:
                                                             s.nonzero_normals)]
         return counts, steps, count, self.final_degree, names
 
-    def write(self, output, count: int, progress=None) -> int:
-        """Write the result (``count`` rows, from :meth:`scan`) to ``output``; its bytes."""
+    def write(self, output, count: int, progress=None, trip=None) -> int:
+        """Write the result (``count`` rows, from :meth:`scan`) to ``output`` in its format
+        (:mod:`.streamed_outputs`); its bytes.  ``trip``: a :class:`RoundTrip` given each
+        piece written and what a reader gets back of it (not for PLY)."""
+        if self.format_name == "splat":
+            return write_splat(output, count, self._blocks(self._tally(), progress), trip)
+        if self.format_name == "compressed_ply":
+            lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+            for block in self._blocks(self._tally(), progress):  # the bounding box first
+                lo = np.minimum(lo, block.means.min(axis=0))
+                hi = np.maximum(hi, block.means.max(axis=0))
+            dtype = record_dtype(self.kind, (self.final_degree + 1) ** 2)
+            try:  # the scratch files' failures (a full disk) name the output, in one line
+                with scratch(output) as folder:
+                    recs = (to_records(b, full_box_codes(b.means, lo.astype(np.float64),
+                                                         hi.astype(np.float64)), dtype)
+                            for b in self._blocks(self._tally(), progress))
+                    runs = sorted_runs(folder, dtype, recs, self.rows, self.rows)
+                    return write_compressed(output, count, whole_chunks(
+                        to_scene(r, self.kind) for r in runs), trip)
+            except OSError as exc:
+                raise write_error(output, exc) from None
         return write_blocks(output, count, self.dtype, self._blocks(self._tally(), progress))
 
     def _tally(self) -> dict:

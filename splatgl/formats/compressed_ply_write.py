@@ -70,9 +70,11 @@ def _pack_rotation(quats: np.ndarray) -> np.ndarray:
             | (t[:, 1] << np.uint32(10)) | t[:, 2])
 
 
-def _ordered(scene: Scene) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Morton order and the per-row values the chunks bound (float64, in that order)."""
-    order = morton_order_full_box(scene.means)
+def _ordered(scene: Scene, order: np.ndarray | None = None
+             ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Morton order (or ``order``) and the per-row values the chunks bound (float64, in that
+    order)."""
+    order = morton_order_full_box(scene.means) if order is None else order
     log_scales = np.clip(scene.log_scales[order].astype(np.float64), -qz.CPLY_SCALE_CLAMP,
                          qz.CPLY_SCALE_CLAMP)
     rgb = 0.5 + SH_C0 * scene.sh[order, 0].astype(np.float64)
@@ -89,8 +91,17 @@ def _check(path, scene: Scene) -> None:
 def write(path, scene: Scene) -> np.ndarray:
     """Write ``scene`` as compressed PLY; returns the (N,) row order written (Morton order)."""
     _check(path, scene)
-    order, v = _ordered(scene)
-    n = scene.count
+    order = morton_order_full_box(scene.means)
+    write_elements(path, encode(scene, order), comments=[COMMENT])
+    return order
+
+
+def encode(scene: Scene, order: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """The PLY elements (chunk, vertex, and sh for SH degrees above 0) of ``scene``'s rows in
+    ``order``, chunked by CHUNK_SIZE rows from the first: what :func:`write` writes, and per
+    piece of whole chunks what the streamed writer writes (:mod:`splatgl.edit.streamed_outputs`)."""
+    order, v = _ordered(scene, order)
+    n = order.size
     chunk = np.arange(n) // CHUNK_SIZE
     bounds = {name: _per_chunk(arr) for name, arr in v.items()}
     packed = np.empty((n, 4), np.uint32)
@@ -123,8 +134,7 @@ def write(path, scene: Scene) -> np.ndarray:
         for i, name in enumerate(sh.dtype.names):
             sh[name] = b[:, i]
         elements.append(("sh", sh))
-    write_elements(path, elements, comments=[COMMENT])
-    return order
+    return elements
 
 
 def error_bounds(scene: Scene) -> dict:

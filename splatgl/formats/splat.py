@@ -59,6 +59,11 @@ def read(path: Path, drop_invalid: bool = False) -> Scene:
         rows = np.fromfile(path, dtype=ROW_DTYPE)
     except OSError as exc:
         raise SceneFormatError(path, f"cannot read: {exc.strerror or exc}") from None
+    return decode(path, rows, drop_invalid)
+
+
+def decode(path, rows: np.ndarray, drop_invalid: bool = False) -> Scene:
+    """The scene of (N,) :data:`ROW_DTYPE` ``rows`` (all of ``path``'s, or a block of them)."""
     means = rows["position"]
     with np.errstate(divide="ignore", invalid="ignore"):
         log_scales = np.log(rows["scale"].astype(np.float64)).astype(np.float32)

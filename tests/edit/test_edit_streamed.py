@@ -161,12 +161,29 @@ def test_cli_edit_and_convert_stream_within_memory(tmp_path, capsys, small_block
     assert (tmp_path / "c.ply").read_bytes() == src.read_bytes()
 
 
-def test_other_formats_load_whole_and_say_so(tmp_path, capsys):
-    src = _ply(tmp_path, _scene(100))
-    assert main(["edit", str(src), "-o", str(tmp_path / "o.spz"), "--sh-degree", "0",
+def test_other_inputs_load_whole_and_say_so(tmp_path, capsys):
+    src = tmp_path / "s.splat"
+    assert main(["convert", str(_ply(tmp_path, _scene(100, degree=0))), str(src)]) == 0
+    capsys.readouterr()
+    assert main(["edit", str(src), "-o", str(tmp_path / "o.ply"), "--sh-degree", "0",
                  "--memory", "1K"]) == 0
     assert ("note: read and edited in memory (about 10.9 KiB, over --memory 1 KiB): only binary "
-            "PLY inputs written as .ply stream") in capsys.readouterr().out
+            "PLY inputs stream") in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ["edit", "convert"])
+@pytest.mark.parametrize("ext, name", [(".spz", "spz"), (".sog", "sog"), (".glb", "gltf")])
+def test_outputs_written_whole_are_refused_over_the_bound(tmp_path, capsys, command, ext, name):
+    src = _ply(tmp_path, _scene(100))
+    out = tmp_path / f"o{ext}"
+    argv = [command, str(src), "-o", str(out), "--sh-degree", "1"] if command == "edit" else \
+        [command, str(src), str(out)]
+    assert main(argv + ["--memory", "1K"]) == 2
+    assert capsys.readouterr().err == (
+        f"splatgl: error: {out}: the {name} format is written from the whole scene in memory "
+        "(about 26.6 KiB, over --memory 1 KiB); write .ply, .splat or .compressed.ply, which "
+        "stream, or give a larger --memory\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
 
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143), (None, 2)])
@@ -258,12 +275,14 @@ def test_peak_memory_is_a_few_blocks_not_the_scene(tmp_path, monkeypatch):
     assert peaks["streamed"] < 2e6, peaks
 
 
-def test_convert_to_another_format_over_the_bound_says_it_loads_whole(tmp_path, capsys):
-    src = _ply(tmp_path, _scene(100))
+def test_convert_of_another_input_over_the_bound_says_it_loads_whole(tmp_path, capsys):
+    src = tmp_path / "s.splat"
+    assert main(["convert", str(_ply(tmp_path, _scene(100, degree=0))), str(src)]) == 0
+    capsys.readouterr()
     assert main(["convert", str(src), str(tmp_path / "o.spz"), "--memory", "1K"]) == 0
     err = capsys.readouterr().err
-    assert err == (f"splatgl: warning: {src}: converted in memory (about 18 KiB, over --memory "
-                   "1 KiB): only a binary PLY written as .ply streams\n"), err
+    assert err == (f"splatgl: warning: {src}: converted in memory (about 10.9 KiB, over --memory "
+                   "1 KiB): only a binary PLY input streams\n"), err
 
 
 def test_a_dry_run_reads_every_row_as_in_memory(tmp_path, small_blocks):
