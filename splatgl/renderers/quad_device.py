@@ -38,6 +38,7 @@ from ..cameras.view import View
 from ..gl.bindings import (BINDING_DEVICE_COUNT, ORDER_BINDING_BLOCKS, ORDER_BINDING_COMMAND, ORDER_BINDING_CULL,
                            ORDER_BINDING_KEYS, ORDER_BINDING_STAGED, ORDER_BINDING_VALUES,
                            ORDER_GROUP)
+from ..gl import limits
 from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
@@ -71,6 +72,8 @@ class DeviceOrder:
                  sorter: RadixSorter):
         self.ctx, self.sorter = ctx, sorter
         self.count = scene.count
+        limits.check_splat_buffer(ctx, self.count, 32 * self.count, "the device order's cull "
+                                  "rows, 32 bytes a splat", advice=limits.DERIVED_ADVICE)
         rows = cull_rows(CullData.from_scene(scene)).tobytes()
         self._cull = ctx.buffer(rows)       # the one-time upload (not a per-frame transfer)
         self._command = ctx.buffer(reserve=COMMAND_BYTES)

@@ -37,11 +37,16 @@ class QuadResources:
     def __init__(self, ctx: moderngl.Context, uses_prepass: bool):
         self.ctx, self.uses_prepass = ctx, uses_prepass
         self.triangles = False
-        self.index = GrowableBuffer(ctx, BINDING_ORDER, minimum=4)
-        self.weights = GrowableBuffer(ctx, BINDING_OPACITY_WEIGHT, minimum=4)
-        self.prepared = GrowableBuffer(ctx, BINDING_PREPARED)
-        self.prepared_normal = GrowableBuffer(ctx, BINDING_PREPARED_NORMAL)
-        self.prepared_radius = GrowableBuffer(ctx, BINDING_PREPARED_RADIUS)
+        self.index = GrowableBuffer(ctx, BINDING_ORDER, minimum=4, stride=4,
+                                    what="the sorted splat indices, 4 bytes a splat")
+        self.weights = GrowableBuffer(ctx, BINDING_OPACITY_WEIGHT, minimum=4, stride=4,
+                                      what="the cut's opacity weights, 4 bytes a splat")
+        self.prepared, self.prepared_normal, self.prepared_radius = (   # limits: one line each
+            GrowableBuffer(ctx, binding, what=f"the pre-pass's {name}, {stride} bytes a splat",
+                           stride=stride)
+            for binding, name, stride in ((BINDING_PREPARED, "prepared quads", PREPARED_BYTES),
+                                          (BINDING_PREPARED_NORMAL, "normals", 16),
+                                          (BINDING_PREPARED_RADIUS, "radii", 4)))
         self._target: ColorTarget | None = None
         self._ordered: OrderedTarget | None = None
         self._under: moderngl.Texture | None = None
