@@ -14,7 +14,7 @@ from ..measure.bench.report import plot, table, write_csv, write_json
 from ..measure.bench.configs import configurations
 from ..measure.bench.machine import describe, machine_info
 from ..measure.bench.runner import BenchOptions, sort_benchmark
-from ..measure.bench.scene_task import BenchSceneTask, SceneSpec, measure_scene
+from ..measure.bench.scene_task import BenchSceneTask, SceneSpec, default_base, measure_scene
 from ..errors import SplatglError
 from ..tasks.executor import run_tasks, summary
 from ._executor import add_executor_arguments, executor_from_args
@@ -32,7 +32,7 @@ from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_mod
                            run_interactive_command, run_lod_command, run_popping_command,
                            run_scale_command, run_scale_lod_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
-from ._memory import STREAM_HELP, add_memory_argument, memory_given
+from ._memory import STREAM_HELP, add_level_argument, add_memory_argument, memory_given, stream_level
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._outputs import add_force_argument, check_out_folder
 
@@ -117,6 +117,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                            "and median frame time, resident memory, chunks, peak RSS. With "
                            "--scale --lod: the budget of its level-of-detail builds and streamed "
                            "frames")
+    add_level_argument(p)
     add_scale_lod_arguments(p)
     add_popping_arguments(p)
     add_interactive_arguments(p)
@@ -170,16 +171,20 @@ def _run_stream_bench(args: argparse.Namespace, sharded: bool) -> int:
     (its figures printed, or as JSON with --json)."""
     from ..measure.bench.stream_bench import describe, run_stream
     from ..lod.io import is_lod_file
+    from ..lod.stream_levels import is_chunked
 
     others = modes_given(args) + [m for m, on in (("--out", args.out),
                                                   ("--workers/--executor ray", sharded)) if on]
     if others:
         raise SplatglError(f"--memory streams one level of detail in one process; not with "
                            f"{', '.join(others)}")
-    if len(args.scenes) != 1 or not is_lod_file(args.scenes[0]):
-        raise SplatglError("--memory: give one level-of-detail file (from 'splatgl lod') to "
-                           f"stream, got {', '.join(map(str, args.scenes)) or 'none'}")
-    report = run_stream(args.scenes[0], memory_given(args), *_size(args))
+    if len(args.scenes) != 1 or not (is_lod_file(args.scenes[0]) or is_chunked(args.scenes[0])):
+        raise SplatglError("--memory: give one level-of-detail file (from 'splatgl lod', or a "
+                           "Streamed SOG lod-meta.json or LCC meta.lcc) to stream, got "
+                           f"{', '.join(map(str, args.scenes)) or 'none'}")
+    level = stream_level(argparse.Namespace(scene=args.scenes[0], memory=args.memory,
+                                            lod_level=args.lod_level))
+    report = run_stream(args.scenes[0], memory_given(args), *_size(args), level=level)
     if not json_to_stdout(args):
         print(describe(report))
     if args.json is not None:
@@ -213,6 +218,10 @@ def run(args: argparse.Namespace) -> int:
     check_mode_options(args)    # a benchmark's options without its flag: refused, not ignored
     if args.memory is not None and not (args.scale and args.lod):   # --scale --lod: its budget
         return _run_stream_bench(args, executor.sharded)
+    if args.lod_level is not None:
+        raise SplatglError(f"--lod-level {args.lod_level} draws a level of a Streamed SOG or LCC "
+                           "streamed from disk: give one SCENE with --memory SIZE (not with "
+                           "--scale --lod)")
     if args.popping:
         if modes_given(args) != ["--popping"] or executor.sharded or args.json is not None:
             raise SplatglError("--popping runs alone in one process (not with --interactive, "
@@ -284,7 +293,8 @@ def run(args: argparse.Namespace) -> int:
         rows = []
         with Renderer() as renderer:
             check_image_size(width, height, "--width/--height: image", "quad", renderer.ctx)
-            machine = machine_info(renderer_name(renderer.ctx))  # before the context closes
+            machine = machine_info(renderer_name(renderer.ctx),    # before the context closes
+                                   default_row=default_base(renderer.ctx))
             for spec in specs:
                 rows += measure_scene(renderer, spec, spec.load(), options, savings, progress)
     sort_ms = sort_benchmark(100_000 if quick else 1_000_000)

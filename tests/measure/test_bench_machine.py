@@ -66,3 +66,33 @@ def test_machine_line_says_what_auto_takes_on_a_gpu(monkeypatch):
     assert (info["device_class"], info["sort_auto"], info["early_stop_auto"]) == (
         "hardware", "gpu", "on")
     assert describe(info).endswith(", hardware device: sort auto -> gpu, early-stop auto -> on")
+
+
+@pytest.mark.parametrize("device_class, sort", [("hardware", "gpu"), ("software", "exact")])
+def test_the_default_row_draws_what_render_draws_on_the_device(ctx, monkeypatch, device_class, sort):
+    """Issue 40 item 4: the scene benchmark's default row measured the exact CPU sort on every
+    device while render's --sort auto takes the GPU sort on hardware: it now takes --sort auto's
+    choice for its context's device (and the savings rows with it), and the machine line says
+    which ran."""
+    from splatgl.measure.bench import scene_task
+    from splatgl.measure.bench.runner import BenchOptions
+
+    monkeypatch.setenv("SPLATGL_DEVICE_CLASS", device_class)
+    seen = {}
+    monkeypatch.setattr(scene_task, "bench_scene",
+                        lambda r, name, s, o, base, progress=None: seen.setdefault("rows", base) and [])
+    monkeypatch.setattr("splatgl.measure.bench.savings.savings_rows",
+                        lambda r, name, s, o, base: seen.setdefault("savings", base) and [])
+
+    class _Renderer:
+        pass
+
+    renderer = _Renderer()
+    renderer.ctx = ctx
+    scene_task.measure_scene(renderer, scene_task.SceneSpec("x", synthetic=10), None,
+                             BenchOptions(8, 8, 1), savings=True)
+    assert seen["rows"].sort_key.value == seen["savings"].sort_key.value == sort
+    assert scene_task.default_base(ctx).sort_key.value == sort
+    info = machine_info("llvmpipe (LLVM 15.0.6, 256 bits)", EPYC, default_row=scene_task.default_base(ctx))
+    assert describe(info).endswith(f"early-stop auto -> {'on' if sort == 'gpu' else 'by coverage'}; "
+                                   f"the default row: sort {sort}")

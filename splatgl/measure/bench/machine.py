@@ -46,11 +46,13 @@ def simd_level(flags: set[str]) -> str:
 CPU_ONLY = "none (CPU only)"
 
 
-def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None) -> dict:
+def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None,
+                 default_row=None) -> dict:
     """``{"cpu", "simd", "cores", "gl_renderer", "platform"}`` of this machine.
 
     ``cores`` counts the CPUs this process may run on (its affinity), which is what NumPy's
-    threads and llvmpipe get.
+    threads and llvmpipe get.  ``default_row``: the settings of the scene benchmark's default
+    row (a RenderSettings), whose sort (``--sort auto`` on this device) is then ``"default_sort"``.
     """
     model, flags = _cpuinfo(cpuinfo_text)
     try:
@@ -63,7 +65,8 @@ def machine_info(gl_renderer: str | None = None, cpuinfo_text: str | None = None
             "simd": simd_level(flags), "cores": cores,
             "gl_renderer": gl_renderer or "?", "platform": platform.platform(terse=True),
             "cull": "compiled (numba)" if cull_kernel.installed() else "numpy",
-            **(auto_choices(gl_renderer) if gl_renderer else {})}
+            **(auto_choices(gl_renderer) if gl_renderer else {}),
+            **({"default_sort": default_row.sort_key.value} if default_row is not None else {})}
 
 
 def auto_choices(gl_renderer: str) -> dict:
@@ -95,4 +98,5 @@ def describe(info: dict) -> str:
     return (f"machine: {info['cpu']} ({info['simd']}), {info['cores']} cores, "
             f"GL renderer {info['gl_renderer']}, cull {info.get('cull', '?')}"
             + (f", {info['device_class']} device: sort auto -> {info['sort_auto']}, early-stop "
-               f"auto -> {info['early_stop_auto']}" if "device_class" in info else ""))
+               f"auto -> {info['early_stop_auto']}" if "device_class" in info else "")
+            + (f"; the default row: sort {info['default_sort']}" if "default_sort" in info else ""))

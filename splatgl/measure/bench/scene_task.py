@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Optional
 
 from ...tasks.task import Done, Files, TaskProgress
+from ...scene.settings import RenderSettings
 from ...scene.splats import Scene
 from .runner import BenchOptions, BenchRow, Progress, bench_scene
 
@@ -54,13 +55,25 @@ class SceneSpec:
 
 def measure_scene(renderer, spec: SceneSpec, scene: Scene, options: BenchOptions, savings: bool,
                   progress: Optional[Progress] = None) -> list[BenchRow]:
-    """Every row of one scene: the configurations and, with ``savings``, the paired rows."""
+    """Every row of one scene: the configurations and, with ``savings``, the paired rows, from
+    the settings ``splatgl render`` draws with on this device (:func:`default_base`)."""
     from .savings import savings_rows
 
-    rows = bench_scene(renderer, spec.name, scene, options, progress=progress)
+    base = default_base(renderer.ctx)
+    rows = bench_scene(renderer, spec.name, scene, options, base, progress=progress)
     if savings:
-        rows += savings_rows(renderer, spec.name, scene, options)
+        rows += savings_rows(renderer, spec.name, scene, options, base)
     return rows
+
+
+def default_base(ctx) -> RenderSettings:
+    """The default row's settings: the library's defaults with ``--sort auto`` resolved for the
+    device ``ctx`` draws on (:func:`splatgl.gl.device_class.resolve_sort`: ``gpu`` on a
+    hardware GPU, ``exact`` on a software rasteriser), as ``render`` draws by default
+    (``--early-stop auto`` is resolved per device by the quad path itself)."""
+    from ...gl.device_class import AUTO, of_context, resolve_sort
+
+    return RenderSettings(sort_key=resolve_sort(AUTO, of_context(ctx)))
 
 
 @dataclass(frozen=True)
@@ -88,7 +101,7 @@ class BenchSceneTask:
         with Renderer() as renderer:
             check_image_size(self.options.width, self.options.height, "--width/--height: image",
                              "quad", renderer.ctx)
-            machine = machine_info(renderer_name(renderer.ctx))
+            machine = machine_info(renderer_name(renderer.ctx), default_row=default_base(renderer.ctx))
             rows = measure_scene(renderer, self.spec, scene, self.options, self.savings,
                                  lambda done, total, what: report(done, total))
         return Done((rows, machine), len(rows))
