@@ -2,7 +2,9 @@
 // staged keys and their indices, written in index order at their group's first slot
 // (order_scan.comp) plus their rank among the group's kept ones (a scan in shared memory), into
 // the radix sorter's keys and values: a stable sort then gives the CPU order, ties by index.
-// Twin: splatgl/order/cull.py cull_visible().
+// Slots from u_rows on are seam copies (order_cull.comp's CULL_SEAM): their value is the
+// splat's index with WRAP_FLAG (splatgl/cameras/equirect.py; 0x80000000), after every plain one.
+// Twin: splatgl/order/cull.py cull_visible(), splatgl/order/chunks.py keys_pairs().
 
 layout(local_size_x = ORDER_GROUP) in;
 layout(std430, binding = ORDER_BINDING_STAGED) readonly buffer Staged { uint staged[]; };
@@ -10,7 +12,8 @@ layout(std430, binding = ORDER_BINDING_BLOCKS) readonly buffer Blocks { uint blo
 layout(std430, binding = ORDER_BINDING_KEYS) writeonly buffer Keys { uint keys[]; };
 layout(std430, binding = ORDER_BINDING_VALUES) writeonly buffer Values { uint values[]; };
 
-uniform uint u_count;
+uniform uint u_count;     // slots staged
+uniform uint u_rows;      // splats: slots from here on are seam copies
 
 shared uint ranks[ORDER_GROUP];
 
@@ -30,6 +33,6 @@ void main() {
     if (kept != 0u) {
         uint slot = blocks[gl_WorkGroupID.x] + ranks[t] - 1u;
         keys[slot] = key;
-        values[slot] = i;
+        values[slot] = i < u_rows ? i : (i - u_rows) | 0x80000000u;
     }
 }

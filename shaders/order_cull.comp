@@ -1,16 +1,23 @@
 // Device-resident order (--sort gpu, splatgl/renderers/quad_device.py): the cull and the depth
-// keys of every splat, one invocation each, for a view whose cull is the side planes
-// (CullKind.FRUSTUM).  The twin of splatgl.order.cull.cull_visible: the same float32 operations
-// in the same order (precise: no fused multiply-add), so the same depth bits and the same plane
-// decisions; the peak-alpha bound, float64 on the CPU, runs here in float32 and keeps whatever
-// lies within DEVICE_CULL_BAND of the cut (a superset by splats that draw nothing).
+// keys of every splat, one invocation each.  One twin per cull kind, the same float32 operations
+// in the same order (precise: no fused multiply-add), so the same depth bits and decisions:
+//   (default) CullKind.FRUSTUM, side planes: splatgl.order.cull.cull_visible(); the peak-alpha
+//     bound, float64 on the CPU, runs here in float32 and keeps whatever lies within
+//     DEVICE_CULL_BAND of the cut (a superset by splats that draw nothing);
+//   CULL_BOX: CullKind.BOX (orthographic), cull_visible()'s box: the planes with z's factor 1;
+//   CULL_SPHERE: CullKind.SPHERE (fisheye, equirectangular), splatgl.order.lens_cull.lens_keys():
+//     key = distance, kept beyond the near plane; CULL_FISHEYE adds cone_keeps(), CULL_SEAM
+//     dispatches 2 u_count invocations, the second u_count being the seam copies (seam_copies()).
 //
-// Output: staged key i = float bits of z for a kept splat (positive z: the bits order like the
-// values), 0xFFFFFFFF for a culled one, and each work group's kept count; order_scan.comp turns
-// the counts into the groups' first slots and the draw's instance count, order_compact.comp
-// writes the kept keys and indices in index order for the stable sort: the CPU order, ties
-// included.  Nothing comes back to the host.
-// Twin: splatgl/order/cull.py cull_visible().
+// Output: staged key j = float bits of z (of the distance) for a kept slot (positive: the bits
+// order like the values), 0xFFFFFFFF for a culled one, and each work group's kept count;
+// order_scan.comp turns the counts into the groups' first slots and the draw's instance count,
+// order_compact.comp writes the kept keys and indices in slot order for the stable sort: the
+// CPU order, ties included (a seam copy's index carries WRAP_FLAG, after every plain index, as
+// splatgl.order.chunks.keys_pairs lists them).  Nothing comes back to the host.
+// Twins: splatgl/order/cull.py cull_visible(), splatgl/order/lens_cull.py lens_keys().
+
+#include "lib/sqrt_rn.glsl"
 
 layout(local_size_x = ORDER_GROUP) in;
 
@@ -22,7 +29,8 @@ layout(std430, binding = ORDER_BINDING_CULL) readonly buffer Cull { CullRow rows
 layout(std430, binding = ORDER_BINDING_STAGED) writeonly buffer Staged { uint staged[]; };
 layout(std430, binding = ORDER_BINDING_BLOCKS) writeonly buffer Blocks { uint blocks[]; };
 
-uniform uint u_count;
+uniform uint u_count;         // splats (rows of the cull buffer)
+uniform uint u_slots;         // invocations: u_count, or 2 u_count with CULL_SEAM
 uniform vec3 u_r0;            // rows of the anchored camera's rotation (float32)
 uniform vec3 u_r1;
 uniform vec3 u_r2;
@@ -36,6 +44,7 @@ uniform bool u_antialias;
 uniform float u_scale;        // the view's uniform scale (max_scale * scale in the bound)
 uniform vec4 u_focal;         // fx, fy, cx, cy of the frustum's camera
 uniform vec4 u_image;         // width, height, tan half fov x, y
+uniform vec3 u_lens;          // CULL_SPHERE: float32 cos(angle limit), scale, SEAM_MARGIN_PX / fx
 
 float view_axis(vec3 p, vec3 r, float t) {
     precise float out_ = p.x * r.x;
@@ -60,11 +69,16 @@ bool planes(float v, float z, float rad, vec4 c) {
 bool peak_keeps(vec3 p, float max_scale, float opacity) {
     float x = p.x, y = p.y, z = p.z;
     float fx = u_focal.x, fy = u_focal.y;
+#ifdef CULL_BOX
+    float jf2 = fx * fx + fy * fy;
+    float u = fx * x + u_focal.z, v = fy * y + u_focal.w;
+#else
     float tx = u_image.z, ty = u_image.w;
     float xc = clamp(x / z, -JACOBIAN_CLAMP * tx, JACOBIAN_CLAMP * tx);
     float yc = clamp(y / z, -JACOBIAN_CLAMP * ty, JACOBIAN_CLAMP * ty);
     float jf2 = (fx * fx * (1.0 + xc * xc) + fy * fy * (1.0 + yc * yc)) / (z * z);
     float u = fx * x / z + u_focal.z, v = fy * y / z + u_focal.w;
+#endif
     float ms = max_scale * u_scale;
     float lam = jf2 * ms * ms + LOW_PASS;
     float nu = clamp(roundEven(u - 0.5), 0.0, u_image.x - 1.0) + 0.5;
@@ -79,6 +93,40 @@ bool peak_keeps(vec3 p, float max_scale, float opacity) {
 
 shared uint group_kept;
 
+#ifdef CULL_SPHERE
+// lens_keys(): the distance beyond the near plane, the fisheye's cone, the seam copy.
+bool cull(uint j) {
+    bool copy = j >= u_count;
+    uint i = copy ? j - u_count : j;
+    CullRow row = rows[i];
+    vec3 p = row.p.xyz;
+    float x = view_axis(p, u_r0, u_t.x);
+    float y = view_axis(p, u_r1, u_t.y);
+    float z = view_axis(p, u_r2, u_t.z);
+    precise float d2 = x * x;
+    precise float yy = y * y;
+    d2 += yy;
+    precise float zz = z * z;
+    d2 += zz;
+    float d = sqrt_rn(d2);
+    bool keep = d > u_near && row.q.z != 0.0;
+#ifdef CULL_FISHEYE
+    precise float off = d * u_lens.x;                 // cone_keeps: z - d cos_limit >= 0
+    off = z - off;
+    keep = keep && off >= 0.0;
+#endif
+#ifdef CULL_SEAM
+    if (copy && keep) {                               // seam_copies: |x| < reach, z < reach
+        precise float reach = row.p.w * u_lens.y;
+        precise float margin = d * u_lens.z;
+        reach += margin;
+        keep = abs(x) < reach && z < reach;
+    }
+#endif
+    staged[j] = keep ? floatBitsToUint(d) : 0xFFFFFFFFu;
+    return keep;
+}
+#else
 bool cull(uint i) {
     CullRow row = rows[i];
     vec3 p = row.p.xyz;
@@ -88,12 +136,17 @@ bool cull(uint i) {
     bool inside = true;
     float vx = view_axis(p, u_r0, u_t.x);
     float vy = view_axis(p, u_r1, u_t.y);
+#ifdef CULL_BOX
+    float zp = 1.0;     // plane_constants' box: z's factor 1
+#else
+    float zp = z;
+#endif
     if (keep) {
-        keep = planes(vx, z, rad, u_plane_x) && planes(vy, z, rad, u_plane_y);
-        precise float ex_lo = z * u_inside.x;
-        precise float ex_hi = z * u_inside.y;
-        precise float ey_lo = z * u_inside.z;
-        precise float ey_hi = z * u_inside.w;
+        keep = planes(vx, zp, rad, u_plane_x) && planes(vy, zp, rad, u_plane_y);
+        precise float ex_lo = zp * u_inside.x;
+        precise float ex_hi = zp * u_inside.y;
+        precise float ey_lo = zp * u_inside.z;
+        precise float ey_hi = zp * u_inside.w;
         inside = vx <= ex_hi && vx >= ex_lo && vy <= ey_hi && vy >= ey_lo;
     }
     if (keep && u_peak && (u_antialias || !inside || row.q.w != 0.0))
@@ -101,12 +154,13 @@ bool cull(uint i) {
     staged[i] = keep ? floatBitsToUint(z) : 0xFFFFFFFFu;
     return keep;
 }
+#endif
 
 void main() {
     if (gl_LocalInvocationIndex == 0u) group_kept = 0u;
     barrier();
     uint i = gl_GlobalInvocationID.x;
-    if (i < u_count && cull(i)) atomicAdd(group_kept, 1u);
+    if (i < u_slots && cull(i)) atomicAdd(group_kept, 1u);
     barrier();
     if (gl_LocalInvocationIndex == 0u) blocks[gl_WorkGroupID.x] = group_kept;
 }

@@ -240,19 +240,17 @@ def _note_point(rows, p, c, row, u, v, w, d):
 
 @numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False)
 def lens_pass(a, b, out0, x, y, z, radius, index, rot, trans, near32, mode, cos_limit, band,
-              seam_scale, seam_px, keys_u32, keys_f32, doubt_rows, doubt_p, seam_rows, seam_p):
+              seam_scale, seam_px, keys_u32, keys_f32, seam_rows, seam_p):
     """:func:`splatgl.order.lens_cull.lens_visible_keys`'s per-row work on the rows ``a:b``, keys
     written from key ``out0`` on (as :func:`view_pass` writes them, distance for depth): the
-    distance ``|p|`` beyond the near plane and, with ``mode`` 1 (fisheye), the cheap cone test
-    ``z - |p| cos_limit >= 0``.  Rows within ``band`` of the cone go to ``doubt_rows`` /
-    ``doubt_p`` (x, y, z, |p|) unkept (NumPy's ``arctan2`` decides them); with ``mode`` 2
-    (equirectangular) kept rows within the float32 seam bound
-    ``(radius seam_scale + |p| seam_px)`` also go to ``seam_rows`` / ``seam_p`` (x, y, z, |p|)
-    for NumPy's float64 copy test.  Both lists are
-    counted past their size.  Returns (keys, doubts, seam candidates)."""
+    distance ``|p|`` beyond the near plane and, with ``mode`` 1 (fisheye), the cone test
+    ``z - |p| cos_limit >= 0`` (float32: the decision itself,
+    :func:`splatgl.order.lens_cull.cone_keeps`); with ``mode`` 2 (equirectangular) kept rows within the seam bound widened by
+    ``band`` (``(radius seam_scale + |p| seam_px) (1 + band)``) go to ``seam_rows`` / ``seam_p``
+    (x, y, z, |p|), where NumPy's float32 copy test decides (counted past their size).
+    Returns (keys, 0, seam candidates)."""
     rt = _rigid(rot, trans)
     n = out0
-    nd = 0
     ns = 0
     for i in range(a, b):
         xi, yi, zi = x[i], y[i], z[i]
@@ -264,9 +262,6 @@ def lens_pass(a, b, out0, x, y, z, radius, index, rot, trans, near32, mode, cos_
             continue
         if mode == 1:
             off = w - d * cos_limit
-            if abs(off) < d * band:
-                nd = _note_point(doubt_rows, doubt_p, nd, i, u, v, w, d)
-                continue
             if not off >= np.float32(0):
                 continue
         keys_u32[2 * n] = index[i]
@@ -276,7 +271,7 @@ def lens_pass(a, b, out0, x, y, z, radius, index, rot, trans, near32, mode, cos_
             reach = (radius[i] * seam_scale + d * seam_px) * (np.float32(1) + band)
             if abs(u) < reach and w < reach:
                 ns = _note_point(seam_rows, seam_p, ns, i, u, v, w, d)
-    return n - out0, nd, ns
+    return n - out0, 0, ns
 
 
 def warm_up() -> None:
@@ -291,8 +286,7 @@ def warm_up() -> None:
     lens_pass(0, 2, 0, f4, f4, f4, f4, u4, np.eye(3, dtype=np.float32), np.zeros(3, np.float32),
               np.float32(0.0), 1, np.float32(0.5), np.float32(1e-4), np.float32(1.0),
               np.float32(0.01), np.zeros(4, np.uint32), np.zeros(4, np.float32),
-              np.zeros(2, np.int64), np.zeros((2, 4), np.float32), np.zeros(2, np.int64),
-              np.zeros((2, 4), np.float32))
+              np.zeros(2, np.int64), np.zeros((2, 4), np.float32))
     rows_pass(np.zeros(1, np.int64), f4, f4, f4, f4, np.ones(2, np.bool_), np.zeros(2, np.bool_),
               f4, f4, np.eye(3, dtype=np.float32), np.zeros(3, np.float32),
               np.zeros((2, 6), np.float32), np.float32(0.0), np.zeros(9), np.zeros(4, np.uint32),

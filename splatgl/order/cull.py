@@ -16,8 +16,8 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..constants import AA_MIN_FACTOR, ALPHA_MIN, JACOBIAN_CLAMP, LOW_PASS
+from ..cameras.model import CullKind
 from ..cameras.view import Frustum, frustum_of, near_threshold
-from ..splatmath.project import to_camera
 
 #: Extra screen margin (pixels) so the 0.3 px^2 dilation and pixel-centre rounding never cull
 #: a splat whose quad would touch the image.
@@ -181,24 +181,24 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
     inside the image lies within 0.5 px per axis of a pixel centre, d^2 <= 0.5, and
     ``lambda >= LOW_PASS``, so ``o exp(-d^2 / (2 lambda)) >= 1/255`` whenever
     ``k^2 = 2 ln(255 o) >= 0.5 / LOW_PASS``).  With antialiasing every survivor takes it.
-    Orthographic cameras take :func:`cull` as is.  A model with its own cull frustum
+    Orthographic cameras run the same float32 tests with z's factor 1 (:func:`plane_constants`:
+    the box's edges; :func:`cull`'s box up to rounding, within the margin where a splat draws
+    nothing), so the device order (shaders/order_cull.comp) makes the same decisions.  A model
+    with its own cull frustum
     (:meth:`~splatgl.cameras.model.CameraModel.cull_frustum`, lens distortion) is culled against
     that frustum's planes without the peak bound.
     """
     n = data.count
     frustum = frustum_of(camera)
     camera, peak = frustum.camera, frustum.peak
-    if camera.is_orthographic:
-        p_cam = to_camera(data.xyz.T, camera)
-        keep = np.flatnonzero(cull(p_cam, data.max_scale * scale, data.opacities, camera, near,
-                                   antialias))
-        return keep.astype(np.uint32), np.ascontiguousarray(p_cam[keep, 2], np.float32)
+    box = frustum.kind is CullKind.BOX
     r = camera.rotation.astype(np.float32)
     t = camera.translation.astype(np.float32)
     planes = plane_constants(frustum, scale)
     near32 = near_threshold(near, np.float32)
     block = min(CULL_BLOCK, max(n, 1))
     z, v, w, u = (np.empty(block, np.float32) for _ in range(4))
+    ones = np.ones(block, np.float32)   # a box's planes: z's factor is 1 (plane_constants)
     keep, inside, tmp = (np.empty(block, bool) for _ in range(3))
     out_idx, out_z = [], []
     for start in range(0, n, block):
@@ -210,19 +210,20 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
         np.greater(zb, near32, out=kb)
         kb &= data.alive[start:stop]
         rad = data.radius[start:stop]
+        zp = ones[:m] if box else zb
         ib.fill(True)
         for axis, (a_hi, b_hi, a_lo, b_lo, lo, hi) in enumerate(planes):
             view_axis(data.xyz, start, stop, r[axis], t[axis], vb, wb)
             for a, b, upper in ((a_hi, b_hi, True), (a_lo, b_lo, False)):
                 np.multiply(rad, b, out=wb)
-                np.multiply(zb, a, out=ub)
+                np.multiply(zp, a, out=ub)
                 wb += ub
                 (np.less_equal if upper else np.greater_equal)(vb, wb, out=tb)
                 kb &= tb
-            np.multiply(zb, hi, out=wb)
+            np.multiply(zp, hi, out=wb)
             np.less_equal(vb, wb, out=tb)
             ib &= tb
-            np.multiply(zb, lo, out=wb)
+            np.multiply(zp, lo, out=wb)
             np.greater_equal(vb, wb, out=tb)
             ib &= tb
         idx = np.flatnonzero(kb)
@@ -252,8 +253,13 @@ def plane_constants(frustum: Frustum, scale: float = 1.0) -> np.ndarray:
     camera-space ``(v, z)`` on that axis with world radius ``rad`` passes the side planes when
     ``v <= (rad * b_hi) + (z * a_hi)`` and ``v >= (rad * b_lo) + (z * a_lo)`` (float32, in that
     order: :func:`cull_visible`'s rearranged plane test); its centre projects inside the image
-    when ``v <= z * hi`` and ``v >= z * lo``."""
+    when ``v <= z * hi`` and ``v >= z * lo``.  For an orthographic box (CullKind.BOX) z is
+    replaced by 1 (``1 * a`` is ``a``): the box's edges, widened by the radius and the margin."""
     out = np.empty((2, 6), np.float32)
+    if frustum.kind is CullKind.BOX:   # the box's edges, z's factor 1: v <= rad scale + hi + m / f
+        for axis, (f, lo, hi) in enumerate(frustum.edges):
+            out[axis] = (hi + MARGIN_PX / f, scale, lo - MARGIN_PX / f, -scale, lo, hi)
+        return out
     for axis, ((f, _lo, _hi), (lo, n_lo, hi, n_hi)) in enumerate(zip(frustum.edges, frustum.sides)):
         out[axis] = (hi + n_hi * MARGIN_PX / f, n_hi * scale, lo - n_lo * MARGIN_PX / f,
                      -n_lo * scale, lo, hi)

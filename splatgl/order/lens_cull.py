@@ -1,19 +1,31 @@
 """Fused float32 cull of the lens cameras (fisheye, equirectangular): sort keys in one pass.
 
-The same decisions, in the same float32 arithmetic, as :func:`lens_cull` followed
-by :func:`lens_order` (the float64 twins at the end of this module) (distance beyond the near plane, a fisheye's angle limit,
-opacity >= 1/255, equirectangular seam copies), run over blocks of
-:data:`~splatgl.order.cull.CULL_BLOCK` rows of the chunked cull data (:mod:`splatgl.order.chunks`,
-whose rows are already the drawable splats) into reused buffers, and written straight into
-uint64 sort keys ``(float_bits(distance) << 32) | index`` (seam copies with
-:data:`~splatgl.cameras.equirect.WRAP_FLAG` in the index).
+The decisions (distance beyond the near plane, a fisheye's angle limit, opacity >= 1/255,
+equirectangular seam copies) are float32 operations without transcendentals, so the device
+order (``shaders/order_cull.comp``, ``--sort gpu``) makes them bit for bit too: one decision,
+two implementations (:func:`cone_keeps`, :func:`seam_copies` are its NumPy twins).  They run
+over blocks of :data:`~splatgl.order.cull.CULL_BLOCK` rows of the chunked cull data
+(:mod:`splatgl.order.chunks`, whose rows are already the drawable splats) into reused buffers,
+and are written straight into uint64 sort keys ``(float_bits(distance) << 32) | index`` (seam
+copies with :data:`~splatgl.cameras.equirect.WRAP_FLAG` in the index):
 
-Two tests are first made cheaply, with exact fallbacks where the cheap test cannot decide:
+- distance ``d = sqrt((x x + y y) + z z)`` and ``d > near`` (float32);
+- fisheye angle ``atan2(rho, z) <= theta_max`` as ``z - d cos(theta_max) >= 0`` (float32, the
+  cosine rounded once on the host): it differs from a float32 ``arctan2`` test only on splats
+  within rounding of the cone, which lies :data:`~splatgl.constants.FISHEYE_THETA_MARGIN`
+  beyond the image's farthest corner;
+- equirectangular seam copies: ``|x| < reach and z < reach`` with
+  ``reach = radius scale + d (SEAM_MARGIN_PX / fx)`` (float32; radius the cull data's
+  ``k(o) max_scale``): :func:`splatgl.cameras.equirect.wrap_copies`' test, whose float64
+  reach it equals up to rounding (a copy within rounding of it lies ``SEAM_MARGIN_PX`` beyond
+  the splat's reach: it draws nothing either way).  A float32 bound widened by
+  :data:`ANGLE_BAND` picks the candidates cheaply; the exact float32 test decides on them.
 
-- fisheye angle ``atan2(rho, z) <= theta_max`` is ``z >= cos(theta_max) |p|``; splats within
-  :data:`ANGLE_BAND` (relative) of that cone take the float32 ``arctan2`` test as before;
-- equirectangular seam copies: a float32 bound of the reach, widened by :data:`ANGLE_BAND`,
-  picks the candidates; :func:`splatgl.cameras.equirect.wrap_copies` (float64) decides on them.
+Omni-directional stereo moves each point to its eye with ``arctan2``/``arcsin``/``cos``/``sin``
+(:func:`~splatgl.cameras.equirect.eye_space`), which no device reproduces bit for bit: those
+views keep the CPU cull (the device order does not cover them).
+:func:`lens_cull` + :func:`lens_order` (the float64 twins at the end of this module) are the
+model's own tests, which these equal up to rounding.
 """
 
 from __future__ import annotations
@@ -23,14 +35,30 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..cameras.equirect import SEAM_MARGIN_PX, WRAP_FLAG, eye_space, wrap_copies
 from ..constants import ALPHA_MIN
-from ..splatmath.project import splat_reach
 from .cull import CULL_BLOCK, CullData, view_axis
 from .chunks import ChunkedCull
 from .sort import depth_keys
 
-#: Relative width of the band around a cheap test's boundary where the exact test decides
-#: (float32 rounding of the distance and of ``arctan2`` is below 1e-6 relative).
+#: Relative widening of the cheap seam bound that picks the candidates the exact float32 seam
+#: test decides on (float32 rounding is below 1e-6 relative).
 ANGLE_BAND = 1e-4
+
+
+def cone_keeps(z: np.ndarray, d: np.ndarray, cos_limit: np.float32) -> np.ndarray:
+    """(N,) bool: a fisheye keeps the points at camera-space ``z`` and distance ``d`` (float32):
+    ``z - d cos_limit >= 0``, in float32 (``shaders/order_cull.comp``'s ``CULL_FISHEYE``)."""
+    return (z - d * np.float32(cos_limit)) >= np.float32(0)
+
+
+def seam_copies(x: np.ndarray, z: np.ndarray, d: np.ndarray, radius: np.ndarray,
+                scale: np.float32, seam_px: np.float32) -> np.ndarray:
+    """(N,) bool: the kept splats at camera-space ``x, z``, distance ``d`` and world radius
+    ``radius`` (float32, the cull data's) an equirectangular view draws twice:
+    ``reach = radius scale + d seam_px``, ``|x| < reach and z < reach`` in float32
+    (``shaders/order_cull.comp``'s ``CULL_SEAM``; ``seam_px = SEAM_MARGIN_PX / fx``)."""
+    reach = radius * np.float32(scale)
+    reach += d * np.float32(seam_px)
+    return (np.abs(x) < reach) & (z < reach)
 
 
 def lens_visible_keys(chunks: ChunkedCull, camera: Camera, near: float, scale: float = 1.0
@@ -62,21 +90,20 @@ def lens_keys(data: CullData, index: np.ndarray, keys: np.ndarray, camera: Camer
     fisheye = limit is not None
     equirect = camera.model.seam_period(camera) is not None
     ods_eye = getattr(camera.model, "ods_eye", 0.0)
-    limit32 = cos_limit = np.float32(0.0)
-    if fisheye:
-        limit32, cos_limit = np.float32(limit), np.float32(np.cos(limit))
+    cos_limit = np.float32(np.cos(limit)) if fisheye else np.float32(0.0)
+    scale32, seam_px = np.float32(scale), np.float32(SEAM_MARGIN_PX / camera.fx)
     if kern is not None and not ods_eye:
-        done = _compiled_keys(kern, data, index, keys, camera, near32, limit32, cos_limit, scale)
+        done = _compiled_keys(kern, data, index, keys, camera, near32, cos_limit, scale)
         if done is not None:
             return done, "compiled"
     block = min(CULL_BLOCK, max(n, 1))
     x, y, z, d, tmp = (np.empty(block, np.float32) for _ in range(5))
-    keep, band = np.empty(block, bool), np.empty(block, bool)
+    keep = np.empty(block, bool)
     out, copies = 0, []
     for start in range(0, n, block):
         stop = min(n, start + block)
         m = stop - start
-        xb, yb, zb, db, tb, kb, bb = x[:m], y[:m], z[:m], d[:m], tmp[:m], keep[:m], band[:m]
+        xb, yb, zb, db, tb, kb = x[:m], y[:m], z[:m], d[:m], tmp[:m], keep[:m]
         for axis, row in enumerate((xb, yb, zb)):
             view_axis(data.xyz, start, stop, rot[axis], t[axis], row, tb)
         if ods_eye:
@@ -90,23 +117,15 @@ def lens_keys(data: CullData, index: np.ndarray, keys: np.ndarray, camera: Camer
         np.sqrt(db, out=db)
         np.greater(db, near32, out=kb)
         if fisheye:
-            np.multiply(db, cos_limit, out=tb)  # cheap cone test with a band of doubt
-            np.subtract(zb, tb, out=tb)
-            np.less(np.abs(tb), db * np.float32(ANGLE_BAND), out=bb)
-            kb &= tb >= 0
-            kb |= bb & (db > near32)
-            doubt = np.flatnonzero(bb & kb)
-            if doubt.size:
-                theta = np.arctan2(np.hypot(xb[doubt], yb[doubt]), zb[doubt])
-                kb[doubt[theta > limit32]] = False
+            kb &= cone_keeps(zb, db, cos_limit)
         if equirect:  # seam candidates from a float32 bound of the reach, on the whole block
-            np.multiply(data.radius[start:stop], np.float32(scale), out=tb)
-            tb += db * np.float32(SEAM_MARGIN_PX / camera.fx)
+            np.multiply(data.radius[start:stop], scale32, out=tb)
+            tb += db * seam_px
             tb *= np.float32(1.0 + ANGLE_BAND)
             cand = np.flatnonzero(kb & (np.abs(xb) < tb) & (zb < tb))
             if cand.size:
-                cand = cand[_seam_copies(data, start + cand, xb[cand], yb[cand], zb[cand],
-                                         camera, scale)]
+                cand = cand[seam_copies(xb[cand], zb[cand], db[cand],
+                                        data.radius[start + cand], scale32, seam_px)]
                 copies.append(depth_keys(db[cand], index[start + cand] | WRAP_FLAG))
         if kb.all():  # no compaction
             depth_keys(db, index[start:stop], keys[out:out + m])
@@ -118,38 +137,28 @@ def lens_keys(data: CullData, index: np.ndarray, keys: np.ndarray, camera: Camer
     return (np.concatenate([keys[:out], *copies]) if copies else keys[:out]), "numpy"
 
 
-def _seam_copies(data: CullData, rows: np.ndarray, x, y, z, camera: Camera,
-                 scale: float) -> np.ndarray:
-    """(R,) bool: which of the kept splats ``rows`` (with camera-space ``x, y, z`` (R,)
-    float32) :func:`splatgl.cameras.equirect.wrap_copies` duplicates (its float64 test, its reach)."""
-    radius = splat_reach(data.max_scale[rows] * scale, data.opacities[rows])
-    return wrap_copies(np.stack([x, y, z], 1), radius, camera)
-
-
-#: Room per half of the rows for the compiled pass's fisheye rows near the cone and equirect
-#: seam candidates (more and the view takes the NumPy path).
+#: Room per half of the rows for the compiled pass's equirect seam candidates (more and the
+#: view takes the NumPy path).
 LIST_ROWS = 1 << 16
 
 
 def _compiled_keys(kern, data: CullData, index: np.ndarray, keys: np.ndarray, camera: Camera,
-                   near32: np.float32, limit32: np.float32, cos_limit: np.float32, scale: float
-                   ) -> np.ndarray | None:
+                   near32: np.float32, cos_limit: np.float32, scale: float) -> np.ndarray | None:
     """:func:`lens_visible_keys` through the compiled ``lens_pass`` (over two threads from
-    :data:`splatgl.order.chunks.SPLIT_ROWS` rows, as the pinhole pass): NumPy's ``arctan2`` on
-    the fisheye rows it leaves in doubt, NumPy's float64 seam test on its candidates; None if
-    either list overflows."""
+    :data:`splatgl.order.chunks.SPLIT_ROWS` rows, as the pinhole pass): its own float32 cone
+    test, NumPy's float32 seam test (:func:`seam_copies`) on its candidates; None if their
+    list overflows."""
     from . import chunks as cull_chunks, kernels as cull_kernel
 
     n = data.count
     mode = 1 if camera.model.angle_limit(camera) is not None else (
         2 if camera.model.seam_period(camera) is not None else 0)
+    scale32, seam_px = np.float32(scale), np.float32(SEAM_MARGIN_PX / camera.fx)
     args = (data.xyz[0], data.xyz[1], data.xyz[2], data.radius, index,
             camera.rotation.astype(np.float32), camera.translation.astype(np.float32), near32,
-            mode, cos_limit, np.float32(ANGLE_BAND), np.float32(scale),
-            np.float32(SEAM_MARGIN_PX / camera.fx), keys.view(np.uint32),
+            mode, cos_limit, np.float32(ANGLE_BAND), scale32, seam_px, keys.view(np.uint32),
             keys.view(np.float32))
-    lists = lambda: (np.empty(LIST_ROWS, np.int64), np.empty((LIST_ROWS, 4), np.float32),
-                     np.empty(LIST_ROWS, np.int64), np.empty((LIST_ROWS, 4), np.float32))
+    lists = lambda: (np.empty(LIST_ROWS, np.int64), np.empty((LIST_ROWS, 4), np.float32))
     pool = cull_kernel.helper() if n >= cull_chunks.SPLIT_ROWS else None
     starts = [0] if pool is None else [0, n // 2]
     found = [lists() for _ in starts]
@@ -162,22 +171,17 @@ def _compiled_keys(kern, data: CullData, index: np.ndarray, keys: np.ndarray, ca
         finally:
             last = second.result()  # its writes must end before the buffer is reused
         results = [first, last]
-    if any(nd > LIST_ROWS or ns > LIST_ROWS for _, nd, ns in results):
+    if any(ns > LIST_ROWS for _, _, ns in results):
         return None
     out = 0
     for at, (count, _, _) in zip(starts, results):
         keys[out:out + count] = keys[at:at + count]  # overlapping: NumPy buffers it
         out += count
     copies = []
-    for (_, nd, ns), (doubt, doubt_p, seam, seam_p) in zip(results, found):
-        if nd:  # near the fisheye's cone: the float32 arctan2 test, as the NumPy path
-            rows, p = doubt[:nd], doubt_p[:nd]
-            ok = ~(np.arctan2(np.hypot(p[:, 0], p[:, 1]), p[:, 2]) > limit32)
-            depth_keys(p[ok, 3], index[rows[ok]], keys[out:out + int(ok.sum())])
-            out += int(ok.sum())
-        if ns:  # near the equirect seam: the float64 copy test on the candidates
+    for (_, _, ns), (seam, seam_p) in zip(results, found):
+        if ns:  # near the equirect seam: the float32 copy test on the candidates
             rows, p = seam[:ns], seam_p[:ns]
-            pick = _seam_copies(data, rows, p[:, 0], p[:, 1], p[:, 2], camera, scale)
+            pick = seam_copies(p[:, 0], p[:, 2], p[:, 3], data.radius[rows], scale32, seam_px)
             copies.append(depth_keys(p[pick, 3], index[rows[pick]] | WRAP_FLAG))
     return np.concatenate([keys[:out], *copies]) if copies else keys[:out]
 

@@ -243,10 +243,10 @@ class QuadRenderer(Registered):
                 frame, extra=frame.extra + (("DEVICE_COUNT", 1),)))
             view.set_uniforms(comp)
             transfers(self.ctx).uniforms(comp)
-            self.gpu.run_prepass(comp, device.count, False, bool(frame.normal), False,
+            self.gpu.run_prepass(comp, device.slots, False, bool(frame.normal), False,
                                  order=device.values, dispatch=device.run_prepass)
         self._t_prepass = time.perf_counter() - t1
-        return device.count, frame
+        return device.slots, frame
 
     def draw(self, view: View, target: ColorTarget, layers: frozenset[Layer] = BASE,
              on_batch: BatchHook | None = None, under: UnderLayer | None = None) -> int:

@@ -2,18 +2,23 @@
 
 Per view, with nothing per splat crossing the bus:
 
-1. ``shaders/order_cull.comp``, one invocation per splat: the cull of
-   :func:`splatgl.order.cull.cull_visible` (same float32 operations, so the same depth bits and
-   plane decisions; the peak-alpha bound in float32 with a band of
-   :data:`~splatgl.constants.DEVICE_CULL_BAND` that only ever keeps more) stages key i = the
-   float bits of z (0xFFFFFFFF when culled) and counts each work group's kept splats;
+1. ``shaders/order_cull.comp``, one invocation per splat: the view's cull
+   (:data:`splatgl.order.stage.CULLS`), one twin per cull kind with the same float32
+   operations in the same order (``precise``), so the same depth bits and decisions: the side
+   planes of :func:`splatgl.order.cull.cull_visible` (pinhole, OpenCV; the peak-alpha bound in
+   float32 with a band of :data:`~splatgl.constants.DEVICE_CULL_BAND` that only ever keeps
+   more), its orthographic box (``CULL_BOX``), and the lens cameras' distance, fisheye cone
+   and equirectangular seam copies of :func:`splatgl.order.lens_cull.lens_keys`
+   (``CULL_SPHERE``; a panorama runs a second invocation per splat for its seam copy, whose
+   index carries :data:`~splatgl.cameras.equirect.WRAP_FLAG`).  It stages key j = the float
+   bits of z (of the distance; 0xFFFFFFFF when culled) and counts each work group's kept ones;
 2. ``order_scan.comp`` (one work group) turns the counts into each group's first slot and
    writes the total into the indirect draw command (and the pre-pass's dispatch size);
-   ``order_compact.comp`` writes the kept keys with their indices, in index order, into the
+   ``order_compact.comp`` writes the kept keys with their indices, in slot order, into the
    radix sorter's A buffers (an ordered stream compaction);
 3. :meth:`splatgl.gl.radix_sort.RadixSorter.sort_buffers` sorts that many keys (its count
    copied from the command on the device): stable, so the kept splats come ordered by
-   (z, index), exactly :class:`splatgl.order.stage.SceneOrder`'s order;
+   (depth, index), exactly :class:`splatgl.order.stage.SceneOrder`'s order;
 4. the draw reads its instance count from the command (``glDrawArraysInstancedIndirect``) and
    its splats from the sorted values (the vertex stage's instanced ``splat_index``), or the
    pre-pass (``DEVICE_COUNT``) is dispatched from the command's second half and prepares that
@@ -21,9 +26,12 @@ Per view, with nothing per splat crossing the bus:
 
 Per frame the host writes the 16-byte command (its vertex count, a zero instance count) and the
 programs' uniforms; the scene's cull data (:class:`~splatgl.order.cull.CullData`, 32 bytes a
-splat) is uploaded once.  Views this order does not cover (:meth:`DeviceOrder.covers`: lens
-cameras' spheres, orthographic boxes, the cull off, a level-of-detail cut, the ordered layers)
-take the CPU cull with the device sort instead.
+splat) is uploaded once.  Views this order does not cover (:meth:`DeviceOrder.covers`:
+omni-directional stereo, whose eye offsets need transcendentals no device reproduces bit for
+bit, the cull off, a level-of-detail cut, the ordered layers) take the CPU cull with the device
+sort instead.  Early termination is not run with this order (the draw is one indirect draw):
+its batch bounds and schedule are decided on the host from the kept count and a coverage
+estimate, which would be read back.
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ import time
 import moderngl
 import numpy as np
 
+from ..cameras.equirect import SEAM_MARGIN_PX
 from ..cameras.model import CullKind
 from ..cameras.view import View
 from ..gl.bindings import (BINDING_DEVICE_COUNT, ORDER_BINDING_BLOCKS, ORDER_BINDING_COMMAND, ORDER_BINDING_CULL,
@@ -70,26 +79,55 @@ class DeviceOrder:
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, programs: ProgramCache,
                  sorter: RadixSorter):
-        self.ctx, self.sorter = ctx, sorter
+        self.ctx, self.sorter, self.programs = ctx, sorter, programs
         self.count = scene.count
         limits.check_splat_buffer(ctx, self.count, 32 * self.count, "the device order's cull "
                                   "rows, 32 bytes a splat", advice=limits.DERIVED_ADVICE)
         rows = cull_rows(CullData.from_scene(scene)).tobytes()
         self._cull = ctx.buffer(rows)       # the one-time upload (not a per-frame transfer)
         self._command = ctx.buffer(reserve=COMMAND_BYTES)
-        self._groups = max(1, -(-self.count // ORDER_GROUP))
-        self._staged = ctx.buffer(reserve=4 * max(self.count, 1))
-        self._blocks = ctx.buffer(reserve=4 * self._groups)
-        self._progs = {name: programs.compute(f"order_{name}.comp")
-                       for name in ("cull", "scan", "compact")}
+        self._slots = 0                     # staged slots the buffers hold (_reserve)
+        #: The most splats the last view can draw: the scene's, twice for a panorama (copies).
+        self.slots = self.count
+        self._staged = self._blocks = None
+        self._progs = {name: programs.compute(f"order_{name}.comp") for name in ("scan", "compact")}
         self._state: tuple | None = None    # (view key, vertices) of the order on the device
-        sorter.reserve(max(self.count, 2))
+        self._reserve(self.count)
+
+    def _reserve(self, slots: int) -> None:
+        """Room for ``slots`` staged keys (a panorama stages 2 per splat: its seam copies)."""
+        if slots <= self._slots:
+            return
+        for buf in (self._staged, self._blocks):
+            if buf is not None:
+                buf.release()
+        self._staged = self.ctx.buffer(reserve=4 * max(slots, 1))
+        self._blocks = self.ctx.buffer(reserve=4 * self._groups(slots))
+        self.sorter.reserve(max(slots, 2))
+        self._slots = slots
+
+    @staticmethod
+    def _groups(slots: int) -> int:
+        return max(1, -(-slots // ORDER_GROUP))
 
     @staticmethod
     def covers(view: View) -> bool:
-        """Whether order_cull.comp is the view's cull: the side planes of a perspective image."""
+        """Whether order_cull.comp has the view's cull: every camera model's but an
+        omni-directional stereo panorama's (see the module doc)."""
+        return not getattr(view.model, "ods_eye", 0.0)
+
+    @staticmethod
+    def cull_defines(view: View) -> dict[str, object]:
+        """order_cull.comp's switches for ``view``'s cull kind (its twin, see the shader)."""
         frustum = view.frustum
-        return frustum.kind is CullKind.FRUSTUM and not frustum.camera.is_orthographic
+        if frustum.kind is CullKind.BOX:
+            return {"CULL_BOX": 1}
+        if frustum.kind is CullKind.SPHERE:
+            cam = frustum.camera
+            return {"CULL_SPHERE": 1,
+                    **({"CULL_FISHEYE": 1} if cam.model.angle_limit(cam) is not None else {}),
+                    **({"CULL_SEAM": 1} if cam.model.seam_period(cam) is not None else {})}
+        return {}
 
     @property
     def values(self) -> moderngl.Buffer:
@@ -110,12 +148,19 @@ class DeviceOrder:
         if state == self._state:
             return 0.0, 0.0
         t0 = time.perf_counter()
+        defines = self.cull_defines(view)
+        slots = 2 * self.count if "CULL_SEAM" in defines else self.count
+        self._reserve(slots)
+        self.slots = slots
+        groups = self._groups(slots)
         counter = transfers(self.ctx)
         counter.write(self._command, np.array([vertices, 0, 0, 0], np.uint32).tobytes())
-        cull, scan, compact = (self._progs[name] for name in ("cull", "scan", "compact"))
-        self._set_uniforms(cull, view, antialias)
-        scan["u_blocks"].value = self._groups
-        compact["u_count"].value = self.count
+        cull = self.programs.compute("order_cull.comp", defines)
+        scan, compact = self._progs["scan"], self._progs["compact"]
+        self._set_uniforms(cull, view, antialias, slots)
+        scan["u_blocks"].value = groups
+        compact["u_count"].value = slots
+        compact["u_rows"].value = self.count
         for prog in (cull, scan, compact):
             counter.uniforms(prog)
         keys, values = self.sorter.buffers()
@@ -124,14 +169,14 @@ class DeviceOrder:
                              (self._command, ORDER_BINDING_COMMAND), (keys, ORDER_BINDING_KEYS),
                              (values, ORDER_BINDING_VALUES)):
             buf.bind_to_storage_buffer(binding)
-        cull.run(group_x=self._groups)
+        cull.run(group_x=groups)
         self.ctx.memory_barrier()
         scan.run(group_x=1)
         self.ctx.memory_barrier()
-        compact.run(group_x=self._groups)
+        compact.run(group_x=groups)
         self.ctx.memory_barrier()
         t1 = time.perf_counter()
-        self.sorter.sort_buffers(self.count, device_count=(self._command, 4))
+        self.sorter.sort_buffers(slots, device_count=(self._command, 4))
         for sort_prog in self.sorter._progs.values():   # the sort's uniforms
             counter.uniforms(sort_prog)
         self._state = state
@@ -145,22 +190,30 @@ class DeviceOrder:
         comp.run_indirect(self._command, PREPASS_ARGS)
         self.ctx.memory_barrier()
 
-    def _set_uniforms(self, prog: moderngl.ComputeShader, view: View, antialias: bool) -> None:
+    def _set_uniforms(self, prog: moderngl.ComputeShader, view: View, antialias: bool,
+                      slots: int) -> None:
         frustum = view.frustum
         cam = frustum.camera
         r = np.asarray(cam.rotation, np.float32)
         t = np.asarray(cam.translation, np.float32)
-        planes = plane_constants(frustum, view.scale)
-        tx, ty = cam.tan_half_fov
         values = {
-            "u_count": self.count, "u_r0": tuple(r[0]), "u_r1": tuple(r[1]), "u_r2": tuple(r[2]),
-            "u_t": tuple(t), "u_near": float(view.near32), "u_plane_x": tuple(planes[0, :4]),
-            "u_plane_y": tuple(planes[1, :4]),
-            "u_inside": (planes[0, 4], planes[0, 5], planes[1, 4], planes[1, 5]),
+            "u_count": self.count, "u_slots": slots, "u_r0": tuple(r[0]), "u_r1": tuple(r[1]),
+            "u_r2": tuple(r[2]), "u_t": tuple(t), "u_near": float(view.near32),
             "u_peak": frustum.peak, "u_antialias": antialias, "u_scale": float(view.scale),
             "u_focal": (cam.fx, cam.fy, cam.cx, cam.cy),
-            "u_image": (cam.width, cam.height, tx, ty),
         }
+        if frustum.kind is CullKind.SPHERE:   # lens_keys' constants
+            limit = cam.model.angle_limit(cam)
+            values["u_near"] = float(np.float32(view.near))
+            values["u_lens"] = (float(np.float32(np.cos(limit))) if limit is not None else 0.0,
+                                float(np.float32(view.scale)),
+                                float(np.float32(SEAM_MARGIN_PX / cam.fx)))
+        else:
+            planes = plane_constants(frustum, view.scale)
+            tx, ty = (1.0, 1.0) if frustum.kind is CullKind.BOX else cam.tan_half_fov
+            values.update({"u_plane_x": tuple(planes[0, :4]), "u_plane_y": tuple(planes[1, :4]),
+                           "u_inside": (planes[0, 4], planes[0, 5], planes[1, 4], planes[1, 5]),
+                           "u_image": (cam.width, cam.height, tx, ty)})
         for name, value in values.items():
             if name in prog:
                 prog[name].value = value

@@ -15,7 +15,7 @@ from splatgl.order import chunks as cull_chunks, kernels as cull_kernel
 from splatgl.cameras.equirect import WRAP_FLAG, Equirectangular
 from splatgl.cameras.fisheye import Fisheye, fisheye_theta_limit
 from splatgl.cameras.registry import retarget
-from splatgl.order.lens_cull import lens_cull, lens_order
+from splatgl.order.lens_cull import cone_keeps, lens_cull, lens_order
 from splatgl.splatmath.project import splat_reach
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
@@ -139,10 +139,21 @@ def test_keys_order_and_pairs_feed_every_sort_as_before():
     np.testing.assert_array_equal(depth, all_z)
 
 
-def _old_lens_keys(points, max_scale, opac, camera, near):
-    """The lens stages as the quad path ran them before the fused cull (sorted keys)."""
+def _old_lens_keys(points, max_scale, opac, camera, near, cone_rows=0):
+    """The lens stages as the quad path ran them before the fused cull (sorted keys); the first
+    ``cone_rows`` rows (on a fisheye's angle-limit cone) decided by the float32 cone test
+    :func:`~splatgl.order.lens_cull.cone_keeps` (the decision the device order shares) instead
+    of the model's ``arctan2``: the two differ only within rounding of the cone."""
     p_cam = to_camera(points, camera)
-    kept = np.flatnonzero(lens_cull(p_cam, opac, camera, near))
+    mask = lens_cull(p_cam, opac, camera, near)
+    if cone_rows:
+        p = p_cam[:cone_rows]
+        d = camera.model.depth(p).astype(np.float32)
+        cos_limit = np.float32(np.cos(fisheye_theta_limit(camera)))
+        mask[:cone_rows] = (d > np.float32(near)) & (opac[:cone_rows] >= 1 / 255) & cone_keeps(
+            p[:, 2], d, cos_limit)
+        assert mask[:cone_rows].any() and not mask[:cone_rows].all()   # the cone is straddled
+    kept = np.flatnonzero(mask)
     reach = splat_reach(max_scale[kept] * camera.scale, opac[kept])
     depth, keep = lens_order(p_cam, kept, reach, camera)
     return np.sort(depth_keys(depth, keep)), keep
@@ -165,8 +176,8 @@ def test_lens_cull_keeps_what_the_old_lens_stages_keep(cam_index, path, monkeypa
     points, max_scale, opac = _clustered(20_000, 17)
     camera = _lens_cameras()[cam_index]
     if isinstance(camera.model, Fisheye):
-        # splats on the angle limit's cone, inside and outside by float32 rounding: the band
-        # where the exact arctan2 test decides
+        # splats on the angle limit's cone, inside and outside by float32 rounding: the float32
+        # cone test decides them (cone_keeps)
         limit = fisheye_theta_limit(camera)
         theta = limit + np.linspace(-3e-6, 3e-6, 600)
         phi = np.linspace(0, 2 * np.pi, 600)
@@ -175,7 +186,8 @@ def test_lens_cull_keeps_what_the_old_lens_stages_keep(cam_index, path, monkeypa
         points[:600] = world.astype(np.float32)
     chunks = ChunkedCull(CullData(points, max_scale, opac), chunk=32, group=8)
     chunks.compiled = path != "numpy"
-    want, keep = _old_lens_keys(points, max_scale, opac, camera, 0.05)
+    want, keep = _old_lens_keys(points, max_scale, opac, camera, 0.05,
+                                600 if isinstance(camera.model, Fisheye) else 0)
     got = np.sort(lens_visible_keys(chunks, camera, 0.05, camera.scale))
     assert chunks.last_path == ("compiled" if path != "numpy" and not getattr(camera.model, "ods_eye", 0.0) else "numpy")
     np.testing.assert_array_equal(got, want)
