@@ -1,5 +1,6 @@
-"""The tile renderer's keys and records: the tile grid, the sort keys' bit layout, stage times,
-and the integer stages compared with the NumPy reference (:mod:`splatgl.renderers.tile`)."""
+"""The tile renderer's keys and records: the tile grid, the sort keys' bit layout, its per-view
+buffers (each checked against the driver's limit on one buffer), stage times, and the integer
+stages compared with the NumPy reference (:mod:`splatgl.renderers.tile`)."""
 
 from __future__ import annotations
 
