@@ -4,7 +4,7 @@
 // the radix sorter's keys and values: a stable sort then gives the CPU order, ties by index.
 // Slots from u_rows on are seam copies (order_cull.comp's CULL_SEAM): their value is the
 // splat's index with WRAP_FLAG (splatgl/cameras/equirect.py; 0x80000000), after every plain one.
-// Twin: splatgl/order/cull.py cull_visible(), splatgl/order/chunks.py keys_pairs().
+// Twin: splatgl/order/cull.py cull_visible(); splatgl/order/chunks.py keys_pairs().
 
 layout(local_size_x = ORDER_GROUP) in;
 layout(std430, binding = ORDER_BINDING_STAGED) readonly buffer Staged { uint staged[]; };

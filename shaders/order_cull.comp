@@ -15,7 +15,8 @@
 // order_compact.comp writes the kept keys and indices in slot order for the stable sort: the
 // CPU order, ties included (a seam copy's index carries WRAP_FLAG, after every plain index, as
 // splatgl.order.chunks.keys_pairs lists them).  Nothing comes back to the host.
-// Twins: splatgl/order/cull.py cull_visible(), splatgl/order/lens_cull.py lens_keys().
+// Twin: splatgl/order/cull.py cull_visible();
+//   splatgl/order/lens_cull.py lens_keys(), cone_keeps(), seam_copies().
 
 #include "lib/sqrt_rn.glsl"
 

@@ -8,6 +8,7 @@
 // The squares are compared exactly in integers: s = S 2^e, m+(s) = (2S + 1) 2^(e - 1),
 // m+(s)^2 = (2S + 1)^2 2^(2e - 2) (50 bits: umulExtended), a = A 2^f (A < 2^24).
 // Used by: shaders/order_cull.comp (CULL_SPHERE).
+// Twin: none (the twin is NumPy's float32 np.sqrt itself; test_quad_device_lens.py checks it)
 
 // Whether a < m+(s)^2, for positive normal floats a and s.
 bool below_upper_mid(float s, float a) {
