@@ -3,7 +3,7 @@
 Per view, a source of rows (:class:`~splatgl.order.stage.RowSource`: the plain scene's cull and
 sort, or a level-of-detail cut, :class:`splatgl.lod.source.LodOrder`) gives the splats to draw,
 front to back; only those indices are uploaded (the scene's storage buffers are uploaded once).
-With ``--sort gpu`` and a view culled by its side planes the order never leaves the device
+With ``--sort gpu`` (every camera model but omni-directional stereo) the order never leaves the device
 (:mod:`~splatgl.renderers.quad_device`: cull, keys, compaction and sort in compute shaders, the
 draw count and order read by an indirect draw); :attr:`QuadTimes.transfers` counts what a frame
 moved between host and device (:mod:`splatgl.gl.transfers`).
