@@ -355,5 +355,7 @@ def run_path(args: argparse.Namespace) -> int:
         print(f"timings: {result.seconds:.3f} s for {result.written} frames; renderer stages "
               f"{result.render_seconds:.3f} s; ratio {ratio:.3f}")
         if memory is not None:
+    if memory is not None and getattr(streamed, "capped", None):   # said once (and --timings)
+        print(streamed.capped)
             print(f"streaming: {streamed.summary()}")
     return 0

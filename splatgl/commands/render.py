@@ -17,14 +17,15 @@ from ..api import Renderer, gl_renderer_name
 from ..lod.frames import LodFrames, render_lod
 from ..lod.budget import format_size
 from ..lod.io import read_lod
-from ..lod.stream_frames import StreamFrames, render_streamed
+from ..lod.stream_frames import StreamFrames
 from ..scene.settings import RendererKind
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
                       check_convention, check_size, format_timings, inputs_from_args,
                       settings_from_args)
 from ._layers import add_layer_arguments, layer_files, under_from_args
-from ._memory import STREAM_HELP, add_memory_argument, memory_given, stream_inputs
+from ._memory import (STREAM_HELP, add_level_argument, add_memory_argument, memory_given,
+                      render_one_streamed, stream_inputs, stream_level)
 from ._outputs import add_force_argument, output_files
 from ._render_path import (add_path_arguments, lod_settings_from_args, refuse_path_only_options,
                            run_path)
@@ -88,6 +89,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "a path's frames change smoothly instead of popping; 1 for no blending "
                         "(default 2)")
     add_memory_argument(p, STREAM_HELP)
+    add_level_argument(p)
     add_camera_arguments(p)
     add_settings_arguments(p)
     add_layer_arguments(p)
@@ -124,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
     fmt = image_format(args.output, "-o")  # before rendering (x.bmp, or no suffix at all)
     under = under_from_args(args)
     memory = memory_given(args)
+    stream_level(args)         # --lod-level: with --memory and a Streamed SOG or LCC
     if memory is not None:     # streamed: the file is never read whole
         cut = lod_settings_from_args(args)   # a .lod.ply, the quad path
         if stereo is not None:
@@ -146,8 +149,8 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(LodFrames.stereo_refusal)
     times = None
     if memory is not None:
-        out, times, gl_name = render_streamed(args.scene, camera, settings, cut, memory, layers,
-                                              under, scene)
+        out, times, gl_name = render_one_streamed(args, camera, settings, cut, memory, layers,
+                                                  under, scene)
         eyes = [out]
         kind_text = f"{kind.value}, level of detail streamed under {format_size(memory)}"
     elif lod:

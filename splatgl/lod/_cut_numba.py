@@ -105,7 +105,8 @@ def _expansion(size, mode, t, k):
 
 @numba.njit(cache=True, nogil=True, fastmath=False, boundscheck=False, error_model="numpy")
 def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, kind, planes,
-             mode, t, k, blend, leaves_at, dense_fraction, sizes, inside, out_rows, out_w):
+             mode, t, k, blend, leaves_at, max_nodes, dense_fraction, sizes, inside, out_rows,
+             out_w):
     """The cut of :func:`splatgl.lod.cut.select_cut_weights` into the tails ``out_rows[pos:]``
     (int64, rows ascending) and ``out_w[pos:]`` (float32 weights, 1 without ``blend``), both at
     least the node count long.  ``kind``: 0 the side planes, 1 the box, 2 the sphere
@@ -115,7 +116,9 @@ def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, kind,
     level whose candidates are at least ``dense_fraction`` of it is tested whole first
     (:func:`_level_test`, into the scratch ``sizes`` float32 / ``inside`` bool, each at least
     the largest level long).  Returns ``pos``, or -1 when the cut would draw at least
-    ``leaves_at`` nodes per leaf (draw the leaves instead)."""
+    ``leaves_at`` nodes per leaf (draw the leaves instead), or ``-2 - count`` when before a
+    level the nodes drawn so far plus its candidates (``count``) exceed ``max_nodes`` (>= 0;
+    -1 for no limit: :class:`splatgl.lod.cut.CutTooLarge`)."""
     rt = (rot[0, 0], rot[0, 1], rot[0, 2], rot[1, 0], rot[1, 1], rot[1, 2],
           rot[2, 0], rot[2, 1], rot[2, 2], trans[0], trans[1], trans[2])
     levels = offsets.size - 1
@@ -140,6 +143,8 @@ def cut_pass(cx, cy, cz, radius, offsets, branching, rot, trans, scale, f, kind,
         lo = offsets[level]
         n = offsets[level + 1] - lo
         fan = n if level == levels - 1 else branching  # children per parent
+        if max_nodes >= 0 and out_rows.size - pos + n_cand > max_nodes:
+            return -2 - (out_rows.size - pos + n_cand)
         if level == 0 and leaves_at >= 0.0:
             s = 0.0  # the candidates' summed weight A (each parent's carry, per child)
             for j in range(par.size):
@@ -211,5 +216,5 @@ def warm_up() -> None:
     f4 = np.zeros(3, np.float32)
     cut_pass(f4, f4, f4, f4, np.array([0, 2, 3], np.int64), 2, np.eye(3, dtype=np.float32),
              np.zeros(3, np.float32), F32(1), F32(1), 0, np.zeros(8, np.float32), 2, F32(1),
-             F32(1), True, -1.0, 0.25, np.zeros(3, np.float32), np.zeros(3, np.bool_),
+             F32(1), True, -1.0, -1, 0.25, np.zeros(3, np.float32), np.zeros(3, np.bool_),
              np.zeros(3, np.int64), np.zeros(3, np.float32))

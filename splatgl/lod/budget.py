@@ -125,3 +125,101 @@ def plan(budget: int, branching: int, record_bytes: int, count: int,
     run = max(working // 3 // run_bytes, 1024)
     rows = int(max(min(working // 12 // (record_bytes + 64), 1 << 16), 256))
     return Plan(budget, working, window, rows, run)
+
+
+# ------------------------------------------------------------------ a streamed frame's budget
+#: Bytes of the CPU side per splat a streamed frame draws, beyond its SH and GPU storage: the
+#: gathered scene's means, quaternions, scales and opacity (44), the cut's rows and weights
+#: (12), the sphere pages the cut keeps (2 x 16, :meth:`splatgl.lod.lazy.LazyLod.trim_spheres`),
+#: the cull's data (20), the order's scratch (indices, keys, their sort and the order: 36) and
+#: the allocator's slack (20).  The SH adds 12 bytes a coefficient (float32 RGB).
+FRAME_CPU_BYTES = 164
+FRAME_SH_BYTES = 12
+#: Bytes of the renderer's per-frame GPU buffers per splat besides the scene's storage
+#: (:func:`splatgl.gl.storage.gpu_bytes_per_splat`): the pre-pass's prepared quad (64), the
+#: sorted rows and weights (8), early termination's survivors and commands (8).  On a software
+#: driver (llvmpipe) these live in the process too.
+FRAME_GPU_BYTES = 80
+#: Held back from a streamed frame's budget for what does not grow with the cut: the driver's
+#: draw of one batch (at most a million splats a draw), its compiled shaders and the targets.
+DRAW_RESERVE = 320 << 20
+#: The chunk cache's share of the working memory (the rest is the frame's); at least what the
+#: resident set needs (its pinned top levels and the chunks in flight).
+CACHE_SHARE = 0.2
+#: A budget whose frame holds fewer splats than this is refused.
+MIN_FRAME_SPLATS = 100
+
+
+def frame_bytes_per_splat(sh_coeffs: int, gpu_bytes: int) -> int:
+    """Bytes of the whole process per splat a streamed frame draws: the CPU side
+    (FRAME_CPU_BYTES + FRAME_SH_BYTES per SH coefficient), the scene's GPU storage
+    ``gpu_bytes`` and the renderer's per-frame buffers (FRAME_GPU_BYTES)."""
+    return FRAME_CPU_BYTES + FRAME_SH_BYTES * int(sh_coeffs) + int(gpu_bytes) + FRAME_GPU_BYTES
+
+
+@dataclass(frozen=True)
+class StreamPlan:
+    """How a streamed level of detail shares one ``--memory`` budget: ``held`` (what the
+    process held before its first frame: interpreter, libraries, the GL context), ``reserve``
+    (DRAW_RESERVE), ``cache`` (the chunk cache's bytes), ``frame`` (the frame's bytes) and
+    ``per_splat`` (:func:`frame_bytes_per_splat`); :attr:`cap` is the most splats a frame
+    draws."""
+
+    budget: int
+    held: int
+    reserve: int
+    cache: int
+    frame: int
+    per_splat: int
+
+    @property
+    def cap(self) -> int:
+        return max(1, self.frame // self.per_splat)
+
+    def describe(self) -> str:
+        return (f"--memory {format_size(self.budget)}: {format_size(self.held)} held, "
+                f"{format_size(self.reserve)} for the draw, {format_size(self.cache)} of chunks, "
+                f"{format_size(self.frame)} for the frame (at most {self.cap:,} splats at "
+                f"{self.per_splat} B)")
+
+
+def stream_plan(budget: int, per_splat: int, cache_need: int = 0, held: int | None = None,
+                reserve: int = DRAW_RESERVE) -> StreamPlan:
+    """The split of ``budget`` for a streamed frame of ``per_splat`` bytes a splat
+    (:func:`frame_bytes_per_splat`): ``held`` bytes (measured when None) and ``reserve`` off
+    first, then CACHE_SHARE of the rest (at least ``cache_need``) to the chunk cache, the rest
+    to the frame.  A budget leaving the frame less than MIN_FRAME_SPLATS is one line."""
+    held = resident_now() if held is None else int(held)
+    working = int(budget) - held - int(reserve)
+    cache = max(int(cache_need), int(CACHE_SHARE * working))
+    frame = working - cache
+    if frame < MIN_FRAME_SPLATS * per_splat:
+        least = held + reserve + max(cache_need + MIN_FRAME_SPLATS * per_splat,
+                                     int(MIN_FRAME_SPLATS * per_splat / (1.0 - CACHE_SHARE)) + 1)
+        raise SplatglError(f"--memory {format_size(budget)} is too small to stream this level of "
+                           f"detail: this process holds {format_size(held)}, the draw needs "
+                           f"{format_size(reserve)} and the chunks {format_size(cache_need)}; "
+                           f"give at least {format_size(least)}")
+    return StreamPlan(int(budget), held, int(reserve), cache, frame, int(per_splat))
+
+
+#: glibc's mallopt parameter: the size from which allocations are mapped (and unmapped on free).
+_M_MMAP_THRESHOLD = -3
+#: Arrays of this many bytes or more are mapped of their own by a streaming process (a fixed
+#: threshold: glibc otherwise raises it to the largest block freed, after which a frame's
+#: freed arrays stay in the heap, resident).
+MMAP_THRESHOLD = 1 << 20
+
+
+def release_freed() -> None:
+    """Fix the allocator's mapping threshold at MMAP_THRESHOLD and give freed heap memory back
+    to the system (glibc; elsewhere nothing), so memory a frame freed is not counted again."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)
+        libc.malloc_trim(0)
+    except (OSError, AttributeError):
+        pass

@@ -45,10 +45,25 @@ BUDGET_TOLERANCE = 0.1
 #: then this many narrowing steps between the last cut too large and the first that fits.
 MAX_LATE_STEPS = 40
 LATE_BISECTIONS = 3
+#: A budget's search abandons a trial cut once it would draw more than this many times the
+#: budget (:class:`CutTooLarge`): the selection's own memory stays a few times the budget's
+#: however fine the threshold (a close view of a 100M-splat tree), and the next threshold is
+#: stepped as if the cut held exactly that many (the compiled and NumPy paths alike).
+ABORT_FACTOR = 3
 #: The search from a nearby view's threshold (:func:`select_cut_budget_near`): at most this many
 #: cuts, stepping the threshold by at least this factor until the budget is bracketed.
 NEAR_STEPS = 6
 NEAR_FACTOR = 1.15
+
+
+class CutTooLarge(Exception):
+    """A cut abandoned before its level whose candidates would take it past ``max_nodes``
+    (:func:`select_cut_weights`): ``nodes`` is the nodes drawn above that level plus its
+    candidates (every candidate is drawn, replaced by its children or out of view)."""
+
+    def __init__(self, nodes: int):
+        super().__init__(f"the cut would test {nodes} nodes")
+        self.nodes = int(nodes)
 
 
 @dataclass(frozen=True)
@@ -170,7 +185,8 @@ def level_leaves(offsets: np.ndarray, branching: int, level: int, local: np.ndar
 
 
 def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX,
-                       band: float = 1.0, leaves_at: float | None = None, kern=None
+                       band: float = 1.0, leaves_at: float | None = None, kern=None,
+                       max_nodes: int | None = None
                        ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The cut with a transition band: ``(rows, weights)``, rows (K,) int64 ascending, weights
     (K,) float32 in (0, 1] (the factor on each node's opacity), or None when every weight is 1.
@@ -195,29 +211,46 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     (the candidates outside the view count as drawn here, which only errs towards the leaves,
     whose image is full detail's).
 
+    ``max_nodes``: before each level, if the nodes drawn so far plus that level's candidates
+    exceed it, raise :class:`CutTooLarge` without testing them (so a cut far over a budget
+    reads and tests only about ``max_nodes`` nodes' spheres).
+
     ``kern``: :func:`splatgl.order.kernels.for_view`'s kernels, whose ``cut_pass`` walks the same
     levels compiled, over the candidates only (the same rows and weights); None: NumPy.
     """
     offsets, b = data.offsets, data.branching
     view = _NodeTest(data, camera)
     if kern is not None:
-        return _compiled_cut(kern, data, view, threshold_px, band, leaves_at)
+        return _compiled_cut(kern, data, view, threshold_px, band, leaves_at, max_nodes)
     top = len(offsets) - 2
     blend = band > 1.0
     carry = None  # float32 A * e over the level above's nodes
     rows, weights = [], []
+    drawn_all = 0
     nodes = covered = 0.0  # so far: nodes drawn, and leaves they stand for (leaves_at only)
     for level in range(top, -1, -1):
         lo, hi = int(offsets[level]), int(offsets[level + 1])
         n = hi - lo
-        above = np.ones(n, np.float32) if carry is None else np.repeat(carry, b)[:n]
-        n_cand = int(np.count_nonzero(above))
+        par = None if carry is None else np.flatnonzero(carry)   # the expanded nodes above
+        n_cand = n if par is None else (
+            par.size * b - (max(0, int(par[-1]) * b + b - n) if par.size else 0))
         if n_cand == 0:
             break
+        if max_nodes is not None and drawn_all + n_cand > max_nodes:
+            raise CutTooLarge(drawn_all + n_cand)
+        dense = n_cand >= DENSE_FRACTION * n
+        if dense:   # a level's worth of candidate weights (only where most of it is)
+            above = np.ones(n, np.float32) if carry is None else np.repeat(carry, b)[:n]
+        else:       # the candidates alone (ascending) and their weights
+            local = (par[:, None] * b + np.arange(b)).ravel()
+            a_cand = np.repeat(carry[par], b)
+            fits = local < n
+            local, a_cand = local[fits], a_cand[fits]
         if (level == 0 and leaves_at is not None
-                and nodes + n_cand >= leaves_at * (covered + float(above.sum(dtype=np.float64)))):
+                and nodes + n_cand >= leaves_at * (covered + float(
+                    (above if dense else a_cand).sum(dtype=np.float64)))):
             return None, None
-        if n_cand >= DENSE_FRACTION * n:  # whole level, contiguous, masked
+        if dense:  # whole level, contiguous, masked
             size, inside = _dense(data, view, lo, hi)
             above[~inside] = 0
             e = np.zeros(n, np.float32) if level == 0 else expansion(size, threshold_px, band)
@@ -225,16 +258,16 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
             carry = above * e
             a, e = above[drawn], e[drawn]
         else:  # only the candidates, gathered
-            local = np.flatnonzero(above)
             size, inside = view.test(data.centres[:, local + lo], data.radius[local + lo])
             local, size = local[inside], size[inside]
             e = np.zeros(local.size, np.float32) if level == 0 else expansion(size, threshold_px, band)
-            a = above[local]
+            a = a_cand[inside]
             carry = np.zeros(n, np.float32)
             carry[local] = a * e
             keep = e < 1
             drawn, a, e = local[keep], a[keep], e[keep]
         rows.append(drawn + lo)
+        drawn_all += drawn.size
         if blend:
             weights.append(a * (1 - e))
         if leaves_at is not None:
@@ -248,7 +281,8 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
 
 
 def _compiled_cut(kern, data: CutData, view: _NodeTest, threshold_px: float, band: float,
-                  leaves_at: float | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+                  leaves_at: float | None, max_nodes: int | None = None
+                  ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """:func:`select_cut_weights` through the compiled ``cut_pass``."""
     n = int(data.offsets[-1])
     rows, weights = np.empty(n, np.int64), np.empty(n, np.float32)
@@ -264,7 +298,10 @@ def _compiled_cut(kern, data: CutData, view: _NodeTest, threshold_px: float, ban
                           view.scale, view.f, view.kind, view.planes, mode,
                           np.float32(threshold_px if finite else 0.0), np.float32(ramp),
                           band > 1.0, -1.0 if leaves_at is None else float(leaves_at),
+                          -1 if max_nodes is None else int(max_nodes),
                           DENSE_FRACTION, *scratch, rows, weights)
+    if pos <= -2:   # -2 - pos: the nodes drawn above the level abandoned, plus its candidates
+        raise CutTooLarge(-2 - pos)
     if pos < 0:
         return None, None
     return rows[pos:], (weights[pos:] if band > 1.0 else None)
@@ -284,17 +321,18 @@ def select_cut_budget(data: CutData, camera: Camera, budget: int,
     gives them for that threshold and ``band``).  The threshold is searched on a log scale (a
     cut's count falls roughly as the threshold squared), BUDGET_STEPS cuts at most; it changes
     from view to view, so a budget's cut is not continuous along a path, band or not.
-    ``kern`` as :func:`select_cut_weights` takes it."""
+    ``kern`` as :func:`select_cut_weights` takes it.  A trial cut past ABORT_FACTOR times the
+    budget is abandoned (:class:`CutTooLarge`) and counts as that many nodes."""
     ok = None
     lo, hi = threshold_px, None  # lo: known too many nodes (or the floor), hi: known to fit
     t = threshold_px
     first_fit = None  # the step of the first cut that fitted
     for step in range(BUDGET_STEPS + MAX_LATE_STEPS):
-        cut, w = select_cut_weights(data, camera, t, band, kern=kern)
-        if cut.size <= budget:
+        cut, w, size = _trial_cut(data, camera, t, band, kern, budget)
+        if size <= budget:
             ok, hi = (cut, w, t), t
             first_fit = step if first_fit is None else first_fit
-            if t <= threshold_px or cut.size >= (1.0 - BUDGET_TOLERANCE) * budget:
+            if t <= threshold_px or size >= (1.0 - BUDGET_TOLERANCE) * budget:
                 break
         else:
             lo = t
@@ -304,12 +342,23 @@ def select_cut_budget(data: CutData, camera: Camera, budget: int,
         if first_fit is not None and step >= max(BUDGET_STEPS, first_fit + LATE_BISECTIONS + 1) - 1:
             break
         if hi is None:
-            t = t * (2.0 if step + 1 >= BUDGET_STEPS else max(1.25, float(np.sqrt(cut.size / budget))))
+            t = t * (2.0 if step + 1 >= BUDGET_STEPS else max(1.25, float(np.sqrt(size / budget))))
         else:
             t = float(np.sqrt(lo * hi))
     if ok is None:  # even the coarsest threshold tried was too fine: the root level's cut
         ok = (*select_cut_weights(data, camera, float("inf"), band, kern=kern), float("inf"))
     return ok
+
+
+def _trial_cut(data: CutData, camera: Camera, t: float, band: float, kern, budget: int):
+    """``(rows, weights, nodes)`` of a budget search's cut at threshold ``t``; rows None and
+    ``nodes`` past the budget where it was abandoned at ABORT_FACTOR times the budget."""
+    try:
+        cut, w = select_cut_weights(data, camera, t, band, kern=kern,
+                                    max_nodes=ABORT_FACTOR * int(budget))
+    except CutTooLarge:
+        return None, None, ABORT_FACTOR * int(budget) + 1
+    return cut, w, int(cut.size)
 
 
 def select_cut_budget_near(data: CutData, camera: Camera, budget: int, start: float,
@@ -324,17 +373,17 @@ def select_cut_budget_near(data: CutData, camera: Camera, budget: int, start: fl
     lo = hi = None
     t = max(float(start), threshold_px) if np.isfinite(start) else threshold_px
     for _ in range(steps):
-        cut, w = select_cut_weights(data, camera, t, band, kern=kern)
-        if cut.size <= budget:
+        cut, w, size = _trial_cut(data, camera, t, band, kern, budget)
+        if size <= budget:
             ok, hi = (cut, w, t), t
-            if t <= threshold_px or cut.size >= (1.0 - BUDGET_TOLERANCE) * budget:
+            if t <= threshold_px or size >= (1.0 - BUDGET_TOLERANCE) * budget:
                 break
         else:
             lo = t
         if hi is None:
-            t *= max(NEAR_FACTOR, cut.size / budget)
+            t *= max(NEAR_FACTOR, size / budget)
         elif lo is None:
-            t = max(threshold_px, t / max(NEAR_FACTOR, float(np.sqrt(budget / max(cut.size, 1)))))
+            t = max(threshold_px, t / max(NEAR_FACTOR, float(np.sqrt(budget / max(size, 1)))))
         else:
             t = float(np.sqrt(lo * hi))
     if ok is None:

@@ -141,6 +141,22 @@ class LazyLod:
             self._load(missing)
         return self._centres[:, rows], self._radius[rows]
 
+    @property
+    def sphere_bytes(self) -> int:
+        """Bytes of the node spheres read so far (and kept)."""
+        return int(np.count_nonzero(self._loaded)) * BOUND_PAGE * 16
+
+    def trim_spheres(self, limit: int) -> bool:
+        """Forget every sphere read (a cut reads them again as it tests them) where they take
+        more than ``limit`` bytes; True when they did (a streamed frame's bound)."""
+        if self.sphere_bytes <= limit:
+            return False
+        m = self._radius.size
+        self._centres = np.zeros((3, m), np.float32)
+        self._radius = np.zeros(m, np.float32)
+        self._loaded[:] = False
+        return True
+
     def nodes(self, rows: np.ndarray) -> Scene:
         """The stored values of node ``rows`` (ascending) as a :class:`Scene`, read in runs of
         rows at most NODE_GAP apart (leaves from ``vertex``, parents from ``lod_node``)."""

@@ -55,15 +55,17 @@ class LodSettings:
             raise SplatglError(f"--lod-budget must be at least 1, got {self.budget}")
 
 
-def threshold_cut(tree: LodTree, data: CutData, camera: Camera, lod: LodSettings, kern=None
+def threshold_cut(tree: LodTree, data: CutData, camera: Camera, lod: LodSettings, kern=None,
+                  max_nodes: int | None = None
                   ) -> tuple[np.ndarray | None, np.ndarray | None, float]:
     """The cut :class:`LodRenderer` draws for ``camera`` without a budget: ``(rows, weights,
     nodes per leaf)``, rows and weights as :func:`select_cut_weights` gives them, or ``(None,
     None, 1.0)`` when the view should draw the leaves instead (its cut stands for at most
     ``1 / SKIP_NODES_PER_LEAF`` leaves a node).  ``kern``: the compiled kernels
-    (:func:`splatgl.order.kernels.for_view`), or None for NumPy: the same cut."""
+    (:func:`splatgl.order.kernels.for_view`), or None for NumPy: the same cut.  ``max_nodes``:
+    :class:`splatgl.lod.cut.CutTooLarge` past it (:func:`select_cut_weights`)."""
     ids, weights = select_cut_weights(data, camera, lod.threshold_px, lod.band,
-                                      leaves_at=SKIP_NODES_PER_LEAF, kern=kern)
+                                      leaves_at=SKIP_NODES_PER_LEAF, kern=kern, max_nodes=max_nodes)
     if ids is None:
         return None, None, 1.0
     covered = leaves_covered(tree, ids, weights) if ids.size else 0.0

@@ -228,17 +228,33 @@ class ResidentSet:
 
     # ------------------------------------------------------------------------- the two draws
     def gather(self, rows: np.ndarray) -> Scene:
-        """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact)."""
+        """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact).  Each
+        chunk's rows are copied into the scene's arrays (allocated once, at the cut's size)
+        as it arrives: no per-chunk copies to concatenate, so the cut is held once."""
         rows = np.asarray(rows, np.int64)
         ids = self.chunk_of(rows)
         need = np.unique(ids)
         cuts = np.searchsorted(ids, need)
         bounds = dict(zip(need.tolist(), zip(cuts.tolist(), np.append(cuts[1:], rows.size).tolist())))
-        parts = self.collect(need.tolist(), lambda c, scene: self._pick(scene, c, rows, *bounds[c]))
-        order = [parts[c] for c in need.tolist()]
-        if not order:
+        out: dict[str, np.ndarray] = {}
+
+        def take(c: int, scene: Scene) -> bool:
+            a, b = bounds[c]
+            local = rows[a:b] - c * self.chunks.rows
+            if not out:   # the arrays, at the cut's size, from the first chunk's shapes
+                kind = scene.kind
+                out.update({f: np.empty((rows.size,) + getattr(scene, f).shape[1:], np.float32)
+                            for f in _FIELDS}, kind=kind)
+            for f in _FIELDS:
+                np.take(getattr(scene, f), local, axis=0, out=out[f][a:b], mode="clip")
+            return True
+
+        self.collect(need.tolist(), take)
+        if not out:
             return self._pick(self.chunks.load(0), 0, rows, 0, 0)
-        return concatenate(order)
+        for f in _FIELDS:
+            out[f].flags.writeable = False   # adopted by the Scene as they are (no copy)
+        return Scene(*(out[f] for f in _FIELDS), out["kind"])
 
     def collect(self, need: list[int], take) -> dict:
         """``{chunk: take(chunk, its scene)}`` for the chunks ``need``, waiting for those not

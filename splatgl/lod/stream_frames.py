@@ -38,16 +38,14 @@ from ..order.stage import OrderTimes, cull_for
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderImage
 from ..renderers.quad import QuadRenderer
-from .budget import format_size
-from .cut import select_cut_budget, select_cut_weights
+from .budget import StreamPlan, format_size, release_freed
 from .lazy import LazyLod
-from .selection import LodSettings, threshold_cut
-from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet
+from .selection import LodSettings
+from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet, scene_bytes
+from .stream_cut import SPHERE_PAGES_PER_SPLAT, choose_cut, plan_for
 
 #: The framing proxy's level: the first from the top with at least this many nodes.
 FRAMING_NODES = 4096
-#: The threshold of the cut that stands for "the leaves" (every leaf in view).
-LEAVES_PX = 1e-30
 
 
 def framing_scene(lazy: LazyLod):
@@ -68,19 +66,6 @@ def framing_scene(lazy: LazyLod):
                            anchor=lazy.anchor, source=None, count=lazy.level_size(0),
                            digest=f"lod-{digest}", kind=SplatKind.GAUSSIAN_3D,
                            sh_degree=lazy.nodes(np.zeros(1, np.int64)).sh_degree)
-
-
-def choose_cut(lazy: LazyLod, camera: Camera, lod: LodSettings):
-    """``(rows, weights)``: the cut :class:`~splatgl.lod.source.LodOrder` draws for ``camera``
-    in a path's frame (no warm start; the leaves where the threshold cut switches to them)."""
-    if lod.budget is not None:
-        rows, weights, _ = select_cut_budget(lazy.cut_data, camera, lod.budget, lod.threshold_px,
-                                             lod.band)
-        return rows, weights
-    rows, weights, _ = threshold_cut(lazy, lazy.cut_data, camera, lod)
-    if rows is None:   # the leaves, every one in view (the in-memory path culls them by chunks)
-        return select_cut_weights(lazy.cut_data, camera, LEAVES_PX, 1.0)[0], None
-    return rows, weights
 
 
 class CutRows:
@@ -113,28 +98,40 @@ class CutRows:
 
 
 class StreamFrames:
-    """Views of the ``.lod.ply`` at ``path`` through the cut ``lod``, streamed under ``memory``
-    bytes of resident chunks (see the module doc); owns its context (a context manager).
-    ``framing``: what frames views (default :func:`framing_scene`)."""
+    """Views of the ``.lod.ply`` at ``path`` through the cut ``lod``, streamed with the whole
+    process under ``memory`` bytes (see the module doc); owns its context (a context manager).
+    ``framing``: what frames views (default :func:`framing_scene`); ``plan``: how the budget
+    is shared (default :func:`splatgl.lod.stream_cut.plan_for`, measured once the context
+    exists): the chunk cache holds ``plan.cache`` bytes, a frame at most ``plan.cap`` splats
+    (a coarser cut where the view's asks for more, said once in :attr:`capped`)."""
 
     stereo_refusal = "--stereo and --memory (streaming a level of detail) cannot be combined yet"
 
     def __init__(self, path, settings: RenderSettings, lod: LodSettings, memory: int,
-                 chunk_rows: int = CHUNK_ROWS, threads: int = LOADERS, framing=None):
+                 chunk_rows: int = CHUNK_ROWS, threads: int = LOADERS, framing=None,
+                 plan: StreamPlan | None = None):
         self.settings, self.lod, self.memory = settings, lod, int(memory)
         self.lazy = LazyLod(path)
         self.ctx = self.renderer = self.resident = None
         try:
             self.framing = framing if framing is not None else framing_scene(self.lazy)
-            self.resident = ResidentSet(LazyChunks(self.lazy, chunk_rows), self.memory,
-                                        self.lazy.offsets, self.lazy.branching, threads)
+            release_freed()
             self.ctx = create_headless_context()
             self.programs = ProgramCache(self.ctx)
+            self.plan = plan or plan_for(self.lazy, self.memory, settings.gpu_storage)
+            self.resident = ResidentSet(LazyChunks(self.lazy, chunk_rows), self.plan.cache,
+                                        self.lazy.offsets, self.lazy.branching, threads)
         except BaseException:
             self.close()
             raise
         self.last_cut_nodes = 0
         self.last_cut_s = 0.0
+        #: The first view's line saying the memory bound made its cut coarser (None: none
+        #: was); :attr:`capped_views` counts such views.
+        self.capped: str | None = None
+        self.capped_views = 0
+        #: Bytes of the last frame's gathered scene (its nodes, held once).
+        self.last_gathered_bytes = 0
         self._views = 0
 
     @property
@@ -145,24 +142,30 @@ class StreamFrames:
                     under: UnderImage | None = None) -> RenderOutput:
         """One exact view: waits for every chunk its cut needs."""
         make_current(self.ctx)
-        view = View.of(camera, self.settings, self.framing)
-        t0 = time.perf_counter()
-        rows, weights = choose_cut(self.lazy, view.camera, self.lod)
-        self.last_cut_s = time.perf_counter() - t0
-        self.last_cut_nodes = int(rows.size)
-        scene = self.resident.gather(rows)
-        scene.__dict__["anchor"] = np.asarray(self.framing.anchor, np.float64)  # cached_property
-        self._views += 1
-        if self.renderer is not None:
+        if self.renderer is not None:   # the last frame's buffers go before this one's cut
             self.renderer.release()
             self.renderer = None
-        quad = QuadRenderer(self.ctx, scene, self.settings, self.programs,
-                            rows=CutRows(scene, None, self.settings, None))
+            release_freed()
+        view = View.of(camera, self.settings, self.framing)
+        t0 = time.perf_counter()
+        choice = choose_cut(self.lazy, view.camera, self.lod, self.plan.cap)
+        self.lazy.trim_spheres(SPHERE_PAGES_PER_SPLAT * 16 * self.plan.cap)
+        self.last_cut_s = time.perf_counter() - t0
+        self.last_cut_nodes = int(choice.rows.size)
+        if choice.capped is not None:
+            self.capped_views += 1
+            self.capped = self.capped or choice.capped
+        scene = self.resident.gather(choice.rows)
+        self.last_gathered_bytes = scene_bytes(scene)
+        scene.__dict__["anchor"] = np.asarray(self.framing.anchor, np.float64)  # cached_property
+        self._views += 1
+        rows = CutRows(scene, choice.weights, self.settings, None, self._views)
+        quad = QuadRenderer(self.ctx, scene, self.settings, self.programs, rows=rows)
         if self.lod.band > 1.0 and not quad.uses_prepass:
             quad.release()
             raise SplatglError(f"--lod-blend {self.lod.band:g} weights opacities in the compute "
                                "pre-pass: use --preprocess compute (the default), or --lod-blend 1")
-        quad.rows = CutRows(scene, weights, self.settings, quad.sort, self._views)
+        rows.sort = quad.sort
         self.renderer = quad
         if under is None:
             return quad.render(view, layers)
@@ -178,8 +181,12 @@ class StreamFrames:
         return self.renderer
 
     def summary(self) -> str:
-        """Resident memory and chunks, and the bytes read from the file (for ``--timings``)."""
-        return f"{self.resident.stats.summary(self.memory)}; {format_size(self.lazy.bytes_read)} read"
+        """Resident memory and chunks, the bytes read from the file and the memory bound's
+        cap (for ``--timings``)."""
+        capped = f", {self.capped_views} of {self._views} views capped" if self.capped_views else ""
+        return (f"{self.resident.stats.summary(self.plan.cache)}; "
+                f"{format_size(self.lazy.bytes_read)} read; frame at most {self.plan.cap:,} "
+                f"splats{capped}")
 
     def close(self) -> None:
         if self.resident is not None:
@@ -202,15 +209,18 @@ class StreamFrames:
 
 def render_streamed(path, camera: Camera, settings: RenderSettings, lod: LodSettings, memory: int,
                     layers: frozenset[Layer] = BASE, under: UnderImage | None = None,
-                    framing=None) -> tuple[RenderOutput, SimpleNamespace, str]:
+                    framing=None, plan: StreamPlan | None = None
+                    ) -> tuple[RenderOutput, SimpleNamespace, str]:
     """One exact view of the ``.lod.ply`` at ``path`` streamed under ``memory`` bytes: (the
     ``layers``, times as :func:`splatgl.lod.frames.render_lod` gives them plus ``streaming``
-    (:meth:`StreamFrames.summary`), the GL renderer's name)."""
+    (:meth:`StreamFrames.summary`) and ``capped`` (:attr:`StreamFrames.capped`), the GL
+    renderer's name)."""
     from ..gl.context import renderer_name
 
-    with StreamFrames(path, settings, lod, memory, framing=framing) as frames:
+    with StreamFrames(path, settings, lod, memory, framing=framing, plan=plan) as frames:
         gl_name = renderer_name(frames.ctx)
         out = frames.render_view(camera, layers, under)
         times = SimpleNamespace(**vars(frames.renderer.last_times), cut_nodes=frames.last_cut_nodes,
-                                cut=frames.last_cut_s, streaming=frames.summary())
+                                cut=frames.last_cut_s, streaming=frames.summary(),
+                                capped=frames.capped)
     return out, times, gl_name

@@ -22,8 +22,10 @@ from ..scene.splats import Scene
 from ..scene.settings import RenderSettings
 from .lazy import LazyLod
 from .selection import LodSettings
+from .budget import StreamPlan, release_freed
 from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet
-from .stream_frames import choose_cut, framing_scene
+from .stream_cut import SPHERE_PAGES_PER_SPLAT, choose_cut, plan_for
+from .stream_frames import framing_scene
 
 
 def weighted(scene: Scene, weights: np.ndarray | None) -> Scene:
@@ -36,19 +38,26 @@ def weighted(scene: Scene, weights: np.ndarray | None) -> Scene:
 
 class StreamedScene:
     """The ``.lod.ply`` at ``path`` for the viewer, under ``memory`` bytes (see the module doc);
-    :attr:`framing` frames the views (a proxy, :func:`framing_scene`)."""
+    :attr:`framing` frames the views (a proxy, :func:`framing_scene`).  ``plan``: how the
+    budget is shared (:func:`splatgl.lod.stream_cut.plan_for`, measured now): the chunks hold
+    ``plan.cache`` bytes and a cut at most ``plan.cap`` nodes (:attr:`capped` says when the
+    bound made one coarser than asked)."""
 
     def __init__(self, path, lod: LodSettings, memory: int, on_change=None,
-                 chunk_rows: int = CHUNK_ROWS, threads: int = LOADERS, chunks=None):
+                 chunk_rows: int = CHUNK_ROWS, threads: int = LOADERS, chunks=None,
+                 plan: StreamPlan | None = None):
         self.lod, self.memory, self.on_change = lod, int(memory), on_change
         self.lazy = LazyLod(path)
         self.resident = None
         self.generation = 0
         self.complete = False
+        self.capped: str | None = None
         self._last: tuple | None = None   # (rows, weights, scene) drawn last
         try:
             self.framing = framing_scene(self.lazy)
-            self.resident = ResidentSet(chunks or LazyChunks(self.lazy, chunk_rows), self.memory,
+            release_freed()
+            self.plan = plan or plan_for(self.lazy, self.memory)
+            self.resident = ResidentSet(chunks or LazyChunks(self.lazy, chunk_rows), self.plan.cache,
                                         self.lazy.offsets, self.lazy.branching, threads,
                                         on_loaded=self._loaded)
             self.resident.load_pinned()   # the top levels: some ancestor is always there
@@ -80,18 +89,25 @@ class StreamedScene:
         """The scene to draw now for ``camera`` (never waits; :attr:`complete` says whether it
         is the exact cut); ``lod``: another cut than the view's (the viewer's budgeted
         frames, :mod:`splatgl.interactive.stream_levels`)."""
-        rows, weights = choose_cut(self.lazy, self._camera(camera, settings), lod or self.lod)
+        rows, weights = self._cut(camera, settings, lod or self.lod)
         rows, weights, self.complete = self.resident.resident_cut(rows, weights)
         return self._scene(rows, weights)
 
     def exact_scene(self, camera: Camera, settings: RenderSettings) -> Scene:
         """The view's exact cut, waiting for its chunks."""
-        rows, weights = choose_cut(self.lazy, self._camera(camera, settings), self.lod)
-        return self._scene(rows, weights)
+        return self._scene(*self._cut(camera, settings, self.lod))
+
+    def _cut(self, camera: Camera, settings: RenderSettings, lod: LodSettings):
+        """The view's ``(rows, weights)`` under the memory bound's cap."""
+        choice = choose_cut(self.lazy, self._camera(camera, settings), lod, self.plan.cap)
+        self.lazy.trim_spheres(SPHERE_PAGES_PER_SPLAT * 16 * self.plan.cap)
+        self.capped = self.capped or choice.capped
+        return choice.rows, choice.weights
 
     def summary(self) -> str:
         """Resident memory and chunks (the status panel)."""
-        return self.resident.stats.summary(self.memory) + ("" if self.complete else ", refining")
+        return (self.resident.stats.summary(self.plan.cache) + ("" if self.complete else ", refining")
+                + (", capped by --memory" if self.capped else ""))
 
     def close(self) -> None:
         if self.resident is not None:

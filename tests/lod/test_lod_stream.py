@@ -18,6 +18,7 @@ from splatgl.lod.frames import LodFrames
 from splatgl.lod.io import read_lod, write_lod
 from splatgl.lod.lazy import LazyLod
 from splatgl.lod.selection import LodSettings
+from splatgl.lod.budget import StreamPlan
 from splatgl.lod.stream import ResidentSet
 from splatgl.lod.stream_frames import StreamFrames
 from splatgl.scene.splats import Scene
@@ -27,6 +28,14 @@ from splatgl.scene.settings import EarlyStop, RenderSettings
 # slightly different points (up to 9e-5 on 1.6% of pixels where `auto` means `on`, as on a GPU),
 # and these tests compare the two lists' images bit for bit.
 SETTINGS = RenderSettings(near=0.01, early_stop=EarlyStop.OFF)
+
+
+def cache_plan(cache: int, cap: int | None = None, per_splat: int = 100):
+    """A stream plan of ``cache`` bytes of chunks and a frame of at most ``cap`` splats (None:
+    not capped), with nothing else held (tests: a tiny scene under budgets smaller than it)."""
+    frame = (1 << 40) if cap is None else cap * per_splat
+    return StreamPlan(budget=cache + frame, held=0, reserve=0, cache=cache, frame=frame,
+                      per_splat=per_splat)
 
 
 def _lod(tmp_path, n: int = 3000):
@@ -61,7 +70,8 @@ def test_streamed_frames_are_the_in_memory_lod_frames(tmp_path, lod):
     tree = _tree_on_file_anchor(path)
     cams = [_camera(8.0), _camera(3.0, 0.5), _camera(6.0, -1.0)]
     with LodFrames(tree, SETTINGS, lod) as ref, \
-            StreamFrames(path, SETTINGS, lod, 96 << 10, chunk_rows=64, framing=tree.nodes) as st:
+            StreamFrames(path, SETTINGS, lod, 96 << 10, chunk_rows=64, framing=tree.nodes,
+                         plan=cache_plan(96 << 10)) as st:
         for a, b in zip(ref.render_many(None, cams), st.render_many(None, cams)):
             assert np.array_equal(a, b)
         assert st.resident.stats.peak_bytes <= 96 << 10
@@ -75,7 +85,7 @@ def test_streamed_close_view_draws_the_leaves_in_view(tmp_path):
     tree = _tree_on_file_anchor(path)
     with LodFrames(tree, SETTINGS, LodSettings()) as ref, \
             StreamFrames(path, SETTINGS, LodSettings(), 1 << 20, chunk_rows=64,
-                         framing=tree.nodes) as st:
+                         framing=tree.nodes, plan=cache_plan(1 << 20)) as st:
         a, b = ref.render_view(_camera(1.5)).rgba, st.render_view(_camera(1.5)).rgba
         assert st.last_cut_nodes < tree.level_size(0)
         assert np.abs(a - b).max() < 1e-3
@@ -86,7 +96,8 @@ def test_streamed_frames_agree_with_the_node_scenes_own_anchor(tmp_path):
     path = _lod(tmp_path)
     tree = read_lod(path)
     with LodFrames(tree, SETTINGS, LodSettings()) as ref, \
-            StreamFrames(path, SETTINGS, LodSettings(), 1 << 20, chunk_rows=64) as st:
+            StreamFrames(path, SETTINGS, LodSettings(), 1 << 20, chunk_rows=64,
+                         plan=cache_plan(1 << 20)) as st:
         a, b = ref.render_view(_camera(5.0)).rgba, st.render_view(_camera(5.0)).rgba
         assert np.abs(a - b).max() < 1e-3
 
@@ -100,7 +111,7 @@ def test_a_path_evicts_least_recently_used_chunks_under_the_budget(tmp_path):
     cams = [_camera(4.0 - 0.4 * i, -1.0 + 0.25 * i) for i in range(8)]
     with LodFrames(tree, SETTINGS, LodSettings(band=1.0)) as ref, \
             StreamFrames(path, SETTINGS, LodSettings(band=1.0), budget, chunk_rows=32,
-                         framing=tree.nodes) as st:
+                         framing=tree.nodes, plan=cache_plan(budget)) as st:
         res = st.resident
         seen = []
         load = res.chunks.load
@@ -199,13 +210,13 @@ def test_render_and_path_stream_with_memory(tmp_path, capsys):
     framing proxy), resident memory and chunks under --timings; the frame record names the
     file by its spheres' digest (never read whole)."""
     path = _lod(tmp_path)
-    code = main(["render", str(path), "-o", str(tmp_path / "a.png"), "--memory", "1.2M",
+    code = main(["render", str(path), "-o", str(tmp_path / "a.png"), "--memory", "1.5G",
                  "--width", "96", "--height", "64", "--timings"])
     out = capsys.readouterr().out
-    assert code == 0 and "level of detail streamed under 1.2 MiB" in out
+    assert code == 0 and "level of detail streamed under 1.5 GiB" in out
     assert "streaming resident" in out and "loaded" in out and "evicted" in out
     code = main(["render", str(path), "--path", "orbit:3", "-o", str(tmp_path / "f%02d.png"),
-                 "--memory", "1.2M", "--width", "96", "--height", "64", "--timings"])
+                 "--memory", "1.5G", "--width", "96", "--height", "64", "--timings"])
     out = capsys.readouterr().out
     assert code == 0 and "wrote 3 frames" in out and "streaming: resident" in out
     assert (tmp_path / "f02.png").exists()
@@ -261,7 +272,7 @@ def test_streamed_scene_draws_what_is_resident_then_the_exact_cut(tmp_path):
         chunks = _Gated(LazyChunks(lazy, 64))
         changes = threading.Semaphore(0)
         stream = StreamedScene(path, LodSettings(threshold_px=2.0, band=1.0), 1 << 20,
-                               on_change=changes.release, chunks=chunks)
+                               on_change=changes.release, chunks=chunks, plan=cache_plan(1 << 20))
         try:
             chunks.gated = True
             camera = _camera(3.0, 0.5)
@@ -293,7 +304,7 @@ def test_view_memory_window_refines_and_screenshots(xvfb_display, tmp_path):
     from splatgl.viewer.screenshot import take_screenshot
 
     path = _lod(tmp_path)
-    stream = StreamedScene(path, LodSettings(), 1 << 20, chunk_rows=64)
+    stream = StreamedScene(path, LodSettings(), 1 << 20, chunk_rows=64, plan=cache_plan(1 << 20))
     options = ViewerOptions(visible=True, screenshot_dir=tmp_path, render_args=(str(path),),
                             vsync=False, target_fps=0.0, stream=stream)
     try:
@@ -334,7 +345,7 @@ def test_eval_memory_scores_the_streamed_views(tmp_path, capsys):
             write_image(root / "images" / view.name, np.concatenate(
                 [np.clip(rgba[..., :3], 0, 1), np.ones_like(rgba[..., :1])], -1), 16)
     colmap.write_colmap(root / "sparse" / "0", views)
-    code = main(["eval", str(path), "--dataset", str(root), "--memory", "4M",
+    code = main(["eval", str(path), "--dataset", str(root), "--memory", "1.5G",
                  "--json", str(tmp_path / "s.json")])
     out, err = capsys.readouterr()
     assert code == 0 and "streaming: resident" in out, err
@@ -352,11 +363,11 @@ def test_bench_memory_times_a_streamed_orbit(tmp_path, capsys):
     import json
 
     path = _lod(tmp_path)
-    assert main(["bench", str(path), "--memory", "4M", "--quick", "--frames", "2",
+    assert main(["bench", str(path), "--memory", "1.5G", "--quick", "--frames", "2",
                  "--width", "64", "--height", "48", "--json", "-"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["frames"] == 2 and report["chunks_loaded"] >= 1
-    assert 0 < report["resident_peak_bytes"] <= 4 << 20 and report["bytes_read"] > 0
+    assert 0 < report["resident_peak_bytes"] <= 1 << 30 and report["bytes_read"] > 0
     assert main(["bench", str(tmp_path / "s.ply"), "--memory", "4M"]) == 2
     assert "--memory: give one level-of-detail file" in capsys.readouterr().err
     assert main(["bench", str(path), "--memory", "4M", "--lod"]) == 2

@@ -1,0 +1,92 @@
+"""A streamed frame's cut under ``--memory`` (issue 41 item 3): the whole process stays within
+the one budget, not only the chunk cache.
+
+:func:`plan_for` splits the budget (:func:`splatgl.lod.budget.stream_plan`): what the process
+holds already and the draw's reserve off first, then the chunk cache's share, the rest the
+frame's; the frame's bytes over :func:`~splatgl.lod.budget.frame_bytes_per_splat` give the most
+splats a frame draws (:attr:`~splatgl.lod.budget.StreamPlan.cap`).  :func:`choose_cut` chooses
+the cut by screen-space error under ``min(--lod-budget, cap)``: the threshold cut (or the
+leaves it switches to) where it fits, else the finest cut within the cap
+(:func:`splatgl.lod.cut.select_cut_budget`), which is exactly the cut the in-memory level of
+detail draws with that budget.  Every trial cut is abandoned once it passes a few times the cap
+(:class:`splatgl.lod.cut.CutTooLarge`), so choosing never reads the spheres of more than that.
+
+    plan = plan_for(lazy, memory, GpuStorage.FLOAT32)    # once, after the GL context exists
+    choice = choose_cut(lazy, camera, lod, plan.cap)     # rows, weights, capped (a line or None)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..cameras.camera import Camera
+from ..gl.storage import gpu_bytes_per_splat
+from ..scene.settings import GpuStorage
+from .budget import StreamPlan, frame_bytes_per_splat, stream_plan
+from .cut import CutTooLarge, select_cut_budget, select_cut_weights
+from .lazy import LazyLod
+from .selection import LodSettings, threshold_cut
+
+#: The threshold of the cut that stands for "the leaves" (every leaf in view).
+LEAVES_PX = 1e-30
+#: Sphere pages a streamed frame keeps between views: this many times 16 bytes a splat of the
+#: cap (beyond it they are dropped after the cut and read again as needed).
+SPHERE_PAGES_PER_SPLAT = 2
+
+
+@dataclass(frozen=True)
+class CutChoice:
+    """A streamed view's cut: node ``rows`` (ascending), ``weights`` (None: all 1), and
+    ``capped``: one line saying how the memory bound made it coarser than asked, or None."""
+
+    rows: np.ndarray
+    weights: np.ndarray | None
+    capped: str | None = None
+
+
+def per_splat(lazy: LazyLod, storage: GpuStorage | str = GpuStorage.FLOAT32) -> int:
+    """Bytes of the whole process per splat a frame of ``lazy`` draws (its SH degree and the
+    renderer's ``storage``)."""
+    node = lazy.nodes(np.zeros(1, np.int64))
+    return frame_bytes_per_splat(node.sh.shape[1], gpu_bytes_per_splat(storage, node.sh_degree))
+
+
+def plan_for(lazy: LazyLod, memory: int, storage: GpuStorage | str = GpuStorage.FLOAT32,
+             cache_need: int = 0, held: int | None = None) -> StreamPlan:
+    """The split of ``memory`` for streamed frames of ``lazy`` (see the module doc): ``held``
+    measured now when None (call it once the GL context exists)."""
+    return stream_plan(memory, per_splat(lazy, storage), cache_need, held)
+
+
+def _capped(lazy: LazyLod, camera: Camera, lod: LodSettings, cap: int, asked: str) -> CutChoice:
+    rows, weights, t = select_cut_budget(lazy.cut_data, camera, cap, lod.threshold_px, lod.band)
+    if not np.isfinite(t) or t > lod.threshold_px:
+        note = (f"the memory bound made the cut coarser than {asked}: {rows.size:,} nodes at "
+                f"{t:.3g} px (the frame holds at most {cap:,} splats)")
+        return CutChoice(rows, weights, note)
+    return CutChoice(rows, weights)
+
+
+def choose_cut(lazy: LazyLod, camera: Camera, lod: LodSettings, cap: int | None = None
+               ) -> CutChoice:
+    """The cut a streamed frame draws for ``camera`` (no warm start): without ``cap`` the one
+    :class:`~splatgl.lod.source.LodOrder` draws (the leaves where the threshold cut switches
+    to them); with it, that cut where it has at most ``cap`` nodes, else the finest cut of at
+    most ``cap`` (``--lod-budget``'s cut with ``min(budget, cap)``), ``capped`` saying so."""
+    data = lazy.cut_data
+    if lod.budget is not None:
+        if cap is not None and cap < lod.budget:
+            return _capped(lazy, camera, lod, cap, f"--lod-budget {lod.budget:,} asked")
+        rows, weights, _ = select_cut_budget(data, camera, lod.budget, lod.threshold_px, lod.band)
+        return CutChoice(rows, weights)
+    asked = f"--lod-threshold {lod.threshold_px:g} px asked"
+    try:
+        rows, weights, _ = threshold_cut(lazy, data, camera, lod, max_nodes=cap)
+        if rows is None:   # the leaves, every one in view (the in-memory path culls them by chunks)
+            return CutChoice(select_cut_weights(data, camera, LEAVES_PX, 1.0, max_nodes=cap)[0],
+                             None)
+    except CutTooLarge:
+        return _capped(lazy, camera, lod, cap, asked)
+    return CutChoice(rows, weights)
