@@ -21,11 +21,63 @@ def memory_budget(args: argparse.Namespace) -> int:
     return budget_from(getattr(args, "memory", None))[0]
 
 
-#: ``--memory``'s help on render, view, eval and bench (issue 41 item 3).
-STREAM_HELP = ("stream a level of detail (SCENE from 'splatgl lod') from disk, holding at most "
-               "SIZE of its nodes resident: chunks of nodes are read on background threads as "
-               "the cut needs them, the least recently used evicted; implies the level of "
-               "detail's default cut where no --lod-* option is given")
+#: ``--memory``'s help on render, view, eval and bench (issue 41 items 3 and 4).
+STREAM_HELP = ("stream a level of detail (SCENE from 'splatgl lod', or a Streamed SOG "
+               "lod-meta.json or LCC meta.lcc) from disk, holding at most SIZE of it resident: "
+               "chunks are read on background threads as the view needs them, the least "
+               "recently used evicted; implies the default cut (a Streamed SOG's or LCC's: each "
+               "chunk's coarsest level within 1 px of screen-space error) where no --lod-* "
+               "option is given")
+#: ``--lod-level``'s help (the same commands).
+LEVEL_HELP = ("with --memory and a Streamed SOG (lod-meta.json) or LCC (meta.lcc) SCENE: draw "
+              "every chunk in view at level N (0 the finest; 'splatgl info SCENE' lists the "
+              "levels and their splats) instead of choosing each chunk's level by its "
+              "screen-space error")
+
+
+def add_level_argument(p: argparse.ArgumentParser) -> None:
+    """Add ``--lod-level N`` (:data:`LEVEL_HELP`)."""
+    from ._common import non_negative_int
+
+    p.add_argument("--lod-level", type=non_negative_int, default=None, metavar="N",
+                   help=LEVEL_HELP)
+
+
+def is_chunked_scene(args: argparse.Namespace) -> bool:
+    """Whether SCENE is a Streamed SOG or an LCC scene (streamed by levels per chunk)."""
+    from ..lod.stream_levels import is_chunked
+
+    return getattr(args, "scene", None) is not None and is_chunked(args.scene)
+
+
+def _cut_options(args: argparse.Namespace) -> dict:
+    """The --lod-threshold/--lod-budget/--lod-blend given, as LodSettings fields."""
+    return {name: getattr(args, option) for name, option in (
+        ("threshold_px", "lod_threshold"), ("budget", "lod_budget"), ("band", "lod_blend"))
+        if getattr(args, option, None) is not None}
+
+
+def stream_level(args: argparse.Namespace) -> int | None:
+    """``--lod-level`` where given, checked before any work (one line each): with --memory, a
+    Streamed SOG or LCC SCENE holding that level, no other --lod-* option."""
+    from ..errors import SplatglError
+    from ..lod.stream_levels import check_level, read_structure
+
+    level = getattr(args, "lod_level", None)
+    if level is None:
+        return None
+    if getattr(args, "memory", None) is None:
+        raise SplatglError(f"--lod-level {level} draws a level of a Streamed SOG or LCC streamed "
+                           "from disk: add --memory SIZE")
+    if not is_chunked_scene(args):
+        raise SplatglError(f"--lod-level: {getattr(args, 'scene', None)} is not a Streamed SOG "
+                           "(lod-meta.json) or LCC (meta.lcc); a .lod.ply's cut is chosen by "
+                           "--lod-threshold/--lod-budget")
+    if _cut_options(args):
+        raise SplatglError("--lod-level draws every chunk at one level; not with "
+                           "--lod-threshold, --lod-budget or --lod-blend")
+    check_level(read_structure(args.scene), level)
+    return level
 
 
 def memory_given(args: argparse.Namespace) -> int | None:
@@ -42,31 +94,69 @@ def stream_inputs(args: argparse.Namespace, settings):
     from ._common import camera_from_args
 
     camera_from_args(args, None, settings)   # the camera file and options checked first
+    if is_chunked_scene(args):   # a Streamed SOG or LCC: its chunks' boxes
+        from ..lod.stream_levels import framing_at
+
+        return (framing := framing_at(args.scene)), camera_from_args(args, framing, settings)
     with LazyLod(args.scene) as lazy:
         framing = framing_scene(lazy)
     return framing, camera_from_args(args, framing, settings)
 
 
-def streamed_frames(args: argparse.Namespace, settings, memory: int):
-    """``eval``/``bench --memory``: :class:`splatgl.lod.stream_frames.StreamFrames` of the
-    ``.lod.ply`` SCENE under ``memory`` bytes, the cut its ``--lod-*`` options ask for (the
-    defaults where the command has none); a scene not from ``splatgl lod``, or another renderer
-    than the quad path, is one line."""
+def streamed_frames(args: argparse.Namespace, settings, memory: int, framing=None):
+    """``render --path``/``eval``/``bench --memory``: the frames of SCENE streamed under
+    ``memory`` bytes (:class:`splatgl.lod.stream_frames.StreamFrames` of a ``.lod.ply``,
+    :class:`splatgl.lod.stream_levels.ChunkedFrames` of a Streamed SOG or LCC), the cut its
+    ``--lod-*`` options ask for (the defaults where the command has none); ``framing``: what
+    frames the views, where already read.  A scene of neither kind, or another renderer than
+    the quad path, is one line."""
     from ..errors import SplatglError
-    from ..lod.io import is_lod_file
     from ..lod.selection import LodSettings
     from ..lod.stream_frames import StreamFrames
+    from ..lod.stream_levels import ChunkedFrames
 
     renderer = getattr(args, "renderer", "quad")
     if renderer not in ("quad", "auto"):   # auto: a level of detail draws through the quad path
         raise SplatglError(f"--memory streams a level of detail through the quad path, not "
                            f"--renderer {renderer}")
     scene = getattr(args, "scene", None)
+    check_streamable(args)
+    level = stream_level(args)
+    lod = LodSettings(**_cut_options(args))
+    if is_chunked_scene(args):
+        return ChunkedFrames(scene, settings, lod, memory, level, framing=framing)
+    return StreamFrames(scene, settings, lod, memory, framing=framing)
+
+
+def check_streamable(args: argparse.Namespace) -> None:
+    """SCENE is what ``--memory`` streams: a ``.lod.ply``, a Streamed SOG or an LCC scene (and
+    a Streamed SOG or LCC is not given --lod-blend: a chunk switches its level whole)."""
+    from ..errors import SplatglError
+    from ..lod.io import is_lod_file
+
+    scene = getattr(args, "scene", None)
+    if is_chunked_scene(args):
+        if getattr(args, "lod_blend", None) is not None:
+            raise SplatglError(f"--lod-blend: {scene} switches a chunk's level whole (Streamed "
+                               "SOG, LCC); drop --lod-blend")
+        return
     if scene is None or not is_lod_file(scene):
-        raise SplatglError(f"{scene}: not a level-of-detail file (--memory streams one); build "
+        raise SplatglError(f"{scene}: not a level-of-detail file (--memory streams one: a "
+                           ".lod.ply, a Streamed SOG lod-meta.json or an LCC meta.lcc); build "
                            "one with 'splatgl lod SCENE -o SCENE.lod.ply'")
-    given = {name: getattr(args, option) for name, option in (
-        ("threshold_px", "lod_threshold"), ("budget", "lod_budget"), ("band", "lod_blend"))
-        if getattr(args, option, None) is not None}
-    return StreamFrames(scene, settings, LodSettings(**given), memory)
+
+
+def render_one_streamed(args: argparse.Namespace, camera, settings, lod, memory: int, layers,
+                        under, framing):
+    """``render --memory``'s one view: (the layers, times, the GL renderer's name) of SCENE
+    streamed under ``memory`` bytes (:func:`splatgl.lod.stream_frames.render_streamed`, or
+    :func:`splatgl.lod.stream_levels.render_chunked` for a Streamed SOG or LCC)."""
+    if is_chunked_scene(args):
+        from ..lod.stream_levels import render_chunked
+
+        return render_chunked(args.scene, camera, settings, lod, memory, stream_level(args),
+                              layers, under, framing)
+    from ..lod.stream_frames import render_streamed
+
+    return render_streamed(args.scene, camera, settings, lod, memory, layers, under, framing)
 

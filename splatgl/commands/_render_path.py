@@ -37,7 +37,6 @@ from ..lod.frames import LodFrames
 from ..lod.io import is_lod_file, read_lod
 from ..lod.budget import format_size
 from ..lod.selection import LodSettings
-from ..lod.stream_frames import StreamFrames
 from ..scene.settings import RendererKind
 from ..renderers.auto import Choice
 from ..renderers.registry import check
@@ -46,7 +45,8 @@ from ..renderers.stereo import StereoLayout, StereoRenderer
 from ._common import (check_convention, default_size, demo_scene_path, load_scene_arg,
                       positive_float, projection_from_args, settings_from_args)
 from ._spz_axes import check_not_sharded
-from ._memory import memory_given, stream_inputs
+from ._memory import (check_streamable, is_chunked_scene, memory_given, stream_inputs,
+                      stream_level, streamed_frames)
 from ._outputs import check_outputs
 
 DEFAULT_FPS = 30.0
@@ -97,12 +97,18 @@ def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
     given = {name: value for name, value in (("threshold_px", args.lod_threshold),
                                              ("budget", args.lod_budget), ("band", args.lod_blend))
              if value is not None}
+    stream_level(args)   # --lod-level: with --memory and a Streamed SOG or LCC
     if not given and getattr(args, "memory", None) is None:
         return None
     if args.renderer not in ("quad", AUTO):
         raise SplatglError(f"--lod-threshold/--lod-budget/--memory render through the quad path, "
                            f"not --renderer {args.renderer}")
-    if args.scene is None or not is_lod_file(args.scene):
+    if getattr(args, "memory", None) is not None:   # a .lod.ply, a Streamed SOG or an LCC
+        check_streamable(args)
+    elif is_chunked_scene(args):
+        raise SplatglError(f"{args.scene}: --lod-threshold/--lod-budget/--lod-blend choose a "
+                           "Streamed SOG's or LCC's levels when it streams: add --memory SIZE")
+    elif args.scene is None or not is_lod_file(args.scene):
         options = [o for o, v in (("--lod-threshold", args.lod_threshold), ("--lod-budget", args.lod_budget),
                                   ("--lod-blend", args.lod_blend), ("--memory", getattr(args, "memory", None)))
                    if v is not None]
@@ -204,7 +210,9 @@ def frame_record(args: argparse.Namespace, scene: Scene, settings, target: Frame
                              layers=layers, named=[layer.value for layer in target.named],
                              normal_space=target.normal_space.value, lod=repr(lod),
                              stereo=[args.stereo, args.stereo_layout] if args.stereo is not None
-                             else None, preview=bool(args.preview), video=target.is_video)
+                             else None, preview=bool(args.preview), video=target.is_video,
+                             **({"lod_level": args.lod_level}
+                                if getattr(args, "lod_level", None) is not None else {}))
     digest = getattr(scene, "digest", None)   # a streamed level of detail's (never read whole)
     return FrameRecord(args.path, digest if isinstance(digest, str) else scene_digest(scene), options,
                        kind.value)
@@ -323,7 +331,7 @@ def run_path(args: argparse.Namespace) -> int:
                                    False, fps, default_progress(), numbers=numbers, record=record)
         print(renderer.report())
     else:
-        with (StreamFrames(args.scene, settings, lod, memory, framing=scene) if memory is not None
+        with (streamed_frames(args, settings, memory, scene) if memory is not None
               else Renderer() if tree is None else LodFrames(tree, settings, lod)) as renderer:
             streamed = renderer if memory is not None else None
             gl_name = gl_renderer_name(kind, renderer.ctx)

@@ -23,7 +23,8 @@ from ..scene.settings import RendererKind
 from ._common import (add_scene_arguments, add_settings_arguments, check_convention, demo_scene_path,
                       load_scene_arg, settings_from_args)
 from ._layers import add_layer_arguments, layer_files, named_layers
-from ._memory import STREAM_HELP, add_memory_argument, memory_given, streamed_frames
+from ._memory import (STREAM_HELP, add_level_argument, add_memory_argument, memory_given,
+                      stream_level, streamed_frames)
 from ._spz_axes import check_not_sharded
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._outputs import add_force_argument, check_outputs, output_files
@@ -81,6 +82,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_force_argument(o)
     add_layer_arguments(p, under=False)
     add_memory_argument(p, STREAM_HELP + "; every view waits for its chunks")
+    add_level_argument(p)
     add_settings_arguments(p)
     add_executor_arguments(p, "contiguous chunks of the views (the scores merge into the same "
                               "table, CSV and JSON as one process's)",
@@ -118,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
     check_not_sharded(args, executor.sharded)
     settings = settings_from_args(args)
     memory = memory_given(args)
+    stream_level(args)   # --lod-level: with --memory and a Streamed SOG or LCC
     if memory is not None and executor.sharded:
         raise SplatglError("--memory streams the views in one process, not with --workers or "
                            "--executor ray")

@@ -18,7 +18,8 @@ from ._common import (add_camera_arguments, add_scene_arguments, add_settings_ar
                       camera_from_args, check_convention, demo_scene_path, load_scene_arg,
                       settings_from_args)
 from ._frame_budget import add_target_fps_argument
-from ._memory import STREAM_HELP, add_memory_argument, memory_given
+from ._memory import (STREAM_HELP, add_level_argument, add_memory_argument, is_chunked_scene,
+                      memory_given, stream_level)
 
 NAME = "view"
 ORDER = 15
@@ -65,6 +66,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-vsync", action="store_true", help="do not wait for the display refresh")
     add_memory_argument(p, STREAM_HELP + "; the window draws what is resident and refines as "
                            "chunks arrive, screenshots wait for theirs")
+    add_level_argument(p)
     add_camera_arguments(p)
     add_settings_arguments(p)
 
@@ -99,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
         raise SplatglError(f"--screenshot-dir {args.screenshot_dir}: is a file, not a folder")
     path = args.scene if args.scene is not None else demo_scene_path()
     memory = memory_given(args)
+    stream_level(args)   # --lod-level: with --memory and a Streamed SOG or LCC
     stream = None
     t0 = time.perf_counter()
     if memory is not None:
@@ -151,14 +154,24 @@ def _open_stream(args: argparse.Namespace, memory: int):
     from ..lod.selection import LodSettings
     from ..lod.stream_view import StreamedScene
 
-    if args.scene is None or not is_lod_file(args.scene):
-        raise SplatglError(f"{args.scene}: not a level-of-detail file (--memory streams one); "
-                           "build one with 'splatgl lod SCENE -o SCENE.lod.ply'")
+    chunked = is_chunked_scene(args)
+    if args.scene is None or not (chunked or is_lod_file(args.scene)):
+        raise SplatglError(f"{args.scene}: not a level-of-detail file (--memory streams one: a "
+                           ".lod.ply, a Streamed SOG lod-meta.json or an LCC meta.lcc); build "
+                           "one with 'splatgl lod SCENE -o SCENE.lod.ply'")
 
     def wake() -> None:   # a chunk arrived (a loader thread): the window's loop draws again
         import glfw
         glfw.post_empty_event()
 
+    if chunked:   # a Streamed SOG or LCC: a level per chunk
+        from ..lod.stream_levels_view import ChunkedScene
+
+        stream = ChunkedScene(args.scene, LodSettings(), memory, on_change=wake,
+                              level=stream_level(args))
+        print(f"streaming {args.scene}: {stream.framing.count:,} splats at level 0 in "
+              f"{stream.levels} levels under {format_size(memory)} (--memory)", flush=True)
+        return stream
     stream = StreamedScene(args.scene, LodSettings(), memory, on_change=wake)
     print(f"streaming {args.scene}: {stream.framing.count:,} leaves in {stream.lazy.levels} "
           f"levels under {format_size(memory)} (--memory)", flush=True)

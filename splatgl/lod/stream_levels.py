@@ -21,6 +21,7 @@ box as for a scene read whole.
 from __future__ import annotations
 
 import hashlib
+import time
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Iterable, Iterator
@@ -120,6 +121,12 @@ def framing_of(structure, sample) -> SimpleNamespace:
                            sh_degree=sample.sh_degree)
 
 
+def framing_at(path) -> SimpleNamespace:
+    """:func:`framing_of` the Streamed SOG or LCC at ``path`` (its manifest and one chunk read)."""
+    structure = read_structure(path)
+    return framing_of(structure, ChunkLevels(structure).sample)
+
+
 class ChunkedStream:
     """What the headless frames and the viewer share: the structure, the chunks, the framing,
     the environment and the :class:`ResidentSet` of ``memory`` bytes (``pinned``: the
@@ -206,6 +213,8 @@ class ChunkedFrames:
         self.framing, self.resident = self.stream.framing, self.stream.resident
         self._ids: list[int] | None = None
         self.last_cut_nodes = 0
+        self.last_cut_s = self.last_gather_s = 0.0   # the level choice; reading the chunks
+        self.capped: str | None = None   # as StreamFrames': the memory bound never coarsens yet
         try:
             if registry.entry(kind).gl:
                 self.ctx = create_headless_context()
@@ -222,9 +231,13 @@ class ChunkedFrames:
                     under: UnderImage | None = None) -> RenderOutput:
         """One exact view: waits for every chunk its levels need."""
         view = View.of(camera, self.settings, self.framing)
+        t0 = time.perf_counter()
         ids = self.stream.ids(self.stream.choose(view.camera))
+        t1 = time.perf_counter()
+        self.last_cut_s, self.last_gather_s = t1 - t0, 0.0
         if ids != self._ids or self.renderer is None:   # the same chunks: the upload is kept
             scene = self.stream.scene_of(ids)
+            self.last_gather_s = time.perf_counter() - t1
             self._release()
             if self.ctx is not None:
                 make_current(self.ctx)
@@ -270,3 +283,20 @@ class ChunkedFrames:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def render_chunked(path, camera: Camera, settings: RenderSettings, lod: LodSettings, memory: int,
+                   level: int | None = None, layers: frozenset[Layer] = BASE,
+                   under: UnderImage | None = None, framing=None):
+    """One exact view of the Streamed SOG or LCC at ``path`` streamed under ``memory`` bytes:
+    (the ``layers``, times as :func:`splatgl.lod.stream_frames.render_streamed` gives them, the
+    GL renderer's name)."""
+    from ..gl.context import renderer_name
+
+    with ChunkedFrames(path, settings, lod, memory, level, framing=framing) as frames:
+        gl_name = renderer_name(frames.ctx)
+        out = frames.render_view(camera, layers, under)
+        times = SimpleNamespace(**vars(frames.renderer.last_times), cut_nodes=frames.last_cut_nodes,
+                                cut=frames.last_cut_s, gather=frames.last_gather_s,
+                                streaming=frames.summary(), capped=frames.capped)
+    return out, times, gl_name

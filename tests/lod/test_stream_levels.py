@@ -147,3 +147,72 @@ def test_budget_too_small_for_the_pinned_levels(tmp_path):
     path, _ = _chunked(tmp_path, "lcc")
     with pytest.raises(SplatglError, match="--memory .* too small"):
         ChunkedScene(path, LodSettings(), 2 << 10)
+
+
+def _view_args(tmp_path) -> list[str]:
+    """An explicit camera and near plane: the streamed render frames the chunks' boxes, the
+    whole file's render its splats' 1-99 % box."""
+    save_camera(tmp_path / "cam.json", _camera(4.0, 0.5))
+    return ["--camera", str(tmp_path / "cam.json"), "--near", "0.01", "--early-stop", "off",
+            "--renderer", "quad"]
+
+
+@pytest.mark.parametrize("kind", ["streamed-sog", "lcc"])
+def test_render_memory_streams_the_level_the_whole_render_draws(tmp_path, kind, capsys):
+    """``splatgl render SCENE --memory 64K --lod-level 0``: the image ``splatgl render SCENE``
+    draws from the finest level read whole (to float32 rounding: the anchors differ), under a
+    budget smaller than the level; without --lod-level the levels by screen error."""
+    path, structure = _chunked(tmp_path, kind)
+    view = _view_args(tmp_path)
+    assert main(["render", str(path), "-o", str(tmp_path / "whole.png"), *view]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "s.png"), "--memory", "64K",
+                 "--lod-level", "0", "--timings", *view]) == 0
+    out = capsys.readouterr().out
+    assert "streamed under 64 KiB" in out and "evicted" in out and "--lod-level 0" in out
+    a, b = read_image(tmp_path / "whole.png"), read_image(tmp_path / "s.png")
+    assert a.max() > 0.2 and np.abs(a - b).max() <= 1.5 / 255, np.abs(a - b).max() * 255
+    assert main(["render", str(path), "-o", str(tmp_path / "far.png"), "--memory", "64K",
+                 "--lod-threshold", "1", "--timings", *view]) == 0
+    assert "cut_nodes" in capsys.readouterr().out
+
+
+def test_level_options_refused_in_one_line(tmp_path, capsys):
+    path, _ = _chunked(tmp_path, "lcc")
+    out = ["-o", str(tmp_path / "x.png")]
+    cases = [
+        (["--memory", "1M", "--lod-level", "2"], "--lod-level 2: ", "has 2 levels (0-1"),
+        (["--lod-level", "1"], "--lod-level 1 draws a level", "add --memory SIZE"),
+        (["--memory", "1M", "--lod-level", "1", "--lod-budget", "5"], "not with --lod-threshold",
+         "--lod-level draws every chunk"),
+        (["--memory", "1M", "--lod-blend", "2"], "--lod-blend: ", "drop --lod-blend"),
+        (["--lod-budget", "5"], "add --memory SIZE", "choose a Streamed SOG's or LCC's levels"),
+    ]
+    for args, *expected in cases:
+        assert main(["render", str(path), *out, *args]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and all(e in err for e in expected), err
+    scene = tmp_path / "s.ply"
+    from splatgl.formats import ply_write
+    ply_write.write(scene, _scene(50))
+    assert main(["render", str(scene), *out, "--memory", "1M", "--lod-level", "0"]) == 2
+    assert "is not a Streamed SOG (lod-meta.json) or LCC" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_bench_and_path_stream_a_chunked_scene(tmp_path, capsys):
+    """``bench SCENE --memory`` and ``render --path --memory`` on a Streamed SOG: every frame
+    streamed under the budget."""
+    import json
+
+    path, _ = _chunked(tmp_path, "streamed-sog")
+    assert main(["bench", str(path), "--memory", "64K", "--quick", "--frames", "2",
+                 "--width", "64", "--height", "48", "--json", "-"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["frames"] == 2 and 0 < report["resident_peak_bytes"] <= 64 << 10
+    assert report["chunks_loaded"] > 0 and report["bytes_read"] is None
+    assert main(["render", str(path), "--memory", "64K", "--lod-level", "1", "--path",
+                 "orbit:3", "-o", str(tmp_path / "f") + "/", "--width", "48", "--height",
+                 "32"]) == 0
+    assert "wrote 3 frames" in capsys.readouterr().out
+    assert main(["bench", str(path), "--memory", "64K", "--lod-level", "9"]) == 2
+    assert "--lod-level 9: " in capsys.readouterr().err

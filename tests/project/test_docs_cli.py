@@ -246,7 +246,7 @@ def test_links_into_the_pages_land_on_a_heading():
 def test_the_checks_catch_a_stale_page():
     """The helpers see what they must: a family, an option in a command line, section bounds."""
     assert _known("--ray-*", _options(LEAVES[("render",)]))
-    assert not _known("--lod-*", _options(LEAVES[("view",)]))
+    assert not _known("--lod-*", _options(LEAVES[("info",)]))
     assert _command_of("splatgl path orbit scene.ply -o p.json") == ("path", "orbit")
     assert _command_of("splatgl nothing --x") is None
     assert _misused("splatgl info scene.ply --json --lod-budget 3") == ["--lod-budget"]

@@ -15,6 +15,7 @@ import numpy as np
 from ...lod.budget import format_size
 from ...lod.selection import LodSettings
 from ...lod.stream_frames import StreamFrames
+from ...lod.stream_levels import ChunkedFrames, is_chunked
 from ...scene.settings import RenderSettings
 from ...paths import orbit
 
@@ -26,11 +27,15 @@ def peak_rss() -> int:
 
 
 def run_stream(path, memory: int, width: int, height: int, frames: int,
-               settings: RenderSettings = RenderSettings(), lod: LodSettings = LodSettings()) -> dict:
-    """The figures of ``frames`` orbit frames of the ``.lod.ply`` at ``path`` under ``memory``
-    bytes (a dict, seconds and bytes)."""
+               settings: RenderSettings = RenderSettings(), lod: LodSettings = LodSettings(),
+               level: int | None = None) -> dict:
+    """The figures of ``frames`` orbit frames of the ``.lod.ply`` (or Streamed SOG or LCC: each
+    chunk's level by screen error, or ``level``) at ``path`` under ``memory`` bytes (a dict,
+    seconds and bytes; ``bytes_read`` None where the reader does not count them)."""
+    chunked = is_chunked(path)
     t0 = time.perf_counter()
-    with StreamFrames(path, settings, lod, memory) as stream:
+    with (ChunkedFrames(path, settings, lod, memory, level) if chunked
+          else StreamFrames(path, settings, lod, memory)) as stream:
         opened = time.perf_counter() - t0
         times, nodes = [], []
         for camera in orbit(stream.framing, frames, width, height):
@@ -39,7 +44,7 @@ def run_stream(path, memory: int, width: int, height: int, frames: int,
             times.append(time.perf_counter() - t)
             nodes.append(stream.last_cut_nodes)
         stats = stream.resident.stats
-        read = stream.lazy.bytes_read
+        read = None if chunked else stream.lazy.bytes_read
     return {"scene": str(path), "memory": memory, "width": width, "height": height,
             "frames": frames, "open_s": opened, "first_frame_s": times[0],
             "median_frame_s": float(np.median(times[1:] if len(times) > 1 else times)),
@@ -56,5 +61,6 @@ def describe(r: dict) -> str:
             f"median frame {r['median_frame_s'] * 1e3:.1f} ms ({r['cut_nodes_median']:,} nodes)\n"
             f"resident {format_size(r['resident_bytes'])} (peak "
             f"{format_size(r['resident_peak_bytes'])}), chunks {r['chunks_loaded']} loaded, "
-            f"{r['chunks_evicted']} evicted, {format_size(r['bytes_read'])} read; process peak "
+            f"{r['chunks_evicted']} evicted"
+            f"{'' if r['bytes_read'] is None else ', ' + format_size(r['bytes_read']) + ' read'}; process peak "
             f"RSS {format_size(r['peak_rss_bytes'])}")
