@@ -355,6 +355,8 @@ def run_path(args: argparse.Namespace) -> int:
           f"{scene.count} splats, {kind_text}, {result.fps:.2f} frames/s)")
     if run is not None:
         print(summary(run, "frames"))
+    if memory is not None and getattr(streamed, "capped", None):   # said once (and --timings)
+        print(streamed.capped)
     if args.timings:
         print(f"GL renderer: {gl_name}")
         for line in auto_lines(args, settings, gl_name if not executor.sharded else None):
@@ -363,7 +365,5 @@ def run_path(args: argparse.Namespace) -> int:
         print(f"timings: {result.seconds:.3f} s for {result.written} frames; renderer stages "
               f"{result.render_seconds:.3f} s; ratio {ratio:.3f}")
         if memory is not None:
-    if memory is not None and getattr(streamed, "capped", None):   # said once (and --timings)
-        print(streamed.capped)
             print(f"streaming: {streamed.summary()}")
     return 0
