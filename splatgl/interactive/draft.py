@@ -82,6 +82,13 @@ class DraftFrame:
 class LevelRenderer:
     """Draws ``scene`` at any level on ``renderer``'s context (see the module doc)."""
 
+    #: Whether the last draw had all it needed (always, in memory; a streamed scene's draws
+    #: lack the chunks not yet resident: :mod:`.stream_levels`); a count of what has arrived
+    #: (None: nothing arrives), now and when the last draw chose what to draw.
+    complete: bool = True
+    generation: int | None = None
+    drawn_generation: int | None = None
+
     def __init__(self, renderer: Renderer, scene: Scene, settings: RenderSettings,
                  lod: LodProvider | None = None, triangles: bool = DRAFT_TRIANGLES):
         self.renderer, self.scene, self.settings, self.lod = renderer, scene, settings, lod

@@ -100,18 +100,21 @@ class Session:
     budgets); ``exact_kind``: the renderer of the exact frame at rest, the quad path or the CPU
     renderer (``RendererKind.CPU``: moving frames are the quad path's drafts as ever, and the
     rest refines straight to the CPU renderer's exact frame, drawn in bands that input
-    interrupts; its cost stays out of the budget's model, which prices quad frames).  After
+    interrupts; its cost stays out of the budget's model, which prices quad frames); ``levels``:
+    what draws them (a streamed scene's: :func:`~.stream_levels.streamed_session`).  After
     each :meth:`frame`: :attr:`shown` (the frame to present), :attr:`status` ("moving",
     "refining" or "exact").
     """
 
     def __init__(self, renderer: Renderer, scene: Scene, settings: RenderSettings, budget: float,
                  lod: LodProvider | None = None,
-                 exact_kind: RendererKind | str = RendererKind.QUAD):
+                 exact_kind: RendererKind | str = RendererKind.QUAD,
+                 levels: LevelRenderer | None = None):
         self.renderer, self.scene, self.settings = renderer, scene, settings
         self.cpu_exact = RendererKind(exact_kind) is RendererKind.CPU
         self.lod = lod
-        self.levels = LevelRenderer(renderer, scene, settings, lod)
+        self.levels = levels or LevelRenderer(renderer, scene, settings, lod)
+        self._whole, self._whole_generation = True, None   # see _note_whole
         software = is_software_renderer(renderer_name(renderer.ctx))   # the cost model's prior
         self.budget = FrameBudget(budget, scene.count, 1280 * 720, scene.sh_degree, has_lod=False,
                                   software=software)
@@ -172,6 +175,10 @@ class Session:
         if key != self._key:
             return self.moving(camera)
         hook = None if input_pending is None else _interrupt_on(input_pending)
+        if self.awaiting:   # a streamed exact frame short of chunks: again once one arrives
+            if self.levels.generation == self._whole_generation:
+                return None
+            self._plan = [EXACT]
         if not self._plan:
             if self._quad_cost:
                 self._observe_quad_exact(camera, hook)
@@ -199,8 +206,12 @@ class Session:
             self._quad_cost = on_cpu
             self._calibration = self._calibration_level()
         self.shown = frame
-        self.status = "refining" if self._plan else "exact"
+        self._note_whole(level)
+        self.status = "refining" if self._plan or not self._whole else "exact"
         return frame
+
+    def _note_whole(self, level: Level) -> None:   # final: not the exact level short of chunks
+        self._whole, self._whole_generation = not level.exact or self.levels.complete, self.levels.drawn_generation
 
     def moving(self, camera: Camera) -> DraftFrame:
         """Draw ``camera`` as a moving frame (at the budget's level) whatever the last camera
@@ -214,11 +225,12 @@ class Session:
         self.budget.report(level, frame.splats, frame.seconds)
         self._key, self.shown, self._moving_level = camera_key(camera), frame, level
         self.moved = True
+        self._note_whole(level)
         final = level.exact and not self.cpu_exact   # the CPU renderer's exact frame is its own
         self._plan = [] if final else self.plan(level)
         self._calibration = None                  # it was for the camera at rest
         self._quad_cost = False
-        self.status = "exact" if final else "moving"
+        self.status = "exact" if final and self._whole else "moving"
         self.refine_started = None
         return frame
 
@@ -319,8 +331,13 @@ class Session:
         return bool(self._plan) or self._quad_cost or self._calibration is not None
 
     @property
+    def awaiting(self) -> bool:
+        """Whether the frame at rest only waits for streamed chunks (the viewer may sleep)."""
+        return not self._plan and not self._whole
+
+    @property
     def exact(self) -> bool:
-        return self.status == "exact" and self.shown is not None and self.shown.level.exact
+        return self.status == "exact" and self._whole and self.shown is not None and self.shown.level.exact
 
     def release(self) -> None:
         self.levels.release()

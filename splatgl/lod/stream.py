@@ -301,9 +301,6 @@ class ResidentSet:
                 if present[c]:
                     self._held.move_to_end(c)
         have = present[self.chunk_of(rows)]
-        missing = np.unique(self.chunk_of(rows[~have]))
-        if missing.size:   # coarse first: the upper levels' chunks come before the leaves'
-            self.request(missing[::-1], keep=frozenset(np.flatnonzero(present).tolist()))
         if have.all():
             return rows, weights, True
         w = np.ones(rows.size, np.float32) if weights is None else weights.astype(np.float32)
@@ -322,6 +319,11 @@ class ResidentSet:
             level[idx] = lv + 1
             todo[idx] = ~present[self.chunk_of(out[idx])]
         uniq, inv = np.unique(out, return_inverse=True)
+        # The missing chunks, coarse first (the upper levels' before the leaves'); only the
+        # cut's resident chunks are kept: the others (stand-ins among them) may make room.
+        # With every resident chunk kept, a full budget never refined a new view.
+        self.request(np.unique(self.chunk_of(rows[~have]))[::-1],
+                     keep=frozenset(np.unique(self.chunk_of(rows[have])).tolist()))
         wsum = np.minimum(np.bincount(inv, weights=w.astype(np.float64)), 1.0).astype(np.float32)
         return uniq, (None if weights is None and wsum.size == uniq.size and (wsum >= 1).all()
                       else wsum), False

@@ -68,7 +68,8 @@ class ViewerOptions:
         scene_path: the scene's file, where the level-of-detail tree for budgets is cached.
         stream: a level of detail streamed from disk (``--memory``,
             :class:`splatgl.lod.stream_view.StreamedScene`): each frame draws what is resident
-            and draws again as chunks arrive; screenshots wait for their chunks.
+            (with a budget: the frame-time budget's level, :mod:`.pacing`) and draws again as
+            chunks arrive, until exact at rest; screenshots wait for their chunks.
     """
 
     title: str = "splatgl view"
@@ -112,7 +113,7 @@ class Viewer:
         self._cursor = (0.0, 0.0)
         self.last_pixel = None   # the last Ctrl+click listing
         o = self.options
-        self.pacer = Pacer(scene, o.target_fps, o.scene_path)
+        self.pacer = Pacer(scene, o.target_fps, o.scene_path, o.stream)
         self.recorder = Recorder()                # K: the camera's flight as a path file
         self._queued: list | None = None   # input that acts after the draw in progress (callables)
         self._events = 0                                         # input events seen so far
@@ -277,10 +278,10 @@ class Viewer:
     def paced(self) -> bool:
         """Whether this frame goes through the frame-time budget (:mod:`.pacing`): the colour
         view of the quad path or the CPU renderer (quad drafts, its exact frame at rest), one
-        eye, with a budget set."""
+        eye, with a budget set (streamed, ``--memory``: the quad path's)."""
         return (self.view is ViewMode.COLOR and self.kind in (RendererKind.QUAD, RendererKind.CPU)
                 and self.options.stereo is None and self.scene.kind is SplatKind.GAUSSIAN_3D
-                and self.options.stream is None
+                and (self.options.stream is None or self.kind is RendererKind.QUAD)
                 and self.pacer.enabled(self.renderer))
 
     def present(self) -> None:
@@ -307,7 +308,7 @@ class Viewer:
         """Loop until closed: poll while input is in progress, else sleep until an event."""
         print("keys:\n" + key_help(), flush=True)
         while not self.should_close():
-            if self.animating or (self.paced and self.pacer.refining):
+            if self.animating or (self.paced and self.pacer.refining and not self.pacer.awaiting):
                 glfw.poll_events()
             else:
                 glfw.wait_events_timeout(1.0 / 4.0)

@@ -24,6 +24,7 @@ from ..cameras.camera import Camera
 from ..interactive.budget import check_fps
 from ..interactive.lod_cache import LodProvider
 from ..interactive.session import Session, default_fps
+from ..interactive.stream_levels import streamed_session
 from ..scene.splats import Scene
 from ..scene.settings import RendererKind, RenderSettings
 from ..renderers.registry import DEFAULT_RENDERER
@@ -33,11 +34,16 @@ class Pacer:
     """The budgeted colour frames of one viewer (see the module doc).
 
     ``fps``: frames a second to aim at while moving (None: :func:`default_fps`; 0: no budget,
-    every frame exact); ``scene_path``: the scene's file, for the level-of-detail cache.
+    every frame exact); ``scene_path``: the scene's file, for the level-of-detail cache;
+    ``stream``: a level of detail streamed from disk (``--memory``,
+    :class:`splatgl.lod.stream_view.StreamedScene`; ``scene`` is then its framing proxy), drawn
+    through :func:`~splatgl.interactive.stream_levels.streamed_session`.
     """
 
-    def __init__(self, scene: Scene, fps: float | None, scene_path: Path | None = None):
+    def __init__(self, scene: Scene, fps: float | None, scene_path: Path | None = None,
+                 stream=None):
         self.scene, self.fps_asked, self.scene_path = scene, check_fps(fps), scene_path
+        self.stream = stream
         self.lod: LodProvider | None = None
         self.session: Session | None = None
         self._owner: tuple | None = None
@@ -54,6 +60,11 @@ class Pacer:
         owner = (id(renderer), settings, kind)
         if self.session is None or self._owner != owner:
             self.release_session()
+            if self.stream is not None:
+                self.session = streamed_session(renderer, self.stream, settings,
+                                                1.0 / self.fps(renderer))
+                self._owner = owner
+                return self.session
             if self.lod is None:
                 self.lod = LodProvider(self.scene, self.scene_path)
             self.session = Session(renderer, self.scene, settings, 1.0 / self.fps(renderer), self.lod,
@@ -95,6 +106,12 @@ class Pacer:
         """Whether refinement steps are left (the loop should poll, not wait for events)."""
         return self.session is not None and self.session.shown is not None and (
             not self.session.exact or self.session.pending)
+
+    @property
+    def awaiting(self) -> bool:
+        """Whether the frame at rest waits for streamed chunks only (the loop may sleep: each
+        arrival wakes it)."""
+        return self.session is not None and self.session.awaiting
 
     @property
     def exact(self) -> bool:
