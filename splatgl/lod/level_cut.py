@@ -15,8 +15,9 @@ with a splat budget (``--lod-budget``) chunks are then coarsened one level at a 
 whose next level's screen error is smallest first, until the splats fit (or every chunk is at
 its coarsest).  Chunks whose sphere lies wholly outside the view are not drawn.  A level given
 (``--lod-level N``) draws every chunk in view at that level.  Levels a chunk holds no splats at
-are never chosen for it.  The files' own per-chunk ``errors`` are not read (PlayCanvas derives
-them as log ratios of counts, not lengths).
+are never chosen for it.  :func:`cap_levels` coarsens a choice alike under a streamed frame's
+splat cap.  The files' own per-chunk ``errors`` are not read (PlayCanvas derives them as log
+ratios of counts, not lengths).
 """
 
 from __future__ import annotations
@@ -114,6 +115,14 @@ def choose_levels(table: ChunkTable, camera: Camera, lod: LodSettings = LodSetti
     if lod.budget is not None:
         _coarsen(table, px, out, lod.budget)
     return out if k else np.zeros(0, np.int64)
+
+
+def cap_levels(table: ChunkTable, camera: Camera, levels: np.ndarray, cap: int) -> np.ndarray:
+    """``levels`` coarsened as a budget of ``cap`` splats coarsens them (a streamed frame's
+    memory bound, :func:`splatgl.lod.budget.stream_plan`); a copy."""
+    out = np.array(levels, np.int64)
+    _coarsen(table, screen_errors(table, camera)[0], out, cap)
+    return out
 
 
 def _next_level(table: ChunkTable, chunk: int, level: int) -> int | None:

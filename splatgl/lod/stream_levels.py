@@ -38,8 +38,10 @@ from ..output.under import UnderImage
 from ..renderers import registry
 from ..scene.settings import RendererKind, RenderSettings
 from ..scene.splats import SplatKind
-from .budget import format_size
-from .level_cut import NOT_DRAWN, ChunkTable, choose_levels
+from ..gl.storage import gpu_bytes_per_splat
+from ..scene.settings import GpuStorage
+from .budget import StreamPlan, format_size, frame_bytes_per_splat, release_freed, stream_plan
+from .level_cut import NOT_DRAWN, ChunkTable, cap_levels, choose_levels
 from .selection import LodSettings
 from .stream import LOADERS, ResidentSet, concatenate, scene_bytes
 
@@ -129,27 +131,38 @@ def framing_at(path) -> SimpleNamespace:
 
 class ChunkedStream:
     """What the headless frames and the viewer share: the structure, the chunks, the framing,
-    the environment and the :class:`ResidentSet` of ``memory`` bytes (``pinned``: the
-    coarsest level of every chunk, loaded at once and never evicted)."""
+    the environment and the :class:`ResidentSet`.  ``memory`` is shared as a ``.lod.ply``
+    stream shares it (``plan``: default :func:`splatgl.lod.budget.stream_plan`, measured now:
+    call it once the GL context exists): the chunks and the environment hold ``plan.cache``
+    bytes, a frame at most ``plan.cap`` splats (levels coarsened to fit, said once in
+    :attr:`capped`).  ``pinned``: the coarsest level of every chunk is loaded at once and never
+    evicted (the viewer's stand-ins)."""
 
     def __init__(self, path, lod: LodSettings, memory: int, level: int | None = None,
-                 threads: int = LOADERS, pinned: bool = False, on_loaded=None, framing=None):
+                 threads: int = LOADERS, pinned: bool = False, on_loaded=None, framing=None,
+                 plan: StreamPlan | None = None, storage: GpuStorage = GpuStorage.FLOAT32):
         self.path, self.lod, self.level, self.memory = Path(path), lod, level, int(memory)
         self.structure = read_structure(path)
         check_level(self.structure, level)
         self.chunks = ChunkLevels(self.structure)
-        self.framing = framing if framing is not None else framing_of(self.structure,
-                                                                      self.chunks.sample)
-        self.chunks.sample = None
+        sample, self.chunks.sample = self.chunks.sample, None
+        self.framing = framing if framing is not None else framing_of(self.structure, sample)
         self.table = ChunkTable.of(self.structure, self.framing.anchor)
         self.environment = self._load_environment()
         env_bytes = 0 if self.environment is None else scene_bytes(self.environment)
-        if env_bytes >= self.memory:
+        release_freed()
+        self.plan = plan or stream_plan(self.memory, frame_bytes_per_splat(
+            sample.sh.shape[1], gpu_bytes_per_splat(storage, sample.sh_degree)))
+        if env_bytes >= self.plan.cache:
             raise SplatglError(f"--memory {format_size(self.memory)} is too small to stream "
-                               f"{self.path.name}: its environment alone is {format_size(env_bytes)}")
+                               f"{self.path.name}: its environment alone is {format_size(env_bytes)}"
+                               f" of the chunks' {format_size(self.plan.cache)}")
+        self.cap = max(1, self.plan.cap - (0 if self.environment is None else self.environment.count))
+        self.capped: str | None = None
+        self.capped_views = self.views = 0
         coarsest = [self.chunks.key[(c, int(np.flatnonzero(row)[-1]))]
                     for c, row in enumerate(self.table.counts > 0) if row.any()]
-        self.resident = ResidentSet(self.chunks, self.memory - env_bytes, None, 1, threads,
+        self.resident = ResidentSet(self.chunks, self.plan.cache - env_bytes, None, 1, threads,
                                     on_loaded, pinned=coarsest if pinned else None)
         if pinned:
             self.resident.collect(sorted(coarsest), lambda i, scene: None)
@@ -163,8 +176,22 @@ class ChunkedStream:
         return View.of(camera, settings, self.framing).camera   # the scene transform applied
 
     def choose(self, camera: Camera, lod: LodSettings | None = None) -> np.ndarray:
-        """(K,) the level of each chunk for ``camera`` (the transformed one)."""
-        return choose_levels(self.table, camera, lod or self.lod, self.level)
+        """(K,) the level of each chunk for ``camera`` (the transformed one), coarsened to the
+        frame's cap where the choice asks for more splats."""
+        levels = choose_levels(self.table, camera, lod or self.lod, self.level)
+        self.views += 1
+        asked = self.table.splats(levels)
+        if asked <= self.cap:
+            return levels
+        levels = cap_levels(self.table, camera, levels, self.cap)
+        self.capped_views += 1
+        if self.capped is None:
+            what = (f"--lod-level {self.level}" if self.level is not None
+                    else f"--lod-threshold {(lod or self.lod).threshold_px:g} px")
+            self.capped = (f"the memory bound made the levels coarser than {what} asked: "
+                           f"{self.table.splats(levels):,} of {asked:,} splats (the frame holds "
+                           f"at most {self.plan.cap:,} splats)")
+        return levels
 
     def ids(self, levels: np.ndarray) -> list[int]:
         """The resident-set chunks of a choice, in the file's chunk order."""
@@ -189,8 +216,10 @@ class ChunkedStream:
 
     def summary(self) -> str:
         where = "" if self.level is None else f", --lod-level {self.level}"
-        return (f"{self.resident.stats.summary(self.memory)}; {self.chunks.count} chunk levels "
-                f"of {len(self.structure.chunks)} chunks x {self.structure.levels} levels{where}")
+        capped = f", {self.capped_views} of {self.views} views capped" if self.capped_views else ""
+        return (f"{self.resident.stats.summary(self.plan.cache)}; {self.chunks.count} chunk "
+                f"levels of {len(self.structure.chunks)} chunks x {self.structure.levels} "
+                f"levels{where}; frame at most {self.plan.cap:,} splats{capped}")
 
     def close(self) -> None:
         self.resident.close()
@@ -206,22 +235,27 @@ class ChunkedFrames:
 
     def __init__(self, path, settings: RenderSettings, lod: LodSettings, memory: int,
                  level: int | None = None, kind: RendererKind = RendererKind.QUAD,
-                 threads: int = LOADERS, framing=None):
+                 threads: int = LOADERS, framing=None, plan: StreamPlan | None = None):
         self.settings, self.lod, self.memory, self.kind = settings, lod, int(memory), kind
-        self.ctx = self.renderer = self.programs = None
-        self.stream = ChunkedStream(path, lod, memory, level, threads, framing=framing)
-        self.framing, self.resident = self.stream.framing, self.stream.resident
+        self.ctx = self.renderer = self.programs = self.stream = None
         self._ids: list[int] | None = None
         self.last_cut_nodes = 0
         self.last_cut_s = self.last_gather_s = 0.0   # the level choice; reading the chunks
-        self.capped: str | None = None   # as StreamFrames': the memory bound never coarsens yet
         try:
-            if registry.entry(kind).gl:
+            if registry.entry(kind).gl:   # first: the plan measures what the process holds
                 self.ctx = create_headless_context()
                 self.programs = ProgramCache(self.ctx)
+            self.stream = ChunkedStream(path, lod, memory, level, threads, framing=framing,
+                                        plan=plan, storage=settings.gpu_storage)
         except BaseException:
             self.close()
             raise
+        self.framing, self.resident = self.stream.framing, self.stream.resident
+
+    @property
+    def capped(self) -> str | None:
+        """One line where the memory bound made a view's levels coarser than asked, else None."""
+        return self.stream.capped
 
     @property
     def nodes(self):
@@ -272,7 +306,8 @@ class ChunkedFrames:
             self.renderer = None
 
     def close(self) -> None:
-        self.stream.close()
+        if self.stream is not None:
+            self.stream.close()
         self._release()
         if self.ctx is not None:
             self.ctx.release()

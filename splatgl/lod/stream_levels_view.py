@@ -18,6 +18,7 @@ import numpy as np
 from ..cameras.camera import Camera
 from ..scene.settings import RenderSettings
 from ..scene.splats import Scene
+from .budget import StreamPlan
 from .level_cut import NOT_DRAWN
 from .selection import LodSettings
 from .stream import LOADERS
@@ -27,16 +28,17 @@ from .stream_levels import ChunkedStream
 class ChunkedScene:
     """The Streamed SOG or LCC at ``path`` for the viewer, under ``memory`` bytes (see the
     module doc); ``level``: every chunk at that level (``--lod-level``) instead of the choice by
-    screen error; :attr:`framing` frames the views."""
+    screen error; :attr:`framing` frames the views; ``plan``: how ``memory`` is shared
+    (:class:`~splatgl.lod.stream_levels.ChunkedStream`)."""
 
     def __init__(self, path, lod: LodSettings, memory: int, on_change=None,
-                 level: int | None = None, threads: int = LOADERS):
+                 level: int | None = None, threads: int = LOADERS, plan: StreamPlan | None = None):
         self.lod, self.memory, self.on_change = lod, int(memory), on_change
         self.generation = 0
         self.complete = False
         self._last: tuple | None = None   # (ids, scene) drawn last
         self.stream = ChunkedStream(path, lod, memory, level, threads, pinned=True,
-                                    on_loaded=self._loaded)
+                                    on_loaded=self._loaded, plan=plan)
         self.framing, self.resident = self.stream.framing, self.stream.resident
         self.levels = self.stream.structure.levels
 
@@ -88,6 +90,10 @@ class ChunkedScene:
         """The view's exact choice, waiting for its chunks."""
         stream = self.stream
         return self._scene(stream.ids(stream.choose(stream.view_camera(camera, settings))))
+
+    @property
+    def capped(self) -> str | None:
+        return self.stream.capped
 
     def summary(self) -> str:
         """Resident memory and chunks (the status panel)."""

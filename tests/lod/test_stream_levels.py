@@ -17,6 +17,7 @@ from splatgl.errors import SplatglError
 from splatgl.formats import lcc, streamed_sog
 from splatgl.imagefiles.images import read_image
 from splatgl.lod import streamed_sog_write
+from splatgl.lod.budget import StreamPlan
 from splatgl.lod.build import build_hierarchy
 from splatgl.lod.level_cut import NOT_DRAWN, ChunkTable, choose_levels, level_errors
 from splatgl.lod.selection import LodSettings
@@ -27,6 +28,14 @@ from splatgl.scene.splats import Scene
 
 SETTINGS = RenderSettings(near=0.01, early_stop=EarlyStop.OFF)
 BUDGET = 40 << 10   # smaller than a level: chunks are evicted between frames
+
+
+def cache_plan(cache: int, cap: int | None = None, per_splat: int = 100) -> StreamPlan:
+    """A stream plan of ``cache`` bytes of chunks and a frame of at most ``cap`` splats (None:
+    not capped), nothing else held (a tiny scene under budgets smaller than it)."""
+    frame = (1 << 40) if cap is None else cap * per_splat
+    return StreamPlan(budget=cache + frame, held=0, reserve=0, cache=cache, frame=frame,
+                      per_splat=per_splat)
 
 
 def _scene(n: int = 1200) -> Scene:
@@ -64,7 +73,8 @@ def test_streamed_level_is_the_level_read_whole(tmp_path, gl_renderer, kind, lev
     (with its environment), the same anchor and near plane; chunks evicted between frames."""
     path, structure = _chunked(tmp_path, kind)
     cams = [_camera(4.0), _camera(3.0, 1.0)]
-    with ChunkedFrames(path, SETTINGS, LodSettings(), BUDGET, level=level) as frames:
+    with ChunkedFrames(path, SETTINGS, LodSettings(), BUDGET, level=level,
+                       plan=cache_plan(BUDGET)) as frames:
         got = [out.rgba for out in map(frames.render_view, cams)]
         stats = frames.resident.stats
         whole = _anchored(structure.load(level), frames.framing.anchor)
@@ -90,7 +100,8 @@ def test_levels_by_screen_error_and_budget(tmp_path, gl_renderer, kind):
     """Far views draw coarser levels than near ones; a budget coarsens until the splats fit;
     chunks out of view are not drawn; the frame is the image of the chosen chunks read whole."""
     path, structure = _chunked(tmp_path, kind)
-    with ChunkedFrames(path, SETTINGS, LodSettings(threshold_px=1.0), BUDGET) as frames:
+    with ChunkedFrames(path, SETTINGS, LodSettings(threshold_px=1.0), BUDGET,
+                       plan=cache_plan(BUDGET)) as frames:
         table = frames.stream.table
         near = choose_levels(table, frames.stream.view_camera(_camera(1.5), SETTINGS),
                              LodSettings(threshold_px=1.0))
@@ -120,7 +131,8 @@ def test_viewer_draws_resident_levels_and_refines(tmp_path, kind):
     requested chunks are in) the view's exact choice, which exact_scene also gives."""
     path, structure = _chunked(tmp_path, kind)
     woke = []
-    scene = ChunkedScene(path, LodSettings(threshold_px=1.0), 1 << 20, on_change=lambda: woke.append(1))
+    scene = ChunkedScene(path, LodSettings(threshold_px=1.0), 1 << 20,
+                         on_change=lambda: woke.append(1), plan=cache_plan(1 << 20))
     try:
         counts = scene.stream.table.counts
         coarse = sum(int(row[row > 0][-1]) for row in counts) + (
@@ -140,13 +152,13 @@ def test_viewer_draws_resident_levels_and_refines(tmp_path, kind):
 def test_level_that_does_not_exist_is_one_line(tmp_path):
     path, _ = _chunked(tmp_path, "streamed-sog")
     with pytest.raises(SplatglError, match=r"--lod-level 7: .*lod-meta.json has \d levels"):
-        ChunkedFrames(path, SETTINGS, LodSettings(), BUDGET, level=7)
+        ChunkedFrames(path, SETTINGS, LodSettings(), BUDGET, level=7, plan=cache_plan(BUDGET))
 
 
 def test_budget_too_small_for_the_pinned_levels(tmp_path):
     path, _ = _chunked(tmp_path, "lcc")
     with pytest.raises(SplatglError, match="--memory .* too small"):
-        ChunkedScene(path, LodSettings(), 2 << 10)
+        ChunkedScene(path, LodSettings(), 2 << 10, plan=cache_plan(2 << 10))
 
 
 def _view_args(tmp_path) -> list[str]:
@@ -159,19 +171,19 @@ def _view_args(tmp_path) -> list[str]:
 
 @pytest.mark.parametrize("kind", ["streamed-sog", "lcc"])
 def test_render_memory_streams_the_level_the_whole_render_draws(tmp_path, kind, capsys):
-    """``splatgl render SCENE --memory 64K --lod-level 0``: the image ``splatgl render SCENE``
-    draws from the finest level read whole (to float32 rounding: the anchors differ), under a
-    budget smaller than the level; without --lod-level the levels by screen error."""
+    """``splatgl render SCENE --memory 1.5G --lod-level 0``: the image ``splatgl render SCENE``
+    draws from the finest level read whole (to float32 rounding: the anchors differ); without
+    --lod-level the levels by screen error.  (Budgets smaller than a level: the tests above.)"""
     path, structure = _chunked(tmp_path, kind)
     view = _view_args(tmp_path)
     assert main(["render", str(path), "-o", str(tmp_path / "whole.png"), *view]) == 0
-    assert main(["render", str(path), "-o", str(tmp_path / "s.png"), "--memory", "64K",
+    assert main(["render", str(path), "-o", str(tmp_path / "s.png"), "--memory", "1.5G",
                  "--lod-level", "0", "--timings", *view]) == 0
     out = capsys.readouterr().out
-    assert "streamed under 64 KiB" in out and "evicted" in out and "--lod-level 0" in out
+    assert "streamed under 1.5 GiB" in out and "loaded" in out and "--lod-level 0" in out
     a, b = read_image(tmp_path / "whole.png"), read_image(tmp_path / "s.png")
     assert a.max() > 0.2 and np.abs(a - b).max() <= 1.5 / 255, np.abs(a - b).max() * 255
-    assert main(["render", str(path), "-o", str(tmp_path / "far.png"), "--memory", "64K",
+    assert main(["render", str(path), "-o", str(tmp_path / "far.png"), "--memory", "1.5G",
                  "--lod-threshold", "1", "--timings", *view]) == 0
     assert "cut_nodes" in capsys.readouterr().out
 
@@ -205,14 +217,38 @@ def test_bench_and_path_stream_a_chunked_scene(tmp_path, capsys):
     import json
 
     path, _ = _chunked(tmp_path, "streamed-sog")
-    assert main(["bench", str(path), "--memory", "64K", "--quick", "--frames", "2",
+    assert main(["bench", str(path), "--memory", "1.5G", "--quick", "--frames", "2",
                  "--width", "64", "--height", "48", "--json", "-"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["frames"] == 2 and 0 < report["resident_peak_bytes"] <= 64 << 10
+    assert report["frames"] == 2 and report["resident_peak_bytes"] > 0
     assert report["chunks_loaded"] > 0 and report["bytes_read"] is None
-    assert main(["render", str(path), "--memory", "64K", "--lod-level", "1", "--path",
+    assert main(["render", str(path), "--memory", "1.5G", "--lod-level", "1", "--path",
                  "orbit:3", "-o", str(tmp_path / "f") + "/", "--width", "48", "--height",
                  "32"]) == 0
     assert "wrote 3 frames" in capsys.readouterr().out
-    assert main(["bench", str(path), "--memory", "64K", "--lod-level", "9"]) == 2
+    assert main(["bench", str(path), "--memory", "1.5G", "--lod-level", "9"]) == 2
     assert "--lod-level 9: " in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kind", ["streamed-sog", "lcc"])
+def test_frame_cap_coarsens_the_levels_and_says_so(tmp_path, gl_renderer, kind):
+    """--memory bounds the frame too: a level asking more splats than the frame's cap is drawn
+    with chunks coarsened (smallest screen error first) to the cap, said once; the image is
+    those chunks' read whole."""
+    path, structure = _chunked(tmp_path, kind)
+    env = structure.load(0, [], environment=True).count if structure.has_environment else 0
+    cam = _camera(2.5, 0.5)
+    with ChunkedFrames(path, SETTINGS, LodSettings(), 1 << 20, level=0,
+                       plan=cache_plan(1 << 20, cap=600 + env)) as frames:
+        image = frames.render_view(cam).rgba
+        assert frames.last_cut_nodes <= 600 + env
+        assert "coarser than --lod-level 0 asked" in frames.capped
+        assert "1 of 1 views capped" in frames.summary()
+        levels = frames.stream.choose(frames.stream.view_camera(cam, SETTINGS))
+        assert (levels > 0).any()
+        chosen = [structure.load(int(levels[c]), [c], environment=False)
+                  for c in np.flatnonzero(levels >= 0)]
+        if env:
+            chosen.append(structure.load(0, [], environment=True))
+        want = _anchored(streamed_sog.concatenate(chosen), frames.framing.anchor)
+    assert np.array_equal(gl_renderer.render(want, cam, SETTINGS), image)
