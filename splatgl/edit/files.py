@@ -23,7 +23,7 @@ from ..writing.outputs import check_output_path
 from ..progress import default_progress
 from .pipeline import Step, apply_operations
 from .streamed import IN_MEMORY_COPIES, memory_bound
-from .streamed_edit import plan_edit
+from .streamed_stages import plan_edit
 from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shared_extras,
                         transform_scene)
 
@@ -120,9 +120,8 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
         if writer is not None and writer.NAME not in EXTRAS_FORMATS:
             note = dropped_note(list(names), writer.NAME)
         else:
-            note = dropped_note([n for n in names if n not in kept],
-                                why="not every input has them")
-        notes += [note] if note else []
+            note = dropped_note([n for n in names if n not in kept], why=streamed.dropped_why)
+        notes += ([note] if note else []) + streamed.notes
         _refuse_empty(steps, count, allow_empty, writer, output)
         size = None if dry_run else streamed.write(output, count, progress)
         return EditReport(tuple(inputs), tuple(counts), output, tuple(steps), count, degree,

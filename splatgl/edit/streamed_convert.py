@@ -21,7 +21,7 @@ from ..lod.budget import format_size
 from ..writing.outputs import check_output_path
 from .operations import ShDegree
 from .streamed import IN_MEMORY_COPIES, Source, memory_bound
-from .streamed_edit import plan_edit
+from .streamed_stages import plan_edit
 from .streamed_outputs import RoundTrip
 
 #: The per-attribute errors :func:`conversion_error` gives as ``{"max", "mean"}``.

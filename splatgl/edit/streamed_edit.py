@@ -5,8 +5,11 @@ whole scene at once.  The file is the in-memory path's, byte for byte.
 
 When the result's count is not known beforehand (a crop or filter, ``--drop-invalid``), a first
 pass counts it (and finds every refusal: nothing is written), a second writes: the PLY header,
-which comes first, holds the count.  Operations that need every splat's neighbours
-(``--remove-floaters``, ``--decimate``) are refused in one line naming the limit.
+which comes first, holds the count.  ``--remove-floaters`` first finds the rows it removes per
+spatial chunk (:mod:`.streamed_neighbours`: the in-memory set), then removes them as a row
+test; ``--decimate`` splits the edit in two stages (:mod:`.streamed_stages`, where
+:func:`plan_edit` decides).  The output is a PLY, ``.splat`` or ``.compressed.ply``
+(:mod:`.streamed_outputs`).
 """
 
 from __future__ import annotations
@@ -18,48 +21,17 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..formats.convert import EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT
-from ..lod.budget import format_size
 from ..writing.atomic import write_error
 from .attributes import Rows
-from .decimate import Decimate
 from .floaters import RemoveFloaters
 from .operations import ROW_TESTS, Filter, ShDegree
 from .pipeline import Step, select
 from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shared_extras,
                         transform_scene)
-from .streamed import (IN_MEMORY_COPIES, NORMALS, block_rows, memory_bound, sources_of,
-                       vertex_dtype, write_blocks)
-from .streamed_outputs import (STREAMED_FORMATS, check_kind, refusal, whole_chunks,
-                               write_compressed, write_splat)
+from .streamed import NORMALS, block_rows, vertex_dtype, write_blocks
+from .streamed_outputs import check_kind, whole_chunks, write_compressed, write_splat
+from .streamed_neighbours import find_floaters
 from .streamed_sort import full_box_codes, record_dtype, scratch, sorted_runs, to_records, to_scene
-
-
-def plan_edit(inputs, writer, operations, transforms, memory: int | None,
-              drop_invalid: bool, writer_options: dict, output=None) -> "StreamedEdit | None":
-    """The streamed edit of ``inputs`` into ``output`` when ``memory`` (bytes; None: the
-    default, half this machine's RAM, :func:`~.streamed.memory_bound`) is below what the
-    in-memory path would hold and every input is a binary PLY; None to edit in memory.  An
-    output format that cannot stream (:data:`~.streamed_outputs.STREAMED_FORMATS`) is then
-    refused in one line."""
-    memory = memory_bound(memory)
-    if writer is not None and writer_options:
-        return None
-    sources = sources_of(inputs, drop_invalid)
-    if sources is None:
-        return None
-    need = IN_MEMORY_COPIES * sum(s.in_memory_bytes() for s in sources)
-    if need <= memory:
-        return None
-    if writer is not None and writer.NAME not in STREAMED_FORMATS:
-        raise refusal(output, writer.NAME, need, memory)
-    for op in operations:
-        if isinstance(op, (RemoveFloaters, Decimate)):
-            raise SplatglError(
-                f"--{op.name} needs every splat's neighbours in memory: the input needs about "
-                f"{format_size(need)}, over --memory {format_size(memory)}; crop or filter it "
-                "into smaller files first, or give a larger --memory")
-    return StreamedEdit(sources, transforms, list(operations), memory,
-                        format_name="ply" if writer is None else writer.NAME, output=output)
 
 
 class StreamedEdit:
@@ -105,6 +77,11 @@ class StreamedEdit:
         self.extras = self.shared if len(sources) > 1 else sources[0].extras
         self.dtype = vertex_dtype(self.kind, degree, self.extras)
         self.counted = None
+        #: Per --remove-floaters (by position): the sorted input rows it removes.
+        self.removed: dict[int, np.ndarray] = {}
+        #: Notes the command prints (a chunked decimation's); why extras are dropped.
+        self.notes: list[str] = []
+        self.dropped_why = "not every input has them"
 
     def scan(self, progress=None, full: bool = False):
         """``(input counts, steps, result count, SH degree, extra names of the inputs)``; a
@@ -112,7 +89,8 @@ class StreamedEdit:
         run: every row read and checked as when writing, so a refusal comes before anything
         is written)."""
         if self.counted is None:
-            if full or any(isinstance(op, ROW_TESTS) for op in self.operations) or \
+            if full or any(isinstance(op, ROW_TESTS + (RemoveFloaters,))
+                           for op in self.operations) or \
                     self.sources[0].drop_invalid:
                 tally = self._tally()
                 for _ in self._blocks(tally, progress, self.warn):
@@ -169,9 +147,10 @@ class StreamedEdit:
         return {"inputs": [s.count for s in self.sources], "dropped": [0] * len(self.sources),
                 "ops": {j: [0, 0] for j in range(len(self.operations))}}
 
-    def _blocks(self, tally: dict, progress=None, warn: bool = False):
-        """The result's blocks, in order, each checked; ``tally`` gets the counts."""
-        first = 0  # the merged input row of the block's row 0 (what 'index' reads)
+    def _inputs(self, tally: dict | None = None, progress=None, warn: bool = False):
+        """``(first, block)``: the placed, merged input blocks; ``first`` the merged input row
+        of the block's row 0 (what 'index' reads)."""
+        first = 0
         total = sum(s.count for s in self.sources)
         done = 0
         for i, (s, tr) in enumerate(zip(self.sources, self.transforms)):
@@ -181,30 +160,63 @@ class StreamedEdit:
                     merged = MergeBuilder(block.count, self.degree, self.kind, self.shared)
                     merged.add(block)
                     block = merged.scene()
-                out = self._edited(block, first, tally)
-                _nonfinite(out, tally.setdefault("out", 0), tally.setdefault("bad", {}))
-                tally["out"] += out.count
+                yield first, block
                 first += block.count
-                if out.count:
-                    yield out
                 if progress is not None:
                     done = min(done + self.rows, total)
                     progress(done, total, f"editing {s.path.name}")
-            tally["dropped"][i] = s.dropped
+            if tally is not None:
+                tally["dropped"][i] = s.dropped
+
+    def _floaters(self, progress=None) -> None:
+        """Find the rows each ``--remove-floaters`` removes, per spatial chunk, in order
+        (:func:`~.streamed_neighbours.find_floaters`)."""
+        for j, op in enumerate(self.operations):
+            if not isinstance(op, RemoveFloaters) or j in self.removed:
+                continue
+
+            def kept(j=j):
+                for first, block in self._inputs(progress=progress):
+                    keep = self._keep(block, first, j)
+                    rows = Rows(block.subset(keep), 0, int(keep.sum()))
+                    yield first + np.flatnonzero(keep), block.means[keep], rows.opacity
+            with scratch(self.output) as folder:
+                self.removed[j], found = find_floaters(op, kept, folder, self.rows)
+            self.details[j] = found.detail()
+
+    def _blocks(self, tally: dict, progress=None, warn: bool = False):
+        """The result's blocks, in order, each checked; ``tally`` gets the counts."""
+        self._floaters(progress)
+        for first, block in self._inputs(tally, progress, warn):
+            out = self._edited(block, first, tally)
+            _nonfinite(out, tally.setdefault("out", 0), tally.setdefault("bad", {}))
+            tally["out"] += out.count
+            if out.count:
+                yield out
         for name in FIELDS:  # the first field holding any, as the in-memory check names it
             if name in tally.get("bad", {}):
                 raise SplatglError(f"edit: the result's field '{name}' holds NaN or Inf (first "
                                    f"at row {tally['bad'][name]:,}); nothing written")
 
     def _edited(self, block, first: int, tally: dict):
+        return select(block, self._keep(block, first, len(self.operations), tally),
+                      self.final_degree)
+
+    def _keep(self, block, first: int, stop: int, tally: dict | None = None) -> np.ndarray:
+        """Which rows of ``block`` the operations before ``stop`` keep."""
         keep = np.ones(block.count, bool)
-        for j, op in enumerate(self.operations):
-            counts = tally["ops"][j]
+        for j, op in enumerate(self.operations[:stop]):
+            counts = [0, 0] if tally is None else tally["ops"][j]
             counts[0] += int(keep.sum())
             if isinstance(op, ROW_TESTS):
                 keep &= op.keep(Rows(block, 0, block.count, first))
+            elif isinstance(op, RemoveFloaters):
+                gone = self.removed[j]
+                rows = first + np.arange(block.count)
+                at = np.minimum(np.searchsorted(gone, rows), max(gone.size - 1, 0))
+                keep &= ~((gone[at] == rows) if gone.size else np.zeros(block.count, bool))
             counts[1] += int(keep.sum())
-        return select(block, keep, self.final_degree)
+        return keep
 
 
 def _placed(block, transform, first: int, what: str):

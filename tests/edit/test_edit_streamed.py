@@ -124,18 +124,6 @@ def test_convert_streams_ply_to_ply(tmp_path, small_blocks):
         assert got_e[key]["mean"] == pytest.approx(ref_e[key]["mean"], rel=1e-12, abs=1e-15)
 
 
-@pytest.mark.parametrize("op", [RemoveFloaters(), Decimate(percent=50)])
-def test_neighbour_operations_over_the_bound_are_refused_in_one_line(tmp_path, op):
-    src = _ply(tmp_path, _scene(50))
-    with pytest.raises(SplatglError) as err:
-        edit_files([src], tmp_path / "o.ply", [CropBox((-1, -1, -1), (1, 1, 1)), op], memory=1)
-    assert str(err.value).startswith(f"--{op.name} needs every splat's neighbours in memory: "
-                                     "the input needs about ")
-    assert str(err.value).endswith("over --memory 1 B; crop or filter it into smaller files "
-                                   "first, or give a larger --memory")
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
-
-
 def test_a_small_memory_is_one_line(tmp_path, capsys, monkeypatch):
     """A budget below what the process holds, for an input that must stream."""
     monkeypatch.setattr(streamed, "resident_now", lambda: 80 << 10)

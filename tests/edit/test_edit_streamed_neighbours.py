@@ -1,0 +1,106 @@
+"""--remove-floaters and --decimate over --memory (issue 41 item 5): per spatial chunk with a
+halo (floaters: the in-memory file, byte for byte) or per chunk alone (decimate: the in-memory
+count, a note said once); tiny blocks and chunks force the halo and the exact fallback."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from splatgl.cli import main
+from splatgl.edit import (CropBox, Decimate, Filter, RemoveFloaters, ShDegree, edit_files,
+                          streamed_edit)
+from splatgl.edit.streamed_neighbours import DECIMATE_NOTE
+from splatgl.formats import load_scene
+from splatgl.scene.splats import Scene
+
+from test_edit_streamed import _ply, _scene
+
+
+def _clusters(n: int, floaters: int, seed: int = 0) -> Scene:
+    """``n`` splats in a few tight clusters, ``floaters`` of them scattered far out."""
+    base = _scene(n, seed, degree=1, extras="label")
+    rng = np.random.default_rng(seed)
+    centres = rng.normal(size=(5, 3)) * 2
+    means = (centres[rng.integers(0, 5, n)] + rng.normal(size=(n, 3)) * 0.1).astype(np.float32)
+    means[:floaters] = rng.uniform(-6, 6, (floaters, 3))
+    return Scene(means, base.quats, base.log_scales, base.opacity_logits, base.sh,
+                 extras=base.extras)
+
+
+@pytest.fixture
+def rows(monkeypatch):
+    """Blocks, sort runs and chunks of ``rows.n`` rows."""
+    class Rows:
+        n = 7
+    monkeypatch.setattr(streamed_edit, "block_rows", lambda *a, **k: Rows.n)
+    return Rows
+
+
+@pytest.mark.parametrize("chunk, ops", [
+    (7, [RemoveFloaters(neighbours=8, sigma=1.5, opacity=1.0)]),  # chunks below k: all exact
+    (60, [RemoveFloaters(neighbours=4, sigma=1.0, opacity=0.7)]),  # halos
+    (60, [CropBox((-5, -5, -5), (5, 5, 5)), RemoveFloaters(neighbours=6, sigma=1.0),
+          Filter("index > 30"), RemoveFloaters(neighbours=3, sigma=2.0, opacity=1.0)]),
+])
+def test_floaters_per_chunk_remove_the_in_memory_set(tmp_path, rows, chunk, ops):
+    rows.n = chunk
+    src = _ply(tmp_path, _clusters(400, 25))
+    ref = edit_files([src], tmp_path / "ref.ply", ops)
+    got = edit_files([src], tmp_path / "got.ply", ops, memory=1)
+    assert any(s.removed for s in ref.steps if s.name == "remove-floaters")
+    assert (tmp_path / "got.ply").read_bytes() == (tmp_path / "ref.ply").read_bytes()
+    assert (got.steps, got.count, got.notes) == (ref.steps, ref.count, ref.notes)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["got.ply", "ref.ply", "s.ply"]
+
+
+@pytest.mark.parametrize("ops", [
+    [Decimate(percent=30)],
+    [RemoveFloaters(neighbours=4, sigma=1.0), Decimate(count=150), ShDegree(0)],
+    [Decimate(percent=50), CropBox((-1, -1, -1), (1, 1, 1))],
+])
+def test_decimate_per_chunk_keeps_the_count_and_says_so(tmp_path, rows, ops):
+    rows.n = 60
+    src = _ply(tmp_path, _clusters(400, 10))
+    ref = edit_files([src], tmp_path / "ref.ply", ops)
+    got = edit_files([src], tmp_path / "got.ply", ops, memory=1)
+    j = next(i for i, s in enumerate(ref.steps) if s.name == "decimate")
+    assert got.steps[:j + 1] == ref.steps[:j + 1]  # the count merged is the in-memory count
+    assert [s.name for s in got.steps] == [s.name for s in ref.steps]
+    assert got.notes == ref.notes + (DECIMATE_NOTE.format(rows=60),)
+    assert load_scene(tmp_path / "got.ply").count == got.count
+    assert (got.sh_degree, got.count > 0) == (ref.sh_degree, True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["got.ply", "ref.ply", "s.ply"]
+
+
+def test_a_decimation_that_merges_nothing_streams_every_row(tmp_path, rows):
+    src = _ply(tmp_path, _clusters(100, 5))
+    ops = [Decimate(count=500), ShDegree(0)]
+    ref = edit_files([src], tmp_path / "ref.ply", ops)
+    got = edit_files([src], tmp_path / "got.ply", ops, memory=1)
+    assert (tmp_path / "got.ply").read_bytes() == (tmp_path / "ref.ply").read_bytes()
+    assert (got.steps, got.notes) == (ref.steps, ref.notes)
+
+
+def test_decimate_chunk_shares_sum_to_the_target(tmp_path, rows):
+    rows.n = 37
+    src = _ply(tmp_path, _clusters(1000, 0))
+    for op in (Decimate(percent=12.5), Decimate(count=333)):
+        got = edit_files([src], tmp_path / "o.ply", [op], memory=1, force=True)
+        assert got.count == op.target(1000)
+
+
+def test_cli_edit_streams_floaters_and_says_the_decimation_once(tmp_path, capsys, rows):
+    rows.n = 50
+    src = _ply(tmp_path, _clusters(300, 12))
+    for name, memory in (("ref", []), ("got", ["--memory", "1K"])):
+        assert main(["edit", str(src), "-o", str(tmp_path / f"{name}.ply"),
+                     "--remove-floaters", "neighbours=4,sigma=1", *memory]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "got.ply").read_bytes() == (tmp_path / "ref.ply").read_bytes()
+    assert main(["edit", str(src), "-o", str(tmp_path / "d.ply"), "--decimate", "40%",
+                 "--memory", "1K"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("note: " + DECIMATE_NOTE.format(rows=50)) == 1, out
+    assert "merged" in out and "-> 120" in out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.ply", "got.ply", "ref.ply", "s.ply"]
