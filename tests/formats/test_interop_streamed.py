@@ -5,7 +5,8 @@ item 4:
 1. A Streamed SOG splat-transform writes (two levels, several chunks, an environment) reads as
    its finest level: the splats splat-transform itself decodes from level 0 (``-L 0`` to PLY,
    which leaves the environment out) followed by the environment's, and splatgl's render of it
-   is at least 40 dB against the render of those splats.
+   is at least 40 dB against the render of those splats; streamed under --memory, each level
+   (--lod-level N) is the image of that level read whole.
 2. splat-transform reads every splat of level 0 (and of each level) of a Streamed SOG splatgl
    writes (``splatgl lod S -o DIR/lod-meta.json``), within SOG's position bound.
 3. LCC (splat-transform reads it but writes none): files written per the white paper's layout
@@ -92,6 +93,49 @@ def test_streamed_sog_from_splat_transform(st, source, tmp_path):
     assert main(["render", str(out), "-o", str(tmp_path / "a.png"), *view]) == 0
     assert main(["render", str(tmp_path / "own.ply"), "-o", str(tmp_path / "b.png"), *view]) == 0
     assert _psnr(read_image(tmp_path / "a.png"), read_image(tmp_path / "b.png")) >= 40.0
+    _streams_like_its_levels(out, tmp_path)
+
+
+def _streams_like_its_levels(path, tmp_path):
+    """Issue 41 item 4: each level of the file streamed under a chunk budget smaller than the
+    level (``--lod-level N``) is the image of that level read whole (the same anchor and near
+    plane); ``render --memory --lod-level 0`` is ``render``'s image of the file to float32
+    rounding (an explicit camera: the two frame different boxes)."""
+    from splatgl.api import Renderer
+    from splatgl.cameras.camera import Camera
+    from splatgl.cameras.camera_files import save_camera
+    from splatgl.cameras.poses import look_at
+    from splatgl.imagefiles.images import read_image
+    from splatgl.lod.budget import StreamPlan
+    from splatgl.lod.selection import LodSettings
+    from splatgl.lod.stream_levels import ChunkedFrames
+    from splatgl.scene.settings import EarlyStop, RenderSettings
+
+    lod = streamed_sog.read_structure(path)
+    settings = RenderSettings(near=0.01, early_stop=EarlyStop.OFF)
+    cache = 200 << 10   # level 0 holds about 330 KiB decoded
+    plan = StreamPlan(budget=1 << 40, held=0, reserve=0, cache=cache, frame=1 << 39, per_splat=100)
+    with Renderer() as gl:
+        for level in range(lod.levels):
+            with ChunkedFrames(path, settings, LodSettings(), cache, level, plan=plan) as frames:
+                box = frames.framing.robust_bounds
+                eye = box[1] + 1.5 * (box[1] - box[0])
+                cam = Camera.from_fov(96, 64, 50.0, look_at(eye, 0.5 * (box[0] + box[1])))
+                got = frames.render_view(cam).rgba
+                stats = frames.resident.stats
+                assert stats.peak_bytes <= cache and (stats.evicted > 0) == (level == 0)
+                whole = lod.load(level)
+                whole.__dict__["anchor"] = frames.framing.anchor
+                assert frames.last_cut_nodes == whole.count
+            assert np.array_equal(gl.render(whole, cam, settings), got)
+    save_camera(tmp_path / "cam.json", cam)
+    view = ["--camera", str(tmp_path / "cam.json"), "--near", "0.01", "--renderer", "quad",
+            "--early-stop", "off"]
+    assert main(["render", str(path), "-o", str(tmp_path / "w.png"), *view]) == 0
+    assert main(["render", str(path), "-o", str(tmp_path / "s.png"), "--memory", "1.5G",
+                 "--lod-level", "0", *view]) == 0
+    a, b = read_image(tmp_path / "w.png"), read_image(tmp_path / "s.png")
+    assert a.max() > 0.2 and np.abs(a - b).max() <= 1.5 / 255
 
 
 def test_splat_transform_reads_what_splatgl_writes(st, source, tmp_path):
