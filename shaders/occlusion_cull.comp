@@ -19,9 +19,17 @@ layout(std430, binding = BINDING_SURVIVORS) writeonly buffer Survivors { uint su
 // DrawArraysIndirectCommand (count, instanceCount, first, baseInstance) in moderngl's 20-byte
 // stride (render_indirect passes stride 20 for arrays too): 5 uints per command.
 layout(std430, binding = BINDING_COMMANDS) writeonly buffer Commands { uint commands[]; };
+uniform uint u_cmd_base;
+#ifdef DEVICE_BATCHES
+// The device-resident order (splatgl/renderers/early_stop_device.py): the batch's slots come
+// from stop_plan.comp's plan, at uint u_bounds_at; the host dispatches the most groups the batch
+// can have, and groups past its end write empty commands (zero instances).
+layout(std430, binding = BINDING_STOP_PLAN) readonly buffer Plan { uint plan[]; };
+uniform uint u_bounds_at;
+#else
 uniform uint u_start;
 uniform uint u_end;
-uniform uint u_cmd_base;
+#endif
 uniform ivec2 u_tiles;         // tile grid (columns, rows)
 uniform bool u_check_tiles;    // false on the first batch: nothing has stopped yet
 
@@ -65,15 +73,20 @@ bool survives(uint k, out uint value) {
 }
 
 void main() {
+#ifdef DEVICE_BATCHES
+    uint batch_start = plan[u_bounds_at], batch_end = plan[u_bounds_at + 1u];
+#else
+    uint batch_start = u_start, batch_end = u_end;
+#endif
     uint l = gl_LocalInvocationID.x;
-    uint seg_base = u_start + gl_WorkGroupID.x * (OCCLUSION_GROUP * OCCLUSION_PER_INVOCATION);
+    uint seg_base = batch_start + gl_WorkGroupID.x * (OCCLUSION_GROUP * OCCLUSION_PER_INVOCATION);
     uint first = seg_base + l * OCCLUSION_PER_INVOCATION;
     uint values[OCCLUSION_PER_INVOCATION];
     uint count = 0u;
     for (uint j = 0u; j < OCCLUSION_PER_INVOCATION; ++j) {
         uint k = first + j;
         uint v;
-        if (k < u_end && survives(k, v)) values[count++] = v;
+        if (k < batch_end && survives(k, v)) values[count++] = v;
     }
     // Inclusive scan of the per-invocation counts (Hillis-Steele over the work group).
     s_scan[l] = count;

@@ -141,6 +141,8 @@ ORDER_BINDING_BLOCKS = 17
 ORDER_BINDING_COMMAND = 18
 ORDER_BINDING_KEYS = 19
 ORDER_BINDING_VALUES = 20
+#: stop_plan.comp: one invocation plans early termination with the device order.
+STOP_PLAN_GROUP = 1
 #: order_cull.comp, order_compact.comp: splats per work group (one invocation each).
 ORDER_GROUP = 128
 #: order_scan.comp: threads of its one work group (each scans a run of the groups' counts).
@@ -148,6 +150,10 @@ ORDER_SCAN_GROUP = 256
 #: quad_prepass.comp with DEVICE_COUNT: the device order's draw command, whose instance count
 #: (the kept splats) bounds the slots it prepares.
 BINDING_DEVICE_COUNT = 15
+#: Early termination with the device order (renderers/early_stop_device.py): stop_plan.comp's
+#: plan (batch bounds, the passes' indirect commands), read by occlusion_cull.comp
+#: (DEVICE_BATCHES).
+BINDING_STOP_PLAN = 16
 
 #: Programs that bind together (see the module doc): in each, every binding point is distinct.
 _SCENE = ("BINDING_A", "BINDING_Q", "BINDING_S", "BINDING_DC", "BINDING_SH")
@@ -155,7 +161,8 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "quad path storage": _SCENE + (
         "BINDING_ORDER", "BINDING_PREPARED", "BINDING_FRAGMENT_COUNTS", "BINDING_STOP_TILES",
         "BINDING_SURVIVORS", "BINDING_COMMANDS", "BINDING_OPACITY_WEIGHT", "BINDING_COVERAGE",
-        "BINDING_PREPARED_NORMAL", "BINDING_PREPARED_RADIUS", "BINDING_DEVICE_COUNT"),
+        "BINDING_PREPARED_NORMAL", "BINDING_PREPARED_RADIUS", "BINDING_DEVICE_COUNT",
+        "BINDING_STOP_PLAN"),
     "tile renderer storage": _SCENE + tuple(
         name for name in globals() if name.startswith("TILE_BINDING_")),
     "device order storage": _SCENE + tuple(

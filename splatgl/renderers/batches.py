@@ -106,7 +106,8 @@ class EarlyStopPasses:
         self.ctx.memory_barrier()
         sums = np.frombuffer(partial.read(size=4 * groups * COVERAGE_GROUP), np.float32)
         transfers(self.ctx).read(sums.nbytes)
-        return float(sums.sum(dtype=np.float64))
+        # added in float64 in index order: shaders/stop_plan.comp adds them so on the device
+        return float(np.cumsum(sums, dtype=np.float64)[-1])
 
     def survivor_count(self, n_cmd: int) -> int:
         """Sum of the instance counts of the first ``n_cmd`` commands (after the frame)."""

@@ -46,6 +46,7 @@ from ..output.layers import BASE, ORDERED, Layer, RenderOutput
 from ..output.under import UnderLayer
 from .batches import Batches
 from .options import QuadOptions
+from . import early_stop_device
 from .early_stop import BatchHook
 from .quad_device import DeviceOrder
 from .quad_gpu import QuadResources
@@ -262,7 +263,11 @@ class QuadRenderer(Registered):
         if under is not None:
             self.gpu.bind_under(under.depth)
         tp = time.perf_counter()
-        if self.gpu.triangles or self._device_frame:   # plain draws only (see use_triangles)
+        device_stop = (self._device_frame and not self.gpu.triangles
+                       and self.batches.mode is not EarlyStop.OFF)
+        if device_stop:   # batched as the device decides (early_stop_device.py)
+            batched = self.batches.batched = True
+        elif self.gpu.triangles or self._device_frame:   # plain draws only (see use_triangles)
             batched = self.batches.batched = False
         else:
             batched = self.batches.decide(view, count, frame)
@@ -284,7 +289,10 @@ class QuadRenderer(Registered):
         self.batches.batches = 0
         self.batches.occlusion_culled = 0
         try:
-            if self._device_frame:
+            if device_stop:
+                run = lambda: early_stop_device.draw(self.batches, view, target, prog,  # noqa: E731
+                                                     frame, self._device, self.gpu)
+            elif self._device_frame:
                 run = lambda: self.gpu.draw_indirect(prog, self._device.values,  # noqa: E731
                                                      self._device.command)
             else:
