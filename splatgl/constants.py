@@ -119,6 +119,10 @@ MAX_SH_DEGREE = 3
 #: 32-bit keys, fewer where the keys share bits.
 RADIX_BITS = 8
 RADIX_ITEMS = 32
+#: The block passes of the radix sort on software devices (shaders/radix_block_*.comp,
+#: splatgl/gl/radix_block.py): bits per pass (2048 digit values, counted in a private array per
+#: lane), so 32-bit keys take at most 3 passes.
+RADIX_BLOCK_BITS = 11
 
 #: The tile renderer's device order (``--sort gpu``, splatgl/renderers/tile_device.py): tiles
 #: touched per thread of the scan (shaders/tile_scan.comp; a block is TILE_SCAN_GROUP times
@@ -220,6 +224,7 @@ def glsl_defines() -> dict[str, str]:
         "SH_C1": glsl_float(SH_C1),
         "RADIX_BITS": str(RADIX_BITS),
         "RADIX_ITEMS": str(RADIX_ITEMS),
+        "RADIX_BLOCK_BITS": str(RADIX_BLOCK_BITS),
         "TILE_SCAN_ITEMS": str(TILE_SCAN_ITEMS),
         "TILE_OVERFLOW_ALPHA": glsl_float(TILE_OVERFLOW_ALPHA),
         "DEVICE_CULL_BAND": glsl_float(DEVICE_CULL_BAND),

@@ -26,6 +26,10 @@ layout(std430, binding = RADIX_BINDING_STATE) coherent buffer RadixState {
     uvec4 st_pass[RADIX_SLOTS];  // xyz: groups of pass s (u_tiles, or 0 to skip it); w: its shift
     uvec4 st_scan[RADIX_SLOTS];  // xyz: groups of pass s's scan (RADIX or 0)
     uvec4 st_copy;               // xyz: groups of the final copy (u_tiles when st_passes is odd)
+    // The block passes (radix_block_*.comp, software devices) only: pass s's scatter into the
+    // next pass's buffers (st_mid) or, as the last of several passes, into A (st_last).
+    uvec4 st_mid[RADIX_SLOTS];
+    uvec4 st_last[RADIX_SLOTS];
     uint st_total[RADIX_SLOTS * RADIX];  // keys of each digit in pass s: [s * RADIX + d]
 };
 

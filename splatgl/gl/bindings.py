@@ -129,6 +129,11 @@ RADIX_GROUP = 128
 RADIX_SCAN_GROUP = 64
 #: radix_downsweep.comp without subgroup operations: threads that exchange digits as one warp.
 RADIX_PORTABLE_WARP = 16
+#: radix_block_*.comp (software devices, gl/radix_block.py): lanes of a work group, each owning
+#: a contiguous block of keys (llvmpipe's 8 SIMD lanes at 256 bits), and the threads of the
+#: block scan's one work group.
+RADIX_BLOCK_LANES = 8
+RADIX_BLOCK_SCAN_GROUP = 64
 
 #: order_cull.comp, order_scan.comp, order_compact.comp (the device-resident order,
 #: splatgl/renderers/quad_device.py): the cull data (two vec4 per splat), each splat's staged

@@ -1,6 +1,11 @@
 """Device sort: a compute-shader LSD radix sort of 32-bit keys with a 32-bit payload.
 
-The design (reduce-then-scan, as in GPUSorting's DeviceRadixSort; ranking by warp-level
+Two designs, by device: on software rasterisers (llvmpipe) the block passes of
+:mod:`splatgl.gl.radix_block` (each invocation sorts a contiguous block serially: the CPU
+parallel radix sort, with no barriers or shared memory); on GPUs the work-group design below.
+Both are stable and give the same order.
+
+The work-group design (reduce-then-scan, as in GPUSorting's DeviceRadixSort; ranking by warp-level
 multi-split, as in Onesweep), in dispatches that read their sizes from the device:
 
 1. ``radix_bits.comp``: the OR and the AND of all keys.
@@ -35,13 +40,14 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from ..constants import RADIX_BITS, RADIX_ITEMS
+from ..constants import RADIX_BITS, RADIX_BLOCK_BITS, RADIX_ITEMS
 from ..errors import ShaderError
 from ..splatmath.radix import key_bits
-from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
+from .bindings import (RADIX_BINDING_HIST, RADIX_BLOCK_LANES, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
                        RADIX_BINDING_STATE, RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT,
                        RADIX_GROUP, RADIX_PORTABLE_WARP)
 from .egl_devices import is_software_renderer
+from .radix_block import BLOCK_SLOTS, BlockPasses
 from .shaders import ProgramCache
 from .transfers import transfers
 
@@ -50,18 +56,25 @@ TILE_KEYS = RADIX_GROUP * RADIX_ITEMS
 RADIX = 1 << RADIX_BITS
 #: Pass slots: enough RADIX_BITS-bit digits for 32-bit keys.
 SLOTS = 32 // RADIX_BITS
-#: The downsweep's ways of ranking (see the module doc), best first.
+#: The downsweep's ways of ranking (see the module doc), best first; ``block``: the block
+#: passes instead of the work-group design (software devices' default).
 PATHS = ("khr", "arb", "portable")
+BLOCK = "block"
 
 # The state buffer (lib/radix.glsl, RadixState, std430): 4 uints, the key count and 3 spare,
 # then uvec4 per pass slot (dispatch size, shift), uvec4 per slot (the scan's dispatch size),
-# one uvec4 (the copy's), then the digit totals.  Byte offsets of the count and of the indirect
-# dispatch arguments:
+# one uvec4 (the copy's), uvec4 per slot twice (the block passes' scatters), then the digit
+# totals.  Byte offsets of the count and of the indirect dispatch arguments:
 _COUNT = 16
 _PASS_ARGS = 32
 _SCAN_ARGS = _PASS_ARGS + 16 * SLOTS
 _COPY_ARGS = _SCAN_ARGS + 16 * SLOTS
-_STATE_BYTES = _COPY_ARGS + 16 + 4 * SLOTS * RADIX
+_MID_ARGS = _COPY_ARGS + 16
+_LAST_ARGS = _MID_ARGS + 16 * SLOTS
+_STATE_BYTES = _LAST_ARGS + 16 * SLOTS + 4 * SLOTS * RADIX
+_BLOCK_ARGS = {"pass": _PASS_ARGS, "scan": _SCAN_ARGS, "mid": _MID_ARGS, "last": _LAST_ARGS,
+               "copy": _COPY_ARGS}
+assert BLOCK_SLOTS <= SLOTS
 
 
 def subgroup_paths(ctx: moderngl.Context) -> list[str]:
@@ -82,25 +95,38 @@ def _subgroup_size(programs: ProgramCache, state: moderngl.Buffer, path: str) ->
 class RadixSorter:
     """Sorts (M,) uint32 keys with uint32 values on the device; reuse it, then :meth:`release`.
 
-    ``path`` picks the downsweep's ranking (:data:`PATHS`); by default the best the context
-    offers whose shaders compile with a subgroup size that divides RADIX_GROUP.  ``narrow``
-    runs one warp per work group with TILE_KEYS / warp keys a lane (radix_downsweep.comp: no
-    per-warp histograms to clear and scan), by default on software renderers, where a work
-    group runs on one CPU thread and a warp is its SIMD lanes (llvmpipe's 8).  Buffers grow to
-    the largest M seen and are kept between calls.
+    ``path`` ``"block"`` runs the block passes (:mod:`splatgl.gl.radix_block`), by default on
+    software renderers; otherwise it picks the work-group design's ranking (:data:`PATHS`), by
+    default the best the context offers whose shaders compile with a subgroup size that
+    divides RADIX_GROUP.  ``block=False`` asks for the work-group design on a software
+    renderer.  ``narrow`` runs one warp per work group with TILE_KEYS / warp keys a lane
+    (radix_downsweep.comp: no per-warp histograms to clear and scan), by default on software
+    renderers, where a work group runs on one CPU thread and a warp is its SIMD lanes
+    (llvmpipe's 8).  Software renderers are those :func:`splatgl.gl.egl_devices.is_software_renderer`
+    names, as for the device class (:mod:`splatgl.gl.device_class`).  Buffers grow to the largest M seen and are kept between calls.
     """
 
     def __init__(self, ctx: moderngl.Context, programs: ProgramCache | None = None,
-                 path: str | None = None, narrow: bool | None = None):
+                 path: str | None = None, narrow: bool | None = None, block: bool | None = None):
         self.ctx = ctx
         self.programs = programs or ProgramCache(ctx)
-        if path is not None and path not in PATHS:
-            raise ValueError(f"radix sort path {path!r}: expected one of {', '.join(PATHS)}")
+        if path is not None and path not in PATHS + (BLOCK,):
+            raise ValueError(f"radix sort path {path!r}: expected one of "
+                             f"{', '.join(PATHS + (BLOCK,))}")
+        # what the device is decides the design, as in gl/device_class.py's classify (whose
+        # measured probe sorts with this class, so it cannot ask it); SPLATGL_DEVICE_CLASS,
+        # which forces the --sort/--early-stop defaults, leaves llvmpipe's sort as it is
+        self._software = is_software_renderer(ctx.info.get("GL_RENDERER", ""))
         self._capacity = 0
-        self._bufs: list[moderngl.Buffer] = []  # keys A, values A, keys B, values B, hist
+        # keys A, values A, keys B, values B, hist (block passes: then keys C, values C)
+        self._bufs: list[moderngl.Buffer] = []
         self._state = ctx.buffer(reserve=_STATE_BYTES)
         self._narrow = narrow
-        self._software = is_software_renderer(ctx.info.get("GL_RENDERER", ""))
+        if path is None and (block if block is not None else self._software):
+            path = BLOCK
+        self._block: BlockPasses | None = None
+        #: Bits of a pass's digits (the twin's ``bits``).
+        self.digit_bits = RADIX_BLOCK_BITS if path == BLOCK else RADIX_BITS
         try:
             self.path, self.warp, self.narrow, self._progs = self._choose(path)
         except BaseException:
@@ -120,6 +146,11 @@ class RadixSorter:
         raise ShaderError("radix sort: no downsweep path compiles")  # portable always should
 
     def _try(self, path: str):
+        if path == BLOCK:
+            self._block = BlockPasses(self.programs)
+            self._progs = {}
+            self._check(path, RADIX_BLOCK_LANES)
+            return path, RADIX_BLOCK_LANES, False, self._progs
         warp, defines = RADIX_PORTABLE_WARP, {}
         if path != "portable":
             warp = _subgroup_size(self.programs, self._state, path)
@@ -132,6 +163,11 @@ class RadixSorter:
             defines.update(RADIX_GROUP=warp, RADIX_ITEMS=TILE_KEYS // warp, RADIX_NARROW=1)
         self._progs = {name: self.programs.compute(f"radix_{name}.comp", defines)
                        for name in ("bits", "plan", "upsweep", "scan", "downsweep", "copy")}
+        self._check(path, warp)
+        return path, warp, narrow, self._progs
+
+    def _check(self, path: str, warp: int) -> None:
+        """Sort a test array once: a ShaderError where the order is wrong on this device."""
         self._state.write(np.array([0, 0xFFFFFFFF], np.uint32).tobytes())  # no bits seen
         keys = (np.arange(2 * TILE_KEYS + 77, dtype=np.uint32) * np.uint32(2654435761)
                 % np.uint32(3001)) << np.uint32(3)  # ties, two passes, a partial tile
@@ -139,7 +175,6 @@ class RadixSorter:
                               np.argsort(keys, kind="stable")):
             raise ShaderError(f"radix sort path {path} (subgroup size {warp}) sorts wrongly "
                               "on this device")
-        return path, warp, narrow, self._progs
 
     def reserve(self, count: int) -> None:
         """Room for ``count`` keys (the buffers are replaced, their contents lost, when they
@@ -149,8 +184,13 @@ class RadixSorter:
         for buf in self._bufs:
             buf.release()
         tiles = -(-count // TILE_KEYS)
-        self._bufs = [self.ctx.buffer(reserve=4 * count) for _ in range(4)]
-        self._bufs.append(self.ctx.buffer(reserve=4 * RADIX * tiles))
+        size = 16 * -(-count // 4)  # whole uvec4s (the block passes read 4 keys at a time)
+        self._bufs = [self.ctx.buffer(reserve=size) for _ in range(4)]
+        if self._block is None:
+            self._bufs.append(self.ctx.buffer(reserve=4 * RADIX * tiles))
+        else:
+            self._bufs.append(self.ctx.buffer(reserve=self._block.hist_bytes()))
+            self._bufs += [self.ctx.buffer(reserve=size) for _ in range(2)]
         self._capacity = count
 
     def sort(self, keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -194,7 +234,7 @@ class RadixSorter:
         back); ``count`` is then the most there can be (the buffers' size), and a device count
         above it sorts ``count`` keys."""
         self.reserve(count)
-        k_a, v_a, k_b, v_b, hist = self._bufs
+        k_a, v_a, k_b, v_b, hist = self._bufs[:5]
         tiles = max(1, -(-self._capacity // TILE_KEYS))  # hist's rows; the plan sizes the passes
         progs = self._progs
         for prog in progs.values():
@@ -209,14 +249,21 @@ class RadixSorter:
             self.ctx.copy_buffer(self._state, device_count[0], 4, read_offset=device_count[1],
                                  write_offset=_COUNT)
         self._state.bind_to_storage_buffer(RADIX_BINDING_STATE)
+        if bits is not None:
+            self._state.write(np.asarray(bits, np.uint32))
+            moved.upload(8)
+        if self._block is not None:
+            sets = ((k_a, v_a), (k_b, v_b), tuple(self._bufs[5:7]))
+            self._block.record(self.ctx, self._state, sets, hist, self._capacity, bits is None,
+                               _BLOCK_ARGS)
+            for prog in self._block.programs.values():
+                moved.uniforms(prog)
+            return k_a, v_a
         hist.bind_to_storage_buffer(RADIX_BINDING_HIST)
         if bits is None:
             k_a.bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
             progs["bits"].run(group_x=tiles if device_count else max(1, -(-count // TILE_KEYS)))
             self.ctx.memory_barrier()
-        else:
-            self._state.write(np.asarray(bits, np.uint32))
-            moved.upload(8)
         progs["plan"].run(group_x=1)
         self.ctx.memory_barrier()
         src, dst = (k_a, v_a), (k_b, v_b)

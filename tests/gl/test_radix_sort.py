@@ -56,6 +56,39 @@ def test_twin_is_a_stable_argsort_of_any_keys(values, shift):
     np.testing.assert_array_equal(got_values, payload[want])
 
 
+@given(st.lists(st.integers(0, 2 ** 32 - 1), min_size=0, max_size=200), st.sampled_from([8, 11]))
+@settings(max_examples=60)
+def test_twin_sorts_by_either_digit_width(values, bits):
+    keys = np.array(values, np.uint32)
+    payload = np.arange(keys.size, dtype=np.uint32)
+    got_keys, got_values = radix_sort_twin(keys, payload, bits)
+    np.testing.assert_array_equal(got_values, np.argsort(keys, kind="stable"))
+    assert len(radix_passes(keys, bits)) <= -(-32 // bits)
+
+
+def test_block_passes_cover_the_differing_bits_in_11_bit_digits():
+    assert radix_passes(np.array([1 << 4, 1 << 27], np.uint32), 11) == [4, 15, 26]
+    assert radix_passes(np.array([0, 0xFFFFFFFF], np.uint32), 11) == [0, 11, 22]
+    assert radix_passes(np.array([0x100, 0x300], np.uint32), 11) == [9]
+
+
+def test_software_devices_sort_with_the_block_passes(ctx, programs):
+    """What the device is decides the design: the block passes on llvmpipe (the work-group
+    design on GPUs, on request here)."""
+    if not is_software_renderer(ctx.info["GL_RENDERER"]):
+        pytest.skip("written for a software renderer")
+    s = RadixSorter(ctx, programs)
+    try:
+        assert (s.path, s.digit_bits) == ("block", 11)
+    finally:
+        s.release()
+    s = RadixSorter(ctx, programs, block=False)
+    try:
+        assert s.path in ("khr", "arb", "portable") and s.digit_bits == 8 and s.narrow
+    finally:
+        s.release()
+
+
 def test_passes_cover_only_the_bits_keys_differ_in():
     keys = np.array([0x3F800000, 0x3F8000FF], np.uint32)  # differ in the low 8 bits only
     assert radix_passes(keys) == [0]
@@ -76,10 +109,12 @@ def _keys(kind: str, n: int, rng) -> np.ndarray:
         return np.full(n, 0xDEADBEEF, np.uint32)
     if kind == "one pass":
         return rng.integers(0, 200, n).astype(np.uint32) << np.uint32(20)
+    if kind == "two block passes":  # 20 bits: 2 passes of 11 (the last writes A), 3 of 8
+        return rng.integers(0, 1 << 20, n).astype(np.uint32) << np.uint32(5)
     return rng.integers(0, 1 << 24, n).astype(np.uint32) << np.uint32(3)  # three passes
 
 
-KINDS = ("random", "duplicates", "equal", "one pass", "three passes")
+KINDS = ("random", "duplicates", "equal", "one pass", "two block passes", "three passes")
 SIZES = (0, 1, 2, 7, TILE_KEYS - 1, TILE_KEYS, TILE_KEYS + 1, 3 * TILE_KEYS + 123, 60_000)
 
 
@@ -92,19 +127,25 @@ def programs(ctx):
 
 
 @pytest.fixture(scope="module", params=[
-    "subgroup", "portable",
+    "block", "subgroup", "portable",
     # the wide groups GPUs run: llvmpipe compiles them in 5-45 s
     pytest.param("subgroup, wide groups", marks=pytest.mark.slow),
     pytest.param("portable, wide groups", marks=pytest.mark.slow)])
 def sorter(request, ctx, programs):
-    """One sorter per downsweep path and group shape (reused across sizes, as a renderer
-    reuses it).  On llvmpipe the default sorters run one warp per group; the wide-group ones
-    are the shape GPUs run."""
+    """One sorter per design, downsweep path and group shape (reused across sizes, as a
+    renderer reuses it): the block passes (software devices' default), and the work-group
+    design, which on llvmpipe runs one warp per group; the wide-group ones are the shape GPUs
+    run."""
+    if request.param == "block":
+        s = RadixSorter(ctx, programs, path="block")
+        yield s
+        s.release()
+        return
     paths = subgroup_paths(ctx)
     path = "portable" if request.param.startswith("portable") else paths[0]
     if request.param.startswith("subgroup") and path == "portable":
         pytest.skip("no subgroup extension on this device")
-    s = RadixSorter(ctx, programs, path=path,
+    s = RadixSorter(ctx, programs, path=path, block=False,
                     narrow=False if request.param.endswith("wide groups") else None)
     yield s
     s.release()
@@ -121,7 +162,7 @@ def test_device_sort_is_numpys_stable_argsort(sorter, n, kind):
     np.testing.assert_array_equal(got_keys, keys[want])
     np.testing.assert_array_equal(got_values, values[want])
     if n >= 2:  # the device planned the passes the twin plans, nothing read back to do it
-        shifts = radix_passes(keys)
+        shifts = radix_passes(keys, sorter.digit_bits)
         assert sorter.last_plan() == ((shifts[0] if shifts else 0), len(shifts))
 
 
@@ -141,7 +182,7 @@ def test_resident_sort_finds_the_key_bits_on_the_device(sorter, n, kind):
     want = np.argsort(keys, kind="stable")
     np.testing.assert_array_equal(np.frombuffer(v_a.read(4 * n), np.uint32), want)
     np.testing.assert_array_equal(np.frombuffer(k_a.read(4 * n), np.uint32), keys[want])
-    shifts = radix_passes(keys)
+    shifts = radix_passes(keys, sorter.digit_bits)
     assert sorter.last_plan() == ((shifts[0] if shifts else 0), len(shifts))
 
 
@@ -237,7 +278,7 @@ def test_a_path_that_sorts_wrongly_is_not_used(ctx, programs, monkeypatch):
     if subgroup_paths(ctx) != ["arb", "portable"]:
         pytest.skip("written for llvmpipe's paths")
     monkeypatch.setattr(radix_sort, "_subgroup_size", lambda *args: 16)  # llvmpipe's is 8
-    s = RadixSorter(ctx, programs)
+    s = RadixSorter(ctx, programs, block=False)
     try:
         assert s.path == "portable"
         keys = np.arange(5000, dtype=np.uint32)[::-1] % np.uint32(7)
