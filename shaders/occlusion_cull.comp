@@ -80,6 +80,19 @@ void main() {
 #endif
     uint l = gl_LocalInvocationID.x;
     uint seg_base = batch_start + gl_WorkGroupID.x * (OCCLUSION_GROUP * OCCLUSION_PER_INVOCATION);
+#ifdef DEVICE_BATCHES
+    if (seg_base >= batch_end) {      // past the batch (the whole group): an empty command
+        if (l == 0u) {
+            uint c = 5u * (u_cmd_base + gl_WorkGroupID.x);
+            commands[c] = 4u;
+            commands[c + 1u] = 0u;
+            commands[c + 2u] = 0u;
+            commands[c + 3u] = 0u;
+            commands[c + 4u] = 0u;
+        }
+        return;
+    }
+#endif
     uint first = seg_base + l * OCCLUSION_PER_INVOCATION;
     uint values[OCCLUSION_PER_INVOCATION];
     uint count = 0u;
