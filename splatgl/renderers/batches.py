@@ -5,7 +5,9 @@ that does not pay) in plain batches of at most :data:`~splatgl.renderers.early_s
 splats; with it on, in its schedule, with the mark, tile and occlusion-cull passes between
 batches (:class:`EarlyStopPasses`; the algorithm, its accuracy and its NumPy twins are in
 :mod:`splatgl.renderers.early_stop`).  :class:`Batches` decides per frame and draws; a hook
-called after each batch may raise KeyboardInterrupt to abandon the frame.
+called after each batch may raise KeyboardInterrupt to abandon the frame.  With the
+device-resident order the same batches are planned and drawn on the device
+(:mod:`splatgl.renderers.early_stop_device`).
 """
 
 from __future__ import annotations

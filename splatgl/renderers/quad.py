@@ -69,7 +69,9 @@ class QuadTimes:
     draw: float
     readback: float
     drawn: int = 0
-    #: Splats the early-termination occlusion cull dropped (0 with early_stop off).
+    #: Splats the early-termination occlusion cull dropped (0 with early_stop off, and with the
+    #: device order, whose early termination is decided on the device: ``batched`` is then
+    #: True, ``batches`` the batches issued and ``fragments_estimate`` 0).
     occlusion_culled: int = 0
     #: Seconds this frame spent building the scene's chunked cull data (the first culled view
     #: only; :class:`splatgl.order.chunks.ChunkedCull`), apart from the per-view ``cull``.

@@ -29,9 +29,8 @@ programs' uniforms; the scene's cull data (:class:`~splatgl.order.cull.CullData`
 splat) is uploaded once.  Views this order does not cover (:meth:`DeviceOrder.covers`:
 omni-directional stereo, whose eye offsets need transcendentals no device reproduces bit for
 bit, the cull off, a level-of-detail cut, the ordered layers) take the CPU cull with the device
-sort instead.  Early termination is not run with this order (the draw is one indirect draw):
-its batch bounds and schedule are decided on the host from the kept count and a coverage
-estimate, which would be read back.
+sort instead.  Early termination runs with this order through
+:mod:`~splatgl.renderers.early_stop_device` (its decisions made on the device).
 """
 
 from __future__ import annotations
