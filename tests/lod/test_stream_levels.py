@@ -4,6 +4,8 @@ frames, exact for their choice) and splatgl.lod.stream_levels_view (the viewer's
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -16,9 +18,7 @@ from splatgl.cli import main
 from splatgl.errors import SplatglError
 from splatgl.formats import lcc, streamed_sog
 from splatgl.imagefiles.images import read_image
-from splatgl.lod import streamed_sog_write
 from splatgl.lod.budget import StreamPlan
-from splatgl.lod.build import build_hierarchy
 from splatgl.lod.level_cut import NOT_DRAWN, ChunkTable, choose_levels, level_errors
 from splatgl.lod.selection import LodSettings
 from splatgl.lod.stream_levels import ChunkedFrames
@@ -43,7 +43,7 @@ def _scene(n: int = 1200) -> Scene:
 
 
 def _chunked(tmp_path, kind: str):
-    """A small Streamed SOG (splatgl's own writer) or LCC (the white paper's layout) with an
+    """A small Streamed SOG (``splatgl lod scene.ply -o out/lod-meta.json``) or LCC (the white paper's layout) with an
     environment (LCC) and several chunks; its structure."""
     scene = _scene()
     if kind == "lcc":
@@ -52,8 +52,13 @@ def _chunked(tmp_path, kind: str):
         path = write_lcc(tmp_path, [scene, scene.subset(np.arange(0, 1200, 4))], cells=5,
                          environment=scene.subset(np.arange(20)))
         return path, lcc.read_structure(path)
-    path = tmp_path / "lod-meta.json"
-    streamed_sog_write.write_streamed_sog(path, build_hierarchy(scene, 4), chunk_splats=256)
+    from splatgl.formats import ply_write
+
+    ply_write.write(tmp_path / "scene.ply", scene)   # as a user writes one: 'splatgl lod'
+    path = tmp_path / "out" / "lod-meta.json"
+    path.parent.mkdir()
+    assert main(["lod", str(tmp_path / "scene.ply"), "-o", str(path), "--chunk-splats", "256",
+                 "--branching", "4"]) == 0
     return path, streamed_sog.read_structure(path)
 
 
@@ -217,6 +222,7 @@ def test_bench_and_path_stream_a_chunked_scene(tmp_path, capsys):
     import json
 
     path, _ = _chunked(tmp_path, "streamed-sog")
+    capsys.readouterr()   # what 'splatgl lod' said
     assert main(["bench", str(path), "--memory", "1.5G", "--quick", "--frames", "2",
                  "--width", "64", "--height", "48", "--json", "-"]) == 0
     report = json.loads(capsys.readouterr().out)
@@ -252,3 +258,68 @@ def test_frame_cap_coarsens_the_levels_and_says_so(tmp_path, gl_renderer, kind):
             chosen.append(structure.load(0, [], environment=True))
         want = _anchored(streamed_sog.concatenate(chosen), frames.framing.anchor)
     assert np.array_equal(gl_renderer.render(want, cam, SETTINGS), image)
+
+
+@pytest.mark.slow
+def test_eval_memory_scores_a_streamed_lcc(tmp_path, capsys):
+    """``eval SCENE --memory --lod-level 0`` on an LCC: each view streamed (photographs: the
+    whole level's renders with the stream's anchor, so the same images)."""
+    import json
+
+    from splatgl.api import Renderer
+    from splatgl.datasets import colmap
+    from splatgl.datasets.named_camera import NamedCamera
+    from splatgl.imagefiles.images import write_image
+
+    path, structure = _chunked(tmp_path, "lcc")
+    root = tmp_path / "data"
+    (root / "images").mkdir(parents=True)
+    views = [NamedCamera(f"v{i}.png", _camera(4.0 + i, 0.3 * i)) for i in range(2)]
+    with ChunkedFrames(path, RenderSettings(), LodSettings(), 1 << 20, 0,
+                       plan=cache_plan(1 << 20)) as frames:
+        whole = _anchored(structure.load(0), frames.framing.anchor)
+    with Renderer() as gl:
+        for view in views:
+            rgba = gl.render(whole, view.camera, RenderSettings())
+            write_image(root / "images" / view.name, np.concatenate(
+                [np.clip(rgba[..., :3], 0, 1), np.ones_like(rgba[..., :1])], -1), 16)
+    colmap.write_colmap(root / "sparse" / "0", views)
+    assert main(["eval", str(path), "--dataset", str(root), "--memory", "1.5G", "--lod-level",
+                 "0", "--json", str(tmp_path / "s.json")]) == 0
+    assert "streaming: resident" in capsys.readouterr().out
+    assert json.loads((tmp_path / "s.json").read_text())["mean"]["psnr"] > 60
+    assert main(["eval", str(path), "--dataset", str(root), "--lod-level", "0"]) == 2
+    assert "add --memory SIZE" in capsys.readouterr().err
+
+
+@pytest.mark.window
+def test_view_memory_window_refines_a_streamed_sog(xvfb_display, tmp_path):
+    """One short window over a Streamed SOG: drawn from the pinned coarsest levels, again as
+    chunks arrive until the view's choice is complete; the status panel shows resident memory;
+    F12 waits for the chunks and writes the screenshot."""
+    from splatgl.errors import ContextError
+    from splatgl.viewer.app import Viewer, ViewerOptions
+    from splatgl.viewer.screenshot import take_screenshot
+
+    path, _ = _chunked(tmp_path, "streamed-sog")
+    stream = ChunkedScene(path, LodSettings(), 1 << 20, plan=cache_plan(1 << 20))
+    options = ViewerOptions(visible=True, screenshot_dir=tmp_path, render_args=(str(path),),
+                            vsync=False, target_fps=0.0, stream=stream)
+    try:
+        try:
+            v = Viewer(stream.framing, SETTINGS, _camera(3.0, 0.5), options=options)
+        except ContextError as exc:
+            pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
+        with v:
+            assert v.step()
+            for _ in range(100):
+                if stream.complete:
+                    break
+                threading.Event().wait(0.02)
+                v.step()
+            assert stream.complete
+            assert "resident" in v._status(v.camera()).message
+            png, _ = take_screenshot(v)
+            assert png.exists()
+    finally:
+        stream.close()
