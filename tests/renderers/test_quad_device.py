@@ -3,9 +3,9 @@ the frame's transfer accounting (splatgl/gl/transfers.py), on llvmpipe.
 
 The device cull (shaders/order_cull.comp) keeps what the CPU cull keeps, in the same order,
 plus at most splats whose float64 peak-alpha bound lies within DEVICE_CULL_BAND of the 1/255
-cut; frames are identical to the CPU order's (early termination off on both: the device order
-draws plainly); a moving-camera frame uploads only uniforms and its 16-byte draw command and
-reads back only the image.
+cut; frames are identical to the CPU order's (early termination off on both here; with it
+on: test_quad_device_stop.py; lens views: test_quad_device_lens.py); a moving-camera frame
+uploads only uniforms and its 16-byte draw command and reads back only the image.
 """
 
 from __future__ import annotations
