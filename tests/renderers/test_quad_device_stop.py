@@ -122,3 +122,17 @@ def test_the_host_issues_enough_batches_and_commands_for_any_count(slots):
             for b, (s, e) in enumerate(zip(bounds[:-1], bounds[1:])):
                 assert -(-(e - s) // SEGMENT) <= groups[b], (count, schedule, b)
     assert groups[0] * SEGMENT >= slots and max(groups[1:] or [0]) * SEGMENT <= MAX_BATCH + SEGMENT
+
+
+@pytest.mark.parametrize("projection", ["orthographic", "fisheye", "equirectangular"])
+def test_lens_views_are_identical_with_early_termination_on(ctx, projection):
+    """The lens culls' order (a panorama's seam copies among its slots) batched alike."""
+    from splatgl.cameras.framing import default_camera
+
+    scene = _scene(**VIEWS["large"][0])
+    cam = default_camera(scene, 96, 48, distance_scale=0.6, projection=projection)
+    want, cpu, _ = _render(ctx, scene, cam, SortKey.EXACT, EarlyStop.ON)
+    got, dev, t = _render(ctx, scene, cam, SortKey.GPU, EarlyStop.ON)
+    assert want.any() and t.device_order and cpu["batched"] and dev["batched"]
+    assert dev["bounds"][-1] == cpu["count"]
+    np.testing.assert_array_equal(got, want)
