@@ -30,7 +30,7 @@ from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shar
                         transform_scene)
 from .streamed import NORMALS, block_rows, vertex_dtype, write_blocks
 from .streamed_outputs import check_kind, whole_chunks, write_compressed, write_splat
-from .streamed_neighbours import find_floaters
+from .streamed_neighbours import find_floaters, floater_rows
 from .streamed_sort import full_box_codes, record_dtype, scratch, sorted_runs, to_records, to_scene
 
 
@@ -41,7 +41,7 @@ class StreamedEdit:
     def __init__(self, sources, transforms, operations, memory: int, warn: bool = False,
                  format_name: str = "ply", output=None):
         self.warn = warn  # InvalidRowsDropped once, in the first pass (convert; edit counts)
-        self.format_name, self.output = format_name, output
+        self.format_name, self.output, self.memory = format_name, output, memory
         self.sources, self.transforms, self.operations = sources, transforms, operations
         kinds = {s.kind for s in sources}
         if len(kinds) > 1:
@@ -180,8 +180,9 @@ class StreamedEdit:
                     keep = self._keep(block, first, j)
                     rows = Rows(block.subset(keep), 0, int(keep.sum()))
                     yield first + np.flatnonzero(keep), block.means[keep], rows.opacity
+            run = floater_rows(self.memory, op.neighbours, self.rows)
             with scratch(self.output) as folder:
-                self.removed[j], found = find_floaters(op, kept, folder, self.rows)
+                self.removed[j], found = find_floaters(op, kept, folder, run)
             self.details[j] = found.detail()
 
     def _blocks(self, tally: dict, progress=None, warn: bool = False):

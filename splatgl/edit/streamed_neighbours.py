@@ -30,6 +30,7 @@ import math
 
 import numpy as np
 
+from ..lod.budget import RESERVE, resident_now
 from ..lod.ply_rows import BoxFinder
 from ..scene.spatial import morton_codes_clamped
 from .decimate import Decimate
@@ -42,7 +43,20 @@ DECIMATE_NOTE = ("--decimate over --memory merges within spatial chunks of about
                  "from the in-memory decimation's: docs/editing.md)")
 #: The share of a chunk's splats whose neighbours its halo is sized for.
 HALO_QUANTILE = 0.99
+#: The most splats a floater chunk holds, however large the budget.
+MAX_CHUNK = 1 << 22
 POINT = np.dtype([("code", "<u8"), ("index", "<i8"), ("means", "<f4", 3), ("opacity", "<f8")])
+
+
+def floater_rows(memory: int, k: int, rows: int, held: int | None = None) -> int:
+    """Splats per floater chunk within ``memory`` bytes (``held``: what the process holds,
+    measured when None): per splat its record and a halo's (a chunk's at most) with their
+    tree, a query's k + 1 distances and indices, and a batch row of the unsure; at least
+    ``rows`` (the edit's blocks)."""
+    held = resident_now() if held is None else held
+    working = memory - held - RESERVE
+    per = 2 * (POINT.itemsize + 64) + 16 * (k + 1) + POINT.itemsize + 8 * (k + 2)
+    return int(max(rows, min(working // per, MAX_CHUNK))) if working > 0 else rows
 
 
 def _box(points) -> tuple[np.ndarray, np.ndarray, int]:
@@ -59,8 +73,8 @@ def _box(points) -> tuple[np.ndarray, np.ndarray, int]:
 
 def find_floaters(op: RemoveFloaters, kept, folder, run: int):
     """The input rows ``op`` removes and its :class:`Floaters` statistics (its mask empty):
-    ``kept()`` yields ``(index, means, opacity)`` of the splats left before it, block by block
-    (see the module notes)."""
+    ``kept()`` yields ``(index, means, opacity)`` of the splats left before it, block by block;
+    chunks of at most ``run`` splats (see the module notes)."""
     lo, hi, n = _box(lambda: (m for _, m, _ in kept()))
     k = op.neighbours
     if n <= k:
@@ -74,26 +88,34 @@ def find_floaters(op: RemoveFloaters, kept, folder, run: int):
         chunks.append((path, data["means"].min(axis=0).astype(np.float64),
                        data["means"].max(axis=0).astype(np.float64)))
     dist_path = folder / "distances"
-    sums, unsure = [], []
     with open(dist_path, "wb") as out:
-        for c, (path, blo, bhi) in enumerate(chunks):
+        unsure = _Unsure(chunks, k, run, out)
+        for c, (path, _, _) in enumerate(chunks):
             own = np.fromfile(path, POINT)
-            d, sure = _chunk_distances(own, c, chunks, k)
-            unsure += [int((~sure).sum())]
-            d[~sure] = _exact_distances(own["means"][~sure], chunks, k)
-            sums.append(float(d.sum()))
-            np.rec.fromarrays([own["index"], d, own["opacity"]],
-                              names="index,d,opacity").tofile(out)
-    table = np.dtype([("index", "<i8"), ("d", "<f8"), ("opacity", "<f8")])
-    mean = math.fsum(sums) / n
-    squares = math.fsum(float(((b["d"] - mean) ** 2).sum()) for b in _file_blocks(dist_path, table,
-                                                                                  run))
+            d, sure, box = _chunk_distances(own["means"], c, chunks, k, run)
+            dist = d[sure, 1:].mean(axis=1)
+            _table(own["index"][sure], dist, own["opacity"][sure]).tofile(out)
+            unsure.sums.append(float(dist.sum()))
+            unsure.add(own[~sure], d[~sure], c, box)
+        unsure.flush()
+    mean = math.fsum(unsure.sums) / n
+    squares = math.fsum(float(((b["d"] - mean) ** 2).sum())
+                        for b in _file_blocks(dist_path, TABLE, run))
     sd = math.sqrt(squares / n)
     threshold = mean + op.sigma * sd
     removed = [b["index"][(b["d"] > threshold) & (b["opacity"] < op.opacity)]
-               for b in _file_blocks(dist_path, table, run)]
+               for b in _file_blocks(dist_path, TABLE, run)]
     return (np.sort(np.concatenate(removed)),
             Floaters(op, np.zeros(0, bool), mean, sd, threshold))
+
+
+TABLE = np.dtype([("index", "<i8"), ("d", "<f8"), ("opacity", "<f8")])
+
+
+def _table(index, d, opacity) -> np.ndarray:
+    out = np.empty(index.size, TABLE)
+    out["index"], out["d"], out["opacity"] = index, d, opacity
+    return out
 
 
 def _file_blocks(path, dtype, rows: int):
@@ -105,53 +127,94 @@ def _file_blocks(path, dtype, rows: int):
             yield block
 
 
-def _chunk_distances(own, c: int, chunks, k: int):
-    """(mean distance to the k nearest other centres, whether it is exact) of chunk ``c``'s
-    splats, from a tree of the chunk and its halo."""
+def _chunk_distances(means, c: int, chunks, k: int, cap: int):
+    """The (M, k+1) distances to the nearest centres of chunk ``c``'s splats in a tree of the
+    chunk and its halo, which of them are exact, and the halo's box (empty where the halo
+    would pass ``cap`` centres: none then)."""
     from scipy.spatial import cKDTree
 
-    means = own["means"]
-    inner = cKDTree(means.astype(np.float64))
-    kth = inner.query(means, k=min(k + 1, len(means)), workers=-1)[0]
-    kth = kth[:, -1] if kth.ndim == 2 and len(means) > k else np.full(len(means), np.inf)
+    m = means.shape[0]
+    kth = np.full(m, np.inf)
+    if m > k:
+        kth = cKDTree(means.astype(np.float64)).query(means, k=k + 1, workers=-1)[0][:, k]
     finite = kth[np.isfinite(kth)]
     r = float(np.quantile(finite, HALO_QUANTILE)) if finite.size else 0.0
     _, blo, bhi = chunks[c]
-    halo = [means]
+    box = (blo - r, bhi + r)
+    halo, held = [means], 0
     for j, (path, lo, hi) in enumerate(chunks):
-        if j == c or (lo > bhi + r).any() or (hi < blo - r).any():
+        if j == c or (lo > box[1]).any() or (hi < box[0]).any():
             continue
         other = np.fromfile(path, POINT)["means"]
-        near = ((other >= blo - r) & (other <= bhi + r)).all(axis=1)
-        halo.append(other[near])
+        halo.append(other[_inside(other, box)])
+        held += halo[-1].shape[0]
+        if held > cap:  # a chunk spread over the scene (clamped outliers): no halo
+            halo, r, box = [means], -1.0, (np.full(3, np.inf), np.full(3, -np.inf))
+            break
     points = np.concatenate(halo)
     tree = cKDTree(points.astype(np.float64), balanced_tree=False, compact_nodes=False)
-    if points.shape[0] <= k:
-        return np.zeros(len(means)), np.zeros(len(means), bool)
-    d, _ = tree.query(means, k=k + 1, workers=-1)
-    return d[:, 1:].mean(axis=1), d[:, k] <= r
+    q = min(k + 1, points.shape[0])  # fewer centres than k + 1: the rest unknown (inf)
+    d = np.full((m, k + 1), np.inf)
+    d[:, :q] = tree.query(means, k=q, workers=-1)[0].reshape(m, q)
+    return d, d[:, k] <= r, box
 
 
-def _exact_distances(means, chunks, k: int) -> np.ndarray:
-    """The mean distance to the k nearest other centres over every chunk (the nearest merged
-    chunk by chunk, chunks farther than the k-th so far skipped)."""
-    from scipy.spatial import cKDTree
+def _inside(points, box) -> np.ndarray:
+    return ((points >= box[0]) & (points <= box[1])).all(axis=1)
 
-    best = np.full((means.shape[0], k + 1), np.inf)
-    if not means.shape[0]:
-        return np.zeros(0)
-    q = means.astype(np.float64)
-    for path, lo, hi in chunks:
-        gap = np.sqrt((np.maximum(np.maximum(lo - q, q - hi), 0.0) ** 2).sum(axis=1))
-        rows = np.flatnonzero(gap <= best[:, k])
-        if not rows.size:
-            continue
-        pts = np.fromfile(path, POINT)["means"]
-        m = min(k + 1, pts.shape[0])
-        d, _ = cKDTree(pts.astype(np.float64)).query(means[rows], k=m, workers=-1)
-        d = d.reshape(rows.size, m)
-        best[rows] = np.sort(np.concatenate([best[rows], d], axis=1), axis=1)[:, :k + 1]
-    return best[:, 1:].mean(axis=1)
+
+class _Unsure:
+    """Splats whose halo did not hold their k nearest neighbours for certain: queried against
+    every chunk nearer than their k-th neighbour so far, the points their own tree held left
+    out (their chunk's, and those inside their halo's box), a batch of at most ``run`` at a
+    time; their mean distances go to ``out``.  ``sums``: every distance's sum, per batch and
+    chunk."""
+
+    def __init__(self, chunks, k: int, run: int, out):
+        self.chunks, self.k, self.run, self.out = chunks, k, run, out
+        self.parts: list[tuple] = []
+        self.held = 0
+        self.sums: list[float] = []
+        self.boxes: dict[int, tuple] = {}
+
+    def add(self, points, d, c: int, box) -> None:
+        self.boxes[c] = box
+        if points.size:
+            self.parts.append((points, d, np.full(points.size, c)))
+            self.held += points.size
+        if self.held >= self.run:
+            self.flush()
+
+    def flush(self) -> None:
+        from scipy.spatial import cKDTree
+
+        if not self.parts:
+            return
+        pts = np.concatenate([p[0] for p in self.parts])
+        best = np.concatenate([p[1] for p in self.parts])
+        owner = np.concatenate([p[2] for p in self.parts])
+        self.parts, self.held = [], 0
+        q = pts["means"].astype(np.float64)
+        k = self.k
+        for j, (path, lo, hi) in enumerate(self.chunks):
+            gap = np.sqrt((np.maximum(np.maximum(lo - q, q - hi), 0.0) ** 2).sum(axis=1))
+            near = (gap <= best[:, k]) & (owner != j)
+            if not near.any():
+                continue
+            other = np.fromfile(path, POINT)["means"]
+            for c in np.unique(owner[near]):
+                rows = np.flatnonzero(near & (owner == c))
+                fresh = other[~_inside(other, self.boxes[int(c)])]
+                if not fresh.shape[0]:
+                    continue
+                m = min(k + 1, fresh.shape[0])
+                d = cKDTree(fresh.astype(np.float64)).query(pts["means"][rows], k=m,
+                                                            workers=-1)[0]
+                d = np.concatenate([best[rows], d.reshape(rows.size, m)], axis=1)
+                best[rows] = np.sort(d, axis=1)[:, :k + 1]
+        dist = best[:, 1:].mean(axis=1)
+        _table(pts["index"], dist, pts["opacity"]).tofile(self.out)
+        self.sums.append(float(dist.sum()))
 
 
 def decimate_chunks(op: Decimate, blocks, kind, coeffs: int, total: int, folder, run: int):
