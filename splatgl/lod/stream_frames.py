@@ -97,6 +97,16 @@ class CutRows:
         return order
 
 
+def _drop_nodes(quad: QuadRenderer, scene) -> None:
+    """Let the gathered nodes' arrays go once ``quad`` has uploaded them (its storage buffers;
+    on a software driver those live in the process too, so keeping both held the cut twice):
+    what the renderer reads of its scene after that (kind, SH degree, anchor) stays, as a scene
+    of no rows."""
+    stub = scene.subset(np.zeros(0, np.int64))
+    stub.__dict__["anchor"] = scene.anchor
+    quad.scene = quad.programs.scene = quad.buffers.scene = stub
+
+
 class StreamFrames:
     """Views of the ``.lod.ply`` at ``path`` through the cut ``lod``, streamed with the whole
     process under ``memory`` bytes (see the module doc); owns its context (a context manager).
@@ -167,6 +177,9 @@ class StreamFrames:
                                "pre-pass: use --preprocess compute (the default), or --lod-blend 1")
         rows.sort = quad.sort
         self.renderer = quad
+        _drop_nodes(quad, scene)   # now in the renderer's buffers and the cull's data
+        del scene
+        release_freed()
         if under is None:
             return quad.render(view, layers)
         return quad.render(view, layers, under=view.geometry(under))

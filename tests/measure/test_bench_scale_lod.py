@@ -171,7 +171,7 @@ def test_memory_is_the_one_budget_option(monkeypatch, capsys):
 @pytest.mark.slow
 def test_end_to_end_tiny_sizes(tmp_path, shared_scenes):
     """Every step run for real at 20k and 50k splats (a fast flight)."""
-    options = ScaleLodOptions(sizes=(20_000, 50_000), memory=200 << 20, width=96, height=64,
+    options = ScaleLodOptions(sizes=(20_000, 50_000), memory=1 << 30, width=96, height=64,
                               speed=20.0, block=20_000)
     report = run_scale_lod(options, tmp_path / "out", {"cpu": "test"}, log=lambda m: None)
     for row in report["rows"]:
