@@ -89,6 +89,20 @@ class StreamedSog:
     def has_environment(self) -> bool:
         return self.environment is not None
 
+    def unit(self, file: int, drop_invalid: bool = False) -> Scene:
+        """The SOG unit ``file`` (an index into :attr:`filenames`), decoded whole."""
+        return sog.read(self.unit_path(self.filenames[file], "filenames"), drop_invalid)
+
+    def rows_of(self, unit: Scene, index: int, level: int) -> Scene:
+        """Chunk ``index``'s splats of ``level`` out of its decoded ``unit``."""
+        file, offset, count = self.chunks[index].lods[level]
+        if offset + count > unit.count:
+            raise SceneFormatError(self.path, f"chunk {index} level {level} needs rows "
+                                              f"{offset}-{offset + count - 1} of "
+                                              f"{self.filenames[file]}, which holds "
+                                              f"{unit.count}", "tree")
+        return unit.subset(np.arange(offset, offset + count))
+
     def load(self, level: int = 0, chunks=None, drop_invalid: bool = False,
              environment: bool = True) -> Scene:
         """The splats of ``level`` in the ``chunks`` (indices into :attr:`chunks`; default all),
@@ -103,17 +117,9 @@ class StreamedSog:
             ref = self.chunks[index].lods.get(level)
             if ref is None or ref[2] == 0:
                 continue
-            file, offset, count = ref
-            if file not in units:
-                units[file] = sog.read(self.unit_path(self.filenames[file], "filenames"),
-                                       drop_invalid)
-            unit = units[file]
-            if offset + count > unit.count:
-                raise SceneFormatError(self.path, f"chunk {index} level {level} needs rows "
-                                                  f"{offset}-{offset + count - 1} of "
-                                                  f"{self.filenames[file]}, which holds "
-                                                  f"{unit.count}", "tree")
-            parts.append(unit.subset(np.arange(offset, offset + count)))
+            if ref[0] not in units:
+                units[ref[0]] = self.unit(ref[0], drop_invalid)
+            parts.append(self.rows_of(units[ref[0]], index, level))
         if environment and self.environment is not None:
             parts.append(sog.read(self.unit_path(self.environment, "environment"), drop_invalid))
         if not parts:

@@ -8,7 +8,7 @@ chunk and level, its splats.  :class:`ChunkLevels` makes each (chunk, level) hol
 chunk of the :class:`~splatgl.lod.stream.ResidentSet` (loaded on its background threads, the
 least recently used evicted; a load decodes that chunk's rows of that level:
 ``structure.load(level, [chunk], environment=False)``; a Streamed SOG's decodes the SOG unit
-holding them).  Each view chooses a level per chunk by screen-space error under the splat budget
+holding them, kept for its sibling chunks: :class:`LastUnit`).  Each view chooses a level per chunk by screen-space error under the splat budget
 (:func:`splatgl.lod.level_cut.choose_levels`), or the level ``--lod-level`` gives; a headless
 frame waits for its chunks and draws them, in the file's chunk order followed by the
 environment (loaded once, counted in the budget), with the renderer asked for: the image of
@@ -21,6 +21,7 @@ box as for a scene read whole.
 from __future__ import annotations
 
 import hashlib
+import threading
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -77,15 +78,38 @@ def check_level(structure, level: int | None) -> None:
                            f"levels (0-{structure.levels - 1}, 0 the finest)")
 
 
+class LastUnit:
+    """The SOG unit a Streamed SOG's loads decoded last (the chunks of a unit are its row ranges:
+    siblings load from it instead of decoding it again); one decode at a time, thread-safe.  It
+    is held beyond the chunk budget, as a load's decode is (one unit, at most about 256K splats
+    in splatgl's files)."""
+
+    def __init__(self, structure):
+        self.structure = structure
+        self._lock = threading.Lock()
+        self._last: tuple[int, object] | None = None
+
+    def rows(self, chunk: int, level: int):
+        file = self.structure.chunks[chunk].lods[level][0]
+        with self._lock:
+            if self._last is None or self._last[0] != file:
+                self._last = None   # freed before the next decode
+                self._last = (file, self.structure.unit(file))
+            unit = self._last[1]
+        return self.structure.rows_of(unit, chunk, level)
+
+
 class ChunkLevels:
     """Each (chunk, level) of ``structure`` holding splats, as one resident-set chunk (``count``,
     ``estimate(i)``, ``load(i)``; ``key[(chunk, level)]`` its index); decoded bytes a row
-    measured on the smallest (:attr:`sample`: that load)."""
+    measured on the smallest (:attr:`sample`: that load).  A Streamed SOG's chunks load through
+    :class:`LastUnit`."""
 
     rows = 1   # no tree rows
 
     def __init__(self, structure):
         self.structure = structure
+        self.units = LastUnit(structure) if hasattr(structure, "rows_of") else None
         self.pairs = [(c, level) for c, chunk in enumerate(structure.chunks)
                       for level in range(structure.levels) if chunk.count(level) > 0]
         if not self.pairs:
@@ -103,6 +127,8 @@ class ChunkLevels:
 
     def load(self, i: int):
         chunk, level = self.pairs[i]
+        if self.units is not None:
+            return self.units.rows(chunk, level)
         return self.structure.load(level, [chunk], environment=False)
 
 

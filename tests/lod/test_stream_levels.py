@@ -323,3 +323,21 @@ def test_view_memory_window_refines_a_streamed_sog(xvfb_display, tmp_path):
             assert png.exists()
     finally:
         stream.close()
+
+
+def test_streamed_sog_chunks_of_one_unit_decode_it_once(tmp_path, monkeypatch):
+    """A Streamed SOG's chunks are row ranges of its SOG units: a frame's chunks of one unit
+    decode that unit once (the loader keeps the last unit), not once a chunk."""
+    path, structure = _chunked(tmp_path, "streamed-sog")
+    level0 = {c.lods[0][0] for c in structure.chunks}
+    assert len(structure.chunks) > len(level0)   # several chunks a unit
+    decoded = []
+    real = type(structure).unit
+    monkeypatch.setattr(type(structure), "unit",
+                        lambda self, file, *a: decoded.append(file) or real(self, file, *a))
+    with ChunkedFrames(path, SETTINGS, LodSettings(), 1 << 20, level=0,
+                       plan=cache_plan(1 << 20)) as frames:
+        decoded.clear()   # the sample chunk's at open
+        frames.render_view(_camera(4.0))
+        assert frames.last_cut_nodes == structure.counts[0]
+    assert sorted(decoded) == sorted(level0)
