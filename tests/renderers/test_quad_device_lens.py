@@ -123,8 +123,10 @@ def test_demo_scene_lens_views_are_identical(ctx):
         np.testing.assert_array_equal(b, a, err_msg=f"camera {k}")
 
 
-def test_a_shared_scene_lens_views_are_identical(ctx, shared_scenes):
-    scene = load_scene(shared_file(shared_scenes, "ply/donut_sh0.ply"))
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["ply/donut_sh0.ply", "compressed_ply/guitar.compressed.ply"])
+def test_shared_scenes_lens_views_are_identical(ctx, shared_scenes, name):
+    scene = load_scene(shared_file(shared_scenes, name), progress=lambda *a: None)
     for k, (a, b) in enumerate(_images(ctx, scene, _framed(scene, 128, 64))):
         assert a.any(), k
         np.testing.assert_array_equal(b, a, err_msg=f"camera {k}")
