@@ -64,17 +64,20 @@ class BlockPasses:
 
     NAMES = ("bits", "plan", "count", "scan", "scatter", "copy")
 
-    def __init__(self, programs: ProgramCache, groups: int | None = None):
+    def __init__(self, programs: ProgramCache, groups: int | None = None,
+                 bits: int = RADIX_BLOCK_BITS):
         self.groups = groups or block_groups()
         self.lanes = self.groups * RADIX_BLOCK_LANES
-        defines = {"RADIX_BLOCK": 1, "RADIX_BLOCK_GROUPS": self.groups}
+        self.bits = bits
+        self.slots = -(-32 // bits)
+        defines = {"RADIX_BLOCK": 1, "RADIX_BLOCK_GROUPS": self.groups, "RADIX_BLOCK_BITS": bits}
         self.programs = {name: programs.compute(f"radix_{'block_' if name != 'plan' else ''}{name}.comp",
                                                 defines)
                          for name in self.NAMES}
 
     def hist_bytes(self) -> int:
         """Bytes of hist: a row of digit counts a lane, then the digit starts."""
-        return 4 * (self.lanes + 1) * BLOCK_RADIX
+        return 4 * (self.lanes + 1) * (1 << self.bits)
 
     def record(self, ctx: moderngl.Context, state: moderngl.Buffer, sets, hist, capacity: int,
                find_bits: bool, args: dict[str, int]) -> None:
@@ -94,7 +97,7 @@ class BlockPasses:
             ctx.memory_barrier()
         progs["plan"].run(group_x=1)
         ctx.memory_barrier()
-        for slot in range(BLOCK_SLOTS):
+        for slot in range(self.slots):
             src = a if slot == 0 else (b if slot % 2 else c)   # what slot - 1 wrote mid-sort
             mid = b if slot % 2 == 0 else c
             for name in ("count", "scatter"):
