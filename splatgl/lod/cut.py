@@ -224,14 +224,16 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
         return _compiled_cut(kern, data, view, threshold_px, band, leaves_at, max_nodes)
     top = len(offsets) - 2
     blend = band > 1.0
-    carry = None  # float32 A * e over the level above's nodes
+    # The level above's expanded nodes (local indices, ascending) and their carry A * e (float32,
+    # nonzero), None above the top: kept sparse, so a level's arrays are its candidates' (a
+    # whole level's only where most of it is a candidate).
+    par = vals = None
     rows, weights = [], []
     drawn_all = 0
     nodes = covered = 0.0  # so far: nodes drawn, and leaves they stand for (leaves_at only)
     for level in range(top, -1, -1):
         lo, hi = int(offsets[level]), int(offsets[level + 1])
         n = hi - lo
-        par = None if carry is None else np.flatnonzero(carry)   # the expanded nodes above
         n_cand = n if par is None else (
             par.size * b - (max(0, int(par[-1]) * b + b - n) if par.size else 0))
         if n_cand == 0:
@@ -239,13 +241,17 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
         if max_nodes is not None and drawn_all + n_cand > max_nodes:
             raise CutTooLarge(drawn_all + n_cand)
         dense = n_cand >= DENSE_FRACTION * n
-        if dense:   # a level's worth of candidate weights (only where most of it is)
-            above = np.ones(n, np.float32) if carry is None else np.repeat(carry, b)[:n]
-        else:       # the candidates alone (ascending) and their weights
+        if par is not None:   # the candidates (ascending) and their weights
             local = (par[:, None] * b + np.arange(b)).ravel()
-            a_cand = np.repeat(carry[par], b)
+            a_cand = np.repeat(vals, b)
             fits = local < n
             local, a_cand = local[fits], a_cand[fits]
+        if dense:   # a level's worth of candidate weights
+            if par is None:
+                above = np.ones(n, np.float32)
+            else:
+                above = np.zeros(n, np.float32)
+                above[local] = a_cand
         if (level == 0 and leaves_at is not None
                 and nodes + n_cand >= leaves_at * (covered + float(
                     (above if dense else a_cand).sum(dtype=np.float64)))):
@@ -256,14 +262,17 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
             e = np.zeros(n, np.float32) if level == 0 else expansion(size, threshold_px, band)
             drawn = np.flatnonzero((above > 0) & (e < 1))
             carry = above * e
+            par = np.flatnonzero(carry)
+            vals = carry[par]
             a, e = above[drawn], e[drawn]
         else:  # only the candidates, gathered
             size, inside = view.test(data.centres[:, local + lo], data.radius[local + lo])
             local, size = local[inside], size[inside]
             e = np.zeros(local.size, np.float32) if level == 0 else expansion(size, threshold_px, band)
             a = a_cand[inside]
-            carry = np.zeros(n, np.float32)
-            carry[local] = a * e
+            carry = a * e
+            expanded = carry != 0
+            par, vals = local[expanded], carry[expanded]
             keep = e < 1
             drawn, a, e = local[keep], a[keep], e[keep]
         rows.append(drawn + lo)
