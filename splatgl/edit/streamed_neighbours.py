@@ -17,8 +17,8 @@ otherwise the in-memory set (docs/editing.md gives the measurements).
 **Decimate** (:func:`decimate_chunks`): each chunk of consecutive Morton codes is decimated
 alone (:meth:`Decimate.apply`) to its share of the target (the target times the chunk's share
 of the splats, rounded so the shares sum to the target; a chunk holds at least half a sorted
-run and takes consecutive runs until its share is a splat or more): the count is the in-memory
-count, but
+run and takes consecutive runs until its share, and what it leaves the rest, are a splat or
+more): the count is the in-memory count, but
 no pair crosses a chunk boundary and the cheapest pairs are chosen per chunk, not over the
 scene, so the result differs from the in-memory decimation (measured as image PSNR, said once
 in the command's output).  The merged rows come chunk by chunk, in Morton order.
@@ -234,12 +234,10 @@ def decimate_chunks(op: Decimate, blocks, kind, coeffs: int, total: int, folder,
         cum += data.shape[0]
         held = sum(p.shape[0] for p in pending)
         t = min(held, int(round(cum * target / total)) - done)
-        if held < run // 2 or t < 1:  # a chunk is at least half a run and merges to >= 1
-            continue
+        if held < run // 2 or t < 1 or (cum < total and target - done - t < 1):
+            continue  # a chunk: half a run or more, merged to >= 1, leaving the rest >= 1
         done += t
         yield Decimate(count=t).apply(to_scene(np.concatenate(pending), kind))
         pending = []
-    if pending:  # the rest (its share rounded to none only after a chunk took it: one splat)
-        held = sum(p.shape[0] for p in pending)
-        yield Decimate(count=min(held, max(1, target - done))).apply(
-            to_scene(np.concatenate(pending), kind))
+    if pending:  # the rest, its share at least one splat
+        yield Decimate(count=target - done).apply(to_scene(np.concatenate(pending), kind))

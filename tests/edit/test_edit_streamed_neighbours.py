@@ -4,12 +4,15 @@ count, a note said once); tiny blocks and chunks force the halo and the exact fa
 
 from __future__ import annotations
 
+import os
+import signal
+
 import numpy as np
 import pytest
 
 from splatgl.cli import main
 from splatgl.edit import (CropBox, Decimate, Filter, RemoveFloaters, ShDegree, edit_files,
-                          streamed_edit)
+                          streamed_edit, streamed_neighbours)
 from splatgl.edit.streamed_neighbours import DECIMATE_NOTE
 from splatgl.formats import load_scene
 from splatgl.scene.splats import Scene
@@ -38,14 +41,14 @@ def rows(monkeypatch):
 
 
 @pytest.mark.parametrize("chunk, ops", [
-    (7, [RemoveFloaters(neighbours=8, sigma=1.5, opacity=1.0)]),  # chunks below k: all exact
+    (7, [RemoveFloaters(neighbours=8, sigma=1.5, opacity=1.0)]),  # chunks below k: no halos
     (60, [RemoveFloaters(neighbours=4, sigma=1.0, opacity=0.7)]),  # halos
     (60, [CropBox((-5, -5, -5), (5, 5, 5)), RemoveFloaters(neighbours=6, sigma=1.0),
           Filter("index > 30"), RemoveFloaters(neighbours=3, sigma=2.0, opacity=1.0)]),
 ])
 def test_floaters_per_chunk_remove_the_in_memory_set(tmp_path, rows, chunk, ops):
     rows.n = chunk
-    src = _ply(tmp_path, _clusters(400, 25))
+    src = _ply(tmp_path, _clusters(150 if chunk < 10 else 400, 25))
     ref = edit_files([src], tmp_path / "ref.ply", ops)
     got = edit_files([src], tmp_path / "got.ply", ops, memory=1)
     assert any(s.removed for s in ref.steps if s.name == "remove-floaters")
@@ -84,10 +87,11 @@ def test_a_decimation_that_merges_nothing_streams_every_row(tmp_path, rows):
 
 def test_decimate_chunk_shares_sum_to_the_target(tmp_path, rows):
     rows.n = 37
-    src = _ply(tmp_path, _clusters(1000, 0))
-    for op in (Decimate(percent=12.5), Decimate(count=333)):
+    src = _ply(tmp_path, _clusters(300, 0))
+    for op in (Decimate(percent=12.5), Decimate(count=222), Decimate(percent=1),
+               Decimate(percent=99), Decimate(count=1)):
         got = edit_files([src], tmp_path / "o.ply", [op], memory=1, force=True)
-        assert got.count == op.target(1000)
+        assert got.count == op.target(300)
 
 
 def test_cli_edit_streams_floaters_and_says_the_decimation_once(tmp_path, capsys, rows):
@@ -104,3 +108,72 @@ def test_cli_edit_streams_floaters_and_says_the_decimation_once(tmp_path, capsys
     assert out.count("note: " + DECIMATE_NOTE.format(rows=50)) == 1, out
     assert "merged" in out and "-> 120" in out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.ply", "got.ply", "ref.ply", "s.ply"]
+
+
+@pytest.mark.parametrize("ops", [["--decimate", "50%"], ["--remove-floaters"]])
+def test_a_dry_run_leaves_no_scratch_files(tmp_path, capsys, rows, ops):
+    rows.n = 30
+    src = _ply(tmp_path, _clusters(120, 8))
+    assert main(["edit", str(src), "--dry-run", *ops, "--memory", "1K"]) == 0
+    assert main(["edit", str(src), "-o", str(tmp_path / "o.ply"), "--dry-run", *ops,
+                 "--memory", "1K"]) == 0
+    assert "-> " in capsys.readouterr().out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
+
+
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+@pytest.mark.parametrize("what", ["decimate", "floaters"])
+def test_an_interrupted_chunked_edit_leaves_nothing(tmp_path, capsys, monkeypatch, rows, sig,
+                                                    code, what):
+    """Ctrl-C or SIGTERM while the chunks are worked: the old output, no scratch folder."""
+    rows.n = 40
+    src = _ply(tmp_path, _clusters(300, 8))
+    (tmp_path / "o.ply").write_bytes(b"old")
+    calls = []
+    if what == "decimate":
+        real = Decimate.apply
+
+        def stop(self, scene, progress=None):
+            calls.append(1)
+            if len(calls) == 2:
+                os.kill(os.getpid(), sig)
+            return real(self, scene, progress)
+        monkeypatch.setattr(Decimate, "apply", stop)
+        ops = ["--decimate", "50%"]
+    else:
+        real = streamed_neighbours._chunk_distances
+
+        def stop(*args):
+            calls.append(1)
+            if len(calls) == 2:
+                os.kill(os.getpid(), sig)
+            return real(*args)
+        monkeypatch.setattr(streamed_neighbours, "_chunk_distances", stop)
+        ops = ["--remove-floaters"]
+    rc = main(["edit", str(src), "-o", str(tmp_path / "o.ply"), *ops, "--force",
+               "--memory", "1K"])
+    assert rc == code and len(calls) == 2, capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.ply", "s.ply"]
+    assert (tmp_path / "o.ply").read_bytes() == b"old"
+
+
+@pytest.mark.slow
+def test_peak_memory_is_chunks_not_the_scene(tmp_path, monkeypatch):
+    """tracemalloc's peak of floaters then a decimation of a 20,000-splat SH3 file in blocks and
+    chunks of 1,000 rows, against the in-memory edit's."""
+    import tracemalloc
+
+    monkeypatch.setattr(streamed_edit, "block_rows", lambda *a, **k: 1000)
+    base = _clusters(20000, 50)
+    rng = np.random.default_rng(1)
+    src = _ply(tmp_path, Scene(base.means, base.quats, base.log_scales, base.opacity_logits,
+                               rng.normal(0, 0.3, (20000, 16, 3)).astype(np.float32)))
+    ops = [RemoveFloaters(neighbours=8), Decimate(percent=50)]
+    peaks = {}
+    for name, memory in (("memory", None), ("streamed", 1)):
+        tracemalloc.start()
+        edit_files([src], tmp_path / f"{name}.ply", ops, memory=memory)
+        peaks[name] = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    assert peaks["memory"] > 15e6
+    assert peaks["streamed"] < peaks["memory"] / 3, peaks
