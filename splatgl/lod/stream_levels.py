@@ -176,9 +176,13 @@ class ChunkedStream:
         self.table = ChunkTable.of(self.structure, self.framing.anchor)
         self.environment = self._load_environment()
         env_bytes = 0 if self.environment is None else scene_bytes(self.environment)
+        coarsest = [self.chunks.key[(c, int(np.flatnonzero(row)[-1]))]
+                    for c, row in enumerate(self.table.counts > 0) if row.any()]
+        need = env_bytes + max(1, threads) * max(map(self.chunks.estimate, range(self.chunks.count)))
+        need += sum(map(self.chunks.estimate, coarsest)) if pinned else 0
         release_freed()
         self.plan = plan or stream_plan(self.memory, frame_bytes_per_splat(
-            sample.sh.shape[1], gpu_bytes_per_splat(storage, sample.sh_degree)))
+            sample.sh.shape[1], gpu_bytes_per_splat(storage, sample.sh_degree)), need)
         if env_bytes >= self.plan.cache:
             raise SplatglError(f"--memory {format_size(self.memory)} is too small to stream "
                                f"{self.path.name}: its environment alone is {format_size(env_bytes)}"
@@ -186,8 +190,6 @@ class ChunkedStream:
         self.cap = max(1, self.plan.cap - (0 if self.environment is None else self.environment.count))
         self.capped: str | None = None
         self.capped_views = self.views = 0
-        coarsest = [self.chunks.key[(c, int(np.flatnonzero(row)[-1]))]
-                    for c, row in enumerate(self.table.counts > 0) if row.any()]
         self.resident = ResidentSet(self.chunks, self.plan.cache - env_bytes, None, 1, threads,
                                     on_loaded, pinned=coarsest if pinned else None)
         if pinned:
