@@ -122,7 +122,7 @@ def run_scale_lod_command(args: argparse.Namespace) -> int:
     machine = probe_machine()
     print(describe(machine), flush=True)
     report = run_scale_lod(options, args.out, machine, log=lambda m: print(m, flush=True))
-    print(table(report["rows"]))
+    print(table(report["rows"], options.memory))
     if args.out is not None:
         print(f"wrote {args.out / 'scale-lod.json'}, scale-lod.png")
     return 0

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import tempfile
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -182,5 +184,80 @@ def test_end_to_end_tiny_sizes(tmp_path, shared_scenes):
         for key in ("psnr_view_db", "psnr_far_db"):   # the same views; None: identical
             assert row[key] is None or row[key] > 25, (key, row[key])
         assert row["far"]["cut_nodes"] < row["frame"]["cut_nodes"]   # a cut, not the leaves
-        assert row["flight"]["moving_frames"] >= 1 and row["flight"]["rest_to_exact_s"] > 0
+        assert row["flight"]["moving_frames"] >= 1 and row["flight"]["reached_exact"]
+        assert row["flight"]["rest_to_exact_s"] >= 0 and row["flight"]["samples"]
     assert json.loads((tmp_path / "out" / "scale-lod.json").read_text())["rows"] == report["rows"]
+
+
+def test_streamed_flight_runs_the_viewers_session_to_exact(tmp_path, gl_renderer, monkeypatch):
+    """The flight step over a level of detail streamed under a chunk cache smaller than the
+    file: the viewer's own session (its budget's levels while moving), then rest until the
+    exact frame with every chunk in; the figures and the per-frame memory samples recorded."""
+    from test_stream_session import cache_plan, tiny_lod
+
+    from splatgl.lod.lazy import LazyLod
+    from splatgl.lod.selection import LodSettings
+    from splatgl.lod.stream import LazyChunks
+    from splatgl.lod.stream_view import StreamedScene
+    from splatgl.measure.bench.scale_lod_steps import flight
+
+    from splatgl.measure.bench import flight as flight_module
+
+    class Slow(LazyChunks):   # a slow disk, closed until the flight is 0.1 s in (of 0.2 s moving)
+        gate = threading.Event()
+
+        def load(self, chunk):
+            self.gate.wait(10)
+            time.sleep(0.02)
+            return super().load(chunk)
+
+    warm_up = flight_module._warm_up
+
+    def then_open(session, flight):   # the chunks arrive while moving and at rest
+        warm_up(session, flight)
+        threading.Timer(0.1, Slow.gate.set).start()
+
+    monkeypatch.setattr(flight_module, "_warm_up", then_open)
+    path = tiny_lod(tmp_path)
+    lazy = LazyLod(path)
+    chunks = Slow(lazy, 128)
+    Slow.gate.set()   # the pinned top levels come first, then the gate closes
+    cache = int(0.9 * sum(chunks.estimate(c) for c in range(chunks.count)))
+    stream = StreamedScene(path, LodSettings(), 1 << 30, chunks=chunks, plan=cache_plan(cache))
+    Slow.gate.clear()
+    try:
+        r = flight(gl_renderer, stream, {"width": 96, "height": 64, "speed": 40.0})
+    finally:
+        stream.close()
+        lazy.close()
+    assert r["moving_frames"] >= 1 and r["fps_median"] > 0 and r["fps_p10"] <= r["fps_median"]
+    assert r["target_fps"] == 10.0 and sum(r["levels"].values()) == r["moving_frames"]
+    assert r["reached_exact"] and r["rest_to_exact_s"] >= 0.0
+    assert 0 < r["resident_max_mb"] * 1e6 <= cache and r["cache_mb"] * 1e6 == cache
+    phases = [s["phase"] for s in r["samples"]]
+    assert phases[0] == "moving" and phases[-1] == "exact"
+    loaded = [s["chunks_loaded"] for s in r["samples"]]
+    assert loaded == sorted(loaded) and loaded[-1] == r["chunks_loaded"] > loaded[0]
+    assert r["rest_frames"] >= 1 and "rest" in phases   # drawn again as chunks arrived
+    assert all(s["rss_mb"] > 0 for s in r["samples"]) and r["rss_max_mb"] >= r["rss_start_mb"]
+    assert "refining" not in r["streaming"]
+
+
+def test_flight_figures_against_the_viewers_targets():
+    """The table adds the flight's 10th percentile and one line a size against the targets:
+    10 fps moving, exact within 15 s of rest, the flight's peak under --memory."""
+    from splatgl.measure.bench.scale_lod_report import table
+
+    rows = [{"splats": 1_000_000, "flight": {"fps_median": 12.04, "fps_p10": 8.46,
+                                            "rest_to_exact_s": 3.2, "peak_rss_mb": 900.0}},
+            {"splats": 5_000_000, "flight": {"fps_median": 4.0, "fps_p10": 2.0,
+                                            "rest_to_exact_s": None, "peak_rss_mb": 2500.0}},
+            {"splats": 9, "flight": {"failed": "stopped"}}]
+    lines = table(rows, 2_000_000_000).splitlines()
+    assert lines[0].count("|") == 16 and "| moving fps p10 |" in lines[0]
+    assert "| 12.0 | 8.5 | 3.20 | 900 |" in lines[2]
+    assert lines[-2:] == [
+        "flight 1,000,000: moving 12.0 fps median, p10 8.5 (>= 10: met), exact 3.2 s after rest "
+        "(<= 15: met), peak 900 MB of --memory 2000 MB (met)",
+        "flight 5,000,000: moving 4.0 fps median, p10 2.0 (>= 10: NOT met), exact - s after rest "
+        "(<= 15: NOT met), peak 2500 MB of --memory 2000 MB (NOT met)"]

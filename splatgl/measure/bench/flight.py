@@ -12,6 +12,14 @@ present or swap), and measures what a person at the window would see:
 - input latency: input arriving at random moments of a refinement (the exact frame drawing at
   rest), timed until the frame for the new camera is done.
 
+Over a level of detail streamed from disk (``stream``: ``bench --scale --lod``'s flight step) the
+session is the viewer's over the resident chunks
+(:func:`splatgl.interactive.stream_levels.streamed_session`, as ``splatgl view --memory``): moving
+frames draw the budget's level of what is resident, and the rest ends when the exact frame is
+drawn with every chunk it needs in.  Each frame then records the resident memory, the chunks
+loaded and the process's resident set (:attr:`FlightResult.samples`); moving frames are not
+scored and no latency is measured (their exact frames would wait for chunks).
+
 The flight (:func:`flight_camera`): an orbit at the default framing distance (0-5 s), a fly-in
 from twice that distance to a third of it (5-8 s), then rest.  Rows are plain data
 (:class:`FlightResult`); :mod:`.flight_report` prints and plots them.
@@ -31,10 +39,12 @@ from ...cameras.framing import default_camera
 from ...cameras.poses import orbit
 from ...cameras.up import resolve_up
 from ..evaluation.metrics import psnr
+from .scale import rss_mb
 from ...interactive.budget import Level
 from ...interactive.draft import DraftFrame
 from ...interactive.lod_cache import LodProvider
 from ...interactive.session import Session
+from ...interactive.stream_levels import streamed_session
 from ...scene.splats import Scene
 from ...scene.settings import RendererKind, RenderSettings
 from ...renderers.registry import DEFAULT_RENDERER
@@ -50,6 +60,11 @@ LATENCY_SAMPLES = 8
 #: At most this many moving frames are scored (evenly spread): at 60 fps on a GPU the flight has
 #: about 500, and each score draws the exact frame again (a full CPU sort: ~0.3 s at 6M splats).
 MAX_SCORED = 160
+#: A streamed flight's rest gives up on the exact frame after this many seconds (a cut whose
+#: chunks do not fit the memory budget is never complete).
+STREAM_REST_LIMIT_S = 300.0
+#: Seconds a streamed rest sleeps while it waits for chunks (the loader threads need the cores).
+STREAM_WAIT_S = 0.005
 
 
 @dataclass
@@ -84,6 +99,11 @@ class FlightResult:
     #: those calibrations ("level: PSNR").
     cut_factor: float = 1.0
     calibrations: list[str] = field(default_factory=list)
+    #: A streamed flight's samples, one a frame: ``t`` (seconds since the flight began),
+    #: ``phase`` (moving, rest), ``resident_mb``, ``chunks_loaded``, ``rss_mb``; and whether
+    #: its rest reached the exact frame (within :data:`STREAM_REST_LIMIT_S`).
+    samples: list[dict] = field(default_factory=list)
+    reached_exact: bool = True
 
     def fps(self) -> np.ndarray:
         return 1.0 / np.array([f.seconds for f in self.frames]) if self.frames else np.zeros(0)
@@ -103,8 +123,19 @@ class FlightResult:
             "latency_median": float(np.median(self.latencies)) if self.latencies else None,
             "latency_max": float(max(self.latencies)) if self.latencies else None,
             "lod_seconds": self.lod_seconds, "exact_matches_render": self.exact_matches_render,
-            "cut_factor": self.cut_factor,
+            "cut_factor": self.cut_factor, **self._stream_summary(),
         }
+
+    def _stream_summary(self) -> dict:
+        """A streamed flight's memory: resident chunks (MB, at most), chunks loaded, the
+        process's resident set (MB) at the flight's start, end and most."""
+        if not self.samples:
+            return {}
+        rss = [s["rss_mb"] for s in self.samples]
+        return {"reached_exact": self.reached_exact,
+                "resident_max_mb": max(s["resident_mb"] for s in self.samples),
+                "chunks_loaded": self.samples[-1]["chunks_loaded"],
+                "rss_start_mb": rss[0], "rss_end_mb": rss[-1], "rss_max_mb": max(rss)}
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -151,32 +182,41 @@ def _level_of(frame: FlightFrame) -> Level:
 def fly(renderer: Renderer, scene: Scene, name: str, width: int = 1280, height: int = 720,
         target_fps: float = 10.0, settings: RenderSettings | None = None,
         psnr_every: int = 1, log=print, speed: float = 1.0,
-        exact_kind: RendererKind | str = DEFAULT_RENDERER) -> FlightResult:
+        exact_kind: RendererKind | str = DEFAULT_RENDERER, stream=None) -> FlightResult:
     """Fly over ``scene`` (see the module doc); ``psnr_every``: score every n-th moving frame
     (more apart where the flight has over :data:`MAX_SCORED`);
     ``speed``: fly the path that many times faster (tests); ``exact_kind``: the renderer of
     the exact frame at rest (the CPU renderer: as ``splatgl view --renderer cpu``), which is
-    also what the moving frames are scored against."""
+    also what the moving frames are scored against.  ``stream``: fly over a level of detail
+    streamed from disk instead (a :class:`~splatgl.lod.stream_view.StreamedScene`; ``scene``
+    is then ignored), through the viewer's session over it (see the module doc)."""
     exact_kind = RendererKind(exact_kind)
     settings = settings or RenderSettings()
+    scene = stream.framing if stream is not None else scene
     flight = Flight(scene, width, height, speed)
     t0 = time.perf_counter()
-    lod = LodProvider(scene, scene.source.path if scene.source is not None else None)
-    lod.wait()
+    if stream is None:
+        lod = LodProvider(scene, scene.source.path if scene.source is not None else None)
+        lod.wait()
+        session = Session(renderer, scene, settings, 1.0 / target_fps, lod, exact_kind=exact_kind)
+    else:
+        session = streamed_session(renderer, stream, settings, 1.0 / target_fps)
     result = FlightResult(name, scene.count, (width, height), target_fps, time.perf_counter() - t0)
-    session = Session(renderer, scene, settings, 1.0 / target_fps, lod, exact_kind=exact_kind)
     try:
         _warm_up(session, flight)
-        _moving(session, flight, result)
-        _rest(session, flight, result)
-        _latency(session, flight, result)
+        sample = None if stream is None else _sampler(stream, result)
+        _moving(session, flight, result, sample)
+        _rest(session, flight, result, sample,
+              math.inf if stream is None else STREAM_REST_LIMIT_S / flight.speed)
+        if stream is None:
+            _latency(session, flight, result)
+            result.calibrations = [f"{lv.describe()}: {p:.1f} dB" for lv, p in session.calibrations]
+            _score(session, flight, result, psnr_every)
+            rest = flight.camera(flight.move_end)
+            exact = session.levels.read(_exact(session, rest))
+            want = renderer.render(scene, rest, settings, exact_kind)
+            result.exact_matches_render = bool(np.array_equal(exact, want))
         result.cut_factor = session.budget.cut_factor
-        result.calibrations = [f"{lv.describe()}: {p:.1f} dB" for lv, p in session.calibrations]
-        _score(session, flight, result, psnr_every)
-        rest = flight.camera(flight.move_end)
-        exact = session.levels.read(_exact(session, rest))
-        want = renderer.render(scene, rest, settings, exact_kind)
-        result.exact_matches_render = bool(np.array_equal(exact, want))
     finally:
         session.release()
     s = result.summary()
@@ -184,6 +224,21 @@ def fly(renderer: Renderer, scene: Scene, name: str, width: int = 1280, height: 
         f"(p10 {s['fps_p10']:.1f}), PSNR median {s['psnr_median'] or 0:.1f} dB, exact "
         f"{s['rest_to_exact']:.2f} s after rest, latency max {(s['latency_max'] or 0) * 1e3:.0f} ms")
     return result
+
+
+def _sampler(stream, result: FlightResult):
+    """A streamed flight's sampler: ``sample(phase)`` appends the resident memory, chunks
+    loaded and the process's resident set to ``result.samples`` (at most every 0.1 s)."""
+    start = time.perf_counter()
+
+    def sample(phase: str) -> None:
+        t = time.perf_counter() - start
+        if result.samples and result.samples[-1]["phase"] == phase and t - result.samples[-1]["t"] < 0.1:
+            return
+        stats = stream.resident.stats
+        result.samples.append({"t": t, "phase": phase, "resident_mb": stats.resident_bytes / 1e6,
+                               "chunks_loaded": stats.loaded, "rss_mb": rss_mb()})
+    return sample
 
 
 def _warm_up(session: Session, flight: Flight) -> None:
@@ -196,29 +251,43 @@ def _warm_up(session: Session, flight: Flight) -> None:
     for i in range(3):
         session.frame(flight.camera(0.01 * (i + 1)))
     rest = flight.camera(0.03)
-    while session.pending:
+    while session.pending and not session.awaiting:   # a streamed scene: no wait for chunks
         session.frame(rest)
 
 
-def _moving(session: Session, flight: Flight, result: FlightResult) -> None:
+def _moving(session: Session, flight: Flight, result: FlightResult, sample=None) -> None:
     start = time.perf_counter()
     while (t := time.perf_counter() - start) < flight.move_end:
         frame = session.frame(flight.camera(t))
         lv = frame.level
         result.frames.append(FlightFrame(t, frame.seconds, lv.scale, lv.budget, lv.sh_degree,
                                          frame.splats))
+        if sample is not None:
+            sample("moving")
 
 
-def _rest(session: Session, flight: Flight, result: FlightResult) -> None:
+def _rest(session: Session, flight: Flight, result: FlightResult, sample=None,
+          limit: float = math.inf) -> None:
+    """At rest until the exact frame (``limit`` seconds at most: then
+    :attr:`FlightResult.reached_exact` is False)."""
     cam = flight.camera(flight.move_end)
     start = time.perf_counter()
     while not session.exact:
+        if time.perf_counter() - start > limit:
+            result.reached_exact = False
+            break
         frame = session.frame(cam)
         if frame is not None:
             result.refine_steps.append(frame.level.describe())
             if frame.level.exact:
                 result.exact_seconds = frame.seconds
+        elif session.awaiting:       # streamed chunks still coming: leave the cores to them
+            time.sleep(STREAM_WAIT_S)
+        if sample is not None:
+            sample("rest")
     result.rest_to_exact = time.perf_counter() - start
+    if sample is not None:
+        sample("exact")
 
 
 def _latency(session: Session, flight: Flight, result: FlightResult) -> None:

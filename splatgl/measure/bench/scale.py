@@ -127,7 +127,7 @@ def scene_file(n: int, sh_degree: int, cache: Path | None = None) -> Path:
     return path
 
 
-def _rss_mb() -> float:
+def rss_mb() -> float:
     """Current resident set size (MB) from /proc/self/statm."""
     with open("/proc/self/statm") as fh:
         pages = int(fh.read().split()[1])
@@ -174,7 +174,7 @@ def measure_file(path: Path, options: ScaleOptions) -> list[ScaleRow]:
     # the compiled cull (where numba is installed) loaded before anything is measured: its
     # import is not the scene's memory, and every timed frame takes the same cull path
     compiled = cull_kernel.kernel(wait=True) is not None
-    base = _rss_mb()
+    base = rss_mb()
     t0 = time.perf_counter()
     scene = load_scene(path, progress=lambda *a: None)
     load_s = time.perf_counter() - t0

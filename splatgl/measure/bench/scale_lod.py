@@ -8,11 +8,13 @@ to exit: a cold start) is measured here too.  Steps: the scene file, the out-of-
 detail under ``memory`` (``splatgl lod --memory``), the lazy open, the first frame of the
 whole-scene view streamed under ``memory``, the same for the far view (6x the framing
 distance), both views at full detail where the scene fits in memory (else "does not fit") and
-the PSNRs, and the interactive flight's camera path over the streamed scene (moving frame rate,
-time from rest to the exact cut).
+the PSNRs, and the viewer's flight over the streamed scene (its own session and frame-time
+budget, ``view --memory``'s: moving frame rate, time from rest to the exact frame, resident
+memory and chunks loaded over time).
 
 Every result is written to ``scale-lod.json`` as it is made (a Ctrl-C keeps what was
-measured), and ``scale-lod.png`` (memory and time against size, log axes) after each size.  The
+measured), and ``scale-lod.png`` (memory and time against size, log axes; the flight's memory
+over time) after each size.  The
 scene and level-of-detail files are removed after each size unless ``keep_scenes``.
 """
 
@@ -239,7 +241,7 @@ def run_scale_lod(options: ScaleLodOptions, out: Path | None, machine: dict, log
             report["rows"].append(row)
             measure_size(n, options, folder, row, save, log)
             if out is not None:
-                plot(out / "scale-lod.png", report["rows"])
+                plot(out / "scale-lod.png", report["rows"], options.memory)
     finally:
         if made and not options.keep_scenes:
             shutil.rmtree(folder, ignore_errors=True)

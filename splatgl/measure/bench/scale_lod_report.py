@@ -38,13 +38,39 @@ def _f(v, fmt: str) -> str:
     return "-" if v is None else format(v, fmt)
 
 
-def table(rows: list[dict]) -> str:
-    """One line a size: build s / MB, open s / MB, first and far frames s / MB, fps, rest to
-    exact, PSNRs."""
+#: The viewer's targets (issue 41): moving at 10 frames a second or more at 1280x720 (the
+#: median), exact within 15 s of rest, the flight's peak resident memory under ``--memory``.
+TARGET_FPS, TARGET_EXACT_S = 10.0, 15.0
+
+
+def targets(rows: list[dict], memory: int | None) -> list[str]:
+    """One line a size with a flight: its figures against the viewer's targets."""
+    lines = []
+    for r in rows:
+        f = r.get("flight", {})
+        if "fps_median" not in f:
+            continue
+        fps, exact, peak = f["fps_median"], f.get("rest_to_exact_s"), f.get("peak_rss_mb")
+        ok = lambda good: "met" if good else "NOT met"  # noqa: E731
+        parts = [f"moving {_f(fps, '.1f')} fps median, p10 {_f(f.get('fps_p10'), '.1f')} "
+                 f"(>= {TARGET_FPS:g}: {ok(fps is not None and fps >= TARGET_FPS)})",
+                 f"exact {_f(exact, '.1f')} s after rest (<= {TARGET_EXACT_S:g}: "
+                 f"{ok(exact is not None and exact <= TARGET_EXACT_S)})"]
+        if memory and peak is not None:
+            parts.append(f"peak {peak:.0f} MB of --memory {memory / 1e6:.0f} MB "
+                         f"({ok(peak * 1e6 <= memory)})")
+        lines.append(f"flight {r['splats']:,}: " + ", ".join(parts))
+    return lines
+
+
+def table(rows: list[dict], memory: int | None = None) -> str:
+    """One line a size: build s / MB, open s / MB, first and far frames s / MB, the viewer's
+    flight (moving fps median and 10th percentile, rest to exact, peak MB), PSNRs; then the
+    flight against its targets (:func:`targets`, the peak against ``memory`` bytes)."""
     head = ("| splats | build s | build MB | open s | open MB | first frame s (cold) | first frame MB "
-            "| far frame s (cold) | far frame MB | moving fps | rest to exact s | flight MB "
-            "| default view dB | far view dB |")
-    lines = [head, "|" + "---:|" * 14]
+            "| far frame s (cold) | far frame MB | moving fps | moving fps p10 | rest to exact s "
+            "| flight MB | default view dB | far view dB |")
+    lines = [head, "|" + "---:|" * 15]
     for r in rows:
         dbs = []
         for key in ("psnr_view_db", "psnr_far_db"):
@@ -57,19 +83,22 @@ def table(rows: list[dict]) -> str:
             _f(value(r, "open", "peak_rss_mb"), ".0f"), _f(value(r, "frame", "wall_s"), ".2f"),
             _f(value(r, "frame", "peak_rss_mb"), ".0f"), _f(value(r, "far", "wall_s"), ".2f"),
             _f(value(r, "far", "peak_rss_mb"), ".0f"), _f(value(r, "flight", "fps_median"), ".1f"),
-            _f(value(r, "flight", "rest_to_exact_s"), ".2f"),
+            _f(value(r, "flight", "fps_p10"), ".1f"), _f(value(r, "flight", "rest_to_exact_s"), ".2f"),
             _f(value(r, "flight", "peak_rss_mb"), ".0f"), *dbs]) + " |")
-    return "\n".join(lines)
+    return "\n".join(lines + targets(rows, memory))
 
 
-def plot(path: Path, rows: list[dict]) -> None:
-    """Log-log: peak resident memory of each step (left) and the times (right) against size."""
+def plot(path: Path, rows: list[dict], memory: int | None = None) -> None:
+    """Log-log: peak resident memory of each step (left) and the times (middle) against size;
+    the viewer's flight over time (right): the process's resident set (solid) and the resident
+    chunks (dashed) per size, ``memory`` (the budget) marked."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax_m, ax_t) = plt.subplots(1, 2, figsize=(13, 5.5))
+    fig, (ax_m, ax_t, ax_f) = plt.subplots(1, 3, figsize=(19, 5.5))
+    _flight_over_time(ax_f, rows, memory)
     for label, step in MEMORY:
         pts = [(r["splats"], value(r, step, "peak_rss_mb")) for r in rows]
         pts = [p for p in pts if p[1] is not None]
@@ -92,3 +121,25 @@ def plot(path: Path, rows: list[dict]) -> None:
             ax.legend(fontsize=7)
     fig.tight_layout()
     save_figure(fig, path)
+
+
+def _flight_over_time(ax, rows: list[dict], memory: int | None) -> None:
+    for r in rows:
+        samples = r.get("flight", {}).get("samples") or []
+        if not samples:
+            continue
+        t = [x["t"] for x in samples]
+        line, = ax.plot(t, [x["rss_mb"] for x in samples], lw=1, label=f"{r['splats']:,}: process")
+        ax.plot(t, [x["resident_mb"] for x in samples], lw=1, ls="--", c=line.get_color(),
+                label=f"{r['splats']:,}: chunks")
+        rest = next((x["t"] for x in samples if x["phase"] != "moving"), None)
+        if rest is not None:
+            ax.axvline(rest, c=line.get_color(), lw=0.5, alpha=0.5)
+    if memory:
+        ax.axhline(memory / 1e6, ls=":", c="red", lw=1, label="--memory")
+    ax.set_xlabel("flight time (s): moving, then rest (thin line) until exact")
+    ax.set_ylabel("resident MB")
+    ax.set_title("the viewer's flight over the streamed scene")
+    ax.grid(True, alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)

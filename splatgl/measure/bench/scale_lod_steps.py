@@ -17,10 +17,13 @@ Steps:
 - ``far``: the same from the far view (:data:`FAR` times the framing distance), in its own
   process.
 - ``full``: both views at full detail from the PLY loaded whole (only where it fits).
-- ``flight``: the interactive flight's camera path (:class:`splatgl.measure.bench.flight.Flight`) over
-  the streamed scene (:class:`splatgl.lod.stream_view.StreamedScene`, resident under
-  ``memory``): every moving frame draws what is resident and requests the rest; at rest the
-  frames go on until the cut is complete (exact).
+- ``flight``: the interactive flight (:func:`splatgl.measure.bench.flight.fly`, ``bench
+  --interactive``'s) over the streamed scene (:class:`splatgl.lod.stream_view.StreamedScene`,
+  resident under ``memory``) through the viewer's own session and frame-time budget
+  (:func:`splatgl.interactive.stream_levels.streamed_session`, as ``view --memory
+  --target-fps 10``): moving frames at the budget's level of what is resident, then at rest
+  until the exact frame is drawn with every chunk in; the resident memory, chunks loaded and
+  resident set sampled every frame.
 """
 
 from __future__ import annotations
@@ -85,6 +88,9 @@ def _save_image(path: str, image: np.ndarray) -> None:
 
 #: The far view's distance, in framing distances (``bench --lod``'s far view).
 FAR = 6.0
+#: The flight's frame rate (the viewer's budget on software GL: ``view --target-fps``'s default
+#: there, and the issue's target).
+FLIGHT_FPS = 10.0
 
 
 def _camera(lazy, a: dict, far: bool = False):
@@ -162,41 +168,50 @@ def step_flight(a: dict) -> dict:
     from ...api import Renderer
     from ...lod.selection import LodSettings
     from ...lod.stream_view import StreamedScene
-    from ...scene.settings import RenderSettings
-    from .flight import Flight
 
-    from ... import api
-
-    api.MAX_CACHED_PATHS = 1   # this process only: one cut's upload held, as the viewer holds one
-    settings = RenderSettings()
     streamed = StreamedScene(a["lod"], LodSettings(), int(a["memory"]))
     try:
-        flight = Flight(streamed.framing, a["width"], a["height"], a.get("speed", 1.0))
         with Renderer() as renderer:
-            def draw(camera):
-                renderer.render(streamed.scene_for(camera, settings), camera, settings)
-
-            draw(flight.camera(0.0))   # the programs compiled: not part of the flight
-            frames, start = [], time.perf_counter()
-            while (t := time.perf_counter() - start) < flight.move_end:
-                t1 = time.perf_counter()
-                draw(flight.camera(t))
-                frames.append(time.perf_counter() - t1)
-            rest, start, draws = flight.camera(flight.move_end), time.perf_counter(), 0
-            while True:
-                draw(rest)
-                draws += 1
-                if streamed.complete:
-                    break
-        exact_s = time.perf_counter() - start
-        summary = streamed.summary()
+            return flight(renderer, streamed, a)
     finally:
         streamed.close()
-    fps = [1.0 / s for s in frames if s > 0]
-    return {"moving_frames": len(frames), "fps_median": float(np.median(fps)) if fps else None,
-            "fps_p10": float(np.percentile(fps, 10)) if fps else None,
+
+
+def flight(renderer, streamed, a: dict) -> dict:
+    """The ``flight`` step's figures: :func:`~.flight.fly` over ``streamed`` (a
+    :class:`~splatgl.lod.stream_view.StreamedScene`) at ``a``'s ``width``, ``height``,
+    ``speed`` and ``target_fps`` (default :data:`FLIGHT_FPS`)."""
+    from .flight import fly
+
+    result = fly(renderer, None, streamed.lazy.path.name, a["width"], a["height"],
+                 a.get("target_fps", FLIGHT_FPS), log=lambda m: None, speed=a.get("speed", 1.0),
+                 stream=streamed)
+    summary = streamed.summary()
+    s = result.summary()
+    frames = [f.seconds for f in result.frames]
+    return {"moving_frames": len(frames), "fps_median": s["fps_median"] if frames else None,
+            "fps_p10": s["fps_p10"] if frames else None,
             "frame_ms_median": 1e3 * float(np.median(frames)) if frames else None,
-            "rest_to_exact_s": exact_s, "rest_frames": draws, "streaming": summary}
+            "target_fps": result.target_fps,
+            "rest_to_exact_s": s["rest_to_exact"] if result.reached_exact else None,
+            "reached_exact": result.reached_exact, "rest_frames": len(result.refine_steps),
+            "exact_frame_s": s["exact_seconds"],
+            "levels": _levels(result), "streaming": summary, "capped": streamed.capped,
+            "cache_mb": streamed.plan.cache / 1e6, "frame_cap": streamed.plan.cap,
+            **{k: s[k] for k in ("resident_max_mb", "chunks_loaded", "rss_start_mb",
+                                 "rss_end_mb", "rss_max_mb")},
+            "samples": result.samples}
+
+
+def _levels(result) -> dict:
+    """How often each level drew a moving frame (``"scale 0.50, <= 100,000 splats": count``)."""
+    from ...interactive.budget import Level
+
+    counts: dict = {}
+    for f in result.frames:
+        name = Level(f.scale, f.budget, f.sh_degree).describe()
+        counts[name] = counts.get(name, 0) + 1
+    return counts
 
 
 STEPS = {"scene": step_scene, "build": step_build, "open": step_open, "frame": step_frame,
