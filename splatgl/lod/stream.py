@@ -82,6 +82,16 @@ class LazyChunks:
         return self.lazy.nodes(np.arange(lo, hi, dtype=np.int64))
 
 
+def tree_cache_need(chunks, offsets, threads: int = LOADERS) -> int:
+    """Bytes a :class:`ResidentSet` over a tree's ``chunks`` needs at least: its pinned top
+    levels' chunks and ``threads`` of the largest in flight (what a memory plan's cache share
+    must hold, :func:`splatgl.lod.budget.stream_plan`)."""
+    top = max(0, len(offsets) - 1 - PINNED_LEVELS)
+    pinned = range(int(offsets[top]) // chunks.rows, chunks.count)
+    largest = max((chunks.estimate(c) for c in range(chunks.count)), default=0)
+    return sum(chunks.estimate(c) for c in pinned) + largest * max(1, threads)
+
+
 @dataclass
 class StreamStats:
     """What a :class:`ResidentSet` did: bytes held now and at most, chunks loaded and evicted."""

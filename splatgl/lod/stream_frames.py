@@ -41,7 +41,7 @@ from ..renderers.quad import QuadRenderer
 from .budget import StreamPlan, format_size, release_freed
 from .lazy import LazyLod
 from .selection import LodSettings
-from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet, scene_bytes
+from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet, scene_bytes, tree_cache_need
 from .stream_cut import SPHERE_PAGES_PER_SPLAT, choose_cut, plan_for
 
 #: The framing proxy's level: the first from the top with at least this many nodes.
@@ -128,9 +128,11 @@ class StreamFrames:
             release_freed()
             self.ctx = create_headless_context()
             self.programs = ProgramCache(self.ctx)
-            self.plan = plan or plan_for(self.lazy, self.memory, settings.gpu_storage)
-            self.resident = ResidentSet(LazyChunks(self.lazy, chunk_rows), self.plan.cache,
-                                        self.lazy.offsets, self.lazy.branching, threads)
+            chunks = LazyChunks(self.lazy, chunk_rows)
+            self.plan = plan or plan_for(self.lazy, self.memory, settings.gpu_storage,
+                                         tree_cache_need(chunks, self.lazy.offsets, threads))
+            self.resident = ResidentSet(chunks, self.plan.cache, self.lazy.offsets,
+                                        self.lazy.branching, threads)
         except BaseException:
             self.close()
             raise

@@ -23,7 +23,7 @@ from ..scene.settings import RenderSettings
 from .lazy import LazyLod
 from .selection import LodSettings
 from .budget import StreamPlan, release_freed
-from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet
+from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet, tree_cache_need
 from .stream_cut import SPHERE_PAGES_PER_SPLAT, choose_cut, plan_for
 from .stream_frames import framing_scene
 
@@ -56,8 +56,10 @@ class StreamedScene:
         try:
             self.framing = framing_scene(self.lazy)
             release_freed()
-            self.plan = plan or plan_for(self.lazy, self.memory)
-            self.resident = ResidentSet(chunks or LazyChunks(self.lazy, chunk_rows), self.plan.cache,
+            chunks = chunks or LazyChunks(self.lazy, chunk_rows)
+            self.plan = plan or plan_for(self.lazy, self.memory,
+                                         cache_need=tree_cache_need(chunks, self.lazy.offsets, threads))
+            self.resident = ResidentSet(chunks, self.plan.cache,
                                         self.lazy.offsets, self.lazy.branching, threads,
                                         on_loaded=self._loaded)
             self.resident.load_pinned()   # the top levels: some ancestor is always there
