@@ -162,7 +162,8 @@ class ChunkedStream:
     call it once the GL context exists): the chunks and the environment hold ``plan.cache``
     bytes, a frame at most ``plan.cap`` splats (levels coarsened to fit, said once in
     :attr:`capped`).  ``pinned``: the coarsest level of every chunk is loaded at once and never
-    evicted (the viewer's stand-ins)."""
+    evicted (the viewer's stand-ins), and a view draws at most the splats the chunks' share
+    holds besides them (the viewer keeps a view's chunks resident to complete it)."""
 
     def __init__(self, path, lod: LodSettings, memory: int, level: int | None = None,
                  threads: int = LOADERS, pinned: bool = False, on_loaded=None, framing=None,
@@ -192,8 +193,10 @@ class ChunkedStream:
         self.capped_views = self.views = 0
         self.resident = ResidentSet(self.chunks, self.plan.cache - env_bytes, None, 1, threads,
                                     on_loaded, pinned=coarsest if pinned else None)
-        if pinned:
+        if pinned:   # the viewer: a view's chunks must all fit to complete (they are kept)
             self.resident.collect(sorted(coarsest), lambda i, scene: None)
+            room = (self.plan.cache - need) // self.chunks.row_bytes
+            self.cap = max(1, min(self.cap, int(room)))
 
     def _load_environment(self):
         if not self.structure.has_environment:
@@ -218,7 +221,7 @@ class ChunkedStream:
                     else f"--lod-threshold {(lod or self.lod).threshold_px:g} px")
             self.capped = (f"the memory bound made the levels coarser than {what} asked: "
                            f"{self.table.splats(levels):,} of {asked:,} splats (the frame holds "
-                           f"at most {self.plan.cap:,} splats)")
+                           f"at most {self.cap:,} splats)")
         return levels
 
     def ids(self, levels: np.ndarray) -> list[int]:
@@ -247,7 +250,7 @@ class ChunkedStream:
         capped = f", {self.capped_views} of {self.views} views capped" if self.capped_views else ""
         return (f"{self.resident.stats.summary(self.plan.cache)}; {self.chunks.count} chunk "
                 f"levels of {len(self.structure.chunks)} chunks x {self.structure.levels} "
-                f"levels{where}; frame at most {self.plan.cap:,} splats{capped}")
+                f"levels{where}; frame at most {self.cap:,} splats{capped}")
 
     def close(self) -> None:
         self.resident.close()

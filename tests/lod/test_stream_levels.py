@@ -341,3 +341,24 @@ def test_streamed_sog_chunks_of_one_unit_decode_it_once(tmp_path, monkeypatch):
         frames.render_view(_camera(4.0))
         assert frames.last_cut_nodes == structure.counts[0]
     assert sorted(decoded) == sorted(level0)
+
+
+def test_viewer_view_fits_the_chunk_cache_and_completes(tmp_path):
+    """The viewer keeps a view's chunks resident to complete it: a level larger than the
+    chunks' share is coarsened to what fits (said in ``capped``), and the view completes."""
+    path, structure = _chunked(tmp_path, "lcc")
+    scene = ChunkedScene(path, LodSettings(), 64 << 10, level=0, plan=cache_plan(64 << 10))
+    try:
+        coarsest = sum(int(row[row > 0][-1]) for row in scene.stream.table.counts)
+        assert coarsest < scene.stream.cap < structure.counts[0]
+        cam = _camera(4.0)
+        for _ in range(200):
+            drawn = scene.scene_for(cam, SETTINGS)
+            if scene.complete:
+                break
+            threading.Event().wait(0.01)
+        assert scene.complete and "coarser than --lod-level 0 asked" in scene.capped
+        assert drawn.count <= scene.stream.cap + 20   # and the 20 environment splats
+        assert scene.resident.stats.peak_bytes <= 64 << 10
+    finally:
+        scene.close()
