@@ -207,3 +207,59 @@ def test_leaving_the_depth_or_difference_view_redraws_the_colour_view_at_once(xv
             while v.step(dt=0.0):
                 pass
             assert np.abs(_window(v) - want).max() <= 1
+
+
+@pytest.mark.slow   # a window and a dozen redraws as the chunks arrive: 2-4 s here
+def test_a_streamed_scene_moves_under_the_budget_and_rests_until_every_chunk_is_in(
+        xvfb_display, tmp_path):
+    """``view --memory``: the budget's drafts while moving (from the resident chunks), then at
+    rest the view's cut drawn again as chunks arrive, the loop asleep in between (``awaiting``),
+    until the frame is exact: the exact cut's image."""
+    import threading
+
+    from test_stream_session import _Gated, cache_plan, tiny_lod
+
+    from splatgl.cameras.camera import Camera
+    from splatgl.cameras.poses import look_at
+    from splatgl.errors import ContextError
+    from splatgl.lod.lazy import LazyLod
+    from splatgl.lod.selection import LodSettings
+    from splatgl.lod.stream import LazyChunks
+    from splatgl.lod.stream_view import StreamedScene
+    from splatgl.scene.settings import RenderSettings
+    from splatgl.viewer.app import Viewer, ViewerOptions
+
+    path = tiny_lod(tmp_path)
+    lazy = LazyLod(path)
+    chunks = _Gated(LazyChunks(lazy, 512))
+    stream = StreamedScene(path, LodSettings(), 1 << 30, chunks=chunks, plan=cache_plan(1 << 20))
+    chunks.gated = True
+    settings = RenderSettings(near=0.01)
+    camera = Camera.from_fov(W, H, 50.0, look_at(np.array([0.3, 0.0, 1.6]), np.zeros(3)))
+    options = ViewerOptions(screenshot_dir=tmp_path, vsync=False, target_fps=5000.0, stream=stream)
+    try:
+        try:
+            v = Viewer(stream.framing, settings, camera, options=options)
+        except ContextError as exc:
+            pytest.skip(f"no OpenGL 4.3+ window context on Xvfb: {exc}")
+        with v:
+            assert v.paced
+            _move(v, 2)
+            assert not v.pacer.session.shown.level.exact and v.last.quality.startswith("moving")
+            while v.step(dt=0.0):   # the refinement's steps, short of chunks
+                pass
+            assert not v.pacer.exact and v.pacer.awaiting and v.pacer.refining
+            assert not v.step(dt=0.0)   # nothing arrived: nothing drawn
+            chunks.gate.set()
+            for _ in range(400):
+                v.step(dt=0.0)
+                if v.pacer.exact:
+                    break
+                threading.Event().wait(0.01)
+            assert v.pacer.exact and stream.complete and not v.pacer.awaiting
+            got = v.pacer.session.levels.read(v.pacer.session.shown)
+            want = v.renderer.render(stream.exact_scene(v.camera(), settings), v.camera(), settings)
+            assert np.array_equal(got, want)
+    finally:
+        stream.close()
+        lazy.close()
