@@ -399,11 +399,3 @@ def select_cut_budget_near(data: CutData, camera: Camera, budget: int, start: fl
         return select_cut_budget(data, camera, budget, threshold_px, band, kern)
     return ok
 
-
-def sphere_sizes(camera: Camera, anchor: np.ndarray, centres: np.ndarray,
-                 radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(projected radius in px, touches the view) of spheres: ``centres`` (3, K) float32
-    relative to ``anchor``, ``radius`` (K,): the cut's own node test (the chunks of a Streamed
-    SOG or LCC, :mod:`splatgl.lod.level_cut`)."""
-    data = CutData(centres, radius, np.zeros(1, np.int64), 1, np.asarray(anchor, np.float64))
-    return _NodeTest(data, camera).test(centres, radius)

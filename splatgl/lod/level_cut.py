@@ -7,7 +7,7 @@ the sphere of volume ``V / n`` (``V`` the chunk's box volume, each side at least
 :data:`FLAT_SIDE` of its longest so a flat chunk keeps a volume; ``n`` its splats at that
 level), 0 at the chunk's finest level, never smaller than a finer level's.  Its *screen error*
 is that radius in pixels at the chunk's bounding sphere (the cut's node test,
-:func:`splatgl.lod.cut.sphere_sizes`: ``f e / (d - R)``, infinite inside the sphere).
+:func:`sphere_sizes`: ``f e / (d - R)``, infinite inside the sphere).
 
 :func:`choose_levels` draws each chunk at its coarsest level whose screen error is at most
 ``threshold_px`` (``--lod-threshold``; level 0 where the camera is inside the chunk's sphere);
@@ -28,13 +28,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cameras.camera import Camera
-from .cut import sphere_sizes
+from .cut import CutData, _NodeTest
 from .selection import LodSettings
 
 #: A chunk box's side counts as at least this fraction of its longest (flat chunks).
 FLAT_SIDE = 1e-2
 #: Not drawn: the level of a chunk out of view (or holding no splats at the level given).
 NOT_DRAWN = -1
+
+
+def sphere_sizes(camera: Camera, anchor: np.ndarray, centres: np.ndarray,
+                 radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(projected radius in px, touches the view) of spheres: ``centres`` (3, K) float32
+    relative to ``anchor``, ``radius`` (K,), by the ``.lod.ply`` cut's own node test."""
+    data = CutData(centres, radius, np.zeros(1, np.int64), 1, np.asarray(anchor, np.float64))
+    return _NodeTest(data, camera).test(centres, radius)
 
 
 def level_errors(lo: np.ndarray, hi: np.ndarray, counts: np.ndarray) -> np.ndarray:
