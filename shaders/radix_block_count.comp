@@ -1,11 +1,11 @@
 // Radix sort, block pass step 1 of 3 (pass slot u_slot): each lane counts the digits of its
-// block in a private array (llvmpipe keeps it in registers and stack: gathers, no storage
-// accesses a key) and writes them as its row of hist.
+// block in a private array (llvmpipe keeps it on the stack: gathers, no storage access a key)
+// and writes them as its row of hist.
 // Twin: splatgl/splatmath/radix.py radix_sort_twin().
+#include "lib/radix_block_io.glsl"
 #include "lib/radix_block.glsl"
 
 layout(local_size_x = RADIX_BLOCK_LANES) in;
-layout(std430, binding = RADIX_BINDING_KEYS_IN) readonly buffer KeysIn { uvec4 keys_in[]; };
 layout(std430, binding = RADIX_BINDING_HIST) writeonly buffer Hist { uvec4 hist[]; };
 
 uniform uint u_slot;
@@ -19,13 +19,13 @@ void main() {
     for (uint d = 0u; d < BLOCK_RADIX; ++d) h[d] = 0u;
     uint i = lo;
     for (; i + 4u <= hi; i += 4u) {
-        uvec4 d = (keys_in[i >> 2] >> shift) & BLOCK_MASK;
+        uvec4 d = (KEYS4(i) >> shift) & BLOCK_MASK;
         h[d.x] += 1u;
         h[d.y] += 1u;
         h[d.z] += 1u;
         h[d.w] += 1u;
     }
-    for (; i < hi; ++i) h[block_digit(keys_in[i >> 2][i & 3u], shift)] += 1u;
+    for (; i < hi; ++i) h[block_digit(KEY1(i), shift)] += 1u;
     uint row = lane * (BLOCK_RADIX / 4u);
     for (uint d = 0u; d < BLOCK_RADIX; d += 4u)
         hist[row + d / 4u] = uvec4(h[d], h[d + 1u], h[d + 2u], h[d + 3u]);

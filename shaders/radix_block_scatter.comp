@@ -3,13 +3,10 @@
 // private array).  A lane's keys of one digit keep their order and land after the same digit's
 // keys of the lanes before it: the pass is stable by construction, hence the whole LSD sort.
 // Twin: splatgl/splatmath/radix.py radix_sort_twin().
+#include "lib/radix_block_io.glsl"
 #include "lib/radix_block.glsl"
 
 layout(local_size_x = RADIX_BLOCK_LANES) in;
-layout(std430, binding = RADIX_BINDING_KEYS_IN) readonly buffer KeysIn { uvec4 keys_in[]; };
-layout(std430, binding = RADIX_BINDING_VALS_IN) readonly buffer ValsIn { uvec4 vals_in[]; };
-layout(std430, binding = RADIX_BINDING_KEYS_OUT) writeonly buffer KeysOut { uint keys_out[]; };
-layout(std430, binding = RADIX_BINDING_VALS_OUT) writeonly buffer ValsOut { uint vals_out[]; };
 layout(std430, binding = RADIX_BINDING_HIST) readonly buffer Hist { uvec4 hist[]; };
 
 uniform uint u_slot;
@@ -29,14 +26,19 @@ void main() {
         h[d + 3u] = at.w;
     }
 #define PLACE(key, value) { uint d_ = block_digit(key, shift); uint o_ = h[d_]; h[d_] = o_ + 1u; \
-                            keys_out[o_] = key; vals_out[o_] = value; }
+                            STORE1(o_, key, value); }
     uint i = lo;
     for (; i + 4u <= hi; i += 4u) {
-        uvec4 k = keys_in[i >> 2], v = vals_in[i >> 2];
+        uvec4 k, v;
+        LOAD4(i, k, v)
         PLACE(k.x, v.x)
         PLACE(k.y, v.y)
         PLACE(k.z, v.z)
         PLACE(k.w, v.w)
     }
-    for (; i < hi; ++i) PLACE(keys_in[i >> 2][i & 3u], vals_in[i >> 2][i & 3u])
+    for (; i < hi; ++i) {
+        uint k, v;
+        LOAD1(i, k, v)
+        PLACE(k, v)
+    }
 }

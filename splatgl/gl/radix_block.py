@@ -15,7 +15,9 @@ this is the classic CPU parallel LSD radix sort instead, shaped for such a devic
   order, (digit, lane), in place, plus the digit starts;
 - ``radix_block_scatter.comp``: each lane walks its block in order and writes each key and
   value at its digit's next place: stable by construction, with no barrier, no shared memory
-  and no subgroup operation.
+  and no subgroup operation.  Between passes a key and its value travel as one uint64 (one
+  storage write instead of two) where the device has 64-bit integers and the pair buffer fits
+  its storage block limit (llvmpipe: 128 MB, 16.7M keys); apart otherwise.
 
 The passes run over only the bits in which keys differ, planned on the device
 (``radix_plan.comp`` with ``RADIX_BLOCK``; ``radix_block_bits.comp`` finds the bits), with
@@ -24,6 +26,11 @@ writes B (s even) or C (s odd), except that the last of several passes writes A;
 pass ``radix_block_copy.comp`` brings B into A.  The host records every slot's dispatches with
 the buffers that slot would use and the plan gives the slots the keys do not need no work
 groups.
+
+Measured on llvmpipe (2 cores, AVX-512 Xeon): the scattered storage writes are most of the
+time (each is a loop over the SIMD lanes in llvmpipe, and the 2048 digit streams miss the
+caches); the digit counts in a private array cost a tenth of it; 8-bit digits (4 passes) cost
+about what 11-bit ones (3 passes) do; ``benchmarks/radix_sort.py`` compares the designs.
 """
 
 from __future__ import annotations
@@ -60,9 +67,9 @@ def block_groups() -> int:
 class BlockPasses:
     """The programs of the block passes for ``groups`` work groups, and the recording of a
     sort (:meth:`record`) into the buffers a :class:`~splatgl.gl.radix_sort.RadixSorter`
-    holds."""
-
-    NAMES = ("bits", "plan", "count", "scan", "scatter", "copy")
+    holds.  Between passes keys and values travel as uint64 pairs (one storage write a key
+    instead of two) where the pair buffers fit the device's storage block size
+    (:meth:`pairs_fit`); apart otherwise."""
 
     def __init__(self, programs: ProgramCache, groups: int | None = None,
                  bits: int = RADIX_BLOCK_BITS):
@@ -70,10 +77,32 @@ class BlockPasses:
         self.lanes = self.groups * RADIX_BLOCK_LANES
         self.bits = bits
         self.slots = -(-32 // bits)
-        defines = {"RADIX_BLOCK": 1, "RADIX_BLOCK_GROUPS": self.groups, "RADIX_BLOCK_BITS": bits}
-        self.programs = {name: programs.compute(f"radix_{'block_' if name != 'plan' else ''}{name}.comp",
-                                                defines)
-                         for name in self.NAMES}
+        self._cache = programs
+        self._defines = {"RADIX_BLOCK": 1, "RADIX_BLOCK_GROUPS": self.groups,
+                         "RADIX_BLOCK_BITS": bits}
+        self.programs: dict[str, moderngl.ComputeShader] = {}  # by name and pairs in/out
+        for name in ("bits", "plan", "scan"):
+            self._program(name)
+        ctx = programs.ctx
+        self._block_limit = (int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 0)
+                             if "GL_ARB_gpu_shader_int64" in ctx.extensions else 0)
+
+    def _program(self, name: str, src_pairs: bool = False, dst_pairs: bool = False):
+        key = f"{name}{' pairs in' if src_pairs else ''}{' pairs out' if dst_pairs else ''}"
+        if key not in self.programs:
+            defines = dict(self._defines)
+            if src_pairs:
+                defines["RADIX_BLOCK_SRC_PAIRS"] = 1
+            if dst_pairs:
+                defines["RADIX_BLOCK_DST_PAIRS"] = 1
+            file = "radix_plan.comp" if name == "plan" else f"radix_block_{name}.comp"
+            self.programs[key] = self._cache.compute(file, defines)
+        return self.programs[key]
+
+    def pairs_fit(self, capacity: int) -> bool:
+        """Whether a pair buffer of ``capacity`` keys fits one storage block here (and the
+        device has 64-bit integers)."""
+        return pair_bytes(capacity) <= self._block_limit
 
     def hist_bytes(self) -> int:
         """Bytes of hist: a row of digit counts a lane, then the digit starts."""
@@ -81,46 +110,66 @@ class BlockPasses:
 
     def record(self, ctx: moderngl.Context, state: moderngl.Buffer, sets, hist, capacity: int,
                find_bits: bool, args: dict[str, int]) -> None:
-        """Dispatch a sort of the A keys (the count is in ``state``): ``sets`` the (keys,
-        values) buffers A, B, C of ``capacity`` keys; ``find_bits``: run the bits kernel first
-        (the state holds no OR/AND yet); ``args``: byte offsets in ``state`` of the indirect
-        arguments by name (pass, scan, mid, last: per slot, 16 bytes each; copy)."""
-        progs = self.programs
-        for prog in progs.values():
-            if "u_capacity" in prog:
-                prog["u_capacity"].value = capacity
+        """Dispatch a sort of the A keys (the count is in ``state``): ``sets`` the buffers A
+        (keys, values), B and C (one pair buffer each, or keys and values) of ``capacity``
+        keys; ``find_bits``: run the bits kernel first (the state holds no OR/AND yet);
+        ``args``: byte offsets in ``state`` of the indirect arguments by name (pass, scan, mid,
+        last: per slot, 16 bytes each; copy)."""
         a, b, c = sets
+        pairs = len(b) == 1
+        progs = self.programs
         hist.bind_to_storage_buffer(RADIX_BINDING_HIST)
         if find_bits:
+            self._set(progs["bits"], capacity)
             _bind(a, None)
             progs["bits"].run(group_x=self.groups)
             ctx.memory_barrier()
+        self._set(progs["plan"], capacity)
         progs["plan"].run(group_x=1)
         ctx.memory_barrier()
         for slot in range(self.slots):
             src = a if slot == 0 else (b if slot % 2 else c)   # what slot - 1 wrote mid-sort
             mid = b if slot % 2 == 0 else c
-            for name in ("count", "scatter"):
-                progs[name]["u_slot"].value = slot
+            from_pairs = pairs and slot > 0
             _bind(src, None)
-            progs["count"].run_indirect(state, args["pass"] + 16 * slot)
+            self._run(self._program("count", from_pairs), state, args["pass"], slot, capacity)
             ctx.memory_barrier()
-            progs["scan"].run_indirect(state, args["scan"] + 16 * slot)
+            self._run(progs["scan"], state, args["scan"], slot, capacity)
             ctx.memory_barrier()
             _bind(src, mid)
-            progs["scatter"].run_indirect(state, args["mid"] + 16 * slot)
+            self._run(self._program("scatter", from_pairs, pairs), state, args["mid"], slot,
+                      capacity)
             if slot:  # the last of several passes writes A (slot 0 never is)
                 _bind(src, a)
-                progs["scatter"].run_indirect(state, args["last"] + 16 * slot)
+                self._run(self._program("scatter", from_pairs), state, args["last"], slot,
+                          capacity)
             ctx.memory_barrier()
         _bind(b, a)
-        progs["copy"].run_indirect(state, args["copy"])
+        self._run(self._program("copy", pairs), state, args["copy"], 0, capacity)
         ctx.memory_barrier()
+
+    @staticmethod
+    def _set(prog, capacity: int) -> None:
+        if "u_capacity" in prog:
+            prog["u_capacity"].value = capacity
+
+    def _run(self, prog, state, offset: int, slot: int, capacity: int) -> None:
+        self._set(prog, capacity)
+        if "u_slot" in prog:
+            prog["u_slot"].value = slot
+        prog.run_indirect(state, offset + 16 * slot)
+
+
+def pair_bytes(capacity: int) -> int:
+    """Bytes of a pair buffer for ``capacity`` keys (whole u64vec4s)."""
+    return 32 * -(-capacity // 4)
 
 
 def _bind(src, dst) -> None:
-    src[0].bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
-    src[1].bind_to_storage_buffer(RADIX_BINDING_VALS_IN)
+    """Bind a set of buffers (keys and values, or one pair buffer) as the input and ``dst``
+    as the output."""
+    for buf, point in zip(src, (RADIX_BINDING_KEYS_IN, RADIX_BINDING_VALS_IN)):
+        buf.bind_to_storage_buffer(point)
     if dst is not None:
-        dst[0].bind_to_storage_buffer(RADIX_BINDING_KEYS_OUT)
-        dst[1].bind_to_storage_buffer(RADIX_BINDING_VALS_OUT)
+        for buf, point in zip(dst, (RADIX_BINDING_KEYS_OUT, RADIX_BINDING_VALS_OUT)):
+            buf.bind_to_storage_buffer(point)

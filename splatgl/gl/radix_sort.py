@@ -47,7 +47,7 @@ from .bindings import (RADIX_BINDING_HIST, RADIX_BLOCK_LANES, RADIX_BINDING_KEYS
                        RADIX_BINDING_STATE, RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT,
                        RADIX_GROUP, RADIX_PORTABLE_WARP)
 from .egl_devices import is_software_renderer
-from .radix_block import BLOCK_SLOTS, BlockPasses
+from .radix_block import BLOCK_SLOTS, BlockPasses, pair_bytes
 from .shaders import ProgramCache
 from .transfers import transfers
 
@@ -118,7 +118,8 @@ class RadixSorter:
         # which forces the --sort/--early-stop defaults, leaves llvmpipe's sort as it is
         self._software = is_software_renderer(ctx.info.get("GL_RENDERER", ""))
         self._capacity = 0
-        # keys A, values A, keys B, values B, hist (block passes: then keys C, values C)
+        # keys A, values A, keys B, values B, hist; the block passes: keys A, values A, hist,
+        # then B and C (a pair buffer each, or keys and values each)
         self._bufs: list[moderngl.Buffer] = []
         self._state = ctx.buffer(reserve=_STATE_BYTES)
         self._narrow = narrow
@@ -185,12 +186,17 @@ class RadixSorter:
             buf.release()
         tiles = -(-count // TILE_KEYS)
         size = 16 * -(-count // 4)  # whole uvec4s (the block passes read 4 keys at a time)
-        self._bufs = [self.ctx.buffer(reserve=size) for _ in range(4)]
         if self._block is None:
+            self._bufs = [self.ctx.buffer(reserve=size) for _ in range(4)]
             self._bufs.append(self.ctx.buffer(reserve=4 * RADIX * tiles))
-        else:
+        elif self._block.pairs_fit(count):
+            self._bufs = [self.ctx.buffer(reserve=size) for _ in range(2)]
             self._bufs.append(self.ctx.buffer(reserve=self._block.hist_bytes()))
-            self._bufs += [self.ctx.buffer(reserve=size) for _ in range(2)]
+            self._bufs += [self.ctx.buffer(reserve=pair_bytes(count)) for _ in range(2)]
+        else:
+            self._bufs = [self.ctx.buffer(reserve=size) for _ in range(2)]
+            self._bufs.append(self.ctx.buffer(reserve=self._block.hist_bytes()))
+            self._bufs += [self.ctx.buffer(reserve=size) for _ in range(4)]
         self._capacity = count
 
     def sort(self, keys: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -234,7 +240,7 @@ class RadixSorter:
         back); ``count`` is then the most there can be (the buffers' size), and a device count
         above it sorts ``count`` keys."""
         self.reserve(count)
-        k_a, v_a, k_b, v_b, hist = self._bufs[:5]
+        k_a, v_a = self._bufs[:2]
         tiles = max(1, -(-self._capacity // TILE_KEYS))  # hist's rows; the plan sizes the passes
         progs = self._progs
         for prog in progs.values():
@@ -253,12 +259,15 @@ class RadixSorter:
             self._state.write(np.asarray(bits, np.uint32))
             moved.upload(8)
         if self._block is not None:
-            sets = ((k_a, v_a), (k_b, v_b), tuple(self._bufs[5:7]))
-            self._block.record(self.ctx, self._state, sets, hist, self._capacity, bits is None,
-                               _BLOCK_ARGS)
+            rest = self._bufs[3:]
+            half = len(rest) // 2
+            sets = ((k_a, v_a), tuple(rest[:half]), tuple(rest[half:]))
+            self._block.record(self.ctx, self._state, sets, self._bufs[2], self._capacity,
+                               bits is None, _BLOCK_ARGS)
             for prog in self._block.programs.values():
                 moved.uniforms(prog)
             return k_a, v_a
+        k_b, v_b, hist = self._bufs[2:5]
         hist.bind_to_storage_buffer(RADIX_BINDING_HIST)
         if bits is None:
             k_a.bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)

@@ -127,7 +127,7 @@ def programs(ctx):
 
 
 @pytest.fixture(scope="module", params=[
-    "block", "subgroup", "portable",
+    "block", "block, keys and values apart", "subgroup", "portable",
     # the wide groups GPUs run: llvmpipe compiles them in 5-45 s
     pytest.param("subgroup, wide groups", marks=pytest.mark.slow),
     pytest.param("portable, wide groups", marks=pytest.mark.slow)])
@@ -136,8 +136,15 @@ def sorter(request, ctx, programs):
     renderer reuses it): the block passes (software devices' default), and the work-group
     design, which on llvmpipe runs one warp per group; the wide-group ones are the shape GPUs
     run."""
-    if request.param == "block":
+    if request.param.startswith("block"):
         s = RadixSorter(ctx, programs, path="block")
+        assert s._block.pairs_fit(s._capacity)  # llvmpipe has 64-bit integers
+        if request.param.endswith("apart"):
+            # as past 16.7M keys (a pair buffer over the 128 MB storage block limit) or on a
+            # device without 64-bit integers: keys and values apart between passes
+            s._block._block_limit = 0
+            s.reserve(s._capacity + 1)
+            assert len(s._bufs) == 7
         yield s
         s.release()
         return
