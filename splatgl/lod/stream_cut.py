@@ -53,11 +53,19 @@ def per_splat(lazy: LazyLod, storage: GpuStorage | str = GpuStorage.FLOAT32) -> 
     return frame_bytes_per_splat(node.sh.shape[1], gpu_bytes_per_splat(storage, node.sh_degree))
 
 
+#: A viewer holds the scene it draws and its upload while the next cut is gathered, weighted
+#: (float64 temporaries) and uploaded: about 2.3 times a headless frame's bytes a splat
+#: (measured: a 5M scene's flight peaked at 3.6 GB under --memory 2G with a headless frame's
+#: cap of 4.26M splats), so its cap is a third of a headless frame's.
+VIEWER_FRAMES = 3
+
+
 def plan_for(lazy: LazyLod, memory: int, storage: GpuStorage | str = GpuStorage.FLOAT32,
-             cache_need: int = 0, held: int | None = None) -> StreamPlan:
+             cache_need: int = 0, held: int | None = None, frames: int = 1) -> StreamPlan:
     """The split of ``memory`` for streamed frames of ``lazy`` (see the module doc): ``held``
-    measured now when None (call it once the GL context exists)."""
-    return stream_plan(memory, per_splat(lazy, storage), cache_need, held)
+    measured now when None (call it once the GL context exists); ``frames``: how many frames'
+    nodes the process holds at once (VIEWER_FRAMES for the viewer's)."""
+    return stream_plan(memory, frames * per_splat(lazy, storage), cache_need, held)
 
 
 def _capped(lazy: LazyLod, camera: Camera, lod: LodSettings, cap: int, asked: str) -> CutChoice:
