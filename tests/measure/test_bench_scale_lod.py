@@ -253,11 +253,11 @@ def test_flight_figures_against_the_viewers_targets():
             {"splats": 5_000_000, "flight": {"fps_median": 4.0, "fps_p10": 2.0,
                                             "rest_to_exact_s": None, "peak_rss_mb": 2500.0}},
             {"splats": 9, "flight": {"failed": "stopped"}}]
-    lines = table(rows, 2_000_000_000).splitlines()
+    lines = table(rows, 2 << 30).splitlines()
     assert lines[0].count("|") == 16 and "| moving fps p10 |" in lines[0]
     assert "| 12.0 | 8.5 | 3.20 | 900 |" in lines[2]
     assert lines[-2:] == [
         "flight 1,000,000: moving 12.0 fps median, p10 8.5 (>= 10: met), exact 3.2 s after rest "
-        "(<= 15: met), peak 900 MB of --memory 2000 MB (met)",
+        "(<= 15: met), peak 879 MiB of --memory 2048 MiB (met)",
         "flight 5,000,000: moving 4.0 fps median, p10 2.0 (>= 10: NOT met), exact - s after rest "
-        "(<= 15: NOT met), peak 2500 MB of --memory 2000 MB (NOT met)"]
+        "(<= 15: NOT met), peak 2441 MiB of --memory 2048 MiB (NOT met)"]

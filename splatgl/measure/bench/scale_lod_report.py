@@ -56,9 +56,9 @@ def targets(rows: list[dict], memory: int | None) -> list[str]:
                  f"(>= {TARGET_FPS:g}: {ok(fps is not None and fps >= TARGET_FPS)})",
                  f"exact {_f(exact, '.1f')} s after rest (<= {TARGET_EXACT_S:g}: "
                  f"{ok(exact is not None and exact <= TARGET_EXACT_S)})"]
-        if memory and peak is not None:
-            parts.append(f"peak {peak:.0f} MB of --memory {memory / 1e6:.0f} MB "
-                         f"({ok(peak * 1e6 <= memory)})")
+        if memory and peak is not None:   # peak_rss_mb is VmHWM's kB / 1000
+            parts.append(f"peak {peak * 1024e3 / 2**20:.0f} MiB of --memory "
+                         f"{memory / 2**20:.0f} MiB ({ok(peak * 1024e3 <= memory)})")
         lines.append(f"flight {r['splats']:,}: " + ", ".join(parts))
     return lines
 
