@@ -1,13 +1,16 @@
 """Peak memory of ``splatgl edit``, ``convert`` and ``info --stats`` in memory and streamed
-within ``--memory`` (issue 41 item 5).
+within ``--memory`` (issue 41 item 5): PLY, .splat and compressed PLY outputs, floaters and
+decimation per chunk.
 
     python benchmarks/stream_memory.py [--size 3M] [--sh 3] [--memory 300M] [--out FILE.json]
+                                       [--only TEXT ...]
 
 The scene is the scale benchmark's real-data scene (:func:`splatgl.measure.bench.scale.scene_file`,
 built from the shared scenes on first use and cached in the temporary folder, never in the
 repository).  Each case runs in a fresh child process (its peak resident memory, VmHWM, is its
 own), once with the default budget (half the RAM: the scene loads whole) and once with
-``--memory``; the two output files must be identical byte for byte.  Seconds are printed but
+``--memory``; the two output files must be identical byte for byte (but the decimation's,
+chunked: the same count, other merges).  Seconds are printed but
 are not benchmark figures where other work shares the machine.
 """
 
@@ -36,6 +39,14 @@ def cases(scene: Path, tmp: str) -> list[tuple[str, list[str], str | None]]:
         ("convert --sh-degree 1", ["convert", str(scene), "{out}", "--sh-degree", "1"],
          "convert.ply"),
         ("info --stats", ["info", str(scene), "--stats", "--json", "{out}"], None),
+        ("convert to .splat", ["convert", str(scene), "{out}"], "convert.splat"),
+        ("convert to .compressed.ply", ["convert", str(scene), "{out}"],
+         "convert.compressed.ply"),
+        ("edit --remove-floaters", ["edit", str(scene), "-o", "{out}", "--remove-floaters"],
+         "floaters.ply"),
+        # per chunk: the count is the in-memory one, the file differs (docs/editing.md)
+        ("edit --decimate 50%", ["edit", str(scene), "-o", "{out}", "--decimate", "50%"],
+         "decimate.ply"),
     ]
 
 
@@ -45,6 +56,8 @@ def main(argv=None) -> int:
     p.add_argument("--sh", type=int, default=3, help="SH degree of the scene (default 3)")
     p.add_argument("--memory", default="300M", help="the streamed runs' --memory")
     p.add_argument("--out", type=Path, default=None, help="write the rows as JSON here")
+    p.add_argument("--only", action="append", default=[],
+                   help="run the cases whose name holds this text (repeatable; default all)")
     args = p.parse_args(argv)
     n = parse_sizes(args.size, (), "--size")[0]
     scene = scene_file(n, args.sh)
@@ -52,6 +65,8 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory(dir=scene.parent) as tmp:
         for name, cmd, out in cases(scene, tmp):
+            if args.only and not any(text in name for text in args.only):
+                continue
             pair = {}
             for how, extra in (("memory", []), ("streamed", ["--memory", args.memory])):
                 target = f"{tmp}/{how}-{out or 'info.json'}"

@@ -1,7 +1,8 @@
 """Binary PLY files larger than memory, a block of rows at a time (issue 41 item 5): the
 reader of decoded blocks, the memory budget's block size and the PLY writer of blocks that
 ``splatgl edit``, ``convert`` and ``info --stats`` use (:mod:`.streamed_edit`,
-:mod:`.streamed_stats`).
+:mod:`.streamed_stats`; other outputs :mod:`.streamed_outputs`, the operations that need
+neighbours :mod:`.streamed_neighbours`).
 
 Reading: :class:`~splatgl.lod.ply_rows.PlyRows` (the level-of-detail build's reader of row
 blocks) gives the records; :meth:`Source.blocks` decodes each block as

@@ -1,8 +1,11 @@
 """``splatgl convert`` within a memory budget (issue 41 item 5): a binary PLY larger than the
-budget, written as a PLY (format change within PLY, ``--sh-degree``, ``--drop-invalid``), goes
-through :mod:`.streamed_edit` a block at a time, and the round-trip error is measured by reading
-the output back block by block beside the input.  Anything else converts in memory
-(:func:`splatgl.formats.convert.convert`); an input over the budget then says so.
+budget, written as a PLY (format change within PLY, ``--sh-degree``, ``--drop-invalid``), a
+``.splat`` or a ``.compressed.ply`` (:mod:`.streamed_outputs`), goes through
+:mod:`.streamed_edit` a block at a time; the round-trip error is measured by reading a PLY
+output back block by block beside the input, and the other formats piece by piece from the
+bytes written for each piece (:class:`~.streamed_outputs.RoundTrip`).  An output format written
+whole (SPZ, SOG, glTF, KSPLAT) is refused over the budget in one line.  Other inputs convert in
+memory (:func:`splatgl.formats.convert.convert`); one over the budget then says so.
 """
 
 from __future__ import annotations

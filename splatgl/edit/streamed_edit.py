@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..formats.convert import EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT
+from ..scene.splats import activate_opacities
 from ..writing.atomic import write_error
 from .attributes import Rows
 from .floaters import RemoveFloaters
@@ -29,7 +30,8 @@ from .pipeline import Step, select
 from .placement import (MergeBuilder, describe_transform, merged_sh_degree, shared_extras,
                         transform_scene)
 from .streamed import NORMALS, block_rows, vertex_dtype, write_blocks
-from .streamed_outputs import check_kind, whole_chunks, write_compressed, write_splat
+from .streamed_outputs import (PIECE_SHARE, check_kind, whole_chunks, write_compressed,
+                               write_splat)
 from .streamed_neighbours import find_floaters, floater_rows
 from .streamed_sort import full_box_codes, record_dtype, scratch, sorted_runs, to_records, to_scene
 
@@ -136,7 +138,8 @@ class StreamedEdit:
                     recs = (to_records(b, full_box_codes(b.means, lo.astype(np.float64),
                                                          hi.astype(np.float64)), dtype)
                             for b in self._blocks(self._tally(), progress))
-                    runs = sorted_runs(folder, dtype, recs, self.rows, self.rows)
+                    piece = max(1, self.rows // PIECE_SHARE)
+                    runs = sorted_runs(folder, dtype, recs, piece, piece)
                     return write_compressed(output, count, whole_chunks(
                         to_scene(r, self.kind) for r in runs), trip)
             except OSError as exc:
@@ -178,8 +181,8 @@ class StreamedEdit:
             def kept(j=j):
                 for first, block in self._inputs(progress=progress):
                     keep = self._keep(block, first, j)
-                    rows = Rows(block.subset(keep), 0, int(keep.sum()))
-                    yield first + np.flatnonzero(keep), block.means[keep], rows.opacity
+                    yield (first + np.flatnonzero(keep), block.means[keep],
+                           activate_opacities(block.opacity_logits[keep], block.quats[keep]))
             run = floater_rows(self.memory, op.neighbours, self.rows)
             with scratch(self.output) as folder:
                 self.removed[j], found = find_floaters(op, kept, folder, run)

@@ -43,6 +43,8 @@ DECIMATE_NOTE = ("--decimate over --memory merges within spatial chunks of about
                  "from the in-memory decimation's: docs/editing.md)")
 #: The share of a chunk's splats whose neighbours its halo is sized for.
 HALO_QUANTILE = 0.99
+#: Splats per k-d tree query (its float64 distances and indices).
+QUERY_ROWS = 1 << 16
 #: The most splats a floater chunk holds, however large the budget.
 MAX_CHUNK = 1 << 22
 POINT = np.dtype([("code", "<u8"), ("index", "<i8"), ("means", "<f4", 3), ("opacity", "<f8")])
@@ -55,7 +57,7 @@ def floater_rows(memory: int, k: int, rows: int, held: int | None = None) -> int
     ``rows`` (the edit's blocks)."""
     held = resident_now() if held is None else held
     working = memory - held - RESERVE
-    per = 2 * (POINT.itemsize + 64) + 16 * (k + 1) + POINT.itemsize + 8 * (k + 2)
+    per = 2 * POINT.itemsize + 120 + 8 * (k + 1) + 3 * (POINT.itemsize + 8 * (k + 1))
     return int(max(rows, min(working // per, MAX_CHUNK))) if working > 0 else rows
 
 
@@ -96,7 +98,9 @@ def find_floaters(op: RemoveFloaters, kept, folder, run: int):
             dist = d[sure, 1:].mean(axis=1)
             _table(own["index"][sure], dist, own["opacity"][sure]).tofile(out)
             unsure.sums.append(float(dist.sum()))
-            unsure.add(own[~sure], d[~sure], c, box)
+            points, rows = own[~sure], d[~sure]
+            del own, d  # before a flush
+            unsure.add(points, rows, c, box)
         unsure.flush()
     mean = math.fsum(unsure.sums) / n
     squares = math.fsum(float(((b["d"] - mean) ** 2).sum())
@@ -135,8 +139,8 @@ def _chunk_distances(means, c: int, chunks, k: int, cap: int):
 
     m = means.shape[0]
     kth = np.full(m, np.inf)
-    if m > k:
-        kth = cKDTree(means.astype(np.float64)).query(means, k=k + 1, workers=-1)[0][:, k]
+    if m > k:  # the k-th neighbour's distance only
+        kth = cKDTree(means.astype(np.float64)).query(means, k=[k + 1], workers=-1)[0][:, 0]
     finite = kth[np.isfinite(kth)]
     r = float(np.quantile(finite, HALO_QUANTILE)) if finite.size else 0.0
     _, blo, bhi = chunks[c]
@@ -153,10 +157,20 @@ def _chunk_distances(means, c: int, chunks, k: int, cap: int):
             break
     points = np.concatenate(halo)
     tree = cKDTree(points.astype(np.float64), balanced_tree=False, compact_nodes=False)
-    q = min(k + 1, points.shape[0])  # fewer centres than k + 1: the rest unknown (inf)
-    d = np.full((m, k + 1), np.inf)
-    d[:, :q] = tree.query(means, k=q, workers=-1)[0].reshape(m, q)
+    del points, halo
+    d = _query(tree, means, k)
     return d, d[:, k] <= r, box
+
+
+def _query(tree, means, k: int) -> np.ndarray:
+    """(M, k+1) distances to the nearest centres in ``tree`` (inf past its centres), a slice
+    of QUERY_ROWS at a time (the neighbours' indices are not kept)."""
+    q = min(k + 1, tree.n)
+    d = np.full((means.shape[0], k + 1), np.inf)
+    for s in range(0, means.shape[0], QUERY_ROWS):
+        part = tree.query(means[s:s + QUERY_ROWS], k=q, workers=-1)[0]
+        d[s:s + QUERY_ROWS, :q] = part.reshape(-1, q)
+    return d
 
 
 def _inside(points, box) -> np.ndarray:
@@ -182,7 +196,7 @@ class _Unsure:
         if points.size:
             self.parts.append((points, d, np.full(points.size, c)))
             self.held += points.size
-        if self.held >= self.run:
+        if self.held >= self.run // 2:
             self.flush()
 
     def flush(self) -> None:
@@ -194,24 +208,27 @@ class _Unsure:
         best = np.concatenate([p[1] for p in self.parts])
         owner = np.concatenate([p[2] for p in self.parts])
         self.parts, self.held = [], 0
-        q = pts["means"].astype(np.float64)
         k = self.k
         for j, (path, lo, hi) in enumerate(self.chunks):
-            gap = np.sqrt((np.maximum(np.maximum(lo - q, q - hi), 0.0) ** 2).sum(axis=1))
-            near = (gap <= best[:, k]) & (owner != j)
+            near = np.zeros(pts.size, bool)
+            for s in range(0, pts.size, QUERY_ROWS):  # the box's distance, a slice at a time
+                q = pts["means"][s:s + QUERY_ROWS].astype(np.float64)
+                gap = np.sqrt((np.maximum(np.maximum(lo - q, q - hi), 0.0) ** 2).sum(axis=1))
+                near[s:s + QUERY_ROWS] = (gap <= best[s:s + QUERY_ROWS, k]) & \
+                    (owner[s:s + QUERY_ROWS] != j)
             if not near.any():
                 continue
             other = np.fromfile(path, POINT)["means"]
             for c in np.unique(owner[near]):
-                rows = np.flatnonzero(near & (owner == c))
+                group = np.flatnonzero(near & (owner == c))
                 fresh = other[~_inside(other, self.boxes[int(c)])]
                 if not fresh.shape[0]:
                     continue
-                m = min(k + 1, fresh.shape[0])
-                d = cKDTree(fresh.astype(np.float64)).query(pts["means"][rows], k=m,
-                                                            workers=-1)[0]
-                d = np.concatenate([best[rows], d.reshape(rows.size, m)], axis=1)
-                best[rows] = np.sort(d, axis=1)[:, :k + 1]
+                tree = cKDTree(fresh.astype(np.float64))
+                for s in range(0, group.size, QUERY_ROWS):
+                    rows = group[s:s + QUERY_ROWS]
+                    d = np.concatenate([best[rows], _query(tree, pts["means"][rows], k)], axis=1)
+                    best[rows] = np.sort(d, axis=1)[:, :k + 1]
         dist = best[:, 1:].mean(axis=1)
         _table(pts["index"], dist, pts["opacity"]).tofile(self.out)
         self.sums.append(float(dist.sum()))
