@@ -33,9 +33,10 @@ Memory: the key capacity starts at ``TILE_KEYS_PER_SPLAT`` (8) keys a splat and 
 1.25x a frame's measured total, never past the key limit (the smaller of
 ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE`` and :func:`splatgl.gl.limits.buffer_limit`, over 8 bytes a
 key; a frame needing more is refused in one line).  A key of capacity holds 8 + 4 + 4 bytes of
-keys, values and order (with the buffers' quarter of slack, 20) and the sorter's 16: at most
-36 bytes a key, 0.6 GiB at llvmpipe's 128 MiB block (16.8M keys), 1.6 GiB for 6M splats'
-first 48M keys.  The NumPy twins are the CPU order of :mod:`splatgl.renderers.tile`
+keys, values and order (with the buffers' quarter of slack, 20) and the sorter's 16 (24 with
+the block passes a software device sorts with, :mod:`splatgl.gl.radix_block`): at most 36
+bytes a key on a GPU, 1.6 GiB for 6M splats' first 48M keys; 44 on llvmpipe, 0.7 GiB at its
+128 MiB block (16.8M keys).  The NumPy twins are the CPU order of :mod:`splatgl.renderers.tile`
 (:func:`scan_twin`, :func:`ranges_twin`).
 """
 
