@@ -80,7 +80,7 @@ class StagedEdit:
         if self.scanned is not None:
             return self.scanned
         self.head.warn = self.warn
-        counts, steps, n, degree, names = self.head.scan(progress, full=True)
+        counts, steps, n, degree, names = self.head.scan(progress, full)
         target = self.op.target(n)
         if target >= n:  # nothing merged: the decimation keeps every row, as in memory
             self.tail = StreamedEdit(self.sources, self.transforms,
