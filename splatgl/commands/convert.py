@@ -68,7 +68,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_spz_axes_argument(p, "for .spz files that record none: rub (the SPZ specification; "
                              "default for versions 3-4) or rdf (PLY axes as is; splat-transform "
                              "3.x); for .spz output, the axes written (default rub for version 3)")
-    add_memory_argument(p, "a larger binary PLY written as .ply is converted a block at a time")
+    add_memory_argument(p, "a larger binary PLY written as .ply, .splat or "
+                        ".compressed.ply is converted a block at a time (other outputs are "
+                        "refused)")
     add_json_argument(p, "the result (one object)")
 
 

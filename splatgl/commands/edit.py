@@ -118,8 +118,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="print what each operation would remove; write nothing")
     add_force_argument(p)
     add_memory_argument(p, "binary PLY inputs whose scene exceeds it are edited a block of rows "
-                           "at a time into a .ply (crops, filters, --sh-degree, --transform, "
-                           "merges; --remove-floaters and --decimate are refused)")
+                           "at a time into a .ply, .splat or .compressed.ply (crops, filters, "
+                           "--sh-degree, --transform, merges; --remove-floaters and --decimate "
+                           "per spatial chunk; other outputs are refused)")
     add_spz_axes_argument(p)
     add_json_argument(p, "the report (inputs, one entry per operation, the result)")
 
