@@ -31,14 +31,16 @@ from ..renderers.quad import QuadRenderer
 from ..scene.settings import RendererKind, RenderSettings
 from .budget import Level
 from .draft import CUT_THRESHOLD_PX, DRAFT_TRIANGLES, DraftFrame, LevelRenderer
-from .session import Session
+from .session import Session, camera_key
 
 
 class StreamedLevels(LevelRenderer):
     """Draws a streamed level of detail (``stream``, a
     :class:`~splatgl.lod.stream_view.StreamedScene`) at any level (see the module doc).  Each
     kind of level (full detail or a cut, and its SH cap) keeps one quad renderer over the
-    scene it drew last; a new scene releases the old one's upload."""
+    scene it drew last; a new scene releases the old one's upload, and a cut drawn for a new
+    view (a moving frame) releases full detail drawn for another view (at 5M splats its cut
+    and upload, 0.6 GB, were held through the whole movement)."""
 
     def __init__(self, renderer: Renderer, stream, settings: RenderSettings,
                  triangles: bool = DRAFT_TRIANGLES):
@@ -47,7 +49,7 @@ class StreamedLevels(LevelRenderer):
         self.complete = True
         self.drawn_generation = stream.generation
         self._camera: Camera | None = None
-        self._paths: dict[tuple, tuple[object, QuadRenderer]] = {}
+        self._paths: dict[tuple, tuple[object, QuadRenderer, tuple]] = {}   # scene, quad, view
 
     @property
     def has_lod(self) -> bool:
@@ -66,6 +68,9 @@ class StreamedLevels(LevelRenderer):
     def _quad(self, level: Level) -> QuadRenderer:
         stream = self.stream
         lod = None if level.budget is None else LodSettings(CUT_THRESHOLD_PX, level.budget)
+        view = camera_key(self._camera)
+        if level.budget is not None:   # a cut for a new view: another view's full detail goes
+            self._drop(lambda key, drawn_for: key[0] and drawn_for != view)
         self.drawn_generation = stream.generation   # before the cut: one after it draws again
         scene = stream.scene_for(self._camera, self.settings, lod)
         self.complete = bool(stream.complete)
@@ -74,23 +79,26 @@ class StreamedLevels(LevelRenderer):
         key = (level.budget is None, level.sh_degree)
         held = self._paths.get(key)
         if held is not None and held[0] is scene:
+            self._paths[key] = (scene, held[1], view)
             return held[1]
-        if held is not None:
-            held[1].release()
+        self._drop(lambda k, drawn_for: k == key)
         make_current(self.renderer.ctx)
         quad = registry.make(RendererKind.QUAD, scene, settings, self.renderer.ctx,
                              self.renderer.programs)
-        self._paths[key] = (scene, quad)
+        self._paths[key] = (scene, quad, view)
         return quad
+
+    def _drop(self, which) -> None:
+        """Release the renderers (their scene's upload) ``which(key, view drawn for)`` names."""
+        for key in [k for k, (_, _, drawn_for) in self._paths.items() if which(k, drawn_for)]:
+            self._paths.pop(key)[1].release()
 
     def draw_cpu(self, camera: Camera, on_batch: BatchHook | None = None) -> DraftFrame:
         raise SplatglError("--renderer cpu and --memory (streaming a level of detail) cannot be "
                            "combined yet: the exact frame at rest is the quad path's")
 
     def release(self) -> None:
-        for _, quad in self._paths.values():
-            quad.release()
-        self._paths.clear()
+        self._drop(lambda key, drawn_for: True)
         super().release()
 
 

@@ -134,7 +134,9 @@ def test_session_over_a_streamed_scene_waits_for_chunks_then_is_exact(tmp_path, 
 def test_budgeted_levels_draw_the_budgets_cut_of_what_is_resident(tmp_path, gl_renderer):
     """A level with a splat budget draws at most that many nodes (the budget's cut), a
     full-detail level the view's cut; each kind of level keeps one renderer, replaced (and
-    released) when its scene changes."""
+    released) when its scene changes; a cut for another view (a moving frame) releases the
+    full detail of the last (its upload is not held through a movement), one for the same
+    view (the calibration at rest) keeps it."""
     stream, chunks, lazy = _stream(tmp_path, memory=4 << 20)
     levels = StreamedLevels(gl_renderer, stream, SETTINGS)
     try:
@@ -149,6 +151,11 @@ def test_budgeted_levels_draw_the_budgets_cut_of_what_is_resident(tmp_path, gl_r
         before = levels._paths[(True, None)][1]
         levels.draw(_camera(2.5, -0.2), EXACT)   # another view's cut: a new scene
         assert levels._paths[(True, None)][1] is not before and len(levels._paths) == 2
+        full = levels._paths[(True, None)][1]
+        levels.draw(_camera(2.5, -0.2), Level(1.0, 200))   # the same view: kept
+        assert levels._paths[(True, None)][1] is full
+        levels.draw(_camera(2.0, 0.1), Level(0.5, 200))    # moving on: released
+        assert set(levels._paths) == {(False, None)}
     finally:
         levels.release()
         stream.close()
