@@ -107,9 +107,7 @@ class Decimate:
         target = self.target(scene.count)
         if target >= scene.count:
             return scene
-        if scene.kind is SplatKind.SURFEL_2D:
-            raise SplatglError("--decimate: 2DGS surfels cannot be merged (moment matching "
-                               "gives 3D Gaussians)")
+        check_kind(scene.kind)
         _check_scales(scene)
         start, rnd = scene.count, 0
         if progress is not None:
@@ -122,6 +120,13 @@ class Decimate:
             if progress is not None:
                 progress(start - scene.count, start - target, "decimating")
         return scene
+
+
+def check_kind(kind: SplatKind) -> None:
+    """Refuse 2DGS surfels (their merged moments are not a surfel)."""
+    if kind is SplatKind.SURFEL_2D:
+        raise SplatglError("--decimate: 2DGS surfels cannot be merged (moment matching gives 3D "
+                           "Gaussians)")
 
 
 def _check_scales(scene: Scene) -> None:

@@ -111,21 +111,11 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
     streamed = plan_edit(inputs, writer, operations, transforms, memory, drop_invalid,
                          writer_options, output)
     if streamed is not None:
-        counts, steps, count, degree, names = streamed.scan(progress, full=dry_run)
-        notes = []
-        if streamed.edited_degree > degree:
-            notes.append(f"the {writer.NAME} format stores SH degree {degree} only: degrees "
-                         f"{degree + 1}..{streamed.edited_degree} dropped")
-        kept = () if streamed.extras is None else streamed.extras.names
-        if writer is not None and writer.NAME not in EXTRAS_FORMATS:
-            note = dropped_note(list(names), writer.NAME)
-        else:
-            note = dropped_note([n for n in names if n not in kept], why=streamed.dropped_why)
-        notes += ([note] if note else []) + streamed.notes
-        _refuse_empty(steps, count, allow_empty, writer, output)
-        size = None if dry_run else streamed.write(output, count, progress)
-        return EditReport(tuple(inputs), tuple(counts), output, tuple(steps), count, degree,
-                          dry_run, time.perf_counter() - t0, size, tuple(notes))
+        try:
+            return _edit_streamed(streamed, inputs, output, writer, allow_empty, dry_run,
+                                  progress, t0)
+        finally:
+            getattr(streamed, "close", lambda: None)()  # a decimation's scratch files
     scene, counts, steps, extras = _read(inputs, transforms, drop_invalid, progress, spz_axes)
     edited = apply_operations(scene, operations, progress)
     del scene
@@ -152,6 +142,26 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
         size = getattr(writer, "stored_bytes", lambda p: p.stat().st_size)(output)
     return EditReport(tuple(inputs), tuple(counts), output, tuple(steps), result.count,
                       result.sh_degree, dry_run, time.perf_counter() - t0, size, tuple(notes))
+
+
+def _edit_streamed(streamed, inputs, output, writer, allow_empty, dry_run, progress,
+                   t0) -> EditReport:
+    """The streamed edit's report, and its output written (:mod:`.streamed_stages`)."""
+    counts, steps, count, degree, names = streamed.scan(progress, full=dry_run)
+    notes = []
+    if streamed.edited_degree > degree:
+        notes.append(f"the {writer.NAME} format stores SH degree {degree} only: degrees "
+                     f"{degree + 1}..{streamed.edited_degree} dropped")
+    kept = () if streamed.extras is None else streamed.extras.names
+    if writer is not None and writer.NAME not in EXTRAS_FORMATS:
+        note = dropped_note(list(names), writer.NAME)
+    else:
+        note = dropped_note([n for n in names if n not in kept], why=streamed.dropped_why)
+    notes += ([note] if note else []) + streamed.notes
+    _refuse_empty(steps, count, allow_empty, writer, output)
+    size = None if dry_run else streamed.write(output, count, progress)
+    return EditReport(tuple(inputs), tuple(counts), output, tuple(steps), count, degree,
+                      dry_run, time.perf_counter() - t0, size, tuple(notes))
 
 
 def _refuse_empty(steps, count: int, allow_empty: bool, writer, output) -> None:

@@ -22,7 +22,6 @@ import numpy as np
 from ..errors import SplatglError
 from ..formats.convert import EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT
 from ..scene.splats import activate_opacities
-from ..writing.atomic import write_error
 from .attributes import Rows
 from .floaters import RemoveFloaters
 from .operations import ROW_TESTS, Filter, ShDegree
@@ -33,7 +32,8 @@ from .streamed import NORMALS, block_rows, vertex_dtype, write_blocks
 from .streamed_outputs import (PIECE_SHARE, check_kind, whole_chunks, write_compressed,
                                write_splat)
 from .streamed_neighbours import find_floaters, floater_rows
-from .streamed_sort import full_box_codes, record_dtype, scratch, sorted_runs, to_records, to_scene
+from .streamed_sort import (full_box_codes, record_dtype, scratch, scratch_error, sorted_runs,
+                            to_records, to_scene)
 
 
 class StreamedEdit:
@@ -143,7 +143,7 @@ class StreamedEdit:
                     return write_compressed(output, count, whole_chunks(
                         to_scene(r, self.kind) for r in runs), trip)
             except OSError as exc:
-                raise write_error(output, exc) from None
+                raise scratch_error(output, exc) from None
         return write_blocks(output, count, self.dtype, self._blocks(self._tally(), progress))
 
     def _tally(self) -> dict:
@@ -184,8 +184,11 @@ class StreamedEdit:
                     yield (first + np.flatnonzero(keep), block.means[keep],
                            activate_opacities(block.opacity_logits[keep], block.quats[keep]))
             run = floater_rows(self.memory, op.neighbours, self.rows)
-            with scratch(self.output) as folder:
-                self.removed[j], found = find_floaters(op, kept, folder, run)
+            try:
+                with scratch(self.output) as folder:
+                    self.removed[j], found = find_floaters(op, kept, folder, run)
+            except OSError as exc:
+                raise scratch_error(self.output, exc) from None
             self.details[j] = found.detail()
 
     def _blocks(self, tally: dict, progress=None, warn: bool = False):

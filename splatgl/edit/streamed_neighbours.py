@@ -27,15 +27,17 @@ in the command's output).  The merged rows come chunk by chunk, in Morton order.
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
+from ..errors import SplatglError
 from ..lod.budget import RESERVE, resident_now
 from ..lod.ply_rows import BoxFinder
 from ..scene.spatial import morton_codes_clamped
-from .decimate import Decimate
+from .decimate import Decimate, _check_scales, check_kind
 from .floaters import Floaters, RemoveFloaters
-from .streamed_sort import sorted_runs, to_records, to_scene
+from .streamed_sort import record_dtype, sorted_runs, to_records, to_scene
 
 #: The note the command prints once for a chunked decimation.
 DECIMATE_NOTE = ("--decimate over --memory merges within spatial chunks of about {rows:,} "
@@ -234,11 +236,26 @@ class _Unsure:
         self.sums.append(float(dist.sum()))
 
 
+def _checked(blocks):
+    """``blocks`` with the decimation's scale check, naming the row in the whole scene."""
+    first = 0
+    for block in blocks:
+        try:
+            _check_scales(block)
+        except SplatglError as exc:
+            exc.args = (re.sub(r"splat ([\d,]+)", lambda m: "splat "
+                               f"{first + int(m.group(1).replace(',', '')):,}", str(exc),
+                               count=1),)
+            raise
+        first += block.count
+        yield block
+
+
 def decimate_chunks(op: Decimate, blocks, kind, coeffs: int, total: int, folder, run: int):
     """The decimated Scenes of the splats ``blocks()`` yields (``total`` of them, ``coeffs``
     SH coefficients), chunk by chunk (see the module notes), and the target."""
-    lo, hi, _ = _box(lambda: (b.means for b in blocks()))
-    from .streamed_sort import record_dtype
+    check_kind(kind)
+    lo, hi, _ = _box(lambda: (b.means for b in _checked(blocks())))
 
     dtype = record_dtype(kind, coeffs)
     recs = (to_records(b, morton_codes_clamped(b.means.astype(np.float64), lo, hi), dtype)

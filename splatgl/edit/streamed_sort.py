@@ -20,8 +20,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..errors import SplatglError
 from ..lod.external import TOP_SHIFT, _Cells, _runs
 from ..scene.splats import Scene, SplatKind
+from ..writing.atomic import disk_note, write_error
 
 #: Bits per axis of the compressed PLY writer's order (:func:`morton_order_full_box`'s default).
 FULL_BOX_BITS = 10
@@ -37,6 +39,17 @@ def scratch(near: Path | None):
         yield folder
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def scratch_error(output, exc: OSError) -> SplatglError:
+    """The one line of a failed write of the scratch files (a full disk): naming ``output``
+    (:func:`~splatgl.writing.atomic.write_error`), or for a dry run the temporary folder."""
+    if output is not None:
+        return write_error(output, exc)
+    folder = Path(tempfile.gettempdir())
+    return SplatglError(f"{folder}: cannot write the edit's scratch files "
+                        f"({exc.strerror or 'the data was written only in part'})"
+                        f"{disk_note(folder)}")
 
 
 def record_dtype(kind: SplatKind, coeffs: int, extra: list | tuple = ()) -> np.dtype:

@@ -19,6 +19,7 @@ from .streamed import IN_MEMORY_COPIES, NORMALS, Source, memory_bound, sources_o
 from .streamed_edit import StreamedEdit
 from .streamed_outputs import STREAMED_FORMATS, refusal
 from .streamed_neighbours import DECIMATE_NOTE, decimate_chunks
+from .streamed_sort import scratch_error
 
 
 def plan_edit(inputs, writer, operations, transforms, memory: int | None,
@@ -76,9 +77,17 @@ class StagedEdit:
         raise AttributeError(name)
 
     def scan(self, progress=None, full: bool = False):
-        """As :meth:`StreamedEdit.scan`; decimates into the scratch folder (once)."""
-        if self.scanned is not None:
-            return self.scanned
+        """As :meth:`StreamedEdit.scan`; decimates into the scratch folder (once; a refusal or
+        an interruption removes it)."""
+        if self.scanned is None:
+            try:
+                self.scanned = self._scan(progress, full)
+            except BaseException:
+                self._cleanup()
+                raise
+        return self.scanned
+
+    def _scan(self, progress, full: bool):
         self.head.warn = self.warn
         counts, steps, n, degree, names = self.head.scan(progress, full)
         target = self.op.target(n)
@@ -94,11 +103,26 @@ class StagedEdit:
             t_steps = list(t_steps)
             t_steps.insert(p + (len(t_steps) - len(self.operations) + 1),
                            Step(self.op.name, self.op.describe(), n, n, self.op.note(n)))
-            self.scanned = counts, t_steps, count, degree, names
-            return self.scanned
+            return counts, t_steps, count, degree, names
         path = self.folder / "decimated.ply"
         raw = self.folder / "decimated.raw"
         dtype = vertex_dtype(self.head.kind, degree, None)
+        try:
+            made = self._decimate(raw, path, dtype, degree, n)
+        except OSError as exc:
+            raise scratch_error(self.output, exc) from None
+        self.notes.append(DECIMATE_NOTE.format(rows=self.rows))
+        merged = Source(path)
+        merged.nonzero_normals = False  # the writer's zero placeholders: none kept, as in memory
+        self.tail = StreamedEdit([merged], [None], self.operations[self.position + 1:],
+                                 self.memory, format_name=self.format_name, output=self.output)
+        _, t_steps, count, degree, _ = self.tail.scan(progress, full)
+        steps = list(steps) + [Step(self.op.name, self.op.describe(), n, made,
+                                    self.op.note(n))] + list(t_steps)
+        return counts, steps, count, degree, names
+
+    def _decimate(self, raw: Path, path: Path, dtype, degree: int, n: int) -> int:
+        """Decimate the first stage's ``n`` splats per chunk into the PLY ``path``; its count."""
         made = 0
         with open(raw, "wb") as fh:
             for scene in decimate_chunks(self.op, lambda: self.head._blocks(self.head._tally()),
@@ -111,19 +135,14 @@ class StagedEdit:
                               ("written by splatgl",)))
             shutil.copyfileobj(fh, out, 1 << 20)
         raw.unlink()
-        self.notes.append(DECIMATE_NOTE.format(rows=self.rows))
-        merged = Source(path)
-        merged.nonzero_normals = False  # the writer's zero placeholders: none kept, as in memory
-        self.tail = StreamedEdit([merged], [None], self.operations[self.position + 1:],
-                                 self.memory, format_name=self.format_name, output=self.output)
-        _, t_steps, count, degree, _ = self.tail.scan(progress, full)
-        steps = list(steps) + [Step(self.op.name, self.op.describe(), n, made,
-                                    self.op.note(n))] + list(t_steps)
-        self.scanned = counts, steps, count, degree, names
-        return self.scanned
+        return made
 
     def write(self, output, count: int, progress=None, trip=None) -> int:
         try:
             return self.tail.write(output, count, progress, trip)
         finally:
             self._cleanup()
+
+    def close(self) -> None:
+        """Remove the scratch folder (after :meth:`write`, or instead of it)."""
+        self._cleanup()

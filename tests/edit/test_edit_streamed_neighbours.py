@@ -14,8 +14,9 @@ from splatgl.cli import main
 from splatgl.edit import (CropBox, Decimate, Filter, RemoveFloaters, ShDegree, edit_files,
                           streamed_edit, streamed_neighbours)
 from splatgl.edit.streamed_neighbours import DECIMATE_NOTE
+from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
-from splatgl.scene.splats import Scene
+from splatgl.scene.splats import Scene, SplatKind
 
 from test_edit_streamed import _ply, _scene
 
@@ -121,11 +122,12 @@ def test_a_dry_run_leaves_no_scratch_files(tmp_path, capsys, rows, ops):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
 
 
-@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143), (None, 2)])
 @pytest.mark.parametrize("what", ["decimate", "floaters"])
 def test_an_interrupted_chunked_edit_leaves_nothing(tmp_path, capsys, monkeypatch, rows, sig,
                                                     code, what):
-    """Ctrl-C or SIGTERM while the chunks are worked: the old output, no scratch folder."""
+    """Ctrl-C, SIGTERM or a full disk while the chunks are worked: the old output, no scratch
+    folder; the full disk in one line naming the output."""
     rows.n = 40
     src = _ply(tmp_path, _clusters(300, 8))
     (tmp_path / "o.ply").write_bytes(b"old")
@@ -136,7 +138,7 @@ def test_an_interrupted_chunked_edit_leaves_nothing(tmp_path, capsys, monkeypatc
         def stop(self, scene, progress=None):
             calls.append(1)
             if len(calls) == 2:
-                os.kill(os.getpid(), sig)
+                _stop(sig)
             return real(self, scene, progress)
         monkeypatch.setattr(Decimate, "apply", stop)
         ops = ["--decimate", "50%"]
@@ -146,15 +148,25 @@ def test_an_interrupted_chunked_edit_leaves_nothing(tmp_path, capsys, monkeypatc
         def stop(*args):
             calls.append(1)
             if len(calls) == 2:
-                os.kill(os.getpid(), sig)
+                _stop(sig)
             return real(*args)
         monkeypatch.setattr(streamed_neighbours, "_chunk_distances", stop)
         ops = ["--remove-floaters"]
     rc = main(["edit", str(src), "-o", str(tmp_path / "o.ply"), *ops, "--force",
                "--memory", "1K"])
-    assert rc == code and len(calls) == 2, capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert rc == code and len(calls) == 2, err
+    if sig is None:
+        assert err == (f"splatgl: error: {tmp_path / 'o.ply'}: cannot write (No space left on "
+                       "device)\n"), err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["o.ply", "s.ply"]
     assert (tmp_path / "o.ply").read_bytes() == b"old"
+
+
+def _stop(sig):
+    if sig is None:
+        raise OSError(28, "No space left on device")
+    os.kill(os.getpid(), sig)
 
 
 @pytest.mark.slow
@@ -177,3 +189,39 @@ def test_peak_memory_is_chunks_not_the_scene(tmp_path, monkeypatch):
         tracemalloc.stop()
     assert peaks["memory"] > 15e6
     assert peaks["streamed"] < peaks["memory"] / 3, peaks
+
+
+def test_decimate_refusals_are_the_in_memory_ones(tmp_path, rows):
+    """A scale whose moments overflow is named by its row in the scene decimated (after a
+    filter), and surfels are refused, as in memory; nothing is left."""
+    rows.n = 20
+    s = _clusters(120, 0)
+    logs = s.log_scales.copy()
+    logs[77, 2] = 120.0
+    big = _ply(tmp_path, Scene(s.means, s.quats, logs, s.opacity_logits, s.sh), "big.ply")
+    surfels = _ply(tmp_path, Scene(s.means, s.quats, s.log_scales[:, :2].copy(),
+                                   s.opacity_logits, s.sh, SplatKind.SURFEL_2D), "surfels.ply")
+    for src, ops in ((big, [Filter("index >= 10"), Decimate(percent=50)]),
+                     (surfels, [Decimate(percent=50)])):
+        messages = []
+        for memory in (None, 1):
+            with pytest.raises(SplatglError) as err:
+                edit_files([src], tmp_path / "o.ply", ops, memory=memory)
+            messages.append(str(err.value))
+        assert messages[1] == messages[0]
+    assert "splat 67 has a scale above e^100" in messages[0] or "surfels" in messages[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["big.ply", "surfels.ply"]
+
+
+def test_an_empty_result_after_a_decimation_is_refused_and_leaves_nothing(tmp_path, rows):
+    rows.n = 20
+    src = _ply(tmp_path, _clusters(100, 0))
+    ops = [Decimate(percent=50), CropBox((50, 50, 50), (60, 60, 60))]
+    messages = []
+    for memory in (None, 1):
+        with pytest.raises(SplatglError) as err:
+            edit_files([src], tmp_path / "o.ply", ops, memory=memory)
+        messages.append(str(err.value))
+    assert messages[1] == messages[0]
+    assert messages[0].startswith("edit: no splats left (crop-box")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
