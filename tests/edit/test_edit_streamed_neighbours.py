@@ -225,3 +225,21 @@ def test_an_empty_result_after_a_decimation_is_refused_and_leaves_nothing(tmp_pa
     assert messages[1] == messages[0]
     assert messages[0].startswith("edit: no splats left (crop-box")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
+
+
+def test_floaters_of_merged_placed_inputs_with_duplicate_centres(tmp_path, rows):
+    """Two inputs, one moved, centres repeated (ties among the neighbours): the in-memory file."""
+    rows.n = 45
+    a = _clusters(200, 12, seed=1)
+    means = a.means.copy()
+    means[100:140] = means[60:100]  # duplicates
+    a = Scene(means, a.quats, a.log_scales, a.opacity_logits, a.sh, extras=a.extras)
+    src_a = _ply(tmp_path, a, "a.ply")
+    src_b = _ply(tmp_path, _clusters(150, 9, seed=2), "b.ply")
+    ops = [RemoveFloaters(neighbours=5, sigma=1.0, opacity=0.8), Filter("index < 300")]
+    from test_edit_streamed import TURN
+    ref = edit_files([src_a, src_b], tmp_path / "ref.ply", ops, [None, TURN])
+    got = edit_files([src_a, src_b], tmp_path / "got.ply", ops, [None, TURN], memory=1)
+    assert next(s for s in ref.steps if s.name == "remove-floaters").removed
+    assert (tmp_path / "got.ply").read_bytes() == (tmp_path / "ref.ply").read_bytes()
+    assert got.steps == ref.steps
