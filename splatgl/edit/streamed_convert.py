@@ -4,7 +4,7 @@ budget, written as a PLY (format change within PLY, ``--sh-degree``, ``--drop-in
 :mod:`.streamed_edit` a block at a time; the round-trip error is measured by reading a PLY
 output back block by block beside the input, and the other formats piece by piece from the
 bytes written for each piece (:class:`~.streamed_outputs.RoundTrip`).  An output format written
-whole (SPZ, SOG, glTF, KSPLAT) is refused over the budget in one line.  Other inputs convert in
+whole (SPZ, SOG, glTF) is refused over the budget in one line.  Other inputs convert in
 memory (:func:`splatgl.formats.convert.convert`); one over the budget then says so.
 """
 

@@ -11,7 +11,7 @@ byte for byte what the in-memory writers write.
   scratch files, joined behind the header at the end.
 
 Either file goes through the atomic writer (:mod:`splatgl.writing.atomic`): nothing
-half-written on an error, Ctrl-C or SIGTERM.  Other formats (SPZ, SOG, glTF, KSPLAT) are
+half-written on an error, Ctrl-C or SIGTERM.  Other formats (SPZ, SOG, glTF) are
 compressed or ordered as a whole: over the budget they are refused in one line
 (:func:`refusal`).  :class:`RoundTrip` measures ``convert``'s round trip piece by piece, each
 piece decoded from the bytes written for it.
