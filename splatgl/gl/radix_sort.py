@@ -5,8 +5,8 @@ Two designs, by device: on software rasterisers (llvmpipe) the block passes of
 parallel radix sort, with no barriers or shared memory); on GPUs the work-group design below.
 Both are stable and give the same order.
 
-The work-group design (reduce-then-scan, as in GPUSorting's DeviceRadixSort; ranking by warp-level
-multi-split, as in Onesweep), in dispatches that read their sizes from the device:
+The work-group design (reduce-then-scan, as in GPUSorting's DeviceRadixSort; ranking by
+warp-level multi-split, as in Onesweep), in dispatches that read their sizes from the device:
 
 1. ``radix_bits.comp``: the OR and the AND of all keys.
 2. ``radix_plan.comp``: the bits in which keys differ give the passes: RADIX_BITS-bit digits
@@ -43,9 +43,9 @@ import numpy as np
 from ..constants import RADIX_BITS, RADIX_BLOCK_BITS, RADIX_ITEMS
 from ..errors import ShaderError
 from ..splatmath.radix import key_bits
-from .bindings import (RADIX_BINDING_HIST, RADIX_BLOCK_LANES, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
+from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
                        RADIX_BINDING_STATE, RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT,
-                       RADIX_GROUP, RADIX_PORTABLE_WARP)
+                       RADIX_BLOCK_LANES, RADIX_GROUP, RADIX_PORTABLE_WARP)
 from .egl_devices import is_software_renderer
 from .radix_block import BLOCK_SLOTS, BlockPasses, pair_bytes
 from .shaders import ProgramCache
@@ -102,8 +102,11 @@ class RadixSorter:
     renderer.  ``narrow`` runs one warp per work group with TILE_KEYS / warp keys a lane
     (radix_downsweep.comp: no per-warp histograms to clear and scan), by default on software
     renderers, where a work group runs on one CPU thread and a warp is its SIMD lanes
-    (llvmpipe's 8).  Software renderers are those :func:`splatgl.gl.egl_devices.is_software_renderer`
-    names, as for the device class (:mod:`splatgl.gl.device_class`).  Buffers grow to the largest M seen and are kept between calls.
+    (llvmpipe's 8).  Software renderers are those
+    :func:`splatgl.gl.egl_devices.is_software_renderer` names, as for the device class
+    (:mod:`splatgl.gl.device_class`); where the block passes do not compile or sort rightly
+    there, the sorter falls back to the work-group design.  Buffers grow to the largest M seen
+    and are kept between calls.
     """
 
     def __init__(self, ctx: moderngl.Context, programs: ProgramCache | None = None,
@@ -123,13 +126,20 @@ class RadixSorter:
         self._bufs: list[moderngl.Buffer] = []
         self._state = ctx.buffer(reserve=_STATE_BYTES)
         self._narrow = narrow
-        if path is None and (block if block is not None else self._software):
-            path = BLOCK
+        by_default = path is None and (block if block is not None else self._software)
+        path = BLOCK if by_default else path
         self._block: BlockPasses | None = None
         #: Bits of a pass's digits (the twin's ``bits``).
         self.digit_bits = RADIX_BLOCK_BITS if path == BLOCK else RADIX_BITS
         try:
-            self.path, self.warp, self.narrow, self._progs = self._choose(path)
+            try:
+                self.path, self.warp, self.narrow, self._progs = self._choose(path)
+            except ShaderError:
+                if not by_default:
+                    raise
+                self._drop_buffers()  # the block passes' layout
+                self._block, self.digit_bits = None, RADIX_BITS
+                self.path, self.warp, self.narrow, self._progs = self._choose(None)
         except BaseException:
             self.release()
             raise
@@ -182,8 +192,7 @@ class RadixSorter:
         grow): call it before writing keys into :meth:`buffers` for :meth:`sort_buffers`."""
         if count <= self._capacity:
             return
-        for buf in self._bufs:
-            buf.release()
+        self._drop_buffers()
         tiles = -(-count // TILE_KEYS)
         size = 16 * -(-count // 4)  # whole uvec4s (the block passes read 4 keys at a time)
         if self._block is None:
@@ -309,11 +318,14 @@ class RadixSorter:
         lo, passes = np.frombuffer(self._state.read(8, offset=8), np.uint32)
         return int(lo), int(passes)
 
-    def release(self) -> None:
+    def _drop_buffers(self) -> None:
         for buf in self._bufs:
             buf.release()
         self._bufs = []
         self._capacity = 0
+
+    def release(self) -> None:
+        self._drop_buffers()
         self._state.release()
 
 

@@ -89,6 +89,27 @@ def test_software_devices_sort_with_the_block_passes(ctx, programs):
         s.release()
 
 
+def test_block_passes_that_fail_fall_back_to_the_work_group_design(ctx, programs, monkeypatch):
+    """A software device whose compiler refuses the block passes (or whose order comes out
+    wrong) still sorts, with the work-group design; asked for by name, the failure is raised."""
+    if not is_software_renderer(ctx.info["GL_RENDERER"]):
+        pytest.skip("written for a software renderer")
+
+    def refuse(*args, **kwargs):
+        raise ShaderError("radix_block_count.comp: refused")
+    monkeypatch.setattr(radix_sort, "BlockPasses", refuse)
+    s = RadixSorter(ctx, programs)
+    try:
+        assert s.path in ("khr", "arb", "portable") and s.digit_bits == 8 and s._block is None
+        keys = np.arange(3000, dtype=np.uint32)[::-1] % np.uint32(11)
+        np.testing.assert_array_equal(s.sort_values(keys, np.arange(3000, dtype=np.uint32)),
+                                      np.argsort(keys, kind="stable"))
+    finally:
+        s.release()
+    with pytest.raises(ShaderError, match="refused"):
+        RadixSorter(ctx, programs, path="block")
+
+
 def test_passes_cover_only_the_bits_keys_differ_in():
     keys = np.array([0x3F800000, 0x3F8000FF], np.uint32)  # differ in the low 8 bits only
     assert radix_passes(keys) == [0]
