@@ -25,7 +25,7 @@ from ..writing.outputs import check_output_path
 from .operations import ShDegree
 from .streamed import IN_MEMORY_COPIES, Source, memory_bound
 from .streamed_stages import plan_edit
-from .streamed_outputs import RoundTrip
+from .streamed_outputs import STREAMED_FORMATS, RoundTrip
 
 #: The per-attribute errors :func:`conversion_error` gives as ``{"max", "mean"}``.
 _MEASURED = ("position", "scale", "opacity", "rotation", "color", "sh_rest")
@@ -35,12 +35,13 @@ def convert_file(source, output, *, memory: int | None = None, drop_invalid: boo
                  sh_degree: int | None = None, force: bool = False, progress=None,
                  spz_axes: str | None = None, **writer_options) -> Conversion:
     """:func:`splatgl.formats.convert.convert`, streamed where ``memory`` (bytes; None: the
-    default, half this machine's RAM) is below what loading the input would take and the input and output are binary
-    PLY (see the module notes); the same file and report either way."""
+    default, half this machine's RAM) is below what loading the input would take, the input is
+    a binary PLY and the output streams (see the module notes); the same file and report
+    either way."""
     source, output = Path(source), Path(output)
     memory = memory_bound(memory)
     streamed = None
-    if spz_axes is None:
+    if spz_axes is None or writer_for(output).NAME not in STREAMED_FORMATS:  # SPZ: refused
         writer_for(output)  # an unsupported extension: the converter's one line first
         check_output_path(output, overwrite=force, inputs={"IN": source})
         if sh_degree is not None and not 0 <= sh_degree <= 3:

@@ -30,8 +30,6 @@ def plan_edit(inputs, writer, operations, transforms, memory: int | None,
     output format that cannot stream (:data:`~.streamed_outputs.STREAMED_FORMATS`) is then
     refused in one line."""
     memory = memory_bound(memory)
-    if writer is not None and writer_options:
-        return None
     sources = sources_of(inputs, drop_invalid)
     if sources is None:
         return None
@@ -40,6 +38,8 @@ def plan_edit(inputs, writer, operations, transforms, memory: int | None,
         return None
     if writer is not None and writer.NAME not in STREAMED_FORMATS:
         raise refusal(output, writer.NAME, need, memory)
+    if writer is not None and writer_options:  # a PLY's other layouts: written in memory
+        return None
     if any(isinstance(op, Decimate) for op in operations):
         return StagedEdit(sources, transforms, list(operations), memory,
                           "ply" if writer is None else writer.NAME, output)

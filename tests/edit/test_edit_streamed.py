@@ -263,6 +263,16 @@ def test_peak_memory_is_a_few_blocks_not_the_scene(tmp_path, monkeypatch):
     assert peaks["streamed"] < 2e6, peaks
 
 
+@pytest.mark.parametrize("options", [["--spz-version", "2"], ["--spz-axes", "rdf"]])
+def test_spz_options_do_not_bypass_the_refusal(tmp_path, capsys, options):
+    src = _ply(tmp_path, _scene(100))
+    out = tmp_path / "o.spz"
+    assert main(["convert", str(src), str(out), *options, "--memory", "1K"]) == 2
+    assert capsys.readouterr().err.startswith(f"splatgl: error: {out}: the spz format is "
+                                              "written from the whole scene in memory")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
+
+
 def test_convert_of_another_input_over_the_bound_says_it_loads_whole(tmp_path, capsys):
     src = tmp_path / "s.splat"
     assert main(["convert", str(_ply(tmp_path, _scene(100, degree=0))), str(src)]) == 0
