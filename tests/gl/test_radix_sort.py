@@ -4,6 +4,7 @@ order (depth, ties by index), bit for bit; a quad frame sorted on the device is 
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 
@@ -16,7 +17,7 @@ from helpers import draw, view_for
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.poses import look_at
 from splatgl.errors import ShaderError
-from splatgl.gl import radix_sort
+from splatgl.gl import radix_block, radix_sort
 from splatgl.gl.egl_devices import is_software_renderer
 from splatgl.gl.shaders import ProgramCache, preprocess
 from splatgl.gl.radix_sort import TILE_KEYS, RadixSorter, device_depth_sort, subgroup_paths
@@ -108,6 +109,17 @@ def test_block_passes_that_fail_fall_back_to_the_work_group_design(ctx, programs
         s.release()
     with pytest.raises(ShaderError, match="refused"):
         RadixSorter(ctx, programs, path="block")
+
+
+def test_block_passes_run_two_work_groups_a_software_rasteriser_thread(monkeypatch):
+    monkeypatch.setenv("LP_NUM_THREADS", "3")
+    assert radix_block.block_groups() == 6
+    monkeypatch.setenv("LP_NUM_THREADS", "0")  # llvmpipe without threads: the calling one
+    assert radix_block.block_groups() == 2
+    monkeypatch.setenv("LP_NUM_THREADS", "500")
+    assert radix_block.block_groups() == radix_block.MAX_GROUPS
+    monkeypatch.delenv("LP_NUM_THREADS")
+    assert radix_block.block_groups() == max(2, 2 * (os.cpu_count() or 1))
 
 
 def test_passes_cover_only_the_bits_keys_differ_in():
