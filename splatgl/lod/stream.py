@@ -42,6 +42,12 @@ CHUNK_ROWS = 4096
 LOADERS = 2
 #: The chunks of this many levels from the top are loaded first and never evicted.
 PINNED_LEVELS = 2
+#: A gather reads a chunk it needs fewer than this fraction of the rows of, and that is not
+#: resident, row by row (runs) instead of whole, and does not keep it: a cut mixing levels
+#: touches many chunks for a few rows each (the 20M tiled scene's capped default view: 4.2M
+#: nodes over 26.6M chunk rows).  Such rows are read this many at a time (several chunks').
+SPARSE_CHUNK = 0.25
+SPARSE_BATCH = 1 << 15
 _FIELDS = ("means", "quats", "log_scales", "opacity_logits", "sh")
 
 
@@ -81,15 +87,9 @@ class LazyChunks:
         lo, hi = self.span(chunk)
         return self.lazy.nodes(np.arange(lo, hi, dtype=np.int64))
 
-
-def tree_cache_need(chunks, offsets, threads: int = LOADERS) -> int:
-    """Bytes a :class:`ResidentSet` over a tree's ``chunks`` needs at least: its pinned top
-    levels' chunks and ``threads`` of the largest in flight (what a memory plan's cache share
-    must hold, :func:`splatgl.lod.budget.stream_plan`)."""
-    top = max(0, len(offsets) - 1 - PINNED_LEVELS)
-    pinned = range(int(offsets[top]) // chunks.rows, chunks.count)
-    largest = max((chunks.estimate(c) for c in range(chunks.count)), default=0)
-    return sum(chunks.estimate(c) for c in pinned) + largest * max(1, threads)
+    def read_rows(self, rows: np.ndarray) -> Scene:
+        """Node ``rows`` (ascending) alone, read in runs (thread-safe)."""
+        return self.lazy.nodes(np.asarray(rows, np.int64))
 
 
 @dataclass
@@ -101,11 +101,13 @@ class StreamStats:
     loaded: int = 0
     evicted: int = 0
     resident_chunks: int = 0
+    rows_read: int = 0   # rows of chunks read alone by gathers (SPARSE_CHUNK), not kept
 
     def summary(self, budget: int) -> str:
+        alone = f", {self.rows_read:,} rows read alone" if self.rows_read else ""
         return (f"resident {format_size(self.resident_bytes)} (peak {format_size(self.peak_bytes)}"
                 f" of {format_size(budget)}), chunks {self.resident_chunks} resident, "
-                f"{self.loaded} loaded, {self.evicted} evicted")
+                f"{self.loaded} loaded, {self.evicted} evicted{alone}")
 
 
 class ResidentSet:
@@ -248,9 +250,10 @@ class ResidentSet:
         bounds = dict(zip(need.tolist(), zip(cuts.tolist(), np.append(cuts[1:], rows.size).tolist())))
         out: dict[str, np.ndarray] = {}
 
-        def take(c: int, scene: Scene) -> bool:
-            a, b = bounds[c]
-            local = rows[a:b] - c * self.chunks.rows
+        def take(c: int, scene: Scene, start: int | None = None) -> bool:
+            a, b = bounds[c]   # the chunk's rows, or (start) rows start.. of rows read alone
+            local = (rows[a:b] - c * self.chunks.rows if start is None
+                     else np.arange(start, start + b - a))
             if not out:   # the arrays, at the cut's size, from the first chunk's shapes
                 kind = scene.kind
                 out.update({f: np.empty((rows.size,) + getattr(scene, f).shape[1:], np.float32)
@@ -259,12 +262,53 @@ class ResidentSet:
                 np.take(getattr(scene, f), local, axis=0, out=out[f][a:b], mode="clip")
             return True
 
-        self.collect(need.tolist(), take)
+        read_rows = getattr(self.chunks, "read_rows", None)
+        sparse = [] if read_rows is None else [
+            c for c in need.tolist() if bounds[c][1] - bounds[c][0] < SPARSE_CHUNK * self.chunks.rows
+            and self.held(c) is None]
+        alone = set(sparse)
+        self.collect([c for c in need.tolist() if c not in alone], take)
+        self._read_rows(sparse, rows, bounds, take)
         if not out:
             return self._pick(self.chunks.load(0), 0, rows, 0, 0)
         for f in _FIELDS:
             out[f].flags.writeable = False   # adopted by the Scene as they are (no copy)
         return Scene(*(out[f] for f in _FIELDS), out["kind"])
+
+    def _read_rows(self, chunks: list[int], rows: np.ndarray, bounds: dict, take) -> None:
+        """``take(chunk, scene, start)`` of each of ``chunks``' rows of ``rows``
+        (``rows[bounds[chunk]]``, at ``start`` in ``scene``), read alone on the loader threads
+        SPARSE_BATCH rows at a time (several chunks a read, a few reads in flight, each copied
+        out as it comes), none kept."""
+        groups, group, count = [], [], 0
+        for c in chunks:
+            group.append(c)
+            count += bounds[c][1] - bounds[c][0]
+            if count >= SPARSE_BATCH:
+                groups.append(group)
+                group, count = [], 0
+        if group:
+            groups.append(group)
+        window = 2 * LOADERS
+        pending: dict[Future, list[int]] = {}
+        while groups or pending:
+            while groups and len(pending) < window:
+                if self._stop.is_set():
+                    raise KeyboardInterrupt
+                g = groups.pop(0)
+                want = np.concatenate([rows[slice(*bounds[c])] for c in g])
+                pending[self._pool.submit(self.chunks.read_rows, want)] = g
+            fut = next(iter(pending))
+            g = pending.pop(fut)
+            try:
+                scene = fut.result()
+            except CancelledError:
+                raise KeyboardInterrupt from None
+            self.stats.rows_read += scene.count
+            start = 0
+            for c in g:
+                take(c, scene, start)
+                start += bounds[c][1] - bounds[c][0]
 
     def collect(self, need: list[int], take) -> dict:
         """``{chunk: take(chunk, its scene)}`` for the chunks ``need``, waiting for those not

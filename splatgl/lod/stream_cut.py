@@ -28,6 +28,7 @@ from .budget import StreamPlan, frame_bytes_per_splat, stream_plan
 from .cut import CutTooLarge, select_cut_budget, select_cut_weights
 from .lazy import LazyLod
 from .selection import LodSettings, threshold_cut
+from .stream import LOADERS, PINNED_LEVELS
 
 #: The threshold of the cut that stands for "the leaves" (every leaf in view).
 LEAVES_PX = 1e-30
@@ -44,6 +45,16 @@ class CutChoice:
     rows: np.ndarray
     weights: np.ndarray | None
     capped: str | None = None
+
+
+def tree_cache_need(chunks, offsets, threads: int = LOADERS) -> int:
+    """Bytes a :class:`~splatgl.lod.stream.ResidentSet` over a tree's ``chunks`` needs at
+    least: its pinned top levels' chunks and ``threads`` of the largest in flight (what a
+    memory plan's cache share must hold, :func:`splatgl.lod.budget.stream_plan`)."""
+    top = max(0, len(offsets) - 1 - PINNED_LEVELS)
+    pinned = range(int(offsets[top]) // chunks.rows, chunks.count)
+    largest = max((chunks.estimate(c) for c in range(chunks.count)), default=0)
+    return sum(chunks.estimate(c) for c in pinned) + largest * max(1, threads)
 
 
 def per_splat(lazy: LazyLod, storage: GpuStorage | str = GpuStorage.FLOAT32) -> int:

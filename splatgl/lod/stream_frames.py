@@ -41,8 +41,8 @@ from ..renderers.quad import QuadRenderer
 from .budget import StreamPlan, format_size, release_freed
 from .lazy import LazyLod
 from .selection import LodSettings
-from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet, scene_bytes, tree_cache_need
-from .stream_cut import SPHERE_PAGES_PER_SPLAT, choose_cut, plan_for
+from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet, scene_bytes
+from .stream_cut import SPHERE_PAGES_PER_SPLAT, choose_cut, plan_for, tree_cache_need
 
 #: The framing proxy's level: the first from the top with at least this many nodes.
 FRAMING_NODES = 4096

@@ -23,8 +23,9 @@ from ..scene.settings import RenderSettings
 from .lazy import LazyLod
 from .selection import LodSettings
 from .budget import StreamPlan, release_freed
-from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet, tree_cache_need
-from .stream_cut import SPHERE_PAGES_PER_SPLAT, VIEWER_FRAMES, choose_cut, plan_for
+from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet
+from .stream_cut import (SPHERE_PAGES_PER_SPLAT, VIEWER_FRAMES, choose_cut, plan_for,
+                         tree_cache_need)
 from .stream_frames import framing_scene
 
 
@@ -57,8 +58,8 @@ class StreamedScene:
             self.framing = framing_scene(self.lazy)
             release_freed()
             chunks = chunks or LazyChunks(self.lazy, chunk_rows)
-            self.plan = plan or plan_for(self.lazy, self.memory,
-                                         cache_need=tree_cache_need(chunks, self.lazy.offsets, threads),
+            need = tree_cache_need(chunks, self.lazy.offsets, threads)
+            self.plan = plan or plan_for(self.lazy, self.memory, cache_need=need,
                                          frames=VIEWER_FRAMES)
             self.resident = ResidentSet(chunks, self.plan.cache,
                                         self.lazy.offsets, self.lazy.branching, threads,

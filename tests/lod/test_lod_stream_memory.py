@@ -122,6 +122,7 @@ def test_capped_frames_are_the_in_memory_budget_frames(tmp_path):
                                     "--lod-threshold 1 px asked: ")
         assert f"(the frame holds at most {cap:,} splats)" in st.capped
         assert "2 of 2 views capped" in st.summary()
+        assert st.resident.stats.rows_read > 0   # chunks needed for a few rows: read alone
     with StreamFrames(path, SETTINGS, LodSettings(), 1 << 20, chunk_rows=64,
                       framing=tree.nodes, plan=_plan(cap)) as st:
         st.render_view(_camera(400.0))   # far: a cut of a few nodes
