@@ -176,6 +176,7 @@ class Session:
             return self.moving(camera)
         hook = None if input_pending is None else _interrupt_on(input_pending)
         if self.awaiting:   # a streamed exact frame short of chunks: again once one arrives
+            self.status = "refining"
             if self.levels.generation == self._whole_generation:
                 return None
             self._plan = [EXACT]

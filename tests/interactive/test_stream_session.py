@@ -115,7 +115,7 @@ def test_session_over_a_streamed_scene_waits_for_chunks_then_is_exact(tmp_path, 
         first = session.frame(camera)
         assert first is not None and first.level == EXACT
         assert not session.exact and session.awaiting and session.status == "moving"
-        assert session.frame(camera) is None and session.status == "moving"  # nothing arrived
+        assert session.frame(camera) is None and session.status == "refining"  # nothing arrived
         chunks.gate.set()
         assert _until(lambda: stream.generation > 0)
         drawn = []
