@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from ..measure.bench.lod_bench import PATH_SETS
 from ..measure.bench.scale import SH3_SIZES, SIZES, parse_sizes
@@ -51,7 +52,8 @@ def modes_given(args: argparse.Namespace) -> list[str]:
 
 
 #: The options only one benchmark reads: (the flags that turn it on, what it is, their dests).
-#: Given without any of those flags, they are refused (they would be silently ignored).
+#: Given without any of those flags, they are refused (they would be silently ignored).  A flag
+#: "scale lod" is two that must be given together.
 MODE_OPTIONS = (
     (("popping",), "the popping benchmark", ("popping_configs", "popping_metric", "popping_window")),
     (("interactive",), "the interactive benchmark", ("target_fps",)),
@@ -59,6 +61,7 @@ MODE_OPTIONS = (
                                                  "lod_paths")),
     (("scale", "lod"), "the scale and level-of-detail benchmarks", ("sizes",)),
     (("scale",), "the scale benchmark", ("sh3_sizes",)),
+    (("scale lod",), "the out-of-core scale benchmark", ("scratch",)),
 )
 
 
@@ -67,8 +70,8 @@ def check_mode_options(args: argparse.Namespace) -> None:
     (:data:`MODE_OPTIONS`), before any work."""
     for flags, what, dests in MODE_OPTIONS:
         given = ["--" + d.replace("_", "-") for d in dests if getattr(args, d, None) is not None]
-        if given and not any(getattr(args, f) for f in flags):
-            add = " or ".join(f"--{f}" for f in flags)
+        if given and not any(all(getattr(args, w) for w in f.split()) for f in flags):
+            add = " or ".join(" ".join(f"--{w}" for w in f.split()) for f in flags)
             raise SplatglError(f"{', '.join(given)}: {'options' if len(given) > 1 else 'an option'} "
                                f"of {what}; add {add}")
 
@@ -94,6 +97,12 @@ def add_scale_lod_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keep-scenes", action="store_true",
                    help="--scale --lod: keep the scene and level-of-detail files in the scratch "
                         "folder (default: removed after each size)")
+    p.add_argument("--scratch", type=Path, default=None, metavar="DIR",
+                   help="--scale --lod: the scratch folder (default: a new one in the temp dir), "
+                        "its files kept as with --keep-scenes; a size whose scale-N.ply and "
+                        "scale-N.lod.ply are there already is not built again (its build "
+                        "figures from build-N.json), so a rerun measures the frames only; a "
+                        "stale file there is refused")
 
 
 #: Options of the other benchmarks that --scale --lod does not read.
@@ -111,14 +120,15 @@ def run_scale_lod_command(args: argparse.Namespace) -> int:
     if given:
         raise SplatglError(f"{', '.join(given)}: not read by --scale --lod (it measures the "
                            "default cut of SH0 scenes; the options are --sizes, --width, --height, "
-                           "--memory, --keep-scenes, --out)")
+                           "--memory, --keep-scenes, --scratch, --out)")
     sizes = parse_sizes(args.sizes, SIZES, "--sizes")
     if not sizes:
         raise SplatglError("--sizes: --scale --lod needs at least one size")
     memory = memory_budget(args)   # as splatgl lod --memory: half this machine's RAM by default
     check_out_folder(args, ("scale-lod.json", "scale-lod.png"))   # before any measuring
     options = ScaleLodOptions(sizes=sizes, memory=memory, width=args.width or 1280,
-                              height=args.height or 720, keep_scenes=args.keep_scenes)
+                              height=args.height or 720, scratch=args.scratch,
+                              keep_scenes=args.keep_scenes or args.scratch is not None)
     machine = probe_machine()
     print(describe(machine), flush=True)
     report = run_scale_lod(options, args.out, machine, log=lambda m: print(m, flush=True))

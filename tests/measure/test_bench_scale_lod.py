@@ -128,7 +128,7 @@ def test_refusals(tmp_path, capsys, monkeypatch):
     _refused(capsys, ["bench", "--scale", "--lod", "--frames", "3"],
              "splatgl: error: --frames: not read by --scale --lod (it measures the default cut of "
              "SH0 scenes; the options are --sizes, --width, --height, --memory, "
-             "--keep-scenes, --out)")
+             "--keep-scenes, --scratch, --out)")
     _refused(capsys, ["bench", "--scale", "--keep-scenes"],
              "splatgl: error: --keep-scenes: an option of the out-of-core scale benchmark; add "
              "--scale --lod")

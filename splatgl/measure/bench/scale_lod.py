@@ -15,7 +15,9 @@ memory and chunks loaded over time).
 Every result is written to ``scale-lod.json`` as it is made (a Ctrl-C keeps what was
 measured), and ``scale-lod.png`` (memory and time against size, log axes; the flight's memory
 over time) after each size.  The
-scene and level-of-detail files are removed after each size unless ``keep_scenes``.
+scene and level-of-detail files are removed after each size unless ``keep_scenes``; those
+already in a given ``scratch`` folder are used again instead of built, and left there
+(:mod:`splatgl.measure.bench.scale_lod_reuse`: ``--scratch DIR``).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from pathlib import Path
 from ...errors import SplatglError
 from ...lod.budget import default_budget, format_size
 from .real_scenes import REAL_SOURCES, shared_scenes_dir, shared_scenes_help
+from .scale_lod_reuse import Found, find, record_path, reused_steps, write_record
 
 #: Default sizes (splats).
 SIZES = (1_000_000, 5_000_000, 20_000_000, 100_000_000)
@@ -55,9 +58,11 @@ class ScaleLodOptions:
     """sizes: splats per scene.  memory: bytes of the build's and the streaming's budget
     (default: ``splatgl lod --memory``'s, :func:`splatgl.lod.budget.default_budget`).
     width, height: frames.  scratch: folder of the scene files (default: a new folder in the
-    temp dir).  keep_scenes: leave them there.  available: bytes of memory a full-detail
-    render may use (default: MemAvailable).  speed: the flight's speed (tests fly faster).
-    branching: of the level of detail.  block: rows of the scene written at a time."""
+    temp dir); a size's scene and level of detail already there, complete, are used again
+    (:mod:`.scale_lod_reuse`; a stale one is refused).  keep_scenes: leave them there.
+    available: bytes of memory a full-detail render may use (default: MemAvailable).  speed:
+    the flight's speed (tests fly faster).  branching: of the level of detail.  block: rows of
+    the scene written at a time."""
 
     sizes: tuple[int, ...] = SIZES
     memory: int = field(default_factory=lambda: default_budget()[0])
@@ -82,18 +87,29 @@ def mem_available() -> int:
     return 0
 
 
-def disk_need(sizes, keep: bool) -> int:
+def disk_need(sizes, keep: bool, found=None) -> int:
     """Bytes of scratch disk the run needs: the largest size's files (all of them with
-    ``keep``, which leaves every size's scene and level of detail)."""
+    ``keep``, which leaves every size's scene and level of detail), less the files ``found``
+    (size -> :class:`~.scale_lod_reuse.Found`) already there, which are used again."""
+    found = found or {}
+
+    def files(n):   # (the files written, the build's temporaries) in scene bytes
+        f = found.get(n)
+        lod = not (f and f.lod)
+        return (0.0 if f and f.scene else 1.0) + (1.4 if lod else 0.0), 1.2 if lod else 0.0
+
     if keep:   # every scene and level of detail stays; one build's temporaries at a time
-        return int(sum(n * ROW_BYTES * 2.4 for n in sizes) + max(sizes) * ROW_BYTES * 1.2)
-    return int(max(sizes) * ROW_BYTES * DISK_FACTOR)
+        return int(sum(n * ROW_BYTES * files(n)[0] for n in sizes)
+                   + max(n * ROW_BYTES * files(n)[1] for n in sizes))
+    return int(max(n * ROW_BYTES * sum(files(n)) for n in sizes))   # DISK_FACTOR with none found
 
 
-def check_disk(folder: Path, sizes, keep: bool) -> None:
+def check_disk(folder: Path, sizes, keep: bool, found=None) -> None:
     """One line when ``folder``'s file system lacks the room :func:`disk_need` names."""
-    need = disk_need(sizes, keep)
-    probe = folder if folder.exists() else folder.parent
+    need = disk_need(sizes, keep, found)
+    if need == 0:
+        return
+    probe = next(p for p in (folder, *folder.parents) if p.exists())
     free = shutil.disk_usage(probe).free
     if free < need:
         raise SplatglError(f"--scale --lod: {probe} has {format_size(free)} free, the scenes of "
@@ -163,8 +179,10 @@ def _psnr(a_path: Path, b_path: Path) -> float | None:
     return None if value == float("inf") else value
 
 
-def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save, log) -> None:
-    """Every step of the ``n``-splat scene into ``row`` (``save()`` after each)."""
+def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save, log,
+                 found: Found = Found()) -> None:
+    """Every step of the ``n``-splat scene into ``row`` (``save()`` after each); the files
+    ``found`` in ``folder`` are used again (:mod:`.scale_lod_reuse`), never removed."""
     scene, lod = folder / f"scale-{n}.ply", folder / f"scale-{n}.lod.ply"
     common = {"scene": str(scene), "lod": str(lod), "memory": options.memory,
               "shared": str(shared_scenes_dir()),
@@ -182,8 +200,14 @@ def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save
     steps += [("flight", {"speed": options.speed})]
     if not fits:
         row["full"] = {"skipped": why}
+    reused = reused_steps(folder, n, found)
     try:
         for step, extra in steps:
+            if step in reused:
+                row[step] = reused[step]
+                log(f"scale-lod: {n:,} splats: {step} reused ({lod if step == 'build' else scene})")
+                save()
+                continue
             log(f"scale-lod: {n:,} splats: {step} ...")
             try:
                 row[step] = run_step(step, {**common, **extra}, cap)
@@ -197,6 +221,8 @@ def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save
             r = row[step]
             log(f"scale-lod: {n:,} splats: {step} {r['seconds']:.2f} s ({r['wall_s']:.2f} s "
                 f"from process start), peak {r['peak_rss_mb']:.0f} MB")
+            if step == "build":   # the figures a later run reusing the files shows
+                write_record(folder, n, row)
             if step == "full":
                 for key, lod_image, full_image in (("psnr_view_db", "frame", "full"),
                                                    ("psnr_far_db", "far", "full far")):
@@ -210,7 +236,9 @@ def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save
             save()
     finally:
         if not options.keep_scenes:
-            for p in (scene, lod, *images.values()):
+            kept = {scene} if found.scene else set()
+            kept |= {lod, record_path(folder, n)} if found.lod else set()
+            for p in {scene, lod, record_path(folder, n), *images.values()} - kept:
                 p.unlink(missing_ok=True)
 
 
@@ -224,7 +252,11 @@ def run_scale_lod(options: ScaleLodOptions, out: Path | None, machine: dict, log
                            f"not found ({shared_scenes_help()})")
     made = options.scratch is None
     folder = Path(tempfile.mkdtemp(prefix="splatgl-scale-lod-")) if made else Path(options.scratch)
-    check_disk(folder, options.sizes, options.keep_scenes)
+    if folder.exists() and not folder.is_dir():
+        raise SplatglError(f"--scale --lod: scratch folder {folder}: not a folder")
+    found = {} if made or not folder.is_dir() else {   # a stale file: one line, before any work
+        n: find(folder, n, options.branching) for n in options.sizes}
+    check_disk(folder, options.sizes, options.keep_scenes, found)
     folder.mkdir(parents=True, exist_ok=True)
     report = {"machine": machine, "options": {**asdict(options), "scratch": str(folder)},
               "rows": []}
@@ -239,7 +271,7 @@ def run_scale_lod(options: ScaleLodOptions, out: Path | None, machine: dict, log
         for n in options.sizes:
             row = {"splats": n}
             report["rows"].append(row)
-            measure_size(n, options, folder, row, save, log)
+            measure_size(n, options, folder, row, save, log, found.get(n, Found()))
             if out is not None:
                 plot(out / "scale-lod.png", report["rows"], options.memory)
     finally:

@@ -38,6 +38,15 @@ def _f(v, fmt: str) -> str:
     return "-" if v is None else format(v, fmt)
 
 
+def _reused(r: dict, step: str, field: str, fmt: str) -> str:
+    """A scene or build cell: a step reused from an earlier run (``--scratch``) reads
+    "reused", after the earlier run's figure where its build-N.json had them."""
+    v = _f(value(r, step, field), fmt)
+    if "reused" not in r.get(step, {}):
+        return v
+    return "reused" if v == "-" else f"{v} (reused)"
+
+
 #: The viewer's targets (issue 41): moving at 10 frames a second or more at 1280x720 (the
 #: median), exact within 15 s of rest, the flight's peak resident memory under ``--memory``.
 TARGET_FPS, TARGET_EXACT_S = 10.0, 15.0
@@ -65,7 +74,8 @@ def targets(rows: list[dict], memory: int | None) -> list[str]:
 
 def table(rows: list[dict], memory: int | None = None) -> str:
     """One line a size: build s / MB, open s / MB, first and far frames s / MB, the viewer's
-    flight (moving fps median and 10th percentile, rest to exact, peak MB), PSNRs; then the
+    flight (moving fps median and 10th percentile, rest to exact, peak MB), PSNRs (a build
+    reused from an earlier run says so: :func:`_reused`); then the
     flight against its targets (:func:`targets`, the peak against ``memory`` bytes)."""
     head = ("| splats | build s | build MB | open s | open MB | first frame s (cold) | first frame MB "
             "| far frame s (cold) | far frame MB | moving fps | moving fps p10 | rest to exact s "
@@ -78,8 +88,8 @@ def table(rows: list[dict], memory: int | None = None) -> str:
             dbs.append("does not fit" if isinstance(v, str) else
                        "identical" if key in r and v is None else _f(v, ".1f"))
         lines.append("| " + " | ".join([
-            f"{r['splats']:,}", _f(value(r, "build", "seconds"), ".1f"),
-            _f(value(r, "build", "peak_rss_mb"), ".0f"), _f(value(r, "open", "seconds"), ".2f"),
+            f"{r['splats']:,}", _reused(r, "build", "seconds", ".1f"),
+            _reused(r, "build", "peak_rss_mb", ".0f"), _f(value(r, "open", "seconds"), ".2f"),
             _f(value(r, "open", "peak_rss_mb"), ".0f"), _f(value(r, "frame", "wall_s"), ".2f"),
             _f(value(r, "frame", "peak_rss_mb"), ".0f"), _f(value(r, "far", "wall_s"), ".2f"),
             _f(value(r, "far", "peak_rss_mb"), ".0f"), _f(value(r, "flight", "fps_median"), ".1f"),
