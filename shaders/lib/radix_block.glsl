@@ -5,6 +5,7 @@
 // shared memory, no subgroup operations.  Its digit counts are a row of hist (lane-major,
 // hist[l * BLOCK_RADIX + d]), which radix_block_scan.comp turns into where its first key of
 // each digit goes.
+// Twin: splatgl/splatmath/radix.py radix_sort_twin(), radix_passes().
 #include "lib/radix.glsl"
 
 #define BLOCK_RADIX (1u << RADIX_BLOCK_BITS)

@@ -7,6 +7,7 @@
 //   LOAD1(i, k, v): key and value i;  KEYS4(i), KEY1(i): the keys alone
 //   STORE1(o, k, v): key and value at o
 // Include it first (its #extension line must precede any code).
+// Twin: none (storage accessors of the block passes; the sort's twin is named in radix_block.glsl).
 #if defined(RADIX_BLOCK_SRC_PAIRS) || defined(RADIX_BLOCK_DST_PAIRS)
 #extension GL_ARB_gpu_shader_int64 : require
 #endif

@@ -265,7 +265,7 @@ class ChunkedFrames:
     stereo_refusal = "--stereo and --memory (streaming a level of detail) cannot be combined yet"
 
     def __init__(self, path, settings: RenderSettings, lod: LodSettings, memory: int,
-                 level: int | None = None, kind: RendererKind = RendererKind.QUAD,
+                 level: int | None = None, kind: RendererKind = registry.DEFAULT_RENDERER,
                  threads: int = LOADERS, framing=None, plan: StreamPlan | None = None):
         self.settings, self.lod, self.memory, self.kind = settings, lod, int(memory), kind
         self.ctx = self.renderer = self.programs = self.stream = None
