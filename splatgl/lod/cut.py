@@ -70,13 +70,16 @@ class CutTooLarge(Exception):
 class CutData:
     """The view-independent arrays of the cut (from a tree): ``centres`` (3, M) float32 node
     means relative to ``anchor`` (the node scene's), ``radius`` (M,) float32, ``offsets``,
-    ``branching``."""
+    ``branching``; ``dense``: the fraction of a level its candidates must reach for the NumPy
+    cut to test it whole (DENSE_FRACTION; above 1, never: arrays read on demand, whose whole
+    levels would be read for a few candidates; the same cut either way)."""
 
     centres: np.ndarray
     radius: np.ndarray
     offsets: np.ndarray
     branching: int
     anchor: np.ndarray
+    dense: float = 0.25
 
     @classmethod
     def from_tree(cls, tree) -> "CutData":
@@ -240,8 +243,10 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
             break
         if max_nodes is not None and drawn_all + n_cand > max_nodes:
             raise CutTooLarge(drawn_all + n_cand)
-        dense = n_cand >= DENSE_FRACTION * n
-        if par is not None:   # the candidates (ascending) and their weights
+        dense = n_cand >= data.dense * n
+        if par is None:   # the top level: every node a candidate, of weight 1
+            local, a_cand = np.arange(n), np.ones(n, np.float32)
+        else:   # the candidates (ascending) and their weights
             local = (par[:, None] * b + np.arange(b)).ravel()
             a_cand = np.repeat(vals, b)
             fits = local < n

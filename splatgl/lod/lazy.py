@@ -33,6 +33,8 @@ from .selection import LodSettings
 
 #: Node spheres per page (16 bytes each: 4 KiB), the unit they are read in.
 BOUND_PAGE = 256
+#: Pages of spheres read and decoded at a time (16 MiB of records at most).
+SPHERE_GROUP = 4096
 #: Node rows this close are read together (one read, the rows between discarded).
 NODE_GAP = 8
 _BRANCHING = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
@@ -76,12 +78,9 @@ class LazyLod:
                                               f"{self.offsets[-1]} nodes", BOUNDS)
         self.anchor = np.array([float(v) for v in anchor.groups()])
         self._fd = os.open(self.path, os.O_RDONLY)
-        m = int(self.offsets[-1])
-        self._centres = np.zeros((3, m), np.float32)
-        self._radius = np.zeros(m, np.float32)
-        self._loaded = np.zeros(-(-m // BOUND_PAGE), bool)
+        self._last_spheres: tuple | None = None   # (rows, centres, radii) of the last read
         self.cut_data = CutData(_Centres(self), _Radius(self), self.offsets, self.branching,
-                                self.anchor)
+                                self.anchor, dense=2.0)   # candidates only: see CutData
 
     @property
     def levels(self) -> int:
@@ -112,50 +111,60 @@ class LazyLod:
         self.bytes_read += size
         return b"".join(parts)
 
-    def _load(self, pages: np.ndarray) -> None:
-        """Read the sphere pages ``pages`` (ascending, not loaded yet), consecutive ones at once."""
+    def _read_pages(self, pages: np.ndarray) -> np.ndarray:
+        """The sphere records of ``pages`` (ascending, unique), page after page (the last
+        page of the element may be short: its records are followed by zeros), consecutive
+        pages read at once."""
         start, elem = self.elements[BOUNDS]
         dtype = elem.dtype(self.order)
+        out = np.zeros(pages.size * BOUND_PAGE, dtype)
         cuts = np.concatenate([[0], np.flatnonzero(np.diff(pages) > 1) + 1, [pages.size]])
         for a, b in zip(cuts[:-1], cuts[1:]):
             lo = int(pages[a]) * BOUND_PAGE
             hi = min((int(pages[b - 1]) + 1) * BOUND_PAGE, elem.count)
-            rows = np.frombuffer(self._read(start + lo * dtype.itemsize, (hi - lo) * dtype.itemsize), dtype)
-            xyz = np.stack([rows[c].astype(np.float32) for c in "xyz"]).astype(np.float64)
-            self._centres[:, lo:hi] = (xyz - self.anchor[:, None]).astype(np.float32)
-            self._radius[lo:hi] = rows["radius"]
-        self._loaded[pages] = True
+            out[a * BOUND_PAGE:a * BOUND_PAGE + hi - lo] = np.frombuffer(
+                self._read(start + lo * dtype.itemsize, (hi - lo) * dtype.itemsize), dtype)
+        return out
 
     def spheres(self, rows) -> tuple[np.ndarray, np.ndarray]:
         """(centres (3, K) float32 relative to :attr:`anchor`, radii (K,)) of node ``rows``
-        (an index array or a slice), reading the pages not read yet (into arrays allocated
-        whole but untouched, so only the pages read take memory)."""
+        (an ascending index array or a slice), read from the file (its pages of BOUND_PAGE
+        spheres, at most SPHERE_GROUP pages at a time) and not kept: a cut over a tree of any
+        size holds only the spheres it is testing (the system's page cache keeps the file's)."""
         if isinstance(rows, slice):
-            lo, hi, _ = rows.indices(self._radius.size)
-            pages = np.arange(lo // BOUND_PAGE, -(-hi // BOUND_PAGE))
-        else:
-            rows = np.asarray(rows, np.int64)
-            pages = np.unique(rows // BOUND_PAGE)
-        missing = pages[~self._loaded[pages]]
-        if missing.size:
-            self._load(missing)
-        return self._centres[:, rows], self._radius[rows]
+            lo, hi, _ = rows.indices(int(self.offsets[-1]))
+            rows = np.arange(lo, hi, dtype=np.int64)
+        rows = np.asarray(rows, np.int64)
+        last = self._last_spheres
+        if last is not None and last[0].size == rows.size and np.array_equal(last[0], rows):
+            return last[1], last[2]   # the radii of the rows whose centres were just read
+        centres = np.empty((3, rows.size), np.float32)
+        radius = np.empty(rows.size, np.float32)
+        page = rows // BOUND_PAGE
+        firsts = np.concatenate([[0], np.flatnonzero(np.diff(page)) + 1]) if rows.size else rows
+        for g in range(0, firsts.size, SPHERE_GROUP):
+            a = int(firsts[g])
+            b = int(firsts[g + SPHERE_GROUP]) if g + SPHERE_GROUP < firsts.size else rows.size
+            pages = page[firsts[g:g + SPHERE_GROUP]]
+            recs = self._read_pages(pages)
+            slot = np.searchsorted(pages, page[a:b]) * BOUND_PAGE + rows[a:b] % BOUND_PAGE
+            got = recs[slot]
+            xyz = np.stack([got[c].astype(np.float32) for c in "xyz"]).astype(np.float64)
+            centres[:, a:b] = (xyz - self.anchor[:, None]).astype(np.float32)
+            radius[a:b] = got["radius"]
+        self._last_spheres = (rows, centres, radius)
+        return centres, radius
 
     @property
     def sphere_bytes(self) -> int:
-        """Bytes of the node spheres read so far (and kept)."""
-        return int(np.count_nonzero(self._loaded)) * BOUND_PAGE * 16
+        """Bytes of node spheres kept between cuts: none (they are read as a cut tests them)."""
+        return 0
 
     def trim_spheres(self, limit: int) -> bool:
-        """Forget every sphere read (a cut reads them again as it tests them) where they take
-        more than ``limit`` bytes; True when they did (a streamed frame's bound)."""
-        if self.sphere_bytes <= limit:
-            return False
-        m = self._radius.size
-        self._centres = np.zeros((3, m), np.float32)
-        self._radius = np.zeros(m, np.float32)
-        self._loaded[:] = False
-        return True
+        """Forget the spheres of the last read (kept for its radii); False: nothing more is
+        kept (see :meth:`spheres`)."""
+        self._last_spheres = None
+        return False
 
     def nodes(self, rows: np.ndarray) -> Scene:
         """The stored values of node ``rows`` (ascending) as a :class:`Scene`, read in runs of
