@@ -130,7 +130,7 @@ def plan(budget: int, branching: int, record_bytes: int, count: int,
 # ------------------------------------------------------------------ a streamed frame's budget
 #: Bytes of the CPU side per splat a streamed frame draws, beyond its SH and GPU storage: the
 #: gathered scene's means, quaternions, scales and opacity (44), the cut's rows and weights
-#: (12), the sphere pages the cut keeps (2 x 16, :meth:`splatgl.lod.lazy.LazyLod.trim_spheres`),
+#: (12), the selection's sphere reads (32: freed before the frame's arrays, so headroom),
 #: the cull's data (20), the order's scratch (indices, keys, their sort and the order: 36) and
 #: the allocator's slack (20).  The SH adds 12 bytes a coefficient (float32 RGB).
 FRAME_CPU_BYTES = 164
