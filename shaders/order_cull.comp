@@ -2,8 +2,7 @@
 // keys of every splat, one invocation each.  One twin per cull kind, the same float32 operations
 // in the same order (precise: no fused multiply-add), so the same depth bits and decisions:
 //   (default) CullKind.FRUSTUM, side planes: splatgl.order.cull.cull_visible(); the peak-alpha
-//     bound, float64 on the CPU, runs here in float32 and keeps whatever lies within
-//     DEVICE_CULL_BAND of the cut (a superset by splats that draw nothing);
+//     bound: splatgl.order.cull.peak_keeps(), float32 on both sides (the same kept splats);
 //   CULL_BOX: CullKind.BOX (orthographic), cull_visible()'s box: the planes with z's factor 1;
 //   CULL_SPHERE: CullKind.SPHERE (fisheye, equirectangular), splatgl.order.lens_cull.lens_keys():
 //     key = distance, kept beyond the near plane; CULL_FISHEYE adds cone_keeps(), CULL_SEAM
@@ -15,7 +14,7 @@
 // order_compact.comp writes the kept keys and indices in slot order for the stable sort: the
 // CPU order, ties included (a seam copy's index carries WRAP_FLAG, after every plain index, as
 // splatgl.order.chunks.keys_pairs lists them).  Nothing comes back to the host.
-// Twin: splatgl/order/cull.py cull_visible();
+// Twin: splatgl/order/cull.py cull_visible(), peak_keeps();
 //   splatgl/order/lens_cull.py lens_keys(), cone_keeps(), seam_copies().
 
 #include "lib/sqrt_rn.glsl"
@@ -24,7 +23,7 @@ layout(local_size_x = ORDER_GROUP) in;
 
 struct CullRow {
     vec4 p;     // anchored centre x, y, z; world radius k(o) max_scale (CullData.radius)
-    vec4 q;     // max_scale, opacity, alive (1/0), faint (1/0)
+    vec4 q;     // max_scale, log(255 opacity) (CullData.cut_log), alive (1/0), faint (1/0)
 };
 layout(std430, binding = ORDER_BINDING_CULL) readonly buffer Cull { CullRow rows[]; };
 layout(std430, binding = ORDER_BINDING_STAGED) writeonly buffer Staged { uint staged[]; };
@@ -44,7 +43,8 @@ uniform bool u_peak;          // the peak-alpha bound may cull (a pinhole image)
 uniform bool u_antialias;
 uniform float u_scale;        // the view's uniform scale (max_scale * scale in the bound)
 uniform vec4 u_focal;         // fx, fy, cx, cy of the frustum's camera
-uniform vec4 u_image;         // width, height, tan half fov x, y
+uniform vec4 u_image;         // width, height, the Jacobian's clamps (peak_constants32)
+uniform float u_aa_floor;     // AA_LOG_FLOOR: log(sqrt(AA_MIN_FACTOR)), float32
 uniform vec3 u_lens;          // CULL_SPHERE: float32 cos(angle limit), scale, SEAM_MARGIN_PX / fx
 
 float view_axis(vec3 p, vec3 r, float t) {
@@ -66,30 +66,66 @@ bool planes(float v, float z, float rad, vec4 c) {
     return v <= w_hi && v >= w_lo;
 }
 
-// log of peak_alpha_bound (splatgl/order/cull.py), in float32, against log(ALPHA_MIN).
-bool peak_keeps(vec3 p, float max_scale, float opacity) {
+// splatgl.order.cull.peak_keeps(): the peak-alpha bound decided in float32 by operations IEEE
+// rounds exactly (+ - * /, roundEven, clamp; precise: no fused multiply-add), in its order:
+// d^2 / 2 <= lambda (cut_log + max(-a - a^2 / 2, u_aa_floor)), a NaN side keeps.  The CPU's
+// decision bit for bit: the same kept splats, so early termination's batches are the CPU's.
+bool peak_keeps(vec3 p, float max_scale, float cut_log) {
     float x = p.x, y = p.y, z = p.z;
     float fx = u_focal.x, fy = u_focal.y;
+    precise float fx2 = fx * fx;
+    precise float fy2 = fy * fy;
+    precise float jf2, u, v;
 #ifdef CULL_BOX
-    float jf2 = fx * fx + fy * fy;
-    float u = fx * x + u_focal.z, v = fy * y + u_focal.w;
+    jf2 = fx2 + fy2;
+    u = fx * x;
+    u += u_focal.z;
+    v = fy * y;
+    v += u_focal.w;
 #else
-    float tx = u_image.z, ty = u_image.w;
-    float xc = clamp(x / z, -JACOBIAN_CLAMP * tx, JACOBIAN_CLAMP * tx);
-    float yc = clamp(y / z, -JACOBIAN_CLAMP * ty, JACOBIAN_CLAMP * ty);
-    float jf2 = (fx * fx * (1.0 + xc * xc) + fy * fy * (1.0 + yc * yc)) / (z * z);
-    float u = fx * x / z + u_focal.z, v = fy * y / z + u_focal.w;
+    precise float xz = x / z;
+    precise float yz = y / z;
+    float xc = clamp(xz, -u_image.z, u_image.z);
+    float yc = clamp(yz, -u_image.w, u_image.w);
+    precise float jx = xc * xc;
+    jx = 1.0 + jx;
+    jx = fx2 * jx;
+    precise float jy = yc * yc;
+    jy = 1.0 + jy;
+    jy = fy2 * jy;
+    precise float zz = z * z;
+    jf2 = jx + jy;
+    jf2 = jf2 / zz;
+    u = fx * xz;
+    u += u_focal.z;
+    v = fy * yz;
+    v += u_focal.w;
 #endif
-    float ms = max_scale * u_scale;
-    float lam = jf2 * ms * ms + LOW_PASS;
-    float nu = clamp(roundEven(u - 0.5), 0.0, u_image.x - 1.0) + 0.5;
-    float nv = clamp(roundEven(v - 0.5), 0.0, u_image.y - 1.0) + 0.5;
-    float d2 = (u - nu) * (u - nu) + (v - nv) * (v - nv);
-    float log_bound = log(opacity) - 0.5 * d2 / lam;
-    if (u_antialias)
-        log_bound += log(max(1.0 - LOW_PASS / lam, sqrt(AA_MIN_FACTOR)));
-    if (isnan(log_bound) || isinf(lam) || isnan(lam)) return true;  // never on a non-finite bound
-    return log_bound >= log(ALPHA_MIN) - DEVICE_CULL_BAND;
+    precise float ms = max_scale * u_scale;
+    precise float lam = jf2 * ms;
+    lam = lam * ms;
+    lam = lam + LOW_PASS;
+    precise float nu = u - 0.5;
+    nu = clamp(roundEven(nu), 0.0, u_image.x - 1.0) + 0.5;
+    precise float nv = v - 0.5;
+    nv = clamp(roundEven(nv), 0.0, u_image.y - 1.0) + 0.5;
+    precise float du = u - nu;
+    precise float dv = v - nv;
+    precise float d2 = du * du;
+    precise float dvv = dv * dv;
+    d2 += dvv;
+    precise float lhs = 0.5 * d2;
+    precise float level = cut_log;
+    if (u_antialias) {
+        precise float a = LOW_PASS / lam;
+        precise float h = 0.5 * a;
+        h = h * a;
+        h = a + h;
+        level = level + max(-h, u_aa_floor);
+    }
+    precise float rhs = level * lam;
+    if (isnan(lhs) || isnan(rhs)) return true;   // never cull on a NaN side
+    return lhs <= rhs;
 }
 
 shared uint group_kept;

@@ -135,12 +135,6 @@ TILE_KEYS_PER_SPLAT = 8
 #: back tells the renderer to grow the buffers and draw again, with no status read per frame.
 TILE_OVERFLOW_ALPHA = -1.0
 
-#: Device-resident order (``--sort gpu``, shaders/order_cull.comp): the GPU cull computes the
-#: peak-alpha bound in float32 (the CPU's is float64, splatgl/order/cull.py) and keeps a splat
-#: whose log bound lies within this of log(ALPHA_MIN): a superset of the CPU's kept set by
-#: splats whose brightest pixel centre is within 0.1% of 1/255 (they draw nothing either way).
-DEVICE_CULL_BAND = 1e-3
-
 #: Compact GPU storage (``--gpu-storage compact``, splatgl/gl/storage.py, shaders/lib/dequantise.glsl):
 #: bits of each smallest-three quaternion component and of the linear opacity.  Two components
 #: and the 2-bit index fill one uint; the third shares a uint with the opacity.  15 bits, not
@@ -227,7 +221,6 @@ def glsl_defines() -> dict[str, str]:
         "RADIX_BLOCK_BITS": str(RADIX_BLOCK_BITS),
         "TILE_SCAN_ITEMS": str(TILE_SCAN_ITEMS),
         "TILE_OVERFLOW_ALPHA": glsl_float(TILE_OVERFLOW_ALPHA),
-        "DEVICE_CULL_BAND": glsl_float(DEVICE_CULL_BAND),
         "COMPACT_QUAT_BITS": str(COMPACT_QUAT_BITS),
         "COMPACT_OPACITY_BITS": str(COMPACT_OPACITY_BITS),
         "OCCLUSION_MAX_TILES": str(OCCLUSION_MAX_TILES),

@@ -18,10 +18,11 @@ import numpy as np
 
 from ..constants import ALPHA_MIN, LOW_PASS
 
-#: A compiled peak-alpha bound this close to 1/255 (relative) is not trusted to fall on the
-#: same side as NumPy's (exp and the order of a few float64 operations may differ in the last
-#: bits): such rows go back to :func:`splatgl.order.cull.peak_keeps`.
-PEAK_UNSURE = 1e-6
+#: A compiled (float64) peak-alpha bound this close to 1/255 (relative) is not trusted to fall
+#: on the side of :func:`splatgl.order.cull.peak_keeps`' float32 decision, which such rows go
+#: back to: float32 rounding moves that decision's exponent ``d^2 / (2 lambda)`` by less than
+#: 6 ulp(u) (u the pixel coordinate: ulp 1e-3 up to 8192 px), well inside this band.
+PEAK_UNSURE = 1e-2
 #: What :func:`splatgl.order.kernels.kernel` hands out from this module.
 KERNELS = ("view_pass", "rows_pass", "lens_pass")
 

@@ -53,9 +53,10 @@ GROUP = 16
 #: pass instead (gathering the boundary rows and the accepted runs' calls then cost more than
 #: they save; measured on the 0.1M scale scene from close by: 44% boundary, 1.3x slower).
 WHOLE_SHARE = 0.35
-#: Room for the rows whose peak bound the compiled pass leaves to NumPy (within 1e-6 of 1/255:
-#: almost never any; more than this and the view takes the NumPy path).
-UNSURE_ROWS = 1024
+#: Room for the rows whose peak bound the compiled pass leaves to NumPy (within
+#: ``_numba_cull.PEAK_UNSURE``, 1%, of 1/255: few; more than this and the view takes the NumPy
+#: path).
+UNSURE_ROWS = 8192
 #: From this many drawable splats on, the compiled pass runs on two threads (half the groups
 #: each); below, starting the second costs about what it saves.
 SPLIT_ROWS = 1 << 17

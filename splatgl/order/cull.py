@@ -33,7 +33,9 @@ def peak_alpha_bound(p_cam: np.ndarray, max_scale: np.ndarray, opacities: np.nda
     ``lambda_max <= ||J||_F^2 max_scale^2 + LOW_PASS`` (``||W||_2 = 1``; J the clamped EWA
     Jacobian).  So ``alpha <= o * aa * exp(-|d|^2 / (2 lambda_bound))``, where with
     antialiasing ``aa = sqrt(det / det_dilated) <= 1 - LOW_PASS / lambda_bound`` (each
-    eigenvalue's factor (l - 0.3) / l grows with l), floored like the reference's factor.
+    eigenvalue's factor (l - 0.3) / l grows with l), floored like the reference's factor,
+    and bounded once more by ``exp(-a - a^2 / 2) >= 1 - a`` (``a = LOW_PASS / lambda_bound``:
+    :func:`peak_keeps`' float32 form, free of transcendentals, has no log of it).
     Only valid for splats in front of the camera (z > 0).
     """
     x, y, z = (p_cam[:, i].astype(np.float64) for i in range(3))
@@ -54,8 +56,9 @@ def peak_alpha_bound(p_cam: np.ndarray, max_scale: np.ndarray, opacities: np.nda
         nv = np.clip(np.round(v - 0.5), 0, camera.height - 1) + 0.5
         d2 = (u - nu) ** 2 + (v - nv) ** 2
         bound = opacities.astype(np.float64) * np.exp(-0.5 * d2 / lam)
-    if antialias:
-        bound *= np.maximum(1.0 - LOW_PASS / lam, np.sqrt(AA_MIN_FACTOR))
+    if antialias:   # exp(-a - a^2 / 2) >= 1 - a: peak_keeps' bound of the factor
+        a = LOW_PASS / lam
+        bound *= np.maximum(np.exp(-(a + 0.5 * a * a)), np.sqrt(AA_MIN_FACTOR))
     return np.where(np.isfinite(bound), bound, 1.0)  # never cull on a non-finite bound
 
 
@@ -120,6 +123,8 @@ class CullData:
         alive: (N,) bool, opacity >= 1/255 (a splat below can never be drawn).
         faint: (N,) bool, ``k^2 < 0.5 / LOW_PASS``: the peak bound can cull such a splat even
             with its centre inside the image (for the others it only can outside).
+        cut_log: (N,) float32 ``log(255 o) = k^2 / 2`` (float64, rounded once): the peak
+            bound's level (:func:`peak_keeps`; the device order's cull rows carry it).
     """
 
     def __init__(self, points: np.ndarray, max_scale: np.ndarray, opacities: np.ndarray):
@@ -131,6 +136,7 @@ class CullData:
         self.radius = (np.sqrt(k2) * self.max_scale).astype(np.float32)
         self.alive = self.opacities >= ALPHA_MIN
         self.faint = k2 < 0.5 / LOW_PASS
+        self.cut_log = (0.5 * k2).astype(np.float32)   # log(255 o) (0 where o < 1/255)
 
     @property
     def count(self) -> int:
@@ -143,7 +149,7 @@ class CullData:
         # each row of xyz must be contiguous (the cull streams rows); a column slice keeps that
         # (np.take: fancy indexing on the second axis gives a non-contiguous array, twice as slow)
         out.xyz = self.xyz[:, rows] if isinstance(rows, slice) else np.take(self.xyz, rows, axis=1)
-        for name in ("max_scale", "opacities", "radius", "alive", "faint"):
+        for name in ("max_scale", "opacities", "radius", "alive", "faint", "cut_log"):
             setattr(out, name, getattr(self, name)[rows])
         return out
 
@@ -266,13 +272,58 @@ def plane_constants(frustum: Frustum, scale: float = 1.0) -> np.ndarray:
     return out
 
 
+def peak_constants32(camera: Camera) -> np.ndarray:
+    """(8,) float32 per-view constants of :func:`peak_keeps`: fx, fy, cx, cy, width, height and
+    the Jacobian's clamps on x/z and y/z (``JACOBIAN_CLAMP tan_half_fov``, rounded once from
+    float64; shaders/order_cull.comp's ``u_focal``, ``u_image``)."""
+    tx, ty = (1.0, 1.0) if camera.is_orthographic else camera.tan_half_fov
+    return np.array([camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height,
+                     JACOBIAN_CLAMP * tx, JACOBIAN_CLAMP * ty], np.float32)
+
+
+#: log(sqrt(AA_MIN_FACTOR)) in float32: the floor of the log of the antialiasing factor.
+AA_LOG_FLOOR = np.float32(0.5 * np.log(AA_MIN_FACTOR))
+
+
 def peak_keeps(p: np.ndarray, rows: np.ndarray, data: "CullData", camera: Camera,
                antialias: bool, scale: float) -> np.ndarray:
     """(K,) bool: the splats ``rows`` of ``data`` at camera-space float32 points ``p`` (K, 3)
-    that the peak alpha bound keeps (:func:`peak_alpha_bound` not below 1/255)."""
-    bound = peak_alpha_bound(p, data.max_scale[rows] * np.float32(scale), data.opacities[rows],
-                             camera, antialias)
-    return ~(bound < ALPHA_MIN)
+    that the peak alpha bound keeps: :func:`peak_alpha_bound` not below 1/255, decided in
+    float32 by operations IEEE 754 rounds exactly (``+ - * /``, rounding to integers, no
+    transcendental, no fused multiply-add), so shaders/order_cull.comp's ``peak_keeps`` makes
+    the same decision bit for bit (the device order keeps the CPU's splats, and early
+    termination's batches are the CPU's).  ``o exp(-d^2 / (2 lambda)) aa >= 1/255`` is
+    ``d^2 / 2 <= lambda (log(255 o) + log aa)``, with ``log(255 o)`` the cull data's
+    ``cut_log`` (float32, once per scene) and ``log aa <= max(-a - a^2 / 2, log sqrt(AA_MIN))``
+    (``a = LOW_PASS / lambda``; ``log(1 - a) <= -a - a^2 / 2``), the bound's factor.  It equals
+    the float64 test up to float32 rounding (splats within it of the cut draw nothing); a NaN
+    side keeps the splat."""
+    f32 = np.float32
+    c = peak_constants32(camera)
+    fx, fy, cx, cy, w, h, clx, cly = (f32(v) for v in c)
+    x, y, z = (np.ascontiguousarray(p[:, i], np.float32) for i in range(3))
+    fx2, fy2 = fx * fx, fy * fy
+    with np.errstate(all="ignore"):
+        if camera.is_orthographic:
+            jf2 = np.full_like(z, fx2 + fy2)
+            u, v = fx * x + cx, fy * y + cy
+        else:
+            xz, yz = x / z, y / z
+            xc, yc = np.clip(xz, -clx, clx), np.clip(yz, -cly, cly)
+            jf2 = (fx2 * (f32(1) + xc * xc) + fy2 * (f32(1) + yc * yc)) / (z * z)
+            u, v = fx * xz + cx, fy * yz + cy
+        ms = data.max_scale[rows] * f32(scale)
+        lam = jf2 * ms * ms + f32(LOW_PASS)
+        nu = np.clip(np.rint(u - f32(0.5)), f32(0), w - f32(1)) + f32(0.5)
+        nv = np.clip(np.rint(v - f32(0.5)), f32(0), h - f32(1)) + f32(0.5)
+        du, dv = u - nu, v - nv
+        lhs = f32(0.5) * (du * du + dv * dv)
+        level = data.cut_log[rows]
+        if antialias:
+            a = f32(LOW_PASS) / lam
+            level = level + np.maximum(-(a + f32(0.5) * a * a), AA_LOG_FLOOR)
+        rhs = level * lam
+        return ~(lhs > rhs)
 
 
 def view_axis(xyz: np.ndarray, start: int, stop: int, r: np.ndarray, t, out: np.ndarray,

@@ -5,9 +5,9 @@ Per view, with nothing per splat crossing the bus:
 1. ``shaders/order_cull.comp``, one invocation per splat: the view's cull
    (:data:`splatgl.order.stage.CULLS`), one twin per cull kind with the same float32
    operations in the same order (``precise``), so the same depth bits and decisions: the side
-   planes of :func:`splatgl.order.cull.cull_visible` (pinhole, OpenCV; the peak-alpha bound in
-   float32 with a band of :data:`~splatgl.constants.DEVICE_CULL_BAND` that only ever keeps
-   more), its orthographic box (``CULL_BOX``), and the lens cameras' distance, fisheye cone
+   planes of :func:`splatgl.order.cull.cull_visible` (pinhole, OpenCV; the peak-alpha bound's
+   float32 decision :func:`splatgl.order.cull.peak_keeps`, exactly rounded operations only:
+   the CPU's kept splats, so early termination's batch bounds are the CPU's), its orthographic box (``CULL_BOX``), and the lens cameras' distance, fisheye cone
    and equirectangular seam copies of :func:`splatgl.order.lens_cull.lens_keys`
    (``CULL_SPHERE``; a panorama runs a second invocation per splat for its seam copy, whose
    index carries :data:`~splatgl.cameras.equirect.WRAP_FLAG`).  It stages key j = the float
@@ -51,7 +51,7 @@ from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
 from ..scene.splats import Scene
-from ..order.cull import CullData, plane_constants
+from ..order.cull import AA_LOG_FLOOR, CullData, peak_constants32, plane_constants
 
 #: Bytes of the indirect draw command (count, instance count, first, base instance), then the
 #: pre-pass's indirect dispatch size (x, y, z, unused) at :data:`PREPASS_ARGS`.
@@ -61,12 +61,12 @@ PREPASS_ARGS = 16
 
 def cull_rows(data: CullData) -> np.ndarray:
     """(N, 8) float32 rows of order_cull.comp's cull buffer: x, y, z, radius, max_scale,
-    opacity, alive, faint."""
+    log(255 opacity) (:attr:`CullData.cut_log`, the peak bound's level), alive, faint."""
     rows = np.empty((data.count, 8), np.float32)
     rows[:, :3] = data.xyz.T
     rows[:, 3] = data.radius
     rows[:, 4] = data.max_scale
-    rows[:, 5] = data.opacities
+    rows[:, 5] = data.cut_log
     rows[:, 6] = data.alive
     rows[:, 7] = data.faint
     return rows
@@ -209,10 +209,12 @@ class DeviceOrder:
                                 float(np.float32(SEAM_MARGIN_PX / cam.fx)))
         else:
             planes = plane_constants(frustum, view.scale)
-            tx, ty = (1.0, 1.0) if frustum.kind is CullKind.BOX else cam.tan_half_fov
+            peak = peak_constants32(cam)    # peak_keeps' float32 constants
             values.update({"u_plane_x": tuple(planes[0, :4]), "u_plane_y": tuple(planes[1, :4]),
                            "u_inside": (planes[0, 4], planes[0, 5], planes[1, 4], planes[1, 5]),
-                           "u_image": (cam.width, cam.height, tx, ty)})
+                           "u_focal": tuple(map(float, peak[:4])),
+                           "u_image": tuple(map(float, peak[4:])),
+                           "u_aa_floor": float(AA_LOG_FLOOR)})
         for name, value in values.items():
             if name in prog:
                 prog[name].value = value

@@ -136,3 +136,49 @@ def test_lens_views_are_identical_with_early_termination_on(ctx, projection):
     assert want.any() and t.device_order and cpu["batched"] and dev["batched"]
     assert dev["bounds"][-1] == cpu["count"]
     np.testing.assert_array_equal(got, want)
+
+
+def _cut_scene(cam: Camera, n_cut: int = 1500, n_opaque: int = 400, seed: int = 3) -> Scene:
+    """Opaque splats over tiny faint ones whose brightest pixel centre is within 0.3% of 1/255
+    (the peak-alpha cut: kept or culled they draw nothing): their kept count moves early
+    termination's batch bounds unless the device keeps exactly the CPU's."""
+    from splatgl.order.cull import peak_alpha_bound
+
+    rng = np.random.default_rng(seed)
+    m = 4 * n_cut
+    uv = rng.uniform([-1.5, -1.5], [cam.width + 1.5, cam.height + 1.5], (m, 2))
+    z = rng.uniform(2.0, 3.0, m)
+    if cam.is_orthographic:
+        p = np.stack([(uv[:, 0] - cam.cx) / cam.fx, (uv[:, 1] - cam.cy) / cam.fy, z], 1)
+    else:
+        p = np.stack([(uv[:, 0] - cam.cx) * z / cam.fx, (uv[:, 1] - cam.cy) * z / cam.fy, z], 1)
+    log_scale = np.full((m, 3), np.log(1e-4))
+    falloff = peak_alpha_bound(p, np.exp(log_scale[:, 0]), np.ones(m), cam)
+    opac = (1 + rng.uniform(-3e-3, 3e-3, m)) / (255 * falloff)
+    pick = np.flatnonzero(opac < 0.9)[:n_cut]
+    assert pick.size == n_cut
+    o = opac[pick]
+    means = np.concatenate([p[pick], rng.uniform([-0.6, -0.5, 1.2], [0.6, 0.5, 1.5], (n_opaque, 3))
+                            * ([1, 1, 1] if not cam.is_orthographic else [2.0, 2.0, 1.0])])
+    scales = np.concatenate([log_scale[pick], rng.uniform(-3.5, -2.5, (n_opaque, 3))])
+    logits = np.concatenate([np.log(o / (1 - o)), np.full(n_opaque, 4.0)])
+    order = rng.permutation(n_cut + n_opaque)    # near-cut splats spread over every batch
+    return Scene(means[order], rng.normal(size=(n_cut + n_opaque, 4)), scales[order],
+                 logits[order], rng.normal(0, 0.5, (n_cut + n_opaque, 1, 3)))
+
+
+@pytest.mark.parametrize("projection", ["pinhole", "orthographic"])
+def test_splats_at_the_peak_alpha_cut_keep_the_batches_and_the_image(ctx, projection):
+    """The device's float32 peak-alpha decision is the CPU's bit for bit (order_cull.comp's
+    peak_keeps, splatgl.order.cull.peak_keeps): the same kept count, so the same batch bounds
+    and the same image; with a band around the cut the device kept more and moved them."""
+    cam = (Camera.from_fov(160, 120, 55.0) if projection == "pinhole"
+           else Camera.orthographic(160, 120, 90.0))
+    scene = _cut_scene(cam)
+    want, cpu, _ = _render(ctx, scene, cam, SortKey.EXACT, EarlyStop.ON)
+    got, dev, t = _render(ctx, scene, cam, SortKey.GPU, EarlyStop.ON)
+    assert t.device_order and cpu["batched"] and 400 < cpu["count"] < scene.count
+    assert dev["bounds"][-1] == cpu["count"]      # the kept counts (the band kept ~20% more)
+    assert dev["bounds"] == batch_bounds(cpu["count"], *COARSE_SCHEDULE if not cpu["fine"]
+                                         else FINE_SCHEDULE)
+    np.testing.assert_array_equal(got, want)
