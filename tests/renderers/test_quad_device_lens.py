@@ -4,8 +4,8 @@ equirectangular views (shaders/order_cull.comp's CULL_BOX and CULL_SPHERE twins)
 The lens culls' decisions are float32 operations without transcendentals
 (:func:`splatgl.order.lens_cull.cone_keeps`, :func:`~splatgl.order.lens_cull.seam_copies`,
 the orthographic box of :func:`splatgl.order.cull.cull_visible`), made bit for bit on the
-device: the device order is the CPU's (the box's up to splats at the peak-alpha cut, as the
-pinhole's), frames are identical, and a moving lens camera uploads only uniforms and reads
+device: the device order is the CPU's (and its sort keys those of
+:func:`~splatgl.order.lens_cull.lens_keys`), frames are identical, and a moving lens camera uploads only uniforms and reads
 back only the image.  Omni-directional stereo keeps the CPU cull.
 """
 
@@ -75,8 +75,8 @@ def _images(ctx, scene, cameras, **changes) -> list[tuple[np.ndarray, np.ndarray
 @pytest.mark.parametrize("antialias", [False, True])
 @pytest.mark.parametrize("name", list(_lens_cameras()))
 def test_device_order_is_the_cpu_order(ctx, name, antialias):
-    """The drawn order (indices, seam copies' flags) and its keys are the CPU cull's; the
-    orthographic box's may add splats at the peak-alpha cut only (as the pinhole's)."""
+    """The drawn order (indices, seam copies' flags) is the CPU cull's (the orthographic
+    box's peak-alpha bound too: one float32 decision, splatgl.order.cull.peak_keeps)."""
     scene = _scene()
     camera = _lens_cameras()[name]
     settings = _settings(SortKey.GPU, antialias=antialias)
@@ -89,7 +89,6 @@ def test_device_order_is_the_cpu_order(ctx, name, antialias):
         assert 0 < want.size
         if name == "orthographic":
             assert want.size < scene.count
-            got = got[np.isin(got, want)]
         np.testing.assert_array_equal(got, want)
         if name == "equirectangular":
             assert (want >= WRAP_FLAG).any()      # seam copies made, on both sides the same
@@ -97,6 +96,39 @@ def test_device_order_is_the_cpu_order(ctx, name, antialias):
             assert want.size < scene.count         # the cone culls
     finally:
         r.release()
+
+
+@pytest.mark.parametrize("name", ["fisheye", "fisheye-k", "equirectangular"])
+def test_device_keys_are_lens_keys(ctx, name):
+    """CULL_SPHERE against its twin splatgl.order.lens_cull.lens_keys() (NumPy path): the
+    device's sorted (distance bits, index) pairs are lens_keys()' sorted uint64 keys bit for bit
+    (seam copies with WRAP_FLAG; cone and near plane the same)."""
+    from splatgl.order.cull import CullData
+    from splatgl.order.lens_cull import lens_keys
+
+    scene = _scene()
+    settings = _settings(SortKey.GPU)
+    r = QuadRenderer(ctx, scene, settings)
+    try:
+        view = View.of(_lens_cameras()[name], settings, scene)
+        r.render(view)
+        values = r._device.order()
+        keys = np.frombuffer(r._device.sorter.buffers()[0].read(4 * values.size), np.uint32)
+    finally:
+        r.release()
+    data = CullData.from_scene(scene)
+    rows = np.flatnonzero(data.alive)
+    out, path = lens_keys(data.subset(rows), rows.astype(np.uint32),
+                          np.empty(2 * scene.count, np.uint64), view.frustum.camera, view.near,
+                          view.scale)
+    want = np.sort(out)
+    assert path == "numpy" and 0 < want.size
+    np.testing.assert_array_equal(keys, (want >> np.uint64(32)).astype(np.uint32))
+    np.testing.assert_array_equal(values, (want & np.uint64(0xFFFFFFFF)).astype(np.uint32))
+    if name == "equirectangular":
+        assert (values >= WRAP_FLAG).any()
+    elif name == "fisheye":
+        assert want.size < rows.size               # the cone and the near plane cull
 
 
 @pytest.mark.parametrize("antialias", [False, True])
