@@ -16,6 +16,7 @@ size.  :attr:`LazyLod.bytes_read` counts what was read.
 
 from __future__ import annotations
 
+import mmap
 import os
 import re
 from pathlib import Path
@@ -79,6 +80,7 @@ class LazyLod:
         self.anchor = np.array([float(v) for v in anchor.groups()])
         self._fd = os.open(self.path, os.O_RDONLY)
         self._last_spheres: tuple | None = None   # (rows, centres, radii) of the last read
+        self._mapped = None   # the sphere element mapped (_bounds_map), False: cannot be
         self.cut_data = CutData(_Centres(self), _Radius(self), self.offsets, self.branching,
                                 self.anchor, dense=2.0)   # candidates only: see CutData
 
@@ -90,6 +92,8 @@ class LazyLod:
         return int(self.offsets[level + 1] - self.offsets[level])
 
     def close(self) -> None:
+        if self._mapped:
+            self._mapped = None   # the mapping closes with its last array
         if self._fd is not None:
             os.close(self._fd)
             self._fd = None
@@ -140,20 +144,40 @@ class LazyLod:
             return last[1], last[2]   # the radii of the rows whose centres were just read
         centres = np.empty((3, rows.size), np.float32)
         radius = np.empty(rows.size, np.float32)
+        mapped = self._bounds_map()
         page = rows // BOUND_PAGE
         firsts = np.concatenate([[0], np.flatnonzero(np.diff(page)) + 1]) if rows.size else rows
         for g in range(0, firsts.size, SPHERE_GROUP):
             a = int(firsts[g])
             b = int(firsts[g + SPHERE_GROUP]) if g + SPHERE_GROUP < firsts.size else rows.size
-            pages = page[firsts[g:g + SPHERE_GROUP]]
-            recs = self._read_pages(pages)
-            slot = np.searchsorted(pages, page[a:b]) * BOUND_PAGE + rows[a:b] % BOUND_PAGE
-            got = recs[slot]
+            if mapped is not None:   # gathered from the mapped file (no read loop), its pages
+                got = mapped[1][rows[a:b]]   # then dropped from this process's RSS
+                self.bytes_read += got.nbytes
+                _drop_pages(mapped, int(rows[a]), int(rows[b - 1]) + 1)
+            else:
+                pages = page[firsts[g:g + SPHERE_GROUP]]
+                recs = self._read_pages(pages)
+                got = recs[np.searchsorted(pages, page[a:b]) * BOUND_PAGE + rows[a:b] % BOUND_PAGE]
             xyz = np.stack([got[c].astype(np.float32) for c in "xyz"]).astype(np.float64)
             centres[:, a:b] = (xyz - self.anchor[:, None]).astype(np.float32)
             radius[a:b] = got["radius"]
         self._last_spheres = (rows, centres, radius)
         return centres, radius
+
+    def _bounds_map(self):
+        """``(mmap, records)``: the sphere element mapped read-only (None where it cannot be)."""
+        if self._mapped is None:
+            start, elem = self.elements[BOUNDS]
+            dtype = elem.dtype(self.order)
+            base = start // mmap.ALLOCATIONGRANULARITY * mmap.ALLOCATIONGRANULARITY
+            try:
+                mm = mmap.mmap(self._fd, start - base + elem.count * dtype.itemsize,
+                               access=mmap.ACCESS_READ, offset=base)
+            except (OSError, ValueError):
+                self._mapped = False
+                return None
+            self._mapped = (mm, np.frombuffer(mm, dtype, elem.count, start - base))
+        return self._mapped or None
 
     @property
     def sphere_bytes(self) -> int:
@@ -213,6 +237,18 @@ class LazyLod:
             return sub
         o = 1.0 - (1.0 - sub.opacities.astype(np.float64)) ** weights.astype(np.float64)
         return Scene.from_activated(sub.means, sub.quats, sub.scales, o, sub.sh, sub.kind)
+
+
+def _drop_pages(mapped, lo: int, hi: int) -> None:
+    """Let the mapped sphere records ``lo:hi`` leave the process's resident pages (they stay
+    in the system's page cache)."""
+    mm, recs = mapped
+    if not hasattr(mm, "madvise"):
+        return
+    first = recs.ctypes.data - np.frombuffer(mm, np.uint8).ctypes.data + lo * recs.itemsize
+    start = first // mmap.PAGESIZE * mmap.PAGESIZE
+    end = min(len(mm), first + (hi - lo) * recs.itemsize)
+    mm.madvise(mmap.MADV_DONTNEED, start, end - start)
 
 
 class _Centres:
