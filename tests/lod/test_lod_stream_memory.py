@@ -182,3 +182,22 @@ def test_render_says_once_when_the_memory_bound_coarsened_the_cut(tmp_path, caps
     out = capsys.readouterr().out
     assert sum(line.startswith("the memory bound") for line in out.splitlines()) == 1
     assert "3 of 3 views capped" in out
+
+
+def test_spheres_read_mapped_or_by_pages_alike_and_kept_nowhere(tmp_path):
+    """A streamed cut's spheres: gathered from the mapped file (pages dropped after) or read by
+    pages where it cannot be mapped, the same values; nothing kept between calls beyond the
+    last read; the cut over them is the in-memory tree's (the candidates alone)."""
+    path = _lod(tmp_path)
+    tree = _tree_on_file_anchor(path)
+    with LazyLod(path) as mapped, LazyLod(path) as paged:
+        paged._mapped = False
+        rows = np.unique(np.random.default_rng(1).integers(0, int(mapped.offsets[-1]), 700))
+        for a, b in zip(mapped.spheres(rows), paged.spheres(rows)):
+            assert np.array_equal(a, b)
+        assert mapped._mapped and mapped.sphere_bytes == 0
+        camera = _camera(2.0, 0.3)
+        want = select_cut_weights(CutData.from_tree(tree), camera, 1.0, 2.0)
+        for lazy in (mapped, paged):
+            got = select_cut_weights(lazy.cut_data, camera, 1.0, 2.0)
+            assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
