@@ -182,8 +182,8 @@ def cull_visible(data: CullData, camera: Camera, near: float, antialias: bool = 
 
     The plane test ``(x - s z) / sqrt(1 + s^2) <= r + m z / f`` is rearranged to
     ``x <= (s + sqrt(1 + s^2) m / f) z + sqrt(1 + s^2) r`` (likewise for the other three
-    planes).  The peak alpha bound (:func:`peak_alpha_bound`, float64) runs only where it can
-    cull: on survivors whose centre projects outside the image, or that are faint (a centre
+    planes).  The peak alpha bound (:func:`peak_keeps`: :func:`peak_alpha_bound`'s decision in
+    float32, the device order's bit for bit) runs only where it can cull: on survivors whose centre projects outside the image, or that are faint (a centre
     inside the image lies within 0.5 px per axis of a pixel centre, d^2 <= 0.5, and
     ``lambda >= LOW_PASS``, so ``o exp(-d^2 / (2 lambda)) >= 1/255`` whenever
     ``k^2 = 2 ln(255 o) >= 0.5 / LOW_PASS``).  With antialiasing every survivor takes it.
