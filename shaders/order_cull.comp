@@ -18,6 +18,7 @@
 //   splatgl/order/lens_cull.py lens_keys(), cone_keeps(), seam_copies().
 
 #include "lib/sqrt_rn.glsl"
+#include "lib/div_rn.glsl"
 
 layout(local_size_x = ORDER_GROUP) in;
 
@@ -67,7 +68,8 @@ bool planes(float v, float z, float rad, vec4 c) {
 }
 
 // splatgl.order.cull.peak_keeps(): the peak-alpha bound decided in float32 by operations IEEE
-// rounds exactly (+ - * /, roundEven, clamp; precise: no fused multiply-add), in its order:
+// rounds exactly (+ - *, lib/div_rn.glsl's /, roundEven, clamp; precise: no fused
+// multiply-add), in its order:
 // d^2 / 2 <= lambda (cut_log + max(-a - a^2 / 2, u_aa_floor)), a NaN side keeps.  The CPU's
 // decision bit for bit: the same kept splats, so early termination's batches are the CPU's.
 bool peak_keeps(vec3 p, float max_scale, float cut_log) {
@@ -83,8 +85,8 @@ bool peak_keeps(vec3 p, float max_scale, float cut_log) {
     v = fy * y;
     v += u_focal.w;
 #else
-    precise float xz = x / z;
-    precise float yz = y / z;
+    precise float xz = div_rn(x, z);          // correctly rounded, as NumPy's
+    precise float yz = div_rn(y, z);
     float xc = clamp(xz, -u_image.z, u_image.z);
     float yc = clamp(yz, -u_image.w, u_image.w);
     precise float jx = xc * xc;
@@ -95,7 +97,7 @@ bool peak_keeps(vec3 p, float max_scale, float cut_log) {
     jy = fy2 * jy;
     precise float zz = z * z;
     jf2 = jx + jy;
-    jf2 = jf2 / zz;
+    jf2 = div_rn(jf2, zz);
     u = fx * xz;
     u += u_focal.z;
     v = fy * yz;
@@ -117,7 +119,7 @@ bool peak_keeps(vec3 p, float max_scale, float cut_log) {
     precise float lhs = 0.5 * d2;
     precise float level = cut_log;
     if (u_antialias) {
-        precise float a = LOW_PASS / lam;
+        precise float a = div_rn(LOW_PASS, lam);
         precise float h = 0.5 * a;
         h = h * a;
         h = a + h;

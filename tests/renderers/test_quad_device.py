@@ -265,3 +265,40 @@ def test_the_viewers_colour_frame_reads_nothing_back(gl_renderer):
     assert "read back 0 bytes" in frame.splats
     uploaded = int(frame.splats.split("per-frame uploads ")[1].split(" bytes")[0].replace(",", ""))
     assert uploaded <= UPLOAD_BUDGET
+
+
+def test_device_division_is_correctly_rounded_from_a_rough_estimate(ctx, tmp_path):
+    """shaders/lib/div_rn.glsl: from quotients off by up to 3 ulp (GLSL allows 2.5), the
+    quotient is NumPy's float32 a / b, bit for bit (order_cull.comp's peak-alpha decision)."""
+    from splatgl.gl.shaders import preprocess, shader_dir
+
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "div_rn.glsl").write_text((shader_dir() / "lib" / "div_rn.glsl").read_text())
+    (tmp_path / "check.comp").write_text(
+        '#include "lib/div_rn.glsl"\nlayout(local_size_x = 64) in;\n'
+        'layout(std430, binding = 0) buffer Io { uint io[]; };\nuniform int u_off;\n'
+        'void main() { uint i = gl_GlobalInvocationID.x; float a = uintBitsToFloat(io[2u * i]);\n'
+        '  float b = uintBitsToFloat(io[2u * i + 1u]); uint q = floatBitsToUint(a / b);\n'
+        '  io[2u * i] = floatBitsToUint(div_rn_from(a, b, uintBitsToFloat(uint(int(q) + u_off)))); }\n')
+    comp = ctx.compute_shader(preprocess("check.comp", root=tmp_path).text)
+    rng = np.random.default_rng(4)
+    n = 8192
+    a = (rng.uniform(-1, 1, n) * 10.0 ** rng.uniform(-8, 8, n)).astype(np.float32)
+    b = (rng.uniform(0.1, 1, n) * 10.0 ** rng.uniform(-8, 8, n)).astype(np.float32)
+    b[: n // 8] = rng.integers(1, 4096, n // 8).astype(np.float32)     # exact quotients
+    a[: n // 8] = b[: n // 8] * rng.integers(-4096, 4096, n // 8).astype(np.float32)
+    a[n // 8: n // 4] = np.float32(0.3)                                 # LOW_PASS / lambda
+    b[n // 8: n // 4] = np.float32(0.3) + rng.uniform(0, 100, n // 8).astype(np.float32)
+    b[-3:] = -b[-3:]
+    want = (a / b).view(np.uint32)
+    io = np.stack([a.view(np.uint32), b.view(np.uint32)], 1)
+    for off in (-3, -1, 0, 1, 3):
+        buf = ctx.buffer(io.tobytes())
+        buf.bind_to_storage_buffer(0)
+        comp["u_off"].value = off
+        comp.run(group_x=n // 64)
+        got = np.frombuffer(buf.read(), np.uint32)[0::2]
+        buf.release()
+        zero = a == 0   # a zero quotient keeps the estimate
+        np.testing.assert_array_equal(got[~zero], want[~zero], err_msg=f"estimate off by {off} ulp")
+    comp.release()
