@@ -54,9 +54,9 @@ GROUP = 16
 #: they save; measured on the 0.1M scale scene from close by: 44% boundary, 1.3x slower).
 WHOLE_SHARE = 0.35
 #: Room for the rows whose peak bound the compiled pass leaves to NumPy (within
-#: ``_numba_cull.PEAK_UNSURE``, 1%, of 1/255: few; more than this and the view takes the NumPy
-#: path).
-UNSURE_ROWS = 8192
+#: ``_numba_cull.PEAK_UNSURE``, 1%, of 1/255: about 130 in 100k splats on the scale scene at
+#: 1280x720; more than this and the view takes the NumPy path).
+UNSURE_ROWS = 1 << 16
 #: From this many drawable splats on, the compiled pass runs on two threads (half the groups
 #: each); below, starting the second costs about what it saves.
 SPLIT_ROWS = 1 << 17
