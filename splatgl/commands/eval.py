@@ -143,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
         print(result.table())
         if memory is not None:
             print(f"streaming: {streamed.summary()}")
+            if getattr(streamed, "capped", None):   # said once: the memory bound's cut
+                print(streamed.capped)
         if run is not None:
             print(summary(run, "views"))
     with outputs:
