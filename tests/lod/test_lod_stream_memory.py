@@ -201,3 +201,18 @@ def test_spheres_read_mapped_or_by_pages_alike_and_kept_nowhere(tmp_path):
         for lazy in (mapped, paged):
             got = select_cut_weights(lazy.cut_data, camera, 1.0, 2.0)
             assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+def test_bench_memory_reports_the_cap(tmp_path, capsys, monkeypatch):
+    """``bench SCENE.lod.ply --memory``: the frame's cap and the capped line in the figures."""
+    import json
+
+    from splatgl.lod import stream_cut
+
+    monkeypatch.setattr(stream_cut, "per_splat", lambda lazy, storage=None: 64 << 20)
+    path = _lod(tmp_path)
+    assert main(["bench", str(path), "--memory", "12G", "--quick", "--frames", "2", "--width",
+                 "192", "--height", "128", "--json", "-"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert 100 <= report["frame_cap"] < 200 and report["cut_nodes_median"] <= report["frame_cap"]
+    assert report["capped"].startswith("the memory bound made the cut coarser")

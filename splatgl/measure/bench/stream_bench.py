@@ -45,12 +45,16 @@ def run_stream(path, memory: int, width: int, height: int, frames: int,
             nodes.append(stream.last_cut_nodes)
         stats = stream.resident.stats
         read = None if chunked else stream.lazy.bytes_read
+        capped = getattr(stream, "capped", None)   # the memory bound's coarser cut, said once
+        plan = getattr(stream, "plan", None)
+        cap = None if plan is None else plan.cap
     return {"scene": str(path), "memory": memory, "width": width, "height": height,
             "frames": frames, "open_s": opened, "first_frame_s": times[0],
             "median_frame_s": float(np.median(times[1:] if len(times) > 1 else times)),
             "cut_nodes_median": int(np.median(nodes)), "resident_bytes": stats.resident_bytes,
             "resident_peak_bytes": stats.peak_bytes, "chunks_loaded": stats.loaded,
-            "chunks_evicted": stats.evicted, "bytes_read": read, "peak_rss_bytes": peak_rss()}
+            "chunks_evicted": stats.evicted, "bytes_read": read, "peak_rss_bytes": peak_rss(),
+            "frame_cap": cap, "capped": capped}
 
 
 def describe(r: dict) -> str:
@@ -63,4 +67,5 @@ def describe(r: dict) -> str:
             f"{format_size(r['resident_peak_bytes'])}), chunks {r['chunks_loaded']} loaded, "
             f"{r['chunks_evicted']} evicted"
             f"{'' if r['bytes_read'] is None else ', ' + format_size(r['bytes_read']) + ' read'}; process peak "
-            f"RSS {format_size(r['peak_rss_bytes'])}")
+            f"RSS {format_size(r['peak_rss_bytes'])}"
+            f"{'' if not r.get('capped') else chr(10) + r['capped']}")
