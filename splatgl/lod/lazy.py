@@ -80,7 +80,8 @@ class LazyLod:
         self.anchor = np.array([float(v) for v in anchor.groups()])
         self._fd = os.open(self.path, os.O_RDONLY)
         self._last_spheres: tuple | None = None   # (rows, centres, radii) of the last read
-        self._mapped = None   # the sphere element mapped (_bounds_map), False: cannot be
+        self._mapped = None   # the file mapped read-only (_records), False: it cannot be
+        self._recs: dict = {}   # element name -> its records in the mapping
         self.cut_data = CutData(_Centres(self), _Radius(self), self.offsets, self.branching,
                                 self.anchor, dense=2.0)   # candidates only: see CutData
 
@@ -93,7 +94,7 @@ class LazyLod:
 
     def close(self) -> None:
         if self._mapped:
-            self._mapped = None   # the mapping closes with its last array
+            self._mapped, self._recs = None, {}   # the mapping closes with its last array
         if self._fd is not None:
             os.close(self._fd)
             self._fd = None
@@ -144,7 +145,7 @@ class LazyLod:
             return last[1], last[2]   # the radii of the rows whose centres were just read
         centres = np.empty((3, rows.size), np.float32)
         radius = np.empty(rows.size, np.float32)
-        mapped = self._bounds_map()
+        mapped = self._records(BOUNDS)
         page = rows // BOUND_PAGE
         firsts = np.concatenate([[0], np.flatnonzero(np.diff(page)) + 1]) if rows.size else rows
         for g in range(0, firsts.size, SPHERE_GROUP):
@@ -153,7 +154,7 @@ class LazyLod:
             if mapped is not None:   # gathered from the mapped file (no read loop), its pages
                 got = mapped[1][rows[a:b]]   # then dropped from this process's RSS
                 self.bytes_read += got.nbytes
-                _drop_pages(mapped, int(rows[a]), int(rows[b - 1]) + 1)
+                _drop_pages(*mapped, int(rows[a]), int(rows[b - 1]) + 1)
             else:
                 pages = page[firsts[g:g + SPHERE_GROUP]]
                 recs = self._read_pages(pages)
@@ -164,20 +165,20 @@ class LazyLod:
         self._last_spheres = (rows, centres, radius)
         return centres, radius
 
-    def _bounds_map(self):
-        """``(mmap, records)``: the sphere element mapped read-only (None where it cannot be)."""
+    def _records(self, name: str):
+        """``(mmap, records)``: element ``name``'s records in the file mapped read-only (None
+        where it cannot be mapped: then they are read)."""
         if self._mapped is None:
-            start, elem = self.elements[BOUNDS]
-            dtype = elem.dtype(self.order)
-            base = start // mmap.ALLOCATIONGRANULARITY * mmap.ALLOCATIONGRANULARITY
             try:
-                mm = mmap.mmap(self._fd, start - base + elem.count * dtype.itemsize,
-                               access=mmap.ACCESS_READ, offset=base)
+                self._mapped = mmap.mmap(self._fd, 0, access=mmap.ACCESS_READ)
             except (OSError, ValueError):
                 self._mapped = False
-                return None
-            self._mapped = (mm, np.frombuffer(mm, dtype, elem.count, start - base))
-        return self._mapped or None
+        if not self._mapped:
+            return None
+        if name not in self._recs:
+            start, elem = self.elements[name]
+            self._recs[name] = np.frombuffer(self._mapped, elem.dtype(self.order), elem.count, start)
+        return self._mapped, self._recs[name]
 
     @property
     def sphere_bytes(self) -> int:
@@ -202,14 +203,21 @@ class LazyLod:
             start, elem = self.elements[name]
             dtype = elem.dtype(self.order)
             local = sel - base
-            got = []
-            cuts = np.concatenate([[0], np.flatnonzero(np.diff(local) > NODE_GAP) + 1, [local.size]])
-            for a, b in zip(cuts[:-1], cuts[1:]):  # runs of near rows, one read each
-                lo, hi = int(local[a]), int(local[b - 1]) + 1
-                run = np.frombuffer(self._read(start + lo * dtype.itemsize,
-                                               (hi - lo) * dtype.itemsize), dtype)
-                got.append(run[local[a:b] - lo])
-            recs = np.concatenate(got)
+            mapped = self._records(name)
+            if mapped is not None:   # gathered from the mapped file, its pages then dropped
+                recs = mapped[1][local]
+                self.bytes_read += recs.nbytes
+                _drop_pages(*mapped, int(local[0]), int(local[-1]) + 1)
+            else:
+                got = []
+                cuts = np.concatenate([[0], np.flatnonzero(np.diff(local) > NODE_GAP) + 1,
+                                       [local.size]])
+                for a, b in zip(cuts[:-1], cuts[1:]):  # runs of near rows, one read each
+                    lo, hi = int(local[a]), int(local[b - 1]) + 1
+                    run = np.frombuffer(self._read(start + lo * dtype.itemsize,
+                                                   (hi - lo) * dtype.itemsize), dtype)
+                    got.append(run[local[a:b] - lo])
+                recs = np.concatenate(got)
             cols = ply._Columns(self.path, [p for p, _ in elem.properties], recs.shape[0])
             cols.fill(recs, 0)
             parts.append(activate(self.path, cols.means, cols.quats, cols.log_scales,
@@ -239,10 +247,10 @@ class LazyLod:
         return Scene.from_activated(sub.means, sub.quats, sub.scales, o, sub.sh, sub.kind)
 
 
-def _drop_pages(mapped, lo: int, hi: int) -> None:
-    """Let the mapped sphere records ``lo:hi`` leave the process's resident pages (they stay
-    in the system's page cache)."""
-    mm, recs = mapped
+def _drop_pages(mm, recs: np.ndarray, lo: int, hi: int) -> None:
+    """Let the mapped records ``lo:hi`` of ``recs`` (an element in ``mm``) leave the process's
+    resident pages (they stay in the system's page cache: a gather of any size holds only
+    what it copied)."""
     if not hasattr(mm, "madvise"):
         return
     first = recs.ctypes.data - np.frombuffer(mm, np.uint8).ctypes.data + lo * recs.itemsize

@@ -196,6 +196,9 @@ def test_spheres_read_mapped_or_by_pages_alike_and_kept_nowhere(tmp_path):
         for a, b in zip(mapped.spheres(rows), paged.spheres(rows)):
             assert np.array_equal(a, b)
         assert mapped._mapped and mapped.sphere_bytes == 0
+        a, b = mapped.nodes(rows), paged.nodes(rows)   # the node rows alike
+        for f in ("means", "quats", "log_scales", "opacity_logits", "sh"):
+            assert np.array_equal(getattr(a, f), getattr(b, f))
         camera = _camera(2.0, 0.3)
         want = select_cut_weights(CutData.from_tree(tree), camera, 1.0, 2.0)
         for lazy in (mapped, paged):
