@@ -45,9 +45,11 @@ PINNED_LEVELS = 2
 #: A gather reads a chunk it needs fewer than this fraction of the rows of, and that is not
 #: resident, row by row (runs) instead of whole, and does not keep it: a cut mixing levels
 #: touches many chunks for a few rows each (the 20M tiled scene's capped default view: 4.2M
-#: nodes over 26.6M chunk rows).  Such rows are read this many at a time (several chunks').
+#: nodes over 26.6M chunk rows).  Such rows are read this many at a time (several chunks'; a
+#: read maps at most that many file pages before it drops them: 1 << 15 raised the 100M far
+#: view's peak by 500 MB with four reads in flight).
 SPARSE_CHUNK = 0.25
-SPARSE_BATCH = 1 << 15
+SPARSE_BATCH = 1 << 13
 _FIELDS = ("means", "quats", "log_scales", "opacity_logits", "sh")
 
 
