@@ -45,10 +45,8 @@ BUDGET_TOLERANCE = 0.1
 #: then this many narrowing steps between the last cut too large and the first that fits.
 MAX_LATE_STEPS = 40
 LATE_BISECTIONS = 3
-#: A budget's search abandons a trial cut once it would draw more than this many times the
-#: budget (:class:`CutTooLarge`): the selection's own memory stays a few times the budget's
-#: however fine the threshold (a close view of a 100M-splat tree), and the next threshold is
-#: stepped as if the cut held exactly that many (the compiled and NumPy paths alike).
+#: A budget's search abandons a trial cut past this many times the budget (CutTooLarge), so
+#: its memory stays a few budgets' at any size, and steps as if the cut held that many.
 ABORT_FACTOR = 3
 #: The search from a nearby view's threshold (:func:`select_cut_budget_near`): at most this many
 #: cuts, stepping the threshold by at least this factor until the budget is bracketed.
@@ -57,9 +55,8 @@ NEAR_FACTOR = 1.15
 
 
 class CutTooLarge(Exception):
-    """A cut abandoned before its level whose candidates would take it past ``max_nodes``
-    (:func:`select_cut_weights`): ``nodes`` is the nodes drawn above that level plus its
-    candidates (every candidate is drawn, replaced by its children or out of view)."""
+    """A cut abandoned before the level whose candidates would take it past ``max_nodes``:
+    ``nodes``, the nodes drawn above that level plus its candidates."""
 
     def __init__(self, nodes: int):
         super().__init__(f"the cut would test {nodes} nodes")
@@ -70,9 +67,8 @@ class CutTooLarge(Exception):
 class CutData:
     """The view-independent arrays of the cut (from a tree): ``centres`` (3, M) float32 node
     means relative to ``anchor`` (the node scene's), ``radius`` (M,) float32, ``offsets``,
-    ``branching``; ``dense``: the fraction of a level its candidates must reach for the NumPy
-    cut to test it whole (DENSE_FRACTION; above 1, never: arrays read on demand, whose whole
-    levels would be read for a few candidates; the same cut either way)."""
+    ``branching``; ``dense``: the share of a level its candidates make for the NumPy cut to
+    test it whole (above 1, never: for arrays read on demand; the same cut either way)."""
 
     centres: np.ndarray
     radius: np.ndarray
@@ -214,9 +210,8 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     (the candidates outside the view count as drawn here, which only errs towards the leaves,
     whose image is full detail's).
 
-    ``max_nodes``: before each level, if the nodes drawn so far plus that level's candidates
-    exceed it, raise :class:`CutTooLarge` without testing them (so a cut far over a budget
-    reads and tests only about ``max_nodes`` nodes' spheres).
+    ``max_nodes``: :class:`CutTooLarge` before a level whose candidates would take the nodes
+    drawn so far past it (a cut far over a budget tests only about ``max_nodes`` nodes).
 
     ``kern``: :func:`splatgl.order.kernels.for_view`'s kernels, whose ``cut_pass`` walks the same
     levels compiled, over the candidates only (the same rows and weights); None: NumPy.
@@ -365,8 +360,7 @@ def select_cut_budget(data: CutData, camera: Camera, budget: int,
 
 
 def _trial_cut(data: CutData, camera: Camera, t: float, band: float, kern, budget: int):
-    """``(rows, weights, nodes)`` of a budget search's cut at threshold ``t``; rows None and
-    ``nodes`` past the budget where it was abandoned at ABORT_FACTOR times the budget."""
+    """``(rows, weights, nodes)`` of a budget search's trial at ``t`` (rows None: abandoned)."""
     try:
         cut, w = select_cut_weights(data, camera, t, band, kern=kern,
                                     max_nodes=ABORT_FACTOR * int(budget))

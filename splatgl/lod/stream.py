@@ -35,6 +35,7 @@ import numpy as np
 from ..errors import SplatglError
 from ..scene.splats import Scene
 from .budget import format_size
+from .stream_gather import FIELDS as _FIELDS, gather
 
 #: Node rows per chunk (a few MiB of decoded SH3 rows).
 CHUNK_ROWS = 4096
@@ -42,15 +43,6 @@ CHUNK_ROWS = 4096
 LOADERS = 2
 #: The chunks of this many levels from the top are loaded first and never evicted.
 PINNED_LEVELS = 2
-#: A gather reads a chunk it needs fewer than this fraction of the rows of, and that is not
-#: resident, row by row (runs) instead of whole, and does not keep it: a cut mixing levels
-#: touches many chunks for a few rows each (the 20M tiled scene's capped default view: 4.2M
-#: nodes over 26.6M chunk rows).  Such rows are read this many at a time (several chunks'; a
-#: read maps at most that many file pages before it drops them: 1 << 15 raised the 100M far
-#: view's peak by 500 MB with four reads in flight).
-SPARSE_CHUNK = 0.25
-SPARSE_BATCH = 1 << 13
-_FIELDS = ("means", "quats", "log_scales", "opacity_logits", "sh")
 
 
 def concatenate(parts: list[Scene]) -> Scene:
@@ -242,75 +234,15 @@ class ResidentSet:
 
     # ------------------------------------------------------------------------- the two draws
     def gather(self, rows: np.ndarray) -> Scene:
-        """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact).  Each
-        chunk's rows are copied into the scene's arrays (allocated once, at the cut's size)
-        as it arrives: no per-chunk copies to concatenate, so the cut is held once."""
-        rows = np.asarray(rows, np.int64)
-        ids = self.chunk_of(rows)
-        need = np.unique(ids)
-        cuts = np.searchsorted(ids, need)
-        bounds = dict(zip(need.tolist(), zip(cuts.tolist(), np.append(cuts[1:], rows.size).tolist())))
-        out: dict[str, np.ndarray] = {}
+        """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact):
+        :func:`splatgl.lod.stream_gather.gather` (held once; sparse chunks read row by row)."""
+        return gather(self, rows)
 
-        def take(c: int, scene: Scene, start: int | None = None) -> bool:
-            a, b = bounds[c]   # the chunk's rows, or (start) rows start.. of rows read alone
-            local = (rows[a:b] - c * self.chunks.rows if start is None
-                     else np.arange(start, start + b - a))
-            if not out:   # the arrays, at the cut's size, from the first chunk's shapes
-                kind = scene.kind
-                out.update({f: np.empty((rows.size,) + getattr(scene, f).shape[1:], np.float32)
-                            for f in _FIELDS}, kind=kind)
-            for f in _FIELDS:
-                np.take(getattr(scene, f), local, axis=0, out=out[f][a:b], mode="clip")
-            return True
-
-        read_rows = getattr(self.chunks, "read_rows", None)
-        sparse = [] if read_rows is None else [
-            c for c in need.tolist() if bounds[c][1] - bounds[c][0] < SPARSE_CHUNK * self.chunks.rows
-            and self.held(c) is None]
-        alone = set(sparse)
-        self.collect([c for c in need.tolist() if c not in alone], take)
-        self._read_rows(sparse, rows, bounds, take)
-        if not out:
-            return self._pick(self.chunks.load(0), 0, rows, 0, 0)
-        for f in _FIELDS:
-            out[f].flags.writeable = False   # adopted by the Scene as they are (no copy)
-        return Scene(*(out[f] for f in _FIELDS), out["kind"])
-
-    def _read_rows(self, chunks: list[int], rows: np.ndarray, bounds: dict, take) -> None:
-        """``take(chunk, scene, start)`` of each of ``chunks``' rows of ``rows``
-        (``rows[bounds[chunk]]``, at ``start`` in ``scene``), read alone on the loader threads
-        SPARSE_BATCH rows at a time (several chunks a read, a few reads in flight, each copied
-        out as it comes), none kept."""
-        groups, group, count = [], [], 0
-        for c in chunks:
-            group.append(c)
-            count += bounds[c][1] - bounds[c][0]
-            if count >= SPARSE_BATCH:
-                groups.append(group)
-                group, count = [], 0
-        if group:
-            groups.append(group)
-        window = 2 * LOADERS
-        pending: dict[Future, list[int]] = {}
-        while groups or pending:
-            while groups and len(pending) < window:
-                if self._stop.is_set():
-                    raise KeyboardInterrupt
-                g = groups.pop(0)
-                want = np.concatenate([rows[slice(*bounds[c])] for c in g])
-                pending[self._pool.submit(self.chunks.read_rows, want)] = g
-            fut = next(iter(pending))
-            g = pending.pop(fut)
-            try:
-                scene = fut.result()
-            except CancelledError:
-                raise KeyboardInterrupt from None
-            self.stats.rows_read += scene.count
-            start = 0
-            for c in g:
-                take(c, scene, start)
-                start += bounds[c][1] - bounds[c][0]
+    def read_alone(self, rows: np.ndarray) -> Future:
+        """Node ``rows`` read alone on a loader thread (``chunks.read_rows``), not kept."""
+        if self._stop.is_set():
+            raise KeyboardInterrupt
+        return self._pool.submit(self.chunks.read_rows, rows)
 
     def collect(self, need: list[int], take) -> dict:
         """``{chunk: take(chunk, its scene)}`` for the chunks ``need``, waiting for those not
@@ -341,9 +273,6 @@ class ResidentSet:
                 parts[c] = take(c, scene)
             todo = [c for c in todo if c not in parts]
         return parts
-
-    def _pick(self, scene: Scene, chunk: int, rows: np.ndarray, a: int, b: int) -> Scene:
-        return scene.subset(rows[a:b] - chunk * self.chunks.rows)
 
     def resident_cut(self, rows: np.ndarray, weights: np.ndarray | None
                      ) -> tuple[np.ndarray, np.ndarray | None, bool]:
