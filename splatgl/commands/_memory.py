@@ -108,24 +108,42 @@ def streamed_frames(args: argparse.Namespace, settings, memory: int, framing=Non
     ``memory`` bytes (:class:`splatgl.lod.stream_frames.StreamFrames` of a ``.lod.ply``,
     :class:`splatgl.lod.stream_levels.ChunkedFrames` of a Streamed SOG or LCC), the cut its
     ``--lod-*`` options ask for (the defaults where the command has none); ``framing``: what
-    frames the views, where already read.  A scene of neither kind, or another renderer than
-    the quad path, is one line."""
-    from ..errors import SplatglError
+    frames the views, where already read; drawn by :func:`stream_renderer`'s choice.  A scene
+    of neither kind, or another renderer than the quad path or the CPU renderer, is one line."""
     from ..lod.selection import LodSettings
     from ..lod.stream_frames import StreamFrames
     from ..lod.stream_levels import ChunkedFrames
 
-    renderer = getattr(args, "renderer", "quad")
-    if renderer not in ("quad", "auto"):   # auto: a level of detail draws through the quad path
-        raise SplatglError(f"--memory streams a level of detail through the quad path, not "
-                           f"--renderer {renderer}")
     scene = getattr(args, "scene", None)
     check_streamable(args)
+    kind = stream_renderer(args, settings, framing)
     level = stream_level(args)
     lod = LodSettings(**_cut_options(args))
     if is_chunked_scene(args):
-        return ChunkedFrames(scene, settings, lod, memory, level, framing=framing)
-    return StreamFrames(scene, settings, lod, memory, framing=framing)
+        return ChunkedFrames(scene, settings, lod, memory, level, kind, framing=framing)
+    return StreamFrames(scene, settings, lod, memory, framing=framing, kind=kind)
+
+
+def stream_renderer(args: argparse.Namespace, settings, framing=None, camera=None, layers=None,
+                    under=None):
+    """The renderer a streamed frame draws with (issue 40 item 4 for streamed frames):
+    ``--renderer quad`` or ``cpu`` as given (checked against the request), ``auto`` resolved as
+    for an in-memory render (:func:`splatgl.commands._renderer_auto.choose_renderer`: the CPU
+    renderer on a software device where it can draw the request and its kernels are ready, said
+    once where only they were missing); any other renderer is one line.  Sets ``args.renderer``
+    to the choice (a second call keeps it)."""
+    from ..lod.stream_frames import streamed_kind
+    from ..renderers.registry import check
+    from ._renderer_auto import AUTO, choose_renderer
+
+    if getattr(args, "renderer", "quad") == AUTO:
+        return streamed_kind(choose_renderer(args, framing, settings, camera, layers, under))
+    kind = streamed_kind(getattr(args, "renderer", "quad"))
+    check(kind, scene=framing, settings=settings,
+          model=camera.model if camera is not None else None,
+          layers=frozenset(layers) if layers is not None else None, under=under is not None)
+    args.renderer = kind.value
+    return kind
 
 
 def check_streamable(args: argparse.Namespace) -> None:
@@ -150,13 +168,16 @@ def render_one_streamed(args: argparse.Namespace, camera, settings, lod, memory:
                         under, framing):
     """``render --memory``'s one view: (the layers, times, the GL renderer's name) of SCENE
     streamed under ``memory`` bytes (:func:`splatgl.lod.stream_frames.render_streamed`, or
-    :func:`splatgl.lod.stream_levels.render_chunked` for a Streamed SOG or LCC)."""
+    :func:`splatgl.lod.stream_levels.render_chunked` for a Streamed SOG or LCC), drawn by
+    :func:`stream_renderer`'s choice."""
+    kind = stream_renderer(args, settings, framing, camera, layers, under)
     if is_chunked_scene(args):
         from ..lod.stream_levels import render_chunked
 
         return render_chunked(args.scene, camera, settings, lod, memory, stream_level(args),
-                              layers, under, framing)
+                              layers, under, framing, kind)
     from ..lod.stream_frames import render_streamed
 
-    return render_streamed(args.scene, camera, settings, lod, memory, layers, under, framing)
+    return render_streamed(args.scene, camera, settings, lod, memory, layers, under, framing,
+                           kind=kind)
 

@@ -46,7 +46,7 @@ from ._common import (check_convention, default_size, demo_scene_path, load_scen
                       positive_float, projection_from_args, settings_from_args)
 from ._spz_axes import check_not_sharded
 from ._memory import (check_streamable, is_chunked_scene, memory_given, stream_inputs,
-                      stream_level, streamed_frames)
+                      stream_level, stream_renderer, streamed_frames)
 from ._outputs import check_outputs
 
 DEFAULT_FPS = 30.0
@@ -100,9 +100,10 @@ def lod_settings_from_args(args: argparse.Namespace) -> LodSettings | None:
     stream_level(args)   # --lod-level: with --memory and a Streamed SOG or LCC
     if not given and getattr(args, "memory", None) is None:
         return None
-    if args.renderer not in ("quad", AUTO):
-        raise SplatglError(f"--lod-threshold/--lod-budget/--memory render through the quad path, "
-                           f"not --renderer {args.renderer}")
+    streamed = getattr(args, "memory", None) is not None
+    if args.renderer not in ("quad", AUTO) + (("cpu",) if streamed else ()):
+        raise SplatglError(f"--lod-threshold/--lod-budget render through the quad path (--memory: "
+                           f"the quad path or the cpu renderer), not --renderer {args.renderer}")
     if getattr(args, "memory", None) is not None:   # a .lod.ply, a Streamed SOG or an LCC
         check_streamable(args)
     elif is_chunked_scene(args):
@@ -297,7 +298,9 @@ def run_path(args: argparse.Namespace) -> int:
         args.renderer, args.renderer_choice = kept.kind.value, kept
     elif args.renderer == AUTO and lod is None and memory is None and not args.preview:
         choose_renderer(args, scene, settings, cameras[0], target.layers or None, None)
-    elif args.renderer == AUTO:       # a level of detail, streaming, drafts: the quad path's
+    elif memory is not None:          # streamed: auto as above, the quad path or the cpu renderer
+        stream_renderer(args, settings, scene, cameras[0], target.layers or None, None)
+    elif args.renderer == AUTO:       # a level of detail, drafts: the quad path's
         args.renderer = RendererKind.QUAD.value
     kind = RendererKind(args.renderer)
     record = frame_record(args, scene, settings, target, kind, lod)

@@ -25,7 +25,7 @@ from ._common import (add_camera_arguments, add_scene_arguments, add_settings_ar
                       settings_from_args)
 from ._layers import add_layer_arguments, layer_files, under_from_args
 from ._memory import (STREAM_HELP, add_level_argument, add_memory_argument, memory_given,
-                      render_one_streamed, stream_inputs, stream_level)
+                      render_one_streamed, stream_inputs, stream_level, stream_renderer)
 from ._outputs import add_force_argument, output_files
 from ._render_path import (add_path_arguments, lod_settings_from_args, refuse_path_only_options,
                            run_path)
@@ -138,7 +138,10 @@ def run(args: argparse.Namespace) -> int:
     if args.renderer == AUTO and memory is None and not lod_given(args):
         kind = choose_renderer(args, scene, settings, camera, plan.render_layers(args.output)
                                | ({Layer.DEPTH} if args.depth_png is not None else set()), under)
-    elif args.renderer == AUTO:     # a level of detail, streamed or not: the quad path's
+    elif memory is not None:        # streamed: auto as above, the quad path or the cpu renderer
+        kind = stream_renderer(args, settings, scene, camera, plan.render_layers(args.output)
+                               | ({Layer.DEPTH} if args.depth_png is not None else set()), under)
+    elif args.renderer == AUTO:     # an in-memory level of detail: the quad path's
         args.renderer = RendererKind.QUAD.value
     files = layer_files(args, camera)
     check_exact_ids(files, args.output, scene.count)

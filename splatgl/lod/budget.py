@@ -157,6 +157,23 @@ def frame_bytes_per_splat(sh_coeffs: int, gpu_bytes: int) -> int:
     return FRAME_CPU_BYTES + FRAME_SH_BYTES * int(sh_coeffs) + int(gpu_bytes) + FRAME_GPU_BYTES
 
 
+#: Bytes the CPU renderer (``--renderer cpu``) holds per splat of its scene beyond the scene's
+#: arrays while it draws: its cull's chunked data, the projection's per-splat outputs (means,
+#: conics, colours, depths, boxes, rectangles), the depth order and the packed records (measured
+#: 301 B a splat on the 1M tiled scene's default view at 1280x720; rounded up).  It uploads
+#: nothing, so a streamed frame's gathered nodes stay held (in FRAME_CPU_BYTES) and no GPU
+#: storage or per-frame GPU buffers are counted.
+CPU_RENDERER_BYTES = 320
+#: The CPU renderer's draw reserve: its images and the tile lists' slack (no driver draw).
+CPU_DRAW_RESERVE = 96 << 20
+
+
+def cpu_frame_bytes_per_splat(sh_coeffs: int) -> int:
+    """Bytes of the whole process per splat a streamed frame drawn by the CPU renderer holds:
+    FRAME_CPU_BYTES + FRAME_SH_BYTES per SH coefficient + CPU_RENDERER_BYTES."""
+    return FRAME_CPU_BYTES + FRAME_SH_BYTES * int(sh_coeffs) + CPU_RENDERER_BYTES
+
+
 @dataclass(frozen=True)
 class StreamPlan:
     """How a streamed level of detail shares one ``--memory`` budget: ``held`` (what the

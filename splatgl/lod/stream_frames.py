@@ -29,16 +29,18 @@ from ..cameras.view import View
 from ..errors import SplatglError
 from ..gl.context import create_headless_context, make_current
 from ..gl.shaders import ProgramCache
-from ..scene.splats import SplatKind
-from ..scene.settings import RenderSettings, SortKey
+from ..scene.splats import Scene, SplatKind
+from ..scene.settings import RendererKind, RenderSettings, SortKey
 from ..order import kernels as cull_kernel
 from ..order.chunks import keys_order, keys_pairs
 from ..order.cull import CullData
 from ..order.stage import OrderTimes, cull_for
 from ..output.layers import BASE, Layer, RenderOutput
 from ..output.under import UnderImage
+from ..renderers import registry
 from ..renderers.quad import QuadRenderer
-from .budget import StreamPlan, format_size, release_freed
+from .budget import (CPU_DRAW_RESERVE, StreamPlan, cpu_frame_bytes_per_splat, format_size,
+                     release_freed, stream_plan)
 from .lazy import LazyLod
 from .selection import LodSettings
 from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet, scene_bytes
@@ -107,30 +109,54 @@ def _drop_nodes(quad: QuadRenderer, scene) -> None:
     quad.scene = quad.programs.scene = quad.buffers.scene = stub
 
 
+def streamed_kind(kind: RendererKind | str) -> RendererKind:
+    """``kind`` as a :class:`RendererKind` a streamed frame draws with
+    (:data:`splatgl.renderers.registry.STREAMED`), else one line."""
+    kind = RendererKind(kind)
+    if kind not in registry.STREAMED:
+        raise SplatglError(f"--memory streams a level of detail through the quad path or the "
+                           f"cpu renderer, not --renderer {kind.value}")
+    return kind
+
+
 class StreamFrames:
     """Views of the ``.lod.ply`` at ``path`` through the cut ``lod``, streamed with the whole
     process under ``memory`` bytes (see the module doc); owns its context (a context manager).
     ``framing``: what frames views (default :func:`framing_scene`); ``plan``: how the budget
     is shared (default :func:`splatgl.lod.stream_cut.plan_for`, measured once the context
     exists): the chunk cache holds ``plan.cache`` bytes, a frame at most ``plan.cap`` splats
-    (a coarser cut where the view's asks for more, said once in :attr:`capped`)."""
+    (a coarser cut where the view's asks for more, said once in :attr:`capped`).  ``kind``:
+    the quad path (default) or the CPU renderer (no GL context; the cut's opacity weights
+    applied to the nodes, and its own bytes a splat in the plan:
+    :func:`splatgl.lod.budget.cpu_frame_bytes_per_splat`)."""
 
     stereo_refusal = "--stereo and --memory (streaming a level of detail) cannot be combined yet"
 
     def __init__(self, path, settings: RenderSettings, lod: LodSettings, memory: int,
                  chunk_rows: int = CHUNK_ROWS, threads: int = LOADERS, framing=None,
-                 plan: StreamPlan | None = None):
+                 plan: StreamPlan | None = None, kind: RendererKind = registry.DEFAULT_RENDERER):
         self.settings, self.lod, self.memory = settings, lod, int(memory)
+        self.kind = streamed_kind(kind)
         self.lazy = LazyLod(path)
         self.ctx = self.renderer = self.resident = None
         try:
             self.framing = framing if framing is not None else framing_scene(self.lazy)
             release_freed()
-            self.ctx = create_headless_context()
-            self.programs = ProgramCache(self.ctx)
+            if registry.entry(self.kind).gl:   # the quad path
+                self.ctx = create_headless_context()
+                self.programs = ProgramCache(self.ctx)
+            else:   # its compiled kernels (and numba) before the plan measures what is held
+                from ..renderers.cpu import prepare
+
+                prepare()
             chunks = LazyChunks(self.lazy, chunk_rows)
-            self.plan = plan or plan_for(self.lazy, self.memory, settings.gpu_storage,
-                                         tree_cache_need(chunks, self.lazy.offsets, threads))
+            need = tree_cache_need(chunks, self.lazy.offsets, threads)
+            self.plan = plan or (
+                plan_for(self.lazy, self.memory, settings.gpu_storage, need)
+                if self.ctx is not None else
+                stream_plan(self.memory, cpu_frame_bytes_per_splat(
+                    self.lazy.nodes(np.zeros(1, np.int64)).sh.shape[1]), need,
+                    reserve=CPU_DRAW_RESERVE))
             self.resident = ResidentSet(chunks, self.plan.cache, self.lazy.offsets,
                                         self.lazy.branching, threads)
         except BaseException:
@@ -153,7 +179,8 @@ class StreamFrames:
     def render_view(self, camera: Camera, layers: frozenset[Layer] = BASE,
                     under: UnderImage | None = None) -> RenderOutput:
         """One exact view: waits for every chunk its cut needs."""
-        make_current(self.ctx)
+        if self.ctx is not None:
+            make_current(self.ctx)
         if self.renderer is not None:   # the last frame's buffers go before this one's cut
             self.renderer.release()
             self.renderer = None
@@ -171,6 +198,8 @@ class StreamFrames:
         self.last_gathered_bytes = scene_bytes(scene)
         scene.__dict__["anchor"] = np.asarray(self.framing.anchor, np.float64)  # cached_property
         self._views += 1
+        if self.ctx is None:   # the CPU renderer
+            return self._render_cpu(view, scene, choice.weights, layers, under)
         rows = CutRows(scene, choice.weights, self.settings, None, self._views)
         quad = QuadRenderer(self.ctx, scene, self.settings, self.programs, rows=rows)
         if self.lod.band > 1.0 and not quad.uses_prepass:
@@ -185,6 +214,24 @@ class StreamFrames:
         if under is None:
             return quad.render(view, layers)
         return quad.render(view, layers, under=view.geometry(under))
+
+    def _render_cpu(self, view: View, scene, weights, layers, under) -> RenderOutput:
+        """The CPU renderer's frame of the gathered cut: its weights applied to the nodes'
+        opacities (:func:`splatgl.lod.selection.blended_scene`'s rule, as the in-memory cut's
+        NumPy twin), drawn as the CPU renderer draws that scene in memory."""
+        from ..renderers.cpu import CpuRenderer
+
+        if weights is not None and (weights < 1).any():
+            o = 1.0 - (1.0 - scene.opacities.astype(np.float64)) ** weights.astype(np.float64)
+            anchor = scene.anchor
+            scene = Scene.from_activated(scene.means, scene.quats, scene.scales, o, scene.sh,
+                                         scene.kind)
+            scene.__dict__["anchor"] = anchor
+        self.renderer = CpuRenderer(scene, self.settings)
+        del scene
+        if under is None:
+            return self.renderer.render(view, layers)
+        return self.renderer.render(view, layers, under=view.geometry(under))
 
     def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
                     layers: frozenset[Layer] | None = None) -> Iterator:
@@ -210,9 +257,9 @@ class StreamFrames:
             make_current(self.ctx)
             if self.renderer is not None:
                 self.renderer.release()
-                self.renderer = None
             self.ctx.release()
             self.ctx = None
+        self.renderer = None
         self.lazy.close()
 
     def __enter__(self) -> "StreamFrames":
@@ -224,16 +271,16 @@ class StreamFrames:
 
 def render_streamed(path, camera: Camera, settings: RenderSettings, lod: LodSettings, memory: int,
                     layers: frozenset[Layer] = BASE, under: UnderImage | None = None,
-                    framing=None, plan: StreamPlan | None = None
+                    framing=None, plan: StreamPlan | None = None,
+                    kind: RendererKind = registry.DEFAULT_RENDERER
                     ) -> tuple[RenderOutput, SimpleNamespace, str]:
     """One exact view of the ``.lod.ply`` at ``path`` streamed under ``memory`` bytes: (the
     ``layers``, times as :func:`splatgl.lod.frames.render_lod` gives them plus ``streaming``
     (:meth:`StreamFrames.summary`) and ``capped`` (:attr:`StreamFrames.capped`), the GL
-    renderer's name)."""
-    from ..gl.context import renderer_name
-
-    with StreamFrames(path, settings, lod, memory, framing=framing, plan=plan) as frames:
-        gl_name = renderer_name(frames.ctx)
+    renderer's name, or the CPU renderer's :func:`splatgl.renderers.registry.describe`)."""
+    with StreamFrames(path, settings, lod, memory, framing=framing, plan=plan,
+                      kind=kind) as frames:
+        gl_name = registry.describe(frames.kind, frames.ctx)
         out = frames.render_view(camera, layers, under)
         times = SimpleNamespace(**vars(frames.renderer.last_times), cut_nodes=frames.last_cut_nodes,
                                 cut=frames.last_cut_s, streaming=frames.summary(),

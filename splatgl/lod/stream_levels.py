@@ -41,7 +41,8 @@ from ..scene.settings import RendererKind, RenderSettings
 from ..scene.splats import SplatKind
 from ..gl.storage import gpu_bytes_per_splat
 from ..scene.settings import GpuStorage
-from .budget import StreamPlan, format_size, frame_bytes_per_splat, release_freed, stream_plan
+from .budget import (CPU_DRAW_RESERVE, DRAW_RESERVE, StreamPlan, cpu_frame_bytes_per_splat,
+                     format_size, frame_bytes_per_splat, release_freed, stream_plan)
 from .level_cut import NOT_DRAWN, ChunkTable, cap_levels, choose_levels
 from .selection import LodSettings
 from .stream import LOADERS, ResidentSet, concatenate, scene_bytes
@@ -167,7 +168,8 @@ class ChunkedStream:
 
     def __init__(self, path, lod: LodSettings, memory: int, level: int | None = None,
                  threads: int = LOADERS, pinned: bool = False, on_loaded=None, framing=None,
-                 plan: StreamPlan | None = None, storage: GpuStorage = GpuStorage.FLOAT32):
+                 plan: StreamPlan | None = None, storage: GpuStorage = GpuStorage.FLOAT32,
+                 cpu: bool = False):
         self.path, self.lod, self.level, self.memory = Path(path), lod, level, int(memory)
         self.structure = read_structure(path)
         check_level(self.structure, level)
@@ -182,8 +184,11 @@ class ChunkedStream:
         need = env_bytes + max(1, threads) * max(map(self.chunks.estimate, range(self.chunks.count)))
         need += sum(map(self.chunks.estimate, coarsest)) if pinned else 0
         release_freed()
-        self.plan = plan or stream_plan(self.memory, frame_bytes_per_splat(
-            sample.sh.shape[1], gpu_bytes_per_splat(storage, sample.sh_degree)), need)
+        self.plan = plan or (stream_plan(   # cpu: the CPU renderer draws (its own bytes a splat)
+            self.memory, cpu_frame_bytes_per_splat(sample.sh.shape[1]), need,
+            reserve=CPU_DRAW_RESERVE) if cpu else stream_plan(self.memory, frame_bytes_per_splat(
+                sample.sh.shape[1], gpu_bytes_per_splat(storage, sample.sh_degree)), need,
+                reserve=DRAW_RESERVE))
         if env_bytes >= self.plan.cache:
             raise SplatglError(f"--memory {format_size(self.memory)} is too small to stream "
                                f"{self.path.name}: its environment alone is {format_size(env_bytes)}"
@@ -276,8 +281,15 @@ class ChunkedFrames:
             if registry.entry(kind).gl:   # first: the plan measures what the process holds
                 self.ctx = create_headless_context()
                 self.programs = ProgramCache(self.ctx)
+            elif RendererKind(kind) in registry.STREAMED:   # the CPU renderer: its kernels
+                # (and numba) loaded before the plan measures what the process holds
+                from ..renderers.cpu import prepare
+
+                prepare()
             self.stream = ChunkedStream(path, lod, memory, level, threads, framing=framing,
-                                        plan=plan, storage=settings.gpu_storage)
+                                        plan=plan, storage=settings.gpu_storage,
+                                        cpu=self.ctx is None and RendererKind(kind) in
+                                        registry.STREAMED)
         except BaseException:
             self.close()
             raise
@@ -353,14 +365,13 @@ class ChunkedFrames:
 
 def render_chunked(path, camera: Camera, settings: RenderSettings, lod: LodSettings, memory: int,
                    level: int | None = None, layers: frozenset[Layer] = BASE,
-                   under: UnderImage | None = None, framing=None):
+                   under: UnderImage | None = None, framing=None,
+                   kind: RendererKind = registry.DEFAULT_RENDERER):
     """One exact view of the Streamed SOG or LCC at ``path`` streamed under ``memory`` bytes:
     (the ``layers``, times as :func:`splatgl.lod.stream_frames.render_streamed` gives them, the
-    GL renderer's name)."""
-    from ..gl.context import renderer_name
-
-    with ChunkedFrames(path, settings, lod, memory, level, framing=framing) as frames:
-        gl_name = renderer_name(frames.ctx)
+    GL renderer's name, or what drew without one: :func:`splatgl.renderers.registry.describe`)."""
+    with ChunkedFrames(path, settings, lod, memory, level, kind, framing=framing) as frames:
+        gl_name = registry.describe(kind, frames.ctx)
         out = frames.render_view(camera, layers, under)
         times = SimpleNamespace(**vars(frames.renderer.last_times), cut_nodes=frames.last_cut_nodes,
                                 cut=frames.last_cut_s, gather=frames.last_gather_s,

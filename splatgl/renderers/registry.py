@@ -119,6 +119,7 @@ RENDERERS: dict[RendererKind, RendererEntry] = {e.kind: e for e in (
 
 #: The renderer used where none is named (the quad path).
 DEFAULT_RENDERER: RendererKind = next(iter(RENDERERS))
+STREAMED = (RendererKind.QUAD, RendererKind.CPU)   #: what draws a frame streamed by --memory
 
 
 def entry(kind: RendererKind | str) -> RendererEntry:

@@ -16,7 +16,8 @@ from ...lod.budget import format_size
 from ...lod.selection import LodSettings
 from ...lod.stream_frames import StreamFrames
 from ...lod.stream_levels import ChunkedFrames, is_chunked
-from ...scene.settings import RenderSettings
+from ...renderers import auto
+from ...scene.settings import RendererKind, RenderSettings
 from ...paths import orbit
 
 
@@ -28,14 +29,22 @@ def peak_rss() -> int:
 
 def run_stream(path, memory: int, width: int, height: int, frames: int,
                settings: RenderSettings = RenderSettings(), lod: LodSettings = LodSettings(),
-               level: int | None = None) -> dict:
+               level: int | None = None, kind: RendererKind | None = None) -> dict:
     """The figures of ``frames`` orbit frames of the ``.lod.ply`` (or Streamed SOG or LCC: each
     chunk's level by screen error, or ``level``) at ``path`` under ``memory`` bytes (a dict,
-    seconds and bytes; ``bytes_read`` None where the reader does not count them)."""
+    seconds and bytes; ``bytes_read`` None where the reader does not count them), drawn by
+    renderer ``kind`` (None: ``--renderer auto``'s choice, :func:`splatgl.renderers.auto.choose`,
+    said once on stderr where only the CPU renderer's kernels were missing)."""
     chunked = is_chunked(path)
+    if kind is None:
+        choice = auto.choose(settings=settings)
+        auto.compiling_notice(choice, background=False)
+        kind, why = choice.kind, choice.text()
+    else:
+        why = f"renderer {RendererKind(kind).value}"
     t0 = time.perf_counter()
-    with (ChunkedFrames(path, settings, lod, memory, level) if chunked
-          else StreamFrames(path, settings, lod, memory)) as stream:
+    with (ChunkedFrames(path, settings, lod, memory, level, kind) if chunked
+          else StreamFrames(path, settings, lod, memory, kind=kind)) as stream:
         opened = time.perf_counter() - t0
         times, nodes = [], []
         for camera in orbit(stream.framing, frames, width, height):
@@ -54,13 +63,14 @@ def run_stream(path, memory: int, width: int, height: int, frames: int,
             "cut_nodes_median": int(np.median(nodes)), "resident_bytes": stats.resident_bytes,
             "resident_peak_bytes": stats.peak_bytes, "chunks_loaded": stats.loaded,
             "chunks_evicted": stats.evicted, "bytes_read": read, "peak_rss_bytes": peak_rss(),
-            "frame_cap": cap, "capped": capped}
+            "frame_cap": cap, "capped": capped, "renderer": RendererKind(kind).value,
+            "renderer_choice": why}
 
 
 def describe(r: dict) -> str:
     """The figures as lines for the terminal."""
     return (f"{r['scene']} streamed under {format_size(r['memory'])}: {r['frames']} frames at "
-            f"{r['width']}x{r['height']} along an orbit\n"
+            f"{r['width']}x{r['height']} along an orbit ({r.get('renderer_choice', 'quad')})\n"
             f"open {r['open_s'] * 1e3:.1f} ms, first frame {r['first_frame_s'] * 1e3:.1f} ms, "
             f"median frame {r['median_frame_s'] * 1e3:.1f} ms ({r['cut_nodes_median']:,} nodes)\n"
             f"resident {format_size(r['resident_bytes'])} (peak "
