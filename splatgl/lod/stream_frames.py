@@ -218,7 +218,8 @@ class StreamFrames:
     def _render_cpu(self, view: View, scene, weights, layers, under) -> RenderOutput:
         """The CPU renderer's frame of the gathered cut: its weights applied to the nodes'
         opacities (:func:`splatgl.lod.selection.blended_scene`'s rule, as the in-memory cut's
-        NumPy twin), drawn as the CPU renderer draws that scene in memory."""
+        NumPy twin), drawn as the CPU renderer draws that scene in memory (every row projected:
+        the same image without building the cull's data)."""
         from ..renderers.cpu import CpuRenderer
 
         if weights is not None and (weights < 1).any():
@@ -227,7 +228,7 @@ class StreamFrames:
             scene = Scene.from_activated(scene.means, scene.quats, scene.scales, o, scene.sh,
                                          scene.kind)
             scene.__dict__["anchor"] = anchor
-        self.renderer = CpuRenderer(scene, self.settings)
+        self.renderer = CpuRenderer(scene, self.settings, cull=False)   # the cut is in view
         del scene
         if under is None:
             return self.renderer.render(view, layers)
