@@ -157,13 +157,14 @@ def frame_bytes_per_splat(sh_coeffs: int, gpu_bytes: int) -> int:
     return FRAME_CPU_BYTES + FRAME_SH_BYTES * int(sh_coeffs) + int(gpu_bytes) + FRAME_GPU_BYTES
 
 
-#: Bytes the CPU renderer (``--renderer cpu``) holds per splat of its scene beyond the scene's
-#: arrays while it draws: its cull's chunked data, the projection's per-splat outputs (means,
-#: conics, colours, depths, boxes, rectangles), the depth order and the packed records (measured
-#: 301 B a splat on the 1M tiled scene's default view at 1280x720; rounded up).  It uploads
-#: nothing, so a streamed frame's gathered nodes stay held (in FRAME_CPU_BYTES) and no GPU
-#: storage or per-frame GPU buffers are counted.
-CPU_RENDERER_BYTES = 320
+#: Bytes the CPU renderer (``--renderer cpu``) holds per splat of a streamed cut beyond the
+#: gathered nodes: its float32 inputs (R S, opacity), the projection's per-splat outputs (means,
+#: conics, colours, depths, boxes, rectangles), the depth order and the packed records; a
+#: streamed cut is projected whole (no cull data).  It uploads nothing, so the gathered nodes
+#: stay held (in FRAME_CPU_BYTES) and no GPU storage or per-frame GPU buffers are counted.
+#: Measured on the 5M tiled scene's capped default view (3.25M nodes, 1280x720, VmHWM): 360 B a
+#: node for the whole process beyond what it held before and the chunks, under the model's 432.
+CPU_RENDERER_BYTES = 256
 #: The CPU renderer's draw reserve: its images and the tile lists' slack (no driver draw).
 CPU_DRAW_RESERVE = 96 << 20
 
