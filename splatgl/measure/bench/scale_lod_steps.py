@@ -139,14 +139,17 @@ def step_frame(a: dict) -> dict:
     from ...lod.lazy import LazyLod
     from ...lod.selection import LodSettings
     from ...lod.stream_frames import render_streamed
+    from ...renderers import auto
     from ...scene.settings import RenderSettings
 
     with LazyLod(a["lod"]) as lazy:
         framing, camera = _camera(lazy, a, a.get("far", False))
+    choice = auto.choose(settings=RenderSettings())   # render --memory's default renderer
     out, times, _ = render_streamed(a["lod"], camera, RenderSettings(), LodSettings(),
-                                    int(a["memory"]), framing=framing)
+                                    int(a["memory"]), framing=framing, kind=choice.kind)
     _save_image(a["image"], out.rgba)
-    return {"cut_nodes": int(times.cut_nodes), "streaming": times.streaming}
+    return {"cut_nodes": int(times.cut_nodes), "streaming": times.streaming,
+            "renderer": choice.text()}
 
 
 def step_full(a: dict) -> dict:
