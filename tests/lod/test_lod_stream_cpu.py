@@ -172,3 +172,41 @@ def test_bench_memory_names_its_renderer(tmp_path, capsys):
     r = run_stream(path, 1536 << 20, 96, 64, 2, SETTINGS)
     assert (r["renderer"], r["renderer_choice"]) == ("quad", "renderer auto -> quad "
                                                               "(SPLATGL_RENDERER_AUTO=quad)")
+
+
+def test_eval_memory_with_the_cpu_renderer(tmp_path, capsys):
+    """``eval --memory --renderer cpu``: the views drawn by the CPU renderer from the stream
+    (photographs: its in-memory images of the same cuts, so identical)."""
+    from splatgl.datasets import colmap
+    from splatgl.datasets.named_camera import NamedCamera
+    from splatgl.imagefiles.images import write_image
+
+    path = _lod(tmp_path)
+    root = tmp_path / "data"
+    (root / "images").mkdir(parents=True)
+    views = [NamedCamera(f"v{i}.png", _camera(5.0 + i, 0.3 * i)) for i in range(2)]
+    with StreamFrames(path, RenderSettings(), LodSettings(), 1536 << 20, kind=CPU) as st:
+        for view in views:
+            rgba = st.render_view(view.camera).rgba
+            write_image(root / "images" / view.name, np.concatenate(
+                [np.clip(rgba[..., :3], 0, 1), np.ones_like(rgba[..., :1])], -1), 16)
+    colmap.write_colmap(root / "sparse" / "0", views)
+    assert main(["eval", str(path), "--dataset", str(root), "--memory", "1.5G", "--renderer",
+                 "cpu", "--json", str(tmp_path / "s.json")]) == 0
+    assert "streaming: resident" in capsys.readouterr().out
+    import json
+    assert json.loads((tmp_path / "s.json").read_text())["mean"]["psnr"] > 80
+
+
+def test_streamed_sog_with_the_cpu_renderer(tmp_path, capsys):
+    """A Streamed SOG streamed with ``--renderer cpu``: drawn without OpenGL, said in --timings."""
+    _lod(tmp_path)
+    out = tmp_path / "sog" / "lod-meta.json"
+    out.parent.mkdir()
+    assert main(["lod", str(tmp_path / "s.ply"), "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["render", str(out), "-o", str(tmp_path / "a.png"), "--memory", "1.5G",
+                 "--renderer", "cpu", "--width", "96", "--height", "64", "--timings"]) == 0
+    text = capsys.readouterr().out
+    assert "cpu, level of detail streamed" in text and "GL renderer: none (the CPU renderer" in text
+    assert read_image(tmp_path / "a.png").any()
