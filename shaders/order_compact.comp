@@ -7,6 +7,7 @@
 // Twin: splatgl/order/cull.py cull_visible(); splatgl/order/chunks.py keys_pairs().
 
 layout(local_size_x = ORDER_GROUP) in;
+#include "lib/dispatch.glsl"
 layout(std430, binding = ORDER_BINDING_STAGED) readonly buffer Staged { uint staged[]; };
 layout(std430, binding = ORDER_BINDING_BLOCKS) readonly buffer Blocks { uint blocks[]; };
 layout(std430, binding = ORDER_BINDING_KEYS) writeonly buffer Keys { uint keys[]; };
@@ -19,7 +20,7 @@ shared uint ranks[ORDER_GROUP];
 
 void main() {
     uint t = gl_LocalInvocationIndex;
-    uint i = gl_GlobalInvocationID.x;
+    uint i = linear_invocation();
     uint key = i < u_count ? staged[i] : 0xFFFFFFFFu;
     uint kept = key != 0xFFFFFFFFu ? 1u : 0u;
     ranks[t] = kept;
@@ -31,7 +32,7 @@ void main() {
         barrier();
     }
     if (kept != 0u) {
-        uint slot = blocks[gl_WorkGroupID.x] + ranks[t] - 1u;
+        uint slot = blocks[linear_group()] + ranks[t] - 1u;
         keys[slot] = key;
         values[slot] = i < u_rows ? i : (i - u_rows) | 0x80000000u;
     }

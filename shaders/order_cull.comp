@@ -21,6 +21,7 @@
 #include "lib/div_rn.glsl"
 
 layout(local_size_x = ORDER_GROUP) in;
+#include "lib/dispatch.glsl"
 
 struct CullRow {
     vec4 p;     // anchored centre x, y, z; world radius k(o) max_scale (CullData.radius)
@@ -198,8 +199,8 @@ bool cull(uint i) {
 void main() {
     if (gl_LocalInvocationIndex == 0u) group_kept = 0u;
     barrier();
-    uint i = gl_GlobalInvocationID.x;
+    uint i = linear_invocation();
     if (i < u_slots && cull(i)) atomicAdd(group_kept, 1u);
     barrier();
-    if (gl_LocalInvocationIndex == 0u) blocks[gl_WorkGroupID.x] = group_kept;
+    if (gl_LocalInvocationIndex == 0u) blocks[linear_group()] = group_kept;
 }

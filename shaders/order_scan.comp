@@ -6,10 +6,12 @@
 // Twin: splatgl/order/cull.py cull_visible().
 
 layout(local_size_x = ORDER_SCAN_GROUP) in;
+#include "lib/dispatch.glsl"
 layout(std430, binding = ORDER_BINDING_BLOCKS) buffer Blocks { uint blocks[]; };
 layout(std430, binding = ORDER_BINDING_COMMAND) buffer Command { uint command[]; };
 
 uniform uint u_blocks;
+uniform uint u_group_limit;   // the pre-pass dispatch's split (splatgl/gl/dispatch.py)
 
 shared uint sums[ORDER_SCAN_GROUP];
 
@@ -29,9 +31,11 @@ void main() {
             run += v;
         }
         command[1] = run;                                           // instances to draw
-        command[4] = (run + uint(PREPASS_GROUP) - 1u) / uint(PREPASS_GROUP);   // pre-pass groups
-        command[5] = 1u;
-        command[6] = 1u;
+        uvec3 prepass = split_groups((run + uint(PREPASS_GROUP) - 1u) / uint(PREPASS_GROUP),
+                                     u_group_limit);                  // pre-pass groups
+        command[4] = prepass.x;
+        command[5] = prepass.y;
+        command[6] = prepass.z;
     }
     barrier();
     uint run = sums[t];

@@ -13,6 +13,7 @@
 #include "lib/splat_setup.glsl"
 
 layout(local_size_x = PREPASS_GROUP) in;
+#include "lib/dispatch.glsl"
 layout(std430, binding = BINDING_ORDER) readonly buffer Order { uint order[]; };
 layout(std430, binding = BINDING_PREPARED) writeonly buffer Prepared { vec4 prepared[]; };
 #ifdef NORMAL_OUTPUT
@@ -36,7 +37,7 @@ layout(std430, binding = BINDING_DEVICE_COUNT) readonly buffer DeviceCount { uin
 #endif
 
 void main() {
-    uint k = u_first + gl_GlobalInvocationID.x;
+    uint k = u_first + linear_invocation();
 #ifdef DEVICE_COUNT
     if (k >= device_command[1]) return;
 #else

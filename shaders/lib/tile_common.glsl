@@ -76,11 +76,12 @@ layout(std430, binding = TILE_BINDING_SORT_VALUES) buffer DevValues { uint dev_v
 #endif
 
 #ifdef TILE_STATE
-// Dispatch arguments covering n invocations of groups of SPLAT_GROUP, 2D past 65535 groups
+// Dispatch arguments covering n invocations of groups of SPLAT_GROUP, 2D past u_group_limit groups
 // (splatgl/renderers/tile_keys.py splat_groups).
+uniform uint u_group_limit;   // splatgl/gl/dispatch.py portable_limit()
 uvec4 splat_args(uint n) {
     uint groups = max(1u, (n + uint(SPLAT_GROUP) - 1u) / uint(SPLAT_GROUP));
-    uint gy = (groups + 65534u) / 65535u;
+    uint gy = (groups + u_group_limit - 1u) / u_group_limit;
     return uvec4((groups + gy - 1u) / gy, gy, 1u, 0u);
 }
 #endif

@@ -46,6 +46,7 @@ from ..splatmath.radix import key_bits
 from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
                        RADIX_BINDING_STATE, RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT,
                        RADIX_BLOCK_LANES, RADIX_GROUP, RADIX_PORTABLE_WARP)
+from . import dispatch
 from .egl_devices import is_software_renderer
 from .radix_block import BLOCK_SLOTS, BlockPasses, pair_bytes
 from .shaders import ProgramCache
@@ -280,7 +281,8 @@ class RadixSorter:
         hist.bind_to_storage_buffer(RADIX_BINDING_HIST)
         if bits is None:
             k_a.bind_to_storage_buffer(RADIX_BINDING_KEYS_IN)
-            progs["bits"].run(group_x=tiles if device_count else max(1, -(-count // TILE_KEYS)))
+            dispatch.run(progs["bits"], tiles if device_count else max(1, -(-count // TILE_KEYS)),
+                         f"{count} sort keys")
             self.ctx.memory_barrier()
         progs["plan"].run(group_x=1)
         self.ctx.memory_barrier()
@@ -289,17 +291,20 @@ class RadixSorter:
             self._bind(src, dst)
             for name in ("upsweep", "scan", "downsweep"):
                 progs[name]["u_slot"].value = slot
-            progs["upsweep"].run_indirect(self._state, _PASS_ARGS + 16 * slot)
+            what = f"{self._capacity} sort keys"   # the plan sizes a pass to the tiles at most
+            dispatch.run_indirect(progs["upsweep"], self._state, _PASS_ARGS + 16 * slot, tiles, what)
             self.ctx.memory_barrier()
-            progs["scan"].run_indirect(self._state, _SCAN_ARGS + 16 * slot)
+            progs["scan"].run_indirect(self._state, _SCAN_ARGS + 16 * slot)   # RADIX groups
             self.ctx.memory_barrier()
-            progs["downsweep"].run_indirect(self._state, _PASS_ARGS + 16 * slot)
+            dispatch.run_indirect(progs["downsweep"], self._state, _PASS_ARGS + 16 * slot, tiles,
+                                  what)
             for name in ("upsweep", "scan", "downsweep"):   # the uniforms of this pass slot
                 moved.uniforms(progs[name])
             self.ctx.memory_barrier()
             src, dst = dst, src
         self._bind((k_b, v_b), (k_a, v_a))
-        progs["copy"].run_indirect(self._state, _COPY_ARGS)
+        dispatch.run_indirect(progs["copy"], self._state, _COPY_ARGS, tiles,
+                              f"{self._capacity} sort keys")
         self.ctx.memory_barrier()
         return k_a, v_a
 

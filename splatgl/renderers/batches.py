@@ -19,6 +19,7 @@ from ..constants import (EARLY_STOP_FINE_QUAD_FRAGMENTS, EARLY_STOP_MIN_OVERDRAW
                          EARLY_STOP_MIN_QUAD_FRAGMENTS, TILE_SIZE)
 from ..gl.bindings import (ACCUM_UNIT, BINDING_COMMANDS, BINDING_COVERAGE, BINDING_STOP_TILES,
                            BINDING_SURVIVORS, COVERAGE_GROUP, STOP_TILES_GROUP)
+from ..gl import dispatch
 from ..gl.buffers import GrowableBuffer
 from ..gl.transfers import transfers
 from ..gl.device_class import of_context, resolve_early_stop
@@ -82,7 +83,7 @@ class EarlyStopPasses:
         comp["u_size"].value = (width, height)
         comp["u_tiles"].value = grid
         accum.use(ACCUM_UNIT)
-        comp.run(group_x=-(-grid[0] * grid[1] // STOP_TILES_GROUP))
+        dispatch.run(comp, -(-grid[0] * grid[1] // STOP_TILES_GROUP), f"{grid[0] * grid[1]} tiles")
 
     def cull(self, comp: moderngl.ComputeShader, start: int, end: int, cmd_base: int,
              width: int, height: int, check_tiles: bool) -> int:
@@ -93,7 +94,7 @@ class EarlyStopPasses:
         comp["u_cmd_base"].value = cmd_base
         comp["u_tiles"].value = (-(-width // TILE_SIZE), -(-height // TILE_SIZE))
         comp["u_check_tiles"].value = check_tiles
-        comp.run(group_x=groups)
+        dispatch.run(comp, groups, f"{end - start} sorted splats")
         return groups
 
     def coverage(self, comp: moderngl.ComputeShader, count: int) -> float:
@@ -104,7 +105,7 @@ class EarlyStopPasses:
         partial = self._grow("partial", 4 * groups * COVERAGE_GROUP)
         partial.bind_to_storage_buffer(BINDING_COVERAGE)
         comp["u_count"].value = count
-        comp.run(group_x=groups)
+        dispatch.run(comp, groups, f"{count} sorted splats")
         self.ctx.memory_barrier()
         sums = np.frombuffer(partial.read(size=4 * groups * COVERAGE_GROUP), np.float32)
         transfers(self.ctx).read(sums.nbytes)

@@ -37,6 +37,7 @@ from ..constants import (EARLY_STOP_FINE_QUAD_FRAGMENTS, EARLY_STOP_MIN_OVERDRAW
                          EARLY_STOP_MIN_QUAD_FRAGMENTS, TILE_SIZE)
 from ..gl.bindings import (ACCUM_UNIT, BINDING_COMMANDS, BINDING_COVERAGE, BINDING_DEVICE_COUNT, BINDING_ORDER,
                            BINDING_STOP_PLAN, COVERAGE_GROUP, STOP_TILES_GROUP)
+from ..gl import dispatch
 from ..gl.transfers import transfers
 from ..scene.settings import EarlyStop
 from .early_stop import (COARSE_SCHEDULE, COMMAND_BYTES, COVERAGE_MIN_INVOCATIONS,
@@ -106,7 +107,8 @@ def draw(batches, view, target, prog: moderngl.Program, frame, device, resources
     cov_groups = max(COVERAGE_MIN_INVOCATIONS, -(-slots // COVERAGE_SLOTS_PER_INVOCATION))
     stop._grow("partial", 4 * COVERAGE_GROUP * -(-cov_groups // COVERAGE_GROUP)
                ).bind_to_storage_buffer(BINDING_COVERAGE)
-    cov.run_indirect(plan, 4 * PLAN_PER_BATCH * n_b)
+    dispatch.run_indirect(cov, plan, 4 * PLAN_PER_BATCH * n_b, -(-cov_groups // COVERAGE_GROUP),
+                          f"{slots} sorted splats")
     ctx.memory_barrier()
     planners[1].run(group_x=1)
     ctx.memory_barrier()
@@ -134,13 +136,14 @@ def draw(batches, view, target, prog: moderngl.Program, frame, device, resources
             target.mask_fbo.use()
             target.mask_fbo.depth_mask = True
             mark_vao.render_indirect(plan, moderngl.TRIANGLES, count=1, first=b)
-            tiles.run_indirect(plan, 4 * (5 * n_b + 3 * b))
+            dispatch.run_indirect(tiles, plan, 4 * (5 * n_b + 3 * b),
+                                  -(-grid[0] * grid[1] // STOP_TILES_GROUP), "tiles")
             ctx.memory_barrier()
         cull["u_bounds_at"].value = 8 * n_b + 2 * b
         cull["u_cmd_base"].value = first
         cull["u_check_tiles"].value = b > 0
         counter.uniforms(cull)
-        cull.run(group_x=n)
+        dispatch.run(cull, n, f"{slots} sorted splats")
         ctx.memory_barrier()
         target.fbo.use()
         target.fbo.depth_mask = False

@@ -46,7 +46,7 @@ from ..cameras.view import View
 from ..gl.bindings import (BINDING_DEVICE_COUNT, ORDER_BINDING_BLOCKS, ORDER_BINDING_COMMAND, ORDER_BINDING_CULL,
                            ORDER_BINDING_KEYS, ORDER_BINDING_STAGED, ORDER_BINDING_VALUES,
                            ORDER_GROUP)
-from ..gl import limits
+from ..gl import dispatch, limits
 from ..gl.radix_sort import RadixSorter
 from ..gl.shaders import ProgramCache
 from ..gl.transfers import transfers
@@ -168,11 +168,13 @@ class DeviceOrder:
                              (self._command, ORDER_BINDING_COMMAND), (keys, ORDER_BINDING_KEYS),
                              (values, ORDER_BINDING_VALUES)):
             buf.bind_to_storage_buffer(binding)
-        cull.run(group_x=groups)
+        what = f"{slots} splat slots"
+        dispatch.run(cull, groups, what)
         self.ctx.memory_barrier()
+        dispatch.set_limit(scan)
         scan.run(group_x=1)
         self.ctx.memory_barrier()
-        compact.run(group_x=groups)
+        dispatch.run(compact, groups, what)
         self.ctx.memory_barrier()
         t1 = time.perf_counter()
         self.sorter.sort_buffers(slots, device_count=(self._command, 4))
@@ -186,7 +188,7 @@ class DeviceOrder:
         over the kept slots, sized from the command on the device."""
         self._command.bind_to_storage_buffer(BINDING_DEVICE_COUNT)
         comp["u_first"].value = 0
-        comp.run_indirect(self._command, PREPASS_ARGS)
+        dispatch.run_indirect(comp, self._command, PREPASS_ARGS, 0, "", split=True)
         self.ctx.memory_barrier()
 
     def _set_uniforms(self, prog: moderngl.ComputeShader, view: View, antialias: bool,

@@ -15,6 +15,7 @@ import numpy as np
 from ..gl.bindings import (BINDING_OPACITY_WEIGHT, BINDING_ORDER, BINDING_PREPARED,
                            BINDING_PREPARED_NORMAL, BINDING_PREPARED_RADIUS, PREPASS_GROUP,
                            UNDER_UNIT)
+from ..gl import dispatch as groups_dispatch
 from ..gl.buffers import GrowableBuffer
 from ..gl.transfers import transfers
 from ..gl.targets import ColorTarget, OrderedTarget
@@ -95,7 +96,8 @@ class QuadResources:
         step = count if between is None or not chunk else max(PREPASS_GROUP, int(chunk))
         for first in range(0, count, step):
             comp["u_first"].value = first
-            comp.run(group_x=(min(step, count - first) + PREPASS_GROUP - 1) // PREPASS_GROUP)
+            groups_dispatch.run(comp, (min(step, count - first) + PREPASS_GROUP - 1)
+                                // PREPASS_GROUP, f"{count} splats")
             if between is not None and first + step < count:
                 self.ctx.finish()
                 between()

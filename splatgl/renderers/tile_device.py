@@ -47,6 +47,7 @@ import numpy as np
 
 from ..constants import TILE_KEYS_PER_SPLAT, TILE_OVERFLOW_ALPHA, TILE_SCAN_ITEMS
 from ..errors import SplatglError
+from ..gl import dispatch
 from ..gl.bindings import (TILE_BINDING_SORT_KEYS, TILE_BINDING_SORT_VALUES, TILE_SCAN_GROUP)
 from ..gl.egl_devices import is_software_renderer
 from ..gl.limits import DERIVED_ADVICE, buffer_limit, check_splat_buffer
@@ -185,13 +186,14 @@ class DeviceOrder:
         emit, _ = self.slots(n_tiles)
         for name, value in (("u_count", self.count), ("u_blocks", self.blocks),
                             ("u_capacity", self.capacity), ("u_emit_slots", emit),
-                            ("u_splat_groups", splat_groups(self.count))):
+                            ("u_splat_groups", splat_groups(self.count)),
+                            ("u_group_limit", dispatch.portable_limit())):
             if name in prog:
                 prog[name].value = value
         for stage, groups in ((0, self.blocks), (1, 1), (2, self.blocks)):
             prog["u_stage"].value = stage
             transfers(self.ctx).uniforms(prog)
-            prog.run(groups)
+            dispatch.run(prog, groups, f"{self.count} splats' tile counts")
             self.ctx.memory_barrier()
 
     def depth_presort(self, bufs: dict, n_tiles: int, rebind) -> None:

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import TILE_LIST_CHUNK, TILE_SIZE  # noqa: F401 (TILE_LIST_CHUNK: tile.py's)
+from ..gl import dispatch
 from ..gl.bindings import SPLAT_GROUP, TILE_BINDINGS
 from ..gl.buffers import GrowableBuffer
 from ..gl.limits import DERIVED_ADVICE, check_splat_buffer
@@ -178,10 +179,9 @@ class TileStages:
 
 
 def splat_groups(n: int) -> tuple[int, int]:
-    """(groups_x, groups_y) covering ``n`` splats with 256-invocation groups (lib/tile_common)."""
-    groups = max(1, -(-n // SPLAT_GROUP))
-    gy = -(-groups // MAX_GROUPS)
-    return -(-groups // gy), gy
+    """(groups_x, groups_y) covering ``n`` splats with 256-invocation groups (lib/tile_common),
+    neither above :func:`splatgl.gl.dispatch.portable_limit`."""
+    return dispatch.grid(max(1, -(-n // SPLAT_GROUP)), dispatch.portable_limit())
 
 
 def read_keys(bufs: dict, layout: KeyLayout, total: int
