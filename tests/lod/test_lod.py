@@ -271,7 +271,8 @@ def test_path_lod_options_are_checked_before_the_work(demo_lod, tmp_path, capsys
     assert main(["render", str(demo_scene_path()), *PATH_ARGS, "--lod-budget", "9", "-o",
                  str(tmp_path / "f")]) == 2
     assert capsys.readouterr().err == (f"splatgl: error: {demo_scene_path()}: not a level-of-detail "
-                                       "file; build one with 'splatgl lod SCENE -o SCENE.lod.ply'\n")
+                                       "file, which --lod-budget reads; build one with 'splatgl lod SCENE -o "
+                                       "SCENE.lod.ply'\n")
     assert main(["render", str(demo_lod), *PATH_ARGS, "--lod-budget", "9", "--stereo", "0.1", "-o",
                  str(tmp_path / "f")]) == 2
     assert "--stereo and --lod-threshold/--lod-budget/--lod-blend cannot be combined" in capsys.readouterr().err
