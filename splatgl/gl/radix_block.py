@@ -40,6 +40,7 @@ import os
 import moderngl
 
 from ..constants import RADIX_BLOCK_BITS
+from ..errors import SplatglError
 from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_KEYS_OUT,
                        RADIX_BINDING_VALS_IN, RADIX_BINDING_VALS_OUT, RADIX_BLOCK_LANES)
 from .shaders import ProgramCache
@@ -52,6 +53,11 @@ BLOCK_SLOTS = -(-32 // RADIX_BLOCK_BITS)
 MAX_GROUPS = 64
 #: llvmpipe's thread count setting (its default: one thread a CPU core).
 THREADS_ENV = "LP_NUM_THREADS"
+#: Most keys a lane owns: llvmpipe ends all of an invocation's loops after 65535 iterations in
+#: total, and a lane reads its block 4 keys an iteration besides looping over the digits, so
+#: past about 250k keys a lane (8.06M keys with 4 groups) the passes stopped short and left
+#: the keys unsorted; a sort of more keys runs more groups (:func:`groups_for`).
+LANE_KEYS = 4 * 32768
 
 
 def block_groups() -> int:
@@ -62,6 +68,18 @@ def block_groups() -> int:
     except ValueError:
         threads = os.cpu_count() or 1
     return max(2, min(MAX_GROUPS, 2 * max(1, threads)))
+
+
+def groups_for(count: int, groups: int) -> int:
+    """Work groups (at least ``groups``) whose lanes own at most :data:`LANE_KEYS` keys each
+    of ``count``; a one-line refusal past :data:`MAX_GROUPS`."""
+    needed = max(groups, -(-count // (RADIX_BLOCK_LANES * LANE_KEYS)))
+    if needed > MAX_GROUPS:
+        most = MAX_GROUPS * RADIX_BLOCK_LANES * LANE_KEYS
+        raise SplatglError(f"{count} sort keys are more than the device radix sort's block "
+                           f"passes sort on this software device ({most}); sort on the CPU "
+                           "(--sort exact) or draw fewer splats")
+    return needed
 
 
 class BlockPasses:

@@ -48,7 +48,7 @@ from .bindings import (RADIX_BINDING_HIST, RADIX_BINDING_KEYS_IN, RADIX_BINDING_
                        RADIX_BLOCK_LANES, RADIX_GROUP, RADIX_PORTABLE_WARP)
 from . import dispatch
 from .egl_devices import is_software_renderer
-from .radix_block import BLOCK_SLOTS, BlockPasses, pair_bytes
+from .radix_block import BLOCK_SLOTS, BlockPasses, groups_for, pair_bytes
 from .shaders import ProgramCache
 from .transfers import transfers
 
@@ -194,6 +194,10 @@ class RadixSorter:
         if count <= self._capacity:
             return
         self._drop_buffers()
+        if self._block is not None:   # each lane's block within llvmpipe's loop limit
+            groups = groups_for(count, self._block.groups)
+            if groups != self._block.groups:
+                self._block = BlockPasses(self.programs, groups, self._block.bits)
         tiles = -(-count // TILE_KEYS)
         size = 16 * -(-count // 4)  # whole uvec4s (the block passes read 4 keys at a time)
         if self._block is None:

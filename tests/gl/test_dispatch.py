@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from splatgl.errors import SplatglError
-from splatgl.gl import dispatch
+from splatgl.gl import dispatch, radix_block
 from splatgl.gl.radix_sort import TILE_KEYS, RadixSorter
 from splatgl.gl.shaders import preprocess
 
@@ -67,6 +67,38 @@ def test_radix_sort_past_the_limit_refuses_in_one_line(ctx, monkeypatch):
     s = RadixSorter(ctx, block=True)
     try:
         np.testing.assert_array_equal(s.sort_values(keys, values),
+                                      np.argsort(keys, kind="stable"))
+    finally:
+        s.release()
+
+
+def test_block_sort_runs_more_groups_for_more_keys(ctx, monkeypatch):
+    """llvmpipe ends an invocation's loops after 65535 iterations in all: a lane of the block
+    passes owns at most LANE_KEYS keys, so more keys run more groups (lowered here so a small
+    sort needs them), and the order stays NumPy's stable argsort."""
+    monkeypatch.setattr(radix_block, "LANE_KEYS", 1024)
+    rng = np.random.default_rng(4)
+    keys = rng.integers(0, 1 << 24, 100_000, dtype=np.uint32) << np.uint32(4)
+    s = RadixSorter(ctx, block=True)
+    try:
+        first = s._block.groups
+        got = s.sort_values(keys, np.arange(keys.size, dtype=np.uint32))
+        assert s._block.groups == max(first, -(-keys.size // (8 * 1024))) == 13
+        np.testing.assert_array_equal(got, np.argsort(keys, kind="stable"))
+        with pytest.raises(SplatglError, match=r"^600000 sort keys are more than [^\n]*--sort exact"):
+            s.reserve(600_000)
+    finally:
+        s.release()
+
+
+@pytest.mark.slow
+def test_block_sort_of_8_3_million_keys(ctx):
+    """The size that came out unsorted (each of 32 lanes past llvmpipe's loop limit)."""
+    rng = np.random.default_rng(5)
+    keys = rng.integers(0, 1 << 31, 8_300_000, dtype=np.uint32)
+    s = RadixSorter(ctx, block=True)
+    try:
+        np.testing.assert_array_equal(s.sort_values(keys, np.arange(keys.size, dtype=np.uint32)),
                                       np.argsort(keys, kind="stable"))
     finally:
         s.release()
