@@ -18,7 +18,8 @@ Two ways to draw a cut (node rows and opacity weights, :mod:`splatgl.lod.cut`):
   sum of those it stands in for, at most 1), the missing chunks are requested, and
   ``on_loaded`` is called as each arrives (the viewer redraws).  Once every chunk is in, the
   cut is the exact one.  The chunks of the top :data:`PINNED_LEVELS` levels are loaded first
-  and never evicted, so some ancestor is always there.
+  (whole) and never evicted, so some ancestor is there; a node with none resident yet is
+  not drawn.
 
 :meth:`ResidentSet.close` stops the loaders promptly (Ctrl-C: loads not started are cancelled).
 """
@@ -228,9 +229,9 @@ class ResidentSet:
         return np.asarray(rows, np.int64) // self.chunks.rows
 
     def load_pinned(self) -> None:
-        """Load the top levels' chunks (pinned) and wait for them."""
-        first = min(self._pinned) * self.chunks.rows if self._pinned else 0
-        self.gather(np.arange(first, self.chunks.nodes))
+        """Load the top levels' chunks (pinned) whole, kept, and wait for them (a gather read a
+        chunk of few rows alone, not kept: the 100M scene's last chunk, 346 rows)."""
+        self.collect(sorted(self._pinned), lambda c, scene: None)
 
     # ------------------------------------------------------------------------- the two draws
     def gather(self, rows: np.ndarray) -> Scene:
@@ -293,17 +294,20 @@ class ResidentSet:
         todo = ~have
         offsets, b = self.offsets, self.branching
         level = np.searchsorted(offsets, out, side="right") - 1
+        drawn = np.ones(rows.size, bool)
         while todo.any():   # climb one level where the chunk is missing
             idx = np.flatnonzero(todo)
             lv = level[idx]
             top = lv >= len(offsets) - 2
-            if top.any():
-                raise SplatglError("the top level of the level of detail is not resident")
+            if top.any():   # no ancestor resident (the pinned levels not in yet): not drawn
+                drawn[idx[top]] = todo[idx[top]] = False
+                idx, lv = idx[~top], lv[~top]
             local = (out[idx] - offsets[lv]) // b
             out[idx] = offsets[lv + 1] + local
             level[idx] = lv + 1
             todo[idx] = ~present[self.chunk_of(out[idx])]
-        uniq, inv = np.unique(out, return_inverse=True)
+        uniq, inv = np.unique(out[drawn], return_inverse=True)
+        w = w[drawn]
         # The missing chunks, coarse first (the upper levels' before the leaves'); only the
         # cut's resident chunks are kept: the others (stand-ins among them) may make room.
         # With every resident chunk kept, a full budget never refined a new view.

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -145,8 +146,10 @@ class _FakeChunks:
     def estimate(self, chunk):
         return 100
 
+    hold_top = False   # the top levels' chunks wait for the gate too
+
     def load(self, chunk):
-        if chunk < self.count - 2:   # the top levels' chunks come at once
+        if chunk < self.count - 2 or self.hold_top:   # the top levels' chunks come at once
             self.gate.wait(5)
         self.loads.append(chunk)
         n = min(self.rows, self.nodes - chunk * self.rows)
@@ -180,6 +183,44 @@ def test_viewer_cut_stands_in_ancestors_then_refines():
         assert complete and rows.tolist() == leaves.tolist()
     finally:
         res.close()
+
+
+def test_viewer_cut_before_the_top_levels_arrive_draws_nothing_for_them():
+    """The pinned top levels' loads held back: a cut whose nodes have no resident ancestor yet
+    draws nothing for them (it raised "the top level ... is not resident": the 100M flight's
+    first frame), requests the chunks, and completes once they arrive."""
+    chunks = _FakeChunks()
+    chunks.hold_top = True
+    res = ResidentSet(chunks, 10_000, chunks.offsets, 4)
+    try:
+        cut = np.concatenate([np.arange(16, 32), [81, 84]])   # leaves, a level-2 node, the root
+        rows, weights, complete = res.resident_cut(cut, None)
+        assert not complete and rows.size == 0 and weights is None
+        chunks.gate.set()
+        end = time.perf_counter() + 10
+        while not (got := res.resident_cut(cut, None))[2] and time.perf_counter() < end:
+            time.sleep(0.005)
+        assert got[2] and got[0].tolist() == cut.tolist() and got[1] is None
+    finally:
+        res.close()
+
+
+def test_load_pinned_keeps_a_small_last_chunk(tmp_path):
+    """The top levels' chunks are loaded whole and kept, the last one too when it has few rows
+    (the gather read it alone and did not keep it: at 100M the root's chunk has 346 of 4096
+    rows, and the first resident cut found no top level)."""
+    from splatgl.lod.stream import LazyChunks
+
+    path = _lod(tmp_path)
+    with LazyLod(path) as lazy:
+        chunks = LazyChunks(lazy, 32)   # 4001 nodes: the last chunk holds the root alone
+        assert chunks.nodes - (chunks.count - 1) * 32 == 1
+        with ResidentSet(chunks, 1 << 22, lazy.offsets, lazy.branching) as res:
+            res.load_pinned()
+            assert all(res.held(c) is not None for c in sorted(res._pinned))
+            top = np.arange(int(lazy.offsets[-3]), chunks.nodes)
+            rows, _, complete = res.resident_cut(top, None)
+            assert complete and rows.tolist() == top.tolist()
 
 
 def test_close_stops_the_loaders_promptly():
