@@ -133,6 +133,7 @@ class ResidentSet:
             self._pinned = frozenset(int(c) for c in pinned)
         largest = max((chunks.estimate(c) for c in range(chunks.count)), default=0)
         need = sum(chunks.estimate(c) for c in self._pinned) + largest * max(1, threads)
+        self._room = self.budget - need   # for chunks besides the pinned, loads in flight
         if need > self.budget:
             raise SplatglError(f"--memory {format_size(self.budget)} is too small to stream this "
                                f"level of detail: its top levels and {max(1, threads)} chunks "
@@ -233,11 +234,18 @@ class ResidentSet:
         chunk of few rows alone, not kept: the 100M scene's last chunk, 346 rows)."""
         self.collect(sorted(self._pinned), lambda c, scene: None)
 
+    def fits(self, rows: np.ndarray) -> bool:
+        """Whether the chunks of the cut ``rows`` can all be resident at once (besides the
+        pinned ones and the loads in flight); else :meth:`resident_cut` never completes."""
+        ids = [c for c in np.unique(self.chunk_of(rows)).tolist() if c not in self._pinned]
+        return sum(self.chunks.estimate(c) for c in ids) <= self._room
+
     # ------------------------------------------------------------------------- the two draws
-    def gather(self, rows: np.ndarray) -> Scene:
+    def gather(self, rows: np.ndarray, cancelled=None) -> Scene:
         """The nodes ``rows`` (ascending) as one scene, waiting for their chunks (exact):
-        :func:`splatgl.lod.stream_gather.gather` (held once; sparse chunks read row by row)."""
-        return gather(self, rows)
+        :func:`splatgl.lod.stream_gather.gather` (held once; sparse chunks read row by row;
+        ``cancelled()`` true: abandoned, :class:`~.stream_gather.Cancelled`)."""
+        return gather(self, rows, cancelled)
 
     def read_alone(self, rows: np.ndarray) -> Future:
         """Node ``rows`` read alone on a loader thread (``chunks.read_rows``), not kept."""
@@ -262,6 +270,10 @@ class ResidentSet:
             if not futures:   # nothing in flight and no room: wait for room, or fail
                 if self._stop.is_set():
                     raise KeyboardInterrupt
+                with self._lock:   # others' loads (the viewer's) hold the room: wait for them
+                    busy = self._reserved > 0 and (self._lock.wait(0.05) or True)
+                if busy:
+                    continue
                 raise SplatglError(f"--memory {format_size(self.budget)}: no room to load a "
                                    f"chunk of {format_size(self.chunks.estimate(todo[0]))}")
             for c, fut in futures.items():
@@ -275,10 +287,11 @@ class ResidentSet:
             todo = [c for c in todo if c not in parts]
         return parts
 
-    def resident_cut(self, rows: np.ndarray, weights: np.ndarray | None
+    def resident_cut(self, rows: np.ndarray, weights: np.ndarray | None, request: bool = True
                      ) -> tuple[np.ndarray, np.ndarray | None, bool]:
         """The cut ``(rows, weights)`` drawn from what is resident now, without waiting:
-        ``(rows, weights, complete)`` (see the module doc); requests the missing chunks."""
+        ``(rows, weights, complete)`` (see the module doc); requests the missing chunks
+        (``request``: not while a gather of the cut loads them)."""
         rows = np.asarray(rows, np.int64)
         with self._lock:
             present = np.zeros(self.chunks.count, bool)
@@ -311,8 +324,9 @@ class ResidentSet:
         # The missing chunks, coarse first (the upper levels' before the leaves'); only the
         # cut's resident chunks are kept: the others (stand-ins among them) may make room.
         # With every resident chunk kept, a full budget never refined a new view.
-        self.request(np.unique(self.chunk_of(rows[~have]))[::-1],
-                     keep=frozenset(np.unique(self.chunk_of(rows[have])).tolist()))
+        if request:
+            self.request(np.unique(self.chunk_of(rows[~have]))[::-1],
+                         keep=frozenset(np.unique(self.chunk_of(rows[have])).tolist()))
         wsum = np.minimum(np.bincount(inv, weights=w.astype(np.float64)), 1.0).astype(np.float32)
         return uniq, (None if weights is None and wsum.size == uniq.size and (wsum >= 1).all()
                       else wsum), False

@@ -28,9 +28,14 @@ SPARSE_BATCH = 1 << 13
 WINDOW = 4
 
 
-def gather(resident, rows: np.ndarray) -> Scene:
+class Cancelled(Exception):
+    """A gather abandoned (its ``cancelled()`` became true: the viewer wants another cut)."""
+
+
+def gather(resident, rows: np.ndarray, cancelled=None) -> Scene:
     """The nodes ``rows`` (ascending) of ``resident`` (a
-    :class:`~splatgl.lod.stream.ResidentSet`) as one scene, waiting for their chunks (exact)."""
+    :class:`~splatgl.lod.stream.ResidentSet`) as one scene, waiting for their chunks (exact);
+    raises :class:`Cancelled` as a chunk arrives once ``cancelled()`` is true."""
     rows = np.asarray(rows, np.int64)
     per = resident.chunks.rows
     ids = resident.chunk_of(rows)
@@ -40,6 +45,8 @@ def gather(resident, rows: np.ndarray) -> Scene:
     out: dict = {}
 
     def take(c: int, scene: Scene, start: int | None = None) -> bool:
+        if cancelled is not None and cancelled():
+            raise Cancelled
         a, b = bounds[c]   # the chunk's rows, or (start) rows start.. of rows read alone
         local = rows[a:b] - c * per if start is None else np.arange(start, start + b - a)
         if not out:   # the arrays, at the cut's size, from the first chunk's shapes

@@ -7,12 +7,21 @@ for the others, their nearest resident ancestors
 (:meth:`splatgl.lod.stream.ResidentSet.resident_cut`), and requests the missing chunks;
 ``on_change`` (the viewer wakes its loop) is called as each arrives and :attr:`generation`
 counts them, so the viewer draws again and the image refines until :attr:`complete`: then it is
-the view's exact cut.  :meth:`exact_scene` waits for every chunk (screenshots).  A cut's opacity
+the view's exact cut.  A view's own cut whose chunks cannot all be resident at once
+(:meth:`~splatgl.lod.stream.ResidentSet.fits`: it touches more chunk bytes than the cache holds
+besides the pinned levels) would never complete that way: it is gathered as a headless frame is
+(:meth:`~splatgl.lod.stream.ResidentSet.gather`, chunks copied out as they arrive) on a
+background thread, one at a time, abandoned when another cut is asked for, while the resident
+ancestors are drawn; once it is gathered the generation moves on and the next draw of that cut
+is the exact one (the gathered scene is the frame's share of the memory plan).
+:meth:`exact_scene` waits for every chunk (screenshots).  A cut's opacity
 weights are applied to the nodes' opacities (:func:`splatgl.lod.selection.blended_scene`'s rule),
 so any renderer draws the scene.
 """
 
 from __future__ import annotations
+
+import threading
 
 import numpy as np
 
@@ -27,6 +36,16 @@ from .stream import CHUNK_ROWS, LOADERS, LazyChunks, ResidentSet
 from .stream_cut import (SPHERE_PAGES_PER_SPLAT, VIEWER_FRAMES, choose_cut, plan_for,
                          tree_cache_need)
 from .stream_frames import framing_scene
+from .stream_gather import Cancelled
+
+#: Seconds :meth:`StreamedScene.close` waits for a background gather to stop.
+GATHER_JOIN_S = 10.0
+
+
+def _same(a: tuple, b: tuple | None) -> bool:
+    """Whether ``a`` and ``b`` are the same cut ``(rows, weights, ...)``."""
+    return (b is not None and np.array_equal(a[0], b[0]) and (a[1] is None) == (b[1] is None)
+            and (a[1] is None or np.array_equal(a[1], b[1])))
 
 
 def weighted(scene: Scene, weights: np.ndarray | None) -> Scene:
@@ -54,6 +73,11 @@ class StreamedScene:
         self.complete = False
         self.capped: str | None = None
         self._last: tuple | None = None   # (rows, weights, scene) drawn last
+        self._ready: tuple | None = None  # (rows, weights, scene, view) gathered in the background
+        self._job: tuple | None = None    # (rows, weights, view) being gathered, the one wanted
+        self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+        self._jobs = threading.Lock()
         try:
             self.framing = framing_scene(self.lazy)
             release_freed()
@@ -70,6 +94,11 @@ class StreamedScene:
             raise
 
     def _loaded(self) -> None:
+        if self._job is not None:
+            return   # a gather in flight: its end moves the generation on
+        self._changed()
+
+    def _changed(self) -> None:
         self.generation += 1
         if self.on_change is not None:
             self.on_change()
@@ -78,15 +107,66 @@ class StreamedScene:
         return View.of(camera, settings, self.framing).camera   # the scene transform applied
 
     def _scene(self, rows: np.ndarray, weights: np.ndarray | None) -> Scene:
-        last = self._last
-        if (last is not None and np.array_equal(last[0], rows)
-                and (last[1] is None) == (weights is None)
-                and (weights is None or np.array_equal(last[1], weights))):
-            return last[2]   # the same object: the renderer keeps its upload
-        scene = weighted(self.resident.gather(rows), weights)
+        for held in (self._last, self._ready):
+            if _same((rows, weights), held):
+                self._last = held
+                return held[2]   # the same object: the renderer keeps its upload
+        self._last = (rows, weights, self._build(rows, weights))
+        return self._last[2]
+
+    def _build(self, rows: np.ndarray, weights: np.ndarray | None, cancelled=None) -> Scene:
+        scene = weighted(self.resident.gather(rows, cancelled), weights)
         scene.__dict__["anchor"] = np.asarray(self.lazy.anchor, np.float64)  # cached_property
-        self._last = (rows, weights, scene)
         return scene
+
+    def _gathered(self, rows: np.ndarray, weights: np.ndarray | None, view: bytes) -> Scene:
+        """The cut that does not fit the cache: gathered in the background (see the module
+        doc); its resident ancestors meanwhile (chunks not requested: the gather loads them)."""
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+        near = self.resident.resident_cut(rows, weights, request=False)
+        self.complete = (near[2] or _same((rows, weights), self._last)
+                         or _same((rows, weights), self._ready))
+        with self._jobs:
+            start = not self.complete and self._job is None
+            if self.complete:
+                self._job = None
+            elif not _same((rows, weights), self._job):
+                self._job = (rows, weights, view)   # one running for another cut abandons it
+        if self.complete:
+            return self._scene(rows, weights)
+        if start:
+            self._thread = threading.Thread(target=self._gather_jobs, daemon=True,
+                                            name="splatgl-lod-gather")
+            self._thread.start()
+        return self._scene(*near[:2])
+
+    def _gather_jobs(self) -> None:
+        """The background gathers: the cut wanted, until none is (or the stream closes)."""
+        stop = self.resident._stop
+        while True:
+            with self._jobs:
+                job = self._job
+                if job is None or stop.is_set():
+                    self._job = None
+                    return
+            try:
+                scene = self._build(*job[:2], cancelled=lambda: self._job is not job or stop.is_set())
+            except Cancelled:
+                continue
+            except KeyboardInterrupt:
+                return
+            except BaseException as error:   # noqa: BLE001 - raised again by the next draw
+                self._error = scene = error
+            with self._jobs:
+                if self._job is not job and self._job is not None:
+                    continue   # another cut is wanted now
+                if self._job is job and not isinstance(scene, BaseException):
+                    self._ready = (job[0], job[1], scene, job[2])
+                self._job = None
+            self._changed()
+            return
 
     def scene_for(self, camera: Camera, settings: RenderSettings,
                   lod: LodSettings | None = None) -> Scene:
@@ -94,6 +174,13 @@ class StreamedScene:
         is the exact cut); ``lod``: another cut than the view's (the viewer's budgeted
         frames, :mod:`splatgl.interactive.stream_levels`)."""
         rows, weights = self._cut(camera, settings, lod or self.lod)
+        view = camera.world_to_camera.tobytes()
+        if self._ready is not None and self._ready[3] != view:
+            self._ready = None   # gathered for another view: not held through a movement
+        if lod is None and not self.resident.fits(rows):
+            return self._gathered(rows, weights, view)
+        with self._jobs:
+            self._job = None   # another cut: a background gather is abandoned
         rows, weights, self.complete = self.resident.resident_cut(rows, weights)
         return self._scene(rows, weights)
 
@@ -116,4 +203,6 @@ class StreamedScene:
     def close(self) -> None:
         if self.resident is not None:
             self.resident.close()
+        if self._thread is not None:   # it stops at its next chunk: then the file may close
+            self._thread.join(GATHER_JOIN_S)
         self.lazy.close()

@@ -174,3 +174,54 @@ def test_cpu_exact_is_refused_over_a_streamed_scene(tmp_path, gl_renderer):
         levels.release()
         stream.close()
         lazy.close()
+
+
+def test_session_reaches_the_exact_frame_when_the_cut_outgrows_the_chunk_cache(tmp_path, gl_renderer):
+    """A view's cut whose chunks do not all fit the chunk cache at once (resident_cut thrashed
+    and never completed: the 20M flight never reached the exact frame at rest) is gathered in
+    the background as a headless frame is: resident ancestors are drawn meanwhile, then the
+    frame at rest is exact and is the exact cut's image; the cache stays under its budget."""
+    memory = 40 << 10   # about 11 of the scene's 63 chunks
+    stream, chunks, lazy = _stream(tmp_path, memory=memory)
+    session = streamed_session(gl_renderer, stream, SETTINGS, 10.0)
+    try:
+        camera = _camera(2.5)
+        rows, _ = stream._cut(camera, SETTINGS, stream.lod)
+        assert not stream.resident.fits(rows)
+        first = session.frame(camera)
+        assert first is not None and not session.exact
+        assert _until(lambda: (session.frame(camera), session.exact)[1], 20)
+        assert stream.complete and session.status == "exact" and session.shown.splats == rows.size
+        got = session.levels.read(session.shown)
+        want = gl_renderer.render(stream.exact_scene(camera, SETTINGS), camera, SETTINGS)
+        assert np.array_equal(got, want)
+        assert stream.resident.stats.peak_bytes <= memory
+        assert session.frame(camera) is None   # at rest: nothing new, nothing gathered again
+    finally:
+        session.release()
+        stream.close()
+        lazy.close()
+
+
+def test_a_background_gather_is_abandoned_for_another_cut_and_on_close(tmp_path, gl_renderer):
+    """While the cut that does not fit is gathered (its loads held back), a moving frame's
+    budgeted cut abandons it and draws what is resident; closing the stream stops it."""
+    memory = 40 << 10
+    stream, chunks, lazy = _stream(tmp_path, memory=memory, gated=True)
+    levels = StreamedLevels(gl_renderer, stream, SETTINGS)
+    try:
+        camera = _camera(2.5)
+        levels.draw(camera, EXACT)
+        assert not levels.complete and stream._job is not None
+        levels.draw(_camera(2.0, 0.1), Level(1.0, 200))
+        assert stream._job is None
+        levels.draw(camera, EXACT)
+        thread = stream._thread
+        chunks.gate.set()
+        stream.close()
+        thread.join(5)
+        assert not thread.is_alive() and stream._error is None
+    finally:
+        levels.release()
+        stream.close()
+        lazy.close()
