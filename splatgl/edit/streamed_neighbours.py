@@ -33,6 +33,7 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..lod.budget import RESERVE, resident_now
+from ..lod.external import file_blocks
 from ..lod.ply_rows import BoxFinder
 from ..scene.spatial import morton_codes_clamped
 from .decimate import Decimate, _check_scales, check_kind
@@ -106,11 +107,11 @@ def find_floaters(op: RemoveFloaters, kept, folder, run: int):
         unsure.flush()
     mean = math.fsum(unsure.sums) / n
     squares = math.fsum(float(((b["d"] - mean) ** 2).sum())
-                        for b in _file_blocks(dist_path, TABLE, run))
+                        for b in file_blocks(dist_path, TABLE, run))
     sd = math.sqrt(squares / n)
     threshold = mean + op.sigma * sd
     removed = [b["index"][(b["d"] > threshold) & (b["opacity"] < op.opacity)]
-               for b in _file_blocks(dist_path, TABLE, run)]
+               for b in file_blocks(dist_path, TABLE, run)]
     return (np.sort(np.concatenate(removed)),
             Floaters(op, np.zeros(0, bool), mean, sd, threshold))
 
@@ -122,15 +123,6 @@ def _table(index, d, opacity) -> np.ndarray:
     out = np.empty(index.size, TABLE)
     out["index"], out["d"], out["opacity"] = index, d, opacity
     return out
-
-
-def _file_blocks(path, dtype, rows: int):
-    with open(path, "rb") as fh:
-        while True:
-            block = np.fromfile(fh, dtype, rows)
-            if not block.size:
-                return
-            yield block
 
 
 def _chunk_distances(means, c: int, chunks, k: int, cap: int):

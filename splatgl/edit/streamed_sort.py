@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..lod.external import TOP_SHIFT, _Cells, _runs
+from ..scene.spatial import box_morton_codes
 from ..scene.splats import Scene, SplatKind
 from ..writing.atomic import disk_note, write_error
 
@@ -92,11 +93,5 @@ def full_box_codes(means: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndar
     axis over the box ``lo..hi`` of every centre), moved to bits 33-62: sorting them stably
     gives that order."""
     bits = FULL_BOX_BITS
-    m = np.asarray(means, np.float64)
-    span = np.where(hi > lo, hi - lo, 1.0)
-    cells = np.clip(((m - lo) / span * ((1 << bits) - 1)).astype(np.int64), 0, (1 << bits) - 1)
-    code = np.zeros(m.shape[0], np.int64)
-    for bit in range(bits):
-        for axis in range(3):
-            code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + (2 - axis))
+    code = box_morton_codes(means, lo, hi, bits)
     return code.astype(np.uint64) << np.uint64(63 - 3 * bits)

@@ -106,7 +106,8 @@ class _Cells:
         return [(self.folder / f"{c:03d}", self.counts[c]) for c in sorted(self.files)]
 
 
-def _file_blocks(path: Path, dtype: np.dtype, rows: int):
+def file_blocks(path: Path, dtype: np.dtype, rows: int):
+    """The records of type ``dtype`` in the file at ``path``, ``rows`` at a time."""
     with open(path, "rb") as fh:
         while True:
             block = np.fromfile(fh, dtype, rows)
@@ -128,11 +129,11 @@ def _runs(cells: _Cells, plan: Plan):
             pending.append(path)
             held += n
         elif cells.shift == 0:  # one code: already in input order
-            yield from _file_blocks(path, cells.dtype, plan.run)
+            yield from file_blocks(path, cells.dtype, plan.run)
             path.unlink()
         else:  # split by the next bits
             sub = _Cells(path.with_name(path.name + "d"), max(cells.shift - CELL_BITS, 0), cells.dtype)
-            for block in _file_blocks(path, cells.dtype, plan.rows):
+            for block in file_blocks(path, cells.dtype, plan.rows):
                 sub.add(block)
             path.unlink()
             yield from _runs(sub, plan)

@@ -50,11 +50,18 @@ def morton_order_full_box(means: np.ndarray, bits: int = 10) -> np.ndarray:
     ``bits`` bits per axis over their bounding box.  Writers that chunk or texture the splats use
     it so neighbours share bounds (tighter chunk quantisation, smaller WebP files)."""
     m = np.asarray(means, np.float64)
-    lo, hi = m.min(axis=0), m.max(axis=0)
+    return np.argsort(box_morton_codes(m, m.min(axis=0), m.max(axis=0), bits), kind="stable")
+
+
+def box_morton_codes(means: np.ndarray, lo: np.ndarray, hi: np.ndarray, bits: int = 10) -> np.ndarray:
+    """(N,) int64 Morton codes of ``means`` (N, 3), ``bits`` bits per axis over the box
+    ``lo..hi`` (x the most significant of each bit triple): the order of
+    :func:`morton_order_full_box` when the box is the centres' own."""
+    m = np.asarray(means, np.float64)
     span = np.where(hi > lo, hi - lo, 1.0)
     cells = np.clip(((m - lo) / span * ((1 << bits) - 1)).astype(np.int64), 0, (1 << bits) - 1)
     code = np.zeros(m.shape[0], np.int64)
     for bit in range(bits):
         for axis in range(3):
             code |= ((cells[:, axis] >> bit) & 1) << (3 * bit + (2 - axis))
-    return np.argsort(code, kind="stable")
+    return code
