@@ -12,8 +12,10 @@ the view's exact cut.  A view's own cut whose chunks cannot all be resident at o
 besides the pinned levels) would never complete that way: it is gathered as a headless frame is
 (:meth:`~splatgl.lod.stream.ResidentSet.gather`, chunks copied out as they arrive) on a
 background thread, one at a time, abandoned when another cut is asked for, while the resident
-ancestors are drawn; once it is gathered the generation moves on and the next draw of that cut
-is the exact one (the gathered scene is the frame's share of the memory plan).
+ancestors are drawn; only from a view's second draw on (at rest: a moving frame does not gather,
+it moves the generation on so that the next draw of its view does); once it is gathered the
+generation moves on and the next draw of that cut is the exact one (the gathered scene is the
+frame's share of the memory plan).
 :meth:`exact_scene` waits for every chunk (screenshots).  A cut's opacity
 weights are applied to the nodes' opacities (:func:`splatgl.lod.selection.blended_scene`'s rule),
 so any renderer draws the scene.
@@ -78,6 +80,7 @@ class StreamedScene:
         self._error: BaseException | None = None
         self._thread: threading.Thread | None = None
         self._jobs = threading.Lock()
+        self._view: bytes | None = None   # the camera of the last draw
         try:
             self.framing = framing_scene(self.lazy)
             release_freed()
@@ -175,10 +178,13 @@ class StreamedScene:
         frames, :mod:`splatgl.interactive.stream_levels`)."""
         rows, weights = self._cut(camera, settings, lod or self.lod)
         view = camera.world_to_camera.tobytes()
+        moved, self._view = view != self._view, view
         if self._ready is not None and self._ready[3] != view:
             self._ready = None   # gathered for another view: not held through a movement
         if lod is None and not self.resident.fits(rows):
-            return self._gathered(rows, weights, view)
+            if not moved:
+                return self._gathered(rows, weights, view)
+            self._changed()   # a moving frame does not gather: at rest the next draw does
         with self._jobs:
             self._job = None   # another cut: a background gather is abandoned
         rows, weights, self.complete = self.resident.resident_cut(rows, weights)

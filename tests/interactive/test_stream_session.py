@@ -211,10 +211,13 @@ def test_a_background_gather_is_abandoned_for_another_cut_and_on_close(tmp_path,
     levels = StreamedLevels(gl_renderer, stream, SETTINGS)
     try:
         camera = _camera(2.5)
-        levels.draw(camera, EXACT)
+        levels.draw(camera, EXACT)   # a moving frame: no gather
+        assert not levels.complete and stream._job is None
+        levels.draw(camera, EXACT)   # the same view again (at rest): gathered
         assert not levels.complete and stream._job is not None
         levels.draw(_camera(2.0, 0.1), Level(1.0, 200))
         assert stream._job is None
+        levels.draw(camera, EXACT)
         levels.draw(camera, EXACT)
         thread = stream._thread
         chunks.gate.set()
@@ -223,5 +226,24 @@ def test_a_background_gather_is_abandoned_for_another_cut_and_on_close(tmp_path,
         assert not thread.is_alive() and stream._error is None
     finally:
         levels.release()
+        stream.close()
+        lazy.close()
+
+
+def test_at_rest_a_cut_that_outgrows_the_cache_is_gathered_with_no_chunk_arriving(tmp_path,
+                                                                                    gl_renderer):
+    """A moving frame does not gather the cut that does not fit but asks for a redraw, so the
+    next frame at rest gathers it even when no chunk arrives in between (its loads held back:
+    a full cache whose chunks the cut keeps loads nothing, and the rest waited forever)."""
+    stream, chunks, lazy = _stream(tmp_path, memory=40 << 10, gated=True)
+    session = streamed_session(gl_renderer, stream, SETTINGS, 10.0)
+    try:
+        camera = _camera(2.5)
+        assert session.frame(camera).level == EXACT and stream._job is None   # moving
+        assert session.frame(camera) is not None and stream._job is not None  # at rest
+        chunks.gate.set()
+        assert _until(lambda: (session.frame(camera), session.exact)[1], 20)
+    finally:
+        session.release()
         stream.close()
         lazy.close()
