@@ -16,9 +16,9 @@ Over a level of detail streamed from disk (``stream``: ``bench --scale --lod``'s
 session is the viewer's over the resident chunks
 (:func:`splatgl.interactive.stream_levels.streamed_session`, as ``splatgl view --memory``): moving
 frames draw the budget's level of what is resident, and the rest ends when the exact frame is
-drawn with every chunk it needs in.  Each frame then records the resident memory, the chunks
-loaded and the process's resident set (:attr:`FlightResult.samples`); moving frames are not
-scored and no latency is measured (their exact frames would wait for chunks).
+drawn with every chunk it needs in (or gathered, where they do not fit the cache at once).
+Each frame then records the resident memory, the chunks loaded and the process's resident set
+(:attr:`FlightResult.samples`); moving frames are not scored and no latency is measured (their exact frames would wait for chunks).
 
 The flight (:func:`flight_camera`): an orbit at the default framing distance (0-5 s), a fly-in
 from twice that distance to a third of it (5-8 s), then rest.  Rows are plain data
@@ -60,8 +60,8 @@ LATENCY_SAMPLES = 8
 #: At most this many moving frames are scored (evenly spread): at 60 fps on a GPU the flight has
 #: about 500, and each score draws the exact frame again (a full CPU sort: ~0.3 s at 6M splats).
 MAX_SCORED = 160
-#: A streamed flight's rest gives up on the exact frame after this many seconds (a cut whose
-#: chunks do not fit the memory budget is never complete).
+#: A streamed flight's rest gives up on the exact frame after this many seconds (a safety limit:
+#: a cut whose chunks do not fit the cache at once is gathered, as a headless frame is).
 STREAM_REST_LIMIT_S = 300.0
 #: Seconds a streamed rest sleeps while it waits for chunks (the loader threads need the cores).
 STREAM_WAIT_S = 0.005
