@@ -155,7 +155,8 @@ class StreamedScene:
                     self._job = None
                     return
             try:
-                scene = self._build(*job[:2], cancelled=lambda: self._job is not job or stop.is_set())
+                scene = self._build(*job[:2],
+                                    cancelled=lambda: self._job is not job or stop.is_set())
             except Cancelled:
                 continue
             except KeyboardInterrupt:

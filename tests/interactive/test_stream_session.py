@@ -176,7 +176,8 @@ def test_cpu_exact_is_refused_over_a_streamed_scene(tmp_path, gl_renderer):
         lazy.close()
 
 
-def test_session_reaches_the_exact_frame_when_the_cut_outgrows_the_chunk_cache(tmp_path, gl_renderer):
+def test_session_reaches_the_exact_frame_when_the_cut_outgrows_the_chunk_cache(tmp_path,
+                                                                              gl_renderer):
     """A view's cut whose chunks do not all fit the chunk cache at once (resident_cut thrashed
     and never completed: the 20M flight never reached the exact frame at rest) is gathered in
     the background as a headless frame is: resident ancestors are drawn meanwhile, then the
