@@ -71,6 +71,8 @@ class StreamedLevels(LevelRenderer):
         view = camera_key(self._camera)
         if level.budget is not None:   # a cut for a new view: another view's full detail goes
             self._drop(lambda key, drawn_for: key[0] and drawn_for != view)
+        else:   # full detail for a new view: the last view's goes before the new cut is gathered
+            self._drop(lambda key, drawn_for: key == (True, level.sh_degree) and drawn_for != view)
         self.drawn_generation = stream.generation   # before the cut: one after it draws again
         scene = stream.scene_for(self._camera, self.settings, lod)
         self.complete = bool(stream.complete)
