@@ -370,3 +370,28 @@ def draw(renderer, camera, depth: bool = False, **options):
     ``render`` (``on_batch``)."""
     layers = with_layers(Layer.DEPTH) if depth else BASE
     return renderer.render(view_for(renderer, camera), layers, **options)
+
+
+def stream_lod_file(tmp_path: Path, n: int = 3000) -> Path:
+    """A ``.lod.ply`` of ``n`` random SH3 splats in the unit cube (branching 4) under
+    ``tmp_path``: the small level of detail the streaming tests read by chunks."""
+    from splatgl.formats import load_scene, ply_write
+    from splatgl.lod.build import build_hierarchy
+    from splatgl.lod.io import write_lod
+
+    rng = np.random.default_rng(0)
+    scene = Scene(rng.uniform(-1, 1, (n, 3)), rng.normal(size=(n, 4)),
+                  rng.normal(-3.5, 0.4, (n, 3)), rng.normal(1, 1, n),
+                  rng.normal(0, 0.3, (n, 4, 3)))
+    ply_write.write(tmp_path / "s.ply", scene)
+    path = tmp_path / "s.lod.ply"
+    write_lod(path, build_hierarchy(load_scene(tmp_path / "s.ply"), 4))
+    return path
+
+
+def stream_camera(z: float, x: float = 0.0):
+    """A 96x64, 50-degree camera at ``(x, 0, z)`` looking at the origin (the streaming tests')."""
+    from splatgl.cameras.camera import Camera
+    from splatgl.cameras.poses import look_at
+
+    return Camera.from_fov(96, 64, 50.0, look_at(np.array([x, 0.0, z]), np.zeros(3)))

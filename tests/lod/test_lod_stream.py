@@ -9,14 +9,11 @@ import time
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera
-from splatgl.cameras.poses import look_at
 from splatgl.cli import main
 from splatgl.errors import SplatglError
-from splatgl.formats import load_scene, ply_write
-from splatgl.lod.build import build_hierarchy, level_offsets
+from splatgl.lod.build import level_offsets
 from splatgl.lod.frames import LodFrames
-from splatgl.lod.io import read_lod, write_lod
+from splatgl.lod.io import read_lod
 from splatgl.lod.lazy import LazyLod
 from splatgl.lod.selection import LodSettings
 from splatgl.lod.budget import StreamPlan
@@ -24,6 +21,7 @@ from splatgl.lod.stream import ResidentSet
 from splatgl.lod.stream_frames import StreamFrames
 from splatgl.scene.splats import Scene
 from splatgl.scene.settings import EarlyStop, RenderSettings
+from helpers import stream_camera, stream_lod_file
 
 # Early termination off: its batches stop on the streamed and the in-memory node lists at
 # slightly different points (up to 9e-5 on 1.6% of pixels where `auto` means `on`, as on a GPU),
@@ -39,19 +37,7 @@ def cache_plan(cache: int, cap: int | None = None, per_splat: int = 100):
                       per_splat=per_splat)
 
 
-def _lod(tmp_path, n: int = 3000):
-    rng = np.random.default_rng(0)
-    scene = Scene(rng.uniform(-1, 1, (n, 3)), rng.normal(size=(n, 4)),
-                  rng.normal(-3.5, 0.4, (n, 3)), rng.normal(1, 1, n),
-                  rng.normal(0, 0.3, (n, 4, 3)))
-    ply_write.write(tmp_path / "s.ply", scene)
-    path = tmp_path / "s.lod.ply"
-    write_lod(path, build_hierarchy(load_scene(tmp_path / "s.ply"), 4))
-    return path
-
-
-def _camera(z: float, x: float = 0.0) -> Camera:
-    return Camera.from_fov(96, 64, 50.0, look_at(np.array([x, 0.0, z]), np.zeros(3)))
+_lod, _camera = stream_lod_file, stream_camera   # the streaming tests' scene and views
 
 
 def _tree_on_file_anchor(path):

@@ -8,17 +8,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera
-from splatgl.cameras.poses import look_at
 from splatgl.cameras.view import View
 from splatgl.cli import main
-from splatgl.formats import load_scene, ply_write
 from splatgl.imagefiles.images import read_image
 from splatgl.lod.budget import (CPU_DRAW_RESERVE, CPU_RENDERER_BYTES, FRAME_CPU_BYTES,
                                 FRAME_SH_BYTES, StreamPlan)
-from splatgl.lod.build import build_hierarchy
 from splatgl.lod.frames import LodFrames
-from splatgl.lod.io import read_lod, write_lod
+from splatgl.lod.io import read_lod
 from splatgl.lod.lazy import LazyLod
 from splatgl.lod.selection import LodSettings, blended_scene
 from splatgl.lod.stream_frames import StreamFrames
@@ -26,7 +22,7 @@ from splatgl.lod.stream_levels import ChunkedStream
 from splatgl.renderers import auto
 from splatgl.renderers.cpu import CpuRenderer
 from splatgl.scene.settings import EarlyStop, RendererKind, RenderSettings
-from splatgl.scene.splats import Scene
+from helpers import stream_camera, stream_lod_file
 
 pytest.importorskip("numba")
 
@@ -34,19 +30,7 @@ SETTINGS = RenderSettings(near=0.01, early_stop=EarlyStop.OFF)
 CPU = RendererKind.CPU
 
 
-def _lod(tmp_path, n: int = 3000):
-    rng = np.random.default_rng(0)
-    scene = Scene(rng.uniform(-1, 1, (n, 3)), rng.normal(size=(n, 4)),
-                  rng.normal(-3.5, 0.4, (n, 3)), rng.normal(1, 1, n),
-                  rng.normal(0, 0.3, (n, 4, 3)))
-    ply_write.write(tmp_path / "s.ply", scene)
-    path = tmp_path / "s.lod.ply"
-    write_lod(path, build_hierarchy(load_scene(tmp_path / "s.ply"), 4))
-    return path
-
-
-def _camera(z: float, x: float = 0.0) -> Camera:
-    return Camera.from_fov(96, 64, 50.0, look_at(np.array([x, 0.0, z]), np.zeros(3)))
+_lod, _camera = stream_lod_file, stream_camera   # the streaming tests' scene and views
 
 
 def _small_plan(cache: int = 96 << 10) -> StreamPlan:
