@@ -395,3 +395,22 @@ def stream_camera(z: float, x: float = 0.0):
     from splatgl.cameras.poses import look_at
 
     return Camera.from_fov(96, 64, 50.0, look_at(np.array([x, 0.0, z]), np.zeros(3)))
+
+
+class GatedChunks:
+    """A :class:`~splatgl.lod.stream.LazyChunks` whose loads wait for ``gate`` (an Event) once
+    ``gated`` is set: the streaming tests hold chunk arrivals back with it."""
+
+    def __init__(self, inner):
+        import threading
+
+        self.inner, self.gate, self.gated = inner, threading.Event(), False
+        self.rows, self.nodes, self.count = inner.rows, inner.nodes, inner.count
+
+    def estimate(self, chunk):
+        return self.inner.estimate(chunk)
+
+    def load(self, chunk):
+        if self.gated:
+            self.gate.wait(10)
+        return self.inner.load(chunk)

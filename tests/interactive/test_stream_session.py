@@ -4,14 +4,11 @@ and 6): splatgl.interactive.stream_levels (the session ``view --memory`` and ``b
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
 import pytest
 
-from splatgl.cameras.camera import Camera
-from splatgl.cameras.poses import look_at
 from splatgl.formats import load_scene, ply_write
 from splatgl.interactive.budget import EXACT, Level
 from splatgl.interactive.stream_levels import StreamedLevels, streamed_session
@@ -22,6 +19,8 @@ from splatgl.lod.selection import LodSettings
 from splatgl.lod.stream import LazyChunks, ResidentSet
 from splatgl.scene.settings import EarlyStop, RenderSettings
 from splatgl.scene.splats import Scene
+
+from helpers import GatedChunks, stream_camera
 
 SETTINGS = RenderSettings(near=0.01, early_stop=EarlyStop.OFF)
 
@@ -38,24 +37,10 @@ def tiny_lod(folder, n: int = 3000, seed: int = 0):
     return path
 
 
-def _camera(z: float, x: float = 0.0) -> Camera:
-    return Camera.from_fov(96, 64, 50.0, look_at(np.array([x, 0.0, z]), np.zeros(3)))
+_camera = stream_camera
 
 
-class _Gated:
-    """A LazyChunks whose loads wait for ``gate`` once ``gated`` is set."""
-
-    def __init__(self, inner):
-        self.inner, self.gate, self.gated = inner, threading.Event(), False
-        self.rows, self.nodes, self.count = inner.rows, inner.nodes, inner.count
-
-    def estimate(self, chunk):
-        return self.inner.estimate(chunk)
-
-    def load(self, chunk):
-        if self.gated:
-            self.gate.wait(10)
-        return self.inner.load(chunk)
+_Gated = GatedChunks
 
 
 def _until(test, seconds: float = 10.0) -> bool:

@@ -21,7 +21,7 @@ from splatgl.lod.stream import ResidentSet
 from splatgl.lod.stream_frames import StreamFrames
 from splatgl.scene.splats import Scene
 from splatgl.scene.settings import EarlyStop, RenderSettings
-from helpers import stream_camera, stream_lod_file
+from helpers import GatedChunks, stream_camera, stream_lod_file
 
 # Early termination off: its batches stop on the streamed and the in-memory node lists at
 # slightly different points (up to 9e-5 on 1.6% of pixels where `auto` means `on`, as on a GPU),
@@ -271,20 +271,7 @@ def test_render_memory_needs_a_level_of_detail(tmp_path, capsys):
     assert "not a level-of-detail file" in capsys.readouterr().err
 
 
-class _Gated:
-    """A LazyChunks whose loads wait for ``gate`` once ``gated`` is set."""
-
-    def __init__(self, inner):
-        self.inner, self.gate, self.gated = inner, threading.Event(), False
-        self.rows, self.nodes, self.count = inner.rows, inner.nodes, inner.count
-
-    def estimate(self, chunk):
-        return self.inner.estimate(chunk)
-
-    def load(self, chunk):
-        if self.gated:
-            self.gate.wait(10)
-        return self.inner.load(chunk)
+_Gated = GatedChunks
 
 
 def test_streamed_scene_draws_what_is_resident_then_the_exact_cut(tmp_path):
