@@ -119,7 +119,24 @@ def streamed_kind(kind: RendererKind | str) -> RendererKind:
     return kind
 
 
-class StreamFrames:
+class StreamedViews:
+    """What the commands' render loops call on a streamed scene's frames besides
+    ``render_view`` (which each kind of stream defines): the views in turn, and the renderer
+    that drew the last one."""
+
+    renderer = None
+
+    def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
+                    layers: frozenset[Layer] | None = None) -> Iterator:
+        for camera in cameras:
+            out = self.render_view(camera, BASE if layers is None else layers)
+            yield out.rgba if layers is None else out
+
+    def renderer_for(self, scene=None, settings=None, kind=None):
+        return self.renderer
+
+
+class StreamFrames(StreamedViews):
     """Views of the ``.lod.ply`` at ``path`` through the cut ``lod``, streamed with the whole
     process under ``memory`` bytes (see the module doc); owns its context (a context manager).
     ``framing``: what frames views (default :func:`framing_scene`); ``plan``: how the budget
@@ -233,15 +250,6 @@ class StreamFrames:
         if under is None:
             return self.renderer.render(view, layers)
         return self.renderer.render(view, layers, under=view.geometry(under))
-
-    def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
-                    layers: frozenset[Layer] | None = None) -> Iterator:
-        for camera in cameras:
-            out = self.render_view(camera, BASE if layers is None else layers)
-            yield out.rgba if layers is None else out
-
-    def renderer_for(self, scene=None, settings=None, kind=None):
-        return self.renderer
 
     def summary(self) -> str:
         """Resident memory and chunks, the bytes read from the file and the memory bound's

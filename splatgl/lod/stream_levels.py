@@ -25,7 +25,6 @@ import threading
 import time
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -46,6 +45,7 @@ from .budget import (CPU_DRAW_RESERVE, DRAW_RESERVE, StreamPlan, cpu_frame_bytes
 from .level_cut import NOT_DRAWN, ChunkTable, cap_levels, choose_levels
 from .selection import LodSettings
 from .stream import LOADERS, ResidentSet, concatenate, scene_bytes
+from .stream_frames import StreamedViews
 
 #: The format names (``formats.detect_format``) streamed here.
 CHUNKED_FORMATS = ("streamed-sog", "lcc")
@@ -261,7 +261,7 @@ class ChunkedStream:
         self.resident.close()
 
 
-class ChunkedFrames:
+class ChunkedFrames(StreamedViews):
     """Views of the Streamed SOG or LCC at ``path`` streamed under ``memory`` bytes, each
     waiting for its chunks (see the module doc), drawn by renderer ``kind``; the interface of
     :class:`splatgl.lod.stream_frames.StreamFrames` (``render_view``, ``render_many``,
@@ -327,15 +327,6 @@ class ChunkedFrames:
         if under is None:
             return self.renderer.render(view, layers)
         return self.renderer.render(view, layers, under=view.geometry(under))
-
-    def render_many(self, scene, cameras: Iterable[Camera], settings=None, kind=None,
-                    layers: frozenset[Layer] | None = None) -> Iterator:
-        for camera in cameras:
-            out = self.render_view(camera, BASE if layers is None else layers)
-            yield out.rgba if layers is None else out
-
-    def renderer_for(self, scene=None, settings=None, kind=None):
-        return self.renderer
 
     def summary(self) -> str:
         """Resident memory and chunks (for ``--timings``)."""
