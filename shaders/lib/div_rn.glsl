@@ -10,6 +10,8 @@
 // Used by: shaders/order_cull.comp.
 // Twin: none (the twin is NumPy's float32 division itself; test_quad_device.py checks it)
 
+#include "lib/round_rn.glsl"
+
 // Whether a < m+(q) b, for positive normal floats a, b and q.
 bool below_upper_quotient(float q, float a, float b) {
     int eq, ea, eb;
@@ -20,21 +22,8 @@ bool below_upper_quotient(float q, float a, float b) {
     uint p_hi, p_lo;
     umulExtended(2u * big_q + 1u, big_b, p_hi, p_lo);
     int s = (ea - 24) - ((eq - 24) - 1 + (eb - 24));   // a = A 2^s, in units of (2Q + 1) B's
-    if (s < 0) return true;                      // A 2^s < 2^24 <= (2Q + 1) B
-    if (s > 40) return false;                    // A 2^s >= 2^64 > (2Q + 1) B (< 2^49)
-    uint a_hi, a_lo;
-    if (s >= 32) {
-        a_hi = big_a << uint(s - 32);
-        a_lo = 0u;
-    } else {
-        a_hi = s == 0 ? 0u : big_a >> uint(32 - s);
-        a_lo = big_a << uint(s);
-    }
-    return a_hi < p_hi || (a_hi == p_hi && a_lo < p_lo);
+    return shifted_below(big_a, s, p_hi, p_lo);
 }
-
-float div_next_up(float s) { return uintBitsToFloat(floatBitsToUint(s) + 1u); }
-float div_next_down(float s) { return uintBitsToFloat(floatBitsToUint(s) - 1u); }
 
 // a / b rounded to nearest, from the estimate q0 (within a few ulp).  Zero, subnormal, huge,
 // infinite and NaN operands and quotients keep the estimate.
@@ -43,8 +32,8 @@ float div_rn_from(float a, float b, float q0) {
     if (!(x >= 1.0e-30 && x <= 1.0e30 && y >= 1.0e-30 && y <= 1.0e30
           && s >= 1.0e-36 && s <= 1.0e36)) return q0;
     for (int k = 0; k < 4; ++k) {
-        if (!below_upper_quotient(s, x, y)) s = div_next_up(s);                    // above
-        else if (below_upper_quotient(div_next_down(s), x, y)) s = div_next_down(s);  // below
+        if (!below_upper_quotient(s, x, y)) s = next_up(s);                    // above
+        else if (below_upper_quotient(next_down(s), x, y)) s = next_down(s);  // below
         else break;
     }
     return (a < 0.0) != (b < 0.0) ? -s : s;

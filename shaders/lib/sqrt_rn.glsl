@@ -10,6 +10,8 @@
 // Used by: shaders/order_cull.comp (CULL_SPHERE).
 // Twin: none (the twin is NumPy's float32 np.sqrt itself; test_quad_device_lens.py checks it)
 
+#include "lib/round_rn.glsl"
+
 // Whether a < m+(s)^2, for positive normal floats a and s.
 bool below_upper_mid(float s, float a) {
     int es, ea;
@@ -17,22 +19,10 @@ bool below_upper_mid(float s, float a) {
     uint big_s = uint(ms * 16777216.0);          // S, 24 bits
     uint big_a = uint(ma * 16777216.0);          // A, 24 bits
     int q = (ea - 24) - (2 * (es - 24) - 2);     // a = A 2^q in units of 2^(2e - 2)
-    if (q < 0) return true;                      // a < 2^24 units <= (2S + 1)^2
-    if (q > 40) return false;                    // a >= 2^64 units > (2S + 1)^2
-    uint p_hi, p_lo, a_hi, a_lo;
+    uint p_hi, p_lo;
     umulExtended(2u * big_s + 1u, 2u * big_s + 1u, p_hi, p_lo);
-    if (q >= 32) {
-        a_hi = big_a << uint(q - 32);
-        a_lo = 0u;
-    } else {
-        a_hi = q == 0 ? 0u : big_a >> uint(32 - q);
-        a_lo = big_a << uint(q);
-    }
-    return a_hi < p_hi || (a_hi == p_hi && a_lo < p_lo);
+    return shifted_below(big_a, q, p_hi, p_lo);
 }
-
-float next_up(float s) { return uintBitsToFloat(floatBitsToUint(s) + 1u); }
-float next_down(float s) { return uintBitsToFloat(floatBitsToUint(s) - 1u); }
 
 // sqrt(a) rounded to nearest, from the estimate s0 (within a few ulp).  Zero, subnormal,
 // infinite and NaN arguments and roots keep the estimate.

@@ -273,7 +273,8 @@ def test_device_division_is_correctly_rounded_from_a_rough_estimate(ctx, tmp_pat
     from splatgl.gl.shaders import preprocess, shader_dir
 
     (tmp_path / "lib").mkdir()
-    (tmp_path / "lib" / "div_rn.glsl").write_text((shader_dir() / "lib" / "div_rn.glsl").read_text())
+    for lib in ("div_rn.glsl", "round_rn.glsl"):
+        (tmp_path / "lib" / lib).write_text((shader_dir() / "lib" / lib).read_text())
     (tmp_path / "check.comp").write_text(
         '#include "lib/div_rn.glsl"\nlayout(local_size_x = 64) in;\n'
         'layout(std430, binding = 0) buffer Io { uint io[]; };\nuniform int u_off;\n'

@@ -232,7 +232,8 @@ def test_device_square_root_is_correctly_rounded_from_a_rough_estimate(ctx, tmp_
     """shaders/lib/sqrt_rn.glsl: from estimates off by up to 2 ulp (as a GPU's sqrt may be),
     the root is NumPy's float32 sqrt, bit for bit (the lens keys are distances)."""
     (tmp_path / "lib").mkdir()
-    (tmp_path / "lib" / "sqrt_rn.glsl").write_text((shader_dir() / "lib" / "sqrt_rn.glsl").read_text())
+    for lib in ("sqrt_rn.glsl", "round_rn.glsl"):
+        (tmp_path / "lib" / lib).write_text((shader_dir() / "lib" / lib).read_text())
     (tmp_path / "check.comp").write_text(
         '#include "lib/sqrt_rn.glsl"\nlayout(local_size_x = 64) in;\n'
         'layout(std430, binding = 0) buffer Io { uint io[]; };\nuniform int u_off;\n'
