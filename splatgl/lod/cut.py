@@ -13,8 +13,8 @@ lens camera is every direction (a fisheye's: its cone).
 
 With a transition band (:func:`select_cut_weights`) nodes near the threshold are drawn as a
 blend of parent and children (opacity weights), so the cut changes continuously as the camera
-moves.  With a splat budget the threshold is searched (on a log scale) for the finest cut that
-fits.
+moves.  With a splat budget the threshold is searched for the finest cut that fits
+(:mod:`splatgl.lod.cut_budget`).
 """
 
 from __future__ import annotations
@@ -38,20 +38,11 @@ DEFAULT_THRESHOLD_PX = 1.0
 #: this many times it are drawn as a blend of themselves and their children (2: about one
 #: level of the tree, whose radii roughly halve per level).
 DEFAULT_BAND = 2.0
-#: Budget search: at most this many cuts per view, stopping within this fraction of the budget.
-BUDGET_STEPS = 8
-BUDGET_TOLERANCE = 0.1
-#: Where no cut fitted within BUDGET_STEPS: at most this many more (doubling the threshold),
-#: then this many narrowing steps between the last cut too large and the first that fits.
-MAX_LATE_STEPS = 40
-LATE_BISECTIONS = 3
-#: A budget's search abandons a trial cut past this many times the budget (CutTooLarge), so
-#: its memory stays a few budgets' at any size, and steps as if the cut held that many.
-ABORT_FACTOR = 3
-#: The search from a nearby view's threshold (:func:`select_cut_budget_near`): at most this many
-#: cuts, stepping the threshold by at least this factor until the budget is bracketed.
-NEAR_STEPS = 6
-NEAR_FACTOR = 1.15
+
+
+#: A level is evaluated whole (contiguous, blocked) rather than gathered when its candidates
+#: are at least this fraction of it: a gather costs several times a contiguous pass.
+DENSE_FRACTION = 0.25
 
 
 class CutTooLarge(Exception):
@@ -75,7 +66,7 @@ class CutData:
     offsets: np.ndarray
     branching: int
     anchor: np.ndarray
-    dense: float = 0.25
+    dense: float = DENSE_FRACTION
 
     @classmethod
     def from_tree(cls, tree) -> "CutData":
@@ -83,10 +74,28 @@ class CutData:
         centres = np.ascontiguousarray((tree.nodes.means.astype(np.float64) - anchor).T, np.float32)
         return cls(centres, tree.radius, tree.offsets, tree.branching, anchor)
 
+    def columns(self) -> tuple | None:
+        """``(cx, cy, cz, radius, anchor)`` for the compiled cut: float32 columns, relative to
+        :attr:`anchor` with ``anchor`` None, or as stored with ``anchor`` to take off (a lazily
+        read tree's mapped spheres); None where the compiled cut cannot read them (NumPy's)."""
+        columns = getattr(self.centres, "columns", None)
+        if columns is not None:
+            return columns()
+        return self.centres[0], self.centres[1], self.centres[2], self.radius, None
 
-#: A level is evaluated whole (contiguous, blocked) rather than gathered when its candidates
-#: are at least this fraction of it: a gather costs several times a contiguous pass.
-DENSE_FRACTION = 0.25
+    @property
+    def slice_rows(self) -> int:
+        """Rows of one slice of the compiled cut's candidates (0: a level at once)."""
+        return int(getattr(self.centres, "slice_rows", 0))
+
+    def release(self, lo: int, hi: int) -> None:
+        """After a slice of the compiled cut (node rows ``lo:hi``): let a lazily read tree's
+        sphere pages go (nothing otherwise)."""
+        release = getattr(self.centres, "release", None)
+        if release is not None:
+            release(lo, hi)
+
+
 #: Rows per block of a dense level pass (float32 temporaries stay in cache).
 BLOCK = 1 << 15
 #: Per-thread scratch of the compiled cut (a level's sizes and frustum flags), reused between
@@ -218,7 +227,7 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     """
     offsets, b = data.offsets, data.branching
     view = _NodeTest(data, camera)
-    if kern is not None:
+    if kern is not None and data.columns() is not None:
         return _compiled_cut(kern, data, view, threshold_px, band, leaves_at, max_nodes)
     top = len(offsets) - 2
     blend = band > 1.0
@@ -292,109 +301,87 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
 def _compiled_cut(kern, data: CutData, view: _NodeTest, threshold_px: float, band: float,
                   leaves_at: float | None, max_nodes: int | None = None
                   ) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """:func:`select_cut_weights` through the compiled ``cut_pass``."""
-    n = int(data.offsets[-1])
-    rows, weights = np.empty(n, np.int64), np.empty(n, np.float32)
+    """:func:`select_cut_weights` through the compiled ``cut_level``, over ``data.columns()``,
+    level by level from the top.  Each level's drawn rows are stacked from the outputs' end
+    downwards, the top level highest: with level 0 lowest that is the rows' ascending order
+    (only the tail's pages are touched); before a level, room for all its candidates is taken
+    below the stack.  A level's candidates are kept as their parents (local index, carry
+    ``A e``), four times fewer, and visited in slices of at most ``data.slice_rows`` rows, the
+    sphere pages of each let go after it (:meth:`CutData.release`)."""
+    cx, cy, cz, radius, anchor = data.columns()
+    offsets, b = data.offsets, int(data.branching)
+    levels = len(offsets) - 1
+    n_all, n_leaves = int(offsets[-1]), int(offsets[1] - offsets[0])
+    # the outputs' used part never passes max_nodes (the cut is abandoned first)
+    size = n_all if max_nodes is None else min(n_all, int(max_nodes) + 1)
+    out_rows, out_w = np.empty(size, np.int64), np.empty(size, np.float32)
+    finite = bool(np.isfinite(threshold_px))
+    mode = 0 if not finite else (1 if band <= 1.0 else 2)
+    t = np.float32(threshold_px if finite else 0.0)
+    ramp = np.float32(1.0 / (threshold_px * (band - 1.0)) if mode == 2 else 0.0)
+    blend = band > 1.0
+    test = (view.r, view.t, view.scale, view.f, view.kind, view.planes)
+    scratch = _scratch(data)
+    pos = size
+    par, par_c = np.zeros(1, np.int64), np.ones(1, np.float32)  # one parent above the top
+    n_cand = int(offsets[levels] - offsets[levels - 1])
+    nodes = covered = 0.0   # so far: nodes drawn and the leaves they stand for (leaves_at)
+    for level in range(levels - 1, -1, -1):
+        if n_cand == 0:
+            break
+        lo, n = int(offsets[level]), int(offsets[level + 1] - offsets[level])
+        fan = n if level == levels - 1 else b   # children per parent
+        if max_nodes is not None and size - pos + n_cand > max_nodes:
+            raise CutTooLarge(size - pos + n_cand)
+        if (level == 0 and leaves_at is not None and nodes + n_cand >= leaves_at * (
+                covered + kern.candidate_weight(par, par_c, fan, n))):
+            return None, None
+        below = int(offsets[level] - offsets[level - 1]) if level else 0
+        nxt, nxt_c = np.empty(n_cand + 1, np.int64), np.empty(n_cand + 1, np.float32)
+        dense = n_cand >= data.dense * n
+        if dense:
+            kern.level_test(cx, cy, cz, radius, anchor, lo, n, *test, *scratch)
+        base = pos - n_cand
+        counts, sums = np.zeros(3, np.int64), np.zeros(2)
+        j = 0
+        while j < par.size:
+            j0, j = j, kern.cut_level(cx, cy, cz, radius, anchor, *test, mode, t, ramp, blend,
+                                      lo, n, fan, below, level, b, par, par_c, j,
+                                      data.slice_rows, dense, *scratch, out_rows, out_w, base,
+                                      nxt, nxt_c, counts, sums)
+            data.release(lo + int(par[j0]) * fan, lo + min(int(par[j - 1]) * fan + fan, n))
+        d, m, n_cand = (int(v) for v in counts)
+        out_rows[pos - d:pos] = out_rows[base:base + d]   # down against the stack
+        out_w[pos - d:pos] = out_w[base:base + d]
+        pos -= d
+        if leaves_at is not None and d:   # level_leaves of the drawn rows
+            span = float(b) ** level
+            stands_for = sums[0] * span
+            if out_rows[pos + d - 1] - lo == n - 1:
+                stands_for -= sums[1] * (span - (n_leaves - (n - 1) * span))
+            nodes += d
+            covered += stands_for
+        par, par_c = nxt[:m], nxt_c[:m]
+    rows, weights = out_rows[pos:], out_w[pos:]
+    if pos > rows.size:   # the tail alone, so that the candidates' room below it is freed
+        rows, weights = rows.copy(), weights.copy()
+    return rows, (weights if blend else None)
+
+
+def _scratch(data: CutData) -> tuple[np.ndarray, np.ndarray]:
+    """A whole level's sizes and frustum flags (the compiled cut's dense levels), per thread
+    and kept (fresh arrays of a few 10 MB cost their page faults on every view); none for a
+    tree whose levels are never tested whole."""
+    if data.dense > 1.0:
+        return np.empty(1, np.float32), np.empty(1, bool)
     widest = int(np.diff(data.offsets).max())
     scratch = getattr(_SCRATCH, "arrays", None)
     if scratch is None or scratch[0].size < widest:
         scratch = _SCRATCH.arrays = np.empty(widest, np.float32), np.empty(widest, bool)
-    finite = bool(np.isfinite(threshold_px))
-    mode = 0 if not finite else (1 if band <= 1.0 else 2)
-    ramp = 1.0 / (threshold_px * (band - 1.0)) if mode == 2 else 0.0
-    pos = kern.cut_pass(data.centres[0], data.centres[1], data.centres[2], data.radius,
-                          np.asarray(data.offsets, np.int64), int(data.branching), view.r, view.t,
-                          view.scale, view.f, view.kind, view.planes, mode,
-                          np.float32(threshold_px if finite else 0.0), np.float32(ramp),
-                          band > 1.0, -1.0 if leaves_at is None else float(leaves_at),
-                          -1 if max_nodes is None else int(max_nodes),
-                          DENSE_FRACTION, *scratch, rows, weights)
-    if pos <= -2:   # -2 - pos: the nodes drawn above the level abandoned, plus its candidates
-        raise CutTooLarge(-2 - pos)
-    if pos < 0:
-        return None, None
-    return rows[pos:], (weights[pos:] if band > 1.0 else None)
+    return scratch
 
 
 def select_cut(data: CutData, camera: Camera, threshold_px: float = DEFAULT_THRESHOLD_PX) -> np.ndarray:
     """(K,) int64 node rows of the cut at ``threshold_px`` (no band), ascending: every node in
     view of size <= threshold_px whose parent is larger, plus the leaves still larger."""
     return select_cut_weights(data, camera, threshold_px)[0]
-
-
-def select_cut_budget(data: CutData, camera: Camera, budget: int,
-                      threshold_px: float = DEFAULT_THRESHOLD_PX, band: float = 1.0, kern=None
-                      ) -> tuple[np.ndarray, np.ndarray | None, float]:
-    """The finest cut of at most ``budget`` drawn nodes, not finer than ``threshold_px``:
-    ``(node rows, weights, threshold used)`` (rows and weights as :func:`select_cut_weights`
-    gives them for that threshold and ``band``).  The threshold is searched on a log scale (a
-    cut's count falls roughly as the threshold squared), BUDGET_STEPS cuts at most; it changes
-    from view to view, so a budget's cut is not continuous along a path, band or not.
-    ``kern`` as :func:`select_cut_weights` takes it.  A trial cut past ABORT_FACTOR times the
-    budget is abandoned (:class:`CutTooLarge`) and counts as that many nodes."""
-    ok = None
-    lo, hi = threshold_px, None  # lo: known too many nodes (or the floor), hi: known to fit
-    t = threshold_px
-    first_fit = None  # the step of the first cut that fitted
-    for step in range(BUDGET_STEPS + MAX_LATE_STEPS):
-        cut, w, size = _trial_cut(data, camera, t, band, kern, budget)
-        if size <= budget:
-            ok, hi = (cut, w, t), t
-            first_fit = step if first_fit is None else first_fit
-            if t <= threshold_px or size >= (1.0 - BUDGET_TOLERANCE) * budget:
-                break
-        else:
-            lo = t
-        # Out of steps: stop.  Where no cut fitted yet (leaves larger than the threshold keep
-        # the count high, so it falls far slower than the threshold squared), keep doubling the
-        # threshold until one does, then narrow that last bracket LATE_BISECTIONS times.
-        if first_fit is not None and step >= max(BUDGET_STEPS, first_fit + LATE_BISECTIONS + 1) - 1:
-            break
-        if hi is None:
-            t = t * (2.0 if step + 1 >= BUDGET_STEPS else max(1.25, float(np.sqrt(size / budget))))
-        else:
-            t = float(np.sqrt(lo * hi))
-    if ok is None:  # even the coarsest threshold tried was too fine: the root level's cut
-        ok = (*select_cut_weights(data, camera, float("inf"), band, kern=kern), float("inf"))
-    return ok
-
-
-def _trial_cut(data: CutData, camera: Camera, t: float, band: float, kern, budget: int):
-    """``(rows, weights, nodes)`` of a budget search's trial at ``t`` (rows None: abandoned)."""
-    try:
-        cut, w = select_cut_weights(data, camera, t, band, kern=kern,
-                                    max_nodes=ABORT_FACTOR * int(budget))
-    except CutTooLarge:
-        return None, None, ABORT_FACTOR * int(budget) + 1
-    return cut, w, int(cut.size)
-
-
-def select_cut_budget_near(data: CutData, camera: Camera, budget: int, start: float,
-                           threshold_px: float = DEFAULT_THRESHOLD_PX, band: float = 1.0, kern=None,
-                           steps: int = NEAR_STEPS) -> tuple[np.ndarray, np.ndarray | None, float]:
-    """:func:`select_cut_budget` searched from ``start``, the threshold of a view nearby (the
-    last frame's): consecutive frames need about the same threshold, so two or three cuts
-    usually settle it where the search from the floor takes a dozen.  Steps by the ratio of the
-    count to the budget (at least NEAR_FACTOR) until bracketed, then halves the bracket on a log
-    scale; where ``steps`` cuts find none that fits, the search from the floor decides."""
-    ok = None
-    lo = hi = None
-    t = max(float(start), threshold_px) if np.isfinite(start) else threshold_px
-    for _ in range(steps):
-        cut, w, size = _trial_cut(data, camera, t, band, kern, budget)
-        if size <= budget:
-            ok, hi = (cut, w, t), t
-            if t <= threshold_px or size >= (1.0 - BUDGET_TOLERANCE) * budget:
-                break
-        else:
-            lo = t
-        if hi is None:
-            t *= max(NEAR_FACTOR, size / budget)
-        elif lo is None:
-            t = max(threshold_px, t / max(NEAR_FACTOR, float(np.sqrt(budget / max(size, 1)))))
-        else:
-            t = float(np.sqrt(lo * hi))
-    if ok is None:
-        return select_cut_budget(data, camera, budget, threshold_px, band, kern)
-    return ok
-

@@ -28,7 +28,8 @@ from ..errors import SceneFormatError
 from ..formats import ply
 from ..scene.splats import Scene, activate
 from .build import level_offsets
-from .cut import CutData, select_cut_budget, select_cut_weights
+from .cut import CutData, select_cut_weights
+from .cut_budget import select_cut_budget
 from .io import BOUNDS, ELEMENT
 from .selection import LodSettings
 
@@ -180,6 +181,30 @@ class LazyLod:
             self._recs[name] = np.frombuffer(self._mapped, elem.dtype(self.order), elem.count, start)
         return self._mapped, self._recs[name]
 
+    def sphere_columns(self):
+        """``(x, y, z, radius, anchor)`` of every node's sphere, straight from the file's
+        mapping (what the compiled cut reads: only the pages it touches come in, and
+        :meth:`drop_sphere_pages` lets them go; :attr:`bytes_read` does not count them), or None (see :meth:`_Centres.columns`)."""
+        mapped = self._records(BOUNDS)
+        if mapped is None:
+            return None
+        recs = mapped[1]
+        if recs.dtype.itemsize != 16 or any(recs.dtype[c] != np.dtype("<f4")
+                                            for c in ("x", "y", "z", "radius")):
+            return None
+        flat = recs.view(np.float32).reshape(-1, 4)
+        cols = [flat[:, recs.dtype.fields[c][1] // 4] for c in ("x", "y", "z", "radius")]
+        return (*cols, self.anchor)
+
+    def drop_sphere_pages(self, lo: int = 0, hi: int | None = None) -> None:
+        """Let the mapped sphere pages of node rows ``lo:hi`` (default: all) leave this
+        process's resident set (the system's page cache keeps them)."""
+        mapped = self._records(BOUNDS) if self._mapped else None
+        if mapped is not None and mapped[1].size:
+            hi = mapped[1].size if hi is None else min(int(hi), mapped[1].size)
+            if hi > lo:
+                _drop_pages(*mapped, int(lo), hi)
+
     @property
     def sphere_bytes(self) -> int:
         """Bytes of node spheres kept between cuts: none (they are read as a cut tests them)."""
@@ -271,6 +296,19 @@ class _Centres:
         if isinstance(key, tuple) and len(key) == 2 and key[0] == slice(None):
             return self.lod.spheres(key[1])[0]
         raise TypeError(f"lazy centres take [:, rows], not {key!r}")
+
+    def columns(self):
+        """:meth:`splatgl.lod.cut.CutData.columns` of the file: its mapped spheres' ``x, y,
+        z, radius`` (read-only float32 views, stored positions) and the anchor; None where
+        the file cannot be mapped or its spheres are not little-endian float32."""
+        return self.lod.sphere_columns()
+
+    #: Rows of the compiled cut's slices: at most this span of spheres (64 MiB) is mapped in
+    #: at once, however widely a level's candidates spread over the file.
+    slice_rows = 1 << 22
+
+    def release(self, lo: int, hi: int) -> None:
+        self.lod.drop_sphere_pages(lo, hi)
 
 
 class _Radius:

@@ -31,7 +31,8 @@ from ..order.cull import CullData
 from ..order.stage import OrderTimes, SortFn, cpu_sort, cull_for
 from ..renderers.quad import QuadRenderer
 from .build import LodTree
-from .cut import CutData, select_cut_budget, select_cut_budget_near
+from .cut import CutData
+from .cut_budget import select_cut_budget, select_cut_budget_near
 from .selection import PREFETCH_NODES_PER_LEAF, LodSettings, threshold_cut
 
 

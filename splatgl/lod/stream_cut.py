@@ -7,7 +7,7 @@ frame's; the frame's bytes over :func:`~splatgl.lod.budget.frame_bytes_per_splat
 splats a frame draws (:attr:`~splatgl.lod.budget.StreamPlan.cap`).  :func:`choose_cut` chooses
 the cut by screen-space error under ``min(--lod-budget, cap)``: the threshold cut (or the
 leaves it switches to) where it fits, else the finest cut within the cap
-(:func:`splatgl.lod.cut.select_cut_budget`), which is exactly the cut the in-memory level of
+(:func:`splatgl.lod.cut_budget.select_cut_budget`), which is exactly the cut the in-memory level of
 detail draws with that budget.  Every trial cut is abandoned once it passes a few times the cap
 (:class:`splatgl.lod.cut.CutTooLarge`), so choosing never reads the spheres of more than that.
 
@@ -23,13 +23,20 @@ import numpy as np
 
 from ..cameras.camera import Camera
 from ..gl.storage import gpu_bytes_per_splat
+from ..order import kernels
 from ..scene.settings import GpuStorage
 from .budget import StreamPlan, frame_bytes_per_splat, stream_plan
-from .cut import CutTooLarge, select_cut_budget, select_cut_weights
+from .cut import CutTooLarge, select_cut_weights
+from .cut_budget import select_cut_budget
 from .lazy import LazyLod
 from .selection import LodSettings, threshold_cut
 from .stream import LOADERS, PINNED_LEVELS
 
+#: Trees of more nodes than this wait for the compiled cut (numba's load, about a second from
+#: its on-disk cache) for their first view rather than search with NumPy: there a budget's
+#: search gathers and tests millions of spheres per trial in float64 temporaries (about 8 s and
+#: 700 MB at 100M splats); smaller ones take it once loaded.  The same cut either way.
+COMPILED_CUT_NODES = 1 << 22
 #: The threshold of the cut that stands for "the leaves" (every leaf in view).
 LEAVES_PX = 1e-30
 #: Sphere pages a streamed frame keeps between views: this many times 16 bytes a splat of the
@@ -79,8 +86,18 @@ def plan_for(lazy: LazyLod, memory: int, storage: GpuStorage | str = GpuStorage.
     return stream_plan(memory, frames * per_splat(lazy, storage), cache_need, held)
 
 
-def _capped(lazy: LazyLod, camera: Camera, lod: LodSettings, cap: int, asked: str) -> CutChoice:
-    rows, weights, t = select_cut_budget(lazy.cut_data, camera, cap, lod.threshold_px, lod.band)
+def cut_kernels(lazy: LazyLod):
+    """The compiled kernels for a streamed view's cut (:func:`splatgl.order.kernels.for_view`),
+    waited for on a tree of more than COMPILED_CUT_NODES nodes (unless the kernel policy says
+    otherwise), or None (NumPy's cut)."""
+    wait = int(lazy.offsets[-1]) > COMPILED_CUT_NODES and kernels.policy() == "auto"
+    return kernels.for_view(kernels.FROM_VIEW, True if wait else None)
+
+
+def _capped(lazy: LazyLod, camera: Camera, lod: LodSettings, cap: int, asked: str, kern
+            ) -> CutChoice:
+    rows, weights, t = select_cut_budget(lazy.cut_data, camera, cap, lod.threshold_px, lod.band,
+                                         kern)
     if not np.isfinite(t) or t > lod.threshold_px:
         note = (f"the memory bound made the cut coarser than {asked}: {rows.size:,} nodes at "
                 f"{t:.3g} px (the frame holds at most {cap:,} splats)")
@@ -93,19 +110,22 @@ def choose_cut(lazy: LazyLod, camera: Camera, lod: LodSettings, cap: int | None 
     """The cut a streamed frame draws for ``camera`` (no warm start): without ``cap`` the one
     :class:`~splatgl.lod.source.LodOrder` draws (the leaves where the threshold cut switches
     to them); with it, that cut where it has at most ``cap`` nodes, else the finest cut of at
-    most ``cap`` (``--lod-budget``'s cut with ``min(budget, cap)``), ``capped`` saying so."""
+    most ``cap`` (``--lod-budget``'s cut with ``min(budget, cap)``), ``capped`` saying so.
+    Compiled where :func:`cut_kernels` gives the kernels (the same cut)."""
     data = lazy.cut_data
+    kern = cut_kernels(lazy)
     if lod.budget is not None:
         if cap is not None and cap < lod.budget:
-            return _capped(lazy, camera, lod, cap, f"--lod-budget {lod.budget:,} asked")
-        rows, weights, _ = select_cut_budget(data, camera, lod.budget, lod.threshold_px, lod.band)
+            return _capped(lazy, camera, lod, cap, f"--lod-budget {lod.budget:,} asked", kern)
+        rows, weights, _ = select_cut_budget(data, camera, lod.budget, lod.threshold_px, lod.band,
+                                             kern)
         return CutChoice(rows, weights)
     asked = f"--lod-threshold {lod.threshold_px:g} px asked"
     try:
-        rows, weights, _ = threshold_cut(lazy, data, camera, lod, max_nodes=cap)
+        rows, weights, _ = threshold_cut(lazy, data, camera, lod, kern, max_nodes=cap)
         if rows is None:   # the leaves, every one in view (the in-memory path culls them by chunks)
-            return CutChoice(select_cut_weights(data, camera, LEAVES_PX, 1.0, max_nodes=cap)[0],
-                             None)
+            return CutChoice(select_cut_weights(data, camera, LEAVES_PX, 1.0, kern=kern,
+                                                max_nodes=cap)[0], None)
     except CutTooLarge:
-        return _capped(lazy, camera, lod, cap, asked)
+        return _capped(lazy, camera, lod, cap, asked, kern)
     return CutChoice(rows, weights)

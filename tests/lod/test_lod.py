@@ -14,7 +14,8 @@ from splatgl.cameras.poses import look_at
 from splatgl.formats import load_scene
 from splatgl.lod.build import build_hierarchy, level_offsets
 from splatgl.scene.quaternion import rotmat_to_quat
-from splatgl.lod.cut import CutData, select_cut, select_cut_budget
+from splatgl.lod.cut import CutData, select_cut
+from splatgl.lod.cut_budget import select_cut_budget
 from splatgl.lod.io import read_lod, write_lod
 from splatgl.lod.selection import LodSettings
 from splatgl.lod.source import lod_renderer

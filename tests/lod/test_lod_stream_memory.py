@@ -10,8 +10,8 @@ import pytest
 from splatgl.cli import main
 from splatgl.errors import SplatglError
 from splatgl.lod.budget import CACHE_SHARE, StreamPlan, stream_plan
-from splatgl.lod.cut import (ABORT_FACTOR, CutData, CutTooLarge, select_cut_budget,
-                             select_cut_weights)
+from splatgl.lod.cut import CutData, CutTooLarge, select_cut_weights
+from splatgl.lod.cut_budget import ABORT_FACTOR, select_cut_budget
 from splatgl.lod.frames import LodFrames
 from splatgl.lod.io import read_lod
 from splatgl.lod.lazy import LazyLod
@@ -203,3 +203,49 @@ def test_bench_memory_reports_the_cap(tmp_path, capsys, monkeypatch):
     report = json.loads(capsys.readouterr().out)
     assert 100 <= report["frame_cap"] < 200 and report["cut_nodes_median"] <= report["frame_cap"]
     assert report["capped"].startswith("the memory bound made the cut coarser")
+
+
+@pytest.mark.parametrize("slice_rows", [None, 7])
+def test_the_compiled_cut_reads_the_files_mapping_and_cuts_alike(tmp_path, compiled_kernels,
+                                                                 monkeypatch, slice_rows):
+    """The compiled cut of a lazily read tree (its spheres straight from the file's mapping,
+    the anchor taken off in the kernel, a level's candidates in slices of rows) gives the NumPy
+    lazy cut's rows and weight bits and the in-memory tree's, abandons a trial at the same
+    count, drives the budget's search to the same cut and threshold."""
+    if compiled_kernels is None:
+        pytest.skip("numba is not installed (the fast extra)")
+    from splatgl.cameras.camera import Camera
+    from splatgl.cameras.poses import look_at
+
+    path = _lod(tmp_path)
+    memory = CutData.from_tree(_tree_on_file_anchor(path))
+    pose = look_at(np.array([0.3, 0.2, 1.2]), np.zeros(3))
+    lenses = (Camera.fisheye(96, 64, 190.0, pose), Camera.orthographic(96, 64, 40.0, pose))
+    with LazyLod(path) as lazy:
+        assert lazy.cut_data.columns() is not None
+        if slice_rows is not None:   # a few parents a slice: every level in many slices
+            monkeypatch.setattr(type(lazy.cut_data.centres), "slice_rows", slice_rows)
+        for camera in (_camera(1.5), _camera(2.0, 0.4), _camera(0.2), *lenses):
+            for t, band in ((1.0, 1.0), (1.0, 2.0), (3.0, 2.0), (float("inf"), 1.0)):
+                want = select_cut_weights(lazy.cut_data, camera, t, band)
+                for data in (lazy.cut_data, memory):
+                    got = select_cut_weights(data, camera, t, band, kern=compiled_kernels)
+                    assert np.array_equal(got[0], want[0])
+                    assert (got[1] is None) == (want[1] is None)
+                    if want[1] is not None:
+                        assert np.array_equal(got[1].view(np.uint32), want[1].view(np.uint32))
+            full = select_cut_weights(lazy.cut_data, camera, 1.0, 2.0)[0]
+            if full.size > 10:
+                counts = []
+                for kern in (None, compiled_kernels):
+                    with pytest.raises(CutTooLarge) as info:
+                        select_cut_weights(lazy.cut_data, camera, 1.0, 2.0, kern=kern,
+                                           max_nodes=full.size // 3)
+                    counts.append(info.value.nodes)
+                assert counts[0] == counts[1]
+                budget = max(1, full.size // 5)
+                a = select_cut_budget(lazy.cut_data, camera, budget, 1.0, 2.0)
+                b = select_cut_budget(lazy.cut_data, camera, budget, 1.0, 2.0,
+                                      kern=compiled_kernels)
+                assert np.array_equal(a[0], b[0]) and a[2] == b[2]
+                assert np.array_equal(a[1], b[1])
