@@ -106,7 +106,7 @@ def add_scale_lod_arguments(p: argparse.ArgumentParser) -> None:
 
 
 #: Options of the other benchmarks that --scale --lod does not read.
-_NOT_SCALE_LOD = ("sh3_sizes", "lod_thresholds", "lod_budgets", "lod_blend", "lod_paths", "frames")
+_NOT_SCALE_LOD = ("sh3_sizes", "lod_thresholds", "lod_budgets", "lod_blend", "lod_paths")
 
 
 def run_scale_lod_command(args: argparse.Namespace) -> int:
@@ -120,7 +120,7 @@ def run_scale_lod_command(args: argparse.Namespace) -> int:
     if given:
         raise SplatglError(f"{', '.join(given)}: not read by --scale --lod (it measures the "
                            "default cut of SH0 scenes; the options are --sizes, --width, --height, "
-                           "--memory, --keep-scenes, --scratch, --out)")
+                           "--memory, --frames, --keep-scenes, --scratch, --out)")
     sizes = parse_sizes(args.sizes, SIZES, "--sizes")
     if not sizes:
         raise SplatglError("--sizes: --scale --lod needs at least one size")
@@ -128,6 +128,7 @@ def run_scale_lod_command(args: argparse.Namespace) -> int:
     check_out_folder(args, ("scale-lod.json", "scale-lod.png"))   # before any measuring
     options = ScaleLodOptions(sizes=sizes, memory=memory, width=args.width or 1280,
                               height=args.height or 720, scratch=args.scratch,
+                              path_frames=args.frames or ScaleLodOptions.path_frames,
                               keep_scenes=args.keep_scenes or args.scratch is not None)
     machine = probe_machine()
     print(describe(machine), flush=True)

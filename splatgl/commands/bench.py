@@ -80,7 +80,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--width", type=positive_int, default=None, help="image width (default 1280; quick 160)")
     p.add_argument("--height", type=positive_int, default=None, help="image height (default 720; quick 120)")
     p.add_argument("--frames", type=positive_int, default=None,
-                   help="timed frames per row (default 12; quick 4)")
+                   help="timed frames per row (default 12; quick 4); with --scale --lod: frames "
+                        "of its path step, whose memory after each frame is recorded (default 60)")
     p.add_argument("--groups", default=None,
                    help="only these comma-separated groups of rows: " + ", ".join(_group_names())
                         + " (default and limit always run)")

@@ -20,7 +20,7 @@ from splatgl.commands._common import demo_scene_path
 from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
 
-STEPS = ("scene", "build", "open", "frame", "far", "full", "flight")
+STEPS = ("scene", "build", "open", "frame", "far", "full", "flight", "path")
 
 
 def _refused(capsys, argv, message):
@@ -125,9 +125,9 @@ def test_keep_scenes(tmp_path, monkeypatch, shared_scenes):
 
 
 def test_refusals(tmp_path, capsys, monkeypatch):
-    _refused(capsys, ["bench", "--scale", "--lod", "--frames", "3"],
-             "splatgl: error: --frames: not read by --scale --lod (it measures the default cut of "
-             "SH0 scenes; the options are --sizes, --width, --height, --memory, "
+    _refused(capsys, ["bench", "--scale", "--lod", "--lod-thresholds", "3"],
+             "splatgl: error: --lod-thresholds: not read by --scale --lod (it measures the default "
+             "cut of SH0 scenes; the options are --sizes, --width, --height, --memory, --frames, "
              "--keep-scenes, --scratch, --out)")
     _refused(capsys, ["bench", "--scale", "--keep-scenes"],
              "splatgl: error: --keep-scenes: an option of the out-of-core scale benchmark; add "
@@ -174,7 +174,7 @@ def test_memory_is_the_one_budget_option(monkeypatch, capsys):
 def test_end_to_end_tiny_sizes(tmp_path, shared_scenes):
     """Every step run for real at 20k and 50k splats (a fast flight)."""
     options = ScaleLodOptions(sizes=(20_000, 50_000), memory=1 << 30, width=96, height=64,
-                              speed=20.0, block=20_000)
+                              speed=20.0, block=20_000, path_frames=3)
     report = run_scale_lod(options, tmp_path / "out", {"cpu": "test"}, log=lambda m: None)
     for row in report["rows"]:
         for step in STEPS:
@@ -186,6 +186,8 @@ def test_end_to_end_tiny_sizes(tmp_path, shared_scenes):
         assert row["far"]["cut_nodes"] < row["frame"]["cut_nodes"]   # a cut, not the leaves
         assert row["flight"]["moving_frames"] >= 1 and row["flight"]["reached_exact"]
         assert row["flight"]["rest_to_exact_s"] >= 0 and row["flight"]["samples"]
+        path = row["path"]
+        assert path["frames"] == len(path["rss_mb"]) == 3 and path["rss_max_mb"] > 0
     assert json.loads((tmp_path / "out" / "scale-lod.json").read_text())["rows"] == report["rows"]
 
 
@@ -261,3 +263,21 @@ def test_flight_figures_against_the_viewers_targets():
         "(<= 15: met), peak 879 MiB of --memory 2048 MiB (met)",
         "flight 5,000,000: moving 4.0 fps median, p10 2.0 (>= 10: NOT met), exact - s after rest "
         "(<= 15: NOT met), peak 2441 MiB of --memory 2048 MiB (NOT met)"]
+
+
+def test_path_memory_against_flat():
+    """A path with its per-frame memory gets one line: flat when its second half's peak is
+    within PATH_FLAT of its first half's."""
+    from splatgl.measure.bench.scale_lod_report import table
+
+    def path(first, second):
+        return {"frames": 60, "frame_s_median": 4.24, "rss_mb": [1000.0], "rss_first_mb": 1000.0,
+                "rss_max_first_half_mb": first, "rss_max_second_half_mb": second}
+
+    rows = [{"splats": 20_000_000, "path": path(1400.0, 1420.0)},
+            {"splats": 100_000_000, "path": path(1400.0, 1600.0)}]
+    assert table(rows).splitlines()[-2:] == [
+        "path 20,000,000: 60 frames, 4.2 s a frame, resident 1000 MB after the first, at most "
+        "1400 MB in the first half and 1420 MB in the second (flat within 5%: met)",
+        "path 100,000,000: 60 frames, 4.2 s a frame, resident 1000 MB after the first, at most "
+        "1400 MB in the first half and 1600 MB in the second (flat within 5%: NOT met)"]

@@ -8,9 +8,10 @@ to exit: a cold start) is measured here too.  Steps: the scene file, the out-of-
 detail under ``memory`` (``splatgl lod --memory``), the lazy open, the first frame of the
 whole-scene view streamed under ``memory``, the same for the far view (6x the framing
 distance), both views at full detail where the scene fits in memory (else "does not fit") and
-the PSNRs, and the viewer's flight over the streamed scene (its own session and frame-time
+the PSNRs, the viewer's flight over the streamed scene (its own session and frame-time
 budget, ``view --memory``'s: moving frame rate, time from rest to the exact frame, resident
-memory and chunks loaded over time).
+memory and chunks loaded over time), and a path of ``path_frames`` exact frames orbiting the
+scene (``render --path --memory``'s: the resident memory after each frame).
 
 Every result is written to ``scale-lod.json`` as it is made (a Ctrl-C keeps what was
 measured), and ``scale-lod.png`` (memory and time against size, log axes; the flight's memory
@@ -61,8 +62,9 @@ class ScaleLodOptions:
     temp dir); a size's scene and level of detail already there, complete, are used again
     (:mod:`.scale_lod_reuse`; a stale one is refused).  keep_scenes: leave them there.
     available: bytes of memory a full-detail render may use (default: MemAvailable).  speed:
-    the flight's speed (tests fly faster).  branching: of the level of detail.  block: rows of
-    the scene written at a time."""
+    the flight's speed (tests fly faster).  path_frames: frames of the path step (a render
+    --path streamed under ``memory``: whether its memory stays flat; 0 leaves it out).
+    branching: of the level of detail.  block: rows of the scene written at a time."""
 
     sizes: tuple[int, ...] = SIZES
     memory: int = field(default_factory=lambda: default_budget()[0])
@@ -72,6 +74,7 @@ class ScaleLodOptions:
     keep_scenes: bool = False
     available: int | None = None
     speed: float = 1.0
+    path_frames: int = 60
     branching: int = 4
     block: int = 1_000_000
 
@@ -198,6 +201,7 @@ def measure_size(n: int, options: ScaleLodOptions, folder: Path, row: dict, save
     steps += [("full", {"image": str(images["full"]), "far_image": str(images["full far"])})
               ] if fits else []
     steps += [("flight", {"speed": options.speed})]
+    steps += [("path", {"frames": options.path_frames})] if options.path_frames else []
     if not fits:
         row["full"] = {"skipped": why}
     reused = reused_steps(folder, n, found)

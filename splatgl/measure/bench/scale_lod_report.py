@@ -13,7 +13,7 @@ from .scale_report import loglog_slope
 #: (label, step, field) of the memory series: each step's peak resident memory.
 MEMORY = (("scene file", "scene"), ("LOD build", "build"), ("open", "open"),
           ("first frame", "frame"), ("far view frame", "far"), ("flight", "flight"),
-          ("full detail", "full"))
+          ("path", "path"), ("full detail", "full"))
 #: (label, step, field, scale) of the time series (seconds).
 TIMES = (("scene file (s)", "scene", "seconds", 1.0), ("LOD build (s)", "build", "seconds", 1.0),
          ("open (s)", "open", "seconds", 1.0), ("first frame, cold (s)", "frame", "wall_s", 1.0),
@@ -50,6 +50,9 @@ def _reused(r: dict, step: str, field: str, fmt: str) -> str:
 #: The viewer's targets (issue 41): moving at 10 frames a second or more at 1280x720 (the
 #: median), exact within 15 s of rest, the flight's peak resident memory under ``--memory``.
 TARGET_FPS, TARGET_EXACT_S = 10.0, 15.0
+#: A path's memory is flat when its second half's peak resident memory is within this share of
+#: its first half's.
+PATH_FLAT = 0.05
 
 
 def targets(rows: list[dict], memory: int | None) -> list[str]:
@@ -69,6 +72,15 @@ def targets(rows: list[dict], memory: int | None) -> list[str]:
             parts.append(f"peak {peak * 1024e3 / 2**20:.0f} MiB of --memory "
                          f"{memory / 2**20:.0f} MiB ({ok(peak * 1024e3 <= memory)})")
         lines.append(f"flight {r['splats']:,}: " + ", ".join(parts))
+    for r in rows:
+        p = r.get("path", {})
+        if "rss_mb" in p:
+            first, second = p["rss_max_first_half_mb"], p["rss_max_second_half_mb"]
+            flat = second <= first * (1 + PATH_FLAT)
+            lines.append(f"path {r['splats']:,}: {p['frames']} frames, {p['frame_s_median']:.1f} s "
+                         f"a frame, resident {p['rss_first_mb']:.0f} MB after the first, at most "
+                         f"{first:.0f} MB in the first half and {second:.0f} MB in the second "
+                         f"(flat within {PATH_FLAT:.0%}: {'met' if flat else 'NOT met'})")
     return lines
 
 

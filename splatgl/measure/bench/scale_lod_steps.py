@@ -152,6 +152,75 @@ def step_frame(a: dict) -> dict:
             "renderer": choice.text()}
 
 
+#: The path step's arc: frames orbit the framing's centre this many degrees, at the default
+#: camera's distance and elevation (every frame a capped whole-scene view, the chunks it needs
+#: changing as the view turns).
+PATH_ARC = 90.0
+
+
+def _rss_mb(field: str = "VmRSS") -> float:
+    """``field`` of /proc/self/status in MB (kB / 1000, as :func:`~.scale.peak_rss_mb`)."""
+    for line in open("/proc/self/status"):
+        if line.startswith(field + ":"):
+            return int(line.split()[1]) / 1e3
+    return 0.0
+
+
+def _reset_peak() -> bool:
+    """Reset this process's peak resident memory (VmHWM; Linux 4.0 on), False where it cannot."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def step_path(a: dict) -> dict:
+    """A ``frames``-frame path render streamed under ``memory`` (``render --path --memory``'s
+    frames: :class:`~splatgl.lod.stream_frames.StreamFrames`, each exact), the process's peak
+    resident memory during each frame (VmHWM reset before it; where it cannot be reset, the
+    resident memory after it): whether it stays flat."""
+    from ...cameras.poses import orbit
+    from ...lod.lazy import LazyLod
+    from ...lod.selection import LodSettings
+    from ...lod.stream_frames import StreamFrames
+    from ...renderers import auto
+    from ...scene.settings import RenderSettings
+
+    with LazyLod(a["lod"]) as lazy:
+        framing, camera = _camera(lazy, a)
+    lo, hi = framing.robust_bounds
+    centre = 0.5 * (np.asarray(lo) + np.asarray(hi))
+    offset = camera.center - centre
+    dist = float(np.linalg.norm(offset))
+    elevation = float(np.degrees(np.arcsin(-offset[1] / dist)))   # orbit's up is -y
+    start = float(np.degrees(np.arctan2(-offset[0], offset[2])))   # its azimuth 0 is +z
+    n = int(a["frames"])
+    cameras = [camera.with_pose(orbit(centre, dist, start + PATH_ARC * i / max(1, n - 1),
+                                      elevation)) for i in range(n)]
+    choice = auto.choose(settings=RenderSettings())
+    rss, seconds = [], []
+    before = peak_rss_mb()   # the peaks are reset below: the step's own is their largest
+    with StreamFrames(a["lod"], RenderSettings(), LodSettings(), int(a["memory"]),
+                      framing=framing, kind=choice.kind) as frames:
+        for cam in cameras:
+            peak = _reset_peak()
+            t0 = time.perf_counter()
+            frames.render_view(cam)
+            seconds.append(time.perf_counter() - t0)
+            rss.append(_rss_mb("VmHWM" if peak else "VmRSS"))
+        summary = frames.summary()
+    before = max(before, peak_rss_mb())   # opening and closing (or all, where not reset)
+    half = max(1, n // 2)
+    return {"frames": n, "frame_s_median": float(np.median(seconds)), "rss_mb": rss,
+            "rss_is": "peak during each frame" if peak else "resident after each frame",
+            "rss_first_mb": rss[0], "rss_last_mb": rss[-1], "rss_max_mb": max(rss),
+            "rss_max_first_half_mb": max(rss[:half]), "rss_max_second_half_mb": max(rss[half:] or rss),
+            "streaming": summary, "renderer": choice.text(),
+            "peak_rss_mb": max([before, *rss])}
+
+
 def step_full(a: dict) -> dict:
     from ...api import Renderer
     from ...formats import load_scene
@@ -218,14 +287,15 @@ def _levels(result) -> dict:
 
 
 STEPS = {"scene": step_scene, "build": step_build, "open": step_open, "frame": step_frame,
-         "far": step_frame, "full": step_full, "flight": step_flight}
+         "far": step_frame, "full": step_full, "flight": step_flight, "path": step_path}
 
 
 def main(argv: list[str]) -> int:
     step, args = argv[0], json.loads(argv[1])
     t0 = time.perf_counter()
     result = STEPS[step](args)
-    result.update(seconds=time.perf_counter() - t0, peak_rss_mb=peak_rss_mb(), pid=os.getpid())
+    result.update(seconds=time.perf_counter() - t0, pid=os.getpid(),
+                  peak_rss_mb=max(peak_rss_mb(), result.get("peak_rss_mb", 0.0)))
     print(json.dumps(result), flush=True)
     return 0
 
