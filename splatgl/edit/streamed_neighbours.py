@@ -18,7 +18,8 @@ otherwise the in-memory set (docs/editing.md gives the measurements).
 alone (:meth:`Decimate.apply`) to its share of the target (the target times the chunk's share
 of the splats, rounded so the shares sum to the target; a chunk holds at least half a sorted
 run and takes consecutive runs until its share, and what it leaves the rest, are a splat or
-more): the count is the in-memory count, but
+more; a target below the number of chunks is refused in one line, since chunks would then pile
+up unmerged past the budget): the count is the in-memory count, but
 no pair crosses a chunk boundary and the cheapest pairs are chosen per chunk, not over the
 scene, so the result differs from the in-memory decimation (measured as image PSNR, said once
 in the command's output).  The merged rows come chunk by chunk, in Morton order.
@@ -247,12 +248,18 @@ def decimate_chunks(op: Decimate, blocks, kind, coeffs: int, total: int, folder,
     """The decimated Scenes of the splats ``blocks()`` yields (``total`` of them, ``coeffs``
     SH coefficients), chunk by chunk (see the module notes), and the target."""
     check_kind(kind)
+    target = op.target(total)
+    chunks = -(-total // max(1, run))
+    if 0 < target < chunks:   # a chunk's share under one splat: chunks would pile up unmerged
+        raise SplatglError(f"--decimate {op.describe().split(' by ')[0]} over --memory leaves "
+                           f"{target:,} splats, fewer than the {chunks:,} spatial chunks of about "
+                           f"{run:,} splats it merges within (one splat each at least): ask for "
+                           f"at least {chunks:,}, or give more --memory")
     lo, hi, _ = _box(lambda: (b.means for b in _checked(blocks())))
 
     dtype = record_dtype(kind, coeffs)
     recs = (to_records(b, morton_codes_clamped(b.means.astype(np.float64), lo, hi), dtype)
             for b in blocks())
-    target = op.target(total)
     done = cum = 0
     pending: list[np.ndarray] = []
     for data in sorted_runs(folder, dtype, recs, run, run):

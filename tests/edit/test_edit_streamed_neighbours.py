@@ -87,12 +87,24 @@ def test_a_decimation_that_merges_nothing_streams_every_row(tmp_path, rows):
 
 
 def test_decimate_chunk_shares_sum_to_the_target(tmp_path, rows):
+    """The chunks' shares sum to the target down to one splat a chunk (300 splats in chunks of
+    37: 9); below that the chunks would pile up unmerged, so it is refused in one line naming
+    the limit, and nothing is written."""
     rows.n = 37
     src = _ply(tmp_path, _clusters(300, 0))
-    for op in (Decimate(percent=12.5), Decimate(count=222), Decimate(percent=1),
-               Decimate(percent=99), Decimate(count=1)):
+    for op in (Decimate(percent=12.5), Decimate(count=222), Decimate(percent=3),
+               Decimate(percent=99), Decimate(count=9)):
         got = edit_files([src], tmp_path / "o.ply", [op], memory=1, force=True)
         assert got.count == op.target(300)
+    (tmp_path / "o.ply").unlink()
+    for op, asked in ((Decimate(count=8), "8 splats"), (Decimate(percent=1), "1%")):
+        with pytest.raises(SplatglError) as err:
+            edit_files([src], tmp_path / "o.ply", [op], memory=1)
+        assert str(err.value) == (
+            f"--decimate to {asked} over --memory leaves {op.target(300)} splats, fewer than the "
+            "9 spatial chunks of about 37 splats it merges within (one splat each at least): ask "
+            "for at least 9, or give more --memory")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
 
 
 def test_cli_edit_streams_floaters_and_says_the_decimation_once(tmp_path, capsys, rows):
