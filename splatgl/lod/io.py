@@ -24,6 +24,18 @@ BOUNDS = "lod_bound"
 #: A level-of-detail file's name ends so (any ``.ply`` is read, but not ``.compressed.ply``).
 SUFFIX = ".lod.ply"
 _COMMENT = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
+#: The header comment with the anchor (:func:`COMMENTS`).
+ANCHOR_COMMENT = re.compile(rb"^comment lod anchor (\S+) (\S+) (\S+)\s*$", re.M)
+
+
+def stored_anchor(head: bytes) -> np.ndarray | None:
+    """(3,) float64 anchor a ``.lod.ply`` header (bytes) stores, or None (written before it)."""
+    match = ANCHOR_COMMENT.search(head)
+    if match is None:
+        return None
+    anchor = np.array([float(v) for v in match.groups()])
+    anchor.flags.writeable = False
+    return anchor
 
 
 def check_lod_name(path: Path) -> None:
@@ -85,7 +97,8 @@ def is_lod_file(path: Path) -> bool:
 
 
 def read_lod(path: Path, progress=None) -> LodTree:
-    """Read a ``.lod.ply`` back into a :class:`LodTree` (radii recomputed from the nodes)."""
+    """Read a ``.lod.ply`` back into a :class:`LodTree` (radii recomputed from the nodes), its
+    nodes anchored where the file says (:func:`stored_anchor`)."""
     path = Path(path)
     leaves = ply.read(path, progress=progress)
     with open(path, "rb") as fh:
@@ -124,5 +137,8 @@ def read_lod(path: Path, progress=None) -> LodTree:
                   np.concatenate([leaves.log_scales, inner.log_scales]),
                   np.concatenate([leaves.opacity_logits, inner.opacity_logits]),
                   np.concatenate([leaves.sh, inner.sh]), leaves.kind)
+    anchor = stored_anchor(head)
+    if anchor is not None:   # the anchor the lazy reader's cut and streamed frames use, so an
+        nodes.__dict__["anchor"] = anchor   # in-memory frame of this file is their frame
     return LodTree(nodes, offsets, branching, np.arange(leaves.count),
                    bounding_radii(nodes, offsets, branching))

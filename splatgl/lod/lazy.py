@@ -30,7 +30,7 @@ from ..scene.splats import Scene, activate
 from .build import level_offsets
 from .cut import CutData, select_cut_weights
 from .cut_budget import select_cut_budget
-from .io import BOUNDS, ELEMENT
+from .io import BOUNDS, ELEMENT, stored_anchor
 from .selection import LodSettings
 
 #: Node spheres per page (16 bytes each: 4 KiB), the unit they are read in.
@@ -40,7 +40,6 @@ SPHERE_GROUP = 4096
 #: Node rows this close are read together (one read, the rows between discarded).
 NODE_GAP = 8
 _BRANCHING = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
-_ANCHOR = re.compile(rb"^comment lod anchor (\S+) (\S+) (\S+)\s*$", re.M)
 
 
 class LazyLod:
@@ -63,7 +62,7 @@ class LazyLod:
             raise SceneFormatError(self.path, "not a binary splatgl LOD file (no 'comment lod "
                                               "branching B' line); build one with 'splatgl lod'")
         self.branching = int(match.group(1))
-        anchor = _ANCHOR.search(head)
+        anchor = stored_anchor(head)
         self.elements = {}  # name -> (byte offset, element)
         offset = header.body_offset
         for e in header.elements:
@@ -78,7 +77,7 @@ class LazyLod:
         if self.elements[BOUNDS][1].count != self.offsets[-1]:
             raise SceneFormatError(self.path, f"{self.elements[BOUNDS][1].count} spheres for "
                                               f"{self.offsets[-1]} nodes", BOUNDS)
-        self.anchor = np.array([float(v) for v in anchor.groups()])
+        self.anchor = anchor
         self._fd = os.open(self.path, os.O_RDONLY)
         self._last_spheres: tuple | None = None   # (rows, centres, radii) of the last read
         self._mapped = None   # the file mapped read-only (_records), False: it cannot be
@@ -194,7 +193,7 @@ class LazyLod:
             return None
         flat = recs.view(np.float32).reshape(-1, 4)
         cols = [flat[:, recs.dtype.fields[c][1] // 4] for c in ("x", "y", "z", "radius")]
-        return (*cols, self.anchor)
+        return (*cols, np.array(self.anchor))   # writable: the type warm_up compiled
 
     def drop_sphere_pages(self, lo: int = 0, hi: int | None = None) -> None:
         """Let the mapped sphere pages of node rows ``lo:hi`` (default: all) leave this

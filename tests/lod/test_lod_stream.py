@@ -40,21 +40,13 @@ def cache_plan(cache: int, cap: int | None = None, per_splat: int = 100):
 _lod, _camera = stream_lod_file, stream_camera   # the streaming tests' scene and views
 
 
-def _tree_on_file_anchor(path):
-    """The in-memory tree with the anchor the file stores (the streamed frames subtract it)."""
-    tree = read_lod(path)
-    with LazyLod(path) as lazy:
-        tree.nodes.__dict__["anchor"] = lazy.anchor
-    return tree
-
-
 @pytest.mark.parametrize("lod", [LodSettings(), LodSettings(threshold_px=2.0, band=1.0),
                                  LodSettings(budget=300)], ids=["blend", "hard", "budget"])
 def test_streamed_frames_are_the_in_memory_lod_frames(tmp_path, lod):
     """Far and middle views (cuts of coarse nodes) and a budget's cut: identical images, with
     chunks of 64 rows under a budget smaller than the file (so chunks are evicted on the way)."""
     path = _lod(tmp_path)
-    tree = _tree_on_file_anchor(path)
+    tree = read_lod(path)
     cams = [_camera(8.0), _camera(3.0, 0.5), _camera(6.0, -1.0)]
     with LodFrames(tree, SETTINGS, lod) as ref, \
             StreamFrames(path, SETTINGS, lod, 96 << 10, chunk_rows=64, framing=tree.nodes,
@@ -69,7 +61,7 @@ def test_streamed_close_view_draws_the_leaves_in_view(tmp_path):
     """Where the in-memory cut switches to every leaf, the stream draws the leaves whose sphere
     is in view: the same image but for splats just outside the frustum (guard band)."""
     path = _lod(tmp_path)
-    tree = _tree_on_file_anchor(path)
+    tree = read_lod(path)
     with LodFrames(tree, SETTINGS, LodSettings()) as ref, \
             StreamFrames(path, SETTINGS, LodSettings(), 1 << 20, chunk_rows=64,
                          framing=tree.nodes, plan=cache_plan(1 << 20)) as st:
@@ -93,7 +85,7 @@ def test_a_path_evicts_least_recently_used_chunks_under_the_budget(tmp_path):
     """A fly-through under a budget of a fraction of the file: every chunk load is checked
     against the budget (instrumented), chunks are evicted, the frames stay exact."""
     path = _lod(tmp_path)
-    tree = _tree_on_file_anchor(path)
+    tree = read_lod(path)
     budget = 64 << 10
     cams = [_camera(4.0 - 0.4 * i, -1.0 + 0.25 * i) for i in range(8)]
     with LodFrames(tree, SETTINGS, LodSettings(band=1.0)) as ref, \
@@ -386,3 +378,14 @@ def test_bench_memory_times_a_streamed_orbit(tmp_path, capsys):
     assert "--memory: give one level-of-detail file" in capsys.readouterr().err
     assert main(["bench", str(path), "--memory", "4M", "--lod"]) == 2
     assert "not with --lod" in capsys.readouterr().err
+
+
+def test_a_read_tree_is_anchored_where_the_file_says(tmp_path):
+    """read_lod anchors the nodes at the file's stored anchor (the leaves' box centre), which
+    the lazy reader's cut and the streamed frames subtract, not at the box of every node: so an
+    in-memory frame of a .lod.ply is its streamed frame (the cut at the same threshold)."""
+    path = _lod(tmp_path)
+    tree = read_lod(path)
+    with LazyLod(path) as lazy:
+        assert np.array_equal(tree.nodes.anchor, lazy.anchor)
+        assert not np.array_equal(lazy.anchor, tree.nodes.subset(slice(None)).anchor)

@@ -34,12 +34,6 @@ def _plan(cap: int, cache: int = 1 << 20, per_splat: int = 100) -> StreamPlan:
                       frame=cap * per_splat, per_splat=per_splat)
 
 
-def _tree_on_file_anchor(path):
-    tree = read_lod(path)
-    with LazyLod(path) as lazy:
-        tree.nodes.__dict__["anchor"] = lazy.anchor
-    return tree
-
 
 def test_the_budget_is_split_between_chunks_and_frame():
     """What the process holds and the draw's reserve come off first; the chunk cache takes
@@ -93,7 +87,7 @@ def test_capped_frames_are_the_in_memory_budget_frames(tmp_path):
     cap: exactly the in-memory LOD's frame with ``--lod-budget cap``; it is said once, with the
     numbers; a view that fits is not capped."""
     path = _lod(tmp_path)
-    tree = _tree_on_file_anchor(path)
+    tree = read_lod(path)
     cap = 200
     cams = [_camera(1.5), _camera(2.0, 0.4)]
     with LodFrames(tree, SETTINGS, LodSettings(budget=cap)) as ref, \
@@ -173,7 +167,7 @@ def test_spheres_read_mapped_or_by_pages_alike_and_kept_nowhere(tmp_path):
     pages where it cannot be mapped, the same values; nothing kept between calls beyond the
     last read; the cut over them is the in-memory tree's (the candidates alone)."""
     path = _lod(tmp_path)
-    tree = _tree_on_file_anchor(path)
+    tree = read_lod(path)
     with LazyLod(path) as mapped, LazyLod(path) as paged:
         paged._mapped = False
         rows = np.unique(np.random.default_rng(1).integers(0, int(mapped.offsets[-1]), 700))
@@ -218,7 +212,7 @@ def test_the_compiled_cut_reads_the_files_mapping_and_cuts_alike(tmp_path, compi
     from splatgl.cameras.poses import look_at
 
     path = _lod(tmp_path)
-    memory = CutData.from_tree(_tree_on_file_anchor(path))
+    memory = CutData.from_tree(read_lod(path))
     pose = look_at(np.array([0.3, 0.2, 1.2]), np.zeros(3))
     lenses = (Camera.fisheye(96, 64, 190.0, pose), Camera.orthographic(96, 64, 40.0, pose))
     with LazyLod(path) as lazy:
