@@ -89,9 +89,10 @@ def plan_for(lazy: LazyLod, memory: int, storage: GpuStorage | str = GpuStorage.
 def cut_kernels(lazy: LazyLod):
     """The compiled kernels for a streamed view's cut (:func:`splatgl.order.kernels.for_view`),
     waited for on a tree of more than COMPILED_CUT_NODES nodes (unless the kernel policy says
-    otherwise), or None (NumPy's cut)."""
-    wait = int(lazy.offsets[-1]) > COMPILED_CUT_NODES and kernels.policy() == "auto"
-    return kernels.for_view(kernels.FROM_VIEW, True if wait else None)
+    otherwise), else the ones already loaded, or None (NumPy's cut)."""
+    if int(lazy.offsets[-1]) > COMPILED_CUT_NODES and kernels.policy() == "auto":
+        return kernels.for_view(kernels.FROM_VIEW, True)
+    return kernels.for_view(1)   # whatever is loaded already; a small tree's cut asks for none
 
 
 def _capped(lazy: LazyLod, camera: Camera, lod: LodSettings, cap: int, asked: str, kern

@@ -243,3 +243,26 @@ def test_the_compiled_cut_reads_the_files_mapping_and_cuts_alike(tmp_path, compi
                                       kern=compiled_kernels)
                 assert np.array_equal(a[0], b[0]) and a[2] == b[2]
                 assert np.array_equal(a[1], b[1])
+
+
+def test_a_large_trees_streamed_cut_waits_for_the_compiled_cut(tmp_path, monkeypatch,
+                                                                compiled_kernels):
+    """Past COMPILED_CUT_NODES nodes a streamed view's cut waits for the compiled kernels (a
+    NumPy budget search there takes seconds); a smaller tree's takes what is loaded, and the
+    kernel policy "off" gives NumPy's everywhere."""
+    from splatgl.lod import stream_cut
+    from splatgl.order import kernels
+
+    path = _lod(tmp_path)
+    with LazyLod(path) as lazy:
+        if compiled_kernels is not None:
+            monkeypatch.setattr(stream_cut, "COMPILED_CUT_NODES", 10)
+            assert stream_cut.cut_kernels(lazy) is compiled_kernels
+            monkeypatch.setattr(stream_cut, "COMPILED_CUT_NODES", int(lazy.offsets[-1]))
+            assert stream_cut.cut_kernels(lazy) is compiled_kernels   # loaded already
+        monkeypatch.setattr(stream_cut, "COMPILED_CUT_NODES", 10)
+        kernels.set_policy("off")
+        try:
+            assert stream_cut.cut_kernels(lazy) is None
+        finally:
+            kernels.set_policy("auto")
