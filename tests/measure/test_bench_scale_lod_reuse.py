@@ -56,7 +56,7 @@ def _run(scratch: Path, n: int = N) -> dict:
 def test_a_second_run_reuses_the_scene_and_its_build(tmp_path, steps):
     scratch = tmp_path / "scratch"
     first = _run(scratch)
-    assert steps == ["scene", "build", "open", "frame", "far", "flight"]
+    assert steps == ["scene", "build", "open", "frame", "far", "flight", "path"]
     scene, lod = scratch / f"scale-{N}.ply", scratch / f"scale-{N}.lod.ply"
     record = json.loads((scratch / f"build-{N}.json").read_text())
     assert record == {"scene": first["scene"], "build": first["build"]}
@@ -64,7 +64,7 @@ def test_a_second_run_reuses_the_scene_and_its_build(tmp_path, steps):
     mtimes = [p.stat().st_mtime_ns for p in (scene, lod)]
     steps.clear()
     row = _run(scratch)
-    assert steps == ["open", "frame", "far", "flight"]   # no scene, no build
+    assert steps == ["open", "frame", "far", "flight", "path"]   # no scene, no build
     assert [p.stat().st_mtime_ns for p in (scene, lod)] == mtimes
     assert row["scene"] == {**first["scene"], "reused": True, "file": str(scene)}
     assert row["build"] == {**first["build"], "reused": True, "file": str(lod)}
@@ -81,7 +81,7 @@ def test_a_scene_without_its_level_of_detail_is_reused_and_built(tmp_path, steps
     (scratch / f"scale-{N}.lod.ply").unlink()
     steps.clear()
     row = _run(scratch)
-    assert steps == ["build", "open", "frame", "far", "flight"]
+    assert steps == ["build", "open", "frame", "far", "flight", "path"]
     assert row["scene"]["reused"] is True and "reused" not in row["build"]
     assert (scratch / f"scale-{N}.lod.ply").is_file()
 
@@ -129,7 +129,7 @@ def test_a_stale_file_is_refused_in_one_line(tmp_path, steps, monkeypatch, capsy
         find(scratch, N, 8)
     assert find(scratch, N, 4) == Found(True, True)
     lod.write_bytes(b"")
-    assert steps == ["scene", "build", "open", "frame", "far", "flight"]   # the other folder's
+    assert steps == ["scene", "build", "open", "frame", "far", "flight", "path"]   # the other folder's
     # the CLI: one line, before anything is measured
     monkeypatch.setattr(machine, "probe_machine", lambda: {"cpu": "test"})
     monkeypatch.setattr(machine, "describe", lambda m: "test machine")
@@ -137,7 +137,7 @@ def test_a_stale_file_is_refused_in_one_line(tmp_path, steps, monkeypatch, capsy
     assert main(["bench", "--scale", "--lod", "--sizes", "3k", "--scratch", str(scratch)]) == 2
     assert capsys.readouterr().err.strip() == (f"splatgl: error: --scale --lod: {lod}: stale (the "
                                                "file is empty); delete it to build it again")
-    assert steps == ["scene", "build", "open", "frame", "far", "flight"]
+    assert steps == ["scene", "build", "open", "frame", "far", "flight", "path"]
 
 
 def test_scratch_is_kept_and_read_by_scale_lod_only(tmp_path, monkeypatch, capsys):
