@@ -139,7 +139,7 @@ class StreamedEdit:
                                                          hi.astype(np.float64)), dtype)
                             for b in self._blocks(self._tally(), progress))
                     piece = max(1, self.rows // PIECE_SHARE)
-                    runs = sorted_runs(folder, dtype, recs, piece, piece)
+                    runs = sorted_runs(folder, dtype, recs, piece, piece, count)
                     return write_compressed(output, count, whole_chunks(
                         to_scene(r, self.kind) for r in runs), trip)
             except OSError as exc:

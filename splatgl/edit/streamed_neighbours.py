@@ -88,7 +88,7 @@ def find_floaters(op: RemoveFloaters, kept, folder, run: int):
     recs = (np.rec.fromarrays([morton_codes_clamped(m.astype(np.float64), lo, hi), i, m, o],
                               dtype=POINT) for i, m, o in kept())
     chunks = []  # (file, lo, hi) per chunk
-    for c, data in enumerate(sorted_runs(folder, POINT, recs, run, run)):
+    for c, data in enumerate(sorted_runs(folder, POINT, recs, run, run, n)):
         path = folder / f"chunk{c}"
         np.ascontiguousarray(data).tofile(path)
         chunks.append((path, data["means"].min(axis=0).astype(np.float64),
@@ -262,7 +262,7 @@ def decimate_chunks(op: Decimate, blocks, kind, coeffs: int, total: int, folder,
             for b in blocks())
     done = cum = 0
     pending: list[np.ndarray] = []
-    for data in sorted_runs(folder, dtype, recs, run, run):
+    for data in sorted_runs(folder, dtype, recs, run, run, total):
         pending.append(data)
         cum += data.shape[0]
         held = sum(p.shape[0] for p in pending)

@@ -12,6 +12,7 @@ hidden folder beside the output (:func:`scratch`), removed on any exit.
 
 from __future__ import annotations
 
+import errno
 import shutil
 import tempfile
 from contextlib import contextmanager
@@ -21,6 +22,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..errors import SplatglError
+from ..lod.budget import format_size
 from ..lod.external import TOP_SHIFT, _Cells, _runs
 from ..scene.spatial import box_morton_codes
 from ..scene.splats import Scene, SplatKind
@@ -79,9 +81,24 @@ def to_scene(recs: np.ndarray, kind: SplatKind) -> Scene:
     return Scene(*arrays, kind)
 
 
-def sorted_runs(folder: Path, dtype: np.dtype, blocks, run: int, rows: int):
+#: Scratch bytes a sort of N records holds at most, in records: its cell files, plus a cell
+#: being split or the files a caller writes from the runs while the cells are read.
+SCRATCH_RECORDS = 2
+
+
+def sorted_runs(folder: Path, dtype: np.dtype, blocks, run: int, rows: int,
+                total: int | None = None):
     """The records ``blocks`` yields, in code order (ties in the order given), as runs of at
-    most ``run`` records; cell files under ``folder`` (read back ``rows`` at a time)."""
+    most ``run`` records; cell files under ``folder`` (read back ``rows`` at a time).  With
+    ``total`` (the records to come), a file system without room for SCRATCH_RECORDS times
+    their bytes is an OSError (ENOSPC, saying how much) before anything is written, so a long
+    edit fails at its start, not hours in (:func:`scratch_error` makes it one line)."""
+    if total is not None:
+        need = SCRATCH_RECORDS * int(total) * dtype.itemsize
+        free = shutil.disk_usage(folder).free
+        if free < need:
+            raise OSError(errno.ENOSPC, f"no room for the edit's scratch files beside it: about "
+                                        f"{format_size(need)} needed, {format_size(free)} free")
     cells = _Cells(folder / "cells", TOP_SHIFT, dtype)
     for recs in blocks:
         cells.add(recs)

@@ -255,3 +255,33 @@ def test_floaters_of_merged_placed_inputs_with_duplicate_centres(tmp_path, rows)
     assert next(s for s in ref.steps if s.name == "remove-floaters").removed
     assert (tmp_path / "got.ply").read_bytes() == (tmp_path / "ref.ply").read_bytes()
     assert got.steps == ref.steps
+
+
+@pytest.mark.parametrize("ops, out", [(["--decimate", "50%"], "o.ply"),
+                                      (["--remove-floaters"], "o.ply"),
+                                      (["--sh-degree", "0"], "o.compressed.ply")])
+def test_no_room_for_the_scratch_files_is_said_before_the_work(tmp_path, capsys, monkeypatch,
+                                                               rows, ops, out):
+    """A disk without room for the sort's scratch files (twice the records) refuses the edit
+    in one line naming the output, before any scratch file is written; the output's old
+    contents and the input stay."""
+    import collections
+
+    from splatgl.edit import streamed_sort
+
+    rows.n = 40
+    src = _ply(tmp_path, _clusters(300, 5))
+    (tmp_path / out).write_bytes(b"old")
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(streamed_sort.shutil, "disk_usage", lambda p: usage(1 << 40, 0, 1000))
+    written = []
+    real_cells = streamed_sort._Cells
+    monkeypatch.setattr(streamed_sort, "_Cells", lambda *a: written.append(a) or real_cells(*a))
+    rc = main(["edit", str(src), "-o", str(tmp_path / out), *ops, "--force", "--memory", "1K"])
+    err = capsys.readouterr().err
+    assert rc == 2 and not written, err
+    assert err.startswith(f"splatgl: error: {tmp_path / out}: cannot write (no room for the "
+                          "edit's scratch files beside it: about "), err
+    assert err.rstrip().endswith("needed, 1000 B free); the disk is full"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["s.ply", out])
+    assert (tmp_path / out).read_bytes() == b"old"
