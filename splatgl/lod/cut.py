@@ -29,7 +29,7 @@ from ..cameras.model import CullKind
 from ..cameras.view import anchored_camera, frustum_of
 from ..order import kernels
 
-kernels.register(f"{__package__}._cut_numba")  # the compiled cut_pass (numba, where installed)
+kernels.register(f"{__package__}._cut_numba")  # the compiled cut_level (numba, where installed)
 
 #: Default threshold: nodes whose sphere projects to at most this many pixels (radius) stand
 #: for their subtree.
@@ -222,7 +222,7 @@ def select_cut_weights(data: CutData, camera: Camera, threshold_px: float = DEFA
     ``max_nodes``: :class:`CutTooLarge` before a level whose candidates would take the nodes
     drawn so far past it (a cut far over a budget tests only about ``max_nodes`` nodes).
 
-    ``kern``: :func:`splatgl.order.kernels.for_view`'s kernels, whose ``cut_pass`` walks the same
+    ``kern``: :func:`splatgl.order.kernels.for_view`'s kernels, whose ``cut_level`` walks the same
     levels compiled, over the candidates only (the same rows and weights); None: NumPy.
     """
     offsets, b = data.offsets, data.branching

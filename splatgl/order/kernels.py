@@ -2,7 +2,7 @@
 nothing waits for them.  This module is the loader only: it knows no kernel.  A kernel module
 (``splatgl.order._numba_cull``: the chunked cull of a pinhole view ``view_pass``, a lens
 camera's ``lens_pass``, a LOD cut's rows in place ``rows_pass``; ``splatgl.lod._cut_numba``: the
-LOD cut's selection ``cut_pass``) is named to it with :func:`register` by the module that uses
+LOD cut's selection ``cut_level``) is named to it with :func:`register` by the module that uses
 its kernels, so that the order stage never imports the layers above it; a kernel module
 provides ``KERNELS`` (the names it hands out) and ``warm_up()`` (compiles them).
 
@@ -90,7 +90,7 @@ def request() -> None:
 
 def kernel(wait: bool = False):
     """The compiled kernels of every registered module (``view_pass``, ``rows_pass`` and
-    ``lens_pass`` of :mod:`splatgl.order._numba_cull`, ``cut_pass`` of
+    ``lens_pass`` of :mod:`splatgl.order._numba_cull`, ``cut_level`` of
     :mod:`splatgl.lod._cut_numba`, as attributes) if they are all loaded (``wait``: after
     waiting for the loads that :func:`request` started, starting them if needed), else None; a
     failed load, or no module registered, gives None."""
