@@ -211,7 +211,8 @@ def warm_up() -> None:
     (read-only strided views of its mapped spheres, the anchor taken off here)."""
     own = np.zeros(3, np.float32)
     mapped = np.frombuffer(bytes(48), np.float32).reshape(3, 4)[:, 0]
-    rot, trans, planes = np.eye(3, dtype=np.float32), np.zeros(3, np.float32), np.zeros(8, np.float32)
+    rot, trans = np.eye(3, dtype=np.float32), np.zeros(3, np.float32)
+    planes = np.zeros(8, np.float32)
     for col, anchor in ((own, None), (mapped, np.zeros(3))):
         sizes, inside = np.zeros(3, np.float32), np.zeros(3, np.bool_)
         level_test(col, col, col, col, anchor, 0, 3, rot, trans, F32(1), F32(1), 0, planes,

@@ -183,7 +183,8 @@ class LazyLod:
     def sphere_columns(self):
         """``(x, y, z, radius, anchor)`` of every node's sphere, straight from the file's
         mapping (what the compiled cut reads: only the pages it touches come in, and
-        :meth:`drop_sphere_pages` lets them go; :attr:`bytes_read` does not count them), or None (see :meth:`_Centres.columns`)."""
+        :meth:`drop_sphere_pages` lets them go; :attr:`bytes_read` does not count them), or
+        None (see :meth:`_Centres.columns`)."""
         mapped = self._records(BOUNDS)
         if mapped is None:
             return None

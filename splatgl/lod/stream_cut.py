@@ -7,8 +7,8 @@ frame's; the frame's bytes over :func:`~splatgl.lod.budget.frame_bytes_per_splat
 splats a frame draws (:attr:`~splatgl.lod.budget.StreamPlan.cap`).  :func:`choose_cut` chooses
 the cut by screen-space error under ``min(--lod-budget, cap)``: the threshold cut (or the
 leaves it switches to) where it fits, else the finest cut within the cap
-(:func:`splatgl.lod.cut_budget.select_cut_budget`), which is exactly the cut the in-memory level of
-detail draws with that budget.  Every trial cut is abandoned once it passes a few times the cap
+(:func:`splatgl.lod.cut_budget.select_cut_budget`), which is exactly the cut the in-memory level
+of detail draws with that budget.  Every trial cut is abandoned once it passes a few times the cap
 (:class:`splatgl.lod.cut.CutTooLarge`), so choosing never reads the spheres of more than that.
 
     plan = plan_for(lazy, memory, GpuStorage.FLOAT32)    # once, after the GL context exists

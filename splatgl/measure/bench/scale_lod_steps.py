@@ -251,7 +251,8 @@ def step_path(a: dict) -> dict:
             "rss_is": "peak during each frame (VmHWM and 10 ms samples)" if peak
                       else "peak during each frame (10 ms samples)",
             "rss_first_mb": rss[0], "rss_last_mb": rss[-1], "rss_max_mb": max(rss),
-            "rss_max_first_half_mb": max(rss[:half]), "rss_max_second_half_mb": max(rss[half:] or rss),
+            "rss_max_first_half_mb": max(rss[:half]),
+            "rss_max_second_half_mb": max(rss[half:] or rss),
             "streaming": summary, "renderer": choice.text(),
             "peak_rss_mb": max([before, *rss])}
 
