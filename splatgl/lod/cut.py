@@ -88,12 +88,12 @@ class CutData:
         """Rows of one slice of the compiled cut's candidates (0: a level at once)."""
         return int(getattr(self.centres, "slice_rows", 0))
 
-    def release(self, lo: int, hi: int) -> None:
-        """After a slice of the compiled cut (node rows ``lo:hi``): let a lazily read tree's
-        sphere pages go (nothing otherwise)."""
+    def release(self, lo: int, hi: int, tested: int) -> None:
+        """After a slice of the compiled cut (``tested`` nodes among rows ``lo:hi``): let a
+        lazily read tree's sphere pages go and count what was read (nothing otherwise)."""
         release = getattr(self.centres, "release", None)
         if release is not None:
-            release(lo, hi)
+            release(lo, hi, tested)
 
 
 #: Rows per block of a dense level pass (float32 temporaries stay in cache).
@@ -349,7 +349,9 @@ def _compiled_cut(kern, data: CutData, view: _NodeTest, threshold_px: float, ban
                                       lo, n, fan, below, level, b, par, par_c, j,
                                       data.slice_rows, dense, *scratch, out_rows, out_w, base,
                                       nxt, nxt_c, counts, sums)
-            data.release(lo + int(par[j0]) * fan, lo + min(int(par[j - 1]) * fan + fan, n))
+            first = par[j0:j] * fan
+            data.release(lo + int(first[0]), lo + min(int(first[-1]) + fan, n),
+                         int((np.minimum(first + fan, n) - first).sum()))
         d, m, n_cand = (int(v) for v in counts)
         out_rows[pos - d:pos] = out_rows[base:base + d]   # down against the stack
         out_w[pos - d:pos] = out_w[base:base + d]

@@ -183,8 +183,8 @@ class LazyLod:
     def sphere_columns(self):
         """``(x, y, z, radius, anchor)`` of every node's sphere, straight from the file's
         mapping (what the compiled cut reads: only the pages it touches come in, and
-        :meth:`drop_sphere_pages` lets them go; :attr:`bytes_read` does not count them), or
-        None (see :meth:`_Centres.columns`)."""
+        :meth:`drop_sphere_pages` lets them go; :attr:`bytes_read` counts 16 bytes a sphere
+        tested, as a gather does), or None (see :meth:`_Centres.columns`)."""
         mapped = self._records(BOUNDS)
         if mapped is None:
             return None
@@ -307,7 +307,8 @@ class _Centres:
     #: at once, however widely a level's candidates spread over the file.
     slice_rows = 1 << 22
 
-    def release(self, lo: int, hi: int) -> None:
+    def release(self, lo: int, hi: int, tested: int) -> None:
+        self.lod.bytes_read += 16 * tested   # as a gather of their spheres counts them
         self.lod.drop_sphere_pages(lo, hi)
 
 

@@ -221,9 +221,14 @@ def test_the_compiled_cut_reads_the_files_mapping_and_cuts_alike(tmp_path, compi
             monkeypatch.setattr(type(lazy.cut_data.centres), "slice_rows", slice_rows)
         for camera in (_camera(1.5), _camera(2.0, 0.4), _camera(0.2), *lenses):
             for t, band in ((1.0, 1.0), (1.0, 2.0), (3.0, 2.0), (float("inf"), 1.0)):
+                lazy.trim_spheres(0)   # no spheres kept from the last cut: all counted
+                read = lazy.bytes_read
                 want = select_cut_weights(lazy.cut_data, camera, t, band)
+                read = lazy.bytes_read - read, lazy.bytes_read
                 for data in (lazy.cut_data, memory):
                     got = select_cut_weights(data, camera, t, band, kern=compiled_kernels)
+                    if data is lazy.cut_data:   # the same spheres tested, counted alike
+                        assert lazy.bytes_read - read[1] == read[0]
                     assert np.array_equal(got[0], want[0])
                     assert (got[1] is None) == (want[1] is None)
                     if want[1] is not None:
