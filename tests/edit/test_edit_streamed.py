@@ -244,20 +244,28 @@ def test_info_stats_streams_the_same_report(tmp_path, capsys, monkeypatch, small
     assert got["opacity"]["median"] == pytest.approx(ref["opacity"]["median"], rel=1e-15)
 
 
-def test_peak_memory_is_a_few_blocks_not_the_scene(tmp_path, monkeypatch):
-    """tracemalloc's peak of a streamed crop + SH cut of a 20,000-splat SH3 file (5 MB of
-    records, 6 MB decoded) in blocks of 500 rows, against the in-memory edit's."""
+def edit_peaks(src, ops, folder) -> dict:
+    """tracemalloc's peak bytes of ``ops`` on ``src`` in memory and streamed (``--memory`` 1
+    byte), as ``{"memory": ..., "streamed": ...}``; the outputs ``memory.ply``, ``streamed.ply``
+    in ``folder``."""
     import tracemalloc
 
-    monkeypatch.setattr(streamed_edit, "block_rows", lambda *a, **k: 500)
-    src = _ply(tmp_path, _scene(20000, degree=3, extras="normals"))
-    ops = [CropBox((-0.9, -1, -1), (1, 1, 1)), ShDegree(2)]
     peaks = {}
     for name, memory in (("memory", None), ("streamed", 1)):
         tracemalloc.start()
-        edit_files([src], tmp_path / f"{name}.ply", ops, memory=memory)
+        edit_files([src], folder / f"{name}.ply", ops, memory=memory)
         peaks[name] = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
+    return peaks
+
+
+def test_peak_memory_is_a_few_blocks_not_the_scene(tmp_path, monkeypatch):
+    """tracemalloc's peak of a streamed crop + SH cut of a 20,000-splat SH3 file (5 MB of
+    records, 6 MB decoded) in blocks of 500 rows, against the in-memory edit's."""
+    monkeypatch.setattr(streamed_edit, "block_rows", lambda *a, **k: 500)
+    src = _ply(tmp_path, _scene(20000, degree=3, extras="normals"))
+    ops = [CropBox((-0.9, -1, -1), (1, 1, 1)), ShDegree(2)]
+    peaks = edit_peaks(src, ops, tmp_path)
     assert (tmp_path / "streamed.ply").read_bytes() == (tmp_path / "memory.ply").read_bytes()
     assert peaks["memory"] > 10e6
     assert peaks["streamed"] < 2e6, peaks

@@ -18,7 +18,7 @@ from splatgl.errors import SplatglError
 from splatgl.formats import load_scene
 from splatgl.scene.splats import Scene, SplatKind
 
-from test_edit_streamed import _ply, _scene
+from test_edit_streamed import _ply, _scene, edit_peaks
 
 
 def _clusters(n: int, floaters: int, seed: int = 0) -> Scene:
@@ -185,22 +185,26 @@ def _stop(sig):
 def test_peak_memory_is_chunks_not_the_scene(tmp_path, monkeypatch):
     """tracemalloc's peak of floaters then a decimation of a 20,000-splat SH3 file in blocks and
     chunks of 1,000 rows, against the in-memory edit's."""
-    import tracemalloc
-
     monkeypatch.setattr(streamed_edit, "block_rows", lambda *a, **k: 1000)
     base = _clusters(20000, 50)
     rng = np.random.default_rng(1)
     src = _ply(tmp_path, Scene(base.means, base.quats, base.log_scales, base.opacity_logits,
                                rng.normal(0, 0.3, (20000, 16, 3)).astype(np.float32)))
     ops = [RemoveFloaters(neighbours=8), Decimate(percent=50)]
-    peaks = {}
-    for name, memory in (("memory", None), ("streamed", 1)):
-        tracemalloc.start()
-        edit_files([src], tmp_path / f"{name}.ply", ops, memory=memory)
-        peaks[name] = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
+    peaks = edit_peaks(src, ops, tmp_path)
     assert peaks["memory"] > 15e6
     assert peaks["streamed"] < peaks["memory"] / 3, peaks
+
+
+def _refused_alike(src, out, ops) -> str:
+    """The refusal of ``ops`` on ``src``, the same in memory and streamed."""
+    messages = []
+    for memory in (None, 1):
+        with pytest.raises(SplatglError) as err:
+            edit_files([src], out, ops, memory=memory)
+        messages.append(str(err.value))
+    assert messages[1] == messages[0]
+    return messages[0]
 
 
 def test_decimate_refusals_are_the_in_memory_ones(tmp_path, rows):
@@ -213,15 +217,10 @@ def test_decimate_refusals_are_the_in_memory_ones(tmp_path, rows):
     big = _ply(tmp_path, Scene(s.means, s.quats, logs, s.opacity_logits, s.sh), "big.ply")
     surfels = _ply(tmp_path, Scene(s.means, s.quats, s.log_scales[:, :2].copy(),
                                    s.opacity_logits, s.sh, SplatKind.SURFEL_2D), "surfels.ply")
-    for src, ops in ((big, [Filter("index >= 10"), Decimate(percent=50)]),
-                     (surfels, [Decimate(percent=50)])):
-        messages = []
-        for memory in (None, 1):
-            with pytest.raises(SplatglError) as err:
-                edit_files([src], tmp_path / "o.ply", ops, memory=memory)
-            messages.append(str(err.value))
-        assert messages[1] == messages[0]
-    assert "splat 67 has a scale above e^100" in messages[0] or "surfels" in messages[0]
+    got = [_refused_alike(src, tmp_path / "o.ply", ops)
+           for src, ops in ((big, [Filter("index >= 10"), Decimate(percent=50)]),
+                            (surfels, [Decimate(percent=50)]))]
+    assert "splat 67 has a scale above e^100" in got[0] and "surfels" in got[1], got
     assert sorted(p.name for p in tmp_path.iterdir()) == ["big.ply", "surfels.ply"]
 
 
@@ -229,13 +228,7 @@ def test_an_empty_result_after_a_decimation_is_refused_and_leaves_nothing(tmp_pa
     rows.n = 20
     src = _ply(tmp_path, _clusters(100, 0))
     ops = [Decimate(percent=50), CropBox((50, 50, 50), (60, 60, 60))]
-    messages = []
-    for memory in (None, 1):
-        with pytest.raises(SplatglError) as err:
-            edit_files([src], tmp_path / "o.ply", ops, memory=memory)
-        messages.append(str(err.value))
-    assert messages[1] == messages[0]
-    assert messages[0].startswith("edit: no splats left (crop-box")
+    assert _refused_alike(src, tmp_path / "o.ply", ops).startswith("edit: no splats left (crop-box")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
 
 

@@ -54,33 +54,36 @@ def _vertex_count(path: Path) -> int | None:
     return next((e.count for e in header.elements if e.name == "vertex"), None)
 
 
-def _check_scene(path: Path, n: int) -> None:
+def _read_checked(path: Path, read):
+    """``read()`` of a file written whole, or the one-line stale-file error naming what is
+    wrong with it (cut short, unreadable)."""
     from ...formats.written import written_problem
 
     try:
         problem = written_problem(path)
-        count = None if problem else _vertex_count(path)
+        value = None if problem else read()
     except (OSError, SplatglError) as exc:
         problem = " ".join(str(exc).split())
     if problem:
         raise _stale(path, problem.replace(f"{path}: ", ""))
+    return value
+
+
+def _check_scene(path: Path, n: int) -> None:
+    count = _read_checked(path, lambda: _vertex_count(path))
     if count != n:
         raise _stale(path, f"its header says {count} splats, the size is {n}")
 
 
-def _check_lod(path: Path, n: int, branching: int) -> None:
-    from ...formats.written import written_problem
+def _lod_shape(path: Path) -> tuple[int, int]:
     from ...lod.lazy import LazyLod
 
-    try:
-        problem = written_problem(path)
-        if problem is None:
-            with LazyLod(path) as lazy:
-                leaves, built = lazy.elements["vertex"][1].count, lazy.branching
-    except (OSError, SplatglError) as exc:
-        problem = " ".join(str(exc).split())
-    if problem:
-        raise _stale(path, problem.replace(f"{path}: ", ""))
+    with LazyLod(path) as lazy:
+        return lazy.elements["vertex"][1].count, lazy.branching
+
+
+def _check_lod(path: Path, n: int, branching: int) -> None:
+    leaves, built = _read_checked(path, lambda: _lod_shape(path))
     if leaves != n:
         raise _stale(path, f"{leaves} leaves, the size is {n}")
     if built != branching:
