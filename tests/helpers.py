@@ -372,21 +372,35 @@ def draw(renderer, camera, depth: bool = False, **options):
     return renderer.render(view_for(renderer, camera), layers, **options)
 
 
-def stream_lod_file(tmp_path: Path, n: int = 3000) -> Path:
-    """A ``.lod.ply`` of ``n`` random SH3 splats in the unit cube (branching 4) under
-    ``tmp_path``: the small level of detail the streaming tests read by chunks."""
+def stream_lod_file(tmp_path: Path, n: int = 3000, seed: int = 0, coeffs: int = 4,
+                    log_scale: float = -3.5) -> Path:
+    """A ``.lod.ply`` of ``n`` random splats (``coeffs`` SH coefficients: 4 = SH1; log-scales
+    about ``log_scale``) in the unit cube (branching 4) under ``tmp_path``: the small level of
+    detail the streaming tests read by chunks."""
     from splatgl.formats import load_scene, ply_write
     from splatgl.lod.build import build_hierarchy
     from splatgl.lod.io import write_lod
 
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(seed)
     scene = Scene(rng.uniform(-1, 1, (n, 3)), rng.normal(size=(n, 4)),
-                  rng.normal(-3.5, 0.4, (n, 3)), rng.normal(1, 1, n),
-                  rng.normal(0, 0.3, (n, 4, 3)))
+                  rng.normal(log_scale, 0.4, (n, 3)), rng.normal(1, 1, n),
+                  rng.normal(0, 0.3, (n, coeffs, 3)))
     ply_write.write(tmp_path / "s.ply", scene)
     path = tmp_path / "s.lod.ply"
     write_lod(path, build_hierarchy(load_scene(tmp_path / "s.ply"), 4))
     return path
+
+
+def compile_lib_check(ctx, folder: Path, libs, source: str):
+    """A compute shader of ``source`` (GLSL that includes ``lib/<name>`` for each of ``libs``,
+    copied from the shader library into ``folder``), for the library's own tests."""
+    from splatgl.gl.shaders import preprocess, shader_dir
+
+    (folder / "lib").mkdir()
+    for lib in libs:
+        (folder / "lib" / lib).write_text((shader_dir() / "lib" / lib).read_text())
+    (folder / "check.comp").write_text(source)
+    return ctx.compute_shader(preprocess("check.comp", root=folder).text)
 
 
 def stream_camera(z: float, x: float = 0.0):

@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from splatgl.cli import main
-from splatgl.edit import (CropBox, CropSphere, Decimate, Filter, RemoveFloaters, ShDegree,
-                          edit_files)
+from splatgl.edit import CropBox, CropSphere, Filter, ShDegree, edit_files
 from splatgl.edit import streamed, streamed_edit, streamed_stats
 from splatgl.edit.streamed_convert import convert_file
 from splatgl.errors import SplatglError

@@ -9,32 +9,21 @@ import time
 import numpy as np
 import pytest
 
-from splatgl.formats import load_scene, ply_write
 from splatgl.interactive.budget import EXACT, Level
 from splatgl.interactive.stream_levels import StreamedLevels, streamed_session
-from splatgl.lod.build import build_hierarchy
-from splatgl.lod.io import write_lod
 from splatgl.lod.lazy import LazyLod
 from splatgl.lod.selection import LodSettings
 from splatgl.lod.stream import LazyChunks, ResidentSet
 from splatgl.scene.settings import EarlyStop, RenderSettings
-from splatgl.scene.splats import Scene
 
-from helpers import GatedChunks, stream_camera
+from helpers import GatedChunks, stream_camera, stream_lod_file
 
 SETTINGS = RenderSettings(near=0.01, early_stop=EarlyStop.OFF)
 
 
 def tiny_lod(folder, n: int = 3000, seed: int = 0):
     """A random ``n``-splat SH0 scene's level of detail (branching 4) at ``folder``/s.lod.ply."""
-    rng = np.random.default_rng(seed)
-    scene = Scene(rng.uniform(-1, 1, (n, 3)), rng.normal(size=(n, 4)),
-                  rng.normal(-4.0, 0.4, (n, 3)), rng.normal(1, 1, n),
-                  rng.normal(0, 0.3, (n, 1, 3)))
-    ply_write.write(folder / "s.ply", scene)
-    path = folder / "s.lod.ply"
-    write_lod(path, build_hierarchy(load_scene(folder / "s.ply"), 4))
-    return path
+    return stream_lod_file(folder, n, seed, coeffs=1, log_scale=-4.0)
 
 
 _camera = stream_camera

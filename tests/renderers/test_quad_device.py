@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import shared_file
+from helpers import compile_lib_check, shared_file
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.opencv import OpenCV
 from splatgl.cameras.poses import look_at
@@ -270,18 +270,13 @@ def test_the_viewers_colour_frame_reads_nothing_back(gl_renderer):
 def test_device_division_is_correctly_rounded_from_a_rough_estimate(ctx, tmp_path):
     """shaders/lib/div_rn.glsl: from quotients off by up to 3 ulp (GLSL allows 2.5), the
     quotient is NumPy's float32 a / b, bit for bit (order_cull.comp's peak-alpha decision)."""
-    from splatgl.gl.shaders import preprocess, shader_dir
-
-    (tmp_path / "lib").mkdir()
-    for lib in ("div_rn.glsl", "round_rn.glsl"):
-        (tmp_path / "lib" / lib).write_text((shader_dir() / "lib" / lib).read_text())
-    (tmp_path / "check.comp").write_text(
+    comp = compile_lib_check(
+        ctx, tmp_path, ("div_rn.glsl", "round_rn.glsl"),
         '#include "lib/div_rn.glsl"\nlayout(local_size_x = 64) in;\n'
         'layout(std430, binding = 0) buffer Io { uint io[]; };\nuniform int u_off;\n'
         'void main() { uint i = gl_GlobalInvocationID.x; float a = uintBitsToFloat(io[2u * i]);\n'
         '  float b = uintBitsToFloat(io[2u * i + 1u]); uint q = floatBitsToUint(a / b);\n'
         '  io[2u * i] = floatBitsToUint(div_rn_from(a, b, uintBitsToFloat(uint(int(q) + u_off)))); }\n')
-    comp = ctx.compute_shader(preprocess("check.comp", root=tmp_path).text)
     rng = np.random.default_rng(4)
     n = 8192
     a = (rng.uniform(-1, 1, n) * 10.0 ** rng.uniform(-8, 8, n)).astype(np.float32)

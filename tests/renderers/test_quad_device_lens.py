@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import shared_file
+from helpers import compile_lib_check, shared_file
 from splatgl.cameras.camera import Camera
 from splatgl.cameras.equirect import WRAP_FLAG, Equirectangular
 from splatgl.cameras.framing import default_camera
@@ -25,7 +25,6 @@ from splatgl.cameras.poses import look_at
 from splatgl.cameras.registry import retarget
 from splatgl.cameras.view import View
 from splatgl.formats import load_scene
-from splatgl.gl.shaders import preprocess, shader_dir
 from splatgl.measure.stress import CASES
 from splatgl.renderers.quad import QuadRenderer
 from splatgl.renderers.quad_device import DeviceOrder
@@ -231,16 +230,13 @@ def test_omni_directional_stereo_keeps_the_cpu_cull(ctx):
 def test_device_square_root_is_correctly_rounded_from_a_rough_estimate(ctx, tmp_path):
     """shaders/lib/sqrt_rn.glsl: from estimates off by up to 2 ulp (as a GPU's sqrt may be),
     the root is NumPy's float32 sqrt, bit for bit (the lens keys are distances)."""
-    (tmp_path / "lib").mkdir()
-    for lib in ("sqrt_rn.glsl", "round_rn.glsl"):
-        (tmp_path / "lib" / lib).write_text((shader_dir() / "lib" / lib).read_text())
-    (tmp_path / "check.comp").write_text(
+    comp = compile_lib_check(
+        ctx, tmp_path, ("sqrt_rn.glsl", "round_rn.glsl"),
         '#include "lib/sqrt_rn.glsl"\nlayout(local_size_x = 64) in;\n'
         'layout(std430, binding = 0) buffer Io { uint io[]; };\nuniform int u_off;\n'
         'void main() { uint i = gl_GlobalInvocationID.x; float a = uintBitsToFloat(io[i]);\n'
         '  uint s = floatBitsToUint(sqrt(a)); io[i] = floatBitsToUint('
         'sqrt_rn_from(a, uintBitsToFloat(uint(int(s) + u_off)))); }\n')
-    comp = ctx.compute_shader(preprocess("check.comp", root=tmp_path).text)
     rng = np.random.default_rng(3)
     a = np.concatenate([rng.uniform(1e-6, 1e6, 4096).astype(np.float32),
                         (rng.uniform(0.5, 64, 1024).astype(np.float32)) ** 2,   # near squares
