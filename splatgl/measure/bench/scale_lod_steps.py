@@ -166,37 +166,6 @@ def _rss_mb(field: str = "VmRSS") -> float:
     return 0.0
 
 
-class _Sampler:
-    """The largest resident memory (MB as VmHWM's: kB / 1000) seen every SAMPLE_S on a thread
-    since the last :meth:`reset`: a frame's peak where VmHWM cannot be reset."""
-
-    SAMPLE_S = 0.01
-
-    def __init__(self):
-        import threading
-
-        self._rss, self._lock, self._stop = _rss_mb, threading.Lock(), threading.Event()
-        self._max = 0.0
-        self._thread = threading.Thread(target=self._run, daemon=True, name="rss-sampler")
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.wait(self.SAMPLE_S):
-            value = self._rss()
-            with self._lock:
-                self._max = max(self._max, value)
-
-    def reset(self) -> float:
-        """The largest since the last reset (or the start), and start again."""
-        with self._lock:
-            got, self._max = max(self._max, self._rss()), 0.0
-        return got
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join()
-
-
 def _reset_peak() -> bool:
     """Reset this process's peak resident memory (VmHWM; Linux 4.0 on), False where it cannot."""
     try:
@@ -210,8 +179,8 @@ def _reset_peak() -> bool:
 def step_path(a: dict) -> dict:
     """A ``frames``-frame path render streamed under ``memory`` (``render --path --memory``'s
     frames: :class:`~splatgl.lod.stream_frames.StreamFrames`, each exact), the process's peak
-    resident memory during each frame (the larger of VmHWM, reset before it, and the resident
-    memory sampled every 10 ms on a thread): whether it stays flat."""
+    resident memory during each frame (VmHWM, reset before it; where it cannot be reset, the
+    resident memory after it): whether it stays flat."""
     from ...cameras.poses import orbit
     from ...lod.lazy import LazyLod
     from ...lod.selection import LodSettings
@@ -233,23 +202,19 @@ def step_path(a: dict) -> dict:
     choice = auto.choose(settings=RenderSettings())
     rss, seconds = [], []
     before = peak_rss_mb()   # the peaks are reset below: the step's own is their largest
-    sampler = _Sampler()
     with StreamFrames(a["lod"], RenderSettings(), LodSettings(), int(a["memory"]),
                       framing=framing, kind=choice.kind) as frames:
         for cam in cameras:
             peak = _reset_peak()
-            sampler.reset()
             t0 = time.perf_counter()
             frames.render_view(cam)
             seconds.append(time.perf_counter() - t0)
-            rss.append(max(_rss_mb("VmHWM" if peak else "VmRSS"), sampler.reset()))
+            rss.append(_rss_mb("VmHWM" if peak else "VmRSS"))
         summary = frames.summary()
-    sampler.stop()
     before = max(before, peak_rss_mb())   # opening and closing (or all, where not reset)
     half = max(1, n // 2)
     return {"frames": n, "frame_s_median": float(np.median(seconds)), "rss_mb": rss,
-            "rss_is": "peak during each frame (VmHWM and 10 ms samples)" if peak
-                      else "peak during each frame (10 ms samples)",
+            "rss_is": "peak during each frame" if peak else "resident after each frame",
             "rss_first_mb": rss[0], "rss_last_mb": rss[-1], "rss_max_mb": max(rss),
             "rss_max_first_half_mb": max(rss[:half]),
             "rss_max_second_half_mb": max(rss[half:] or rss),
