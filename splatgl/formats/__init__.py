@@ -79,7 +79,9 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
     for callers that take one (``info``, ``convert``, ``edit``); otherwise it is refused.
 
     The scene's :attr:`~splatgl.scene.splats.Scene.source` names the file and its tags
-    (:func:`scene_source`), which give the scene's default camera up and settings.
+    (:func:`scene_source`), which give the scene's default camera up and settings.  A file
+    whose header records a framing box (a ``.lod.ply``) is framed by it
+    (:func:`splatgl.formats.metadata.apply_framing_box`).
     """
     path = Path(path)
     mod = detect_format(path)
@@ -94,7 +96,10 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
         options["allow_empty"] = True
     if "progress" in inspect.signature(mod.read).parameters:
         options["progress"] = progress if progress is not None else default_progress()
-    return dataclasses.replace(read(path, **options), source=scene_source(path))  # arrays shared
+    from .metadata import apply_framing_box
+
+    scene = dataclasses.replace(read(path, **options), source=scene_source(path))  # arrays shared
+    return apply_framing_box(scene, path)   # a level-of-detail file: its recorded box frames it
 
 
 def scene_source(path: str | Path) -> SceneSource:

@@ -10,17 +10,72 @@
 - SOG: ``"model": "antialiased"`` in meta.json.
 
 Untagged files (and formats without such a tag: .splat, .ksplat, glTF) give None.
+
+:func:`framing_box` reads the box a PLY header records for framing (``comment lod box``, which
+``splatgl lod`` writes: the 1-99 % box of the leaves' centres), so that a level-of-detail file
+is framed alike whether it is read whole or streamed (:func:`apply_framing_box`).
 """
 
 from __future__ import annotations
 
+import re
 import zlib
 from pathlib import Path
+
+import numpy as np
 
 from ..errors import SceneFormatError
 
 #: Bytes read from the start of a file to find a tag.
 HEAD_BYTES = 1 << 16
+#: The header comment with the framing box: ``lo`` then ``hi``, x y z each, as Python writes a
+#: float64 (``repr``).
+BOX_COMMENT = re.compile(rb"^comment lod box" + rb" (\S+)" * 6 + rb"\s*$", re.M)
+
+
+def box_comment(lo: np.ndarray, hi: np.ndarray) -> str:
+    """The header comment (without ``comment``) recording the framing box ``(lo, hi)``."""
+    return "lod box " + " ".join(repr(float(v)) for v in (*lo, *hi))
+
+
+def header_box(head: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(lo, hi)`` float64 (3,) of the framing box a PLY header (bytes) records, or None
+    (none recorded, or not finite and ordered)."""
+    match = BOX_COMMENT.search(head.split(b"end_header", 1)[0])
+    if match is None:
+        return None
+    try:
+        values = np.array([float(v) for v in match.groups()])
+    except ValueError:
+        return None
+    lo, hi = values[:3], values[3:]
+    if not (np.isfinite(values).all() and (lo <= hi).all()):
+        return None
+    lo.flags.writeable = hi.flags.writeable = False
+    return lo, hi
+
+
+def framing_box(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """The framing box ``path``'s PLY header records (:func:`header_box`), or None."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(HEAD_BYTES)
+    except OSError:
+        return None
+    return header_box(head) if head.startswith(b"ply") else None
+
+
+def apply_framing_box(scene, path: str | Path):
+    """``scene`` (read from ``path``, whole) framed by the box ``path`` records, where it
+    records one: its ``robust_bounds``, which the default camera, orbits and the viewer frame,
+    become that box.  A level-of-detail file streamed under ``--memory`` frames the same box
+    without reading its leaves (:func:`splatgl.lod.stream_frames.framing_scene`), so the two
+    give the same default view, and the source scene's (up to the float32 rounding of its
+    own percentiles)."""
+    box = framing_box(path)
+    if box is not None and scene.count:
+        scene.__dict__["robust_bounds"] = box
+    return scene
 
 
 def antialias_tag(path: str | Path) -> str | None:

@@ -259,14 +259,11 @@ def build_lod_file(src: Path, out: Path, branching: int, plan_for, progress=None
     if window >= n:  # one chunk: the whole tree
         k = len(offsets) - 2
         window = n
-    anchor = (0.5 * (lo + hi)).astype(np.float32).astype(np.float64)
-    if not np.isfinite(anchor).all():
-        anchor = np.zeros(3)
     one = rows.scene(next(rows.blocks(1))[1])
     vertex = ply_write.scene_to_vertices(one, normals=False).dtype
     header = ply_write._header([("vertex", n, vertex), (ELEMENT, int(offsets[-1]) - n, vertex),
                                 (BOUNDS, int(offsets[-1]), bounds_rows(one.means, np.zeros(1)).dtype)],
-                               "little", False, COMMENTS(branching, anchor))
+                               "little", False, COMMENTS(branching, lo, hi))
     rec = np.dtype([("code", "<u8"), ("idx", "<i8"), ("rec", rows.dtype)])
     out = Path(out)
     _check_space(out, n * rec.itemsize + 2 * (len(header) + int(offsets[-1]) * (vertex.itemsize + 16)))

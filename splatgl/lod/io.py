@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import SceneFormatError
 from ..formats import ply, ply_write
+from ..formats.metadata import box_comment
 from ..formats.written import write_checked
 from ..scene.splats import Scene, activate
 from .build import LodTree, bounding_radii, level_offsets
@@ -45,20 +46,27 @@ def check_lod_name(path: Path) -> None:
         raise SceneFormatError(path, f"a level-of-detail file is an INRIA PLY; name it *{SUFFIX}")
 
 
-def COMMENTS(branching: int, anchor: np.ndarray) -> tuple[str, ...]:  # noqa: N802
-    """The header comments: who wrote it, the tree's shape, and the anchor the lazy reader's
-    cut subtracts (the centre of the leaves' 1-99 % box, a float32 value)."""
-    xyz = " ".join(repr(float(v)) for v in anchor)
-    return ("written by splatgl lod", f"lod branching {branching}", f"lod anchor {xyz}")
+def COMMENTS(branching: int, lo: np.ndarray, hi: np.ndarray) -> tuple[str, ...]:  # noqa: N802
+    """The header comments: who wrote it, the tree's shape, the anchor the lazy reader's cut
+    subtracts (:func:`anchor_of` the box) and the leaves' 1-99 % box ``(lo, hi)``, which frames
+    the file read whole or streamed alike
+    (:func:`splatgl.formats.metadata.apply_framing_box`)."""
+    xyz = " ".join(repr(float(v)) for v in anchor_of(lo, hi))
+    return ("written by splatgl lod", f"lod branching {branching}", f"lod anchor {xyz}",
+            box_comment(lo, hi))
 
 
-def leaf_anchor(means: np.ndarray) -> np.ndarray:
-    """(3,) float64 centre of the 1-99 % box of the leaves' (N, 3) ``means`` (float32 value;
-    zeros where not finite): the one both writers store (the out-of-core build finds the same
-    box in its streaming passes, :mod:`splatgl.lod.ply_rows`)."""
+def leaf_box(means: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` float64 (3,): the 1-99 % box of the leaves' (N, 3) ``means``, taken in
+    float64: the one both writers store (the out-of-core build finds the same box in its
+    streaming passes, :class:`splatgl.lod.ply_rows.BoxFinder`)."""
     points = means.astype(np.float64)
-    lo, hi = np.percentile(points, 1.0, axis=0), np.percentile(points, 99.0, axis=0)
-    anchor = (0.5 * (lo + hi)).astype(np.float32).astype(np.float64)
+    return np.percentile(points, 1.0, axis=0), np.percentile(points, 99.0, axis=0)
+
+
+def anchor_of(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(3,) float64 centre of the box ``(lo, hi)`` (a float32 value; zeros where not finite)."""
+    anchor = (0.5 * (np.asarray(lo) + np.asarray(hi))).astype(np.float32).astype(np.float64)
     return anchor if np.isfinite(anchor).all() else np.zeros(3)
 
 
@@ -83,7 +91,7 @@ def write_lod(path: Path, tree: LodTree) -> None:
         tmp, [("vertex", ply_write.scene_to_vertices(leaves, normals=False)),
               (ELEMENT, ply_write.scene_to_vertices(inner, normals=False)),
               (BOUNDS, bounds_rows(tree.nodes.means, tree.radius))],
-        comments=COMMENTS(tree.branching, leaf_anchor(leaves.means))))
+        comments=COMMENTS(tree.branching, *leaf_box(leaves.means))))
 
 
 def is_lod_file(path: Path) -> bool:

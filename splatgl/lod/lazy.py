@@ -30,6 +30,7 @@ from ..scene.splats import Scene, activate
 from .build import level_offsets
 from .cut import CutData, select_cut_weights
 from .cut_budget import select_cut_budget
+from ..formats.metadata import header_box
 from .io import BOUNDS, ELEMENT, stored_anchor
 from .selection import LodSettings
 
@@ -63,6 +64,9 @@ class LazyLod:
                                               "branching B' line); build one with 'splatgl lod'")
         self.branching = int(match.group(1))
         anchor = stored_anchor(head)
+        #: The leaves' 1-99 % box the header records ((lo, hi) float64), or None (written
+        #: before it): what frames the file's views (:func:`splatgl.lod.stream_frames.framing_scene`).
+        self.box = header_box(head)
         self.elements = {}  # name -> (byte offset, element)
         offset = header.body_offset
         for e in header.elements:

@@ -11,8 +11,9 @@ sorted and weighted as :class:`~splatgl.lod.source.LodOrder` draws them (:class:
 Positions are taken relative to the anchor stored in the file (the centre of the leaves' 1-99 %
 box) where the in-memory path subtracts its node scene's own: the images agree to float32
 rounding, and are identical given the same anchor (tests/lod/test_lod_stream.py).  The default
-camera and near plane frame a proxy of the scene (:func:`framing_scene`: the 1-99 % box of the
-first level from the top with at least :data:`FRAMING_NODES` nodes).
+camera and near plane frame the leaves' 1-99 % box the file's header records (:func:`framing_scene`),
+as the file read whole is framed; files written before it record no box and are framed by the
+1-99 % box of the first level from the top with at least :data:`FRAMING_NODES` nodes.
 """
 
 from __future__ import annotations
@@ -52,16 +53,23 @@ FRAMING_NODES = 4096
 
 def framing_scene(lazy: LazyLod):
     """What the default camera, an orbit and the near plane read of a scene (``robust_bounds``,
-    ``robust_radius``, ``anchor``, ``source``, ``count``, ``kind``, ``sh_degree``), from one coarse level's spheres, and
-    ``digest`` (of those spheres, the tree's shape and anchor: what a path's frames record)."""
+    ``robust_radius``, ``anchor``, ``source``, ``count``, ``kind``, ``sh_degree``), and
+    ``digest`` (of one coarse level's spheres, the tree's shape and anchor: what a path's frames
+    record).  ``robust_bounds`` is the leaves' 1-99 % box the header records, the box that
+    frames the file read whole (:func:`splatgl.formats.metadata.apply_framing_box`), so the
+    default views agree; for a file written before that box, the 1-99 % box of that coarse
+    level's centres."""
     level = 0
     for lv in range(lazy.levels - 1, -1, -1):
         if lazy.level_size(lv) >= FRAMING_NODES:
             level = lv
             break
     centres, radius = lazy.spheres(slice(int(lazy.offsets[level]), int(lazy.offsets[level + 1])))
-    pts = centres.T.astype(np.float64) + lazy.anchor
-    lo, hi = np.percentile(pts, 1.0, axis=0), np.percentile(pts, 99.0, axis=0)
+    if lazy.box is not None:   # the leaves' box, as the file read whole is framed
+        lo, hi = lazy.box
+    else:                      # written before the box: the proxy's
+        pts = centres.T.astype(np.float64) + lazy.anchor
+        lo, hi = np.percentile(pts, 1.0, axis=0), np.percentile(pts, 99.0, axis=0)
     digest = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in (
         lazy.offsets, lazy.anchor, centres, radius))).hexdigest()[:20]
     return SimpleNamespace(robust_bounds=(lo, hi), robust_radius=float(0.5 * np.linalg.norm(hi - lo)),
