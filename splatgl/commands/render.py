@@ -16,13 +16,14 @@ from ..imagefiles.pictures import depth_preview
 from ..api import Renderer, gl_renderer_name
 from ..lod.frames import LodFrames, render_lod
 from ..lod.budget import format_size
+from ..formats.metadata import apply_framing_box
 from ..lod.io import read_lod
 from ..lod.stream_frames import StreamFrames
 from ..scene.settings import RendererKind
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      check_convention, check_size, format_timings, inputs_from_args,
-                      settings_from_args)
+                      camera_from_args, check_convention, check_size, format_timings,
+                      inputs_from_args, settings_from_args)
 from ._layers import add_layer_arguments, layer_files, under_from_args
 from ._memory import (STREAM_HELP, add_level_argument, add_memory_argument, memory_given,
                       render_one_streamed, stream_inputs, stream_level, stream_renderer)
@@ -133,6 +134,15 @@ def run(args: argparse.Namespace) -> int:
             raise SplatglError(StreamFrames.stereo_refusal)
         settings = settings_from_args(args)
         scene, camera = stream_inputs(args, settings)
+    elif lod_given(args):      # an in-memory level of detail: the file read once, as a tree
+        cut = lod_settings_from_args(args)   # its checks (a .lod.ply) before reading it
+        if stereo is not None:
+            raise SplatglError(LodFrames.stereo_refusal)
+        settings = settings_from_args(args)
+        camera_from_args(args, None, settings)   # the camera file and options checked first
+        tree = read_lod(args.scene)
+        scene = apply_framing_box(tree.nodes.subset(slice(0, tree.level_size(0))), args.scene)
+        camera = camera_from_args(args, scene, settings)   # the leaves frame it, as load_scene's
     else:
         scene, settings, camera = inputs_from_args(args)
     if args.renderer == AUTO and memory is None and not lod_given(args):
@@ -148,8 +158,6 @@ def run(args: argparse.Namespace) -> int:
     # what the file holds (EXR: the depth layer as Z), and the depth the preview needs
     layers = files.render_layers(args.output) | ({Layer.DEPTH} if args.depth_png is not None else set())
     lod = lod_given(args)
-    if lod and stereo is not None:
-        raise SplatglError(LodFrames.stereo_refusal)
     times = None
     if memory is not None:
         out, times, gl_name = render_one_streamed(args, camera, settings, cut, memory, layers,
@@ -157,8 +165,8 @@ def run(args: argparse.Namespace) -> int:
         eyes = [out]
         kind_text = f"{kind.value}, level of detail streamed under {format_size(memory)}"
     elif lod:
-        cut = lod_settings_from_args(args)  # its checks before reading the tree
-        out, times, gl_name = render_lod(read_lod(args.scene), camera, settings, cut, layers, under)
+        out, times, gl_name = render_lod(tree, camera, settings, cut, layers, under)
+        del tree
         eyes = [out]
         kind_text = f"{kind.value}, level of detail"
     else:
