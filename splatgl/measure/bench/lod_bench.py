@@ -28,12 +28,12 @@ import json
 import math
 import statistics
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from .lod_report import plot, summary, table
+from .lod_report import LodFrame, plot, summary, table
 
 #: Fly-through distances, in multiples of the framing distance.
 FLY_FAR, FLY_NEAR = 6.0, 0.5
@@ -42,30 +42,6 @@ FINE_FAR, FINE_STEP, FINE_DEGREES = 6.0, 0.97, 1.0
 #: Path sets: coarse (time and error from far to close), fine (popping between frames) and
 #: switch (popping where the renderer switches from the cut to drawing the leaves).
 PATH_SETS = ("coarse", "fine", "switch")
-
-
-@dataclass(frozen=True)
-class LodFrame:
-    scene: str
-    path: str
-    config: str
-    frame: int
-    distance: float
-    frame_ms: float
-    full_ms: float
-    drawn: int
-    cut_nodes: int
-    cut_ms: float
-    psnr: float | None
-    ssim: float
-    popping_psnr: float | None
-    pop_max: float | None = None  # max |D| over pixels and RGB (see the module docstring)
-    pop_mean: float | None = None  # mean |D|
-    cut_change_max: float | None = None  # max |L[k] - L'[k]|, L' drawn with frame k-1's cut
-    cut_change_mean: float | None = None  # mean |L[k] - L'[k]|
-    full_change_max: float | None = None  # max |F[k+1] - F[k]|
-    full_change_mean: float | None = None  # mean |F[k+1] - F[k]|
-    leaves: bool = False  # the frame drew the leaves (no cut)
 
 
 def _psnr(mse: float) -> float | None:

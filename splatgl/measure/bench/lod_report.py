@@ -5,16 +5,40 @@ against RMS error)."""
 from __future__ import annotations
 
 import statistics
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from .report import _fmt, log_axes, save_figure
 
-if TYPE_CHECKING:
-    from .lod_bench import LodFrame
-
 #: Frames with at least this distance multiple count as far views.
 FAR_FROM = 3.0
+
+
+@dataclass(frozen=True)
+class LodFrame:
+    """One frame :func:`splatgl.measure.bench.lod_bench.bench_lod` measured (the popping figures
+    are defined in its module doc)."""
+
+    scene: str
+    path: str
+    config: str
+    frame: int
+    distance: float
+    frame_ms: float
+    full_ms: float
+    drawn: int
+    cut_nodes: int
+    cut_ms: float
+    psnr: float | None
+    ssim: float
+    popping_psnr: float | None
+    pop_max: float | None = None  # max |D| over pixels and RGB (see the module docstring)
+    pop_mean: float | None = None  # mean |D|
+    cut_change_max: float | None = None  # max |L[k] - L'[k]|, L' drawn with frame k-1's cut
+    cut_change_mean: float | None = None  # mean |L[k] - L'[k]|
+    full_change_max: float | None = None  # max |F[k+1] - F[k]|
+    full_change_mean: float | None = None  # mean |F[k+1] - F[k]|
+    leaves: bool = False  # the frame drew the leaves (no cut)
 
 
 def summary(rows: list[LodFrame]) -> list[dict]:
