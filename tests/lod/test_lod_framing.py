@@ -89,7 +89,7 @@ def test_render_default_view_is_the_same_with_and_without_memory(tmp_path, capsy
     path = stream_lod_file(tmp_path)
     common = [str(path), "--lod-budget", "400", "--renderer", "quad", *SIZE]
     assert main(["render", *common, "-o", str(tmp_path / "a.exr")]) == 0
-    assert main(["render", *common, "-o", str(tmp_path / "b.exr"), "--memory", "1G"]) == 0
+    assert main(["render", *common, "-o", str(tmp_path / "b.exr"), "--memory", "3G"]) == 0
     capsys.readouterr()
     a, b = read_image(tmp_path / "a.exr"), read_image(tmp_path / "b.exr")
     assert np.array_equal(a, b) and a[..., 3].max() > 0
