@@ -7,6 +7,7 @@ import warnings
 from pathlib import Path
 
 from ..formats import detect_format, load_scene
+from ..lod.io import is_lod_file
 from ..scene.stats import format_info, scene_info
 from ._spz_axes import add_spz_axes_argument
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
@@ -56,9 +57,7 @@ def run(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():  # a conflict with the file was reported on loading
             warnings.simplefilter("ignore")
             info["spz_axes"] = read_axes(args.scene, args.spz_axes).as_dict()
-    level_info = getattr(detect_format(args.scene), "level_info", None)
-    if level_info is not None:  # a level-of-detail format (Streamed SOG, LCC): splats per level
-        info["lod_levels"] = level_info(args.scene)
+    _add_levels(args.scene, info)
     text = format_info(args.scene, scene, info)
     if args.stats and scene.count:
         from ..edit.statistics import attribute_statistics, format_statistics, overdraw
@@ -83,6 +82,7 @@ def _streamed(args: argparse.Namespace) -> bool:
         return False
     stats, table, draw = found
     info = {"format": "ply", **stats}
+    _add_levels(args.scene, info)
     text = format_info(args.scene, None, info)
     if table is not None:
         info["attributes"], info["overdraw"] = table, draw
@@ -92,3 +92,13 @@ def _streamed(args: argparse.Namespace) -> bool:
     if args.json is not None:
         emit_json(args, {"path": str(args.scene), **info}, indent=2)
     return True
+
+
+def _add_levels(path, info: dict) -> None:
+    """``info["lod_levels"]`` for a level-of-detail file: splats per level, from the format
+    (Streamed SOG, LCC) or the ``.lod.ply`` header."""
+    level_info = getattr(detect_format(path), "level_info", None)
+    if level_info is None and is_lod_file(path):
+        from ..lod.io import level_info
+    if level_info is not None:
+        info["lod_levels"] = level_info(path)

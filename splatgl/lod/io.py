@@ -104,6 +104,23 @@ def is_lod_file(path: Path) -> bool:
     return head.startswith(b"ply") and f"element {ELEMENT} ".encode() in head.split(b"end_header")[0]
 
 
+def level_info(path: Path) -> dict:
+    """What ``splatgl info`` says of a ``.lod.ply``'s levels, from its header alone: nodes per
+    level, finest first, the branching, and the level a reader loads (0, the leaves)."""
+    path = Path(path)
+    with open(path, "rb") as fh:
+        header = ply.parse_header(path, fh)
+        fh.seek(0)
+        match = _COMMENT.search(fh.read(header.body_offset))
+    if match is None:
+        raise SceneFormatError(path, "not a splatgl LOD file (no 'comment lod branching B' line)")
+    branching = int(match.group(1))
+    leaves = next(e.count for e in header.elements if e.name == "vertex")
+    offsets = level_offsets(leaves, branching)
+    return {"counts": [int(b - a) for a, b in zip(offsets[:-1], offsets[1:])],
+            "branching": branching, "loaded": 0}
+
+
 def read_lod(path: Path, progress=None) -> LodTree:
     """Read a ``.lod.ply`` back into a :class:`LodTree` (radii recomputed from the nodes), its
     nodes anchored where the file says (:func:`stored_anchor`)."""

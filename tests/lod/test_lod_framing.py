@@ -93,3 +93,13 @@ def test_render_default_view_is_the_same_with_and_without_memory(tmp_path, capsy
     capsys.readouterr()
     a, b = read_image(tmp_path / "a.exr"), read_image(tmp_path / "b.exr")
     assert np.array_equal(a, b) and a[..., 3].max() > 0
+
+
+def test_info_names_a_lod_files_levels(tmp_path, capsys):
+    """``splatgl info x.lod.ply``: its levels, from the header."""
+    path = stream_lod_file(tmp_path)   # 3000 leaves, branching 4
+    assert main(["info", str(path)]) == 0
+    assert ("levels:      7 of a tree with branching 4, splats per level 0: 3000, 1: 750, 2: 188"
+            in capsys.readouterr().out)
+    assert main(["info", str(tmp_path / "s.ply")]) == 0
+    assert "levels:" not in capsys.readouterr().out
