@@ -281,7 +281,7 @@ def run_path(args: argparse.Namespace) -> int:
     if memory is not None and (executor.sharded or args.preview):
         raise SplatglError("--memory streams a path's frames in one process, not with "
                            "--workers, --executor ray or --preview")
-    tree = read_lod(args.scene) if lod is not None and memory is None else None
+    tree = read_lod(args.scene, default_progress()) if lod is not None and memory is None else None
     settings = settings_from_args(args)
     if memory is not None:   # streamed: the box the file records frames the orbit
         scene, _ = stream_inputs(args, settings)

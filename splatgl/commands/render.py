@@ -140,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
             raise SplatglError(LodFrames.stereo_refusal)
         settings = settings_from_args(args)
         camera_from_args(args, None, settings)   # the camera file and options checked first
-        tree = read_lod(args.scene)
+        tree = read_lod(args.scene, progress=default_progress())
         scene = apply_framing_box(tree.nodes.subset(slice(0, tree.level_size(0))), args.scene)
         camera = camera_from_args(args, scene, settings)   # the leaves frame it, as load_scene's
     else:
