@@ -7,7 +7,8 @@ The tree is built on a daemon thread (:class:`splatgl.background.Background`), s
 frames draw full detail at a lower scale meanwhile, and is kept in a cache folder
 (``$SPLATGL_CACHE``, else ``~/.cache/splatgl``) as ``lod/<key>.lod.ply``, the key naming the
 scene file, its size and its modification time: a second session loads it instead of building.
-A cache that cannot be written is not an error (the tree is simply rebuilt next time).
+A cache that cannot be written is not an error (the tree is simply rebuilt next time).  A
+``.lod.ply`` (from ``splatgl lod``) is its own tree: it is read, never built again or cached.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 
 from ..background import Background
 from ..lod.build import LodTree, build_hierarchy
-from ..lod.io import read_lod, write_lod
+from ..lod.io import is_lod_file, read_lod, write_lod
 from ..scene.splats import Scene, SplatKind
 
 #: Scenes with at least this many splats get a level-of-detail tree for budgeted frames.
@@ -44,6 +45,10 @@ def cache_file(scene_path: Path) -> Path:
 
 
 def _load_or_build(scene: Scene, path: Path | None) -> LodTree:
+    if path is not None and is_lod_file(path):   # a .lod.ply: its own tree, nothing built
+        tree = read_lod(path)                     # or cached (its leaves are the scene's rows)
+        if tree.level_size(0) == scene.count:
+            return tree
     cached = cache_file(path) if path is not None and path.is_file() else None
     if cached is not None and cached.is_file():
         try:

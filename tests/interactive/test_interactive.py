@@ -564,3 +564,23 @@ def test_lod_cache_is_reused_and_a_damaged_entry_rebuilt(tmp_path, monkeypatch, 
     entry.write_bytes(entry.read_bytes()[:100])                 # damaged: rebuilt, not an error
     assert LodProvider(scene, path, min_splats=1_000).wait().level_size(0) == scene.count
     assert LodProvider(scene, path, min_splats=scene.count + 1).wait() is None  # too small: none
+
+
+def test_a_lod_file_gives_its_own_tree_never_built_or_cached(tmp_path, monkeypatch):
+    """The viewer's budget on a ``.lod.ply`` draws from the file's tree: read in the background,
+    no build and no cache entry (before, it built a second tree of the leaves and cached it)."""
+    import splatgl.interactive.lod_cache as lod_cache
+    from helpers import stream_lod_file
+    from splatgl.formats import load_scene
+    from splatgl.lod.io import read_lod
+
+    monkeypatch.setenv("SPLATGL_CACHE", str(tmp_path / "cache"))
+    path = stream_lod_file(tmp_path)
+    monkeypatch.setattr(lod_cache, "build_hierarchy",
+                        lambda *a, **k: pytest.fail("a .lod.ply's tree was built again"))
+    scene = load_scene(path)
+    tree = LodProvider(scene, path, min_splats=1_000).wait()
+    want = read_lod(path)
+    assert np.array_equal(tree.offsets, want.offsets)
+    assert np.array_equal(tree.nodes.means, want.nodes.means)
+    assert not (tmp_path / "cache").exists()
