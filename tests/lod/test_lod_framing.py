@@ -103,3 +103,16 @@ def test_info_names_a_lod_files_levels(tmp_path, capsys):
             in capsys.readouterr().out)
     assert main(["info", str(tmp_path / "s.ply")]) == 0
     assert "levels:" not in capsys.readouterr().out
+
+
+def test_path_orbit_is_the_same_with_and_without_memory(tmp_path, capsys):
+    """``render --path orbit`` of a ``.lod.ply``: the orbit frames the recorded box both ways,
+    so the frames read whole and streamed are the same images."""
+    path = stream_lod_file(tmp_path)
+    common = [str(path), "--path", "orbit:2", "--lod-budget", "400", "--renderer", "quad", *SIZE]
+    assert main(["render", *common, "-o", str(tmp_path / "a%d.exr")]) == 0
+    assert main(["render", *common, "-o", str(tmp_path / "b%d.exr"), "--memory", "3G"]) == 0
+    capsys.readouterr()
+    for i in range(2):
+        a, b = read_image(tmp_path / f"a{i}.exr"), read_image(tmp_path / f"b{i}.exr")
+        assert np.array_equal(a, b) and a[..., 3].max() > 0
