@@ -34,8 +34,7 @@ from ..cameras.registry import adapt_camera, retarget
 from ..interactive.budget import check_fps
 from ..interactive.preview import PreviewRenderer
 from ..lod.frames import LodFrames
-from ..formats.metadata import apply_framing_box
-from ..lod.io import is_lod_file, read_lod
+from ..lod.io import framed_leaves, is_lod_file, read_lod
 from ..lod.budget import format_size
 from ..lod.selection import LodSettings
 from ..scene.settings import RendererKind
@@ -287,7 +286,7 @@ def run_path(args: argparse.Namespace) -> int:
         scene, _ = stream_inputs(args, settings)
     else:  # the scene frames the orbit and is counted in the summary: a LOD file's leaves
         scene = (load_scene_arg(args) if tree is None else   # framed as load_scene frames it
-                 apply_framing_box(tree.nodes.subset(slice(0, tree.level_size(0))), args.scene))
+                 framed_leaves(tree, args.scene))
     if not target.is_video:
         check_exact_ids(target.files(), target.frame_path(0), scene.count)
     cameras, source_fps, numbers = path_cameras(args, scene)

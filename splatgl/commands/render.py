@@ -16,8 +16,7 @@ from ..imagefiles.pictures import depth_preview
 from ..api import Renderer, gl_renderer_name
 from ..lod.frames import LodFrames, render_lod
 from ..lod.budget import format_size
-from ..formats.metadata import apply_framing_box
-from ..lod.io import read_lod
+from ..lod.io import framed_leaves, read_lod
 from ..lod.stream_frames import StreamFrames
 from ..scene.settings import RendererKind
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
@@ -141,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
         settings = settings_from_args(args)
         camera_from_args(args, None, settings)   # the camera file and options checked first
         tree = read_lod(args.scene, progress=default_progress())
-        scene = apply_framing_box(tree.nodes.subset(slice(0, tree.level_size(0))), args.scene)
+        scene = framed_leaves(tree, args.scene)
         camera = camera_from_args(args, scene, settings)   # the leaves frame it, as load_scene's
     else:
         scene, settings, camera = inputs_from_args(args)

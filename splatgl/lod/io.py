@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import SceneFormatError
 from ..formats import ply, ply_write
-from ..formats.metadata import box_comment
+from ..formats.metadata import apply_framing_box, box_comment
 from ..formats.written import write_checked
 from ..scene.splats import Scene, activate
 from .build import LodTree, bounding_radii, level_offsets
@@ -24,9 +24,19 @@ ELEMENT = "lod_node"
 BOUNDS = "lod_bound"
 #: A level-of-detail file's name ends so (any ``.ply`` is read, but not ``.compressed.ply``).
 SUFFIX = ".lod.ply"
-_COMMENT = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
+_BRANCHING = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
 #: The header comment with the anchor (:func:`COMMENTS`).
 ANCHOR_COMMENT = re.compile(rb"^comment lod anchor (\S+) (\S+) (\S+)\s*$", re.M)
+
+
+def stored_branching(path: Path, head: bytes) -> int:
+    """The branching a ``.lod.ply`` header (bytes) of the file ``path`` records; one line
+    naming the file where it records none."""
+    match = _BRANCHING.search(head)
+    if match is None:
+        raise SceneFormatError(path, "not a splatgl LOD file (no 'comment lod branching B' "
+                                     "line); build one with 'splatgl lod'", ELEMENT)
+    return int(match.group(1))
 
 
 def stored_anchor(head: bytes) -> np.ndarray | None:
@@ -111,14 +121,18 @@ def level_info(path: Path) -> dict:
     with open(path, "rb") as fh:
         header = ply.parse_header(path, fh)
         fh.seek(0)
-        match = _COMMENT.search(fh.read(header.body_offset))
-    if match is None:
-        raise SceneFormatError(path, "not a splatgl LOD file (no 'comment lod branching B' line)")
-    branching = int(match.group(1))
-    leaves = next(e.count for e in header.elements if e.name == "vertex")
+        branching = stored_branching(path, fh.read(header.body_offset))
+    leaves = sum(e.count for e in header.elements if e.name == "vertex")
     offsets = level_offsets(leaves, branching)
     return {"counts": [int(b - a) for a, b in zip(offsets[:-1], offsets[1:])],
             "branching": branching, "loaded": 0}
+
+
+def framed_leaves(tree: LodTree, path: Path) -> Scene:
+    """The leaves of ``tree`` (read from ``path``) as a scene, framed as
+    :func:`splatgl.formats.load_scene` frames the file (its recorded box): what the default
+    camera and orbits of an in-memory level of detail frame."""
+    return apply_framing_box(tree.nodes.subset(slice(0, tree.level_size(0))), path)
 
 
 def read_lod(path: Path, progress=None) -> LodTree:
@@ -130,11 +144,7 @@ def read_lod(path: Path, progress=None) -> LodTree:
         header = ply.parse_header(path, fh)
         fh.seek(0)
         head = fh.read(header.body_offset)
-        match = _COMMENT.search(head)
-        if match is None:
-            raise SceneFormatError(path, "not a splatgl LOD file (no 'comment lod branching B' "
-                                         "line); build one with 'splatgl lod'", ELEMENT)
-        branching = int(match.group(1))
+        branching = stored_branching(path, head)
         offset = header.body_offset
         elem = None
         for e in header.elements:

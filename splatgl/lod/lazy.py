@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import mmap
 import os
-import re
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +30,7 @@ from .build import level_offsets
 from .cut import CutData, select_cut_weights
 from .cut_budget import select_cut_budget
 from ..formats.metadata import header_box
-from .io import BOUNDS, ELEMENT, stored_anchor
+from .io import BOUNDS, ELEMENT, stored_anchor, stored_branching
 from .selection import LodSettings
 
 #: Node spheres per page (16 bytes each: 4 KiB), the unit they are read in.
@@ -40,7 +39,6 @@ BOUND_PAGE = 256
 SPHERE_GROUP = 4096
 #: Node rows this close are read together (one read, the rows between discarded).
 NODE_GAP = 8
-_BRANCHING = re.compile(rb"^comment lod branching (\d+)\s*$", re.M)
 
 
 class LazyLod:
@@ -58,11 +56,10 @@ class LazyLod:
         except OSError as exc:
             raise SceneFormatError(self.path, f"cannot read: {exc.strerror or exc}") from None
         self.bytes_read += len(head)
-        match = _BRANCHING.search(head)
-        if match is None or header.order is None:
-            raise SceneFormatError(self.path, "not a binary splatgl LOD file (no 'comment lod "
-                                              "branching B' line); build one with 'splatgl lod'")
-        self.branching = int(match.group(1))
+        self.branching = stored_branching(self.path, head)
+        if header.order is None:
+            raise SceneFormatError(self.path, "not a binary splatgl LOD file (an ASCII PLY); "
+                                              "build one with 'splatgl lod'")
         anchor = stored_anchor(head)
         #: The leaves' 1-99 % box the header records ((lo, hi) float64), or None (written
         #: before it): what frames the file's views (:func:`splatgl.lod.stream_frames.framing_scene`).
