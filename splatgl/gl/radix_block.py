@@ -15,9 +15,11 @@ this is the classic CPU parallel LSD radix sort instead, shaped for such a devic
   order, (digit, lane), in place, plus the digit starts;
 - ``radix_block_scatter.comp``: each lane walks its block in order and writes each key and
   value at its digit's next place: stable by construction, with no barrier, no shared memory
-  and no subgroup operation.  Between passes a key and its value travel as one uint64 (one
-  storage write instead of two) where the device has 64-bit integers and the pair buffer fits
-  its storage block limit (llvmpipe: 128 MB, 16.7M keys); apart otherwise.
+  and no subgroup operation.  Between passes a key and its value travel as one ``uvec2``
+  (one storage write instead of two) where the pair buffer fits the device's storage block
+  limit (llvmpipe: 128 MB, 16.7M keys); apart otherwise.  On llvmpipe a ``uvec2`` write costs
+  about 0.8 of a uint64 one (it stores the pair as two 32-bit components in one lane loop;
+  the uint64 is packed and unpacked) and 0.7 of two 32-bit writes to separate buffers.
 
 The passes run over only the bits in which keys differ, planned on the device
 (``radix_plan.comp`` with ``RADIX_BLOCK``; ``radix_block_bits.comp`` finds the bits), with
@@ -85,7 +87,7 @@ def groups_for(count: int, groups: int) -> int:
 class BlockPasses:
     """The programs of the block passes for ``groups`` work groups, and the recording of a
     sort (:meth:`record`) into the buffers a :class:`~splatgl.gl.radix_sort.RadixSorter`
-    holds.  Between passes keys and values travel as uint64 pairs (one storage write a key
+    holds.  Between passes keys and values travel as ``uvec2`` pairs (one storage write a key
     instead of two) where the pair buffers fit the device's storage block size
     (:meth:`pairs_fit`); apart otherwise."""
 
@@ -102,8 +104,7 @@ class BlockPasses:
         for name in ("bits", "plan", "scan"):
             self._program(name)
         ctx = programs.ctx
-        self._block_limit = (int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 0)
-                             if "GL_ARB_gpu_shader_int64" in ctx.extensions else 0)
+        self._block_limit = int(ctx.info.get("GL_MAX_SHADER_STORAGE_BLOCK_SIZE") or 0)
 
     def _program(self, name: str, src_pairs: bool = False, dst_pairs: bool = False):
         key = f"{name}{' pairs in' if src_pairs else ''}{' pairs out' if dst_pairs else ''}"
@@ -118,8 +119,7 @@ class BlockPasses:
         return self.programs[key]
 
     def pairs_fit(self, capacity: int) -> bool:
-        """Whether a pair buffer of ``capacity`` keys fits one storage block here (and the
-        device has 64-bit integers)."""
+        """Whether a pair buffer of ``capacity`` keys fits one storage block here."""
         return pair_bytes(capacity) <= self._block_limit
 
     def hist_bytes(self) -> int:
@@ -179,7 +179,7 @@ class BlockPasses:
 
 
 def pair_bytes(capacity: int) -> int:
-    """Bytes of a pair buffer for ``capacity`` keys (whole u64vec4s)."""
+    """Bytes of a pair buffer for ``capacity`` keys (8 a key, in whole groups of 4 keys)."""
     return 32 * -(-capacity // 4)
 
 
