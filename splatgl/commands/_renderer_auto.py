@@ -17,8 +17,9 @@ def choose_renderer(args: argparse.Namespace, scene, settings: RenderSettings, c
                     under, background: bool = False) -> RendererKind:
     """``--renderer auto`` for this request: sets ``args.renderer`` to the choice (and
     ``args.renderer_choice``, for ``--timings``).  Where only the CPU renderer's kernels were
-    missing: ``background`` (the viewer) compiles them on a thread now; either way it is said
-    once on stderr."""
+    missing: ``background`` (the viewer) compiles them on a thread now, a one-shot command in a
+    process of its own (:mod:`splatgl.renderers.kernel_build`); either way it is said once on
+    stderr."""
     choice = renderer_auto.choose(scene=scene, settings=settings,
                                   model=camera.model if camera is not None else None,
                                   layers=frozenset(layers) if layers is not None else None,
@@ -28,7 +29,7 @@ def choose_renderer(args: argparse.Namespace, scene, settings: RenderSettings, c
     if choice.kernels_missing:
         if background:
             renderer_auto.compile_in_background()
-        renderer_auto.compiling_notice(choice, background)
+        renderer_auto.compiling_notice(choice, background, detach=not background)
     return choice.kind
 
 

@@ -15,8 +15,10 @@ renderer draws the exact frame about 3x sooner than llvmpipe's quads
 Otherwise, and on every hardware GPU, ``auto`` is the quad path.  Where only the missing
 kernels stood in the way the caller says so once (:func:`compiling_notice`): the viewer
 compiles them on a background thread (:func:`compile_in_background`), draws with the quad
-path meanwhile and with the CPU renderer once they are ready (:func:`when_compiled`); a one-shot ``render`` draws with the quad path rather than wait half a minute
-for a frame that takes a second or two there, and says how to compile them.
+path meanwhile and with the CPU renderer once they are ready (:func:`when_compiled`); a
+one-shot ``render`` draws with the quad path rather than wait half a minute for a frame that
+takes a second or two there, and starts the compile in a detached low-priority process
+(:mod:`splatgl.renderers.kernel_build`), so that the next command finds them ready.
 
 ``SPLATGL_RENDERER_AUTO=quad`` pins ``auto`` to the quad path (the test suite sets it, so that
 no test depends on whether numba's cache is warm; docs/testing.md).
@@ -88,9 +90,12 @@ def choose(*, scene=None, settings: RenderSettings | None = None, model=None, la
 _told = False
 
 
-def compiling_notice(choice: Choice, background: bool) -> None:
+def compiling_notice(choice: Choice, background: bool, detach: bool = False) -> None:
     """Say once per process, on stderr, that the CPU renderer waits for its kernels:
-    ``background``, that they are compiling now (the viewer); else how to compile them."""
+    ``background``, that they are compiling now (the viewer, on a thread); ``detach`` (a
+    one-shot command), start their compile in a process of its own
+    (:func:`splatgl.renderers.kernel_build.start`) and say how it stands; else how to compile
+    them (a benchmark: nothing may run beside its timings)."""
     global _told
     if _told or not choice.kernels_missing:
         return
@@ -99,9 +104,34 @@ def compiling_notice(choice: Choice, background: bool) -> None:
         line = ("the cpu renderer's kernels are compiling (first use, about half a minute, in "
                 "the background); drawing with quad until they are ready")
     else:
-        line = ("the cpu renderer's kernels are not compiled yet (first use, about half a "
-                "minute once: '--renderer cpu' compiles them); drawing with quad this time")
+        line = _detached_line() if detach else None
+        line = line or ("the cpu renderer's kernels are not compiled yet (first use, about half "
+                        "a minute once: '--renderer cpu' compiles them); drawing with quad this "
+                        "time")
     print(f"splatgl: {line}", file=sys.stderr, flush=True)
+
+
+def _detached_line() -> str | None:
+    """Start the detached compile where none ran lately; what to say of it (None: it could not
+    be started)."""
+    from . import kernel_build
+
+    build = kernel_build.start()
+    if build is None:
+        return None
+    kernels = "the cpu renderer's kernels"
+    if build.state == kernel_build.COMPILING and build.age == 0.0:
+        return (f"{kernels} are compiling in a background process (first use, about half a "
+                "minute, once); this command draws with quad")
+    if build.state == kernel_build.COMPILING:
+        return (f"{kernels} are still compiling in a background process (started "
+                f"{build.age:.0f} s ago); this command draws with quad")
+    if build.state == kernel_build.FAILED:
+        return (f"{kernels} did not compile ({build.why}); drawing with quad ('--renderer cpu' "
+                "compiles them in the foreground)")
+    return (f"{kernels} were compiled {build.age:.0f} s ago, but numba's cache does not hold "
+            "them now (is its folder writable?); drawing with quad ('--renderer cpu' compiles "
+            "them in the foreground)")
 
 
 _compiling: threading.Thread | None = None

@@ -19,16 +19,32 @@ from splatgl.gl.device_class import (Device, DeviceClass, choice_text, classify,
 from splatgl.scene.splats import SplatKind
 from splatgl.scene.settings import EarlyStop, Precision, RendererKind, RenderSettings, SortKey
 from splatgl.output.layers import BASE, Layer
-from splatgl.renderers import auto, cpu
+from splatgl.renderers import auto, cpu, kernel_build
 
 SOFTWARE = Device(DeviceClass.SOFTWARE, "llvmpipe")
 HARDWARE = Device(DeviceClass.HARDWARE, "NVIDIA H100 80GB HBM3")
 
 
+class Spawned(list):
+    """The processes :mod:`splatgl.renderers.kernel_build` started (argv, keywords), none run."""
+
+    def __call__(self, argv, **kwargs):
+        self.append((argv, kwargs))
+
+
 @pytest.fixture
-def unpinned(monkeypatch):
+def spawned(monkeypatch, tmp_path):
+    """The detached compile's processes recorded, not started; its stamp under tmp_path."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    record = Spawned()
+    monkeypatch.setattr(kernel_build, "_spawn", record)
+    return record
+
+
+@pytest.fixture
+def unpinned(monkeypatch, spawned):
     """``--renderer auto`` by the device's rule (the suite pins it to quad), the message not
-    yet said, no device class forced."""
+    yet said, no device class forced, no compile process started."""
     monkeypatch.delenv(auto.PIN_ENV, raising=False)
     monkeypatch.delenv(device_class.CLASS_ENV, raising=False)
     monkeypatch.setattr(auto, "_told", False)
@@ -145,7 +161,7 @@ def test_timings_say_what_each_auto_chose(unpinned, tmp_path, capsys):
     assert ": software; the cpu renderer's kernels are not compiled yet)\n" in got.out
     assert "\nsort auto -> exact (llvmpipe: software)\n" in got.out
     assert "\nearly-stop auto -> by coverage (llvmpipe: software)\n" in got.out
-    assert got.err.count("the cpu renderer's kernels are not compiled yet") == 1
+    assert got.err.count("the cpu renderer's kernels are compiling in a background process") == 1
     got = _render(tmp_path, capsys)                       # once a process
     assert "kernels" not in got.err
 
@@ -236,3 +252,88 @@ def test_the_apis_default_settings_take_the_devices_sort(unpinned):
     assert default_settings(sort_key="exact").sort_key is SortKey.EXACT
     unpinned.setenv(device_class.CLASS_ENV, "software")
     assert default_settings(sort_key="auto").sort_key is SortKey.EXACT
+
+
+def test_a_one_shot_render_compiles_the_kernels_once_in_a_process_of_its_own(unpinned, spawned,
+                                                                             tmp_path, capsys):
+    """The first ``render`` without the kernels draws with quad and starts their compile in a
+    detached process; later commands while its stamp is fresh start none and say how it stands;
+    a stale stamp (a compile that died) lets the next command start one again."""
+    import os
+    import sys
+
+    unpinned.setenv(device_class.CLASS_ENV, "software")
+    _ready(unpinned, False)
+    got = _render(tmp_path, capsys)
+    assert "(32x24, 1604 splats, quad)" in got.out
+    assert got.err == ("splatgl: the cpu renderer's kernels are compiling in a background process "
+                       "(first use, about half a minute, once); this command draws with quad\n")
+    stamp = kernel_build.stamp_path()
+    assert stamp.parent == tmp_path / "cache" / "splatgl" and stamp.read_text() == "compiling\n"
+    [(argv, kwargs)] = spawned
+    assert argv == [sys.executable, "-m", "splatgl.renderers.kernel_build", str(stamp)]
+    assert kwargs["start_new_session"] and kwargs["stdin"] == kernel_build.subprocess.DEVNULL
+
+    def again() -> str:
+        unpinned.setattr(auto, "_told", False)            # a new process
+        return _render(tmp_path, capsys).err
+
+    assert "are still compiling in a background process (started 0 s ago)" in again()
+    stamp.write_text("failed: no LLVM here\n")
+    assert again() == ("splatgl: the cpu renderer's kernels did not compile (no LLVM here); "
+                       "drawing with quad ('--renderer cpu' compiles them in the foreground)\n")
+    stamp.write_text("ready\n")                           # done, yet numba's cache lacks them
+    assert "were compiled 0 s ago, but numba's cache does not hold them now" in again()
+    assert len(spawned) == 1
+    old = stamp.stat().st_mtime - kernel_build.STALE_S - 1
+    os.utime(stamp, (old, old))
+    assert "are compiling in a background process (first use" in again()
+    assert len(spawned) == 2 and stamp.read_text() == "compiling\n"
+
+
+def test_without_a_writable_cache_folder_it_says_how_to_compile_them(unpinned, spawned, tmp_path,
+                                                                     capsys):
+    (tmp_path / "cache").write_text("a file where the folder would be")
+    _ready(unpinned, False)
+    auto.compiling_notice(auto.choose(device=SOFTWARE), background=False, detach=True)
+    assert "'--renderer cpu' compiles them); drawing with quad this time" in capsys.readouterr().err
+    assert spawned == []
+
+
+def test_a_benchmark_starts_no_compile_beside_its_timings(unpinned, spawned, capsys):
+    _ready(unpinned, False)
+    auto.compiling_notice(auto.choose(device=SOFTWARE), background=False)
+    assert "not compiled yet" in capsys.readouterr().err and spawned == []
+
+
+def test_the_compile_process_says_in_its_stamp_how_it_ended(monkeypatch, tmp_path):
+    stamp = tmp_path / "stamp"
+
+    def broken(progress=None):
+        raise RuntimeError("LLVM ERROR: no target\nmore lines")
+
+    monkeypatch.setattr(cpu, "prepare", broken)
+    assert kernel_build.main([str(stamp)]) == 1
+    assert stamp.read_text() == "failed: LLVM ERROR: no target\n"
+    assert kernel_build.read(stamp).why == "LLVM ERROR: no target"
+    monkeypatch.setattr(cpu, "prepare", lambda progress=None: None)
+    assert kernel_build.main([str(stamp)]) == 0 and kernel_build.read(stamp).state == "ready"
+    assert kernel_build.main([]) == 2
+    stamp.write_text("something else\n")
+    assert kernel_build.read(stamp) is None
+
+
+def test_the_compile_process_fills_numbas_cache(monkeypatch, tmp_path):
+    """The real child, as :func:`kernel_build.start` runs it (``-m``, niced): afterwards
+    ``kernels_ready`` finds every kernel in numba's on-disk cache (a compile of about half a
+    minute where the cache was cold; a load where the suite's CPU renderer tests filled it)."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("numba")
+    stamp = tmp_path / "stamp"
+    done = subprocess.run([sys.executable, "-m", "splatgl.renderers.kernel_build", str(stamp)],
+                          capture_output=True, text=True, timeout=600)
+    assert (done.returncode, stamp.read_text()) == (0, "ready\n"), done.stderr
+    monkeypatch.setattr(cpu, "_READY", False)
+    assert cpu.kernels_ready()
