@@ -66,10 +66,17 @@ def pytest_configure(config) -> None:
 
 
 def pytest_collection_modifyitems(items) -> None:
-    """Mark ``shared`` every test that needs the real scenes (directly or through a fixture)."""
+    """Mark ``shared`` every test that needs the real scenes (directly or through a fixture);
+    run the tests marked ``last`` after all others (stable: each keeps its place otherwise)."""
     for item in items:
         if "shared_scenes" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.shared)
+    items.sort(key=lambda item: item.get_closest_marker("last") is not None)
+
+
+# Every shader stage this process compiles is kept (helpers.COMPILED_SHADERS) for
+# tests/gl/test_glsl_portable.py, which hands them to glslang, a second GLSL front-end.
+helpers.record_compiled_shaders()
 
 
 @pytest.fixture(scope="session")

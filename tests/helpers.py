@@ -428,3 +428,30 @@ class GatedChunks:
         if self.gated:
             self.gate.wait(10)
         return self.inner.load(chunk)
+
+
+#: Every shader stage source compiled in this test process, by its text's SHA-1: (the stage's
+#: file extension, the stage file, the preprocessed text) (:func:`record_compiled_shaders`).
+COMPILED_SHADERS: dict[str, tuple[str, str, str]] = {}
+
+
+def record_compiled_shaders() -> None:
+    """Keep every stage source :class:`splatgl.gl.shaders.ProgramCache` compiles from now on in
+    :data:`COMPILED_SHADERS` (once per process; the compile itself is unchanged)."""
+    import hashlib
+
+    from splatgl.gl import shaders
+
+    compile_ = shaders.ProgramCache._compile
+    if getattr(compile_, "records", False):
+        return
+    ext = {"compute": "comp", "vertex": "vert", "fragment": "frag"}
+
+    def recording(self, kind, sources):
+        for stage, source in sources.items():
+            digest = hashlib.sha1(source.text.encode()).hexdigest()
+            COMPILED_SHADERS.setdefault(digest, (ext[stage], source.files[0], source.text))
+        return compile_(self, kind, sources)
+
+    recording.records = True
+    shaders.ProgramCache._compile = recording
