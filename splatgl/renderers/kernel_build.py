@@ -55,8 +55,9 @@ class Build:
         return self.age < STALE_S
 
 
-def stamp_path() -> Path:
-    """The stamp file of this splatgl and numba version."""
+def stamp_path() -> Path | None:
+    """The stamp file of this splatgl and numba version; None where the cache folder is not
+    an absolute path (no home folder)."""
     from .. import __version__
 
     try:
@@ -64,12 +65,16 @@ def stamp_path() -> Path:
     except metadata.PackageNotFoundError:
         numba_version = "none"
     root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    if not os.path.isabs(root):   # HOME unset ("~" left as it is), or a relative XDG path
+        return None
     return Path(root) / "splatgl" / f"cpu-kernels-{__version__}-numba-{numba_version}"
 
 
 def read(stamp: Path | None = None) -> Build | None:
     """What the stamp says, or None where there is none (or it cannot be read)."""
     stamp = stamp or stamp_path()
+    if stamp is None:
+        return None
     try:
         text = stamp.read_text(encoding="utf-8").strip()
         age = max(0.0, time.time() - stamp.stat().st_mtime)
@@ -100,10 +105,10 @@ def start() -> Build | None:
     stamp as it stands afterwards (``age`` 0 where this call started it), or None where no
     process could be started (no writable cache folder, no ``fork``)."""
     stamp = stamp_path()
-    build = read(stamp)
+    build = read(stamp) if stamp is not None else None
     if build is not None and build.fresh:
         return build
-    if not hasattr(os, "setsid"):
+    if stamp is None or not hasattr(os, "setsid"):
         return None
     try:
         _write(stamp, COMPILING)

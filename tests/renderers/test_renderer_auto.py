@@ -300,6 +300,14 @@ def test_without_a_writable_cache_folder_it_says_how_to_compile_them(unpinned, s
     assert spawned == []
 
 
+def test_without_a_home_folder_nothing_is_written_in_the_working_one(unpinned, spawned, tmp_path,
+                                                                    capsys):
+    unpinned.setenv("XDG_CACHE_HOME", "relative/cache")
+    unpinned.chdir(tmp_path)
+    assert kernel_build.stamp_path() is None and kernel_build.start() is None
+    assert list(tmp_path.iterdir()) == [] and spawned == []
+
+
 def test_a_benchmark_starts_no_compile_beside_its_timings(unpinned, spawned, capsys):
     _ready(unpinned, False)
     auto.compiling_notice(auto.choose(device=SOFTWARE), background=False)
