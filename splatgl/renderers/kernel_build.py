@@ -11,18 +11,20 @@ the compile in a detached, low-priority process that fills numba's cache and end
 ``render`` finds the kernels ready.
 
 A stamp file in the user's cache folder (``$XDG_CACHE_HOME/splatgl`` or ``~/.cache/splatgl``),
-one per splatgl and numba version, says what that process is doing (``compiling``, ``ready``
-or ``failed: <the error's first line>``), so that it is started once, not by every command,
-and what the commands say is true: while it is younger than :data:`STALE_S` seconds no other
-process starts; an older one (a compile that was killed, or whose cache was lost since) lets
-the next command start again.  Nothing here runs where the stamp folder cannot be written:
-the command then says how to compile them in the foreground (``--renderer cpu``).
+one per splatgl and numba version and Python environment, says what that process is doing
+(``compiling``, ``ready`` or ``failed: <the error's first line>``), so that it is started
+once, not by every command, and what the commands say is true: while it is younger than
+:data:`STALE_S` seconds no other process starts; an older one (a compile that was killed, or
+whose cache was lost since) lets the next command start again.  Nothing here runs where the
+stamp folder cannot be written: the command then says how to compile them in the foreground
+(``--renderer cpu``).
 
 Run as ``python -m splatgl.renderers.kernel_build STAMP`` by :func:`start` only.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import subprocess
 import sys
@@ -67,7 +69,10 @@ def stamp_path() -> Path | None:
     root = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     if not os.path.isabs(root):   # HOME unset ("~" left as it is), or a relative XDG path
         return None
-    return Path(root) / "splatgl" / f"cpu-kernels-{__version__}-numba-{numba_version}"
+    # one stamp an environment and checkout: each has its own numba cache (__pycache__ beside
+    # the kernels' sources), so another's "ready" says nothing of this one's
+    where = hashlib.sha1(f"{sys.prefix}\0{Path(__file__).resolve().parent}".encode()).hexdigest()
+    return Path(root) / "splatgl" / f"cpu-kernels-{__version__}-numba-{numba_version}-{where[:10]}"
 
 
 def read(stamp: Path | None = None) -> Build | None:

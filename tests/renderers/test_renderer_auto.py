@@ -308,6 +308,17 @@ def test_without_a_home_folder_nothing_is_written_in_the_working_one(unpinned, s
     assert list(tmp_path.iterdir()) == [] and spawned == []
 
 
+def test_each_python_environment_has_its_own_stamp(unpinned, spawned):
+    """Two virtual environments with the same versions keep two numba caches: one's compile
+    says nothing of the other's."""
+    import sys
+
+    here = kernel_build.stamp_path()
+    unpinned.setattr(sys, "prefix", sys.prefix + "-other")
+    there = kernel_build.stamp_path()
+    assert here.parent == there.parent and here != there
+
+
 def test_a_benchmark_starts_no_compile_beside_its_timings(unpinned, spawned, capsys):
     _ready(unpinned, False)
     auto.compiling_notice(auto.choose(device=SOFTWARE), background=False)
