@@ -17,7 +17,7 @@ once, not by every command, and what the commands say is true: while it is young
 :data:`STALE_S` seconds no other process starts; an older one (a compile that was killed, or
 whose cache was lost since) lets the next command start again.  Nothing here runs where the
 stamp folder cannot be written: the command then says how to compile them in the foreground
-(``--renderer cpu``).
+(``--renderer cpu``); nor where ``SPLATGL_RENDERER_AUTO=quad`` keeps ``auto`` on the quad path.
 
 Run as ``python -m splatgl.renderers.kernel_build STAMP`` by :func:`start` only.
 """
