@@ -80,8 +80,8 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
 
     The scene's :attr:`~splatgl.scene.splats.Scene.source` names the file and its tags
     (:func:`scene_source`), which give the scene's default camera up and settings.  A file
-    whose header records a framing box (a ``.lod.ply``) is framed by it
-    (:func:`splatgl.formats.metadata.apply_framing_box`).
+    that records a framing box (a ``.lod.ply``'s header, a Streamed SOG manifest ``splatgl lod``
+    wrote) is framed by it (:func:`splatgl.formats.metadata.apply_framing_box`).
     """
     path = Path(path)
     mod = detect_format(path)

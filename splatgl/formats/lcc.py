@@ -150,6 +150,8 @@ class Lcc:
     chunks: tuple
     has_sh: bool
     ranges: dict
+    #: A framing box the file records (as a Streamed SOG ``splatgl lod`` wrote does): never.
+    box = None
 
     def _read(self, name: str, offset: int, size: int) -> bytes:
         path = _file(self.path, name)

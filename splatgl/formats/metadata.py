@@ -11,9 +11,10 @@
 
 Untagged files (and formats without such a tag: .splat, .ksplat, glTF) give None.
 
-:func:`framing_box` reads the box a PLY header records for framing (``comment lod box``, which
-``splatgl lod`` writes: the 1-99 % box of the leaves' centres), so that a level-of-detail file
-is framed alike whether it is read whole or streamed (:func:`apply_framing_box`).
+:func:`framing_box` reads the box a level-of-detail file records for framing, which ``splatgl
+lod`` writes (the 1-99 % box of the leaves' centres): a ``.lod.ply`` header's ``comment lod
+box``, a Streamed SOG manifest's ``splatglFramingBox``; so that the file is framed alike
+whether it is read whole or streamed (:func:`apply_framing_box`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,9 @@ HEAD_BYTES = 1 << 16
 #: The header comment with the framing box: ``lo`` then ``hi``, x y z each, as Python writes a
 #: float64 (``repr``).
 BOX_COMMENT = re.compile(rb"^comment lod box" + rb" (\S+)" * 6 + rb"\s*$", re.M)
+#: The Streamed SOG manifest key holding the same box, ``[x0, y0, z0, x1, y1, z1]``
+#: (:mod:`splatgl.formats.streamed_sog`; other readers ignore it).
+BOX_KEY = "splatglFramingBox"
 
 
 def box_comment(lo: np.ndarray, hi: np.ndarray) -> str:
@@ -38,44 +42,72 @@ def box_comment(lo: np.ndarray, hi: np.ndarray) -> str:
     return "lod box " + " ".join(repr(float(v)) for v in (*lo, *hi))
 
 
-def header_box(head: bytes) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(lo, hi)`` float64 (3,) of the framing box a PLY header (bytes) records, or None
-    (none recorded, or not finite and ordered)."""
-    match = BOX_COMMENT.search(head.split(b"end_header", 1)[0])
-    if match is None:
-        return None
+def checked_box(values) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(lo, hi)`` float64 (3,) of six numbers ``x0 y0 z0 x1 y1 z1``, or None where they are
+    not six finite numbers with ``lo <= hi`` (a malformed box is ignored, not refused)."""
     try:
-        values = np.array([float(v) for v in match.groups()])
-    except ValueError:
+        arr = np.array([float(v) for v in values], np.float64)
+    except (TypeError, ValueError):
         return None
-    lo, hi = values[:3], values[3:]
-    if not (np.isfinite(values).all() and (lo <= hi).all()):
+    if arr.shape != (6,):
+        return None
+    lo, hi = arr[:3], arr[3:]
+    if not (np.isfinite(arr).all() and (lo <= hi).all()):
         return None
     lo.flags.writeable = hi.flags.writeable = False
     return lo, hi
 
 
+def header_box(head: bytes) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(lo, hi)`` float64 (3,) of the framing box a PLY header (bytes) records, or None
+    (none recorded, or not finite and ordered)."""
+    match = BOX_COMMENT.search(head.split(b"end_header", 1)[0])
+    return None if match is None else checked_box(match.groups())
+
+
 def framing_box(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
-    """The framing box ``path``'s PLY header records (:func:`header_box`), or None."""
+    """The framing box ``path`` records, or None: a PLY header's (:func:`header_box`), or a
+    Streamed SOG manifest's (:func:`manifest_box`)."""
     try:
         with open(path, "rb") as fh:
             head = fh.read(HEAD_BYTES)
     except OSError:
         return None
-    return header_box(head) if head.startswith(b"ply") else None
+    if head.startswith(b"ply"):
+        return header_box(head)
+    if not (head.lstrip().startswith(b"{") and b'"lodLevels"' in head):
+        return None   # not a Streamed SOG manifest (a glTF is parsed no second time)
+    from ._binary import json_object
+
+    try:
+        return manifest_box(json_object(Path(path), "lod-meta.json"))
+    except (SceneFormatError, OSError):
+        return None
+
+
+def manifest_box(meta: dict) -> tuple[np.ndarray, np.ndarray] | None:
+    """The framing box a Streamed SOG manifest (parsed JSON) records under :data:`BOX_KEY`, or
+    None (none, or malformed)."""
+    box = meta.get(BOX_KEY)
+    return checked_box(box) if isinstance(box, list) else None
+
+
+def apply_box(scene, box: tuple[np.ndarray, np.ndarray] | None):
+    """``scene`` with ``box`` as its ``robust_bounds`` (what the default camera, orbits, the
+    viewer and the anchor read), where a box is given and the scene has splats."""
+    if box is not None and scene.count:
+        scene.__dict__["robust_bounds"] = box
+    return scene
 
 
 def apply_framing_box(scene, path: str | Path):
     """``scene`` (read from ``path``, whole) framed by the box ``path`` records, where it
-    records one: its ``robust_bounds``, which the default camera, orbits and the viewer frame,
-    become that box.  A level-of-detail file streamed under ``--memory`` frames the same box
-    without reading its leaves (:func:`splatgl.lod.stream_frames.framing_scene`), so the two
-    give the same default view, and the source scene's (up to the float32 rounding of its
-    own percentiles)."""
-    box = framing_box(path)
-    if box is not None and scene.count:
-        scene.__dict__["robust_bounds"] = box
-    return scene
+    records one (:func:`framing_box`).  A level-of-detail file streamed under ``--memory``
+    frames the same box without reading its leaves
+    (:func:`splatgl.lod.stream_frames.framing_scene`,
+    :func:`splatgl.lod.stream_levels.framing_of`), so the two give the same default view, and
+    the source scene's (up to the float32 rounding of its own percentiles)."""
+    return apply_box(scene, framing_box(path))
 
 
 def antialias_tag(path: str | Path) -> str | None:

@@ -15,6 +15,11 @@ streams.  ``lod-meta.json`` (``version`` 1, or none in older files) holds:
   "count": rows}``; optionally ``errors`` (one per level, ``lodErrors`` true when every leaf has
   them).
 - ``environment`` (optional): one more SOG folder of splats drawn at every level (a skybox).
+- ``splatglFramingBox`` (optional, written by ``splatgl lod`` only; other readers ignore it):
+  ``[x0, y0, z0, x1, y1, z1]``, the 1-99 % box of the finest level's centres, which frames the
+  file alike read whole and streamed (:func:`splatgl.formats.metadata.manifest_box`; a
+  ``.lod.ply`` records the same box in its header).  Without it a streamed file frames its
+  chunks' box, and read whole its splats' 1-99 % box.
 
 Both store the PLY axes (the scene's own).  :func:`read_structure` reads the manifest only
 (levels, chunks with bounds, for a streaming renderer); :meth:`StreamedSog.load` decodes one
@@ -32,6 +37,7 @@ import numpy as np
 from ..errors import SceneFormatError
 from ..scene.splats import Scene
 from . import _binary, sog
+from .metadata import manifest_box
 
 NAME = "streamed-sog"
 EXTENSIONS = ("lod-meta.json",)
@@ -75,6 +81,8 @@ class StreamedSog:
     filenames: tuple
     chunks: tuple
     environment: str | None = None
+    #: The framing box the manifest records (``(lo, hi)`` float64), or None.
+    box: tuple | None = None
 
     def unit_path(self, name: str, field: str) -> Path:
         """The ``meta.json`` of a unit named ``name`` (relative, inside the manifest's folder)."""
@@ -229,7 +237,8 @@ def read_structure(path: str | Path) -> StreamedSog:
     counts = meta.get("counts")
     if counts is not None and counts != found:
         raise SceneFormatError(path, f"counts {counts!r} disagree with the tree's {found}", "counts")
-    return StreamedSog(path, levels, tuple(found), tuple(names), tuple(chunks), env)
+    return StreamedSog(path, levels, tuple(found), tuple(names), tuple(chunks), env,
+                       manifest_box(meta))
 
 
 def read(path: Path, drop_invalid: bool = False, level: int = 0) -> Scene:

@@ -14,8 +14,9 @@ frame waits for its chunks and draws them, in the file's chunk order followed by
 environment (loaded once, counted in the budget), with the renderer asked for: the image of
 those chunks read whole.  With a level given and every chunk in view that is the level read whole
 (``structure.load(level)``), given the same anchor and near plane (tests/lod/test_stream_levels.py).
-The default camera frames the boxes of the chunks (:func:`framing_of`), not the splats' 1-99 %
-box as for a scene read whole.
+The default camera frames the box the manifest records where ``splatgl lod`` wrote it (the one
+the file read whole frames), else the boxes of the chunks (:func:`framing_of`), not the splats'
+1-99 % box as for a scene read whole.
 """
 
 from __future__ import annotations
@@ -135,12 +136,17 @@ class ChunkLevels:
 
 def framing_of(structure, sample) -> SimpleNamespace:
     """What frames the views (as :func:`splatgl.lod.stream_frames.framing_scene` gives it):
-    the box of the chunks holding level-0 splats (every chunk where level 0 has none), its
-    centre the anchor; ``sample``: a decoded chunk (the SH degree)."""
-    boxes = [(c.bound_min, c.bound_max) for c in structure.chunks if c.count(0) > 0] or [
-        (c.bound_min, c.bound_max) for c in structure.chunks]
-    lo = np.min([b[0] for b in boxes], 0).astype(np.float64)
-    hi = np.max([b[1] for b in boxes], 0).astype(np.float64)
+    the framing box the manifest records (a Streamed SOG ``splatgl lod`` wrote: the box that
+    frames the file read whole, :func:`splatgl.formats.metadata.apply_framing_box`), else the
+    box of the chunks holding level-0 splats (every chunk where level 0 has none); its centre
+    the anchor; ``sample``: a decoded chunk (the SH degree)."""
+    if structure.box is not None:   # recorded by splatgl lod: the file's framing read whole too
+        lo, hi = structure.box
+    else:
+        boxes = [(c.bound_min, c.bound_max) for c in structure.chunks if c.count(0) > 0] or [
+            (c.bound_min, c.bound_max) for c in structure.chunks]
+        lo = np.min([b[0] for b in boxes], 0).astype(np.float64)
+        hi = np.max([b[1] for b in boxes], 0).astype(np.float64)
     anchor = (0.5 * (lo + hi)).astype(np.float32).astype(np.float64)
     digest = hashlib.sha256(repr((structure.levels, structure.counts, lo.tolist(), hi.tolist(),
                                   len(structure.chunks))).encode()).hexdigest()[:20]

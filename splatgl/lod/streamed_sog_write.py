@@ -35,8 +35,10 @@ import numpy as np
 
 from ..errors import SplatglError
 from ..formats import sog_write, webp
+from ..formats.metadata import BOX_KEY
 from ..writing.atomic import atomic_write_bytes, cannot_write, size_problem, temp_path, write_error
 from .build import LodTree
+from .io import leaf_box
 
 #: What the output's name ends with.
 MANIFEST = "lod-meta.json"
@@ -168,6 +170,10 @@ def write_streamed_sog(target: str | Path, tree: LodTree, chunk_splats: int = CH
                 "count": int(sum(counts)), "counts": [int(c) for c in counts],
                 "lodLevels": levels, "lodErrors": False,
                 "filenames": [name for name, _ in units], "tree": _tree(chunks)}
+    # the leaves' 1-99 % box, as a .lod.ply's header records it: the file read whole and
+    # streamed frame it alike (formats.metadata.manifest_box)
+    lo, hi = leaf_box(tree.nodes.means[:tree.level_size(0)])
+    manifest[BOX_KEY] = [float(v) for v in (*lo, *hi)]
     folder = target.parent
     staging = temp_path(folder / "lod-units")
     try:

@@ -1,11 +1,13 @@
 """One framing of a ``.lod.ply``: the leaves' 1-99 % box its header records frames it whether it
 is read whole (``load_scene``, ``read_lod``) or streamed under ``--memory`` (``framing_scene``),
 so ``--memory`` does not move the default view (before, the streamed frames framed a coarse
-level's box and the in-memory ones the leaves')."""
+level's box and the in-memory ones the leaves').  The same for a Streamed SOG ``splatgl lod``
+writes: its manifest records the box (``splatglFramingBox``)."""
 
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -116,3 +118,46 @@ def test_path_orbit_is_the_same_with_and_without_memory(tmp_path, capsys):
     for i in range(2):
         a, b = read_image(tmp_path / f"a{i}.exr"), read_image(tmp_path / f"b{i}.exr")
         assert np.array_equal(a, b) and a[..., 3].max() > 0
+
+
+def _streamed_sog(tmp_path):
+    """``splatgl lod s.ply -o out/lod-meta.json``: a Streamed SOG of several chunks."""
+    stream_lod_file(tmp_path)      # writes s.ply, the source
+    out = tmp_path / "out" / "lod-meta.json"
+    out.parent.mkdir()
+    assert main(["lod", str(tmp_path / "s.ply"), "-o", str(out), "--chunk-splats", "512"]) == 0
+    return out
+
+
+def test_a_streamed_sog_splatgl_writes_is_framed_alike_read_whole_and_streamed(tmp_path, capsys):
+    """The manifest records the leaves' box (``splatglFramingBox``, as a ``.lod.ply`` header
+    does): ``render`` and ``render --memory --lod-level 0`` without a camera write the same
+    image (before, the stream framed its chunks' box: other pixels, up to 0.76 apart)."""
+    from splatgl.formats import streamed_sog
+    from splatgl.formats.metadata import BOX_KEY
+    from splatgl.lod.stream_levels import framing_at
+
+    out = _streamed_sog(tmp_path)
+    source = load_scene(tmp_path / "s.ply")
+    structure = streamed_sog.read_structure(out)
+    assert len(structure.chunks) > 2
+    for got, want in zip(structure.box, leaf_box(source.means)):
+        assert np.array_equal(got, want)
+    whole, streamed = load_scene(out), framing_at(out)
+    for a, b in zip(whole.robust_bounds, streamed.robust_bounds):
+        assert np.array_equal(a, b)
+    assert np.array_equal(whole.anchor, streamed.anchor)
+    common = [str(out), "--renderer", "quad", *SIZE]
+    assert main(["render", *common, "-o", str(tmp_path / "a.exr")]) == 0
+    assert main(["render", *common, "-o", str(tmp_path / "b.exr"), "--memory", "3G",
+                 "--lod-level", "0"]) == 0
+    capsys.readouterr()
+    a, b = read_image(tmp_path / "a.exr"), read_image(tmp_path / "b.exr")
+    assert np.array_equal(a, b) and a[..., 3].max() > 0
+    # a malformed box is ignored: the stream frames its chunks, the reader the splats
+    meta = json.loads(out.read_text())
+    meta[BOX_KEY] = [0, 0, 0, 1, "x", 1]
+    out.write_text(json.dumps(meta))
+    assert streamed_sog.read_structure(out).box is None and framing_box(out) is None
+    np.testing.assert_allclose(load_scene(out).robust_bounds, whole.robust_bounds, atol=0.05)
+    assert not np.array_equal(framing_at(out).robust_bounds[0], whole.robust_bounds[0])

@@ -167,8 +167,8 @@ def test_budget_too_small_for_the_pinned_levels(tmp_path):
 
 
 def _view_args(tmp_path) -> list[str]:
-    """An explicit camera and near plane: the streamed render frames the chunks' boxes, the
-    whole file's render its splats' 1-99 % box."""
+    """An explicit camera and near plane: an LCC streamed frames its chunks' boxes, read whole
+    its splats' 1-99 % box (a Streamed SOG splatgl wrote frames its recorded box both ways)."""
     save_camera(tmp_path / "cam.json", _camera(4.0, 0.5))
     return ["--camera", str(tmp_path / "cam.json"), "--near", "0.01", "--early-stop", "off",
             "--renderer", "quad"]
