@@ -65,13 +65,20 @@ def header_box(head: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     return None if match is None else checked_box(match.groups())
 
 
+def _head(path: str | Path) -> bytes | None:
+    """The first :data:`HEAD_BYTES` of ``path``, or None where it cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(HEAD_BYTES)
+    except OSError:
+        return None
+
+
 def framing_box(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
     """The framing box ``path`` records, or None: a PLY header's (:func:`header_box`), or a
     Streamed SOG manifest's (:func:`manifest_box`)."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(HEAD_BYTES)
-    except OSError:
+    head = _head(path)
+    if head is None:
         return None
     if head.startswith(b"ply"):
         return header_box(head)
@@ -92,31 +99,25 @@ def manifest_box(meta: dict) -> tuple[np.ndarray, np.ndarray] | None:
     return checked_box(box) if isinstance(box, list) else None
 
 
-def apply_box(scene, box: tuple[np.ndarray, np.ndarray] | None):
-    """``scene`` with ``box`` as its ``robust_bounds`` (what the default camera, orbits, the
-    viewer and the anchor read), where a box is given and the scene has splats."""
+def apply_framing_box(scene, path: str | Path):
+    """``scene`` (read from ``path``, whole) framed by the box ``path`` records, where it
+    records one (:func:`framing_box`): its ``robust_bounds``, which the default camera, orbits,
+    the viewer and the anchor read, become that box.  A level-of-detail file streamed under
+    ``--memory`` frames the same box without reading its leaves
+    (:func:`splatgl.lod.stream_frames.framing_scene`,
+    :func:`splatgl.lod.stream_levels.framing_of`), so the two give the same default view, and
+    the source scene's (up to the float32 rounding of its own percentiles)."""
+    box = framing_box(path)
     if box is not None and scene.count:
         scene.__dict__["robust_bounds"] = box
     return scene
 
 
-def apply_framing_box(scene, path: str | Path):
-    """``scene`` (read from ``path``, whole) framed by the box ``path`` records, where it
-    records one (:func:`framing_box`).  A level-of-detail file streamed under ``--memory``
-    frames the same box without reading its leaves
-    (:func:`splatgl.lod.stream_frames.framing_scene`,
-    :func:`splatgl.lod.stream_levels.framing_of`), so the two give the same default view, and
-    the source scene's (up to the float32 rounding of its own percentiles)."""
-    return apply_box(scene, framing_box(path))
-
-
 def antialias_tag(path: str | Path) -> str | None:
     """A short description of the antialiasing tag ``path`` carries, or None."""
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(HEAD_BYTES)
-    except OSError:
+    head = _head(path)
+    if head is None:
         return None
     if head.startswith(b"\x1f\x8b"):
         try:
