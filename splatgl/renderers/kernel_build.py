@@ -12,10 +12,11 @@ the compile in a detached, low-priority process that fills numba's cache and end
 
 A stamp file in the user's cache folder (``$XDG_CACHE_HOME/splatgl`` or ``~/.cache/splatgl``),
 one per splatgl and numba version and Python environment, says what that process is doing
-(``compiling``, ``ready`` or ``failed: <the error's first line>``), so that it is started
-once, not by every command, and what the commands say is true: while it is younger than
-:data:`STALE_S` seconds no other process starts; an older one (a compile that was killed, or
-whose cache was lost since) lets the next command start again.  Nothing here runs where the
+(``compiling: <host> <pid>``, ``ready`` or ``failed: <the error's first line>``), so that it
+is started once, not by every command, and what the commands say is true: while it is younger
+than :data:`STALE_S` seconds no other process starts; an older one (kernels whose cache was
+lost since), or a ``compiling`` one whose process is gone from this host (killed, a reboot),
+lets the next command start again.  Nothing here runs where the
 stamp folder cannot be written: the command then says how to compile them in the foreground
 (``--renderer cpu``); nor where ``SPLATGL_RENDERER_AUTO=quad`` keeps ``auto`` on the quad path.
 
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import socket
 import subprocess
 import sys
 import sysconfig
@@ -46,15 +48,32 @@ NICE = 10
 @dataclass(frozen=True)
 class Build:
     """What the stamp says (``state``: COMPILING, READY or FAILED; ``why``: the error's first
-    line where FAILED) and how old it is in seconds."""
+    line where FAILED, the compiling process's host and pid where COMPILING) and how old it is
+    in seconds; ``gone``: it says COMPILING but its process no longer runs on this host."""
 
     state: str
     age: float
     why: str = ""
+    gone: bool = False
 
     @property
     def fresh(self) -> bool:
-        return self.age < STALE_S
+        return self.age < STALE_S and not self.gone
+
+
+def _gone(why: str) -> bool:
+    """Whether ``why`` (a COMPILING stamp's ``<host> <pid>``) names a process of this host that
+    no longer runs; False where it names none, or another host's (which cannot be asked)."""
+    host, _, pid = why.rpartition(" ")
+    if not pid.isdigit() or host != socket.gethostname():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except OSError:   # it runs, as another user (EPERM)
+        return False
+    return False
 
 
 def stamp_path() -> Path | None:
@@ -88,7 +107,8 @@ def read(stamp: Path | None = None) -> Build | None:
     state, _, why = text.partition(":")
     if state not in (COMPILING, READY, FAILED):
         return None
-    return Build(state, age, why.strip())
+    why = why.strip()
+    return Build(state, age, why, state == COMPILING and _gone(why))
 
 
 def _write(stamp: Path, text: str) -> None:
@@ -142,6 +162,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     stamp = Path(args[0])
+    _write(stamp, f"{COMPILING}: {socket.gethostname()} {os.getpid()}")   # who, should it die
     try:
         from .cpu import prepare
 

@@ -342,6 +342,39 @@ def test_the_compile_process_says_in_its_stamp_how_it_ended(monkeypatch, tmp_pat
     assert kernel_build.read(stamp) is None
 
 
+def test_a_compile_whose_process_is_gone_lets_the_next_command_start_again(monkeypatch,
+                                                                            tmp_path):
+    """The child names itself (host, pid) in its stamp while it compiles; a ``compiling``
+    stamp whose process no longer runs on this host (killed, a reboot) is not fresh, however
+    young, so the next command need not wait ten minutes; one naming a live process, or
+    another host's (which cannot be asked), still holds a new compile back."""
+    import os
+    import socket
+    import subprocess
+    import sys
+
+    stamp = tmp_path / "stamp"
+    seen = []
+
+    def compile_(progress=None):
+        seen.append(kernel_build.read(stamp))
+
+    monkeypatch.setattr(cpu, "prepare", compile_)
+    assert kernel_build.main([str(stamp)]) == 0
+    [during] = seen
+    assert (during.state, during.why) == ("compiling", f"{socket.gethostname()} {os.getpid()}")
+    assert during.fresh and not during.gone
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stamp.write_text(f"compiling: {socket.gethostname()} {dead.pid}\n")
+    build = kernel_build.read(stamp)
+    assert build.age < kernel_build.STALE_S and build.gone and not build.fresh
+    stamp.write_text(f"compiling: another-host {dead.pid}\n")
+    assert kernel_build.read(stamp).fresh
+    stamp.write_text("compiling\n")                      # as the parent writes it, no pid yet
+    assert kernel_build.read(stamp).fresh
+
+
 def test_the_compile_process_fills_numbas_cache(monkeypatch, tmp_path):
     """The real child, as :func:`kernel_build.start` runs it (``-m``, niced): afterwards
     ``kernels_ready`` finds every kernel in numba's on-disk cache (a compile of about half a
