@@ -91,11 +91,13 @@ def check_outputs(args: argparse.Namespace, paths: Iterable[Path], option: str,
     """Each of several files one option writes into a folder it makes and checks itself (a
     path's frames, eval's renders): none is a file the command reads, and none exists without
     ``--force``; ``keep``: existing files are allowed (``--resume`` keeps or completes them: no
-    overwrite), though never an input."""
+    overwrite), though never an input, nor (``--force`` or not) a directory."""
     inputs = InputIndex(input_files(args, extra))   # many outputs against many inputs
     replace = force(args) or keep
     for path in paths:
         check_not_an_input(path, option, inputs)
+        if path.is_dir():
+            raise SplatglError(f"{option} {path}: is a directory; give a file name")
         if not replace and (path.exists() or path.is_symlink()):
             raise SplatglError(f"{option} {path}: exists (use --force to replace it)")
 

@@ -322,7 +322,8 @@ def run_path(args: argparse.Namespace) -> int:
                                          cameras, settings, target, executor, kind, args.bit_depth,
                                          args.resume, args.drop_invalid, fps, default_progress(),
                                          numbers, lod, record)
-        except KeyboardInterrupt:     # Ctrl-C or SIGTERM: say what the workers left, if anything
+        except (KeyboardInterrupt, SplatglError):   # Ctrl-C, SIGTERM, a failure: say what the
+            # workers left for --resume, if anything
             note = stopped_video_note(target.video) if target.is_video else None
             if note is not None:
                 print(f"splatgl: {note}", file=sys.stderr)

@@ -7,6 +7,7 @@ message, so a reworded or multi-line error fails here.
 from __future__ import annotations
 
 import json
+import os
 import re
 import warnings
 
@@ -138,6 +139,13 @@ def test_same_output_twice_and_directory_outputs(tmp_path, capsys):
     folder.mkdir()
     expect_one_line(capsys, tmp_path, ["render", "-o", folder],
                     f"splatgl: error: -o {folder}: is a directory; give a file name")
+    video = tmp_path / "v.mp4"          # a folder named like a video, --force or not:
+    video.mkdir()                       # refused before any frame renders (none is left)
+    for extra in ([], ["--workers", "2"]):
+        expect_one_line(capsys, tmp_path, ["render", "--path", "orbit:3", "-o", video, "--width",
+                                           "16", "--height", "16", "--force", *extra],
+                        f"splatgl: error: -o {video}: is a directory; give a file name")
+    assert sorted(os.listdir(tmp_path)) == ["folder", "v.mp4"] and not os.listdir(video)
     expect_one_line(capsys, tmp_path, ["compare", "--side-by-side", out, "--heatmap", out],
                     f"splatgl: error: --heatmap {out}: the same file as --side-by-side; give each "
                     "output its own name")

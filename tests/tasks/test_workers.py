@@ -122,6 +122,29 @@ def test_dead_worker_names_its_frames(tmp_path, capsys, monkeypatch):
     assert sorted(os.listdir(tmp_path / "f")) == [f"{k:05d}.png" for k in range(6)]
 
 
+def test_a_failed_sharded_video_names_the_frames_it_kept(tmp_path, capsys, monkeypatch):
+    """A sharded video that stops on an error after its workers rendered (here: encoding it
+    fails) says, besides the error, where the frames wait for --resume, as a Ctrl-C does."""
+    pytest.importorskip("av", reason="PyAV is not installed (pip install 'splatgl[video]')")
+    from splatgl.errors import SplatglError
+    from splatgl.tasks import render_tasks
+
+    def full_disk(*args, **kwargs):
+        raise SplatglError("v.mp4: cannot write (No space left on device)")
+
+    monkeypatch.setattr(render_tasks, "assemble_video", full_disk)
+    out = tmp_path / "v.mp4"
+    assert main([*ARGS, "-o", str(out), "--workers", "2"]) == 2
+    err = capsys.readouterr().err
+    frames = frame_folder(out)
+    assert err == (f"splatgl: 6 frames kept in the hidden folder {frames}/ (no video written): "
+                   f"re-run with --resume to render the rest and write {out}, or delete the "
+                   "folder\nsplatgl: error: v.mp4: cannot write (No space left on device)\n"), err
+    monkeypatch.undo()
+    assert main([*ARGS, "-o", str(out), "--workers", "2", "--resume"]) == 0
+    assert len(_video(out)) == 6 and os.listdir(tmp_path) == ["v.mp4"]
+
+
 def test_sigterm_mid_video_leaves_no_video_and_resume_encodes(tmp_path):
     """SIGTERM while the workers render: exit 143, no video (nor a partial one), the finished
     frames kept whole for --resume, no worker left running."""
