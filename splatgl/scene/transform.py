@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,6 +31,46 @@ def _euler_xyz(degrees) -> np.ndarray:
     return mz @ my @ mx
 
 
+def _finite_array(value, shape: tuple) -> np.ndarray | None:
+    """``value`` as a float64 array if it is nested lists, tuples or arrays of exactly ``shape``
+    holding finite real numbers; else None.  Booleans and strings are not numbers here (NumPy
+    would read ``true`` as 1 and ``"1"`` as 1.0, hiding a mistake)."""
+    def fits(v, dims: tuple) -> bool:
+        if not dims:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+                return False
+            try:
+                return math.isfinite(v)
+            except OverflowError:   # an integer beyond float64
+                return False
+        if isinstance(v, np.ndarray) and v.ndim == 0 or not isinstance(v, (list, tuple, np.ndarray)):
+            return False
+        return len(v) == dims[0] and all(fits(x, dims[1:]) for x in v)
+    return np.asarray(value, np.float64) if fits(value, tuple(shape)) else None
+
+
+def _is_rotation(r: np.ndarray) -> bool:
+    """``r`` (3x3) is orthonormal with determinant +1 (no mirroring, no scale)."""
+    return bool(np.allclose(r @ r.T, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0)
+
+
+#: The longest value a message quotes in full.
+SHOWN_CHARS = 80
+
+
+def _shown(value, as_json: bool = False) -> str:
+    """``value`` on one line for a message: as JSON (what a ``--transform`` user typed) or as
+    Python writes it, cut to :data:`SHOWN_CHARS`."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    try:
+        text = json.dumps(value) if as_json else repr(value)
+    except (TypeError, ValueError):
+        text = repr(value)
+    text = " ".join(text.split())
+    return text if len(text) <= SHOWN_CHARS else text[:SHOWN_CHARS - 3] + "..."
+
+
 @dataclass(frozen=True)
 class SceneTransform:
     """Scene-to-world transform ``p_w = scale * rotation @ p + translation``.
@@ -45,16 +86,18 @@ class SceneTransform:
     scale: float = 1.0
 
     def __post_init__(self) -> None:
-        r = np.asarray(self.rotation, np.float64)
-        t = np.asarray(self.translation, np.float64)
-        if r.shape != (3, 3) or not np.isfinite(r).all():
-            raise SplatglError(f"transform rotation must be a finite 3x3 matrix, got shape {r.shape}")
-        if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
-            raise SplatglError("transform rotation must be a proper rotation (orthonormal, det +1)")
-        if t.shape != (3,) or not np.isfinite(t).all():
-            raise SplatglError(f"transform translation must be 3 finite numbers, got {self.translation!r}")
-        if not (math.isfinite(self.scale) and self.scale > 0):
-            raise SplatglError(f"transform scale must be positive, got {self.scale!r}")
+        r = _finite_array(self.rotation, (3, 3))
+        t = _finite_array(self.translation, (3,))
+        if r is None:
+            raise SplatglError(f"transform rotation must be a 3x3 matrix of finite numbers, got "
+                               f"{_shown(self.rotation)}")
+        if not _is_rotation(r):
+            raise SplatglError("transform rotation must be a proper rotation (orthonormal, det +1), "
+                               f"got {_shown(self.rotation)}")
+        if t is None:
+            raise SplatglError(f"transform translation must be 3 finite numbers, got {_shown(self.translation)}")
+        if _finite_array(self.scale, ()) is None or not self.scale > 0:
+            raise SplatglError(f"transform scale must be a positive finite number, got {_shown(self.scale)}")
         object.__setattr__(self, "rotation", tuple(tuple(float(v) for v in row) for row in r))
         object.__setattr__(self, "translation", tuple(float(v) for v in t))
         object.__setattr__(self, "scale", float(self.scale))
@@ -88,33 +131,62 @@ def parse_transform(text: str, what: str = "--transform") -> SceneTransform:
     from .json_text import DuplicateKeyError, unique_keys
 
     source = text
-    path = Path(text)
-    if not text.lstrip().startswith("{") and path.is_file():
-        source = path.read_text()
+    if not text.lstrip().startswith("{") and _is_file(text):
+        try:
+            source = Path(text).read_text()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SplatglError(f"{what}: cannot read {text}: {exc}") from None
     try:
         obj = json.loads(source, object_pairs_hook=unique_keys)
     except DuplicateKeyError as exc:
-        raise SplatglError(f"{what}: {exc}: {text!r}") from None
+        raise SplatglError(f"{what}: {exc}: {_shown(text)}") from None
     except json.JSONDecodeError as exc:
-        raise SplatglError(f"{what}: not JSON or a JSON file ({exc.msg} at column {exc.colno}): {text!r}") from None
+        raise SplatglError(f"{what}: not JSON or a JSON file ({exc.msg} at column {exc.colno}): "
+                           f"{_shown(text)}") from None
+    except RecursionError:
+        raise SplatglError(f"{what}: not JSON (nested too deeply)") from None
     return transform_from_object(obj, what)
 
 
+def _is_file(text: str) -> bool:
+    """``text`` names an existing file (a name the system refuses, too long or holding a NUL,
+    names none)."""
+    try:
+        return Path(text).is_file()
+    except (OSError, ValueError):
+        return False
+
+
+#: Each key of a transform object: the shape of its value and what it must be, for messages.
+TRANSFORM_KEYS = {
+    "rotate_deg": ((3,), "3 finite numbers (degrees)"),
+    "rotation": ((3, 3), "a 3x3 rotation matrix (3 rows of 3 finite numbers)"),
+    "translate": ((3,), "3 finite numbers"),
+    "scale": ((), "a positive finite number"),
+}
+
+
 def transform_from_object(obj, what: str = "--transform") -> SceneTransform:
-    """A transform from a parsed JSON object (:func:`parse_transform`'s keys)."""
+    """A transform from a parsed JSON object (:func:`parse_transform`'s keys).  Each refused
+    value is one :class:`SplatglError` line naming ``what``, the key and the value as JSON."""
     if not isinstance(obj, dict):
-        raise SplatglError(f"{what}: expected a JSON object")
-    unknown = set(obj) - {"rotate_deg", "rotation", "translate", "scale"}
+        raise SplatglError(f"{what}: expected a JSON object with keys {', '.join(TRANSFORM_KEYS)}, "
+                           f"got {_shown(obj, True)}")
+    unknown = set(obj) - set(TRANSFORM_KEYS)
     if unknown:
-        raise SplatglError(f"{what}: unknown key(s) {sorted(unknown)} (use rotate_deg, rotation, translate, scale)")
+        raise SplatglError(f"{what}: unknown key(s) {sorted(unknown)} (use {', '.join(TRANSFORM_KEYS)})")
     if "rotation" in obj and "rotate_deg" in obj:
         raise SplatglError(f"{what}: give either 'rotate_deg' or 'rotation', not both "
                            "(one would be ignored)")
-    try:
-        if "rotation" in obj:
-            rot = tuple(map(tuple, np.asarray(obj["rotation"], np.float64)))
-        else:
-            rot = tuple(map(tuple, _euler_xyz(obj.get("rotate_deg", (0, 0, 0)))))
-        return SceneTransform(rot, tuple(obj.get("translate", (0.0, 0.0, 0.0))), float(obj.get("scale", 1.0)))
-    except (TypeError, ValueError, OverflowError) as exc:
-        raise SplatglError(f"{what}: {exc}") from None
+    values = {}
+    for key, value in obj.items():
+        shape, need = TRANSFORM_KEYS[key]
+        values[key] = _finite_array(value, shape)
+        if values[key] is None or key == "scale" and not values[key] > 0:
+            raise SplatglError(f"{what}: {key} must be {need}, got {_shown(value, True)}")
+    if "rotation" in values and not _is_rotation(values["rotation"]):
+        raise SplatglError(f"{what}: rotation must be a proper rotation matrix (orthonormal, "
+                           f"det +1), got {_shown(obj['rotation'], True)}")
+    rotation = values["rotation"] if "rotation" in values else _euler_xyz(values.get("rotate_deg", (0, 0, 0)))
+    return SceneTransform(tuple(map(tuple, rotation)), tuple(values.get("translate", (0.0, 0.0, 0.0))),
+                          float(values.get("scale", 1.0)))

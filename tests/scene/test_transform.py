@@ -95,4 +95,90 @@ def test_parse_transform_and_cli_errors(tmp_path, capsys):
         with pytest.raises(SplatglError):
             parse_transform(bad)
     assert main(["render", "-o", str(tmp_path / "x.png"), "--transform", '{"scale": 0}']) == 2
-    assert "scale must be positive" in capsys.readouterr().err
+    assert capsys.readouterr().err == ("splatgl: error: --transform: scale must be a positive finite "
+                                       "number, got 0\n")
+
+
+DEGREES = "3 finite numbers (degrees)"
+MATRIX = "a 3x3 rotation matrix (3 rows of 3 finite numbers)"
+POSITIVE = "a positive finite number"
+
+
+@pytest.mark.parametrize("text, message", [
+    # each was a raw Python error ("not enough values to unpack", "could not convert string to
+    # float: 'a'", "'int' object is not iterable", "math domain error"), or accepted a boolean or
+    # a string as a number
+    ('{"rotate_deg": [0,0]}', f"rotate_deg must be {DEGREES}, got [0, 0]"),
+    ('{"rotate_deg": [0,0,0,0]}', f"rotate_deg must be {DEGREES}, got [0, 0, 0, 0]"),
+    ('{"rotate_deg": "abc"}', f'rotate_deg must be {DEGREES}, got "abc"'),
+    ('{"rotate_deg": 5}', f"rotate_deg must be {DEGREES}, got 5"),
+    ('{"rotate_deg": [true, 0, 0]}', f"rotate_deg must be {DEGREES}, got [true, 0, 0]"),
+    ('{"rotate_deg": [NaN, 0, 0]}', f"rotate_deg must be {DEGREES}, got [NaN, 0, 0]"),
+    ('{"rotate_deg": [1e400, 0, 0]}', f"rotate_deg must be {DEGREES}, got [Infinity, 0, 0]"),
+    ('{"rotate_deg": null}', f"rotate_deg must be {DEGREES}, got null"),
+    ('{"rotation": [[1, 0], [0, 1]]}', f"rotation must be {MATRIX}, got [[1, 0], [0, 1]]"),
+    ('{"rotation": "abc"}', f'rotation must be {MATRIX}, got "abc"'),
+    ('{"rotation": [1, 0, 0, 0]}', f"rotation must be {MATRIX}, got [1, 0, 0, 0]"),
+    ('{"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, "1"]]}',
+     f'rotation must be {MATRIX}, got [[1, 0, 0], [0, 1, 0], [0, 0, "1"]]'),
+    ('{"rotation": [[true, 0, 0], [0, 1, 0], [0, 0, 1]]}',
+     f"rotation must be {MATRIX}, got [[true, 0, 0], [0, 1, 0], [0, 0, 1]]"),
+    ('{"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, NaN]]}',
+     f"rotation must be {MATRIX}, got [[1, 0, 0], [0, 1, 0], [0, 0, NaN]]"),
+    ('{"rotation": [[-1, 0, 0], [0, 1, 0], [0, 0, 1]]}', "rotation must be a proper rotation "
+     "matrix (orthonormal, det +1), got [[-1, 0, 0], [0, 1, 0], [0, 0, 1]]"),
+    ('{"translate": [1, 2]}', "translate must be 3 finite numbers, got [1, 2]"),
+    ('{"translate": "abc"}', 'translate must be 3 finite numbers, got "abc"'),
+    ('{"translate": ["1", 0, 0]}', 'translate must be 3 finite numbers, got ["1", 0, 0]'),
+    ('{"translate": [false, 0, 0]}', "translate must be 3 finite numbers, got [false, 0, 0]"),
+    ('{"translate": [0, -Infinity, 0]}', "translate must be 3 finite numbers, got [0, -Infinity, 0]"),
+    ('{"scale": "abc"}', f'scale must be {POSITIVE}, got "abc"'),
+    ('{"scale": "2"}', f'scale must be {POSITIVE}, got "2"'),
+    ('{"scale": true}', f"scale must be {POSITIVE}, got true"),
+    ('{"scale": [1]}', f"scale must be {POSITIVE}, got [1]"),
+    ('{"scale": NaN}', f"scale must be {POSITIVE}, got NaN"),
+    ('{"scale": Infinity}', f"scale must be {POSITIVE}, got Infinity"),
+    ('{"scale": -1}', f"scale must be {POSITIVE}, got -1"),
+    ('{"scale": null}', f"scale must be {POSITIVE}, got null"),
+    ("[1, 2]", "expected a JSON object with keys rotate_deg, rotation, translate, scale, got [1, 2]"),
+])
+def test_each_transform_key_refuses_a_bad_value_in_one_line(text, message):
+    with pytest.raises(SplatglError) as err:
+        parse_transform(text)
+    assert str(err.value) == f"--transform: {message}"
+
+
+def test_a_long_bad_transform_is_cut_short_and_never_a_traceback():
+    with pytest.raises(SplatglError, match=r"^--transform: translate must be 3 finite numbers, got "
+                                           r"\[1, 1, [1, ]*1?\.\.\.$"):
+        parse_transform('{"translate": [%s]}' % ",".join(["1"] * 1000))
+    with pytest.raises(SplatglError, match=r"^--transform: not JSON or a JSON file"):
+        parse_transform("x" * 5000)  # too long for a file name: was an OSError traceback
+
+
+def test_the_edit_crop_box_placement_names_its_option():
+    from splatgl.edit.options import crop_box
+
+    with pytest.raises(SplatglError) as err:
+        crop_box('{"min": [0, 0, 0], "max": [1, 1, 1], "rotate_deg": [0, 0]}')
+    assert str(err.value) == f"--crop-box: rotate_deg must be {DEGREES}, got [0, 0]"
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(rotation="abc"), "transform rotation must be a 3x3 matrix of finite numbers, got 'abc'"),
+    (dict(rotation=np.eye(3) * 2), "transform rotation must be a proper rotation (orthonormal, "
+     "det +1), got [[2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 2.0]]"),
+    (dict(translation=(1, 2)), "transform translation must be 3 finite numbers, got (1, 2)"),
+    (dict(translation=(True, 0, 0)), "transform translation must be 3 finite numbers, got (True, 0, 0)"),
+    (dict(scale="2"), "transform scale must be a positive finite number, got '2'"),
+    (dict(scale=float("nan")), "transform scale must be a positive finite number, got nan"),
+])
+def test_scene_transform_refuses_bad_values_from_python(kwargs, message):
+    with pytest.raises(SplatglError) as err:
+        SceneTransform(**kwargs)
+    assert str(err.value) == message
+
+
+def test_numpy_values_make_a_transform():
+    t = SceneTransform(np.eye(3), np.array([1, 2, 3]), np.float32(2.0))
+    assert t.translation == (1.0, 2.0, 3.0) and t.scale == 2.0
