@@ -3,6 +3,7 @@ order), apply the operations, refuse an empty result, write the output atomicall
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -14,6 +15,7 @@ from ..constants import sh_coeff_count
 from ..errors import SplatglError
 from ..formats._memory import scene_bytes
 from ..lod.budget import format_size
+from ..lod.io import dropped_levels_note
 from ..formats import detect_format, load_scene, save_scene, writer_for
 from ..formats.convert import (EMPTY_FORMATS, EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT,
                                dropped_note, extra_properties)
@@ -108,18 +110,20 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
     if spz_axes is not None and "spz" not in formats:
         raise SplatglError("--spz-axes applies to .spz inputs only")
     progress = progress if progress is not None else default_progress()
+    levels = [n for n in map(dropped_levels_note, inputs) if n]   # a level of detail's leaves
     streamed = plan_edit(inputs, writer, operations, transforms, memory, drop_invalid,
                          writer_options, output)
     if streamed is not None:
         try:
-            return _edit_streamed(streamed, inputs, output, writer, allow_empty, dry_run,
-                                  progress, t0)
+            report = _edit_streamed(streamed, inputs, output, writer, allow_empty, dry_run,
+                                    progress, t0)
         finally:
             getattr(streamed, "close", lambda: None)()  # a decimation's scratch files
+        return dataclasses.replace(report, notes=tuple(levels) + report.notes)
     scene, counts, steps, extras = _read(inputs, transforms, drop_invalid, progress, spz_axes)
     edited = apply_operations(scene, operations, progress)
     del scene
-    result, notes = edited.scene, []
+    result, notes = edited.scene, levels
     limit = MAX_SH_DEGREE_OF_FORMAT.get(writer.NAME, 3) if writer is not None else 3
     if result.sh_degree > limit:
         notes.append(f"the {writer.NAME} format stores SH degree {limit} only: degrees "

@@ -21,6 +21,7 @@ from ..formats import writer_for
 from ..formats._memory import scene_bytes
 from ..formats.convert import Conversion, conversion_error, convert
 from ..lod.budget import format_size
+from ..lod.io import dropped_levels_note
 from ..writing.outputs import check_output_path
 from .operations import ShDegree
 from .streamed import IN_MEMORY_COPIES, Source, memory_bound
@@ -37,7 +38,18 @@ def convert_file(source, output, *, memory: int | None = None, drop_invalid: boo
     """:func:`splatgl.formats.convert.convert`, streamed where ``memory`` (bytes; None: the
     default, half this machine's RAM) is below what loading the input would take, the input is
     a binary PLY and the output streams (see the module notes); the same file and report
-    either way."""
+    either way.  A level-of-detail input converts its finest level, with a warning
+    (:func:`splatgl.lod.io.dropped_levels_note`)."""
+    result = _convert_file(source, output, memory, drop_invalid, sh_degree, force, progress,
+                           spz_axes, writer_options)
+    note = dropped_levels_note(source)
+    if note:
+        warnings.warn(note, stacklevel=2)
+    return result
+
+
+def _convert_file(source, output, memory, drop_invalid, sh_degree, force, progress, spz_axes,
+                  writer_options) -> Conversion:
     source, output = Path(source), Path(output)
     memory = memory_bound(memory)
     streamed = None

@@ -128,6 +128,34 @@ def level_info(path: Path) -> dict:
             "branching": branching, "loaded": 0}
 
 
+def levels_of(path) -> dict | None:
+    """The levels a level-of-detail file holds (``{"counts": splats per level, finest first,
+    ...}``, as ``splatgl info`` shows them), from its header or manifest alone: a ``.lod.ply``
+    (:func:`level_info`), a Streamed SOG or an LCC scene (their format's ``level_info``); None
+    for any other file."""
+    from ..formats import detect_format
+
+    info = getattr(detect_format(Path(path)), "level_info", None)
+    if info is None and is_lod_file(Path(path)):
+        info = level_info
+    return None if info is None else info(Path(path))
+
+
+def dropped_levels_note(path) -> str | None:
+    """The note for a command that reads ``path`` whole and writes a plain scene (``convert``,
+    ``edit``): only its finest level is read, its coarser ones are not written; None where it
+    holds one level."""
+    levels = levels_of(path)
+    counts = [] if levels is None else levels["counts"]
+    if len(counts) < 2:
+        return None
+    coarser = len(counts) - 1
+    return (f"{path} is a level-of-detail file: its finest level ({counts[0]:,} splats) is "
+            f"read; its {coarser} coarser level{'s' if coarser != 1 else ''} "
+            f"({sum(counts[1:]):,} splats) {'are' if coarser != 1 else 'is'} not written "
+            "(build them again with 'splatgl lod' on the output)")
+
+
 def framed_leaves(tree: LodTree, path: Path) -> Scene:
     """The leaves of ``tree`` (read from ``path``) as a scene, framed as
     :func:`splatgl.formats.load_scene` frames the file (its recorded box): what the default

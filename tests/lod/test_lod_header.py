@@ -36,3 +36,23 @@ def test_info_names_the_file_and_the_missing_line(tmp_path, capsys):
     assert main(["info", str(path)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("splatgl: error:") and str(path) in err and LINE in err
+
+
+def test_convert_and_edit_of_a_level_of_detail_file_say_its_coarser_levels_are_not_written(
+        tmp_path, capsys):
+    """``convert`` and ``edit`` read a ``.lod.ply`` whole (its leaves) and write a plain scene:
+    they say so, with the levels' splat counts from the header, and a plain input gets no
+    such note (before, ``convert`` said "bit-exact" of a file that lost its levels)."""
+    path = stream_lod_file(tmp_path)
+    counts = level_info(path)["counts"]
+    coarser = f"its {len(counts) - 1} coarser levels ({sum(counts[1:]):,} splats) are not written"
+    assert main(["convert", str(path), str(tmp_path / "c.ply")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith(f"splatgl: warning: {path} is a level-of-detail file: its finest level "
+                          f"({counts[0]:,} splats) is read; {coarser}") and err.count("\n") == 1
+    assert main(["edit", str(path), "-o", str(tmp_path / "e.ply"), "--remove", "opacity < 0"]) == 0
+    assert f"  note: {path} is a level-of-detail file" in capsys.readouterr().out
+    assert main(["convert", str(tmp_path / "s.ply"), str(tmp_path / "c2.ply")]) == 0
+    assert main(["edit", str(tmp_path / "s.ply"), "-o", str(tmp_path / "e2.ply"), "--remove",
+                 "opacity < 0"]) == 0
+    assert "level-of-detail" not in "".join(capsys.readouterr())
