@@ -16,7 +16,7 @@ from ..errors import SplatglError
 from ..formats._memory import scene_bytes
 from ..lod.budget import format_size
 from ..lod.io import dropped_levels_note
-from ..formats import detect_format, load_scene, save_scene, writer_for
+from ..formats import detect_format, load_scene, save_scene, stored_bytes, writer_for
 from ..formats.convert import (EMPTY_FORMATS, EXTRAS_FORMATS, MAX_SH_DEGREE_OF_FORMAT,
                                dropped_note, extra_properties)
 from ..scene.splats import InvalidRowsDropped
@@ -143,7 +143,7 @@ def edit_files(inputs, output=None, operations=(), transforms=None, *, drop_inva
             save_scene(output, result, **writer_options)
         except OSError as exc:
             raise SplatglError(f"{output}: cannot write: {exc.strerror or exc}") from None
-        size = getattr(writer, "stored_bytes", lambda p: p.stat().st_size)(output)
+        size = stored_bytes(output)
     return EditReport(tuple(inputs), tuple(counts), output, tuple(steps), result.count,
                       result.sh_degree, dry_run, time.perf_counter() - t0, size, tuple(notes))
 

@@ -125,6 +125,13 @@ def writer_for(path: str | Path) -> ModuleType:
     raise SceneFormatError(path, f"cannot write this format (writable: {exts})")
 
 
+def stored_bytes(path: str | Path) -> int:
+    """Bytes the scene file ``path`` occupies with what it names (a SOG folder's meta.json and
+    its textures, a Streamed SOG's units), as its reader's format counts them; else its size."""
+    count = getattr(detect_format(Path(path)), "stored_bytes", None)
+    return count(Path(path)) if count is not None else Path(path).stat().st_size
+
+
 def save_scene(path: str | Path, scene: Scene, **options):
     """Write ``scene`` in the format the extension names, atomically (temp file, checked to be
     complete by :func:`splatgl.formats.written.written_problem`, then renamed).

@@ -18,7 +18,7 @@ import numpy as np
 from ..constants import SH_C0
 from ..errors import SplatglError
 from ..writing.outputs import check_output_path
-from . import detect_format, load_scene, save_scene, writer_for
+from . import detect_format, load_scene, save_scene, stored_bytes, writer_for
 from .spz_axes import Axes, check_choice as check_spz_axes
 from ..scene.splats import Scene
 
@@ -242,7 +242,7 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
     error = conversion_error(scene, back)
     error["bounds"] = bounds
     error["within_bounds"] = within_bounds(error, bounds)
-    size = getattr(writer, "stored_bytes", lambda p: p.stat().st_size)(output)
+    size = stored_bytes(output)
     return Conversion(source, output, source_format, writer.NAME, scene.count, scene.sh_degree,
                       back.sh_degree, size, time.perf_counter() - t0, error,
                       _axes(source, source_format, axes_in), _axes(output, writer.NAME, axes_out))

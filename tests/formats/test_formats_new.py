@@ -295,3 +295,18 @@ def test_a_repeated_json_key_in_gltf_or_sog_is_refused(tmp_path):
         load_scene(sog)
     assert str(info.value) == (f"{sog}: meta.json is not valid JSON: key 'count' given twice in "
                                "one object (JSON keeps only the last)")
+
+
+def test_convert_and_edit_count_a_sog_folders_textures(tmp_path, capsys):
+    """The bytes ``convert`` and ``edit`` report for a SOG folder are the folder's (meta.json
+    and its textures), not meta.json's alone (which the writer module cannot count)."""
+    save_scene(tmp_path / "s.ply", random_scene(200, degree=1))
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(["convert", str(tmp_path / "s.ply"), str(out / "meta.json")]) == 0
+    total = sum(p.stat().st_size for p in out.iterdir())
+    assert f"(sog, {total:,} bytes)" in capsys.readouterr().out
+    assert main(["edit", str(tmp_path / "s.ply"), "-o", str(out / "meta.json"), "--force",
+                 "--remove", "opacity < -100"]) == 0
+    total = sum(p.stat().st_size for p in out.iterdir())
+    assert f"({total:,} bytes)" in capsys.readouterr().out
