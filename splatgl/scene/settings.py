@@ -227,16 +227,10 @@ class RenderSettings:
             raise SplatglError(f"--background {','.join(f'{v:g}' for v in bg)}: each of R,G,B must "
                                f"be a number from 0 to {MAX_BACKGROUND:.4g} (what a float32 image holds)")
         object.__setattr__(self, "background", bg)
-        object.__setattr__(self, "precision", Precision(self.precision))
-        object.__setattr__(self, "extent", QuadExtent(self.extent))
-        object.__setattr__(self, "sort_key", SortKey(self.sort_key))
-        object.__setattr__(self, "preprocess", Preprocess(self.preprocess))
-        object.__setattr__(self, "convention", Convention(self.convention))
-        object.__setattr__(self, "gpu_storage", GpuStorage(self.gpu_storage))
         if isinstance(self.early_stop, bool):
             object.__setattr__(self, "early_stop", EarlyStop.ON if self.early_stop else EarlyStop.OFF)
-        object.__setattr__(self, "early_stop", EarlyStop(self.early_stop))
-        object.__setattr__(self, "order", Order(self.order))
+        for name, kind in ENUM_FIELDS.items():
+            object.__setattr__(self, name, _member(kind, getattr(self, name), name))
         if not isinstance(self.emulation, Emulation):
             raise SplatglError(f"emulation must be an Emulation, got {type(self.emulation).__name__}")
         if (int(self.order_window) != self.order_window
@@ -254,6 +248,28 @@ class RenderSettings:
                                "(the largest depth a float32 holds)")
         if self.sh_degree is not None and not 0 <= self.sh_degree <= MAX_SH_DEGREE:
             raise SplatglError(f"SH degree cap must be 0..{MAX_SH_DEGREE}, got {self.sh_degree}")
+
+
+class SettingValueError(SplatglError, ValueError):
+    """A :class:`RenderSettings` mode given as a value its enum does not have (a ValueError, as
+    the enum's own refusal was before it named the field)."""
+
+
+#: RenderSettings' fields that hold an enum member, given as the member or its value.
+ENUM_FIELDS = {"precision": Precision, "extent": QuadExtent, "sort_key": SortKey,
+               "preprocess": Preprocess, "convention": Convention, "gpu_storage": GpuStorage,
+               "early_stop": EarlyStop, "order": Order}
+
+
+def _member(kind: type[enum.Enum], value, name: str) -> enum.Enum:
+    """``value`` (a member of ``kind`` or its value, as ``"rgba16f"``) as the member; else one
+    line naming the field, the value and the values accepted."""
+    try:
+        return kind(value)
+    except (ValueError, TypeError):
+        accepted = ", ".join(str(m.value) for m in kind)
+        raise SettingValueError(f"RenderSettings {name}: {value!r} is not one of {accepted}") from None
+
 
 def resolve_near(settings: RenderSettings, scene_radius: float) -> float:
     """The near plane to use: the explicit setting, or ``min(0.2, 0.01 * scene_radius)``.

@@ -269,3 +269,25 @@ def test_bench_mode_options_are_refused_before_the_work(capsys):
         "--lod-thresholds: expected comma-separated numbers, got '1,x'")
     assert cli_error(capsys, "bench", "--scale", "--sizes", "1M,lots") == (
         "--sizes: 'lots' is not a size (e.g. 0.1M, 300k, 6M)")
+
+
+# ------------------------------------------------------------------ easy mistakes through the API
+
+
+@pytest.mark.parametrize("field, value, accepted", [
+    ("precision", "rgba64", "rgba32f, rgba16f, rgba8"),
+    ("extent", "circle", "ellipse, square, fast"),
+    ("sort_key", "radix", "exact, bucket16, gpu"),
+    ("preprocess", None, "vertex, compute"),
+    ("convention", "INRIA", "inria, gsplat"),
+    ("gpu_storage", "half", "float32, half-sh, compact"),
+    ("early_stop", "sometimes", "auto, on, off"),
+    ("order", ["global"], "global, per-pixel"),
+])
+def test_render_settings_name_the_field_the_value_and_the_accepted_values(field, value, accepted):
+    """RenderSettings(precision="rgba64") said only "'rgba64' is not a valid Precision"; the
+    accepted values are the CLI's choices for the option."""
+    with pytest.raises(SplatglError) as err:
+        splatgl.RenderSettings(**{field: value})
+    assert str(err.value) == f"RenderSettings {field}: {value!r} is not one of {accepted}"
+    assert isinstance(err.value, ValueError)   # what the enum raised before
