@@ -23,7 +23,7 @@ from .gl.shaders import ProgramCache
 from .output.layers import BASE, Layer, RenderOutput, with_layers
 from .output.under import UnderImage
 from .progress import ProgressCallback
-from .scene.splats import Scene, SceneSource
+from .scene.splats import Scene, SceneSource, require_scene
 from .scene.settings import RenderSettings, RendererKind
 from .cameras.view import View
 from .renderers import registry
@@ -39,6 +39,8 @@ def default_settings(scene: Scene | SceneSource | None = None, **fields) -> Rend
     software rasteriser), as ``--sort auto``."""
     from .gl.device_class import AUTO, resolve_sort
 
+    if scene is not None and not isinstance(scene, SceneSource):
+        require_scene(scene, "default_settings")
     fields["sort_key"] = resolve_sort(fields.get("sort_key", AUTO))
     source = scene.source if isinstance(scene, Scene) else scene
     if fields.get("antialias") is None:
@@ -135,6 +137,7 @@ class Renderer:
         It makes ``self.ctx`` current; when other OpenGL contexts are created later, call
         :func:`splatgl.gl.context.make_current` before using the object directly.
         """
+        require_scene(scene, "Renderer.renderer_for")
         self._check_open()
         kind = registry.entry(kind).kind
         self._gl(kind)
@@ -151,6 +154,7 @@ class Renderer:
         reference, the tile renderer) during the frame.  The quad and tile renderers refuse
         ``convention`` gsplat (:func:`splatgl.renderers.registry.check_convention`).
         """
+        require_scene(scene, "Renderer.render")
         return self.render_layers(scene, camera, settings, kind, progress, BASE).rgba
 
     def render_layers(self, scene: Scene, camera: Camera | None = None,
@@ -165,7 +169,7 @@ class Renderer:
         (:func:`splatgl.imagefiles.under_exr.read_under`) to composite the splats into: splats at or
         behind it are dropped, the rest composited over its colour."""
         kind = registry.entry(kind).kind
-        camera, settings = _inputs(scene, camera, settings)
+        camera, settings = _inputs(scene, camera, settings, "Renderer.render_layers")
         self._check_open()
         layers = frozenset(layers)
         view = View.of(camera, settings, scene)
@@ -185,8 +189,14 @@ class Renderer:
         The scene is uploaded and the shaders compiled once (on the first frame); each frame is
         exactly what :meth:`render` (or :meth:`render_layers` with ``layers``) returns for that
         camera.  Yields (H, W, 4) float32 arrays, or :class:`RenderOutput` with ``layers``.
-        ``settings`` None: :func:`default_settings`.
+        ``settings`` None: :func:`default_settings`.  A bad ``scene`` is refused at the call,
+        not at the first frame.
         """
+        require_scene(scene, "Renderer.render_many")
+        return self._frames(scene, cameras, settings, kind, layers)
+
+    def _frames(self, scene, cameras, settings, kind, layers) -> Iterator[np.ndarray | RenderOutput]:
+        """:meth:`render_many`'s frames."""
         settings = settings if settings is not None else default_settings(scene)
         for camera in cameras:
             if layers is None:
@@ -255,9 +265,11 @@ def gl_renderer_name(kind: RendererKind | str, ctx: moderngl.Context | None) -> 
     return registry.describe(kind, ctx)
 
 
-def _inputs(scene: Scene, camera: Camera | None,
-            settings: RenderSettings | None) -> tuple[Camera, RenderSettings]:
-    """``camera`` and ``settings``, or the scene's defaults where None (``splatgl render``'s)."""
+def _inputs(scene: Scene, camera: Camera | None, settings: RenderSettings | None,
+            caller: str) -> tuple[Camera, RenderSettings]:
+    """``camera`` and ``settings``, or the scene's defaults where None (``splatgl render``'s);
+    a ``scene`` that is none is refused naming ``caller``."""
+    require_scene(scene, caller)
     settings = settings if settings is not None else default_settings(scene)
     return camera if camera is not None else default_camera(scene, model=settings.transform), settings
 
@@ -269,7 +281,7 @@ def render(scene: Scene, camera: Camera | None = None, settings: RenderSettings 
     does not read is refused (:func:`splatgl.renderers.registry.check_settings`); a
     :class:`Renderer` draws one ``settings`` with every kind (the viewer's Tab), each reading
     its own part.  No OpenGL context is made for a renderer that needs none."""
-    camera, settings = _inputs(scene, camera, settings)
+    camera, settings = _inputs(scene, camera, settings, "render")
     registry.check_settings(settings, kind)
     with Renderer() as r:
         return r.render(scene, camera, settings, kind)

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from ..errors import CameraError
-from ..scene.splats import Scene
+from ..scene.splats import Scene, require_scene
 from ..scene.transform import SceneTransform
 from . import registry
 from .camera import MAX_CAMERA_VALUE, MIN_FOCAL, Camera
@@ -55,6 +55,8 @@ def default_camera(scene: Scene, width: int | None = None, height: int | None = 
     positive integer, a field of view outside the model's range and a distance scale that is
     not positive, with the messages ``splatgl render`` gives.
     """
+    # what the framing reads: a streamed scene's framing proxy stands in for a Scene
+    require_scene(scene, "default_camera", ("robust_bounds", "robust_radius", "source"))
     cls = registry.model_class(projection or registry.names()[0])
     for name, value in (("width", width), ("height", height)):
         if value is not None and (isinstance(value, bool) or int(value) != value or value < 1):

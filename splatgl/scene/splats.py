@@ -92,12 +92,7 @@ class Scene:
     def __post_init__(self) -> None:
         n = np.shape(self.means)[0]
         nscale = 2 if self.kind is SplatKind.SURFEL_2D else 3
-        expect = {
-            "means": (n, 3),
-            "quats": (n, 4),
-            "log_scales": (n, nscale),
-            "opacity_logits": (n,),
-        }
+        expect = {"means": (n, 3), "quats": (n, 4), "log_scales": (n, nscale), "opacity_logits": (n,)}
         for name, shape in expect.items():
             if np.shape(getattr(self, name)) != shape:
                 raise ValueError(
@@ -118,15 +113,9 @@ class Scene:
             object.__setattr__(self, name, arr)
 
     @classmethod
-    def from_activated(
-        cls,
-        means: np.ndarray,
-        rotations: np.ndarray,
-        scales: np.ndarray,
-        opacities: np.ndarray,
-        sh: np.ndarray,
-        kind: SplatKind = SplatKind.GAUSSIAN_3D,
-    ) -> "Scene":
+    def from_activated(cls, means: np.ndarray, rotations: np.ndarray, scales: np.ndarray,
+                       opacities: np.ndarray, sh: np.ndarray,
+                       kind: SplatKind = SplatKind.GAUSSIAN_3D) -> "Scene":
         """A scene from activated values (unit or raw quaternions, scales > 0, opacity in [0, 1]).
 
         Opacities of exactly 0 or 1 are stored as logits of +-40 (sigmoid(40) rounds to 1.0 in
@@ -137,6 +126,11 @@ class Scene:
             logits = np.clip(np.log(o) - np.log1p(-o), -MAX_LOGIT, MAX_LOGIT)
         scales64 = np.maximum(np.asarray(scales, np.float64), MIN_SCALE)
         return cls(means, rotations, np.log(scales64), logits, sh, kind)
+
+    def __repr__(self) -> str:
+        """One line: count, kind, SH degree and the file's name (the arrays stay out)."""
+        source = "" if self.source is None else f", source {Path(self.source.path).name!r}"
+        return f"Scene({self.count:,} splats, {self.kind.value}, SH degree {self.sh_degree}{source})"
 
     @property
     def count(self) -> int:
@@ -225,6 +219,19 @@ class Scene:
             sh = np.concatenate([sh, np.zeros((self.count, k - sh.shape[1], 3), np.float32)], 1)
         return Scene(self.means, self.quats, self.log_scales, self.opacity_logits, sh, self.kind,
                      extras=self.extras)
+
+
+def require_scene(value, caller: str, reads: tuple[str, ...] = ()):
+    """``value`` if it is a :class:`Scene` (or, where ``reads`` is given, has those attributes:
+    a streamed scene's framing proxy); else a TypeError naming ``caller``, what it was given
+    and how to load a scene.  The public functions taking a scene call it first."""
+    if isinstance(value, Scene) or reads and all(hasattr(value, a) for a in reads):
+        return value
+    shown, name = " ".join(repr(value).split()), type(value).__name__
+    shown = shown if len(shown) <= 60 else shown[:57] + "..."
+    got = shown if value is None or shown.startswith(name) else f"{name} {shown}"
+    raise TypeError(f"{caller}: scene must be a splatgl Scene (load one with "
+                    f"splatgl.load_scene(path)), got {got}")
 
 
 def _adoptable(arr) -> bool:
@@ -343,17 +350,9 @@ def _rows_where(arr: np.ndarray, test) -> np.ndarray:
     return out
 
 
-def activate(
-    path: object,
-    means: np.ndarray,
-    quats: np.ndarray,
-    log_scales: np.ndarray,
-    opacity_logits: np.ndarray,
-    sh: np.ndarray,
-    kind: SplatKind = SplatKind.GAUSSIAN_3D,
-    drop_invalid: bool = False,
-    extras: np.ndarray | None = None,
-) -> Scene:
+def activate(path: object, means: np.ndarray, quats: np.ndarray, log_scales: np.ndarray,
+             opacity_logits: np.ndarray, sh: np.ndarray, kind: SplatKind = SplatKind.GAUSSIAN_3D,
+             drop_invalid: bool = False, extras: np.ndarray | None = None) -> Scene:
     """Validate raw file values and build the :class:`Scene` (the one entry point for loaders).
 
     Rows with NaN/Inf in any field or a zero/degenerate quaternion are invalid.  By default an

@@ -291,3 +291,26 @@ def test_render_settings_name_the_field_the_value_and_the_accepted_values(field,
         splatgl.RenderSettings(**{field: value})
     assert str(err.value) == f"RenderSettings {field}: {value!r} is not one of {accepted}"
     assert isinstance(err.value, ValueError)   # what the enum raised before
+
+
+@pytest.mark.parametrize("call, caller", [
+    (lambda s: splatgl.render(s), "render"),
+    (lambda s: splatgl.default_camera(s, 64, 48), "default_camera"),
+    (lambda s: splatgl.default_settings(s), "default_settings"),
+    (lambda s: splatgl.Renderer().render(s), "Renderer.render"),
+    (lambda s: splatgl.Renderer().render_layers(s), "Renderer.render_layers"),
+    (lambda s: splatgl.Renderer().render_many(s, []), "Renderer.render_many"),   # at the call
+    (lambda s: splatgl.Renderer().renderer_for(s, splatgl.RenderSettings()), "Renderer.renderer_for"),
+])
+def test_the_api_says_a_scene_is_needed_where_it_is_given_something_else(call, caller):
+    """splatgl.render("x.splat") was AttributeError: 'str' object has no attribute
+    'antialias_tag'; splatgl.render(None): 'NoneType' object has no attribute 'source'."""
+    need = f"{caller}: scene must be a splatgl Scene (load one with splatgl.load_scene(path)), got"
+    for value, got in (("x.splat", "str 'x.splat'"), (None, "None"), (3, "int 3")):
+        if value is None and caller == "default_settings":
+            continue   # no scene: the settings of none
+        with pytest.raises(TypeError) as err:
+            call(value)
+        assert str(err.value) == f"{need} {got}"
+    with pytest.raises(TypeError, match=r"got ndarray array\(\[\[0\., 0\., 0\.\], \[0\., .*\.\.\.$"):
+        call(np.zeros((1000, 3)))   # one line, cut short
