@@ -9,6 +9,7 @@ orthographic, fisheye and equirectangular, each in its own module of :mod:`splat
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,6 +21,18 @@ from .model import CameraModel, CullKind
 from .orthographic import Orthographic
 from .pinhole import Pinhole
 from .poses import MAX_CAMERA_VALUE, MIN_FOCAL, nonfinite_entry
+
+
+def image_side(value, name: str) -> int:
+    """``value`` as an image side in pixels: a whole number >= 1 (an int, a NumPy integer or a
+    float without a fraction; not a bool, not a string); else a :class:`CameraError` naming the
+    side (``name``: width or height) and the value.  The size limits of the device are checked
+    later (:func:`splatgl.renderers.registry.check_image_size`, as for ``--width``)."""
+    whole = isinstance(value, numbers.Integral) or (
+        isinstance(value, numbers.Real) and math.isfinite(value) and float(value).is_integer())
+    if not whole or isinstance(value, (bool, np.bool_)) or value < 1:
+        raise CameraError(f"camera {name} must be a positive integer, got {value!r}")
+    return int(value)
 
 
 def _frozen_matrix(m: object) -> np.ndarray:
@@ -66,10 +79,7 @@ class Camera:
 
     def __post_init__(self) -> None:
         for name in ("width", "height"):
-            value = getattr(self, name)
-            if int(value) != value or int(value) < 1:
-                raise CameraError(f"camera {name} must be a positive integer, got {value!r}")
-            object.__setattr__(self, name, int(value))
+            object.__setattr__(self, name, image_side(getattr(self, name), name))
         for name in ("fx", "fy", "cx", "cy"):
             value = float(getattr(self, name))
             if not math.isfinite(value):
@@ -144,6 +154,7 @@ class Camera:
                  fov_degrees: float | None = None, world_to_camera: np.ndarray | None = None,
                  like: "Camera | None" = None) -> "Camera":
         """A camera of ``model`` at this size and pose (:meth:`CameraModel.intrinsics`)."""
+        width, height = image_side(width, "width"), image_side(height, "height")
         fx, fy, cx, cy, instance = model.intrinsics(width, height, fov_degrees, like)
         return cls(width, height, fx, fy, cx, cy, _pose(world_to_camera), instance)
 
@@ -158,6 +169,7 @@ class Camera:
 
     def resized(self, width: int, height: int) -> "Camera":
         """The same view at another resolution (intrinsics scaled per axis)."""
+        width, height = image_side(width, "width"), image_side(height, "height")
         sx, sy = width / self.width, height / self.height
         return Camera(width, height, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy,
                       self.world_to_camera, self.model)

@@ -11,7 +11,7 @@ from ..errors import CameraError
 from ..scene.splats import Scene, require_scene
 from ..scene.transform import SceneTransform
 from . import registry
-from .camera import MAX_CAMERA_VALUE, MIN_FOCAL, Camera
+from .camera import MAX_CAMERA_VALUE, MIN_FOCAL, Camera, image_side
 from .orthographic import Orthographic
 from .pinhole import DEFAULT_FOV, Pinhole
 from .poses import orbit
@@ -58,9 +58,8 @@ def default_camera(scene: Scene, width: int | None = None, height: int | None = 
     # what the framing reads: a streamed scene's framing proxy stands in for a Scene
     require_scene(scene, "default_camera", ("robust_bounds", "robust_radius", "source"))
     cls = registry.model_class(projection or registry.names()[0])
-    for name, value in (("width", width), ("height", height)):
-        if value is not None and (isinstance(value, bool) or int(value) != value or value < 1):
-            raise CameraError(f"camera {name} must be a positive integer, got {value!r}")
+    width = None if width is None else image_side(width, "width")
+    height = None if height is None else image_side(height, "height")
     width, height = registry.default_size(cls.name, width, height)
     registry.check_fov(cls.name, fov_degrees)
     if not (math.isfinite(distance_scale) and distance_scale > 0.0):

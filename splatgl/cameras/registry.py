@@ -11,7 +11,7 @@ registered later takes a name over from an earlier one.
 from __future__ import annotations
 
 from ..errors import CameraError
-from .camera import Camera
+from .camera import Camera, image_side
 from .equirect import Equirectangular
 from .fisheye import Fisheye
 from .model import CameraModel
@@ -138,10 +138,12 @@ def adapt_camera(camera: Camera, width: int | None = None, height: int | None = 
     ``source`` (the file's name) appears in messages.
 
     Raises:
-        CameraError: both sides given in another aspect than the file's own intrinsics; a field
+        CameraError: a side that is not a positive integer (:func:`~splatgl.cameras.camera.
+            image_side`); both sides given in another aspect than the file's own intrinsics; a field
             of view the model has none of (:func:`check_fov_applies`).
     """
-    w, h = width, height
+    w = None if width is None else image_side(width, "width")
+    h = None if height is None else image_side(height, "height")
     if not replaces_intrinsics(camera, name, fov_degrees):
         if w and h and w != round(camera.width * h / camera.height) \
                 and h != round(camera.height * w / camera.width):

@@ -314,3 +314,32 @@ def test_the_api_says_a_scene_is_needed_where_it_is_given_something_else(call, c
         assert str(err.value) == f"{need} {got}"
     with pytest.raises(TypeError, match=r"got ndarray array\(\[\[0\., 0\., 0\.\], \[0\., .*\.\.\.$"):
         call(np.zeros((1000, 3)))   # one line, cut short
+
+
+@pytest.mark.parametrize("side, value", [("width", "abc"), ("height", 0), ("width", -3),
+                                         ("height", 2.5), ("width", float("nan")),
+                                         ("height", float("inf")), ("width", "800"), ("width", True)])
+def test_image_sizes_from_python_are_checked_as_the_cli_checks_them(side, value, capsys, tmp_path):
+    """default_camera(scene, "abc", 10) was ValueError: invalid literal for int() with base 10;
+    the CLI refuses the same values (its --width/--height are argparse's whole numbers >= 1)."""
+    scene = splatgl.load_scene(DEMO)
+    size = {"width": 64, "height": 48, side: value}
+    message = f"camera {side} must be a positive integer, got {value!r}"
+    camera_file = tmp_path / "camera.json"
+    splatgl.save_camera(camera_file, splatgl.default_camera(scene, 64, 48))
+    for call in (lambda: splatgl.default_camera(scene, size["width"], size["height"]),
+                 lambda: splatgl.Camera.from_fov(size["width"], size["height"], 60.0),
+                 lambda: splatgl.default_camera(scene).resized(size["width"], size["height"]),
+                 lambda: splatgl.load_camera(camera_file, **{side: value})):   # 0 was ignored
+        with pytest.raises(CameraError) as err:
+            call()
+        assert str(err.value) == message
+    if not (isinstance(value, bool) or str(value).isdigit()):   # the CLI reads "800" as 800
+        assert cli_error(capsys, "render", f"--{side}", value, "-o", tmp_path / "x.png").startswith(
+            f"argument --{side}: ")
+
+
+def test_whole_numbers_of_any_kind_are_image_sizes():
+    scene = splatgl.load_scene(DEMO)
+    camera = splatgl.default_camera(scene, np.int64(64), 48.0)
+    assert (camera.width, camera.height) == (64, 48) and type(camera.width) is int
