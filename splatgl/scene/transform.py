@@ -95,7 +95,8 @@ class SceneTransform:
             raise SplatglError("transform rotation must be a proper rotation (orthonormal, det +1), "
                                f"got {_shown(self.rotation)}")
         if t is None:
-            raise SplatglError(f"transform translation must be 3 finite numbers, got {_shown(self.translation)}")
+            raise SplatglError("transform translation must be 3 finite numbers, got "
+                               f"{_shown(self.translation)}")
         if _finite_array(self.scale, ()) is None or not self.scale > 0:
             raise SplatglError(f"transform scale must be a positive finite number, got {_shown(self.scale)}")
         object.__setattr__(self, "rotation", tuple(tuple(float(v) for v in row) for row in r))
