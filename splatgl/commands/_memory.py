@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ..lod.budget import budget_from
 
@@ -57,12 +58,32 @@ def _cut_options(args: argparse.Namespace) -> dict:
         if getattr(args, option, None) is not None}
 
 
+#: The options that read SCENE as a level of detail (render, view, eval, bench).
+LOD_OPTIONS = ("memory", "lod_level", "lod_threshold", "lod_budget", "lod_blend")
+
+
+def check_scene_file(path) -> None:
+    """SCENE read as :func:`splatgl.load_scene` reads it first
+    (:func:`splatgl.formats.detect_format`): a missing file is ``PATH: no such file`` (a
+    folder, an unreadable or an unknown file its own line), as ``info`` and a plain render say,
+    before a level-of-detail check asks what kind of file it is (before, a missing
+    ``x.lod.ply`` was 'not a level-of-detail file'); None, the bundled demo, passes."""
+    from ..formats import detect_format
+
+    if path is not None:
+        detect_format(Path(path))
+
+
 def stream_level(args: argparse.Namespace) -> int | None:
     """``--lod-level`` where given, checked before any work (one line each): with --memory, a
-    Streamed SOG or LCC SCENE holding that level, no other --lod-* option."""
+    Streamed SOG or LCC SCENE holding that level, no other --lod-* option.  The first check of
+    every command's level-of-detail options: where any of :data:`LOD_OPTIONS` is given, SCENE
+    must be a file (:func:`check_scene_file`)."""
     from ..errors import SplatglError
     from ..lod.stream_levels import check_level, read_structure
 
+    if any(getattr(args, name, None) is not None for name in LOD_OPTIONS):
+        check_scene_file(getattr(args, "scene", None))
     level = getattr(args, "lod_level", None)
     if level is None:
         return None

@@ -32,7 +32,8 @@ from ._bench_modes import (add_interactive_arguments, add_lod_arguments, add_mod
                            run_interactive_command, run_lod_command, run_popping_command,
                            run_scale_command, run_scale_lod_command)
 from ._common import demo_scene_path, non_negative_int, positive_int
-from ._memory import STREAM_HELP, add_level_argument, add_memory_argument, memory_given, stream_level
+from ._memory import (STREAM_HELP, add_level_argument, add_memory_argument, check_scene_file,
+                      memory_given, stream_level)
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
 from ._outputs import add_force_argument, check_out_folder
 
@@ -179,6 +180,8 @@ def _run_stream_bench(args: argparse.Namespace, sharded: bool) -> int:
     if others:
         raise SplatglError(f"--memory streams one level of detail in one process; not with "
                            f"{', '.join(others)}")
+    if len(args.scenes) == 1:
+        check_scene_file(args.scenes[0])   # a missing file: 'no such file', as info says
     if len(args.scenes) != 1 or not (is_lod_file(args.scenes[0]) or is_chunked(args.scenes[0])):
         raise SplatglError("--memory: give one level-of-detail file (from 'splatgl lod', or a "
                            "Streamed SOG lod-meta.json or LCC meta.lcc) to stream, got "
