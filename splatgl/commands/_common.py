@@ -117,10 +117,10 @@ def add_camera_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--stereo", type=positive_float, default=None, metavar="IPD",
                    help="render a stereo pair with this interpupillary distance (world units); "
                         "equirectangular cameras render omni-directional stereo")
-    g.add_argument("--stereo-layout", choices=[m.value for m in StereoLayout], default="side-by-side",
-                   help="where the two eyes go: side-by-side (left | right, default), top-bottom "
-                        "(left above right, the 360-video convention), or separate files "
-                        "OUT_left.EXT and OUT_right.EXT")
+    g.add_argument("--stereo-layout", choices=[m.value for m in StereoLayout], default=None,
+                   help="with --stereo, where the two eyes go: side-by-side (left | right, "
+                        "default), top-bottom (left above right, the 360-video convention), or "
+                        "separate files OUT_left.EXT and OUT_right.EXT")
     g.add_argument("--distance", type=positive_float, default=None, metavar="SCALE",
                    help="default camera distance as a multiple of the framing distance "
                         "(default 1; 0.5 is twice as close)")
@@ -276,14 +276,19 @@ def projection_from_args(args: argparse.Namespace) -> str | None:
     return projection
 
 
-def _file_camera(args: argparse.Namespace, projection: str | None) -> Camera:
-    """``--camera`` adapted by --width/--height/--projection/--fov (:func:`splatgl.load_camera`)."""
+def _file_camera(args: argparse.Namespace, projection: str | None,
+                 orbit_up: bool = False) -> Camera:
+    """``--camera`` adapted by --width/--height/--projection/--fov (:func:`splatgl.load_camera`);
+    ``--up`` is refused beside it unless ``orbit_up`` (the viewer's orbit keeps it)."""
     if getattr(args, "orthographic", False):
         raise SplatglError(f"--orthographic zooms the default camera to frame the scene; "
                            f"{args.camera} brings its own camera (--projection orthographic keeps "
                            "its fx, fy as pixels per world unit)")
     if getattr(args, "distance", None) is not None:
         raise SplatglError(f"--distance places the default camera; {args.camera} brings its own pose")
+    if getattr(args, "up", None) is not None and not orbit_up:
+        raise SplatglError(f"--up {args.up} places the default camera and orbit paths; "
+                           f"{args.camera} brings its own pose, which fixes which way is up")
     cam = load_camera(args.camera, args.camera_index or 0, width=args.width, height=args.height,
                       projection=projection, fov_degrees=args.fov)
     check_image_size(cam.width, cam.height, size_origin(args), RendererKind.REFERENCE)
@@ -299,16 +304,31 @@ def default_size(args: argparse.Namespace, projection: str | None) -> tuple[int,
     return width, height
 
 
+def check_stereo_layout(args: argparse.Namespace) -> None:
+    """``--stereo-layout`` lays out ``--stereo``'s pair: refused without it (it was accepted and
+    ignored); with it, ``args.stereo_layout`` is side-by-side unless given."""
+    layout = getattr(args, "stereo_layout", None)
+    if getattr(args, "stereo", None) is None:
+        if layout is not None:
+            raise SplatglError(f"--stereo-layout {layout} lays out a stereo pair: add --stereo "
+                               "IPD, or leave --stereo-layout out")
+    elif layout is None:
+        args.stereo_layout = StereoLayout.SIDE_BY_SIDE.value
+
+
 def camera_from_args(args: argparse.Namespace, scene: Scene | None,
-                     settings: RenderSettings | None = None) -> Camera | None:
+                     settings: RenderSettings | None = None,
+                     orbit_up: bool = False) -> Camera | None:
     """The camera the options describe (:func:`splatgl.load_camera` or
     :func:`splatgl.default_camera`); with ``scene`` None, only the checks that need no scene
-    (done before loading one), returning the file's camera or None."""
+    (done before loading one), returning the file's camera or None.  ``orbit_up``: the command
+    orbits about ``--up`` (view), which a camera file then does not refuse."""
     if args.camera is None and args.camera_index is not None:
         raise SplatglError("--camera-index needs --camera (a cameras.json to pick from)")
+    check_stereo_layout(args)
     projection = projection_from_args(args)
     if args.camera is not None:
-        return _file_camera(args, projection)
+        return _file_camera(args, projection, orbit_up)
     width, height = default_size(args, projection)
     if scene is None:
         return None

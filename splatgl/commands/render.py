@@ -6,8 +6,9 @@ import argparse
 from pathlib import Path
 
 from ..errors import SplatglError
-from ..imagefiles.image_formats import (BIT_DEPTHS, IMAGE_FORMATS, image_format, picture_format,
-                                    suffix_list)
+from ..imagefiles.frame_targets import FrameTarget
+from ..imagefiles.image_formats import (BIT_DEPTHS, IMAGE_FORMATS, PICTURE_FORMATS, image_format,
+                                        picture_format, suffix_list)
 from ..imagefiles.images import write_image
 from ..imagefiles.layer_files import check_exact_ids, picture_path, write_layers
 from ..output.layers import BASE, Layer, RenderOutput
@@ -21,8 +22,8 @@ from ..lod.stream_frames import StreamFrames
 from ..scene.settings import RendererKind
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      camera_from_args, check_convention, check_size, format_timings,
-                      inputs_from_args, settings_from_args)
+                      camera_from_args, check_convention, check_size, check_stereo_layout,
+                      format_timings, inputs_from_args, settings_from_args)
 from ._layers import add_layer_arguments, layer_files, under_from_args
 from ._memory import (STREAM_HELP, add_level_argument, add_memory_argument, memory_given,
                       render_one_streamed, stream_inputs, stream_level, stream_renderer)
@@ -62,8 +63,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", required=True,  # text: with --path a trailing / matters
                    help=f"output image ({suffix_list(IMAGE_FORMATS, ', ')}); with --path a folder, a "
                         "pattern such as frames/%%05d.png, or a video (.mp4)")
-    p.add_argument("--bit-depth", type=int, choices=BIT_DEPTHS, default=8,
-                   help="bits per channel of PNG/TIFF output (default 8)")
+    p.add_argument("--bit-depth", type=int, choices=BIT_DEPTHS, default=None,
+                   help="bits per channel of PNG/TIFF output (default 8); refused for an EXR "
+                        "(float32) and for a video's frames above 8")
     p.add_argument("--renderer", choices=[AUTO] + renderer_names(), default=AUTO,
                    help="auto (default) = cpu on a machine without a GPU where it can draw the "
                         "request and its compiled kernels are ready (no option only the quad path "
@@ -97,6 +99,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_stereo_layout(args)
+    args.bit_depth = bit_depth_from_args(args)
     if args.path is not None:
         return run_path(args)
     args.output = Path(args.output)
@@ -194,6 +198,28 @@ def run(args: argparse.Namespace) -> int:
         print(times.capped)
     _print_timings(args, gl_name, times, settings)
     return 0
+
+
+def bit_depth_from_args(args: argparse.Namespace) -> int:
+    """``--bit-depth`` (default 8) where the output takes it: a PNG or TIFF (8 or 16), a
+    video's frames (8); an EXR (float32 channels) or a 16-bit video is one line, never a file
+    written at another depth than asked."""
+    if args.bit_depth is None:
+        return 8
+    target = FrameTarget.parse(args.output, args.format) if args.path is not None else None
+    if target is not None and target.is_video:
+        depths, what = (8,), "is a video, whose frames are 8-bit"
+    else:   # a float format (EXR) has no depth to choose
+        fmt = target.image_format if target is not None else image_format(args.output, "-o")
+        name = fmt.name.upper()
+        depths = fmt.bit_depths
+        what = (f"is an {name} image" if target is None else f"gets {name} frames") + \
+            ", whose channels are float32"
+    if args.bit_depth not in depths:
+        raise SplatglError(f"--bit-depth {args.bit_depth}: -o {args.output} {what}; "
+                           f"--bit-depth applies to {suffix_list(PICTURE_FORMATS)} output "
+                           f"({' or '.join(map(str, BIT_DEPTHS))} bits per channel)")
+    return args.bit_depth
 
 
 def lod_given(args: argparse.Namespace) -> bool:

@@ -15,8 +15,8 @@ from ..renderers.registry import check, names
 from ..renderers import auto as renderer_auto
 from ._renderer_auto import AUTO, auto_lines, choose_renderer
 from ._common import (add_camera_arguments, add_scene_arguments, add_settings_arguments,
-                      camera_from_args, check_convention, demo_scene_path, load_scene_arg,
-                      settings_from_args)
+                      camera_from_args, check_convention, check_stereo_layout, demo_scene_path,
+                      load_scene_arg, settings_from_args)
 from ._frame_budget import add_target_fps_argument
 from ._memory import (STREAM_HELP, add_level_argument, add_memory_argument, is_chunked_scene,
                       memory_given, stream_level)
@@ -89,6 +89,7 @@ def _render_args(args: argparse.Namespace) -> tuple[str, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_stereo_layout(args)   # none without --stereo; side-by-side by default
     if args.stereo is not None and args.stereo_layout != "side-by-side":
         raise SplatglError("the viewer shows stereo side by side; --stereo-layout is for render")
     if args.benchmark is not None and args.benchmark < 1:
@@ -122,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     if args.renderer == RendererKind.CPU.value:
         from ..renderers.cpu import prepare
         prepare()     # compiled on first use (half a minute), not in the window's first rest
-    camera = camera_from_args(args, scene, settings)
+    camera = camera_from_args(args, scene, settings, orbit_up=True)   # the orbit keeps --up
     cameras = load_cameras(args.camera) if args.camera is not None else []
     if args.camera is not None and not (args.width or args.height):
         camera = _fit(camera)

@@ -6,6 +6,8 @@ line on stderr, exit 2, nothing written."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from splatgl.cli import main
@@ -47,5 +49,73 @@ def test_a_missing_scene_is_no_such_file_under_every_option(tmp_path, capsys, ar
 def test_level_of_detail_options_on_a_folder_say_so(tmp_path, capsys):
     refused(capsys, tmp_path, ["render", tmp_path, "-o", tmp_path / "z.png", "--memory", "1G"],
             f"splatgl: error: {tmp_path}: is a directory, not a scene file")
+
+
+BIT_DEPTH = ("; --bit-depth applies to .png or .tif output (8 or 16 bits per channel)")
+
+
+@pytest.mark.parametrize("extra, out, line", [
+    (["--bit-depth", "16"], "b16.exr", "-o {out} is an EXR image, whose channels are float32"),
+    (["--bit-depth", "8"], "b8.exr", "-o {out} is an EXR image, whose channels are float32"),
+    (["--bit-depth", "16", "--path", "orbit:2"], "v.mp4",
+     "-o {out} is a video, whose frames are 8-bit"),
+    (["--bit-depth", "16", "--path", "orbit:2", "--format", "exr"], "frames/",
+     "-o {out} gets EXR frames, whose channels are float32"),
+    (["--bit-depth", "16", "--path", "orbit:2"], "f_%02d.exr",
+     "-o {out} gets EXR frames, whose channels are float32"),
+])
+def test_bit_depth_is_refused_where_the_output_has_none(tmp_path, capsys, extra, out, line):
+    """``render -o b16.exr --bit-depth 16`` wrote a float32 EXR and said nothing."""
+    target = f"{tmp_path}/{out}"
+    depth = extra[1]
+    refused(capsys, tmp_path, ["render", "-o", target, *SMALL, *extra],
+            f"splatgl: error: --bit-depth {depth}: " + line.format(out=target) + BIT_DEPTH)
+
+
+def test_bit_depth_still_applies_to_png(tmp_path, capsys):
+    assert main(["render", "-o", str(tmp_path / "a.png"), "--bit-depth", "16", *SMALL]) == 0
+    assert main(["render", "-o", str(tmp_path / "b.png"), *SMALL]) == 0   # default 8
+    # the PNG header's bit depth (IHDR: 8-byte signature, length, type, width, height, depth)
+    assert [(tmp_path / n).read_bytes()[24] for n in ("a.png", "b.png")] == [16, 8]
+    capsys.readouterr()
+
+
+def _camera(tmp_path):
+    path = tmp_path / "cam.json"
+    path.write_text(json.dumps({"width": 32, "height": 24, "fx": 30, "fy": 30, "cx": 16, "cy": 12,
+                                "world_to_camera": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 3],
+                                                    [0, 0, 0, 1]]}))
+    return path
+
+
+@pytest.mark.parametrize("command", [["render", "-o", "{tmp}/x.png"], ["pixel", "--at", "1,1"],
+                                     ["compare"]])
+def test_up_beside_a_camera_file_is_refused(tmp_path, capsys, command):
+    """A camera file's pose fixes which way is up: --up was ignored."""
+    cam = _camera(tmp_path)
+    argv = [a.format(tmp=tmp_path) for a in command]
+    refused(capsys, tmp_path, [*argv, "--camera", cam, "--up", "+z"],
+            f"splatgl: error: --up +z places the default camera and orbit paths; {cam} brings its "
+            "own pose, which fixes which way is up")
+
+
+@pytest.mark.parametrize("command", [["render", "-o", "{tmp}/x.png"], ["pixel", "--at", "1,1"],
+                                     ["compare"]])
+def test_stereo_layout_without_stereo_is_refused(tmp_path, capsys, command):
+    argv = [a.format(tmp=tmp_path) for a in command]
+    refused(capsys, tmp_path, [*argv, *SMALL, "--stereo-layout", "top-bottom"],
+            "splatgl: error: --stereo-layout top-bottom lays out a stereo pair: add --stereo IPD, "
+            "or leave --stereo-layout out")
+
+
+def test_stereo_keeps_side_by_side_as_its_default(tmp_path, capsys):
+    from splatgl.imagefiles.images import read_image
+
+    assert main(["render", "-o", str(tmp_path / "s.png"), *SMALL, "--stereo", "0.1"]) == 0
+    assert read_image(tmp_path / "s.png").shape[:2] == (24, 64)
+    assert main(["render", "-o", str(tmp_path / "t.png"), *SMALL, "--stereo", "0.1",
+                 "--stereo-layout", "top-bottom"]) == 0
+    assert read_image(tmp_path / "t.png").shape[:2] == (48, 32)
+    capsys.readouterr()
 
 
