@@ -1,8 +1,10 @@
 """The ``splatgl`` command line: one sub-command per module in :mod:`splatgl.commands`.
 
 Every sub-command module defines ``NAME``, ``HELP``, ``add_arguments(parser)`` and
-``run(args) -> int``.  Bad input (any :class:`SplatglError`, and any bad argument) prints one
-line and exits with 2, never a traceback.  Ctrl-C (SIGINT) and SIGTERM stop the command the
+``run(args) -> int``.  ``splatgl --version`` prints the version; ``splatgl`` alone prints the
+commands (the top-level help) on stderr and exits with 2, as a usage error does.  Bad input
+(any :class:`SplatglError`, and any bad argument) prints one line and exits with 2, never a
+traceback.  Ctrl-C (SIGINT) and SIGTERM stop the command the
 same way, at any moment including start-up: the exception unwinds, so every temporary file is
 removed, and one line says so (exit 130 or 143).  A closed stdout (``splatgl info S | head -1``)
 ends the command quietly (exit 141, as a shell reports SIGPIPE).
@@ -90,10 +92,14 @@ def build_parser():
     """The ``splatgl`` argument parser (an :class:`argparse.ArgumentParser`)."""
     import argparse
 
+    from . import __version__
+
     parser = _parser_class()(
         prog="splatgl",
         description="Render trained Gaussian-splat scenes (3DGS, 2DGS) through OpenGL.",
+        epilog="'splatgl COMMAND --help' explains a command and its options.",
     )
+    parser.add_argument("--version", action="version", version=f"splatgl {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for mod in _command_modules():
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=getattr(mod, "DESCRIPTION", mod.HELP),
@@ -193,6 +199,9 @@ def main(argv: list[str] | None = None) -> int:
         from .errors import SplatglError
 
         parser = build_parser()
+        if not (sys.argv[1:] if argv is None else argv):   # bare 'splatgl': the commands, and
+            print(parser.format_help(), end="", file=sys.stderr)   # 2 so that scripts notice
+            return EXIT_BAD_INPUT
         try:
             args, unknown = parser.parse_known_args(argv)
             if unknown:   # named by the sub-command, whose --help lists what it takes

@@ -10,6 +10,7 @@ import json
 
 import pytest
 
+from splatgl import __version__
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 
@@ -117,5 +118,14 @@ def test_stereo_keeps_side_by_side_as_its_default(tmp_path, capsys):
                  "--stereo-layout", "top-bottom"]) == 0
     assert read_image(tmp_path / "t.png").shape[:2] == (48, 32)
     capsys.readouterr()
+
+
+def test_version_and_a_bare_splatgl(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0 and capsys.readouterr().out == f"splatgl {__version__}\n"
+    assert main([]) == 2   # the commands, where scripts notice: stderr, exit 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("usage: splatgl ") and "render" in err and "COMMAND" in err
 
 

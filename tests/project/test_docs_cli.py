@@ -53,6 +53,8 @@ def _commands() -> dict[tuple[str, ...], argparse.ArgumentParser]:
 
 
 COMMANDS = _commands()
+#: The options of ``splatgl`` itself, before any command (``splatgl --version``).
+TOP = {o for a in build_parser()._actions for o in a.option_strings if o not in ("-h", "--help")}
 #: Commands that run (``path`` and ``conformance`` only choose a sub-command).
 LEAVES = {words: p for words, p in COMMANDS.items()
           if not any(isinstance(a, argparse._SubParsersAction) for a in p._actions)}
@@ -126,7 +128,8 @@ def _misused(line: str) -> list[str]:
     the command (or, for ``path``, any of its sub-commands) does not take."""
     words = _command_of(line)
     if words is None:
-        return ["no such command"]
+        named = _named(line)
+        return [] if named and named <= TOP and len(line.split()) == 2 else ["no such command"]
     options = set().union({"--help"}, *(_options(p) for w, p in LEAVES.items()
                                         if w[:len(words)] == words))
     return [o for o in sorted(_named(line)) if not _known(o, options)]
@@ -174,7 +177,7 @@ def test_every_option_is_documented_under_its_command():
 
 def test_the_page_names_no_option_a_command_lacks():
     page = _page()
-    every = set().union({"--help"}, *(_options(p) for p in LEAVES.values()))
+    every = set().union({"--help"}, TOP, *(_options(p) for p in LEAVES.values()))
     wrong = []
     # Written-out command lines, anywhere on the page.
     wrong += [f"{line!r}: {problem}" for line in _command_lines(page) for problem in _misused(line)]
@@ -249,6 +252,7 @@ def test_the_checks_catch_a_stale_page():
     assert not _known("--lod-*", _options(LEAVES[("info",)]))
     assert _command_of("splatgl path orbit scene.ply -o p.json") == ("path", "orbit")
     assert _command_of("splatgl nothing --x") is None
+    assert _misused("splatgl --version") == [] and _misused("splatgl --version x") != []
     assert _misused("splatgl info scene.ply --json --lod-budget 3") == ["--lod-budget"]
     assert _command_lines("a `splatgl info --stats` b\n```sh\nsplatgl lod s -o t\nother\n```\n") == [
         "splatgl info --stats", "splatgl lod s -o t"]
