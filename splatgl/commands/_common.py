@@ -141,7 +141,10 @@ def add_settings_arguments(p: argparse.ArgumentParser) -> None:
                    help="blend target of the quad path (default rgba32f)")
     g.add_argument("--extent", choices=[m.value for m in QuadExtent], default="ellipse",
                    help="quad size: 'ellipse' = opacity-aware ellipse axes (default), 'square' = "
-                        "the reference's 3-sigma square")
+                        "the reference's 3-sigma square, 'fast' = the web viewers' approximation: "
+                        "a fixed 2.83 sigma (2 sqrt 2) along the ellipse axes whatever the "
+                        "opacity, the fragment evaluating the Gaussian in those axes (quicker, "
+                        "less exact: docs/fidelity.md)")
     g.add_argument("--near", type=positive_float, default=None,
                    help="near-plane distance in world units (default: min(0.2, 1%% of the "
                         "scene's robust radius))")

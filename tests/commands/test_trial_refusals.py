@@ -129,3 +129,10 @@ def test_version_and_a_bare_splatgl(capsys):
     assert out == "" and err.startswith("usage: splatgl ") and "render" in err and "COMMAND" in err
 
 
+def test_extent_help_says_what_fast_is(capsys):
+    with pytest.raises(SystemExit):
+        main(["render", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "'fast' = the web viewers' approximation: a fixed 2.83 sigma" in text
+
+
