@@ -205,7 +205,11 @@ def main(argv: list[str] | None = None) -> int:
         try:
             args, unknown = parser.parse_known_args(argv)
             if unknown:   # named by the sub-command, whose --help lists what it takes
-                getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")
+                from .commands._json_output import json_file_hint
+
+                hint = json_file_hint([str(a) for a in (sys.argv[1:] if argv is None else argv)])
+                getattr(args, "_parser", parser).error(
+                    f"unrecognized arguments: {' '.join(unknown)}{hint}")
         except BadArguments as exc:
             print(exc, file=sys.stderr)
             return EXIT_BAD_INPUT

@@ -30,6 +30,13 @@ def add_json_argument(p: argparse.ArgumentParser, what: str) -> None:
                         f"standard output with - or no FILE")
 
 
+def _left_as_argument(word: str, nxt: str) -> bool:
+    """Whether ``nxt``, after ``word``, is a word a bare ``--json`` does not take as its FILE
+    (not ``-``, not an option, not a name ending in .json)."""
+    return (word == OPTION and nxt != STDOUT and not nxt.startswith("-")
+            and not nxt.lower().endswith(SUFFIX))
+
+
 def bare_json_first(parser: argparse.ArgumentParser, args: list[str]) -> list[str]:
     """``args`` with a bare ``--json`` made ``--json=-`` where the next word is not a JSON
     file name (so it stays a positional argument, as before ``--json`` took a FILE)."""
@@ -39,11 +46,21 @@ def bare_json_first(parser: argparse.ArgumentParser, args: list[str]) -> list[st
     for i, word in enumerate(out[:-1]):
         if word == "--":
             break
-        nxt = out[i + 1]
-        if word == OPTION and nxt != STDOUT and not nxt.startswith("-") \
-                and not nxt.lower().endswith(SUFFIX):
+        if _left_as_argument(word, out[i + 1]):
             out[i] = f"{OPTION}={STDOUT}"
     return out
+
+
+def json_file_hint(args: list[str]) -> str:
+    """For an 'unrecognized arguments' line: why the word after a bare ``--json`` was not its
+    FILE (``info x.ply --json i.txt`` left i.txt over), or "" where no word was left so."""
+    for word, nxt in zip(args, args[1:]):
+        if word == "--":
+            break
+        if _left_as_argument(word, nxt):
+            return (f"; {OPTION} takes a FILE ending in {SUFFIX} (or - for standard output), so "
+                    f"{nxt} was not taken as its FILE")
+    return ""
 
 
 def json_to_stdout(args: argparse.Namespace) -> bool:

@@ -136,3 +136,16 @@ def test_extent_help_says_what_fast_is(capsys):
     assert "'fast' = the web viewers' approximation: a fixed 2.83 sigma" in text
 
 
+def test_json_file_not_ending_in_json_says_why(tmp_path, capsys):
+    """``info x.ply --json i.txt`` said only 'unrecognized arguments: i.txt'."""
+    out = tmp_path / "i.txt"
+    hint = (f"; --json takes a FILE ending in .json (or - for standard output), so {out} was not "
+            "taken as its FILE (see splatgl info --help)")
+    refused(capsys, tmp_path, ["info", DEMO, "--json", out],
+            f"splatgl: error: unrecognized arguments: {out}" + hint)
+    refused(capsys, tmp_path, ["info", "--json", out, DEMO],
+            f"splatgl: error: unrecognized arguments: {DEMO}" + hint)
+    refused(capsys, tmp_path, ["info", DEMO, "extra"],   # no --json: no hint
+            "splatgl: error: unrecognized arguments: extra (see splatgl info --help)")
+
+
