@@ -69,10 +69,36 @@ def _parser_class():
         def parse_known_args(self, args=None, namespace=None):
             if args is not None:   # a sub-command's words: the older bare --json spelling
                 from .commands._json_output import bare_json_first
-                args = bare_json_first(self, args)
+                args = bare_json_first(self, negative_values_joined(self, args))
             return super().parse_known_args(args, namespace)
 
     return OneLineParser
+
+
+def negative_values_joined(parser, args: list[str]) -> list[str]:
+    """``args`` with ``--memory -1G`` written ``--memory=-1G``: a value after an option that
+    takes one, starting with '-' and a digit or '.', is that option's value, so the option's
+    own check refuses it by name.  argparse takes only plain numbers (-1, -2.5) so; -1G or
+    -1e3 it took for an unknown option and said 'expected one argument'."""
+    actions = getattr(parser, "_option_string_actions", {})
+    out: list[str] = []
+    words = iter(args)
+    for word in words:
+        if word == "--":
+            out += [word, *words]
+            break
+        action = actions.get(word)
+        if action is not None and action.nargs is None:
+            value = next(words, None)
+            if value is None:
+                out.append(word)
+            elif len(value) > 1 and value[0] == "-" and (value[1].isdigit() or value[1] == "."):
+                out.append(f"{word}={value}")
+            else:
+                out += [word, value]
+        else:
+            out.append(word)
+    return out
 
 
 def _command_modules():

@@ -149,3 +149,15 @@ def test_json_file_not_ending_in_json_says_why(tmp_path, capsys):
             "splatgl: error: unrecognized arguments: extra (see splatgl info --help)")
 
 
+@pytest.mark.parametrize("argv, line", [
+    (["info", DEMO, "--memory", "-1G"],
+     "splatgl: error: --memory: expected a size such as 200M, 1.5G or 4GiB, got '-1G'"),
+    (["render", "-o", "x.png", "--near", "-1e3"],
+     "splatgl: error: argument --near: must be a finite number > 0, got '-1e3' (see splatgl "
+     "render --help)"),
+])
+def test_a_value_starting_with_minus_reaches_its_option(tmp_path, capsys, argv, line):
+    """argparse took -1G for an option: 'argument --memory: expected one argument'."""
+    refused(capsys, tmp_path, argv, line)
+
+
