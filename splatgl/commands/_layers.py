@@ -12,6 +12,9 @@ from ..output.layers import Layer, NormalSpace, parse_layer_names
 from ..imagefiles.under_exr import read_under
 from ..output.under import DepthKind, UnderImage
 
+#: ``--under-channel``'s default: the depth channel splatgl writes.
+DEFAULT_CHANNEL = "Z"
+
 LAYER_NAMES = ", ".join(m.value for m in Layer)
 
 
@@ -33,7 +36,7 @@ def add_layer_arguments(p: argparse.ArgumentParser, under: bool = True) -> None:
         g.add_argument("--under-depth", choices=[m.value for m in DepthKind], default=None,
                        help="what --under's Z holds: view-space z or distance along the ray "
                             "(default: the file's splatgl:depth attribute; one of them must say)")
-        g.add_argument("--under-channel", default="Z", metavar="NAME",
+        g.add_argument("--under-channel", default=None, metavar="NAME",
                        help="--under's depth channel (default Z)")
 
 
@@ -56,13 +59,16 @@ def layer_files(args: argparse.Namespace, camera: Camera | None) -> LayerFiles:
 
 
 def check_under_options(args: argparse.Namespace) -> None:
-    """``--under-depth`` / ``--under-channel`` need ``--under``."""
+    """``--under-depth`` / ``--under-channel`` need ``--under`` (``--under-channel Z``, its
+    default, too: given, it is refused rather than ignored)."""
     if getattr(args, "under", None) is None:
-        given = [o for o, v, d in (("--under-depth", getattr(args, "under_depth", None), None),
-                                   ("--under-channel", getattr(args, "under_channel", "Z"), "Z"))
-                 if v != d]
+        given = [o for o, v in (("--under-depth", getattr(args, "under_depth", None)),
+                                ("--under-channel", getattr(args, "under_channel", None)))
+                 if v is not None]
         if given:
-            raise SplatglError(f"{', '.join(given)} describe --under's file; give --under FILE.exr")
+            verb = "describes" if len(given) == 1 else "describe"
+            raise SplatglError(f"{' and '.join(given)} {verb} the --under file; give --under "
+                               "FILE.exr")
 
 
 def under_from_args(args: argparse.Namespace) -> UnderImage | None:
@@ -70,4 +76,4 @@ def under_from_args(args: argparse.Namespace) -> UnderImage | None:
     check_under_options(args)
     if getattr(args, "under", None) is None:
         return None
-    return read_under(args.under, args.under_depth, args.under_channel)
+    return read_under(args.under, args.under_depth, args.under_channel or DEFAULT_CHANNEL)

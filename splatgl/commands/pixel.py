@@ -57,7 +57,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="leave out the splats at or behind this geometry's depth (as render --under)")
     g.add_argument("--under-depth", choices=("z", "distance"), default=None,
                    help="what --under's depth holds (default: the file's splatgl:depth)")
-    g.add_argument("--under-channel", default="Z", metavar="NAME", help="--under's depth channel")
+    g.add_argument("--under-channel", default=None, metavar="NAME",
+                   help="--under's depth channel (default Z)")
     add_camera_arguments(p)
     add_settings_arguments(p)
 

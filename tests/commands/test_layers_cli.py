@@ -94,7 +94,7 @@ def test_every_frame_of_a_path_carries_the_layers(tmp_path, capsys, gl_renderer)
     (["-o", "v.png", "--layers", "colour,nromal"], "--layers: unknown layer 'nromal'"),
     (["-o", "v.png", "--normal-space", "world"], "--normal-space world applies to the normal layer"),
     (["-o", "v.mp4", "--path", "orbit:2", "--layers", "depth"], "a video holds the colour alone"),
-    (["-o", "v.png", "--under-depth", "z"], "--under-depth describe --under's file"),
+    (["-o", "v.png", "--under-depth", "z"], "--under-depth describes the --under file"),
     (["-o", "v.png", "--under", "nothing.exr"], "--under nothing.exr: no such file"),
 ])
 def test_layer_options_refused_in_one_line(tmp_path, capsys, monkeypatch, args, message):

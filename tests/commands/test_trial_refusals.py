@@ -161,3 +161,14 @@ def test_a_value_starting_with_minus_reaches_its_option(tmp_path, capsys, argv, 
     refused(capsys, tmp_path, argv, line)
 
 
+def test_under_options_without_under_read_as_sentences(tmp_path, capsys):
+    out = str(tmp_path / "v.png")
+    refused(capsys, tmp_path, ["render", "-o", out, "--under-depth", "z"],
+            "splatgl: error: --under-depth describes the --under file; give --under FILE.exr")
+    refused(capsys, tmp_path, ["render", "-o", out, "--under-depth", "z", "--under-channel", "D"],
+            "splatgl: error: --under-depth and --under-channel describe the --under file; give "
+            "--under FILE.exr")
+    refused(capsys, tmp_path, ["pixel", "--at", "1,1", "--under-channel", "Z"],   # the default
+            "splatgl: error: --under-channel describes the --under file; give --under FILE.exr")
+
+

@@ -104,7 +104,7 @@ def test_cli_json_lists_the_pixel(tmp_path, capsys):
     (["--at", "40,3"], "--at 40,3: outside the 40x30 image"),
     (["--at", "x"], "expected X,Y"),
     (["--at", "1,1", "--limit", "-1"], "--limit must be 0 or more"),
-    (["--at", "1,1", "--under-depth", "z"], "--under-depth describe --under's file"),
+    (["--at", "1,1", "--under-depth", "z"], "--under-depth describes the --under file"),
 ])
 def test_cli_refusals_are_one_line(capsys, args, message):
     code = main(["pixel", "--width", "40", "--height", "30"] + args)
