@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from ..errors import SplatglError
+from ..edit.decimate import plural
 from ..formats import load_scene
 from ..progress import StderrProgress, enabled
 from ..scene.splats import SplatKind
@@ -102,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
                               progress)
         print(f"wrote {out}: {info['leaves']:,} leaves, {info['parents']:,} parents in "
               f"{info['levels']} levels (branching {args.branching}) in "
-              f"{time.perf_counter() - t0:.1f} s ({info['chunks']:,} chunks of at most "
+              f"{time.perf_counter() - t0:.1f} s ({plural(info['chunks'], 'chunk')} of at most "
               f"{info['window']:,} leaves; memory budget {how})")
         return 0
     scene = load_scene(args.scene, progress=progress)

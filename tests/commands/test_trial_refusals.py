@@ -172,3 +172,7 @@ def test_under_options_without_under_read_as_sentences(tmp_path, capsys):
             "splatgl: error: --under-channel describes the --under file; give --under FILE.exr")
 
 
+def test_one_chunk_is_singular(tmp_path, capsys):
+    assert main(["lod", DEMO, "-o", str(tmp_path / "d.lod.ply")]) == 0
+    out = capsys.readouterr().out
+    assert "(1 chunk of at most " in out, out
