@@ -35,6 +35,7 @@ from ..errors import SceneFormatError
 from ..scene.json_text import unique_keys
 from ..scene.splats import Scene, SplatKind, activate
 from . import _binary, webp
+from ._messages import quote
 from . import quantise as qz
 
 NAME = "sog"
@@ -59,9 +60,16 @@ class _Files:
         self.zip = None
         try:
             with open(path, "rb") as fh:
-                magic = fh.read(4)
+                head = fh.read(32)
         except OSError as exc:
             raise SceneFormatError(path, f"cannot read: {exc.strerror or exc}") from None
+        magic = head[:4]
+        if magic != _ZIP_MAGIC and path.name.lower().endswith(".sog"):
+            # a .sog is a zip; read as meta.json text, a stray text file was 'meta.json is
+            # not valid JSON', which named a file the user never gave
+            raise SceneFormatError(path, "not a SOG bundle: a .sog file is a zip archive "
+                                         "(starting 'PK\\x03\\x04'), this one "
+                                         + (f"starts {quote(head)}" if head else "is empty"))
         if magic == _ZIP_MAGIC:
             try:
                 self.zip = zipfile.ZipFile(path)

@@ -234,6 +234,18 @@ def test_bad_new_inputs_are_one_line_errors(tmp_path, capsys):
     assert "truncated" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("content, starts", [(b"hello world\n", "starts 'hello world\\x0a'"),
+                                             (b"", "is empty")])
+def test_a_sog_that_is_no_zip_says_so(tmp_path, capsys, content, starts):
+    """A text file named x.sog was 'meta.json is not valid JSON': a file the user never gave."""
+    bad = tmp_path / "x.sog"
+    bad.write_bytes(content)
+    assert main(["info", str(bad)]) == 2
+    assert capsys.readouterr().err == (f"splatgl: error: {bad}: not a SOG bundle: a .sog file is "
+                                       f"a zip archive (starting 'PK\\x03\\x04'), this one "
+                                       f"{starts}\n")
+
+
 def test_antialias_tags_turn_on_antialias(tmp_path, capsys):
     import argparse
     import gzip
