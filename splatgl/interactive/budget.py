@@ -44,6 +44,10 @@ from .costs import CostModel
 #: cut there: 24.4-26.0 dB in 83-90 ms, against 18.5 dB for a 12k cut at 0.15 in 75 ms
 #: (benchmarks/interactive_levels.py at the flight's 7.5 s view).
 SCALES = (1.0, 0.85, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, 0.25, 0.2, 0.15, 0.12, 0.1)
+#: The fewest pixels a lower render scale may draw: 128 x 72, the 1280x720 viewer's lowest
+#: scale (0.1).  Smaller outputs skip the scales below it: a 160x120 path preview drew frames
+#: of 16x12 pixels at 0.1, blobs once upscaled, where pixels cost little anyway.
+MIN_DRAFT_PIXELS = 128 * 72
 #: Splat budgets tried below the full scene (only where a level-of-detail tree exists).
 BUDGETS = (1_000_000, 600_000, 400_000, 250_000, 160_000, 100_000, 70_000, 50_000, 35_000,
            25_000, 18_000, 12_000)
@@ -109,19 +113,22 @@ def check_fps(fps: float | None) -> float | None:
     return fps
 
 
-def ladder(count: int, has_lod: bool, sh_degree: int, cut_factor: float = 1.0) -> list[Level]:
+def ladder(count: int, has_lod: bool, sh_degree: int, cut_factor: float = 1.0,
+           pixels: int | None = None) -> list[Level]:
     """The levels for a scene of ``count`` splats, best first by :func:`predicted_psnr` (with
     the scene's ``cut_factor``).
 
     Budgets apply only with a level-of-detail tree (``has_lod``) and only below ``count``; the
     SH degree is capped at 0 on levels that also cut splats (view-dependent colour matters
-    least in a coarse preview)."""
+    least in a coarse preview); given the output's ``pixels`` at scale 1, scales that would
+    draw fewer than :data:`MIN_DRAFT_PIXELS` are left out."""
     budgets: list[int | None] = [None]
     if has_lod:
         budgets += [b for b in BUDGETS if b < count]
+    scales = [s for s in SCALES if s == 1.0 or pixels is None or pixels * s * s >= MIN_DRAFT_PIXELS]
     levels = []
     for b in budgets:
-        for s in SCALES:
+        for s in scales:
             sh = 0 if (b is not None and sh_degree > 0) else None
             levels.append(Level(s, b, sh))
     return sorted(levels, key=lambda lv: (-predicted_psnr(lv, count, cut_factor), -lv.scale))
@@ -190,7 +197,7 @@ class FrameBudget:
         self._probing: int | None = None        # the level a probe moved to
         self.model = CostModel.for_device(software)
         self.has_lod, self.cut_factor = has_lod, 1.0
-        self.levels = ladder(self.count, has_lod, sh_degree)
+        self.levels = ladder(self.count, has_lod, sh_degree, pixels=self.pixels)
         #: The exact frame's measured seconds, smoothed (:data:`EXACT_SMOOTHING`); None until
         #: one is measured at these pixels.  :meth:`predict` prices the exact level by it.
         self.exact_seconds: float | None = None
@@ -217,7 +224,7 @@ class FrameBudget:
     def _rebuild(self) -> None:
         level, f = self.current, self.cut_factor
         q = predicted_psnr(level, self.count, f)
-        self.levels = ladder(self.count, self.has_lod, self.sh_degree, f)
+        self.levels = ladder(self.count, self.has_lod, self.sh_degree, f, self.pixels)
         self.index = min(range(len(self.levels)),
                          key=lambda i: abs(predicted_psnr(self.levels[i], self.count, f) - q))
         self._probe_wait.clear()
@@ -235,9 +242,11 @@ class FrameBudget:
                 EXACT_SMOOTHING * float(seconds) + (1.0 - EXACT_SMOOTHING) * last
 
     def set_pixels(self, pixels: int) -> None:
+        """The window's pixels at scale 1 changed (a resize): the scales it may draw too."""
         if int(pixels) != self.pixels:
             self.exact_seconds = None     # measured at other pixels
-        self.pixels = int(pixels)
+            self.pixels = int(pixels)
+            self._rebuild()
 
     def set_budget(self, budget: float) -> None:
         """Seconds a moving frame's draw may take from now on (the viewer's frame period less

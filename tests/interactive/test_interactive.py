@@ -52,6 +52,19 @@ def test_ladder_starts_exact_and_is_ordered_by_quality():
     assert all(lv.budget is None for lv in ladder(500_000, False, 3))
 
 
+def test_small_outputs_draw_no_scale_below_the_pixel_floor():
+    """A 160x120 preview drew frames of 16x12 pixels at scale 0.1; it now keeps scales that draw
+    at least MIN_DRAFT_PIXELS (the 1280x720 viewer keeps all of them, a resize re-ranks)."""
+    from splatgl.interactive.budget import MIN_DRAFT_PIXELS, SCALES
+
+    small = {lv.scale for lv in ladder(500_000, True, 3, pixels=160 * 120)}
+    assert small == {s for s in SCALES if 160 * 120 * s * s >= MIN_DRAFT_PIXELS} == {1.0, 0.85, 0.7}
+    assert {lv.scale for lv in ladder(500_000, True, 3, pixels=1280 * 720)} == set(SCALES)
+    budget = FrameBudget(0.1, 500_000, 1280 * 720, has_lod=True)
+    budget.set_pixels(160 * 120)
+    assert min(lv.scale for lv in budget.levels) == 0.7 and budget.current in budget.levels
+
+
 def test_predicted_psnr_follows_the_measured_grid():
     """The quality model against docs/results/interactive-levels-psnr.json: within 4 dB on
     median over the levels measured (it only has to rank levels, not predict them exactly)."""
