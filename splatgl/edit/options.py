@@ -62,7 +62,9 @@ def remove_floaters(text: str | None = None) -> RemoveFloaters:
             raise SplatglError(f"--remove-floaters {text!r}: expected KEY=VALUE pairs with keys "
                                f"neighbours, sigma, opacity (e.g. neighbours=16,sigma=3)")
         try:
-            values[field] = float(value)
+            number = float(value)
+            # a count stays an integer, so a refusal shows it as given (neighbours=0: "got 0")
+            values[field] = int(number) if field == "neighbours" and number.is_integer() else number
         except ValueError:
             raise SplatglError(f"--remove-floaters: {key.strip()}={value!r} is not a number") \
                 from None

@@ -211,6 +211,10 @@ def test_floater_parameters_from_text_and_their_refusals():
         remove_floaters("radius=2")
     with pytest.raises(SplatglError, match="sigma must be > 0"):
         remove_floaters("sigma=0")
+    with pytest.raises(SplatglError, match=r"neighbours must be an integer 1-256, got 0$"):
+        remove_floaters("neighbours=0")            # as given (it said "got 0.0")
+    with pytest.raises(SplatglError, match=r"neighbours must be an integer 1-256, got 2\.5$"):
+        remove_floaters("k=2.5")
 
 
 # ------------------------------------------------------------------ decimation
