@@ -7,7 +7,7 @@ import warnings
 from pathlib import Path
 
 from ..formats import detect_format, load_scene
-from ..lod.io import is_lod_file
+from ..lod.io import levels_of
 from ..scene.stats import format_info, scene_info
 from ._spz_axes import add_spz_axes_argument
 from ._json_output import add_json_argument, check_json_target, emit_json, json_to_stdout
@@ -95,10 +95,8 @@ def _streamed(args: argparse.Namespace) -> bool:
 
 
 def _add_levels(path, info: dict) -> None:
-    """``info["lod_levels"]`` for a level-of-detail file: splats per level, from the format
-    (Streamed SOG, LCC) or the ``.lod.ply`` header."""
-    level_info = getattr(detect_format(path), "level_info", None)
-    if level_info is None and is_lod_file(path):
-        from ..lod.io import level_info
-    if level_info is not None:
-        info["lod_levels"] = level_info(path)
+    """``info["lod_levels"]`` for a level-of-detail file: splats per level
+    (:func:`splatgl.lod.io.levels_of`)."""
+    levels = levels_of(path)
+    if levels is not None:
+        info["lod_levels"] = levels

@@ -259,8 +259,9 @@ class ChunkedStream:
     def summary(self) -> str:
         where = "" if self.level is None else f", --lod-level {self.level}"
         capped = f", {self.capped_views} of {self.views} views capped" if self.capped_views else ""
+        chunks = len(self.structure.chunks)
         return (f"{self.resident.stats.summary(self.plan.cache)}; {self.chunks.count} chunk "
-                f"levels of {len(self.structure.chunks)} chunks x {self.structure.levels} "
+                f"levels of {chunks} chunk{'s' if chunks != 1 else ''} x {self.structure.levels} "
                 f"levels{where}; frame at most {self.cap:,} splats{capped}")
 
     def close(self) -> None:

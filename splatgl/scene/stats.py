@@ -77,8 +77,8 @@ def format_info(path: str | Path, scene: Scene, info: dict) -> str:
     if "lod_levels" in info:  # a level-of-detail file: splats per level, the level loaded
         lv = info["lod_levels"]
         counts = ", ".join(f"{i}: {c}" for i, c in enumerate(lv["counts"]))
-        shape = (f"in {lv['chunks']} chunks" if "chunks" in lv   # Streamed SOG, LCC
-                 else f"of a tree with branching {lv['branching']}")  # a .lod.ply
+        shape = (f"in {lv['chunks']} chunk{'s' if lv['chunks'] != 1 else ''}" if "chunks" in lv
+                 else f"of a tree with branching {lv['branching']}")  # a .lod.ply; else SOG, LCC
         lines.append(f"levels:      {len(lv['counts'])} {shape}, splats per level "
                      f"{counts} (level {lv['loaded']} shown; 0 is the finest)")
     return "\n".join(lines)
