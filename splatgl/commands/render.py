@@ -187,11 +187,13 @@ def run(args: argparse.Namespace) -> int:
                             depth_preview(out.expected_depth(), out.alpha))
     for path in depth_names.values():
         print(f"wrote {path} (expected depth)")
+    cut = getattr(times, "cut_nodes", None)   # a level of detail draws its cut, not the scene
+    splats = f"{scene.count} splats" if cut is None else f"{cut:,} of {scene.count:,} splats"
     for eye, path in eyes_out.items():
         height, width = eyes[0].rgba.shape[:2]
         shown = [layer.value for layer in files.render_layers(path) if fmt.is_float] if plan.named else []
         extra = f", layers {', '.join(sorted(shown))}" if shown else ""
-        print(f"wrote {path} ({width}x{height}, {scene.count} splats, {kind_text}{extra})")
+        print(f"wrote {path} ({width}x{height}, {splats}, {kind_text}{extra})")
         for layer in plan.pictures(path):
             print(f"wrote {picture_path(path, layer)} ({layer.value})")
     if memory is not None and getattr(times, "capped", None):   # said once (and in --timings)

@@ -234,6 +234,13 @@ def test_render_and_path_stream_with_memory(tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 0 and "level of detail streamed under 1.5 GiB" in out
     assert "streaming resident" in out and "loaded" in out and "evicted" in out
+    # the summary counts the cut drawn, of the scene's splats (it gave the scene's alone)
+    import re
+    from splatgl.formats import load_scene
+
+    cut = int(re.search(r"cut_nodes ([\d,]+)", out).group(1).rstrip(",").replace(",", ""))
+    count = load_scene(path).count
+    assert f"(96x64, {cut:,} of {count:,} splats, " in out, out
     code = main(["render", str(path), "--path", "orbit:3", "-o", str(tmp_path / "f%02d.png"),
                  "--memory", "1.5G", "--width", "96", "--height", "64", "--timings"])
     out = capsys.readouterr().out
