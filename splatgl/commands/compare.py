@@ -177,6 +177,10 @@ def run(args: argparse.Namespace) -> int:
         emit_json(args, result)
         return 0
     _print_report(result, errors, depth, names, seconds, notes, scene.count, camera)
+    if args.side_by_side is not None:
+        print(f"wrote {args.side_by_side} (side by side: {names[0]} | {names[-1]})")
+    if args.heatmap is not None:
+        print(f"wrote {args.heatmap} (error heatmap, top of its scale at |err| {args.heatmap_scale:.3g})")
     if explanation is not None:
         print("\n".join(explanation.lines()))
     if args.json is not None:

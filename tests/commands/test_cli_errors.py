@@ -191,6 +191,14 @@ def test_a_failed_second_file_leaves_neither(tmp_path, capsys, monkeypatch, comm
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # neither file, no temporaries
 
 
+def test_compare_says_which_pictures_it_wrote(tmp_path, capsys):
+    a, b = tmp_path / "a.png", tmp_path / "b.png"
+    rc, out, _ = run_cli(capsys, "compare", "--side-by-side", a, "--heatmap", b, "--width", "40",
+                         "--height", "30")
+    assert rc == 0 and f"wrote {a} (side by side: " in out
+    assert f"wrote {b} (error heatmap, top of its scale at |err| 0.0157)" in out
+
+
 def test_render_writes_both_files_on_success(tmp_path, capsys):
     a, b = tmp_path / "a.exr", tmp_path / "b.png"
     rc, out, _ = run_cli(capsys, "render", "-o", a, "--depth-png", b, "--width", "40", "--height", "30")
