@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import numbers
 from dataclasses import dataclass
 
 from ..constants import MAX_SH_DEGREE, REFERENCE_NEAR
@@ -220,7 +221,10 @@ class RenderSettings:
     order_window: int = DEFAULT_ORDER_WINDOW
 
     def __post_init__(self) -> None:
-        bg = tuple(float(v) for v in self.background)
+        if isinstance(self.background, (str, bytes)) or not hasattr(self.background, "__len__"):
+            raise SettingValueError(f"RenderSettings background: expected 3 numbers (R, G, B), "
+                                    f"got {self.background!r}")
+        bg = tuple(float(_number(v, "background")) for v in self.background)
         if len(bg) != 3:
             raise SplatglError(f"background must have 3 components, got {len(bg)}")
         if not all(0.0 <= v <= MAX_BACKGROUND for v in bg):   # NaN fails too
@@ -233,6 +237,9 @@ class RenderSettings:
             object.__setattr__(self, name, _member(kind, getattr(self, name), name))
         if not isinstance(self.emulation, Emulation):
             raise SplatglError(f"emulation must be an Emulation, got {type(self.emulation).__name__}")
+        for name in ("order_window", "resort_interval", "near", "sh_degree"):
+            if name in ("order_window", "resort_interval") or getattr(self, name) is not None:
+                _number(getattr(self, name), name)
         if (int(self.order_window) != self.order_window
                 or not 1 <= self.order_window <= MAX_ORDER_WINDOW):
             raise SplatglError(f"order window must be a whole number 1..{MAX_ORDER_WINDOW}, "
@@ -259,6 +266,14 @@ class SettingValueError(SplatglError, ValueError):
 ENUM_FIELDS = {"precision": Precision, "extent": QuadExtent, "sort_key": SortKey,
                "preprocess": Preprocess, "convention": Convention, "gpu_storage": GpuStorage,
                "early_stop": EarlyStop, "order": Order}
+
+
+def _number(value, name: str):
+    """``value`` where it is a real number (not a bool, not a string); else one line naming the
+    field (the checks of its range follow)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise SettingValueError(f"RenderSettings {name}: expected a number, got {value!r}")
+    return value
 
 
 def _member(kind: type[enum.Enum], value, name: str) -> enum.Enum:

@@ -293,6 +293,22 @@ def test_render_settings_name_the_field_the_value_and_the_accepted_values(field,
     assert isinstance(err.value, ValueError)   # what the enum raised before
 
 
+@pytest.mark.parametrize("field, value, message", [
+    ("background", "abc", "expected 3 numbers (R, G, B), got 'abc'"),
+    ("background", (0, 0, "x"), "expected a number, got 'x'"),
+    ("order_window", "x", "expected a number, got 'x'"),
+    ("resort_interval", None, "expected a number, got None"),
+    ("sh_degree", "2", "expected a number, got '2'"),
+    ("near", True, "expected a number, got True"),
+])
+def test_render_settings_numbers_name_the_field(field, value, message):
+    """RenderSettings(background="abc") was "could not convert string to float: 'a'",
+    sh_degree="2" a TypeError from a comparison: each now names the field and the value."""
+    with pytest.raises(SplatglError) as err:
+        splatgl.RenderSettings(**{field: value})
+    assert str(err.value) == f"RenderSettings {field}: {message}"
+
+
 @pytest.mark.parametrize("call, caller", [
     (lambda s: splatgl.render(s), "render"),
     (lambda s: splatgl.default_camera(s, 64, 48), "default_camera"),
