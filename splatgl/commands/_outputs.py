@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Iterable
 
 from ..errors import SplatglError
-from ..writing.outputs import Inputs, InputIndex, OutputFiles, check_not_an_input, check_output_path
+from ..writing.outputs import (Inputs, InputIndex, OutputFiles, check_not_an_input, check_output_path,
+                               folder_writable)
 
 #: The one help text of ``--force``.
 FORCE_HELP = ("replace output files that exist (an output that is one of the command's own "
@@ -119,5 +120,5 @@ def check_out_folder(args: argparse.Namespace, names: Iterable[str], option: str
     parent = Path(os.path.abspath(folder)).parent
     if not parent.is_dir():
         raise SplatglError(f"{option} {folder}: folder {folder.parent} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not folder_writable(parent):
         raise SplatglError(f"{option} {folder}: folder {folder.parent} is not writable")

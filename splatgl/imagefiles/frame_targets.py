@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Sequence
 
 from ..errors import SplatglError
+from ..writing.outputs import folder_writable
 from ..output.layers import BASE, Layer, NormalSpace
 from .image_formats import (DEFAULT_FORMAT, FORMAT_NAMES, IMAGE_SUFFIXES, ImageFormat, find_format,
                             format_named)
@@ -139,7 +140,7 @@ class FrameTarget:
             parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SplatglError(f"{parent}: cannot create the output folder ({exc.strerror})") from None
-        if not os.access(parent, os.W_OK | os.X_OK):
+        if not folder_writable(parent):
             raise SplatglError(f"{parent}: the output folder is not writable")
 
 

@@ -138,6 +138,18 @@ def check_not_an_input(path: PathLike, name: str, inputs: "Inputs | InputIndex |
         raise SplatglError(f"{where}: the same file as {shown}; give the output its own name")
 
 
+def folder_writable(folder: PathLike) -> bool:
+    """Whether files can be made in ``folder``: this user may write and enter it, and its mode
+    lets someone write it.  The superuser may write any folder; one whose mode has no write
+    bit (``dr-xr-xr-x``, a shared data folder) is still read-only to splatgl (``splatgl lod
+    SCENE`` run as root wrote its default output into such a folder beside the scene)."""
+    try:
+        mode = os.stat(folder).st_mode
+    except OSError:
+        return False
+    return bool(mode & 0o222) and os.access(folder, os.W_OK | os.X_OK)
+
+
 def check_output_path(path: PathLike, name: str = "", overwrite: bool = False,
                       inputs: "Inputs | InputIndex | None" = None) -> None:
     """Refuse, in one line naming option ``name`` (if any) and ``path``, an output path that
@@ -155,11 +167,11 @@ def check_output_path(path: PathLike, name: str = "", overwrite: bool = False,
     shown = parent if link else path.parent
     if not parent.is_dir():
         raise SplatglError(f"{where}: folder {shown} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise SplatglError(f"{where}: folder {shown} is not writable")
     if _pseudo_file_system(parent):
         raise SplatglError(f"{where}: folder {shown} is on a system pseudo file system (such as "
                            "/proc or /sys), where no files can be made; give a folder on a disk")
+    if not folder_writable(parent):
+        raise SplatglError(f"{where}: folder {shown} is not writable")
     if path.exists() and not overwrite:
         raise SplatglError(f"{where}: exists (use --force to replace it)")
 

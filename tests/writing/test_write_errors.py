@@ -197,3 +197,25 @@ def test_video_to_a_full_or_read_only_folder_fails_in_one_line(tmp_path, capsys,
     monkeypatch.setattr(frame_output.os, "access", lambda p, mode: False if str(p) == str(tmp_path) else real(p, mode))
     assert _path(tmp_path, "-o", out) == 2
     assert _one_line(capsys) == f"splatgl: error: {tmp_path}: the output folder is not writable"
+
+
+def test_a_folder_whose_mode_has_no_write_bit_is_read_only_even_to_root(tmp_path, capsys):
+    """``splatgl lod SCENE`` run as root wrote its default output beside a scene in a
+    ``dr-xr-xr-x`` shared folder (the superuser may write any folder); a folder whose mode lets
+    nobody write it is refused as not writable, whoever runs splatgl."""
+    import shutil
+
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    scene = shared / "s.ply"
+    shutil.copy(demo_scene_path(), scene)
+    shared.chmod(0o555)
+    try:
+        assert main(["lod", str(scene)]) == 2
+        assert _one_line(capsys) == (f"splatgl: error: -o {shared / 's.lod.ply'}: folder {shared} "
+                                     "is not writable")
+        assert main(["render", str(scene), "-o", str(shared / "x.png")]) == 2
+        assert "is not writable" in _one_line(capsys)
+        assert sorted(p.name for p in shared.iterdir()) == ["s.ply"]
+    finally:
+        shared.chmod(0o755)

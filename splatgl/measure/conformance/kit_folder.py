@@ -21,6 +21,7 @@ import signal
 from pathlib import Path
 
 from ...errors import SplatglError
+from ...writing.outputs import folder_writable
 from .index import GENERATOR, load_index
 
 #: What a kit's folder holds, and each case folder.
@@ -90,7 +91,7 @@ def check_export_target(out: str | Path, force: bool = False) -> None:
     parent = Path(os.path.abspath(out)).parent
     if not parent.is_dir():
         raise SplatglError(f"{out}: folder {out.parent} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
+    if not folder_writable(parent):
         raise SplatglError(f"{out}: folder {out.parent} is not writable")
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from ...cameras.camera_files import load_camera
 from ...errors import SplatglError
+from ...writing.outputs import folder_writable
 from ..evaluation.explain import candidates, explain
 from ..evaluation.metrics import image_errors
 from ..evaluation.their_image import match_to_reference, read_their_image
@@ -175,7 +176,7 @@ def check_render_output(kit: str | Path, out: str | Path, index: dict, suffix: s
         probe = probe.parent
     if not probe.is_dir():
         raise SplatglError(f"-o {out}: {probe} is a file, not a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
+    if not folder_writable(probe):
         raise SplatglError(f"-o {out}: folder {probe} is not writable")
     inputs = {"the kit's file": kit_files(kit, index)}
     for entry in index["cases"]:
