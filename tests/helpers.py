@@ -224,6 +224,18 @@ MEMORY_PER_BYTE = 32
 MEMORY_SLACK = 4 << 20
 
 
+def refused(capsys, tmp_path: Path, argv, line: str) -> None:
+    """The command ``argv`` exits 2 with exactly ``line`` on stderr, nothing on stdout, and
+    leaves ``tmp_path`` as it was (no output, no temporary)."""
+    from splatgl.cli import main
+
+    before = sorted(p.name for p in tmp_path.iterdir())
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    assert (rc, out, err) == (2, "", line + "\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
 def truncations(size: int, cases: int, rng) -> list[int]:
     """Fixed lengths (empty, magic only, header-sized) and ``cases`` random ones, all < size."""
     fixed = [0, 1, 4, 15, 16, 100, size // 2, size - 1]

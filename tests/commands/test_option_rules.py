@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from helpers import refused
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 from splatgl.datasets import select_indices
@@ -15,14 +16,6 @@ from splatgl.errors import CameraError
 from splatgl.imagefiles.images import read_image
 
 DEMO = str(demo_scene_path())
-
-
-def refused(capsys, tmp_path, argv, line):
-    before = sorted(p.name for p in tmp_path.iterdir())
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    assert (rc, out, err) == (2, "", line + "\n")
-    assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
 @pytest.mark.parametrize("extra, names, verb", [

@@ -11,19 +11,12 @@ import json
 import pytest
 
 from splatgl import __version__
+from helpers import refused
 from splatgl.cli import main
 from splatgl.commands._common import demo_scene_path
 
 DEMO = str(demo_scene_path())
 SMALL = ["--width", "32", "--height", "24"]
-
-
-def refused(capsys, tmp_path, argv, line):
-    before = sorted(p.name for p in tmp_path.iterdir())
-    rc = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    assert (rc, out, err) == (2, "", line + "\n")
-    assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
 @pytest.mark.parametrize("argv", [
