@@ -97,11 +97,14 @@ class Renderer:
                                "inside its 'with' block, or create a new Renderer")
 
     def _check_size(self, camera: Camera, kind: RendererKind, settings: RenderSettings) -> None:
-        """Refuse an image the context or the memory cannot hold, before allocating it."""
+        """Make the context current (every frame: a frame drawn after another context was made
+        current, by ``splatgl.render`` or a second Renderer, crashed or came out nearly empty);
+        refuse an image the context or the memory cannot hold, before allocating it."""
+        gl = self._gl(kind)
         key = (camera.width, camera.height, kind, settings.precision)
         if key not in self._sizes_ok:
-            registry.check_image_size(camera.width, camera.height, "image", kind, self._gl(kind),
-                             settings.precision)
+            registry.check_image_size(camera.width, camera.height, "image", kind, gl,
+                                      settings.precision)
             self._sizes_ok.add(key)
 
     def _path(self, scene: Scene, settings: RenderSettings,

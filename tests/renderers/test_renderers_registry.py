@@ -205,6 +205,25 @@ def test_the_api_keeps_each_renderer_by_its_own_options(ctx):
         assert isinstance(tile.options, options.TileOptions)
 
 
+@pytest.mark.parametrize("early_stop", ["auto", "off"])
+def test_a_renderer_draws_the_same_frame_after_another_context_was_current(early_stop):
+    """A Renderer's cached path drew on whatever context was current: after ``splatgl.render``
+    or a second Renderer, its next frame raised "cannot map the buffer" (early termination's
+    coverage read) or, with early_stop off, came back nearly empty (alpha mean 5e-41)."""
+    import splatgl
+
+    scene = random_scene(200, 1, center=(0.0, 0.0, 4.0), spread=0.5)
+    settings = RenderSettings(early_stop=early_stop)
+    with Renderer() as r:
+        first = r.render(scene, CAMERA, settings)
+        splatgl.render(scene, CAMERA, settings)         # its own context, made current
+        with Renderer() as other:
+            other.render(scene, CAMERA, settings)
+        again = r.render(scene, CAMERA, settings)
+    assert first[..., 3].max() > 0.1
+    np.testing.assert_array_equal(again, first)
+
+
 def test_a_timed_frame_follows_a_warm_up_where_the_entry_says_so():
     assert [k.value for k, e in registry.RENDERERS.items() if not e.warms_up] == ["reference"]
     for module in ("commands/compare.py", "measure/bench/popping_bench.py"):
