@@ -197,9 +197,13 @@ def write_image(path: str | Path, rgba: np.ndarray, bit_depth: int = 8,
 
 
 def read_image(path: str | Path) -> np.ndarray:
-    """(H, W, C) float32 pixels of an image file (integer formats scaled to [0, 1])."""
+    """(H, W, C) float32 pixels of an image file as stored (integer formats scaled to [0, 1]):
+    a PNG's colour with its straight alpha is not multiplied by that alpha (OpenImageIO's
+    default for such files; ``eval`` then composited a photograph's alpha twice)."""
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
     with quiet_image_library():
-        inp = oiio.ImageInput.open(str(path))
+        inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
         raise SplatglError(f"{path}: cannot read image ({_clean(oiio.geterror())})")
     try:
