@@ -222,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         import warnings
 
-        from .errors import SplatglError
+        from .errors import SplatglError, note_of
 
         parser = build_parser()
         if not (sys.argv[1:] if argv is None else argv):   # bare 'splatgl': the commands, and
@@ -243,7 +243,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             code = int(args._run(args) or 0)
         except SplatglError as exc:
-            print(f"splatgl: error: {exc}", file=sys.stderr)
+            note = note_of(exc)
+            print(f"splatgl: error: {exc}{'' if note is None else '; ' + note}", file=sys.stderr)
             code = EXIT_BAD_INPUT
         sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
         return code
@@ -256,7 +257,11 @@ def main(argv: list[str] | None = None) -> int:
         # Ctrl-C or SIGTERM, possibly surfacing as another error (an import interrupted
         # inside a C extension); the unwinding has removed every temporary file.
         terminated = isinstance(exc, Terminated) or signal.SIGTERM in _received
-        print("splatgl: terminated" if terminated else "splatgl: interrupted", file=sys.stderr)
+        from .errors import note_of   # (the import above may not have run yet)
+
+        note = note_of(exc)   # what the command left (kept frames, how to resume)
+        print(("splatgl: terminated" if terminated else "splatgl: interrupted")
+              + ("" if note is None else f": {note}"), file=sys.stderr)
         return EXIT_TERMINATED if terminated else EXIT_INTERRUPTED
     finally:
         for sig, handler in previous.items():

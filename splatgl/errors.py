@@ -32,3 +32,16 @@ class ContextError(SplatglError, RuntimeError):
 
 class ShaderError(SplatglError, RuntimeError):
     """A shader failed to preprocess or compile; the message names file and line."""
+
+
+def add_note(exc: BaseException, note: str) -> BaseException:
+    """Attach ``note`` (what a stopped or failed command leaves, how to go on) to ``exc``, which
+    the CLI then prints on its one line after the error or ``interrupted``; returns ``exc``."""
+    before = note_of(exc)
+    exc.splatgl_note = note if before is None else f"{before}; {note}"
+    return exc
+
+
+def note_of(exc: BaseException) -> str | None:
+    """The note :func:`add_note` attached to ``exc``, if any."""
+    return getattr(exc, "splatgl_note", None)

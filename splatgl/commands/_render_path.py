@@ -7,12 +7,12 @@ work itself is :func:`splatgl.tasks.batch.render_frames`.
 from __future__ import annotations
 
 import argparse
-import sys
 
 from ..tasks.batch import render_frames
+from ..tasks.render_tasks import stopped_note
 from ..cameras.camera import Camera
 from ..datasets import load_source, select_indices
-from ..errors import SplatglError
+from ..errors import SplatglError, add_note
 from ..tasks.executor import summary
 from ._executor import add_executor_arguments, executor_from_args
 from ._frame_budget import add_target_fps_argument
@@ -311,41 +311,16 @@ def run_path(args: argparse.Namespace) -> int:
         # too: a Ctrl-C during the compile leaves nothing behind
         from ..renderers.cpu import prepare
         prepare()
-    run = None
     gl_name = "not known here (the frames were rendered by workers)"
     size = (cameras[0].width, cameras[0].height)
-    if executor.sharded:
-        from ..tasks.render_tasks import render_sharded, stopped_video_note
-
-        try:
-            result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
-                                         cameras, settings, target, executor, kind, args.bit_depth,
-                                         args.resume, args.drop_invalid, fps, default_progress(),
-                                         numbers, lod, record)
-        except (KeyboardInterrupt, SplatglError):   # Ctrl-C, SIGTERM, a failure: say what the
-            # workers left for --resume, if anything
-            note = stopped_video_note(target.video) if target.is_video else None
-            if note is not None:
-                print(f"splatgl: {note}", file=sys.stderr)
-            raise
-    elif args.preview:
-        with PreviewRenderer(args.target_fps, args.scene if args.scene is not None
-                             else demo_scene_path()) as renderer:
-            gl_name = renderer_name(renderer.ctx)
-            result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
-                                   False, fps, default_progress(), numbers=numbers, record=record)
-        print(renderer.report())
-    else:
-        with (streamed_frames(args, settings, memory, scene) if memory is not None
-              else Renderer() if tree is None else LodFrames(tree, settings, lod)) as renderer:
-            streamed = renderer if memory is not None else None
-            gl_name = gl_renderer_name(kind, renderer.ctx)
-            if args.stereo is not None:    # each frame holds both eyes
-                renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
-                size = renderer.frame_size(cameras[0])
-            result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
-                                   args.resume, fps, default_progress(), numbers=numbers,
-                                   record=record)
+    try:
+        result, run, gl_name, size, streamed = _render_all(
+            args, scene, cameras, settings, target, executor, kind, fps, numbers, lod, record,
+            memory, tree, gl_name, size)
+    except (KeyboardInterrupt, SplatglError) as exc:   # say what is left, on the one line
+        note = None if args.preview else stopped_note(target, numbers, executor.sharded,
+                                                      isinstance(exc, KeyboardInterrupt))
+        raise (exc if note is None else add_note(exc, note))
     where = target.video if target.is_video else target.pattern
     skipped = f", {result.skipped} already there" if result.skipped else ""
     if result.damaged:
@@ -372,3 +347,36 @@ def run_path(args: argparse.Namespace) -> int:
         if memory is not None:
             print(f"streaming: {streamed.summary()}")
     return 0
+
+
+def _render_all(args, scene, cameras, settings, target, executor, kind, fps, numbers, lod, record,
+                memory, tree, gl_name, size):
+    """Render the path's frames on the executor, as a preview, or here: (the result, the
+    workers' run or None, the GL renderer's name, the frame size, the streamed frames or None)."""
+    run = streamed = None
+    if executor.sharded:
+        from ..tasks.render_tasks import render_sharded
+
+        result, run = render_sharded(args.scene if args.scene is not None else demo_scene_path(),
+                                     cameras, settings, target, executor, kind, args.bit_depth,
+                                     args.resume, args.drop_invalid, fps, default_progress(),
+                                     numbers, lod, record)
+    elif args.preview:
+        with PreviewRenderer(args.target_fps, args.scene if args.scene is not None
+                             else demo_scene_path()) as renderer:
+            gl_name = renderer_name(renderer.ctx)
+            result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
+                                   False, fps, default_progress(), numbers=numbers, record=record)
+        print(renderer.report())
+    else:
+        with (streamed_frames(args, settings, memory, scene) if memory is not None
+              else Renderer() if tree is None else LodFrames(tree, settings, lod)) as renderer:
+            streamed = renderer if memory is not None else None
+            gl_name = gl_renderer_name(kind, renderer.ctx)
+            if args.stereo is not None:    # each frame holds both eyes
+                renderer = StereoRenderer(renderer, args.stereo, StereoLayout(args.stereo_layout))
+                size = renderer.frame_size(cameras[0])
+            result = render_frames(renderer, scene, cameras, settings, target, kind, args.bit_depth,
+                                   args.resume, fps, default_progress(), numbers=numbers,
+                                   record=record)
+    return result, run, gl_name, size, streamed

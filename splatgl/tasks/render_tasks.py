@@ -10,7 +10,7 @@ hidden folder beside the video (``.NAME.mp4.frames/``), quantised exactly as the
 quantises (``clip(rgb) * 255 + 0.5``, truncated), so the encoder sees the same pixels as in a
 single-process run; then this process encodes them with :class:`splatgl.imagefiles.video.VideoWriter`
 (temporary file renamed when complete) and deletes the folder.  If anything fails or is
-interrupted the folder stays (the command names it: :func:`stopped_video_note`; a folder
+interrupted the folder stays (the command names it: :func:`stopped_note`; a folder
 without a complete frame is removed), no video is written, and ``--resume`` renders only the
 frames still missing before encoding.
 """
@@ -95,6 +95,29 @@ def frame_folder(video: Path) -> Path:
     return video.with_name(f".{video.name}.frames")
 
 
+def stopped_note(target: FrameTarget, numbers: Sequence[int], sharded: bool,
+                 interrupted: bool) -> str | None:
+    """What a ``render --path`` stopped by Ctrl-C or SIGTERM (``interrupted``) or an error
+    leaves, in a few words for its one line (None: nothing worth saying): a sharded video's
+    hidden frames (:func:`stopped_video_note`), after an error too; an interrupted video
+    rendered in one process leaves nothing; interrupted frames: how many of the path's are in
+    the folder, which ``--resume`` completes (an error, such as a refused ``--resume``, gets
+    no such note: it says itself what to do)."""
+    if target.is_video and sharded:
+        return stopped_video_note(target.video)
+    if not interrupted:
+        return None
+    if target.is_video:
+        return (f"no video written ({target.video} is written once every frame is drawn; with "
+                "--workers N its frames are kept for --resume)")
+    kept = sum(all(p.is_file() for p in target.frame_paths(n)) for n in numbers)
+    if not kept:
+        return None
+    folder = target.frame_path(numbers[0]).parent
+    return (f"{kept} of {len(numbers)} frames are in {folder}/; the same command with --resume "
+            "renders the rest")
+
+
 def stopped_video_note(video: Path) -> str | None:
     """What a stopped sharded render of ``video`` (Ctrl-C, SIGTERM) leaves, in one line: the
     complete frames kept in its hidden folder (:func:`frame_folder`) for ``--resume``, or None
@@ -108,8 +131,8 @@ def stopped_video_note(video: Path) -> str | None:
         shutil.rmtree(folder, ignore_errors=True)
         return None
     return (f"{len(frames)} frame{'s' if len(frames) != 1 else ''} kept in the hidden folder "
-            f"{folder}/ (no video written): re-run with --resume to render the rest and write "
-            f"{video}, or delete the folder")
+            f"{folder}/ (no video written): re-run with --resume and workers (--workers N or "
+            f"--executor ray) to render the rest and write {video}, or delete the folder")
 
 
 def render_sharded(scene_path: Path, cameras: Sequence[Camera], settings: RenderSettings,

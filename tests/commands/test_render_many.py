@@ -192,6 +192,44 @@ def test_interrupt_removes_the_video(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_an_interrupted_path_says_on_its_line_what_it_left(tmp_path, monkeypatch, capsys):
+    """Ctrl-C said only 'interrupted': now the frames a folder keeps and that --resume renders
+    the rest, or that a video drawn in one process was not written (and how to keep frames)."""
+    pytest.importorskip("av")
+    from splatgl.imagefiles import video
+    from splatgl.tasks import batch
+
+    real, calls = batch.write_image, []
+
+    def third_stops(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(batch, "write_image", third_stops)
+    capsys.readouterr()
+    assert _render("--path", "orbit:6", *SIZE, "-o", tmp_path / "f") == 130
+    kept = len(list((tmp_path / "f").iterdir()))   # the writer may have finished a later one
+    assert 2 <= kept < 6 and capsys.readouterr().err == (
+        f"splatgl: interrupted: {kept} of 6 frames are in {tmp_path / 'f'}/; the same command "
+        "with --resume renders the rest\n")
+    real_write = video.VideoWriter.write
+
+    def third_frame_stops(self, rgba):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        real_write(self, rgba)
+
+    monkeypatch.setattr(video.VideoWriter, "write", third_frame_stops)
+    calls.clear()
+    assert _render("--path", "orbit:6", *SIZE, "-o", tmp_path / "v.mp4") == 130
+    assert capsys.readouterr().err == (f"splatgl: interrupted: no video written ({tmp_path / 'v.mp4'} "
+                                       "is written once every frame is drawn; with --workers N its "
+                                       "frames are kept for --resume)\n")
+
+
 @pytest.mark.slow
 def test_ctrl_c_on_a_real_process(tmp_path):
     """SIGINT while frames are being written (the process holds at its third frame until the

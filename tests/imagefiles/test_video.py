@@ -87,5 +87,6 @@ def test_a_stopped_sharded_video_names_its_frames_or_leaves_nothing(tmp_path):
     (folder / "00000.png").write_bytes(b"x")
     assert stopped_video_note(video) == (
         f"1 frame kept in the hidden folder {folder}/ (no video written): re-run with --resume "
-        f"to render the rest and write {video}, or delete the folder")
+        f"and workers (--workers N or --executor ray) to render the rest and write {video}, or "
+        "delete the folder")
     assert folder.is_dir()
