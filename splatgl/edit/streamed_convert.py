@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SplatglError
+from ..errors import SplatglError, add_note
 from ..formats import writer_for
 from ..formats._memory import scene_bytes
-from ..formats.convert import Conversion, conversion_error, convert
+from ..formats.convert import Conversion, conversion_error, convert, written_note
 from ..lod.budget import format_size
 from ..lod.io import dropped_levels_note
 from ..writing.outputs import check_output_path
@@ -80,7 +80,10 @@ def _convert_file(source, output, memory, drop_invalid, sh_degree, force, progre
     counts, steps, count, degree, names = streamed.scan(progress)
     if name == "ply":
         size = streamed.write(output, count, progress)
-        error = _round_trip(src, output, streamed.rows)
+        try:   # OUT is whole from here: a Ctrl-C cuts short only the report
+            error = _round_trip(src, output, streamed.rows)
+        except KeyboardInterrupt as exc:
+            raise add_note(exc, written_note(output))
     else:
         trip = RoundTrip(writer_for(output))
         size = streamed.write(output, count, progress, trip)

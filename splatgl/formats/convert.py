@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..constants import SH_C0
-from ..errors import SplatglError
+from ..errors import SplatglError, add_note
 from ..writing.outputs import check_output_path
 from . import detect_format, load_scene, save_scene, stored_bytes, writer_for
 from .spz_axes import Axes, check_choice as check_spz_axes
@@ -234,18 +234,27 @@ def convert(source: str | Path, output: str | Path, *, drop_invalid: bool = Fals
         order = save_scene(output, written, **writer_options)
     except OSError as exc:
         raise SplatglError(f"{output}: cannot write: {exc.strerror or exc}") from None
-    bounds = error_bounds(writer, written, **writer_options)
-    del written
-    back = load_scene(output, progress=progress, spz_axes=axes_out, allow_empty=True)
-    if order is not None:
-        scene = scene.subset(order)
-    error = conversion_error(scene, back)
+    try:   # OUT is whole from here: a Ctrl-C cuts short only the report
+        bounds = error_bounds(writer, written, **writer_options)
+        del written
+        back = load_scene(output, progress=progress, spz_axes=axes_out, allow_empty=True)
+        if order is not None:
+            scene = scene.subset(order)
+        error = conversion_error(scene, back)
+    except KeyboardInterrupt as exc:
+        raise add_note(exc, written_note(output))
     error["bounds"] = bounds
     error["within_bounds"] = within_bounds(error, bounds)
     size = stored_bytes(output)
     return Conversion(source, output, source_format, writer.NAME, scene.count, scene.sh_degree,
                       back.sh_degree, size, time.perf_counter() - t0, error,
                       _axes(source, source_format, axes_in), _axes(output, writer.NAME, axes_out))
+
+
+def written_note(output: Path) -> str:
+    """What a conversion stopped while it measured its round trip says: OUT is complete."""
+    return (f"{output} was written whole; only its round-trip report was cut short (read it "
+            "with 'splatgl info', or convert again with --force for the report)")
 
 
 def _axes(path: Path, format_name: str, axes: str | None) -> Axes | None:

@@ -145,3 +145,22 @@ def test_cli_progress_lines_for_a_reference_render(tmp_path):
                           text=True, env=env, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert "reference: rasterizing tiles: 100.0%" in proc.stderr
+
+
+def test_ctrl_c_during_converts_report_says_the_output_is_whole(tmp_path, capsys, monkeypatch):
+    """A Ctrl-C while convert measured its round trip said only 'interrupted', yet OUT was
+    complete (and a second run refused it as existing): the line now says so."""
+    from splatgl.cli import main
+    from splatgl.commands._common import demo_scene_path
+    from splatgl.formats import convert as convert_module, load_scene
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(convert_module, "conversion_error", stopped)
+    out = tmp_path / "out.spz"
+    assert main(["convert", str(demo_scene_path()), str(out)]) == 130
+    assert capsys.readouterr().err == (
+        f"splatgl: interrupted: {out} was written whole; only its round-trip report was cut short "
+        "(read it with 'splatgl info', or convert again with --force for the report)\n")
+    assert load_scene(out).count == load_scene(demo_scene_path()).count
