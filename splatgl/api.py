@@ -17,7 +17,7 @@ import numpy as np
 from .cameras.camera import Camera
 # the default camera is camera code (the path generators use it too); part of the API
 from .cameras.framing import DEFAULT_ELEVATION, DEFAULT_FOV_Y, ORTHOGRAPHIC_SPAN, default_camera  # noqa: F401
-from .errors import SplatglError
+from .errors import SplatglError, require
 from .gl.context import create_headless_context, make_current
 from .gl.shaders import ProgramCache
 from .output.layers import BASE, Layer, RenderOutput, with_layers
@@ -27,6 +27,11 @@ from .scene.splats import Scene, SceneSource, require_scene
 from .scene.settings import RenderSettings, RendererKind
 from .cameras.view import View
 from .renderers import registry
+
+#: What a camera argument must be, and how to make one.
+CAMERA_NEED = ("a splatgl Camera (splatgl.default_camera(scene, width, height), "
+               "splatgl.load_camera(path) or splatgl.Camera.from_fov(...))")
+
 
 def default_settings(scene: Scene | SceneSource | None = None, **fields) -> RenderSettings:
     """The settings ``splatgl render`` uses for ``scene`` (a loaded scene or its
@@ -173,6 +178,9 @@ class Renderer:
         behind it are dropped, the rest composited over its colour."""
         kind = registry.entry(kind).kind
         camera, settings = _inputs(scene, camera, settings, "Renderer.render_layers")
+        if under is not None:
+            require(under, UnderImage, "Renderer.render_layers", "under",
+                    "an UnderImage (splatgl.imagefiles.under_exr.read_under(path))")
         self._check_open()
         layers = frozenset(layers)
         view = View.of(camera, settings, scene)
@@ -196,6 +204,9 @@ class Renderer:
         not at the first frame.
         """
         require_scene(scene, "Renderer.render_many")
+        if isinstance(cameras, Camera) or not isinstance(cameras, Iterable):
+            require(cameras, (), "Renderer.render_many", "cameras",
+                    "an iterable of Cameras (one view: Renderer.render)")
         return self._frames(scene, cameras, settings, kind, layers)
 
     def _frames(self, scene, cameras, settings, kind, layers) -> Iterator[np.ndarray | RenderOutput]:
@@ -273,6 +284,12 @@ def _inputs(scene: Scene, camera: Camera | None, settings: RenderSettings | None
     """``camera`` and ``settings``, or the scene's defaults where None (``splatgl render``'s);
     a ``scene`` that is none is refused naming ``caller``."""
     require_scene(scene, caller)
+    if camera is not None:
+        require(camera, Camera, caller, "camera", CAMERA_NEED)
+    if settings is not None:
+        require(settings, RenderSettings, caller, "settings",
+                "a RenderSettings (splatgl.RenderSettings(background=(1, 1, 1), ...) or "
+                "splatgl.default_settings(scene, ...))")
     settings = settings if settings is not None else default_settings(scene)
     return camera if camera is not None else default_camera(scene, model=settings.transform), settings
 

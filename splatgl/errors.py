@@ -45,3 +45,16 @@ def add_note(exc: BaseException, note: str) -> BaseException:
 def note_of(exc: BaseException) -> str | None:
     """The note :func:`add_note` attached to ``exc``, if any."""
     return getattr(exc, "splatgl_note", None)
+
+
+def require(value, kind, caller: str, what: str, need: str, reads: tuple[str, ...] = ()):
+    """``value`` if it is a ``kind`` (a type or tuple of types; or, where ``reads`` is given,
+    has those attributes); else a TypeError in one line: ``caller``, the argument ``what``,
+    what it must be (``need``, with how to make one) and what it was given.  The public
+    functions check their arguments with it before any work."""
+    if isinstance(value, kind) or reads and all(hasattr(value, a) for a in reads):
+        return value
+    shown, name = " ".join(repr(value).split()), type(value).__name__
+    shown = shown if len(shown) <= 60 else shown[:57] + "..."
+    got = shown if value is None or shown.startswith(name) else f"{name} {shown}"
+    raise TypeError(f"{caller}: {what} must be {need}, got {got}")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,7 @@ import numpy as np
 from .camera import Camera
 from .poses import check_rigid_pose
 from .registry import MODELS, adapt_camera, model_class
-from ..errors import CameraError
+from ..errors import CameraError, require
 from .json_fields import matrix, read_json
 
 
@@ -170,4 +171,7 @@ def save_camera(path: str | Path, camera: Camera) -> None:
     one line naming ``path`` and leaves the old file, if any)."""
     from ..writing.atomic import atomic_write_text
 
+    require(path, (str, os.PathLike), "save_camera", "path",
+            "a file path (a str or a pathlib.Path; the camera goes second)")
+    require(camera, Camera, "save_camera", "camera", "a splatgl Camera")
     atomic_write_text(path, json.dumps(camera.to_json(), indent=2) + "\n")

@@ -12,7 +12,7 @@ Layer: above the formats, the scene and the LOD merge it reuses; below the comma
 from __future__ import annotations
 
 from ..errors import SplatglError
-from ..scene.splats import Scene
+from ..scene.splats import Scene, require_scene
 from .decimate import Decimate
 from .expression import Expression, parse_expression
 from .files import EditReport, edit_files
@@ -29,6 +29,7 @@ __all__ = ["CropBox", "CropSphere", "Decimate", "DropInvalid", "EditReport", "Ed
 def edit_scene(scene: Scene, *operations, allow_empty: bool = False, progress=None) -> Scene:
     """``scene`` with ``operations`` applied in order (:func:`apply_operations`); an empty
     result is refused (:class:`SplatglError`) unless ``allow_empty``."""
+    require_scene(scene, "edit_scene")
     edited = apply_operations(scene, operations, progress)
     if edited.scene.count == 0 and not allow_empty:
         raise SplatglError("edit: no splats left (pass allow_empty=True to accept an empty "

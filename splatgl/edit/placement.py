@@ -23,10 +23,10 @@ import functools
 import numpy as np
 
 from ..constants import sh_coeff_count
-from ..errors import SplatglError
+from ..errors import SplatglError, require
 from ..scene.quaternion import quat_multiply, rotmat_to_quat
-from ..scene.splats import Scene
-from ..scene.transform import SceneTransform
+from ..scene.splats import Scene, require_scene
+from ..scene.transform import SceneTransform, transform_from_object
 from ..splatmath.project import sh_basis
 
 #: Rows per block while baking (float64 temporaries of one block at a time).
@@ -65,7 +65,16 @@ def transform_scene(scene: Scene, transform: SceneTransform | None,
                     what: str = "transform") -> Scene:
     """``scene`` with ``transform`` baked into its stored values (see the module notes); the
     same scene when the transform is None or the identity.  A transform that moves a splat
-    beyond what float32 holds is refused (:class:`SplatglError` naming ``what``)."""
+    beyond what float32 holds is refused (:class:`SplatglError` naming ``what``).  A dict
+    with ``--transform``'s keys (``{"translate": [1, 0, 0]}``) is read as that option reads
+    its JSON (:func:`splatgl.scene.transform.transform_from_object`)."""
+    require_scene(scene, "transform_scene")
+    if isinstance(transform, dict):
+        transform = transform_from_object(transform, what)
+    if transform is not None:
+        require(transform, SceneTransform, "transform_scene", "transform",
+                "a SceneTransform (SceneTransform.from_euler(...)), a dict with --transform's "
+                "keys, or None")
     if transform is None or transform.is_identity:
         return scene
     n = scene.count

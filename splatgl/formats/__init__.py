@@ -18,12 +18,13 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import inspect
+import os
 from pathlib import Path
 from types import ModuleType
 
-from ..errors import SceneFormatError
+from ..errors import SceneFormatError, require
 from ..progress import default_progress
-from ..scene.splats import Scene, SceneSource
+from ..scene.splats import Scene, SceneSource, require_scene
 from ._messages import reader_guard
 
 #: Format modules in detection order (most specific signature first).
@@ -64,6 +65,10 @@ def detect_format(path: Path) -> ModuleType:
     raise SceneFormatError(path, f"unknown scene format (supported: {names})")
 
 
+#: What a scene file argument must be.
+PATH_NEED = "a file path (a str or a pathlib.Path)"
+
+
 def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
                spz_axes: str | None = None, allow_empty: bool = False) -> Scene:
     """Load a scene file of any supported format.
@@ -83,7 +88,7 @@ def load_scene(path: str | Path, drop_invalid: bool = False, progress=None,
     that records a framing box (a ``.lod.ply``'s header, a Streamed SOG manifest ``splatgl lod``
     wrote) is framed by it (:func:`splatgl.formats.metadata.apply_framing_box`).
     """
-    path = Path(path)
+    path = Path(require(path, (str, os.PathLike), "load_scene", "path", PATH_NEED))
     mod = detect_format(path)
     read = reader_guard(mod.read)  # every format, including any added later
     options = {"drop_invalid": drop_invalid}
@@ -142,6 +147,8 @@ def save_scene(path: str | Path, scene: Scene, **options):
     """
     from .written import write_checked
 
+    require(path, (str, os.PathLike), "save_scene", "path", PATH_NEED + " (the scene goes second)")
+    require_scene(scene, "save_scene")
     mod = writer_for(path)
     if "target" in inspect.signature(mod.write).parameters:  # its output depends on the name
         options = {**options, "target": Path(path)}

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..constants import MAX_LOGIT, MAX_SH_DEGREE, MIN_SCALE, sh_coeff_count
-from ..errors import SceneFormatError
+from ..errors import SceneFormatError, require
 
 #: A quaternion whose norm is below this is treated as degenerate (no rotation can be derived).
 MIN_QUAT_NORM = 1e-12
@@ -225,13 +225,8 @@ def require_scene(value, caller: str, reads: tuple[str, ...] = ()):
     """``value`` if it is a :class:`Scene` (or, where ``reads`` is given, has those attributes:
     a streamed scene's framing proxy); else a TypeError naming ``caller``, what it was given
     and how to load a scene.  The public functions taking a scene call it first."""
-    if isinstance(value, Scene) or reads and all(hasattr(value, a) for a in reads):
-        return value
-    shown, name = " ".join(repr(value).split()), type(value).__name__
-    shown = shown if len(shown) <= 60 else shown[:57] + "..."
-    got = shown if value is None or shown.startswith(name) else f"{name} {shown}"
-    raise TypeError(f"{caller}: scene must be a splatgl Scene (load one with "
-                    f"splatgl.load_scene(path)), got {got}")
+    return require(value, Scene, caller, "scene",
+                   "a splatgl Scene (load one with splatgl.load_scene(path))", reads)
 
 
 def _adoptable(arr) -> bool:

@@ -359,3 +359,39 @@ def test_whole_numbers_of_any_kind_are_image_sizes():
     scene = splatgl.load_scene(DEMO)
     camera = splatgl.default_camera(scene, np.int64(64), 48.0)
     assert (camera.width, camera.height) == (64, 48) and type(camera.width) is int
+
+
+def test_the_api_names_a_wrong_argument_and_how_to_make_a_right_one(tmp_path):
+    """A camera file's name where a Camera goes, settings as a dict, one Camera to render_many,
+    arguments swapped in save_scene / save_camera, a number as a path: each was an
+    AttributeError or a pathlib TypeError from deep inside; each now says, in one line, which
+    argument of which function must be what, and what it got."""
+    from splatgl.edit import edit_scene, transform_scene
+
+    scene = splatgl.load_scene(DEMO)
+    cam = splatgl.default_camera(scene, 16, 12)
+    cases = [
+        (lambda: splatgl.render(scene, "cam.json"), "render: camera must be a splatgl Camera"),
+        (lambda: splatgl.Renderer().render(scene, cam, {"background": (1, 1, 1)}),
+         "Renderer.render_layers: settings must be a RenderSettings"),
+        (lambda: splatgl.Renderer().render_many(scene, cam),
+         "Renderer.render_many: cameras must be an iterable of Cameras (one view: "
+         "Renderer.render), got Camera("),
+        (lambda: splatgl.Renderer().render_layers(scene, cam, under=np.zeros((12, 16, 4))),
+         "Renderer.render_layers: under must be an UnderImage"),
+        (lambda: splatgl.save_scene(scene, tmp_path / "x.ply"),
+         "save_scene: path must be a file path (a str or a pathlib.Path) (the scene goes "
+         "second), got Scene("),
+        (lambda: splatgl.save_camera(cam, tmp_path / "c.json"), "save_camera: path must be"),
+        (lambda: splatgl.load_scene(123), "load_scene: path must be a file path (a str or a "
+                                          "pathlib.Path), got int 123"),
+        (lambda: edit_scene("x.ply"), "edit_scene: scene must be a splatgl Scene"),
+        (lambda: transform_scene(scene, 5), "transform_scene: transform must be a SceneTransform"),
+    ]
+    for call, start in cases:
+        with pytest.raises(TypeError) as err:
+            call()
+        assert str(err.value).startswith(start) and "\n" not in str(err.value), err.value
+    assert list(tmp_path.iterdir()) == []
+    moved = transform_scene(scene, {"translate": [1, 0, 0]})        # --transform's keys
+    np.testing.assert_allclose(moved.means, scene.means + np.float32([1, 0, 0]), atol=1e-6)
