@@ -187,7 +187,7 @@ def plan_frames(target: FrameTarget, sizes: Sequence[tuple[int, int]], numbers: 
         if mismatch is not None:
             raise SplatglError(f"{path}: {mismatch} as this run renders its frames; --resume only "
                                "completes frames of the same kind (render into another folder, "
-                               "or without --resume to replace them)")
+                               "or with --force instead of --resume to replace them)")
         if record is not None and not kept_frame(path, info.description, record, cameras[k]):
             unchecked += 1
     return FramePlan(todo, len(sizes) - len(todo), damaged, unchecked)
