@@ -289,6 +289,9 @@ def run_path(args: argparse.Namespace) -> int:
                  framed_leaves(tree, args.scene))
     if not target.is_video:
         check_exact_ids(target.files(), target.frame_path(0), scene.count)
+        if args.fps is not None:   # refused, never ignored
+            raise SplatglError(f"--fps sets a video's frame rate; -o {args.output} writes image "
+                               "files, which hold none (give a .mp4 or .mov to write a video)")
     cameras, source_fps, numbers = path_cameras(args, scene)
     check_frame_outputs(args, target, numbers)
     fps = args.fps if args.fps is not None else (source_fps or DEFAULT_FPS)

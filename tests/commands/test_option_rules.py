@@ -30,6 +30,13 @@ def test_path_only_options_without_path(tmp_path, capsys, extra, names, verb):
             "render draws one view")
 
 
+def test_fps_applies_to_a_video_only(tmp_path, capsys):
+    refused(capsys, tmp_path, ["render", DEMO, "--path", "orbit:2", "--fps", "24", "-o",
+                               tmp_path / "f"],
+            f"splatgl: error: --fps sets a video's frame rate; -o {tmp_path / 'f'} writes image "
+            "files, which hold none (give a .mp4 or .mov to write a video)")
+
+
 @pytest.mark.parametrize("out, what", [("o.mp4", "a video"),
                                        ("f_%03d.png", "a pattern whose suffix names the image type")])
 def test_format_applies_to_a_folder_only(tmp_path, capsys, out, what):
