@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..cameras.up import UP_CHOICES, resolve_up
 from ..datasets import load_cameras
 from ..datasets.gs_cameras import gs_cameras_json
 from ..datasets.nerfstudio_path import camera_path_json
@@ -65,6 +66,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o.add_argument("--fov", type=float, default=50.0, help="vertical field of view, degrees (default 50)")
     o.add_argument("--width", type=positive_int, default=1280, help="image width (default 1280)")
     o.add_argument("--height", type=positive_int, default=720, help="image height (default 720)")
+    o.add_argument("--up", choices=UP_CHOICES, default=None,
+                   help="world axis the orbit turns about, up in its images; default as for "
+                        "'splatgl render' (the average up of the training cameras found beside "
+                        "the scene, else -y), so the file's frames are render --path orbit's")
     s = sub.add_parser("spiral", help="forward-facing spiral through the cameras")
     cameras(s)
     common(s)
@@ -86,9 +91,11 @@ def run(args: argparse.Namespace) -> int:
         scene = load_scene_arg(args)
         if not 0.0 < args.fov < 180.0:
             raise SplatglError(f"--fov must be in (0, 180) degrees, got {args.fov}")
-        cams = orbit(scene, args.frames, args.width, args.height, args.fov, args.elevation, args.radius)
+        up, _ = resolve_up(args.up, args.scene)   # as render's default camera and orbit
+        cams = orbit(scene, args.frames, args.width, args.height, args.fov, args.elevation,
+                     args.radius, tuple(float(v) for v in up))
         lo, hi = scene.robust_bounds
-        keys = path_json(cams, look_at_target=0.5 * (lo + hi), fps=args.fps)
+        keys = path_json(cams, look_at_target=0.5 * (lo + hi), fps=args.fps, up=up)
     else:
         source = load_cameras(args.cameras, args.select)
         if args.generator == "spiral":

@@ -281,6 +281,21 @@ def test_path_command_writes_files_render_reads(tmp_path, capsys):
     assert "path files are JSON" in capsys.readouterr().err
 
 
+def test_path_orbit_takes_up_as_render_does(tmp_path, capsys):
+    """``path orbit`` had no --up: a z-up scene's orbit file turned about -y while ``render
+    --path orbit:N --up +z`` turned about z.  Now the file's frames are render's."""
+    path = tmp_path / "o.json"
+    assert main(["path", "orbit", str(demo_scene_path()), "--up", "+z", "--frames", "3",
+                 *SIZE, "-o", str(path)]) == 0
+    assert _render("--path", path, "-o", tmp_path / "file") == 0
+    assert _render("--path", "orbit:3", *SIZE, "--up", "+z", "-o", tmp_path / "orbit") == 0
+    for k in range(3):
+        np.testing.assert_array_equal(read_image(tmp_path / "file" / f"{k:05d}.png"),
+                                      read_image(tmp_path / "orbit" / f"{k:05d}.png"))
+    cams = splatgl.load_cameras(path)
+    assert cams[1].world_to_camera[1, 2] < -0.9   # the image's y (down) runs along -z
+
+
 def test_path_sizes_follow_the_camera_rule(tmp_path, capsys):
     """--width and --height over a path's cameras: as with --camera, one of them scales keeping
     each camera's aspect and both must match it (they stretched the frames silently)."""
