@@ -78,9 +78,11 @@ class PixelListing:
     def table(self, limit: int | None = None) -> str:
         """The listing as text: one line per splat (at most ``limit``), then the pixel."""
         lines = [f"pixel ({self.x}, {self.y}): {len(self.splats)} splats blended of "
-                 f"{self.candidates} in its tile, front to back",
-                 f"{'#':>4}  {'index':>9}  {'depth':>10}  {'alpha':>8}  {'weight':>8}  "
-                 f"{'T after':>8}  colour"]
+                 f"{self.candidates} in its tile, front to back" if self.splats else
+                 f"pixel ({self.x}, {self.y}): no splat reaches it ({self.candidates} in its tile)"]
+        if self.splats:
+            lines.append(f"{'#':>4}  {'index':>9}  {'depth':>10}  {'alpha':>8}  {'weight':>8}  "
+                         f"{'T after':>8}  colour")
         shown = self.splats if limit is None else self.splats[:limit]
         for k, s in enumerate(shown):
             rgb = ", ".join(f"{c:.3f}" for c in s.color)

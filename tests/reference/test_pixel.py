@@ -69,6 +69,14 @@ def test_outside_the_image_is_one_line():
         pixel_splats(scene, Camera(16, 16, 10.0, 10.0, 8.0, 8.0), 16, 3)
 
 
+def test_a_pixel_no_splat_reaches_says_so_without_an_empty_table():
+    scene = random_scene(10, seed=1, **IN_DEPTH)
+    listing = pixel_splats(scene, Camera(64, 64, 10.0, 10.0, 32.0, 32.0), 0, 0)
+    text = listing.table()
+    assert not listing.splats and text.splitlines()[0].startswith("pixel (0, 0): no splat reaches it")
+    assert "index" not in text and "weights sum 0.000000 = alpha 0.000000" in text
+
+
 def test_equirect_seam_copies_name_their_scene_rows():
     """A splat on the +-180 degree seam is drawn twice (its copy one turn away); either copy's
     listing names the splat's own row."""
