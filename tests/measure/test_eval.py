@@ -158,6 +158,15 @@ def test_a_photographs_partial_alpha_is_applied_once(tmp_path):
     np.testing.assert_allclose(load_photo(path, 4, 4, (b, b, b)), c * a + b * (1 - a), atol=1e-4)
 
 
+def test_the_table_columns_line_up_with_short_view_names():
+    from splatgl.measure.evaluation.evaluate import Evaluation, ViewScore
+
+    table = Evaluation((ViewScore("a", 30.0, 0.9), ViewScore("b", 32.0, 0.95))).table()
+    lines = table.splitlines()
+    assert lines[-1].startswith("mean (2 views)")
+    assert len({len(line) for line in lines}) == 1, table   # the columns end alike
+
+
 def test_sheet_of_worst_views(dataset, capsys, tmp_path):
     code, _, err = _run(capsys, "--dataset", dataset, "--split", "test", "--sheet", tmp_path / "w.png", "--worst", "2")
     assert code == 0, err

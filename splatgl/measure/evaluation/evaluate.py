@@ -66,11 +66,11 @@ class Evaluation:
         return sorted(self.scores, key=lambda s: s.psnr)[:count]
 
     def table(self) -> str:
-        width = max([len("view")] + [len(s.name) for s in self.scores])
+        mean = f"mean ({len(self.scores)} views)"
+        width = max([len("view"), len(mean)] + [len(s.name) for s in self.scores])
         lines = [f"{'view':<{width}}  {'PSNR dB':>8}  {'SSIM':>6}"]
         lines += [f"{s.name:<{width}}  {s.psnr:8.3f}  {s.ssim:6.4f}" for s in self.scores]
-        lines.append(f"{'mean (' + str(len(self.scores)) + ' views)':<{width}}  "
-                     f"{self.mean_psnr:8.3f}  {self.mean_ssim:6.4f}")
+        lines.append(f"{mean:<{width}}  {self.mean_psnr:8.3f}  {self.mean_ssim:6.4f}")
         return "\n".join(lines)
 
     def csv(self) -> str:
