@@ -178,3 +178,15 @@ def test_benchmark_modes_are_one_table(capsys):
     assert capsys.readouterr().err.strip() == (
         "splatgl: error: --memory streams one level of detail in one process; not with --scale, "
         "--popping")
+
+
+def test_a_row_without_an_error_figure_shows_a_dash_not_a_dash_percent():
+    """bench --quick's fisheye row printed '-%' in the >1/255 column."""
+    from splatgl.measure.bench.report import table
+    from splatgl.measure.bench.runner import BenchRow
+
+    rows = [BenchRow("s", 10, "a", "g", "quad", 1.0, 1.0, 1.0, off_1=0.25),
+            BenchRow("s", 10, "b", "g", "quad", 1.0, 1.0, 1.0)]
+    lines = table(rows).splitlines()
+    assert lines[-2].endswith(" 25.000%") and lines[-1].endswith(" -") and "-%" not in lines[-1]
+    assert len(lines[-1]) == len(lines[-2]) == len(lines[-3])

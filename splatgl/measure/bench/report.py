@@ -35,7 +35,7 @@ def table(rows: list[BenchRow]) -> str:
                 f"{_fmt(r.limit_ratio, '.2f'):>7} "
                 f"{_fmt(r.drawn, 'd'):>8} {_fmt(r.fragment_efficiency, '.3f'):>8} "
                 f"{_fmt(r.psnr, '.1f'):>7} {_fmt(r.max_abs, '.4f'):>8} "
-                f"{_fmt(None if r.off_1 is None else r.off_1 * 100, '.3f'):>7}%")
+                f"{'-' if r.off_1 is None else format(r.off_1 * 100, '.3f') + '%':>8}")
     return "\n".join(out)
 
 
