@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
     for path in depth_names.values():
         print(f"wrote {path} (expected depth)")
     cut = getattr(times, "cut_nodes", None)   # a level of detail draws its cut, not the scene
-    splats = f"{scene.count} splats" if cut is None else f"{cut:,} of {scene.count:,} splats"
+    splats = f"{scene.count} splats" if cut is None else f"a {cut:,}-splat cut of {scene.count:,}"
     for eye, path in eyes_out.items():
         height, width = eyes[0].rgba.shape[:2]
         shown = [layer.value for layer in files.render_layers(path) if fmt.is_float] if plan.named else []

@@ -240,7 +240,7 @@ def test_render_and_path_stream_with_memory(tmp_path, capsys):
 
     cut = int(re.search(r"cut_nodes ([\d,]+)", out).group(1).rstrip(",").replace(",", ""))
     count = load_scene(path).count
-    assert f"(96x64, {cut:,} of {count:,} splats, " in out, out
+    assert f"(96x64, a {cut:,}-splat cut of {count:,}, " in out, out
     code = main(["render", str(path), "--path", "orbit:3", "-o", str(tmp_path / "f%02d.png"),
                  "--memory", "1.5G", "--width", "96", "--height", "64", "--timings"])
     out = capsys.readouterr().out
