@@ -119,11 +119,12 @@ def run(args: argparse.Namespace) -> int:
         print(args.renderer_choice.text(), flush=True)
         for line in auto_lines(args, settings)[1:]:
             print(line, flush=True)
-    check(args.renderer, scene=scene, settings=settings)   # refused here, before a window opens
+    camera = camera_from_args(args, scene, settings, orbit_up=True)   # the orbit keeps --up
+    # refused here, before a window opens (the camera model too), naming the viewer's renderers
+    check(args.renderer, scene=scene, settings=settings, model=camera.model, interactive=True)
     if args.renderer == RendererKind.CPU.value:
         from ..renderers.cpu import prepare
         prepare()     # compiled on first use (half a minute), not in the window's first rest
-    camera = camera_from_args(args, scene, settings, orbit_up=True)   # the orbit keeps --up
     cameras = load_cameras(args.camera) if args.camera is not None else []
     if args.camera is not None and not (args.width or args.height):
         camera = _fit(camera)

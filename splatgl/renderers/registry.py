@@ -10,9 +10,8 @@ constructor ask it; no other module keeps a list of what a renderer can draw.
 
 Every renderer follows :class:`~splatgl.renderers.protocol.FrameRenderer`, made with its own
 options (:mod:`splatgl.renderers.options`), which :func:`options_for` builds from the user's
-:class:`RenderSettings`: the one place a renderer's part of the settings is taken.  Each is
-imported only when first made (:func:`make`), so importing this module loads neither OpenGL nor
-numba.
+:class:`RenderSettings` (the one place a renderer's part of the settings is taken); each is
+imported only when first made (:func:`make`): this module loads neither OpenGL nor numba.
 """
 
 from __future__ import annotations
@@ -164,8 +163,7 @@ def check_image_size(width: int, height: int, what: str,
 
 
 def installed(kind: RendererKind | str) -> bool:
-    """Whether what renderer ``kind`` needs is installed (the CPU renderer: numba, the
-    ``fast`` extra)."""
+    """Whether what renderer ``kind`` needs is installed (the CPU renderer: numba, ``fast``)."""
     needs = entry(kind).needs
     return needs is None or importlib.util.find_spec(needs[0]) is not None
 
@@ -246,12 +244,13 @@ def refusal(kind: RendererKind | str, *, scene: Scene | None = None,
 
 def check(kind: RendererKind | str, *, scene: Scene | None = None,
           settings: RenderSettings | None = None, model: "CameraModel | None" = None,
-          layers: frozenset[Layer] | None = None, under: bool = False) -> None:
+          layers: frozenset[Layer] | None = None, under: bool = False,
+          interactive: bool = False) -> None:
     """Raise :class:`SplatglError` (:class:`CameraError` for a camera model) where renderer
     ``kind`` cannot draw: it is not installed; a scene of surfels; a camera ``model`` (a lens
     model also draws no surfels anywhere); ``layers`` or ``under`` geometry it does not draw;
     ``settings`` whose convention, emulation or order it does not follow (the options it merely
-    ignores: :func:`check_settings`)."""
+    ignores: :func:`check_settings`); ``interactive``: advice names the viewer's renderers only."""
     e = entry(kind)
     if not installed(e.kind):
         raise SplatglError(f"--renderer {e.kind.value} needs {e.needs[0]}: "
@@ -264,7 +263,8 @@ def check(kind: RendererKind | str, *, scene: Scene | None = None,
     if model is not None:
         model.check_surfels(surfels)
         if model.name in e.lacks_models:
-            able = [k for k, o in RENDERERS.items() if model.name not in o.lacks_models]
+            able = [k for k, o in RENDERERS.items() if model.name not in o.lacks_models
+                    and (o.interactive or not interactive)]
             raise CameraError(f"{e.title} cannot draw {model.name} images; use --renderer "
                               f"{_which(able)}")
     full = [next(k for k, o in RENDERERS.items() if o.layers is None and o.under)]
@@ -332,11 +332,9 @@ def own_settings(settings: RenderSettings, kind: RendererKind | str) -> RenderSe
 
 
 def _spelled(value) -> str:
-    if isinstance(value, enum.Enum):
-        return str(value.value)
     if isinstance(value, bool):
         return "on" if value else "off"
-    return str(value)
+    return str(value.value if isinstance(value, enum.Enum) else value)
 
 
 def check_settings(settings: RenderSettings, *kinds: RendererKind | str,

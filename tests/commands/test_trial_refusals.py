@@ -169,3 +169,14 @@ def test_one_chunk_is_singular(tmp_path, capsys):
     assert main(["lod", DEMO, "-o", str(tmp_path / "d.lod.ply")]) == 0
     out = capsys.readouterr().out
     assert "(1 chunk of at most " in out, out
+
+
+def test_view_refuses_a_renderer_that_cannot_draw_the_projection_before_a_window(tmp_path,
+                                                                                  capsys):
+    """view --renderer tile on a panorama was refused once the window was open, advising
+    'reference', which the viewer does not offer; now before any window (none is needed to
+    say so), naming the viewer's renderers only."""
+    assert main(["view", DEMO, "--projection", "equirectangular", "--renderer", "tile"]) == 2
+    assert capsys.readouterr().err == ("splatgl: error: the tile renderer cannot draw "
+                                       "equirectangular images; use --renderer quad or cpu\n")
+    assert list(tmp_path.iterdir()) == []
