@@ -77,8 +77,8 @@ def _parser_class():
 
 def negative_values_joined(parser, args: list[str]) -> list[str]:
     """``args`` with ``--memory -1G`` written ``--memory=-1G``: a value after an option that
-    takes one, starting with '-' and a digit or '.', is that option's value, so the option's
-    own check refuses it by name.  argparse takes only plain numbers (-1, -2.5) so; -1G or
+    takes one, starting with '-' and a digit or '.', or one of the option's choices (``--up
+    -y``), is that option's value, so the option's own check refuses it by name.  argparse takes only plain numbers (-1, -2.5) so; -1G or
     -1e3 it took for an unknown option and said 'expected one argument'."""
     actions = getattr(parser, "_option_string_actions", {})
     out: list[str] = []
@@ -92,8 +92,9 @@ def negative_values_joined(parser, args: list[str]) -> list[str]:
             value = next(words, None)
             if value is None:
                 out.append(word)
-            elif len(value) > 1 and value[0] == "-" and (value[1].isdigit() or value[1] == "."):
-                out.append(f"{word}={value}")
+            elif len(value) > 1 and value[0] == "-" and (value[1].isdigit() or value[1] == "."
+                                                         or value in (action.choices or ())):
+                out.append(f"{word}={value}")   # (--up -y: one of its choices)
             else:
                 out += [word, value]
         else:

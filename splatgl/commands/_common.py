@@ -361,8 +361,8 @@ def format_timings(times: object) -> str:
     bytes, N syncs``."""
     parts, total = [], 0.0
     for name, value in vars(times).items():
-        if isinstance(value, bool) or value is None:
-            continue
+        if isinstance(value, bool) or value is None or name == "capped":   # capped: a sentence,
+            continue                                                        # said on its own line
         if isinstance(value, TransferCounts):   # the frame's transfers (issue 40 item 3)
             parts.append(value.text())
         elif isinstance(value, int):

@@ -196,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {path} ({width}x{height}, {splats}, {kind_text}{extra})")
         for layer in plan.pictures(path):
             print(f"wrote {picture_path(path, layer)} ({layer.value})")
-    if memory is not None and getattr(times, "capped", None):   # said once (and in --timings)
+    if memory is not None and getattr(times, "capped", None):   # said once, here
         print(times.capped)
     _print_timings(args, gl_name, times, settings)
     return 0

@@ -180,3 +180,21 @@ def test_view_refuses_a_renderer_that_cannot_draw_the_projection_before_a_window
     assert capsys.readouterr().err == ("splatgl: error: the tile renderer cannot draw "
                                        "equirectangular images; use --renderer quad or cpu\n")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_timings_leave_the_capped_sentence_to_its_own_line():
+    """--timings printed '1 of 1 views capped, capped the memory bound made the cut ...':
+    the streamed frame's capped sentence is said once, on its own line."""
+    from types import SimpleNamespace
+
+    from splatgl.commands._common import format_timings
+
+    line = format_timings(SimpleNamespace(cut=0.002, cut_nodes=12, streaming="1 of 1 views capped",
+                                          capped="the memory bound made the cut coarser"))
+    assert line == "cut 2.0 ms, cut_nodes 12, streaming 1 of 1 views capped (stages total 2.0 ms)"
+
+
+def test_an_option_value_that_is_one_of_its_choices_may_start_with_a_dash(tmp_path, capsys):
+    """--up -y (as the docs write it) was 'argument --up: expected one argument'."""
+    assert main(["render", DEMO, "--up", "-y", "-o", str(tmp_path / "a.png"), *SMALL]) == 0
+    assert "wrote" in capsys.readouterr().out

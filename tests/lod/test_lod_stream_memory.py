@@ -154,7 +154,7 @@ def test_render_says_once_when_the_memory_bound_coarsened_the_cut(tmp_path, caps
     out = capsys.readouterr().out
     lines = [line for line in out.splitlines() if line.startswith("the memory bound")]
     assert len(lines) == 1 and "coarser than --lod-threshold 0.25 px asked" in lines[0]
-    assert "1 of 1 views capped" in out
+    assert "1 of 1 views capped" in out and "capped the memory bound" not in out   # said once
     assert main(["render", str(path), "--path", "orbit:3", "-o", str(tmp_path / "f%02d.png"),
                  *args]) == 0
     out = capsys.readouterr().out
