@@ -41,7 +41,8 @@ are read whole.
 
 Naming the output DIR/lod-meta.json writes PlayCanvas Streamed SOG instead (what splat-transform
 writes and PlayCanvas streams): the hierarchy's finest levels as SOG folders DIR/L_i/, in spatial
-chunks of --chunk-splats original splats, listed in lod-meta.json (see docs/formats.md).
+chunks of --chunk-splats original splats, listed in lod-meta.json (see docs/formats.md); it is
+built in memory, refused before the build where a binary PLY needs more than --memory.
 
   splatgl lod scene.ply -o out/lod-meta.json"""
 
@@ -93,6 +94,17 @@ def run(args: argparse.Namespace) -> int:
     if sog:
         streamed.check_folder(out)  # no unit folder the manifest there does not name
     budget, how = budget_from(args.memory)
+    if sog:   # built in memory: refused over the budget, as convert refuses formats written whole
+        from ..edit.streamed import sources_of
+        from ..lod.budget import format_size
+
+        sources = sources_of([args.scene])   # a binary PLY: its decoded size from the header
+        need = None if sources is None else streamed.BUILD_COPIES * sources[0].in_memory_bytes()
+        if need is not None and need > budget:
+            raise SplatglError(f"{out}: a Streamed SOG is built from the whole scene in memory "
+                               f"(about {format_size(need)}, over --memory {format_size(budget)});"
+                               " write a .lod.ply, which builds within it, or give a larger "
+                               "--memory")
     progress = StderrProgress() if enabled() else None
     if not sog and streamable(args.scene):
         if progress is not None:  # on a terminal; the summary below says it too

@@ -17,7 +17,7 @@ from .decimate import Decimate
 from .pipeline import Step
 from .streamed import IN_MEMORY_COPIES, NORMALS, Source, memory_bound, sources_of, vertex_dtype
 from .streamed_edit import StreamedEdit
-from .streamed_outputs import STREAMED_FORMATS, refusal
+from .streamed_outputs import STREAMED_FORMATS, refusal, whole_write_bytes
 from .streamed_neighbours import DECIMATE_NOTE, decimate_chunks
 from .streamed_sort import scratch_error
 
@@ -33,11 +33,12 @@ def plan_edit(inputs, writer, operations, transforms, memory: int | None,
     sources = sources_of(inputs, drop_invalid)
     if sources is None:
         return None
-    need = IN_MEMORY_COPIES * sum(s.in_memory_bytes() for s in sources)
-    if need <= memory:
+    scene = sum(s.in_memory_bytes() for s in sources)
+    whole = writer is not None and writer.NAME not in STREAMED_FORMATS
+    if whole and whole_write_bytes(writer.NAME, scene) > memory:   # before the in-memory path
+        raise refusal(output, writer.NAME, whole_write_bytes(writer.NAME, scene), memory)
+    if IN_MEMORY_COPIES * scene <= memory:
         return None
-    if writer is not None and writer.NAME not in STREAMED_FORMATS:
-        raise refusal(output, writer.NAME, need, memory)
     if writer is not None and writer_options:  # a PLY's other layouts: written in memory
         return None
     if any(isinstance(op, Decimate) for op in operations):

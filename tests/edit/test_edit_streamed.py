@@ -161,15 +161,24 @@ def test_other_inputs_load_whole_and_say_so(tmp_path, capsys):
 @pytest.mark.parametrize("command", ["edit", "convert"])
 @pytest.mark.parametrize("ext, name", [(".spz", "spz"), (".sog", "sog"), (".glb", "gltf")])
 def test_outputs_written_whole_are_refused_over_the_bound(tmp_path, capsys, command, ext, name):
+    """What a format written whole takes is counted as it peaks (4.2-5.2x the decoded scene,
+    measured), not 2x: a --memory between the two was let through to 2.1-2.6x over it."""
+    from splatgl.edit.streamed_outputs import whole_write_bytes
+    from splatgl.lod.budget import format_size
+
     src = _ply(tmp_path, _scene(100))
     out = tmp_path / f"o{ext}"
     argv = [command, str(src), "-o", str(out), "--sh-degree", "1"] if command == "edit" else \
         [command, str(src), str(out)]
-    assert main(argv + ["--memory", "1K"]) == 2
-    assert capsys.readouterr().err == (
-        f"splatgl: error: {out}: the {name} format is written from the whole scene in memory "
-        "(about 26.6 KiB, over --memory 1 KiB); write .ply, .splat or .compressed.ply, which "
-        "stream, or give a larger --memory\n")
+    from splatgl.edit.streamed import Source
+
+    need = whole_write_bytes(name, Source(src).in_memory_bytes())   # the decoded scene: 13.3 KiB
+    for memory in ("1K", "40K"):                       # 40K: over 2x the scene, under the peak
+        assert main(argv + ["--memory", memory]) == 2
+        assert capsys.readouterr().err == (
+            f"splatgl: error: {out}: the {name} format is written from the whole scene in "
+            f"memory (about {format_size(need)}, over --memory {memory[:-1]} KiB); write .ply, "
+            ".splat or .compressed.ply, which stream, or give a larger --memory\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.ply"]
 
 

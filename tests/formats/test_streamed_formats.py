@@ -98,6 +98,26 @@ def test_cli_writes_refuses_and_replaces_whole(tmp_path, capsys):
     assert f"levels:      5 in 2 chunks, splats per level {counts}" in text
 
 
+def test_a_streamed_sog_over_the_memory_bound_is_refused_before_the_build(tmp_path, capsys):
+    """lod -o DIR/lod-meta.json built in memory whatever --memory said (812 MB at --memory 100M
+    for 1.5M splats, not a word); it is now refused, as convert refuses formats written whole."""
+    from splatgl.edit.streamed import Source
+    from splatgl.lod.budget import format_size
+
+    src = tmp_path / "s.ply"
+    save_scene(src, _scene(900))
+    out = tmp_path / "out" / "lod-meta.json"
+    out.parent.mkdir()
+    need = writer.BUILD_COPIES * Source(src).in_memory_bytes()
+    assert main(["lod", str(src), "-o", str(out), "--memory", "20K"]) == 2
+    assert capsys.readouterr().err == (
+        f"splatgl: error: {out}: a Streamed SOG is built from the whole scene in memory (about "
+        f"{format_size(need)}, over --memory 20 KiB); write a .lod.ply, which builds within it, "
+        "or give a larger --memory\n")
+    assert list(out.parent.iterdir()) == []
+    assert main(["lod", str(src), "-o", str(out), "--memory", "10M"]) == 0
+
+
 def test_stray_unit_folder_is_never_replaced(tmp_path, capsys):
     src = tmp_path / "s.ply"
     save_scene(src, _scene(300))
