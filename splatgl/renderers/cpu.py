@@ -128,7 +128,9 @@ def _kernels(progress: ProgressCallback | None = None) -> SimpleNamespace:
                                   project_model=project_mod.project_model,
                                   pack=raster_mod.pack, bin_tiles=raster_mod.bin_tiles,
                                   rasterize=raster_mod.rasterize, REC_SIZE=raster_mod.REC_SIZE)
-        _warm_up(default_progress() if progress is None else progress)
+        if progress is None:   # the terminal's meter only for a compile (a load: about 0.5 s)
+            progress = None if kernels_ready() else default_progress()
+        _warm_up(progress)
     _READY = True
     return _LOADED
 

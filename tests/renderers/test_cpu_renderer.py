@@ -433,3 +433,18 @@ def test_real_scene_through_other_camera_models_matches_reference(shared_scenes,
     assert int((ref.alpha > 0.5).sum()) > 200, "the scene must be in view"
     rel = np.abs(out.depth - ref.depth) / max(float(np.abs(ref.depth).max()), 1e-6)
     assert float(rel.max()) < 1e-3
+
+
+@pytest.mark.parametrize("cached", [True, False])
+def test_the_terminal_hears_of_a_compile_not_of_a_load(monkeypatch, cached):
+    """Every cpu render on a terminal said 'preparing the CPU renderer (compiled on first use:
+    about half a minute)', also when numba's cache held the kernels (a load of about 0.5 s)."""
+    from splatgl.renderers import cpu
+
+    heard = []
+    monkeypatch.setattr(cpu, "_LOADED", None)
+    monkeypatch.setattr(cpu, "_READY", False)
+    monkeypatch.setattr(cpu, "kernels_ready", lambda: cached)
+    monkeypatch.setattr(cpu, "default_progress", lambda: lambda *a: heard.append(a[2]))
+    cpu.prepare()
+    assert bool(heard) is not cached
