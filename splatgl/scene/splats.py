@@ -16,6 +16,7 @@ import numpy as np
 
 from ..constants import MAX_LOGIT, MAX_SH_DEGREE, MIN_SCALE, sh_coeff_count
 from ..errors import SceneFormatError, require
+from .opacity import finite_logits
 
 #: A quaternion whose norm is below this is treated as degenerate (no rotation can be derived).
 MIN_QUAT_NORM = 1e-12
@@ -365,6 +366,7 @@ def activate(path: object, means: np.ndarray, quats: np.ndarray, log_scales: np.
     if n == 0:
         raise SceneFormatError(path, "the scene has no splats")
     dropped = np.zeros(n, bool)
+    opacity_logits = finite_logits(path, opacity_logits)   # +-Inf: opacity exactly 1 or 0
     fields = {
         "position": means, "rotation": quats, "scale": log_scales,
         "opacity": opacity_logits.reshape(n, 1), "sh": sh.reshape(n, -1),

@@ -188,7 +188,7 @@ def test_splat_size_not_a_multiple_of_32(tmp_path):
 
 
 @pytest.mark.parametrize("prop,field,value", [
-    ("y", "position", np.nan), ("f_dc_2", "sh", np.inf), ("opacity", "opacity", -np.inf),
+    ("y", "position", np.nan), ("f_dc_2", "sh", np.inf), ("opacity", "opacity", np.nan),
     ("scale_1", "scale", np.nan), ("rot_0", "rotation", np.nan),
 ])
 def test_nan_and_inf_give_field_count_and_first_index(tmp_path, prop, field, value):
@@ -197,6 +197,23 @@ def test_nan_and_inf_give_field_count_and_first_index(tmp_path, prop, field, val
     for kwargs in ({}, {"ascii": True}):
         path = write_vertices(tmp_path / f"nan{len(kwargs)}.ply", verts, **kwargs)
         expect_error(path, "3 row(s)", "NaN or Inf", "first at index 4", field=field)
+
+
+def test_an_infinite_opacity_logit_is_opacity_one_or_zero(tmp_path):
+    """splat-transform writes +Inf for opacity 1 (a compressed PLY's 255 turned into a PLY):
+    such rows were refused as NaN or Inf, and --drop-invalid dropped the most opaque splats.
+    +-Inf reads as +-30 (sigmoid 1 or 0 in float32), with one warning that counts them."""
+    from splatgl.scene.opacity import OPAQUE_LOGIT
+
+    verts = good_vertices(20)
+    verts["opacity"][[4, 9]] = np.inf
+    verts["opacity"][15] = -np.inf
+    path = write_vertices(tmp_path / "inf.ply", verts)
+    with pytest.warns(UserWarning, match=r"inf.ply: 3 opacity logit\(s\) are infinite"):
+        scene = load_scene(path)
+    assert scene.count == 20
+    assert scene.opacity_logits[[4, 9, 15]].tolist() == [OPAQUE_LOGIT, OPAQUE_LOGIT, -OPAQUE_LOGIT]
+    assert scene.opacities[[4, 9]].tolist() == [1.0, 1.0] and scene.opacities[15] < 1e-12
 
 
 @pytest.mark.parametrize("scale", [0.0, 1e-30])
@@ -221,7 +238,7 @@ def test_splat_with_centred_rotation_bytes_is_degenerate(tmp_path):
 def test_drop_invalid_warns_with_count_and_drops_rows(tmp_path):
     verts = good_vertices(12)
     verts["x"][3] = np.nan
-    verts["opacity"][7] = np.inf
+    verts["opacity"][7] = np.nan
     for i in range(4):
         verts[f"rot_{i}"][10] = 0.0
     path = write_vertices(tmp_path / "d.ply", verts)
