@@ -209,11 +209,20 @@ def test_an_infinite_opacity_logit_is_opacity_one_or_zero(tmp_path):
     verts["opacity"][[4, 9]] = np.inf
     verts["opacity"][15] = -np.inf
     path = write_vertices(tmp_path / "inf.ply", verts)
-    with pytest.warns(UserWarning, match=r"inf.ply: 3 opacity logit\(s\) are infinite"):
+    with pytest.warns(UserWarning, match=r"inf.ply: 3 of 20 rows read hold an infinite opacity"):
         scene = load_scene(path)
     assert scene.count == 20
     assert scene.opacity_logits[[4, 9, 15]].tolist() == [OPAQUE_LOGIT, OPAQUE_LOGIT, -OPAQUE_LOGIT]
     assert scene.opacities[[4, 9]].tolist() == [1.0, 1.0] and scene.opacities[15] < 1e-12
+    import warnings
+
+    from splatgl.scene.opacity import finite_logits
+
+    with warnings.catch_warnings(record=True) as caught:   # a reader by blocks: said once a file
+        warnings.simplefilter("always")
+        for _ in range(3):
+            block = finite_logits(tmp_path / "blocks.ply", np.array([0.5, np.inf], np.float32))
+    assert len(caught) == 1 and block.tolist() == [0.5, OPAQUE_LOGIT]
 
 
 @pytest.mark.parametrize("scale", [0.0, 1e-30])
