@@ -394,4 +394,5 @@ def test_the_api_names_a_wrong_argument_and_how_to_make_a_right_one(tmp_path):
         assert str(err.value).startswith(start) and "\n" not in str(err.value), err.value
     assert list(tmp_path.iterdir()) == []
     moved = transform_scene(scene, {"translate": [1, 0, 0]})        # --transform's keys
+    # atol: one float32 addition on coordinates of order 1 (a rounding of 6e-8)
     np.testing.assert_allclose(moved.means, scene.means + np.float32([1, 0, 0]), atol=1e-6)
